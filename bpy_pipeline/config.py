@@ -1,0 +1,299 @@
+"""YAML -> typed, validated configuration. Every default of the pipeline lives in this file.
+
+A config is a tree of frozen dataclasses. :func:`load_config` reads YAML, applies ``--set``
+overrides, and checks every key against the dataclass fields: an unknown key, a wrong type or
+a value outside what is allowed raises :class:`~bpy_pipeline.errors.InputError` whose message
+starts with the dotted key path (``sensor.max_range: ...``). :func:`config_to_dict` gives the
+resolved config back as plain data (for the manifest and for saving), and loading that again
+gives an equal config.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import typing
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Literal
+
+import yaml
+
+from .errors import InputError
+from .lidar.sensors import SensorSpec, resolve_sensor
+from .schema import convert, from_dict, key_of
+
+Vec3 = tuple[float, float, float]
+MATERIALS = ("diffuse", "mirror", "glass", "absorber")
+Material = Literal["diffuse", "mirror", "glass", "absorber"]
+
+
+# ----------------------------------------------------------------------------- scene builders
+@dataclass(frozen=True)
+class Shape:
+    """One shape of the ``primitives`` builder.
+
+    ``size``: plane and box, edge length (a number, or [x, y] / [x, y, z]); sphere, radius;
+    cylinder, [radius, height]. A plane's normal is +Z before rotation; rotations are
+    Blender's XYZ Euler angles in degrees. ``segments`` tessellates spheres and cylinders.
+    """
+
+    type: Literal["plane", "box", "sphere", "cylinder"]
+    size: float | list[float] = 1.0
+    position: Vec3 = (0.0, 0.0, 0.0)
+    rotation_deg: Vec3 = (0.0, 0.0, 0.0)
+    class_name: str = field(default="unlabeled", metadata={"key": "class"})
+    material: Material = "diffuse"
+    reflectivity: float = 0.5
+    segments: int = 64
+    name: str = ""
+
+
+@dataclass(frozen=True)
+class PrimitivesScene:
+    """``scene.builder: primitives``: a ground plane, a box and a sphere unless shapes are given."""
+
+    shapes: list[Shape] = field(
+        default_factory=lambda: [
+            Shape("plane", [40.0, 40.0], class_name="ground", name="ground"),
+            Shape("box", [2.0, 2.0, 2.0], (8.0, 0.0, 1.0), class_name="wall", name="box"),
+            Shape("sphere", 1.0, (0.0, 8.0, 1.0), class_name="person", reflectivity=0.8, name="sphere"),
+        ]
+    )
+
+
+@dataclass(frozen=True)
+class RailwayScene:
+    """``scene.builder: railway``: a straight single track with sleepers, ballast, masts and wires."""
+
+    length: float = 60.0  # m, track length centred on the origin along +x
+    gauge: float = 1.435  # m, between the rail heads' inner edges
+    sleeper_spacing: float = 0.6  # m
+    ballast_height: float = 0.35  # m
+    ballast_shoulder: float = 0.5  # m beyond the sleeper ends
+    span: float = 50.0  # m between the two masts
+    mast_offset: float = 3.2  # m, lateral distance of the masts from the track centre
+    mast_height: float = 8.0  # m
+    contact_wire_height: float = 5.5  # m above the rail head
+    system_height: float = 1.4  # m, messenger wire above the contact wire at the supports
+    contact_wire_sag: float = 0.0  # m at mid-span (contact wires are pre-sagged to ~0)
+    messenger_wire_sag: float = 0.5  # m at mid-span
+    contact_wire_diameter: float = 0.012  # m
+    messenger_wire_diameter: float = 0.011  # m
+    stagger: float = 0.2  # m, lateral zig-zag of the contact wire at the supports
+    dropper_spacing: float = 5.0  # m
+
+
+@dataclass(frozen=True)
+class BlendScene:
+    """``scene.builder: blend``: scan the user's own .blend file."""
+
+    path: str = ""
+
+
+BUILDERS = {"railway": RailwayScene, "primitives": PrimitivesScene, "blend": BlendScene}
+
+
+@dataclass(frozen=True)
+class SceneConfig:
+    builder: str = "railway"
+    params: RailwayScene | PrimitivesScene | BlendScene = field(default_factory=RailwayScene)
+
+
+# ----------------------------------------------------------------------------- sensor, effects, output
+@dataclass(frozen=True)
+class SensorConfig:
+    """The sensor: a preset resolved with field-by-field overrides, and its pose in the world."""
+
+    spec: SensorSpec
+    position: Vec3 = (0.0, -4.0, 2.0)  # m, world
+    rotation_deg: Vec3 = (0.0, 0.0, 0.0)  # roll, pitch, yaw
+
+
+@dataclass(frozen=True)
+class NoiseConfig:
+    sigma: float = 0.0  # m, Gaussian along the beam
+
+
+@dataclass(frozen=True)
+class DropConfig:
+    model: Literal["none", "uniform"] = "none"
+    probability: float = 0.0  # for `uniform`
+
+
+@dataclass(frozen=True)
+class MirrorConfig:
+    max_bounces: int = 3
+
+
+@dataclass(frozen=True)
+class EffectsConfig:
+    noise: NoiseConfig = field(default_factory=NoiseConfig)
+    drop: DropConfig = field(default_factory=DropConfig)
+    mirrors: MirrorConfig = field(default_factory=MirrorConfig)
+
+
+FORMATS = ("ply", "semantickitti", "las", "npy")
+
+
+@dataclass(frozen=True)
+class OutputConfig:
+    formats: list[Literal["ply", "semantickitti", "las", "npy"]] = field(default_factory=lambda: ["ply", "semantickitti"])
+    frame: Literal["sensor", "world"] = "sensor"
+    preview: bool = True
+    sequence: int = 0  # SemanticKITTI sequence number (sequences/SS/)
+
+
+@dataclass(frozen=True)
+class LabelsConfig:
+    """Extra name rules, tried before those of assets_manifest/labels.yaml."""
+
+    name_rules: list[dict] = field(default_factory=list)
+
+
+@dataclass(frozen=True)
+class Config:
+    seed: int = 0
+    frames: int = 1
+    scene: SceneConfig = field(default_factory=SceneConfig)
+    sensor: SensorConfig = field(default_factory=lambda: SensorConfig(resolve_sensor({}, "sensor")))
+    effects: EffectsConfig = field(default_factory=EffectsConfig)
+    output: OutputConfig = field(default_factory=OutputConfig)
+    labels: LabelsConfig = field(default_factory=LabelsConfig)
+
+
+# ----------------------------------------------------------------------------- validation
+def _check_positive(value: float, path: str, allow_zero: bool = False) -> None:
+    if value < 0 or (value == 0 and not allow_zero):
+        raise InputError(f"{path}: must be {'>= 0' if allow_zero else '> 0'}, got {value}")
+
+
+def _scene_from_dict(data) -> SceneConfig:
+    data = dict(data or {})
+    builder = data.pop("builder", "railway")
+    if builder not in BUILDERS:
+        raise InputError(f"scene.builder: unknown builder {builder!r}; allowed: {', '.join(BUILDERS)}")
+    params = from_dict(BUILDERS[builder], data, "scene")
+    if isinstance(params, PrimitivesScene):
+        for i, shape in enumerate(params.shapes):
+            where = f"scene.shapes[{i}]"
+            sizes = [shape.size] if isinstance(shape.size, float) else shape.size
+            want = {"plane": (1, 2), "box": (1, 3), "sphere": (1,), "cylinder": (2,)}[shape.type]
+            if len(sizes) not in want or any(s <= 0 for s in sizes):
+                raise InputError(f"{where}.size: a {shape.type} takes {' or '.join(map(str, want))} positive number(s), got {shape.size}")
+            if not 0 <= shape.reflectivity <= 1:
+                raise InputError(f"{where}.reflectivity: must lie in 0..1, got {shape.reflectivity}")
+            if shape.segments < 3:
+                raise InputError(f"{where}.segments: must be >= 3, got {shape.segments}")
+    elif isinstance(params, BlendScene) and not params.path:
+        raise InputError("scene.path: the blend builder needs the path of a .blend file")
+    elif isinstance(params, RailwayScene):
+        for f in dataclasses.fields(RailwayScene):
+            _check_positive(getattr(params, f.name), f"scene.{f.name}", allow_zero=f.name.endswith(("sag", "stagger")))
+    return SceneConfig(builder, params)
+
+
+def config_from_dict(data) -> Config:
+    """Validate a plain config mapping (as read from YAML) into a :class:`Config`."""
+    if data is None:
+        data = {}
+    if not isinstance(data, dict):
+        raise InputError(f"config: expected a mapping at the top level, got {type(data).__name__}")
+    data = dict(data)
+    scene = _scene_from_dict(data.pop("scene", None))
+    sensor_data = dict(data.pop("sensor", None) or {})
+    hints = typing.get_type_hints(SensorConfig)
+    pose = {k: convert(sensor_data.pop(k), hints[k], f"sensor.{k}") for k in ("position", "rotation_deg") if k in sensor_data}
+    sensor = SensorConfig(resolve_sensor(sensor_data, "sensor"), **pose)
+    config = from_dict(Config, data, "")
+    config = dataclasses.replace(config, scene=scene, sensor=sensor)
+    if config.frames < 1:
+        raise InputError(f"frames: must be >= 1, got {config.frames}")
+    if config.seed < 0:
+        raise InputError(f"seed: must be >= 0, got {config.seed}")
+    _check_positive(config.effects.noise.sigma, "effects.noise.sigma", allow_zero=True)
+    if not 0 <= config.effects.drop.probability <= 1:
+        raise InputError(f"effects.drop.probability: must lie in 0..1, got {config.effects.drop.probability}")
+    if config.effects.mirrors.max_bounces < 0:
+        raise InputError(f"effects.mirrors.max_bounces: must be >= 0, got {config.effects.mirrors.max_bounces}")
+    if not config.output.formats and not config.output.preview:
+        raise InputError(f"output.formats: name at least one of {', '.join(FORMATS)}")
+    return config
+
+
+def config_to_dict(config: Config) -> dict:
+    """The resolved config as plain YAML-ready data; ``config_from_dict`` of it gives ``config`` back."""
+
+    def plain(value):
+        if dataclasses.is_dataclass(value):
+            return {key_of(f): plain(getattr(value, f.name)) for f in dataclasses.fields(value)}
+        if isinstance(value, (list, tuple)):
+            return [plain(v) for v in value]
+        return value
+
+    out = plain(config)
+    out["scene"] = {"builder": config.scene.builder, **out["scene"]["params"]}
+    sensor = out["sensor"]
+    out["sensor"] = {**sensor.pop("spec"), **sensor}
+    return out
+
+
+# ----------------------------------------------------------------------------- files and overrides
+def apply_override(data: dict, assignment: str) -> None:
+    """Apply one ``key.path=value`` (value parsed as YAML) to the raw config mapping in place."""
+    key, sep, text = assignment.partition("=")
+    if not sep or not key.strip():
+        raise InputError(f"--set {assignment!r}: expected key.path=value")
+    try:
+        value = yaml.safe_load(text)
+    except yaml.YAMLError:
+        raise InputError(f"--set {key}: the value {text!r} is not valid YAML") from None
+    parts = key.strip().split(".")
+    node = data
+    for i, part in enumerate(parts[:-1]):
+        if isinstance(node, list) and part.isdigit() and int(part) < len(node):
+            node = node[int(part)]
+        elif isinstance(node, dict):
+            node = node.setdefault(part, {})
+        else:
+            raise InputError(f"--set {key}: {'.'.join(parts[:i + 1])} is not a mapping")
+    last = parts[-1]
+    if isinstance(node, list) and last.isdigit() and int(last) < len(node):
+        node[int(last)] = value
+    elif isinstance(node, dict):
+        node[last] = value
+    else:
+        raise InputError(f"--set {key}: {'.'.join(parts[:-1])} is not a mapping")
+
+
+def read_config_file(path: str | Path) -> dict:
+    """Raw mapping from a YAML file; ``InputError`` naming the file when missing or malformed."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except OSError as err:
+        raise InputError(f"{path}: cannot read the config file ({err.strerror or err})") from None
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as err:
+        mark = getattr(err, "problem_mark", None)
+        where = f" at line {mark.line + 1}" if mark else ""
+        raise InputError(f"{path}: not valid YAML{where}") from None
+    if data is not None and not isinstance(data, dict):
+        raise InputError(f"{path}: expected a mapping of config keys at the top level")
+    return data or {}
+
+
+def load_config(path: str | Path | None = None, overrides: list[str] = ()) -> Config:
+    """Read ``path`` (or the embedded defaults when ``None``), apply ``key=value`` overrides, validate."""
+    data = read_config_file(path) if path else {}
+    for assignment in overrides:
+        apply_override(data, assignment)
+    return config_from_dict(data)
+
+
+def save_config(config: Config, path: str | Path) -> None:
+    """Write the resolved config as YAML (atomically)."""
+    path = Path(path)
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(yaml.safe_dump(config_to_dict(config), sort_keys=False))
+    tmp.replace(path)

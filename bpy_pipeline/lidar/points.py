@@ -1,0 +1,23 @@
+"""The per-point record every scan returns and every writer reads (DESIGN.md, "Per-point record")."""
+
+import numpy as np
+
+POINT_DTYPE = np.dtype(
+    [
+        ("x", "<f4"),  # metres, sensor frame unless the output asks for world
+        ("y", "<f4"),
+        ("z", "<f4"),
+        ("intensity", "<f4"),  # 0..1
+        ("semantic", "<u2"),  # raw class id from assets_manifest/labels.yaml
+        ("instance", "<u4"),  # object instance id, 0 for none
+        ("ring", "<u2"),  # laser channel
+        ("time", "<f8"),  # seconds from frame start
+        ("range", "<f4"),  # metres along the beam (total path length after mirrors)
+        ("bounces", "u1"),  # 0 direct, k after k mirror reflections
+    ]
+)
+
+
+def empty_points(n: int = 0) -> np.ndarray:
+    """A zeroed ``(n,)`` array of :data:`POINT_DTYPE`."""
+    return np.zeros(n, POINT_DTYPE)

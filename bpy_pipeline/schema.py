@@ -1,0 +1,98 @@
+"""Check plain data (parsed YAML) against frozen dataclasses, naming the key path on error.
+
+``from_dict(cls, data, path)`` fills defaults from the dataclass, rejects unknown keys and
+converts values by the field type hints (float, int, bool, str, Literal, unions, lists,
+fixed-length tuples, nested dataclasses). A field may carry ``metadata={"key": "class"}`` to
+be spelled differently in YAML than in Python.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import types
+import typing
+from typing import Literal
+
+from .errors import InputError
+
+
+def key_of(f: dataclasses.Field) -> str:
+    return f.metadata.get("key", f.name)
+
+
+def _type_name(hint) -> str:
+    origin = typing.get_origin(hint)
+    if origin is Literal:
+        return " | ".join(repr(a) for a in typing.get_args(hint))
+    if origin in (typing.Union, types.UnionType):
+        return " or ".join(_type_name(a) for a in typing.get_args(hint))
+    if origin is list:
+        item = _type_name(typing.get_args(hint)[0]).removeprefix("an ").removeprefix("a ")
+        return f"a list of {item}s" if " " not in item else f"a list of ({item})"
+    if origin is tuple:
+        return f"a list of {len(typing.get_args(hint))} numbers"
+    if dataclasses.is_dataclass(hint):
+        return "a mapping"
+    return {float: "a number", int: "an integer", bool: "true or false", str: "a string", dict: "a mapping"}.get(hint, str(hint))
+
+
+def convert(value, hint, path: str):
+    """Check ``value`` against the type ``hint`` and return it converted; ``InputError`` names ``path``."""
+    origin = typing.get_origin(hint)
+    wrong = InputError(f"{path}: expected {_type_name(hint)}, got {value!r}")
+    if origin is Literal:
+        if value not in typing.get_args(hint):
+            raise wrong
+        return value
+    if origin in (typing.Union, types.UnionType):
+        for option in typing.get_args(hint):
+            try:
+                return convert(value, option, path)
+            except InputError:
+                continue
+        raise wrong
+    if origin is list:
+        if not isinstance(value, (list, tuple)):
+            raise wrong
+        (item,) = typing.get_args(hint)
+        return [convert(v, item, f"{path}[{i}]") for i, v in enumerate(value)]
+    if origin is tuple:
+        items = typing.get_args(hint)
+        if not isinstance(value, (list, tuple)) or len(value) != len(items):
+            raise wrong
+        return tuple(convert(v, t, f"{path}[{i}]") for i, (v, t) in enumerate(zip(value, items)))
+    if dataclasses.is_dataclass(hint):
+        return from_dict(hint, value, path)
+    if hint is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or value != value or abs(value) == float("inf"):
+            raise wrong
+        return float(value)
+    if hint is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise wrong
+        return value
+    if hint in (bool, str, dict) and isinstance(value, hint):
+        return value
+    raise wrong
+
+
+def from_dict(cls, data, path: str = ""):
+    """Build dataclass ``cls`` from a mapping, filling defaults; ``InputError`` naming the key path."""
+    if data is None:
+        data = {}
+    if not isinstance(data, dict):
+        raise InputError(f"{path or 'config'}: expected a mapping, got {data!r}")
+    hints = typing.get_type_hints(cls)
+    fields = {key_of(f): f for f in dataclasses.fields(cls)}
+    unknown = sorted(set(map(str, data)) - set(fields))
+    if unknown:
+        raise InputError(f"{_join(path, unknown[0])}: unknown key; allowed: {', '.join(fields)}")
+    kwargs = {f.name: convert(data[k], hints[f.name], _join(path, k)) for k, f in fields.items() if k in data}
+    try:
+        return cls(**kwargs)
+    except TypeError as err:  # a required field is missing
+        raise InputError(f"{path or 'config'}: {err}") from None
+
+
+def _join(path: str, key: str) -> str:
+    return f"{path}.{key}" if path else str(key)
