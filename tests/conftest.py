@@ -1,0 +1,32 @@
+"""Shared fixtures: where the real scans are, and the bpy marker skip."""
+
+import importlib.util
+import os
+from pathlib import Path
+
+import pytest
+
+REAL_SCANS = Path(os.environ.get("BPY_PIPELINE_REAL_SCANS", Path(__file__).resolve().parents[2] / "shared" / "real_scans"))
+HAS_BPY = importlib.util.find_spec("bpy") is not None
+
+
+@pytest.fixture
+def real_scan():
+    """Path of a file in ../shared/real_scans; skips with a reason where it is absent."""
+
+    def get(name: str) -> Path:
+        path = REAL_SCANS / name
+        if not path.exists():
+            pytest.skip(f"real scan {path} is absent (set BPY_PIPELINE_REAL_SCANS to its folder)")
+        return path
+
+    return get
+
+
+def pytest_collection_modifyitems(config, items):
+    if HAS_BPY:
+        return
+    skip = pytest.mark.skip(reason="needs the bpy module (pip install 'bpy==4.5.*' on Python 3.11)")
+    for item in items:
+        if "bpy" in item.keywords:
+            item.add_marker(skip)
