@@ -122,7 +122,9 @@ class DropConfig:
 
 @dataclass(frozen=True)
 class MirrorConfig:
-    max_bounces: int = 3
+    max_bounces: int = 3  # reflections before a beam is given up
+    label: Literal["target", "reflection"] = "target"  # class of points seen through a mirror
+    ideal: bool = False  # report mirrored points at the true hit instead of behind the mirror
 
 
 @dataclass(frozen=True)

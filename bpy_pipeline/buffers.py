@@ -1,0 +1,80 @@
+"""Scene buffers: the one type that crosses the bpy boundary (DESIGN.md, "The way a frame flows").
+
+``export.py`` fills them from Blender's evaluated depsgraph; everything after that (scanner,
+effects, writers) reads only these numpy arrays and never imports bpy.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import InputError
+
+MATERIALS = ("diffuse", "mirror", "glass", "absorber")
+MATERIAL_ID = {name: i for i, name in enumerate(MATERIALS)}
+
+
+@dataclass
+class ObjectTable:
+    """One row per exported object (``k`` rows).
+
+    names, parents, class_names : list[str] of length k (parent ``""`` for none)
+    semantic : (k,) uint16 raw class id (assets_manifest/labels.yaml)
+    instance : (k,) uint32 instance id (>= 1)
+    material : (k,) uint8 index into :data:`MATERIALS`
+    reflectivity : (k,) float32 in 0..1
+    """
+
+    names: list[str]
+    parents: list[str]
+    class_names: list[str]
+    semantic: np.ndarray
+    instance: np.ndarray
+    material: np.ndarray
+    reflectivity: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.names)
+
+    def rows(self) -> list[dict]:
+        """The table as a list of plain dicts (for the manifest)."""
+        return [
+            {
+                "name": self.names[i],
+                "parent": self.parents[i],
+                "class": self.class_names[i],
+                "semantic": int(self.semantic[i]),
+                "instance": int(self.instance[i]),
+                "material": MATERIALS[self.material[i]],
+                "reflectivity": round(float(self.reflectivity[i]), 6),
+            }
+            for i in range(len(self))
+        ]
+
+
+@dataclass
+class SceneBuffers:
+    """Triangles of the evaluated scene in world coordinates.
+
+    vertices : (n, 3) float64, metres, world frame
+    triangles : (m, 3) int32 indices into ``vertices``
+    triangle_object : (m,) int32 row of :attr:`objects` each triangle belongs to
+    objects : :class:`ObjectTable`
+    """
+
+    vertices: np.ndarray
+    triangles: np.ndarray
+    triangle_object: np.ndarray
+    objects: ObjectTable
+
+    def check(self) -> None:
+        """``InputError`` for an empty scene or non-finite vertices (naming the object)."""
+        if len(self.triangles) == 0:
+            raise InputError("scene: nothing to scan (no object with triangles); add geometry or check scene.builder")
+        bad_vertex = ~np.isfinite(self.vertices).all(axis=1)
+        if bad_vertex.any():
+            bad_triangle = np.flatnonzero(bad_vertex[self.triangles].any(axis=1))[0]
+            name = self.objects.names[self.triangle_object[bad_triangle]]
+            raise InputError(f"object {name!r}: has NaN or infinite vertex coordinates; fix or remove it")

@@ -1,0 +1,170 @@
+"""Blender's evaluated depsgraph -> :class:`~bpy_pipeline.buffers.SceneBuffers`.
+
+Modifiers, Geometry Nodes and instances are included (everything ``depsgraph.object_instances``
+lists), world transforms applied in float64 numpy; mesh data is read with ``foreach_get`` once
+per distinct mesh and every instance of it is transformed in one batched matrix product.
+
+Labels come from the custom properties of the object that owns the geometry: the object itself,
+or for instances the instanced object if it is tagged, else the instancer. Untagged objects get
+a class from the name rules (their name, then their ancestors' names) or ``unlabeled``.
+"""
+
+from __future__ import annotations
+
+from collections import defaultdict
+
+import bpy
+import numpy as np
+
+from .buffers import MATERIAL_ID, MATERIALS, ObjectTable, SceneBuffers
+from .errors import InputError
+from .labels import ClassTable
+
+GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "META", "FONT"}
+
+
+def _mesh_arrays(obj) -> tuple[np.ndarray, np.ndarray]:
+    """``(vertices (n, 3) float64 local, triangles (m, 3) int32)`` of an evaluated object."""
+    mesh = obj.to_mesh()
+    try:
+        mesh.calc_loop_triangles()
+        vertices = np.empty(len(mesh.vertices) * 3, np.float32)
+        mesh.vertices.foreach_get("co", vertices)
+        triangles = np.empty(len(mesh.loop_triangles) * 3, np.int32)
+        mesh.loop_triangles.foreach_get("vertices", triangles)
+    finally:
+        obj.to_mesh_clear()
+    return vertices.reshape(-1, 3).astype(np.float64), triangles.reshape(-1, 3)
+
+
+def _ancestors(obj) -> list[str]:
+    names = []
+    while obj is not None:
+        names.append(obj.name)
+        obj = obj.parent
+    return names
+
+
+def _owner(instance):
+    """The original object whose custom properties label this depsgraph instance, and its name chain."""
+    obj = instance.object.original
+    if not instance.is_instance:
+        return obj, _ancestors(obj)
+    parent = instance.parent.original
+    if obj is not parent and "lidar_class" in obj:
+        return obj, _ancestors(obj) + _ancestors(parent)
+    return parent, _ancestors(parent)
+
+
+class _Labeller:
+    """Builds the object table: one row per owner object, validated against the class table."""
+
+    def __init__(self, table: ClassTable, extra_rules=()):
+        self.table = table
+        self.rules = tuple(extra_rules)
+        self.rows: dict[str, dict] = {}
+
+    def row(self, owner, names: list[str]) -> int:
+        key = owner.name_full
+        if key not in self.rows:
+            self.rows[key] = self._describe(owner, names) | {"index": len(self.rows)}
+        return self.rows[key]["index"]
+
+    def _describe(self, owner, names: list[str]) -> dict:
+        where = f"object {owner.name!r}"
+        if "lidar_class" in owner:
+            class_name = str(owner["lidar_class"])
+            semantic = self.table.id_of(class_name, f"{where}: lidar_class")
+        else:
+            class_name = next((r.class_name for r in self.rules if r.applies(names)), None) or self.table.classify(names)
+            semantic = self.table.id_of(class_name, where)
+        material = str(owner.get("lidar_material", "diffuse"))
+        if material not in MATERIAL_ID:
+            raise InputError(f"{where}: lidar_material {material!r} is not one of {', '.join(MATERIALS)}")
+        try:
+            reflectivity = float(owner.get("lidar_reflectivity", 0.5))
+        except (TypeError, ValueError):
+            reflectivity = -1.0
+        if not 0.0 <= reflectivity <= 1.0:
+            raise InputError(f"{where}: lidar_reflectivity must be a number in 0..1, got {owner.get('lidar_reflectivity')!r}")
+        instance = owner.get("lidar_instance")
+        if instance is not None and (not isinstance(instance, int) or instance < 1):
+            raise InputError(f"{where}: lidar_instance must be a positive integer, got {instance!r}")
+        parent = names[1] if len(names) > 1 else ""
+        return {
+            "name": owner.name,
+            "parent": parent,
+            "class": self.table.names[semantic],
+            "semantic": semantic,
+            "instance": instance,
+            "material": MATERIAL_ID[material],
+            "reflectivity": reflectivity,
+        }
+
+    def table_out(self) -> ObjectTable:
+        rows = sorted(self.rows.values(), key=lambda r: r["index"])
+        taken = {r["instance"] for r in rows if r["instance"] is not None}
+        auto = (i for i in range(1, len(rows) + len(taken) + 2) if i not in taken)
+        # Automatic instance ids follow the object names, so they do not depend on evaluation order.
+        for r in sorted((r for r in rows if r["instance"] is None), key=lambda r: r["name"]):
+            r["instance"] = next(auto)
+        return ObjectTable(
+            names=[r["name"] for r in rows],
+            parents=[r["parent"] for r in rows],
+            class_names=[r["class"] for r in rows],
+            semantic=np.array([r["semantic"] for r in rows], np.uint16),
+            instance=np.array([r["instance"] for r in rows], np.uint32),
+            material=np.array([r["material"] for r in rows], np.uint8),
+            reflectivity=np.array([r["reflectivity"] for r in rows], np.float32),
+        )
+
+
+def export_scene(table: ClassTable, extra_rules=(), depsgraph=None, keep_within=None) -> SceneBuffers:
+    """Triangles of every visible, renderable object of the evaluated scene, in world coordinates.
+
+    table : the class table (``labels.load_class_table()``)
+    extra_rules : name rules tried before the table's own
+    keep_within : optional ``(centre (3,), radius)`` in metres; objects whose bounds lie wholly
+        farther than ``radius`` from ``centre`` are not exported (beyond the sensor's range)
+    """
+    depsgraph = depsgraph or bpy.context.evaluated_depsgraph_get()
+    labeller = _Labeller(table, extra_rules)
+    meshes: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
+    placements: dict[tuple, list[np.ndarray]] = defaultdict(list)  # (mesh key, row) -> world matrices
+    for instance in depsgraph.object_instances:
+        obj = instance.object
+        if obj.type not in GEOMETRY_TYPES or (not instance.is_instance and not instance.show_self):
+            continue
+        owner, names = _owner(instance)
+        if owner.hide_render:
+            continue
+        matrix = np.array(instance.matrix_world, np.float64)
+        if keep_within is not None and not _near(obj, matrix, *keep_within):
+            continue
+        key = (obj.data.as_pointer(), "" if instance.is_instance else obj.name_full)
+        if key not in meshes:
+            meshes[key] = _mesh_arrays(obj)
+        if len(meshes[key][1]):
+            placements[(key, labeller.row(owner, names))].append(matrix)
+
+    vertices, triangles, triangle_object, offset = [], [], [], 0
+    for (key, row), matrices in placements.items():
+        local, tris = meshes[key]
+        stack = np.asarray(matrices)  # (g, 4, 4)
+        world = np.einsum("gij,nj->gni", stack[:, :3, :3], local) + stack[:, None, :3, 3]
+        vertices.append(world.reshape(-1, 3))
+        copies = tris[None] + (np.arange(len(stack)) * len(local))[:, None, None]
+        triangles.append(copies.reshape(-1, 3) + offset)
+        triangle_object.append(np.full(len(stack) * len(tris), row, np.int32))
+        offset += len(stack) * len(local)
+    objects = labeller.table_out()
+    if not vertices:
+        return SceneBuffers(np.zeros((0, 3)), np.zeros((0, 3), np.int32), np.zeros(0, np.int32), objects)
+    return SceneBuffers(np.concatenate(vertices), np.concatenate(triangles).astype(np.int32), np.concatenate(triangle_object), objects)
+
+
+def _near(obj, matrix: np.ndarray, centre, radius: float) -> bool:
+    corners = np.array(obj.bound_box, np.float64) @ matrix[:3, :3].T + matrix[:3, 3]
+    low, high = corners.min(axis=0), corners.max(axis=0)
+    nearest = np.clip(np.asarray(centre, float), low, high)
+    return float(np.linalg.norm(nearest - centre)) <= radius

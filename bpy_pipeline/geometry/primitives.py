@@ -1,0 +1,85 @@
+"""Triangle meshes of simple solids, centred on the origin, outward-facing winding. Pure numpy.
+
+Every function returns ``(vertices (n, 3) float64 metres, triangles (m, 3) int32)``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def plane(size_x: float, size_y: float):
+    """A rectangle in z = 0, normal +z."""
+    hx, hy = size_x / 2, size_y / 2
+    vertices = np.array([[-hx, -hy, 0], [hx, -hy, 0], [hx, hy, 0], [-hx, hy, 0]], float)
+    return vertices, np.array([[0, 1, 2], [0, 2, 3]], np.int32)
+
+
+def box(size_x: float, size_y: float, size_z: float):
+    """An axis-aligned box."""
+    corners = np.array([[x, y, z] for x in (-0.5, 0.5) for y in (-0.5, 0.5) for z in (-0.5, 0.5)])
+    faces = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
+    triangles = np.array([t for a, b, c, d in faces for t in ((a, b, c), (a, c, d))], np.int32)
+    return corners * [size_x, size_y, size_z], triangles
+
+
+def prism(profile_yz: np.ndarray, x0: float, x1: float):
+    """A convex profile (k, 2) in the y-z plane, counter-clockwise, extruded from x0 to x1, capped."""
+    profile = np.asarray(profile_yz, float)
+    k = len(profile)
+    vertices = np.concatenate([np.column_stack([np.full(k, x), profile]) for x in (x0, x1)])
+    i = np.arange(k)
+    j = (i + 1) % k
+    sides = np.concatenate([np.stack([i, k + j, j], 1), np.stack([i, k + i, k + j], 1)])
+    fan = np.arange(1, k - 1)
+    caps = np.concatenate([np.stack([np.zeros_like(fan), fan + 1, fan], 1), np.stack([np.full_like(fan, k), k + fan, k + fan + 1], 1)])
+    return vertices, np.concatenate([sides, caps]).astype(np.int32)
+
+
+def uv_sphere(radius: float, segments: int = 64):
+    """A UV sphere with ``segments`` meridians and ``segments // 2`` rings."""
+    rings = max(segments // 2, 2)
+    theta = np.linspace(0, np.pi, rings + 1)[1:-1]
+    phi = np.linspace(0, 2 * np.pi, segments, endpoint=False)
+    t, p = np.meshgrid(theta, phi, indexing="ij")
+    body = np.stack([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)], -1).reshape(-1, 3)
+    vertices = np.concatenate([[[0, 0, 1]], body, [[0, 0, -1]]]) * radius
+    s = segments
+    j = np.arange(s)
+    top = np.stack([np.zeros(s, int), 1 + j, 1 + (j + 1) % s], 1)
+    last = len(vertices) - 1
+    base = 1 + (rings - 2) * s
+    bottom = np.stack([np.full(s, last), base + (j + 1) % s, base + j], 1)
+    r = np.arange(rings - 2)[:, None]
+    a, b = 1 + r * s + j, 1 + r * s + (j + 1) % s
+    quads = np.concatenate([np.stack([a, a + s, b + s], -1).reshape(-1, 3), np.stack([a, b + s, b], -1).reshape(-1, 3)])
+    return vertices, np.concatenate([top, quads, bottom]).astype(np.int32)
+
+
+def cylinder(radius: float, height: float, segments: int = 64):
+    """A capped cylinder along z."""
+    phi = np.linspace(0, 2 * np.pi, segments, endpoint=False)
+    ring = np.column_stack([np.cos(phi), np.sin(phi)]) * radius
+    profile_vertices = np.concatenate([np.column_stack([ring, np.full(segments, z)]) for z in (-height / 2, height / 2)])
+    vertices = np.concatenate([profile_vertices, [[0, 0, -height / 2], [0, 0, height / 2]]])
+    j = np.arange(segments)
+    k = (j + 1) % segments
+    s = segments
+    sides = np.concatenate([np.stack([j, k, s + k], 1), np.stack([j, s + k, s + j], 1)])
+    caps = np.concatenate([np.stack([np.full(s, 2 * s), k, j], 1), np.stack([np.full(s, 2 * s + 1), s + j, s + k], 1)])
+    return vertices, np.concatenate([sides, caps]).astype(np.int32)
+
+
+def merge(parts):
+    """Concatenate ``[(vertices, triangles), ...]`` into one mesh."""
+    vertices, triangles, offset = [], [], 0
+    for v, t in parts:
+        vertices.append(v)
+        triangles.append(t + offset)
+        offset += len(v)
+    return np.concatenate(vertices), np.concatenate(triangles).astype(np.int32)
+
+
+def translated(mesh, offset):
+    """``(vertices + offset, triangles)``."""
+    return mesh[0] + np.asarray(offset, float), mesh[1]

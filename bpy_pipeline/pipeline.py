@@ -1,0 +1,150 @@
+"""Config -> frames on disk: build, export, scan, effects, write; one seeded generator per frame.
+
+Each frame is written into a hidden staging folder and moved into place only when every
+format of it has been written, so a failure never leaves a partial frame. ``manifest.json``
+is rewritten after every frame and records the resolved config, versions, and per frame its
+files, point count, sensor pose and timings.
+"""
+
+from __future__ import annotations
+
+import platform
+import shutil
+import time
+from pathlib import Path
+
+import numpy as np
+
+from . import __version__
+from .buffers import SceneBuffers
+from .config import Config, config_to_dict
+from .errors import InputError
+from .geometry.transforms import pose_matrix, transform_points
+from .io import WRITERS, write_manifest, write_preview
+from .labels import load_class_table, parse_rules
+from .lidar.effects import apply_effects
+from .lidar.raycast import RayCaster
+from .lidar.scanner import scan
+from .lidar.sensors import sensor_pattern, spec_summary
+
+
+def frame_rng(seed: int, frame: int) -> np.random.Generator:
+    """The generator of frame ``frame`` of a run seeded with ``seed``."""
+    return np.random.default_rng(np.random.SeedSequence([seed, frame]))
+
+
+def versions() -> dict:
+    """Versions of everything that shapes the output."""
+    import embreex
+    import numpy
+
+    out = {"bpy_pipeline": __version__, "python": platform.python_version(), "numpy": numpy.__version__}
+    out["embreex"] = getattr(embreex, "__version__", "unknown")
+    try:
+        import bpy
+
+        out["blender"] = bpy.app.version_string
+    except ImportError:
+        out["blender"] = None
+    return out
+
+
+def scan_buffers(buffers: SceneBuffers, config: Config, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """Scan exported buffers with the configured sensor and effects: ``(points, pose (4, 4))``."""
+    buffers.check()
+    spec = config.sensor.spec
+    pose = pose_matrix(config.sensor.position, config.sensor.rotation_deg)
+    caster = RayCaster(buffers, origin=pose[:3, 3])
+    try:
+        ghost = load_class_table().id_of("reflection") if config.effects.mirrors.label == "reflection" else None
+        points = scan(
+            caster, buffers, sensor_pattern(spec), pose, spec.min_range, spec.max_range,
+            max_bounces=config.effects.mirrors.max_bounces, ghost_semantic=ghost, ideal=config.effects.mirrors.ideal,
+        )
+    finally:
+        caster.close()
+    points = apply_effects(points, config.effects, rng)
+    if config.output.frame == "world":
+        xyz = transform_points(np.column_stack([points["x"], points["y"], points["z"]]).astype(np.float64), pose)
+        points["x"], points["y"], points["z"] = xyz.T
+    return points, pose
+
+
+def write_frame(out_dir: Path, index: int, points: np.ndarray, config: Config) -> list[str]:
+    """Write one frame in every configured format, all or nothing; returns paths relative to ``out_dir``."""
+    staging = out_dir / f".frame_{index:06d}.tmp"
+    shutil.rmtree(staging, ignore_errors=True)
+    try:
+        written = []
+        for name in config.output.formats:
+            written += WRITERS[name](staging, index, points, config.output.sequence)
+        if config.output.preview:
+            path = staging / "preview" / f"{index:06d}.png"
+            write_preview(path, points, load_class_table().color_lut())
+            written.append(path)
+        relative = [Path(p).relative_to(staging) for p in written]
+        for rel in relative:
+            (out_dir / rel).parent.mkdir(parents=True, exist_ok=True)
+            (staging / rel).replace(out_dir / rel)
+        return [str(rel) for rel in relative]
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+
+
+def prepare_output(out_dir: Path) -> Path:
+    out_dir = Path(out_dir)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise InputError(f"--out: {out_dir} exists and is not a folder")
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise InputError(f"--out: cannot create {out_dir} ({err.strerror or err})") from None
+    return out_dir
+
+
+def run(config: Config, out_dir: str | Path, log=print) -> dict:
+    """Generate ``config.frames`` frames into ``out_dir``; returns the manifest."""
+    from .export import export_scene
+    from .scenes import build_scene
+
+    table = load_class_table()
+    extra_rules = parse_rules(config.labels.name_rules, "labels.name_rules", table.names)
+    out_dir = prepare_output(out_dir)
+    manifest = {
+        "config": config_to_dict(config),
+        "seed": config.seed,
+        "versions": versions(),
+        "sensor": spec_summary(config.sensor.spec),
+        "class_table": {int(k): v for k, v in table.names.items()},
+        "frames": [],
+    }
+    for index in range(config.frames):
+        rng = frame_rng(config.seed, index)
+        timings = {}
+        start = time.perf_counter()
+        build_scene(config.scene, rng)
+        timings["build"] = time.perf_counter() - start
+        start = time.perf_counter()
+        sensor_range = (np.asarray(config.sensor.position, float), config.sensor.spec.max_range)
+        buffers = export_scene(table, extra_rules, keep_within=sensor_range)
+        timings["export"] = time.perf_counter() - start
+        start = time.perf_counter()
+        points, pose = scan_buffers(buffers, config, rng)
+        timings["scan"] = time.perf_counter() - start
+        start = time.perf_counter()
+        files = write_frame(out_dir, index, points, config)
+        timings["write"] = time.perf_counter() - start
+        manifest["frames"].append(
+            {
+                "index": index,
+                "files": files,
+                "points": int(len(points)),
+                "triangles": int(len(buffers.triangles)),
+                "sensor_pose": pose.tolist(),
+                "timings_s": {k: round(v, 4) for k, v in timings.items()},
+                "objects": buffers.objects.rows(),
+            }
+        )
+        write_manifest(out_dir, manifest)
+        log(f"frame {index + 1}/{config.frames}: {len(points)} points, " + ", ".join(f"{k} {v:.2f} s" for k, v in timings.items()))
+    return manifest

@@ -1,0 +1,83 @@
+"""Blender objects from numpy arrays, label tags, and the collection builders write into."""
+
+from __future__ import annotations
+
+import bpy
+import numpy as np
+
+COLLECTION = "LiDAR Scene"
+
+
+def scene_collection(name: str = COLLECTION) -> bpy.types.Collection:
+    """An empty collection ``name`` linked to the current scene (emptied if it exists, orphans purged)."""
+    collection = bpy.data.collections.get(name)
+    if collection is None:
+        collection = bpy.data.collections.new(name)
+        bpy.context.scene.collection.children.link(collection)
+    for obj in list(collection.all_objects):
+        data = obj.data
+        bpy.data.objects.remove(obj, do_unlink=True)
+        if data is not None and data.users == 0:
+            getattr(bpy.data, {"MESH": "meshes", "CURVE": "curves"}.get(obj.type, "meshes")).remove(data)
+    for child in list(collection.children):
+        bpy.data.collections.remove(child)
+    return collection
+
+
+def tag(obj: bpy.types.Object, class_name: str | None = None, material: str = "diffuse", reflectivity: float = 0.5, instance: int | None = None):
+    """Set the ``lidar_*`` custom properties export reads (DESIGN.md, "One class table")."""
+    if class_name is not None:
+        obj["lidar_class"] = class_name
+    obj["lidar_material"] = material
+    obj["lidar_reflectivity"] = float(reflectivity)
+    if instance is not None:
+        obj["lidar_instance"] = int(instance)
+    return obj
+
+
+def mesh_data(name: str, vertices: np.ndarray, triangles: np.ndarray) -> bpy.types.Mesh:
+    """A mesh datablock from ``(n, 3)`` vertices and ``(m, 3)`` triangles, filled with foreach_set."""
+    mesh = bpy.data.meshes.new(name)
+    vertices = np.ascontiguousarray(vertices, np.float32).reshape(-1)
+    triangles = np.ascontiguousarray(triangles, np.int32).reshape(-1)
+    mesh.vertices.add(len(vertices) // 3)
+    mesh.vertices.foreach_set("co", vertices)
+    mesh.loops.add(len(triangles))
+    mesh.loops.foreach_set("vertex_index", triangles)
+    mesh.polygons.add(len(triangles) // 3)
+    mesh.polygons.foreach_set("loop_start", np.arange(0, len(triangles), 3, dtype=np.int32))
+    mesh.update()
+    return mesh
+
+
+def mesh_object(name, mesh, collection, location=(0, 0, 0), rotation=(0, 0, 0), parent=None) -> bpy.types.Object:
+    """A mesh object for ``mesh`` (a datablock or a ``(vertices, triangles)`` pair) at a pose (m, radians)."""
+    if isinstance(mesh, tuple):
+        mesh = mesh_data(name, *mesh)
+    obj = bpy.data.objects.new(name, mesh)
+    obj.location = location
+    obj.rotation_euler = rotation
+    collection.objects.link(obj)
+    if parent is not None:
+        obj.parent = parent
+    return obj
+
+
+def wire_object(name: str, polylines: list[np.ndarray], radius: float, collection, sides: int = 6) -> bpy.types.Object:
+    """A curve object of poly splines through ``(k, 3)`` points, bevelled to a round wire of ``radius``.
+
+    Blender turns it into a mesh at evaluation; export reads that mesh through the depsgraph.
+    """
+    curve = bpy.data.curves.new(name, "CURVE")
+    curve.dimensions = "3D"
+    curve.bevel_depth = radius
+    curve.bevel_resolution = max(0, (sides - 4) // 2)
+    curve.use_fill_caps = True
+    for points in polylines:
+        spline = curve.splines.new("POLY")
+        spline.points.add(len(points) - 1)
+        co = np.column_stack([points, np.ones(len(points))]).astype(np.float32)
+        spline.points.foreach_set("co", co.ravel())
+    obj = bpy.data.objects.new(name, curve)
+    collection.objects.link(obj)
+    return obj
