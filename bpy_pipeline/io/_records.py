@@ -1,0 +1,30 @@
+"""Check and normalise the points every writer receives (DESIGN.md, "Per-point record")."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import InputError
+from ..lidar.points import POINT_DTYPE
+
+
+def as_points(points, where: str) -> np.ndarray:
+    """``points`` as a C-contiguous ``(n,)`` array of :data:`POINT_DTYPE` (copied only when needed).
+
+    Accepts any 1-D structured array holding at least the :data:`POINT_DTYPE` fields (extra
+    fields are dropped, other field types are cast); ``InputError`` naming ``where`` otherwise.
+    """
+    arr = np.asarray(points)
+    names = arr.dtype.names or ()
+    missing = [name for name in POINT_DTYPE.names if name not in names]
+    if missing or arr.ndim != 1:
+        raise InputError(
+            f"{where}: expected a 1-D structured array with fields {', '.join(POINT_DTYPE.names)}; "
+            f"got shape {arr.shape} dtype {arr.dtype}"
+        )
+    if arr.dtype == POINT_DTYPE:
+        return np.ascontiguousarray(arr)
+    out = np.empty(arr.shape[0], POINT_DTYPE)
+    for name in POINT_DTYPE.names:
+        out[name] = arr[name]
+    return out

@@ -1,0 +1,56 @@
+"""The run manifest, ``OUT/manifest.json`` (DESIGN.md, "Output folder").
+
+The manifest is a plain JSON object (indent 2, keys in insertion order, UTF-8, trailing
+newline). numpy scalars and arrays become JSON numbers and lists, paths become strings.
+NaN and infinity are refused (they are not JSON): a ``ValueError`` names the file.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from .atomic import atomic_write
+
+MANIFEST_NAME = "manifest.json"
+
+
+def to_json(value):
+    """``json.dumps`` fallback: numpy scalars and arrays to Python numbers and lists, paths to strings."""
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, os.PathLike):
+        return os.fspath(value)
+    raise TypeError(f"{type(value).__name__} is not JSON serialisable: {value!r}")
+
+
+def write_manifest(out_dir: str | os.PathLike, manifest: dict) -> Path:
+    """Write ``manifest`` (a JSON-able dict) to ``out_dir/manifest.json`` atomically; return its path."""
+    path = Path(out_dir) / MANIFEST_NAME
+    try:
+        text = json.dumps(manifest, indent=2, sort_keys=False, ensure_ascii=False, allow_nan=False, default=to_json)
+    except (TypeError, ValueError) as err:
+        raise ValueError(f"{path}: cannot write the manifest as JSON ({err})") from None
+    with atomic_write(path) as tmp:
+        tmp.write_text(text + "\n", encoding="utf-8")
+    return path
+
+
+def read_manifest(out_dir: str | os.PathLike) -> dict:
+    """Read ``out_dir/manifest.json``; ``InputError`` naming the file when it is missing or not a JSON object."""
+    path = Path(out_dir) / MANIFEST_NAME
+    try:
+        manifest = json.loads(path.read_text(encoding="utf-8"))
+    except OSError as err:
+        raise InputError(f"{path}: cannot read the run manifest ({err.strerror})") from None
+    except ValueError as err:
+        raise InputError(f"{path}: not valid JSON ({err})") from None
+    if not isinstance(manifest, dict):
+        raise InputError(f"{path}: expected a JSON object at the top level, got {type(manifest).__name__}")
+    return manifest

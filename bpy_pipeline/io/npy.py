@@ -1,0 +1,93 @@
+"""Pointcept-style NPY folders: one folder per frame, one ``.npy`` file per attribute.
+
+Folder contents (Pointcept's ``DefaultDataset`` asset names)::
+
+    coord.npy     (n, 3) float32   x y z, metres
+    strength.npy  (n, 1) float32   intensity, 0..1
+    segment.npy   (n,)   int32     semantic (raw class id)
+    instance.npy  (n,)   int32     instance id; -1 where the point record says 0 (no instance),
+                                   Pointcept's ignore index, so "no object" is never an instance
+
+ring, time, range and bounces are not part of the layout and are not kept.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from ..lidar.points import POINT_DTYPE
+from ._records import as_points
+from .atomic import atomic_dir
+
+NPY_FILES = ("coord", "strength", "segment", "instance")
+IGNORE_INDEX = -1
+
+
+def write_npy_folder(folder: str | os.PathLike, points: np.ndarray) -> list[Path]:
+    """Write ``points`` as a Pointcept frame folder (see the module docstring for the files).
+
+    Parameters
+    ----------
+    folder : str or PathLike
+        The frame folder; it appears atomically (written under a temporary name, then renamed),
+        replacing an existing folder of the same name as a whole.
+    points : (n,) POINT_DTYPE
+        Points (``n`` may be 0); ``instance`` must fit int32 (< 2**31).
+
+    Returns
+    -------
+    paths : list of Path
+        ``[coord.npy, strength.npy, segment.npy, instance.npy]`` inside ``folder``.
+    """
+    folder = Path(folder)
+    pts = as_points(points, str(folder))
+    n = len(pts)
+    if n and int(pts["instance"].max()) > np.iinfo(np.int32).max:
+        raise InputError(f"{folder}: Pointcept instance.npy is int32; got instance ids up to {int(pts['instance'].max())}")
+    arrays = {
+        "coord": np.stack([pts["x"], pts["y"], pts["z"]], axis=1).astype(np.float32),
+        "strength": pts["intensity"].astype(np.float32).reshape(n, 1),
+        "segment": pts["semantic"].astype(np.int32),
+        "instance": np.where(pts["instance"] == 0, IGNORE_INDEX, pts["instance"].astype(np.int64)).astype(np.int32),
+    }
+    with atomic_dir(folder) as tmp:
+        for name in NPY_FILES:
+            np.save(tmp / f"{name}.npy", arrays[name], allow_pickle=False)
+    return [folder / f"{name}.npy" for name in NPY_FILES]
+
+
+def read_npy_folder(folder: str | os.PathLike) -> np.ndarray:
+    """Read a Pointcept frame folder as ``(n,)`` :data:`POINT_DTYPE`.
+
+    ``coord.npy`` is required; ``strength``, ``segment`` and ``instance`` are read when
+    present. Negative segment and instance values (Pointcept's ignore index) become 0
+    (unlabeled, no instance). ring, time, range and bounces are zero.
+    ``InputError`` naming the file for a missing coord file or mismatched shapes.
+    """
+    folder = Path(folder)
+    coord_path = folder / "coord.npy"
+    if not coord_path.is_file():
+        raise InputError(f"{coord_path}: missing; a Pointcept frame folder needs coord.npy")
+    coord = np.load(coord_path, allow_pickle=False)
+    if coord.ndim != 2 or coord.shape[1] != 3:
+        raise InputError(f"{coord_path}: expected shape (n, 3), got {coord.shape}")
+    n = len(coord)
+    out = np.zeros(n, POINT_DTYPE)
+    out["x"], out["y"], out["z"] = coord.T
+    for name, field in (("strength", "intensity"), ("segment", "semantic"), ("instance", "instance")):
+        path = folder / f"{name}.npy"
+        if not path.is_file():
+            continue
+        values = np.load(path, allow_pickle=False)
+        if values.shape not in ((n,), (n, 1)):
+            raise InputError(f"{path}: expected shape ({n},) or ({n}, 1) to match coord.npy, got {values.shape}")
+        values = values.reshape(n)
+        if field == "intensity":
+            out[field] = values
+        else:
+            out[field] = np.where(values < 0, 0, values)
+    return out

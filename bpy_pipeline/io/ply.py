@@ -1,0 +1,157 @@
+"""PLY point clouds: binary little-endian, one vertex property per :data:`POINT_DTYPE` field.
+
+The vertex element of a written file is exactly the bytes of the ``(n,)`` :data:`POINT_DTYPE`
+array (37-byte packed records), so it is written with one ``tofile`` and read with one
+``fromfile``. Property names and types::
+
+    x y z float (m), intensity float (0..1), semantic ushort, instance uint, ring ushort,
+    time double (s from frame start), range float (m), bounces uchar
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from ..lidar.points import POINT_DTYPE
+from ._records import as_points
+from .atomic import atomic_write
+
+# PLY scalar type names (both spellings of the spec) -> numpy type character codes.
+PLY_TYPES = {
+    "char": "i1", "int8": "i1",
+    "uchar": "u1", "uint8": "u1",
+    "short": "i2", "int16": "i2",
+    "ushort": "u2", "uint16": "u2",
+    "int": "i4", "int32": "i4",
+    "uint": "u4", "uint32": "u4",
+    "float": "f4", "float32": "f4",
+    "double": "f8", "float64": "f8",
+}  # fmt: skip
+# What the writer uses for each numpy type.
+PLY_NAMES = {"i1": "char", "u1": "uchar", "i2": "short", "u2": "ushort", "i4": "int", "u4": "uint", "f4": "float", "f8": "double"}
+FORMATS = {"binary_little_endian": "<", "binary_big_endian": ">", "ascii": None}
+
+
+def ply_header(n: int, dtype: np.dtype = POINT_DTYPE) -> bytes:
+    """The ASCII header (``end_header`` and its newline included) for ``n`` vertices of ``dtype``."""
+    lines = ["ply", "format binary_little_endian 1.0", "comment bpy_pipeline point record: metres, seconds", f"element vertex {n}"]
+    for name in dtype.names:
+        code = f"{dtype[name].kind}{dtype[name].itemsize}"
+        lines.append(f"property {PLY_NAMES[code]} {name}")
+    lines.append("end_header")
+    return ("\n".join(lines) + "\n").encode("ascii")
+
+
+def write_ply(path: str | os.PathLike, points: np.ndarray) -> Path:
+    """Write ``points`` as a binary little-endian PLY point cloud, every field kept.
+
+    Parameters
+    ----------
+    path : str or PathLike
+        Destination file; parent folders are created, the file appears atomically.
+    points : (n,) POINT_DTYPE
+        Points (``n`` may be 0). Other structured arrays with the same fields are cast.
+
+    Returns
+    -------
+    path : Path
+        The written file.
+    """
+    path = Path(path)
+    pts = as_points(points, str(path))
+    with atomic_write(path) as tmp, open(tmp, "wb") as f:
+        f.write(ply_header(len(pts)))
+        pts.tofile(f)
+    return path
+
+
+def parse_header(f, path: Path) -> tuple[str, list[tuple[str, int, list[tuple[str, str | tuple]]]]]:
+    """Read the header from an open binary file; return ``(format, elements)``.
+
+    ``elements`` lists ``(name, count, properties)``; a property is ``(name, numpy code)`` or
+    ``(name, (count code, item code))`` for a list property. The file is left at the first data byte.
+    """
+    if f.readline().strip() != b"ply":
+        raise InputError(f"{path}: not a PLY file (it does not start with 'ply')")
+    fmt = None
+    elements: list = []
+    while True:
+        raw = f.readline()
+        if not raw:
+            raise InputError(f"{path}: PLY header has no end_header line")
+        words = raw.decode("ascii", "replace").split()
+        if not words or words[0] in ("comment", "obj_info"):
+            continue
+        key = words[0]
+        try:
+            if key == "end_header":
+                break
+            if key == "format":
+                fmt = words[1]
+                if fmt not in FORMATS:
+                    raise InputError(f"{path}: unsupported PLY format {fmt!r}; allowed: {', '.join(FORMATS)}")
+            elif key == "element":
+                elements.append((words[1], int(words[2]), []))
+            elif key == "property" and words[1] == "list":
+                elements[-1][2].append((words[4], (PLY_TYPES[words[2]], PLY_TYPES[words[3]])))
+            elif key == "property":
+                elements[-1][2].append((words[2], PLY_TYPES[words[1]]))
+            else:
+                raise InputError(f"{path}: unexpected PLY header line {raw.strip()!r}")
+        except (IndexError, KeyError, ValueError):
+            raise InputError(f"{path}: malformed PLY header line {raw.strip()!r}") from None
+    if fmt is None:
+        raise InputError(f"{path}: PLY header has no format line")
+    return fmt, elements
+
+
+def read_ply(path: str | os.PathLike) -> np.ndarray:
+    """Read the vertices of a PLY file as an ``(n,)`` :data:`POINT_DTYPE` array.
+
+    Reads binary (little or big endian) and ASCII files. Vertex properties are matched to
+    :data:`POINT_DTYPE` fields by name and cast; fields the file does not have are zero and
+    extra properties are ignored. Elements before ``vertex`` are skipped if they have only
+    scalar properties (binary) or are read line by line (ASCII). ``InputError`` naming the
+    file for anything it cannot read (not a PLY, list properties on the vertex, truncated data).
+    """
+    path = Path(path)
+    try:
+        f = open(path, "rb")
+    except OSError as err:
+        raise InputError(f"{path}: cannot open PLY file ({err.strerror})") from None
+    with f:
+        fmt, elements = parse_header(f, path)
+        order = FORMATS[fmt]
+        for name, count, props in elements:
+            if any(isinstance(code, tuple) for _, code in props):
+                if name == "vertex":
+                    raise InputError(f"{path}: list properties on the vertex element are not supported")
+                if order is not None:
+                    raise InputError(f"{path}: cannot skip element {name!r} with list properties before 'vertex'")
+            dtype = np.dtype([(prop, (order or "<") + code) for prop, code in props if not isinstance(code, tuple)])
+            if name == "vertex":
+                if order is None:
+                    table = np.loadtxt(f, dtype=np.float64, ndmin=2, max_rows=count) if count else np.zeros((0, len(props)))
+                    if table.shape != (count, len(props)):
+                        raise InputError(f"{path}: expected {count} ASCII vertex rows of {len(props)} values, got {table.shape}")
+                    data = {prop: table[:, i] for i, (prop, _) in enumerate(props)}
+                else:
+                    arr = np.fromfile(f, dtype=dtype, count=count)
+                    if len(arr) != count:
+                        raise InputError(f"{path}: truncated PLY: {len(arr)} of {count} vertices present")
+                    data = {prop: arr[prop] for prop in dtype.names}
+                out = np.zeros(count, POINT_DTYPE)
+                for field in POINT_DTYPE.names:
+                    if field in data:
+                        out[field] = data[field]
+                return out
+            if order is None:
+                for _ in range(count):
+                    f.readline()
+            else:
+                f.seek(count * dtype.itemsize, os.SEEK_CUR)
+    raise InputError(f"{path}: PLY file has no vertex element")

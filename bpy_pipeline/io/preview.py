@@ -1,0 +1,125 @@
+"""Preview images of a labelled cloud: top view (x-y) and side view (x-z), coloured by class.
+
+The image is two equal panels side by side on a dark background: left, seen from above (x to
+the right, y up; higher points drawn over lower ones); right, seen from the side (x to the
+right, z up; points with smaller y, nearer a viewer on the -y side, drawn over the others).
+Each panel is fitted to the cloud with equal aspect (one metre is as many pixels along both
+axes). Rasterisation is vectorised; PNG encoding uses only ``zlib`` and ``struct``.
+"""
+
+from __future__ import annotations
+
+import os
+import struct
+import zlib
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from ._records import as_points
+from .atomic import atomic_write
+
+BACKGROUND = (24, 24, 28)  # not a class colour of assets_manifest/labels.yaml
+MARGIN = 8  # pixels around the cloud inside each panel
+
+
+def encode_png(rgb: np.ndarray, level: int = 6) -> bytes:
+    """PNG file bytes of an ``(h, w, 3) uint8`` RGB image (8-bit truecolour, no filtering)."""
+    rgb = np.ascontiguousarray(rgb, np.uint8)
+    if rgb.ndim != 3 or rgb.shape[2] != 3:
+        raise ValueError(f"expected an (h, w, 3) uint8 image, got shape {rgb.shape}")
+    h, w, _ = rgb.shape
+    rows = np.zeros((h, 1 + 3 * w), np.uint8)  # filter byte 0 (None) before each row
+    rows[:, 1:] = rgb.reshape(h, 3 * w)
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
+
+    ihdr = struct.pack(">IIBBBBB", w, h, 8, 2, 0, 0, 0)
+    return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", zlib.compress(rows.tobytes(), level)) + chunk(b"IEND", b"")
+
+
+def fit(u: np.ndarray, v: np.ndarray, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
+    """Pixel columns and rows ``(n,) int`` of points ``(u, v)`` (n,) fitted into a width x height panel.
+
+    Equal aspect, centred, ``v`` up; a cloud with zero extent along an axis is centred on it.
+    """
+    inner_w, inner_h = max(width - 2 * MARGIN, 1), max(height - 2 * MARGIN, 1)
+    u_min, u_max, v_min, v_max = u.min(), u.max(), v.min(), v.max()
+    spans = np.array([u_max - u_min, v_max - v_min])
+    with np.errstate(divide="ignore"):
+        ratios = np.array([(inner_w - 1) / spans[0], (inner_h - 1) / spans[1]])
+    ratios = ratios[np.isfinite(ratios)]
+    scale = ratios.min() if len(ratios) else 1.0
+    col = np.rint((width - 1) / 2 + (u - (u_min + u_max) / 2) * scale).astype(np.int64)
+    row = np.rint((height - 1) / 2 - (v - (v_min + v_max) / 2) * scale).astype(np.int64)
+    return np.clip(col, 0, width - 1), np.clip(row, 0, height - 1)
+
+
+def splat(image: np.ndarray, col: np.ndarray, row: np.ndarray, depth: np.ndarray, colors: np.ndarray) -> None:
+    """Paint ``colors`` (n, 3) at pixels ``(row, col)`` of ``image`` in place; the largest ``depth`` wins."""
+    if len(col) == 0:
+        return
+    pixel = row * image.shape[1] + col
+    order = np.lexsort((depth, pixel))  # by pixel, then depth ascending
+    pixel = pixel[order]
+    last = np.append(pixel[1:] != pixel[:-1], True)  # the deepest-sorted (winning) point of each pixel
+    winners = order[last]
+    image.reshape(-1, 3)[pixel[last]] = colors[winners]
+
+
+def render_preview(points: np.ndarray, color_lut: np.ndarray, size: tuple[int, int] = (1600, 800), dot: int = 1) -> np.ndarray:
+    """The preview as an ``(height, width, 3) uint8`` RGB array (see the module docstring).
+
+    Parameters
+    ----------
+    points : (n,) POINT_DTYPE
+        Points; those with non-finite coordinates are left out.
+    color_lut : (k, 3) uint8
+        RGB colour per raw class id (``load_class_table().color_lut()``); ``semantic`` must be < k.
+    size : (width, height) int
+        Image size in pixels; each panel is ``width // 2`` wide.
+    dot : int
+        Side of the square drawn per point, in pixels.
+    """
+    pts = as_points(points, "preview")
+    lut = np.asarray(color_lut, np.uint8)
+    width, height = int(size[0]), int(size[1])
+    if width < 2 or height < 1 or dot < 1:
+        raise InputError(f"preview: size must be at least (2, 1) pixels and dot >= 1, got size {size}, dot {dot}")
+    if lut.ndim != 2 or lut.shape[1] != 3:
+        raise InputError(f"preview: color_lut must be a (k, 3) uint8 table, got shape {lut.shape}")
+    image = np.empty((height, width, 3), np.uint8)
+    image[:] = BACKGROUND
+    x, y, z = (pts[name].astype(np.float64) for name in "xyz")
+    keep = np.isfinite(x) & np.isfinite(y) & np.isfinite(z)
+    if not keep.any():
+        return image
+    x, y, z, semantic = x[keep], y[keep], z[keep], pts["semantic"][keep]
+    if int(semantic.max()) >= len(lut):
+        raise InputError(f"preview: semantic id {int(semantic.max())} has no colour (color_lut has {len(lut)} entries)")
+    colors = lut[semantic]
+    panel = width // 2
+    offsets = np.arange(dot) - (dot - 1) // 2
+    du, dv = (a.ravel() for a in np.meshgrid(offsets, offsets))
+    for left, (u, v, depth) in ((0, (x, y, z)), (panel, (x, z, -y))):
+        col, row = fit(u, v, panel, height)
+        col = np.clip(col[:, None] + du, 0, panel - 1).ravel() + left
+        row = np.clip(row[:, None] + dv, 0, height - 1).ravel()
+        splat(image, col, row, np.repeat(depth, len(du)), np.repeat(colors, len(du), axis=0))
+    return image
+
+
+def write_preview(
+    path: str | os.PathLike, points: np.ndarray, color_lut: np.ndarray, size: tuple[int, int] = (1600, 800), dot: int = 1
+) -> Path:
+    """Write the top and side view of ``points`` as a PNG (see :func:`render_preview` for the arguments).
+
+    An empty cloud gives a valid image of background only. Returns the written path.
+    """
+    path = Path(path)
+    data = encode_png(render_preview(points, color_lut, size, dot))
+    with atomic_write(path) as tmp:
+        tmp.write_bytes(data)
+    return path

@@ -1,0 +1,71 @@
+"""atomic_write / atomic_dir: nothing half-written under a final name, no temporary left behind."""
+
+import numpy as np
+import pytest
+
+from bpy_pipeline.io import atomic_dir, atomic_write, write_ply
+from bpy_pipeline.io import ply as ply_module
+from bpy_pipeline.lidar.points import empty_points
+
+
+def test_atomic_write_renames_temporary_on_success(tmp_path):
+    target = tmp_path / "a" / "b" / "frame.bin"
+    with atomic_write(target) as tmp:
+        assert tmp.parent == target.parent and tmp.parent.is_dir()
+        assert tmp.name.startswith(".") and tmp.name.endswith(".tmp")
+        tmp.write_bytes(b"payload")
+        assert not target.exists()
+    assert target.read_bytes() == b"payload"
+    assert sorted(p.name for p in target.parent.iterdir()) == ["frame.bin"]
+
+
+def test_atomic_write_removes_temporary_and_keeps_old_file_on_error(tmp_path):
+    target = tmp_path / "frame.bin"
+    target.write_bytes(b"old")
+    with pytest.raises(RuntimeError, match="boom"):
+        with atomic_write(target) as tmp:
+            tmp.write_bytes(b"half")
+            raise RuntimeError("boom")
+    assert target.read_bytes() == b"old"
+    assert [p.name for p in tmp_path.iterdir()] == ["frame.bin"]
+
+
+def test_atomic_write_fails_when_nothing_was_written(tmp_path):
+    with pytest.raises(FileNotFoundError):
+        with atomic_write(tmp_path / "x.bin"):
+            pass
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_atomic_dir_replaces_whole_folder_or_nothing(tmp_path):
+    target = tmp_path / "frame"
+    target.mkdir()
+    (target / "stale.npy").write_bytes(b"old")
+    with pytest.raises(RuntimeError):
+        with atomic_dir(target) as tmp:
+            (tmp / "new.npy").write_bytes(b"half")
+            raise RuntimeError("boom")
+    assert [p.name for p in target.iterdir()] == ["stale.npy"]
+    assert [p.name for p in tmp_path.iterdir()] == ["frame"]
+    with atomic_dir(target) as tmp:
+        assert tmp.name.startswith(".") and tmp.name.endswith(".tmp")
+        (tmp / "new.npy").write_bytes(b"new")
+    assert [p.name for p in target.iterdir()] == ["new.npy"]
+    assert [p.name for p in tmp_path.iterdir()] == ["frame"]
+
+
+class Exploding(np.ndarray):
+    """A points array whose write fails after some bytes reached the file (a full disk)."""
+
+    def tofile(self, f, *args):
+        f.write(b"partial")
+        raise OSError("No space left on device")
+
+
+def test_writer_failing_mid_write_leaves_no_file(tmp_path, monkeypatch):
+    real = ply_module.as_points
+    monkeypatch.setattr(ply_module, "as_points", lambda points, where: real(points, where).view(Exploding))
+    target = tmp_path / "ply" / "000000.ply"
+    with pytest.raises(OSError, match="No space"):
+        write_ply(target, empty_points(10))
+    assert list(target.parent.iterdir()) == []
