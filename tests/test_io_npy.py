@@ -34,7 +34,7 @@ def test_files_shapes_dtypes_and_round_trip(tmp_path, n):
     np.testing.assert_array_equal(coord, np.stack([pts["x"], pts["y"], pts["z"]], axis=1))
     np.testing.assert_array_equal(strength[:, 0], pts["intensity"])
     np.testing.assert_array_equal(segment, pts["semantic"])
-    np.testing.assert_array_equal(instance, np.where(pts["instance"] == 0, -1, pts["instance"]))
+    np.testing.assert_array_equal(instance, np.where(pts["instance"] == 0, -1, pts["instance"].astype(np.int64)))
     if n:
         assert (instance == -1).any() and (instance > 0).any() and not (instance == 0).any()
     back = read_npy_folder(tmp_path / "000000")

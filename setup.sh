@@ -1,0 +1,39 @@
+#!/usr/bin/env bash
+# Set up ./.venv with bpy_pipeline and Blender's bpy module (Debian 12, Python 3.11).
+#   ./setup.sh        runtime: bpy 4.5 LTS, embreex, trimesh, pyyaml, numpy
+#   ./setup.sh test   the same plus the test tools (pytest, plyfile, laspy)
+# On a bare Debian it installs, as root, what bpy's wheel and venv need from Debian:
+# python3-venv and the X11/GL client libraries bpy links against (no display is used).
+set -euo pipefail
+cd "$(dirname "$0")"
+extras="blender"
+[ "${1:-}" = "test" ] && extras="blender,test"
+venv="${VENV:-.venv}"
+py="${PYTHON:-python3.11}"
+"$py" -c "import sys; assert sys.version_info[:2] == (3, 11)" 2>/dev/null || py=python3
+if ! "$py" -c "import sys; assert sys.version_info[:2] == (3, 11)" 2>/dev/null; then
+  echo "setup.sh: needs Python 3.11 (the bpy 4.5 wheels are built for it); set PYTHON=/path/to/python3.11" >&2
+  exit 1
+fi
+
+packages=()
+"$py" -c "import ensurepip, venv" 2>/dev/null || packages+=(python3-venv)
+declare -A lib_package=([libX11.so.6]=libx11-6 [libXrender.so.1]=libxrender1 [libXfixes.so.3]=libxfixes3 [libXi.so.6]=libxi6
+  [libxkbcommon.so.0]=libxkbcommon0 [libXext.so.6]=libxext6 [libSM.so.6]=libsm6 [libGL.so.1]=libgl1)
+known_libs=$( (/sbin/ldconfig -p 2>/dev/null || ldconfig -p 2>/dev/null) || true)
+for lib in "${!lib_package[@]}"; do
+  grep -q "$lib" <<<"$known_libs" || packages+=("${lib_package[$lib]}")
+done
+if [ ${#packages[@]} -gt 0 ]; then
+  if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
+    echo "setup.sh: installing from Debian: ${packages[*]}"
+    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends "${packages[@]}" >/dev/null
+  else
+    echo "setup.sh: please install these Debian packages first: ${packages[*]}" >&2
+    exit 1
+  fi
+fi
+
+[ -x "$venv/bin/python" ] || "$py" -m venv "$venv"
+"$venv/bin/python" -m pip install -q --disable-pip-version-check -e ".[$extras]"
+echo "setup.sh: ready ($venv, extras: $extras)"
