@@ -54,15 +54,12 @@ def scan_buffers(buffers: SceneBuffers, config: Config, rng: np.random.Generator
     buffers.check()
     spec = config.sensor.spec
     pose = pose_matrix(config.sensor.position, config.sensor.rotation_deg)
-    caster = RayCaster(buffers, origin=pose[:3, 3])
-    try:
-        ghost = load_class_table().id_of("reflection") if config.effects.mirrors.label == "reflection" else None
-        points = scan(
-            caster, buffers, sensor_pattern(spec), pose, spec.min_range, spec.max_range,
-            max_bounces=config.effects.mirrors.max_bounces, ghost_semantic=ghost, ideal=config.effects.mirrors.ideal,
-        )
-    finally:
-        caster.close()
+    caster = RayCaster(buffers, frame=pose)
+    ghost = load_class_table().id_of("reflection") if config.effects.mirrors.label == "reflection" else None
+    points = scan(
+        caster, buffers, sensor_pattern(spec), pose, spec.min_range, spec.max_range,
+        max_bounces=config.effects.mirrors.max_bounces, ghost_semantic=ghost, ideal=config.effects.mirrors.ideal,
+    )
     points = apply_effects(points, config.effects, rng)
     if config.output.frame == "world":
         xyz = transform_points(np.column_stack([points["x"], points["y"], points["z"]]).astype(np.float64), pose)

@@ -27,17 +27,19 @@ OFFSET_ULPS = 64.0 * np.finfo(np.float32).eps  # mirror re-launch offset per met
 
 @dataclass
 class Beams:
-    """Where n beams ended.
+    """The beams that returned (k of n), in firing order.
 
-    path : (n,) float64 total path length, metres (inf where lost)
-    point : (n, 3) float64 world position of the final hit
-    triangle : (n,) int64 final triangle, -1 where lost
-    bounces : (n,) uint8 mirror reflections before the final hit
-    mirror_object : (n,) int32 object row of the first mirror met, -1 for none
-    gain : (n,) float64 product of the reflectivities of the mirrors met
-    cos_incidence : (n,) float64 |cos| of the angle between the last ray and the final surface normal
+    ray : (k,) int64 index of the beam among the n traced
+    path : (k,) float64 total path length, metres
+    point : (k, 3) float64 world position of the final hit
+    triangle : (k,) int64 final triangle
+    bounces : (k,) uint8 mirror reflections before the final hit
+    mirror_object : (k,) int32 object row of the first mirror met, -1 for none
+    gain : (k,) float64 product of the reflectivities of the mirrors met
+    cos_incidence : (k,) float64 |cos| of the angle between the last ray and the final surface normal
     """
 
+    ray: np.ndarray
     path: np.ndarray
     point: np.ndarray
     triangle: np.ndarray
@@ -46,47 +48,90 @@ class Beams:
     gain: np.ndarray
     cos_incidence: np.ndarray
 
-    @property
-    def hit(self) -> np.ndarray:
-        return self.triangle >= 0
 
+def trace_beams(caster: RayCaster, buffers: SceneBuffers, origin, directions, min_range: float, max_range: float, max_bounces: int = 3, directions32=None) -> Beams:
+    """Trace beams through mirrors, in the caster's local frame.
 
-def trace_beams(caster: RayCaster, buffers: SceneBuffers, origins, directions, min_range: float, max_range: float, max_bounces: int = 3) -> Beams:
-    """Trace ``(n, 3)`` world origins and unit directions through mirrors to their final hits."""
-    n = len(origins)
-    beams = Beams(np.zeros(n), np.zeros((n, 3)), np.full(n, -1, np.int64), np.zeros(n, np.uint8), np.full(n, -1, np.int32), np.ones(n), np.zeros(n))
+    origin : (3,) or (n, 3) float64 local coordinates, metres
+    directions : (n, 3) float64 unit vectors, local frame (``directions32``: the same as float32, optional)
+    Returns :class:`Beams` whose ``point`` is in the local frame.
+    """
+    n = len(directions)
     objects = buffers.objects
-    active = np.arange(n)
-    o, d = np.asarray(origins, np.float64), np.asarray(directions, np.float64)
-    while len(active):
-        hits = caster.intersect(o, d, max_range - beams.path[active])
-        keep = hits.hit
-        rows, o, d = active[keep], o[keep], d[keep]
-        t, tri, normal = hits.distance[keep], hits.triangle[keep], hits.normal[keep]
-        beams.path[rows] += t
-        point = o + t[:, None] * d
-        obj = buffers.triangle_object[tri]
-        facing = -np.einsum("ij,ij->i", d, normal)  # > 0 on the front face
+    rows = None  # beam of each active ray; None while it is the identity (first segment)
+    o, d = np.asarray(origin, np.float64), np.asarray(directions, np.float64)
+    travelled, bounces, gain, mirror = 0.0, np.zeros(n, np.uint8), np.ones(n), np.full(n, -1, np.int32)
+    done = []
+    while True:
+        hits = caster.intersect(o, d, max_range - travelled, directions32)
+        directions32 = None
+        i = hits.ray
+        seg_d = d[i]
+        point = (o if o.ndim == 1 else o[i]) + hits.distance[:, None] * seg_d
+        path = hits.distance + (travelled[i] if rows is not None else 0.0)
+        obj = buffers.triangle_object[hits.triangle]
+        facing = -np.einsum("ij,ij->i", seg_d, hits.normal)  # > 0 on the front face
         reflects = (objects.material[obj] == MIRROR) & (facing > 0)
+        beam = i if rows is None else rows[i]
+        if not reflects.any():
+            if rows is None:  # one segment, no mirror met: the defaults need no gathering
+                done.append((beam, path, point, hits.triangle, np.zeros(len(i), np.uint8), np.full(len(i), -1, np.int32), np.ones(len(i)), np.abs(facing)))
+            else:
+                done.append((beam, path, point, hits.triangle, bounces[i], mirror[i], gain[i], np.abs(facing)))
+            break
         final = ~reflects
-        beams.triangle[rows[final]] = tri[final]
-        beams.point[rows[final]] = point[final]
-        beams.cos_incidence[rows[final]] = np.abs(facing[final])
-        bounce = reflects & (beams.bounces[rows] < max_bounces) & (objects.reflectivity[obj] > 0)
-        rows, obj = rows[bounce], obj[bounce]
-        first = beams.mirror_object[rows] < 0
-        beams.mirror_object[rows[first]] = obj[first]
-        beams.gain[rows] *= objects.reflectivity[obj]
-        beams.bounces[rows] += 1
-        normal, d, point = normal[bounce], d[bounce], point[bounce]
+        done.append((beam[final], path[final], point[final], hits.triangle[final], bounces[i][final], mirror[i][final], gain[i][final], np.abs(facing[final])))
+        bounce = reflects & (bounces[i] < max_bounces) & (objects.reflectivity[obj] > 0)
+        if not bounce.any():
+            break
+        j, obj, normal = i[bounce], obj[bounce], hits.normal[bounce]
+        rows, travelled, bounces = beam[bounce], path[bounce], bounces[j] + 1
+        gain = gain[j] * objects.reflectivity[obj]
+        mirror = np.where(mirror[j] < 0, obj, mirror[j])
+        d = seg_d[bounce]
         d = d - 2.0 * np.einsum("ij,ij->i", d, normal)[:, None] * normal
-        offset = OFFSET_ULPS * (1.0 + np.abs(point - caster.origin).max(axis=1))
+        point = point[bounce]
+        offset = OFFSET_ULPS * (1.0 + np.abs(point).max(axis=1))
         o = point + offset[:, None] * normal
-        active = rows
-    lost = (beams.triangle < 0) | (beams.path < min_range)
-    beams.triangle[lost] = -1
-    beams.path[lost] = np.inf
+    if len(done) == 1:
+        beams = Beams(*done[0])
+    else:
+        fields = [np.concatenate(column) for column in zip(*done)]
+        order = np.argsort(fields[0], kind="stable")
+        beams = Beams(*(f[order] for f in fields))
+    near = beams.path >= min_range
+    if not near.all():
+        beams = Beams(*(getattr(beams, f)[near] for f in Beams.__dataclass_fields__))
     return beams
+
+
+def scan_chunk(caster, buffers, directions: np.ndarray, pose: np.ndarray, min_range: float, max_range: float, max_bounces: int, ghost_semantic, ideal: bool) -> np.ndarray:
+    """Point records (sensor frame) of ``(n, 3)`` sensor-frame unit ``directions`` fired from ``pose``.
+
+    Returns ``(points, ray)``: the records and, for each, the index of its ray in ``directions``.
+    """
+    sensor_to_local = np.linalg.solve(caster.frame, pose)
+    rotation, position = sensor_to_local[:3, :3], sensor_to_local[:3, 3]
+    if np.allclose(sensor_to_local, np.eye(4), rtol=0, atol=1e-12):  # the caster works in this sensor's frame
+        beams = trace_beams(caster, buffers, np.zeros(3), directions, min_range, max_range, max_bounces, directions.astype(np.float32))
+    else:
+        beams = trace_beams(caster, buffers, position, directions @ rotation.T, min_range, max_range, max_bounces)
+    objects = buffers.objects
+    obj = buffers.triangle_object[beams.triangle]
+    ghost = beams.bounces > 0
+    points = empty_points(len(beams.ray))
+    xyz = (beams.point - position) @ rotation if ideal else directions[beams.ray] * beams.path[:, None]
+    points["x"], points["y"], points["z"] = xyz.T
+    points["range"] = beams.path
+    points["intensity"] = np.clip(objects.reflectivity[obj] * beams.cos_incidence * beams.gain, 0.0, 1.0)
+    points["semantic"] = objects.semantic[obj]
+    points["instance"] = objects.instance[obj]
+    if ghost.any():
+        points["instance"][ghost] = objects.instance[beams.mirror_object[ghost]]
+        if ghost_semantic is not None:
+            points["semantic"][ghost] = ghost_semantic
+    points["bounces"] = beams.bounces
+    return points, beams.ray
 
 
 def scan_chunks(
@@ -101,38 +146,21 @@ def scan_chunks(
     ideal: bool = False,
     chunk_rays: int = 1 << 18,
 ) -> Iterator[np.ndarray]:
-    """Point records (sensor frame) of a static scan, ``chunk_rays`` rays at a time.
+    """Point records (sensor frame) of a static scan, chunk by chunk in firing order, on every core.
 
     pattern : the sensor's rays (sensor frame)
     pose : (4, 4) float64 sensor-to-world transform
     ghost_semantic : class id given to points seen through mirrors; ``None`` keeps the final object's class
     ideal : report mirrored points at their true position instead of along the original beam
-    Yields :data:`~.points.POINT_DTYPE` arrays holding the hits of consecutive ray chunks.
+    Rays go through in chunks of ``chunk_rays``, so memory does not grow with the ray count;
+    each chunk's Embree queries use every core (:meth:`RayCaster.intersect`).
     """
-    rotation, position = pose[:3, :3], pose[:3, 3]
-    objects = buffers.objects
+
     for start in range(0, len(pattern), chunk_rays):
         s = slice(start, start + chunk_rays)
-        local_dirs = pattern.directions[s]
-        beams = trace_beams(caster, buffers, np.broadcast_to(position, local_dirs.shape), local_dirs @ rotation.T, min_range, max_range, max_bounces)
-        hit = beams.hit
-        obj = buffers.triangle_object[beams.triangle[hit]]
-        ghost = beams.bounces[hit] > 0
-        points = empty_points(int(hit.sum()))
-        if ideal:
-            xyz = (beams.point[hit] - position) @ rotation
-        else:
-            xyz = local_dirs[hit] * beams.path[hit, None]
-        points["x"], points["y"], points["z"] = xyz.T
-        points["range"] = beams.path[hit]
-        points["intensity"] = np.clip(objects.reflectivity[obj] * beams.cos_incidence[hit] * beams.gain[hit], 0.0, 1.0)
-        points["semantic"] = objects.semantic[obj]
-        points["instance"] = np.where(ghost, objects.instance[beams.mirror_object[hit]], objects.instance[obj])
-        if ghost_semantic is not None:
-            points["semantic"][ghost] = ghost_semantic
-        points["ring"] = pattern.ring[s][hit]
-        points["time"] = pattern.time[s][hit]
-        points["bounces"] = beams.bounces[hit]
+        points, ray = scan_chunk(caster, buffers, pattern.directions[s], pose, min_range, max_range, max_bounces, ghost_semantic, ideal)
+        points["ring"] = pattern.ring[s][ray]
+        points["time"] = pattern.time[s][ray]
         yield points
 
 

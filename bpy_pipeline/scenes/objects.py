@@ -15,10 +15,10 @@ def scene_collection(name: str = COLLECTION) -> bpy.types.Collection:
         collection = bpy.data.collections.new(name)
         bpy.context.scene.collection.children.link(collection)
     for obj in list(collection.all_objects):
-        data = obj.data
+        data, kind = obj.data, obj.type
         bpy.data.objects.remove(obj, do_unlink=True)
-        if data is not None and data.users == 0:
-            getattr(bpy.data, {"MESH": "meshes", "CURVE": "curves"}.get(obj.type, "meshes")).remove(data)
+        if data is not None and data.users == 0 and kind in ("MESH", "CURVE"):
+            (bpy.data.meshes if kind == "MESH" else bpy.data.curves).remove(data)
     for child in list(collection.children):
         bpy.data.collections.remove(child)
     return collection
