@@ -25,7 +25,10 @@ from .labels import load_class_table, parse_rules
 from .lidar.effects import apply_effects
 from .lidar.raycast import RayCaster
 from .lidar.scanner import scan
-from .lidar.sensors import sensor_pattern, spec_summary
+from .lidar.sensors import iter_pattern, mount_offset, spec_summary
+
+
+CHUNK_RAYS = 1 << 18  # rays generated and traced at a time: bounds memory for 23-million-ray scans
 
 
 def frame_rng(seed: int, frame: int) -> np.random.Generator:
@@ -49,15 +52,22 @@ def versions() -> dict:
     return out
 
 
+def sensor_pose(config: Config) -> np.ndarray:
+    """``(4, 4)`` sensor-to-world transform: the configured pose, raised by the preset's mount height."""
+    pose = pose_matrix(config.sensor.position, config.sensor.rotation_deg)
+    pose[:3, 3] += mount_offset(config.sensor.spec)
+    return pose
+
+
 def scan_buffers(buffers: SceneBuffers, config: Config, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     """Scan exported buffers with the configured sensor and effects: ``(points, pose (4, 4))``."""
     buffers.check()
     spec = config.sensor.spec
-    pose = pose_matrix(config.sensor.position, config.sensor.rotation_deg)
+    pose = sensor_pose(config)
     caster = RayCaster(buffers, frame=pose)
     ghost = load_class_table().id_of("reflection") if config.effects.mirrors.label == "reflection" else None
     points = scan(
-        caster, buffers, sensor_pattern(spec), pose, spec.min_range, spec.max_range,
+        caster, buffers, iter_pattern(spec, CHUNK_RAYS), pose, spec.min_range, spec.max_range,
         max_bounces=config.effects.mirrors.max_bounces, ghost_semantic=ghost, ideal=config.effects.mirrors.ideal,
     )
     points = apply_effects(points, config.effects, rng)
@@ -122,7 +132,7 @@ def run(config: Config, out_dir: str | Path, log=print) -> dict:
         build_scene(config.scene, rng)
         timings["build"] = time.perf_counter() - start
         start = time.perf_counter()
-        sensor_range = (np.asarray(config.sensor.position, float), config.sensor.spec.max_range)
+        sensor_range = (sensor_pose(config)[:3, 3], config.sensor.spec.max_range)
         buffers = export_scene(table, extra_rules, keep_within=sensor_range)
         timings["export"] = time.perf_counter() - start
         start = time.perf_counter()

@@ -276,7 +276,11 @@ def test_every_preset_round_trips_through_the_config():
         for extra in ([], ["sensor.rotation_hz=20"], ["sensor.max_range=50"]):
             config = load_config(None, [f"sensor.preset={name}", *extra])
             assert config_from_dict(config_to_dict(config)) == config, (name, extra)
-    assert load_config().sensor.spec.name == DEFAULT_PRESET
+    from bpy_pipeline.config import DEFAULT_SENSOR
+
+    assert load_config().sensor.spec.name == DEFAULT_SENSOR["preset"]
+    assert load_config(None, ["sensor.max_range=50"]).sensor.spec.name == DEFAULT_SENSOR["preset"]
+    assert load_config(None, ["sensor.preset=custom"]).sensor.spec.sampling_factor == 1.0
 
 
 def test_overrides_replace_what_they_name():

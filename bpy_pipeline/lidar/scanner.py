@@ -12,7 +12,7 @@ true hit with ``ideal=True``.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Iterator
+from typing import Iterable, Iterator
 
 import numpy as np
 
@@ -137,7 +137,7 @@ def scan_chunk(caster, buffers, directions: np.ndarray, pose: np.ndarray, min_ra
 def scan_chunks(
     caster: RayCaster,
     buffers: SceneBuffers,
-    pattern: Pattern,
+    patterns: Pattern | Iterable[Pattern],
     pose: np.ndarray,
     min_range: float,
     max_range: float,
@@ -146,22 +146,23 @@ def scan_chunks(
     ideal: bool = False,
     chunk_rays: int = 1 << 18,
 ) -> Iterator[np.ndarray]:
-    """Point records (sensor frame) of a static scan, chunk by chunk in firing order, on every core.
+    """Point records (sensor frame) of a static scan, chunk by chunk in firing order.
 
-    pattern : the sensor's rays (sensor frame)
+    patterns : the sensor's rays (sensor frame): one :class:`Pattern`, or consecutive chunks of
+        one (``sensors.iter_pattern``), so a 23-million-ray scan never holds all its rays at once
     pose : (4, 4) float64 sensor-to-world transform
     ghost_semantic : class id given to points seen through mirrors; ``None`` keeps the final object's class
     ideal : report mirrored points at their true position instead of along the original beam
-    Rays go through in chunks of ``chunk_rays``, so memory does not grow with the ray count;
-    each chunk's Embree queries use every core (:meth:`RayCaster.intersect`).
+    Rays go through in chunks of at most ``chunk_rays``, so memory does not grow with the ray
+    count; each chunk's Embree queries use every core (:meth:`RayCaster.intersect`).
     """
-
-    for start in range(0, len(pattern), chunk_rays):
-        s = slice(start, start + chunk_rays)
-        points, ray = scan_chunk(caster, buffers, pattern.directions[s], pose, min_range, max_range, max_bounces, ghost_semantic, ideal)
-        points["ring"] = pattern.ring[s][ray]
-        points["time"] = pattern.time[s][ray]
-        yield points
+    for pattern in [patterns] if isinstance(patterns, Pattern) else patterns:
+        for start in range(0, len(pattern), chunk_rays):
+            s = slice(start, start + chunk_rays)
+            points, ray = scan_chunk(caster, buffers, pattern.directions[s], pose, min_range, max_range, max_bounces, ghost_semantic, ideal)
+            points["ring"] = pattern.ring[s][ray]
+            points["time"] = pattern.time[s][ray]
+            yield points
 
 
 def scan(*args, **kwargs) -> np.ndarray:
