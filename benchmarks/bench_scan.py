@@ -78,7 +78,7 @@ def main():
     bpy.ops.wm.read_factory_settings(use_empty=True)
     resolution = 0.4 if args.small else 0.1
     config = load_config(None, ["sensor.preset=custom", "sensor.channels=320", "sensor.vertical_fov_deg=[-70, 90]",
-                                f"sensor.horizontal_resolution_deg={resolution}", "sensor.min_range=0.2", "sensor.max_range=150"])
+                                f"sensor.horizontal_resolution_deg={resolution}", "sensor.min_range=0.2", "sensor.max_range=150", "sensor.position=[0, -4, 2]"])
     rows = []
     for label, side in (("default railway", 0), ("railway on a GN terrain grid", 200 if args.small else 708)):
         rows.append({"scene": label, **measure(config, side)})

@@ -1,0 +1,13 @@
+"""Run every benchmark in turn: python benchmarks/run_all.py [--small] [--out DIR]."""
+
+import subprocess
+import sys
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+BENCHMARKS = ["bench_export.py", "bench_scan.py", "bench_default_job.py"]
+
+if __name__ == "__main__":
+    for name in BENCHMARKS:
+        print(f"== {name}", flush=True)
+        subprocess.run([sys.executable, str(HERE / name), *sys.argv[1:]], check=True)
