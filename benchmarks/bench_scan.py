@@ -56,7 +56,7 @@ def measure(config, terrain_side: int) -> dict:
 
     caster = RayCaster(buffers, frame=pose, threads=threads)
     full = lambda: scan(caster, buffers, pattern, pose, 0.2, 150.0)  # noqa: E731
-    points = full()
+    points, _ = full()
     t_full = best_of(full)
 
     vertices32 = np.ascontiguousarray(buffers.vertices - pose[:3, 3], np.float32)

@@ -66,11 +66,11 @@ def scan_buffers(buffers: SceneBuffers, config: Config, rng: np.random.Generator
     pose = sensor_pose(config)
     caster = RayCaster(buffers, frame=pose)
     ghost = load_class_table().id_of("reflection") if config.effects.mirrors.label == "reflection" else None
-    points = scan(
+    points, beam = scan(
         caster, buffers, iter_pattern(spec, CHUNK_RAYS), pose, spec.min_range, spec.max_range,
         max_bounces=config.effects.mirrors.max_bounces, ghost_semantic=ghost, ideal=config.effects.mirrors.ideal,
     )
-    points = apply_effects(points, config.effects, rng)
+    points = apply_effects(points, beam, config.effects, rng)
     if config.output.frame == "world":
         xyz = transform_points(np.column_stack([points["x"], points["y"], points["z"]]).astype(np.float64), pose)
         points["x"], points["y"], points["z"] = xyz.T

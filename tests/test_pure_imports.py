@@ -46,7 +46,7 @@ cfg = load_config()
 v, t = primitives.box(10, 10, 10)
 objs = ObjectTable(['room'], [''], ['wall'], np.array([17], np.uint16), np.array([1], np.uint32), np.array([0], np.uint8), np.array([0.5], np.float32))
 buf = SceneBuffers(v, t, np.zeros(len(t), np.int32), objs)
-pts = scan(RayCaster(buf, frame=np.eye(4)), buf, sensor_pattern(cfg.sensor.spec), pose_matrix([0, 0, 0], [0, 0, 0]), 0.1, 100)
+pts, beam = scan(RayCaster(buf, frame=np.eye(4)), buf, sensor_pattern(cfg.sensor.spec), pose_matrix([0, 0, 0], [0, 0, 0]), 0.1, 100)
 assert len(pts) == len(sensor_pattern(cfg.sensor.spec)), len(pts)
 assert 'bpy' not in sys.modules
 print('ok')

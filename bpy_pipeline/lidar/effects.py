@@ -30,8 +30,11 @@ def range_noise(points: np.ndarray, sigma: float, rng: np.random.Generator) -> n
     return points
 
 
-def apply_effects(points: np.ndarray, effects, rng: np.random.Generator) -> np.ndarray:
-    """The configured effects (``config.EffectsConfig``) in a fixed order: drop, then noise."""
+def apply_effects(points: np.ndarray, beam: np.ndarray, effects, rng: np.random.Generator) -> np.ndarray:
+    """The configured effects (``config.EffectsConfig``) in a fixed order: drop, then noise.
+
+    points : (p,) POINT_DTYPE records (sensor frame); beam : (p,) BEAM_DTYPE facts of the same points
+    """
     if effects.drop.model == "uniform":
         points = drop_uniform(points, effects.drop.probability, rng)
     return range_noise(points, effects.noise.sigma, rng)

@@ -21,3 +21,13 @@ POINT_DTYPE = np.dtype(
 def empty_points(n: int = 0) -> np.ndarray:
     """A zeroed ``(n,)`` array of :data:`POINT_DTYPE`."""
     return np.zeros(n, POINT_DTYPE)
+
+
+# What the trace knows about each point beyond its record, for the effects (intensity, drop, noise).
+BEAM_DTYPE = np.dtype(
+    [
+        ("cos_incidence", "<f4"),  # |cos| of the angle between the last ray and the surface normal
+        ("reflectivity", "<f4"),  # lidar_reflectivity of the object finally hit, 0..1
+        ("gain", "<f4"),  # product of the reflectivities of the mirrors met (1 for direct returns)
+    ]
+)

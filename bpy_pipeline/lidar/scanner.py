@@ -17,7 +17,7 @@ from typing import Iterable, Iterator
 import numpy as np
 
 from ..buffers import MATERIAL_ID, SceneBuffers
-from .points import POINT_DTYPE, empty_points
+from .points import BEAM_DTYPE, POINT_DTYPE, empty_points
 from .raycast import RayCaster
 from .sensors import Pattern
 
@@ -105,25 +105,37 @@ def trace_beams(caster: RayCaster, buffers: SceneBuffers, origin, directions, mi
     return beams
 
 
-def scan_chunk(caster, buffers, directions: np.ndarray, pose: np.ndarray, min_range: float, max_range: float, max_bounces: int, ghost_semantic, ideal: bool) -> np.ndarray:
-    """Point records (sensor frame) of ``(n, 3)`` sensor-frame unit ``directions`` fired from ``pose``.
+def scan_chunk(caster, buffers, pattern: Pattern, sensor_to_local: np.ndarray, min_range: float, max_range: float, max_bounces: int = 3, ghost_semantic=None, ideal: bool = False):
+    """Point records of one chunk of rays, in the caster's local frame.
 
-    Returns ``(points, ray)``: the records and, for each, the index of its ray in ``directions``.
+    pattern : the chunk's rays (sensor frame)
+    sensor_to_local : (4, 4) sensor pose in the caster's frame, or (n, 4, 4) one per ray (a moving sensor)
+    Returns ``(points, beam, ray)``: :data:`POINT_DTYPE` records, :data:`BEAM_DTYPE` facts for the
+    effects, and for each point the index of its ray in the chunk.
     """
-    sensor_to_local = np.linalg.solve(caster.frame, pose)
-    rotation, position = sensor_to_local[:3, :3], sensor_to_local[:3, 3]
-    if np.allclose(sensor_to_local, np.eye(4), rtol=0, atol=1e-12):  # the caster works in this sensor's frame
-        beams = trace_beams(caster, buffers, np.zeros(3), directions, min_range, max_range, max_bounces, directions.astype(np.float32))
+    directions = pattern.directions
+    if sensor_to_local.ndim == 2 and pattern.origins is None and np.allclose(sensor_to_local, np.eye(4), rtol=0, atol=1e-12):
+        origin, world_d = np.zeros(3), directions  # the caster works in this sensor's frame: rays go in as they are
+        beams = trace_beams(caster, buffers, origin, directions, min_range, max_range, max_bounces, directions.astype(np.float32))
     else:
-        beams = trace_beams(caster, buffers, position, directions @ rotation.T, min_range, max_range, max_bounces)
+        rotation, translation = sensor_to_local[..., :3, :3], sensor_to_local[..., :3, 3]
+        rotate = (lambda v: v @ rotation.T) if rotation.ndim == 2 else (lambda v: np.einsum("nij,nj->ni", rotation, v))
+        world_d = rotate(directions)
+        origin = translation if pattern.origins is None else translation + rotate(pattern.origins)
+        beams = trace_beams(caster, buffers, origin, world_d, min_range, max_range, max_bounces)
     objects = buffers.objects
     obj = buffers.triangle_object[beams.triangle]
     ghost = beams.bounces > 0
     points = empty_points(len(beams.ray))
-    xyz = (beams.point - position) @ rotation if ideal else directions[beams.ray] * beams.path[:, None]
+    if ideal:
+        xyz = beams.point
+    else:  # where the sensor believes the return is: along the emitted ray at the total path length
+        start = origin if origin.ndim == 1 else origin[beams.ray]
+        xyz = start + world_d[beams.ray] * beams.path[:, None]
     points["x"], points["y"], points["z"] = xyz.T
     points["range"] = beams.path
-    points["intensity"] = np.clip(objects.reflectivity[obj] * beams.cos_incidence * beams.gain, 0.0, 1.0)
+    reflectivity = objects.reflectivity[obj]
+    points["intensity"] = np.clip(reflectivity * beams.cos_incidence * beams.gain, 0.0, 1.0)
     points["semantic"] = objects.semantic[obj]
     points["instance"] = objects.instance[obj]
     if ghost.any():
@@ -131,41 +143,51 @@ def scan_chunk(caster, buffers, directions: np.ndarray, pose: np.ndarray, min_ra
         if ghost_semantic is not None:
             points["semantic"][ghost] = ghost_semantic
     points["bounces"] = beams.bounces
-    return points, beams.ray
+    points["ring"] = pattern.ring[beams.ray]
+    points["time"] = pattern.time[beams.ray]
+    beam = np.empty(len(beams.ray), BEAM_DTYPE)
+    beam["cos_incidence"], beam["reflectivity"], beam["gain"] = beams.cos_incidence, reflectivity, beams.gain
+    return points, beam, beams.ray
 
 
 def scan_chunks(
     caster: RayCaster,
     buffers: SceneBuffers,
     patterns: Pattern | Iterable[Pattern],
-    pose: np.ndarray,
+    pose,
     min_range: float,
     max_range: float,
     max_bounces: int = 3,
     ghost_semantic: int | None = None,
     ideal: bool = False,
     chunk_rays: int = 1 << 18,
-) -> Iterator[np.ndarray]:
-    """Point records (sensor frame) of a static scan, chunk by chunk in firing order.
+) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+    """``(points, beam)`` of a scan, chunk by chunk in firing order; points in the caster's frame.
 
     patterns : the sensor's rays (sensor frame): one :class:`Pattern`, or consecutive chunks of
         one (``sensors.iter_pattern``), so a 23-million-ray scan never holds all its rays at once
-    pose : (4, 4) float64 sensor-to-world transform
+    pose : (4, 4) float64 sensor-to-world transform of a static sensor, or a callable mapping
+        firing times (n,) to (n, 4, 4) poses for a moving one
     ghost_semantic : class id given to points seen through mirrors; ``None`` keeps the final object's class
     ideal : report mirrored points at their true position instead of along the original beam
+    Points come out in the caster's local frame: give the caster the sensor's pose (at frame
+    start, for a moving sensor) and they are in the sensor frame, motion-compensated to that pose.
     Rays go through in chunks of at most ``chunk_rays``, so memory does not grow with the ray
     count; each chunk's Embree queries use every core (:meth:`RayCaster.intersect`).
     """
+    world_to_local = np.linalg.inv(caster.frame)
     for pattern in [patterns] if isinstance(patterns, Pattern) else patterns:
         for start in range(0, len(pattern), chunk_rays):
             s = slice(start, start + chunk_rays)
-            points, ray = scan_chunk(caster, buffers, pattern.directions[s], pose, min_range, max_range, max_bounces, ghost_semantic, ideal)
-            points["ring"] = pattern.ring[s][ray]
-            points["time"] = pattern.time[s][ray]
-            yield points
+            chunk = Pattern(pattern.directions[s], pattern.ring[s], pattern.time[s], None if pattern.origins is None else pattern.origins[s])
+            poses = pose(chunk.time) if callable(pose) else pose
+            points, beam, _ = scan_chunk(caster, buffers, chunk, world_to_local @ poses, min_range, max_range, max_bounces, ghost_semantic, ideal)
+            yield points, beam
 
 
-def scan(*args, **kwargs) -> np.ndarray:
-    """All point records of :func:`scan_chunks` in one ``(p,)`` array."""
+def scan(*args, **kwargs) -> tuple[np.ndarray, np.ndarray]:
+    """All ``(points, beam)`` of :func:`scan_chunks`, each in one array."""
     chunks = list(scan_chunks(*args, **kwargs))
-    return np.concatenate(chunks) if chunks else np.zeros(0, POINT_DTYPE)
+    if not chunks:
+        return np.zeros(0, POINT_DTYPE), np.zeros(0, BEAM_DTYPE)
+    return np.concatenate([c[0] for c in chunks]), np.concatenate([c[1] for c in chunks])

@@ -120,11 +120,14 @@ class Pattern:
     directions : (n, 3) float64 unit vectors, sensor frame
     ring : (n,) uint16 channel index
     time : (n,) float64 seconds from frame start at which each ray fires
+    origins : (n, 3) float64 ray origins, sensor frame, metres; ``None`` when every ray leaves
+        the sensor's origin (a sensor looking through its own mirrors has per-ray origins)
     """
 
     directions: np.ndarray
     ring: np.ndarray
     time: np.ndarray
+    origins: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.directions)
