@@ -11,7 +11,9 @@ from __future__ import annotations
 import platform
 import shutil
 import time
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Iterator
 
 import numpy as np
 
@@ -109,8 +111,37 @@ def prepare_output(out_dir: Path) -> Path:
     return out_dir
 
 
-def run(config: Config, out_dir: str | Path, log=print) -> dict:
+@dataclass(frozen=True)
+class FrameResult:
+    """One frame on disk.
+
+    index : frame index; points : (p,) POINT_DTYPE records as written; pose : (4, 4) float64
+    sensor-to-world transform; manifest : the run manifest as written after this frame
+    """
+
+    index: int
+    points: np.ndarray
+    pose: np.ndarray
+    manifest: dict
+
+
+def run(config: Config, out_dir: str | Path, log=print, build: bool = True) -> dict:
     """Generate ``config.frames`` frames into ``out_dir``; returns the manifest."""
+    manifest = {}
+    for frame in run_frames(config, out_dir, build):
+        manifest = frame.manifest
+        timings = manifest["frames"][-1]["timings_s"]
+        log(f"frame {frame.index + 1}/{config.frames}: {len(frame.points)} points, " + ", ".join(f"{k} {v:.2f} s" for k, v in timings.items()))
+    return manifest
+
+
+def run_frames(config: Config, out_dir: str | Path, build: bool = True) -> Iterator[FrameResult]:
+    """The frames of :func:`run`, one at a time: each is on disk, manifest included, when it is yielded.
+
+    Stopping early (``close()``, or dropping the iterator) keeps every frame already yielded.
+    ``build=False`` scans the current scene as it is instead of building ``config.scene`` for
+    each frame (the Blender panel's "my scene", or a built scene the user has edited since).
+    """
     from .export import export_scene
     from .scenes import build_scene
 
@@ -129,7 +160,8 @@ def run(config: Config, out_dir: str | Path, log=print) -> dict:
         rng = frame_rng(config.seed, index)
         timings = {}
         start = time.perf_counter()
-        build_scene(config.scene, rng)
+        if build:
+            build_scene(config.scene, rng)
         timings["build"] = time.perf_counter() - start
         start = time.perf_counter()
         sensor_range = (sensor_pose(config)[:3, 3], config.sensor.spec.max_range)
@@ -153,5 +185,4 @@ def run(config: Config, out_dir: str | Path, log=print) -> dict:
             }
         )
         write_manifest(out_dir, manifest)
-        log(f"frame {index + 1}/{config.frames}: {len(points)} points, " + ", ".join(f"{k} {v:.2f} s" for k, v in timings.items()))
-    return manifest
+        yield FrameResult(index, points, pose, manifest)
