@@ -70,9 +70,21 @@ class SceneBuffers:
     objects: ObjectTable
 
     def check(self) -> None:
-        """``InputError`` for an empty scene or non-finite vertices (naming the object)."""
-        if len(self.triangles) == 0:
+        """``InputError`` for an empty scene, non-finite vertices or triangle indices out of range (naming the object)."""
+        m = len(self.triangles)
+        if m == 0:
             raise InputError("scene: nothing to scan (no object with triangles); add geometry or check scene.builder")
+        rows = np.asarray(self.triangle_object)
+        if rows.shape != (m,) or rows.min() < 0 or rows.max() >= len(self.objects):
+            raise InputError(f"scene buffers: triangle_object must give each of the {m} triangles a row of the {len(self.objects)}-row object table")
+        out_of_range = (self.triangles < 0) | (self.triangles >= len(self.vertices))
+        if out_of_range.any():
+            bad_triangle, corner = (int(i[0]) for i in np.nonzero(out_of_range))
+            name = self.objects.names[rows[bad_triangle]]
+            raise InputError(
+                f"object {name!r}: a triangle refers to vertex {int(self.triangles[bad_triangle, corner])}, "
+                f"but the scene has vertices 0..{len(self.vertices) - 1}; fix or remove its mesh"
+            )
         bad_vertex = ~np.isfinite(self.vertices).all(axis=1)
         if bad_vertex.any():
             bad_triangle = np.flatnonzero(bad_vertex[self.triangles].any(axis=1))[0]
