@@ -8,6 +8,9 @@ Commands:
 ``sensors show NAME [--rays FILE.npy]``
     One preset's resolved fields and summary; ``--rays`` saves the ray directions of a full
     frame as ``(n, 3)`` float32 in the sensor frame (x forward, y left, z up).
+``fit SCAN [SCAN ...] --out MODEL.yaml [--rings 32 ...]``
+    Ray drop and range noise models fitted to real organised scans (``lidar/fitting.py``),
+    written for ``effects.model_file``; prints each drop model's held-out error.
 
 Each command is a ``_add_<name>(subparsers)`` function that registers its parser and sets
 ``func`` (``args -> exit code``); add new commands the same way. Bad input (``InputError``)
@@ -95,7 +98,80 @@ def _add_sensors(sub) -> None:
     show.set_defaults(func=show_sensor)
 
 
-COMMANDS = [_add_sensors]
+def fit_effects(args) -> int:
+    """Fit drop and noise models to real organised scans and write a model file (``effects.model_file``)."""
+    from dataclasses import replace
+
+    from .lidar import fitting
+    from .lidar.effects import write_model_file
+
+    options = fitting.FitOptions()
+    changes = {k: getattr(args, k) for k in fitting.FitOptions.__dataclass_fields__ if getattr(args, k, None) is not None}
+    options = replace(options, **changes)
+    if options.min_range <= 0 or options.max_range <= options.min_range:
+        raise InputError(f"fit: need 0 < --min-range < --max-range, got {options.min_range} and {options.max_range}")
+    if min(options.range_bins, options.incidence_bins, options.noise_range_bins, options.noise_incidence_bins, options.min_samples) < 1:
+        raise InputError("fit: bin counts and --min-samples must be >= 1")
+    ring_field = None if args.ring_field < 0 else args.ring_field
+    scans = [fitting.read_scan(path, args.rings, args.fields, args.intensity_field, ring_field, args.empty_radius) for path in args.scans]
+    scan = scans[0] if len(scans) == 1 else fitting.stack_scans(scans)
+    models, report = fitting.fit_models(scan, options)
+    write_model_file(args.out, models)
+    src = models.source
+    print(f"{src['sweeps']} sweep(s) of {src['rings']} x {src['columns']}: {src['empty']} empty firings; "
+          f"{src['samples']} with a known target ({src['filled_from_neighbours']} filled from ring neighbours), {src['dropped']} of them dropped")
+    t = models.threshold
+    print(f"uniform: drop {models.uniform:.4f}")
+    print(f"threshold: exponent {t.exponent:g}, softness {t.softness:.3g}, 50 % range at 10 % / 80 %: {t.range_at(0.1):.1f} m / {t.range_at(0.8):.1f} m")
+    kept = int((~np.isnan(models.drop_table.values)).sum())
+    print(f"table: {options.range_bins} x {options.incidence_bins} bins, {kept} with >= {options.min_samples} samples")
+    print(f"noise: sigma {models.noise_range[0] * 1000:.1f} mm + {models.noise_range[1] * 1000:.2f} mm per m (from {src['noise_samples']} samples)")
+    if "cross_validation" in report:
+        cv = report["cross_validation"]
+        names = list(cv)
+        best, pick = fitting.simplest_within_noise(cv, names)
+        print(f"held-out log-loss over {options.folds} column blocks (nats per firing; lower is better):")
+        for name in names:
+            diff = cv[name]["loss"] - cv[best]["loss"]
+            se = diff.std(ddof=1) / np.sqrt(len(diff))
+            print(f"  {name:<12} {cv[name]['parameters']:>3} parameters  {cv[name]['loss'].mean():.4f}  ({diff.mean():+.4f} +- {se:.4f} to the best)")
+        print(f"simplest within noise of the best: {pick}")
+    print(f"written: {args.out} (set effects.model_file to it)")
+    return 0
+
+
+def _add_fit(sub) -> None:
+    p = sub.add_parser(
+        "fit", help="fit ray drop and range noise to real organised scans",
+        description="Fit the uniform, threshold and table drop models and the range and table noise models to real "
+        "organised scans (one sweep: gaps filled from ring neighbours; several sweeps of a static scene: per-pixel "
+        "medians) and write a model file for effects.model_file.",
+    )
+    p.add_argument("scans", nargs="+", metavar="SCAN", help="organised sweep(s): float32 .bin (x y z intensity ring per firing, column after column) or .npy (rings, columns, >= 4)")
+    p.add_argument("--out", required=True, metavar="FILE.yaml", help="model file to write")
+    p.add_argument("--rings", type=int, default=32, help="rings (channels) per column (default 32, an HDL-32E)")
+    p.add_argument("--fields", type=int, default=5, help=".bin: float32 fields per firing (default 5)")
+    p.add_argument("--intensity-field", type=int, default=3, help=".bin: field of the intensity (default 3)")
+    p.add_argument("--ring-field", type=int, default=4, help=".bin: field of the ring id, checked (default 4; -1: none)")
+    p.add_argument("--empty-radius", type=float, default=0.5, help="m: returns nearer the origin are empty-firing candidates (default 0.5)")
+    for name, kind, what in (
+        ("max_gap", int, "columns: longest run of empty firings filled from its ring neighbours"),
+        ("intensity_scale", float, "intensity of an apparent reflectance of 1"),
+        ("min_range", float, "m: nearer targets are left out (the vehicle itself)"),
+        ("max_range", float, "m: farther targets are left out"),
+        ("range_bins", int, "drop table: log-spaced range bins"),
+        ("incidence_bins", int, "drop table: incidence bins over 0..90 deg"),
+        ("noise_range_bins", int, "noise table: range bins"),
+        ("noise_incidence_bins", int, "noise table: incidence bins"),
+        ("min_samples", int, "bins with fewer samples are discarded"),
+        ("folds", int, "column blocks for the held-out comparison (0: skip)"),
+    ):
+        default = getattr(__import__("bpy_pipeline.lidar.fitting", fromlist=["FitOptions"]).FitOptions, name)
+        p.add_argument("--" + name.replace("_", "-"), dest=name, type=kind, default=None, help=f"{what} (default {default})")
+    p.set_defaults(func=fit_effects)
+
+
+COMMANDS = [_add_sensors, _add_fit]
 
 
 def parser() -> argparse.ArgumentParser:

@@ -111,14 +111,61 @@ class SensorConfig:
 
 
 @dataclass(frozen=True)
+class IntensityConfig:
+    """``effects.intensity`` (lidar/effects.py): what a point's intensity (0..1) says."""
+
+    model: Literal["reflectance", "lidar", "carla"] = "reflectance"  # rho cos g | lidar equation | CARLA exp(-a R)
+    alpha: float = 0.0  # 1/m atmospheric extinction, two-way exp(-2 alpha R): `lidar` intensity and `threshold` drop
+    reference_range: float = 10.0  # m: `lidar`, a target of reference_reflectivity at normal incidence here reads 1
+    reference_reflectivity: float = 1.0
+    attenuation_rate: float = 0.004  # 1/m: `carla`, CARLA's atmosphere_attenuation_rate
+
+
+@dataclass(frozen=True)
 class NoiseConfig:
-    sigma: float = 0.0  # m, Gaussian along the beam
+    """``effects.noise``: Gaussian range noise along the beam, per-ring bias, angular jitter."""
+
+    model: Literal["constant", "range", "table"] = "constant"  # table: from effects.model_file
+    sigma: float = 0.0  # m, Gaussian along the beam (`range`: at zero range)
+    sigma_per_metre: float = 0.0  # m of sigma per m of range (`range`)
+    ring_bias: list[float] = field(default_factory=list)  # m added to every range of ring k (one per ring, or none)
+    angular_jitter_deg: float = 0.0  # one sigma, in azimuth and in elevation
+
+
+@dataclass(frozen=True)
+class CarlaDrop:
+    """CARLA's RayCastLidar drop-off, with CARLA's defaults."""
+
+    general_rate: float = 0.45  # dropoff_general_rate: rays lost whatever they hit
+    intensity_limit: float = 0.8  # dropoff_intensity_limit: above it, never lost
+    zero_intensity: float = 0.4  # dropoff_zero_intensity: probability of losing a zero-intensity point
+    attenuation_rate: float = 0.004  # atmosphere_attenuation_rate: intensity exp(-a R), 1/m
+
+
+@dataclass(frozen=True)
+class ThresholdDrop:
+    """A detection threshold from a datasheet's ranges (normal incidence, 50 % detection)."""
+
+    range_at_10: float = 40.0  # m for a 10 % reflectivity target (Ouster OS1: 40; sparse 3D camera: 10)
+    range_at_80: float = 120.0  # m for an 80 % target (0: unknown, the lidar equation's R^2 decides)
+    softness: float = 0.1  # width of the transition in ln(received power); 0 for a hard cut
 
 
 @dataclass(frozen=True)
 class DropConfig:
-    model: Literal["none", "uniform"] = "none"
+    model: Literal["none", "uniform", "carla", "threshold", "table"] = "none"  # table: from effects.model_file
     probability: float = 0.0  # for `uniform`
+    carla: CarlaDrop = field(default_factory=CarlaDrop)
+    threshold: ThresholdDrop = field(default_factory=ThresholdDrop)
+
+
+@dataclass(frozen=True)
+class GlassConfig:
+    """``effects.mirrors.glass``: how beams meet ``glass`` objects (car windows), lidar/scanner.py."""
+
+    normal_return_deg: float = 5.0  # met this close to normal incidence, the glass itself returns the beam
+    reflect_fraction: float = 0.0  # share of the other beams that reflect like a mirror instead of passing through
+    max_passes: int = 8  # glass surfaces a beam may pass through; one more loses it
 
 
 @dataclass(frozen=True)
@@ -133,6 +180,10 @@ class EffectsConfig:
     noise: NoiseConfig = field(default_factory=NoiseConfig)
     drop: DropConfig = field(default_factory=DropConfig)
     mirrors: MirrorConfig = field(default_factory=MirrorConfig)
+    intensity: IntensityConfig = field(default_factory=IntensityConfig)
+    # A file of `python -m bpy_pipeline fit`: the uniform, threshold and table drop models and the
+    # range and table noise models take their parameters from it (relative paths: from the working folder)
+    model_file: str = ""
 
 
 FORMATS = ("ply", "semantickitti", "las", "npy")
@@ -197,6 +248,76 @@ def _scene_from_dict(data) -> SceneConfig:
     return SceneConfig(builder, params)
 
 
+def effects_from_dict(data, spec: SensorSpec | None = None) -> EffectsConfig:
+    """Validate an ``effects`` mapping on its own (as written under ``effects:`` in a config);
+    ``spec``, when given, is the sensor whose rings ``noise.ring_bias`` must match."""
+    effects = from_dict(EffectsConfig, data, "effects")
+    _check_effects(effects, spec)
+    return effects
+
+
+def _check_effects(effects: EffectsConfig, spec: SensorSpec | None) -> None:
+    """Ranges of the effects' parameters, and that a model file holds the models asked of it."""
+    from .lidar.effects import read_model_file
+
+    noise, drop, intensity = effects.noise, effects.drop, effects.intensity
+    for key in ("sigma", "sigma_per_metre", "angular_jitter_deg"):
+        _check_positive(getattr(noise, key), f"effects.noise.{key}", allow_zero=True)
+    rings = None if spec is None else spec.channels if spec.pattern in ("spinning", "terrestrial", "pinhole", "grid") else 1
+    if noise.ring_bias and rings is not None and len(noise.ring_bias) != rings:
+        raise InputError(f"effects.noise.ring_bias: one value per ring ({rings} for this sensor), got {len(noise.ring_bias)}")
+    probabilities = {"effects.drop.probability": drop.probability, "effects.drop.carla.general_rate": drop.carla.general_rate, "effects.drop.carla.zero_intensity": drop.carla.zero_intensity}
+    for key, value in probabilities.items():
+        if not 0 <= value <= 1:
+            raise InputError(f"{key}: must lie in 0..1, got {value}")
+    if not 0 < drop.carla.intensity_limit <= 1:
+        raise InputError(f"effects.drop.carla.intensity_limit: must lie in (0, 1], got {drop.carla.intensity_limit}")
+    _check_positive(drop.carla.attenuation_rate, "effects.drop.carla.attenuation_rate", allow_zero=True)
+    _check_positive(drop.threshold.range_at_10, "effects.drop.threshold.range_at_10")
+    _check_positive(drop.threshold.softness, "effects.drop.threshold.softness", allow_zero=True)
+    if drop.threshold.range_at_80 and drop.threshold.range_at_80 <= drop.threshold.range_at_10:
+        raise InputError(f"effects.drop.threshold.range_at_80: must exceed range_at_10 ({drop.threshold.range_at_10} m), or be 0, got {drop.threshold.range_at_80}")
+    for key in ("alpha", "attenuation_rate"):
+        _check_positive(getattr(intensity, key), f"effects.intensity.{key}", allow_zero=True)
+    _check_positive(intensity.reference_range, "effects.intensity.reference_range")
+    if not 0 < intensity.reference_reflectivity <= 1:
+        raise InputError(f"effects.intensity.reference_reflectivity: must lie in (0, 1], got {intensity.reference_reflectivity}")
+    models = read_model_file(effects.model_file) if effects.model_file else None
+    needs = {"drop_table": drop.model == "table", "noise_table": noise.model == "table"}
+    for attr, needed in needs.items():
+        if needed and (models is None or getattr(models, attr) is None):
+            what = "drop" if attr == "drop_table" else "noise"
+            raise InputError(f"effects.model_file: the table {what} model needs a model file with a {what} table (python -m bpy_pipeline fit), got {effects.model_file or 'none'}")
+
+
+def _check_mirrors(mirrors: MirrorConfig) -> None:
+    if not 0 <= mirrors.max_bounces <= 255:
+        raise InputError(f"effects.mirrors.max_bounces: must lie in 0..255 (a point's bounces is uint8), got {mirrors.max_bounces}")
+    for key, angle in (("normal_return_deg", mirrors.normal_return_deg), ("glass.normal_return_deg", mirrors.glass.normal_return_deg)):
+        if not 0 <= angle < 90:
+            raise InputError(f"effects.mirrors.{key}: must lie in 0..90 degrees (0 = never), got {angle}")
+    if not 0 <= mirrors.glass.reflect_fraction <= 1:
+        raise InputError(f"effects.mirrors.glass.reflect_fraction: must lie in 0..1, got {mirrors.glass.reflect_fraction}")
+    if not 0 <= mirrors.glass.max_passes <= 65535:
+        raise InputError(f"effects.mirrors.glass.max_passes: must lie in 0..65535, got {mirrors.glass.max_passes}")
+
+
+def _check_reflector(reflector: ReflectorConfig, spec: SensorSpec) -> None:
+    if not reflector.enabled:
+        return
+    where = "sensor.reflector"
+    check_reflector(reflector, where)
+    edge = reflector.edge_drop
+    if not 0 <= edge.probability <= 1:
+        raise InputError(f"{where}.edge_drop.probability: must lie in 0..1, got {edge.probability}")
+    if edge.beam_diameter < 0:
+        raise InputError(f"{where}.edge_drop.beam_diameter: must be >= 0 m, got {edge.beam_diameter}")
+    if edge.mask != "none":
+        check_grid(spec, f"{where}.edge_drop.mask")
+        if edge.mask != "generated":
+            load_edge_mask(edge.mask, image_shape(spec), f"{where}.edge_drop.mask")
+
+
 def config_from_dict(data) -> Config:
     """Validate a plain config mapping (as read from YAML) into a :class:`Config`."""
     if data is None:
@@ -216,9 +337,7 @@ def config_from_dict(data) -> Config:
         raise InputError(f"frames: must be >= 1, got {config.frames}")
     if config.seed < 0:
         raise InputError(f"seed: must be >= 0, got {config.seed}")
-    _check_positive(config.effects.noise.sigma, "effects.noise.sigma", allow_zero=True)
-    if not 0 <= config.effects.drop.probability <= 1:
-        raise InputError(f"effects.drop.probability: must lie in 0..1, got {config.effects.drop.probability}")
+    _check_effects(config.effects, config.sensor.spec)
     if config.effects.mirrors.max_bounces < 0:
         raise InputError(f"effects.mirrors.max_bounces: must be >= 0, got {config.effects.mirrors.max_bounces}")
     if not config.output.formats and not config.output.preview:

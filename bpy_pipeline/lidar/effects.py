@@ -1,40 +1,490 @@
-"""Sensor effects applied to point records after the trace: ray drop and range noise.
+"""Sensor effects applied to point records after the trace: intensity, ray drop, range noise.
 
-Every effect takes an explicit ``numpy.random.Generator`` and can be switched off; points
-are in the sensor frame, so a beam's direction is the point's direction from the origin.
+Each effect is a small model chosen in the config (``config.EffectsConfig``), takes the
+explicit ``numpy.random.Generator`` of the frame, and can be switched off. Points are in the
+sensor frame, so a beam's direction is the point's direction from the origin (the scanner
+reports mirrored returns along the emitted beam at the total path length).
+
+Intensity (``effects.intensity.model``)
+    ``reflectance``: ``rho cos(theta) g``, the object's ``lidar_reflectivity`` times the cosine
+    of incidence times the mirror gain ``g`` (product of the reflectivities of the mirrors met),
+    which is what range-compensated sensors report ("calibrated reflectivity").
+    ``lidar``: the lidar equation for an extended Lambertian target,
+    ``P ~ rho cos(theta) g exp(-2 alpha R) / R^2``, normalised so that a target of
+    ``reference_reflectivity`` at normal incidence at ``reference_range`` reads 1 (nearer or
+    brighter returns saturate at 1, as a receiver does).
+    ``carla``: CARLA's ``exp(-a R)`` (``attenuation_rate`` a, CARLA's 0.004 per metre by default).
+
+Ray drop (``effects.drop.model``)
+    ``none``; ``uniform`` (each point lost with ``probability``; the parking paper drew up to
+    0.3 %); ``carla`` (CARLA's RayCastLidar: a general rate dropped before tracing,
+    independent of the hit, then with ``I = exp(-a R)`` a point above ``intensity_limit`` is
+    kept and one below it is kept with probability ``(zero_intensity / intensity_limit) I +
+    1 - zero_intensity``); ``threshold`` (a physical detection threshold: the received power
+    ``rho cos g exp(-2 alpha R) / R^n`` against a sensitivity set by a datasheet's range at 10 %
+    and 80 % reflectivity, so dark objects vanish nearer than bright ones); ``table`` (a drop
+    probability over (range, incidence angle) fitted to real scans, bilinear between bins).
+
+Range noise (``effects.noise``)
+    Gaussian along the beam with sigma ``constant``, growing with ``range`` (``sigma +
+    sigma_per_metre R``) or from a ``table`` over (range, incidence angle); a fixed per-ring
+    range bias (``ring_bias``, metres per ring, as each laser of a multi-beam sensor has its
+    own); angular jitter (``angular_jitter_deg``, one sigma in azimuth and in elevation; the
+    point turns about the sensor at its range, the small-angle view of a beam pointing
+    slightly off).
+
+Fitted models (``effects.model_file``, written by ``python -m bpy_pipeline fit``, see
+:mod:`.fitting`): the ``uniform``, ``threshold`` and ``table`` drop models and the ``range`` and
+``table`` noise models take their parameters from the file when one is given.
 """
 
 from __future__ import annotations
 
+import math
+import os
+from dataclasses import dataclass, field
+from functools import cached_property, lru_cache
+from pathlib import Path
+
 import numpy as np
+import yaml
+
+from ..errors import InputError
+
+MODEL_FORMAT = "bpy_pipeline effects model"
+MODEL_VERSION = 1
+MIN_RANGE = 1e-3  # m: ranges are clamped here before dividing by them
 
 
-def drop_uniform(points: np.ndarray, probability: float, rng: np.random.Generator) -> np.ndarray:
-    """Each point lost independently with ``probability``."""
-    if probability <= 0:
-        return points
-    return points[rng.random(len(points)) >= probability]
+# ----------------------------------------------------------------------------- tables
+@dataclass(frozen=True)
+class BinnedTable:
+    """A quantity binned over (range, incidence angle), bilinear between bin centres.
+
+    range_edges : (nr + 1,) float64 increasing, metres
+    incidence_edges_deg : (ni + 1,) float64 increasing within 0..90, degrees
+    values : (nr, ni) float64; NaN where a bin had too few samples (discarded)
+    samples : (nr, ni) int64 samples each bin was estimated from
+    Discarded bins take the mean of their measured neighbours, growing outwards from the
+    measured ones (:meth:`filled`); queries outside the edges take the outermost bins' values.
+    """
+
+    range_edges: np.ndarray
+    incidence_edges_deg: np.ndarray
+    values: np.ndarray
+    samples: np.ndarray
+
+    def __post_init__(self):
+        for name, dtype in (("range_edges", np.float64), ("incidence_edges_deg", np.float64), ("values", np.float64), ("samples", np.int64)):
+            object.__setattr__(self, name, np.asarray(getattr(self, name), dtype))
+
+    def check(self, where: str) -> None:
+        """``InputError`` naming ``where`` when the table is malformed."""
+        r, i, v = self.range_edges, self.incidence_edges_deg, self.values
+        if r.ndim != 1 or len(r) < 2 or not (np.diff(r) > 0).all() or r[0] < 0:
+            raise InputError(f"{where}.range_edges: need at least 2 increasing ranges >= 0 m")
+        if i.ndim != 1 or len(i) < 2 or not (np.diff(i) > 0).all() or i[0] < 0 or i[-1] > 90:
+            raise InputError(f"{where}.incidence_edges_deg: need at least 2 increasing angles within 0..90 deg")
+        if v.shape != (len(r) - 1, len(i) - 1) or self.samples.shape != v.shape:
+            raise InputError(f"{where}: values and samples must be {len(r) - 1} x {len(i) - 1} (range bins x incidence bins), got {v.shape}")
+        if np.isnan(v).all():
+            raise InputError(f"{where}: every bin is empty (too few samples everywhere)")
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.values.shape
+
+    @cached_property
+    def filled(self) -> np.ndarray:
+        """``(nr, ni)`` values with discarded bins filled from their measured neighbours."""
+        out = self.values.copy()
+        known = ~np.isnan(out)
+        while not known.all():
+            total, count = np.zeros_like(out), np.zeros_like(out)
+            for axis in (0, 1):
+                for shift in (1, -1):
+                    v = np.roll(np.where(known, out, 0.0), shift, axis)
+                    k = np.roll(known, shift, axis).astype(float)
+                    edge = [slice(None)] * 2
+                    edge[axis] = 0 if shift == 1 else -1
+                    v[tuple(edge)], k[tuple(edge)] = 0.0, 0.0  # no wrap-around
+                    total, count = total + v, count + k
+            grow = ~known & (count > 0)
+            out[grow] = total[grow] / count[grow]
+            known = known | grow
+        return out
+
+    def bilinear(self, range_m: np.ndarray, incidence_deg: np.ndarray) -> np.ndarray:
+        """Exact bilinear interpolation between bin centres (clamped outside); ``(p,)`` float64."""
+        rc = 0.5 * (self.range_edges[:-1] + self.range_edges[1:])
+        ic = 0.5 * (self.incidence_edges_deg[:-1] + self.incidence_edges_deg[1:])
+        fr = np.interp(range_m, rc, np.arange(len(rc), dtype=float))
+        fi = np.interp(incidence_deg, ic, np.arange(len(ic), dtype=float))
+        r0, i0 = np.floor(fr).astype(np.intp), np.floor(fi).astype(np.intp)
+        r1, i1 = np.minimum(r0 + 1, len(rc) - 1), np.minimum(i0 + 1, len(ic) - 1)
+        tr, ti = fr - r0, fi - i0
+        v = self.filled
+        return (v[r0, i0] * (1 - tr) + v[r1, i0] * tr) * (1 - ti) + (v[r0, i1] * (1 - tr) + v[r1, i1] * tr) * ti
+
+    # The scan-time lookup: the bilinear surface sampled on a fine regular raster, read at the
+    # nearest raster node (a multiply and a gather instead of two binary searches a point).
+    RASTER = (2048, 91)  # range nodes from the first to the last bin centre; incidence nodes 0..90 deg
+
+    @cached_property
+    def _raster(self):
+        rc = 0.5 * (self.range_edges[:-1] + self.range_edges[1:])
+        nr, ni = self.RASTER if len(rc) > 1 else (1, self.RASTER[1])
+        r_nodes = np.linspace(rc[0], rc[-1], nr)
+        i_nodes = np.linspace(0.0, 90.0, ni)
+        grid = self.bilinear(np.repeat(r_nodes, ni), np.tile(i_nodes, nr)).reshape(nr, ni)
+        r_scale = (nr - 1) / (rc[-1] - rc[0]) if nr > 1 else 0.0
+        return grid.astype(np.float32), float(rc[0]), r_scale, (ni - 1) / 90.0
+
+    def lookup(self, range_m: np.ndarray, cos_incidence: np.ndarray) -> np.ndarray:
+        """Values at ``(p,)`` ranges (m) and ``(p,)`` cosines of incidence; ``(p,)`` float32.
+
+        The bilinear surface read on a raster of 2048 x 91 nodes (range within the bin centres,
+        incidence every 1 deg): within half a node of :meth:`bilinear`.
+        """
+        grid, r0, r_scale, i_scale = self._raster
+        ri = np.clip((np.asarray(range_m, np.float32) - np.float32(r0)) * np.float32(r_scale) + np.float32(0.5), 0, grid.shape[0] - 1).astype(np.intp)
+        angle = np.arccos(np.clip(np.asarray(cos_incidence, np.float32), 0.0, 1.0))
+        ii = (angle * np.float32(math.degrees(1.0) * i_scale) + np.float32(0.5)).astype(np.intp)
+        return grid[ri, np.minimum(ii, grid.shape[1] - 1)]
+
+    def to_dict(self, name: str) -> dict:
+        return {
+            "range_edges": [float(x) for x in self.range_edges],
+            "incidence_edges_deg": [float(x) for x in self.incidence_edges_deg],
+            name: [[None if math.isnan(x) else float(x) for x in row] for row in self.values],
+            "samples": [[int(x) for x in row] for row in self.samples],
+        }
+
+    @classmethod
+    def from_dict(cls, data, name: str, where: str) -> "BinnedTable":
+        if not isinstance(data, dict) or any(k not in data for k in ("range_edges", "incidence_edges_deg", name, "samples")):
+            raise InputError(f"{where}: expected a mapping with range_edges, incidence_edges_deg, {name} and samples")
+        try:
+            values = np.array([[np.nan if x is None else float(x) for x in row] for row in data[name]], np.float64)
+            table = cls(data["range_edges"], data["incidence_edges_deg"], values, np.array(data["samples"], np.int64))
+        except (TypeError, ValueError):
+            raise InputError(f"{where}: the table holds something that is not a number") from None
+        table.check(where)
+        return table
 
 
-def range_noise(points: np.ndarray, sigma: float, rng: np.random.Generator) -> np.ndarray:
-    """Gaussian noise of ``sigma`` metres along each beam; ``range`` and ``x y z`` move together."""
-    if sigma <= 0 or len(points) == 0:
-        return points
-    points = points.copy()
-    old = points["range"].astype(np.float64)
-    new = np.maximum(old + rng.normal(0.0, sigma, len(points)), 0.0)
-    scale = new / np.where(old > 0, old, 1.0)
-    for axis in "xyz":
-        points[axis] = points[axis] * scale
+# ----------------------------------------------------------------------------- intensity
+def reflectance(beam: np.ndarray) -> np.ndarray:
+    """``rho cos(theta) g`` of each point; beam : (p,) BEAM_DTYPE; returns (p,) float32."""
+    return beam["reflectivity"] * beam["cos_incidence"] * beam["gain"]
+
+
+def lidar_intensity(range_m: np.ndarray, beam: np.ndarray, alpha: float, reference_range: float, reference_reflectivity: float = 1.0) -> np.ndarray:
+    """The lidar equation ``rho cos g exp(-2 alpha R) / R^2`` over its value for the reference target.
+
+    range_m : (p,) metres; alpha : 1/m atmospheric extinction; the reference is a Lambertian
+    target of ``reference_reflectivity`` at normal incidence at ``reference_range`` metres.
+    Returns (p,) float32 in 0..1 (clipped: nearer or brighter returns saturate).
+    """
+    r = np.maximum(np.asarray(range_m, np.float32), np.float32(MIN_RANGE))
+    scale = np.float32(reference_range**2 / reference_reflectivity)
+    power = reflectance(beam) * scale / (r * r)
+    if alpha > 0:
+        power *= np.exp(np.float32(-2.0 * alpha) * (r - np.float32(reference_range)))
+    return np.minimum(power, np.float32(1.0))
+
+
+def carla_intensity(range_m: np.ndarray, attenuation_rate: float) -> np.ndarray:
+    """CARLA's intensity ``exp(-a R)``, (p,) float32 (RayCastLidar ComputeIntensity)."""
+    return np.exp(np.float32(-attenuation_rate) * np.asarray(range_m, np.float32))
+
+
+def compute_intensity(range_m: np.ndarray, beam: np.ndarray, intensity) -> np.ndarray:
+    """The configured intensity model (``config.IntensityConfig``) of each point, (p,) float32 in 0..1."""
+    if intensity.model == "lidar":
+        return lidar_intensity(range_m, beam, intensity.alpha, intensity.reference_range, intensity.reference_reflectivity)
+    if intensity.model == "carla":
+        return carla_intensity(range_m, intensity.attenuation_rate)
+    return np.clip(reflectance(beam), 0.0, 1.0)
+
+
+# ----------------------------------------------------------------------------- ray drop
+def carla_keep_probability(intensity: np.ndarray, intensity_limit: float, zero_intensity: float) -> np.ndarray:
+    """CARLA's intensity-based keep probability: 1 above the limit, ``(p0 / limit) I + 1 - p0`` below."""
+    keep = np.float32(zero_intensity / intensity_limit) * intensity + np.float32(1.0 - zero_intensity)
+    return np.where(intensity > intensity_limit, np.float32(1.0), keep)
+
+
+@dataclass(frozen=True)
+class ThresholdModel:
+    """Detection against a receiver sensitivity: a point returns when its received power
+    ``P = a exp(-2 alpha R) / R^n`` (``a = rho cos g``, the apparent reflectance) exceeds
+    ``sensitivity``; ``softness`` > 0 blurs the step into ``p = 1 / (1 + (P / s)^(-1 / softness))``,
+    a logistic in ``ln P`` of width ``softness`` (0: a hard step). ``n`` is 2 for targets larger
+    than the beam (the lidar equation).
+    """
+
+    sensitivity: float
+    exponent: float = 2.0
+    softness: float = 0.0
+    alpha: float = 0.0
+
+    @classmethod
+    def from_datasheet(cls, range_at_10: float, range_at_80: float = 0.0, softness: float = 0.0, alpha: float = 0.0) -> "ThresholdModel":
+        """The model whose 50 % detection range is ``range_at_10`` for a 10 % target and
+        ``range_at_80`` for an 80 % one (normal incidence). With one figure the exponent is the
+        lidar equation's 2; with both it is the one that puts both on the threshold
+        (``ln(8 exp(-2 alpha (R80 - R10))) / ln(R80 / R10)``: 1.89 for an Ouster OS1's 40 m / 120 m).
+        """
+        if range_at_80 > 0:
+            exponent = (math.log(8.0) - 2.0 * alpha * (range_at_80 - range_at_10)) / math.log(range_at_80 / range_at_10)
+        else:
+            exponent = 2.0
+        return cls(0.1 * math.exp(-2.0 * alpha * range_at_10) / range_at_10**exponent, exponent, softness, alpha)
+
+    def range_at(self, reflectivity: float) -> float:
+        """Range (m) at which a target of ``reflectivity`` at normal incidence is seen half the time."""
+        lo, hi = 1e-3, 1e6
+        for _ in range(200):  # bisection: exp(-2 alpha R) / R^n falls monotonically with R
+            mid = math.sqrt(lo * hi)
+            lo, hi = (mid, hi) if reflectivity * math.exp(-2 * self.alpha * mid) / mid**self.exponent > self.sensitivity else (lo, mid)
+        return math.sqrt(lo * hi)
+
+    def detection_probability(self, apparent_reflectance: np.ndarray, range_m: np.ndarray) -> np.ndarray:
+        """(p,) float32 probability that each point returns (apparent reflectance ``a``, range in m)."""
+        r = np.maximum(np.asarray(range_m, np.float32), np.float32(MIN_RANGE))
+        log_p = np.log(np.maximum(np.asarray(apparent_reflectance, np.float32), np.float32(1e-12))) - np.float32(self.exponent) * np.log(r)
+        if self.alpha > 0:
+            log_p -= np.float32(2.0 * self.alpha) * r
+        z = log_p - np.float32(math.log(self.sensitivity))
+        if self.softness <= 0:
+            return (z >= 0).astype(np.float32)
+        return np.float32(1.0) / (np.float32(1.0) + np.exp(np.clip(-z / np.float32(self.softness), -80, 80)))
+
+    def to_dict(self) -> dict:
+        return {
+            "sensitivity": float(self.sensitivity), "exponent": float(self.exponent), "softness": float(self.softness), "alpha": float(self.alpha),
+            "range_at_10": round(self.range_at(0.1), 3), "range_at_80": round(self.range_at(0.8), 3),  # for reading only
+        }
+
+
+# ----------------------------------------------------------------------------- fitted models on file
+@dataclass(frozen=True)
+class FittedModels:
+    """Models fitted to real scans (:mod:`.fitting`), as a model file holds them; any may be absent.
+
+    uniform : drop probability of the ``uniform`` model
+    threshold : the ``threshold`` drop model
+    drop_table : drop probability over (range, incidence)
+    noise_range : ``(sigma, sigma_per_metre)`` of the ``range`` noise model, metres and m/m
+    noise_table : range noise sigma (m) over (range, incidence)
+    source : what the models were fitted on, and how (free-form, for people)
+    """
+
+    uniform: float | None = None
+    threshold: ThresholdModel | None = None
+    drop_table: BinnedTable | None = None
+    noise_range: tuple[float, float] | None = None
+    noise_table: BinnedTable | None = None
+    source: dict = field(default_factory=dict)
+
+    def to_dict(self) -> dict:
+        drop, noise = {}, {}
+        if self.uniform is not None:
+            drop["uniform"] = {"probability": float(self.uniform)}
+        if self.threshold is not None:
+            drop["threshold"] = self.threshold.to_dict()
+        if self.drop_table is not None:
+            drop["table"] = self.drop_table.to_dict("probability")
+        if self.noise_range is not None:
+            noise["range"] = {"sigma": float(self.noise_range[0]), "sigma_per_metre": float(self.noise_range[1])}
+        if self.noise_table is not None:
+            noise["table"] = self.noise_table.to_dict("sigma")
+        return {"format": MODEL_FORMAT, "version": MODEL_VERSION, "source": self.source, "drop": drop, "noise": noise}
+
+
+def write_model_file(path: str | Path, models: FittedModels) -> None:
+    """Write ``models`` as YAML (atomically: a temporary name, then renamed)."""
+    path = Path(path)
+    tmp = path.with_name(path.name + ".tmp")
+    try:
+        tmp.write_text(yaml.safe_dump(models.to_dict(), sort_keys=False, width=120, default_flow_style=None))
+        os.replace(tmp, path)
+    except OSError as err:
+        tmp.unlink(missing_ok=True)
+        raise InputError(f"{path}: cannot write the model file ({err.strerror or err})") from None
+
+
+def read_model_file(path: str | Path) -> FittedModels:
+    """The models of a file written by :func:`write_model_file`; ``InputError`` naming the file."""
+    path = Path(path)
+    try:
+        stat = path.stat()
+    except OSError as err:
+        raise InputError(f"effects.model_file: cannot read {path} ({err.strerror or err})") from None
+    return _read_model_file(str(path.resolve()), stat.st_mtime_ns, stat.st_size)
+
+
+@lru_cache(maxsize=8)
+def _read_model_file(path: str, mtime_ns: int, size: int) -> FittedModels:  # cached per file version
+    where = f"effects.model_file {path}"
+    try:
+        data = yaml.safe_load(Path(path).read_text())
+    except OSError as err:
+        raise InputError(f"{where}: cannot read it ({err.strerror or err})") from None
+    except yaml.YAMLError:
+        raise InputError(f"{where}: not valid YAML") from None
+    if not isinstance(data, dict) or data.get("format") != MODEL_FORMAT:
+        raise InputError(f"{where}: not a model file of `python -m bpy_pipeline fit` (format: {MODEL_FORMAT!r})")
+    if data.get("version") != MODEL_VERSION:
+        raise InputError(f"{where}: version {data.get('version')!r}; this package reads version {MODEL_VERSION}")
+    drop, noise = data.get("drop") or {}, data.get("noise") or {}
+    try:
+        uniform = float(drop["uniform"]["probability"]) if "uniform" in drop else None
+        threshold = None
+        if "threshold" in drop:
+            t = drop["threshold"]
+            threshold = ThresholdModel(float(t["sensitivity"]), float(t["exponent"]), float(t["softness"]), float(t.get("alpha", 0.0)))
+        noise_range = (float(noise["range"]["sigma"]), float(noise["range"]["sigma_per_metre"])) if "range" in noise else None
+    except (KeyError, TypeError, ValueError) as err:
+        raise InputError(f"{where}: a model lacks a parameter or holds a non-number ({err})") from None
+    drop_table = BinnedTable.from_dict(drop["table"], "probability", f"{where}: drop.table") if "table" in drop else None
+    noise_table = BinnedTable.from_dict(noise["table"], "sigma", f"{where}: noise.table") if "table" in noise else None
+    return FittedModels(uniform, threshold, drop_table, noise_range, noise_table, data.get("source") or {})
+
+
+def fitted_models(effects) -> FittedModels | None:
+    """The models of ``effects.model_file``, or ``None`` when the config names none."""
+    return read_model_file(effects.model_file) if effects.model_file else None
+
+
+def threshold_model(effects, models: FittedModels | None = None) -> ThresholdModel:
+    """The ``threshold`` drop model: fitted (model file) or from the config's datasheet figures."""
+    if models is not None and models.threshold is not None:
+        return models.threshold
+    t = effects.drop.threshold
+    return ThresholdModel.from_datasheet(t.range_at_10, t.range_at_80, t.softness, effects.intensity.alpha)
+
+
+# ----------------------------------------------------------------------------- applying them
+def drop_probability(points: np.ndarray, beam: np.ndarray, effects, models: FittedModels | None = None) -> np.ndarray | None:
+    """Probability that each traced point is lost, (p,) float32, for the configured model
+    (CARLA's general rate included); ``None`` for ``none``. ``models``: those of
+    ``effects.model_file``, read here when not given."""
+    drop = effects.drop
+    if drop.model == "none":
+        return None
+    models = fitted_models(effects) if models is None else models
+    if drop.model == "uniform":
+        p = models.uniform if models is not None and models.uniform is not None else drop.probability
+        return np.full(len(points), p, np.float32)
+    if drop.model == "carla":
+        c = drop.carla
+        keep = carla_keep_probability(carla_intensity(points["range"], c.attenuation_rate), c.intensity_limit, c.zero_intensity)
+        return np.float32(1.0) - np.float32(1.0 - c.general_rate) * keep
+    if drop.model == "threshold":
+        return np.float32(1.0) - threshold_model(effects, models).detection_probability(reflectance(beam), points["range"])
+    if models is None or models.drop_table is None:
+        raise InputError("effects.model_file: the table drop model needs a model file holding a drop table (python -m bpy_pipeline fit)")
+    return models.drop_table.lookup(points["range"], beam["cos_incidence"])
+
+
+def drop_mask(points: np.ndarray, beam: np.ndarray, effects, rng: np.random.Generator, models: FittedModels | None = None) -> np.ndarray | None:
+    """(p,) bool, True for the points that survive the configured drop model; ``None`` keeps all.
+
+    ``carla`` draws twice per point, as CARLA does: the general drop (before tracing in CARLA,
+    so independent of the hit), then the intensity-based one; the others draw once.
+    """
+    drop = effects.drop
+    n = len(points)
+    if drop.model == "none" or n == 0:
+        return None
+    if drop.model == "carla":
+        c = drop.carla
+        keep = rng.random(n, dtype=np.float32) >= np.float32(c.general_rate)
+        p_keep = carla_keep_probability(carla_intensity(points["range"], c.attenuation_rate), c.intensity_limit, c.zero_intensity)
+        return keep & (rng.random(n, dtype=np.float32) < p_keep)
+    return rng.random(n, dtype=np.float32) >= drop_probability(points, beam, effects, models)
+
+
+def noise_sigma(points: np.ndarray, beam: np.ndarray, noise, models: FittedModels | None = None) -> np.ndarray | float:
+    """Range noise sigma (m) of each point: a float for ``constant``, else (p,) float32."""
+    if noise.model == "constant":
+        return noise.sigma
+    if noise.model == "range":
+        sigma, slope = models.noise_range if models is not None and models.noise_range is not None else (noise.sigma, noise.sigma_per_metre)
+        return np.float32(sigma) + np.float32(slope) * points["range"]
+    if models is None or models.noise_table is None:
+        raise InputError("effects.model_file: the table noise model needs a model file holding a noise table (python -m bpy_pipeline fit)")
+    return models.noise_table.lookup(points["range"], beam["cos_incidence"])
+
+
+def perturb(points: np.ndarray, beam: np.ndarray, noise, rng: np.random.Generator, models: FittedModels | None = None) -> None:
+    """Range noise, per-ring bias and angular jitter applied to ``points`` in place (sensor frame).
+
+    The range moves by ``N(0, sigma) + bias[ring]`` along the beam (clamped at 0) and, with
+    jitter, the direction turns by ``N(0, jitter)`` in azimuth and in elevation (tangent-plane
+    step, then back to the new range); ``x y z`` and ``range`` stay consistent.
+    """
+    n = len(points)
+    sigma = noise_sigma(points, beam, noise, models)
+    has_noise = np.any(np.asarray(sigma) > 0)
+    jitter = math.radians(noise.angular_jitter_deg)
+    if n == 0 or not (has_noise or noise.ring_bias or jitter > 0):
+        return
+    old = points["range"]
+    new = old.copy()
+    if has_noise:
+        new += rng.standard_normal(n, dtype=np.float32) * (np.float32(sigma) if np.isscalar(sigma) else sigma)
+    if noise.ring_bias:
+        bias = np.asarray(noise.ring_bias, np.float32)
+        ring = points["ring"]
+        if ring.max() >= len(bias):
+            raise InputError(f"effects.noise.ring_bias: {len(bias)} values but the scan has ring {int(ring.max())}; give one per ring")
+        new += bias[ring]
+    np.maximum(new, 0.0, out=new)
+    x, y, z = points["x"], points["y"], points["z"]
+    if jitter > 0:
+        a, e = rng.standard_normal((2, n), dtype=np.float32) * np.float32(jitter)
+        rho = np.sqrt(x * x + y * y)
+        flat = rho > np.float32(1e-6) * np.maximum(old, np.float32(MIN_RANGE))
+        rho_safe = np.where(flat, rho, np.float32(1.0))
+        # azimuth unit (-y, x, 0)/rho; elevation unit (-x z, -y z, rho^2)/(rho r); steps scaled by r
+        r_safe = np.maximum(old, np.float32(MIN_RANGE))
+        step_a = np.where(flat, a * r_safe / rho_safe, 0)
+        step_e = np.where(flat, e / rho_safe, 0)
+        x, y, z = x - y * step_a - x * z * step_e, y + x * step_a - y * z * step_e, z + rho * rho * step_e
+        old = np.sqrt(x * x + y * y + z * z)
+    scale = new / np.maximum(old, np.float32(MIN_RANGE))
+    points["x"], points["y"], points["z"] = x * scale, y * scale, z * scale
     points["range"] = new
-    return points
+
+
+def _copy_records(records: np.ndarray, keep: np.ndarray | None = None) -> np.ndarray:
+    """A copy of a structured array, of only its ``keep`` rows when given.
+
+    Through a same-size opaque (void) view: numpy copies packed records field by field
+    otherwise, ten times slower for :data:`POINT_DTYPE`.
+    """
+    records = np.ascontiguousarray(records)
+    raw = records.view(np.dtype((np.void, records.dtype.itemsize)))
+    return (raw.copy() if keep is None else raw[keep]).view(records.dtype)
 
 
 def apply_effects(points: np.ndarray, beam: np.ndarray, effects, rng: np.random.Generator) -> np.ndarray:
-    """The configured effects (``config.EffectsConfig``) in a fixed order: drop, then noise.
+    """The configured effects (``config.EffectsConfig``) in a fixed order; returns new records.
 
     points : (p,) POINT_DTYPE records (sensor frame); beam : (p,) BEAM_DTYPE facts of the same points
+    1. intensity of the true geometry; 2. ray drop (it sees the true range, as the receiver
+    does); 3. range noise, ring bias and angular jitter on the points that remain. Random draws
+    come from ``rng`` in that order, so the same generator state gives the same bytes.
     """
-    if effects.drop.model == "uniform":
-        points = drop_uniform(points, effects.drop.probability, rng)
-    return range_noise(points, effects.noise.sigma, rng)
+    models = fitted_models(effects)
+    intensity = compute_intensity(points["range"], beam, effects.intensity)
+    keep = drop_mask(points, beam, effects, rng, models)
+    points = _copy_records(points, keep)
+    if keep is not None:
+        beam, intensity = _copy_records(beam, keep), intensity[keep]
+    points["intensity"] = intensity
+    perturb(points, beam, effects.noise, rng, models)
+    return points
