@@ -19,7 +19,9 @@ from typing import Literal
 import yaml
 
 from .errors import InputError
-from .lidar.sensors import SensorSpec, resolve_sensor
+from .lidar.divergence import Divergence, check_divergence
+from .lidar.platform import Trajectory
+from .lidar.sensors import SensorSpec, frame_time, mount_offset, resolve_sensor
 from .schema import convert, from_dict, key_of
 
 Vec3 = tuple[float, float, float]
@@ -102,12 +104,33 @@ class SceneConfig:
 
 # ----------------------------------------------------------------------------- sensor, effects, output
 @dataclass(frozen=True)
+class TrajectoryConfig:
+    """``sensor.trajectory``: a moving sensor (``lidar/platform.py``); replaces ``sensor.position``.
+
+    The path is ``waypoints`` or the scene's curve object named ``curve`` (its evaluated,
+    world-space polyline); its clock a constant ``speed`` or one of ``times`` per waypoint.
+    The optical centre rides ``height`` (plus the preset's mount_height) above the path.
+    """
+
+    waypoints: list[Vec3] = field(default_factory=list)  # m, world
+    curve: str = ""  # name of a curve object of the scene, instead of waypoints
+    speed: float = 0.0  # m/s along the path (0: give times)
+    times: list[float] = field(default_factory=list)  # s at each waypoint, instead of speed
+    height: float = 0.0  # m above the path
+    heading: bool = True  # the sensor's x axis follows the path's yaw; rotation_deg turns it from there
+    start_distance: float = 0.0  # m along the path where frame 0 starts (with speed)
+    start_time: float = 0.0  # s after the path's start where frame 0 starts
+
+
+@dataclass(frozen=True)
 class SensorConfig:
-    """The sensor: a preset resolved with field-by-field overrides, and its pose in the world."""
+    """The sensor: a preset resolved with field-by-field overrides, its pose or trajectory, its beam footprint."""
 
     spec: SensorSpec
     position: Vec3 = (0.0, -4.0, 0.0)  # m, world (the station point; the preset's mount_height is added)
     rotation_deg: Vec3 = (0.0, 0.0, 0.0)  # roll, pitch, yaw
+    trajectory: TrajectoryConfig | None = None  # a moving sensor instead of the static position
+    divergence: Divergence = field(default_factory=Divergence)  # off unless rays > 1
 
 
 @dataclass(frozen=True)
@@ -318,6 +341,49 @@ def _check_reflector(reflector: ReflectorConfig, spec: SensorSpec) -> None:
             load_edge_mask(edge.mask, image_shape(spec), f"{where}.edge_drop.mask")
 
 
+def sensor_trajectory(sensor: SensorConfig, path=None) -> Trajectory | None:
+    """The configured :class:`~.lidar.platform.Trajectory`, ``None`` for a static sensor.
+
+    path : (k, 3) float64 world polyline of ``trajectory.curve`` (``scenes.curves.curve_polyline``);
+        needed only when the trajectory follows a curve of the scene
+    """
+    section = sensor.trajectory
+    if section is None:
+        return None
+    if section.curve and path is None:
+        raise ValueError("sensor_trajectory: a curve trajectory needs the curve's polyline (scenes.curves.curve_polyline)")
+    points = path if section.curve else section.waypoints
+    return Trajectory(
+        points,
+        speed=None if section.times else section.speed,
+        times=section.times or None,
+        heading=section.heading,
+        rotation_deg=sensor.rotation_deg,
+        offset=mount_offset(sensor.spec) + [0.0, 0.0, section.height],
+        start_distance=section.start_distance,
+        start_time=section.start_time,
+        where=f"sensor.trajectory{'.curve' if section.curve else '.waypoints'}",
+    )
+
+
+def _trajectory_from_dict(data, sensor_data: dict) -> TrajectoryConfig | None:
+    if data is None:
+        return None
+    where = "sensor.trajectory"
+    section = from_dict(TrajectoryConfig, data, where)
+    if "position" in sensor_data:
+        raise InputError("sensor.position: a trajectory replaces the static position; give one of them")
+    if bool(section.waypoints) == bool(section.curve):
+        raise InputError(f"{where}: give either waypoints (a list of [x, y, z]) or curve (the name of a curve object of the scene)")
+    if section.curve and section.times:
+        raise InputError(f"{where}.times: per-waypoint times need waypoints; a curve takes a speed")
+    if section.times and section.speed:
+        raise InputError(f"{where}.speed: give either a speed or times, not both")
+    if not section.times and not section.speed > 0:
+        raise InputError(f"{where}.speed: must be > 0 m/s (or give times per waypoint), got {section.speed}")
+    return section
+
+
 def config_from_dict(data) -> Config:
     """Validate a plain config mapping (as read from YAML) into a :class:`Config`."""
     if data is None:
@@ -328,15 +394,20 @@ def config_from_dict(data) -> Config:
     scene = _scene_from_dict(data.pop("scene", None))
     sensor_data = dict(data.pop("sensor", None) or {})
     hints = typing.get_type_hints(SensorConfig)
+    trajectory = _trajectory_from_dict(sensor_data.pop("trajectory", None), sensor_data)
+    divergence = from_dict(Divergence, sensor_data.pop("divergence", None) or {}, "sensor.divergence")
+    check_divergence(divergence, "sensor.divergence")
     pose = {k: convert(sensor_data.pop(k), hints[k], f"sensor.{k}") for k in ("position", "rotation_deg") if k in sensor_data}
     base = {} if "preset" in sensor_data else DEFAULT_SENSOR  # overrides without a preset refine the default
-    sensor = SensorConfig(resolve_sensor(base | sensor_data, "sensor"), **pose)
+    sensor = SensorConfig(resolve_sensor(base | sensor_data, "sensor"), **pose, trajectory=trajectory, divergence=divergence)
     config = from_dict(Config, data, "")
     config = dataclasses.replace(config, scene=scene, sensor=sensor)
     if config.frames < 1:
         raise InputError(f"frames: must be >= 1, got {config.frames}")
     if config.seed < 0:
         raise InputError(f"seed: must be >= 0, got {config.seed}")
+    if trajectory is not None and trajectory.waypoints:  # a curve's path is checked once the scene is built
+        sensor_trajectory(sensor).check_frames(config.frames, frame_time(sensor.spec))
     _check_effects(config.effects, config.sensor.spec)
     if config.effects.mirrors.max_bounces < 0:
         raise InputError(f"effects.mirrors.max_bounces: must be >= 0, got {config.effects.mirrors.max_bounces}")
@@ -358,6 +429,8 @@ def config_to_dict(config: Config) -> dict:
     out = plain(config)
     out["scene"] = {"builder": config.scene.builder, **out["scene"]["params"]}
     sensor = out["sensor"]
+    if config.sensor.trajectory is not None:
+        del sensor["position"]  # a trajectory replaces it
     out["sensor"] = {**sensor.pop("spec"), **sensor}
     return out
 

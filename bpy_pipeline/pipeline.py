@@ -19,15 +19,17 @@ import numpy as np
 
 from . import __version__
 from .buffers import SceneBuffers
-from .config import Config, config_to_dict
+from .config import Config, config_to_dict, sensor_trajectory
 from .errors import InputError
 from .geometry.transforms import pose_matrix, transform_points
 from .io import WRITERS, write_manifest, write_preview
 from .labels import load_class_table, parse_rules
+from .lidar.divergence import scan_footprint
 from .lidar.effects import apply_effects
+from .lidar.platform import Trajectory
 from .lidar.raycast import RayCaster
 from .lidar.scanner import scan
-from .lidar.sensors import iter_pattern, mount_offset, spec_summary
+from .lidar.sensors import frame_time, iter_pattern, mount_offset, spec_summary
 
 
 CHUNK_RAYS = 1 << 18  # rays generated and traced at a time: bounds memory for 23-million-ray scans
@@ -61,17 +63,44 @@ def sensor_pose(config: Config) -> np.ndarray:
     return pose
 
 
-def scan_buffers(buffers: SceneBuffers, config: Config, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-    """Scan exported buffers with the configured sensor and effects: ``(points, pose (4, 4))``."""
+def scene_trajectory(config: Config) -> Trajectory | None:
+    """The sensor's trajectory in the scene as built (a curve is read from it); ``None`` for a static sensor."""
+    section = config.sensor.trajectory
+    if section is None or not section.curve:
+        return sensor_trajectory(config.sensor)
+    from .scenes.curves import curve_polyline
+
+    return sensor_trajectory(config.sensor, curve_polyline(section.curve))
+
+
+def scan_buffers(buffers: SceneBuffers, config: Config, rng: np.random.Generator, frame: int = 0, trajectory: Trajectory | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Scan exported buffers with the configured sensor and effects: ``(points, pose (4, 4))``.
+
+    frame : frame index: a moving sensor's frame k starts k frame times along its path (and a
+        rosette's pattern continues where frame k - 1 stopped)
+    trajectory : the moving sensor's path (:func:`scene_trajectory`); built from the config's
+        waypoints when ``None``, and needed for a trajectory along a curve of the scene
+    A moving sensor casts each ray from its pose at that ray's firing time; ``pose`` is its pose at
+    the frame's start, and points come out in the sensor frame of that pose (motion compensated,
+    as nuScenes does), so a static object stays where it is whatever the motion.
+    """
     buffers.check()
     spec = config.sensor.spec
-    pose = sensor_pose(config)
+    if config.sensor.trajectory is None:
+        pose = pose_at = sensor_pose(config)
+    else:
+        trajectory = trajectory or sensor_trajectory(config.sensor)
+        trajectory.check_frames(frame + 1, frame_time(spec))
+        pose_at = trajectory.frame_poses(frame, frame_time(spec))
+        pose = pose_at(np.zeros(1))[0]
     caster = RayCaster(buffers, frame=pose)
     ghost = load_class_table().id_of("reflection") if config.effects.mirrors.label == "reflection" else None
-    points, beam = scan(
-        caster, buffers, iter_pattern(spec, CHUNK_RAYS), pose, spec.min_range, spec.max_range,
-        max_bounces=config.effects.mirrors.max_bounces, ghost_semantic=ghost, ideal=config.effects.mirrors.ideal,
-    )
+    options = {"max_bounces": config.effects.mirrors.max_bounces, "ghost_semantic": ghost, "ideal": config.effects.mirrors.ideal, "chunk_rays": CHUNK_RAYS}
+    patterns = iter_pattern(spec, CHUNK_RAYS, frame)
+    if config.sensor.divergence.active:
+        points, beam = scan_footprint(caster, buffers, patterns, pose_at, config.sensor.divergence, spec.min_range, spec.max_range, **options)
+    else:
+        points, beam = scan(caster, buffers, patterns, pose_at, spec.min_range, spec.max_range, **options)
     points = apply_effects(points, beam, config.effects, rng)
     if config.output.frame == "world":
         xyz = transform_points(np.column_stack([points["x"], points["y"], points["z"]]).astype(np.float64), pose)
@@ -162,13 +191,19 @@ def run_frames(config: Config, out_dir: str | Path, build: bool = True) -> Itera
         start = time.perf_counter()
         if build:
             build_scene(config.scene, rng)
+        trajectory = scene_trajectory(config)
         timings["build"] = time.perf_counter() - start
         start = time.perf_counter()
-        sensor_range = (sensor_pose(config)[:3, 3], config.sensor.spec.max_range)
+        period, max_range = frame_time(config.sensor.spec), config.sensor.spec.max_range
+        if trajectory is None:
+            sensor_range = (sensor_pose(config)[:3, 3], max_range)
+        else:  # everything the sensor can reach from anywhere along this frame's stretch of path
+            trajectory.check_frames(index + 1, period)
+            sensor_range = (trajectory.frame_poses(index, period)(np.zeros(1))[0, :3, 3], max_range + trajectory.reach(index, period))
         buffers = export_scene(table, extra_rules, keep_within=sensor_range)
         timings["export"] = time.perf_counter() - start
         start = time.perf_counter()
-        points, pose = scan_buffers(buffers, config, rng)
+        points, pose = scan_buffers(buffers, config, rng, index, trajectory)
         timings["scan"] = time.perf_counter() - start
         start = time.perf_counter()
         files = write_frame(out_dir, index, points, config)
@@ -180,6 +215,7 @@ def run_frames(config: Config, out_dir: str | Path, build: bool = True) -> Itera
                 "points": int(len(points)),
                 "triangles": int(len(buffers.triangles)),
                 "sensor_pose": pose.tolist(),
+                **({} if trajectory is None else {"trajectory": trajectory.frame_info(index, period)}),
                 "timings_s": {k: round(v, 4) for k, v in timings.items()},
                 "objects": buffers.objects.rows(),
             }
