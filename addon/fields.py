@@ -1,0 +1,191 @@
+"""Config dataclasses seen as Blender properties: the panel is generated from the config's own fields.
+
+A :class:`GroupView` walks a config dataclass (``config.RailwayScene``, ``config.EffectsConfig``,
+...) and maps every field Blender can hold to a property of a generated ``PropertyGroup``:
+
+==========================  ====================================
+config type hint            Blender property
+==========================  ====================================
+``bool``                    ``BoolProperty``
+``int`` / ``float``         ``IntProperty`` / ``FloatProperty``
+``str``                     ``StringProperty``
+``Literal[...]``            ``EnumProperty``
+``list[Literal[...]]``      ``EnumProperty`` (``ENUM_FLAG``)
+``tuple[float, ...]``       ``FloatVectorProperty``
+a nested dataclass          ``PointerProperty`` to its own group
+==========================  ====================================
+
+Anything else (lists of shapes, unions) is not shown and passes through untouched from the
+config the panel was loaded from. Blender stores floats in 32 bits; :func:`read` hands back the
+loaded config's exact value where the panel still shows it, and otherwise the shortest decimal
+that gives the panel's float32, so a config survives panel -> YAML -> panel unchanged.
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import typing
+from dataclasses import dataclass, field
+from typing import Literal
+
+import bpy
+import numpy as np
+
+from .bpy_pipeline.errors import InputError
+from .bpy_pipeline.schema import key_of
+
+UNITS = {"deg": "°", "hz": "Hz", "s": "s"}
+
+
+@dataclass
+class FieldView:
+    """One config field shown in the panel: ``attr`` is the Blender property, ``key`` the YAML key."""
+
+    attr: str
+    key: str
+    kind: str  # bool | int | float | str | enum | flags | vector | group
+    items: tuple = ()  # enum identifiers
+    size: int = 0  # vector length
+    group: GroupView | None = None
+
+
+@dataclass
+class GroupView:
+    """The shown fields of a config dataclass and the ``PropertyGroup`` class generated for them."""
+
+    name: str
+    fields: list[FieldView] = field(default_factory=list)
+    property_group: type | None = None
+    children: list[GroupView] = field(default_factory=list)
+
+    def classes(self) -> list[type]:
+        """Generated classes in registration order (nested groups first)."""
+        return [c for child in self.children for c in child.classes()] + [self.property_group]
+
+
+def plain(value):
+    """A config dataclass (or anything inside one) as plain YAML data, keyed as in YAML."""
+    if dataclasses.is_dataclass(value):
+        return {key_of(f): plain(getattr(value, f.name)) for f in dataclasses.fields(value)}
+    if isinstance(value, (list, tuple)):
+        return [plain(v) for v in value]
+    return value
+
+
+def label(attr: str) -> str:
+    """``contact_wire_height`` -> ``Contact wire height``; ``rotation_deg`` -> ``Rotation (°)``."""
+    words = attr.split("_")
+    unit = UNITS.get(words[-1]) if len(words) > 1 else None
+    text = " ".join(words[:-1] if unit else words).capitalize()
+    return f"{text} ({unit})" if unit else text
+
+
+def _kind(hint) -> tuple[str, tuple, int] | None:
+    origin, args = typing.get_origin(hint), typing.get_args(hint)
+    if hint is bool:
+        return "bool", (), 0
+    if hint in (int, float, str):
+        return hint.__name__, (), 0
+    if origin is Literal and all(isinstance(a, str) for a in args):
+        return "enum", args, 0
+    if origin is list and len(args) == 1 and typing.get_origin(args[0]) is Literal:
+        return "flags", typing.get_args(args[0]), 0
+    if origin is tuple and args and all(a in (int, float) for a in args):
+        return "vector", (), len(args)
+    if dataclasses.is_dataclass(hint):
+        return "group", (), 0
+    return None
+
+
+def _property(view: FieldView, default, update=None):
+    name = label(view.attr)
+    extra = {"update": update} if update is not None else {}
+    if view.kind == "bool":
+        return bpy.props.BoolProperty(name=name, default=bool(default), **extra)
+    if view.kind == "int":
+        return bpy.props.IntProperty(name=name, default=int(default), **extra)
+    if view.kind == "float":
+        return bpy.props.FloatProperty(name=name, default=float(default), precision=4, step=1, **extra)
+    if view.kind == "str":
+        subtype = "FILE_PATH" if view.attr.endswith(("path", "file")) else "NONE"
+        return bpy.props.StringProperty(name=name, default=str(default), subtype=subtype, **extra)
+    items = [(v, v.replace("_", " ").capitalize(), "") for v in view.items]
+    if view.kind == "enum":
+        return bpy.props.EnumProperty(name=name, items=items, default=default, **extra)
+    if view.kind == "flags":
+        return bpy.props.EnumProperty(name=name, items=items, default=set(default), options={"ENUM_FLAG"}, **extra)
+    if view.kind == "vector":
+        return bpy.props.FloatVectorProperty(name=name, size=view.size, default=tuple(float(v) for v in default), precision=4, **extra)
+    return bpy.props.PointerProperty(type=view.group.property_group)
+
+
+def group_view(cls, name: str, defaults: dict, only=None, skip=(), extra: dict | None = None) -> GroupView:
+    """Generate the ``PropertyGroup`` class ``name`` for dataclass ``cls``.
+
+    defaults : YAML key -> value, the values a fresh panel shows (the default config's)
+    only, skip : field names to show (all representable fields when ``only`` is ``None``) or not
+    extra : more annotations of the generated class (properties of the panel's own)
+    """
+    hints = typing.get_type_hints(cls)
+    view = GroupView(name)
+    annotations = dict(extra or {})
+    for f in dataclasses.fields(cls):
+        if (only is not None and f.name not in only) or f.name in skip:
+            continue
+        kind = _kind(hints[f.name])
+        if kind is None or key_of(f) not in defaults:
+            continue
+        fv = FieldView(f.name, key_of(f), *kind)
+        if fv.kind == "group":
+            fv.group = group_view(hints[f.name], f"{name}_{f.name}", defaults[fv.key])
+            view.children.append(fv.group)
+        view.fields.append(fv)
+        annotations[fv.attr] = _property(fv, defaults[fv.key])
+    view.property_group = type(name, (bpy.types.PropertyGroup,), {"__annotations__": annotations})
+    return view
+
+
+def exact_float(panel_value: float, loaded=None) -> float:
+    """The config value for a float the panel shows: ``loaded`` when its float32 is the panel's, else the shortest decimal."""
+    if isinstance(loaded, (int, float)) and not isinstance(loaded, bool) and np.float32(loaded) == np.float32(panel_value):
+        return float(loaded)
+    return float(str(np.float32(panel_value)))
+
+
+def read(group, view: GroupView, base: dict) -> dict:
+    """``base`` (plain config data) with the fields the panel shows replaced by the panel's values."""
+    out = copy.deepcopy(base)
+    for fv in view.fields:
+        value, loaded = getattr(group, fv.attr), base.get(fv.key)
+        if fv.kind == "float":
+            value = exact_float(value, loaded)
+        elif fv.kind == "vector":
+            loaded = loaded if isinstance(loaded, (list, tuple)) and len(loaded) == fv.size else [None] * fv.size
+            value = [exact_float(v, b) for v, b in zip(value, loaded)]
+        elif fv.kind == "flags":
+            kept = [v for v in (loaded or []) if v in value]  # keep the loaded order of what is still ticked
+            value = kept + [v for v in fv.items if v in value and v not in kept]
+        elif fv.kind == "group":
+            value = read(value, fv.group, loaded if isinstance(loaded, dict) else {})
+        out[fv.key] = value
+    return out
+
+
+def write(group, view: GroupView, data: dict, where: str) -> None:
+    """Show the plain config data ``data`` (validated already) in ``group``; ``where`` is its key path."""
+    for fv in view.fields:
+        if fv.key not in data:
+            continue
+        value = data[fv.key]
+        if fv.kind == "group":
+            write(getattr(group, fv.attr), fv.group, value, f"{where}.{fv.key}")
+            continue
+        if fv.kind == "flags":
+            value = set(value)
+        elif fv.kind == "vector":
+            value = tuple(float(v) for v in value)
+        try:
+            setattr(group, fv.attr, value)
+        except (TypeError, ValueError, OverflowError) as err:
+            raise InputError(f"{where}.{fv.key}: the panel cannot hold {value!r} ({err})") from None

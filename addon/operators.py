@@ -1,0 +1,333 @@
+"""The panel's buttons. Each reads the config the panel shows and calls the pipeline.
+
+A value the config does not allow is reported as one line naming its key (``InputError``) and
+the operator is cancelled; any other error propagates (Blender shows its traceback).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import bpy
+import numpy as np
+from bpy_extras.io_utils import ExportHelper, ImportHelper
+
+from . import cloud
+from . import settings as panel
+from .bpy_pipeline import config as cfg
+from .bpy_pipeline.errors import InputError
+from .bpy_pipeline.labels import load_class_table, normalise
+
+LIDAR_KEYS = ("lidar_class", "lidar_material", "lidar_reflectivity", "lidar_instance")
+LAST: dict = {}  # the last frame scanned in this session: points, pose, output frame ("sensor" | "world")
+
+
+def output_dir(settings) -> Path:
+    """The chosen output folder, or ``output`` in the extension's user folder when none is chosen."""
+    if not settings.out_dir:
+        return Path(bpy.utils.extension_path_user(__package__, path="output", create=True))
+    if settings.out_dir.startswith("//") and not bpy.data.filepath:
+        raise InputError(f"output folder: {settings.out_dir} is relative to the .blend file; save the file or choose an absolute folder")
+    return Path(bpy.path.abspath(settings.out_dir))
+
+
+class FrameJob:
+    """The frames of a config, generated one :meth:`step` at a time; :meth:`cancel` keeps those done."""
+
+    def __init__(self, config: cfg.Config, out_dir: Path, build: bool):
+        from .bpy_pipeline.pipeline import run_frames
+
+        self.total, self.done, self.out_dir = config.frames, 0, out_dir
+        self.output_frame = config.output.frame
+        self.points = 0
+        self._frames = run_frames(config, out_dir, build)
+
+    def step(self) -> bool:
+        """Generate, write and remember the next frame; ``False`` when every frame is done."""
+        try:
+            frame = next(self._frames)
+        except StopIteration:
+            return False
+        self.done += 1
+        self.points = len(frame.points)
+        LAST.update(points=frame.points, pose=frame.pose, frame=self.output_frame, out_dir=str(self.out_dir))
+        return True
+
+    def cancel(self) -> None:
+        self._frames.close()
+
+    def message(self) -> str:
+        return f"{self.done}/{self.total} frames ({self.points} points in the last) in {self.out_dir}"
+
+
+def scene_built() -> bool:
+    from .bpy_pipeline.scenes.objects import COLLECTION
+
+    collection = bpy.data.collections.get(COLLECTION)
+    return collection is not None and len(collection.all_objects) > 0
+
+
+def start_job(context, frames: int | None = None, build: bool | None = None) -> FrameJob:
+    """A job for the panel's config (``frames`` overrides its frame count); ``build`` defaults to every builder but My scene."""
+    settings = context.scene.lidar
+    config = panel.settings_config(settings)
+    if frames is not None:
+        config = dataclasses.replace(config, frames=frames)
+    if build is None:
+        build = settings.builder != panel.MY_SCENE
+    return FrameJob(config, output_dir(settings), build)
+
+
+class LIDAR_OT_build_scene(bpy.types.Operator):
+    """Build the chosen scene into the "LiDAR Scene" collection (replacing what it holds)"""
+
+    bl_idname = "lidar.build_scene"
+    bl_label = "Build scene"
+    bl_options = {"REGISTER", "UNDO"}
+
+    def execute(self, context):
+        from .bpy_pipeline.pipeline import frame_rng
+        from .bpy_pipeline.scenes import build_scene
+
+        settings = context.scene.lidar
+        if settings.builder == panel.MY_SCENE:
+            self.report({"INFO"}, "My scene is scanned as it is: nothing to build")
+            return {"CANCELLED"}
+        try:
+            config = panel.settings_config(settings)
+            build_scene(config.scene, frame_rng(config.seed, 0))
+        except InputError as err:
+            self.report({"ERROR"}, str(err))
+            return {"CANCELLED"}
+        settings.status = f"built {config.scene.builder}"
+        return {"FINISHED"}
+
+
+class LIDAR_OT_scan(bpy.types.Operator):
+    """Scan the scene as it is (building the chosen scene first if nothing is built) and write frame 0"""
+
+    bl_idname = "lidar.scan"
+    bl_label = "Scan"
+    bl_options = {"REGISTER"}
+
+    def execute(self, context):
+        settings = context.scene.lidar
+        try:
+            build = settings.builder != panel.MY_SCENE and not scene_built()
+            job = start_job(context, frames=1, build=build)
+            job.step()
+        except InputError as err:
+            self.report({"ERROR"}, str(err))
+            return {"CANCELLED"}
+        settings.status = f"scan: {job.points} points in {job.out_dir}"
+        self.report({"INFO"} if job.points else {"WARNING"}, settings.status if job.points else "scan: no points (nothing in range?)")
+        return {"FINISHED"}
+
+
+class LIDAR_OT_generate(bpy.types.Operator):
+    """Generate the configured number of frames, rebuilding the scene for each (Esc cancels; finished frames stay)"""
+
+    bl_idname = "lidar.generate"
+    bl_label = "Generate frames"
+    bl_options = {"REGISTER"}
+
+    def execute(self, context):  # scripts and background mode: every frame, blocking
+        try:
+            job = start_job(context)
+            while job.step():
+                pass
+        except InputError as err:
+            self.report({"ERROR"}, str(err))
+            return {"CANCELLED"}
+        context.scene.lidar.status = job.message()
+        self.report({"INFO"}, job.message())
+        return {"FINISHED"}
+
+    def invoke(self, context, event):
+        if context.window is None:
+            return self.execute(context)
+        try:
+            self._job = start_job(context)
+        except InputError as err:
+            self.report({"ERROR"}, str(err))
+            return {"CANCELLED"}
+        wm = context.window_manager
+        self._timer = wm.event_timer_add(0.01, window=context.window)
+        wm.modal_handler_add(self)
+        wm.progress_begin(0, self._job.total)
+        self._show(context, f"LiDAR: frame 1/{self._job.total} (Esc to cancel)")
+        return {"RUNNING_MODAL"}
+
+    def modal(self, context, event):
+        job = self._job
+        if event.type == "ESC":
+            job.cancel()
+            self._end(context)
+            self.report({"WARNING"}, f"cancelled: kept {job.message()}")
+            return {"CANCELLED"}
+        if event.type != "TIMER":
+            return {"PASS_THROUGH"}
+        try:
+            more = job.step()
+        except InputError as err:
+            self._end(context)
+            self.report({"ERROR"}, str(err))
+            return {"CANCELLED"}
+        except BaseException:
+            self._end(context)
+            raise
+        if not more:
+            self._end(context)
+            self.report({"INFO"}, job.message())
+            return {"FINISHED"}
+        context.window_manager.progress_update(job.done)
+        self._show(context, f"LiDAR: {job.done}/{job.total} frames done (Esc to cancel)")
+        return {"RUNNING_MODAL"}
+
+    def _show(self, context, text: str) -> None:
+        context.workspace.status_text_set(text)
+        context.scene.lidar.status = text
+        for area in context.screen.areas:
+            if area.type == "VIEW_3D":
+                area.tag_redraw()
+
+    def _end(self, context) -> None:
+        wm = context.window_manager
+        wm.event_timer_remove(self._timer)
+        wm.progress_end()
+        context.workspace.status_text_set(None)
+        context.scene.lidar.status = self._job.message()
+
+
+class LIDAR_OT_show_cloud(bpy.types.Operator):
+    """Show the last scanned frame as point-cloud objects coloured by class (ghost points apart)"""
+
+    bl_idname = "lidar.show_cloud"
+    bl_label = "Show cloud"
+    bl_options = {"REGISTER", "UNDO"}
+
+    def execute(self, context):
+        try:
+            points, pose = self._last_frame(context)
+        except InputError as err:
+            self.report({"ERROR"}, str(err))
+            return {"CANCELLED"}
+        objects = cloud.show_frame(points, pose, load_class_table().color_lut())
+        space = context.space_data
+        if space is not None and space.type == "VIEW_3D" and space.shading.type == "SOLID":
+            space.shading.color_type = "ATTRIBUTE"
+        ghosts = int((points["bounces"] > 0).sum())
+        self.report({"INFO"}, f"{len(points)} points ({ghosts} ghost) in {', '.join(o.name for o in objects)}")
+        return {"FINISHED"}
+
+    @staticmethod
+    def _last_frame(context) -> tuple[np.ndarray, np.ndarray]:
+        """This session's last frame, else the last frame of the output folder's PLY files."""
+        if LAST:
+            return LAST["points"], LAST["pose"] if LAST["frame"] == "sensor" else np.eye(4)
+        from .bpy_pipeline.io import read_manifest, read_ply
+
+        out = output_dir(context.scene.lidar)
+        if not (out / "manifest.json").is_file():
+            raise InputError(f"show cloud: nothing scanned yet (no manifest in {out}); press Scan first")
+        manifest = read_manifest(out)
+        frame = manifest["frames"][-1]
+        ply = next((f for f in frame["files"] if f.endswith(".ply")), None)
+        if ply is None:
+            raise InputError(f"show cloud: the last frame in {out} has no PLY file; press Scan or add ply to the formats")
+        world = manifest["config"]["output"]["frame"] == "world"
+        return read_ply(out / ply), np.eye(4) if world else np.asarray(frame["sensor_pose"], np.float64)
+
+
+class LIDAR_OT_config_load(bpy.types.Operator, ImportHelper):
+    """Show a YAML config (as run.py reads it) in the panel"""
+
+    bl_idname = "lidar.config_load"
+    bl_label = "Load config"
+    filename_ext = ".yaml"
+    filter_glob: bpy.props.StringProperty(default="*.yaml;*.yml", options={"HIDDEN"})
+
+    def execute(self, context):
+        try:
+            notes = panel.settings_from_dict(context.scene.lidar, cfg.read_config_file(self.filepath))
+        except InputError as err:
+            self.report({"ERROR"}, str(err))
+            return {"CANCELLED"}
+        for note in notes:
+            self.report({"WARNING"}, note)
+        context.scene.lidar.status = f"loaded {self.filepath}"
+        return {"FINISHED"}
+
+
+class LIDAR_OT_config_save(bpy.types.Operator, ExportHelper):
+    """Save the panel as a resolved YAML config: python run.py --config FILE runs the same job"""
+
+    bl_idname = "lidar.config_save"
+    bl_label = "Save config"
+    filename_ext = ".yaml"
+    filter_glob: bpy.props.StringProperty(default="*.yaml;*.yml", options={"HIDDEN"})
+
+    def execute(self, context):
+        settings = context.scene.lidar
+        try:
+            cfg.save_config(panel.settings_config(settings), self.filepath)
+        except InputError as err:
+            self.report({"ERROR"}, str(err))
+            return {"CANCELLED"}
+        if settings.builder == panel.MY_SCENE and bpy.data.is_dirty:
+            self.report({"WARNING"}, f"{bpy.data.filepath} has unsaved changes; run.py scans the file as saved")
+        settings.status = f"saved {self.filepath}"
+        return {"FINISHED"}
+
+
+class LIDAR_OT_tag_selected(bpy.types.Operator):
+    """Set lidar_class, lidar_material and lidar_reflectivity on the selected objects"""
+
+    bl_idname = "lidar.tag_selected"
+    bl_label = "Tag selected"
+    bl_options = {"REGISTER", "UNDO"}
+
+    @classmethod
+    def poll(cls, context):
+        return bool(context.selected_objects)
+
+    def execute(self, context):
+        from .bpy_pipeline.scenes.objects import tag
+
+        settings = context.scene.lidar
+        for obj in context.selected_objects:
+            tag(obj, normalise(settings.label_class), settings.label_material, settings.label_reflectivity)
+        self.report({"INFO"}, f"tagged {len(context.selected_objects)} object(s) {normalise(settings.label_class)!r}")
+        return {"FINISHED"}
+
+
+class LIDAR_OT_clear_tags(bpy.types.Operator):
+    """Remove the lidar_* properties of the selected objects: their names' rules label them again"""
+
+    bl_idname = "lidar.clear_tags"
+    bl_label = "Clear tags"
+    bl_options = {"REGISTER", "UNDO"}
+
+    @classmethod
+    def poll(cls, context):
+        return bool(context.selected_objects)
+
+    def execute(self, context):
+        for obj in context.selected_objects:
+            for key in LIDAR_KEYS:
+                if key in obj:
+                    del obj[key]
+        return {"FINISHED"}
+
+
+CLASSES = (
+    LIDAR_OT_build_scene,
+    LIDAR_OT_scan,
+    LIDAR_OT_generate,
+    LIDAR_OT_show_cloud,
+    LIDAR_OT_config_load,
+    LIDAR_OT_config_save,
+    LIDAR_OT_tag_selected,
+    LIDAR_OT_clear_tags,
+)
