@@ -20,6 +20,8 @@ import yaml
 
 from .errors import InputError
 from .lidar.divergence import Divergence, check_divergence
+from .lidar.grid import check_grid, image_shape
+from .lidar.mirror_sensor import check_reflector, load_edge_mask
 from .lidar.platform import Trajectory
 from .lidar.sensors import SensorSpec, frame_time, mount_offset, resolve_sensor
 from .schema import convert, from_dict, key_of
@@ -123,6 +125,33 @@ class TrajectoryConfig:
 
 
 @dataclass(frozen=True)
+class EdgeDropConfig:
+    """``sensor.reflector.edge_drop``: returns lost where a beam splits on a mirror edge (lidar/mirror_sensor.py)."""
+
+    mask: str = "generated"  # generated | none | path of a measured (rows, columns) .npy of drop probabilities
+    probability: float = 0.95  # generated: drop probability where the footprint straddles an edge (the paper: > 90 %)
+    beam_diameter: float = 0.01  # m, generated: the beam's width where it meets the mirror (assumed; measure it)
+
+
+@dataclass(frozen=True)
+class ReflectorConfig:
+    """``sensor.reflector``: the super-resolution LiDAR's own ring of mirrors (lidar/mirror_sensor.py has the geometry).
+
+    Defaults: the human-robot paper's eight segments at 34 deg, around an Ouster OS1-128.
+    """
+
+    enabled: bool = False
+    segments: int = 8
+    inclination_deg: float = 34.0  # between each mirror and the spin axis: horizontal beams leave 2x this below the horizon
+    azimuth_deg: float = 0.0  # azimuth of segment 0's centre
+    distance: float = 0.1  # m, optical centre to each mirror along its central horizontal beam
+    bottom: float = 0.09  # m along the slope from that central point down to the segment's lower edge
+    top: float = 0.05  # m along the slope up to its upper edge
+    width: float = 0.0  # m, each segment's width; 0 = full facets meeting edge to edge
+    edge_drop: EdgeDropConfig = field(default_factory=EdgeDropConfig)
+
+
+@dataclass(frozen=True)
 class SensorConfig:
     """The sensor: a preset resolved with field-by-field overrides, its pose or trajectory, its beam footprint."""
 
@@ -131,6 +160,7 @@ class SensorConfig:
     rotation_deg: Vec3 = (0.0, 0.0, 0.0)  # roll, pitch, yaw
     trajectory: TrajectoryConfig | None = None  # a moving sensor instead of the static position
     divergence: Divergence = field(default_factory=Divergence)  # off unless rays > 1
+    reflector: ReflectorConfig = field(default_factory=ReflectorConfig)  # the sensor's own mirrors; off by default
 
 
 @dataclass(frozen=True)
@@ -192,10 +222,23 @@ class GlassConfig:
 
 
 @dataclass(frozen=True)
+class GlassConfig:
+    """``effects.mirrors.glass``: how beams meet ``glass`` objects (car windows), lidar/scanner.py."""
+
+    normal_return_deg: float = 5.0  # met this close to normal incidence, the glass itself returns the beam
+    reflect_fraction: float = 0.0  # share of the other beams that reflect like a mirror instead of passing through
+    max_passes: int = 8  # glass surfaces a beam may pass through; one more loses it
+
+
+@dataclass(frozen=True)
 class MirrorConfig:
-    max_bounces: int = 3  # reflections before a beam is given up
+    """``effects.mirrors``: specular surfaces of the scene (``mirror`` and ``glass`` objects), lidar/scanner.py."""
+
+    max_bounces: int = 3  # reflections before a beam is given up (0..255)
     label: Literal["target", "reflection"] = "target"  # class of points seen through a mirror
     ideal: bool = False  # report mirrored points at the true hit instead of behind the mirror
+    normal_return_deg: float = 0.5  # a mirror met this close to normal incidence returns the beam itself
+    glass: GlassConfig = field(default_factory=GlassConfig)
 
 
 @dataclass(frozen=True)
@@ -209,12 +252,12 @@ class EffectsConfig:
     model_file: str = ""
 
 
-FORMATS = ("ply", "semantickitti", "las", "npy")
+FORMATS = ("ply", "semantickitti", "las", "npy", "range_image")
 
 
 @dataclass(frozen=True)
 class OutputConfig:
-    formats: list[Literal["ply", "semantickitti", "las", "npy"]] = field(default_factory=lambda: ["ply", "semantickitti"])
+    formats: list[Literal["ply", "semantickitti", "las", "npy", "range_image"]] = field(default_factory=lambda: ["ply", "semantickitti"])
     frame: Literal["sensor", "world"] = "sensor"
     preview: bool = True
     sequence: int = 0  # SemanticKITTI sequence number (sequences/SS/)
@@ -396,10 +439,12 @@ def config_from_dict(data) -> Config:
     hints = typing.get_type_hints(SensorConfig)
     trajectory = _trajectory_from_dict(sensor_data.pop("trajectory", None), sensor_data)
     divergence = from_dict(Divergence, sensor_data.pop("divergence", None) or {}, "sensor.divergence")
+    reflector = from_dict(ReflectorConfig, sensor_data.pop("reflector", None) or {}, "sensor.reflector")
     check_divergence(divergence, "sensor.divergence")
     pose = {k: convert(sensor_data.pop(k), hints[k], f"sensor.{k}") for k in ("position", "rotation_deg") if k in sensor_data}
     base = {} if "preset" in sensor_data else DEFAULT_SENSOR  # overrides without a preset refine the default
-    sensor = SensorConfig(resolve_sensor(base | sensor_data, "sensor"), **pose, trajectory=trajectory, divergence=divergence)
+    sensor = SensorConfig(resolve_sensor(base | sensor_data, "sensor"), **pose, trajectory=trajectory, divergence=divergence, reflector=reflector)
+    _check_reflector(reflector, sensor.spec)
     config = from_dict(Config, data, "")
     config = dataclasses.replace(config, scene=scene, sensor=sensor)
     if config.frames < 1:
@@ -409,8 +454,9 @@ def config_from_dict(data) -> Config:
     if trajectory is not None and trajectory.waypoints:  # a curve's path is checked once the scene is built
         sensor_trajectory(sensor).check_frames(config.frames, frame_time(sensor.spec))
     _check_effects(config.effects, config.sensor.spec)
-    if config.effects.mirrors.max_bounces < 0:
-        raise InputError(f"effects.mirrors.max_bounces: must be >= 0, got {config.effects.mirrors.max_bounces}")
+    _check_mirrors(config.effects.mirrors)
+    if "range_image" in config.output.formats:
+        check_grid(config.sensor.spec, "output.formats: range_image")
     if not config.output.formats and not config.output.preview:
         raise InputError(f"output.formats: name at least one of {', '.join(FORMATS)}")
     return config

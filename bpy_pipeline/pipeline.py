@@ -23,12 +23,15 @@ from .config import Config, config_to_dict, sensor_trajectory
 from .errors import InputError
 from .geometry.transforms import pose_matrix, transform_points
 from .io import WRITERS, write_manifest, write_preview
+from .io.range_image import write_frame_range_image
 from .labels import load_class_table, parse_rules
 from .lidar.divergence import scan_footprint
 from .lidar.effects import apply_effects
 from .lidar.platform import Trajectory
+from .lidar.grid import image_shape
+from .lidar.mirror_sensor import drop_at_edges, edge_drop_mask, load_edge_mask, reflect_patterns
 from .lidar.raycast import RayCaster
-from .lidar.scanner import scan
+from .lidar.scanner import Surfaces, scan
 from .lidar.sensors import frame_time, iter_pattern, mount_offset, spec_summary
 
 
@@ -73,6 +76,23 @@ def scene_trajectory(config: Config) -> Trajectory | None:
     return sensor_trajectory(config.sensor, curve_polyline(section.curve))
 
 
+def scan_surfaces(config: Config) -> Surfaces:
+    """The scanner's rules for mirrors and glass from ``effects.mirrors``."""
+    mirrors = config.effects.mirrors
+    return Surfaces(mirrors.normal_return_deg, mirrors.glass.normal_return_deg, mirrors.glass.reflect_fraction, mirrors.glass.max_passes)
+
+
+def edge_mask(config: Config) -> np.ndarray | None:
+    """``(rows, columns)`` float32 mirror-edge drop probabilities of the sensor's own mirrors; ``None`` when off."""
+    reflector = config.sensor.reflector
+    edge = reflector.edge_drop
+    if not reflector.enabled or edge.mask == "none":
+        return None
+    if edge.mask == "generated":
+        return edge_drop_mask(reflector, config.sensor.spec, edge.probability, edge.beam_diameter)
+    return load_edge_mask(edge.mask, image_shape(config.sensor.spec), "sensor.reflector.edge_drop.mask")
+
+
 def scan_buffers(buffers: SceneBuffers, config: Config, rng: np.random.Generator, frame: int = 0, trajectory: Trajectory | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Scan exported buffers with the configured sensor and effects: ``(points, pose (4, 4))``.
 
@@ -97,10 +117,16 @@ def scan_buffers(buffers: SceneBuffers, config: Config, rng: np.random.Generator
     ghost = load_class_table().id_of("reflection") if config.effects.mirrors.label == "reflection" else None
     options = {"max_bounces": config.effects.mirrors.max_bounces, "ghost_semantic": ghost, "ideal": config.effects.mirrors.ideal, "chunk_rays": CHUNK_RAYS}
     patterns = iter_pattern(spec, CHUNK_RAYS, frame)
+    if config.sensor.reflector.enabled:  # the super-resolution sensor: every ray leaves through its own mirrors
+        patterns = reflect_patterns(patterns, config.sensor.reflector)
     if config.sensor.divergence.active:
         points, beam = scan_footprint(caster, buffers, patterns, pose_at, config.sensor.divergence, spec.min_range, spec.max_range, **options)
     else:
-        points, beam = scan(caster, buffers, patterns, pose_at, spec.min_range, spec.max_range, **options)
+        points, beam = scan(caster, buffers, patterns, pose_at, spec.min_range, spec.max_range, **options, surfaces=scan_surfaces(config), rng=rng)
+    mask = edge_mask(config)
+    if mask is not None:  # returns lost where the beam split on an edge of the sensor's own mirrors
+        keep = drop_at_edges(points, mask, spec, rng)
+        points, beam = points[keep], beam[keep]
     points = apply_effects(points, beam, config.effects, rng)
     if config.output.frame == "world":
         xyz = transform_points(np.column_stack([points["x"], points["y"], points["z"]]).astype(np.float64), pose)
@@ -115,7 +141,10 @@ def write_frame(out_dir: Path, index: int, points: np.ndarray, config: Config) -
     try:
         written = []
         for name in config.output.formats:
-            written += WRITERS[name](staging, index, points, config.output.sequence)
+            if name == "range_image":  # organised by the sensor's rings and columns
+                written += write_frame_range_image(staging, index, points, config.sensor.spec, load_class_table().color_lut())
+            else:
+                written += WRITERS[name](staging, index, points, config.output.sequence)
         if config.output.preview:
             path = staging / "preview" / f"{index:06d}.png"
             write_preview(path, points, load_class_table().color_lut())

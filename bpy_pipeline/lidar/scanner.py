@@ -1,16 +1,24 @@
-"""The scan: a sensor pattern at a pose traced through the scene, with mirror bounces, into point records.
+"""The scan: a sensor pattern at a pose traced through the scene, with mirrors and glass, into point records.
 
-Rays leave the sensor, hit the nearest triangle (:class:`~.raycast.RayCaster`), and either
-end there or, on a ``mirror`` object's front face, reflect (r = d - 2 (d.n) n) and go on from
-the hit point, offset along the normal by an epsilon that follows float32's resolution at that
-point, up to ``max_bounces`` reflections. A beam that meets a mirror with no bounces left, or
-a mirror of zero reflectivity, is lost. The reported point lies where the sensor believes it
-is: along the original beam at the total path length (a "ghost" behind the mirror), or at the
-true hit with ``ideal=True``.
+Rays leave the sensor and hit the nearest triangle (:class:`~.raycast.RayCaster`). What
+happens there depends on the object's ``lidar_material`` (:func:`trace_beams` has the rules):
+``diffuse`` surfaces return the beam; ``absorber`` swallows it (no return); a ``mirror``'s
+front face reflects it (r = d - 2 (d.n) n) and its back face is a diffuse surface; ``glass``
+lets it through unchanged, returns it from its own surface near normal incidence, or reflects
+a configured fraction of beams like a mirror. A reflected or transmitted beam goes on from
+the hit point, offset off the surface by an epsilon that follows float32's resolution there,
+until ``max_bounces`` reflections (or :attr:`Surfaces.glass_passes` passes through glass);
+one more loses the beam. Path length accumulates and counts against the maximum range.
+
+The reported point of a reflected beam lies where the sensor believes it is: along the
+original beam at the total path length (a "ghost" behind the mirror), or at the true hit with
+``ideal=True``. A beam that only passed through glass is reported where it truly hit: its
+direction never changed.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Iterable, Iterator
 
@@ -21,8 +29,30 @@ from .points import BEAM_DTYPE, POINT_DTYPE, empty_points
 from .raycast import RayCaster
 from .sensors import Pattern
 
-MIRROR = MATERIAL_ID["mirror"]
-OFFSET_ULPS = 64.0 * np.finfo(np.float32).eps  # mirror re-launch offset per metre of local coordinate
+DIFFUSE, MIRROR, GLASS, ABSORBER = (MATERIAL_ID[name] for name in ("diffuse", "mirror", "glass", "absorber"))
+# Re-launch offset off a mirror or glass surface, per metre of the largest local coordinate of
+# the hit point and of the hit triangle's corners (float32 rounds both Embree's hit and its copy
+# of the triangle at that scale): 64 float32 ulps, 7.6 um at 1 m, 0.76 mm at 100 m.
+OFFSET_ULPS = 64.0 * np.finfo(np.float32).eps
+
+
+@dataclass(frozen=True)
+class Surfaces:
+    """How the trace treats mirrors and glass (the config's ``effects.mirrors``). Angles in degrees.
+
+    mirror_return_deg : a mirror's front face met within this angle of normal incidence sends
+        the beam straight back into the receiver: the point lies on the mirror itself
+        (0: never; a beam at exactly normal incidence then bounces back past the sensor)
+    glass_return_deg : the same for glass (either face): the glass itself returns the beam
+    glass_reflect : fraction, 0..1, of the other beams meeting glass that reflect like a mirror
+        instead of passing through; drawn from the scan's ``rng`` when strictly between 0 and 1
+    glass_passes : the most glass surfaces a beam passes through; meeting one more loses it
+    """
+
+    mirror_return_deg: float = 0.0
+    glass_return_deg: float = 0.0
+    glass_reflect: float = 0.0
+    glass_passes: int = 8
 
 
 @dataclass
@@ -31,11 +61,12 @@ class Beams:
 
     ray : (k,) int64 index of the beam among the n traced
     path : (k,) float64 total path length, metres
-    point : (k, 3) float64 world position of the final hit
+    point : (k, 3) float64 local position of the final hit
     triangle : (k,) int64 final triangle
-    bounces : (k,) uint8 mirror reflections before the final hit
-    mirror_object : (k,) int32 object row of the first mirror met, -1 for none
-    gain : (k,) float64 product of the reflectivities of the mirrors met
+    bounces : (k,) uint8 specular reflections (mirror or glass) before the final hit
+    mirror_object : (k,) int32 object row of the first surface that reflected the beam, -1 for none
+    gain : (k,) float64 product of the one-way factors met: a reflecting surface's
+        reflectivity, a traversed glass surface's 1 - reflectivity (1 for direct returns)
     cos_incidence : (k,) float64 |cos| of the angle between the last ray and the final surface normal
     """
 
@@ -49,52 +80,137 @@ class Beams:
     cos_incidence: np.ndarray
 
 
-def trace_beams(caster: RayCaster, buffers: SceneBuffers, origin, directions, min_range: float, max_range: float, max_bounces: int = 3, directions32=None) -> Beams:
-    """Trace beams through mirrors, in the caster's local frame.
+def _relaunch_offset(caster: RayCaster, buffers: SceneBuffers, point: np.ndarray, triangle: np.ndarray) -> np.ndarray:
+    """``(k,)`` metres to move re-launched rays off their surface (see :data:`OFFSET_ULPS`)."""
+    corners = caster.to_local(buffers.vertices[buffers.triangles[triangle].reshape(-1)]).reshape(-1, 9)
+    scale = np.maximum(np.abs(point).max(axis=1), np.abs(corners).max(axis=1))
+    return OFFSET_ULPS * (1.0 + scale)
+
+
+def _from_launch(caster: RayCaster, launch: np.ndarray, d: np.ndarray, hits, shift: np.ndarray) -> np.ndarray:
+    """``(h,)`` distances of ``hits`` solved again in float64 from the un-offset ``launch`` points (h, 3).
+
+    The relaunched ray started ``shift`` (h,) metres off its surface; solving the hit triangle's
+    plane from the true launch point removes that bias from the path. Where the solve disagrees
+    with the caster's distance by more than the offset could explain (grazing rays), the
+    caster's distance is kept.
+    """
+    normal = hits.normal
+    with np.errstate(divide="ignore", invalid="ignore"):
+        exact = (caster.plane_offset[hits.triangle] - np.einsum("ij,ij->i", launch, normal)) / np.einsum("ij,ij->i", d, normal)
+    trust = np.abs(exact - hits.distance) <= 4.0 * shift
+    return np.where(trust, exact, hits.distance)
+
+
+def trace_beams(
+    caster: RayCaster,
+    buffers: SceneBuffers,
+    origin,
+    directions,
+    min_range: float,
+    max_range: float,
+    max_bounces: int = 3,
+    directions32=None,
+    surfaces: Surfaces | None = None,
+    rng: np.random.Generator | None = None,
+) -> Beams:
+    """Trace beams through mirrors and glass, in the caster's local frame.
 
     origin : (3,) or (n, 3) float64 local coordinates, metres
     directions : (n, 3) float64 unit vectors, local frame (``directions32``: the same as float32, optional)
+    surfaces : the rules for mirrors and glass (default :class:`Surfaces`: no normal-incidence
+        returns, glass always transmits)
+    rng : needed only when ``surfaces.glass_reflect`` lies strictly between 0 and 1
     Returns :class:`Beams` whose ``point`` is in the local frame.
+
+    At each hit, by the hit object's material (``n`` the triangle's normal, ``d`` the ray):
+
+    - ``diffuse``, and a mirror's back face (d.n > 0): the beam returns from there;
+    - ``absorber``: the beam is lost;
+    - ``mirror`` front face: within ``mirror_return_deg`` of normal incidence the beam returns
+      from the mirror itself; otherwise it reflects, gain x reflectivity. It is lost instead
+      when the mirror's reflectivity is 0 or ``max_bounces`` reflections are used up;
+    - ``glass``, either face: within ``glass_return_deg`` of normal incidence it returns from the
+      glass (if reflectivity > 0); otherwise a ``glass_reflect`` share of beams reflects like a
+      mirror (gain x reflectivity) and the rest passes straight through (gain x (1 - reflectivity));
+      lost when that factor is 0 or the reflection or pass budget is used up.
+
+    Every segment is bounded by what is left of ``max_range``, so no trace outlives its range
+    and the loop ends after at most ``max_bounces + glass_passes + 1`` Embree queries.
     """
+    surfaces = surfaces or Surfaces()
     n = len(directions)
     objects = buffers.objects
+    cos_mirror_return = math.cos(math.radians(surfaces.mirror_return_deg)) if surfaces.mirror_return_deg > 0 else math.inf
+    cos_glass_return = math.cos(math.radians(surfaces.glass_return_deg)) if surfaces.glass_return_deg > 0 else math.inf
     rows = None  # beam of each active ray; None while it is the identity (first segment)
     o, d = np.asarray(origin, np.float64), np.asarray(directions, np.float64)
-    travelled, bounces, gain, mirror = 0.0, np.zeros(n, np.uint8), np.ones(n), np.full(n, -1, np.int32)
+    launch = shift = None  # after a bounce: the un-offset points the rays leave from, and their offsets
+    travelled = 0.0
+    bounces, passes = np.zeros(n, np.uint8), np.zeros(n, np.uint16)
+    gain, mirror = np.ones(n), np.full(n, -1, np.int32)
     done = []
     while True:
         hits = caster.intersect(o, d, max_range - travelled, directions32)
         directions32 = None
         i = hits.ray
         seg_d = d[i]
-        point = (o if o.ndim == 1 else o[i]) + hits.distance[:, None] * seg_d
-        path = hits.distance + (travelled[i] if rows is not None else 0.0)
+        if launch is None:
+            start, distance = (o if o.ndim == 1 else o[i]), hits.distance
+        else:  # measure from where the beam really left the surface, not from the offset origin
+            start = launch[i]
+            distance = _from_launch(caster, start, seg_d, hits, shift[i])
+        point = start + distance[:, None] * seg_d
+        path = distance + (travelled[i] if rows is not None else 0.0)
         obj = buffers.triangle_object[hits.triangle]
-        facing = -np.einsum("ij,ij->i", seg_d, hits.normal)  # > 0 on the front face
-        reflects = (objects.material[obj] == MIRROR) & (facing > 0)
+        facing = -np.einsum("ij,ij->i", seg_d, hits.normal)  # cos of incidence, > 0 on the front face
+        cos_incidence = np.abs(facing)
+        material = objects.material[obj]
         beam = i if rows is None else rows[i]
-        if not reflects.any():
-            if rows is None:  # one segment, no mirror met: the defaults need no gathering
-                done.append((beam, path, point, hits.triangle, np.zeros(len(i), np.uint8), np.full(len(i), -1, np.int32), np.ones(len(i)), np.abs(facing)))
+        if rows is None and not (material != DIFFUSE).any():  # one segment, only diffuse hits: nothing to gather
+            done.append((beam, path, point, hits.triangle, np.zeros(len(i), np.uint8), np.full(len(i), -1, np.int32), np.ones(len(i)), cos_incidence))
+            break
+        reflectivity = objects.reflectivity[obj].astype(np.float64)
+        is_mirror, is_glass = material == MIRROR, material == GLASS
+        mirror_front = is_mirror & (facing > 0)
+        specular_return = (reflectivity > 0) & np.where(is_mirror, cos_incidence >= cos_mirror_return, cos_incidence >= cos_glass_return)
+        returns = (material == DIFFUSE) | (is_mirror & (facing <= 0)) | ((mirror_front | is_glass) & specular_return)
+        reflect = mirror_front & ~returns
+        through = is_glass & ~returns
+        if surfaces.glass_reflect > 0 and through.any():
+            if surfaces.glass_reflect >= 1:
+                turn = through
             else:
-                done.append((beam, path, point, hits.triangle, bounces[i], mirror[i], gain[i], np.abs(facing)))
+                if rng is None:
+                    raise ValueError("trace_beams: glass_reflect between 0 and 1 needs a numpy Generator (rng)")
+                turn = np.zeros(len(i), bool)
+                turn[through] = rng.random(int(through.sum())) < surfaces.glass_reflect
+            reflect |= turn
+            through &= ~turn
+        reflect &= (reflectivity > 0) & (bounces[i] < max_bounces)
+        through &= (reflectivity < 1) & (passes[i] < surfaces.glass_passes)
+        if returns.any():
+            done.append((beam[returns], path[returns], point[returns], hits.triangle[returns], bounces[i][returns], mirror[i][returns], gain[i][returns], cos_incidence[returns]))
+        go = reflect | through
+        if not go.any():
             break
-        final = ~reflects
-        done.append((beam[final], path[final], point[final], hits.triangle[final], bounces[i][final], mirror[i][final], gain[i][final], np.abs(facing[final])))
-        bounce = reflects & (bounces[i] < max_bounces) & (objects.reflectivity[obj] > 0)
-        if not bounce.any():
-            break
-        j, obj, normal = i[bounce], obj[bounce], hits.normal[bounce]
-        rows, travelled, bounces = beam[bounce], path[bounce], bounces[j] + 1
-        gain = gain[j] * objects.reflectivity[obj]
-        mirror = np.where(mirror[j] < 0, obj, mirror[j])
-        d = seg_d[bounce]
-        d = d - 2.0 * np.einsum("ij,ij->i", d, normal)[:, None] * normal
-        point = point[bounce]
-        offset = OFFSET_ULPS * (1.0 + np.abs(point).max(axis=1))
-        o = point + offset[:, None] * normal
+        j, turned = i[go], reflect[go]
+        rows, travelled = beam[go], path[go]
+        bounces, passes = bounces[j] + turned, passes[j] + ~turned
+        gain = gain[j] * np.where(turned, reflectivity[go], 1.0 - reflectivity[go])
+        mirror = np.where((mirror[j] < 0) & turned, obj[go], mirror[j])
+        normal, d = hits.normal[go], seg_d[go]
+        d_dot_n = np.einsum("ij,ij->i", d, normal)
+        d = np.where(turned[:, None], d - 2.0 * d_dot_n[:, None] * normal, d)
+        launch = point[go]
+        shift = _relaunch_offset(caster, buffers, launch, hits.triangle[go])
+        # Off the surface on the side the beam now travels to: back towards it after a reflection, beyond it after a pass.
+        side = np.where(turned, -np.sign(d_dot_n), np.sign(d_dot_n))
+        o = launch + (side * shift)[:, None] * normal
     if len(done) == 1:
         beams = Beams(*done[0])
+    elif not done:
+        beams = Beams(np.zeros(0, np.int64), np.zeros(0), np.zeros((0, 3)), np.zeros(0, np.int64), np.zeros(0, np.uint8), np.zeros(0, np.int32), np.zeros(0), np.zeros(0))
     else:
         fields = [np.concatenate(column) for column in zip(*done)]
         order = np.argsort(fields[0], kind="stable")
@@ -105,24 +221,38 @@ def trace_beams(caster: RayCaster, buffers: SceneBuffers, origin, directions, mi
     return beams
 
 
-def scan_chunk(caster, buffers, pattern: Pattern, sensor_to_local: np.ndarray, min_range: float, max_range: float, max_bounces: int = 3, ghost_semantic=None, ideal: bool = False):
+def scan_chunk(
+    caster,
+    buffers,
+    pattern: Pattern,
+    sensor_to_local: np.ndarray,
+    min_range: float,
+    max_range: float,
+    max_bounces: int = 3,
+    ghost_semantic=None,
+    ideal: bool = False,
+    *,
+    surfaces: Surfaces | None = None,
+    rng: np.random.Generator | None = None,
+):
     """Point records of one chunk of rays, in the caster's local frame.
 
     pattern : the chunk's rays (sensor frame)
     sensor_to_local : (4, 4) sensor pose in the caster's frame, or (n, 4, 4) one per ray (a moving sensor)
+    surfaces, rng : the mirror and glass rules and the frame's generator (:func:`trace_beams`)
     Returns ``(points, beam, ray)``: :data:`POINT_DTYPE` records, :data:`BEAM_DTYPE` facts for the
     effects, and for each point the index of its ray in the chunk.
     """
     directions = pattern.directions
     if sensor_to_local.ndim == 2 and pattern.origins is None and np.allclose(sensor_to_local, np.eye(4), rtol=0, atol=1e-12):
         origin, world_d = np.zeros(3), directions  # the caster works in this sensor's frame: rays go in as they are
-        beams = trace_beams(caster, buffers, origin, directions, min_range, max_range, max_bounces, directions.astype(np.float32))
+        beams = trace_beams(caster, buffers, origin, directions, min_range, max_range, max_bounces, directions.astype(np.float32), surfaces, rng)
     else:
         rotation, translation = sensor_to_local[..., :3, :3], sensor_to_local[..., :3, 3]
         rotate = (lambda v: v @ rotation.T) if rotation.ndim == 2 else (lambda v: np.einsum("nij,nj->ni", rotation, v))
         world_d = rotate(directions)
         origin = translation if pattern.origins is None else translation + rotate(pattern.origins)
-        beams = trace_beams(caster, buffers, origin, world_d, min_range, max_range, max_bounces)
+        beams = trace_beams(caster, buffers, origin, world_d, min_range, max_range, max_bounces, None, surfaces, rng)
     objects = buffers.objects
     obj = buffers.triangle_object[beams.triangle]
     ghost = beams.bounces > 0
@@ -161,6 +291,9 @@ def scan_chunks(
     ghost_semantic: int | None = None,
     ideal: bool = False,
     chunk_rays: int = 1 << 18,
+    *,
+    surfaces: Surfaces | None = None,
+    rng: np.random.Generator | None = None,
 ) -> Iterator[tuple[np.ndarray, np.ndarray]]:
     """``(points, beam)`` of a scan, chunk by chunk in firing order; points in the caster's frame.
 
@@ -170,6 +303,8 @@ def scan_chunks(
         firing times (n,) to (n, 4, 4) poses for a moving one
     ghost_semantic : class id given to points seen through mirrors; ``None`` keeps the final object's class
     ideal : report mirrored points at their true position instead of along the original beam
+    surfaces : the rules for mirrors and glass (:class:`Surfaces`); rng : the frame's generator,
+        needed only when some glass reflects a fraction of beams (:func:`trace_beams`)
     Points come out in the caster's local frame: give the caster the sensor's pose (at frame
     start, for a moving sensor) and they are in the sensor frame, motion-compensated to that pose.
     Rays go through in chunks of at most ``chunk_rays``, so memory does not grow with the ray
@@ -181,7 +316,9 @@ def scan_chunks(
             s = slice(start, start + chunk_rays)
             chunk = Pattern(pattern.directions[s], pattern.ring[s], pattern.time[s], None if pattern.origins is None else pattern.origins[s])
             poses = pose(chunk.time) if callable(pose) else pose
-            points, beam, _ = scan_chunk(caster, buffers, chunk, world_to_local @ poses, min_range, max_range, max_bounces, ghost_semantic, ideal)
+            points, beam, _ = scan_chunk(
+                caster, buffers, chunk, world_to_local @ poses, min_range, max_range, max_bounces, ghost_semantic, ideal, surfaces=surfaces, rng=rng
+            )
             yield points, beam
 
 
