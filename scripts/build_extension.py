@@ -159,7 +159,7 @@ def build(platforms: list[str] | None = None, out_dir: Path = ROOT / "dist", cac
     out_dir.mkdir(parents=True, exist_ok=True)
     split = ["--split-platforms"] if len(platforms) > 1 else []
     output = run_tool(tool, "build", "--source-dir", str(folder), "--output-dir", str(out_dir), *split)
-    zips = [Path(m) for m in re.findall(r'created: "(.+?\.zip)"', output)]
+    zips = [out_dir / name for name in re.findall(r"^building: (\S+\.zip)$", output, flags=re.MULTILINE)]
     if not zips:
         raise BuildError(f"blender_ext build: wrote no zip ({output.strip().splitlines()[-1:]})")
     for path in zips:

@@ -154,6 +154,10 @@ report["loaded_equals_file"] = panel.settings_config(settings) == cfg.load_confi
 report["generate"] = sorted(bpy.ops.lidar.generate())
 report["generate_files"] = frame_files(out_dir)
 report["generate_manifest_frames"] = len(json.loads((out_dir / "manifest.json").read_text())["frames"])
+settings.out_dir = str(WORK / "out_invoke")  # invoked without a window (background): runs like execute
+report["generate_invoke"] = sorted(bpy.ops.lidar.generate("INVOKE_DEFAULT"))
+report["generate_invoke_files"] = frame_files(WORK / "out_invoke")
+settings.out_dir = str(out_dir)
 saved_yaml = WORK / "saved.yaml"
 report["save"] = sorted(bpy.ops.lidar.config_save(filepath=str(saved_yaml)))
 report["saved_equals_file"] = cfg.load_config(saved_yaml) == cfg.load_config(job_yaml)

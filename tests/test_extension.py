@@ -150,6 +150,7 @@ def test_panel_yaml_round_trip_and_run_py(session, tmp_path):
     assert report["load"] == ["FINISHED"] and report["loaded_equals_file"]
     assert report["save"] == ["FINISHED"] and report["saved_equals_file"] and report["resave_is_byte_identical"]
     assert report["generate"] == ["FINISHED"] and report["generate_manifest_frames"] == 2
+    assert report["generate_invoke"] == ["FINISHED"] and report["generate_invoke_files"] == report["generate_files"]
     for config in ("job.yaml", "saved.yaml"):
         out = tmp_path / config
         result = subprocess.run([sys.executable, str(ROOT / "run.py"), "--config", str(work / config), "--out", str(out)], capture_output=True, text=True, timeout=300)
