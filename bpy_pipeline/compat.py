@@ -34,3 +34,18 @@ def get_modifier_input(modifier: bpy.types.Modifier, name: str):
     if VERSION >= (5, 2, 0):
         return getattr(modifier.properties.inputs, item.identifier).value
     return modifier[item.identifier]
+
+
+def set_node_option(node: bpy.types.Node, name: str, value: str) -> None:
+    """Set a node's enum option ``name`` (e.g. ``mode``) to ``value``, an RNA identifier such as ``"Z_UP"``.
+
+    Up to 4.5 such options are node properties (``node.mode = "Z_UP"``); from 5.x many became menu
+    input sockets (``node.inputs["Mode"]``) whose items are named ``"Z Up"``.
+    """
+    if name in node.bl_rna.properties:
+        setattr(node, name, value)
+        return
+    socket = node.inputs.get(name.replace("_", " ").title())
+    if socket is None or socket.type != "MENU":
+        raise KeyError(f"node {node.bl_idname} has no option {name!r}")
+    socket.default_value = value.replace("_", " ").title()

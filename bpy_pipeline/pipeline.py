@@ -32,7 +32,7 @@ from .lidar.grid import image_shape
 from .lidar.mirror_sensor import drop_at_edges, edge_drop_mask, load_edge_mask, reflect_patterns
 from .lidar.raycast import RayCaster
 from .lidar.scanner import Surfaces, scan
-from .lidar.sensors import frame_time, iter_pattern, mount_offset, spec_summary
+from .lidar.sensors import angular_resolution, frame_time, iter_pattern, mount_offset, spec_summary
 
 
 CHUNK_RAYS = 1 << 18  # rays generated and traced at a time: bounds memory for 23-million-ray scans
@@ -59,11 +59,46 @@ def versions() -> dict:
     return out
 
 
-def sensor_pose(config: Config) -> np.ndarray:
-    """``(4, 4)`` sensor-to-world transform: the configured pose, raised by the preset's mount height."""
-    pose = pose_matrix(config.sensor.position, config.sensor.rotation_deg)
+def scene_stations(config: Config) -> np.ndarray:
+    """``(n, 4, 4)`` level frames of the scanner stations the scene defines (railway ``scene.stations``:
+    x along the track, z up); n = 0 when it defines none or the sensor follows a trajectory."""
+    from .config import RailwayScene
+
+    if config.sensor.trajectory is not None or not isinstance(config.scene.params, RailwayScene):
+        return np.zeros((0, 4, 4))
+    from .geometry.railway_layout import station_frames
+
+    return station_frames(config.scene.params)
+
+
+def sensor_pose(config: Config, frame: int = 0) -> np.ndarray:
+    """``(4, 4)`` sensor-to-world transform of frame ``frame``, raised by the preset's mount height.
+
+    The configured position and rotation; in a scene with stations, station ``frame mod n``
+    instead, its frame turned by ``sensor.rotation_deg`` (so yaw 0 looks along the track).
+    """
+    stations = scene_stations(config)
+    if len(stations):
+        pose = stations[frame % len(stations)] @ pose_matrix((0.0, 0.0, 0.0), config.sensor.rotation_deg)
+    elif getattr(config.scene.params, "place_sensor", False):  # parking, industrial_hall: the scene's own station
+        from .geometry.indoor import scene_station
+
+        pose = scene_station(config.scene.params, frame) @ pose_matrix((0.0, 0.0, 0.0), config.sensor.rotation_deg)
+    else:
+        pose = pose_matrix(config.sensor.position, config.sensor.rotation_deg)
     pose[:3, 3] += mount_offset(config.sensor.spec)
     return pose
+
+
+def scene_view(config: Config, first: int, count: int):
+    """The :class:`~.geometry.lod.SensorView` of frames ``first`` .. ``first + count - 1`` (static sensors;
+    ``None`` for a moving one, whose builders then model at a fixed detail)."""
+    if config.sensor.trajectory is not None:
+        return None
+    from .geometry.lod import view_of
+
+    frames = range(first, min(first + count, config.frames))
+    return view_of(config.sensor.spec, [sensor_pose(config, f)[:3, 3] for f in frames])
 
 
 def scene_trajectory(config: Config) -> Trajectory | None:
@@ -107,7 +142,7 @@ def scan_buffers(buffers: SceneBuffers, config: Config, rng: np.random.Generator
     buffers.check()
     spec = config.sensor.spec
     if config.sensor.trajectory is None:
-        pose = pose_at = sensor_pose(config)
+        pose = pose_at = sensor_pose(config, frame)
     else:
         trajectory = trajectory or sensor_trajectory(config.sensor)
         trajectory.check_frames(frame + 1, frame_time(spec))
@@ -120,7 +155,7 @@ def scan_buffers(buffers: SceneBuffers, config: Config, rng: np.random.Generator
     if config.sensor.reflector.enabled:  # the super-resolution sensor: every ray leaves through its own mirrors
         patterns = reflect_patterns(patterns, config.sensor.reflector)
     if config.sensor.divergence.active:
-        points, beam = scan_footprint(caster, buffers, patterns, pose_at, config.sensor.divergence, spec.min_range, spec.max_range, **options)
+        points, beam = scan_footprint(caster, buffers, patterns, pose_at, config.sensor.divergence, spec.min_range, spec.max_range, **options, surfaces=scan_surfaces(config), rng=rng)
     else:
         points, beam = scan(caster, buffers, patterns, pose_at, spec.min_range, spec.max_range, **options, surfaces=scan_surfaces(config), rng=rng)
     mask = edge_mask(config)
@@ -134,12 +169,40 @@ def scan_buffers(buffers: SceneBuffers, config: Config, rng: np.random.Generator
     return points, pose
 
 
-def write_frame(out_dir: Path, index: int, points: np.ndarray, config: Config) -> list[str]:
-    """Write one frame in every configured format, all or nothing; returns paths relative to ``out_dir``."""
+def frame_boxes(buffers: SceneBuffers, config: Config, pose: np.ndarray, points: np.ndarray, headings: dict | None = None, frame: int = 0, rng: np.random.Generator | None = None) -> np.ndarray:
+    """The frame's 3D box labels (:data:`~.io.boxes.BOX_DTYPE`) in the frame of the points, thin boxes dropped.
+
+    headings : {instance: yaw} from the builder (others get their footprint's heading)
+    Truncation and occlusion come from the sensor's own rays at ``pose`` (io/boxes.py).
+    """
+    from .io import boxes as box_labels
+
+    section = config.output.boxes
+    boxes = box_labels.fit_boxes(buffers, section.classes, headings)
+    if len(boxes):
+        spec = config.sensor.spec
+        patterns = iter_pattern(spec, CHUNK_RAYS, frame)
+        if config.sensor.reflector.enabled:
+            patterns = reflect_patterns(patterns, config.sensor.reflector)
+        steps = [v for v in angular_resolution(spec) if v is not None and np.isfinite(v)]
+        cell = float(np.clip(max(steps) if steps else 1.0, 0.2, 5.0))
+        box_labels.visibility(buffers, boxes, patterns, pose, spec.min_range, spec.max_range, cell, surfaces=scan_surfaces(config), rng=rng)
+        boxes["occlusion"] = box_labels.occlusion_levels(boxes["visible"], boxes["unoccluded"], section.occlusion_levels)
+        box_labels.count_points(boxes, points)
+        boxes = box_labels.keep_boxes(boxes, section.min_points, section.min_points_default)
+    return box_labels.boxes_in_frame(boxes, pose if config.output.frame == "sensor" else np.eye(4))
+
+
+def write_frame(out_dir: Path, index: int, points: np.ndarray, config: Config, boxes: np.ndarray | None = None) -> list[str]:
+    """Write one frame in every configured format (and its box labels), all or nothing; returns paths relative to ``out_dir``."""
     staging = out_dir / f".frame_{index:06d}.tmp"
     shutil.rmtree(staging, ignore_errors=True)
     try:
         written = []
+        if boxes is not None and config.output.boxes.formats:
+            from .io.boxes import write_frame_boxes
+
+            written += write_frame_boxes(staging, index, boxes, points, config.output.boxes.formats, config.output.boxes.names)
         for name in config.output.formats:
             if name == "range_image":  # organised by the sensor's rings and columns
                 written += write_frame_range_image(staging, index, points, config.sensor.spec, load_class_table().color_lut())
@@ -193,6 +256,19 @@ def run(config: Config, out_dir: str | Path, log=print, build: bool = True) -> d
     return manifest
 
 
+def build_frame_scene(config: Config, index: int = 0, rng: np.random.Generator | None = None):
+    """Build the scene that frame ``index`` of :func:`run_frames` scans (the panel's Build scene: frame 0).
+
+    rng : the frame's generator (``frame_rng(config.seed, index)`` when ``None``)
+    Returns what the builder returns.
+    """
+    from .scenes import build_scene
+
+    per_scene = max(len(scene_stations(config)), 1)
+    rng = frame_rng(config.seed, index) if rng is None else rng
+    return build_scene(config.scene, rng, scene_view(config, index, per_scene))
+
+
 def run_frames(config: Config, out_dir: str | Path, build: bool = True) -> Iterator[FrameResult]:
     """The frames of :func:`run`, one at a time: each is on disk, manifest included, when it is yielded.
 
@@ -201,8 +277,6 @@ def run_frames(config: Config, out_dir: str | Path, build: bool = True) -> Itera
     each frame (the Blender panel's "my scene", or a built scene the user has edited since).
     """
     from .export import export_scene
-    from .scenes import build_scene
-
     table = load_class_table()
     extra_rules = parse_rules(config.labels.name_rules, "labels.name_rules", table.names)
     out_dir = prepare_output(out_dir)
@@ -214,18 +288,22 @@ def run_frames(config: Config, out_dir: str | Path, build: bool = True) -> Itera
         "class_table": {int(k): v for k, v in table.names.items()},
         "frames": [],
     }
+    stations = len(scene_stations(config))
+    per_scene = max(stations, 1)  # a scene with n stations is built once and scanned from each in turn
     for index in range(config.frames):
         rng = frame_rng(config.seed, index)
         timings = {}
         start = time.perf_counter()
-        if build:
-            build_scene(config.scene, rng)
+        built = None
+        if build and index % per_scene == 0:
+            built = build_frame_scene(config, index, rng)
+        headings, scene_info = getattr(built, "headings", None), getattr(built, "info", None)
         trajectory = scene_trajectory(config)
         timings["build"] = time.perf_counter() - start
         start = time.perf_counter()
         period, max_range = frame_time(config.sensor.spec), config.sensor.spec.max_range
         if trajectory is None:
-            sensor_range = (sensor_pose(config)[:3, 3], max_range)
+            sensor_range = (sensor_pose(config, index)[:3, 3], max_range)
         else:  # everything the sensor can reach from anywhere along this frame's stretch of path
             trajectory.check_frames(index + 1, period)
             sensor_range = (trajectory.frame_poses(index, period)(np.zeros(1))[0, :3, 3], max_range + trajectory.reach(index, period))
@@ -234,8 +312,17 @@ def run_frames(config: Config, out_dir: str | Path, build: bool = True) -> Itera
         start = time.perf_counter()
         points, pose = scan_buffers(buffers, config, rng, index, trajectory)
         timings["scan"] = time.perf_counter() - start
+        boxes = None
+        if config.output.boxes.formats:
+            start = time.perf_counter()
+            boxes = frame_boxes(buffers, config, pose, points, headings, index, rng)
+            timings["boxes"] = time.perf_counter() - start
         start = time.perf_counter()
-        files = write_frame(out_dir, index, points, config)
+        files = write_frame(out_dir, index, points, config, boxes)
+        if boxes is not None:
+            from .io.boxes import write_image_sets
+
+            write_image_sets(out_dir, range(index + 1), config.output.boxes.formats)
         timings["write"] = time.perf_counter() - start
         manifest["frames"].append(
             {
@@ -244,9 +331,12 @@ def run_frames(config: Config, out_dir: str | Path, build: bool = True) -> Itera
                 "points": int(len(points)),
                 "triangles": int(len(buffers.triangles)),
                 "sensor_pose": pose.tolist(),
+                **({"station": index % stations} if stations else {}),
                 **({} if trajectory is None else {"trajectory": trajectory.frame_info(index, period)}),
                 "timings_s": {k: round(v, 4) for k, v in timings.items()},
                 "objects": buffers.objects.rows(),
+                **({} if scene_info is None else {"scene": scene_info}),
+                **({} if boxes is None else {"boxes": [{"class": str(b["class_name"]), "instance": int(b["instance"]), "points": int(b["points"]), "visible": int(b["visible"]), "unoccluded": int(b["unoccluded"]), "occlusion": int(b["occlusion"]), "truncation": round(float(b["truncation"]), 4)} for b in boxes]}),
             }
         )
         write_manifest(out_dir, manifest)

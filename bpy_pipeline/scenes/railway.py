@@ -1,103 +1,184 @@
-"""``scene.builder: railway``: a straight single track with ballast, sleepers, rails, two masts and wires.
+"""``scene.builder: railway``: tracks, supports and catenary along an arc through three points (bpy).
 
-The track runs along +x, centred on the origin; ground at z = 0. Sleepers come from the
-"Boxes Along Line" Geometry Nodes group; wires are bevelled curves. Every object is tagged
-with its class from assets_manifest/labels.yaml.
+The layout (alignment, supports, spans, wires, droppers, stations) comes from the pure
+:mod:`~bpy_pipeline.geometry.railway_layout`; this module turns it into tagged Blender objects:
+
+- ``track_centreline``: a poly curve through the alignment at formation level (not scanned);
+  the "Track" Geometry Nodes group follows it, and a trajectory can follow it too
+  (``sensor.trajectory.curve: track_centreline``; the rail heads are ``rail_top_height`` above it);
+- one object per track part, each running the "Track" group (:mod:`.railway_nodes`) with its
+  ``Part``: ``rails.t<i>`` and ``sleepers.t<i>`` per track, ``ballast``, ``ballast_stones``,
+  ``embankment``, ``ground``;
+- per support ``support.<k>.mast.<side>`` (or ``support.<k>.gantry``), and per track it carries
+  ``support.<k>.cantilever.t<i>``, ``support.<k>.registration_arm.t<i>``, plus ``support.<k>.insulators``;
+- per span and run ``span.<run>.<k>.<wire>`` (contact_wire, messenger_wire, feeder, earth_wire)
+  and ``span.<run>.<k>.droppers``: wires are bevelled curves of their real diameters, so every
+  element has its class and an instance per span.
+
+Detail follows the sensor (:func:`~bpy_pipeline.geometry.railway_layout.level_of_detail`) when the
+pipeline passes a :class:`~bpy_pipeline.geometry.lod.SensorView`.
 """
 
 from __future__ import annotations
 
-import math
-
 import bpy
 import numpy as np
 
-from ..geometry import primitives
+from ..geometry import railway_parts
 from ..geometry.catenary import parabolic_sag
-from .nodes import add_group_modifier, boxes_along_line_group
-from .objects import mesh_object, scene_collection, tag, wire_object
+from ..geometry.primitives import merge
+from ..geometry.railway_layout import EARTH_BRACKET, FEEDER_BRACKET, STAY_RISE, RailwayLayout, level_of_detail, plan
+from .nodes import add_group_modifier
+from .objects import mesh_data, mesh_object, scene_collection, tag, wire_object
+from .railway_nodes import PARTS, track_group
 
-SLEEPER = (0.26, 2.6, 0.22)  # m: width along the track, length across, height (B70 concrete)
-RAIL_PARTS = ((0.150, 0.0115), (0.0165, 0.1225), (0.072, 0.038))  # m: (width, height) of foot, web, head
-RAIL_HEIGHT = sum(h for _, h in RAIL_PARTS)
-MAST_SECTION = (0.3, 0.3, 0.02)  # m: flange width, depth, thickness of the H-section
-
-
-def rail_mesh(length: float):
-    """A simplified flat-bottom rail (foot, web, head boxes) along x, foot on z = 0."""
-    parts, z = [], 0.0
-    for width, height in RAIL_PARTS:
-        parts.append(primitives.translated(primitives.box(length, width, height), (0, 0, z + height / 2)))
-        z += height
-    return primitives.merge(parts)
+CENTRELINE = "track_centreline"
+STONE_CENTRES = "track_stone_centres"
+REFLECTIVITY = {
+    "rail": 0.6, "sleeper": 0.4, "ballast": 0.35, "ground": 0.3, "mast": 0.5, "gantry": 0.5, "cantilever": 0.5,
+    "registration arm": 0.5, "insulator": 0.4, "contact wire": 0.7, "messenger wire": 0.7, "dropper": 0.6,
+    "feeder wire": 0.6, "earth wire": 0.6,
+}
 
 
-def h_section_mesh(height: float):
-    """An H-section mast standing on z = 0 (flanges across y)."""
-    width, depth, t = MAST_SECTION
-    return primitives.merge(
-        [
-            primitives.translated(primitives.box(t, width, height), (-depth / 2 + t / 2, 0, height / 2)),
-            primitives.translated(primitives.box(t, width, height), (depth / 2 - t / 2, 0, height / 2)),
-            primitives.translated(primitives.box(depth - 2 * t, t, height), (0, 0, height / 2)),
-        ]
-    )
+def build(params, rng: np.random.Generator, view=None) -> RailwayLayout:
+    """Build the railway of a ``RailwayScene`` config; ``view`` (a SensorView) drives the level of detail.
 
-
-def arm_mesh(y0: float, y1: float, z: float, thickness: float = 0.06):
-    """A horizontal bar across the track from y0 to y1 at height z."""
-    return primitives.translated(primitives.box(thickness, abs(y1 - y0), thickness), (0, (y0 + y1) / 2, z))
-
-
-def build(params, rng: np.random.Generator) -> None:
+    Returns the :class:`~bpy_pipeline.geometry.railway_layout.RailwayLayout` that was built.
+    """
     collection = scene_collection()
-    half = params.length / 2
-    sleeper_top = params.ballast_height + SLEEPER[2]
-    rail_top = sleeper_top + RAIL_HEIGHT
-
-    ground = mesh_object("ground", primitives.plane(params.length + 40, 40), collection)
-    tag(ground, "ground", reflectivity=0.3)
-
-    top = SLEEPER[1] / 2 + params.ballast_shoulder
-    bottom = top + params.ballast_height * 1.5  # 1:1.5 slope
-    ballast_profile = np.array([[-bottom, 0.0], [bottom, 0.0], [top, params.ballast_height], [-top, params.ballast_height]])
-    tag(mesh_object("ballast", primitives.prism(ballast_profile, -half, half), collection), "ballast", reflectivity=0.35)
-
-    count = int(params.length // params.sleeper_spacing)
-    start = -(count - 1) * params.sleeper_spacing / 2
-    sleepers = mesh_object("sleepers", (np.zeros((0, 3)), np.zeros((0, 3), np.int32)), collection)
-    add_group_modifier(
-        sleepers,
-        boxes_along_line_group(),
-        {"Count": count, "Start": (start, 0.0, params.ballast_height + SLEEPER[2] / 2), "Offset": (params.sleeper_spacing, 0.0, 0.0), "Size": SLEEPER},
-    )
-    tag(sleepers, "sleeper", reflectivity=0.4)
-
-    rail_offset = params.gauge / 2 + RAIL_PARTS[2][0] / 2
-    rail = rail_mesh(params.length)
-    for side, y in (("left", rail_offset), ("right", -rail_offset)):
-        tag(mesh_object(f"rail_{side}", rail, collection, (0, y, sleeper_top)), "rail", reflectivity=0.6)
-
-    contact_z = rail_top + params.contact_wire_height
-    messenger_z = contact_z + params.system_height
-    mast_x = (-params.span / 2, params.span / 2)
-    mast_y = -params.mast_offset
-    stagger = (params.stagger, -params.stagger)
-    for i, (x, y_wire) in enumerate(zip(mast_x, stagger)):
-        tag(mesh_object(f"mast_{i}", h_section_mesh(params.mast_height), collection, (x, mast_y, 0)), "mast", reflectivity=0.5)
-        tag(mesh_object(f"cantilever_{i}", arm_mesh(mast_y, y_wire, messenger_z), collection, (x, 0, 0)), "cantilever", reflectivity=0.5)
-        tag(mesh_object(f"registration_arm_{i}", arm_mesh(mast_y, y_wire, contact_z, 0.04), collection, (x, 0, 0)), "registration arm", reflectivity=0.5)
-
-    samples = max(3, math.ceil(params.span / 0.5) + 1)
-    ends = [(mast_x[0], stagger[0]), (mast_x[1], stagger[1])]
-    contact = parabolic_sag([*ends[0], contact_z], [*ends[1], contact_z], params.contact_wire_sag, samples)
-    messenger = parabolic_sag([*ends[0], messenger_z], [*ends[1], messenger_z], params.messenger_wire_sag, samples)
-    tag(wire_object("contact_wire", [contact], params.contact_wire_diameter / 2, collection), "contact wire", reflectivity=0.7)
-    tag(wire_object("messenger_wire", [messenger], params.messenger_wire_diameter / 2, collection), "messenger wire", reflectivity=0.7)
-
-    droppers = max(1, math.floor(params.span / params.dropper_spacing))
-    u = (np.arange(droppers) + 0.5) / droppers
-    lower = np.array([np.interp(u, np.linspace(0, 1, samples), contact[:, k]) for k in range(3)]).T
-    upper = np.array([np.interp(u, np.linspace(0, 1, samples), messenger[:, k]) for k in range(3)]).T
-    tag(wire_object("droppers", [np.stack([a, b]) for a, b in zip(lower, upper)], 0.004, collection), "dropper", reflectivity=0.6)
+    layout = plan(params, rng)
+    detail = level_of_detail(layout, params, view)
+    centreline = _centreline(layout, detail.centreline_tolerance, collection)
+    centreline["rail_top_height"] = float(layout.section.rail_top)
+    centres = _stone_centres(view, collection) if detail.stone_radius > 0 else None
+    _track(params, layout, detail, centreline, centres, int(rng.integers(0, 2**31 - 1)), collection)
+    _supports(params, layout, detail, collection)
+    _wires(layout, detail, collection)
     bpy.context.view_layer.update()
+    return layout
+
+
+def _centreline(layout: RailwayLayout, tolerance: float, collection) -> bpy.types.Object:
+    alignment = layout.alignment
+    points = alignment.point(alignment.chainage_samples(tolerance))
+    curve = bpy.data.curves.new(CENTRELINE, "CURVE")
+    curve.dimensions = "3D"
+    spline = curve.splines.new("POLY")
+    spline.points.add(len(points) - 1)
+    spline.points.foreach_set("co", np.column_stack([points, np.ones(len(points))]).astype(np.float32).ravel())
+    obj = bpy.data.objects.new(CENTRELINE, curve)
+    obj.hide_render = True  # a guide, not a surface: never scanned
+    collection.objects.link(obj)
+    return obj
+
+
+def _stone_centres(view, collection) -> bpy.types.Object:
+    mesh = bpy.data.meshes.new(STONE_CENTRES)
+    mesh.vertices.add(len(view.positions))
+    mesh.vertices.foreach_set("co", np.asarray(view.positions, np.float32).ravel())
+    obj = bpy.data.objects.new(STONE_CENTRES, mesh)
+    obj.hide_render = True
+    collection.objects.link(obj)
+    return obj
+
+
+def _track(params, layout, detail, centreline, centres, seed: int, collection) -> None:
+    track = params.track
+    rail = track.rail
+    inputs = {
+        "Centreline": centreline, "Tracks": track.tracks, "Track Spacing": track.track_spacing, "Gauge": track.gauge,
+        "Rail Foot Width": rail.foot_width, "Rail Foot Height": rail.foot_height, "Rail Web Width": rail.web_width,
+        "Rail Web Height": rail.web_height, "Rail Head Width": rail.head_width, "Rail Head Height": rail.head_height,
+        "Sleeper Spacing": track.sleeper_spacing, "Sleeper Length": track.sleeper_length, "Sleeper Width": track.sleeper_width,
+        "Sleeper Height": track.sleeper_height, "Ballast Height": track.ballast_height, "Ballast Shoulder": track.ballast_shoulder,
+        "Ballast Slope": track.ballast_slope, "Embankment Height": track.embankment_height, "Embankment Slope": track.embankment_slope,
+        "Embankment Berm": track.embankment_berm, "Ground Width": track.ground_width, "Stone Size": params.detail.stone_size, "Seed": seed,
+    }
+    group = track_group()
+    parts = [(f"rails.t{i}", "rails", "rail", i) for i in range(track.tracks)]
+    parts += [(f"sleepers.t{i}", "sleepers", "sleeper", i) for i in range(track.tracks)]
+    parts += [("ballast", "ballast", "ballast", -1), ("ground", "ground", "ground", -1)]
+    if track.embankment_height > 0:
+        parts.append(("embankment", "embankment", "ground", -1))
+    if centres is not None:
+        parts.append(("ballast_stones", "stones", "ballast", -1))
+    for name, part, class_name, index in parts:
+        trim = detail.ground_trim if part == "ground" else detail.track_trim
+        if trim[1] <= trim[0]:
+            continue
+        obj = mesh_object(name, (np.zeros((0, 3)), np.zeros((0, 3), np.int32)), collection)
+        extra = {"Part": PARTS[part], "Track": index, "Trim Start": trim[0], "Trim End": trim[1]}
+        if part == "stones":
+            extra |= {"Stone Centres": centres, "Stone Radius": detail.stone_radius}
+        add_group_modifier(obj, group, inputs | extra)
+        tag(obj, class_name, reflectivity=REFLECTIVITY[class_name])
+
+
+def _placed(name: str, mesh, frame: np.ndarray, class_name: str, collection) -> bpy.types.Object:
+    obj = mesh_object(name, mesh, collection)
+    obj.matrix_world = frame.T.tolist()  # Blender matrices are row-major lists of rows
+    return tag(obj, class_name, reflectivity=REFLECTIVITY[class_name])
+
+
+def _mast_mesh(mast, cat) -> tuple[np.ndarray, np.ndarray]:
+    """A mast with the brackets of its feeder and earth wire, in the support frame."""
+    parts = [railway_parts.mast(mast.kind, mast.top - mast.base, (0.0, mast.lateral, mast.base))]
+    if cat.feeders:
+        parts.append(railway_parts.bracket(mast.lateral, mast.outward, FEEDER_BRACKET[0] + 0.15, mast.top - 0.05))
+    if cat.earth_wire:
+        parts.append(railway_parts.bracket(mast.lateral, mast.outward, EARTH_BRACKET[0] + 0.1, mast.top + EARTH_BRACKET[1] + 0.05))
+    return merge(parts)
+
+
+def _supports(params, layout: RailwayLayout, detail, collection) -> None:
+    cat, section = params.catenary, layout.section
+    contact_z = section.rail_top + cat.contact_wire_height
+    messenger_z = contact_z + cat.system_height
+    shared: dict[tuple, bpy.types.Mesh] = {}  # identical masts (same side, kind, height) share one mesh datablock
+    for k in detail.supports:
+        support = layout.supports[k]
+        frame = np.asarray(support.frame, float)
+        label = f"support.{k:02d}"
+        insulators = []
+        beam_underside = None
+        if support.gantry:
+            right, left = support.masts
+            mesh, beam_underside = railway_parts.gantry(left.lateral, right.lateral, left.base, right.base, left.top, left.kind)
+            _placed(f"{label}.gantry", mesh, frame, "gantry", collection)
+        for mast in support.masts:
+            if not support.gantry:
+                key = (mast.side, mast.kind, round(mast.top, 6), round(mast.base, 6), round(mast.lateral, 6))
+                if key not in shared:
+                    shared[key] = mesh_data(f"mast.{mast.side}.{mast.kind}", *_mast_mesh(mast, cat))
+                _placed(f"{label}.mast.{mast.side}", shared[key], frame, "mast", collection)
+            if cat.feeders:  # the feeder hangs from its bracket on a rod insulator
+                y = mast.lateral + mast.outward * FEEDER_BRACKET[0]
+                insulators.append(railway_parts.insulator((0.0, y, mast.top - 0.075), (0.0, y, mast.top + FEEDER_BRACKET[1] + 0.02), 0.05, 3))
+            for i in mast.tracks:
+                attach_y = section.offsets[i] + support.stagger
+                if support.gantry:  # a drop tube under the beam, 0.9 m from the wires towards the middle
+                    root_y = attach_y - 0.9 * (np.sign(attach_y) or -1.0)
+                else:
+                    root_y = mast.lateral - mast.outward * 0.15
+                pieces = railway_parts.cantilever(root_y, attach_y, contact_z, messenger_z, STAY_RISE, beam_underside)
+                _placed(f"{label}.cantilever.t{i}", pieces["cantilever"], frame, "cantilever", collection)
+                _placed(f"{label}.registration_arm.t{i}", pieces["registration arm"], frame, "registration arm", collection)
+                insulators.append(pieces["insulator"])
+        if insulators:
+            _placed(f"{label}.insulators", merge(insulators), frame, "insulator", collection)
+
+
+def _wires(layout: RailwayLayout, detail, collection) -> None:
+    for wire, setting in zip(layout.wires, detail.wires):
+        if setting is None:
+            continue
+        samples, sides = setting
+        points = parabolic_sag(wire.start, wire.end, wire.sag, samples, f"span {wire.run}.{wire.span}")
+        obj = wire_object(f"span.{wire.run}.{wire.span:02d}.{wire.kind}", [points], wire.diameter / 2, collection, sides)
+        tag(obj, wire.class_name, reflectivity=REFLECTIVITY[wire.class_name])
+    for droppers, built in zip(layout.droppers, detail.droppers):
+        if built:
+            lines = [np.stack([a, b]) for a, b in zip(droppers.lower, droppers.upper)]
+            obj = wire_object(f"span.{droppers.run}.{droppers.span:02d}.droppers", lines, droppers.diameter / 2, collection, 4)
+            tag(obj, "dropper", reflectivity=REFLECTIVITY["dropper"])

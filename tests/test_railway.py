@@ -1,0 +1,192 @@
+"""The railway builder in Blender: measured from labeled scans, and the Track node group a user can edit."""
+
+import math
+
+import numpy as np
+import pytest
+
+from bpy_pipeline.config import load_config
+from bpy_pipeline.geometry import catenary
+
+pytestmark = pytest.mark.bpy
+TLS = ["sensor.preset=railway_tls"]
+
+
+def scan_world(tmp_path, *overrides):
+    """Run the pipeline in-process (world-frame output); ``(points, manifest)``."""
+    import bpy
+
+    from bpy_pipeline.io import read_ply
+    from bpy_pipeline.pipeline import run
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    config = load_config(None, ["output.formats=[ply]", "output.preview=false", "output.frame=world", *overrides])
+    manifest = run(config, tmp_path, log=lambda *_: None)
+    return read_ply(tmp_path / "ply" / "000000.ply"), manifest
+
+
+def instance_of(manifest, name):
+    return next(o["instance"] for o in manifest["frames"][0]["objects"] if o["name"] == name)
+
+
+def test_gauge_measured_from_the_rail_points(tmp_path):
+    # a station on the centreline, looking down at both rails' inner faces
+    points, manifest = scan_world(tmp_path, *TLS, "sensor.vertical_fov_deg=[-70, -30]", "sensor.sampling_factor=0.5",
+                                  "scene.stations.offset=0", "scene.track.gauge=1.5")
+    rails = points[points["instance"] == instance_of(manifest, "rails.t0")]
+    y, z = rails["y"].astype(float), rails["z"].astype(float)
+    head = z > z.max() - 0.030  # the rail heads (43 mm high): their inner faces carry the gauge
+    gauge = y[head & (y > 0)].min() - y[head & (y < 0)].max()
+    assert len(rails) > 1000 and gauge == pytest.approx(1.5, abs=1e-3)
+
+
+def test_sag_measured_from_the_contact_wire_points(tmp_path):
+    sag = 0.25  # pre-sag at the reference length; the law scales it with each span
+    points, manifest = scan_world(tmp_path, *TLS, "sensor.vertical_fov_deg=[0, 90]", "sensor.sampling_factor=0.5",
+                                  f"scene.catenary.contact_wire_sag={sag}", "scene.catenary.sag_exponent=2", "scene.catenary.sag_reference_length=50")
+    objects = {o["name"]: o for o in manifest["frames"][0]["objects"]}
+    checked = 0
+    for name, row in objects.items():
+        if not name.endswith("contact_wire"):
+            continue
+        wire = points[points["instance"] == row["instance"]]
+        if len(wire) < 200:
+            continue
+        xyz = np.column_stack([wire["x"], wire["y"], wire["z"]]).astype(float)
+        span = next(s for s in manifest_spans(manifest) if s[0] == int(name.split(".")[2]))
+        start, end = span[1], span[2]
+        t = (xyz[:, :2] - start[:2]) @ (end[:2] - start[:2]) / np.sum((end[:2] - start[:2]) ** 2)
+        c2, _, _ = np.polyfit(t, xyz[:, 2], 2)  # z = z0 + (dz - 4 s) t + 4 s t^2
+        expected = catenary.sag_for_span(np.linalg.norm((end - start)[:2]), sag, 50.0, 2.0)
+        assert c2 / 4 == pytest.approx(expected, abs=0.01), name
+        checked += 1
+    assert checked >= 1  # the span over the station (farther ones return too few points at 0.1 deg)
+
+
+def manifest_spans(manifest):
+    """``(span index, start (3,), end (3,))`` of each contact wire, rebuilt from the resolved config."""
+    from bpy_pipeline.config import config_from_dict
+    from bpy_pipeline.geometry.railway_layout import plan
+    from bpy_pipeline.pipeline import frame_rng
+
+    config = config_from_dict(manifest["config"])
+    layout = plan(config.scene.params, frame_rng(manifest["seed"], 0))
+    return [(w.span, w.start, w.end) for w in layout.wires if w.kind == "contact_wire"]
+
+
+def build(*overrides, seed=0, view=None):
+    import bpy
+
+    from bpy_pipeline.pipeline import frame_rng
+    from bpy_pipeline.scenes import build_scene
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    config = load_config(None, list(overrides))
+    return config, build_scene(config.scene, frame_rng(seed, 0), view)
+
+
+def test_dropper_count_per_span_follows_the_rule():
+    import bpy
+
+    _, layout = build("scene.catenary.dropper_spacing=4.5", "scene.track.start=[-150, 0, 0]", "scene.track.end=[150, 0, 0]")
+    contact = {w.span: w for w in layout.wires if w.kind == "contact_wire"}
+    assert len(contact) >= 4
+    for span, wire in contact.items():
+        droppers = bpy.data.objects[f"span.t0.{span:02d}.droppers"]
+        assert len(droppers.data.splines) == max(1, math.floor(wire.length / 4.5))
+
+
+def evaluated_vertices(obj):
+    import bpy
+
+    evaluated = obj.evaluated_get(bpy.context.evaluated_depsgraph_get())
+    mesh = evaluated.to_mesh()
+    v = np.empty(len(mesh.vertices) * 3, np.float32)
+    mesh.vertices.foreach_get("co", v)
+    evaluated.to_mesh_clear()
+    return v.reshape(-1, 3).astype(float) @ np.array(obj.matrix_world)[:3, :3].T + np.array(obj.matrix_world)[:3, 3]
+
+
+def test_collinear_alignment_gives_a_straight_track():
+    import bpy
+
+    build("scene.track.start=[0, 0, 0]", "scene.track.mid=[30, 40, 0]", "scene.track.end=[60, 80, 0]", "scene.stations.count=0")
+    rails = evaluated_vertices(bpy.data.objects["rails.t0"])
+    direction = np.array([0.6, 0.8, 0.0])
+    lateral = rails[:, :2] @ np.array([-0.8, 0.6])
+    along = rails @ direction
+    assert along.min() == pytest.approx(0, abs=1e-4) and along.max() == pytest.approx(100, abs=1e-4)
+    rail_centre = 1.435 / 2 + 0.072 / 2  # the head's inner face is half the gauge out
+    assert np.abs(lateral).min() == pytest.approx(rail_centre - 0.075, abs=1e-5) and np.abs(lateral).max() == pytest.approx(rail_centre + 0.075, abs=1e-5)
+
+
+def test_the_track_follows_a_curve_and_its_node_group_is_editable():
+    import bpy
+
+    from bpy_pipeline.compat import set_modifier_input
+    from bpy_pipeline.geometry.alignment import arc_through
+
+    build("scene.track.mid=[0, 25, 0]", "scene.stations.count=0")
+    arc = arc_through((-75, 0, 0), (0, 25, 0), (75, 0, 0))
+    rails = evaluated_vertices(bpy.data.objects["rails.t0"])
+    s = arc.nearest_chainage(rails)
+    offset = np.einsum("ij,ij->i", rails - arc.point(s), arc.lateral(s))
+    head = rails[:, 2] > rails[:, 2].max() - 0.03
+    assert np.abs(offset[head]).min() == pytest.approx(1.435 / 2, abs=0.002)  # rails keep the gauge along the arc
+    assert np.abs(offset).max() == pytest.approx(1.435 / 2 + 0.036 + 0.075, abs=0.002)
+    group = bpy.data.node_groups["Track"]
+    names = {item.name for item in group.interface.items_tree if getattr(item, "in_out", None) == "INPUT"}
+    assert {"Gauge", "Sleeper Spacing", "Ballast Height", "Ballast Shoulder", "Tracks", "Track Spacing", "Embankment Height", "Embankment Slope", "Rail Head Width"} <= names
+    rails_obj = bpy.data.objects["rails.t0"]
+    set_modifier_input(rails_obj.modifiers[0], "Gauge", 1.0)  # what a user does in the modifier panel
+    rails_obj.update_tag()
+    moved = evaluated_vertices(rails_obj)
+    s = arc.nearest_chainage(moved)
+    head = moved[:, 2] > moved[:, 2].max() - 0.03
+    assert np.abs(np.einsum("ij,ij->i", moved - arc.point(s), arc.lateral(s))[head]).min() == pytest.approx(0.5, abs=0.002)
+    curve = bpy.data.objects["track_centreline"]
+    curve.location.z = 1.0  # editing the centreline moves the track
+    bpy.context.view_layer.update()
+    assert evaluated_vertices(rails_obj)[:, 2].min() == pytest.approx(1.0 + 0.35 + 0.22, abs=1e-4)
+
+
+def test_every_class_of_the_scene_appears_in_the_output(tmp_path):
+    from bpy_pipeline.labels import load_class_table
+
+    table = load_class_table()
+    for layout in ("single", "gantry"):
+        out = tmp_path / layout
+        points, manifest = scan_world(out, "scene.track.tracks=2", f"scene.supports.layout={layout}", "scene.track.embankment_height=0.6",
+                                      "scene.catenary.double_contact_probability=1", "scene.supports.mast_type=lattice")
+        built = {o["class"] for o in manifest["frames"][0]["objects"]}
+        seen = {table.names[i] for i in np.unique(points["semantic"])}
+        expected = {"ground", "ballast", "rail", "sleeper", "cantilever", "registration arm", "insulator", "contact wire", "messenger wire",
+                    "dropper", "feeder wire", "earth wire", "mast" if layout == "single" else "gantry"}
+        assert built == expected and seen == expected, (layout, built ^ expected, expected - seen)
+
+
+def test_same_seed_same_scene():
+    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.geometry.lod import view_of
+    from bpy_pipeline.labels import load_class_table
+
+    overrides = ("scene.track.tracks=2", "scene.supports.mast_type=mixed", "scene.catenary.double_contact_probability=0.5")
+    spec = load_config().sensor.spec
+    view = view_of(spec, [[0.0, 8.0, 2.0]])
+    scenes = []
+    for seed in (5, 5, 6):
+        build(*overrides, seed=seed, view=view)
+        buffers = export_scene(load_class_table())
+        scenes.append((buffers.vertices.tobytes(), buffers.triangles.tobytes(), tuple(buffers.objects.names)))
+    assert scenes[0] == scenes[1] and scenes[0] != scenes[2]
+
+
+def test_stations_are_frames_of_one_built_line(tmp_path):
+    points, manifest = scan_world(tmp_path, "scene.stations.count=3", "frames=3", "sensor.sampling_factor=0.05")
+    frames = manifest["frames"]
+    assert [f["station"] for f in frames] == [0, 1, 2]
+    xs = [f["sensor_pose"][0][3] for f in frames]
+    np.testing.assert_allclose(xs, [-50, 0, 50])
+    np.testing.assert_allclose([f["sensor_pose"][1][3] for f in frames], 4.0)
+    np.testing.assert_allclose([f["sensor_pose"][2][3] for f in frames], 2.0)  # 2 m above the ground beside the track
+    assert frames[1]["timings_s"]["build"] < frames[0]["timings_s"]["build"]  # built once, scanned three times
