@@ -98,6 +98,21 @@ def _kind(hint) -> tuple[str, tuple, int] | None:
     return None
 
 
+def _fits(view: FieldView, default) -> bool:
+    """Whether a property of ``view.kind`` can show ``default``."""
+    number = isinstance(default, (int, float)) and not isinstance(default, bool)
+    return {
+        "bool": isinstance(default, bool),
+        "int": number and isinstance(default, int),
+        "float": number,
+        "str": isinstance(default, str),
+        "enum": default in view.items,
+        "flags": isinstance(default, (list, tuple)) and set(default) <= set(view.items),
+        "vector": isinstance(default, (list, tuple)) and len(default) == view.size,
+        "group": isinstance(default, dict),
+    }[view.kind]
+
+
 def _property(view: FieldView, default, update=None):
     name = label(view.attr)
     extra = {"update": update} if update is not None else {}
@@ -137,6 +152,8 @@ def group_view(cls, name: str, defaults: dict, only=None, skip=(), extra: dict |
         if kind is None or key_of(f) not in defaults:
             continue
         fv = FieldView(f.name, key_of(f), *kind)
+        if not _fits(fv, defaults[fv.key]):
+            continue  # e.g. an optional vector that is None by default: passes through, not shown
         if fv.kind == "group":
             fv.group = group_view(hints[f.name], f"{name}_{f.name}", defaults[fv.key])
             view.children.append(fv.group)

@@ -87,8 +87,7 @@ class LIDAR_OT_build_scene(bpy.types.Operator):
     bl_options = {"REGISTER", "UNDO"}
 
     def execute(self, context):
-        from .bpy_pipeline.pipeline import frame_rng
-        from .bpy_pipeline.scenes import build_scene
+        from .bpy_pipeline.pipeline import build_frame_scene
 
         settings = context.scene.lidar
         if settings.builder == panel.MY_SCENE:
@@ -96,7 +95,7 @@ class LIDAR_OT_build_scene(bpy.types.Operator):
             return {"CANCELLED"}
         try:
             config = panel.settings_config(settings)
-            build_scene(config.scene, frame_rng(config.seed, 0))
+            build_frame_scene(config, 0)
         except InputError as err:
             self.report({"ERROR"}, str(err))
             return {"CANCELLED"}
@@ -281,6 +280,21 @@ class LIDAR_OT_config_save(bpy.types.Operator, ExportHelper):
         return {"FINISHED"}
 
 
+class LIDAR_OT_config_reset(bpy.types.Operator):
+    """Show the default config in the panel (forgets the loaded config)"""
+
+    bl_idname = "lidar.config_reset"
+    bl_label = "Reset config"
+    bl_options = {"REGISTER", "UNDO"}
+
+    def execute(self, context):
+        settings = context.scene.lidar
+        settings.loaded = ""
+        panel.settings_from_dict(settings, {})
+        settings.status = "default config"
+        return {"FINISHED"}
+
+
 class LIDAR_OT_tag_selected(bpy.types.Operator):
     """Set lidar_class, lidar_material and lidar_reflectivity on the selected objects"""
 
@@ -328,6 +342,7 @@ CLASSES = (
     LIDAR_OT_show_cloud,
     LIDAR_OT_config_load,
     LIDAR_OT_config_save,
+    LIDAR_OT_config_reset,
     LIDAR_OT_tag_selected,
     LIDAR_OT_clear_tags,
 )

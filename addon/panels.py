@@ -60,6 +60,7 @@ class LIDAR_PT_run(LidarPanel, bpy.types.Panel):
         row = layout.row(align=True)
         row.operator("lidar.config_load", icon="FILE_FOLDER")
         row.operator("lidar.config_save", icon="FILE_TICK")
+        row.operator("lidar.config_reset", text="", icon="LOOP_BACK")
         if settings.status:
             layout.label(text=settings.status, icon="INFO")
 

@@ -339,5 +339,9 @@ settings_module.make_views = original
 addon_utils.enable(MODULE, default_set=True, handle_error=raise_error)
 report["after_retry"] = (len(lidar_classes()), hasattr(bpy.types.Scene, "lidar"))
 
+settings = bpy.context.scene.lidar
+report["reset"] = sorted(bpy.ops.lidar.config_reset())
+report["reset_is_default"] = panel.settings_config(settings) == cfg.config_from_dict({}) and settings.builder == "railway"
+
 (WORK / "report.json").write_text(json.dumps(report, indent=1, default=str))
 print("session done")

@@ -116,7 +116,7 @@ def test_installs_from_the_zip_with_its_own_wheels(session):
     assert report["install"] == ["FINISHED"] and report["enabled"]
     assert report["bundled"] == {"embreex": "True", "yaml": "True", "trimesh": "True"}
     assert {"__init__.py", "bpy_pipeline/config.py", "assets_manifest/labels.yaml"} <= set(report["extension_files"])
-    operators = {"LIDAR_OT_build_scene", "LIDAR_OT_scan", "LIDAR_OT_show_cloud", "LIDAR_OT_generate", "LIDAR_OT_config_load", "LIDAR_OT_config_save", "LIDAR_OT_tag_selected", "LIDAR_OT_clear_tags"}
+    operators = {"LIDAR_OT_build_scene", "LIDAR_OT_scan", "LIDAR_OT_show_cloud", "LIDAR_OT_generate", "LIDAR_OT_config_load", "LIDAR_OT_config_save", "LIDAR_OT_config_reset", "LIDAR_OT_tag_selected", "LIDAR_OT_clear_tags"}
     assert operators <= set(report["classes"])
     assert {c for c in report["classes"] if c.startswith("LIDAR_PT_")} == {"LIDAR_PT_run", "LIDAR_PT_scene", "LIDAR_PT_sensor", "LIDAR_PT_effects", "LIDAR_PT_labels", "LIDAR_PT_output"}
     assert set(report["builders"]) == (set(cfg.BUILDERS) - {"blend"}) | {"my_scene"}
@@ -204,4 +204,5 @@ def test_register_unregister_cycles_and_registration_errors(session):
     assert report["registration_error"] == "ValueError"  # propagated, not swallowed
     assert report["after_failed_registration"] == [[], False]  # what was registered is unregistered again
     assert report["after_retry"] == [registered, True]
+    assert report["reset"] == ["FINISHED"] and report["reset_is_default"]
     assert report["extension_dir_unchanged"]  # nothing written into the extension's own folder
