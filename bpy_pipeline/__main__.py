@@ -10,7 +10,8 @@ Commands:
     frame as ``(n, 3)`` float32 in the sensor frame (x forward, y left, z up).
 ``fit SCAN [SCAN ...] --out MODEL.yaml [--rings 32 ...]``
     Ray drop and range noise models fitted to real organised scans (``lidar/fitting.py``),
-    written for ``effects.model_file``; prints each drop model's held-out error.
+    written for ``effects.drop.model_file`` / ``effects.noise.model_file``; prints each drop
+    model's held-out error.
 
 Each command is a ``_add_<name>(subparsers)`` function that registers its parser and sets
 ``func`` (``args -> exit code``); add new commands the same way. Bad input (``InputError``)
@@ -99,7 +100,7 @@ def _add_sensors(sub) -> None:
 
 
 def fit_effects(args) -> int:
-    """Fit drop and noise models to real organised scans and write a model file (``effects.model_file``)."""
+    """Fit drop and noise models to real organised scans and write a model file for the effects."""
     from dataclasses import replace
 
     from .lidar import fitting
@@ -136,7 +137,7 @@ def fit_effects(args) -> int:
             se = diff.std(ddof=1) / np.sqrt(len(diff))
             print(f"  {name:<12} {cv[name]['parameters']:>3} parameters  {cv[name]['loss'].mean():.4f}  ({diff.mean():+.4f} +- {se:.4f} to the best)")
         print(f"simplest within noise of the best: {pick}")
-    print(f"written: {args.out} (set effects.model_file to it)")
+    print(f"written: {args.out} (effects.drop.model_file and effects.noise.model_file read it)")
     return 0
 
 
@@ -145,7 +146,7 @@ def _add_fit(sub) -> None:
         "fit", help="fit ray drop and range noise to real organised scans",
         description="Fit the uniform, threshold and table drop models and the range and table noise models to real "
         "organised scans (one sweep: gaps filled from ring neighbours; several sweeps of a static scene: per-pixel "
-        "medians) and write a model file for effects.model_file.",
+        "medians) and write a model file for effects.drop.model_file and effects.noise.model_file.",
     )
     p.add_argument("scans", nargs="+", metavar="SCAN", help="organised sweep(s): float32 .bin (x y z intensity ring per firing, column after column) or .npy (rings, columns, >= 4)")
     p.add_argument("--out", required=True, metavar="FILE.yaml", help="model file to write")

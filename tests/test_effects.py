@@ -127,7 +127,7 @@ def test_table_drop_rate_per_bin_within_a_binomial_interval(tmp_path):
     table = BinnedTable([2.0, 10.0, 50.0], [0.0, 45.0, 90.0], [[0.01, 0.05], [0.2, np.nan]], [[500, 500], [500, 3]])
     path = tmp_path / "model.yaml"
     write_model_file(path, FittedModels(drop_table=table))
-    eff = effects(drop={"model": "table"}, model_file=str(path))
+    eff = effects(drop={"model": "table", "model_file": str(path)})
     n = 100_000
     # bin centres: (6 m, 22.5 deg) -> 0.01, (6 m, 67.5 deg) -> 0.05, (30 m, 22.5 deg) -> 0.2, and the
     # discarded bin (30 m, 67.5 deg) takes the mean of its measured neighbours: (0.05 + 0.2) / 2
@@ -190,7 +190,7 @@ def test_noise_table_sigma_per_bin(tmp_path):
     table = BinnedTable([0.0, 20.0, 40.0], [0.0, 90.0], [[0.01], [0.04]], [[1000], [1000]])
     path = tmp_path / "noise.yaml"
     write_model_file(path, FittedModels(noise_table=table))
-    eff = effects(noise={"model": "table"}, model_file=str(path))
+    eff = effects(noise={"model": "table", "model_file": str(path)})
     for r, sigma in [(10.0, 0.01), (30.0, 0.04), (20.0, 0.025)]:
         points, beam = cloud(200_000, np.random.default_rng(12), range_m=r)
         out = apply_effects(points, beam, eff, np.random.default_rng(4))
@@ -286,13 +286,13 @@ def test_config_keys_and_errors(tmp_path):
         effects(drop={"model": "gaussian"})
     with pytest.raises(InputError, match=r"^effects\.drop\.probability: must lie in 0\.\.1"):
         effects(drop={"model": "uniform", "probability": 1.5})
-    with pytest.raises(InputError, match=r"^effects\.model_file: the table drop model needs"):
+    with pytest.raises(InputError, match=r"^effects\.drop\.model_file: the table drop model needs a model file"):
         effects(drop={"model": "table"})
-    with pytest.raises(InputError, match=r"^effects\.model_file: cannot read"):
-        effects(drop={"model": "table"}, model_file=str(tmp_path / "absent.yaml"))
+    with pytest.raises(InputError, match=r"^effects\.drop\.model_file: cannot read"):
+        effects(drop={"model": "table", "model_file": str(tmp_path / "absent.yaml")})
     (tmp_path / "bad.yaml").write_text("format: something else\n")
-    with pytest.raises(InputError, match="not a model file"):
-        effects(model_file=str(tmp_path / "bad.yaml"))
+    with pytest.raises(InputError, match=r"^effects\.noise\.model_file .*bad\.yaml: not a model file"):
+        effects(noise={"model": "range", "model_file": str(tmp_path / "bad.yaml")})
     with pytest.raises(InputError, match=r"^effects\.drop\.threshold\.range_at_80: must exceed"):
         effects(drop={"model": "threshold", "threshold": {"range_at_10": 40, "range_at_80": 30}})
     with pytest.raises(InputError, match=r"^effects\.noise\.angular_jitter_deg: must be >= 0"):
@@ -300,8 +300,13 @@ def test_config_keys_and_errors(tmp_path):
     with pytest.raises(InputError, match=r"^effects\.intensity\.reference_range: must be > 0"):
         effects(intensity={"model": "lidar", "reference_range": 0})
     write_model_file(tmp_path / "drop_only.yaml", FittedModels(uniform=0.1))
-    with pytest.raises(InputError, match="noise table"):
-        effects(noise={"model": "table"}, model_file=str(tmp_path / "drop_only.yaml"))
+    with pytest.raises(InputError, match=r"^effects\.noise\.model_file: .* holds no table noise model"):
+        effects(noise={"model": "table", "model_file": str(tmp_path / "drop_only.yaml")})
+    with pytest.raises(InputError, match=r"^effects\.drop\.probability: give either inline parameters"):
+        effects(drop={"model": "uniform", "probability": 0.003, "model_file": str(tmp_path / "drop_only.yaml")})
+    fitted = effects(drop={"model": "uniform", "model_file": str(tmp_path / "drop_only.yaml")})
+    points, beam = cloud(10, np.random.default_rng(0))
+    np.testing.assert_allclose(drop_probability(points, beam, fitted), 0.1)  # the file's probability
 
 
 def test_ring_bias_must_match_the_sensor_rings():

@@ -129,7 +129,7 @@ def test_a_saved_and_loaded_model_gives_the_same_probabilities(tmp_path):
     samples = fitting.Samples(rng.uniform(1, 120, 5000), rng.uniform(0, 1, 5000), rng.uniform(0, 1, 5000), np.zeros(5000, int), np.zeros(5000, int), np.zeros(5000, bool))
     points, beam = fitting.samples_as_points(samples)
     for model in ("uniform", "threshold", "table"):
-        effects = effects_from_dict({"drop": {"model": model}, "model_file": str(path)})
+        effects = effects_from_dict({"drop": {"model": model, "model_file": str(path)}})
         from_file = drop_probability(points, beam, effects)
         in_memory = drop_probability(points, beam, effects, models)
         np.testing.assert_array_equal(from_file, in_memory)
@@ -143,8 +143,8 @@ def test_fit_command_writes_a_model_file_the_config_accepts(tmp_path, capsys):
     assert main(["fit", str(scan_path), "--out", str(out), "--range-bins", "3", "--folds", "4"]) == 0
     printed = capsys.readouterr().out
     assert "held-out log-loss" in printed and "simplest within noise of the best" in printed
-    effects = effects_from_dict({"drop": {"model": "table"}, "noise": {"model": "table"}, "model_file": str(out)})
-    assert effects.model_file == str(out)
+    effects = effects_from_dict({"drop": {"model": "table", "model_file": str(out)}, "noise": {"model": "table", "model_file": str(out)}})
+    assert effects.drop.model_file == effects.noise.model_file == str(out)
     assert read_model_file(out).source["rings"] == 32
 
 
@@ -199,7 +199,7 @@ def test_real_sweep_table_beats_uniform_on_held_out_columns_and_reproduces_drop_
         table = fitting.fit_drop_table(samples.subset(~test), np.geomspace(2, 100, 5), fitting.incidence_edges(2))
         path = tmp_path / f"fold{k}.yaml"
         write_model_file(path, fitting.FittedModels(drop_table=table))
-        effects = effects_from_dict({"drop": {"model": "table"}, "model_file": str(path)})
+        effects = effects_from_dict({"drop": {"model": "table", "model_file": str(path)}})
         simulated[test] = fitting.simulate_drops(samples.subset(test), effects, np.random.default_rng(k))
     edges = np.geomspace(2, 100, 6)
     for lo, hi in zip(edges[:-1], edges[1:]):

@@ -33,15 +33,17 @@ Range noise (``effects.noise``)
     point turns about the sensor at its range, the small-angle view of a beam pointing
     slightly off).
 
-Fitted models (``effects.model_file``, written by ``python -m bpy_pipeline fit``, see
-:mod:`.fitting`): the ``uniform``, ``threshold`` and ``table`` drop models and the ``range`` and
-``table`` noise models take their parameters from the file when one is given.
+Fitted models (files written by ``python -m bpy_pipeline fit``, see :mod:`.fitting`): with
+``effects.drop.model_file`` the ``uniform``, ``threshold`` and ``table`` drop models take their
+parameters from the file, with ``effects.noise.model_file`` the ``range`` and ``table`` noise
+models do.
 """
 
 from __future__ import annotations
 
 import math
 import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from functools import cached_property, lru_cache
 from pathlib import Path
@@ -147,10 +149,18 @@ class BinnedTable:
         incidence every 1 deg): within half a node of :meth:`bilinear`.
         """
         grid, r0, r_scale, i_scale = self._raster
-        ri = np.clip((np.asarray(range_m, np.float32) - np.float32(r0)) * np.float32(r_scale) + np.float32(0.5), 0, grid.shape[0] - 1).astype(np.intp)
-        angle = np.arccos(np.clip(np.asarray(cos_incidence, np.float32), 0.0, 1.0))
-        ii = (angle * np.float32(math.degrees(1.0) * i_scale) + np.float32(0.5)).astype(np.intp)
-        return grid[ri, np.minimum(ii, grid.shape[1] - 1)]
+        nr, ni = grid.shape
+        f = np.asarray(range_m, np.float32) * np.float32(r_scale)
+        f += np.float32(0.5 - r0 * r_scale)
+        np.clip(f, np.float32(0), np.float32(nr - 1), out=f)
+        index = f.astype(np.intp)
+        index *= ni
+        a = np.clip(np.asarray(cos_incidence, np.float32), np.float32(0), np.float32(1))
+        np.arccos(a, out=a)
+        a *= np.float32(math.degrees(1.0) * i_scale)
+        a += np.float32(0.5)
+        index += a.astype(np.intp)  # arccos of 0..1 stays within 0..90 deg: no clip needed
+        return grid.ravel().take(index)
 
     def to_dict(self, name: str) -> dict:
         return {
@@ -315,19 +325,20 @@ def write_model_file(path: str | Path, models: FittedModels) -> None:
         raise InputError(f"{path}: cannot write the model file ({err.strerror or err})") from None
 
 
-def read_model_file(path: str | Path) -> FittedModels:
-    """The models of a file written by :func:`write_model_file`; ``InputError`` naming the file."""
+def read_model_file(path: str | Path, where: str = "model_file") -> FittedModels:
+    """The models of a file written by :func:`write_model_file` (read once per file version);
+    ``InputError`` naming ``where`` (the config key) and the file."""
     path = Path(path)
     try:
         stat = path.stat()
     except OSError as err:
-        raise InputError(f"effects.model_file: cannot read {path} ({err.strerror or err})") from None
-    return _read_model_file(str(path.resolve()), stat.st_mtime_ns, stat.st_size)
+        raise InputError(f"{where}: cannot read {path} ({err.strerror or err})") from None
+    return _read_model_file(str(path.resolve()), stat.st_mtime_ns, stat.st_size, where)
 
 
 @lru_cache(maxsize=8)
-def _read_model_file(path: str, mtime_ns: int, size: int) -> FittedModels:  # cached per file version
-    where = f"effects.model_file {path}"
+def _read_model_file(path: str, mtime_ns: int, size: int, key: str) -> FittedModels:
+    where = f"{key} {path}"
     try:
         data = yaml.safe_load(Path(path).read_text())
     except OSError as err:
@@ -353,9 +364,10 @@ def _read_model_file(path: str, mtime_ns: int, size: int) -> FittedModels:  # ca
     return FittedModels(uniform, threshold, drop_table, noise_range, noise_table, data.get("source") or {})
 
 
-def fitted_models(effects) -> FittedModels | None:
-    """The models of ``effects.model_file``, or ``None`` when the config names none."""
-    return read_model_file(effects.model_file) if effects.model_file else None
+def fitted_models(section, where: str = "model_file") -> FittedModels | None:
+    """The models of a config section's ``model_file`` (``effects.drop`` or ``effects.noise``),
+    or ``None`` when it names none."""
+    return read_model_file(section.model_file, where) if section.model_file else None
 
 
 def threshold_model(effects, models: FittedModels | None = None) -> ThresholdModel:
@@ -370,11 +382,11 @@ def threshold_model(effects, models: FittedModels | None = None) -> ThresholdMod
 def drop_probability(points: np.ndarray, beam: np.ndarray, effects, models: FittedModels | None = None) -> np.ndarray | None:
     """Probability that each traced point is lost, (p,) float32, for the configured model
     (CARLA's general rate included); ``None`` for ``none``. ``models``: those of
-    ``effects.model_file``, read here when not given."""
+    ``effects.drop.model_file``, read here when not given."""
     drop = effects.drop
     if drop.model == "none":
         return None
-    models = fitted_models(effects) if models is None else models
+    models = fitted_models(drop, "effects.drop.model_file") if models is None else models
     if drop.model == "uniform":
         p = models.uniform if models is not None and models.uniform is not None else drop.probability
         return np.full(len(points), p, np.float32)
@@ -385,7 +397,7 @@ def drop_probability(points: np.ndarray, beam: np.ndarray, effects, models: Fitt
     if drop.model == "threshold":
         return np.float32(1.0) - threshold_model(effects, models).detection_probability(reflectance(beam), points["range"])
     if models is None or models.drop_table is None:
-        raise InputError("effects.model_file: the table drop model needs a model file holding a drop table (python -m bpy_pipeline fit)")
+        raise InputError("effects.drop.model_file: the table drop model needs a model file holding a drop table (python -m bpy_pipeline fit)")
     return models.drop_table.lookup(points["range"], beam["cos_incidence"])
 
 
@@ -415,7 +427,7 @@ def noise_sigma(points: np.ndarray, beam: np.ndarray, noise, models: FittedModel
         sigma, slope = models.noise_range if models is not None and models.noise_range is not None else (noise.sigma, noise.sigma_per_metre)
         return np.float32(sigma) + np.float32(slope) * points["range"]
     if models is None or models.noise_table is None:
-        raise InputError("effects.model_file: the table noise model needs a model file holding a noise table (python -m bpy_pipeline fit)")
+        raise InputError("effects.noise.model_file: the table noise model needs a model file holding a noise table (python -m bpy_pipeline fit)")
     return models.noise_table.lookup(points["range"], beam["cos_incidence"])
 
 
@@ -435,28 +447,38 @@ def perturb(points: np.ndarray, beam: np.ndarray, noise, rng: np.random.Generato
     old = points["range"]
     new = old.copy()
     if has_noise:
-        new += rng.standard_normal(n, dtype=np.float32) * (np.float32(sigma) if np.isscalar(sigma) else sigma)
+        draw = rng.standard_normal(n, dtype=np.float32)
+        draw *= np.float32(sigma) if np.isscalar(sigma) else sigma
+        new += draw
     if noise.ring_bias:
         bias = np.asarray(noise.ring_bias, np.float32)
         ring = points["ring"]
         if ring.max() >= len(bias):
             raise InputError(f"effects.noise.ring_bias: {len(bias)} values but the scan has ring {int(ring.max())}; give one per ring")
         new += bias[ring]
-    np.maximum(new, 0.0, out=new)
-    x, y, z = points["x"], points["y"], points["z"]
+    np.maximum(new, np.float32(0), out=new)
+    scale = new / np.maximum(old, np.float32(MIN_RANGE))
     if jitter > 0:
+        x, y, z = (np.ascontiguousarray(points[k]) for k in "xyz")  # packed records: strided math is ~10x slower
+        # p' = p + r (a e_az + e e_el), with e_az = (-y, x, 0) / rho and e_el = (-x z, -y z, rho^2) / (rho r)
+        # orthonormal to p, so |p'| = r sqrt(1 + a^2 + e^2) exactly; beams along z (rho ~ 0) keep still
         a, e = rng.standard_normal((2, n), dtype=np.float32) * np.float32(jitter)
         rho = np.sqrt(x * x + y * y)
-        flat = rho > np.float32(1e-6) * np.maximum(old, np.float32(MIN_RANGE))
-        rho_safe = np.where(flat, rho, np.float32(1.0))
-        # azimuth unit (-y, x, 0)/rho; elevation unit (-x z, -y z, rho^2)/(rho r); steps scaled by r
-        r_safe = np.maximum(old, np.float32(MIN_RANGE))
-        step_a = np.where(flat, a * r_safe / rho_safe, 0)
-        step_e = np.where(flat, e / rho_safe, 0)
-        x, y, z = x - y * step_a - x * z * step_e, y + x * step_a - y * z * step_e, z + rho * rho * step_e
-        old = np.sqrt(x * x + y * y + z * z)
-    scale = new / np.maximum(old, np.float32(MIN_RANGE))
-    points["x"], points["y"], points["z"] = x * scale, y * scale, z * scale
+        ok = rho > np.float32(1e-6) * old
+        inv = np.divide(np.float32(1), rho, out=np.zeros(n, np.float32), where=ok)
+        a *= ok
+        e *= ok
+        step_a = a * old * inv
+        step_e = e * inv
+        xz = x * z
+        new_x = x - y * step_a - xz * step_e
+        new_y = y + x * step_a - (y * z) * step_e
+        new_z = z + rho * rho * step_e
+        scale /= np.sqrt(np.float32(1) + a * a + e * e)
+        points["x"], points["y"], points["z"] = new_x * scale, new_y * scale, new_z * scale
+    else:
+        for k in "xyz":
+            points[k] *= scale
     points["range"] = new
 
 
@@ -471,20 +493,46 @@ def _copy_records(records: np.ndarray, keep: np.ndarray | None = None) -> np.nda
     return (raw.copy() if keep is None else raw[keep]).view(records.dtype)
 
 
-def apply_effects(points: np.ndarray, beam: np.ndarray, effects, rng: np.random.Generator) -> np.ndarray:
-    """The configured effects (``config.EffectsConfig``) in a fixed order; returns new records.
+CHUNK_POINTS = 1 << 16  # records per work item: a chunk's fields stay in cache across the passes over it
 
-    points : (p,) POINT_DTYPE records (sensor frame); beam : (p,) BEAM_DTYPE facts of the same points
-    1. intensity of the true geometry; 2. ray drop (it sees the true range, as the receiver
-    does); 3. range noise, ring bias and angular jitter on the points that remain. Random draws
-    come from ``rng`` in that order, so the same generator state gives the same bytes.
-    """
-    models = fitted_models(effects)
+
+def _apply_chunk(points, beam, effects, rng, drop_models, noise_models) -> np.ndarray:
     intensity = compute_intensity(points["range"], beam, effects.intensity)
-    keep = drop_mask(points, beam, effects, rng, models)
+    keep = drop_mask(points, beam, effects, rng, drop_models)
     points = _copy_records(points, keep)
     if keep is not None:
         beam, intensity = _copy_records(beam, keep), intensity[keep]
     points["intensity"] = intensity
-    perturb(points, beam, effects.noise, rng, models)
+    perturb(points, beam, effects.noise, rng, noise_models)
     return points
+
+
+def apply_effects(points: np.ndarray, beam: np.ndarray, effects, rng: np.random.Generator, threads: int | None = None) -> np.ndarray:
+    """The configured effects (``config.EffectsConfig``) in a fixed order; returns new records.
+
+    points : (p,) POINT_DTYPE records (sensor frame); beam : (p,) BEAM_DTYPE facts of the same points
+    1. intensity of the true geometry; 2. ray drop (it sees the true range, as the receiver
+    does); 3. range noise, ring bias and angular jitter on the points that remain.
+    The points go through in chunks of :data:`CHUNK_POINTS` on ``threads`` threads (default:
+    every core); chunk k draws from its own generator, seeded by the k-th of one draw of seeds
+    from ``rng``, so the same generator state gives the same bytes however the threads run.
+    """
+    drop_models = fitted_models(effects.drop, "effects.drop.model_file")
+    noise_models = fitted_models(effects.noise, "effects.noise.model_file")
+    for models in (drop_models, noise_models):
+        for table in (models.drop_table, models.noise_table) if models is not None else ():
+            if table is not None:
+                table._raster  # build the lookup raster once, before the threads share it
+    starts = range(0, max(len(points), 1), CHUNK_POINTS)
+    seeds = rng.integers(0, 2**63, size=len(starts), dtype=np.int64)
+
+    def chunk(k: int) -> np.ndarray:
+        part = slice(starts[k], starts[k] + CHUNK_POINTS)
+        return _apply_chunk(points[part], beam[part], effects, np.random.Generator(np.random.PCG64(seeds[k])), drop_models, noise_models)
+
+    if len(starts) == 1:
+        return chunk(0)
+    with ThreadPoolExecutor(threads or os.cpu_count() or 1) as pool:
+        parts = list(pool.map(chunk, range(len(starts))))
+    raw = np.dtype((np.void, points.dtype.itemsize))
+    return np.concatenate([p.view(raw) for p in parts]).view(points.dtype)

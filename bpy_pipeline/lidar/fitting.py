@@ -1,4 +1,5 @@
-"""Ray drop and range noise fitted to real organised scans, for ``effects.model_file``.
+"""Ray drop and range noise fitted to real organised scans, for ``effects.drop.model_file`` and
+``effects.noise.model_file``.
 
 An *organised* scan is a range image: ``rings x columns`` firings of a spinning sensor, each
 either a return or empty. Two ways to learn from it:

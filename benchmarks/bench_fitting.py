@@ -1,0 +1,193 @@
+"""Ray-drop models fitted to a real HDL-32E sweep: held-out error against parameters and cost.
+
+The nuScenes sweep (../shared/real_scans/nuscenes_hdl32e_sweep.bin, 32 x 1084 firings) is read
+as an organised scan (ego motion undone, gaps of up to 4 columns filled from ring neighbours,
+incidence from local normals; lidar/fitting.py). Each model is fitted on 7 of 8 blocks of 135
+columns (45 degrees of azimuth) and scored on the eighth: mean negative log-likelihood per
+firing (nats), paired fold by fold against the best model. "Within noise" = the mean paired
+difference is at most one standard error. Cost: the model's drop decision (probability and
+draw, effects.drop_mask) on a million points, best of five.
+A scan simulated with each held-out fit (apply_effects on the real firings' geometry) gives
+per-ring drop fractions and the drop fraction against range, beside the real ones.
+Run: python benchmarks/bench_fitting.py [--small]
+"""
+
+import math
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+from common import ROOT, arguments, best_of, report
+
+from bpy_pipeline.config import effects_from_dict
+from bpy_pipeline.lidar import fitting
+from bpy_pipeline.lidar.effects import FittedModels, drop_mask, fitted_models, write_model_file
+
+SCAN = ROOT.parent / "shared" / "real_scans" / "nuscenes_hdl32e_sweep.bin"
+FOLDS = 8
+RANGE = (2.0, 100.0)
+TABLES = [(2, 1), (4, 1), (8, 1), (4, 2), (8, 2), (8, 4), (16, 4), (16, 8), (32, 8), (56, 16)]
+NAMES = ["carla", "uniform", "threshold_n2", "threshold"] + [f"table {r}x{i}" for r, i in TABLES]
+SIMPLEST_FIRST = ["carla", "uniform", "threshold_n2", "table 2x1", "threshold", "table 4x1", "table 4x2", "table 8x1", "table 8x2",
+                  "table 8x4", "table 16x4", "table 16x8", "table 32x8", "table 56x16"]
+
+
+def fitted_file(name: str, train: fitting.Samples, folder: Path) -> tuple[dict, str]:
+    """The effects section and model file that reproduce ``name`` fitted on ``train``."""
+    path = folder / "model.yaml"
+    if name == "carla":
+        return {"drop": {"model": "carla"}}, ""
+    if name == "uniform":
+        models, model = FittedModels(uniform=fitting.fit_uniform(train)), "uniform"
+    elif name.startswith("threshold"):
+        models, model = FittedModels(threshold=fitting.fit_threshold(train, 2.0 if name == "threshold_n2" else None)), "threshold"
+    else:
+        nr, ni = (int(v) for v in name.split()[1].split("x"))
+        table = fitting.fit_drop_table(train, np.geomspace(*RANGE, nr + 1), fitting.incidence_edges(ni))
+        models, model = FittedModels(drop_table=table), "table"
+    write_model_file(path, models)
+    return {"drop": {"model": model, "model_file": str(path)}}, str(path)
+
+
+def simulate(samples, fold, name, folder, seed=0):
+    """Held-out simulated drops: each fold's firings through apply_effects with the model fitted on the others."""
+    dropped = np.zeros(len(samples), bool)
+    for k in range(FOLDS):
+        test = fold == k
+        section, _ = fitted_file(name, samples.subset(~test), folder)
+        dropped[test] = fitting.simulate_drops(samples.subset(test), effects_from_dict(section), np.random.default_rng([seed, k]))
+    return dropped
+
+
+def cost_per_million(name, samples, folder, n=1_000_000):
+    """ms to decide the drops of a million points with ``name`` fitted on all samples."""
+    rng = np.random.default_rng(0)
+    pick = rng.integers(0, len(samples), n)
+    points, beam = fitting.samples_as_points(samples.subset(pick))
+    section, _ = fitted_file(name, samples, folder)
+    effects = effects_from_dict(section)
+    models = fitted_models(effects.drop)
+    drop_mask(points, beam, effects, rng, models)  # warm: the table's raster is built once
+    return 1000 * best_of(lambda: drop_mask(points, beam, effects, rng, models), 5) * 1e6 / n
+
+
+def main():
+    args = arguments(__doc__)
+    if not SCAN.exists():
+        print(f"skipped: {SCAN} is absent")
+        return
+    start = time.perf_counter()
+    scan = fitting.read_scan(SCAN, 32)
+    geometry = fitting.scan_geometry(scan)
+    samples = fitting.drop_samples(scan, geometry, *RANGE)
+    noise = fitting.noise_samples(scan, geometry, *RANGE)
+    prepare_s = time.perf_counter() - start
+    names = NAMES if not args.small else ["carla", "uniform", "threshold", "table 4x2", "table 8x4"]
+    scores = fitting.cross_validate(samples, names, FOLDS, scan.shape[1], {"range": RANGE, "min_samples": 100})
+    best, pick = fitting.simplest_within_noise(scores, [n for n in SIMPLEST_FIRST if n in scores])
+    fold = fitting.column_folds(samples, FOLDS, scan.shape[1])
+    rows, simulated = [], {}
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        for name in names:
+            diff = scores[name]["loss"] - scores[best]["loss"]
+            se = float(diff.std(ddof=1) / math.sqrt(FOLDS))
+            rows.append({
+                "model": name, "parameters": scores[name]["parameters"],
+                "held_out_nats_per_firing": float(scores[name]["loss"].mean()), "minus_best": float(diff.mean()), "se": se,
+                "within_noise": bool(diff.mean() <= se),
+                "cost_ms_per_Mpts": cost_per_million(name, samples, folder, 200_000 if args.small else 1_000_000),
+            })
+        for name in {"uniform", "threshold", pick} & set(names):
+            simulated[name] = simulate(samples, fold, name, folder)
+
+    rings = np.arange(scan.shape[0])
+    real_ring = np.array([samples.dropped[samples.ring == k].mean() if (samples.ring == k).any() else np.nan for k in rings])
+    sim_ring = {k: np.array([v[samples.ring == r].mean() if (samples.ring == r).any() else np.nan for r in rings]) for k, v in simulated.items()}
+    edges = np.geomspace(*RANGE, 13)
+    centre = np.sqrt(edges[:-1] * edges[1:])
+    in_bin = [(samples.range >= lo) & (samples.range < hi) for lo, hi in zip(edges[:-1], edges[1:])]
+    real_range = np.array([samples.dropped[m].mean() if m.any() else np.nan for m in in_bin])
+    count_range = np.array([m.sum() for m in in_bin])
+    sim_range = {k: np.array([v[m].mean() if m.any() else np.nan for m in in_bin]) for k, v in simulated.items()}
+    raw_ring = (~scan.valid[0]).mean(axis=1)
+    ring_rms = {k: float(np.sqrt(np.nanmean((v - real_ring) ** 2))) for k, v in sim_ring.items()}
+    range_rms = {k: float(np.sqrt(np.nansum(count_range * (v - real_range) ** 2) / count_range.sum())) for k, v in sim_range.items()}
+    noise_table = fitting.fit_noise_table(noise, np.geomspace(*RANGE, 9), fitting.incidence_edges(1), 100)
+
+    notes = {
+        "command": "python benchmarks/bench_fitting.py" + (" --small" if args.small else ""),
+        "scan": str(SCAN.name), "firings": int(scan.valid.size), "empty": int((~scan.valid).sum()),
+        "samples_with_known_target": len(samples), "dropped_among_them": int(samples.dropped.sum()),
+        "filled_from_ring_neighbours": int(geometry.filled.sum()), "prepare_s": prepare_s,
+        "folds": f"{FOLDS} blocks of {scan.shape[1] // FOLDS} columns", "best": best, "recommended": pick,
+        "per_ring_drop_real_all_firings": [round(float(x), 4) for x in raw_ring],
+        "per_ring_drop_real_known_target": [round(float(x), 4) for x in real_ring],
+        "per_ring_drop_simulated": {k: [round(float(x), 4) for x in v] for k, v in sim_ring.items()},
+        "per_ring_rms": ring_rms,
+        "range_bin_centres_m": [round(float(x), 2) for x in centre], "drop_vs_range_real": [round(float(x), 4) for x in real_range],
+        "drop_vs_range_simulated": {k: [round(float(x), 4) for x in v] for k, v in sim_range.items()},
+        "drop_vs_range_rms_weighted": range_rms,
+        "noise_sigma_mm_by_range": {f"{lo:.1f}-{hi:.1f}": (None if np.isnan(s) else round(1000 * float(s), 2))
+                                    for lo, hi, s in zip(noise_table.range_edges[:-1], noise_table.range_edges[1:], noise_table.values[:, 0])},
+    }
+    name = "fitting" + ("_small" if args.small else "")
+    report(name, rows, args.out, notes)
+    print(f"best: {best}; simplest within noise of the best: {pick}")
+    chart(rows, pick, real_ring, raw_ring, sim_ring, centre, real_range, sim_range, count_range, noise_table, args.out / f"{name}.png")
+
+
+def chart(rows, pick, real_ring, raw_ring, sim_ring, centre, real_range, sim_range, count_range, noise_table, path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(2, 2, figsize=(13, 9))
+    shown = [r for r in rows if r["model"] != "carla"]
+    for panel, key, label in ((ax[0, 0], "parameters", "parameters (measured bins for tables)"), (ax[0, 1], "cost_ms_per_Mpts", "drop decision, ms per million points")):
+        for r in shown:
+            colour = "tab:green" if r["model"] == pick else ("tab:blue" if r["within_noise"] else "tab:grey")
+            panel.errorbar(max(r[key], 0.5 if key == "parameters" else 0.1), r["minus_best"], yerr=r["se"], fmt="o", color=colour, capsize=3)
+            panel.annotate(r["model"], (max(r[key], 0.5 if key == "parameters" else 0.1), r["minus_best"]), fontsize=7, xytext=(4, 3), textcoords="offset points")
+        panel.set_xscale("log")
+        panel.set_yscale("symlog", linthresh=0.002)
+        panel.axhline(0, color="k", lw=0.5)
+        panel.set_xlabel(label)
+        panel.set_ylabel("held-out loss minus the best (nats / firing)")
+    carla = next((r for r in rows if r["model"] == "carla"), None)
+    ax[0, 0].set_title("fit error on held-out columns" + (f" (CARLA defaults: +{carla['minus_best']:.2f}, off the chart)" if carla else ""))
+    ax[0, 1].set_title(f"cost; green: recommended ({pick}), blue: within one SE of the best")
+    rings = np.arange(len(real_ring))
+    ax[1, 0].plot(rings, raw_ring, "k:", label="real, all firings (sky, own vehicle included)")
+    ax[1, 0].plot(rings, real_ring, "ko-", label="real, firings with a known target")
+    for k, v in sim_ring.items():
+        ax[1, 0].plot(rings, v, ".-", label=f"simulated, {k} (held out)")
+    ax[1, 0].set_xlabel("ring (0: lowest beam)")
+    ax[1, 0].set_ylabel("drop fraction")
+    ax[1, 0].legend(fontsize=7)
+    ax[1, 0].set_title("per-ring drop: real HDL-32E sweep vs simulated")
+    se = np.sqrt(np.maximum(real_range * (1 - real_range), 1e-4) / np.maximum(count_range, 1))
+    ax[1, 1].errorbar(centre, real_range, yerr=2 * se, fmt="ko-", capsize=2, label="real (2 binomial SE)")
+    for k, v in sim_range.items():
+        ax[1, 1].plot(centre, v, ".-", label=f"simulated, {k}")
+    twin = ax[1, 1].twinx()
+    sig = noise_table.values[:, 0] * 1000
+    rc = np.sqrt(noise_table.range_edges[:-1] * noise_table.range_edges[1:])
+    twin.plot(rc, sig, "s--", color="tab:purple", alpha=0.6, label="range noise sigma, mm (one-sweep upper bound)")
+    twin.set_yscale("log")
+    twin.set_ylabel("noise sigma, mm", color="tab:purple")
+    twin.legend(fontsize=7, loc="lower right")
+    ax[1, 1].set_xscale("log")
+    ax[1, 1].set_xlabel("range, m")
+    ax[1, 1].set_ylabel("drop fraction")
+    ax[1, 1].legend(fontsize=7, loc="upper left")
+    ax[1, 1].set_title("drop fraction against range")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    print(f"chart: {path}")
+
+
+if __name__ == "__main__":
+    main()
