@@ -69,6 +69,30 @@ class SceneBuffers:
     triangle_object: np.ndarray
     objects: ObjectTable
 
+    @classmethod
+    def from_meshes(cls, meshes: dict, reflectivity: float = 0.5) -> "SceneBuffers":
+        """Buffers of named numpy meshes, one object each, for scenes built without Blender (tests, benchmarks).
+
+        meshes : {name: (vertices (n, 3) float64 world metres, triangles (m, 3) int indices)}, in object order
+        Every object is ``unlabeled`` (semantic 0), ``diffuse``, of ``reflectivity``; instance ids 1..k.
+        """
+        names = list(meshes)
+        vertices, triangles, rows, offset = [], [], [], 0
+        for row, (v, t) in enumerate(meshes.values()):
+            v, t = np.asarray(v, np.float64).reshape(-1, 3), np.asarray(t, np.int64).reshape(-1, 3)
+            vertices.append(v)
+            triangles.append(t + offset)
+            rows.append(np.full(len(t), row, np.int32))
+            offset += len(v)
+        k = len(names)
+        objects = ObjectTable(
+            names, [""] * k, ["unlabeled"] * k, np.zeros(k, np.uint16), np.arange(1, k + 1, dtype=np.uint32),
+            np.full(k, MATERIAL_ID["diffuse"], np.uint8), np.full(k, reflectivity, np.float32),
+        )
+        if not names:
+            return cls(np.zeros((0, 3)), np.zeros((0, 3), np.int32), np.zeros(0, np.int32), objects)
+        return cls(np.concatenate(vertices), np.concatenate(triangles).astype(np.int32), np.concatenate(rows), objects)
+
     def check(self) -> None:
         """``InputError`` for an empty scene, non-finite vertices or triangle indices out of range (naming the object)."""
         m = len(self.triangles)

@@ -11,7 +11,7 @@ ray that slips through a closed surface, a hang or a crash.
 import numpy as np
 import pytest
 
-from bpy_pipeline.buffers import ObjectTable, SceneBuffers
+from bpy_pipeline.buffers import SceneBuffers
 from bpy_pipeline.errors import InputError
 from bpy_pipeline.geometry import primitives
 from bpy_pipeline.geometry.transforms import pose_matrix
@@ -22,19 +22,9 @@ from bpy_pipeline.lidar.sensors import Pattern, resolve_sensor, sensor_pattern
 
 
 # ----------------------------------------------------------------------------- numpy scenes
-def object_table(names) -> ObjectTable:
-    k = len(names)
-    return ObjectTable(
-        list(names), [""] * k, ["unlabeled"] * k, np.zeros(k, np.uint16), np.arange(1, k + 1, dtype=np.uint32),
-        np.zeros(k, np.uint8), np.full(k, 0.5, np.float32),
-    )
-
-
 def scene(**meshes) -> SceneBuffers:
     """Buffers of named ``(vertices, triangles)`` meshes, one object each, in the order given."""
-    merged = primitives.merge(list(meshes.values()))
-    rows = np.concatenate([np.full(len(t), i, np.int32) for i, (_, t) in enumerate(meshes.values())])
-    return SceneBuffers(merged[0], merged[1], rows, object_table(meshes))
+    return SceneBuffers.from_meshes(meshes)
 
 
 def icosphere(radius: float, subdivisions: int):

@@ -1,0 +1,236 @@
+"""Ray casters side by side: speed against accuracy, on the same scene and rays, in one run.
+
+The scene is :mod:`bench_far_origin`'s (ground, wall, a car-sized box, a pillar and a 12 mm
+wire, axis-aligned in their own frame and turned 37 degrees in the world, planes split into
+a grid of triangles), near the world origin; the rays are a 64-channel spinning sensor's
+(0.1 deg steps, 150 m) 1.8 m above the ground. Every method's hit points are compared with
+the exact intersections: the largest position error over the rays that hit the surface the
+exact answer hits, and the rays that hit another surface or none.
+
+- ``embreex raw``: ``EmbreeScene.run`` on float32 rays over a thread pool, Embree's float32 distance
+- ``RayCaster.intersect``: the pipeline's caster (sensor frame, float64 re-solve, vertex re-traces)
+- ``scan (records)``: the whole scan, point records and labels included (float32 x y z)
+- ``trimesh + embreex``: ``trimesh.ray.ray_pyembree.RayMeshIntersector.intersects_location``
+- ``Blender BVHTree``: ``mathutils.bvhtree.BVHTree.FromPolygons`` and ``ray_cast`` in a Python
+  loop, world coordinates, as BlAInder does; timed on a subset of the rays and extrapolated
+- ``Blender scene.ray_cast``: ``bpy.types.Scene.ray_cast`` over the evaluated depsgraph, subset
+- ``trimesh ray_triangle`` (pure numpy) needs the ``rtree`` package for its broad phase; it is
+  not a dependency of this project and is reported as not run when it is not installed.
+
+Rays per second use every core for Embree-based methods (embreex releases the GIL while
+tracing); trimesh's wrapper and Blender's ray casts run on one thread.
+Run: python benchmarks/bench_raycasters.py [--small]
+"""
+
+import importlib.util
+import os
+import time
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+from common import arguments, best_of, report
+
+import bpy  # noqa: E402
+from bench_far_origin import BOXES, SENSOR, TURN_DEG, analytic_scene, exact_hits, placed  # noqa: E402
+from embreex import rtcore_scene  # noqa: E402
+from embreex.mesh_construction import TriangleMesh  # noqa: E402
+
+from bpy_pipeline.geometry.transforms import pose_matrix  # noqa: E402
+from bpy_pipeline.lidar.raycast import RayCaster  # noqa: E402
+from bpy_pipeline.lidar.scanner import scan, scan_chunk  # noqa: E402
+from bpy_pipeline.lidar.sensors import resolve_sensor, sensor_pattern  # noqa: E402
+
+
+class Setup:
+    """The scene, the rays and the exact answer."""
+
+    def __init__(self, small: bool):
+        self.scene_pose = pose_matrix((0.0, 0.0, 0.0), TURN_DEG)
+        self.buffers = placed(analytic_scene(cells=30 if small else 220), self.scene_pose)
+        spec = resolve_sensor({"preset": "custom", "channels": 16 if small else 64, "vertical_fov_deg": [-25, 15],
+                               "horizontal_resolution_deg": 1.0 if small else 0.1, "min_range": 0.0, "max_range": 150.0})
+        self.pattern = sensor_pattern(spec)
+        self.max_range = spec.max_range
+        self.pose = pose_matrix(self.scene_pose[:3, :3] @ SENSOR, np.add(TURN_DEG, (0.0, 0.0, 5.0)))
+        self.origin = self.pose[:3, 3]
+        self.directions = self.pattern.directions @ self.pose[:3, :3].T  # world
+        t, self.exact_row = exact_hits(np.asarray(SENSOR), self.directions @ self.scene_pose[:3, :3], self.max_range)
+        self.exact_point = self.origin + self.directions * np.where(self.exact_row >= 0, t, 0.0)[:, None]
+
+    def score(self, ray: np.ndarray, point: np.ndarray, row: np.ndarray, subset: np.ndarray | None = None) -> dict:
+        """Accuracy of hits ``ray`` (indices), world ``point`` (h, 3), object ``row`` (h,), over ``subset`` of the rays."""
+        rows = np.full(len(self.directions), -1)
+        rows[ray] = row
+        points = np.zeros((len(self.directions), 3))
+        points[ray] = point
+        sel = np.arange(len(self.directions)) if subset is None else subset
+        right = (rows[sel] == self.exact_row[sel]) & (rows[sel] >= 0)
+        error = np.linalg.norm(points[sel][right] - self.exact_point[sel][right], axis=1)
+        return {"max_error_m": float(error.max()), "wrong_rays": int(np.count_nonzero(rows[sel] != self.exact_row[sel])), "compared_rays": len(sel)}
+
+
+def embreex_raw(setup: Setup, threads: int):
+    vertices32 = np.ascontiguousarray(setup.buffers.vertices, np.float32)
+    start = time.perf_counter()
+    scene = rtcore_scene.EmbreeScene()
+    TriangleMesh(scene, vertices32, setup.buffers.triangles)
+    o32 = np.tile(setup.origin.astype(np.float32), (len(setup.directions), 1))
+    d32 = np.ascontiguousarray(setup.directions, np.float32)
+    scene.run(o32[:1], d32[:1], output=1)  # commit
+    build = time.perf_counter() - start
+    spans = [slice(i, i + 32768) for i in range(0, len(d32), 32768)]
+    pool = ThreadPoolExecutor(threads)
+
+    def run():
+        return list(pool.map(lambda s: scene.run(o32[s], d32[s], dists=setup.max_range, output=1), spans))
+
+    seconds = best_of(run)
+    out = {k: np.concatenate([p[k] for p in run()]) for k in ("tfar", "primID", "geomID")}
+    pool.shutdown()
+    ray = np.flatnonzero(out["geomID"] >= 0)
+    point = o32[ray].astype(np.float64) + d32[ray].astype(np.float64) * out["tfar"][ray, None].astype(np.float64)
+    return seconds, build, setup.score(ray, point, setup.buffers.triangle_object[out["primID"][ray]])
+
+
+def raycaster(setup: Setup, threads: int):
+    start = time.perf_counter()
+    caster = RayCaster(setup.buffers, frame=setup.pose, threads=threads)
+    build = time.perf_counter() - start
+    d = setup.pattern.directions
+    d32 = d.astype(np.float32)
+    seconds = best_of(lambda: caster.intersect(np.zeros(3), d, setup.max_range, d32))
+    hits = caster.intersect(np.zeros(3), d, setup.max_range, d32)
+    point = (d[hits.ray] * hits.distance[:, None]) @ setup.pose[:3, :3].T + setup.origin
+    return seconds, build, setup.score(hits.ray, point, setup.buffers.triangle_object[hits.triangle])
+
+
+def full_scan(setup: Setup, threads: int):
+    caster = RayCaster(setup.buffers, frame=setup.pose, threads=threads)
+    seconds = best_of(lambda: scan(caster, setup.buffers, setup.pattern, setup.pose, 0.0, setup.max_range))
+    points, _, ray = scan_chunk(caster, setup.buffers, setup.pattern, np.eye(4), 0.0, setup.max_range)
+    xyz = np.column_stack([points["x"], points["y"], points["z"]]).astype(np.float64) @ setup.pose[:3, :3].T + setup.origin
+    row = np.searchsorted(setup.buffers.objects.instance, points["instance"])  # instance ids are 1..k in row order
+    return seconds, None, setup.score(ray, xyz, row)
+
+
+def trimesh_embree(setup: Setup, threads: int):
+    import trimesh
+    from trimesh.ray.ray_pyembree import RayMeshIntersector
+
+    mesh = trimesh.Trimesh(setup.buffers.vertices, setup.buffers.triangles, process=False)
+    origins = np.tile(setup.origin, (len(setup.directions), 1))
+    start = time.perf_counter()
+    intersector = RayMeshIntersector(mesh)
+    intersector.intersects_first(origins[:1], setup.directions[:1])  # builds its scene
+    build = time.perf_counter() - start
+    seconds = best_of(lambda: intersector.intersects_location(origins, setup.directions, multiple_hits=False))
+    location, ray, triangle = intersector.intersects_location(origins, setup.directions, multiple_hits=False)
+    far = np.linalg.norm(location - setup.origin, axis=1) > setup.max_range  # trimesh has no maximum distance
+    ray, location, triangle = ray[~far], location[~far], triangle[~far]
+    return seconds, build, setup.score(ray, location, setup.buffers.triangle_object[triangle])
+
+
+def subset_of(setup: Setup, count: int) -> np.ndarray:
+    """``count`` rays spread over the whole pattern (every k-th)."""
+    return np.arange(0, len(setup.directions), max(1, len(setup.directions) // count))
+
+
+def blender_bvhtree(setup: Setup, threads: int, count: int):
+    from mathutils import Vector
+    from mathutils.bvhtree import BVHTree
+
+    start = time.perf_counter()
+    tree = BVHTree.FromPolygons(setup.buffers.vertices.tolist(), setup.buffers.triangles.tolist(), all_triangles=True)
+    build = time.perf_counter() - start
+    subset = subset_of(setup, count)
+    origin = Vector(setup.origin)
+    directions = setup.directions[subset].tolist()
+    start = time.perf_counter()
+    results = [tree.ray_cast(origin, Vector(d), setup.max_range) for d in directions]
+    seconds = (time.perf_counter() - start) * len(setup.directions) / len(subset)
+    hit = np.array([r[0] is not None for r in results])
+    point = np.array([tuple(r[0]) for r in results if r[0] is not None]).reshape(-1, 3)
+    index = np.array([r[2] for r in results if r[0] is not None], np.int64)
+    return seconds, build, setup.score(subset[hit], point, setup.buffers.triangle_object[index], subset)
+
+
+def blender_scene_ray_cast(setup: Setup, threads: int, count: int):
+    from bpy_pipeline.scenes.objects import mesh_object, scene_collection
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    start = time.perf_counter()
+    objects = {}
+    collection = scene_collection()
+    for row, name in enumerate(setup.buffers.objects.names):
+        mask = setup.buffers.triangle_object == row
+        triangles = setup.buffers.triangles[mask]
+        used = np.unique(triangles)
+        remap = np.searchsorted(used, triangles)
+        objects[mesh_object(name, (setup.buffers.vertices[used], remap), collection).name] = row
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    scene = bpy.context.scene
+    scene.ray_cast(depsgraph, tuple(setup.origin), (0.0, 0.0, -1.0))  # builds Blender's scene BVH
+    build = time.perf_counter() - start
+    subset = subset_of(setup, count)
+    origin = tuple(setup.origin)
+    directions = [tuple(d) for d in setup.directions[subset].tolist()]
+    start = time.perf_counter()
+    results = [scene.ray_cast(depsgraph, origin, d, distance=setup.max_range) for d in directions]
+    seconds = (time.perf_counter() - start) * len(setup.directions) / len(subset)
+    hit = np.array([r[0] for r in results])
+    point = np.array([tuple(r[1]) for r in results if r[0]]).reshape(-1, 3)
+    row = np.array([objects[r[4].original.name] for r in results if r[0]], np.int64)
+    return seconds, build, setup.score(subset[hit], point, row, subset)
+
+
+def chart(rows: list[dict], path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7.5, 4.6))
+    for i, r in enumerate(r for r in rows if r.get("rays_per_s")):
+        ax.loglog(r["rays_per_s"], max(r["max_error_m"], 1e-15), "o")
+        ax.annotate(r["method"], (r["rays_per_s"], max(r["max_error_m"], 1e-15)), textcoords="offset points", xytext=(6, 5 if i % 2 else -12), fontsize=8)
+    ax.set(xlabel="rays per second", ylabel="largest position error (m)", title=f"Speed against accuracy ({rows[0]['rays']:,} rays, {rows[0]['triangles']:,} triangles)")
+    ax.axhline(1e-4, color="grey", lw=0.8, ls=":")
+    ax.grid(True, which="major", alpha=0.3)
+    lo, hi = ax.get_xlim()
+    ax.set_xlim(lo, hi * 8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def main():
+    args = arguments(__doc__)
+    threads = os.cpu_count() or 1
+    setup = Setup(args.small)
+    count = 5000 if args.small else 50000  # rays timed for Blender's ray casts (a Python loop)
+    methods = [
+        ("embreex raw", embreex_raw, threads, "float32 distance"),
+        ("RayCaster.intersect", raycaster, threads, "sensor frame, float64 re-solve"),
+        ("scan (records)", full_scan, threads, "point records: float32 x y z"),
+        ("trimesh + embreex", trimesh_embree, 1, "trimesh.ray.ray_pyembree"),
+        ("Blender BVHTree", lambda s, t: blender_bvhtree(s, t, count), 1, f"Python loop; {count:,} rays timed, extrapolated"),
+        ("Blender scene.ray_cast", lambda s, t: blender_scene_ray_cast(s, t, count), 1, f"Python loop; {count:,} rays timed, extrapolated"),
+    ]
+    rows = []
+    common = {"rays": len(setup.directions), "triangles": len(setup.buffers.triangles), "hits": int((setup.exact_row >= 0).sum())}
+    for name, fn, used_threads, note in methods:
+        seconds, build, accuracy = fn(setup, used_threads)
+        rows.append({"method": name, **common, "threads": used_threads, "rays_per_s": len(setup.directions) / seconds, "build_s": build, **accuracy, "note": note})
+    if importlib.util.find_spec("rtree") is None:
+        rows.append({"method": "trimesh ray_triangle", **common, "note": "not run: needs the rtree package (not a dependency)"})
+    reference = rows[0]["rays_per_s"]
+    for r in rows:
+        if r.get("rays_per_s"):
+            r["vs_embreex_raw"] = r["rays_per_s"] / reference
+    name = "raycasters" + ("_small" if args.small else "")
+    report(name, rows, args.out, {"threads": threads, "wire_hits_exact": int((setup.exact_row == list(BOXES).index("wire")).sum())})
+    chart(rows, args.out / f"{name}.png")
+
+
+if __name__ == "__main__":
+    main()
