@@ -342,6 +342,13 @@ report["after_retry"] = (len(lidar_classes()), hasattr(bpy.types.Scene, "lidar")
 settings = bpy.context.scene.lidar
 report["reset"] = sorted(bpy.ops.lidar.config_reset())
 report["reset_is_default"] = panel.settings_config(settings) == cfg.config_from_dict({}) and settings.builder == "railway"
+builders = {}
+for builder in settings.bl_rna.properties["builder"].enum_items.keys():
+    if builder != "my_scene":
+        settings.builder = builder
+        drawn = [line for line in draw_all_panels() if line.startswith("prop ")]
+        builders[builder] = [panel.settings_config(settings).scene == cfg.config_from_dict({"scene": {"builder": builder}}).scene, len(drawn)]
+report["every_builder"] = builders
 
 (WORK / "report.json").write_text(json.dumps(report, indent=1, default=str))
 print("session done")

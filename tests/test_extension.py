@@ -121,6 +121,9 @@ def test_installs_from_the_zip_with_its_own_wheels(session):
     assert {c for c in report["classes"] if c.startswith("LIDAR_PT_")} == {"LIDAR_PT_run", "LIDAR_PT_scene", "LIDAR_PT_sensor", "LIDAR_PT_effects", "LIDAR_PT_labels", "LIDAR_PT_output"}
     assert set(report["builders"]) == (set(cfg.BUILDERS) - {"blend"}) | {"my_scene"}
     assert report["panels_drawn"] > 20  # every panel drew, naming only properties and operators that exist
+    # every builder: the panel's defaults are the config's, and its parameters are drawn
+    assert set(report["every_builder"]) == set(cfg.BUILDERS) - {"blend"}
+    assert all(same and drawn > 10 for same, drawn in report["every_builder"].values()), report["every_builder"]
 
 
 @pytest.mark.bpy
