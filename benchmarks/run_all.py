@@ -5,7 +5,7 @@ import sys
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
-BENCHMARKS = ["bench_export.py", "bench_scan.py", "bench_default_job.py", "bench_effects.py", "bench_fitting.py"]
+BENCHMARKS = ["bench_export.py", "bench_scan.py", "bench_default_job.py", "bench_effects.py", "bench_fitting.py", "bench_divergence.py", "bench_mirrors.py"]
 
 if __name__ == "__main__":
     for name in BENCHMARKS:

@@ -13,7 +13,7 @@ import shutil
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterator
+from typing import Iterable, Iterator
 
 import numpy as np
 
@@ -29,10 +29,10 @@ from .lidar.divergence import scan_footprint
 from .lidar.effects import apply_effects
 from .lidar.platform import Trajectory
 from .lidar.grid import image_shape
-from .lidar.mirror_sensor import drop_at_edges, edge_drop_mask, load_edge_mask, reflect_patterns
+from .lidar.mirror_sensor import MirrorFrame, drop_at_edges, load_edge_mask, reflect_patterns
 from .lidar.raycast import RayCaster
 from .lidar.scanner import Surfaces, scan
-from .lidar.sensors import angular_resolution, frame_time, iter_pattern, mount_offset, spec_summary
+from .lidar.sensors import Pattern, angular_resolution, frame_time, iter_pattern, mount_offset, ray_count, spec_summary
 
 
 CHUNK_RAYS = 1 << 18  # rays generated and traced at a time: bounds memory for 23-million-ray scans
@@ -117,15 +117,52 @@ def scan_surfaces(config: Config) -> Surfaces:
     return Surfaces(mirrors.normal_return_deg, mirrors.glass.normal_return_deg, mirrors.glass.reflect_fraction, mirrors.glass.max_passes)
 
 
-def edge_mask(config: Config) -> np.ndarray | None:
+MAX_KEPT_MIRROR_RAYS = 1 << 22  # a mirror sensor's rays up to this many are traced through its mirrors once and kept
+_MIRROR_SENSOR: dict = {}  # the last mirror sensor seen: {"key": ..., "rays": Pattern, "mask": (rows, columns) or None}
+
+
+def _mirror_sensor(config: Config, frame: int) -> dict:
+    """The sensor's rays after its own mirrors and its edge-drop mask, kept while the sensor stays the same.
+
+    Both are the same every frame (a rosette's rays are not: they are traced again each frame),
+    so a run traces the sensor's mirrors once, not once a frame.
+    """
+    spec, reflector = config.sensor.spec, config.sensor.reflector
+    edge = reflector.edge_drop
+    measured = Path(edge.mask) if edge.mask not in ("none", "generated") else None
+    key = (reflector, repr(spec), frame if spec.pattern == "rosette" else 0, measured and measured.exists() and measured.stat().st_mtime_ns)
+    if _MIRROR_SENSOR.get("key") != key:
+        _MIRROR_SENSOR.clear()
+        traced = MirrorFrame.of(reflector, spec, key[2])
+        mask = None
+        if edge.mask == "generated":
+            mask = traced.edge_drop_mask(spec, edge.probability, edge.beam_diameter)
+        elif measured is not None:
+            mask = load_edge_mask(measured, image_shape(spec), "sensor.reflector.edge_drop.mask")
+        _MIRROR_SENSOR.update(key=key, rays=traced.reflected(reflector), mask=mask)
+    return _MIRROR_SENSOR
+
+
+def sensor_rays(config: Config, frame: int = 0) -> Iterable[Pattern]:
+    """The sensor's rays of frame ``frame`` as they enter the scene (sensor frame), in chunks.
+
+    A mirror sensor's (``sensor.reflector``) leave from its mirrors with per-ray origins; lost
+    rays are left out.
+    """
+    spec, reflector = config.sensor.spec, config.sensor.reflector
+    if not reflector.enabled:
+        return iter_pattern(spec, CHUNK_RAYS, frame)
+    if ray_count(spec) > MAX_KEPT_MIRROR_RAYS:
+        return reflect_patterns(iter_pattern(spec, CHUNK_RAYS, frame), reflector)
+    return [_mirror_sensor(config, frame)["rays"]]
+
+
+def edge_mask(config: Config, frame: int = 0) -> np.ndarray | None:
     """``(rows, columns)`` float32 mirror-edge drop probabilities of the sensor's own mirrors; ``None`` when off."""
     reflector = config.sensor.reflector
-    edge = reflector.edge_drop
-    if not reflector.enabled or edge.mask == "none":
+    if not reflector.enabled or reflector.edge_drop.mask == "none":
         return None
-    if edge.mask == "generated":
-        return edge_drop_mask(reflector, config.sensor.spec, edge.probability, edge.beam_diameter)
-    return load_edge_mask(edge.mask, image_shape(config.sensor.spec), "sensor.reflector.edge_drop.mask")
+    return _mirror_sensor(config, frame)["mask"]
 
 
 def scan_buffers(buffers: SceneBuffers, config: Config, rng: np.random.Generator, frame: int = 0, trajectory: Trajectory | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -151,14 +188,12 @@ def scan_buffers(buffers: SceneBuffers, config: Config, rng: np.random.Generator
     caster = RayCaster(buffers, frame=pose)
     ghost = load_class_table().id_of("reflection") if config.effects.mirrors.label == "reflection" else None
     options = {"max_bounces": config.effects.mirrors.max_bounces, "ghost_semantic": ghost, "ideal": config.effects.mirrors.ideal, "chunk_rays": CHUNK_RAYS}
-    patterns = iter_pattern(spec, CHUNK_RAYS, frame)
-    if config.sensor.reflector.enabled:  # the super-resolution sensor: every ray leaves through its own mirrors
-        patterns = reflect_patterns(patterns, config.sensor.reflector)
+    patterns = sensor_rays(config, frame)  # a mirror sensor's leave through its own mirrors
     if config.sensor.divergence.active:
         points, beam = scan_footprint(caster, buffers, patterns, pose_at, config.sensor.divergence, spec.min_range, spec.max_range, **options, surfaces=scan_surfaces(config), rng=rng)
     else:
         points, beam = scan(caster, buffers, patterns, pose_at, spec.min_range, spec.max_range, **options, surfaces=scan_surfaces(config), rng=rng)
-    mask = edge_mask(config)
+    mask = edge_mask(config, frame)
     if mask is not None:  # returns lost where the beam split on an edge of the sensor's own mirrors
         keep = drop_at_edges(points, mask, spec, rng)
         points, beam = points[keep], beam[keep]
@@ -181,9 +216,7 @@ def frame_boxes(buffers: SceneBuffers, config: Config, pose: np.ndarray, points:
     boxes = box_labels.fit_boxes(buffers, section.classes, headings)
     if len(boxes):
         spec = config.sensor.spec
-        patterns = iter_pattern(spec, CHUNK_RAYS, frame)
-        if config.sensor.reflector.enabled:
-            patterns = reflect_patterns(patterns, config.sensor.reflector)
+        patterns = sensor_rays(config, frame)
         steps = [v for v in angular_resolution(spec) if v is not None and np.isfinite(v)]
         cell = float(np.clip(max(steps) if steps else 1.0, 0.2, 5.0))
         box_labels.visibility(buffers, boxes, patterns, pose, spec.min_range, spec.max_range, cell, surfaces=scan_surfaces(config), rng=rng)

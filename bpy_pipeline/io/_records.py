@@ -1,4 +1,10 @@
-"""Check and normalise the points every writer receives (DESIGN.md, "Per-point record")."""
+"""Check and normalise the points every writer receives (DESIGN.md, "Per-point record"), and the
+steps writers take through them.
+
+Writers convert and write :data:`WRITE_CHUNK` points at a time (:func:`chunks`), so what they
+allocate besides the points themselves stays a few tens of megabytes however large the scan
+(a terrestrial scan holds about 10 million points).
+"""
 
 from __future__ import annotations
 
@@ -6,6 +12,13 @@ import numpy as np
 
 from ..errors import InputError
 from ..lidar.points import POINT_DTYPE
+
+WRITE_CHUNK = 1 << 20  # points converted and written at a time
+
+
+def chunks(n: int, size: int = WRITE_CHUNK) -> list[slice]:
+    """Consecutive slices of at most ``size`` covering ``range(n)`` (none for ``n == 0``)."""
+    return [slice(start, min(start + size, n)) for start in range(0, n, size)]
 
 
 def as_points(points, where: str) -> np.ndarray:

@@ -29,7 +29,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..lidar.points import POINT_DTYPE
-from ._records import as_points
+from ._records import as_points, chunks
 from .atomic import atomic_write
 
 HEADER_DTYPE = np.dtype(
@@ -176,9 +176,13 @@ def write_las(
     path = Path(path)
     pts = as_points(points, str(path))
     n = len(pts)
-    xyz = np.stack([pts["x"], pts["y"], pts["z"]], axis=1).astype(np.float64)
-    if not (np.isfinite(xyz).all() and np.isfinite(pts["intensity"]).all()):
-        raise InputError(f"{path}: LAS cannot store non-finite coordinates or intensity")
+    # First pass, chunk by chunk: finiteness and the coordinate extents (for the offset, the int32 check and the header).
+    low, high = np.full(3, np.inf), np.full(3, -np.inf)
+    for part in chunks(n):
+        xyz = np.stack([pts["x"][part], pts["y"][part], pts["z"][part]], axis=1).astype(np.float64)
+        if not (np.isfinite(xyz).all() and np.isfinite(pts["intensity"][part]).all()):
+            raise InputError(f"{path}: LAS cannot store non-finite coordinates or intensity")
+        low, high = np.minimum(low, xyz.min(axis=0)), np.maximum(high, xyz.max(axis=0))
     semantic = pts["semantic"]
     if n and int(semantic.max()) > 255:
         raise InputError(
@@ -188,25 +192,17 @@ def write_las(
     scale = np.broadcast_to(np.asarray(scale, np.float64), (3,)).copy()
     if not (np.isfinite(scale).all() and (scale > 0).all()):
         raise InputError(f"{path}: LAS scale must be positive and finite, got {scale.tolist()}")
-    offset = default_offset(xyz) if offset is None else np.broadcast_to(np.asarray(offset, np.float64), (3,)).copy()
+    offset = default_offset(low[None] if n else low[:0]) if offset is None else np.broadcast_to(np.asarray(offset, np.float64), (3,)).copy()
     if not np.isfinite(offset).all():
         raise InputError(f"{path}: LAS offset must be finite, got {offset.tolist()}")
-    quantised = np.rint((xyz - offset) / scale)
+    # Quantising is monotonic, so the extreme points give the extreme int32 values and stored coordinates.
+    q_low, q_high = (np.rint((bound - offset) / scale) for bound in (low, high))
     limit = np.iinfo(np.int32)
-    if n and (quantised.min() < limit.min or quantised.max() > limit.max):
+    if n and (q_low.min() < limit.min or q_high.max() > limit.max):
         raise InputError(
             f"{path}: coordinates do not fit LAS int32 with scale {scale.tolist()} and offset {offset.tolist()}; "
             "use a larger scale or an offset nearer the points"
         )
-
-    records = np.zeros(n, RECORD_DTYPE)
-    records["X"], records["Y"], records["Z"] = quantised.astype(np.int32).T
-    records["intensity"] = np.rint(np.clip(pts["intensity"].astype(np.float64), 0.0, 1.0) * 65535.0).astype(np.uint16)
-    records["returns"] = 1 | (1 << 4)
-    records["classification"] = semantic.astype(np.uint8)
-    records["gps_time"] = pts["time"]
-    for name, _, _, _ in EXTRA_DIMENSIONS:
-        records[name] = pts[name]
 
     vlr = extra_bytes_vlr()
     header = np.zeros((), HEADER_DTYPE)
@@ -224,17 +220,26 @@ def write_las(
     header["point_data_format"] = 6
     header["point_data_record_length"] = RECORD_DTYPE.itemsize
     header["scale"], header["offset"] = scale, offset
-    if n:
-        stored = quantised * scale + offset  # the extents of the coordinates as stored
-        (header["min_x"], header["min_y"], header["min_z"]) = stored.min(axis=0)
-        (header["max_x"], header["max_y"], header["max_z"]) = stored.max(axis=0)
+    if n:  # the extents of the coordinates as stored
+        (header["min_x"], header["min_y"], header["min_z"]) = q_low * scale + offset
+        (header["max_x"], header["max_y"], header["max_z"]) = q_high * scale + offset
     header["point_count"] = n
     header["points_by_return"][0] = n
 
     with atomic_write(path) as tmp, open(tmp, "wb") as f:
         f.write(header.tobytes())
         f.write(vlr)
-        records.tofile(f)
+        for part in chunks(n):
+            xyz = np.stack([pts["x"][part], pts["y"][part], pts["z"][part]], axis=1).astype(np.float64)
+            records = np.zeros(part.stop - part.start, RECORD_DTYPE)
+            records["X"], records["Y"], records["Z"] = np.rint((xyz - offset) / scale).astype(np.int32).T
+            records["intensity"] = np.rint(np.clip(pts["intensity"][part].astype(np.float64), 0.0, 1.0) * 65535.0).astype(np.uint16)
+            records["returns"] = 1 | (1 << 4)
+            records["classification"] = semantic[part].astype(np.uint8)
+            records["gps_time"] = pts["time"][part]
+            for name, _, _, _ in EXTRA_DIMENSIONS:
+                records[name] = pts[name][part]
+            records.tofile(f)
     return path
 
 

@@ -20,7 +20,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..lidar.points import POINT_DTYPE
-from ._records import as_points
+from ._records import as_points, chunks
 from .atomic import atomic_dir
 
 NPY_FILES = ("coord", "strength", "segment", "instance")
@@ -48,15 +48,19 @@ def write_npy_folder(folder: str | os.PathLike, points: np.ndarray) -> list[Path
     n = len(pts)
     if n and int(pts["instance"].max()) > np.iinfo(np.int32).max:
         raise InputError(f"{folder}: Pointcept instance.npy is int32; got instance ids up to {int(pts['instance'].max())}")
-    arrays = {
-        "coord": np.stack([pts["x"], pts["y"], pts["z"]], axis=1).astype(np.float32),
-        "strength": pts["intensity"].astype(np.float32).reshape(n, 1),
-        "segment": pts["semantic"].astype(np.int32),
-        "instance": np.where(pts["instance"] == 0, IGNORE_INDEX, pts["instance"].astype(np.int64)).astype(np.int32),
+    columns = {  # name -> (dtype, shape of a row, the rows of a slice of the points)
+        "coord": (np.float32, (3,), lambda s: np.stack([pts["x"][s], pts["y"][s], pts["z"][s]], axis=1).astype(np.float32)),
+        "strength": (np.float32, (1,), lambda s: pts["intensity"][s].astype(np.float32).reshape(-1, 1)),
+        "segment": (np.int32, (), lambda s: pts["semantic"][s].astype(np.int32)),
+        "instance": (np.int32, (), lambda s: np.where(pts["instance"][s] == 0, IGNORE_INDEX, pts["instance"][s].astype(np.int64)).astype(np.int32)),
     }
     with atomic_dir(folder) as tmp:
-        for name in NPY_FILES:
-            np.save(tmp / f"{name}.npy", arrays[name], allow_pickle=False)
+        for name in NPY_FILES:  # the bytes of np.save, written a chunk at a time
+            dtype, row, rows = columns[name]
+            with open(tmp / f"{name}.npy", "wb") as f:
+                np.lib.format.write_array_header_1_0(f, {"descr": np.lib.format.dtype_to_descr(np.dtype(dtype)), "fortran_order": False, "shape": (n, *row)})
+                for part in chunks(n):
+                    rows(part).tofile(f)
     return [folder / f"{name}.npy" for name in NPY_FILES]
 
 

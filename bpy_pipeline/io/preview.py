@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from ._records import as_points
+from ._records import as_points, chunks
 from .atomic import atomic_write
 
 BACKGROUND = (24, 24, 28)  # not a class colour of assets_manifest/labels.yaml
@@ -40,13 +40,14 @@ def encode_png(rgb: np.ndarray, level: int = 6) -> bytes:
     return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", zlib.compress(rows.tobytes(), level)) + chunk(b"IEND", b"")
 
 
-def fit(u: np.ndarray, v: np.ndarray, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
+def fit(u: np.ndarray, v: np.ndarray, width: int, height: int, bounds=None) -> tuple[np.ndarray, np.ndarray]:
     """Pixel columns and rows ``(n,) int`` of points ``(u, v)`` (n,) fitted into a width x height panel.
 
     Equal aspect, centred, ``v`` up; a cloud with zero extent along an axis is centred on it.
+    bounds : ``(u_min, u_max, v_min, v_max)`` of the whole cloud when ``u, v`` are a part of it
     """
     inner_w, inner_h = max(width - 2 * MARGIN, 1), max(height - 2 * MARGIN, 1)
-    u_min, u_max, v_min, v_max = u.min(), u.max(), v.min(), v.max()
+    u_min, u_max, v_min, v_max = (u.min(), u.max(), v.min(), v.max()) if bounds is None else bounds
     spans = np.array([u_max - u_min, v_max - v_min])
     with np.errstate(divide="ignore"):
         ratios = np.array([(inner_w - 1) / spans[0], (inner_h - 1) / spans[1]])
@@ -57,16 +58,24 @@ def fit(u: np.ndarray, v: np.ndarray, width: int, height: int) -> tuple[np.ndarr
     return np.clip(col, 0, width - 1), np.clip(row, 0, height - 1)
 
 
-def splat(image: np.ndarray, col: np.ndarray, row: np.ndarray, depth: np.ndarray, colors: np.ndarray) -> None:
-    """Paint ``colors`` (n, 3) at pixels ``(row, col)`` of ``image`` in place; the largest ``depth`` wins."""
+def splat(image: np.ndarray, col: np.ndarray, row: np.ndarray, depth: np.ndarray, colors: np.ndarray, depth_image: np.ndarray | None = None) -> None:
+    """Paint ``colors`` (n, 3) at pixels ``(row, col)`` of ``image`` in place; the largest ``depth`` wins.
+
+    Of equal depths the later point wins. depth_image : ``(height, width)`` float64 depth of what
+    ``image`` holds (-inf where empty), updated in place, so a cloud can be painted part by part.
+    """
     if len(col) == 0:
         return
     pixel = row * image.shape[1] + col
     order = np.lexsort((depth, pixel))  # by pixel, then depth ascending
     pixel = pixel[order]
     last = np.append(pixel[1:] != pixel[:-1], True)  # the deepest-sorted (winning) point of each pixel
-    winners = order[last]
-    image.reshape(-1, 3)[pixel[last]] = colors[winners]
+    winners, pixel = order[last], pixel[last]
+    if depth_image is not None:
+        nearer = depth[winners] >= depth_image.reshape(-1)[pixel]
+        winners, pixel = winners[nearer], pixel[nearer]
+        depth_image.reshape(-1)[pixel] = depth[winners]
+    image.reshape(-1, 3)[pixel] = colors[winners]
 
 
 def render_preview(points: np.ndarray, color_lut: np.ndarray, size: tuple[int, int] = (1600, 800), dot: int = 1) -> np.ndarray:
@@ -92,22 +101,37 @@ def render_preview(points: np.ndarray, color_lut: np.ndarray, size: tuple[int, i
         raise InputError(f"preview: color_lut must be a (k, 3) uint8 table, got shape {lut.shape}")
     image = np.empty((height, width, 3), np.uint8)
     image[:] = BACKGROUND
-    x, y, z = (pts[name].astype(np.float64) for name in "xyz")
-    keep = np.isfinite(x) & np.isfinite(y) & np.isfinite(z)
-    if not keep.any():
+
+    def finite(part: slice):
+        """``x, y, z`` (float64) and semantic ids of the finite points of a slice of the cloud."""
+        x, y, z = (pts[name][part].astype(np.float64) for name in "xyz")
+        keep = np.isfinite(x) & np.isfinite(y) & np.isfinite(z)
+        return x[keep], y[keep], z[keep], pts["semantic"][part][keep]
+
+    # First pass, chunk by chunk: the cloud's extent (each panel is fitted to all of it).
+    low, high, top = np.full(3, np.inf), np.full(3, -np.inf), -1
+    for part in chunks(len(pts)):
+        x, y, z, semantic = finite(part)
+        if len(x):
+            xyz = (x, y, z)
+            low, high = np.minimum(low, [a.min() for a in xyz]), np.maximum(high, [a.max() for a in xyz])
+            top = max(top, int(semantic.max()))
+    if top < 0:
         return image
-    x, y, z, semantic = x[keep], y[keep], z[keep], pts["semantic"][keep]
-    if int(semantic.max()) >= len(lut):
-        raise InputError(f"preview: semantic id {int(semantic.max())} has no colour (color_lut has {len(lut)} entries)")
-    colors = lut[semantic]
+    if top >= len(lut):
+        raise InputError(f"preview: semantic id {top} has no colour (color_lut has {len(lut)} entries)")
     panel = width // 2
     offsets = np.arange(dot) - (dot - 1) // 2
     du, dv = (a.ravel() for a in np.meshgrid(offsets, offsets))
-    for left, (u, v, depth) in ((0, (x, y, z)), (panel, (x, z, -y))):
-        col, row = fit(u, v, panel, height)
-        col = np.clip(col[:, None] + du, 0, panel - 1).ravel() + left
-        row = np.clip(row[:, None] + dv, 0, height - 1).ravel()
-        splat(image, col, row, np.repeat(depth, len(du)), np.repeat(colors, len(du), axis=0))
+    depth_image = np.full((height, width), -np.inf)
+    for part in chunks(len(pts)):  # then paint each chunk over what the earlier ones left
+        x, y, z, semantic = finite(part)
+        colors = np.repeat(lut[semantic], len(du), axis=0)
+        for left, (u, v, depth), bounds in ((0, (x, y, z), (low[0], high[0], low[1], high[1])), (panel, (x, z, -y), (low[0], high[0], low[2], high[2]))):
+            col, row = fit(u, v, panel, height, bounds)
+            col = np.clip(col[:, None] + du, 0, panel - 1).ravel() + left
+            row = np.clip(row[:, None] + dv, 0, height - 1).ravel()
+            splat(image, col, row, np.repeat(depth, len(du)), colors, depth_image)
     return image
 
 

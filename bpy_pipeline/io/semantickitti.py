@@ -18,7 +18,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..lidar.points import POINT_DTYPE
-from ._records import as_points
+from ._records import as_points, chunks
 from .atomic import atomic_write
 
 MAX_INSTANCE = 0xFFFF
@@ -40,13 +40,18 @@ def pack_labels(semantic: np.ndarray, instance: np.ndarray, where: str = "Semant
     ``InputError`` naming ``where`` when an instance id does not fit in 16 bits (no silent wrap).
     """
     instance = np.asarray(instance)
+    check_instances(instance, where)
+    return np.asarray(semantic).astype("<u4") | (instance.astype("<u4") << 16)
+
+
+def check_instances(instance: np.ndarray, where: str = "SemanticKITTI labels") -> None:
+    """``InputError`` naming ``where`` when an instance id of ``instance`` (n,) does not fit in 16 bits."""
     if instance.size and int(instance.max()) > MAX_INSTANCE:
         bad = int(np.count_nonzero(instance > MAX_INSTANCE))
         raise InputError(
             f"{where}: SemanticKITTI stores instance ids 0..{MAX_INSTANCE} in the high 16 bits of the label; "
             f"{bad} points have larger ids (max {int(instance.max())})"
         )
-    return np.asarray(semantic).astype("<u4") | (instance.astype("<u4") << 16)
 
 
 def write_semantickitti(root: str | os.PathLike, sequence: int, frame: int, points: np.ndarray) -> tuple[Path, Path]:
@@ -71,13 +76,14 @@ def write_semantickitti(root: str | os.PathLike, sequence: int, frame: int, poin
     """
     bin_path, label_path = scan_paths(root, sequence, frame)
     pts = as_points(points, str(bin_path))
-    labels = pack_labels(pts["semantic"], pts["instance"], str(label_path))
-    scan = np.empty((len(pts), 4), "<f4")
-    for i, name in enumerate(("x", "y", "z", "intensity")):
-        scan[:, i] = pts[name]
-    with atomic_write(bin_path) as tmp_bin, atomic_write(label_path) as tmp_label:
-        scan.tofile(tmp_bin)
-        labels.tofile(tmp_label)
+    check_instances(pts["instance"], str(label_path))
+    with atomic_write(bin_path) as tmp_bin, atomic_write(label_path) as tmp_label, open(tmp_bin, "wb") as f_bin, open(tmp_label, "wb") as f_label:
+        for part in chunks(len(pts)):
+            scan = np.empty((part.stop - part.start, 4), "<f4")
+            for i, name in enumerate(("x", "y", "z", "intensity")):
+                scan[:, i] = pts[name][part]
+            scan.tofile(f_bin)
+            pack_labels(pts["semantic"][part], pts["instance"][part], str(label_path)).tofile(f_label)
     return bin_path, label_path
 
 

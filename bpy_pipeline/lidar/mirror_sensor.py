@@ -4,8 +4,8 @@ The human-robot safety paper's sensor (../shared/seeds/002) is an Ouster OS1-128
 over 45 deg, 2048 columns, 10 Hz) mounted overhead inside ``segments`` planar mirrors arranged
 around it. Every ray reflects once on the sensor's own mirrors before it enters the scene, so
 the whole 360 x 45 deg sweep is folded down onto the floor below: each segment maps its own
-45 deg wedge of columns onto one sector of the floor, and the eight sectors form the real
-sensor's star pattern.
+45 deg wedge of columns onto a trapezoid of floor centred on its own direction, and the eight
+overlapping trapezoids form the real sensor's star pattern.
 
 Geometry, in the sensor frame (z the spin axis, up; the optical centre at the origin). Segment
 ``k`` is centred at azimuth ``phi_k = azimuth_deg + k * 360 / segments`` (u_k the horizontal
@@ -13,9 +13,11 @@ unit vector there). Its plane passes through ``distance * u_k`` (where the horiz
 that azimuth meets it) and makes ``inclination_deg`` (i) with the spin axis; its unit normal
 ``n_k = -cos(i) u_k - sin(i) z`` faces the sensor and the floor. A horizontal beam therefore
 leaves the mirror 2 i below the horizon, heading back under the sensor: at the paper's 34 deg
-the 45 deg fan of the OS1-128 (+-22.5 deg) covers 45.5 to 90.5 deg below the horizon, a cone of
-44.5 deg around the nadir. (34 deg measured from the horizontal instead is ``inclination_deg:
-56``: the same cone with the fan sent outward, not under the sensor.) Together the planes form
+the 45 deg fan of the OS1-128 (+-22.5 deg) covers 45.5 to 90.5 deg below the horizon at a
+segment's centre, a cone of 44.5 deg around the nadir (40.4 deg below the horizon at the
+segments' edges: the points of the star). (34 deg measured from the horizontal instead is
+``inclination_deg: 56``: the same cone with the fan sent outward, not under the sensor; its
+mirrors must reach about three times as far down the slope.) Together the planes form
 a pyramid frustum narrowing upward; segment ``k`` is its facet, cut to ``bottom`` and ``top``
 metres along the slope below and above the centre point and, when ``width`` > 0, to that width.
 
@@ -47,9 +49,8 @@ from ..errors import InputError
 from . import grid
 from .sensors import Pattern, SensorSpec, sensor_pattern
 
-# The reflector is any object with these attributes (``config.ReflectorConfig``):
-# segments (int), inclination_deg, azimuth_deg, distance, bottom, top, width (floats; metres, degrees).
-REFLECTOR_FIELDS = ("segments", "inclination_deg", "azimuth_deg", "distance", "bottom", "top", "width")
+# A ``reflector`` below is any object with the attributes of ``config.ReflectorConfig``: segments (int),
+# inclination_deg, azimuth_deg (degrees), distance, bottom, top, width (metres).
 
 
 @dataclass(frozen=True)
@@ -214,17 +215,17 @@ def _meets_another_facet(reflector, f: Facets, point: np.ndarray, reflected: np.
     return blocked
 
 
-def reflect_pattern(pattern: Pattern, reflector) -> Pattern:
+def reflect_pattern(pattern: Pattern, reflector, rays: MirrorRays | None = None) -> Pattern:
     """The rays of ``pattern`` as they leave the mirrors: per-ray origins on the mirrors, reflected directions.
 
     Lost rays are left out; the others keep their ring and firing time (so their pixel in the
     frame's image is still known, :func:`.grid.pixels`). Origins and directions are in the
-    sensor frame. A pattern that already has per-ray origins is refused: the mirrors are
-    traced from the optical centre.
+    sensor frame. ``rays``: :func:`trace_mirrors` of ``pattern``, when already traced. A pattern
+    that already has per-ray origins is refused: the mirrors are traced from the optical centre.
     """
     if pattern.origins is not None:
         raise ValueError("reflect_pattern: the sensor's mirrors are traced from its optical centre; this pattern already has per-ray origins")
-    rays = trace_mirrors(reflector, pattern.directions)
+    rays = trace_mirrors(reflector, pattern.directions) if rays is None else rays
     kept = rays.kept
     return Pattern(rays.direction[kept], pattern.ring[kept], pattern.time[kept], rays.origin[kept])
 
@@ -233,6 +234,37 @@ def reflect_patterns(patterns: Iterable[Pattern], reflector) -> Iterator[Pattern
     """:func:`reflect_pattern` of each chunk of a pattern stream (``sensors.iter_pattern``)."""
     for pattern in patterns:
         yield reflect_pattern(pattern, reflector)
+
+
+@dataclass(frozen=True)
+class MirrorFrame:
+    """Every ray of one frame of a sensor and where its own mirrors send it (traced once, used twice).
+
+    pattern : :class:`Pattern` the sensor's rays as fired (sensor frame), all of a frame
+    rays : :class:`MirrorRays` of them
+    """
+
+    pattern: Pattern
+    rays: MirrorRays
+
+    @classmethod
+    def of(cls, reflector, spec: SensorSpec, frame: int = 0) -> "MirrorFrame":
+        pattern = sensor_pattern(spec, frame)
+        return cls(pattern, trace_mirrors(reflector, pattern.directions))
+
+    def reflected(self, reflector) -> Pattern:
+        """The rays that leave the sensor (:func:`reflect_pattern`)."""
+        return reflect_pattern(self.pattern, reflector, self.rays)
+
+    def edge_drop_mask(self, spec: SensorSpec, probability: float, beam_diameter: float) -> np.ndarray:
+        """``(rows, columns)`` float32 drop probabilities (:func:`edge_drop_mask`); ``spec`` must be the frame's."""
+        grid.check_grid(spec, "sensor.reflector.edge_drop")
+        rays = self.rays
+        p = np.where(rays.kept, np.where(rays.clearance < beam_diameter / 2.0, probability, 0.0), 1.0)
+        mask = np.ones(grid.image_shape(spec), np.float32)
+        row, column = grid.pixels(spec, self.pattern.ring, self.pattern.time)
+        mask[row, column] = p
+        return mask
 
 
 # ----------------------------------------------------------------------------- mirror-edge drop
@@ -246,13 +278,7 @@ def edge_drop_mask(reflector, spec: SensorSpec, probability: float, beam_diamete
     columns: once per mirror.
     """
     grid.check_grid(spec, "sensor.reflector.edge_drop")
-    pattern = sensor_pattern(spec)
-    rays = trace_mirrors(reflector, pattern.directions)
-    p = np.where(rays.kept, np.where(rays.clearance < beam_diameter / 2.0, probability, 0.0), 1.0)
-    mask = np.ones(grid.image_shape(spec), np.float32)
-    row, column = grid.pixels(spec, pattern.ring, pattern.time)
-    mask[row, column] = p
-    return mask
+    return MirrorFrame.of(reflector, spec).edge_drop_mask(spec, probability, beam_diameter)
 
 
 def load_edge_mask(path: str | Path, shape: tuple[int, int], where: str = "sensor.reflector.edge_drop.mask") -> np.ndarray:
