@@ -4,7 +4,7 @@
    (``pip download --only-binary :all: --no-deps`` for each file's own Python, ABI and platform
    tags) into ``wheels/`` (git-ignored).
 2. Stages the package in ``build/extension/<id>/``: ``addon/*`` as the package root, with
-   ``bpy_pipeline/``, ``assets_manifest/labels.yaml``, the manifest and the wheels of the chosen
+   ``bpy_pipeline/``, ``assets_manifest/*.yaml``, the manifest and the wheels of the chosen
    platforms (``--platform`` narrows the manifest's ``platforms`` and ``wheels`` to them).
 3. Runs Blender's own extension tool from the installed ``bpy`` wheel
    (``bpy/<version>/scripts/addons_core/bl_pkg/cli/blender_ext.py``): ``validate`` on the staged
@@ -124,7 +124,8 @@ def stage(manifest: dict, platforms: list[str], cache: Path, stage_root: Path) -
     shutil.copytree(ROOT / "addon", folder, ignore=IGNORE)
     shutil.copytree(ROOT / "bpy_pipeline", folder / "bpy_pipeline", ignore=IGNORE)
     (folder / "assets_manifest").mkdir()
-    shutil.copy2(ROOT / "assets_manifest" / "labels.yaml", folder / "assets_manifest" / "labels.yaml")
+    for path in sorted((ROOT / "assets_manifest").glob("*.yaml")):  # the class table, the robot arm, asset lists
+        shutil.copy2(path, folder / "assets_manifest" / path.name)
     (folder / "wheels").mkdir()
     for wheel in wheels:
         shutil.copy2(fetch(Path(wheel).name, cache), folder / wheel)

@@ -347,7 +347,8 @@ for builder in settings.bl_rna.properties["builder"].enum_items.keys():
     if builder != "my_scene":
         settings.builder = builder
         drawn = [line for line in draw_all_panels() if line.startswith("prop ")]
-        builders[builder] = [panel.settings_config(settings).scene == cfg.config_from_dict({"scene": {"builder": builder}}).scene, len(drawn)]
+        built = sorted(bpy.ops.lidar.build_scene()) == ["FINISHED"] and len(bpy.data.collections["LiDAR Scene"].all_objects) >= 3
+        builders[builder] = [panel.settings_config(settings).scene == cfg.config_from_dict({"scene": {"builder": builder}}).scene, len(drawn), built]
 report["every_builder"] = builders
 
 (WORK / "report.json").write_text(json.dumps(report, indent=1, default=str))

@@ -103,7 +103,9 @@ def test_zip_is_validated_and_holds_only_what_runs(extension_zip):
     addon = {p.name for p in (ROOT / "addon").glob("*.py")}
     wheels = {n for n in names if n.startswith("wheels/")}
     assert "__init__.py" in names and "blender_manifest.toml" in names
-    assert addon | package | {"assets_manifest/labels.yaml", "blender_manifest.toml"} | wheels == set(names)
+    assets = {f"assets_manifest/{p.name}" for p in (ROOT / "assets_manifest").glob("*.yaml")}
+    assert "assets_manifest/labels.yaml" in assets
+    assert addon | package | assets | {"blender_manifest.toml"} | wheels == set(names)
     assert not any("__pycache__" in n or n.endswith(".pyc") or n.startswith(("tests/", "benchmarks/")) for n in names)
     assert manifest["platforms"] == [THIS_PLATFORM]
     assert sorted(wheels) == sorted(w.removeprefix("./") for w in manifest["wheels"])
@@ -123,7 +125,7 @@ def test_installs_from_the_zip_with_its_own_wheels(session):
     assert report["panels_drawn"] > 20  # every panel drew, naming only properties and operators that exist
     # every builder: the panel's defaults are the config's, and its parameters are drawn
     assert set(report["every_builder"]) == set(cfg.BUILDERS) - {"blend"}
-    assert all(same and drawn > 10 for same, drawn in report["every_builder"].values()), report["every_builder"]
+    assert all(same and drawn > 10 and built for same, drawn, built in report["every_builder"].values()), report["every_builder"]
 
 
 @pytest.mark.bpy
