@@ -25,17 +25,19 @@ from .geometry.transforms import pose_matrix, transform_points
 from .io import WRITERS, write_manifest, write_preview
 from .io.range_image import write_frame_range_image
 from .labels import load_class_table, parse_rules
-from .lidar.divergence import scan_footprint
+from .lidar.divergence import scan_footprint_chunks
 from .lidar.effects import apply_effects
 from .lidar.platform import Trajectory
 from .lidar.grid import image_shape
 from .lidar.mirror_sensor import MirrorFrame, drop_at_edges, load_edge_mask, reflect_patterns
 from .lidar.raycast import RayCaster
-from .lidar.scanner import Surfaces, scan
+from .lidar.points import POINT_DTYPE
+from .lidar.scanner import Surfaces, scan_chunks
 from .lidar.sensors import Pattern, angular_resolution, frame_time, iter_pattern, mount_offset, ray_count, spec_summary
 
 
 CHUNK_RAYS = 1 << 18  # rays generated and traced at a time: bounds memory for 23-million-ray scans
+MAX_RESERVED_POINTS = 1 << 25  # point records reserved up front (address space only; pages fill as points come)
 
 
 def frame_rng(seed: int, frame: int) -> np.random.Generator:
@@ -175,6 +177,8 @@ def scan_buffers(buffers: SceneBuffers, config: Config, rng: np.random.Generator
     A moving sensor casts each ray from its pose at that ray's firing time; ``pose`` is its pose at
     the frame's start, and points come out in the sensor frame of that pose (motion compensated,
     as nuScenes does), so a static object stays where it is whatever the motion.
+    Each chunk of rays is traced, given its effects and moved to the output frame before the
+    next is traced, so memory holds the final point records and one chunk's work, no more.
     """
     buffers.check()
     spec = config.sensor.spec
@@ -190,18 +194,42 @@ def scan_buffers(buffers: SceneBuffers, config: Config, rng: np.random.Generator
     options = {"max_bounces": config.effects.mirrors.max_bounces, "ghost_semantic": ghost, "ideal": config.effects.mirrors.ideal, "chunk_rays": CHUNK_RAYS}
     patterns = sensor_rays(config, frame)  # a mirror sensor's leave through its own mirrors
     if config.sensor.divergence.active:
-        points, beam = scan_footprint(caster, buffers, patterns, pose_at, config.sensor.divergence, spec.min_range, spec.max_range, **options, surfaces=scan_surfaces(config), rng=rng)
+        chunks = scan_footprint_chunks(caster, buffers, patterns, pose_at, config.sensor.divergence, spec.min_range, spec.max_range, **options, surfaces=scan_surfaces(config), rng=rng)
     else:
-        points, beam = scan(caster, buffers, patterns, pose_at, spec.min_range, spec.max_range, **options, surfaces=scan_surfaces(config), rng=rng)
+        chunks = scan_chunks(caster, buffers, patterns, pose_at, spec.min_range, spec.max_range, **options, surfaces=scan_surfaces(config), rng=rng)
     mask = edge_mask(config, frame)
-    if mask is not None:  # returns lost where the beam split on an edge of the sensor's own mirrors
-        keep = drop_at_edges(points, mask, spec, rng)
-        points, beam = points[keep], beam[keep]
-    points = apply_effects(points, beam, config.effects, rng)
-    if config.output.frame == "world":
-        xyz = transform_points(np.column_stack([points["x"], points["y"], points["z"]]).astype(np.float64), pose)
-        points["x"], points["y"], points["z"] = xyz.T
-    return points, pose
+
+    def finished(chunks):
+        for points, beam in chunks:
+            if mask is not None:  # returns lost where the beam split on an edge of the sensor's own mirrors
+                keep = drop_at_edges(points, mask, spec, rng)
+                points, beam = points[keep], beam[keep]
+            points = apply_effects(points, beam, config.effects, rng)
+            if config.output.frame == "world":
+                xyz = transform_points(np.column_stack([points["x"], points["y"], points["z"]]).astype(np.float64), pose)
+                points["x"], points["y"], points["z"] = xyz.T
+            yield points
+
+    return collect_points(finished(chunks), ray_count(spec)), pose
+
+
+def collect_points(parts: Iterable[np.ndarray], expected: int) -> np.ndarray:
+    """The :data:`POINT_DTYPE` records of ``parts`` in one ``(p,)`` array, copied in as they come.
+
+    expected : the most points likely (the ray count); that many (at most
+    :data:`MAX_RESERVED_POINTS`) are reserved up front, so the parts are never all held twice:
+    the operating system maps the reserved pages only as points fill them. More points than
+    reserved double the reserve.
+    """
+    out, n = np.empty(min(max(expected, 1), MAX_RESERVED_POINTS), POINT_DTYPE), 0
+    for part in parts:
+        if n + len(part) > len(out):
+            grown = np.empty(max(2 * len(out), n + len(part)), POINT_DTYPE)
+            grown[:n] = out[:n]
+            out = grown
+        out[n : n + len(part)] = part
+        n += len(part)
+    return out[:n]
 
 
 def frame_boxes(buffers: SceneBuffers, config: Config, pose: np.ndarray, points: np.ndarray, headings: dict | None = None, frame: int = 0, rng: np.random.Generator | None = None) -> np.ndarray:
