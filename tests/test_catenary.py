@@ -7,7 +7,7 @@ import pytest
 
 from bpy_pipeline.errors import InputError
 from bpy_pipeline.geometry import catenary
-from bpy_pipeline.geometry.lod import SensorView, polygon_sides
+from bpy_pipeline.geometry.lod import SensorView, equal_perimeter_radius, polygon_sides
 
 
 def test_sag_law():
@@ -105,3 +105,13 @@ def test_lod_helpers():
         n = polygon_sides(radius, tolerance)
         assert radius * (1 - math.cos(math.pi / n)) <= tolerance
     assert polygon_sides(0.006, 0.01) == 4
+
+
+@pytest.mark.parametrize("sides", [4, 6, 8])
+def test_polygonal_wires_keep_their_mean_width(sides):
+    r = equal_perimeter_radius(0.006, sides)
+    corners = r * np.column_stack([np.cos(np.arange(sides) * 2 * np.pi / sides), np.sin(np.arange(sides) * 2 * np.pi / sides)])
+    directions = np.linspace(0, np.pi, 3601)[:-1]
+    normals = np.column_stack([np.cos(directions), np.sin(directions)])
+    widths = np.ptp(corners @ normals.T, axis=0)  # the shadow the section casts across each viewing direction
+    assert widths.mean() == pytest.approx(0.012, rel=1e-4)  # beams meet it as often as the 12 mm round wire

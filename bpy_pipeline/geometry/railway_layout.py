@@ -424,6 +424,7 @@ def check_railway(params, where: str = "scene") -> None:
 
 # ----------------------------------------------------------------------------- level of detail
 MIN_TOLERANCE = 1e-4  # m: no shape is modelled finer than this
+MIN_WIRE_SIDES = 6  # a hexagon's width varies +-5 % with the viewing angle, a square's +-17 %: thin wires keep their hit rate
 MAX_WIRE_SIDES = 12
 
 
@@ -434,6 +435,8 @@ class RailwayDetailPlan:
     centreline_tolerance : m, chord error of the sampled alignment
     track_trim, ground_trim : (start, end) chainages (m) of the track parts and of the ground strip
     stone_radius : m around each optical centre where ballast stones are modelled (0: none)
+    stone_trims : ``(k, (start, end))``: the chainages where stones around optical centre k can lie, for the
+        centres near enough to the ballast (none without stones)
     supports : indices of the supports to build
     wires : per wire of ``layout.wires``, ``(samples, sides)``, or ``None`` when not built
     droppers : per dropper set of ``layout.droppers``, True when built
@@ -443,6 +446,7 @@ class RailwayDetailPlan:
     track_trim: tuple[float, float]
     ground_trim: tuple[float, float]
     stone_radius: float
+    stone_trims: list[tuple[int, tuple[float, float]]]
     supports: list[int]
     wires: list[tuple[int, int] | None]
     droppers: list[bool]
@@ -478,13 +482,20 @@ def level_of_detail(layout: RailwayLayout, params, view=None) -> RailwayDetailPl
     if view is None or params.detail.mode == "fixed":
         per_10m = params.catenary.points_per_10m
         wires = [(catenary.thesis_sample_count(w.length, per_10m), 6) for w in layout.wires]
-        return RailwayDetailPlan(0.005, everything, everything, 0.0, list(range(len(layout.supports))), wires, [True] * len(layout.droppers))
+        return RailwayDetailPlan(0.005, everything, everything, 0.0, [], list(range(len(layout.supports))), wires, [True] * len(layout.droppers))
     reach = view.max_range
     nearest = float(view.distance(alignment.point(alignment.nearest_chainage(view.positions))).min())
     centreline_tolerance = max(float(view.tolerance(max(nearest, 0.5))), MIN_TOLERANCE)
     track_trim = _within(alignment, view, reach, layout.section.embankment_toe_half)
     ground_trim = _within(alignment, view, reach, track.ground_width / 2)
     stone_radius = view.resolve_radius(params.detail.stone_size) if params.detail.stones else 0.0
+    stone_trims = []
+    if stone_radius > 0:
+        for k, position in enumerate(view.positions):  # each centre's own stretch, so each frame exports only its own stones
+            own = type(view)(position[None], view.step, stone_radius)
+            trim = _within(alignment, own, stone_radius, layout.section.ballast_toe_half)
+            if trim[1] > trim[0]:
+                stone_trims.append((k, trim))
     supports = []
     for support in layout.supports:
         extent = max(abs(m.lateral) for m in support.masts) + max(m.top for m in support.masts)
@@ -497,6 +508,6 @@ def level_of_detail(layout: RailwayLayout, params, view=None) -> RailwayDetailPl
             continue
         tolerance = wire_tolerance(wire, view)
         samples = catenary.samples_for_tolerance(wire.sag, tolerance)
-        wires.append((samples, min(polygon_sides(wire.diameter / 2, tolerance), MAX_WIRE_SIDES)))
+        wires.append((samples, min(polygon_sides(wire.diameter / 2, tolerance, MIN_WIRE_SIDES), MAX_WIRE_SIDES)))
     droppers = [bool((view.segment_distance(d.lower, d.upper) <= reach).any()) for d in layout.droppers]
-    return RailwayDetailPlan(centreline_tolerance, track_trim, ground_trim, stone_radius, supports, wires, droppers)
+    return RailwayDetailPlan(centreline_tolerance, track_trim, ground_trim, stone_radius, stone_trims, supports, wires, droppers)

@@ -7,7 +7,7 @@ The layout (alignment, supports, spans, wires, droppers, stations) comes from th
   the "Track" Geometry Nodes group follows it, and a trajectory can follow it too
   (``sensor.trajectory.curve: track_centreline``; the rail heads are ``rail_top_height`` above it);
 - one object per track part, each running the "Track" group (:mod:`.railway_nodes`) with its
-  ``Part``: ``rails.t<i>`` and ``sleepers.t<i>`` per track, ``ballast``, ``ballast_stones``,
+  ``Part``: ``rails.t<i>`` and ``sleepers.t<i>`` per track, ``ballast``, ``ballast_stones.s<k>`` (around station k),
   ``embankment``, ``ground``;
 - per support ``support.<k>.mast.<side>`` (or ``support.<k>.gantry``), and per track it carries
   ``support.<k>.cantilever.t<i>``, ``support.<k>.registration_arm.t<i>``, plus ``support.<k>.insulators``;
@@ -26,8 +26,9 @@ import numpy as np
 
 from ..geometry import railway_parts
 from ..geometry.catenary import parabolic_sag
+from ..geometry.lod import equal_perimeter_radius
 from ..geometry.primitives import merge
-from ..geometry.railway_layout import EARTH_BRACKET, FEEDER_BRACKET, STAY_RISE, RailwayLayout, level_of_detail, plan
+from ..geometry.railway_layout import EARTH_BRACKET, FEEDER_BRACKET, MIN_WIRE_SIDES, STAY_RISE, RailwayLayout, level_of_detail, plan
 from .nodes import add_group_modifier
 from .objects import mesh_data, mesh_object, scene_collection, tag, wire_object
 from .railway_nodes import PARTS, track_group
@@ -51,8 +52,7 @@ def build(params, rng: np.random.Generator, view=None) -> RailwayLayout:
     detail = level_of_detail(layout, params, view)
     centreline = _centreline(layout, detail.centreline_tolerance, collection)
     centreline["rail_top_height"] = float(layout.section.rail_top)
-    centres = _stone_centres(view, collection) if detail.stone_radius > 0 else None
-    _track(params, layout, detail, centreline, centres, int(rng.integers(0, 2**31 - 1)), collection)
+    _track(params, layout, detail, centreline, view, int(rng.integers(0, 2**31 - 1)), collection)
     _supports(params, layout, detail, collection)
     _wires(layout, detail, collection)
     bpy.context.view_layer.update()
@@ -73,17 +73,18 @@ def _centreline(layout: RailwayLayout, tolerance: float, collection) -> bpy.type
     return obj
 
 
-def _stone_centres(view, collection) -> bpy.types.Object:
-    mesh = bpy.data.meshes.new(STONE_CENTRES)
-    mesh.vertices.add(len(view.positions))
-    mesh.vertices.foreach_set("co", np.asarray(view.positions, np.float32).ravel())
-    obj = bpy.data.objects.new(STONE_CENTRES, mesh)
+def _stone_centre(name: str, position, collection) -> bpy.types.Object:
+    """A one-vertex mesh object at ``position``: the centre the "Track" group scatters stones around."""
+    mesh = bpy.data.meshes.new(name)
+    mesh.vertices.add(1)
+    mesh.vertices.foreach_set("co", np.asarray(position, np.float32).ravel())
+    obj = bpy.data.objects.new(name, mesh)
     obj.hide_render = True
     collection.objects.link(obj)
     return obj
 
 
-def _track(params, layout, detail, centreline, centres, seed: int, collection) -> None:
+def _track(params, layout, detail, centreline, view, seed: int, collection) -> None:
     track = params.track
     rail = track.rail
     inputs = {
@@ -101,17 +102,21 @@ def _track(params, layout, detail, centreline, centres, seed: int, collection) -
     parts += [("ballast", "ballast", "ballast", -1), ("ground", "ground", "ground", -1)]
     if track.embankment_height > 0:
         parts.append(("embankment", "embankment", "ground", -1))
-    if centres is not None:
-        parts.append(("ballast_stones", "stones", "ballast", -1))
+    trims = {name: detail.ground_trim if part == "ground" else detail.track_trim for name, part, _, _ in parts}
+    extras = {}
+    for k, trim in detail.stone_trims:  # one stones object per station: each frame exports its own
+        name = f"ballast_stones.s{k}"
+        parts.append((name, "stones", "ballast", -1))
+        trims[name] = trim
+        centre = _stone_centre(f"{STONE_CENTRES}.s{k}", view.positions[k], collection)
+        extras[name] = {"Stone Centres": centre, "Stone Radius": detail.stone_radius, "Seed": seed + k}
     for name, part, class_name, index in parts:
-        trim = detail.ground_trim if part == "ground" else detail.track_trim
+        trim = trims[name]
         if trim[1] <= trim[0]:
             continue
         obj = mesh_object(name, (np.zeros((0, 3)), np.zeros((0, 3), np.int32)), collection)
         extra = {"Part": PARTS[part], "Track": index, "Trim Start": trim[0], "Trim End": trim[1]}
-        if part == "stones":
-            extra |= {"Stone Centres": centres, "Stone Radius": detail.stone_radius}
-        add_group_modifier(obj, group, inputs | extra)
+        add_group_modifier(obj, group, inputs | extra | extras.get(name, {}))
         tag(obj, class_name, reflectivity=REFLECTIVITY[class_name])
 
 
@@ -169,16 +174,23 @@ def _supports(params, layout: RailwayLayout, detail, collection) -> None:
             _placed(f"{label}.insulators", merge(insulators), frame, "insulator", collection)
 
 
+def _bevel_sides(sides: int) -> int:
+    """Sides of the section a curve bevel draws when asked for ``sides`` (4, 6, 8...: 4 + 2 x resolution)."""
+    return 4 + 2 * max(0, (sides - 4) // 2)
+
+
 def _wires(layout: RailwayLayout, detail, collection) -> None:
+    """Wires and droppers as bevelled curves: the mean width of their polygonal section is their diameter."""
     for wire, setting in zip(layout.wires, detail.wires):
         if setting is None:
             continue
         samples, sides = setting
         points = parabolic_sag(wire.start, wire.end, wire.sag, samples, f"span {wire.run}.{wire.span}")
-        obj = wire_object(f"span.{wire.run}.{wire.span:02d}.{wire.kind}", [points], wire.diameter / 2, collection, sides)
+        radius = equal_perimeter_radius(wire.diameter / 2, _bevel_sides(sides))
+        obj = wire_object(f"span.{wire.run}.{wire.span:02d}.{wire.kind}", [points], radius, collection, sides)
         tag(obj, wire.class_name, reflectivity=REFLECTIVITY[wire.class_name])
     for droppers, built in zip(layout.droppers, detail.droppers):
         if built:
             lines = [np.stack([a, b]) for a, b in zip(droppers.lower, droppers.upper)]
-            obj = wire_object(f"span.{droppers.run}.{droppers.span:02d}.droppers", lines, droppers.diameter / 2, collection, 4)
+            obj = wire_object(f"span.{droppers.run}.{droppers.span:02d}.droppers", lines, equal_perimeter_radius(droppers.diameter / 2, MIN_WIRE_SIDES), collection, MIN_WIRE_SIDES)
             tag(obj, "dropper", reflectivity=REFLECTIVITY["dropper"])
