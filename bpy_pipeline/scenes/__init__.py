@@ -35,6 +35,12 @@ def _frame_builders() -> dict:
 _BUILT: dict = {}  # builder name -> (params, the built scene) of a builder that re-randomises in place
 
 
+def built_scene(builder: str):
+    """The scene object ``builder`` (parking, industrial_hall) keeps between frames, or ``None``."""
+    built = _BUILT.get(builder)
+    return None if built is None else built[1]
+
+
 def reset_built_scenes() -> None:
     """Forget the scenes built for re-randomisation; the next frame builds its scene anew."""
     _BUILT.clear()

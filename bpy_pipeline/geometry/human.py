@@ -1,0 +1,367 @@
+"""An articulated human: a skeleton of 14 segments, joints with anatomical limits, four pose families. Pure numpy.
+
+The person's own frame: x forward, y left, z up, origin on the floor below the hip centre.
+Segment lengths follow the height ``H`` (Drillis & Contini 1966, as tabulated in Winter,
+*Biomechanics and Motor Control of Human Movement*, fig. 4.1: hip 0.530 H, knee 0.285 H, ankle
+0.039 H, shoulder 0.818 H, upper arm 0.186 H, forearm 0.146 H, hand 0.108 H, biacromial breadth
+0.259 H, foot 0.152 H). Joint ranges are the usual adult active ranges of motion (American Academy
+of Orthopaedic Surgeons: hip flexion 120-125, extension 30, abduction 45; knee flexion 135-150;
+ankle dorsiflexion 20, plantarflexion 45-50; shoulder flexion 180, extension 60, abduction 180;
+elbow flexion 145-150; thoracolumbar flexion 80, extension 25, lateral bend 35, rotation 45;
+neck flexion and extension 45, rotation 60 degrees).
+
+Every segment's rest frame is parallel to the person's frame (the rest pose stands upright with
+arms hanging); a segment's frame is its parent's, moved to the joint and turned by the joint's
+rotations, in the order the degrees of freedom are listed:
+
+    F[root] = placement @ T(joint_root) @ J_root(angles)
+    F[s]    = F[parent] @ T(joint_s - joint_parent) @ J_s(angles)
+
+The body is a union of capsules (segment, end points in the segment's frame, radius), each
+scaled by ``H`` and a build factor on the radius. The mesh Blender shows is inscribed in the
+same capsules (:func:`~.collision.capsule_mesh`), so capsule tests bound the mesh.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .collision import capsule_gaps
+from .kinematics import axis_rotations
+
+# name, parent, joint position at rest (units of H, person frame)
+SEGMENTS = (
+    ("pelvis", None, (0.0, 0.0, 0.52)),
+    ("spine", "pelvis", (0.0, 0.0, 0.60)),
+    ("head", "spine", (0.0, 0.0, 0.83)),
+    ("upper_arm_l", "spine", (0.0, 0.135, 0.80)),
+    ("forearm_l", "upper_arm_l", (0.0, 0.135, 0.614)),
+    ("upper_arm_r", "spine", (0.0, -0.135, 0.80)),
+    ("forearm_r", "upper_arm_r", (0.0, -0.135, 0.614)),
+    ("thigh_l", "pelvis", (0.0, 0.085, 0.52)),
+    ("shank_l", "thigh_l", (0.0, 0.085, 0.285)),
+    ("foot_l", "shank_l", (0.0, 0.085, 0.039)),
+    ("thigh_r", "pelvis", (0.0, -0.085, 0.52)),
+    ("shank_r", "thigh_r", (0.0, -0.085, 0.285)),
+    ("foot_r", "shank_r", (0.0, -0.085, 0.039)),
+)
+SEGMENT_NAMES = tuple(s[0] for s in SEGMENTS)
+SEGMENT_INDEX = {name: i for i, name in enumerate(SEGMENT_NAMES)}
+PARENT = np.array([-1 if p is None else SEGMENT_INDEX[p] for _, p, _ in SEGMENTS])
+JOINT = np.array([j for _, _, j in SEGMENTS], float)  # (s, 3), units of H
+
+# segment, degree of freedom, axis (segment frame), limits in degrees. Positive angles:
+# flexion swings the limb forward (hip, shoulder, elbow), the shank backward (knee), the toes
+# down (ankle, plantarflexion), the trunk and head forward; abduction moves a limb outward.
+DOFS = (
+    ("pelvis", "pitch", (0, 1, 0), (-15.0, 30.0)),
+    ("spine", "flexion", (0, 1, 0), (-25.0, 80.0)),
+    ("spine", "lateral", (1, 0, 0), (-35.0, 35.0)),
+    ("spine", "twist", (0, 0, 1), (-45.0, 45.0)),
+    ("head", "flexion", (0, 1, 0), (-45.0, 45.0)),
+    ("head", "twist", (0, 0, 1), (-60.0, 60.0)),
+    ("upper_arm_l", "flexion", (0, -1, 0), (-60.0, 180.0)),
+    ("upper_arm_l", "abduction", (1, 0, 0), (0.0, 180.0)),
+    ("forearm_l", "flexion", (0, -1, 0), (0.0, 145.0)),
+    ("upper_arm_r", "flexion", (0, -1, 0), (-60.0, 180.0)),
+    ("upper_arm_r", "abduction", (-1, 0, 0), (0.0, 180.0)),
+    ("forearm_r", "flexion", (0, -1, 0), (0.0, 145.0)),
+    ("thigh_l", "flexion", (0, -1, 0), (-30.0, 125.0)),
+    ("thigh_l", "abduction", (1, 0, 0), (-20.0, 45.0)),
+    ("shank_l", "flexion", (0, 1, 0), (0.0, 145.0)),
+    ("foot_l", "flexion", (0, 1, 0), (-20.0, 45.0)),
+    ("thigh_r", "flexion", (0, -1, 0), (-30.0, 125.0)),
+    ("thigh_r", "abduction", (-1, 0, 0), (-20.0, 45.0)),
+    ("shank_r", "flexion", (0, 1, 0), (0.0, 145.0)),
+    ("foot_r", "flexion", (0, 1, 0), (-20.0, 45.0)),
+)
+DOF_NAMES = tuple(f"{s}.{d}" for s, d, _, _ in DOFS)
+DOF_INDEX = {name: i for i, name in enumerate(DOF_NAMES)}
+DOF_SEGMENT = np.array([SEGMENT_INDEX[s] for s, _, _, _ in DOFS])
+DOF_AXIS = np.array([a for _, _, a, _ in DOFS], float)
+LOWER = np.array([lim[0] for _, _, _, lim in DOFS])
+UPPER = np.array([lim[1] for _, _, _, lim in DOFS])
+
+# segment, a, b (segment frame, units of H), radius (units of H)
+CAPSULES = (
+    ("pelvis", (0.0, -0.045, 0.03), (0.0, 0.045, 0.03), 0.058),
+    ("spine", (0.0, -0.045, 0.04), (0.0, -0.045, 0.17), 0.055),
+    ("spine", (0.0, 0.045, 0.04), (0.0, 0.045, 0.17), 0.055),
+    ("head", (0.0, 0.0, 0.0), (0.0, 0.0, 0.05), 0.028),
+    ("head", (0.012, 0.0, 0.092), (0.012, 0.0, 0.11), 0.063),
+    ("upper_arm_l", (0.0, 0.0, -0.01), (0.0, 0.0, -0.186), 0.024),
+    ("forearm_l", (0.0, 0.0, 0.0), (0.0, 0.0, -0.146), 0.02),
+    ("forearm_l", (0.0, 0.0, -0.146), (0.0, 0.0, -0.23), 0.017),
+    ("upper_arm_r", (0.0, 0.0, -0.01), (0.0, 0.0, -0.186), 0.024),
+    ("forearm_r", (0.0, 0.0, 0.0), (0.0, 0.0, -0.146), 0.02),
+    ("forearm_r", (0.0, 0.0, -0.146), (0.0, 0.0, -0.23), 0.017),
+    ("thigh_l", (0.0, 0.0, 0.0), (0.0, 0.0, -0.235), 0.045),
+    ("shank_l", (0.0, 0.0, 0.0), (0.0, 0.0, -0.236), 0.031),
+    ("foot_l", (-0.025, 0.0, -0.017), (0.105, 0.0, -0.017), 0.022),
+    ("thigh_r", (0.0, 0.0, 0.0), (0.0, 0.0, -0.235), 0.045),
+    ("shank_r", (0.0, 0.0, 0.0), (0.0, 0.0, -0.236), 0.031),
+    ("foot_r", (-0.025, 0.0, -0.017), (0.105, 0.0, -0.017), 0.022),
+)
+CAPSULE_SEGMENT = np.array([SEGMENT_INDEX[c[0]] for c in CAPSULES])
+CAPSULE_A = np.array([c[1] for c in CAPSULES], float)
+CAPSULE_B = np.array([c[2] for c in CAPSULES], float)
+CAPSULE_RADIUS = np.array([c[3] for c in CAPSULES], float)
+SEATED_SEGMENTS = ("pelvis", "thigh_l", "thigh_r")  # what rests on a desk top
+BUILDS = {"slim": 0.88, "medium": 1.0, "broad": 1.13}  # capsule radius factors
+POSES = ("standing", "walking", "sitting", "crouching")
+
+
+def _self_pairs() -> np.ndarray:
+    """Capsule pairs checked for self-intersection: not the same or adjacent segments, not arm-trunk at the shoulder."""
+    skip = set()
+    for s, parent in enumerate(PARENT):
+        if parent >= 0:
+            skip.add((min(s, parent), max(s, parent)))
+    spine = SEGMENT_INDEX["spine"]
+    pelvis = SEGMENT_INDEX["pelvis"]
+    for side in "lr":
+        upper = SEGMENT_INDEX[f"upper_arm_{side}"]
+        skip.add((min(upper, spine), max(upper, spine)))
+        thigh = SEGMENT_INDEX[f"thigh_{side}"]
+        skip.add((min(thigh, spine), max(thigh, spine)))  # hip and lower trunk meet at the pelvis
+        skip.add((min(thigh, pelvis), max(thigh, pelvis)))
+    skip.add((SEGMENT_INDEX["head"], SEGMENT_INDEX["upper_arm_l"]))
+    skip.add((SEGMENT_INDEX["head"], SEGMENT_INDEX["upper_arm_r"]))
+    pairs = []
+    for i in range(len(CAPSULES)):
+        for j in range(i + 1, len(CAPSULES)):
+            si, sj = CAPSULE_SEGMENT[i], CAPSULE_SEGMENT[j]
+            if si != sj and (min(si, sj), max(si, sj)) not in skip:
+                pairs.append((i, j))
+    return np.array(pairs)
+
+
+SELF_PAIRS = _self_pairs()
+
+
+def neutral_angles() -> np.ndarray:
+    """``(k,)`` degrees: the rest pose (upright, arms hanging slightly away from the body)."""
+    angles = np.zeros(len(DOFS))
+    angles[DOF_INDEX["upper_arm_l.abduction"]] = 8.0
+    angles[DOF_INDEX["upper_arm_r.abduction"]] = 8.0
+    return angles
+
+
+def within_limits(angles: np.ndarray, tolerance: float = 1e-9) -> bool:
+    """True when every angle (degrees) lies within its joint's limits."""
+    angles = np.asarray(angles, float)
+    return bool(((angles >= LOWER - tolerance) & (angles <= UPPER + tolerance)).all())
+
+
+def joint_rotations(angles: np.ndarray) -> np.ndarray:
+    """``(s, 3, 3)`` joint rotation of each segment for ``angles (k,)`` in degrees."""
+    per_dof = axis_rotations(DOF_AXIS, np.radians(np.asarray(angles, float)))  # (k, 3, 3)
+    out = np.repeat(np.eye(3)[None], len(SEGMENTS), axis=0)
+    for k, s in enumerate(DOF_SEGMENT):
+        out[s] = out[s] @ per_dof[k]
+    return out
+
+
+def segment_frames(angles: np.ndarray, height: float, placement: np.ndarray | None = None) -> np.ndarray:
+    """``(s, 4, 4)`` world frames of the segments for ``angles (k,)`` degrees and a person ``height`` (m).
+
+    placement : (4, 4) the person's frame in the world (identity by default)
+    """
+    rotations = joint_rotations(angles)
+    frames = np.empty((len(SEGMENTS), 4, 4))
+    base = np.eye(4) if placement is None else np.asarray(placement, float)
+    for s, parent in enumerate(PARENT):
+        local = np.eye(4)
+        local[:3, :3] = rotations[s]
+        local[:3, 3] = (JOINT[s] - (JOINT[parent] if parent >= 0 else 0.0)) * height
+        frames[s] = (frames[parent] if parent >= 0 else base) @ local
+    return frames
+
+
+def capsules(frames: np.ndarray, height: float, build: float = 1.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The body's capsules placed by ``frames``: ``a (c, 3)``, ``b (c, 3)``, ``radius (c,)``, metres."""
+    f = frames[CAPSULE_SEGMENT]
+    a = np.einsum("cij,cj->ci", f[:, :3, :3], CAPSULE_A * height) + f[:, :3, 3]
+    b = np.einsum("cij,cj->ci", f[:, :3, :3], CAPSULE_B * height) + f[:, :3, 3]
+    return a, b, CAPSULE_RADIUS * height * build
+
+
+def self_gap(angles: np.ndarray, height: float = 1.0, build: float = 1.0) -> float:
+    """Smallest surface gap (metres) between the body's own non-adjacent capsules."""
+    a, b, r = capsules(segment_frames(angles, height), height, build)
+    i, j = SELF_PAIRS[:, 0], SELF_PAIRS[:, 1]
+    from .collision import segment_distance
+
+    return float((segment_distance(a[i], b[i], a[j], b[j]) - r[i] - r[j]).min())
+
+
+def _level_feet(angles: np.ndarray) -> np.ndarray:
+    """Set the ankles so each foot's sole is level (within the ankle's limits); returns new angles."""
+    angles = angles.copy()
+    for side in "lr":
+        k = DOF_INDEX[f"foot_{side}.flexion"]
+        angles[k] = 0.0
+        frames = segment_frames(angles, 1.0)
+        forward = frames[SEGMENT_INDEX[f"foot_{side}"], :3, 0]
+        pitch_down = np.degrees(np.arctan2(-forward[2], np.hypot(forward[0], forward[1])))  # toes below heel > 0
+        angles[k] = np.clip(-pitch_down, LOWER[k], UPPER[k])
+    return angles
+
+
+def _uniform(rng, ranges: dict) -> np.ndarray:
+    angles = neutral_angles()
+    for name, (lo, hi) in ranges.items():
+        angles[DOF_INDEX[name]] = rng.uniform(lo, hi)
+    return angles
+
+
+def _both(name: str, lo: float, hi: float) -> dict:
+    return {name.replace("*", "l"): (lo, hi), name.replace("*", "r"): (lo, hi)}
+
+
+def sample_pose(kind: str, rng: np.random.Generator, build: float = max(BUILDS.values()), tries: int = 100) -> np.ndarray:
+    """``(k,)`` joint angles in degrees for a pose family, drawn from ``rng``, within the limits and free of self-intersection.
+
+    kind : ``standing``, ``walking`` (a random phase of the gait cycle), ``sitting`` (on a desk edge,
+        thighs level, shanks hanging) or ``crouching``. Ankles are set so the soles are level
+        where the ankle's range allows (a deep crouch lifts the heels).
+    build : capsule radius factor the body must be free of self-intersection at (gaps scale with
+        the height, so any height will do); draws are repeated up to ``tries`` times, then the
+        neutral standing pose is returned.
+    """
+    if kind not in POSES:
+        raise ValueError(f"unknown pose {kind!r}; allowed: {', '.join(POSES)}")
+    for _ in range(tries):
+        angles = _draw_pose(kind, rng)
+        if self_gap(angles, 1.0, build) >= 0.0:
+            return angles
+    return _level_feet(neutral_angles())
+
+
+def _draw_pose(kind: str, rng: np.random.Generator) -> np.ndarray:
+    trunk = {"spine.lateral": (-6, 6), "spine.twist": (-12, 12), "head.twist": (-40, 40)}
+    if kind == "standing":
+        angles = _uniform(rng, trunk | {"pelvis.pitch": (-3, 5), "spine.flexion": (-5, 12), "head.flexion": (-15, 25)}
+                          | _both("upper_arm_*.flexion", -15, 35) | _both("upper_arm_*.abduction", 6, 25)
+                          | _both("forearm_*.flexion", 5, 70) | _both("thigh_*.flexion", -4, 8)
+                          | _both("thigh_*.abduction", 0, 7) | _both("shank_*.flexion", 0, 8))
+    elif kind == "walking":
+        angles = _uniform(rng, trunk | {"pelvis.pitch": (0, 6), "spine.flexion": (0, 8), "head.flexion": (-10, 20)}
+                          | _both("upper_arm_*.abduction", 6, 14) | _both("thigh_*.abduction", 0, 5))
+        phase = rng.uniform(0.0, 2 * np.pi)
+        for side, shift in (("l", 0.0), ("r", np.pi)):
+            p = phase + shift
+            angles[DOF_INDEX[f"thigh_{side}.flexion"]] = 8.0 + 20.0 * np.sin(p)  # -12 .. 28 degrees
+            angles[DOF_INDEX[f"shank_{side}.flexion"]] = 8.0 + 26.0 * max(0.0, np.sin(p + 0.9 * np.pi))  # swing-phase knee bend
+            angles[DOF_INDEX[f"upper_arm_{side}.flexion"]] = -18.0 * np.sin(p)  # arms swing against the legs
+            angles[DOF_INDEX[f"forearm_{side}.flexion"]] = 15.0 + 15.0 * max(0.0, -np.sin(p))
+    elif kind == "sitting":
+        angles = _uniform(rng, trunk | {"pelvis.pitch": (-10, 0), "spine.flexion": (5, 20), "head.flexion": (0, 25)}
+                          | _both("upper_arm_*.flexion", 0, 45) | _both("upper_arm_*.abduction", 8, 25)
+                          | _both("forearm_*.flexion", 30, 100) | _both("thigh_*.abduction", 2, 12)
+                          | _both("shank_*.flexion", 70, 100))
+        for side in "lr":  # thighs level on the desk: hip flexion undoes the pelvis tilt
+            angles[DOF_INDEX[f"thigh_{side}.flexion"]] = 90.0 + angles[DOF_INDEX["pelvis.pitch"]]
+    elif kind == "crouching":
+        angles = _uniform(rng, trunk | {"pelvis.pitch": (5, 20), "spine.flexion": (10, 35), "head.flexion": (-30, 0)}
+                          | _both("upper_arm_*.flexion", 35, 80) | _both("upper_arm_*.abduction", 12, 35)
+                          | _both("forearm_*.flexion", 20, 90) | _both("thigh_*.abduction", 15, 30))
+        hip = rng.uniform(95, 115)
+        knee = rng.uniform(115, 140)
+        for side in "lr":
+            angles[DOF_INDEX[f"thigh_{side}.flexion"]] = hip + rng.uniform(-4, 4)
+            angles[DOF_INDEX[f"shank_{side}.flexion"]] = knee + rng.uniform(-4, 4)
+    angles = np.clip(angles, LOWER, UPPER)
+    if kind != "sitting":
+        angles = _level_feet(angles)
+    return angles
+
+
+@dataclass
+class Person:
+    """One posed person in the world.
+
+    angles : (k,) degrees; height : m; build : capsule radius factor; pose : the pose family
+    placement : (4, 4) the person's frame (origin on the supporting surface below the hip
+        centre, z up, yaw only) in the world
+    frames : (s, 4, 4) segment frames, world
+    a, b, radius : the body's capsules, world, metres
+    support : (3,) the lowest point of the body (on the floor, or on the desk top when sitting)
+    """
+
+    angles: np.ndarray
+    height: float
+    build: float
+    pose: str
+    placement: np.ndarray
+    frames: np.ndarray
+    a: np.ndarray
+    b: np.ndarray
+    radius: np.ndarray
+    support: np.ndarray
+
+    @property
+    def yaw(self) -> float:
+        return float(np.arctan2(self.placement[1, 0], self.placement[0, 0]))
+
+
+def pose_person(angles: np.ndarray, height: float, build: float, pose: str, position_xy, yaw: float, support_z: float = 0.0) -> Person:
+    """Place a posed body: rotate by ``yaw`` about z at ``position_xy`` and lower it onto ``support_z``.
+
+    The body comes to rest with its lowest capsule point on ``support_z`` (standing, walking,
+    crouching: the floor), or with the lowest point of its pelvis and thighs on it (sitting).
+    """
+    local = segment_frames(angles, height)
+    a, b, r = capsules(local, height, build)
+    rests = np.isin(CAPSULE_SEGMENT, [SEGMENT_INDEX[s] for s in SEATED_SEGMENTS]) if pose == "sitting" else np.ones(len(r), bool)
+    bottoms = np.minimum(a[:, 2], b[:, 2]) - r
+    lift = support_z - bottoms[rests].min()
+    placement = np.eye(4)
+    c, s = np.cos(yaw), np.sin(yaw)
+    placement[:3, :3] = [[c, -s, 0], [s, c, 0], [0, 0, 1]]
+    placement[:3, 3] = [position_xy[0], position_xy[1], lift]
+    frames = segment_frames(angles, height, placement)
+    a, b, r = capsules(frames, height, build)
+    low = np.argmin(np.where(rests, np.minimum(a[:, 2], b[:, 2]) - r, np.inf))
+    end = a[low] if a[low, 2] <= b[low, 2] else b[low]
+    support = np.array([end[0], end[1], end[2] - r[low]])
+    return Person(np.asarray(angles, float), float(height), float(build), pose, placement, frames, a, b, r, support)
+
+
+def seat_offset(angles: np.ndarray, height: float, build: float, margin: float = 0.02) -> float:
+    """How far in front of the hip centre (metres, person frame) a desk edge must be for a seated pose.
+
+    The shanks and feet hang ``margin`` metres in front of the edge; pelvis and thighs rest on the top.
+    """
+    frames = segment_frames(angles, height)
+    a, b, r = capsules(frames, height, build)
+    hanging = np.isin(CAPSULE_SEGMENT, [SEGMENT_INDEX[s] for s in ("shank_l", "shank_r", "foot_l", "foot_r")])
+    return float((np.minimum(a[hanging, 0], b[hanging, 0]) - r[hanging]).min() - margin)
+
+
+def people_overlap(p: Person, q: Person, clearance: float = 0.0) -> bool:
+    """True when two people's bodies come closer than ``clearance`` (metres)."""
+    reach = np.linalg.norm(p.placement[:2, 3] - q.placement[:2, 3])
+    if reach > (p.height + q.height) * 0.7 + clearance:  # a body never reaches farther than 0.7 H from its origin
+        return False
+    return bool((capsule_gaps(p.a, p.b, p.radius, q.a, q.b, q.radius) < clearance).any())
+
+
+def body_mesh(a: np.ndarray, b: np.ndarray, radius: np.ndarray, segments: int = 10, rings: int = 3):
+    """The body's mesh from its capsules: ``(vertices (n, 3), triangles (m, 3), capsule (n,) int)``.
+
+    One closed capsule mesh per capsule (:func:`~.collision.capsule_mesh`), inscribed in it;
+    ``capsule`` gives each vertex's capsule (so :data:`CAPSULE_SEGMENT` gives its segment).
+    """
+    from .collision import capsule_mesh
+
+    vertices, triangles, owner, offset = [], [], [], 0
+    for k in range(len(radius)):
+        v, t = capsule_mesh(a[k], b[k], float(radius[k]), segments, rings)
+        vertices.append(v)
+        triangles.append(t + offset)
+        owner.append(np.full(len(v), k))
+        offset += len(v)
+    return np.concatenate(vertices), np.concatenate(triangles).astype(np.int32), np.concatenate(owner)

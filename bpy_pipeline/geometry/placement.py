@@ -1,0 +1,247 @@
+"""Collision-free placement: random draws from configured distributions, the parking paper's insertion
+rule, and upright boxes placed on a floor around a sensor without collisions or heavy occlusion. Pure numpy.
+
+The insertion rule (Section 3.2.2 and 4.3 of the underground-parking paper, seed 000): the number of
+objects per scan is drawn from N(5, 4) (clipped at zero here); each object gets a distance from the
+sensor and a random rotation about the sensor's vertical axis; when it cannot be inserted it is
+turned on by 10 degrees about that axis and tried again, 36 times in all (the whole circle); an
+object that fits nowhere is replaced by a fresh one, and insertion stops after ``k_f = 10``
+consecutive objects failed. :func:`insert_sequentially` is that loop; :class:`FloorBoxPlacer`
+says whether one candidate box fits.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from .collision import box_axes, ray_box_distance, rectangle_inside, rectangles_overlap
+
+
+# ----------------------------------------------------------------------------- distributions
+def sample(distribution, rng: np.random.Generator, size: int | None = None):
+    """Draw from a ``config.Distribution`` (``kind`` normal or uniform, ``mean``, ``std``, ``min``, ``max``).
+
+    ``normal`` is truncated to ``[min, max]`` by redrawing the values that fall outside (100
+    rounds, then clipping), ``uniform`` is uniform on ``[min, max]``. Returns a float, or an
+    ``(size,)`` float64 array.
+    """
+    n = 1 if size is None else size
+    lo, hi = distribution.min, distribution.max
+    if distribution.kind == "uniform" or distribution.std == 0:
+        values = rng.uniform(lo, hi, n) if distribution.kind == "uniform" else np.full(n, float(np.clip(distribution.mean, lo, hi)))
+    else:
+        values = rng.normal(distribution.mean, distribution.std, n)
+        for _ in range(100):
+            bad = (values < lo) | (values > hi)
+            if not bad.any():
+                break
+            values[bad] = rng.normal(distribution.mean, distribution.std, int(bad.sum()))
+        values = np.clip(values, lo, hi)
+    return float(values[0]) if size is None else values
+
+
+def sample_count(distribution, rng: np.random.Generator) -> int:
+    """A count: a draw of ``distribution`` (normal: not truncated, as the paper's N(5, 4)), rounded, clipped to ``[min, max]``."""
+    if distribution.kind == "uniform":
+        return int(rng.integers(int(np.ceil(distribution.min)), int(np.floor(distribution.max)) + 1))
+    return int(np.clip(round(rng.normal(distribution.mean, distribution.std)), distribution.min, distribution.max))
+
+
+# ----------------------------------------------------------------------------- the insertion rule
+@dataclass
+class InsertionLog:
+    """What :func:`insert_sequentially` did.
+
+    placed : the accepted candidates, in insertion order
+    attempts : candidate positions tried by each object drawn (``rotations`` for one that failed;
+        0 for one rejected before any position was tried)
+    stopped : ``"count"`` (all wanted objects placed) or ``"failures"`` (too many consecutive failures)
+    """
+
+    placed: list = field(default_factory=list)
+    attempts: list[int] = field(default_factory=list)
+    stopped: str = "count"
+
+    @property
+    def objects_tried(self) -> int:
+        return len(self.attempts)
+
+
+def insert_sequentially(
+    count: int,
+    new_object: Callable[[], object],
+    try_at: Callable[[object, float], object | None],
+    rotations: int = 36,
+    step_deg: float = 10.0,
+    max_consecutive_failures: int = 10,
+) -> InsertionLog:
+    """Insert up to ``count`` objects one after another with the parking paper's retry rule.
+
+    new_object() : a fresh object (its size, distance from the sensor, initial angle, yaw: the
+        caller's draws), or ``None`` when it is rejected before placement (counts as a failure)
+    try_at(obj, angle_deg) : the accepted placement of ``obj`` turned by ``angle_deg`` about the
+        sensor's vertical axis, or ``None`` when it does not fit there
+    Each object is tried at ``0, step, 2 step, ...`` up to ``rotations`` positions; the first that
+    fits is kept. After ``max_consecutive_failures`` objects in a row fit nowhere, insertion stops.
+    """
+    log = InsertionLog()
+    failures = 0
+    while len(log.placed) < count:
+        if failures >= max_consecutive_failures:
+            log.stopped = "failures"
+            break
+        obj = new_object()
+        placed = None
+        tried = 0
+        if obj is not None:
+            for k in range(rotations):
+                tried += 1
+                placed = try_at(obj, k * step_deg)
+                if placed is not None:
+                    break
+        log.attempts.append(tried)
+        if placed is None:
+            failures += 1
+        else:
+            log.placed.append(placed)
+            failures = 0
+    return log
+
+
+def turn_about(pivot_xy, position_xy, yaw: float, angle_deg: float) -> tuple[np.ndarray, float]:
+    """``position_xy`` and ``yaw`` (radians) turned rigidly by ``angle_deg`` about the vertical axis through ``pivot_xy``."""
+    angle = np.radians(angle_deg)
+    c, s = np.cos(angle), np.sin(angle)
+    offset = np.asarray(position_xy, float) - np.asarray(pivot_xy, float)
+    turned = np.array([c * offset[0] - s * offset[1], s * offset[0] + c * offset[1]]) + pivot_xy
+    return turned, float(np.angle(np.exp(1j * (yaw + angle))))
+
+
+# ----------------------------------------------------------------------------- boxes on a floor
+def facing_samples(origin, centre, half, yaw: float, per_side: int = 4) -> np.ndarray:
+    """``(m, 3)`` points on the faces of an upright box that face ``origin`` (a grid of ``per_side`` x ``per_side`` cell centres each)."""
+    axes = box_axes(yaw)
+    centre, half = np.asarray(centre, float), np.asarray(half, float)
+    u = (np.arange(per_side) + 0.5) / per_side * 2.0 - 1.0
+    gu, gv = np.meshgrid(u, u, indexing="ij")
+    points = []
+    for k in range(3):
+        for sign in (-1.0, 1.0):
+            normal = sign * axes[:, k]
+            face_centre = centre + normal * half[k]
+            if np.dot(np.asarray(origin, float) - face_centre, normal) <= 0:
+                continue
+            i, j = [m for m in range(3) if m != k]
+            grid = face_centre + gu.reshape(-1, 1) * half[i] * axes[:, i] + gv.reshape(-1, 1) * half[j] * axes[:, j]
+            points.append(grid)
+    return np.concatenate(points) if points else np.zeros((0, 3))
+
+
+@dataclass
+class PlacedBox:
+    """An upright box on the floor.
+
+    centre : (3,) metres; half : (3,) half length, width, height; yaw : radians
+    samples : (m, 3) points on its faces towards the sensor; visible : (m,) bool, unblocked now
+    """
+
+    centre: np.ndarray
+    half: np.ndarray
+    yaw: float
+    samples: np.ndarray
+    visible: np.ndarray
+
+    @property
+    def visible_fraction(self) -> float:
+        return float(self.visible.mean()) if len(self.visible) else 0.0
+
+
+class FloorBoxPlacer:
+    """Decides whether an upright box fits on a floor seen by a sensor, and remembers the boxes placed.
+
+    sensor : (3,) sensor position, metres
+    region : ``(low (2,), high (2,))`` the floor area a box must lie inside (metres)
+    obstacles : rectangles ``(centre (2,), half (2,), yaw)`` a box must not overlap (pillars, ramps)
+    static_distance : ``f(directions (n, 3)) -> (n,)`` distance from the sensor to the first static
+        surface along each unit direction (inf where none); ``None``: nothing static occludes
+    clearance : metres kept between boxes, and between a box and an obstacle
+    min_visible : the smallest fraction of a box's sensor-facing surface samples that must be in
+        line of sight, for the new box and for every box already placed
+    keep_out : radius (metres) around the sensor no box may reach into (the robot carrying it)
+    """
+
+    def __init__(self, sensor, region, obstacles=(), static_distance=None, clearance: float = 0.3, min_visible: float = 0.3, keep_out: float = 1.0, samples_per_side: int = 4):
+        self.sensor = np.asarray(sensor, float)
+        self.region = (np.asarray(region[0], float), np.asarray(region[1], float))
+        self.obstacles = list(obstacles)
+        self.static_distance = static_distance
+        self.clearance = clearance
+        self.min_visible = min_visible
+        self.keep_out = keep_out
+        self.per_side = samples_per_side
+        self.boxes: list[PlacedBox] = []
+        self.rejections: Counter = Counter()
+
+    def _rays(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        offset = points - self.sensor
+        distance = np.linalg.norm(offset, axis=1)
+        return offset / np.maximum(distance, 1e-12)[:, None], distance
+
+    def _blocked_by_box(self, directions, distance, box: PlacedBox) -> np.ndarray:
+        hit = ray_box_distance(self.sensor, directions, box.centre, box_axes(box.yaw), box.half)
+        return hit < distance - 1e-6
+
+    def try_place(self, centre_xy, yaw: float, half) -> PlacedBox | None:
+        """The box standing on the floor at ``centre_xy`` with ``yaw`` and ``half`` extents, or ``None``.
+
+        Rejection reasons are counted in :attr:`rejections`: ``outside`` the region or inside the
+        keep-out circle, ``obstacle``, ``collision`` with a placed box, ``occluded`` (its own visible
+        fraction too low), ``occludes`` (it would hide too much of a placed box).
+        """
+        half = np.asarray(half, float)
+        centre_xy = np.asarray(centre_xy, float)
+        if not rectangle_inside(centre_xy, half[:2], yaw, *self.region):
+            self.rejections["outside"] += 1
+            return None
+        nearest = np.abs((self.sensor[:2] - centre_xy) @ box_axes(yaw)[:2, :2])
+        if np.linalg.norm(np.maximum(nearest - half[:2], 0.0)) < self.keep_out:
+            self.rejections["outside"] += 1
+            return None
+        for o_centre, o_half, o_yaw in self.obstacles:
+            if rectangles_overlap(centre_xy, half[:2], yaw, o_centre, o_half, o_yaw, self.clearance):
+                self.rejections["obstacle"] += 1
+                return None
+        for box in self.boxes:
+            if rectangles_overlap(centre_xy, half[:2], yaw, box.centre[:2], box.half[:2], box.yaw, self.clearance):
+                self.rejections["collision"] += 1
+                return None
+        centre = np.array([centre_xy[0], centre_xy[1], half[2]])
+        samples = facing_samples(self.sensor, centre, half, yaw, self.per_side)
+        directions, distance = self._rays(samples)
+        visible = np.ones(len(samples), bool)
+        if self.static_distance is not None and len(samples):
+            visible &= self.static_distance(directions) >= distance - 1e-3
+        candidate = PlacedBox(centre, half, yaw, samples, visible)
+        for box in self.boxes:
+            visible &= ~self._blocked_by_box(directions, distance, box)
+        if candidate.visible_fraction < self.min_visible:
+            self.rejections["occluded"] += 1
+            return None
+        for box in self.boxes:
+            d, dist = self._rays(box.samples)
+            still = box.visible & ~self._blocked_by_box(d, dist, candidate)
+            if still.mean() < self.min_visible:
+                self.rejections["occludes"] += 1
+                return None
+        return candidate
+
+    def commit(self, box: PlacedBox) -> None:
+        """Keep ``box``: later boxes avoid it, and it now hides the samples of earlier boxes behind it."""
+        for other in self.boxes:
+            d, dist = self._rays(other.samples)
+            other.visible &= ~self._blocked_by_box(d, dist, box)
+        self.boxes.append(box)

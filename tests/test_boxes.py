@@ -1,0 +1,211 @@
+"""3D box labels: fitting, occlusion levels of constructed cases, truncation, point thresholds, KITTI and OpenPCDet files."""
+
+import json
+
+import numpy as np
+import pytest
+
+from bpy_pipeline.buffers import ObjectTable, SceneBuffers
+from bpy_pipeline.geometry import human, primitives
+from bpy_pipeline.geometry.transforms import pose_matrix
+from bpy_pipeline.io import boxes as bx
+from bpy_pipeline.lidar.raycast import RayCaster
+from bpy_pipeline.lidar.scanner import scan
+from bpy_pipeline.lidar.sensors import iter_pattern, resolve_sensor
+
+SENSOR = resolve_sensor({"preset": "vlp16", "rotation_hz": 5.0}, "sensor")  # 0.1 deg columns
+POSE = pose_matrix([0.0, 0.0, 1.2], [0.0, 0.0, 0.0])
+
+
+def scene(parts):
+    """Buffers of ``[(name, class, instance, (vertices, triangles)), ...]``."""
+    vertices, triangles, owner, offset = [], [], [], 0
+    for row, (_, _, _, (v, t)) in enumerate(parts):
+        vertices.append(v)
+        triangles.append(t + offset)
+        owner.append(np.full(len(t), row, np.int32))
+        offset += len(v)
+    k = len(parts)
+    objects = ObjectTable([p[0] for p in parts], [""] * k, [p[1] for p in parts], np.zeros(k, np.uint16), np.array([p[2] for p in parts], np.uint32), np.zeros(k, np.uint8), np.full(k, 0.5, np.float32))
+    return SceneBuffers(np.concatenate(vertices), np.concatenate(triangles).astype(np.int32), np.concatenate(owner), objects)
+
+
+def standing(x, y, yaw=np.pi):
+    person = human.pose_person(human.neutral_angles(), 1.75, 1.0, "standing", (x, y), yaw)
+    return person, human.body_mesh(person.a, person.b, person.radius)[:2]
+
+
+def upright_box(size, centre_xy, yaw, bottom=0.0):
+    v, t = primitives.box(*size)
+    c, s = np.cos(yaw), np.sin(yaw)
+    return v @ np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]]).T + [centre_xy[0], centre_xy[1], bottom + size[2] / 2], t
+
+
+def people_and_pillar():
+    """Three people 8 m away facing the sensor: in the open, half behind a pillar, behind a wall up to the eyes."""
+    floor = primitives.translated(primitives.box(60, 60, 0.2), (0, 0, -0.1))
+    parts = [("floor", "floor", 1, floor)]
+    people = {}
+    for instance, (x, y) in ((10, (8.0, 0.0)), (11, (8.0, 4.0)), (12, (8.0, -4.0))):
+        person, mesh = standing(x, y)
+        people[instance] = person
+        parts.append((f"person_{instance}", "person", instance, mesh))
+    # the pillar: its edge on the ray to the middle of person 11, hiding its left half (seen from the sensor)
+    az = np.arctan2(4.0, 8.0)
+    along, across = np.array([np.cos(az), np.sin(az)]), np.array([-np.sin(az), np.cos(az)])
+    parts.append(("pillar", "pillar", 2, upright_box((0.3, 1.0, 3.0), 5.0 * along + 0.5 * across, az, -0.2)))
+    # the wall: 5 m away in front of person 12, its top on the line from the sensor to the person's eyes
+    az = np.arctan2(-4.0, 8.0)
+    eyes = 0.93 * 1.75
+    top = 1.2 + (eyes - 1.2) * 5.0 / np.hypot(8.0, 4.0)
+    parts.append(("wall", "wall", 3, upright_box((0.2, 3.0, top + 0.2), 5.0 * np.array([np.cos(az), np.sin(az)]), az, -0.2)))
+    return scene(parts), people
+
+
+def test_occlusion_levels_of_constructed_cases():
+    buffers, people = people_and_pillar()
+    boxes = bx.fit_boxes(buffers, ["person"], {k: p.yaw for k, p in people.items()})
+    bx.visibility(buffers, boxes, iter_pattern(SENSOR, 1 << 18), POSE, SENSOR.min_range, SENSOR.max_range, cell_deg=2.5)
+    fraction = boxes["visible"] / boxes["unoccluded"]
+    levels = bx.occlusion_levels(boxes["visible"], boxes["unoccluded"], (0.8, 0.4, 0.1))
+    by_instance = dict(zip(boxes["instance"].tolist(), zip(fraction, levels)))
+    assert by_instance[10][0] == 1.0 and by_instance[10][1] == 0  # in the open
+    assert 0.4 < by_instance[11][0] < 0.6 and by_instance[11][1] == 1  # half behind the pillar
+    assert (boxes["unoccluded"] > 100).all() and (boxes["truncation"] == 0).all()
+    # behind the wall: the person's own returns (traced alone) whose ray clears the wall's top, counted by hand
+    rows = [r for r in range(len(buffers.objects)) if buffers.objects.instance[r] == 12]
+    keep = np.isin(buffers.triangle_object, rows)
+    alone = SceneBuffers(buffers.vertices, buffers.triangles[keep], buffers.triangle_object[keep], buffers.objects)
+    hits, _ = scan(RayCaster(alone, frame=POSE), alone, iter_pattern(SENSOR, 1 << 18), POSE, SENSOR.min_range, SENSOR.max_range)
+    xyz = np.column_stack([hits["x"], hits["y"], hits["z"]]).astype(np.float64)  # sensor frame
+    normal = np.array([np.cos(np.arctan2(-4.0, 8.0)), np.sin(np.arctan2(-4.0, 8.0))])
+    top = 1.2 + (0.93 * 1.75 - 1.2) * 5.0 / np.hypot(8.0, 4.0) - 1.2  # the wall's top, sensor frame
+    clears = np.ones(len(xyz), bool)
+    for face in (4.9, 5.1):
+        t = face / (xyz[:, :2] @ normal)
+        clears &= t * xyz[:, 2] > top
+    assert len(hits) == boxes["unoccluded"][boxes["instance"] == 12][0]
+    assert abs(int(clears.sum()) - int(boxes["visible"][boxes["instance"] == 12][0])) <= 1
+    assert by_instance[12][0] < 0.2 and by_instance[12][1] >= 2  # only the top of the head shows
+
+
+def test_every_box_contains_its_instances_points():
+    buffers, people = people_and_pillar()
+    boxes = bx.fit_boxes(buffers, ["person", "pillar", "wall"], {k: p.yaw for k, p in people.items()})
+    points, _ = scan(RayCaster(buffers, frame=POSE), buffers, iter_pattern(SENSOR, 1 << 18), POSE, SENSOR.min_range, SENSOR.max_range)
+    in_sensor = bx.boxes_in_frame(boxes, POSE)
+    xyz = np.column_stack([points["x"], points["y"], points["z"]]).astype(np.float64)
+    for box in in_sensor:
+        mine = points["instance"] == box["instance"]
+        assert mine.sum() >= 10 and bx.points_in_box(xyz[mine], box, 1e-4).all()
+        # and it is tight: the object's vertices touch all six faces
+        rows = [r for r in range(len(buffers.objects)) if buffers.objects.instance[r] == box["instance"]]
+        vertices = buffers.vertices[np.unique(buffers.triangles[np.isin(buffers.triangle_object, rows)])]
+        local = (vertices - POSE[:3, 3]) @ POSE[:3, :3] - box["centre"]
+        c, s = np.cos(box["heading"]), np.sin(box["heading"])
+        along = np.column_stack([c * local[:, 0] + s * local[:, 1], -s * local[:, 0] + c * local[:, 1], local[:, 2]])
+        np.testing.assert_allclose(along.max(axis=0), box["size"] / 2, atol=1e-9)
+        np.testing.assert_allclose(along.min(axis=0), -box["size"] / 2, atol=1e-9)
+    person = in_sensor[in_sensor["instance"] == 10][0]
+    assert np.isclose(person["size"][2], 1.75, atol=0.02) and np.isclose(abs(person["heading"]), np.pi)
+    # headings the builder does not give come from the footprint: the pillar and the wall are rotated boxes
+    turned = in_sensor[in_sensor["class_name"] == "pillar"][0]
+    assert np.isclose(np.cos(2 * (turned["heading"] - np.arctan2(4.0, 8.0))) ** 2, 1.0, atol=1e-6)
+    np.testing.assert_allclose(np.sort(turned["size"][:2]), [0.3, 1.0], atol=1e-6)
+
+
+def test_truncation_is_the_share_outside_the_field_of_view():
+    # a 2 m tall panel 3 m in front of a VLP-16 at 1.2 m: the lowest beam (-15 deg) meets it at 1.2 - 3 tan 15 = 0.396 m
+    panel = upright_box((0.1, 1.0, 2.0), (3.0, 0.0), 0.0)
+    far_panel = upright_box((0.1, 1.0, 2.0), (150.0, 0.0), 0.0)  # beyond the 100 m range
+    buffers = scene([("panel", "car", 5, panel), ("far", "car", 6, far_panel)])
+    boxes = bx.fit_boxes(buffers, ["car"], {5: 0.0, 6: 0.0})
+    bx.visibility(buffers, boxes, iter_pattern(SENSOR, 1 << 18), POSE, SENSOR.min_range, SENSOR.max_range, cell_deg=2.0)
+    near, far = boxes[boxes["instance"] == 5][0], boxes[boxes["instance"] == 6][0]
+    hidden_below = (1.2 - 3.0 * np.tan(np.radians(15.0))) / 2.0  # of the panel's height (its faces: mostly front and back)
+    assert abs(near["truncation"] - hidden_below) < 0.08, near["truncation"]
+    assert far["truncation"] == 1.0 and far["unoccluded"] == 0
+    assert bx.occlusion_levels(far["visible"], far["unoccluded"])[()] == 3
+
+
+def test_thin_boxes_are_dropped_by_their_class_minimum():
+    boxes = np.zeros(4, bx.BOX_DTYPE)
+    boxes["class_name"] = ["car", "car", "person", "robot arm"]
+    boxes["points"] = [12, 11, 6, 5]
+    kept = bx.keep_boxes(boxes, {"car": 12}, default=6)
+    assert kept["class_name"].tolist() == ["car", "person"] and kept["points"].tolist() == [12, 6]
+    points = np.zeros(7, [("instance", "<u4")])
+    points["instance"] = [3, 3, 3, 9, 9, 0, 0]
+    boxes = np.zeros(3, bx.BOX_DTYPE)
+    boxes["instance"] = [3, 9, 4]
+    bx.count_points(boxes, points)
+    assert boxes["points"].tolist() == [3, 2, 0]
+
+
+def test_kitti_and_openpcdet_files_round_trip(tmp_path):
+    rng = np.random.default_rng(2)
+    boxes = np.zeros(5, bx.BOX_DTYPE)
+    boxes["class_name"] = ["car", "person", "robot arm", "car", "person"]
+    boxes["centre"] = rng.uniform(-20, 20, (5, 3))
+    boxes["size"] = rng.uniform(0.3, 5, (5, 3))
+    boxes["heading"] = rng.uniform(-np.pi, np.pi, 5)
+    boxes["truncation"] = rng.uniform(0, 1, 5)
+    boxes["occlusion"] = [0, 1, 2, 3, 0]
+    points = np.zeros(4, [("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("intensity", "<f4")])
+    written = bx.write_frame_boxes(tmp_path, 7, boxes, points, ["kitti", "openpcdet"], {"person": "Pedestrian"})
+    assert {p.relative_to(tmp_path).as_posix() for p in written} == {"kitti/label_2/000007.txt", "kitti/calib/000007.txt", "kitti/velodyne/000007.bin", "openpcdet/labels/000007.txt", "openpcdet/points/000007.npy"}
+    kitti = bx.read_kitti_labels(tmp_path / "kitti/label_2/000007.txt")
+    pcdet = bx.read_openpcdet_labels(tmp_path / "openpcdet/labels/000007.txt")
+    assert kitti["class_name"].tolist() == pcdet["class_name"].tolist() == ["Car", "Pedestrian", "RobotArm", "Car", "Pedestrian"]
+    for read in (kitti, pcdet):
+        np.testing.assert_allclose(read["centre"], boxes["centre"], atol=1e-4)
+        np.testing.assert_allclose(read["size"], boxes["size"], atol=1e-4)
+        np.testing.assert_allclose(np.cos(read["heading"] - boxes["heading"]), 1.0, atol=1e-7)
+    assert kitti["occlusion"].tolist() == [0, 1, 2, 3, 0]
+    # KITTI's camera convention as OpenPCDet reads it: location = bottom centre, heading = -(rotation_y + pi / 2)
+    first = (tmp_path / "kitti/label_2/000007.txt").read_text().splitlines()[0].split()
+    x, y, z = map(float, first[11:14])
+    np.testing.assert_allclose([z, -x, -y + float(first[8]) / 2], boxes["centre"][0], atol=1e-4)
+    assert np.isclose(np.cos(-(float(first[14]) + np.pi / 2) - boxes["heading"][0]), 1.0)
+    assert np.load(tmp_path / "openpcdet/points/000007.npy").shape == (4, 4)
+    assert "Tr_velo_to_cam: 0.0" in (tmp_path / "kitti/calib/000007.txt").read_text()
+    bx.write_image_sets(tmp_path, range(3), ["openpcdet"])
+    assert (tmp_path / "openpcdet/ImageSets/train.txt").read_text() == "000000\n000001\n000002\n"
+
+
+def test_a_tilted_frame_cannot_hold_upright_boxes():
+    from bpy_pipeline.errors import InputError
+
+    boxes = np.zeros(1, bx.BOX_DTYPE)
+    with pytest.raises(InputError, match="output.frame"):
+        bx.boxes_in_frame(boxes, pose_matrix([0, 0, 3], [0, 90, 0]))
+
+
+@pytest.mark.bpy
+def test_pipeline_writes_boxes_that_hold_the_hall_points(tmp_path):
+    import bpy
+
+    from bpy_pipeline.config import load_config
+    from bpy_pipeline.io import read_ply
+    from bpy_pipeline.pipeline import run
+    from bpy_pipeline.scenes import reset_built_scenes
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    reset_built_scenes()
+    config = load_config(None, ["scene.builder=industrial_hall", "frames=2", "sensor.columns=1024", "output.formats=[ply]", "output.preview=false", "sensor.reflector.edge_drop.mask=none"])
+    run(config, tmp_path, log=lambda *_: None)
+    manifest = json.loads((tmp_path / "manifest.json").read_text())
+    checked = 0
+    for frame in manifest["frames"]:
+        points = read_ply(tmp_path / "ply" / f"{frame['index']:06d}.ply")
+        labels = bx.read_openpcdet_labels(tmp_path / "openpcdet" / "labels" / f"{frame['index']:06d}.txt")
+        kitti = bx.read_kitti_labels(tmp_path / "kitti" / "label_2" / f"{frame['index']:06d}.txt")
+        assert len(labels) == len(kitti) == len(frame["boxes"]) >= 2 and "boxes" in frame["timings_s"]
+        xyz = np.column_stack([points["x"], points["y"], points["z"]]).astype(np.float64)
+        for box, entry in zip(labels, frame["boxes"]):
+            mine = points["instance"] == entry["instance"]
+            assert mine.sum() == entry["points"] >= 6
+            assert bx.points_in_box(xyz[mine], box, 1e-3).all()
+            assert entry["points"] == entry["visible"] <= entry["unoccluded"]  # no effects: every visible ray is a point
+            checked += 1
+    assert checked >= 4
