@@ -19,6 +19,7 @@ direction never changed.
 from __future__ import annotations
 
 import math
+import weakref
 from dataclasses import dataclass
 from typing import Iterable, Iterator
 
@@ -80,10 +81,28 @@ class Beams:
     cos_incidence: np.ndarray
 
 
+_CORNER_SCALES: "weakref.WeakKeyDictionary[RayCaster, np.ndarray]" = weakref.WeakKeyDictionary()
+
+
+def _corner_scales(caster: RayCaster, buffers: SceneBuffers) -> np.ndarray:
+    """``(m,)`` float64 largest local coordinate of each triangle's corners; 0 for diffuse ones (never re-launched from).
+
+    Computed once per caster (a caster is one scene in one frame) for the specular triangles only.
+    """
+    scales = _CORNER_SCALES.get(caster)
+    if scales is None:
+        scales = np.zeros(len(buffers.triangles))
+        specular = np.flatnonzero(buffers.objects.material[buffers.triangle_object] != DIFFUSE)
+        if len(specular):
+            corners = caster.to_local(buffers.vertices[buffers.triangles[specular].reshape(-1)]).reshape(-1, 9)
+            scales[specular] = np.abs(corners).max(axis=1)
+        _CORNER_SCALES[caster] = scales
+    return scales
+
+
 def _relaunch_offset(caster: RayCaster, buffers: SceneBuffers, point: np.ndarray, triangle: np.ndarray) -> np.ndarray:
     """``(k,)`` metres to move re-launched rays off their surface (see :data:`OFFSET_ULPS`)."""
-    corners = caster.to_local(buffers.vertices[buffers.triangles[triangle].reshape(-1)]).reshape(-1, 9)
-    scale = np.maximum(np.abs(point).max(axis=1), np.abs(corners).max(axis=1))
+    scale = np.maximum(np.abs(point).max(axis=1), _corner_scales(caster, buffers)[triangle])
     return OFFSET_ULPS * (1.0 + scale)
 
 
@@ -213,7 +232,9 @@ def trace_beams(
         beams = Beams(np.zeros(0, np.int64), np.zeros(0), np.zeros((0, 3)), np.zeros(0, np.int64), np.zeros(0, np.uint8), np.zeros(0, np.int32), np.zeros(0), np.zeros(0))
     else:
         fields = [np.concatenate(column) for column in zip(*done)]
-        order = np.argsort(fields[0], kind="stable")
+        slot = np.full(n, -1, np.int64)  # each beam returns at most once: firing order by scattering, not sorting
+        slot[fields[0]] = np.arange(len(fields[0]))
+        order = slot[slot >= 0]
         beams = Beams(*(f[order] for f in fields))
     near = beams.path >= min_range
     if not near.all():
