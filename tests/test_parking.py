@@ -191,3 +191,20 @@ def test_same_seed_same_frame_whatever_came_before(bpy_scene, tmp_path):
     assert outputs[0] == outputs[1] and outputs[0].keys() == outputs[2].keys()
     labels = Path("openpcdet/labels/000001.txt")
     assert outputs[0][labels] != outputs[2][labels]
+
+
+@pytest.mark.bpy
+def test_cars_park_in_bays_when_asked(bpy_scene):
+    from bpy_pipeline.config import load_config
+    from bpy_pipeline.scenes import built_scene
+
+    config = load_config(None, ["scene.builder=parking", "scene.placement=bays", "scene.cars={kind: normal, mean: 8, std: 0, min: 0, max: 40}"])
+    state, _ = _frame(config, 0)
+    bays = parking_layout(config.scene.params).bays
+    placed = built_scene("parking").last.placed
+    assert len(placed) >= 4
+    for car, box in placed:
+        k = int(np.argmin(np.linalg.norm(bays[:, :2] - box.centre[:2], axis=1)))
+        np.testing.assert_allclose(box.centre[:2], bays[k, :2], atol=1e-9)
+        assert np.isclose(np.sin(box.yaw - bays[k, 2]), 0.0, atol=1e-9)  # nose in or reversed in
+    assert len({tuple(np.round(box.centre[:2], 6)) for _, box in placed}) == len(placed)  # one car a bay

@@ -58,7 +58,8 @@ BOX_DTYPE = np.dtype(
         ("points", "<u4"),  # labeled points of the instance in the final cloud
     ]
 )
-SAMPLE_SPACING = 0.1  # m between surface samples for truncation
+SAMPLE_SPACING = 0.1  # m between surface samples for truncation (wider on objects that would need more than:)
+MAX_SAMPLES = 4000
 KITTI_AXES = np.array([[0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]])  # velodyne -> camera rotation
 
 
@@ -96,6 +97,10 @@ def footprint_heading(xy: np.ndarray) -> float:
     return float(wrap_angle(best))
 
 
+def _cross2(u, v) -> float:
+    return float(u[0] * v[1] - u[1] * v[0])
+
+
 def _convex_hull(points: np.ndarray) -> np.ndarray:
     """Andrew's monotone chain; ``points`` unique, sorted by x then y."""
     order = np.lexsort((points[:, 1], points[:, 0]))
@@ -104,7 +109,7 @@ def _convex_hull(points: np.ndarray) -> np.ndarray:
     def half(seq):
         out = []
         for p in seq:
-            while len(out) >= 2 and np.cross(out[-1] - out[-2], p - out[-2]) <= 0:
+            while len(out) >= 2 and _cross2(out[-1] - out[-2], p - out[-2]) <= 0:
                 out.pop()
             out.append(p)
         return out
@@ -207,15 +212,15 @@ class Coverage:
         if len(directions):
             row, col = self._cells(directions)
             self.mask[row, col] = True
+            self._grown = None
 
     def covers(self, directions: np.ndarray) -> np.ndarray:
         """``(n,)`` bool for ``(n, 3)`` directions (sensor frame)."""
+        if getattr(self, "_grown", None) is None:  # the mask grown by one cell (azimuth wraps around)
+            rows = self.mask | np.vstack([self.mask[1:], self.mask[-1:]]) | np.vstack([self.mask[:1], self.mask[:-1]])
+            self._grown = rows | np.roll(rows, 1, axis=1) | np.roll(rows, -1, axis=1)
         row, col = self._cells(directions)
-        out = np.zeros(len(row), bool)
-        for dr in (-1, 0, 1):
-            for dc in (-1, 0, 1):
-                out |= self.mask[np.clip(row + dr, 0, self.rows - 1), (col + dc) % self.columns]
-        return out
+        return self._grown[row, col]
 
 
 def _subset(buffers: SceneBuffers, rows: list[int]) -> SceneBuffers:
@@ -297,7 +302,8 @@ def visibility(
     boxes["unoccluded"] = unoccluded
     for k, rows in enumerate(members):
         triangles = buffers.vertices[buffers.triangles[np.isin(buffers.triangle_object, rows)]]  # (m, 3, 3)
-        samples, area = surface_samples(triangles, SAMPLE_SPACING)
+        total = np.linalg.norm(np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0]), axis=1).sum() / 2
+        samples, area = surface_samples(triangles, max(SAMPLE_SPACING, float(np.sqrt(total / MAX_SAMPLES))))
         samples = (samples - pose[:3, 3]) @ pose[:3, :3]
         distance = np.linalg.norm(samples, axis=1)
         inside = (distance >= min_range) & (distance <= max_range)
