@@ -8,11 +8,15 @@ the reference is that figure (it cannot be rerun here), the target under 20 s on
 ``line_1km``: two tracks, 1 km, 20 spans (48 +- 2 m), five stations (frames = stations), the
 scanner at 0.1 deg (5.8 M rays a station); build, export, scan and write time per station.
 Each runs ``python run.py --config FILE`` in a subprocess: wall time includes Python start-up
-and the bpy import. Results: benchmarks/results/railway.json.
+and the bpy import; cpu_s is the CPU time the run used (both cores), load_before the machine's
+load average when it started (other work on a shared machine stretches the wall time).
+Results: benchmarks/results/railway.json.
 Run: python benchmarks/bench_railway.py [--small]
 """
 
 import json
+import os
+import resource
 import subprocess
 import sys
 import tempfile
@@ -54,16 +58,20 @@ def run(config: dict) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "config.yaml"
         path.write_text(yaml.safe_dump(config))
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
+        load = os.getloadavg()[0]
         start = time.perf_counter()
         subprocess.run([sys.executable, str(ROOT / "run.py"), "--config", str(path), "--out", str(Path(tmp) / "out")], check=True, capture_output=True)
         wall = time.perf_counter() - start
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
         manifest = json.loads((Path(tmp) / "out" / "manifest.json").read_text())
         size = sum(p.stat().st_size for p in (Path(tmp) / "out").rglob("*") if p.is_file())
     frames = manifest["frames"]
     totals = {k: sum(f["timings_s"][k] for f in frames) for k in ("build", "export", "scan", "write")}
     rays = manifest["sensor"].get("rays") or manifest["sensor"].get("rays_per_frame")
     return {
-        "wall_s": wall, **{f"{k}_s": v for k, v in totals.items()}, "startup_s": wall - sum(totals.values()),
+        "wall_s": wall, "cpu_s": cpu, "load_before": load, **{f"{k}_s": v for k, v in totals.items()}, "startup_s": wall - sum(totals.values()),
         "frames": len(frames), "rays_per_frame": rays, "points": sum(f["points"] for f in frames),
         "triangles_max": max(f["triangles"] for f in frames), "output_mb": size / 1e6,
         "per_frame": [{"station": f.get("station"), **f["timings_s"], "points": f["points"], "triangles": f["triangles"]} for f in frames],

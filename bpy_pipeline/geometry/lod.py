@@ -93,3 +93,10 @@ def equal_perimeter_radius(radius: float, sides: int) -> float:
     (an inscribed square would lose 10 % of its returns, a hexagon 4.5 %).
     """
     return radius * math.pi / (sides * math.sin(math.pi / sides))
+
+
+def section_error(radius: float, sides: int) -> float:
+    """Largest distance (m) between a circle of ``radius`` and the equal-perimeter ``sides``-gon
+    (:func:`equal_perimeter_radius`): at its corners (outside) or its edges' middles (inside)."""
+    r = equal_perimeter_radius(radius, sides)
+    return max(r - radius, radius - r * math.cos(math.pi / sides))

@@ -22,7 +22,7 @@ import numpy as np
 from ..errors import InputError
 from . import catenary
 from .alignment import Alignment, arc_through
-from .lod import polygon_sides
+from .lod import polygon_sides, section_error
 
 STAY_RISE = 0.3  # m: cantilever stay tube above the messenger attachment
 FEEDER_BRACKET = (0.6, -0.5)  # m: feeder beside (field side) and below the mast top
@@ -472,8 +472,8 @@ def level_of_detail(layout: RailwayLayout, params, view=None) -> RailwayDetailPl
     """Detail of every part of ``layout`` for a :class:`~.lod.SensorView` (``None`` or ``detail.mode: fixed``:
     everything, wires at ``catenary.points_per_10m``, no stones).
 
-    Sensor-driven: wires sampled so their chords stay within half the beam spacing at their nearest
-    distance (their round cross-section too), the alignment likewise at its nearest distance,
+    Sensor-driven: wires sampled so that chords and polygonal cross-section together stay within half
+    the beam spacing at their nearest distance, the alignment likewise at its nearest distance,
     ballast stones only within ``stone_size / (2 step)`` of an optical centre, and nothing whose
     every point lies beyond the sensor's range.
     """
@@ -507,7 +507,8 @@ def level_of_detail(layout: RailwayLayout, params, view=None) -> RailwayDetailPl
             wires.append(None)
             continue
         tolerance = wire_tolerance(wire, view)
-        samples = catenary.samples_for_tolerance(wire.sag, tolerance)
-        wires.append((samples, min(polygon_sides(wire.diameter / 2, tolerance, MIN_WIRE_SIDES), MAX_WIRE_SIDES)))
+        sides = min(polygon_sides(wire.diameter / 2, tolerance / 2, MIN_WIRE_SIDES), MAX_WIRE_SIDES)
+        chords = max(tolerance - section_error(wire.diameter / 2, sides), tolerance / 2)  # section and chords share it
+        wires.append((catenary.samples_for_tolerance(wire.sag, chords), sides))
     droppers = [bool((view.segment_distance(d.lower, d.upper) <= reach).any()) for d in layout.droppers]
     return RailwayDetailPlan(centreline_tolerance, track_trim, ground_trim, stone_radius, stone_trims, supports, wires, droppers)
