@@ -152,6 +152,8 @@ def test_a_step_edge_gives_the_first_strongest_and_last_returns_of_its_sub_rays(
         assert np.array_equal(points["instance"], np.where(take_near, 1, 2))
         assert np.allclose(xyz(points), beams.directions * points["range"][:, None], atol=1e-4)  # along the central beam
         assert np.allclose(facts["reflectivity"], np.where(take_near, 0.2, 0.9))
+        power = facts["reflectivity"] * facts["cos_incidence"] * facts["gain"]  # what the effects' intensity models see
+        assert np.allclose(power, points["intensity"], atol=1e-6)
         straddling = (near_energy > 0) & (far_energy > 0)
         assert straddling.sum() >= 5  # 10 mrad at 10 m: beams within +-0.29 deg of the edge see both walls
 
