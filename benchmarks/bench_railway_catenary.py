@@ -15,7 +15,7 @@ import math
 import time
 
 import numpy as np
-from common import RESULTS, arguments, report
+from common import arguments, report
 
 from bpy_pipeline.geometry.catenary import parabola_error, sag_for_span
 

@@ -149,3 +149,19 @@ def test_far_view_builds_nothing_of_the_catenary():
     view = SensorView(np.array([[0.0, 1000.0, 0.0]]), math.radians(0.1), 150.0)
     detail = level_of_detail(layout, params(), view)
     assert detail.supports == [] and all(s is None for s in detail.wires) and detail.track_trim == (0.0, 0.0)
+
+
+def test_supports_and_wires_sit_on_the_lateral_perpendicular_of_a_curve():
+    p = params("scene.track.mid=[0, 12, 0]", "scene.track.start=[-150, 0, 0]", "scene.track.end=[150, 0, 0]")
+    layout = plan(p, np.random.default_rng(0))
+    arc, section = layout.alignment, layout.section
+    contact_z = section.rail_top + p.catenary.contact_wire_height
+    for support in layout.supports:
+        np.testing.assert_allclose(support.frame[:3, 3], arc.point(support.chainage)[0])
+        np.testing.assert_allclose(support.frame[:3, 1], arc.lateral(support.chainage)[0])
+        mast = support.masts[0]
+        assert mast.side == "right" and mast.lateral == pytest.approx(-p.supports.mast_offset)
+    for wire in (w for w in layout.wires if w.kind == "contact_wire"):
+        a, b = layout.supports[wire.span], layout.supports[wire.span + 1]
+        np.testing.assert_allclose(wire.start, arc.offset([a.chainage], a.stagger, contact_z)[0], atol=1e-9)
+        np.testing.assert_allclose(wire.end, arc.offset([b.chainage], b.stagger, contact_z)[0], atol=1e-9)

@@ -22,6 +22,7 @@ pipeline passes a :class:`~bpy_pipeline.geometry.lod.SensorView`.
 from __future__ import annotations
 
 import bpy
+import mathutils
 import numpy as np
 
 from ..geometry import railway_parts
@@ -122,7 +123,7 @@ def _track(params, layout, detail, centreline, view, seed: int, collection) -> N
 
 def _placed(name: str, mesh, frame: np.ndarray, class_name: str, collection) -> bpy.types.Object:
     obj = mesh_object(name, mesh, collection)
-    obj.matrix_world = frame.T.tolist()  # Blender matrices are row-major lists of rows
+    obj.matrix_world = mathutils.Matrix(frame.tolist())
     return tag(obj, class_name, reflectivity=REFLECTIVITY[class_name])
 
 
