@@ -1,22 +1,26 @@
 """Cost of the sensor effects beside the scan of the default job, measured in the same run.
 
-Builds and exports the default job's scene (python run.py without --config), times
-``pipeline.scan_buffers`` with every effect off (the scan alone: trace, records, labels), keeps
-the points and beam facts it hands to ``effects.apply_effects``, and times ``apply_effects`` on
-them with each effect, and with all of them together: the lidar-equation intensity, the
-fitted (range, incidence) drop table, the noise table, a per-ring bias and angular jitter
-(models fitted on ../shared/real_scans/nuscenes_hdl32e_sweep.bin; the datasheet threshold and a
-constant sigma stand in when it is absent). Target: all together add at most 10 % to the scan.
-Best of five; the end-to-end check times scan_buffers with all effects on as well.
+Builds and exports the default job's scene (python run.py without --config) as run_frames does, times
+``pipeline.scan_buffers`` with ``apply_effects`` taken out (the scan alone: trace, records,
+labels), keeps the points and beam facts it would have handed to ``effects.apply_effects`` (one
+call per chunk of rays, as the pipeline makes them), and times those calls with each effect,
+and with all of them together: the
+lidar-equation intensity, the fitted (range, incidence) drop table, the noise table, a per-ring
+bias and angular jitter (models fitted on ../shared/real_scans/nuscenes_hdl32e_sweep.bin; the
+datasheet threshold and a constant sigma stand in when it is absent). Target: all together add
+at most 10 % to the scan. Every timing is the best of five rounds taken in turn; the end-to-end
+check times scan_buffers with all effects on as well (a difference of two timings: noisier).
 Run: python benchmarks/bench_effects.py [--small]
 """
 
 import dataclasses
+import os
 import tempfile
+import time
 from pathlib import Path
 
 import numpy as np
-from common import ROOT, arguments, best_of, report
+from common import ROOT, arguments, report
 
 import bpy  # noqa: E402,F401
 
@@ -26,7 +30,6 @@ from bpy_pipeline.export import export_scene  # noqa: E402
 from bpy_pipeline.labels import load_class_table  # noqa: E402
 from bpy_pipeline.lidar import fitting  # noqa: E402
 from bpy_pipeline.lidar.effects import write_model_file  # noqa: E402
-from bpy_pipeline.scenes import build_scene  # noqa: E402
 
 SCAN = ROOT.parent / "shared" / "real_scans" / "nuscenes_hdl32e_sweep.bin"
 
@@ -65,50 +68,70 @@ def variants(path: str, rings: int) -> dict:
     return out
 
 
+def interleaved(fns: dict, rounds: int) -> dict:
+    """Best wall time of each callable, measured in turn round after round (a shared machine's load
+    then weighs on all of them alike)."""
+    best = {k: float("inf") for k in fns}
+    for _ in range(rounds):
+        for k, fn in fns.items():
+            start = time.perf_counter()
+            fn()
+            best[k] = min(best[k], time.perf_counter() - start)
+    return best
+
+
 def main():
     args = arguments(__doc__)
     overrides = ["sensor.sampling_factor=0.1"] if args.small else []
     config = load_config(None, overrides)
-    rng = pipeline.frame_rng(config.seed, 0)
-    build_scene(config.scene, rng)
+    pipeline.build_frame_scene(config, 0)
     buffers = export_scene(load_class_table(), (), keep_within=(pipeline.sensor_pose(config)[:3, 3], config.sensor.spec.max_range))
 
-    captured = {}
+    captured = []
     original = pipeline.apply_effects
 
-    def capture(points, beam, effects, generator):
-        captured["points"], captured["beam"] = points, beam
-        return original(points, beam, effects, generator)
+    def capture(points, beam, effects, generator):  # the scan alone: keep what the effects would get
+        captured.append((points, beam))
+        return points
 
-    pipeline.apply_effects = capture
-    try:
-        t_buffers_off = best_of(lambda: pipeline.scan_buffers(buffers, config, pipeline.frame_rng(0, 0)), 5)
-    finally:
-        pipeline.apply_effects = original
-    points, beam = captured["points"], captured["beam"]
-    t_off = best_of(lambda: original(points, beam, config.effects, np.random.default_rng(0)), 5)  # copies the records only
-    t_scan = t_buffers_off - t_off
-    rows = [{"effects": "none (scan alone)", "points": len(points), "time_s": t_scan, "percent_of_scan": 0.0}]
+    def scan_alone():
+        captured.clear()
+        pipeline.apply_effects = capture
+        try:
+            return pipeline.scan_buffers(buffers, config, pipeline.frame_rng(0, 0))
+        finally:
+            pipeline.apply_effects = original
+
+    def effects_on_every_chunk(effects):  # as the pipeline applies them: chunk after chunk of the scan
+        rng = np.random.default_rng(0)
+        return sum(len(original(points, beam, effects, rng)) for points, beam in chunks)
+
+    scan_alone()
+    chunks = list(captured)
+    n_points = sum(len(p) for p, _ in chunks)
+    rounds = 5
     with tempfile.TemporaryDirectory() as tmp:
         path = model_file(Path(tmp))
-        for name, section in variants(path, config.sensor.spec.channels).items():
-            effects = effects_from_dict(section, config.sensor.spec)
-            original(points, beam, effects, np.random.default_rng(0))  # warm: model file read, table raster built
-            t = best_of(lambda: original(points, beam, effects, np.random.default_rng(0)), 5)
-            kept = len(original(points, beam, effects, np.random.default_rng(0)))
-            rows.append({"effects": name, "points": kept, "time_s": t, "percent_of_scan": 100 * t / t_scan})
-        everything = effects_from_dict(variants(path, config.sensor.spec.channels)["all"], config.sensor.spec)
-        on = dataclasses.replace(config, effects=everything)
-        t_buffers_on = best_of(lambda: pipeline.scan_buffers(buffers, on, pipeline.frame_rng(0, 0)), 5)
+        sections = variants(path, config.sensor.spec.channels)
+        effects = {name: effects_from_dict(section, config.sensor.spec) for name, section in sections.items()}
+        kept = {name: effects_on_every_chunk(e) for name, e in effects.items()}  # warms: model files read, rasters built
+        on = dataclasses.replace(config, effects=effects["all"])
+        timed = {"scan alone": scan_alone, "scan + all effects": lambda: pipeline.scan_buffers(buffers, on, pipeline.frame_rng(0, 0))}
+        timed |= {name: (lambda e=e: effects_on_every_chunk(e)) for name, e in effects.items()}
+        best = interleaved(timed, rounds)
+    t_scan = best["scan alone"]
+    rows = [{"effects": "none (scan alone)", "points": n_points, "time_s": t_scan, "percent_of_scan": 0.0}]
+    rows += [{"effects": name, "points": kept[name], "time_s": best[name], "percent_of_scan": 100 * best[name] / t_scan} for name in effects]
     all_row = next(r for r in rows if r["effects"] == "all")
     notes = {
         "command": "python benchmarks/bench_effects.py" + (" --small" if args.small else ""),
         "job": "the default job (python run.py)" + (" at sensor.sampling_factor=0.1" if args.small else ""),
-        "rays_scanned_points": len(points),
-        "scan_buffers_effects_off_s": t_buffers_off, "scan_buffers_all_effects_s": t_buffers_on,
-        "end_to_end_added_percent": 100 * (t_buffers_on - t_buffers_off) / t_scan,
+        "scan_points": n_points, "scan_chunks": len(chunks), "rounds": rounds,
+        "scan_buffers_all_effects_s": best["scan + all effects"],
+        "end_to_end_added_percent": 100 * (best["scan + all effects"] - t_scan) / t_scan,
         "all_effects_percent_of_scan": all_row["percent_of_scan"], "target_percent": 10.0,
         "models": "fitted on the nuScenes HDL-32E sweep" if path else "datasheet threshold and constant sigma (real sweep absent)",
+        "load_average_1min": os.getloadavg()[0],
     }
     name = "effects" + ("_small" if args.small else "")
     report(name, rows, args.out, notes)

@@ -9,6 +9,7 @@ import pytest
 from bpy_pipeline.config import effects_from_dict
 from bpy_pipeline.errors import InputError
 from bpy_pipeline.lidar.effects import (
+    CHUNK_POINTS,
     BinnedTable,
     FittedModels,
     ThresholdModel,
@@ -242,6 +243,14 @@ def test_same_seed_same_bytes_another_seed_differs():
     before = points.tobytes()
     apply_effects(points, beam, eff, np.random.default_rng(42))
     assert points.tobytes() == before  # the input records are left alone
+
+
+def test_bytes_do_not_depend_on_the_threads():
+    points, beam = cloud(3 * CHUNK_POINTS + 123, np.random.default_rng(19))
+    eff = effects(**ALL)
+    one = apply_effects(points, beam, eff, np.random.default_rng(7), threads=1)
+    assert apply_effects(points, beam, eff, np.random.default_rng(7), threads=3).tobytes() == one.tobytes()
+    assert 0.4 * len(points) < len(one) < 0.7 * len(points)  # CARLA's drop ran on every chunk
 
 
 def test_empty_scan_passes_through():
