@@ -459,23 +459,33 @@ def perturb(points: np.ndarray, beam: np.ndarray, noise, rng: np.random.Generato
     np.maximum(new, np.float32(0), out=new)
     scale = new / np.maximum(old, np.float32(MIN_RANGE))
     if jitter > 0:
-        x, y, z = (np.ascontiguousarray(points[k]) for k in "xyz")  # packed records: strided math is ~10x slower
-        # p' = p + r (a e_az + e e_el), with e_az = (-y, x, 0) / rho and e_el = (-x z, -y z, rho^2) / (rho r)
-        # orthonormal to p, so |p'| = r sqrt(1 + a^2 + e^2) exactly; beams along z (rho ~ 0) keep still
+        # p' = p + |p| (a e_az + e e_el), with e_az = (-y, x, 0) / rho and e_el = (-x z, -y z, rho^2) / (rho |p|)
+        # orthonormal to p, so |p'| = |p| sqrt(1 + a^2 + e^2) exactly; beams along z (rho ~ 0) keep still
+        x, y, z = (np.ascontiguousarray(points[k]) for k in "xyz")  # packed records: strided math is slower
         a, e = rng.standard_normal((2, n), dtype=np.float32) * np.float32(jitter)
-        rho = np.sqrt(x * x + y * y)
-        ok = rho > np.float32(1e-6) * old
-        inv = np.divide(np.float32(1), rho, out=np.zeros(n, np.float32), where=ok)
-        a *= ok
-        e *= ok
-        step_a = a * old * inv
-        step_e = e * inv
-        xz = x * z
-        new_x = x - y * step_a - xz * step_e
-        new_y = y + x * step_a - (y * z) * step_e
-        new_z = z + rho * rho * step_e
-        scale /= np.sqrt(np.float32(1) + a * a + e * e)
-        points["x"], points["y"], points["z"] = new_x * scale, new_y * scale, new_z * scale
+        rho2 = x * x
+        rho2 += y * y
+        rho = np.sqrt(rho2)
+        length = np.sqrt(rho2 + z * z)
+        still = rho <= np.float32(1e-6) * length
+        if still.any():
+            a[still], e[still], rho[still] = 0.0, 0.0, 1.0
+        stretch = a * a
+        stretch += e * e
+        stretch += np.float32(1)
+        np.sqrt(stretch, out=stretch)
+        scale /= stretch  # back to |p| new / old
+        e /= rho  # elevation step per unit of (-x z, -y z, rho^2)
+        a *= length
+        a /= rho  # azimuth step per unit of (-y, x, 0)
+        ez = e * z
+        new_x = x - y * a - x * ez
+        new_y = y + x * a - y * ez
+        new_z = z + rho2 * e
+        new_x *= scale
+        new_y *= scale
+        new_z *= scale
+        points["x"], points["y"], points["z"] = new_x, new_y, new_z
     else:
         for k in "xyz":
             points[k] *= scale
