@@ -618,6 +618,8 @@ def _check_indoor_scene(params) -> None:
         _check_distribution(params.cars, "scene.cars", low=0.0)
         _check_distribution(params.car_distance, "scene.car_distance", low=0.0)
         _check_distribution(params.car_height, "scene.car_height", low=0.5, high=4.0)
+        if params.ramp_length > params.length - 8.0:
+            raise InputError(f"scene.ramp_length: must leave at least 8 m of the level's length ({params.length} m) for the driveway, got {params.ramp_length}")
         if params.sensor_height >= params.ceiling_height:
             raise InputError(f"scene.sensor_height: must be below the ceiling ({params.ceiling_height} m), got {params.sensor_height}")
     else:

@@ -208,3 +208,24 @@ def test_cars_park_in_bays_when_asked(bpy_scene):
         np.testing.assert_allclose(box.centre[:2], bays[k, :2], atol=1e-9)
         assert np.isclose(np.sin(box.yaw - bays[k, 2]), 0.0, atol=1e-9)  # nose in or reversed in
     assert len({tuple(np.round(box.centre[:2], 6)) for _, box in placed}) == len(placed)  # one car a bay
+
+
+def test_bad_scene_input_names_the_key():
+    from bpy_pipeline.config import load_config
+    from bpy_pipeline.errors import InputError
+
+    cases = {
+        "scene.ramp_length=58": "scene.ramp_length: must leave at least 8 m",
+        "scene.cars={kind: normal, mean: 5, std: 4, min: 3, max: 1}": "scene.cars.min: must not exceed max",
+        "scene.car_height={kind: uniform, min: 0.2, max: 1.7}": "scene.car_height.min: must be >= 0.5",
+        "scene.sensor_height=2.8": "scene.sensor_height: must be below the ceiling",
+        "scene.placement=anywhere": "scene.placement: expected 'free' | 'bays'",
+        "sensor.position=[0, 0, 1]": "sensor.position: the parking scene places the sensor itself",
+        "output.boxes.min_points={car: -1}": "output.boxes.min_points.car: expected an integer >= 0",
+    }
+    for assignment, message in cases.items():
+        with pytest.raises(InputError, match=message.replace("(", r"\(").replace("|", r"\|")):
+            load_config(None, ["scene.builder=parking", assignment])
+    with pytest.raises(InputError, match="scene.poses: expected weights"):
+        load_config(None, ["scene.builder=industrial_hall", "scene.poses={dancing: 1}"])
+    assert load_config(None, ["scene.builder=parking", "scene.place_sensor=false", "sensor.position=[0, 0, 1.5]"]).sensor.position == (0.0, 0.0, 1.5)

@@ -52,6 +52,7 @@ class IndustrialHall:
         self.robots = [RobotArm(self.arm, self.collection, r) for r in range(p.robots)]
         self.assets = [import_asset(a) for a in load_assets(p.assets or None, "person")]
         self.rigs: list = []
+        self.last = {"robots": [], "people": []}  # the last frame's placements (kinematics and bodies)
         self.boxes = [(c, box_axes(0.0), h) for item in self.layout.furniture for c, h in item.parts] + [(c, box_axes(0.0), h) for c, h in self.layout.walls]
         bpy.context.view_layer.update()
 
@@ -67,7 +68,6 @@ class IndustrialHall:
         return p.area_radius <= 0 or float(np.hypot(xy[0], xy[1])) <= p.area_radius
 
     def _area_point(self, rng) -> np.ndarray:
-        p = self.params
         low, high = self.layout.low, self.layout.high
         for _ in range(100):
             xy = rng.uniform(low, high)

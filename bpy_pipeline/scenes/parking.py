@@ -230,6 +230,7 @@ class ParkingGarage:
                 parts[part] = mesh
             self.meshes.append(parts)
         self.slots: list[CarSlot] = []
+        self.last = None  # the last frame's insertion log (geometry.placement.InsertionLog)
         bpy.context.view_layer.update()
 
     def alive(self) -> bool:

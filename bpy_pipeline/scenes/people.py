@@ -58,6 +58,8 @@ def skeleton() -> bpy.types.Armature:
             bone.parent = bones[human.SEGMENT_NAMES[parent]]
         bones[name] = bone
     bpy.ops.object.mode_set(mode="OBJECT")
+    for segment, dof, _, limits in human.DOFS:  # the joint ranges the poses keep to, for anyone posing by hand
+        data.bones[segment][f"limit_{dof}_deg"] = list(limits)
     view_layer.objects.active = previous
     bpy.data.objects.remove(holder)
     data.use_fake_user = True  # outlives its edit holder; every person shares it
