@@ -246,7 +246,9 @@ def visibility(
 
     patterns : the sensor's rays (one :class:`Pattern` or an iterable of chunks), sensor frame
     pose : (4, 4) sensor-to-world transform at frame start
-    cell_deg : coverage cell for truncation (about the pattern's coarsest angular spacing)
+    cell_deg : coverage cell for truncation (about the pattern's coarsest angular spacing): the
+        rays passing an object mark the directions they cover, taken from the sensor's centre
+        to where they pass it (so rays leaving from the sensor's own mirrors count right)
     caster : a :class:`RayCaster` of ``buffers`` in the sensor's frame, if one exists already
     surfaces, rng : the scanner's rules for mirrors and glass and a generator for glass that
         reflects a fraction of beams (:func:`~bpy_pipeline.lidar.scanner.trace_beams`)
@@ -266,12 +268,8 @@ def visibility(
     alone = [(RayCaster(sub, frame=pose), sub) for sub in (_subset(buffers, rows) for rows in members)]
     visible = np.zeros(len(boxes), np.int64)
     unoccluded = np.zeros(len(boxes), np.int64)
-    coverage = None
+    seen = [[] for _ in range(len(boxes))]  # per object: where the rays passing it are, seen from the sensor
     for chunk in [patterns] if isinstance(patterns, Pattern) else patterns:
-        if coverage is None:
-            coverage = Coverage(chunk.directions, cell_deg)
-        else:
-            coverage.add(chunk.directions)
         origins = np.zeros((len(chunk), 3)) if chunk.origins is None else chunk.origins
         # a cone test from the sensor's centre first (all objects at once), widened by the farthest
         # ray origin, then the exact ray-sphere test on the rays it lets through
@@ -288,11 +286,13 @@ def visibility(
             offset = centres[k] - origins[candidates]
             along = np.einsum("ij,ij->i", offset, chunk.directions[candidates])
             miss2 = np.einsum("ij,ij->i", offset, offset) - along**2
-            near = candidates[(miss2 <= radii[k] ** 2) & (along >= -radii[k]) & (along - radii[k] <= max_range)]
+            passing = (miss2 <= radii[k] ** 2) & (along >= -radii[k]) & (along - radii[k] <= max_range)
+            near = candidates[passing]
             if len(near) == 0:
                 continue
             o = origins[near] if chunk.origins is not None else np.zeros(3)
             d = chunk.directions[near]
+            seen[k].append(o + along[passing, None] * d)  # the ray's point closest to the object's centre
             beams = trace_beams(caster, buffers, o, d, min_range, max_range, max_bounces=0, surfaces=surfaces, rng=rng)
             hit_instance = instance_of_triangle[beams.triangle]
             visible[k] += int(np.count_nonzero((hit_instance == boxes["instance"][k]) & (beams.bounces == 0)))
@@ -307,8 +307,10 @@ def visibility(
         samples = (samples - pose[:3, 3]) @ pose[:3, :3]
         distance = np.linalg.norm(samples, axis=1)
         inside = (distance >= min_range) & (distance <= max_range)
-        if coverage is not None:
-            inside &= coverage.covers(samples)
+        if seen[k]:  # the directions the rays passing the object cover, from the sensor's centre
+            inside &= Coverage(np.concatenate(seen[k]), cell_deg).covers(samples)
+        else:
+            inside[:] = False
         total = area.sum()
         boxes["truncation"][k] = float(1.0 - area[inside].sum() / total) if total > 0 else 1.0
 
