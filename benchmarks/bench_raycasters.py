@@ -19,6 +19,11 @@ exact answer hits, and the rays that hit another surface or none.
 
 Rays per second use every core for Embree-based methods (embreex releases the GIL while
 tracing); trimesh's wrapper and Blender's ray casts run on one thread.
+
+Watertightness, separately: rays from 200 places around a closed UV sphere (24 segments),
+each aimed exactly at a vertex where it enters the sphere; ``slipped_vertex_rays`` counts
+those that pass into it without a hit there (a hit more than 1 cm beyond the vertex, or none).
+``embreex (robust off)`` is the same raw query on a scene built without Embree's robust flag.
 Run: python benchmarks/bench_raycasters.py [--small]
 """
 
@@ -35,6 +40,8 @@ from bench_far_origin import BOXES, SENSOR, TURN_DEG, analytic_scene, exact_hits
 from embreex import rtcore_scene  # noqa: E402
 from embreex.mesh_construction import TriangleMesh  # noqa: E402
 
+from bpy_pipeline.buffers import SceneBuffers  # noqa: E402
+from bpy_pipeline.geometry import primitives  # noqa: E402
 from bpy_pipeline.geometry.transforms import pose_matrix  # noqa: E402
 from bpy_pipeline.lidar.raycast import RayCaster  # noqa: E402
 from bpy_pipeline.lidar.scanner import scan, scan_chunk  # noqa: E402
@@ -183,6 +190,63 @@ def blender_scene_ray_cast(setup: Setup, threads: int, count: int):
     return seconds, build, setup.score(subset[hit], point, row, subset)
 
 
+def vertex_rays(seed: int = 0, places: int = 200):
+    """A closed UV sphere (turned) and rays aimed exactly at its vertices, entering it there.
+
+    Returns ``(vertices, triangles, origins (n, 3), directions (n, 3), distances (n,))``, world frame.
+    """
+    vertices, triangles = primitives.uv_sphere(1.5, 24)
+    vertices = vertices @ pose_matrix((0, 0, 0), (17, -33, 61))[:3, :3].T
+    a, b, c = (vertices[triangles[:, k]] for k in range(3))
+    normal = np.cross(b - a, c - a)
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    depth = lambda p: -(p @ normal.T - np.einsum("ij,ij->i", normal, a)).max(axis=1)  # noqa: E731  > 0 inside
+    rng = np.random.default_rng(seed)
+    origins, directions, distances = [], [], []
+    for _ in range(places):
+        sensor = rng.normal(size=3)
+        sensor *= rng.uniform(3.0, 40.0) / np.linalg.norm(sensor)
+        d = vertices - sensor
+        distance = np.linalg.norm(d, axis=1)
+        d /= distance[:, None]
+        enters = (depth(vertices + 0.01 * d) > 1e-5) & (depth(vertices - 0.01 * d) < -1e-5)
+        origins.append(np.repeat(sensor[None], enters.sum(), axis=0))
+        directions.append(d[enters])
+        distances.append(distance[enters])
+    return vertices, triangles, np.concatenate(origins), np.concatenate(directions), np.concatenate(distances)
+
+
+def slipped_vertex_rays() -> tuple[dict, int]:
+    """Per method, how many vertex-aimed rays slip into the sphere (:func:`vertex_rays`); and how many rays."""
+    import trimesh
+    from mathutils import Vector
+    from mathutils.bvhtree import BVHTree
+    from trimesh.ray.ray_pyembree import RayMeshIntersector
+
+    vertices, triangles, origins, directions, distance = vertex_rays()
+    far = np.full(len(distance), np.inf)
+    slipped = lambda got: int(np.count_nonzero(~(got <= distance + 0.01)))  # noqa: E731
+    out = {}
+    for name, robust in (("embreex raw", True), ("embreex (robust off)", False)):
+        scene = rtcore_scene.EmbreeScene(robust=robust)
+        TriangleMesh(scene, vertices.astype(np.float32), triangles)
+        hit = scene.run(origins.astype(np.float32), directions.astype(np.float32), output=1)
+        out[name] = slipped(np.where(hit["geomID"] >= 0, hit["tfar"], np.inf))
+    buffers = SceneBuffers.from_meshes({"sphere": (vertices, triangles)})
+    hits = RayCaster(buffers, frame=np.eye(4)).intersect(origins, directions)
+    got = far.copy()
+    got[hits.ray] = hits.distance
+    out["RayCaster.intersect"] = out["scan (records)"] = slipped(got)
+    location, ray, _ = RayMeshIntersector(trimesh.Trimesh(vertices, triangles, process=False)).intersects_location(origins, directions, multiple_hits=False)
+    got = far.copy()
+    got[ray] = np.linalg.norm(location - origins[ray], axis=1)
+    out["trimesh + embreex"] = slipped(got)
+    tree = BVHTree.FromPolygons(vertices.tolist(), triangles.tolist(), all_triangles=True)
+    got = np.array([r[3] if r[0] is not None else np.inf for r in (tree.ray_cast(Vector(o), Vector(d)) for o, d in zip(origins.tolist(), directions.tolist()))])
+    out["Blender BVHTree"] = slipped(got)
+    return out, len(distance)
+
+
 def chart(rows: list[dict], path) -> None:
     import matplotlib
 
@@ -221,6 +285,10 @@ def main():
     for name, fn, used_threads, note in methods:
         seconds, build, accuracy = fn(setup, used_threads)
         rows.append({"method": name, **common, "threads": used_threads, "rays_per_s": len(setup.directions) / seconds, "build_s": build, **accuracy, "note": note})
+    slips, vertex_ray_count = slipped_vertex_rays()
+    for r in rows:
+        r["slipped_vertex_rays"] = slips.get(r["method"])
+    rows.append({"method": "embreex (robust off)", **common, "slipped_vertex_rays": slips["embreex (robust off)"], "note": "watertightness only"})
     if importlib.util.find_spec("rtree") is None:
         rows.append({"method": "trimesh ray_triangle", **common, "note": "not run: needs the rtree package (not a dependency)"})
     reference = rows[0]["rays_per_s"]
@@ -228,7 +296,7 @@ def main():
         if r.get("rays_per_s"):
             r["vs_embreex_raw"] = r["rays_per_s"] / reference
     name = "raycasters" + ("_small" if args.small else "")
-    report(name, rows, args.out, {"threads": threads, "wire_hits_exact": int((setup.exact_row == list(BOXES).index("wire")).sum())})
+    report(name, rows, args.out, {"threads": threads, "wire_hits_exact": int((setup.exact_row == list(BOXES).index("wire")).sum()), "vertex_rays": vertex_ray_count})
     chart(rows, args.out / f"{name}.png")
 
 

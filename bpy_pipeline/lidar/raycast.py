@@ -16,8 +16,9 @@ Where Embree fails, and what is done about it (``tests/test_scan_failures.py``):
   of a closed mesh from outside do (rays not aimed at vertices practically never). A ray that
   slipped into a closed mesh leaves it through a back face, so a back-face hit on an object
   the same query also hit from the front, and a miss while the origin is enclosed by a closed
-  mesh (seen only from inside), are traced again with the ray turned by :data:`JITTER`
-  radians; the nearer hit wins and its distance is solved along the original ray. Scenes seen
+  mesh (seen only from inside), are traced again with the ray moved across by :data:`JITTER`
+  (radians, and metres per metre of origin coordinate) four ways; the nearest hit wins and its
+  distance is solved along the original ray. Scenes seen
   from outside have no such rays and pay nothing; a ray that slips out of an enclosing mesh
   and then hits another object, or slips through an open mesh, is not caught.
 - Grazing rays (parallel to a plane) keep Embree's distance where the plane solve is
@@ -232,25 +233,33 @@ class RayCaster:
         return np.concatenate(suspect)
 
     def _retrace(self, rays, local, directions, far, tfar, prim, geom) -> np.ndarray:
-        """Trace ``rays`` again, turned by :data:`JITTER`; keep the nearer hit (updates tfar, prim, geom in place).
+        """Trace ``rays`` again, moved by :data:`JITTER` four ways across; keep the nearest hit
+        (updates tfar, prim, geom in place). Returns the rays whose hit now comes from a moved ray.
 
-        Returns the rays whose hit now comes from the turned ray.
+        Four ways (two crossed axes, both senses), since a ray that slipped in where it only just
+        enters the mesh can be moved out of it by one of them.
         """
         d = directions[rays]
         o = np.broadcast_to(local, (len(directions), 3))[rays]
-        # A unit vector across each ray: d x (the axis d is least aligned with).
+        # Two unit vectors across each ray: u = d x (the axis d is least aligned with), and d x u.
         axis = np.zeros_like(d)
         axis[np.arange(len(d)), np.argmin(np.abs(d), axis=1)] = 1.0
-        across = np.cross(d, axis)
-        across /= np.linalg.norm(across, axis=1, keepdims=True)
-        turned = d + JITTER * across
-        turned /= np.linalg.norm(turned, axis=1, keepdims=True)
+        u = np.cross(d, axis)
+        u /= np.linalg.norm(u, axis=1, keepdims=True)
         shift = JITTER * (1.0 + np.abs(o).max(axis=1))
-        o32 = np.ascontiguousarray(o + shift[:, None] * across, np.float32)
-        t2, p2, g2 = self._embree(o32, np.ascontiguousarray(turned, np.float32), np.ascontiguousarray(far[rays]))
-        better = (g2 >= 0) & ((geom[rays] < 0) | (t2 < tfar[rays]))
-        take = rays[better]
-        tfar[take], prim[take], geom[take] = t2[better], p2[better], g2[better]
+        far = np.ascontiguousarray(far[rays])
+        best_t, best_p, best_g = tfar[rays].copy(), prim[rays].copy(), geom[rays].copy()
+        moved = np.zeros(len(rays), bool)
+        for across in (u, -u, np.cross(d, u), -np.cross(d, u)):
+            turned = d + JITTER * across
+            turned /= np.linalg.norm(turned, axis=1, keepdims=True)
+            o32 = np.ascontiguousarray(o + shift[:, None] * across, np.float32)
+            t2, p2, g2 = self._embree(o32, np.ascontiguousarray(turned, np.float32), far)
+            better = (g2 >= 0) & ((best_g < 0) | (t2 < best_t))
+            best_t[better], best_p[better], best_g[better] = t2[better], p2[better], g2[better]
+            moved |= better
+        take = rays[moved]
+        tfar[take], prim[take], geom[take] = best_t[moved], best_p[moved], best_g[moved]
         return take
 
 
