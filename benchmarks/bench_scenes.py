@@ -4,8 +4,9 @@ Each builder runs with its own default sensor (parking: the paper's VLP-16 at 0.
 cleaning robot; hall: the OS1-128 x 2048 through its eight mirrors, overhead) and the default
 outputs plus both box formats, in one process (``pipeline.run_frames``). Frame 0 builds the
 static scene; later frames only re-randomise it. Reference, measured in the same run: the same
-frames with the scene rebuilt from nothing every frame; and the human-robot paper's 27.6 s per
-frame (seed 002). Reports medians over the frames after the first.
+frames with the scene rebuilt every frame (every object created anew; the mesh datablocks of the
+car styles and the body builds, made once per Blender session, are kept); and the human-robot
+paper's 27.6 s per frame (seed 002). Reports medians over the frames after the first.
 Run: python benchmarks/bench_scenes.py [--small]
 """
 
