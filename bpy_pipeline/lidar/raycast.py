@@ -95,7 +95,8 @@ class RayCaster:
         the centre of the vertices' bounds. ``intersect`` takes and returns local coordinates.
     threads : threads for Embree (default: every core); embreex releases the GIL while tracing
     chunk : rays per embreex call
-    ``InputError`` (naming the object) for non-finite vertices or bad triangle indices.
+    ``InputError`` (naming the object) for non-finite vertices, bad triangle indices, or vertices
+    farther than :data:`MAX_COORDINATE` from the local origin.
     """
 
     def __init__(self, buffers: SceneBuffers, frame=None, threads: int | None = None, chunk: int = 32768):
