@@ -38,6 +38,7 @@ def cloud(n, rng, range_m=None, reflectivity=0.5, cos=1.0, rings=1):
     points["instance"] = np.arange(n)
     beam = np.zeros(n, BEAM_DTYPE)
     beam["cos_incidence"], beam["reflectivity"], beam["gain"] = cos, reflectivity, 1.0
+    beam["direction"] = d
     return points, beam
 
 

@@ -117,6 +117,29 @@ def test_ideal_sensor_reports_the_true_hit_and_labels_follow_the_policy():
     assert (reflection["instance"][reflection["bounces"] == 1] == 1).all()
 
 
+def test_range_noise_moves_points_along_their_own_beam():
+    """Behind the mirror (reported) a ghost moves along the emitted ray; at its true position
+    (ideal) along the reflected segment, so it stays on the wall instead of drifting off it."""
+    from bpy_pipeline.config import effects_from_dict
+    from bpy_pipeline.lidar.effects import apply_effects
+
+    buffers = scene(MIRROR_45, SIDE_WALL)
+    noise = effects_from_dict({"noise": {"sigma": 0.05}})
+    for ideal in (False, True):
+        points, beam = run(buffers, BEAMS_45, ideal=ideal)
+        noisy = apply_effects(points, beam, noise, np.random.default_rng(0))
+        ghost = points["bounces"] == 1
+        before = np.column_stack([points[k] for k in "xyz"]).astype(np.float64)[ghost]
+        after = np.column_stack([noisy[k] for k in "xyz"]).astype(np.float64)[ghost]
+        step = (noisy["range"] - points["range"]).astype(np.float64)[ghost]
+        assert np.std(step) > 0.03  # the noise really moved them
+        np.testing.assert_allclose(after - before, step[:, None] * beam["direction"][ghost], atol=2e-5)
+        if ideal:  # the reflected segment runs from the mirror to the wall (+y), not back to the sensor
+            assert (beam["direction"][ghost][:, 1] > 0.9).all()
+        else:
+            np.testing.assert_allclose(np.linalg.norm(after, axis=1), noisy["range"][ghost], rtol=1e-5)
+
+
 def test_two_facing_mirrors_stop_at_max_bounces():
     # Mirrors at x = -2 and x = +2 facing each other, 400 m long, a floor 3 m below the sensor.
     left = ("left", plane_at([400.0, 20.0], [-2.0, 0.0, 0.0], [1.0, 0.0, 0.0]), "mirror", 1.0, MIRROR_CLASS)

@@ -245,8 +245,10 @@ def scan_footprint_chunks(
                 translation = to_local[:3, 3] if to_local.ndim == 2 else to_local[beam, :3, 3]
                 rotate = (lambda x: x @ rotation.T) if rotation.ndim == 2 else (lambda x: np.einsum("nij,nj->ni", rotation, x))
                 origin = translation if beams.origins is None else translation + rotate(beams.origins[beam])
-                xyz = origin + rotate(beams.directions[beam]) * distance[:, None]
+                central = rotate(beams.directions[beam])
+                xyz = origin + central * distance[:, None]
                 out["x"], out["y"], out["z"] = xyz.T
+                out_facts["direction"] = central
             yield out, out_facts
 
 

@@ -434,9 +434,11 @@ def noise_sigma(points: np.ndarray, beam: np.ndarray, noise, models: FittedModel
 def perturb(points: np.ndarray, beam: np.ndarray, noise, rng: np.random.Generator, models: FittedModels | None = None) -> None:
     """Range noise, per-ring bias and angular jitter applied to ``points`` in place (sensor frame).
 
-    The range moves by ``N(0, sigma) + bias[ring]`` along the beam (clamped at 0) and, with
-    jitter, the direction turns by ``N(0, jitter)`` in azimuth and in elevation (tangent-plane
-    step, then back to the new range); ``x y z`` and ``range`` stay consistent.
+    The range moves by ``N(0, sigma) + bias[ring]`` (clamped at 0) and the point moves as much
+    along its beam (``beam["direction"]``: the emitted ray, or the last segment of a point at its
+    true position behind mirrors), so ``x y z`` and ``range`` stay consistent. With jitter the
+    point first turns by ``N(0, jitter)`` in azimuth and in elevation about the sensor's origin
+    (tangent-plane step, length kept).
     """
     n = len(points)
     sigma = noise_sigma(points, beam, noise, models)
@@ -457,10 +459,10 @@ def perturb(points: np.ndarray, beam: np.ndarray, noise, rng: np.random.Generato
             raise InputError(f"effects.noise.ring_bias: {len(bias)} values but the scan has ring {int(ring.max())}; give one per ring")
         new += bias[ring]
     np.maximum(new, np.float32(0), out=new)
-    scale = new / np.maximum(old, np.float32(MIN_RANGE))
     if jitter > 0:
         # p' = p + |p| (a e_az + e e_el), with e_az = (-y, x, 0) / rho and e_el = (-x z, -y z, rho^2) / (rho |p|)
-        # orthonormal to p, so |p'| = |p| sqrt(1 + a^2 + e^2) exactly; beams along z (rho ~ 0) keep still
+        # orthonormal to p, so |p'| = |p| sqrt(1 + a^2 + e^2): divided by that, the length is kept;
+        # beams along z (rho ~ 0) keep still
         x, y, z = (np.ascontiguousarray(points[k]) for k in "xyz")  # packed records: strided math is slower
         a, e = rng.standard_normal((2, n), dtype=np.float32) * np.float32(jitter)
         rho2 = x * x
@@ -474,21 +476,18 @@ def perturb(points: np.ndarray, beam: np.ndarray, noise, rng: np.random.Generato
         stretch += e * e
         stretch += np.float32(1)
         np.sqrt(stretch, out=stretch)
-        scale /= stretch  # back to |p| new / old
+        keep = np.float32(1) / stretch
         e /= rho  # elevation step per unit of (-x z, -y z, rho^2)
         a *= length
         a /= rho  # azimuth step per unit of (-y, x, 0)
         ez = e * z
-        new_x = x - y * a - x * ez
-        new_y = y + x * a - y * ez
-        new_z = z + rho2 * e
-        new_x *= scale
-        new_y *= scale
-        new_z *= scale
-        points["x"], points["y"], points["z"] = new_x, new_y, new_z
-    else:
-        for k in "xyz":
-            points[k] *= scale
+        points["x"] = (x - y * a - x * ez) * keep
+        points["y"] = (y + x * a - y * ez) * keep
+        points["z"] = (z + rho2 * e) * keep
+    step = new - old
+    direction = beam["direction"]
+    for axis, k in enumerate("xyz"):
+        points[k] += step * direction[:, axis]
     points["range"] = new
 
 

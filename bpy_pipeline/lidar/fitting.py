@@ -553,6 +553,7 @@ def samples_as_points(samples: Samples) -> tuple[np.ndarray, np.ndarray]:
     beam["cos_incidence"] = samples.cos_incidence
     beam["reflectivity"] = samples.reflectance / np.maximum(samples.cos_incidence, 1e-6)
     beam["gain"] = 1.0
+    beam["direction"] = (1.0, 0.0, 0.0)
     return points, beam
 
 

@@ -28,6 +28,11 @@ BEAM_DTYPE = np.dtype(
     [
         ("cos_incidence", "<f4"),  # |cos| of the angle between the last ray and the surface normal
         ("reflectivity", "<f4"),  # lidar_reflectivity of the object finally hit, 0..1
-        ("gain", "<f4"),  # product of the reflectivities of the mirrors met (1 for direct returns)
+        # one-way factors met (a mirror's reflectivity, a glass pass's 1 - reflectivity) times, with
+        # beam divergence, the share of the footprint's energy this return carries; 1 for a plain direct return
+        ("gain", "<f4"),
+        # unit vector (output frame) along which the reported point moves when its measured range
+        # changes: the emitted ray, or the last segment for points reported at their true position
+        ("direction", "<f4", (3,)),
     ]
 )

@@ -69,6 +69,7 @@ class Beams:
     gain : (k,) float64 product of the one-way factors met: a reflecting surface's
         reflectivity, a traversed glass surface's 1 - reflectivity (1 for direct returns)
     cos_incidence : (k,) float64 |cos| of the angle between the last ray and the final surface normal
+    direction : (k, 3) float64 unit direction of the last segment, local frame
     """
 
     ray: np.ndarray
@@ -79,6 +80,7 @@ class Beams:
     mirror_object: np.ndarray
     gain: np.ndarray
     cos_incidence: np.ndarray
+    direction: np.ndarray
 
 
 _CORNER_SCALES: "weakref.WeakKeyDictionary[RayCaster, np.ndarray]" = weakref.WeakKeyDictionary()
@@ -187,7 +189,7 @@ def trace_beams(
         material = objects.material[obj]
         beam = i if rows is None else rows[i]
         if rows is None and not (material != DIFFUSE).any():  # one segment, only diffuse hits: nothing to gather
-            done.append((beam, path, point, hits.triangle, np.zeros(len(i), np.uint8), np.full(len(i), -1, np.int32), np.ones(len(i)), cos_incidence))
+            done.append((beam, path, point, hits.triangle, np.zeros(len(i), np.uint8), np.full(len(i), -1, np.int32), np.ones(len(i)), cos_incidence, seg_d))
             break
         reflectivity = objects.reflectivity[obj].astype(np.float64)
         is_mirror, is_glass = material == MIRROR, material == GLASS
@@ -209,7 +211,7 @@ def trace_beams(
         reflect &= (reflectivity > 0) & (bounces[i] < max_bounces)
         through &= (reflectivity < 1) & (passes[i] < surfaces.glass_passes)
         if returns.any():
-            done.append((beam[returns], path[returns], point[returns], hits.triangle[returns], bounces[i][returns], mirror[i][returns], gain[i][returns], cos_incidence[returns]))
+            done.append((beam[returns], path[returns], point[returns], hits.triangle[returns], bounces[i][returns], mirror[i][returns], gain[i][returns], cos_incidence[returns], seg_d[returns]))
         go = reflect | through
         if not go.any():
             break
@@ -229,7 +231,7 @@ def trace_beams(
     if len(done) == 1:
         beams = Beams(*done[0])
     elif not done:
-        beams = Beams(np.zeros(0, np.int64), np.zeros(0), np.zeros((0, 3)), np.zeros(0, np.int64), np.zeros(0, np.uint8), np.zeros(0, np.int32), np.zeros(0), np.zeros(0))
+        beams = Beams(np.zeros(0, np.int64), np.zeros(0), np.zeros((0, 3)), np.zeros(0, np.int64), np.zeros(0, np.uint8), np.zeros(0, np.int32), np.zeros(0), np.zeros(0), np.zeros((0, 3)))
     else:
         fields = [np.concatenate(column) for column in zip(*done)]
         slot = np.full(n, -1, np.int64)  # each beam returns at most once: firing order by scattering, not sorting
@@ -298,6 +300,7 @@ def scan_chunk(
     points["time"] = pattern.time[beams.ray]
     beam = np.empty(len(beams.ray), BEAM_DTYPE)
     beam["cos_incidence"], beam["reflectivity"], beam["gain"] = beams.cos_incidence, reflectivity, beams.gain
+    beam["direction"] = beams.direction if ideal else world_d[beams.ray]
     return points, beam, beams.ray
 
 
