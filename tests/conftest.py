@@ -30,3 +30,14 @@ def pytest_collection_modifyitems(config, items):
     for item in items:
         if "bpy" in item.keywords:
             item.add_marker(skip)
+
+
+@pytest.fixture
+def bpy_scene():
+    """An empty Blender scene, and no scene kept from an earlier test."""
+    bpy = pytest.importorskip("bpy")
+    from bpy_pipeline.scenes import reset_built_scenes
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    reset_built_scenes()
+    yield bpy

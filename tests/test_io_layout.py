@@ -11,6 +11,7 @@ from bpy_pipeline.errors import InputError
 from bpy_pipeline.io import WRITERS, read_las, read_npy_folder, read_ply, read_semantickitti, write_frame_preview
 from bpy_pipeline.labels import load_class_table
 from bpy_pipeline.lidar.points import empty_points
+from samples import random_points
 
 EXPECTED = {
     "ply": ["ply/000012.ply"],
@@ -26,19 +27,9 @@ READERS = {
 }
 
 
-def random_points(n, rng):
-    pts = empty_points(n)
-    for name in "xyz":
-        pts[name] = rng.uniform(-20, 20, n)
-    pts["intensity"] = rng.uniform(0, 1, n)
-    pts["semantic"] = rng.integers(0, 26, n)
-    pts["instance"] = rng.integers(0, 100, n)
-    return pts
-
-
 @pytest.mark.parametrize("fmt", sorted(EXPECTED))
 def test_writer_layout_and_contents(tmp_path, fmt):
-    pts = random_points(100, np.random.default_rng(0))
+    pts = random_points(100, np.random.default_rng(0), extent=20.0, instances=100)
     paths = WRITERS[fmt](tmp_path, 12, pts, 3)
     assert [p.relative_to(tmp_path).as_posix() for p in paths] == EXPECTED[fmt]
     assert all(p.is_file() for p in paths)
@@ -57,7 +48,7 @@ def test_writers_are_the_four_formats_and_check_the_frame_index(tmp_path):
 
 
 def test_frame_preview_path(tmp_path):
-    path = write_frame_preview(tmp_path, 7, random_points(10, np.random.default_rng(0)), load_class_table().color_lut())
+    path = write_frame_preview(tmp_path, 7, random_points(10, np.random.default_rng(0), extent=20.0, instances=100), load_class_table().color_lut())
     assert path == tmp_path / "preview" / "000007.png" and path.read_bytes()[:4] == b"\x89PNG"
 
 

@@ -7,22 +7,12 @@ from bpy_pipeline.errors import InputError
 from bpy_pipeline.io import npy as npy_module
 from bpy_pipeline.io import read_npy_folder, write_npy_folder
 from bpy_pipeline.lidar.points import empty_points
-
-
-def random_points(n, rng):
-    pts = empty_points(n)
-    for name in "xyz":
-        pts[name] = rng.uniform(-100, 100, n)
-    pts["intensity"] = rng.uniform(0, 1, n)
-    pts["semantic"] = rng.integers(0, 26, n)
-    pts["instance"] = rng.integers(0, 5, n)  # many zeros: "no instance"
-    pts["time"] = rng.uniform(0, 0.1, n)
-    return pts
+from samples import random_points
 
 
 @pytest.mark.parametrize("n", [0, 1000])
 def test_files_shapes_dtypes_and_round_trip(tmp_path, n):
-    pts = random_points(n, np.random.default_rng(0))
+    pts = random_points(n, np.random.default_rng(0), instances=5)
     paths = write_npy_folder(tmp_path / "000000", pts)
     assert [p.name for p in paths] == ["coord.npy", "strength.npy", "segment.npy", "instance.npy"]
     assert sorted(p.name for p in (tmp_path / "000000").iterdir()) == sorted(p.name for p in paths)
@@ -45,9 +35,9 @@ def test_files_shapes_dtypes_and_round_trip(tmp_path, n):
 
 def test_rewrite_replaces_folder_and_failure_keeps_old_one(tmp_path, monkeypatch):
     folder = tmp_path / "npy" / "000001"
-    write_npy_folder(folder, random_points(10, np.random.default_rng(0)))
+    write_npy_folder(folder, random_points(10, np.random.default_rng(0), instances=5))
     (folder / "stale.npy").write_bytes(b"x")
-    write_npy_folder(folder, random_points(20, np.random.default_rng(1)))
+    write_npy_folder(folder, random_points(20, np.random.default_rng(1), instances=5))
     assert not (folder / "stale.npy").exists() and len(read_npy_folder(folder)) == 20
 
     calls = []
@@ -61,7 +51,7 @@ def test_rewrite_replaces_folder_and_failure_keeps_old_one(tmp_path, monkeypatch
 
     monkeypatch.setattr(npy_module.np.lib.format, "write_array_header_1_0", failing_header)
     with pytest.raises(OSError):
-        write_npy_folder(folder, random_points(30, np.random.default_rng(2)))
+        write_npy_folder(folder, random_points(30, np.random.default_rng(2), instances=5))
     monkeypatch.undo()
     assert len(read_npy_folder(folder)) == 20
     assert [p.name for p in folder.parent.iterdir()] == ["000001"]

@@ -6,20 +6,7 @@ import pytest
 from bpy_pipeline.errors import InputError
 from bpy_pipeline.io import read_ply, write_ply
 from bpy_pipeline.lidar.points import POINT_DTYPE, empty_points
-
-
-def random_points(n, rng):
-    pts = empty_points(n)
-    for name in "xyz":
-        pts[name] = rng.uniform(-100, 100, n)
-    pts["intensity"] = rng.uniform(0, 1, n)
-    pts["semantic"] = rng.integers(0, 26, n)
-    pts["instance"] = rng.integers(0, 2**32, n, dtype=np.uint64)
-    pts["ring"] = rng.integers(0, 128, n)
-    pts["time"] = rng.uniform(0, 0.1, n)
-    pts["range"] = rng.uniform(0.5, 120, n)
-    pts["bounces"] = rng.integers(0, 4, n)
-    return pts
+from samples import random_points
 
 
 @pytest.mark.parametrize("n", [0, 1, 1000])

@@ -12,17 +12,6 @@ from bpy_pipeline.geometry.indoor import parking_layout, parking_station
 from bpy_pipeline.geometry.placement import FloorBoxPlacer, insert_sequentially, sample, sample_count, turn_about
 
 
-@pytest.fixture
-def bpy_scene():
-    """An empty Blender scene, and no scene kept from an earlier test."""
-    bpy = pytest.importorskip("bpy")
-    from bpy_pipeline.scenes import reset_built_scenes
-
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    reset_built_scenes()
-    yield bpy
-
-
 # ----------------------------------------------------------------------------- the insertion rule
 class Script:
     """Objects numbered 0, 1, ...; ``fits(obj, angle)`` decides; every try is recorded."""

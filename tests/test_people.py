@@ -10,17 +10,6 @@ from bpy_pipeline.geometry import human, kinematics
 from bpy_pipeline.lidar.raycast import RayCaster
 
 
-@pytest.fixture
-def bpy_scene():
-    """An empty Blender scene, and no scene kept from an earlier test."""
-    bpy = pytest.importorskip("bpy")
-    from bpy_pipeline.scenes import reset_built_scenes
-
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    reset_built_scenes()
-    yield bpy
-
-
 # ----------------------------------------------------------------------------- the body model
 def test_every_pose_lies_within_the_joint_limits_without_self_intersection():
     rng = np.random.default_rng(0)

@@ -9,17 +9,6 @@ from bpy_pipeline.geometry import kinematics
 from bpy_pipeline.geometry.collision import segment_distance
 
 # ROS-Industrial staubli_experimental, staubli_tx90_support/urdf/tx90l_macro.xacro: joint limits in radians
-@pytest.fixture
-def bpy_scene():
-    """An empty Blender scene, and no scene kept from an earlier test."""
-    bpy = pytest.importorskip("bpy")
-    from bpy_pipeline.scenes import reset_built_scenes
-
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    reset_built_scenes()
-    yield bpy
-
-
 URDF_LIMITS = [(-3.14159, 3.14159), (-2.268928, 2.574360), (-2.530727, 2.530727), (-4.712389, 4.712389), (-2.007129, 2.443461), (-4.712389, 4.712389)]
 
 

@@ -43,8 +43,7 @@ from typing import Iterable, Iterator, Literal
 import numpy as np
 
 from ..errors import InputError
-from .points import BEAM_DTYPE, POINT_DTYPE
-from .scanner import scan_chunk
+from .scanner import collect, scan_chunk
 from .sensors import Pattern
 
 GOLDEN_ANGLE = math.pi * (3.0 - math.sqrt(5.0))  # radians
@@ -254,7 +253,4 @@ def scan_footprint_chunks(
 
 def scan_footprint(*args, **kwargs) -> tuple[np.ndarray, np.ndarray]:
     """All ``(points, beam)`` of :func:`scan_footprint_chunks`, each in one array."""
-    chunks = list(scan_footprint_chunks(*args, **kwargs))
-    if not chunks:
-        return np.zeros(0, POINT_DTYPE), np.zeros(0, BEAM_DTYPE)
-    return np.concatenate([c[0] for c in chunks]), np.concatenate([c[1] for c in chunks])
+    return collect(scan_footprint_chunks(*args, **kwargs))

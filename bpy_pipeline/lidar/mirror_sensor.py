@@ -47,7 +47,7 @@ import numpy as np
 
 from ..errors import InputError
 from . import grid
-from .sensors import Pattern, SensorSpec, sensor_pattern
+from .sensors import Pattern, SensorSpec, load_numeric_npy, sensor_pattern
 
 # A ``reflector`` below is any object with the attributes of ``config.ReflectorConfig``: segments (int),
 # inclination_deg, azimuth_deg (degrees), distance, bottom, top, width (metres).
@@ -287,14 +287,7 @@ def load_edge_mask(path: str | Path, shape: tuple[int, int], where: str = "senso
     The file holds probabilities (float, 0..1) or a dropped-or-not mask (bool, or integers 0/1),
     in the :mod:`.grid` layout (row 0 the highest beam, column 0 the first fired).
     """
-    try:
-        mask = np.load(path, allow_pickle=False)
-    except OSError as err:
-        raise InputError(f"{where}: cannot read {path} ({err.strerror or err})") from None
-    except ValueError:
-        raise InputError(f"{where}: {path} is not a numeric .npy array") from None
-    if not isinstance(mask, np.ndarray) or mask.dtype.kind not in "biuf":
-        raise InputError(f"{where}: {path} holds {getattr(mask, 'dtype', type(mask).__name__)}, expected drop probabilities")
+    mask = load_numeric_npy(path, where, "biuf", "drop probabilities")
     if mask.shape != tuple(shape):
         raise InputError(f"{where}: {path} has shape {mask.shape}, expected {tuple(shape)} (rows x columns of the sensor's image)")
     mask = mask.astype(np.float32)

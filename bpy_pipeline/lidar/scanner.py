@@ -346,9 +346,14 @@ def scan_chunks(
             yield points, beam
 
 
-def scan(*args, **kwargs) -> tuple[np.ndarray, np.ndarray]:
-    """All ``(points, beam)`` of :func:`scan_chunks`, each in one array."""
-    chunks = list(scan_chunks(*args, **kwargs))
+def collect(chunks: Iterable[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
+    """``(points, beam)`` chunks of a scan joined into one array each."""
+    chunks = list(chunks)
     if not chunks:
         return np.zeros(0, POINT_DTYPE), np.zeros(0, BEAM_DTYPE)
     return np.concatenate([c[0] for c in chunks]), np.concatenate([c[1] for c in chunks])
+
+
+def scan(*args, **kwargs) -> tuple[np.ndarray, np.ndarray]:
+    """All ``(points, beam)`` of :func:`scan_chunks`, each in one array."""
+    return collect(scan_chunks(*args, **kwargs))

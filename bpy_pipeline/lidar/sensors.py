@@ -318,18 +318,24 @@ def _check_grid(spec: SensorSpec, where: str) -> None:
         raise InputError(f"{where}.horizontal_resolution_deg: must lie in (0, {hi - lo}], got {spec.horizontal_resolution_deg}")
 
 
-def load_rays(path: str, where: str = "sensor.rays_file") -> np.ndarray:
-    """``(n, 3)`` float64 unit directions from an ``.npy`` file; ``InputError`` naming ``where`` and the file."""
-    if not path:
-        raise InputError(f"{where}: the file pattern needs the path of an (n, 3) .npy of ray directions")
+def load_numeric_npy(path, where: str, kinds: str, expected: str) -> np.ndarray:
+    """An array from an ``.npy`` file whose dtype kind is one of ``kinds``; ``InputError`` naming ``where`` and the file."""
     try:
-        rays = np.load(path, allow_pickle=False)
+        array = np.load(path, allow_pickle=False)
     except OSError as err:
         raise InputError(f"{where}: cannot read {path} ({err.strerror or err})") from None
     except ValueError:
         raise InputError(f"{where}: {path} is not a numeric .npy array") from None
-    if not isinstance(rays, np.ndarray) or rays.dtype.kind not in "iuf":
-        raise InputError(f"{where}: {path} holds {getattr(rays, 'dtype', type(rays).__name__)}, expected numbers")
+    if not isinstance(array, np.ndarray) or array.dtype.kind not in kinds:
+        raise InputError(f"{where}: {path} holds {getattr(array, 'dtype', type(array).__name__)}, expected {expected}")
+    return array
+
+
+def load_rays(path: str, where: str = "sensor.rays_file") -> np.ndarray:
+    """``(n, 3)`` float64 unit directions from an ``.npy`` file; ``InputError`` naming ``where`` and the file."""
+    if not path:
+        raise InputError(f"{where}: the file pattern needs the path of an (n, 3) .npy of ray directions")
+    rays = load_numeric_npy(path, where, "iuf", "numbers")
     if rays.ndim != 2 or rays.shape[1] != 3:
         raise InputError(f"{where}: {path} has shape {rays.shape}, expected (n, 3) ray directions")
     if len(rays) == 0:
