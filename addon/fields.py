@@ -33,7 +33,7 @@ import bpy
 import numpy as np
 
 from .bpy_pipeline.errors import InputError
-from .bpy_pipeline.schema import key_of
+from .bpy_pipeline.schema import key_of, to_plain
 
 UNITS = {"deg": "°", "hz": "Hz", "s": "s"}
 
@@ -62,15 +62,6 @@ class GroupView:
     def classes(self) -> list[type]:
         """Generated classes in registration order (nested groups first)."""
         return [c for child in self.children for c in child.classes()] + [self.property_group]
-
-
-def plain(value):
-    """A config dataclass (or anything inside one) as plain YAML data, keyed as in YAML."""
-    if dataclasses.is_dataclass(value):
-        return {key_of(f): plain(getattr(value, f.name)) for f in dataclasses.fields(value)}
-    if isinstance(value, (list, tuple)):
-        return [plain(v) for v in value]
-    return value
 
 
 def label(attr: str) -> str:

@@ -91,7 +91,7 @@ def make_views() -> Views:
         if name == "blend":
             continue  # "My scene" instead: the open file
         try:
-            builder_defaults = fields.plain(params())
+            builder_defaults = fields.to_plain(params())
         except TypeError:  # a builder without defaults for every field: nothing to show
             builder_defaults = {}
         builders[name] = fields.group_view(params, f"LIDAR_PG_scene_{name}", builder_defaults)
@@ -104,7 +104,7 @@ def make_views() -> Views:
     trajectory = None
     if has_trajectory():
         trajectory_cls = cfg.TrajectoryConfig
-        trajectory = fields.group_view(trajectory_cls, "LIDAR_PG_trajectory", fields.plain(trajectory_cls()), skip=("waypoints", "times", "curve"))
+        trajectory = fields.group_view(trajectory_cls, "LIDAR_PG_trajectory", fields.to_plain(trajectory_cls()), skip=("waypoints", "times", "curve"))
     effects = fields.group_view(cfg.EffectsConfig, "LIDAR_PG_effects", defaults["effects"])
     output = fields.group_view(cfg.OutputConfig, "LIDAR_PG_output", defaults["output"])
     views = Views(builders, sensor, pose, trajectory, effects, output, defaults)

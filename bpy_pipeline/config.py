@@ -24,7 +24,7 @@ from .lidar.grid import check_grid, image_shape
 from .lidar.mirror_sensor import check_reflector, load_edge_mask
 from .lidar.platform import Trajectory
 from .lidar.sensors import SensorSpec, frame_time, mount_offset, resolve_sensor
-from .schema import convert, from_dict, key_of
+from .schema import convert, from_dict, to_plain
 
 Vec3 = tuple[float, float, float]
 DEFAULT_SENSOR = {"preset": "railway_tls", "sampling_factor": 0.25}
@@ -837,15 +837,7 @@ def _check_boxes(config: Config) -> Config:
 
 def config_to_dict(config: Config) -> dict:
     """The resolved config as plain YAML-ready data; ``config_from_dict`` of it gives ``config`` back."""
-
-    def plain(value):
-        if dataclasses.is_dataclass(value):
-            return {key_of(f): plain(getattr(value, f.name)) for f in dataclasses.fields(value)}
-        if isinstance(value, (list, tuple)):
-            return [plain(v) for v in value]
-        return value
-
-    out = plain(config)
+    out = to_plain(config)
     out["scene"] = {"builder": config.scene.builder, **out["scene"]["params"]}
     sensor = out["sensor"]
     if config.sensor.trajectory is not None or getattr(config.scene.params, "place_sensor", False):

@@ -96,3 +96,12 @@ def from_dict(cls, data, path: str = ""):
 
 def _join(path: str, key: str) -> str:
     return f"{path}.{key}" if path else str(key)
+
+
+def to_plain(value):
+    """A dataclass (or anything inside one) as plain YAML data keyed as in YAML: the inverse of :func:`from_dict`."""
+    if dataclasses.is_dataclass(value):
+        return {key_of(f): to_plain(getattr(value, f.name)) for f in dataclasses.fields(value)}
+    if isinstance(value, (list, tuple)):
+        return [to_plain(v) for v in value]
+    return value
