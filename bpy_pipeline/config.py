@@ -199,15 +199,6 @@ class RailwayScene:
         return self.stations.count > 0 or bool(self.stations.chainages)
 
 
-# The flat keys of the first railway builder, still accepted: key -> (section, key) of RailwayScene.
-RAILWAY_LEGACY_KEYS = {
-    **{k: ("track", k) for k in ("gauge", "sleeper_spacing", "ballast_height", "ballast_shoulder")},
-    **{k: ("supports", k) for k in ("span", "mast_offset", "mast_height")},
-    **{k: ("catenary", k) for k in ("contact_wire_height", "system_height", "contact_wire_sag", "messenger_wire_sag",
-                                    "contact_wire_diameter", "messenger_wire_diameter", "stagger", "dropper_spacing")},
-}
-
-
 @dataclass(frozen=True)
 class BlendScene:
     """``scene.builder: blend``: scan the user's own .blend file."""
@@ -529,26 +520,6 @@ def _check_positive(value: float, path: str, allow_zero: bool = False) -> None:
         raise InputError(f"{path}: must be {'>= 0' if allow_zero else '> 0'}, got {value}")
 
 
-def _migrate_railway(data: dict) -> dict:
-    """Move the first railway builder's flat keys (``scene.gauge``, ``scene.length``...) into their sections."""
-    data = dict(data)
-    for key, (section, name) in RAILWAY_LEGACY_KEYS.items():
-        if key in data:
-            target = data[section] = dict(data.get(section) or {})
-            if name in target:
-                raise InputError(f"scene.{key}: also given as scene.{section}.{name}; give one of them")
-            target[name] = data.pop(key)
-    if "length" in data:
-        length = data.pop("length")
-        if isinstance(length, bool) or not isinstance(length, (int, float)) or not length > 0:
-            raise InputError(f"scene.length: expected a number > 0, got {length!r}")
-        track = data["track"] = dict(data.get("track") or {})
-        if {"start", "mid", "end"} & set(track):
-            raise InputError("scene.length: also given as scene.track.start/mid/end; give one of them")
-        track.update(start=[-length / 2, 0.0, 0.0], mid=[0.0, 0.0, 0.0], end=[length / 2, 0.0, 0.0])
-    return data
-
-
 def _stations_or_sensor(scene: SceneConfig, raw_scene, sensor_data: dict) -> SceneConfig:
     """A sensor.position or trajectory given explicitly replaces the railway's default stations;
     stations configured explicitly as well are an error (one of them places the sensor)."""
@@ -567,8 +538,6 @@ def _scene_from_dict(data) -> SceneConfig:
     builder = data.pop("builder", "railway")
     if builder not in BUILDERS:
         raise InputError(f"scene.builder: unknown builder {builder!r}; allowed: {', '.join(BUILDERS)}")
-    if builder == "railway":
-        data = _migrate_railway(data)
     params = from_dict(BUILDERS[builder], data, "scene")
     if isinstance(params, PrimitivesScene):
         for i, shape in enumerate(params.shapes):

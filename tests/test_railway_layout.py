@@ -107,14 +107,6 @@ def test_bad_railway_config_names_its_key(override):
         load_config(None, [override])
 
 
-def test_first_builders_flat_keys_still_work():
-    p = params("scene.length=60", "scene.gauge=1.5", "scene.span=40", "scene.stagger=0.3")
-    assert p.track.start == (-30.0, 0.0, 0.0) and p.track.end == (30.0, 0.0, 0.0)
-    assert (p.track.gauge, p.supports.span, p.catenary.stagger) == (1.5, 40.0, 0.3)
-    with pytest.raises(InputError, match="scene.gauge: also given as scene.track.gauge"):
-        load_config(None, ["scene.gauge=1.5", "scene.track.gauge=1.6"])
-
-
 def test_sensor_driven_detail():
     p = params("scene.track.start=[0, 0, 0]", "scene.track.mid=[400, 30, 0]", "scene.track.end=[800, 0, 0]")
     layout = plan(p, np.random.default_rng(0))
