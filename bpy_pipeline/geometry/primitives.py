@@ -62,12 +62,19 @@ def cylinder(radius: float, height: float, segments: int = 64):
     ring = np.column_stack([np.cos(phi), np.sin(phi)]) * radius
     profile_vertices = np.concatenate([np.column_stack([ring, np.full(segments, z)]) for z in (-height / 2, height / 2)])
     vertices = np.concatenate([profile_vertices, [[0, 0, -height / 2], [0, 0, height / 2]]])
-    j = np.arange(segments)
-    k = (j + 1) % segments
-    s = segments
-    sides = np.concatenate([np.stack([j, k, s + k], 1), np.stack([j, s + k, s + j], 1)])
+    return vertices, capped_ring_triangles(segments)
+
+
+def capped_ring_triangles(sides: int) -> np.ndarray:
+    """``(4 sides, 3)`` int32 triangles of a capped tube whose vertices are: the ``sides`` points of
+    the first ring, those of the second ring (same order, counter-clockwise seen from the second
+    end), the first end's centre, the second end's centre. Faces point outwards."""
+    j = np.arange(sides)
+    k = (j + 1) % sides
+    s = sides
+    walls = np.concatenate([np.stack([j, k, s + k], 1), np.stack([j, s + k, s + j], 1)])
     caps = np.concatenate([np.stack([np.full(s, 2 * s), k, j], 1), np.stack([np.full(s, 2 * s + 1), s + j, s + k], 1)])
-    return vertices, np.concatenate([sides, caps]).astype(np.int32)
+    return np.concatenate([walls, caps]).astype(np.int32)
 
 
 def merge(parts):

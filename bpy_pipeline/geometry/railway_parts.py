@@ -32,12 +32,7 @@ def tube(p0, p1, radius: float, sides: int = 8):
     phi = np.linspace(0, 2 * np.pi, sides, endpoint=False)
     ring = radius * (np.cos(phi)[:, None] * u + np.sin(phi)[:, None] * v)
     vertices = np.concatenate([p0 + ring, p1 + ring, [p0, p1]])
-    j = np.arange(sides)
-    k = (j + 1) % sides
-    s = sides
-    walls = np.concatenate([np.stack([j, k, s + k], 1), np.stack([j, s + k, s + j], 1)])
-    caps = np.concatenate([np.stack([np.full(s, 2 * s), k, j], 1), np.stack([np.full(s, 2 * s + 1), s + j, s + k], 1)])
-    return vertices, np.concatenate([walls, caps]).astype(np.int32)
+    return vertices, primitives.capped_ring_triangles(sides)
 
 
 def bar(p0, p1, size: float):
