@@ -34,3 +34,8 @@ def world_to_sensor(points: np.ndarray, pose: np.ndarray) -> np.ndarray:
 def transform_points(points: np.ndarray, matrix: np.ndarray) -> np.ndarray:
     """``(n, 3)`` points through a ``(4, 4)`` affine matrix."""
     return points @ matrix[:3, :3].T + matrix[:3, 3]
+
+
+def rotate(vectors: np.ndarray, rotation: np.ndarray) -> np.ndarray:
+    """``(n, 3)`` vectors turned by one ``(3, 3)`` rotation, or by ``(n, 3, 3)`` rotations, one per vector."""
+    return vectors @ rotation.T if rotation.ndim == 2 else np.einsum("nij,nj->ni", rotation, vectors)

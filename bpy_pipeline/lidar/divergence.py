@@ -43,8 +43,9 @@ from typing import Iterable, Iterator, Literal
 import numpy as np
 
 from ..errors import InputError
+from ..geometry.transforms import rotate
 from .scanner import collect, scan_chunk
-from .sensors import Pattern
+from .sensors import Pattern, pattern_chunks
 
 GOLDEN_ANGLE = math.pi * (3.0 - math.sqrt(5.0))  # radians
 MAX_SUB_RAYS = 1024
@@ -224,31 +225,27 @@ def scan_footprint_chunks(
     world_to_local = np.linalg.inv(caster.frame)
     k = divergence.rays
     beams_per_chunk = max(1, chunk_rays // k)
-    for pattern in [patterns] if isinstance(patterns, Pattern) else patterns:
-        for start in range(0, len(pattern), beams_per_chunk):
-            s = slice(start, start + beams_per_chunk)
-            beams = Pattern(pattern.directions[s], pattern.ring[s], pattern.time[s], None if pattern.origins is None else pattern.origins[s])
-            to_local = world_to_local @ (pose(beams.time) if callable(pose) else pose)  # (4, 4) or (b, 4, 4)
-            sub, _ = expand(beams, divergence)
-            sub_to_local = to_local if to_local.ndim == 2 else np.repeat(to_local, k, axis=0)
-            points, facts, ray = scan_chunk(caster, buffers, sub, sub_to_local, min_range, max_range, max_bounces, ghost_semantic, ideal, **trace)
-            beam = ray // k
-            row, distance, energy = reduce_returns(beam, points["range"].astype(np.float64), points["intensity"].astype(np.float64), k, divergence.pick, divergence.separation)
-            out, out_facts, beam = points[row], facts[row], beam[row]
-            strongest = out["intensity"].astype(np.float64)
-            share = np.divide(energy, strongest, out=np.zeros_like(energy), where=strongest > 0)  # <= 1
-            out_facts["gain"] = out_facts["gain"] * share  # so reflectivity x cos x gain is the return's energy
-            out["range"], out["intensity"] = distance, energy
-            if not ideal:  # along the beam's central direction at the return's range
-                rotation = to_local[:3, :3] if to_local.ndim == 2 else to_local[beam, :3, :3]
-                translation = to_local[:3, 3] if to_local.ndim == 2 else to_local[beam, :3, 3]
-                rotate = (lambda x: x @ rotation.T) if rotation.ndim == 2 else (lambda x: np.einsum("nij,nj->ni", rotation, x))
-                origin = translation if beams.origins is None else translation + rotate(beams.origins[beam])
-                central = rotate(beams.directions[beam])
-                xyz = origin + central * distance[:, None]
-                out["x"], out["y"], out["z"] = xyz.T
-                out_facts["direction"] = central
-            yield out, out_facts
+    for beams in pattern_chunks(patterns, beams_per_chunk):
+        to_local = world_to_local @ (pose(beams.time) if callable(pose) else pose)  # (4, 4) or (b, 4, 4)
+        sub, _ = expand(beams, divergence)
+        sub_to_local = to_local if to_local.ndim == 2 else np.repeat(to_local, k, axis=0)
+        points, facts, ray = scan_chunk(caster, buffers, sub, sub_to_local, min_range, max_range, max_bounces, ghost_semantic, ideal, **trace)
+        beam = ray // k
+        row, distance, energy = reduce_returns(beam, points["range"].astype(np.float64), points["intensity"].astype(np.float64), k, divergence.pick, divergence.separation)
+        out, out_facts, beam = points[row], facts[row], beam[row]
+        strongest = out["intensity"].astype(np.float64)
+        share = np.divide(energy, strongest, out=np.zeros_like(energy), where=strongest > 0)  # <= 1
+        out_facts["gain"] = out_facts["gain"] * share  # so reflectivity x cos x gain is the return's energy
+        out["range"], out["intensity"] = distance, energy
+        if not ideal:  # along the beam's central direction at the return's range
+            rotation = to_local[:3, :3] if to_local.ndim == 2 else to_local[beam, :3, :3]
+            translation = to_local[:3, 3] if to_local.ndim == 2 else to_local[beam, :3, 3]
+            origin = translation if beams.origins is None else translation + rotate(beams.origins[beam], rotation)
+            central = rotate(beams.directions[beam], rotation)
+            xyz = origin + central * distance[:, None]
+            out["x"], out["y"], out["z"] = xyz.T
+            out_facts["direction"] = central
+        yield out, out_facts
 
 
 def scan_footprint(*args, **kwargs) -> tuple[np.ndarray, np.ndarray]:

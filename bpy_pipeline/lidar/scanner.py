@@ -26,9 +26,10 @@ from typing import Iterable, Iterator
 import numpy as np
 
 from ..buffers import MATERIAL_ID, SceneBuffers
+from ..geometry.transforms import rotate
 from .points import BEAM_DTYPE, POINT_DTYPE, empty_points
 from .raycast import RayCaster
-from .sensors import Pattern
+from .sensors import Pattern, pattern_chunks
 
 DIFFUSE, MIRROR, GLASS, ABSORBER = (MATERIAL_ID[name] for name in ("diffuse", "mirror", "glass", "absorber"))
 # Re-launch offset off a mirror or glass surface, per metre of the largest local coordinate of
@@ -272,9 +273,8 @@ def scan_chunk(
         beams = trace_beams(caster, buffers, origin, directions, min_range, max_range, max_bounces, directions.astype(np.float32), surfaces, rng)
     else:
         rotation, translation = sensor_to_local[..., :3, :3], sensor_to_local[..., :3, 3]
-        rotate = (lambda v: v @ rotation.T) if rotation.ndim == 2 else (lambda v: np.einsum("nij,nj->ni", rotation, v))
-        world_d = rotate(directions)
-        origin = translation if pattern.origins is None else translation + rotate(pattern.origins)
+        world_d = rotate(directions, rotation)
+        origin = translation if pattern.origins is None else translation + rotate(pattern.origins, rotation)
         beams = trace_beams(caster, buffers, origin, world_d, min_range, max_range, max_bounces, None, surfaces, rng)
     objects = buffers.objects
     obj = buffers.triangle_object[beams.triangle]
@@ -335,15 +335,12 @@ def scan_chunks(
     count; each chunk's Embree queries use every core (:meth:`RayCaster.intersect`).
     """
     world_to_local = np.linalg.inv(caster.frame)
-    for pattern in [patterns] if isinstance(patterns, Pattern) else patterns:
-        for start in range(0, len(pattern), chunk_rays):
-            s = slice(start, start + chunk_rays)
-            chunk = Pattern(pattern.directions[s], pattern.ring[s], pattern.time[s], None if pattern.origins is None else pattern.origins[s])
-            poses = pose(chunk.time) if callable(pose) else pose
-            points, beam, _ = scan_chunk(
-                caster, buffers, chunk, world_to_local @ poses, min_range, max_range, max_bounces, ghost_semantic, ideal, surfaces=surfaces, rng=rng
-            )
-            yield points, beam
+    for chunk in pattern_chunks(patterns, chunk_rays):
+        poses = pose(chunk.time) if callable(pose) else pose
+        points, beam, _ = scan_chunk(
+            caster, buffers, chunk, world_to_local @ poses, min_range, max_range, max_bounces, ghost_semantic, ideal, surfaces=surfaces, rng=rng
+        )
+        yield points, beam
 
 
 def collect(chunks: Iterable[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:

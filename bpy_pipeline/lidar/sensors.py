@@ -43,7 +43,7 @@ import math
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
-from typing import Callable, Iterator, Literal
+from typing import Callable, Iterable, Iterator, Literal
 
 import numpy as np
 import yaml
@@ -131,6 +131,14 @@ class Pattern:
 
     def __len__(self) -> int:
         return len(self.directions)
+
+
+def pattern_chunks(patterns: Pattern | Iterable[Pattern], chunk_rays: int) -> Iterator[Pattern]:
+    """One pattern, or consecutive chunks of one, cut into chunks of at most ``chunk_rays`` rays, in order."""
+    for pattern in [patterns] if isinstance(patterns, Pattern) else patterns:
+        for start in range(0, len(pattern), chunk_rays):
+            s = slice(start, start + chunk_rays)
+            yield Pattern(pattern.directions[s], pattern.ring[s], pattern.time[s], None if pattern.origins is None else pattern.origins[s])
 
 
 # ----------------------------------------------------------------------------- presets and overrides
