@@ -1,0 +1,76 @@
+"""The golden jobs: small runs of every builder whose frames must keep their bytes across refactors.
+
+``python tests/golden/jobs.py record`` runs each job and writes ``golden.json`` beside this file:
+per frame, the sha256 of the point records (canonical :data:`POINT_DTYPE` bytes, independent of
+the file formats) and of the SemanticKITTI files, with the versions that produced them.
+``tests/test_golden.py`` runs the same jobs and compares.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parents[1]
+GOLDEN = HERE / "golden.json"
+
+# name -> run.py arguments (the default job at a coarser step so the check stays quick)
+JOBS = {
+    "default": ["--set", "sensor.horizontal_resolution_deg=0.5", "--set", "sensor.vertical_resolution_deg=0.5"],
+    "parking": ["--set", "scene.builder=parking", "--frames", "3", "--seed", "7"],
+    "industrial_hall": ["--set", "scene.builder=industrial_hall", "--frames", "2", "--seed", "5", "--set", "sensor.columns=512"],
+    "primitives": ["--set", "scene.builder=primitives", "--set", "sensor.preset=vlp16", "--set", "sensor.position=[0,0,1]", "--set", "effects.noise.sigma=0.01", "--set", "effects.drop.model=uniform", "--set", "effects.drop.probability=0.1"],
+}
+
+
+def versions() -> dict:
+    import bpy
+    import embreex
+    import numpy
+
+    return {"blender": bpy.app.version_string, "numpy": numpy.__version__, "embreex": getattr(embreex, "__version__", "unknown")}
+
+
+def digests(out: Path) -> dict:
+    """{frame file stem: {"points": sha256 of the canonical records, "bin": ..., "label": ...}}."""
+    sys.path.insert(0, str(ROOT))
+    from bpy_pipeline.io import read_ply
+    from bpy_pipeline.lidar.points import POINT_DTYPE
+
+    result = {}
+    for ply in sorted((out / "ply").glob("*.ply")):
+        records = read_ply(ply)
+        canonical = __import__("numpy").empty(len(records), POINT_DTYPE)
+        for name in POINT_DTYPE.names:
+            canonical[name] = records[name]
+        entry = {"points": hashlib.sha256(canonical.tobytes()).hexdigest()}
+        for kind, rel in (("bin", f"sequences/00/velodyne/{ply.stem}.bin"), ("label", f"sequences/00/labels/{ply.stem}.label")):
+            path = out / rel
+            if path.exists():
+                entry[kind] = hashlib.sha256(path.read_bytes()).hexdigest()
+        result[ply.stem] = entry
+    return result
+
+
+def run_job(name: str, out: Path, extra: list[str] = ()) -> dict:
+    """Run job ``name`` into ``out`` (PLY and SemanticKITTI, ideal effects beyond what the job sets)."""
+    args = [sys.executable, str(ROOT / "run.py"), "--out", str(out), *JOBS[name], "--set", "output.formats=[ply,semantickitti]", *extra]
+    done = subprocess.run(args, cwd=ROOT, capture_output=True, text=True, timeout=600)
+    if done.returncode != 0:
+        raise RuntimeError(f"{name}: {done.stderr.strip()}")
+    return digests(out)
+
+
+if __name__ == "__main__" and sys.argv[1:] == ["record"]:
+    import tempfile
+
+    record = {"versions": versions(), "jobs": {}}
+    with tempfile.TemporaryDirectory() as tmp:
+        for name in JOBS:
+            record["jobs"][name] = run_job(name, Path(tmp) / name)
+            print(name, record["jobs"][name])
+    GOLDEN.write_text(json.dumps(record, indent=1) + "\n")
