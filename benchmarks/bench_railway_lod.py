@@ -58,7 +58,7 @@ def measure(label: str, overrides: list[str], repeat: int) -> dict:
     for _ in range(repeat):
         bpy.ops.wm.read_factory_settings(use_empty=True)
         start = time.perf_counter()
-        layout = build_scene(config.scene, frame_rng(0, 0), view)
+        layout = build_scene(config.scene, frame_rng(0, 0), view).scene
         builds.append(time.perf_counter() - start)
         buffers = export_scene(table, keep_within=(sensor_pose(config)[:3, 3], config.sensor.spec.max_range))
         start = time.perf_counter()

@@ -26,19 +26,19 @@ def frames(config, rebuild: bool):
     """``[(wall_s, timings, points, boxes), ...]`` of one run of ``config``."""
     import bpy
 
-    from bpy_pipeline.pipeline import run_frames
-    from bpy_pipeline.scenes import reset_built_scenes
+    from bpy_pipeline.pipeline import Run, make_frame
+    from bpy_pipeline.dataset import Dataset
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
-    reset_built_scenes()
     out = []
-    with tempfile.TemporaryDirectory() as folder:
+    with tempfile.TemporaryDirectory() as folder, Dataset.open(folder, config) as dataset:
+        run = Run(config)
         start = time.perf_counter()
-        for result in run_frames(config, folder):
-            entry = result.manifest["frames"][-1]
+        for index in range(config.frames):
+            entry = dataset.commit(make_frame(run, index))
             out.append((time.perf_counter() - start, entry["timings_s"], entry["points"], len(entry.get("boxes", []))))
             if rebuild:
-                reset_built_scenes()  # the next frame builds its scene from nothing
+                run.keep.clear()  # the next frame builds its scene from nothing
             start = time.perf_counter()
     return out
 

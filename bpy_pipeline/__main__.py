@@ -1,6 +1,9 @@
-"""``python -m bpy_pipeline COMMAND ...``: tools around the pipeline (``run.py`` generates frames).
+"""``bpy-pipeline COMMAND ...`` (or ``python -m bpy_pipeline COMMAND ...``): the pipeline and its tools.
 
 Commands:
+
+``run [--config FILE] [--out DIR] ...``
+    Generate frames, as ``run.py`` does (:mod:`.cli` lists the options).
 
 ``sensors [list]``
     The sensor presets, one line each: pattern, channels, elevation range, columns, rays a
@@ -88,6 +91,13 @@ def save_rays(spec: sensors.SensorSpec, path: str | Path, chunk_rays: int = 1 <<
     return total
 
 
+def _add_run(sub) -> None:
+    from .cli import add_run_arguments, run_main
+
+    p = sub.add_parser("run", help="generate labeled frames (as run.py)", description="Generate labeled LiDAR frames from a config.")
+    add_run_arguments(p).set_defaults(func=run_main)
+
+
 def _add_sensors(sub) -> None:
     p = sub.add_parser("sensors", help="list the sensor presets or show one", description="List the sensor presets or show one.")
     p.set_defaults(func=list_sensors)
@@ -172,11 +182,11 @@ def _add_fit(sub) -> None:
     p.set_defaults(func=fit_effects)
 
 
-COMMANDS = [_add_sensors, _add_fit]
+COMMANDS = [_add_run, _add_sensors, _add_fit]
 
 
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m bpy_pipeline", description="Tools around the bpy_pipeline LiDAR generator (frames: run.py).")
+    p = argparse.ArgumentParser(prog="bpy-pipeline", description="Synthetic labeled LiDAR point clouds: generate frames and the tools around them.")
     sub = p.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for add in COMMANDS:
         add(sub)
@@ -191,6 +201,9 @@ def main(argv: list[str] | None = None) -> int:
     except InputError as err:
         print(f"error: {err}", file=sys.stderr)
         return err.exit_code
+    except KeyboardInterrupt:
+        print("interrupted: every frame written so far is committed; --resume continues the run", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":

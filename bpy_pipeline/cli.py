@@ -1,7 +1,10 @@
-"""The command line of run.py: ``[--config FILE] [--out DIR] [--seed N] [--frames N] [--set key.path=value ...]``.
+"""The command line of run.py and ``bpy-pipeline run``.
 
-Works the same under ``python run.py ...`` and ``blender --background --python run.py -- ...``
-(Blender's own arguments come before ``--`` and are ignored).
+``[--config FILE] [--out DIR] [--seed N] [--frames N] [--set key.path=value ...]`` plus the dataset
+options: ``--frames-range A:B``, ``--shard i/n``, ``--resume``, ``--overwrite``, ``--workers N``,
+``--ray auto|ADDRESS``, ``--threads N``. Works the same under ``python run.py ...`` and
+``blender --background --python-exit-code 1 --python run.py -- ...`` (Blender's own arguments
+come before ``--`` and are ignored). Bad input prints one line and exits with code 2.
 """
 
 from __future__ import annotations
@@ -17,37 +20,130 @@ def script_arguments(argv: list[str]) -> list[str]:
     return argv[argv.index("--") + 1 :] if "--" in argv else argv[1:]
 
 
-def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="run.py", description="Generate labeled LiDAR frames from a procedural Blender scene.")
+def add_run_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     p.add_argument("--config", help="YAML config file (default: the embedded railway scene)")
     p.add_argument("--out", default="out", help="output folder (default: ./out)")
     p.add_argument("--seed", type=int, help="run seed (overrides the config)")
-    p.add_argument("--frames", type=int, help="number of frames (overrides the config)")
+    p.add_argument("--frames", type=int, help="number of frames of the run (overrides the config)")
     p.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE", help="override one config key (repeatable)")
+    p.add_argument("--frames-range", metavar="A:B", help="make only frames A .. B-1 of the run (same bytes as in the full run)")
+    p.add_argument("--shard", metavar="I/N", help="make only the I-th of N equal contiguous parts of the run's frames (0-based)")
+    mode = p.add_mutually_exclusive_group()
+    mode.add_argument("--resume", action="store_true", help="continue the run in --out (same config and seed): keep its verified frames, make the rest")
+    mode.add_argument("--overwrite", action="store_true", help="remove the run in --out first")
+    p.add_argument("--join", action="store_true", help=argparse.SUPPRESS)  # a worker: add frames to the run another process holds
+    p.add_argument("--workers", type=int, default=1, help="local worker processes, each with its own Blender (default 1)")
+    p.add_argument("--ray", metavar="ADDRESS", help="send frame ranges to a Ray cluster: auto, or HOST:PORT (pip install .[distributed])")
+    p.add_argument("--threads", type=int, help="ray-casting threads per process (default: the cores available, split between workers)")
     return p
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Run the pipeline; returns the process exit code (2 on bad input)."""
-    args = parser().parse_args(script_arguments(sys.argv if argv is None else argv))
+def parser() -> argparse.ArgumentParser:
+    return add_run_arguments(argparse.ArgumentParser(prog="run.py", description="Generate labeled LiDAR frames from a procedural Blender scene."))
+
+
+def frame_selection(args, frames: int) -> list[int]:
+    """The frame indices ``--frames-range`` and ``--shard`` select of a run of ``frames`` frames."""
+    selected = list(range(frames))
+    if args.frames_range:
+        try:
+            a, b = (int(v) if v else d for v, d in zip(args.frames_range.split(":"), (0, frames)))
+        except ValueError:
+            raise InputError(f"--frames-range: expected A:B (frame indices, B excluded), got {args.frames_range!r}") from None
+        if not 0 <= a < b <= frames:
+            raise InputError(f"--frames-range: expected 0 <= A < B <= {frames} (the run's frames), got {args.frames_range}")
+        selected = selected[a:b]
+    if args.shard:
+        try:
+            i, n = (int(v) for v in args.shard.split("/"))
+        except ValueError:
+            raise InputError(f"--shard: expected I/N (the I-th of N parts, 0-based), got {args.shard!r}") from None
+        if not 0 <= i < n:
+            raise InputError(f"--shard: expected 0 <= I < N, got {args.shard}")
+        selected = split(selected, n)[i]
+    return selected
+
+
+def split(frames: list[int], parts: int) -> list[list[int]]:
+    """``frames`` in ``parts`` contiguous runs of nearly equal length (the first ones one longer)."""
+    size, extra = divmod(len(frames), parts)
+    out, start = [], 0
+    for k in range(parts):
+        end = start + size + (k < extra)
+        out.append(frames[start:end])
+        start = end
+    return out
+
+
+def load_run_config(args):
+    """The run's config from ``--config`` and the overrides, or from ``--out``'s manifest for a worker (``--join``)."""
+    from .config import config_from_dict, load_config
+
+    if args.join:
+        from .io import read_manifest
+
+        return config_from_dict(read_manifest(args.out)["config"])
     overrides = list(args.set)
     if args.seed is not None:
         overrides.append(f"seed={args.seed}")
     if args.frames is not None:
         overrides.append(f"frames={args.frames}")
-    try:
-        from .config import load_config
+    if args.threads is not None:
+        overrides.append(f"threads={args.threads}")
+    return load_config(args.config, overrides)
 
-        config = load_config(args.config, overrides)
+
+def progress(total: int):
+    """A per-frame log function: a tqdm bar on a terminal (frames done, rate, ETA), else one line per frame."""
+    if sys.stderr.isatty():
         try:
-            import bpy
+            from tqdm import tqdm
         except ImportError:
-            raise InputError("bpy: Blender's Python module is not installed; pip install 'bpy==4.5.*' (Python 3.11), or run blender --background --python run.py -- ...") from None
-        bpy.ops.wm.read_factory_settings(use_empty=True)
-        from .pipeline import run
+            tqdm = None
+        if tqdm is not None:
+            bar = tqdm(total=total, unit="frame", file=sys.stderr)
 
-        run(config, args.out)
+            def log(text: str) -> None:
+                if text.startswith("frame "):
+                    bar.update(1)
+                    bar.set_postfix_str(text.split(": ", 1)[-1][:60])
+                else:
+                    bar.write(text)
+
+            return log
+    return lambda text: print(text, file=sys.stderr if text.startswith(("warning", "note")) else sys.stdout, flush=True)
+
+
+def run_main(args) -> int:
+    """``run``: make the selected frames of the run into ``--out``; returns the exit code."""
+    config = load_run_config(args)
+    frames = frame_selection(args, config.frames)
+    mode = "join" if args.join else "resume" if args.resume else "overwrite" if args.overwrite else "new"
+    if args.workers < 1:
+        raise InputError(f"--workers: must be >= 1, got {args.workers}")
+    if args.workers > 1 or args.ray:
+        from .parallel import run_parallel
+
+        return run_parallel(config, args.out, frames, mode, workers=args.workers, ray_address=args.ray, log=progress(len(frames)))
+    try:
+        import bpy
+    except ImportError:
+        raise InputError("bpy: Blender's Python module is not installed; pip install 'bpy==4.5.*' (Python 3.11), or run blender --background --python-exit-code 1 --python run.py -- ...") from None
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    from .pipeline import run
+
+    run(config, args.out, log=progress(len(frames)), frames=frames, mode=mode)
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the pipeline; returns the process exit code (2 on bad input)."""
+    args = parser().parse_args(script_arguments(sys.argv if argv is None else argv))
+    try:
+        return run_main(args)
     except InputError as err:
         print(f"error: {err}", file=sys.stderr)
         return err.exit_code
-    return 0
+    except KeyboardInterrupt:
+        print("interrupted: every frame written so far is committed; --resume continues the run", file=sys.stderr)
+        return 130

@@ -24,304 +24,26 @@ from .lidar.grid import check_grid, image_shape
 from .lidar.mirror_sensor import check_reflector, load_edge_mask
 from .lidar.platform import Trajectory
 from .lidar.sensors import SensorSpec, frame_time, mount_offset, resolve_sensor
-from .schema import convert, from_dict, to_plain
+from .buffers import MATERIALS  # noqa: F401  (the panel's list)
+from .builders import BUILDERS as BUILDER_REGISTRY
+from .builders.railway import RailwayScene
+from .io.writers import frame_writers
+from .schema import check_positive, convert, from_dict, to_plain
 
 Vec3 = tuple[float, float, float]
 DEFAULT_SENSOR = {"preset": "railway_tls", "sampling_factor": 0.25}
-MATERIALS = ("diffuse", "mirror", "glass", "absorber")
-Material = Literal["diffuse", "mirror", "glass", "absorber"]
 
 
-# ----------------------------------------------------------------------------- scene builders
-@dataclass(frozen=True)
-class Shape:
-    """One shape of the ``primitives`` builder.
-
-    ``size``: plane and box, edge length (a number, or [x, y] / [x, y, z]); sphere, radius;
-    cylinder, [radius, height]. A plane's normal is +Z before rotation; rotations are
-    Blender's XYZ Euler angles in degrees. ``segments`` tessellates spheres and cylinders.
-    """
-
-    type: Literal["plane", "box", "sphere", "cylinder"]
-    size: float | list[float] = 1.0
-    position: Vec3 = (0.0, 0.0, 0.0)
-    rotation_deg: Vec3 = (0.0, 0.0, 0.0)
-    class_name: str = field(default="unlabeled", metadata={"key": "class"})
-    material: Material = "diffuse"
-    reflectivity: float = 0.5
-    segments: int = 64
-    name: str = ""
-
-
-@dataclass(frozen=True)
-class PrimitivesScene:
-    """``scene.builder: primitives``: a ground plane, a box and a sphere unless shapes are given."""
-
-    shapes: list[Shape] = field(
-        default_factory=lambda: [
-            Shape("plane", [40.0, 40.0], class_name="ground", name="ground"),
-            Shape("box", [2.0, 2.0, 2.0], (8.0, 0.0, 1.0), class_name="wall", name="box"),
-            Shape("sphere", 1.0, (0.0, 8.0, 1.0), class_name="person", reflectivity=0.8, name="sphere"),
-        ]
-    )
-
-
-@dataclass(frozen=True)
-class RailProfile:
-    """A simplified flat-bottom rail: three stacked rectangles (m). The default weighs about 60 kg/m
-    (7.63e-3 m^2 of steel; UIC 60: 172 mm high, 150 mm foot, 72 mm head, 16.5 mm web)."""
-
-    foot_width: float = 0.150
-    foot_height: float = 0.018
-    web_width: float = 0.0165
-    web_height: float = 0.111
-    head_width: float = 0.072
-    head_height: float = 0.043
-
-
-@dataclass(frozen=True)
-class RailwayTrack:
-    """``scene.track``: the railway thesis's table 4.1, in metres (the thesis gives no values; these are
-    European standard-gauge ones). The alignment is the arc through start, mid and end (straight when
-    they are collinear), at formation level (the underside of the ballast); tracks are spread evenly
-    across it, track 0 the rightmost in the direction of travel."""
-
-    start: Vec3 = (-75.0, 0.0, 0.0)
-    mid: Vec3 = (0.0, 0.0, 0.0)
-    end: Vec3 = (75.0, 0.0, 0.0)
-    gauge: float = 1.435  # between the inner faces of the rail heads
-    rail: RailProfile = field(default_factory=RailProfile)
-    sleeper_spacing: float = 0.6
-    sleeper_length: float = 2.6  # concrete monoblock sleeper (B70-like): across the track
-    sleeper_width: float = 0.26  # along the track
-    sleeper_height: float = 0.22
-    ballast_height: float = 0.35  # under the sleepers
-    ballast_shoulder: float = 0.5  # beyond the sleeper ends
-    ballast_slope: float = 1.5  # horizontal per vertical
-    tracks: int = 1  # 1..5
-    track_spacing: float = 4.0  # between neighbouring track centrelines
-    embankment_height: float = 0.0  # formation above the surrounding ground
-    embankment_slope: float = 1.5  # horizontal per vertical
-    embankment_berm: float = 1.0  # flat formation beyond the ballast toe
-    ground_width: float = 80.0  # flat ground strip along the alignment
-
-
-@dataclass(frozen=True)
-class RailwaySupports:
-    """``scene.supports``: masts (H-section or lattice) with cantilevers and registration arms, or portal
-    gantries, every ``span`` +- ``span_jitter`` metres along the alignment (the thesis: 40 to 65 m).
-    ``layout``: ``single`` one mast per support on ``side`` carrying up to two tracks; ``both_sides`` a mast
-    on each side, each carrying the nearer half of the tracks (up to four); ``gantry`` a portal over
-    2 to 5 tracks; ``auto`` single for one track, single or both_sides (even odds) for two, gantry beyond.
-    On a curve of radius R (in plan) spans shorten to sqrt(8 R (stagger + 0.4 m)), so the contact wire,
-    pulled outwards at every support, strays at most 0.4 m inside the track at mid-span."""
-
-    layout: Literal["auto", "single", "both_sides", "gantry"] = "auto"
-    side: Literal["right", "left"] = "right"
-    span: float = 50.0
-    span_jitter: float = 5.0
-    mast_type: Literal["h_section", "lattice", "mixed"] = "h_section"
-    mast_offset: float = 3.2  # from the centreline of the nearest track
-    mast_height: float = 8.5  # above the ground it stands on
-
-
-@dataclass(frozen=True)
-class RailwayCatenary:
-    """``scene.catenary``: the catenary manager of the thesis (table 4.2), in metres. Sag of a wire over a
-    span L: f(L) = <wire>_sag (L / sag_reference_length) ^ sag_exponent; droppers n = max(1, floor(L /
-    dropper_spacing)) per contact wire. ``points_per_10m`` samples the wires when ``scene.detail.mode`` is
-    ``fixed``; the sensor-driven default samples them as finely as the sensor can tell apart."""
-
-    enabled: bool = True  # ENABLE_CATENARY: contact and messenger wires, droppers
-    feeders: bool = True  # ENABLE_FEEDERS
-    earth_wire: bool = True  # ENABLE_CdPA
-    contact_wire_height: float = 5.5  # above the rail heads
-    system_height: float = 1.4  # messenger above the contact wire at the supports (1.1-1.8)
-    stagger: float = 0.2  # contact wire zig-zag at the supports, +- (0.2-0.3)
-    double_contact_probability: float = 0.0  # FC_DOUBLE_PROBABILITY, per track
-    double_contact_spacing: float = 0.04  # FC_DOUBLE_SPACING: between the two contact wires
-    sag_reference_length: float = 50.0  # SAG_REFERENCE_LENGTH
-    sag_exponent: float = 2.0  # SAG_EXPONENT_ALPHA (2: sag grows with L^2 at a fixed tension)
-    contact_wire_sag: float = 0.05  # SAG_* at the reference length (contact wire: pre-sag, 1/1000 of the span)
-    messenger_wire_sag: float = 0.5
-    feeder_sag: float = 1.0
-    earth_wire_sag: float = 0.8
-    contact_wire_diameter: float = 0.012  # DIAM_*: 107 mm^2 grooved copper
-    messenger_wire_diameter: float = 0.011
-    feeder_diameter: float = 0.024
-    earth_wire_diameter: float = 0.012
-    dropper_diameter: float = 0.005
-    dropper_spacing: float = 5.0  # PENDULUM_SPACING
-    dropper_jitter: float = 0.2  # PENDULUM_JITTER, +- along the span
-    points_per_10m: int = 20  # CURVE_RESOLUTION_POINTS_PER_10M, for scene.detail.mode fixed
-
-
-@dataclass(frozen=True)
-class RailwayStations:
-    """``scene.stations``: static scanner stations beside the track, ``offset`` metres beyond the outermost
-    track on ``side``, on the ground there, facing along the track (the preset's mount_height lifts the
-    sensor above it: 2 m for railway_tls). Frame k scans from station k mod n, and one built line serves
-    n frames in a row (frames = stations scans one line from every station). ``chainages`` (m from the
-    start point) place them; else ``count`` stations sit at the middles of equal parts of the line.
-    ``count: 0`` uses sensor.position instead."""
-
-    count: int = 1
-    chainages: list[float] = field(default_factory=list)
-    side: Literal["right", "left"] = "left"  # the masts stand on the right: the scanner sees them across the track
-    offset: float = 4.0
-
-
-@dataclass(frozen=True)
-class RailwayDetail:
-    """``scene.detail``: ``sensor`` (the default) models no finer than the scanner resolves: wire sampling
-    and cross-sections within half the beam spacing at their distance, ballast stones of ``stone_size``
-    only where two beams fall on one, nothing beyond the sensor's range. ``fixed`` samples wires at
-    catenary.points_per_10m, builds the whole line and no stones."""
-
-    mode: Literal["sensor", "fixed"] = "sensor"
-    stones: bool = True
-    stone_size: float = 0.045  # m, ballast grading 31.5/63 mm
-
-
-@dataclass(frozen=True)
-class RailwayScene:
-    """``scene.builder: railway``: tracks on an arc or a straight line, supports, catenary, scanner stations."""
-
-    track: RailwayTrack = field(default_factory=RailwayTrack)
-    supports: RailwaySupports = field(default_factory=RailwaySupports)
-    catenary: RailwayCatenary = field(default_factory=RailwayCatenary)
-    stations: RailwayStations = field(default_factory=RailwayStations)
-    detail: RailwayDetail = field(default_factory=RailwayDetail)
-
-    @property
-    def place_sensor(self) -> bool:
-        """True when the stations place the sensor (then sensor.position is not used, nor saved)."""
-        return self.stations.count > 0 or bool(self.stations.chainages)
-
-
-@dataclass(frozen=True)
-class BlendScene:
-    """``scene.builder: blend``: scan the user's own .blend file."""
-
-    path: str = ""
-
-
-@dataclass(frozen=True)
-class Distribution:
-    """A random quantity: ``normal`` (``mean``, ``std``; truncated to ``[min, max]`` by redrawing, a
-    count rounded and clipped instead) or ``uniform`` on ``[min, max]`` (geometry/placement.py)."""
-
-    kind: Literal["normal", "uniform"] = "normal"
-    mean: float = 0.0
-    std: float = 1.0
-    min: float = 0.0
-    max: float = 1.0
-
-
-@dataclass(frozen=True)
-class ParkingScene:
-    """``scene.builder: parking``: one level of an underground car park (the parking paper, seed 000), in metres.
-
-    A driveway along x with parking bays on both sides, a pillar between every ``pillar_every``
-    bays on the bays' front line, walls, floor and ceiling slabs, a ramp to the next level in
-    place of the last bays on the +y side (``ramp_length`` 0: none). The sensor rides a cleaning
-    robot along the driveway centre: ``sensor_height`` above the floor (the paper's VLP-16:
-    1.51 m), ``sensor_start`` from the driveway's start at frame 0, ``sensor_step`` further each
-    frame, back to the start past the end. Cars per frame follow the paper's insertion rule
-    (geometry/placement.py): ``cars`` of them (N(5, 4) clipped at 0), each at a distance from the
-    sensor drawn from ``car_distance`` (the paper: N(10, 20) m up to 20 m), height from
-    ``car_height`` (U(1.55, 1.70) m), a random yaw, turned ``rotation_step_deg`` about the sensor up
-    to ``rotations`` times; ``max_consecutive_failures`` objects in a row that fit nowhere end it.
-    A car closer than ``near_rejection_distance`` is refused outright with
-    ``near_rejection_probability`` (the paper's refinement: 10 % under 5 m). A car must keep
-    ``car_clearance`` from pillars, ramp and other cars and show at least ``min_visible_fraction``
-    of its sensor-facing side, without hiding more than that of any car placed before it.
-    ``placement: bays`` snaps each candidate into the nearest free bay instead of placing it freely.
-    """
-
-    length: float = 60.0
-    driveway_width: float = 6.5
-    bay_width: float = 2.5
-    bay_depth: float = 5.0
-    ceiling_height: float = 2.6
-    slab_thickness: float = 0.3
-    wall_thickness: float = 0.3
-    pillar_size: float = 0.6
-    pillar_every: int = 3
-    ramp_length: float = 16.0
-    place_sensor: bool = True
-    sensor_height: float = 1.51
-    sensor_start: float = 4.0
-    sensor_step: float = 2.0
-    cars: Distribution = field(default_factory=lambda: Distribution("normal", 5.0, 4.0, 0.0, 40.0))
-    car_distance: Distribution = field(default_factory=lambda: Distribution("normal", 10.0, 20.0, 2.5, 20.0))
-    car_height: Distribution = field(default_factory=lambda: Distribution("uniform", 1.625, 0.0, 1.55, 1.70))
-    near_rejection_distance: float = 5.0
-    near_rejection_probability: float = 0.1
-    placement: Literal["free", "bays"] = "free"
-    rotation_step_deg: float = 10.0
-    rotations: int = 36
-    max_consecutive_failures: int = 10
-    min_visible_fraction: float = 0.3
-    car_clearance: float = 0.3
-
-
-@dataclass(frozen=True)
-class IndustrialHallScene:
-    """``scene.builder: industrial_hall``: a factory hall watched from above (the human-robot paper, seed 002), in metres.
-
-    Floor, walls and ceiling; ``desk_rows`` x ``desks_per_row`` desks (``desk_size`` length x depth,
-    ``desk_height`` high: the paper finds seats at about 0.7 m) west of the centre, ``shelves``
-    shelf racks (``shelf_size`` length x depth x height, ``shelf_levels`` boards) along the +y wall.
-    The sensor hangs at ``sensor_height`` above the hall's centre (``place_sensor``). Per frame,
-    within ``area_radius`` of the point below it (0: anywhere; the default mirror sensor sees a
-    cone of 44.5 degrees around the nadir, a floor disc of 4.4 m radius from 4.5 m):
-    ``robots`` six-axis arms (assets_manifest/robot_arm.yaml, or ``robot_model``) on the floor with
-    random joint angles within their limits and no self-collision, then ``people`` persons of
-    heights drawn from ``person_height``, in poses drawn with ``poses`` weights (standing, walking,
-    sitting on a desk edge, crouching), on walkable floor or desk tops, ``person_clearance`` apart
-    from each other, the robots and the furniture. ``assets``: a manifest of external person
-    meshes (empty: assets_manifest/assets.yaml); the procedural people are used when it lists none.
-    """
-
-    length: float = 16.0
-    width: float = 12.0
-    height: float = 5.0
-    wall_thickness: float = 0.3
-    desk_rows: int = 2
-    desks_per_row: int = 3
-    desk_size: tuple[float, float] = (1.6, 0.8)
-    desk_height: float = 0.72
-    shelves: int = 3
-    shelf_size: tuple[float, float, float] = (2.0, 0.6, 2.2)
-    shelf_levels: int = 4
-    place_sensor: bool = True
-    sensor_height: float = 4.5
-    area_radius: float = 4.5  # people and robots stand within this of the point below the sensor (0: anywhere)
-    robots: int = 1
-    robot_model: str = ""
-    people: Distribution = field(default_factory=lambda: Distribution("normal", 4.4, 2.0, 0.0, 12.0))
-    person_height: Distribution = field(default_factory=lambda: Distribution("normal", 1.72, 0.09, 1.50, 1.98))
-    poses: dict = field(default_factory=lambda: {"standing": 0.35, "walking": 0.35, "sitting": 0.15, "crouching": 0.15})
-    person_clearance: float = 0.05
-    placement_tries: int = 60
-    assets: str = ""
-
-
-BUILDERS = {"railway": RailwayScene, "primitives": PrimitivesScene, "blend": BlendScene, "parking": ParkingScene, "industrial_hall": IndustrialHallScene}
-# What a builder brings along when the config leaves it out: the sensor of its paper (used when
-# `sensor` names no preset; fields given refine it) and its box labels.
-BUILDER_SENSORS = {
-    "parking": {"preset": "vlp16", "rotation_hz": 20.0},  # 0.4 deg, 16 channels, +-15 deg: the paper's table 1
-    "industrial_hall": {"preset": "os1_128", "columns": 2048, "reflector": {"enabled": True}},  # 128 x 2048 through 8 mirrors
-}
-BOX_BUILDERS = ("parking", "industrial_hall")
+# ----------------------------------------------------------------------------- scene
+BUILDERS = {name: entry.params for name, entry in BUILDER_REGISTRY.items()}  # name -> its parameters dataclass (the panel's list)
 
 
 @dataclass(frozen=True)
 class SceneConfig:
+    """``scene``: the builder's name and its parameters (:mod:`bpy_pipeline.builders` owns both)."""
+
     builder: str = "railway"
-    params: RailwayScene | PrimitivesScene | BlendScene | ParkingScene | IndustrialHallScene = field(default_factory=RailwayScene)
+    params: typing.Any = field(default_factory=RailwayScene)
 
 
 # ----------------------------------------------------------------------------- sensor, effects, output
@@ -462,9 +184,6 @@ class EffectsConfig:
     intensity: IntensityConfig = field(default_factory=IntensityConfig)
 
 
-FORMATS = ("ply", "semantickitti", "las", "npy", "range_image")
-
-
 @dataclass(frozen=True)
 class BoxesConfig:
     """``output.boxes``: 3D box labels per frame (io/boxes.py), in the frame of the points.
@@ -477,7 +196,7 @@ class BoxesConfig:
     class to its label-file type (default: its words capitalised and joined, robot arm -> RobotArm).
     """
 
-    formats: list[Literal["kitti", "openpcdet"]] | Literal["auto"] = "auto"
+    formats: list[str] | Literal["auto"] = "auto"  # box writers (io/writers.py)
     classes: list[str] = field(default_factory=lambda: ["car", "person", "robot arm"])
     names: dict = field(default_factory=dict)
     min_points: dict = field(default_factory=lambda: {"car": 12})
@@ -487,7 +206,7 @@ class BoxesConfig:
 
 @dataclass(frozen=True)
 class OutputConfig:
-    formats: list[Literal["ply", "semantickitti", "las", "npy", "range_image"]] = field(default_factory=lambda: ["ply", "semantickitti"])
+    formats: list[str] = field(default_factory=lambda: ["ply", "semantickitti"])  # writers of io/writers.py
     frame: Literal["sensor", "world"] = "sensor"
     preview: bool = True
     sequence: int = 0  # SemanticKITTI sequence number (sequences/SS/)
@@ -505,6 +224,7 @@ class LabelsConfig:
 class Config:
     seed: int = 0
     frames: int = 1
+    threads: int = 0  # ray-casting threads per process (0: the cores available); never changes the output
     scene: SceneConfig = field(default_factory=SceneConfig)
     # The default job: the railway thesis's terrestrial scanner (table 4.3) 2 m above a station
     # point 4 m beside the track, at 0.2 x 0.2 degrees (1.4 M rays) so it runs in seconds.
@@ -515,93 +235,27 @@ class Config:
 
 
 # ----------------------------------------------------------------------------- validation
-def _check_positive(value: float, path: str, allow_zero: bool = False) -> None:
-    if value < 0 or (value == 0 and not allow_zero):
-        raise InputError(f"{path}: must be {'>= 0' if allow_zero else '> 0'}, got {value}")
+def _mapping(data, key: str, what: str) -> dict:
+    """A config section that must be a mapping (``{}`` when absent)."""
+    if data is None:
+        return {}
+    if not isinstance(data, dict):
+        raise InputError(f"{key}: expected a mapping ({what}), got {type(data).__name__} {data!r}")
+    return data
 
 
-def _stations_or_sensor(scene: SceneConfig, raw_scene, sensor_data: dict) -> SceneConfig:
-    """A sensor.position or trajectory given explicitly replaces the railway's default stations;
-    stations configured explicitly as well are an error (one of them places the sensor)."""
-    if not any(sensor_data.get(k) is not None for k in ("position", "trajectory")):
-        return scene
-    given = sensor_data.get("trajectory") is not None and "trajectory" or "position"
-    stations = (raw_scene or {}).get("stations") if isinstance(raw_scene, dict) else None
-    if isinstance(stations, dict) and (stations.get("count", 0) or stations.get("chainages")):
-        raise InputError(f"sensor.{given}: scene.stations place the scanner of this railway; give one of them (scene.stations.count: 0 to use sensor.{given})")
-    params = dataclasses.replace(scene.params, stations=dataclasses.replace(scene.params.stations, count=0, chainages=[]))
-    return SceneConfig(scene.builder, params)
+def scene_places_sensor(scene: SceneConfig) -> bool:
+    """True when the scene places the sensor (railway stations, the parking robot, the hall's mount)."""
+    return BUILDER_REGISTRY.get(scene.builder).station(scene.params, 0) is not None
 
 
 def _scene_from_dict(data) -> SceneConfig:
-    data = dict(data or {})
-    builder = data.pop("builder", "railway")
-    if builder not in BUILDERS:
-        raise InputError(f"scene.builder: unknown builder {builder!r}; allowed: {', '.join(BUILDERS)}")
-    params = from_dict(BUILDERS[builder], data, "scene")
-    if isinstance(params, PrimitivesScene):
-        for i, shape in enumerate(params.shapes):
-            where = f"scene.shapes[{i}]"
-            sizes = [shape.size] if isinstance(shape.size, float) else shape.size
-            want = {"plane": (1, 2), "box": (1, 3), "sphere": (1,), "cylinder": (2,)}[shape.type]
-            if len(sizes) not in want or any(s <= 0 for s in sizes):
-                raise InputError(f"{where}.size: a {shape.type} takes {' or '.join(map(str, want))} positive number(s), got {shape.size}")
-            if not 0 <= shape.reflectivity <= 1:
-                raise InputError(f"{where}.reflectivity: must lie in 0..1, got {shape.reflectivity}")
-            if shape.segments < 3:
-                raise InputError(f"{where}.segments: must be >= 3, got {shape.segments}")
-    elif isinstance(params, BlendScene) and not params.path:
-        raise InputError("scene.path: the blend builder needs the path of a .blend file")
-    elif isinstance(params, RailwayScene):
-        from .geometry.railway_layout import check_railway
-
-        check_railway(params, "scene")
-    elif isinstance(params, (ParkingScene, IndustrialHallScene)):
-        _check_indoor_scene(params)
-    return SceneConfig(builder, params)
-
-
-def _check_distribution(d: Distribution, where: str, low: float | None = None, high: float | None = None) -> None:
-    if d.min > d.max:
-        raise InputError(f"{where}.min: must not exceed max ({d.max}), got {d.min}")
-    _check_positive(d.std, f"{where}.std", allow_zero=True)
-    if low is not None and d.min < low:
-        raise InputError(f"{where}.min: must be >= {low}, got {d.min}")
-    if high is not None and d.max > high:
-        raise InputError(f"{where}.max: must be <= {high}, got {d.max}")
-
-
-def _check_indoor_scene(params) -> None:
-    """Sizes positive, counts and probabilities in range, for the parking and industrial_hall builders."""
-    may_be_zero = {"ramp_length", "sensor_start", "sensor_step", "near_rejection_distance", "car_clearance", "person_clearance", "min_visible_fraction", "near_rejection_probability", "robots", "shelves", "max_consecutive_failures", "desk_rows", "desks_per_row", "area_radius"}
-    for f in dataclasses.fields(params):
-        value = getattr(params, f.name)
-        if isinstance(value, bool) or not isinstance(value, (int, float, tuple)):
-            continue
-        for v in value if isinstance(value, tuple) else (value,):
-            _check_positive(v, f"scene.{f.name}", allow_zero=f.name in may_be_zero)
-    if isinstance(params, ParkingScene):
-        for key in ("near_rejection_probability", "min_visible_fraction"):
-            if getattr(params, key) > 1:
-                raise InputError(f"scene.{key}: must lie in 0..1, got {getattr(params, key)}")
-        _check_distribution(params.cars, "scene.cars", low=0.0)
-        _check_distribution(params.car_distance, "scene.car_distance", low=0.0)
-        _check_distribution(params.car_height, "scene.car_height", low=0.5, high=4.0)
-        if params.ramp_length > params.length - 8.0:
-            raise InputError(f"scene.ramp_length: must leave at least 8 m of the level's length ({params.length} m) for the driveway, got {params.ramp_length}")
-        if params.sensor_height >= params.ceiling_height:
-            raise InputError(f"scene.sensor_height: must be below the ceiling ({params.ceiling_height} m), got {params.sensor_height}")
-    else:
-        _check_distribution(params.people, "scene.people", low=0.0)
-        _check_distribution(params.person_height, "scene.person_height", low=0.5, high=2.5)
-        from .geometry.human import POSES
-
-        if not params.poses or any(k not in POSES for k in params.poses):
-            raise InputError(f"scene.poses: expected weights for some of {', '.join(POSES)}, got {params.poses!r}")
-        if any(isinstance(w, bool) or not isinstance(w, (int, float)) or w < 0 for w in params.poses.values()) or sum(params.poses.values()) <= 0:
-            raise InputError(f"scene.poses: weights must be numbers >= 0, not all zero, got {params.poses!r}")
-        if params.sensor_height >= params.height:
-            raise InputError(f"scene.sensor_height: must be below the ceiling ({params.height} m), got {params.sensor_height}")
+    data = dict(_mapping(data, "scene", "builder: NAME and its parameters"))
+    name = data.pop("builder", "railway")
+    builder = BUILDER_REGISTRY.get(name)
+    params = from_dict(builder.params, data, "scene")
+    builder.check(params, "scene")
+    return SceneConfig(name, params)
 
 
 def sensor_trajectory(sensor: SensorConfig, path=None) -> Trajectory | None:
@@ -661,7 +315,7 @@ def _check_effects(effects: EffectsConfig, spec: SensorSpec | None) -> None:
 
     noise, drop, intensity = effects.noise, effects.drop, effects.intensity
     for key in ("sigma", "sigma_per_metre", "angular_jitter_deg"):
-        _check_positive(getattr(noise, key), f"effects.noise.{key}", allow_zero=True)
+        check_positive(getattr(noise, key), f"effects.noise.{key}", allow_zero=True)
     rings = None if spec is None else spec.channels if spec.pattern in ("spinning", "terrestrial", "pinhole", "grid") else 1
     if noise.ring_bias and rings is not None and len(noise.ring_bias) != rings:
         raise InputError(f"effects.noise.ring_bias: one value per ring ({rings} for this sensor), got {len(noise.ring_bias)}")
@@ -671,14 +325,14 @@ def _check_effects(effects: EffectsConfig, spec: SensorSpec | None) -> None:
             raise InputError(f"{key}: must lie in 0..1, got {value}")
     if not 0 < drop.carla.intensity_limit <= 1:
         raise InputError(f"effects.drop.carla.intensity_limit: must lie in (0, 1], got {drop.carla.intensity_limit}")
-    _check_positive(drop.carla.attenuation_rate, "effects.drop.carla.attenuation_rate", allow_zero=True)
-    _check_positive(drop.threshold.range_at_10, "effects.drop.threshold.range_at_10")
-    _check_positive(drop.threshold.softness, "effects.drop.threshold.softness", allow_zero=True)
+    check_positive(drop.carla.attenuation_rate, "effects.drop.carla.attenuation_rate", allow_zero=True)
+    check_positive(drop.threshold.range_at_10, "effects.drop.threshold.range_at_10")
+    check_positive(drop.threshold.softness, "effects.drop.threshold.softness", allow_zero=True)
     if drop.threshold.range_at_80 and drop.threshold.range_at_80 <= drop.threshold.range_at_10:
         raise InputError(f"effects.drop.threshold.range_at_80: must exceed range_at_10 ({drop.threshold.range_at_10} m), or be 0, got {drop.threshold.range_at_80}")
     for key in ("alpha", "attenuation_rate"):
-        _check_positive(getattr(intensity, key), f"effects.intensity.{key}", allow_zero=True)
-    _check_positive(intensity.reference_range, "effects.intensity.reference_range")
+        check_positive(getattr(intensity, key), f"effects.intensity.{key}", allow_zero=True)
+    check_positive(intensity.reference_range, "effects.intensity.reference_range")
     if not 0 < intensity.reference_reflectivity <= 1:
         raise InputError(f"effects.intensity.reference_reflectivity: must lie in (0, 1], got {intensity.reference_reflectivity}")
     # fitted models: the file must hold the model asked of it, and replaces its inline parameters
@@ -738,18 +392,15 @@ def config_from_dict(data) -> Config:
     if not isinstance(data, dict):
         raise InputError(f"config: expected a mapping at the top level, got {type(data).__name__}")
     data = dict(data)
-    raw_scene = data.get("scene")
+    raw_scene = _mapping(data.get("scene"), "scene", "builder: NAME and its parameters")
     scene = _scene_from_dict(data.pop("scene", None))
-    sensor_data = dict(data.pop("sensor", None) or {})
-    if isinstance(scene.params, RailwayScene):
-        scene = _stations_or_sensor(scene, raw_scene, sensor_data)
-    if "preset" not in sensor_data and scene.builder in BUILDER_SENSORS:  # the builder's own sensor, refined by the fields given
-        defaults = BUILDER_SENSORS[scene.builder]
+    builder = BUILDER_REGISTRY.get(scene.builder)
+    sensor_data = dict(_mapping(data.pop("sensor", None), "sensor", "preset: NAME and its fields"))
+    if builder.release_sensor is not None:
+        scene = SceneConfig(scene.builder, builder.release_sensor(scene.params, raw_scene, sensor_data))
+    if "preset" not in sensor_data and builder.sensor:  # the builder's own sensor, refined by the fields given
+        defaults = builder.sensor
         sensor_data = {**defaults, **sensor_data, **({"reflector": {**defaults["reflector"], **(sensor_data.get("reflector") or {})}} if "reflector" in defaults else {})}
-    if getattr(scene.params, "place_sensor", False):
-        for key in ("position", "trajectory"):
-            if sensor_data.get(key) is not None:
-                raise InputError(f"sensor.{key}: the {scene.builder} scene places the sensor itself; set scene.place_sensor: false to use sensor.{key}")
     hints = typing.get_type_hints(SensorConfig)
     trajectory = _trajectory_from_dict(sensor_data.pop("trajectory", None), sensor_data)
     divergence = from_dict(Divergence, sensor_data.pop("divergence", None) or {}, "sensor.divergence")
@@ -765,15 +416,31 @@ def config_from_dict(data) -> Config:
         raise InputError(f"frames: must be >= 1, got {config.frames}")
     if config.seed < 0:
         raise InputError(f"seed: must be >= 0, got {config.seed}")
+    if config.threads < 0:
+        raise InputError(f"threads: must be >= 0 (0: the cores available), got {config.threads}")
     if trajectory is not None and trajectory.waypoints:  # a curve's path is checked once the scene is built
         sensor_trajectory(sensor).check_frames(config.frames, frame_time(sensor.spec))
     _check_effects(config.effects, config.sensor.spec)
     _check_mirrors(config.effects.mirrors)
-    if "range_image" in config.output.formats:
-        check_grid(config.sensor.spec, "output.formats: range_image")
+    config = _check_boxes(config)
+    _check_writers(config)
+    return config
+
+
+def _check_writers(config: Config) -> None:
+    """Every writer named exists, in the right list, and accepts the config."""
+    from .io import WRITERS
+
+    point_writers = [name for name, w in WRITERS.items() if not w.boxes and name != "preview"]
+    for key, names, boxes in (("output.formats", config.output.formats, False), ("output.boxes.formats", config.output.boxes.formats, True)):
+        for i, name in enumerate(names):
+            if name not in WRITERS or WRITERS.get(name).boxes != boxes or name == "preview":
+                allowed = [n for n, w in WRITERS.items() if w.boxes] if boxes else point_writers
+                raise InputError(f"{key}[{i}]: unknown format {name!r}; allowed: {', '.join(allowed)}")
     if not config.output.formats and not config.output.preview:
-        raise InputError(f"output.formats: name at least one of {', '.join(FORMATS)}")
-    return _check_boxes(config)
+        raise InputError(f"output.formats: name at least one of {', '.join(point_writers)}")
+    for name in frame_writers(config):
+        WRITERS.get(name).check(config)
 
 
 def _check_boxes(config: Config) -> Config:
@@ -782,7 +449,7 @@ def _check_boxes(config: Config) -> Config:
 
     boxes = config.output.boxes
     if boxes.formats == "auto":
-        boxes = dataclasses.replace(boxes, formats=["kitti", "openpcdet"] if config.scene.builder in BOX_BUILDERS else [])
+        boxes = dataclasses.replace(boxes, formats=["kitti", "openpcdet"] if BUILDER_REGISTRY.get(config.scene.builder).boxes else [])
     table = load_class_table()
     classes = [table.names[table.id_of(c, f"output.boxes.classes[{i}]")] for i, c in enumerate(boxes.classes)]
     for key in ("names", "min_points"):
@@ -794,7 +461,7 @@ def _check_boxes(config: Config) -> Config:
     for name, value in boxes.names.items():
         if not isinstance(value, str) or not value or any(c.isspace() for c in value):
             raise InputError(f"output.boxes.names.{name}: expected one word (label files split on spaces), got {value!r}")
-    _check_positive(boxes.min_points_default, "output.boxes.min_points_default", allow_zero=True)
+    check_positive(boxes.min_points_default, "output.boxes.min_points_default", allow_zero=True)
     t0, t1, t2 = boxes.occlusion_levels
     if not 1 >= t0 >= t1 >= t2 >= 0:
         raise InputError(f"output.boxes.occlusion_levels: expected three fractions 1 >= t0 >= t1 >= t2 >= 0, got {list(boxes.occlusion_levels)}")
@@ -809,7 +476,7 @@ def config_to_dict(config: Config) -> dict:
     out = to_plain(config)
     out["scene"] = {"builder": config.scene.builder, **out["scene"]["params"]}
     sensor = out["sensor"]
-    if config.sensor.trajectory is not None or getattr(config.scene.params, "place_sensor", False):
+    if config.sensor.trajectory is not None or scene_places_sensor(config.scene):
         del sensor["position"]  # a trajectory, or the scene, places the sensor
     out["sensor"] = {**sensor.pop("spec"), **sensor}
     return out
@@ -847,9 +514,11 @@ def read_config_file(path: str | Path) -> dict:
     """Raw mapping from a YAML file; ``InputError`` naming the file when missing or malformed."""
     path = Path(path)
     try:
-        text = path.read_text()
+        text = path.read_text(encoding="utf-8")
     except OSError as err:
         raise InputError(f"{path}: cannot read the config file ({err.strerror or err})") from None
+    except UnicodeDecodeError as err:
+        raise InputError(f"{path}: not UTF-8 text (byte {err.start}); save the config as UTF-8 YAML") from None
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as err:
@@ -861,9 +530,15 @@ def read_config_file(path: str | Path) -> dict:
     return data or {}
 
 
-def load_config(path: str | Path | None = None, overrides: list[str] = ()) -> Config:
-    """Read ``path`` (or the embedded defaults when ``None``), apply ``key=value`` overrides, validate."""
-    data = read_config_file(path) if path else {}
+def load_config(path_or_dict: str | Path | dict | None = None, overrides: list[str] = ()) -> Config:
+    """The validated config of a YAML file, or of a mapping as read from one (``None``: the defaults),
+    with ``key.path=value`` overrides applied (values parsed as YAML)."""
+    import copy
+
+    if isinstance(path_or_dict, dict):
+        data = copy.deepcopy(path_or_dict)
+    else:
+        data = read_config_file(path_or_dict) if path_or_dict else {}
     for assignment in overrides:
         apply_override(data, assignment)
     return config_from_dict(data)

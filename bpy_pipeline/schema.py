@@ -64,6 +64,11 @@ def convert(value, hint, path: str):
     if dataclasses.is_dataclass(hint):
         return from_dict(hint, value, path)
     if hint is float:
+        if isinstance(value, str):  # YAML 1.1 reads 2e-3 (no dot) as a string
+            try:
+                value = float(value)
+            except ValueError:
+                raise wrong from None
         if isinstance(value, bool) or not isinstance(value, (int, float)) or value != value or abs(value) == float("inf"):
             raise wrong
         return float(value)
@@ -105,3 +110,9 @@ def to_plain(value):
     if isinstance(value, (list, tuple)):
         return [to_plain(v) for v in value]
     return value
+
+
+def check_positive(value: float, path: str, allow_zero: bool = False) -> None:
+    """``InputError`` naming ``path`` unless ``value`` > 0 (>= 0 with ``allow_zero``)."""
+    if value < 0 or (value == 0 and not allow_zero):
+        raise InputError(f"{path}: must be {'>= 0' if allow_zero else '> 0'}, got {value}")

@@ -34,10 +34,7 @@ def pytest_collection_modifyitems(config, items):
 
 @pytest.fixture
 def bpy_scene():
-    """An empty Blender scene, and no scene kept from an earlier test."""
+    """An empty Blender scene (what a builder keeps across frames is owned by each run or call, never by a module)."""
     bpy = pytest.importorskip("bpy")
-    from bpy_pipeline.scenes import reset_built_scenes
-
     bpy.ops.wm.read_factory_settings(use_empty=True)
-    reset_built_scenes()
     yield bpy

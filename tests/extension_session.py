@@ -119,6 +119,7 @@ report["classes"] = lidar_classes()
 package = sys.modules[MODULE]
 panel, operators = package.settings, package.operators
 cfg = sys.modules[f"{MODULE}.bpy_pipeline.config"]
+read_dataset = sys.modules[f"{MODULE}.bpy_pipeline.io"].read_dataset
 settings = bpy.context.scene.lidar
 report["builders"] = sorted(settings.bl_rna.properties["builder"].enum_items.keys())
 report["fresh_panel_is_default_config"] = cfg.config_from_dict(panel.settings_to_dict(settings)) == cfg.config_from_dict({})
@@ -153,7 +154,7 @@ report["load"] = sorted(bpy.ops.lidar.config_load(filepath=str(job_yaml)))
 report["loaded_equals_file"] = panel.settings_config(settings) == cfg.load_config(job_yaml)
 report["generate"] = sorted(bpy.ops.lidar.generate())
 report["generate_files"] = frame_files(out_dir)
-report["generate_manifest_frames"] = len(json.loads((out_dir / "manifest.json").read_text())["frames"])
+report["generate_manifest_frames"] = len(read_dataset(out_dir)["frames"])
 settings.out_dir = str(WORK / "out_invoke")  # invoked without a window (background): runs like execute
 report["generate_invoke"] = sorted(bpy.ops.lidar.generate("INVOKE_DEFAULT"))
 report["generate_invoke_files"] = frame_files(WORK / "out_invoke")
@@ -172,7 +173,7 @@ settings.out_dir = str(scan_dir)
 report["build_scene"] = sorted(bpy.ops.lidar.build_scene())
 report["scene_objects"] = sorted(o.name for o in bpy.data.collections["LiDAR Scene"].all_objects)
 report["scan"] = sorted(bpy.ops.lidar.scan())
-scan_manifest = json.loads((scan_dir / "manifest.json").read_text())
+scan_manifest = read_dataset(scan_dir)
 report["scan_points"] = scan_manifest["frames"][0]["points"]
 report["scan_files"] = sorted(frame_files(scan_dir))
 report["show_cloud"] = sorted(bpy.ops.lidar.show_cloud())
@@ -208,7 +209,7 @@ job = operators.start_job(bpy.context, frames=4)
 job.step(), job.step()
 job.cancel()
 report["cancel"] = {
-    "manifest_frames": [f["index"] for f in json.loads((cancel_dir / "manifest.json").read_text())["frames"]],
+    "manifest_frames": [f["index"] for f in read_dataset(cancel_dir)["frames"]],
     "ply": sorted(p.name for p in (cancel_dir / "ply").iterdir()),
     "leftovers": sorted(p.name for p in cancel_dir.iterdir() if p.name.startswith(".")),
     "step_after_cancel": job.step(),
@@ -297,7 +298,7 @@ settings.out_dir = str(mine_dir)
 kept = sorted(o.name for o in bpy.data.collections["LiDAR Scene"].all_objects)
 report["mine_scan"] = sorted(bpy.ops.lidar.scan())
 report["mine_scene_untouched"] = kept == sorted(o.name for o in bpy.data.collections["LiDAR Scene"].all_objects)
-mine_objects = {row["name"]: row["class"] for row in json.loads((mine_dir / "manifest.json").read_text())["frames"][0]["objects"]}
+mine_objects = {row["name"]: row["class"] for row in read_dataset(mine_dir)["frames"][0]["objects"]}
 report["mine_objects"] = mine_objects
 mine_yaml = WORK / "mine.yaml"
 bpy.ops.lidar.config_save(filepath=str(mine_yaml))

@@ -5,6 +5,8 @@ import json
 import numpy as np
 import pytest
 
+from bpy_pipeline.io import read_dataset
+
 from bpy_pipeline.buffers import ObjectTable, SceneBuffers
 from bpy_pipeline.geometry import human, primitives
 from bpy_pipeline.geometry.transforms import pose_matrix
@@ -188,13 +190,11 @@ def test_pipeline_writes_boxes_that_hold_the_hall_points(tmp_path):
     from bpy_pipeline.config import load_config
     from bpy_pipeline.io import read_ply
     from bpy_pipeline.pipeline import run
-    from bpy_pipeline.scenes import reset_built_scenes
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
-    reset_built_scenes()
     config = load_config(None, ["scene.builder=industrial_hall", "frames=2", "sensor.columns=1024", "output.formats=[ply]", "output.preview=false", "sensor.reflector.edge_drop.mask=none"])
     run(config, tmp_path, log=lambda *_: None)
-    manifest = json.loads((tmp_path / "manifest.json").read_text())
+    manifest = read_dataset(tmp_path)
     checked = 0
     for frame in manifest["frames"]:
         points = read_ply(tmp_path / "ply" / f"{frame['index']:06d}.ply")

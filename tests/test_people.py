@@ -80,12 +80,12 @@ def _hall(seed: int, **params):
     from bpy_pipeline.export import export_scene
     from bpy_pipeline.labels import load_class_table
     from bpy_pipeline.pipeline import build_frame_scene, frame_rng
-    from bpy_pipeline.scenes import built_scene
 
     sets = ["scene.builder=industrial_hall"] + [f"scene.{k}={v}" for k, v in params.items()]
     config = load_config(None, sets)
-    state = build_frame_scene(config, 0, frame_rng(seed, 0))
-    return config, state, export_scene(load_class_table()), built_scene("industrial_hall")
+    keep = {}
+    state = build_frame_scene(config, 0, frame_rng(seed, 0), keep)
+    return config, state, export_scene(load_class_table()), keep["industrial_hall"][1]
 
 
 @pytest.mark.bpy
@@ -149,14 +149,14 @@ def test_a_new_frame_reposes_without_rebuilding(bpy_scene):
 
     from bpy_pipeline.config import load_config
     from bpy_pipeline.pipeline import build_frame_scene, frame_rng
-    from bpy_pipeline.scenes import built_scene
 
     config = load_config(None, ["scene.builder=industrial_hall"])
-    first = build_frame_scene(config, 0, frame_rng(0, 0))
-    hall = built_scene("industrial_hall")
+    keep = {}
+    first = build_frame_scene(config, 0, frame_rng(0, 0), keep)
+    hall = keep["industrial_hall"][1]
     pointers = {obj.name: obj.as_pointer() for obj in bpy.data.objects}
-    second = build_frame_scene(config, 1, frame_rng(0, 1))
-    assert built_scene("industrial_hall") is hall
+    second = build_frame_scene(config, 1, frame_rng(0, 1), keep)
+    assert keep["industrial_hall"][1] is hall
     survivors = {obj.name: obj.as_pointer() for obj in bpy.data.objects if obj.name in pointers}
     assert survivors == pointers  # the hall, the robot and the people of frame 0 are the same objects
     assert first.info != second.info

@@ -289,9 +289,8 @@ def test_pipeline_follows_a_curve_of_the_scene(tmp_path):
         "output": {"formats": ["ply"], "preview": False},
     })
     frames = list(run_frames(config, tmp_path / "out"))
-    manifest = frames[-1].manifest
     for k, frame in enumerate(frames):
-        entry = manifest["frames"][k]
+        entry = frame.record
         start = [2000.0 + SPEED * 0.1 * k, 0.0, 1.5]
         assert np.allclose(np.array(entry["sensor_pose"])[:3, 3], start, atol=1e-4)
         assert entry["trajectory"]["distance_m"] == pytest.approx([SPEED * 0.1 * k, SPEED * 0.1 * (k + 1)])

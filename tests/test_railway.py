@@ -82,7 +82,7 @@ def build(*overrides, seed=0, view=None):
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     config = load_config(None, list(overrides))
-    return config, build_scene(config.scene, frame_rng(seed, 0), view)
+    return config, build_scene(config.scene, frame_rng(seed, 0), view).scene  # the railway layout
 
 
 def test_dropper_count_per_span_follows_the_rule():

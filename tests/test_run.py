@@ -8,6 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from bpy_pipeline.io import read_dataset
+
 pytestmark = pytest.mark.bpy
 ROOT = Path(__file__).resolve().parents[1]
 SMALL = ["--set", "sensor.horizontal_resolution_deg=1.0", "--set", "effects.noise.sigma=0.01"]
@@ -18,7 +20,8 @@ def run(*args, cwd=ROOT):
 
 
 def frame_files(out: Path) -> dict[str, bytes]:
-    return {str(p.relative_to(out)): p.read_bytes() for p in sorted(out.rglob("*")) if p.is_file() and p.name != "manifest.json"}
+    """The frames' files (not the run's manifest nor the frame records, which hold timings)."""
+    return {str(p.relative_to(out)): p.read_bytes() for p in sorted(out.rglob("*")) if p.is_file() and p.name != "manifest.json" and p.parent.name != "records"}
 
 
 def test_python_and_blender_invocations_write_identical_files(tmp_path):
@@ -36,7 +39,7 @@ def test_python_and_blender_invocations_write_identical_files(tmp_path):
     assert files_a.keys() == files_c.keys()
     assert files_a["sequences/00/velodyne/000000.bin"] != files_c["sequences/00/velodyne/000000.bin"]
 
-    manifest = json.loads((a / "manifest.json").read_text())
+    manifest = read_dataset(a)
     frame = manifest["frames"][0]
     assert manifest["seed"] == 3 and manifest["versions"]["blender"]
     assert set(frame["timings_s"]) == {"build", "export", "scan", "write"}
@@ -83,7 +86,7 @@ def test_blend_builder_scans_the_users_file(tmp_path):
     result = run("--out", str(out), "--set", "scene.builder=blend", "--set", f"scene.path={blend}", "--set", "sensor.position=[0, 0, 1]")
     assert result.returncode == 0, result.stderr
     points = read_ply(out / "ply" / "000000.ply")
-    objects = {o["name"]: o for o in json.loads((out / "manifest.json").read_text())["frames"][0]["objects"]}
+    objects = {o["name"]: o for o in read_dataset(out)["frames"][0]["objects"]}
     assert set(objects) == {"Floor.001", "Crate"}  # the render-hidden helper is not scanned
     assert objects["Floor.001"]["class"] == "floor"  # from the name rules
     assert objects["Crate"]["class"] == "shelf" and objects["Crate"]["instance"] == 42

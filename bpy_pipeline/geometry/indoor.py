@@ -217,9 +217,3 @@ def hall_station(p) -> np.ndarray:
     """``(4, 4)`` the overhead sensor's station: ``sensor_height`` above the hall's centre, level, x along the hall."""
     return pose_matrix([0.0, 0.0, p.sensor_height], [0.0, 0.0, 0.0])
 
-
-def scene_station(params, frame: int) -> np.ndarray:
-    """The station of a scene that places its sensor (``place_sensor``): parking or industrial hall."""
-    if hasattr(params, "driveway_width"):
-        return parking_station(params, frame)
-    return hall_station(params)

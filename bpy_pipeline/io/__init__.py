@@ -4,20 +4,24 @@ Formats (DESIGN.md, "Output folder"): PLY (binary, all fields), SemanticKITTI (`
 ``.label``), LAS 1.4 (point format 6 + extra bytes), Pointcept NPY folders, a preview PNG and
 the run manifest. Every writer takes an ``(n,)`` :data:`~bpy_pipeline.lidar.points.POINT_DTYPE`
 array and writes under a temporary name, then renames (:mod:`.atomic`), so no half-written file
-ever carries its final name. :data:`WRITERS` maps the ``output.formats`` names to per-frame writers.
+ever carries its final name. :data:`WRITERS` is the registry of per-frame writers (:mod:`.writers`).
 """
 
 from .atomic import atomic_dir, atomic_write
 from .las import read_las, write_las
-from .layout import WRITERS, frame_stem, write_frame_preview
-from .manifest import read_manifest, write_manifest
+from .layout import frame_stem, write_frame_preview
+from .manifest import read_dataset, read_frame_records, read_manifest, write_manifest
 from .npy import read_npy_folder, write_npy_folder
 from .ply import read_ply, write_ply
 from .preview import encode_png, render_preview, write_preview
 from .semantickitti import read_bin, read_label, read_semantickitti, write_semantickitti
+from .writers import WRITERS, Writer, register_writer
+from . import formats  # noqa: F401,E402  (registers the built-in writers)
 
 __all__ = [
     "WRITERS",
+    "Writer",
+    "register_writer",
     "atomic_dir",
     "atomic_write",
     "encode_png",
@@ -25,6 +29,8 @@ __all__ = [
     "read_bin",
     "read_label",
     "read_las",
+    "read_dataset",
+    "read_frame_records",
     "read_manifest",
     "read_npy_folder",
     "read_ply",

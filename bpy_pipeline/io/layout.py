@@ -8,15 +8,14 @@ Output folder layout (DESIGN.md, "Output folder")::
     OUT/npy/NNNNNN/{coord,strength,segment,instance}.npy
     OUT/preview/NNNNNN.png
 
-:data:`WRITERS` maps each name allowed in ``output.formats`` to a function
-``(out_dir: Path, frame_index: int, points: (n,) POINT_DTYPE, sequence: int = 0) -> list[Path]``
-that writes the frame and returns the written paths. Only SemanticKITTI uses ``sequence``.
+Each ``write_frame_<format>(out_dir, frame_index, points (n,) POINT_DTYPE, sequence=0) -> list[Path]``
+writes one frame and returns the written paths (only SemanticKITTI uses ``sequence``);
+:mod:`.formats` registers them as writers.
 """
 
 from __future__ import annotations
 
 import os
-from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -61,10 +60,3 @@ def write_frame_preview(out_dir: str | os.PathLike, frame_index: int, points: np
     """``OUT/preview/NNNNNN.png``: top and side view coloured by ``color_lut`` (k, 3) uint8."""
     return write_preview(Path(out_dir) / "preview" / f"{frame_stem(frame_index)}.png", points, color_lut)
 
-
-WRITERS: dict[str, Callable[..., list[Path]]] = {
-    "ply": write_frame_ply,
-    "semantickitti": write_frame_semantickitti,
-    "las": write_frame_las,
-    "npy": write_frame_npy,
-}

@@ -54,3 +54,19 @@ def read_manifest(out_dir: str | os.PathLike) -> dict:
     if not isinstance(manifest, dict):
         raise InputError(f"{path}: expected a JSON object at the top level, got {type(manifest).__name__}")
     return manifest
+
+
+def read_frame_records(out_dir: str | os.PathLike) -> list[dict]:
+    """The records of the committed frames of the dataset in ``out_dir`` (``records/NNNNNN.json``), by frame index."""
+    records = []
+    for path in sorted((Path(out_dir) / "records").glob("*.json")):
+        try:
+            records.append(json.loads(path.read_text(encoding="utf-8")))
+        except ValueError as err:
+            raise InputError(f"{path}: not valid JSON ({err})") from None
+    return sorted(records, key=lambda r: r["index"])
+
+
+def read_dataset(out_dir: str | os.PathLike) -> dict:
+    """The run manifest with its committed frames' records under ``frames``."""
+    return {**read_manifest(out_dir), "frames": read_frame_records(out_dir)}

@@ -5,12 +5,11 @@ from __future__ import annotations
 from pathlib import Path
 
 import bpy
-import numpy as np
 
 from ..errors import InputError
 
 
-def build(params, rng: np.random.Generator) -> None:
+def build(params) -> None:
     """Open ``params.path`` as the current file."""
     path = Path(params.path).expanduser()
     if not path.is_file():

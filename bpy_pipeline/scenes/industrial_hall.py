@@ -166,7 +166,7 @@ class IndustrialHall:
 
     # ------------------------------------------------------------------ a frame
     def randomize(self, rng: np.random.Generator, view=None):
-        from . import FrameState
+        from ..builders import BuildResult
 
         p = self.params
         robots = []
@@ -219,4 +219,4 @@ class IndustrialHall:
             "people_not_placed": missed,
         }
         self.last = {"robots": robots, "people": people}
-        return FrameState(headings=headings, info=info)
+        return BuildResult(headings=headings, info=info)

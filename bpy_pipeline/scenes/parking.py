@@ -273,7 +273,7 @@ class ParkingGarage:
         return bays[k, :2].copy(), float(np.angle(np.exp(1j * bay_yaw)))
 
     def randomize(self, rng: np.random.Generator, view=None):
-        from . import FrameState
+        from ..builders import BuildResult
 
         p = self.params
         # where the sensor is this frame (a moving sensor's view is None: the first station stands in)
@@ -320,7 +320,7 @@ class ParkingGarage:
             ],
         }
         self.last = log
-        return FrameState(headings=headings, info=info)
+        return BuildResult(headings=headings, info=info)
 
 
 def _buffers(meshes: dict) -> SceneBuffers:

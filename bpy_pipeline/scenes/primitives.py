@@ -9,7 +9,7 @@ from .objects import mesh_object, scene_collection, tag
 
 
 def shape_mesh(shape):
-    """``(vertices, triangles)`` of a :class:`~bpy_pipeline.config.Shape` in its own frame."""
+    """``(vertices, triangles)`` of a :class:`~bpy_pipeline.builders.primitives.Shape` in its own frame."""
     size = shape.size if isinstance(shape.size, list) else [shape.size]
     if shape.type == "plane":
         return primitives.plane(size[0], size[-1])
@@ -20,7 +20,7 @@ def shape_mesh(shape):
     return primitives.cylinder(size[0], size[1], shape.segments)
 
 
-def build(params, rng: np.random.Generator) -> None:
+def build(params) -> None:
     """One object per shape, tagged with its class, material and reflectivity."""
     collection = scene_collection()
     for i, shape in enumerate(params.shapes):

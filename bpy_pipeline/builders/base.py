@@ -1,0 +1,149 @@
+"""What a scene builder is: its config dataclass, its build function and what it tells the run.
+
+A builder turns its ``scene`` section into tagged objects of the current Blender scene. The
+entry itself is pure (config validation needs no Blender); its ``build`` imports the bpy code
+when called. A frame's scene is built by :func:`build_scene`, which hands the builder a
+:class:`BuildContext`; the builder answers with a :class:`BuildResult`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Callable, Literal
+
+import numpy as np
+
+from ..errors import InputError
+from ..registry import Registry
+from ..schema import check_positive
+
+
+@dataclass
+class BuildContext:
+    """What a builder gets besides its parameters.
+
+    rng : the generator the scene is drawn from (the frame's, or the first frame's of a scene that
+        serves several frames)
+    view : :class:`~bpy_pipeline.geometry.lod.SensorView` of the frames the scene serves (where it is
+        scanned from and how finely), or ``None`` (a moving sensor: fixed detail)
+    keep : state the run owns across frames; a builder that re-randomises in place keeps its static
+        scene here (and must give the same result as when built from nothing)
+    """
+
+    rng: np.random.Generator
+    view: Any = None
+    keep: dict = field(default_factory=dict)
+
+    def kept(self, key: str, params, make: Callable[[], Any]):
+        """The object kept under ``key`` for ``params`` while it is alive, else a new one from ``make()``."""
+        held = self.keep.get(key)
+        if held is None or held[0] != params or not held[1].alive():
+            self.keep.clear()
+            held = self.keep[key] = (params, make())
+        return held[1]
+
+
+@dataclass(frozen=True)
+class BuildResult:
+    """What a builder reports about the scene it built.
+
+    headings : {instance id: yaw in radians} of the objects that get 3D boxes
+    info : plain data for the frame's record (counts, placement log)
+    scene : the builder's own description of what it built (the railway's layout), for callers
+        that want it; never written
+    """
+
+    headings: dict = field(default_factory=dict)
+    info: dict | None = None
+    scene: Any = None
+
+
+def no_check(params, where: str) -> None:
+    """Parameters that need no check beyond their types."""
+
+
+def no_station(params, frame: int) -> None:
+    """A scene that does not place the sensor."""
+    return None
+
+
+def one_frame(params) -> int:
+    return 1
+
+
+@dataclass(frozen=True)
+class Builder:
+    """A scene builder's registry entry.
+
+    params : the dataclass of its ``scene`` section (the keys after ``builder``)
+    build : ``build(params, context) -> BuildResult``; builds the scene in the current Blender scene
+    check : ``check(params, where)``: ``InputError`` naming the key when the parameters cannot build a scene
+    station : ``station(params, frame) -> (4, 4) | None``: the level frame the scene places the sensor
+        at in frame ``frame`` (the sensor's rotation and mount height are applied on top), ``None``
+        where the config's ``sensor.position`` applies
+    frames_per_scene : ``frames_per_scene(params) -> n``: one built scene serves n frames in a row
+        (frame k scans the scene built for frame k - k mod n)
+    sensor : the builder's own sensor, used when the config's ``sensor`` names no preset (fields given refine it)
+    boxes : whether 3D box labels are written by default (``output.boxes.formats: auto``)
+    release_sensor : ``release_sensor(params, raw_scene, sensor_data) -> params``: when the config places
+        the sensor itself (sensor.position or trajectory), the parameters that stop the scene placing it
+        (``InputError`` where both do)
+    """
+
+    params: type
+    build: Callable[[Any, BuildContext], BuildResult]
+    check: Callable[[Any, str], None] = no_check
+    station: Callable[[Any, int], np.ndarray | None] = no_station
+    frames_per_scene: Callable[[Any], int] = one_frame
+    sensor: dict = field(default_factory=dict)
+    boxes: bool = False
+    release_sensor: Callable[[Any, dict, dict], Any] | None = None
+
+
+BUILDERS: Registry[Builder] = Registry("scene builder", "scene.builder")
+
+
+def register_builder(name: str, builder: Builder) -> Builder:
+    """Make ``scene.builder: name`` build with ``builder``."""
+    return BUILDERS.register(name, builder)
+
+
+def build_scene(builder: str, params, context: BuildContext) -> BuildResult:
+    """Build scene ``builder`` with ``params`` in the current Blender scene."""
+    return BUILDERS.get(builder).build(params, context)
+
+
+def refuse_sensor_placement(name: str) -> Callable[[Any, dict, dict], Any]:
+    """``release_sensor`` of a scene whose ``place_sensor`` flag places the sensor: a position or trajectory
+    given as well is an error unless ``place_sensor`` is false."""
+
+    def release(params, raw_scene: dict, sensor_data: dict):
+        if getattr(params, "place_sensor", False):
+            for key in ("position", "trajectory"):
+                if sensor_data.get(key) is not None:
+                    raise InputError(f"sensor.{key}: the {name} scene places the sensor itself; set scene.place_sensor: false to use sensor.{key}")
+        return params
+
+    return release
+
+
+@dataclass(frozen=True)
+class Distribution:
+    """A random quantity: ``normal`` (``mean``, ``std``; truncated to ``[min, max]`` by redrawing, a
+    count rounded and clipped instead) or ``uniform`` on ``[min, max]`` (geometry/placement.py)."""
+
+    kind: Literal["normal", "uniform"] = "normal"
+    mean: float = 0.0
+    std: float = 1.0
+    min: float = 0.0
+    max: float = 1.0
+
+
+def check_distribution(d: Distribution, where: str, low: float | None = None, high: float | None = None) -> None:
+    if d.min > d.max:
+        raise InputError(f"{where}.min: must not exceed max ({d.max}), got {d.min}")
+    check_positive(d.std, f"{where}.std", allow_zero=True)
+    if low is not None and d.min < low:
+        raise InputError(f"{where}.min: must be >= {low}, got {d.min}")
+    if high is not None and d.max > high:
+        raise InputError(f"{where}.max: must be <= {high}, got {d.max}")

@@ -1,0 +1,190 @@
+"""``scene.builder: railway``: tracks, supports and catenary along an arc, scanned from stations beside the track."""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+
+from ..errors import InputError
+from .base import Builder, BuildContext, BuildResult, register_builder
+
+Vec3 = tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class RailProfile:
+    """A simplified flat-bottom rail: three stacked rectangles (m). The default weighs about 60 kg/m
+    (7.63e-3 m^2 of steel; UIC 60: 172 mm high, 150 mm foot, 72 mm head, 16.5 mm web)."""
+
+    foot_width: float = 0.150
+    foot_height: float = 0.018
+    web_width: float = 0.0165
+    web_height: float = 0.111
+    head_width: float = 0.072
+    head_height: float = 0.043
+
+
+@dataclass(frozen=True)
+class RailwayTrack:
+    """``scene.track``: the railway thesis's table 4.1, in metres (the thesis gives no values; these are
+    European standard-gauge ones). The alignment is the arc through start, mid and end (straight when
+    they are collinear), at formation level (the underside of the ballast); tracks are spread evenly
+    across it, track 0 the rightmost in the direction of travel."""
+
+    start: Vec3 = (-75.0, 0.0, 0.0)
+    mid: Vec3 = (0.0, 0.0, 0.0)
+    end: Vec3 = (75.0, 0.0, 0.0)
+    gauge: float = 1.435  # between the inner faces of the rail heads
+    rail: RailProfile = field(default_factory=RailProfile)
+    sleeper_spacing: float = 0.6
+    sleeper_length: float = 2.6  # concrete monoblock sleeper (B70-like): across the track
+    sleeper_width: float = 0.26  # along the track
+    sleeper_height: float = 0.22
+    ballast_height: float = 0.35  # under the sleepers
+    ballast_shoulder: float = 0.5  # beyond the sleeper ends
+    ballast_slope: float = 1.5  # horizontal per vertical
+    tracks: int = 1  # 1..5
+    track_spacing: float = 4.0  # between neighbouring track centrelines
+    embankment_height: float = 0.0  # formation above the surrounding ground
+    embankment_slope: float = 1.5  # horizontal per vertical
+    embankment_berm: float = 1.0  # flat formation beyond the ballast toe
+    ground_width: float = 80.0  # flat ground strip along the alignment
+
+
+@dataclass(frozen=True)
+class RailwaySupports:
+    """``scene.supports``: masts (H-section or lattice) with cantilevers and registration arms, or portal
+    gantries, every ``span`` +- ``span_jitter`` metres along the alignment (the thesis: 40 to 65 m).
+    ``layout``: ``single`` one mast per support on ``side`` carrying up to two tracks; ``both_sides`` a mast
+    on each side, each carrying the nearer half of the tracks (up to four); ``gantry`` a portal over
+    2 to 5 tracks; ``auto`` single for one track, single or both_sides (even odds) for two, gantry beyond.
+    On a curve of radius R (in plan) spans shorten to sqrt(8 R (stagger + 0.4 m)), so the contact wire,
+    pulled outwards at every support, strays at most 0.4 m inside the track at mid-span."""
+
+    layout: Literal["auto", "single", "both_sides", "gantry"] = "auto"
+    side: Literal["right", "left"] = "right"
+    span: float = 50.0
+    span_jitter: float = 5.0
+    mast_type: Literal["h_section", "lattice", "mixed"] = "h_section"
+    mast_offset: float = 3.2  # from the centreline of the nearest track
+    mast_height: float = 8.5  # above the ground it stands on
+
+
+@dataclass(frozen=True)
+class RailwayCatenary:
+    """``scene.catenary``: the catenary manager of the thesis (table 4.2), in metres. Sag of a wire over a
+    span L: f(L) = <wire>_sag (L / sag_reference_length) ^ sag_exponent; droppers n = max(1, floor(L /
+    dropper_spacing)) per contact wire. ``points_per_10m`` samples the wires when ``scene.detail.mode`` is
+    ``fixed``; the sensor-driven default samples them as finely as the sensor can tell apart."""
+
+    enabled: bool = True  # ENABLE_CATENARY: contact and messenger wires, droppers
+    feeders: bool = True  # ENABLE_FEEDERS
+    earth_wire: bool = True  # ENABLE_CdPA
+    contact_wire_height: float = 5.5  # above the rail heads
+    system_height: float = 1.4  # messenger above the contact wire at the supports (1.1-1.8)
+    stagger: float = 0.2  # contact wire zig-zag at the supports, +- (0.2-0.3)
+    double_contact_probability: float = 0.0  # FC_DOUBLE_PROBABILITY, per track
+    double_contact_spacing: float = 0.04  # FC_DOUBLE_SPACING: between the two contact wires
+    sag_reference_length: float = 50.0  # SAG_REFERENCE_LENGTH
+    sag_exponent: float = 2.0  # SAG_EXPONENT_ALPHA (2: sag grows with L^2 at a fixed tension)
+    contact_wire_sag: float = 0.05  # SAG_* at the reference length (contact wire: pre-sag, 1/1000 of the span)
+    messenger_wire_sag: float = 0.5
+    feeder_sag: float = 1.0
+    earth_wire_sag: float = 0.8
+    contact_wire_diameter: float = 0.012  # DIAM_*: 107 mm^2 grooved copper
+    messenger_wire_diameter: float = 0.011
+    feeder_diameter: float = 0.024
+    earth_wire_diameter: float = 0.012
+    dropper_diameter: float = 0.005
+    dropper_spacing: float = 5.0  # PENDULUM_SPACING
+    dropper_jitter: float = 0.2  # PENDULUM_JITTER, +- along the span
+    points_per_10m: int = 20  # CURVE_RESOLUTION_POINTS_PER_10M, for scene.detail.mode fixed
+
+
+@dataclass(frozen=True)
+class RailwayStations:
+    """``scene.stations``: static scanner stations beside the track, ``offset`` metres beyond the outermost
+    track on ``side``, on the ground there, facing along the track (the preset's mount_height lifts the
+    sensor above it: 2 m for railway_tls). Frame k scans from station k mod n, and one built line serves
+    n frames in a row (frames = stations scans one line from every station). ``chainages`` (m from the
+    start point) place them; else ``count`` stations sit at the middles of equal parts of the line.
+    ``count: 0`` uses sensor.position instead."""
+
+    count: int = 1
+    chainages: list[float] = field(default_factory=list)
+    side: Literal["right", "left"] = "left"  # the masts stand on the right: the scanner sees them across the track
+    offset: float = 4.0
+
+
+@dataclass(frozen=True)
+class RailwayDetail:
+    """``scene.detail``: ``sensor`` (the default) models no finer than the scanner resolves: wire sampling
+    and cross-sections within half the beam spacing at their distance, ballast stones of ``stone_size``
+    only where two beams fall on one, nothing beyond the sensor's range. ``fixed`` samples wires at
+    catenary.points_per_10m, builds the whole line and no stones."""
+
+    mode: Literal["sensor", "fixed"] = "sensor"
+    stones: bool = True
+    stone_size: float = 0.045  # m, ballast grading 31.5/63 mm
+
+
+@dataclass(frozen=True)
+class RailwayScene:
+    """``scene.builder: railway``: tracks on an arc or a straight line, supports, catenary, scanner stations."""
+
+    track: RailwayTrack = field(default_factory=RailwayTrack)
+    supports: RailwaySupports = field(default_factory=RailwaySupports)
+    catenary: RailwayCatenary = field(default_factory=RailwayCatenary)
+    stations: RailwayStations = field(default_factory=RailwayStations)
+    detail: RailwayDetail = field(default_factory=RailwayDetail)
+
+    @property
+    def place_sensor(self) -> bool:
+        """True when the stations place the sensor (then sensor.position is not used, nor saved)."""
+        return self.stations.count > 0 or bool(self.stations.chainages)
+
+
+
+def check(params: RailwayScene, where: str) -> None:
+    from ..geometry.railway_layout import check_railway
+
+    check_railway(params, where)
+
+
+def station(params: RailwayScene, frame: int) -> np.ndarray | None:
+    """Station ``frame`` mod n of ``scene.stations`` (x along the track, z up), ``None`` without stations."""
+    from ..geometry.railway_layout import station_frames
+
+    stations = station_frames(params)
+    return stations[frame % len(stations)] if len(stations) else None
+
+
+def frames_per_scene(params: RailwayScene) -> int:
+    """One built line serves every station in turn."""
+    from ..geometry.railway_layout import station_frames
+
+    return max(len(station_frames(params)), 1)
+
+
+def release_sensor(params: RailwayScene, raw_scene: dict, sensor_data: dict) -> RailwayScene:
+    """A sensor.position or trajectory given explicitly replaces the default stations; stations
+    configured explicitly as well are an error (one of them places the sensor)."""
+    if not any(sensor_data.get(k) is not None for k in ("position", "trajectory")):
+        return params
+    given = sensor_data.get("trajectory") is not None and "trajectory" or "position"
+    stations = raw_scene.get("stations")
+    if isinstance(stations, dict) and (stations.get("count", 0) or stations.get("chainages")):
+        raise InputError(f"sensor.{given}: scene.stations place the scanner of this railway; give one of them (scene.stations.count: 0 to use sensor.{given})")
+    return dataclasses.replace(params, stations=dataclasses.replace(params.stations, count=0, chainages=[]))
+
+
+def build(params: RailwayScene, context: BuildContext) -> BuildResult:
+    from ..scenes import railway
+
+    return BuildResult(scene=railway.build(params, context.rng, context.view))
+
+
+register_builder("railway", Builder(RailwayScene, build, check, station, frames_per_scene, release_sensor=release_sensor))

@@ -1,0 +1,128 @@
+"""Frames in several processes: local workers (``--workers N``) and a Ray cluster (``--ray ADDRESS``).
+
+The parent opens the dataset (lock, clean-up, manifest) and closes it (indexes, summary); workers
+join it and commit frames with the same atomic protocol (:mod:`.dataset`), each from its own
+Blender. Frames are handed out in contiguous ranges aligned to the scenes they share (a railway's
+stations), and every frame is a pure function of (config, seed, index), so the bytes do not depend
+on the worker count. Each worker runs one BLAS thread and its share of the ray-casting threads, so
+the machine is not oversubscribed.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+from typing import Callable
+
+from .cli import split
+from .config import Config
+from .dataset import Dataset
+from .errors import InputError
+
+SINGLE_THREAD_ENV = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "NUMBA_NUM_THREADS": "1"}
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def available_cores() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:
+        return os.cpu_count() or 1
+
+
+def aligned_ranges(frames: list[int], parts: int, per_scene: int) -> list[list[int]]:
+    """``frames`` in at most ``parts`` contiguous runs that do not cut a scene's frames apart."""
+    groups: list[list[int]] = []
+    for f in frames:
+        if groups and f // per_scene == groups[-1][-1] // per_scene and f == groups[-1][-1] + 1:
+            groups[-1].append(f)
+        else:
+            groups.append([f])
+    return [sum(chunk, []) for chunk in split(groups, min(parts, len(groups))) if chunk]
+
+
+def worker_command(out: str, frames: list[int], threads: int) -> list[str]:
+    """The command of a worker making ``frames`` (a contiguous run) into ``out``: Blender's own binary when
+    this process is a Blender, else this Python with the bpy module."""
+    args = ["--out", str(out), "--join", "--frames-range", f"{frames[0]}:{frames[-1] + 1}", "--threads", str(threads)]
+    try:
+        import bpy
+
+        binary = bpy.app.binary_path
+    except ImportError:
+        binary = ""
+    if binary and Path(binary).name.startswith("blender"):
+        return [binary, "--background", "--factory-startup", "--python-exit-code", "1", "--python", str(ROOT / "run.py"), "--", *args]
+    return [sys.executable, "-m", "bpy_pipeline", "run", *args]
+
+
+def run_parallel(config: Config, out: str, frames: list[int], mode: str, workers: int = 1, ray_address: str | None = None, log: Callable[[str], None] = print) -> int:
+    """Make ``frames`` of ``config`` into ``out`` with ``workers`` local processes or on the Ray cluster at
+    ``ray_address``; returns the exit code (0 when every frame is committed)."""
+    from .pipeline import frames_per_scene
+
+    with Dataset.open(out, config, mode, log=log) as dataset:
+        todo = [f for f in frames if not dataset.has(f)]
+        if not todo:
+            return 0
+        if ray_address:
+            return _run_on_ray(out, todo, ray_address, frames_per_scene(config), log)
+        ranges = aligned_ranges(todo, workers, frames_per_scene(config))
+        threads = max(1, (config.threads or available_cores()) // len(ranges))
+        env = {**os.environ, **SINGLE_THREAD_ENV}
+        procs = [subprocess.Popen(worker_command(out, r, threads), env=env, cwd=os.getcwd()) for r in ranges]
+        codes = [p.wait() for p in procs]
+    failed = [f"{r[0]}:{r[-1] + 1} (exit {c})" for r, c in zip(ranges, codes) if c != 0]
+    if failed:
+        log(f"warning: workers failed for frames {', '.join(failed)}; their committed frames are kept, --resume makes the rest")
+        return 2 if all(c == 2 for c in codes if c) else 1
+    return 0
+
+
+def _frames_task(out: str, frames: list[int], threads: int) -> int:
+    """A Ray task: make ``frames`` into ``out`` (joining the run) in this worker's own Blender; returns the count."""
+    os.environ.update(SINGLE_THREAD_ENV)
+    import bpy
+
+    from .config import config_from_dict
+    from .io import read_manifest
+    from .pipeline import run_frames
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    config = config_from_dict(read_manifest(out)["config"])
+    config = __import__("dataclasses").replace(config, threads=threads)
+    return sum(1 for _ in run_frames(config, out, frames=frames, mode="join"))
+
+
+def _run_on_ray(out: str, frames: list[int], address: str, per_scene: int, log: Callable[[str], None]) -> int:
+    """Frame ranges as Ray tasks (retried on failure); every task commits its frames itself."""
+    try:
+        import ray
+    except ImportError:
+        raise InputError("--ray: Ray is not installed; pip install '.[distributed]'") from None
+    try:
+        ray.init(address=address, log_to_driver=False, include_dashboard=False, runtime_env={"env_vars": SINGLE_THREAD_ENV})
+    except (ConnectionError, RuntimeError, ValueError) as err:
+        raise InputError(f"--ray: cannot connect to a Ray cluster at {address} ({str(err).splitlines()[0]}); start one with `ray start --head`") from None
+    try:
+        cpus = max(1, int(ray.cluster_resources().get("CPU", 1)))
+        task = ray.remote(num_cpus=1, max_retries=3, retry_exceptions=True)(_frames_task)
+        ranges = aligned_ranges(frames, 4 * cpus, per_scene)
+        pending = {task.remote(str(Path(out).resolve()), r, 1): r for r in ranges}
+        failed = []
+        while pending:
+            done, _ = ray.wait(list(pending), num_returns=1)
+            r = pending.pop(done[0])
+            try:
+                ray.get(done[0])
+                log(f"frames {r[0]}..{r[-1]} done on the cluster")
+            except Exception as err:  # noqa: BLE001 - a task that failed after its retries
+                failed.append(f"{r[0]}:{r[-1] + 1} ({type(err).__name__})")
+    finally:
+        ray.shutdown()
+    if failed:
+        log(f"warning: Ray tasks failed for frames {', '.join(failed)}; --resume makes the rest")
+        return 1
+    return 0
