@@ -1,7 +1,19 @@
-"""bpy_pipeline: synthetic, automatically labeled LiDAR point clouds from procedural Blender scenes.
+"""bpy_pipeline: synthetic, automatically labeled LiDAR point clouds from procedural Blender scenes and real scans.
 
-The pure part (config, geometry, lidar, io) runs anywhere; ``scenes``, ``export`` and
-``pipeline.run`` need Blender's ``bpy`` module.
+The public API (stable names; :mod:`bpy_pipeline.api` has a runnable example):
+
+- :func:`load_config` (a YAML file or a mapping, with ``key.path=value`` overrides),
+- :func:`run` (frames of a config into a dataset folder; needs Blender's ``bpy`` module),
+- :func:`scan` (meshes and a sensor to labelled point records, without Blender),
+- the readers :func:`read_ply`, :func:`read_semantickitti`, :func:`read_las`, :func:`read_npy_folder`,
+  :func:`read_dataset` (a run's manifest with its frames' records).
+
+The pure part (config, geometry, lidar, io) runs anywhere; ``scenes``, ``export`` and ``run`` need ``bpy``.
 """
 
 __version__ = "0.1.0"
+
+from .api import load_config, run, scan  # noqa: E402
+from .io import read_dataset, read_las, read_npy_folder, read_ply, read_semantickitti  # noqa: E402
+
+__all__ = ["load_config", "run", "scan", "read_dataset", "read_las", "read_npy_folder", "read_ply", "read_semantickitti", "__version__"]

@@ -300,6 +300,9 @@ class Dataset:
                 writer = WRITERS.get(name)
                 if writer.index is not None:
                     writer.index(self.out, records, self.config)
+            for name in (STAGING, MOVING):  # empty once every frame is committed
+                if (self.out / name).is_dir() and not any((self.out / name).iterdir()):
+                    (self.out / name).rmdir()
             manifest = read_manifest(self.out)
             manifest["summary"] = {"frames": len(records), "points": int(sum(r["points"] for r in records)), "frame_indices": _ranges([r["index"] for r in records])}
             write_manifest(self.out, manifest)

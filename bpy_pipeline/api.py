@@ -1,0 +1,102 @@
+"""The public Python API, re-exported from :mod:`bpy_pipeline`: a handful of stable names over a moving implementation.
+
+Example (runs as a test, tests/test_api.py)::
+
+    import numpy as np
+    import bpy_pipeline as bp
+
+    # a scan without Blender: a 20 m box room around a VLP-16 1.5 m above the floor
+    v = np.array([[x, y, z] for x in (-10, 10) for y in (-10, 10) for z in (0, 4)], float)
+    t = np.array([[0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3], [0, 4, 5], [0, 5, 1],
+                  [2, 3, 7], [2, 7, 6], [0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5]])
+    pose = np.eye(4)
+    pose[2, 3] = 1.5
+    points = bp.scan({"room": (v, t, "wall")}, "vlp16", pose, seed=1)
+    assert len(points) == 16 * 1809                 # every ray of the VLP-16 (16 x 1809 at 10 Hz) hits the room
+    print(points.dtype.names)                         # x y z intensity semantic instance ring time range bounces
+
+    # a run with Blender (the bpy module): two parking frames into a dataset folder
+    config = bp.load_config({"scene": {"builder": "parking"}, "frames": 2})
+    manifest = bp.run(config, "out/parking")
+    cloud = bp.read_ply("out/parking/ply/000001.ply")
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Iterable, Mapping
+
+import numpy as np
+
+from .buffers import MATERIAL_ID, ObjectTable, SceneBuffers
+from .config import Config, config_from_dict
+from .config import load_config as _load_config
+from .errors import InputError
+
+
+def load_config(path_or_dict: str | Path | Mapping | None = None, overrides: Iterable[str] = ()) -> Config:
+    """The validated :class:`~.config.Config` of a YAML file or of a mapping (``None``: the defaults),
+    with ``key.path=value`` overrides (``["sensor.preset=vlp16", "frames=10"]``)."""
+    return _load_config(dict(path_or_dict) if isinstance(path_or_dict, Mapping) else path_or_dict, list(overrides))
+
+
+def run(config: Config, out: str | Path, frames: Iterable[int] | None = None, mode: str = "new", log=print) -> dict:
+    """Make frames ``frames`` (default: all) of ``config`` into the dataset folder ``out``; returns the
+    manifest with the frames' records. Blender's scene is reset to an empty one first (needs ``bpy``).
+
+    mode : ``new`` (refuse a folder holding another run), ``resume`` or ``overwrite`` (see :mod:`.dataset`)
+    """
+    try:
+        import bpy
+    except ImportError:
+        raise InputError("bpy: bpy_pipeline.run needs Blender's Python module (pip install 'bpy==4.5.*'); bpy_pipeline.scan needs none") from None
+    from .pipeline import run as run_pipeline
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    return run_pipeline(config, out, log=log, frames=frames, mode=mode)
+
+
+def scene_buffers(meshes: SceneBuffers | Mapping) -> SceneBuffers:
+    """Scene buffers of ``meshes``: buffers as they are, or ``{name: (vertices (n, 3) m, triangles (m, 3))}``
+    with an optional class name, material and reflectivity after the triangles
+    (``(v, t, "car", "diffuse", 0.3)``); objects are ``unlabeled``, ``diffuse``, 0.5 by default."""
+    if isinstance(meshes, SceneBuffers):
+        return meshes
+    from .labels import load_class_table
+
+    table = load_class_table()
+    buffers = SceneBuffers.from_meshes({name: mesh[:2] for name, mesh in meshes.items()})
+    classes, materials, reflectivity = [], [], []
+    for name, mesh in meshes.items():
+        extra = list(mesh[2:]) + [None] * 3
+        classes.append(table.names[table.id_of(extra[0] or "unlabeled", f"meshes[{name!r}] class")])
+        material = extra[1] or "diffuse"
+        if material not in MATERIAL_ID:
+            raise InputError(f"meshes[{name!r}] material: expected one of {', '.join(MATERIAL_ID)}, got {material!r}")
+        materials.append(MATERIAL_ID[material])
+        reflectivity.append(0.5 if extra[2] is None else float(extra[2]))
+    objects = buffers.objects
+    buffers.objects = ObjectTable(objects.names, objects.parents, classes, np.array([table.id_of(c) for c in classes], np.uint16), objects.instance, np.array(materials, np.uint8), np.array(reflectivity, np.float32))
+    return buffers
+
+
+def scan(meshes: SceneBuffers | Mapping, sensor: str | Mapping = "vlp16", pose: np.ndarray | None = None, effects: Mapping | None = None, seed: int = 0, frame: int = 0) -> np.ndarray:
+    """Scan meshes with a sensor without touching Blender: ``(p,)`` POINT_DTYPE records in the sensor frame.
+
+    meshes : scene buffers, or ``{name: (vertices (n, 3), triangles (m, 3)[, class, material, reflectivity])}`` in world metres
+    sensor : a preset name (``python -m bpy_pipeline sensors``) or a mapping as the config's ``sensor`` section
+    pose : (4, 4) sensor-to-world transform (default: identity); the preset's mount height is not added
+    effects : a mapping as the config's ``effects`` section (``None``: the config's defaults, as run.py uses)
+    seed, frame : the frame's generator is the one frame ``frame`` of a run seeded ``seed`` gets
+    """
+    from .frame import Frame
+    from .pipeline import Run, effects_stage, frame_rng, scan_stage
+
+    section = {"preset": sensor} if isinstance(sensor, str) else dict(sensor)
+    config = config_from_dict({"seed": seed, "sensor": section, **({} if effects is None else {"effects": dict(effects)}), "output": {"formats": ["ply"]}})
+    out = Frame(frame, config, frame_rng(seed, frame), buffers=scene_buffers(meshes))
+    out.pose = out.pose_at = np.eye(4) if pose is None else np.asarray(pose, np.float64)
+    run = Run(config, build=False)
+    scan_stage(out, run)
+    effects_stage(out, run)
+    return out.points

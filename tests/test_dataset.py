@@ -1,0 +1,206 @@
+"""The output folder as a dataset: frame ranges, atomic frames under kill -9, resume, refusal, lock, workers, Ray."""
+
+import json
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bpy_pipeline.io import read_dataset
+
+pytestmark = pytest.mark.bpy
+ROOT = Path(__file__).resolve().parents[1]
+PARKING = ["--set", "scene.builder=parking", "--set", "output.formats=[ply,semantickitti]", "--seed", "11"]
+RAILWAY = ["--set", "scene.stations.count=3", "--set", "sensor.horizontal_resolution_deg=1.0", "--set", "sensor.vertical_resolution_deg=1.0", "--set", "output.formats=[ply]", "--set", "output.preview=false", "--seed", "2"]
+
+
+def cli(*args, env=None, **kwargs):
+    return subprocess.run([sys.executable, str(ROOT / "run.py"), *args], cwd=ROOT, capture_output=True, text=True, timeout=600, env=env, **kwargs)
+
+
+def frame_files(out: Path) -> dict[str, bytes]:
+    """Every file of the frames (not the manifest, records or indexes, which hold timings or the run's extent)."""
+    skip = {"manifest.json", "train.txt", "val.txt"}
+    files = (p for p in sorted(out.rglob("*")) if p.is_file() and p.name not in skip)
+    return {str(p.relative_to(out)): p.read_bytes() for p in files if p.parent.name != "records" and not any(part.startswith(".") for part in p.relative_to(out).parts)}
+
+
+def consistent(out: Path) -> set[int]:
+    """Check that every frame on disk is complete and recorded, or absent; returns the recorded frames.
+
+    Files a killed run was moving into place are named by its leftover intent (``.moving/``) and are
+    not part of the dataset: the next start removes them.
+    """
+    records = read_dataset(out)["frames"] if (out / "manifest.json").exists() else []
+    recorded = {str(rel) for r in records for rel in r["files"]}
+    for r in records:
+        for rel, digest in r["sha256"].items():
+            assert (out / rel).is_file(), rel
+    pending = {rel for intent in (out / ".moving").glob("*.json") for rel in json.loads(intent.read_text() or "[]")}
+    assert not pending & recorded
+    on_disk = set(frame_files(out))
+    assert on_disk <= recorded | pending, sorted(on_disk - recorded - pending)[:5]
+    return {r["index"] for r in records}
+
+
+@pytest.fixture(scope="module")
+def full_parking(tmp_path_factory):
+    out = tmp_path_factory.mktemp("full") / "parking"
+    done = cli("--out", str(out), "--frames", "10", *PARKING)
+    assert done.returncode == 0, done.stderr
+    return out
+
+
+def test_frames_5_to_9_alone_give_the_bytes_of_the_full_run(full_parking, tmp_path):
+    part = tmp_path / "part"
+    done = cli("--out", str(part), "--frames", "10", "--frames-range", "5:10", *PARKING)
+    assert done.returncode == 0, done.stderr
+    full, alone = frame_files(full_parking), frame_files(part)
+    assert alone and all("00000" in k for k in alone)
+    assert {k: full[k] for k in alone} == alone
+    assert consistent(part) == {5, 6, 7, 8, 9}
+
+
+def test_a_frame_of_a_scene_serving_several_frames_alone(tmp_path):
+    """A railway built once for three stations: frames 4 and 5 alone scan the scene frame 3 built."""
+    full, part = tmp_path / "full", tmp_path / "part"
+    assert cli("--out", str(full), "--frames", "6", *RAILWAY).returncode == 0
+    done = cli("--out", str(part), "--frames", "6", "--shard", "2/3", *RAILWAY)
+    assert done.returncode == 0, done.stderr
+    files = frame_files(part)
+    assert sorted(files) == ["ply/000004.ply", "ply/000005.ply"]
+    assert files == {k: frame_files(full)[k] for k in files}
+
+
+def test_a_second_run_into_the_folder_refuses(full_parking, tmp_path):
+    out = tmp_path / "run"
+    shutil.copytree(full_parking, out)
+    other_seed = cli("--out", str(out), "--frames", "10", *PARKING, "--seed", "12")
+    fewer = cli("--out", str(out), "--frames", "3", *PARKING)
+    for done in (other_seed, fewer):
+        assert done.returncode == 2
+        assert done.stderr.strip().splitlines() == [f"error: --out: {out} holds another run (seed 11, 10 frames); give --resume to continue it (same config and seed) or --overwrite to replace it"]
+    resumed_other = cli("--out", str(out), "--frames", "10", *PARKING, "--seed", "12", "--resume")
+    assert resumed_other.returncode == 2 and "another config or seed (differs in: seed)" in resumed_other.stderr
+    assert frame_files(out) == frame_files(full_parking)
+    replaced = cli("--out", str(out), "--frames", "2", *PARKING, "--seed", "12", "--overwrite")
+    assert replaced.returncode == 0, replaced.stderr
+    assert consistent(out) == {0, 1} and read_dataset(out)["seed"] == 12
+
+
+def test_two_runs_at_once_one_refuses(tmp_path):
+    out = tmp_path / "busy"
+    first = subprocess.Popen([sys.executable, str(ROOT / "run.py"), "--out", str(out), "--frames", "40", *PARKING], cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.time() + 60
+        while not (out / ".lock").exists() and time.time() < deadline:
+            time.sleep(0.05)
+        second = cli("--out", str(out), "--frames", "40", *PARKING, "--resume")
+        assert second.returncode == 2
+        assert f"is being written by pid {first.pid} on {socket.gethostname()}" in second.stderr
+    finally:
+        first.kill()
+        first.wait()
+
+
+def test_kill_9_at_random_points_then_resume_gives_the_uninterrupted_bytes(full_parking, tmp_path):
+    rng = np.random.default_rng(0)
+    reference = frame_files(full_parking)
+    runs = int(os.environ.get("BPY_PIPELINE_KILL_RUNS", "20"))
+    for k in range(runs):
+        out = tmp_path / f"killed{k}"
+        proc = subprocess.Popen([sys.executable, str(ROOT / "run.py"), "--out", str(out), "--frames", "10", *PARKING], cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        time.sleep(float(rng.uniform(0.6, 2.4)))
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+        if not (out / "manifest.json").exists():
+            continue  # killed before the run began: nothing to resume
+        consistent(out)  # what a killed run leaves is whole frames or nothing (after the next start's clean-up)
+        done = cli("--out", str(out), "--frames", "10", *PARKING, "--resume")
+        assert done.returncode == 0, done.stderr
+        assert consistent(out) == set(range(10))
+        assert frame_files(out) == reference
+        assert not (out / ".lock").exists() and not (out / ".staging").exists() and not any((out / ".moving").glob("*"))
+
+
+def test_a_kill_during_the_move_phase_leaves_no_frame_then_resume_completes(full_parking, tmp_path, monkeypatch):
+    """Forced: the process dies after the first of a frame's files is moved into place."""
+    from bpy_pipeline.config import load_config
+    from bpy_pipeline.pipeline import run_frames
+
+    config = load_config(None, ["scene.builder=parking", "output.formats=[ply,semantickitti]", "seed=11", "frames=10"])
+    out = tmp_path / "moved"
+    frames = run_frames(config, out)
+    next(frames)  # frame 0 committed
+    original, moved = Path.replace, []
+
+    def dying_replace(self, target):
+        if moved:
+            raise SystemExit("killed")
+        moved.append(target)
+        return original(self, target)
+
+    monkeypatch.setattr(Path, "replace", dying_replace)
+    with pytest.raises(SystemExit):
+        next(frames)
+    monkeypatch.setattr(Path, "replace", original)
+    (out / ".lock").unlink(missing_ok=True)  # a killed process leaves its lock (a dead pid on this host is taken over anyway)
+    assert moved and Path(moved[0]).exists()  # a file of frame 1 in place, without its record
+    assert len(read_dataset(out)["frames"]) == 1
+    done = cli("--out", str(out), "--frames", "10", *PARKING, "--resume")
+    assert done.returncode == 0, done.stderr
+    assert "removed the files of frame 000001" in done.stderr + done.stdout
+    assert frame_files(out) == frame_files(full_parking)
+
+
+def test_resume_redoes_a_frame_whose_file_changed(full_parking, tmp_path):
+    out = tmp_path / "tampered"
+    shutil.copytree(full_parking, out)
+    (out / "ply" / "000003.ply").write_bytes(b"not a ply")
+    done = cli("--out", str(out), "--frames", "10", *PARKING, "--resume")
+    assert done.returncode == 0 and "frame 000003 does not match its record" in done.stdout + done.stderr
+    assert frame_files(out) == frame_files(full_parking)
+
+
+def test_two_workers_give_the_bytes_of_one_process(full_parking, tmp_path):
+    out = tmp_path / "workers"
+    done = cli("--out", str(out), "--frames", "10", *PARKING, "--workers", "2")
+    assert done.returncode == 0, done.stderr
+    assert frame_files(out) == frame_files(full_parking)
+    assert consistent(out) == set(range(10))
+    assert (out / "kitti" / "ImageSets" / "train.txt").read_text() == (full_parking / "kitti" / "ImageSets" / "train.txt").read_text()
+
+
+def test_a_local_ray_cluster_gives_the_bytes_of_one_process(full_parking, tmp_path):
+    pytest.importorskip("ray", reason="Ray is not installed (pip install '.[distributed]')")
+    ray_cli = Path(sys.executable).with_name("ray")
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    env = {**os.environ, "RAY_USAGE_STATS_ENABLED": "0"}
+    start = subprocess.run([str(ray_cli), "start", "--head", "--node-ip-address=127.0.0.1", f"--port={port}", "--num-cpus=2", "--include-dashboard=false", "--disable-usage-stats"], capture_output=True, text=True, timeout=180, env=env)
+    if start.returncode != 0:
+        pytest.skip(f"a local Ray cluster would not start: {start.stderr.strip().splitlines()[-1:]}")
+    try:
+        out = tmp_path / "ray"
+        done = cli("--out", str(out), "--frames", "10", *PARKING, "--ray", f"127.0.0.1:{port}", env=env)
+        assert done.returncode == 0, done.stderr
+        assert frame_files(out) == frame_files(full_parking)
+        assert consistent(out) == set(range(10))
+    finally:
+        subprocess.run([str(ray_cli), "stop", "--force"], capture_output=True, timeout=120, env=env)
+
+
+def test_records_hold_each_frame_and_the_manifest_is_written_once(full_parking):
+    manifest = json.loads((full_parking / "manifest.json").read_text())
+    assert "frames" not in manifest and manifest["summary"]["frames"] == 10 and manifest["summary"]["frame_indices"] == [[0, 9]]
+    records = read_dataset(full_parking)["frames"]
+    assert [r["index"] for r in records] == list(range(10))
+    assert all(set(r["sha256"]) == set(r["files"]) and r["points"] > 0 for r in records)
