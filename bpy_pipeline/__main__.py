@@ -123,11 +123,18 @@ def fit_effects(args) -> int:
         raise InputError(f"fit: need 0 < --min-range < --max-range, got {options.min_range} and {options.max_range}")
     if min(options.range_bins, options.incidence_bins, options.noise_range_bins, options.noise_incidence_bins, options.min_samples) < 1:
         raise InputError("fit: bin counts and --min-samples must be >= 1")
+    out = Path(args.out)
+    if not out.parent.is_dir() and (out.parent.exists() or any(p.exists() and not p.is_dir() for p in out.parents)):
+        raise InputError(f"--out: {out.parent} is not a folder (a file stands in the path); give a path in a folder")
     ring_field = None if args.ring_field < 0 else args.ring_field
     scans = [fitting.read_scan(path, args.rings, args.fields, args.intensity_field, ring_field, args.empty_radius) for path in args.scans]
     scan = scans[0] if len(scans) == 1 else fitting.stack_scans(scans)
     models, report = fitting.fit_models(scan, options)
-    write_model_file(args.out, models)
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        write_model_file(out, models)
+    except OSError as err:
+        raise InputError(f"--out: cannot write {out} ({err.strerror or err})") from None
     src = models.source
     print(f"{src['sweeps']} sweep(s) of {src['rings']} x {src['columns']}: {src['empty']} empty firings; "
           f"{src['samples']} with a known target ({src['filled_from_neighbours']} filled from ring neighbours), {src['dropped']} of them dropped")

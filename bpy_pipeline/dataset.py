@@ -24,6 +24,7 @@ when a run ends. A run's cost per frame does not grow with the number of frames.
 from __future__ import annotations
 
 import datetime
+import errno
 import hashlib
 import json
 import os
@@ -73,8 +74,13 @@ def _pid_alive(pid: int) -> bool:
 
 
 def _error(path: Path, doing: str, err: OSError) -> InputError:
-    if err.errno == 28:  # ENOSPC
-        return InputError(f"--out: no space left on the device holding {path} ({doing})")
+    """The one line of a failed write: a full disk said as such (numpy's short writes carry no errno)."""
+    try:
+        full = err.errno == errno.ENOSPC or shutil.disk_usage(path if path.exists() else path.parent).free < (1 << 20)
+    except OSError:
+        full = False
+    if full:
+        return InputError(f"--out: no space left on the device holding {path} (trying to {doing} it); the frames committed so far are kept, --resume continues")
     return InputError(f"--out: cannot {doing} {path} ({err.strerror or err})")
 
 
@@ -280,7 +286,7 @@ class Dataset:
                 tmp.write_text(json.dumps(record, default=to_json, allow_nan=False) + "\n")
             intent.unlink()
         except OSError as err:
-            raise _error(self.out, f"write frame {frame.index}", err) from None
+            raise _error(self.out, f"write frame {frame.index} into", err) from None
         finally:
             shutil.rmtree(staging, ignore_errors=True)
         frame.record = record
@@ -404,10 +410,18 @@ def check_writable(out: Path, config: Config) -> None:
     except OSError as err:
         raise _error(out, "write into", err) from None
     rays = ray_count(config.sensor.spec)
+    memory, frame_bytes = available_memory(), rays * POINT_DTYPE.itemsize * 2
+    if memory and frame_bytes > memory:
+        raise InputError(f"sensor: {rays:.3g} rays per frame need about {size(frame_bytes)} of memory for their points; {size(memory)} are available. Lower the resolution or the field of view")
     need = rays * BYTES_PER_POINT * max(len(config.output.formats), 1)
     free = shutil.disk_usage(out).free
     if need > free:
-        raise InputError(f"--out: {out} has {free / 1e9:.2f} GB free; one frame of {rays:.3g} rays may need {need / 1e9:.2f} GB")
-    memory, frame_bytes = available_memory(), rays * POINT_DTYPE.itemsize * 2
-    if memory and frame_bytes > memory:
-        raise InputError(f"sensor: {rays:.3g} rays per frame need about {frame_bytes / 1e9:.1f} GB of memory for their points; {memory / 1e9:.1f} GB are available. Lower the resolution or the field of view")
+        raise InputError(f"--out: {out} has {size(free)} free; one frame of {rays:.3g} rays may need {size(need)}")
+
+
+def size(n: float) -> str:
+    """A byte count for people: ``12.3 MB``."""
+    for unit in ("B", "kB", "MB", "GB"):
+        if n < 1000 or unit == "GB":
+            return f"{n:.3g} {unit}" if unit != "B" else f"{int(n)} B"
+        n /= 1000

@@ -24,6 +24,7 @@ from . import __version__
 from .buffers import SceneBuffers
 from .builders import BUILDERS, BuildContext
 from .config import Config, sensor_trajectory
+from .errors import InputError
 from .frame import Frame
 from .geometry.transforms import pose_matrix, transform_points
 from .labels import ClassTable, load_class_table, parse_rules
@@ -179,6 +180,7 @@ class Run:
     rays : the sensor's rays (:class:`SensorRays`); scene_frame : the frame whose scene is built now
     trajectory : the moving sensor's path in the built scene (``None`` for a static sensor)
     threads : ray-casting threads (``None``: the cores available)
+    log : where warnings and the lines of long stages go (``None``: nowhere)
     """
 
     config: Config
@@ -190,6 +192,7 @@ class Run:
     scene_frame: int | None = None
     trajectory: Trajectory | None = None
     threads: int | None = None
+    log: Callable[[str], None] | None = None
 
     def __post_init__(self):
         self.rules = parse_rules(self.config.labels.name_rules, "labels.name_rules", self.table.names)
@@ -236,6 +239,9 @@ def export_stage(frame: Frame, run: Run) -> None:
     if frame.trajectory is not None:  # everything the sensor can reach from anywhere along this frame's stretch of path
         max_range += frame.trajectory.reach(frame.index, frame_time(run.config.sensor.spec))
     frame.buffers = export_scene(run.table, run.rules, keep_within=(frame.pose[:3, 3], max_range))
+    if not len(frame.buffers.triangles) and len(export_scene(run.table, run.rules).triangles):
+        where = [round(float(v), 2) for v in frame.pose[:3, 3]]
+        raise InputError(f"sensor: no object of the scene lies within max_range ({max_range} m) of the sensor at {where} in frame {frame.index}; move the sensor or raise sensor.max_range")
 
 
 def scan_stage(frame: Frame, run: Run) -> None:
@@ -255,7 +261,7 @@ def scan_stage(frame: Frame, run: Run) -> None:
 def effects_stage(frame: Frame, run: Run) -> None:
     """Trace each chunk, give it its effects and move it to the output frame before the next is traced,
     so memory holds the final point records and one chunk's work, no more."""
-    config = run.config
+    config, spec = run.config, run.config.sensor.spec
     mask = run.rays.edge_mask(frame.index)
 
     def finished(chunks):
@@ -264,6 +270,9 @@ def effects_stage(frame: Frame, run: Run) -> None:
                 keep = drop_at_edges(points, mask, config.sensor.spec, frame.rng)
                 points, beam = points[keep], beam[keep]
             points = apply_effects(points, beam, config.effects, frame.rng)
+            inside = (points["range"] >= spec.min_range) & (points["range"] <= spec.max_range)
+            if not inside.all():  # noise never pushes a return past the sensor's limits: such returns are dropped
+                points = points[inside]
             if config.output.frame == "world":
                 xyz = transform_points(np.column_stack([points["x"], points["y"], points["z"]]).astype(np.float64), frame.pose)
                 points["x"], points["y"], points["z"] = xyz.T
@@ -291,14 +300,23 @@ STAGES: tuple[tuple[Callable[[Frame, Run], None], str | None], ...] = (
 )
 
 
+LONG_STAGE_S = 3.0  # a stage that takes longer gets a line of its own
+
+
 def make_frame(run: Run, index: int) -> Frame:
-    """Frame ``index`` through every stage before writing, timed."""
+    """Frame ``index`` through every stage before writing, timed; the builder's warnings and long stages are logged."""
     frame = Frame(index, run.config, frame_rng(run.config.seed, index))
     for stage, timing in STAGES:
         start = time.perf_counter()
         stage(frame, run)
+        took = time.perf_counter() - start
         if timing != "boxes" or frame.boxes is not None:
-            frame.timings[timing] = frame.timings.get(timing, 0.0) + time.perf_counter() - start
+            frame.timings[timing] = frame.timings.get(timing, 0.0) + took
+        if run.log is not None and took > LONG_STAGE_S:
+            run.log(f"note: frame {index}: {stage.__name__.removesuffix('_stage')} took {took:.1f} s")
+    if run.log is not None and frame.scene is not None:
+        for line in frame.scene.warnings:
+            run.log(f"warning: frame {index}: {line}")
     return frame
 
 
@@ -389,7 +407,7 @@ def run_frames(config: Config, out_dir: str | Path, build: bool = True, frames: 
     from .dataset import Dataset
 
     frames = range(config.frames) if frames is None else frames
-    run = Run(config, build)
+    run = Run(config, build, log=log)
     with Dataset.open(out_dir, config, mode, log=log) as dataset:
         for index in frames:
             if dataset.has(index):

@@ -104,6 +104,12 @@ BAD = {
     "empty scene": (["--set", "scene.builder=primitives", "--set", "scene.shapes=[]"], "scene: nothing to scan"),
     "missing blend": (["--set", "scene.builder=blend", "--set", "scene.path={tmp}/gone.blend"], "scene.path: "),
     "out is a file": (["--out", "{tmp}/afile"], "--out: "),
+    "config not utf-8": (["--config", "{tmp}/latin1.yaml"], "latin1.yaml: not UTF-8 text"),
+    "scene as a scalar": (["--set", "scene=railway"], "scene: expected a mapping"),
+    "sensor as a list": (["--set", "sensor=[1, 2]"], "sensor: expected a mapping"),
+    "rays beyond memory": (["--set", "sensor.preset=railway_tls", "--set", "sensor.sampling_factor=6.3"], "rays per frame need about"),
+    "a hall of 100000 people": (["--set", "scene.builder=industrial_hall", "--set", "scene.people={mean: 100000, std: 0, min: 0, max: 100000}"], "scene.people.max: must be <= 500"),
+    "scene out of range": (["--set", "scene.builder=primitives", "--set", "sensor.preset=vlp16", "--set", "sensor.position=[5000, 0, 1]"], "no object of the scene lies within max_range"),
 }
 
 
@@ -111,6 +117,7 @@ BAD = {
 def test_bad_input_one_line_exit_2_nothing_written(tmp_path, case):
     (tmp_path / "bad.yaml").write_text("scene: {builder: [\n")
     (tmp_path / "afile").write_text("x")
+    (tmp_path / "latin1.yaml").write_bytes("scene: {builder: primitives}  # Stra\xdfe\n".encode("latin-1"))
     args, expected = BAD[case]
     args = [a.replace("{tmp}", str(tmp_path)) for a in args]
     out = tmp_path / "out"
@@ -121,3 +128,77 @@ def test_bad_input_one_line_exit_2_nothing_written(tmp_path, case):
     assert expected in lines[0]
     written = [p for p in out.rglob("*") if p.is_file()] if out.exists() else []
     assert written == []
+
+
+def test_numbers_in_exponent_form_are_numbers(tmp_path):
+    from bpy_pipeline.config import load_config
+
+    assert load_config(None, ["effects.noise.sigma=2e-3"]).effects.noise.sigma == 0.002
+
+
+@pytest.fixture
+def tiny_mount(tmp_path):
+    """A folder on its own small tmpfs (mounting needs root; skipped otherwise)."""
+    mounted = []
+
+    def mount(options: str) -> Path:
+        folder = tmp_path / f"mnt{len(mounted)}"
+        folder.mkdir()
+        done = subprocess.run(["mount", "-t", "tmpfs", "-o", options, "tmpfs", str(folder)], capture_output=True, text=True)
+        if done.returncode != 0:
+            pytest.skip(f"cannot mount a tmpfs here ({done.stderr.strip()})")
+        mounted.append(folder)
+        return folder
+
+    yield mount
+    for folder in mounted:
+        subprocess.run(["umount", "-l", str(folder)], capture_output=True)
+
+
+def test_read_only_out_refused_before_any_work(tiny_mount):
+    out = tiny_mount("ro,size=1m")
+    result = run("--out", str(out), *SMALL)
+    assert result.returncode == 2 and result.stderr.strip().splitlines() == [f"error: --out: cannot write into {out} (Read-only file system)"]
+    assert "frame" not in result.stdout  # nothing was built or scanned
+
+
+def test_full_disk_refused_before_any_work(tiny_mount):
+    out = tiny_mount("size=64k")
+    result = run("--out", str(out / "run"), *SMALL)
+    assert result.returncode == 2 and " free; one frame of " in result.stderr and len(result.stderr.strip().splitlines()) == 1
+    assert not any((out / "run").rglob("*.ply")) if (out / "run").exists() else True
+
+
+def test_disk_full_during_a_frame_leaves_no_half_frame(tiny_mount):
+    """The estimate passes (a small scan) but the disk fills while a later frame is written."""
+    out = tiny_mount("size=8m")
+    result = run("--out", str(out / "run"), "--set", "scene.builder=primitives", "--set", "sensor.preset=vlp16", "--set", "sensor.position=[0, 0, 1.5]", "--frames", "40", "--set", "output.formats=[ply,las]")
+    assert result.returncode == 2 and "no space left on the device" in result.stderr, result.stderr
+    from bpy_pipeline.io import read_dataset
+
+    records = read_dataset(out / "run")["frames"]
+    recorded = {f for r in records for f in r["files"]}
+    on_disk = {str(p.relative_to(out / "run")) for p in (out / "run").rglob("*") if p.is_file() and p.parts[-2] not in ("records",) and not any(s.startswith(".") for s in p.relative_to(out / "run").parts) and p.name != "manifest.json"}
+    assert 0 < len(records) < 40 and on_disk <= recorded
+
+
+def test_empty_frame_warns_with_the_likely_cause(tmp_path):
+    result = run("--out", str(tmp_path / "o"), "--set", "sensor.preset=vlp16")  # the railway's station is on the ground
+    assert result.returncode == 0, result.stderr
+    assert "warning: frame 0: 0 points. The sensor (vlp16" in result.stderr and "a sensor on or under the ground sees nothing" in result.stderr
+
+
+def test_noise_never_pushes_a_range_past_max_range(tmp_path):
+    result = run("--out", str(tmp_path / "o"), "--set", "scene.builder=primitives", "--set", "scene.shapes=[{type: box, size: [1, 30, 30], position: [10.2, 0, 0], class: wall}]",
+                 "--set", "sensor.preset=vlp16", "--set", "sensor.position=[0, 0, 0]", "--set", "sensor.max_range=10", "--set", "effects.noise.sigma=0.5", "--set", "output.formats=[ply]")
+    assert result.returncode == 0, result.stderr
+    from bpy_pipeline.io import read_ply
+
+    points = read_ply(tmp_path / "o" / "ply" / "000000.ply")
+    assert len(points) and points["range"].max() <= 10.0
+
+
+def test_fit_out_under_a_regular_file(tmp_path, real_scan):
+    (tmp_path / "file").write_text("x")
+    result = subprocess.run([sys.executable, "-m", "bpy_pipeline", "fit", str(real_scan("nuscenes_hdl32e_sweep.bin")), "--out", str(tmp_path / "file" / "model.yaml")], cwd=ROOT, capture_output=True, text=True)
+    assert result.returncode == 2 and result.stderr.strip().splitlines() == [f"error: --out: {tmp_path / 'file'} is not a folder (a file stands in the path); give a path in a folder"]

@@ -51,11 +51,13 @@ class BuildResult:
     info : plain data for the frame's record (counts, placement log)
     scene : the builder's own description of what it built (the railway's layout), for callers
         that want it; never written
+    warnings : lines for the user (a placement loop that gave up, say), printed by the run
     """
 
     headings: dict = field(default_factory=dict)
     info: dict | None = None
     scene: Any = None
+    warnings: tuple[str, ...] = ()
 
 
 def no_check(params, where: str) -> None:

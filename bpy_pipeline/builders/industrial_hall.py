@@ -50,10 +50,12 @@ class IndustrialHallScene:
     poses: dict = field(default_factory=lambda: {"standing": 0.35, "walking": 0.35, "sitting": 0.15, "crouching": 0.15})
     person_clearance: float = 0.05
     placement_tries: int = 60
+    max_consecutive_failures: int = 10  # people in a row that fit nowhere end the frame's placement (with a warning)
     assets: str = ""
 
 
 
+MAX_PEOPLE = 500  # per frame: far more than a hall of 16 x 12 m holds, and placement tries grow with it
 MAY_BE_ZERO = {"person_clearance", "robots", "shelves", "desk_rows", "desks_per_row", "area_radius"}
 
 
@@ -61,7 +63,7 @@ def check(params: IndustrialHallScene, where: str) -> None:
     from ..geometry.human import POSES
 
     check_sizes(params, where, MAY_BE_ZERO)
-    check_distribution(params.people, f"{where}.people", low=0.0)
+    check_distribution(params.people, f"{where}.people", low=0.0, high=MAX_PEOPLE)
     check_distribution(params.person_height, f"{where}.person_height", low=0.5, high=2.5)
     if not params.poses or any(k not in POSES for k in params.poses):
         raise InputError(f"{where}.poses: expected weights for some of {', '.join(POSES)}, got {params.poses!r}")

@@ -178,14 +178,20 @@ class IndustrialHall:
         weights = np.array([p.poses[k] for k in kinds], float)
         count = sample_count(p.people, rng)
         people = []
-        missed = 0
-        for _ in range(count):
+        missed = in_a_row = 0
+        warnings = ()
+        for wanted in range(count):
             kind = kinds[rng.choice(len(kinds), p=weights / weights.sum())]
             asset = int(rng.integers(len(self.assets))) if self.assets else None
             placed = self._place_person(rng, kind, robots, people, asset)
             if placed is None:
-                missed += 1
+                missed, in_a_row = missed + 1, in_a_row + 1
+                if in_a_row >= p.max_consecutive_failures:
+                    missed += count - wanted - 1
+                    warnings = (f"scene.people: placed {len(people)} of {count} people; {in_a_row} in a row fit nowhere, so the rest were given up (scene.max_consecutive_failures)",)
+                    break
             else:
+                in_a_row = 0
                 people.append((*placed, asset))
         reflectivity = rng.uniform(*PERSON_REFLECTIVITY, size=len(people))
         # apply: move and re-pose what exists, hide what this frame does not use
@@ -219,4 +225,4 @@ class IndustrialHall:
             "people_not_placed": missed,
         }
         self.last = {"robots": robots, "people": people}
-        return BuildResult(headings=headings, info=info)
+        return BuildResult(headings=headings, info=info, warnings=warnings)
