@@ -58,13 +58,6 @@ def capsule_gaps(a1, b1, r1, a2, b2, r2) -> np.ndarray:
     return distance - np.asarray(r1, float)[:, None] - np.asarray(r2, float)[None]
 
 
-def capsules_overlap(a1, b1, r1, a2, b2, r2, clearance: float = 0.0) -> bool:
-    """True when any capsule of the first set comes closer than ``clearance`` to any of the second."""
-    if len(a1) == 0 or len(a2) == 0:
-        return False
-    return bool((capsule_gaps(a1, b1, r1, a2, b2, r2) < clearance).any())
-
-
 def point_box_distance(points: np.ndarray, centre, axes, half) -> np.ndarray:
     """``(n,)`` distance from ``(n, 3)`` points to an oriented box (0 inside)."""
     local = (np.asarray(points, np.float64) - np.asarray(centre, float)) @ np.asarray(axes, float)
@@ -105,13 +98,6 @@ def capsule_box_gaps(a, b, radius, centre, axes, half, iterations: int = 40) -> 
         x1, x2, f1, f2 = new_x1, new_x2, new_f1, new_f2
     ends = np.minimum(f(np.zeros(len(a))), f(np.ones(len(a))))
     return np.minimum(np.minimum(f1, f2), ends) - np.asarray(radius, float)
-
-
-def capsules_hit_box(a, b, radius, centre, axes, half, clearance: float = 0.0) -> bool:
-    """True when a capsule comes closer than ``clearance`` to the box."""
-    if len(a) == 0:
-        return False
-    return bool((capsule_box_gaps(a, b, radius, centre, axes, half) < clearance).any())
 
 
 def box_axes(yaw: float) -> np.ndarray:
