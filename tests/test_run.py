@@ -1,6 +1,5 @@
 """run.py end to end: Python and Blender-style invocations, seeds, bad input, the blend builder."""
 
-import json
 import subprocess
 import sys
 from pathlib import Path

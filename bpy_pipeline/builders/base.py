@@ -8,6 +8,7 @@ when called. A frame's scene is built by :func:`build_scene`, which hands the bu
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from typing import Any, Callable, Literal
 
@@ -149,3 +150,13 @@ def check_distribution(d: Distribution, where: str, low: float | None = None, hi
         raise InputError(f"{where}.min: must be >= {low}, got {d.min}")
     if high is not None and d.max > high:
         raise InputError(f"{where}.max: must be <= {high}, got {d.max}")
+
+
+def check_sizes(params, where: str, may_be_zero: set) -> None:
+    """Every number (and number pair) of an indoor scene's parameters positive, or >= 0 where allowed."""
+    for f in dataclasses.fields(params):
+        value = getattr(params, f.name)
+        if isinstance(value, bool) or not isinstance(value, (int, float, tuple)):
+            continue
+        for v in value if isinstance(value, tuple) else (value,):
+            check_positive(v, f"{where}.{f.name}", allow_zero=f.name in may_be_zero)

@@ -7,8 +7,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import InputError
-from .base import Builder, BuildContext, BuildResult, Distribution, check_distribution, refuse_sensor_placement, register_builder
-from .parking import check_sizes
+from .base import Builder, BuildContext, BuildResult, Distribution, check_distribution, check_sizes, refuse_sensor_placement, register_builder
 
 
 @dataclass(frozen=True)

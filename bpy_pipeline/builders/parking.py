@@ -2,15 +2,13 @@
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass, field
 from typing import Literal
 
 import numpy as np
 
 from ..errors import InputError
-from ..schema import check_positive
-from .base import Builder, BuildContext, BuildResult, Distribution, check_distribution, refuse_sensor_placement, register_builder
+from .base import Builder, BuildContext, BuildResult, Distribution, check_distribution, check_sizes, refuse_sensor_placement, register_builder
 
 
 @dataclass(frozen=True)
@@ -63,16 +61,6 @@ class ParkingScene:
 
 
 MAY_BE_ZERO = {"ramp_length", "sensor_start", "sensor_step", "near_rejection_distance", "car_clearance", "min_visible_fraction", "near_rejection_probability", "max_consecutive_failures"}
-
-
-def check_sizes(params, where: str, may_be_zero: set) -> None:
-    """Every number (and number pair) of an indoor scene's parameters positive, or >= 0 where allowed."""
-    for f in dataclasses.fields(params):
-        value = getattr(params, f.name)
-        if isinstance(value, bool) or not isinstance(value, (int, float, tuple)):
-            continue
-        for v in value if isinstance(value, tuple) else (value,):
-            check_positive(v, f"{where}.{f.name}", allow_zero=f.name in may_be_zero)
 
 
 def check(params: ParkingScene, where: str) -> None:
