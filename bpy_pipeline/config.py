@@ -24,6 +24,7 @@ from .lidar.grid import check_grid, image_shape
 from .lidar.mirror_sensor import check_reflector, load_edge_mask
 from .lidar.platform import Trajectory
 from .lidar.sensors import SensorSpec, frame_time, mount_offset, resolve_sensor
+from .lidar.sensors import rings as sensor_rings
 from .buffers import MATERIALS  # noqa: F401  (the panel's list)
 from .builders import BUILDERS as BUILDER_REGISTRY
 from .builders.railway import RailwayScene
@@ -316,7 +317,7 @@ def _check_effects(effects: EffectsConfig, spec: SensorSpec | None) -> None:
     noise, drop, intensity = effects.noise, effects.drop, effects.intensity
     for key in ("sigma", "sigma_per_metre", "angular_jitter_deg"):
         check_positive(getattr(noise, key), f"effects.noise.{key}", allow_zero=True)
-    rings = None if spec is None else spec.channels if spec.pattern in ("spinning", "terrestrial", "pinhole", "grid") else 1
+    rings = None if spec is None else sensor_rings(spec)
     if noise.ring_bias and rings is not None and len(noise.ring_bias) != rings:
         raise InputError(f"effects.noise.ring_bias: one value per ring ({rings} for this sensor), got {len(noise.ring_bias)}")
     probabilities = {"effects.drop.probability": drop.probability, "effects.drop.carla.general_rate": drop.carla.general_rate, "effects.drop.carla.zero_intensity": drop.carla.zero_intensity}

@@ -31,6 +31,7 @@ from .labels import ClassTable, load_class_table, parse_rules
 from .lidar.divergence import scan_footprint_chunks
 from .lidar.effects import apply_effects
 from .lidar.grid import image_shape
+from .lidar.patterns import PATTERNS
 from .lidar.mirror_sensor import MirrorFrame, drop_at_edges, load_edge_mask, reflect_patterns
 from .lidar.platform import Trajectory
 from .lidar.points import POINT_DTYPE
@@ -130,7 +131,7 @@ class SensorRays:
         spec, reflector = self.config.sensor.spec, self.config.sensor.reflector
         edge = reflector.edge_drop
         measured = Path(edge.mask) if edge.mask not in ("none", "generated") else None
-        key = (frame if spec.pattern == "rosette" else 0, measured and measured.exists() and measured.stat().st_mtime_ns)
+        key = (frame if PATTERNS.get(spec.pattern).per_frame else 0, measured and measured.exists() and measured.stat().st_mtime_ns)
         if self.cached.get("key") != key:
             traced = MirrorFrame.of(reflector, spec, key[0])
             mask = None

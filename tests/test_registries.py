@@ -85,3 +85,45 @@ def test_toy_builder_and_writer_run(toys, bpy_scene, tmp_path):
     assert manifest["frames"][0]["files"] == ["xyz/000000.xyz", "ply/000000.ply"]
     front = xyz[(np.abs(xyz[:, 1]) < 0.2) & (xyz[:, 2] > 0)]
     assert len(front) and np.allclose(front[:, 0].min(), 4.75, atol=0.02)  # the pillar's near face
+
+
+# ----------------------------------------------------------------------------- a toy ray pattern
+def halo_rays(spec):
+    """``columns`` rays in a horizontal ring, ring 0, all at t = 0."""
+    from bpy_pipeline.lidar.sensors import Pattern
+
+    def chunk(start, stop, frame):
+        azimuth = 2 * np.pi * np.arange(start, stop) / spec.columns
+        return Pattern(np.column_stack([np.cos(azimuth), np.sin(azimuth), np.zeros(stop - start)]), np.zeros(stop - start, np.uint16), np.zeros(stop - start))
+
+    return chunk
+
+
+def check_halo(spec, where):
+    if spec.columns < 3:
+        raise InputError(f"{where}.columns: a halo needs >= 3 rays, got {spec.columns}")
+
+
+@pytest.fixture
+def halo():
+    from bpy_pipeline.lidar.patterns import PATTERNS, RayPattern, register_pattern
+
+    register_pattern("halo", RayPattern(halo_rays, lambda spec: spec.columns, lambda spec: (360.0 / spec.columns, None), check_halo, lambda spec: "columns"))
+    yield
+    PATTERNS.unregister("halo")
+
+
+def test_toy_pattern_fires_from_a_config(halo):
+    import bpy_pipeline
+    from bpy_pipeline.geometry import primitives
+
+    config = load_config({"sensor": {"preset": "custom", "pattern": "halo", "columns": 360, "max_range": 50}})
+    assert config.sensor.spec.pattern == "halo"
+    with pytest.raises(InputError, match=r"^sensor.columns: a halo needs >= 3 rays"):
+        load_config({"sensor": {"preset": "custom", "pattern": "halo", "columns": 2}})
+    with pytest.raises(InputError, match=r"^sensor.pattern: unknown ray pattern 'hallo'; allowed: .*halo"):
+        load_config({"sensor": {"preset": "custom", "pattern": "hallo"}})
+    v, t = primitives.box(20.0, 20.0, 4.0)
+    points = bpy_pipeline.scan({"room": (v, t, "wall")}, {"preset": "custom", "pattern": "halo", "columns": 360, "max_range": 50})
+    assert len(points) == 360 and np.allclose(np.abs(points["z"]), 0.0, atol=1e-6)
+    assert np.allclose(np.maximum(np.abs(points["x"]), np.abs(points["y"])), 10.0, atol=1e-4)  # the walls of the 20 m room

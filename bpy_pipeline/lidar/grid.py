@@ -19,15 +19,14 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import InputError
+from .patterns import PATTERNS
 from .sensors import SensorSpec, azimuth_step, azimuths, elevations
-
-GRID_PATTERNS = ("spinning", "terrestrial")
-
 
 def check_grid(spec: SensorSpec, where: str) -> None:
     """``InputError`` naming ``where`` when the sensor's frames do not form a rows x columns image."""
-    if spec.pattern not in GRID_PATTERNS:
-        raise InputError(f"{where}: needs a sensor whose frames are a rows x columns image ({' or '.join(GRID_PATTERNS)}), not the {spec.pattern} pattern")
+    if not PATTERNS.get(spec.pattern).image:
+        images = [name for name, pattern in PATTERNS.items() if pattern.image]
+        raise InputError(f"{where}: needs a sensor whose frames are a rows x columns image ({' or '.join(images)}), not the {spec.pattern} pattern")
 
 
 def image_shape(spec: SensorSpec) -> tuple[int, int]:
