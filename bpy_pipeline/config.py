@@ -20,6 +20,9 @@ import yaml
 
 from .errors import InputError
 from .lidar.divergence import Divergence, check_divergence
+from .lidar.drop import DROP_MODELS
+from .lidar.drop.carla import CarlaDrop
+from .lidar.drop.threshold import ThresholdDrop
 from .lidar.grid import check_grid, image_shape
 from .lidar.mirror_sensor import check_reflector, load_edge_mask
 from .lidar.platform import Trajectory
@@ -130,30 +133,14 @@ class NoiseConfig:
 
 
 @dataclass(frozen=True)
-class CarlaDrop:
-    """CARLA's RayCastLidar drop-off, with CARLA's defaults."""
-
-    general_rate: float = 0.45  # dropoff_general_rate: rays lost whatever they hit
-    intensity_limit: float = 0.8  # dropoff_intensity_limit: above it, never lost
-    zero_intensity: float = 0.4  # dropoff_zero_intensity: probability of losing a zero-intensity point
-    attenuation_rate: float = 0.004  # atmosphere_attenuation_rate: intensity exp(-a R), 1/m
-
-
-@dataclass(frozen=True)
-class ThresholdDrop:
-    """A detection threshold from a datasheet's ranges (normal incidence, 50 % detection)."""
-
-    range_at_10: float = 40.0  # m for a 10 % reflectivity target (Ouster OS1: 40; sparse 3D camera: 10)
-    range_at_80: float = 120.0  # m for an 80 % target (0: unknown, the lidar equation's R^2 decides)
-    softness: float = 0.1  # width of the transition in ln(received power); 0 for a hard cut
-
-
-@dataclass(frozen=True)
 class DropConfig:
-    model: Literal["none", "uniform", "carla", "threshold", "table"] = "none"
+    """``effects.drop``: the model (lidar/drop, a registry) and its parameters."""
+
+    model: str = "none"  # a name of lidar/drop (DROP_MODELS)
     probability: float = 0.0  # for `uniform`
     carla: CarlaDrop = field(default_factory=CarlaDrop)
     threshold: ThresholdDrop = field(default_factory=ThresholdDrop)
+    params: dict = field(default_factory=dict)  # for a model that takes its parameters here (its own dataclass checks them)
     model_file: str = ""  # a file of `python -m bpy_pipeline fit`: `uniform`, `threshold` and `table` take their parameters from it
 
 
@@ -336,11 +323,14 @@ def _check_effects(effects: EffectsConfig, spec: SensorSpec | None) -> None:
     check_positive(intensity.reference_range, "effects.intensity.reference_range")
     if not 0 < intensity.reference_reflectivity <= 1:
         raise InputError(f"effects.intensity.reference_reflectivity: must lie in (0, 1], got {intensity.reference_reflectivity}")
+    model = DROP_MODELS.get(drop.model)
+    if model.params is not None:
+        from_dict(model.params, drop.params, "effects.drop.params")
+    elif drop.params:
+        raise InputError(f"effects.drop.params: the {drop.model} drop model takes no params")
     # fitted models: the file must hold the model asked of it, and replaces its inline parameters
     fitted = {
-        "drop": (drop, {"uniform": ("uniform", drop.probability != DropConfig.probability, "probability"),
-                        "threshold": ("threshold", drop.threshold != ThresholdDrop(), "threshold"),
-                        "table": ("drop_table", False, "")}),
+        "drop": (drop, {drop.model: (model.fitted, model.inline(drop), model.inline_keys)} if model.fitted else {}),
         "noise": (noise, {"range": ("noise_range", (noise.sigma, noise.sigma_per_metre) != (0.0, 0.0), "sigma / sigma_per_metre"),
                           "table": ("noise_table", False, "")}),
     }

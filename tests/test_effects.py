@@ -292,7 +292,7 @@ def test_intensity_models_chosen_in_the_config():
 def test_config_keys_and_errors(tmp_path):
     defaults = effects()
     assert defaults.drop.model == "none" and defaults.noise.sigma == 0.0 and defaults.intensity.model == "reflectance"
-    with pytest.raises(InputError, match=r"^effects\.drop\.model: expected"):
+    with pytest.raises(InputError, match=r"^effects\.drop\.model: unknown drop model 'gaussian'; allowed: none, uniform"):
         effects(drop={"model": "gaussian"})
     with pytest.raises(InputError, match=r"^effects\.drop\.probability: must lie in 0\.\.1"):
         effects(drop={"model": "uniform", "probability": 1.5})

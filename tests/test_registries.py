@@ -127,3 +127,41 @@ def test_toy_pattern_fires_from_a_config(halo):
     points = bpy_pipeline.scan({"room": (v, t, "wall")}, {"preset": "custom", "pattern": "halo", "columns": 360, "max_range": 50})
     assert len(points) == 360 and np.allclose(np.abs(points["z"]), 0.0, atol=1e-6)
     assert np.allclose(np.maximum(np.abs(points["x"]), np.abs(points["y"])), 10.0, atol=1e-4)  # the walls of the 20 m room
+
+
+# ----------------------------------------------------------------------------- a toy drop model
+@dataclass(frozen=True)
+class RingDrop:
+    """The toy drop model's parameters: rings at or above ``from_ring`` are lost with ``probability``."""
+
+    from_ring: int = 8
+    probability: float = 1.0
+
+
+def ring_drop(points, beam, effects, models):
+    params = RingDrop(**effects.drop.params)
+    return np.where(points["ring"] >= params.from_ring, np.float32(params.probability), np.float32(0.0))
+
+
+@pytest.fixture
+def ring_model():
+    from bpy_pipeline.lidar.drop import DROP_MODELS, DropModel, register_drop_model
+
+    register_drop_model("upper_rings", DropModel(ring_drop, params=RingDrop))
+    yield
+    DROP_MODELS.unregister("upper_rings")
+
+
+def test_toy_drop_model_drops_from_a_config(ring_model):
+    import bpy_pipeline
+    from bpy_pipeline.geometry import primitives
+
+    v, t = primitives.box(40.0, 40.0, 30.0)
+    room = {"room": (v, t, "wall")}
+    kept = bpy_pipeline.scan(room, "vlp16", effects={"drop": {"model": "upper_rings", "params": {"from_ring": 4}}})
+    everything = bpy_pipeline.scan(room, "vlp16")
+    assert set(np.unique(everything["ring"])) == set(range(16)) and set(np.unique(kept["ring"])) == set(range(4))
+    with pytest.raises(InputError, match=r"^effects.drop.params.from_rings: unknown key"):
+        load_config({"effects": {"drop": {"model": "upper_rings", "params": {"from_rings": 4}}}})
+    with pytest.raises(InputError, match=r"^effects.drop.params: the uniform drop model takes no params"):
+        load_config({"effects": {"drop": {"model": "uniform", "params": {"from_ring": 4}}}})

@@ -1,5 +1,9 @@
 """Sensor effects applied to point records after the trace: intensity, ray drop, range noise.
 
+The intensity models live in :mod:`.intensity`, the drop models in :mod:`.drop` (a registry, one
+module per model); this module holds range noise, the fitted models and their files, and applies
+all of them in order (:func:`apply_effects`).
+
 Each effect is a small model chosen in the config (``config.EffectsConfig``), takes the
 explicit ``numpy.random.Generator`` of the frame, and can be switched off. Points are in the
 sensor frame, so a beam's direction is the point's direction from the origin (the scanner
@@ -52,10 +56,13 @@ import numpy as np
 import yaml
 
 from ..errors import InputError
+from .drop import DROP_MODELS
+from .drop.carla import carla_keep_probability  # noqa: F401  (stable names)
+from .drop.threshold import ThresholdModel, threshold_model  # noqa: F401
+from .intensity import carla_intensity, compute_intensity, lidar_intensity, reflectance  # noqa: F401
 
 MODEL_FORMAT = "bpy_pipeline effects model"
 MODEL_VERSION = 1
-MIN_RANGE = 1e-3  # m: ranges are clamped here before dividing by them
 
 
 # ----------------------------------------------------------------------------- tables
@@ -183,101 +190,6 @@ class BinnedTable:
         return table
 
 
-# ----------------------------------------------------------------------------- intensity
-def reflectance(beam: np.ndarray) -> np.ndarray:
-    """``rho cos(theta) g`` of each point; beam : (p,) BEAM_DTYPE; returns (p,) float32."""
-    return beam["reflectivity"] * beam["cos_incidence"] * beam["gain"]
-
-
-def lidar_intensity(range_m: np.ndarray, beam: np.ndarray, alpha: float, reference_range: float, reference_reflectivity: float = 1.0) -> np.ndarray:
-    """The lidar equation ``rho cos g exp(-2 alpha R) / R^2`` over its value for the reference target.
-
-    range_m : (p,) metres; alpha : 1/m atmospheric extinction; the reference is a Lambertian
-    target of ``reference_reflectivity`` at normal incidence at ``reference_range`` metres.
-    Returns (p,) float32 in 0..1 (clipped: nearer or brighter returns saturate).
-    """
-    r = np.maximum(np.asarray(range_m, np.float32), np.float32(MIN_RANGE))
-    scale = np.float32(reference_range**2 / reference_reflectivity)
-    power = reflectance(beam) * scale / (r * r)
-    if alpha > 0:
-        power *= np.exp(np.float32(-2.0 * alpha) * (r - np.float32(reference_range)))
-    return np.minimum(power, np.float32(1.0))
-
-
-def carla_intensity(range_m: np.ndarray, attenuation_rate: float) -> np.ndarray:
-    """CARLA's intensity ``exp(-a R)``, (p,) float32 (RayCastLidar ComputeIntensity)."""
-    return np.exp(np.float32(-attenuation_rate) * np.asarray(range_m, np.float32))
-
-
-def compute_intensity(range_m: np.ndarray, beam: np.ndarray, intensity) -> np.ndarray:
-    """The configured intensity model (``config.IntensityConfig``) of each point, (p,) float32 in 0..1."""
-    if intensity.model == "lidar":
-        return lidar_intensity(range_m, beam, intensity.alpha, intensity.reference_range, intensity.reference_reflectivity)
-    if intensity.model == "carla":
-        return carla_intensity(range_m, intensity.attenuation_rate)
-    return np.clip(reflectance(beam), 0.0, 1.0)
-
-
-# ----------------------------------------------------------------------------- ray drop
-def carla_keep_probability(intensity: np.ndarray, intensity_limit: float, zero_intensity: float) -> np.ndarray:
-    """CARLA's intensity-based keep probability: 1 above the limit, ``(p0 / limit) I + 1 - p0`` below."""
-    keep = np.float32(zero_intensity / intensity_limit) * intensity + np.float32(1.0 - zero_intensity)
-    return np.where(intensity > intensity_limit, np.float32(1.0), keep)
-
-
-@dataclass(frozen=True)
-class ThresholdModel:
-    """Detection against a receiver sensitivity: a point returns when its received power
-    ``P = a exp(-2 alpha R) / R^n`` (``a = rho cos g``, the apparent reflectance) exceeds
-    ``sensitivity``; ``softness`` > 0 blurs the step into ``p = 1 / (1 + (P / s)^(-1 / softness))``,
-    a logistic in ``ln P`` of width ``softness`` (0: a hard step). ``n`` is 2 for targets larger
-    than the beam (the lidar equation).
-    """
-
-    sensitivity: float
-    exponent: float = 2.0
-    softness: float = 0.0
-    alpha: float = 0.0
-
-    @classmethod
-    def from_datasheet(cls, range_at_10: float, range_at_80: float = 0.0, softness: float = 0.0, alpha: float = 0.0) -> "ThresholdModel":
-        """The model whose 50 % detection range is ``range_at_10`` for a 10 % target and
-        ``range_at_80`` for an 80 % one (normal incidence). With one figure the exponent is the
-        lidar equation's 2; with both it is the one that puts both on the threshold
-        (``ln(8 exp(-2 alpha (R80 - R10))) / ln(R80 / R10)``: 1.89 for an Ouster OS1's 40 m / 120 m).
-        """
-        if range_at_80 > 0:
-            exponent = (math.log(8.0) - 2.0 * alpha * (range_at_80 - range_at_10)) / math.log(range_at_80 / range_at_10)
-        else:
-            exponent = 2.0
-        return cls(0.1 * math.exp(-2.0 * alpha * range_at_10) / range_at_10**exponent, exponent, softness, alpha)
-
-    def range_at(self, reflectivity: float) -> float:
-        """Range (m) at which a target of ``reflectivity`` at normal incidence is seen half the time."""
-        lo, hi = 1e-3, 1e6
-        for _ in range(200):  # bisection: exp(-2 alpha R) / R^n falls monotonically with R
-            mid = math.sqrt(lo * hi)
-            lo, hi = (mid, hi) if reflectivity * math.exp(-2 * self.alpha * mid) / mid**self.exponent > self.sensitivity else (lo, mid)
-        return math.sqrt(lo * hi)
-
-    def detection_probability(self, apparent_reflectance: np.ndarray, range_m: np.ndarray) -> np.ndarray:
-        """(p,) float32 probability that each point returns (apparent reflectance ``a``, range in m)."""
-        r = np.maximum(np.asarray(range_m, np.float32), np.float32(MIN_RANGE))
-        log_p = np.log(np.maximum(np.asarray(apparent_reflectance, np.float32), np.float32(1e-12))) - np.float32(self.exponent) * np.log(r)
-        if self.alpha > 0:
-            log_p -= np.float32(2.0 * self.alpha) * r
-        z = log_p - np.float32(math.log(self.sensitivity))
-        if self.softness <= 0:
-            return (z >= 0).astype(np.float32)
-        return np.float32(1.0) / (np.float32(1.0) + np.exp(np.clip(-z / np.float32(self.softness), -80, 80)))
-
-    def to_dict(self) -> dict:
-        return {
-            "sensitivity": float(self.sensitivity), "exponent": float(self.exponent), "softness": float(self.softness), "alpha": float(self.alpha),
-            "range_at_10": round(self.range_at(0.1), 3), "range_at_80": round(self.range_at(0.8), 3),  # for reading only
-        }
-
-
 # ----------------------------------------------------------------------------- fitted models on file
 @dataclass(frozen=True)
 class FittedModels:
@@ -370,53 +282,26 @@ def fitted_models(section, where: str = "model_file") -> FittedModels | None:
     return read_model_file(section.model_file, where) if section.model_file else None
 
 
-def threshold_model(effects, models: FittedModels | None = None) -> ThresholdModel:
-    """The ``threshold`` drop model: fitted (model file) or from the config's datasheet figures."""
-    if models is not None and models.threshold is not None:
-        return models.threshold
-    t = effects.drop.threshold
-    return ThresholdModel.from_datasheet(t.range_at_10, t.range_at_80, t.softness, effects.intensity.alpha)
-
-
 # ----------------------------------------------------------------------------- applying them
 def drop_probability(points: np.ndarray, beam: np.ndarray, effects, models: FittedModels | None = None) -> np.ndarray | None:
     """Probability that each traced point is lost, (p,) float32, for the configured model
-    (CARLA's general rate included); ``None`` for ``none``. ``models``: those of
+    (:mod:`.drop`); ``None`` for a model that drops nothing. ``models``: those of
     ``effects.drop.model_file``, read here when not given."""
-    drop = effects.drop
-    if drop.model == "none":
-        return None
-    models = fitted_models(drop, "effects.drop.model_file") if models is None else models
-    if drop.model == "uniform":
-        p = models.uniform if models is not None and models.uniform is not None else drop.probability
-        return np.full(len(points), p, np.float32)
-    if drop.model == "carla":
-        c = drop.carla
-        keep = carla_keep_probability(carla_intensity(points["range"], c.attenuation_rate), c.intensity_limit, c.zero_intensity)
-        return np.float32(1.0) - np.float32(1.0 - c.general_rate) * keep
-    if drop.model == "threshold":
-        return np.float32(1.0) - threshold_model(effects, models).detection_probability(reflectance(beam), points["range"])
-    if models is None or models.drop_table is None:
-        raise InputError("effects.drop.model_file: the table drop model needs a model file holding a drop table (python -m bpy_pipeline fit)")
-    return models.drop_table.lookup(points["range"], beam["cos_incidence"])
+    models = fitted_models(effects.drop, "effects.drop.model_file") if models is None else models
+    return DROP_MODELS.get(effects.drop.model).probability(points, beam, effects, models)
 
 
 def drop_mask(points: np.ndarray, beam: np.ndarray, effects, rng: np.random.Generator, models: FittedModels | None = None) -> np.ndarray | None:
     """(p,) bool, True for the points that survive the configured drop model; ``None`` keeps all.
 
-    ``carla`` draws twice per point, as CARLA does: the general drop (before tracing in CARLA,
-    so independent of the hit), then the intensity-based one; the others draw once.
+    One draw per point against its probability, unless the model draws itself (``carla``: twice).
     """
-    drop = effects.drop
-    n = len(points)
-    if drop.model == "none" or n == 0:
+    model = DROP_MODELS.get(effects.drop.model)
+    if len(points) == 0 or model.probability(points[:0], beam[:0], effects, models) is None:
         return None
-    if drop.model == "carla":
-        c = drop.carla
-        keep = rng.random(n, dtype=np.float32) >= np.float32(c.general_rate)
-        p_keep = carla_keep_probability(carla_intensity(points["range"], c.attenuation_rate), c.intensity_limit, c.zero_intensity)
-        return keep & (rng.random(n, dtype=np.float32) < p_keep)
-    return rng.random(n, dtype=np.float32) >= drop_probability(points, beam, effects, models)
+    if model.mask is not None:
+        return model.mask(points, beam, effects, rng, models)
+    return rng.random(len(points), dtype=np.float32) >= drop_probability(points, beam, effects, models)
 
 
 def noise_sigma(points: np.ndarray, beam: np.ndarray, noise, models: FittedModels | None = None) -> np.ndarray | float:

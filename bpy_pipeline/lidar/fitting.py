@@ -40,7 +40,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from .effects import BinnedTable, FittedModels, ThresholdModel, apply_effects
+from .drop.threshold import ThresholdModel
+from .effects import BinnedTable, FittedModels, apply_effects
 from .points import BEAM_DTYPE, empty_points
 
 
@@ -498,7 +499,8 @@ def predictor(name: str, train: Samples, options: dict):
         table = fit_drop_table(train, np.geomspace(low, high, nr + 1), incidence_edges(ni), options.get("min_samples", 100))
         return (lambda s: table.lookup(s.range, s.cos_incidence)), int((~np.isnan(table.values)).sum())
     if name == "carla":
-        from .effects import carla_intensity, carla_keep_probability
+        from .drop.carla import carla_keep_probability
+        from .intensity import carla_intensity
 
         return (lambda s: 1.0 - 0.55 * carla_keep_probability(carla_intensity(s.range, 0.004), 0.8, 0.4)), 0
     raise ValueError(f"unknown model {name!r}")

@@ -1,0 +1,49 @@
+"""Intensity models: what a point's intensity (0..1) says (``effects.intensity.model``).
+
+``reflectance``: ``rho cos(theta) g``, the object's ``lidar_reflectivity`` times the cosine of
+incidence times the mirror gain ``g`` (product of the reflectivities of the mirrors met), which is
+what range-compensated sensors report ("calibrated reflectivity"). ``lidar``: the lidar equation for
+an extended Lambertian target, ``P ~ rho cos(theta) g exp(-2 alpha R) / R^2``, normalised so that a
+target of ``reference_reflectivity`` at normal incidence at ``reference_range`` reads 1 (nearer or
+brighter returns saturate at 1, as a receiver does). ``carla``: CARLA's ``exp(-a R)``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+MIN_RANGE = 1e-3  # m: ranges are clamped here before dividing by them
+
+
+def reflectance(beam: np.ndarray) -> np.ndarray:
+    """``rho cos(theta) g`` of each point; beam : (p,) BEAM_DTYPE; returns (p,) float32."""
+    return beam["reflectivity"] * beam["cos_incidence"] * beam["gain"]
+
+
+def lidar_intensity(range_m: np.ndarray, beam: np.ndarray, alpha: float, reference_range: float, reference_reflectivity: float = 1.0) -> np.ndarray:
+    """The lidar equation ``rho cos g exp(-2 alpha R) / R^2`` over its value for the reference target.
+
+    range_m : (p,) metres; alpha : 1/m atmospheric extinction; the reference is a Lambertian
+    target of ``reference_reflectivity`` at normal incidence at ``reference_range`` metres.
+    Returns (p,) float32 in 0..1 (clipped: nearer or brighter returns saturate).
+    """
+    r = np.maximum(np.asarray(range_m, np.float32), np.float32(MIN_RANGE))
+    scale = np.float32(reference_range**2 / reference_reflectivity)
+    power = reflectance(beam) * scale / (r * r)
+    if alpha > 0:
+        power *= np.exp(np.float32(-2.0 * alpha) * (r - np.float32(reference_range)))
+    return np.minimum(power, np.float32(1.0))
+
+
+def carla_intensity(range_m: np.ndarray, attenuation_rate: float) -> np.ndarray:
+    """CARLA's intensity ``exp(-a R)``, (p,) float32 (RayCastLidar ComputeIntensity)."""
+    return np.exp(np.float32(-attenuation_rate) * np.asarray(range_m, np.float32))
+
+
+def compute_intensity(range_m: np.ndarray, beam: np.ndarray, intensity) -> np.ndarray:
+    """The configured intensity model (``config.IntensityConfig``) of each point, (p,) float32 in 0..1."""
+    if intensity.model == "lidar":
+        return lidar_intensity(range_m, beam, intensity.alpha, intensity.reference_range, intensity.reference_reflectivity)
+    if intensity.model == "carla":
+        return carla_intensity(range_m, intensity.attenuation_rate)
+    return np.clip(reflectance(beam), 0.0, 1.0)
