@@ -41,7 +41,8 @@ class FrameJob:
         self.total, self.done, self.out_dir = config.frames, 0, out_dir
         self.output_frame = config.output.frame
         self.points = 0
-        self._frames = run_frames(config, out_dir, build)
+        # the panel's output folder holds its latest scan or frames: each Scan and Generate replaces it
+        self._frames = run_frames(config, out_dir, build, mode="overwrite")
 
     def step(self) -> bool:
         """Generate, write and remember the next frame; ``False`` when every frame is done."""
@@ -225,12 +226,12 @@ class LIDAR_OT_show_cloud(bpy.types.Operator):
         """This session's last frame, else the last frame of the output folder's PLY files."""
         if LAST:
             return LAST["points"], LAST["pose"] if LAST["frame"] == "sensor" else np.eye(4)
-        from .bpy_pipeline.io import read_manifest, read_ply
+        from .bpy_pipeline.io import read_dataset, read_ply
 
         out = output_dir(context.scene.lidar)
-        if not (out / "manifest.json").is_file():
-            raise InputError(f"show cloud: nothing scanned yet (no manifest in {out}); press Scan first")
-        manifest = read_manifest(out)
+        manifest = read_dataset(out) if (out / "manifest.json").is_file() else {"frames": []}
+        if not manifest["frames"]:
+            raise InputError(f"show cloud: nothing scanned yet (no frame in {out}); press Scan first")
         frame = manifest["frames"][-1]
         ply = next((f for f in frame["files"] if f.endswith(".ply")), None)
         if ply is None:
