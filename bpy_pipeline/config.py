@@ -107,6 +107,7 @@ class SensorConfig:
     trajectory: TrajectoryConfig | None = None  # a moving sensor instead of the static position
     divergence: Divergence = field(default_factory=Divergence)  # off unless rays > 1
     reflector: ReflectorConfig = field(default_factory=ReflectorConfig)  # the sensor's own mirrors; off by default
+    rig: tuple = ()  # sensor rig (bpy_pipeline/rig.py): RigSensor s on the platform placed by position/rotation_deg; spec is the first's
 
 
 @dataclass(frozen=True)
@@ -207,6 +208,9 @@ class LabelsConfig:
 
     name_rules: list[dict] = field(default_factory=list)
 
+    skip_empty: bool = False  # a frame with fewer than min_objects labelled objects is recorded as skipped, no files
+    min_objects: int = 1  # objects of output.boxes.classes with their minimum points (skip_empty)
+    frames_kept: bool = False  # skip_empty: `frames` counts kept frames; indices go on past it (full runs only)
 
 @dataclass(frozen=True)
 class Config:
@@ -295,6 +299,19 @@ def effects_from_dict(data, spec: SensorSpec | None = None) -> EffectsConfig:
     effects = from_dict(EffectsConfig, data, "effects")
     _check_effects(effects, spec)
     return effects
+
+
+def _rig_from_dict(sensor_data: dict) -> tuple:
+    """``sensor.rig`` (popped from ``sensor_data``): a rig name or list (bpy_pipeline/rig.py); ``()`` when absent."""
+    data = sensor_data.pop("rig", None)
+    if data is None or data == []:
+        return ()
+    from .rig import rig_from_data
+
+    if sensor_data:  # position, rotation_deg and trajectory are popped already: they place the platform
+        extra = sorted(sensor_data)[0]
+        raise InputError(f"sensor.{extra}: with sensor.rig, give each sensor's preset and fields in its rig entry (sensor.rig[k].{extra}); sensor keeps position, rotation_deg and trajectory")
+    return rig_from_data(data, "sensor.rig")
 
 
 def _check_effects(effects: EffectsConfig, spec: SensorSpec | None) -> None:
@@ -399,7 +416,8 @@ def config_from_dict(data) -> Config:
     check_divergence(divergence, "sensor.divergence")
     pose = {k: convert(sensor_data.pop(k), hints[k], f"sensor.{k}") for k in ("position", "rotation_deg") if k in sensor_data}
     base = {} if "preset" in sensor_data else DEFAULT_SENSOR  # overrides without a preset refine the default
-    sensor = SensorConfig(resolve_sensor(base | sensor_data, "sensor"), **pose, trajectory=trajectory, divergence=divergence, reflector=reflector)
+    spec = rig[0].spec if rig and "preset" not in sensor_data else resolve_sensor(base | sensor_data, "sensor")
+    sensor = SensorConfig(spec, **pose, trajectory=trajectory, divergence=divergence, reflector=reflector, rig=rig)
     _check_reflector(reflector, sensor.spec)
     config = from_dict(Config, data, "")
     config = dataclasses.replace(config, scene=scene, sensor=sensor)
@@ -444,6 +462,7 @@ def _check_boxes(config: Config) -> Config:
     table = load_class_table()
     classes = [table.names[table.id_of(c, f"output.boxes.classes[{i}]")] for i, c in enumerate(boxes.classes)]
     for key in ("names", "min_points"):
+    rig = _rig_from_dict(sensor_data)
         for name in getattr(boxes, key):
             table.id_of(name, f"output.boxes.{key}")
     for name, value in boxes.min_points.items():
@@ -462,6 +481,10 @@ def _check_boxes(config: Config) -> Config:
     return dataclasses.replace(config, output=dataclasses.replace(config.output, boxes=boxes))
 
 
+    if config.output.min_objects < 0:
+        raise InputError(f"output.min_objects: must be >= 0, got {config.output.min_objects}")
+    if config.output.frames_kept and not config.output.skip_empty:
+        raise InputError("output.frames_kept: counts kept frames, so it needs output.skip_empty: true")
 def config_to_dict(config: Config) -> dict:
     """The resolved config as plain YAML-ready data; ``config_from_dict`` of it gives ``config`` back."""
     out = to_plain(config)
@@ -469,7 +492,13 @@ def config_to_dict(config: Config) -> dict:
     sensor = out["sensor"]
     if config.sensor.trajectory is not None or scene_places_sensor(config.scene):
         del sensor["position"]  # a trajectory, or the scene, places the sensor
-    out["sensor"] = {**sensor.pop("spec"), **sensor}
+    if config.sensor.rig:  # each sensor's fields in its entry (bpy_pipeline/rig.py)
+        sensor.pop("spec")
+        sensor["rig"] = [{**entry.pop("spec"), **entry} for entry in sensor["rig"]]
+        out["sensor"] = sensor
+    else:
+        sensor.pop("rig", None)
+        out["sensor"] = {**sensor.pop("spec"), **sensor}
     return out
 
 

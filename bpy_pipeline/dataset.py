@@ -295,13 +295,29 @@ class Dataset:
             self._say(f"warning: frame {frame.index}: 0 points. {empty_frame_cause(frame)}")
         return record
 
+    def skip(self, frame, reason: str) -> dict:
+        """Record ``frame`` as skipped (``output.skip_empty``): a record with ``"skipped": true``, the reason
+        and its counts, and no files; the frame index stays taken, so a resume or another worker never makes it again."""
+        record = {"index": frame.index, "skipped": True, "reason": reason, "files": [], "sha256": {}, "points": int(len(frame.points)) if frame.points is not None else 0,
+                  "timings_s": {k: round(v, 4) for k, v in frame.timings.items()}}
+        if frame.scene is not None and frame.scene.info is not None:
+            record["scene"] = frame.scene.info
+        try:
+            with atomic_write(self.out / RECORDS / f"{frame.stem}.json") as tmp:
+                tmp.write_text(json.dumps(record, default=to_json, allow_nan=False) + "\n")
+        except OSError as err:
+            raise _error(self.out, f"record skipped frame {frame.index} in", err) from None
+        frame.record = record
+        self.committed[frame.index] = record
+        return record
+
     # ------------------------------------------------------------------ closing
     def close(self) -> None:
         """Derive the per-dataset indexes and the summary from the records, and release the lock."""
         if self.mode == "join":
             return
         try:
-            records = [r for _, r in sorted(self._read_records().items())]  # workers commit frames too
+            records = [r for _, r in sorted(self._read_records().items()) if not r.get("skipped")]  # workers commit frames too
             for name in frame_writers(self.config):
                 writer = WRITERS.get(name)
                 if writer.index is not None:
@@ -311,6 +327,9 @@ class Dataset:
                     (self.out / name).rmdir()
             manifest = read_manifest(self.out)
             manifest["summary"] = {"frames": len(records), "points": int(sum(r["points"] for r in records)), "frame_indices": _ranges([r["index"] for r in records])}
+            skipped = [i for i, r in self._read_records().items() if r.get("skipped")]
+            if skipped:
+                manifest["summary"]["skipped"] = {"frames": len(skipped), "frame_indices": _ranges(skipped)}
             write_manifest(self.out, manifest)
         finally:
             self._unlock()
@@ -372,6 +391,8 @@ def frame_record(frame, digests: dict[str, str]) -> dict:
     record["objects"] = frame.buffers.objects.rows()
     if frame.scene is not None and frame.scene.info is not None:
         record["scene"] = frame.scene.info
+    if frame.rig is not None:
+        record["rig"] = frame.rig.record()
     if frame.boxes is not None:
         record["boxes"] = [{"class": str(b["class_name"]), "instance": int(b["instance"]), "points": int(b["points"]), "visible": int(b["visible"]), "unoccluded": int(b["unoccluded"]), "occlusion": int(b["occlusion"]), "truncation": round(float(b["truncation"]), 4)} for b in frame.boxes]
     return record

@@ -47,6 +47,7 @@ class Frame:
     files: list[str] = field(default_factory=list)
     timings: dict[str, float] = field(default_factory=dict)
     record: dict = field(default_factory=dict)
+    rig: Any = None  # a sensor rig's per-sensor frames (:class:`~bpy_pipeline.rig.RigFrame`), ``None`` for one sensor
 
     @property
     def stem(self) -> str:

@@ -78,7 +78,8 @@ def sensor_pose(config: Config, frame: int = 0) -> np.ndarray:
         pose = station @ pose_matrix((0.0, 0.0, 0.0), config.sensor.rotation_deg)
     else:
         pose = pose_matrix(config.sensor.position, config.sensor.rotation_deg)
-    pose[:3, 3] += mount_offset(config.sensor.spec)
+    if not config.sensor.rig:  # a rig's platform: each sensor adds its own mount height (rig.RigSensor.matrix)
+        pose[:3, 3] += mount_offset(config.sensor.spec)
     return pose
 
 
@@ -94,8 +95,19 @@ def scene_view(config: Config, first: int, count: int):
         return None
     from .geometry.lod import view_of
 
-    frames = range(first, min(first + count, config.frames))
-    return view_of(config.sensor.spec, [sensor_pose(config, f)[:3, 3] for f in frames])
+    from .rig import RigSensor, RigView, field_of_view
+
+    frames = range(first, min(first + count, config.frames)) or range(first, first + 1)
+    sensors = config.sensor.rig or (RigSensor(config.sensor.spec),)
+    poses = [sensor_pose(config, f) @ (s.matrix() if config.sensor.rig else np.eye(4)) for f in frames for s in sensors]
+    fields = tuple(field_of_view(s.spec, pose) for s, pose in zip(sensors * len(frames), poses))
+    if not config.sensor.rig:
+        view = view_of(config.sensor.spec, [sensor_pose(config, f)[:3, 3] for f in frames])
+    else:  # the finest of the sensors, as far as the farthest reaches
+        views = [view_of(s.spec, [p[:3, 3] for p in poses]) for s in sensors]
+        view = min(views, key=lambda v: v.step)
+        view = RigView(view.positions, view.step, max(v.max_range for v in views))
+    return RigView(view.positions, view.step, view.max_range, fields)
 
 
 def scene_trajectory(config: Config) -> Trajectory | None:
@@ -194,11 +206,14 @@ class Run:
     trajectory: Trajectory | None = None
     threads: int | None = None
     log: Callable[[str], None] | None = None
+    members: list = field(default_factory=list)  # a rig's sensors: one single-sensor Run each (rig.py)
 
     def __post_init__(self):
         self.rules = parse_rules(self.config.labels.name_rules, "labels.name_rules", self.table.names)
         self.rays = self.rays or SensorRays(self.config)
         self.threads = self.threads or self.config.threads or None
+        if self.config.sensor.rig and not self.members:
+            self.members = [Run(member_config(self.config, k), build=False, table=self.table, threads=self.threads, log=self.log) for k in range(len(self.config.sensor.rig))]
 
 
 def build_stage(frame: Frame, run: Run) -> None:
@@ -236,6 +251,8 @@ def export_stage(frame: Frame, run: Run) -> None:
     """The evaluated scene as buffers: every object the sensor can reach during the frame."""
     from .export import export_scene
 
+    if run.members:
+        return rig_export_stage(frame, run)
     max_range = run.config.sensor.spec.max_range
     if frame.trajectory is not None:  # everything the sensor can reach from anywhere along this frame's stretch of path
         max_range += frame.trajectory.reach(frame.index, frame_time(run.config.sensor.spec))
@@ -247,6 +264,8 @@ def export_stage(frame: Frame, run: Run) -> None:
 
 def scan_stage(frame: Frame, run: Run) -> None:
     """The scan's ``(points, beam)`` chunks (lazy: the effects stage traces them one at a time)."""
+    if run.members:
+        return _each_member(scan_stage, frame, run)
     frame.buffers.check()
     config, spec = run.config, run.config.sensor.spec
     caster = RayCaster(frame.buffers, frame=frame.pose, threads=run.threads)
@@ -262,6 +281,8 @@ def scan_stage(frame: Frame, run: Run) -> None:
 def effects_stage(frame: Frame, run: Run) -> None:
     """Trace each chunk, give it its effects and move it to the output frame before the next is traced,
     so memory holds the final point records and one chunk's work, no more."""
+    if run.members:
+        return rig_effects_stage(frame, run)
     config, spec = run.config, run.config.sensor.spec
     mask = run.rays.edge_mask(frame.index)
 
@@ -285,9 +306,90 @@ def effects_stage(frame: Frame, run: Run) -> None:
 
 def annotate_stage(frame: Frame, run: Run) -> None:
     """The frame's 3D box labels, when a box format is asked for (semantic labels come with the scan)."""
+    if run.members:
+        return rig_annotate_stage(frame, run)
     if run.config.output.boxes.formats:
         headings = None if frame.scene is None else frame.scene.headings
         frame.boxes = frame_boxes(frame.buffers, run.config, frame.pose, frame.points, headings, frame.index, frame.rng, run.rays)
+
+
+# ----------------------------------------------------------------------------- a sensor rig's stages
+def member_config(config: Config, k: int) -> Config:
+    """The single-sensor config of sensor ``k`` of the rig of ``config`` (its pose comes from the rig, not from it)."""
+    import dataclasses
+
+    from .config import SensorConfig
+
+    member = config.sensor.rig[k]
+    sensor = SensorConfig(member.spec, position=member.position, rotation_deg=member.rotation_deg, divergence=config.sensor.divergence)
+    return dataclasses.replace(config, sensor=sensor)
+
+
+def rig_export_stage(frame: Frame, run: Run) -> None:
+    """Per sensor, its own frame (pose on the platform, generator, export within its range); the platform's
+    buffers (everything any sensor reaches) for the frame's record and merged boxes."""
+    from .export import export_scene
+    from .rig import RigFrame, member_rng
+
+    config = run.config
+    sensors = config.sensor.rig
+    frame.rig = RigFrame(sensors)
+    reach = 0.0
+    for k, (sensor, member) in enumerate(zip(sensors, run.members)):
+        matrix = sensor.matrix()
+        sub = Frame(frame.index, member.config, member_rng(config.seed, frame.index, k), scene=frame.scene)
+        sub.pose = frame.pose @ matrix
+        if frame.trajectory is None:
+            sub.pose_at = sub.pose
+        else:
+            sub.trajectory = frame.trajectory
+            sub.pose_at = lambda t, m=matrix: frame.pose_at(t) @ m
+        start = time.perf_counter()
+        export_stage(sub, member)
+        sub.timings["export"] = time.perf_counter() - start
+        frame.rig.frames.append(sub)
+        reach = max(reach, float(np.linalg.norm(matrix[:3, 3])) + sensor.spec.max_range + (0.0 if frame.trajectory is None else frame.trajectory.reach(frame.index, frame_time(sensor.spec))))
+    frame.buffers = export_scene(run.table, run.rules, keep_within=(frame.pose[:3, 3], reach))
+
+
+def _each_member(stage, frame: Frame, run: Run) -> None:
+    for sub, member in zip(frame.rig.frames, run.members):
+        start = time.perf_counter()
+        stage(sub, member)
+        sub.timings[stage.__name__.removesuffix("_stage")] = sub.timings.get(stage.__name__.removesuffix("_stage"), 0.0) + time.perf_counter() - start
+
+
+def rig_effects_stage(frame: Frame, run: Run) -> None:
+    """Each sensor's points (its own frame, or the world), then the merged cloud with each point's sensor index
+    (:data:`~.rig.RIG_POINT_DTYPE`; the platform frame, or the world)."""
+    from .rig import merge_clouds
+
+    _each_member(effects_stage, frame, run)
+    world = run.config.output.frame == "world"
+    frame.rig.to_merged = None if world else [s.matrix() for s in run.config.sensor.rig]
+    frame.points = merge_clouds([sub.points for sub in frame.rig.frames], frame.rig.to_merged)
+
+
+def rig_annotate_stage(frame: Frame, run: Run) -> None:
+    """Boxes per sensor (kept where that sensor holds their minimum points) and merged (where the merged cloud does)."""
+    from .io import boxes as box_labels
+    from .rig import merged_boxes
+
+    section = run.config.output.boxes
+    if not section.formats and not run.config.output.skip_empty:
+        return
+    headings = None if frame.scene is None else frame.scene.headings
+    unfiltered = []
+    for sub, member in zip(frame.rig.frames, run.members):
+        start = time.perf_counter()
+        world = world_boxes(sub.buffers, member.config, sub.pose, sub.points, headings, sub.index, sub.rng, member.rays)
+        unfiltered.append(world)
+        kept = box_labels.keep_boxes(world, section.min_points, section.min_points_default)
+        sub.boxes = box_labels.boxes_in_frame(kept, sub.pose if member.config.output.frame == "sensor" else np.eye(4))
+        sub.timings["boxes"] = time.perf_counter() - start
+    merged = merged_boxes(unfiltered, section.min_points, section.min_points_default)
+    merged["occlusion"] = box_labels.occlusion_levels(merged["visible"], merged["unoccluded"], section.occlusion_levels)
+    frame.boxes = box_labels.boxes_in_frame(merged, frame.pose if run.config.output.frame == "sensor" else np.eye(4))
 
 
 # (stage, the timing it counts towards): the scan is lazy, so tracing is timed with the effects
@@ -368,6 +470,18 @@ def frame_boxes(buffers: SceneBuffers, config: Config, pose: np.ndarray, points:
     from .io import boxes as box_labels
 
     section = config.output.boxes
+    boxes = world_boxes(buffers, config, pose, points, headings, frame, rng, rays)
+    if len(boxes):
+        boxes = box_labels.keep_boxes(boxes, section.min_points, section.min_points_default)
+    return box_labels.boxes_in_frame(boxes, pose if config.output.frame == "sensor" else np.eye(4))
+
+
+def world_boxes(buffers: SceneBuffers, config: Config, pose: np.ndarray, points: np.ndarray, headings: dict | None = None, frame: int = 0, rng: np.random.Generator | None = None, rays: SensorRays | None = None) -> np.ndarray:
+    """Every box of ``output.boxes.classes`` in the world frame with truncation, occlusion and its points, none dropped
+    (:func:`frame_boxes` keeps those with their minimum points and moves them into the points' frame)."""
+    from .io import boxes as box_labels
+
+    section = config.output.boxes
     boxes = box_labels.fit_boxes(buffers, section.classes, headings)
     if len(boxes):
         spec = config.sensor.spec
@@ -377,8 +491,7 @@ def frame_boxes(buffers: SceneBuffers, config: Config, pose: np.ndarray, points:
         box_labels.visibility(buffers, boxes, patterns, pose, spec.min_range, spec.max_range, cell, surfaces=scan_surfaces(config), rng=rng)
         boxes["occlusion"] = box_labels.occlusion_levels(boxes["visible"], boxes["unoccluded"], section.occlusion_levels)
         box_labels.count_points(boxes, points)
-        boxes = box_labels.keep_boxes(boxes, section.min_points, section.min_points_default)
-    return box_labels.boxes_in_frame(boxes, pose if config.output.frame == "sensor" else np.eye(4))
+    return boxes
 
 
 def build_frame_scene(config: Config, index: int = 0, rng: np.random.Generator | None = None, keep: dict | None = None):
@@ -407,15 +520,54 @@ def run_frames(config: Config, out_dir: str | Path, build: bool = True, frames: 
     """
     from .dataset import Dataset
 
+    output = config.output
+    until_kept = frames is None and output.skip_empty and output.frames_kept
     frames = range(config.frames) if frames is None else frames
+    if until_kept:  # frame indices go on until `frames` frames are kept (at most MAX_INDICES_PER_KEPT per kept frame)
+        frames = range(MAX_INDICES_PER_KEPT * config.frames)
     run = Run(config, build, log=log)
     with Dataset.open(out_dir, config, mode, log=log) as dataset:
         for index in frames:
+            if until_kept and sum(1 for r in dataset.committed.values() if not r.get("skipped")) >= config.frames:
+                break
             if dataset.has(index):
                 continue
             frame = make_frame(run, index)
+            reason = empty_reason(frame, run) if output.skip_empty else None
+            if reason is not None:
+                dataset.skip(frame, reason)
+                if log is not None:
+                    log(f"frame {index}: skipped ({reason})")
+                continue
             dataset.commit(frame)
             yield frame
+        else:
+            if until_kept and log is not None:
+                log(f"warning: output.frames_kept: {MAX_INDICES_PER_KEPT * config.frames} frame indices gave fewer than {config.frames} kept frames; the scene rarely holds {output.min_objects} labelled objects")
+
+
+MAX_INDICES_PER_KEPT = 20  # output.frames_kept: frame indices tried per kept frame before giving up
+
+
+def labelled_objects(frame: Frame, run: Run) -> int:
+    """How many objects of ``output.boxes.classes`` the frame's cloud holds with their minimum points
+    (its boxes when it has any, else counted from the points' instances)."""
+    if frame.boxes is not None:
+        return int(len(frame.boxes))
+    section = run.config.output.boxes
+    wanted = {run.table.id_of(c): section.min_points.get(c, section.min_points_default) for c in section.classes}
+    points = frame.points
+    keep = np.isin(points["semantic"], list(wanted)) & (points["instance"] > 0)
+    instances, first, counts = np.unique(points["instance"][keep], return_index=True, return_counts=True)
+    classes = points["semantic"][keep][first]
+    return int(sum(1 for c, n in zip(classes, counts) if n >= wanted[int(c)]))
+
+
+def empty_reason(frame: Frame, run: Run) -> str | None:
+    """Why ``output.skip_empty`` skips the frame, ``None`` to keep it."""
+    objects = labelled_objects(frame, run)
+    need = run.config.output.min_objects
+    return None if objects >= need else f"{objects} labelled object{'s' if objects != 1 else ''}, fewer than output.min_objects ({need})"
 
 
 def run(config: Config, out_dir: str | Path, log=print, build: bool = True, frames: Iterable[int] | None = None, mode: str = "new") -> dict:

@@ -50,3 +50,5 @@ register_writer("range_image", Writer(_write_range_image, _check_range_image))
 register_writer("preview", Writer(_write_preview))
 register_writer("kitti", _box_writer("kitti"))
 register_writer("openpcdet", _box_writer("openpcdet"))
+
+from . import rig_outputs  # noqa: F401,E402  (registers rig and flash_image)
