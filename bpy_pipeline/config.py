@@ -200,6 +200,9 @@ class OutputConfig:
     preview: bool = True
     sequence: int = 0  # SemanticKITTI sequence number (sequences/SS/)
     boxes: BoxesConfig = field(default_factory=BoxesConfig)
+    skip_empty: bool = False  # a frame with fewer than min_objects labelled objects is recorded as skipped, no files
+    min_objects: int = 1  # objects of output.boxes.classes with their minimum points (skip_empty)
+    frames_kept: bool = False  # skip_empty: `frames` counts kept frames; indices go on past it (full runs only)
 
 
 @dataclass(frozen=True)
@@ -208,9 +211,6 @@ class LabelsConfig:
 
     name_rules: list[dict] = field(default_factory=list)
 
-    skip_empty: bool = False  # a frame with fewer than min_objects labelled objects is recorded as skipped, no files
-    min_objects: int = 1  # objects of output.boxes.classes with their minimum points (skip_empty)
-    frames_kept: bool = False  # skip_empty: `frames` counts kept frames; indices go on past it (full runs only)
 
 @dataclass(frozen=True)
 class Config:
@@ -293,14 +293,6 @@ def _trajectory_from_dict(data, sensor_data: dict) -> TrajectoryConfig | None:
     return section
 
 
-def effects_from_dict(data, spec: SensorSpec | None = None) -> EffectsConfig:
-    """Validate an ``effects`` mapping on its own (as written under ``effects:`` in a config);
-    ``spec``, when given, is the sensor whose rings ``noise.ring_bias`` must match."""
-    effects = from_dict(EffectsConfig, data, "effects")
-    _check_effects(effects, spec)
-    return effects
-
-
 def _rig_from_dict(sensor_data: dict) -> tuple:
     """``sensor.rig`` (popped from ``sensor_data``): a rig name or list (bpy_pipeline/rig.py); ``()`` when absent."""
     data = sensor_data.pop("rig", None)
@@ -312,6 +304,14 @@ def _rig_from_dict(sensor_data: dict) -> tuple:
         extra = sorted(sensor_data)[0]
         raise InputError(f"sensor.{extra}: with sensor.rig, give each sensor's preset and fields in its rig entry (sensor.rig[k].{extra}); sensor keeps position, rotation_deg and trajectory")
     return rig_from_data(data, "sensor.rig")
+
+
+def effects_from_dict(data, spec: SensorSpec | None = None) -> EffectsConfig:
+    """Validate an ``effects`` mapping on its own (as written under ``effects:`` in a config);
+    ``spec``, when given, is the sensor whose rings ``noise.ring_bias`` must match."""
+    effects = from_dict(EffectsConfig, data, "effects")
+    _check_effects(effects, spec)
+    return effects
 
 
 def _check_effects(effects: EffectsConfig, spec: SensorSpec | None) -> None:
@@ -415,6 +415,7 @@ def config_from_dict(data) -> Config:
     reflector = from_dict(ReflectorConfig, sensor_data.pop("reflector", None) or {}, "sensor.reflector")
     check_divergence(divergence, "sensor.divergence")
     pose = {k: convert(sensor_data.pop(k), hints[k], f"sensor.{k}") for k in ("position", "rotation_deg") if k in sensor_data}
+    rig = _rig_from_dict(sensor_data)
     base = {} if "preset" in sensor_data else DEFAULT_SENSOR  # overrides without a preset refine the default
     spec = rig[0].spec if rig and "preset" not in sensor_data else resolve_sensor(base | sensor_data, "sensor")
     sensor = SensorConfig(spec, **pose, trajectory=trajectory, divergence=divergence, reflector=reflector, rig=rig)
@@ -433,6 +434,10 @@ def config_from_dict(data) -> Config:
     _check_mirrors(config.effects.mirrors)
     config = _check_boxes(config)
     _check_writers(config)
+    if config.output.min_objects < 0:
+        raise InputError(f"output.min_objects: must be >= 0, got {config.output.min_objects}")
+    if config.output.frames_kept and not config.output.skip_empty:
+        raise InputError("output.frames_kept: counts kept frames, so it needs output.skip_empty: true")
     return config
 
 
@@ -462,7 +467,6 @@ def _check_boxes(config: Config) -> Config:
     table = load_class_table()
     classes = [table.names[table.id_of(c, f"output.boxes.classes[{i}]")] for i, c in enumerate(boxes.classes)]
     for key in ("names", "min_points"):
-    rig = _rig_from_dict(sensor_data)
         for name in getattr(boxes, key):
             table.id_of(name, f"output.boxes.{key}")
     for name, value in boxes.min_points.items():
@@ -481,10 +485,6 @@ def _check_boxes(config: Config) -> Config:
     return dataclasses.replace(config, output=dataclasses.replace(config.output, boxes=boxes))
 
 
-    if config.output.min_objects < 0:
-        raise InputError(f"output.min_objects: must be >= 0, got {config.output.min_objects}")
-    if config.output.frames_kept and not config.output.skip_empty:
-        raise InputError("output.frames_kept: counts kept frames, so it needs output.skip_empty: true")
 def config_to_dict(config: Config) -> dict:
     """The resolved config as plain YAML-ready data; ``config_from_dict`` of it gives ``config`` back."""
     out = to_plain(config)
