@@ -1,0 +1,197 @@
+"""The street builder: layout, lane-following placement, platoons, field-of-view awareness, no intersections, same seed same bytes."""
+
+import dataclasses
+import json
+import math
+
+import numpy as np
+import pytest
+
+from bpy_pipeline.builders.base import Distribution
+from bpy_pipeline.builders.street import StreetScene
+from bpy_pipeline.errors import InputError
+from bpy_pipeline.geometry import primitives, street
+from bpy_pipeline.geometry.collision import rectangles_overlap
+from bpy_pipeline.geometry.transforms import pose_matrix
+from bpy_pipeline.lidar.sensors import resolve_sensor
+from bpy_pipeline.rig import field_of_view
+
+BOX_CLASSES = ["car", "van", "truck", "bus", "person", "bicycle", "motorcycle", "rider"]
+BUSY = dict(vehicles=Distribution("normal", 12.0, 0.0, 0.0, 40.0), parked=Distribution("normal", 8.0, 0.0, 0.0, 40.0),
+            bicycles=Distribution("normal", 3.0, 0.0, 0.0, 10.0), motorcycles=Distribution("normal", 2.0, 0.0, 0.0, 10.0),
+            pedestrians=Distribution("normal", 12.0, 0.0, 0.0, 40.0))
+
+
+def _placed(seed=0, views=(), **changes):
+    params = dataclasses.replace(StreetScene(**BUSY), **changes)
+    layout = street.street_layout(params, np.random.default_rng(params.layout_seed))
+    return params, layout, street.place_users(params, layout, np.random.default_rng(seed), views)
+
+
+def _camera_views(yaws=(0.0,), position=(-7.6, -7.6, 2.15), platform_yaw=45.0, preset="flash96x16_carla"):
+    spec = resolve_sensor({"preset": preset})
+    return [field_of_view(spec, pose_matrix(position, (0.0, 0.0, platform_yaw + yaw))) for yaw in yaws]
+
+
+# ----------------------------------------------------------------------------- layout and placement (pure)
+def test_layout_areas_are_apart_and_lanes_lie_on_the_road():
+    params = StreetScene()
+    layout = street.street_layout(params, np.random.default_rng(0))
+    R = layout.half_road
+    assert R == pytest.approx(params.lanes_per_direction * params.lane_width + params.parking_width)
+    assert layout.on_road((0.0, 0.0)) and layout.on_road((30.0, R - 0.1)) and not layout.on_road((30.0, R + 0.1))
+    assert layout.on_sidewalk((30.0, layout.walk_inner + 1.0)) and not layout.on_sidewalk((30.0, R - 1.0))
+    assert layout.on_sidewalk((-layout.walk_inner - 0.5, -layout.walk_inner - 0.5))  # the corner where the post stands
+    for lane in layout.lanes:
+        for s in np.linspace(0.0, lane.length, 7):
+            for side in (-1, 1):
+                assert layout.on_road(lane.at(s, side * (lane.width / 2 - 1e-6)))
+    classes = {p.class_name for p in layout.parts}
+    assert classes == {"road", "kerb", "sidewalk", "traffic light", "traffic sign", "building"}
+
+
+def test_users_keep_to_their_lanes_sidewalks_and_crossings_and_never_overlap():
+    params, layout, placement = _placed(seed=3)
+    users = placement.users
+    kinds = {u.kind for u in users}
+    assert {"car", "person", "bicycle", "motorcycle"} <= kinds
+    for u in users:
+        area, _, index = u.where.partition(":")
+        if area in ("lane", "parking"):
+            lane = layout.lanes[int(index)]
+            assert lane.kind == ("drive" if area == "lane" else "parking")
+            assert math.isclose(math.cos(u.yaw - lane.heading), 1.0, abs_tol=1e-9)  # heading along the traffic
+            d = (lane.end - lane.start) / lane.length
+            lateral = abs(float(np.cross(d, u.centre - lane.start)))
+            assert lateral + u.size[1] / 2 <= lane.width / 2 + 1e-6  # the whole footprint inside its lane
+            assert u.z == street.MARKING_THICKNESS
+        elif area == "sidewalk":
+            assert u.kind == "person" and layout.on_sidewalk(u.centre) and u.z == params.kerb_height
+        else:
+            assert area == "crossing" and u.kind == "person" and layout.on_crossing(u.centre)
+    for i, a in enumerate(users):
+        for b in users[i + 1 :]:
+            assert not rectangles_overlap(a.centre, a.half, a.yaw, b.centre, b.half, b.yaw, params.clearance - 1e-6)
+        for x, y, r in layout.poles:
+            assert not rectangles_overlap(a.centre, a.half, a.yaw, (x, y), (r, r), 0.0)
+
+
+def test_platoons_follow_their_leader_at_the_drawn_gap():
+    gap = Distribution("uniform", 5.0, 0.0, 4.0, 6.0)
+    params, layout, placement = _placed(seed=1, platoon_probability=1.0, platoon_gap=gap, parked=Distribution("normal", 0.0, 0.0, 0.0, 0.0))
+    assert placement.platoons >= 3
+    moving = [u for u in placement.users if u.where.startswith("lane:") and u.kind in street.VEHICLES]
+    followers = 0
+    for u in moving:
+        lane = layout.lanes[int(u.where.split(":")[1])]
+        d = (lane.end - lane.start) / lane.length
+        ahead = [v for v in moving if v is not u and v.where == u.where and np.dot(v.centre - u.centre, d) > 0]
+        if ahead:
+            leader = min(ahead, key=lambda v: np.dot(v.centre - u.centre, d))
+            clear = float(np.dot(leader.centre - u.centre, d)) - (leader.size[0] + u.size[0]) / 2
+            followers += 4.0 - 1e-6 <= clear <= 6.0 + 1e-6
+    assert followers >= placement.platoons - 1  # a platoon broken only where a later vehicle fitted into a gap
+
+
+def test_field_of_view_aware_placement_puts_users_where_the_camera_sees_them():
+    views = _camera_views((80.0, 0.0, -80.0))
+    params, layout, placement = _placed(seed=5, views=views)
+    assert placement.users and sum(placement.out_of_view.values()) > 0
+    for u in placement.users:
+        assert street.in_view_fraction(views, u.centre, u.half, u.yaw, u.size[2], u.z) >= params.min_in_view
+    _, _, blind = _placed(seed=5, views=views, fov_aware=False)
+    seen = [street.in_view_fraction(views, u.centre, u.half, u.yaw, u.size[2], u.z) >= params.min_in_view for u in blind.users]
+    assert not all(seen)  # without the rule, some users stand where no camera looks
+
+
+def test_field_of_view_counts_azimuth_elevation_and_range():
+    (view,) = _camera_views(position=(0.0, 0.0, 2.0), platform_yaw=0.0)
+    ahead = [[10.0, 0.0, 2.0], [10.0, 0.0, 0.0], [40.0, 0.0, 2.0], [10.0, 9.0, 2.0], [-10.0, 0.0, 2.0], [10.0, 0.0, 1.0]]
+    assert view.contains(np.array(ahead)).tolist() == [True, False, False, False, False, True]  # 11.3 deg down is out, 5.7 in
+
+
+def test_meshes_that_cross_are_found_and_touching_ones_are_not():
+    a = street.box_mesh(0, 1, 0, 1, 0, 1)
+    assert street.meshes_intersect(a, street.box_mesh(0.5, 1.5, 0.2, 0.8, 0.2, 0.8))
+    assert not street.meshes_intersect(a, street.box_mesh(1, 2, 0, 1, 0, 1))  # sharing a face
+    assert not street.meshes_intersect(a, street.box_mesh(1.01, 2, 0, 1, 0, 1))
+    pole = primitives.translated(primitives.cylinder(0.1, 3.0, 8), (0.5, 0.5, 1.5))
+    assert street.meshes_intersect(a, pole)
+
+
+@pytest.mark.parametrize("change, key", [
+    ({"arm_length": 15.0}, "scene.arm_length"),
+    ({"vehicle_mix": {"tram": 1.0}}, "scene.vehicle_mix"),
+    ({"platoon_probability": 1.5}, "scene.platoon_probability"),
+    ({"building_height": [20.0, 6.0]}, "scene.building_height"),
+])
+def test_bad_street_parameters_name_their_key(change, key):
+    from bpy_pipeline.config import load_config
+
+    with pytest.raises(InputError, match=key.replace(".", r"\.")):
+        load_config({"scene": {"builder": "street", **change}})
+
+
+# ----------------------------------------------------------------------------- in Blender
+def _config(frames=1, seed=0, **scene):
+    from bpy_pipeline.config import load_config
+
+    return load_config({"seed": seed, "frames": frames, "scene": {"builder": "street", **BUSY_RAW, **scene},
+                        "output": {"formats": ["ply"], "preview": False, "boxes": {"formats": ["openpcdet"], "classes": BOX_CLASSES}}})
+
+
+BUSY_RAW = {k: {"kind": d.kind, "mean": d.mean, "std": d.std, "min": d.min, "max": d.max} for k, d in BUSY.items()}
+
+
+@pytest.mark.bpy
+def test_exported_street_has_no_intersections_and_users_stand_on_their_ground(bpy_scene):
+    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.labels import load_class_table
+    from bpy_pipeline.pipeline import build_frame_scene
+
+    config = _config(seed=2)
+    result = build_frame_scene(config, 0)
+    buffers = export_scene(load_class_table())
+    objects = buffers.objects
+    meshes = {}
+    for row in range(len(objects)):
+        tris = buffers.triangles[buffers.triangle_object == row]
+        used, inverse = np.unique(tris, return_inverse=True)
+        meshes[row] = (buffers.vertices[used].astype(np.float64), inverse.reshape(-1, 3))
+    users = [r for r in range(len(objects)) if objects.instance[r] >= 1000]
+    assert len({int(objects.instance[r]) for r in users}) == len(result.info["placed"]) > 20
+    crossing = []
+    for r in users:
+        for other in range(len(objects)):
+            if objects.instance[other] == objects.instance[r] or (other in users and other < r):
+                continue  # the parts of one user (a rider on their bicycle) touch by design
+            if street.meshes_intersect(meshes[r], meshes[other]):
+                crossing.append((objects.names[r], objects.names[other]))
+    assert crossing == []
+    kerb = config.scene.params.kerb_height
+    for placed in result.info["placed"]:
+        rows = [r for r in users if objects.instance[r] == placed["instance"]]
+        low = min(meshes[r][0][:, 2].min() for r in rows)
+        ground = kerb if placed["where"] == "sidewalk" else street.MARKING_THICKNESS
+        assert low == pytest.approx(ground, abs=2e-3), placed
+        assert objects.class_names[rows[0]] == ("person" if placed["kind"] == "person" else placed["kind"])
+    riders = [r for r in users if objects.class_names[r] == "rider"]
+    assert riders and all(objects.class_names[min(x for x in users if objects.instance[x] == objects.instance[r])] in ("bicycle", "motorcycle") for r in riders)
+
+
+@pytest.mark.bpy
+def test_same_seed_same_bytes_whatever_frame_a_run_starts_at(bpy_scene, tmp_path):
+    from bpy_pipeline.pipeline import run
+
+    config = _config(frames=3, seed=7)
+    run(config, tmp_path / "a", log=lambda s: None)
+    run(config, tmp_path / "b", log=lambda s: None)
+    run(config, tmp_path / "c", log=lambda s: None, frames=[2])
+    for index in range(3):
+        a = json.loads((tmp_path / "a" / "records" / f"{index:06d}.json").read_text())
+        b = json.loads((tmp_path / "b" / "records" / f"{index:06d}.json").read_text())
+        assert a["sha256"] == b["sha256"] and a["points"] > 0
+    c = json.loads((tmp_path / "c" / "records" / "000002.json").read_text())
+    assert c["sha256"] == json.loads((tmp_path / "a" / "records" / "000002.json").read_text())["sha256"]
+    boxes = {b["class"] for i in range(3) for b in json.loads((tmp_path / "a" / "records" / f"{i:06d}.json").read_text()).get("boxes", [])}
+    assert "car" in boxes
