@@ -1,4 +1,4 @@
-"""WRITERS: the output-folder layout per format; and bpy_pipeline.io stays free of bpy."""
+"""The output-folder layout per format (io/layout.py, and the registered writers that use it); bpy_pipeline.io stays free of bpy."""
 
 import subprocess
 import sys
@@ -9,10 +9,12 @@ import pytest
 
 from bpy_pipeline.errors import InputError
 from bpy_pipeline.io import WRITERS, read_las, read_npy_folder, read_ply, read_semantickitti, write_frame_preview
+from bpy_pipeline.io.layout import write_frame_las, write_frame_npy, write_frame_ply, write_frame_semantickitti
 from bpy_pipeline.labels import load_class_table
 from bpy_pipeline.lidar.points import empty_points
 from samples import random_points
 
+LAYOUT = {"ply": write_frame_ply, "semantickitti": write_frame_semantickitti, "las": write_frame_las, "npy": write_frame_npy}
 EXPECTED = {
     "ply": ["ply/000012.ply"],
     "semantickitti": ["sequences/03/velodyne/000012.bin", "sequences/03/labels/000012.label"],
@@ -30,7 +32,7 @@ READERS = {
 @pytest.mark.parametrize("fmt", sorted(EXPECTED))
 def test_writer_layout_and_contents(tmp_path, fmt):
     pts = random_points(100, np.random.default_rng(0), extent=20.0, instances=100)
-    paths = WRITERS[fmt](tmp_path, 12, pts, 3)
+    paths = LAYOUT[fmt](tmp_path, 12, pts, 3)
     assert [p.relative_to(tmp_path).as_posix() for p in paths] == EXPECTED[fmt]
     assert all(p.is_file() for p in paths)
     back = READERS[fmt](paths)
@@ -39,9 +41,20 @@ def test_writer_layout_and_contents(tmp_path, fmt):
     assert not [p for p in tmp_path.rglob("*") if p.name.startswith(".")]
 
 
+def test_registered_point_writers_write_the_layout(tmp_path):
+    from bpy_pipeline.config import load_config
+    from bpy_pipeline.frame import Frame
+
+    pts = random_points(50, np.random.default_rng(4), extent=20.0, instances=100)
+    frame = Frame(12, load_config(None, ["output.sequence=3"]), np.random.default_rng(0), points=pts)
+    for fmt, expected in EXPECTED.items():
+        paths = WRITERS.get(fmt).write(frame, tmp_path / fmt)
+        assert [p.relative_to(tmp_path / fmt).as_posix() for p in paths] == expected
+
+
 def test_writers_are_the_four_formats_and_check_the_frame_index(tmp_path):
-    assert set(WRITERS) == {"ply", "semantickitti", "las", "npy"}
-    for fmt, write in WRITERS.items():
+    assert {"ply", "semantickitti", "las", "npy"} <= set(WRITERS)
+    for fmt, write in LAYOUT.items():
         with pytest.raises(InputError, match="frame index"):
             write(tmp_path, -1, empty_points(1), 0)
     assert list(tmp_path.iterdir()) == []
@@ -67,7 +80,8 @@ for module in pkgutil.iter_modules(io.__path__):
     importlib.import_module(f"bpy_pipeline.io.{module.name}")
 from bpy_pipeline.lidar.points import empty_points
 out = Path(tempfile.mkdtemp())
-for write in io.WRITERS.values():
+from bpy_pipeline.io.layout import write_frame_las, write_frame_npy, write_frame_ply, write_frame_semantickitti
+for write in (write_frame_las, write_frame_npy, write_frame_ply, write_frame_semantickitti):
     write(out, 0, empty_points(3), 0)
 assert not {"bpy", "bmesh", "mathutils"} & set(sys.modules)
 print("ok")
