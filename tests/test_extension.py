@@ -37,7 +37,7 @@ def build_script():
 
 
 def frame_files(out: Path) -> dict[str, str]:
-    return {str(p.relative_to(out)): hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(out.rglob("*")) if p.is_file() and p.name != "manifest.json"}
+    return {str(p.relative_to(out)): hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(out.rglob("*")) if p.is_file() and p.name != "manifest.json" and p.parent.name != "records"}  # records hold timings
 
 
 @pytest.fixture(scope="module")
@@ -85,8 +85,8 @@ def test_manifest_wheels_cover_every_platform_and_blender_python():
     names = [Path(w).name for w in MANIFEST["wheels"]]
     assert {build.wheel_tags(n)[0] for n in names} == {"embreex", "pyyaml", "trimesh"}  # numpy comes with Blender
     assert build.missing_wheels(MANIFEST["wheels"], MANIFEST["platforms"]) == []
-    # cp311: Blender 4.2 to 5.0; cp313: Blender 5.1 and newer
-    assert {build.wheel_tags(n)[2] for n in names if build.wheel_platforms(n) != {"*"}} == {"cp311", "cp313"}
+    # cp311: Blender 4.2 to 5.0; cp313: Blender 5.1 and newer, Debian 13's 4.3; cp314: distribution Blenders on Python 3.14
+    assert {build.wheel_tags(n)[2] for n in names if build.wheel_platforms(n) != {"*"}} == {"cp311", "cp313", "cp314"}
     # platforms are exactly those the binary wheels exist for
     covered = set.intersection(*({p for n in names if build.wheel_tags(n)[0] == dist for p in build.wheel_platforms(n)} for dist in ("embreex", "pyyaml")))
     assert covered == set(MANIFEST["platforms"])
@@ -109,7 +109,7 @@ def test_zip_is_validated_and_holds_only_what_runs(extension_zip):
     assert not any("__pycache__" in n or n.endswith(".pyc") or n.startswith(("tests/", "benchmarks/")) for n in names)
     assert manifest["platforms"] == [THIS_PLATFORM]
     assert sorted(wheels) == sorted(w.removeprefix("./") for w in manifest["wheels"])
-    assert {Path(w).name.split("-")[2] for w in wheels} == {"cp311", "cp313", "py3"}
+    assert {Path(w).name.split("-")[2] for w in wheels} == {"cp311", "cp313", "cp314", "py3"}
 
 
 @pytest.mark.bpy
