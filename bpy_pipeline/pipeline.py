@@ -521,7 +521,7 @@ def run_frames(config: Config, out_dir: str | Path, build: bool = True, frames: 
     from .dataset import Dataset
 
     output = config.output
-    until_kept = frames is None and output.skip_empty and output.frames_kept
+    until_kept = output.skip_empty and output.frames_kept and (frames is None or list(frames) == list(range(config.frames)))  # a full run
     frames = range(config.frames) if frames is None else frames
     if until_kept:  # frame indices go on until `frames` frames are kept (at most MAX_INDICES_PER_KEPT per kept frame)
         frames = range(MAX_INDICES_PER_KEPT * config.frames)
@@ -574,7 +574,6 @@ def run(config: Config, out_dir: str | Path, log=print, build: bool = True, fram
     """Generate the frames ``frames`` (default: all) of ``config`` into ``out_dir``; returns the manifest (with its frames)."""
     from .io import read_dataset
 
-    frames = range(config.frames) if frames is None else frames
-    for frame in run_frames(config, out_dir, build, frames, mode, log):
+    for frame in run_frames(config, out_dir, build, frames, mode, log):  # None: all (output.frames_kept: until enough are kept)
         log(f"frame {frame.index + 1}/{config.frames}: {len(frame.points)} points, " + ", ".join(f"{k} {v:.2f} s" for k, v in frame.timings.items()))
     return read_dataset(out_dir)
