@@ -13,22 +13,11 @@ import bpy
 import numpy as np
 from mathutils import Matrix
 
-from ..geometry.collision import capsule_mesh
 from ..geometry.kinematics import ArmModel
-from ..geometry.primitives import merge
+from ..geometry.objects import link_meshes
 from .objects import mesh_object, tag
 
 REFLECTIVITY = 0.55  # painted metal (Staubli's melon-yellow; an assumption, not measured)
-
-
-def link_meshes(model: ArmModel) -> list:
-    """``[(vertices, triangles), ...]`` per link (base first), in the link's own frame."""
-    out = []
-    for link in range(model.joints + 1):
-        rows = np.flatnonzero(model.capsule_link == link)
-        parts = [capsule_mesh(model.capsule_a[k], model.capsule_b[k], float(model.capsule_radius[k]), 16, 4, bool(model.capsule_flat_start[k])) for k in rows]
-        out.append(merge(parts))
-    return out
 
 
 class RobotArm:

@@ -1,0 +1,241 @@
+"""Meshes of the objects inserted into scenes and real scans: cars, people, robot arms. Pure numpy.
+
+Every mesh is ``(vertices (n, 3) float64 metres, triangles (m, 3) int32)`` with outward winding.
+The parking builder (scenes/parking.py) shows these cars in Blender; the real-scan mixing
+(bpy_pipeline.mixing) casts the real sensor's firings at them without any Blender scene.
+
+A car is four parts sharing one instance: the body (its paint's reflectivity), the windows
+(``glass``), the interior (dashboard and seats) and the tyres. Three body styles (sedan,
+hatchback, estate), each a nominal mesh at :data:`NOMINAL_HEIGHT` scaled to a car's height.
+A person is the capsule body of :mod:`.human`; a robot arm the capsule links of :mod:`.kinematics`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import primitives
+
+GLASS_REFLECTIVITY = 0.08  # two faces of about 4 % each at normal incidence
+INTERIOR_REFLECTIVITY = 0.15
+TYRE_REFLECTIVITY = 0.05
+NOMINAL_HEIGHT = 1.625  # m: the styles' meshes are built at this height and scaled to each car's
+# Paint colours: share of cars (roughly the global popularity of recent years: white, black, grey,
+# silver, blue, red, others) and reflectivity at 905 nm (assumed: white paint about 0.7, black 0.05).
+COLOURS = (
+    ("white", (0.9, 0.9, 0.9), 0.35, 0.70),
+    ("black", (0.02, 0.02, 0.02), 0.19, 0.05),
+    ("grey", (0.3, 0.3, 0.32), 0.18, 0.30),
+    ("silver", (0.6, 0.6, 0.62), 0.09, 0.50),
+    ("blue", (0.05, 0.15, 0.5), 0.07, 0.20),
+    ("red", (0.6, 0.03, 0.03), 0.06, 0.45),
+    ("beige", (0.6, 0.5, 0.35), 0.06, 0.40),
+)
+
+
+@dataclass(frozen=True)
+class CarStyle:
+    """A body shape: length and width per metre of height; x positions as fractions of the length
+    from the centre (front +); heights as fractions of the height."""
+
+    name: str
+    length_ratio: float
+    width_ratio: float
+    windshield: float  # base of the windshield
+    roof_front: float
+    roof_back: float
+    rear_base: float  # base of the rear window
+    deck: float  # rear deck (trunk lid) height
+    belt: float  # beltline (bottom of the side windows)
+
+
+STYLES = (
+    CarStyle("sedan", 2.85, 1.12, 0.20, -0.02, -0.26, -0.38, 0.62, 0.58),
+    CarStyle("hatchback", 2.55, 1.10, 0.22, 0.03, -0.37, -0.47, 0.60, 0.57),
+    CarStyle("estate", 2.80, 1.12, 0.21, 0.02, -0.45, -0.49, 0.62, 0.58),
+)
+PARTS = ("body", "windows", "interior", "tyres")
+
+
+# ----------------------------------------------------------------------------- car meshes (pure numpy)
+def _prism_xz(profile, y0: float, y1: float):
+    v, t = primitives.prism(np.asarray(profile, float), y0, y1)
+    return v[:, [1, 0, 2]], t[:, ::-1].copy()
+
+
+def _box(x0, x1, y0, y1, z0, z1):
+    return primitives.translated(primitives.box(x1 - x0, y1 - y0, z1 - z0), ((x0 + x1) / 2, (y0 + y1) / 2, (z0 + z1) / 2))
+
+
+def _beam(p0, p1, thickness: float):
+    """A square beam from ``p0`` to ``p1`` (3,)."""
+    p0, p1 = np.asarray(p0, float), np.asarray(p1, float)
+    axis = p1 - p0
+    length = np.linalg.norm(axis)
+    w = axis / length
+    u = np.cross(w, [0.0, 1.0, 0.0] if abs(w[1]) < 0.9 else [1.0, 0.0, 0.0])
+    u /= np.linalg.norm(u)
+    v = np.cross(w, u)
+    vertices, triangles = primitives.box(thickness, thickness, length)
+    rotation = np.column_stack([u, v, w])
+    return vertices @ rotation.T + (p0 + p1) / 2, triangles
+
+
+def _quad(a, b, c, d):
+    """A planar polygon a-b-c-d (one-sided: glass either way)."""
+    return np.array([a, b, c, d], float), np.array([[0, 1, 2], [0, 2, 3]], np.int32)
+
+
+def _tyre(x, y, radius, width):
+    v, t = primitives.cylinder(radius, width, 16)
+    return v[:, [0, 2, 1]] + [x, y, radius], t[:, ::-1].copy()
+
+
+def car_parts(style: CarStyle, height: float = NOMINAL_HEIGHT) -> dict:
+    """Part name -> ``(vertices, triangles)`` of a car of ``style`` at ``height`` (m), origin on the ground at its centre, nose +x.
+
+    Everything lies within the box of length x width x height around the origin (z from 0).
+    """
+    H = height
+    L, W = style.length_ratio * H, style.width_ratio * H
+    xf, xr = L / 2, -L / 2
+    xw, xr1, xr2, xb = style.windshield * L, style.roof_front * L, style.roof_back * L, style.rear_base * L
+    zc, belt, deck, roof = 0.17 * H, style.belt * H, style.deck * H, 0.97 * H
+    ys, yt = W / 2 - 0.04, W / 2 - 0.10  # side glass at the beltline and at the roof (tumblehome)
+    body = [
+        _prism_xz([(xw, zc), (xf, zc), (xf, 0.45 * H), (xf - 0.06 * L, belt), (xw, belt)], -W / 2, W / 2),  # hood and front
+        _prism_xz([(xr, zc), (xb, zc), (xb, deck), (xr + 0.04 * L, deck), (xr, 0.45 * H)], -W / 2, W / 2),  # trunk and rear
+        _box(xb, xw, -W / 2, W / 2, zc, zc + 0.08 * H),  # cabin floor
+        _box(xb, xw, W / 2 - 0.05, W / 2, zc, belt),  # doors
+        _box(xb, xw, -W / 2, -W / 2 + 0.05, zc, belt),
+        _box(xr2, xr1, -yt, yt, roof, H),  # roof
+    ]
+    for side in (-1, 1):
+        body.append(_beam((xw, side * ys, belt), (xr1, side * yt, roof), 0.07))  # A pillar
+        xm = (xr1 + xr2) / 2
+        body.append(_beam((xm, side * ys, belt), (xm, side * yt, roof), 0.08))  # B pillar
+        body.append(_beam((xb, side * ys, deck), (xr2, side * yt, roof), 0.09))  # C pillar
+    windows = [
+        _quad((xw, -ys, belt), (xw, ys, belt), (xr1, yt, roof), (xr1, -yt, roof)),  # windshield
+        _quad((xb, ys, deck), (xb, -ys, deck), (xr2, -yt, roof), (xr2, yt, roof)),  # rear window
+    ]
+    for side in (-1, 1):
+        outline = [(xw, side * ys, belt), (xr1, side * yt, roof), (xr2, side * yt, roof), (xb, side * ys, deck), (xb, side * ys, belt)]
+        windows.append((np.array(outline, float), np.array([[0, 1, 2], [0, 2, 3], [0, 3, 4]], np.int32)))
+    cabin = lambda c: xb + c * (xw - xb)  # noqa: E731 - fraction of the cabin from its rear
+    interior = [
+        _box(xw - 0.08 * L, xw, -W / 2 + 0.06, W / 2 - 0.06, zc, belt + 0.02 * H),  # dashboard
+        _box(cabin(0.04), cabin(0.10), -0.42 * W, 0.42 * W, zc, 0.80 * H),  # rear bench back
+        _box(cabin(0.08), cabin(0.32), -0.42 * W, 0.42 * W, zc, 0.44 * H),  # rear bench cushion
+    ]
+    for y0, y1 in ((0.03 * W, 0.44 * W), (-0.44 * W, -0.03 * W)):
+        interior.append(_box(cabin(0.42), cabin(0.48), y0, y1, zc, 0.84 * H))  # front seat back
+        interior.append(_box(cabin(0.46), cabin(0.70), y0, y1, zc, 0.45 * H))  # front seat cushion
+    radius, width = 0.197 * H, 0.13 * W
+    tyres = [_tyre(x, side * (W / 2 - 0.02 - width / 2), radius, width) for x in (xf - 0.17 * L, xr + 0.18 * L) for side in (-1, 1)]
+    return {"body": primitives.merge(body), "windows": primitives.merge(windows), "interior": primitives.merge(interior), "tyres": primitives.merge(tyres)}
+
+
+def style_size(style: CarStyle, height: float = NOMINAL_HEIGHT) -> np.ndarray:
+    """``(3,)`` length, width, height (m) of the nominal car of ``style``."""
+    return np.array([style.length_ratio * height, style.width_ratio * height, height])
+
+
+# ----------------------------------------------------------------------------- robot arms and people
+def link_meshes(model) -> list:
+    """``[(vertices, triangles), ...]`` per link of an arm (:class:`~.kinematics.ArmModel`, base first), in the link's own frame."""
+    from .collision import capsule_mesh
+
+    out = []
+    for link in range(model.joints + 1):
+        rows = np.flatnonzero(model.capsule_link == link)
+        parts = [capsule_mesh(model.capsule_a[k], model.capsule_b[k], float(model.capsule_radius[k]), 16, 4, bool(model.capsule_flat_start[k])) for k in rows]
+        out.append(primitives.merge(parts))
+    return out
+
+
+def arm_mesh(model, q: np.ndarray, base: np.ndarray | None = None):
+    """The whole arm posed at joint angles ``q`` (radians): ``(vertices, triangles)`` in the frame of ``base`` (4, 4)."""
+    from .kinematics import forward
+
+    frames = forward(model, np.asarray(q, float), base)
+    parts = [(v @ frames[k][:3, :3].T + frames[k][:3, 3], t) for k, (v, t) in enumerate(link_meshes(model))]
+    return primitives.merge(parts)
+
+
+def person_mesh(angles: np.ndarray, height: float, build: float = 1.0, pose: str = "standing"):
+    """A posed body (:mod:`.human`) standing on z = 0 at the origin, facing +x: ``(vertices, triangles)``."""
+    from .human import body_mesh, pose_person
+
+    person = pose_person(angles, height, build, pose, (0.0, 0.0), 0.0)
+    vertices, triangles, _ = body_mesh(person.a, person.b, person.radius)
+    return vertices, triangles
+
+
+# ----------------------------------------------------------------------------- an object fitted to a box
+@dataclass(frozen=True)
+class ObjectPart:
+    """One part of an object: mesh, ``lidar_material`` (``diffuse``, ``glass``, ...) and reflectivity 0..1."""
+
+    vertices: np.ndarray  # (n, 3) float64, metres
+    triangles: np.ndarray  # (m, 3) int32
+    material: str = "diffuse"
+    reflectivity: float = 0.5
+
+
+def fit_to_box(parts: list[ObjectPart], size) -> list[ObjectPart]:
+    """``parts`` scaled per axis so their joint bounds fill a box of ``size`` (length, width, height) m centred at the origin."""
+    vertices = np.concatenate([p.vertices for p in parts])
+    low, high = vertices.min(axis=0), vertices.max(axis=0)
+    scale = np.asarray(size, float) / np.maximum(high - low, 1e-9)
+    centre = (low + high) / 2
+    return [ObjectPart((p.vertices - centre) * scale, p.triangles, p.material, p.reflectivity) for p in parts]
+
+
+def car_object(rng: np.random.Generator, size=None) -> list[ObjectPart]:
+    """A car of a random style and paint, its parts centred on the origin (nose +x); scaled to ``size`` when given."""
+    style = STYLES[int(rng.integers(len(STYLES)))]
+    shares = np.array([c[2] for c in COLOURS])
+    paint = COLOURS[int(rng.choice(len(COLOURS), p=shares / shares.sum()))][3]
+    mesh = car_parts(style)
+    reflect = {"body": ("diffuse", paint), "windows": ("glass", GLASS_REFLECTIVITY), "interior": ("diffuse", INTERIOR_REFLECTIVITY), "tyres": ("diffuse", TYRE_REFLECTIVITY)}
+    parts = [ObjectPart(mesh[name][0], mesh[name][1], *reflect[name]) for name in PARTS]
+    return fit_to_box(parts, style_size(style) if size is None else size)
+
+
+PERSON_REFLECTIVITY = 0.4  # clothing (an assumption)
+
+
+def person_object(rng: np.random.Generator, size=None) -> list[ObjectPart]:
+    """A standing or walking person of a random pose; scaled to ``size`` when given."""
+    from .human import BUILDS, sample_pose
+
+    pose = ("standing", "walking")[int(rng.integers(2))]
+    build = BUILDS[("slim", "medium", "broad")[int(rng.integers(3))]]
+    height = 1.75 if size is None else float(size[2])
+    v, t = person_mesh(sample_pose(pose, rng, build), height, build, pose)
+    part = ObjectPart(v, t, "diffuse", PERSON_REFLECTIVITY)
+    return fit_to_box([part], (v.max(axis=0) - v.min(axis=0)) if size is None else size)
+
+
+ARM_REFLECTIVITY = 0.55  # painted metal (as scenes/robot_arm.py)
+
+
+def robot_arm_object(rng: np.random.Generator, size=None) -> list[ObjectPart]:
+    """The project's six-axis arm (assets_manifest/robot_arm.yaml) at a random valid pose on z = 0; scaled to ``size`` when given."""
+    from .kinematics import load_arm, random_configuration
+
+    model = load_arm()
+    v, t = arm_mesh(model, random_configuration(model, rng, floor_z=0.0))
+    part = ObjectPart(v, t, "diffuse", ARM_REFLECTIVITY)
+    return fit_to_box([part], (v.max(axis=0) - v.min(axis=0)) if size is None else size)
+
+
+# type -> (class name, maker(rng, size) -> parts, nominal size (length, width, height) m)
+OBJECT_TYPES = {
+    "car": ("car", car_object, (4.6, 1.8, 1.625)),
+    "person": ("person", person_object, (0.6, 0.5, 1.75)),
+    "robot_arm": ("robot arm", robot_arm_object, (1.2, 0.6, 1.6)),
+}
