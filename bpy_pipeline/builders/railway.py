@@ -140,6 +140,7 @@ class RailwayScene:
     catenary: RailwayCatenary = field(default_factory=RailwayCatenary)
     stations: RailwayStations = field(default_factory=RailwayStations)
     detail: RailwayDetail = field(default_factory=RailwayDetail)
+    reroll_every: int = 0  # 0: one railway per run, drawn from frame 0's generator; k: a new one every k frames
 
     @property
     def place_sensor(self) -> bool:
@@ -151,6 +152,8 @@ class RailwayScene:
 def check(params: RailwayScene, where: str) -> None:
     from ..geometry.railway_layout import check_railway
 
+    if params.reroll_every < 0:
+        raise InputError(f"{where}.reroll_every: must be >= 0 (0: one railway per run; k: a new railway every k frames), got {params.reroll_every}")
     check_railway(params, where)
 
 
@@ -162,11 +165,14 @@ def station(params: RailwayScene, frame: int) -> np.ndarray | None:
     return stations[frame % len(stations)] if len(stations) else None
 
 
-def frames_per_scene(params: RailwayScene) -> int:
-    """One built line serves every station in turn."""
-    from ..geometry.railway_layout import station_frames
+ONE_SCENE_PER_RUN = 2**31 - 1  # frames: more than any run has, so frame k always scans the scene built for frame 0
 
-    return max(len(station_frames(params)), 1)
+
+def frames_per_scene(params: RailwayScene) -> int:
+    """One built line serves every frame of the run (stations in turn, or a trajectory), drawn once from
+    frame 0's generator; ``reroll_every: k`` builds a new line from frame k's generator every k frames
+    (k = the number of stations: each station cycle scans its own line)."""
+    return params.reroll_every if params.reroll_every > 0 else ONE_SCENE_PER_RUN
 
 
 def release_sensor(params: RailwayScene, raw_scene: dict, sensor_data: dict) -> RailwayScene:

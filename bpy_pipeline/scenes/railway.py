@@ -49,6 +49,7 @@ def build(params, rng: np.random.Generator, view=None) -> RailwayLayout:
     Returns the :class:`~bpy_pipeline.geometry.railway_layout.RailwayLayout` that was built.
     """
     collection = scene_collection()
+    view = _distinct_positions(view)
     layout = plan(params, rng)
     detail = level_of_detail(layout, params, view)
     centreline = _centreline(layout, detail.centreline_tolerance, collection)
@@ -58,6 +59,19 @@ def build(params, rng: np.random.Generator, view=None) -> RailwayLayout:
     _wires(layout, detail, collection)
     bpy.context.view_layer.update()
     return layout
+
+
+def _distinct_positions(view):
+    """``view`` with each optical centre once, in first-seen order: frames that revisit a station
+    (a run longer than its station cycle) share that station's stones."""
+    if view is None:
+        return None
+    _, first = np.unique(np.round(np.asarray(view.positions, float), 6), axis=0, return_index=True)
+    if len(first) == len(view.positions):
+        return view
+    import dataclasses
+
+    return dataclasses.replace(view, positions=np.asarray(view.positions)[np.sort(first)])
 
 
 def _centreline(layout: RailwayLayout, tolerance: float, collection) -> bpy.types.Object:
