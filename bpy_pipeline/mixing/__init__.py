@@ -1,0 +1,14 @@
+"""Real scans as backgrounds: synthetic objects cast into a real sweep by its own firings, exact per firing.
+
+Pure (numpy and embreex); never imports bpy. The stages, one module each: :mod:`.firings`
+(every firing of the sweep, hit or not), :mod:`.ground` (ground plane and collision index),
+:mod:`.placement` (explicit boxes, the parking and KITTI papers' rules), :mod:`.cast` (the one
+cast), :mod:`.noise` (the parking paper's noise injections), :mod:`.frame` (:func:`mix_frame`),
+:mod:`.convert` (a dense scan resampled into a sparser sensor) and :mod:`.references` (the two
+papers' insertion methods, for comparison).
+"""
+
+from .frame import MixedFrame, mix_frame
+from .section import KittiRule, NoiseInjections, ObjectBox, ParkingRule, RealScanScene, RemoveBox
+
+__all__ = ["MixedFrame", "mix_frame", "RealScanScene", "ObjectBox", "RemoveBox", "ParkingRule", "KittiRule", "NoiseInjections"]

@@ -1,0 +1,132 @@
+"""One cast, exact per firing: every firing of the real sweep against the inserted meshes only.
+
+Each firing keeps at most one return (:func:`merge_returns`):
+
+- a new hit nearer than the real return replaces it (the real point behind is occluded);
+- a new hit on an empty firing fills it (what the KITTI paper's point wall approximates);
+- a new hit behind a real return is discarded.
+
+The meshes go to Embree in the scan's sensor frame (:class:`~bpy_pipeline.lidar.raycast.RayCaster`
+with the identity as its local frame); each firing leaves from its own origin (the sensor's
+position at firing time) along its own direction, so an inserted point lies exactly on a real
+firing's ray. Glass (car windows) is traced as the scanner traces it (:func:`~bpy_pipeline.lidar.scanner.trace_beams`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..buffers import MATERIAL_ID, ObjectTable, SceneBuffers
+from ..errors import InputError
+from ..geometry.objects import OBJECT_TYPES, ObjectPart, fit_to_box
+from ..lidar.raycast import RayCaster
+from ..lidar.scanner import Surfaces, trace_beams
+from .firings import Firings
+from .placement import Placement
+
+
+def mesh_file_parts(path: str, size) -> list[ObjectPart]:
+    """A user mesh (.ply with faces, or .obj) as one diffuse part scaled to the box ``size``."""
+    p = Path(path)
+    if not p.is_file():
+        raise InputError(f"scene.objects.type: {path!r} is neither car, person, robot_arm nor a mesh file")
+    if p.suffix.lower() == ".ply":
+        from plyfile import PlyData
+
+        ply = PlyData.read(str(p))
+        v = np.column_stack([ply["vertex"][k] for k in "xyz"]).astype(np.float64)
+        faces = [np.asarray(f, np.int64) for f in ply["face"].data[ply["face"].data.dtype.names[0]]]
+    elif p.suffix.lower() == ".obj":
+        verts, faces = [], []
+        for line in p.read_text(errors="replace").splitlines():
+            if line.startswith("v "):
+                verts.append([float(x) for x in line.split()[1:4]])
+            elif line.startswith("f "):
+                faces.append(np.array([int(t.split("/")[0]) for t in line.split()[1:]]) - 1)
+        v = np.asarray(verts, float)
+    else:
+        raise InputError(f"scene.objects.type: {path!r}: mesh files are .ply or .obj (export other formats to one of them)")
+    triangles = np.array([[f[0], f[k], f[k + 1]] for f in faces for k in range(1, len(f) - 1)], np.int32).reshape(-1, 3)
+    if not len(triangles):
+        raise InputError(f"scene.objects.type: {path!r} has no faces")
+    return fit_to_box([ObjectPart(v, triangles)], size)
+
+
+def object_parts(p: Placement, rng: np.random.Generator) -> list[ObjectPart]:
+    """The parts of placement ``p`` in the sensor frame (the type's mesh scaled to the box, yawed, moved)."""
+    parts = OBJECT_TYPES[p.type][1](rng, p.size) if p.type in OBJECT_TYPES else mesh_file_parts(p.type, p.size)
+    c, s = math.cos(p.yaw), math.sin(p.yaw)
+    rotation = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    return [ObjectPart(part.vertices @ rotation.T + p.centre, part.triangles, part.material, part.reflectivity) for part in parts]
+
+
+def object_buffers(placements: list[Placement], parts: list[list[ObjectPart]], instances: list[int], semantic: list[int]) -> SceneBuffers:
+    """Scene buffers of the inserted objects: one object row per part, the placement's class and instance."""
+    vertices, triangles, rows, names, classes, sem, inst, material, reflect = [], [], [], [], [], [], [], [], []
+    offset = 0
+    for k, (p, object_parts_) in enumerate(zip(placements, parts)):
+        for j, part in enumerate(object_parts_):
+            row = len(names)
+            names.append(f"inserted_{k:03d}_{j}")
+            classes.append(p.class_name)
+            sem.append(semantic[k])
+            inst.append(instances[k])
+            material.append(MATERIAL_ID[part.material])
+            reflect.append(part.reflectivity)
+            vertices.append(part.vertices)
+            triangles.append(np.asarray(part.triangles, np.int64) + offset)
+            rows.append(np.full(len(part.triangles), row, np.int32))
+            offset += len(part.vertices)
+    k = len(names)
+    table = ObjectTable(names, [""] * k, classes, np.array(sem, np.uint16), np.array(inst, np.uint32), np.array(material, np.uint8), np.array(reflect, np.float32))
+    if not k:
+        return SceneBuffers(np.zeros((0, 3)), np.zeros((0, 3), np.int32), np.zeros(0, np.int32), table)
+    return SceneBuffers(np.concatenate(vertices), np.concatenate(triangles).astype(np.int32), np.concatenate(rows), table)
+
+
+@dataclass
+class Hits:
+    """The inserted objects' returns, one per firing that hit them (h of f firings).
+
+    firing : (h,) int64; path : (h,) float64 metres from the firing's origin; row : (h,) object row of the final hit
+    cos_incidence, gain : (h,) float64; bounces : (h,) uint8
+    """
+
+    firing: np.ndarray
+    path: np.ndarray
+    row: np.ndarray
+    cos_incidence: np.ndarray
+    gain: np.ndarray
+    bounces: np.ndarray
+
+
+def cast_firings(firings: Firings, buffers: SceneBuffers, max_range: float, threads: int | None = None, surfaces: Surfaces | None = None, rng=None, rows: np.ndarray | None = None) -> Hits:
+    """Every firing (or the firings ``rows``) against ``buffers`` alone; the nearest hit of each.
+
+    The caster's local frame is the scan's sensor frame (identity): origins and directions go in unchanged.
+    """
+    rows = np.arange(len(firings)) if rows is None else np.asarray(rows, np.int64)
+    if not len(buffers.triangles) or not len(rows):
+        z = np.zeros(0)
+        return Hits(np.zeros(0, np.int64), z, np.zeros(0, np.int32), z, z, np.zeros(0, np.uint8))
+    caster = RayCaster(buffers, frame=np.eye(4), threads=threads)
+    origin = firings.origin[rows]
+    shared = not origin.any()
+    beams = trace_beams(caster, buffers, np.zeros(3) if shared else origin, firings.direction[rows], 0.0, max_range, 3, surfaces=surfaces or Surfaces(glass_return_deg=5.0), rng=rng)
+    return Hits(rows[beams.ray], beams.path, buffers.triangle_object[beams.triangle], beams.cos_incidence, beams.gain, beams.bounces)
+
+
+def merge_returns(firings: Firings, hits: Hits) -> tuple[np.ndarray, np.ndarray]:
+    """Which hits are kept and which real returns they occlude: ``(kept (h,) bool, occluded (f,) bool)``.
+
+    A hit is kept where its firing was empty or its path is shorter than the real return's range.
+    """
+    real = firings.range[hits.firing]
+    kept = ~firings.valid[hits.firing] | (hits.path < real)
+    occluded = np.zeros(len(firings), bool)
+    occluded[hits.firing[kept & firings.valid[hits.firing]]] = True
+    return kept, occluded

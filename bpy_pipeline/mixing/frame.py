@@ -1,0 +1,308 @@
+"""A mixed frame: a real scan with synthetic objects cast in by its own firings (:func:`mix_frame`).
+
+Stages, each timed in ``info["timings_ms"]``: read (file -> :class:`~bpy_pipeline.io.real_scans.RealScan`),
+firings (:mod:`.firings`), ground (:mod:`.ground`), placement (:mod:`.placement`), meshes, cast
+(:mod:`.cast`), effects (the fitted drop and noise models on inserted returns only, then the
+noise injections of :mod:`.noise`), records and boxes.
+
+Labels: real returns get ``background_class`` or, from a SemanticKITTI file with
+``keep_labels``, their class mapped by name to the project's table (:data:`SEMANTICKITTI_NAMES`;
+unknown ones the background) and their instance; inserted returns their object's class and an
+instance above every real one. Boxes (:data:`~bpy_pipeline.io.boxes.BOX_DTYPE`): each inserted
+object with truncation (the share of its surface outside the firings' azimuth span) and
+occlusion (visible / unoccluded firings: those whose return is the object, against those that
+hit it when it is alone); each of ``real_boxes`` with its occlusion updated from the share of its
+real returns the inserted objects hid (the KITTI paper's synthetic annotation).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import InputError
+from ..io.boxes import BOX_DTYPE, occlusion_levels, surface_samples
+from ..io.real_scans import RealScan, read_real_scan
+from ..labels import ClassTable, load_class_table
+from ..lidar.points import BEAM_DTYPE, POINT_DTYPE
+from . import noise as injections
+from .cast import Hits, cast_firings, merge_returns, object_buffers, object_parts
+from .firings import Firings, angles_deg, recover_firings
+from .ground import PointIndex, find_ground, in_box
+from .placement import Placement, Scene, explicit_placements, kitti_rule, parking_rule, real_placements
+from .section import RealScanScene
+
+# SemanticKITTI raw ids -> the project's class names (assets_manifest/labels.yaml); others: the background class
+SEMANTICKITTI_NAMES = {
+    10: "car", 11: "bicycle", 13: "bus", 15: "motorcycle", 18: "truck", 20: "van", 30: "person", 31: "rider", 32: "rider",
+    40: "road", 44: "road", 48: "sidewalk", 49: "ground", 50: "building", 51: "wall", 52: "building", 60: "road", 72: "ground",
+    80: "mast", 81: "traffic sign", 99: "unlabeled", 252: "car", 253: "rider", 254: "person", 255: "rider", 256: "unlabeled",
+    257: "bus", 258: "truck", 259: "van",
+}
+OCCLUSION_LEVELS = (0.8, 0.4, 0.1)
+
+
+@dataclass
+class MixedFrame:
+    """points : (p,) POINT_DTYPE in the scan's sensor frame, one per firing at most, in firing order;
+    boxes : (b,) BOX_DTYPE; info : plain data for the manifest; firings : the recovered :class:`Firings`;
+    firing : (p,) int64 firing of each point; inserted : (p,) bool, True for inserted returns."""
+
+    points: np.ndarray
+    boxes: np.ndarray
+    info: dict
+    firings: Firings
+    firing: np.ndarray
+    inserted: np.ndarray
+    placements: list = field(default_factory=list)
+
+
+def real_labels(scan: RealScan, firings: Firings, section: RealScanScene, table: ClassTable) -> tuple[np.ndarray, np.ndarray]:
+    """``(semantic (f,) uint16, instance (f,) uint32)`` of the real firings."""
+    background = table.id_of(section.background_class, "scene.background_class")
+    semantic = np.full(len(firings), background, np.uint16)
+    instance = np.zeros(len(firings), np.uint32)
+    if scan.labels is not None and section.keep_labels:
+        have = firings.point >= 0
+        raw = scan.labels[firings.point[have]]
+        lut = {k: table.id_of(v) for k, v in SEMANTICKITTI_NAMES.items()}
+        low = (raw & 0xFFFF).astype(np.int64)
+        semantic[have] = np.array([lut.get(int(k), background) for k in low], np.uint16) if len(low) else semantic[have]
+        instance[have] = raw >> 16
+    return semantic, instance
+
+
+def _effects(points: np.ndarray, beam: np.ndarray, effects, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """The fitted drop and noise models on the inserted returns; ``(points, kept firing rows)`` (a dropped firing stays empty)."""
+    from ..lidar.effects import apply_effects
+
+    tag = points["time"].copy()
+    points["time"] = np.arange(len(points), dtype=np.float64)  # carry each record's row through the drop
+    out = apply_effects(points, beam, effects, rng)
+    rows = out["time"].astype(np.int64)
+    out["time"] = tag[rows]
+    return out, rows
+
+
+def _timed(timings: dict, name: str, start: float) -> float:
+    now = time.perf_counter()
+    timings[name] = round((now - start) * 1e3, 3)
+    return now
+
+
+def mix_frame(section: RealScanScene, rng: np.random.Generator, effects=None, threads: int | None = None, table: ClassTable | None = None, scan: RealScan | None = None, firings: Firings | None = None) -> MixedFrame:
+    """Insert ``section``'s objects into its real scan, exact per firing (module notes).
+
+    rng : the frame's generator (placement rules, object shapes, effects and injections draw from it in a fixed order)
+    effects : a ``config.EffectsConfig`` for the inserted returns (``None``: exact, no drop or noise)
+    scan, firings : already read (benchmarks reuse them across frames); read from ``section.path`` when ``None``
+    """
+    timings: dict = {}
+    table = table or load_class_table()
+    start = time.perf_counter()
+    if scan is None:
+        if not section.path:
+            raise InputError("scene.path: the real_scan builder needs the path of a scan file")
+        scan = read_real_scan(section.path, section.format or None)
+    start = _timed(timings, "read", start)
+    firings = firings or recover_firings(scan, section.preset or None)
+    start = _timed(timings, "firings", start)
+    max_range = section.max_range or 100.0
+    if section.preset and not section.max_range:
+        from ..lidar.sensors import resolve_sensor
+
+        max_range = resolve_sensor({"preset": section.preset}, "scene.preset").max_range
+
+    valid = firings.valid.copy()
+    returns = firings.returns
+    removed = np.zeros(len(firings), bool)
+    for box in section.remove:
+        removed |= valid & in_box(returns, box.center, box.size, box.yaw_deg)
+    valid &= ~removed
+    semantic_real, instance_real = real_labels(scan, firings, section, table)
+
+    # ground and obstacles from the remaining real returns
+    placements = explicit_placements(section.objects)
+    rule_log = {}
+    if section.parking_rule.enabled or section.kitti_rule.enabled:
+        xyz = returns[valid]
+        ground = find_ground(xyz, section.ground)
+        work = Firings(**{**firings.__dict__, "valid": valid})
+        scene = Scene(work, ground, PointIndex(xyz[~ground.ground]), PointIndex(xyz[ground.ground]), list(placements))
+        start = _timed(timings, "ground", start)
+        real = real_placements(section.real_boxes)
+        if section.parking_rule.enabled:
+            placed, rule_log["parking"] = parking_rule(scene, section.parking_rule, rng)
+            placements += placed
+        if section.kitti_rule.enabled:
+            placed, rule_log["kitti"] = kitti_rule(scene, section.kitti_rule, xyz[ground.ground], real, rng)
+            placements += placed
+        rule_log["ground"] = {"method": ground.method, "normal": [round(float(v), 5) for v in ground.normal], "offset": round(ground.offset, 4), "points": int(ground.ground.sum())}
+    start = _timed(timings, "placement", start)
+
+    # meshes and the cast
+    first_instance = int(instance_real.max(initial=0)) + 1
+    instances = [first_instance + k for k in range(len(placements))]
+    semantic_ids = [table.id_of(p.class_name, "scene.objects.class") for p in placements]
+    parts = [object_parts(p, rng) for p in placements]
+    buffers = object_buffers(placements, parts, instances, semantic_ids)
+    start = _timed(timings, "meshes", start)
+    work = Firings(**{**firings.__dict__, "valid": valid})
+    hits = cast_firings(work, buffers, max_range, threads, rng=rng)
+    kept, occluded = merge_returns(work, hits)
+    start = _timed(timings, "cast", start)
+
+    # inserted returns: records, then effects on them alone
+    h = Hits(*(a[kept] for a in (hits.firing, hits.path, hits.row, hits.cos_incidence, hits.gain, hits.bounces)))
+    objects = buffers.objects
+    new = np.zeros(len(h.firing), POINT_DTYPE)
+    xyz_new = firings.origin[h.firing] + h.path[:, None] * firings.direction[h.firing]
+    new["x"], new["y"], new["z"] = xyz_new.T
+    new["range"] = h.path
+    new["semantic"] = objects.semantic[h.row]
+    new["instance"] = objects.instance[h.row]
+    new["ring"] = firings.ring[h.firing]
+    new["time"] = firings.time[h.firing]
+    new["bounces"] = h.bounces
+    beam = np.zeros(len(h.firing), BEAM_DTYPE)
+    beam["cos_incidence"] = h.cos_incidence
+    beam["reflectivity"] = objects.reflectivity[h.row]
+    beam["gain"] = h.gain
+    beam["direction"] = firings.direction[h.firing]
+    new["intensity"] = np.clip(beam["reflectivity"] * beam["cos_incidence"] * beam["gain"], 0, 1)
+    visible_rays = np.bincount(new["instance"], minlength=max(instances, default=0) + 1)
+    dropped_firings = np.zeros(0, np.int64)
+    if effects is not None and len(new):
+        new, rows = _effects(new, beam, effects, rng)
+        dropped_firings = np.setdiff1d(h.firing, h.firing[rows])
+        h_firing = h.firing[rows]
+    else:
+        h_firing = h.firing
+    noise = section.noise
+    if len(new) and (noise.dropout_max > 0 or noise.range_sigma[1] > 0 or noise.cutoff_probability > 0):
+        present = np.unique(new["instance"])
+        keep = injections.object_dropout(new["instance"], present, noise, rng)
+        keep &= injections.vertical_cutoff(np.column_stack([new["x"], new["y"]]).astype(float), new["instance"], present, noise, rng)
+        step = injections.object_range_noise(new["instance"], present, noise, rng).astype(np.float32)
+        d = firings.direction[h_firing]
+        for axis, k in enumerate("xyz"):
+            new[k] += step * d[:, axis].astype(np.float32)
+        new["range"] += step
+        new, h_firing = new[keep], h_firing[keep]
+    start = _timed(timings, "effects", start)
+
+    # real returns that stay: valid, not occluded by a kept hit (a dropped inserted firing stays empty)
+    stay = valid & ~occluded
+    real_rows = np.flatnonzero(stay)
+    old = np.zeros(len(real_rows), POINT_DTYPE)
+    old["x"], old["y"], old["z"] = returns[real_rows].T
+    old["intensity"] = firings.intensity[real_rows]
+    old["semantic"], old["instance"] = semantic_real[real_rows], instance_real[real_rows]
+    old["ring"], old["time"], old["range"] = firings.ring[real_rows], firings.time[real_rows], firings.range[real_rows]
+
+    # interior points: on the nearest firing, kept only where nearer than its return
+    extra_points, extra_firing = np.zeros(0, POINT_DTYPE), np.zeros(0, np.int64)
+    if noise.interior_points > 0 and placements:
+        centres = np.array([p.centre for p in placements])
+        pts, owner = injections.interior_points(centres, noise, rng)
+        f, r = injections.nearest_firing(firings, pts)
+        taken = np.concatenate([real_rows, h_firing])
+        current = np.full(len(firings), np.inf)
+        current[real_rows] = firings.range[real_rows]
+        current[h_firing] = new["range"]
+        ok = (r > 0) & (r < current[f])
+        order = np.argsort(r, kind="stable")
+        seen = set()
+        pick = [i for i in order if ok[i] and not (int(f[i]) in seen or seen.add(int(f[i])))]
+        pick = np.array(sorted(pick), np.int64)
+        if len(pick):
+            extra_firing = f[pick]
+            extra_points = np.zeros(len(pick), POINT_DTYPE)
+            xyz = firings.origin[extra_firing] + r[pick, None] * firings.direction[extra_firing]
+            extra_points["x"], extra_points["y"], extra_points["z"] = xyz.T
+            extra_points["range"] = r[pick]
+            extra_points["semantic"] = np.array(semantic_ids, np.uint16)[owner[pick]]
+            extra_points["instance"] = np.array(instances, np.uint32)[owner[pick]]
+            extra_points["ring"], extra_points["time"] = firings.ring[extra_firing], firings.time[extra_firing]
+            # the firing's earlier return (real or inserted) gives way
+            drop_real = np.isin(real_rows, extra_firing)
+            old, real_rows = old[~drop_real], real_rows[~drop_real]
+            drop_new = np.isin(h_firing, extra_firing)
+            new, h_firing = new[~drop_new], h_firing[~drop_new]
+        del taken
+
+    points = np.concatenate([old, new, extra_points])
+    firing = np.concatenate([real_rows, h_firing, extra_firing])
+    inserted = np.concatenate([np.zeros(len(old), bool), np.ones(len(new) + len(extra_points), bool)])
+    order = np.argsort(firing, kind="stable")
+    points, firing, inserted = points[order], firing[order], inserted[order]
+    if noise.class_flip > 0:
+        classes = np.unique(points["semantic"])
+        points["semantic"] = injections.class_flips(points["semantic"], classes, noise, rng)
+    start = _timed(timings, "records", start)
+
+    boxes = frame_boxes(firings, valid, placements, instances, buffers, visible_rays, points, section, returns, occluded, semantic_real, instance_real, threads)
+    _timed(timings, "boxes", start)
+    info = {
+        "scan": {"path": str(scan.path), "format": scan.format, "points": int(len(scan)), "notes": list(scan.notes)},
+        "firings": firings.info(),
+        "removed": int(removed.sum()),
+        "objects": [dict(p.info(), instance=i) for p, i in zip(placements, instances)],
+        "rules": rule_log,
+        "inserted_points": int(inserted.sum()),
+        "occluded_real": int(occluded.sum()),
+        "filled_empty": int((~valid[h.firing]).sum()),
+        "dropped_inserted": int(len(dropped_firings)),
+        "timings_ms": timings,
+    }
+    return MixedFrame(points, boxes, info, firings, firing, inserted, placements)
+
+
+def azimuth_coverage(firings: Firings, bins: int = 720) -> np.ndarray:
+    """``(bins,)`` bool: azimuth cells (0.5 deg by default) some firing points into."""
+    az, _ = angles_deg(firings.direction)
+    covered = np.zeros(bins, bool)
+    covered[((az + 180.0) / 360.0 * bins).astype(np.int64) % bins] = True
+    return covered
+
+
+def frame_boxes(firings, valid, placements, instances, buffers, visible_rays, points, section, returns, occluded, semantic_real, instance_real, threads) -> np.ndarray:
+    """Boxes of the inserted objects and of the section's labelled real objects (module notes)."""
+    real = real_placements(section.real_boxes)
+    boxes = np.zeros(len(placements) + len(real), BOX_DTYPE)
+    if not len(boxes):
+        return boxes
+    covered = azimuth_coverage(firings)
+    _, el = angles_deg(firings.direction)
+    el_lo, el_hi = el.min() - 0.5, el.max() + 0.5
+    counts = np.bincount(points["instance"], minlength=max(instances, default=0) + 1)
+    for k, (p, inst) in enumerate(zip(placements, instances)):
+        rows = np.flatnonzero(buffers.objects.instance == inst)
+        alone = cast_firings(firings, _subset(buffers, rows), section.max_range or 100.0, threads)
+        tri = buffers.triangles[np.isin(buffers.triangle_object, rows)]
+        samples, _ = surface_samples(buffers.vertices[tri], 0.1)
+        az, sel = angles_deg(samples / np.maximum(np.linalg.norm(samples, axis=1, keepdims=True), 1e-9))
+        inside = covered[((az + 180.0) / 360.0 * len(covered)).astype(np.int64) % len(covered)] & (sel >= el_lo) & (sel <= el_hi)
+        b = boxes[k]
+        b["class_name"], b["instance"], b["centre"], b["size"], b["heading"] = p.class_name, inst, p.centre, p.size, p.yaw
+        b["truncation"] = 1.0 - float(inside.mean()) if len(inside) else 0.0
+        b["visible"], b["unoccluded"] = int(visible_rays[inst]) if inst < len(visible_rays) else 0, len(alone.firing)
+        b["points"] = int(counts[inst]) if inst < len(counts) else 0
+    for j, p in enumerate(real):
+        inside = valid & in_box(returns, p.centre, p.size, math.degrees(p.yaw))
+        b = boxes[len(placements) + j]
+        b["class_name"], b["instance"], b["centre"], b["size"], b["heading"] = p.class_name, 0, p.centre, p.size, p.yaw
+        b["unoccluded"] = int(inside.sum())
+        b["visible"] = int((inside & ~occluded).sum())
+        b["points"] = b["visible"]
+    boxes["occlusion"] = occlusion_levels(boxes["visible"], boxes["unoccluded"], OCCLUSION_LEVELS)
+    return boxes
+
+
+def _subset(buffers, rows):
+    from ..io.boxes import _subset as subset
+
+    return subset(buffers, list(int(r) for r in rows))

@@ -1,0 +1,123 @@
+"""``scene.builder: real_scan``: the section's parameters (a real scan as the background, objects cast into it).
+
+Everything in the sensor frame of the scan (x forward, y left, z up, metres); a box is its
+centre, its size (length along the heading, width, height) and its yaw in degrees.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal
+
+from ..builders.base import Distribution
+
+
+@dataclass(frozen=True)
+class ObjectBox:
+    """One object: ``type`` car | person | robot_arm (or a user mesh file: .obj, .glb/.gltf, .ply), scaled to the box."""
+
+    type: str = "car"
+    center: tuple[float, float, float] = (10.0, 0.0, 0.0)
+    size: tuple[float, float, float] = (0.0, 0.0, 0.0)  # 0: the type's nominal size
+    yaw_deg: float = 0.0
+    class_name: str = field(default="", metadata={"key": "class"})  # "" : the type's class (car, person, robot arm)
+
+
+@dataclass(frozen=True)
+class RemoveBox:
+    """A box whose real returns are cut out before insertion (to swap a real object for a synthetic one)."""
+
+    center: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    size: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    yaw_deg: float = 0.0
+
+
+@dataclass(frozen=True)
+class ParkingRule:
+    """The parking paper's insertion rule: ``count`` objects from N(5, 4), each at a distance from
+    ``distance`` (N(10, 20) m, up to 20 m) and a random angle about the sensor, turned
+    ``rotation_step_deg`` about it up to ``rotations`` times until it fits; ``max_consecutive_failures``
+    objects in a row that fit nowhere end it. Refused where more than ``max_real_points`` non-ground
+    real returns fall in the box grown by ``box_margin`` (10 %), where fewer than ``min_ground_points``
+    ground returns lie under it (an empty space), where it overlaps an object placed before, or where
+    more than ``max_hidden_fraction`` of the firings towards it already return nearer."""
+
+    enabled: bool = False
+    type: str = "car"
+    count: Distribution = field(default_factory=lambda: Distribution("normal", 5.0, 4.0, 0.0, 40.0))
+    distance: Distribution = field(default_factory=lambda: Distribution("normal", 10.0, 20.0, 2.5, 20.0))
+    height: Distribution = field(default_factory=lambda: Distribution("uniform", 1.625, 0.0, 1.55, 1.70))
+    rotation_step_deg: float = 10.0
+    rotations: int = 36
+    max_consecutive_failures: int = 10
+    max_real_points: int = 5
+    box_margin: float = 0.1
+    min_ground_points: int = 3
+    max_hidden_fraction: float = 0.5
+
+
+@dataclass(frozen=True)
+class KittiRule:
+    """The KITTI paper's rule: ``candidates`` random ground returns; one picked at random removes the
+    others within ``collision_distance`` (d), candidates within d / 2 of a non-ground return are
+    discarded, ``count`` kept; yaw by its equation (1) from the lateral offset (|y| < 10 m: 0 or 180 deg;
+    10-30 m: 0, 180 or random; else random), snapped to the nearest labelled real vehicle within
+    ``snap_distance`` m (0: never)."""
+
+    enabled: bool = False
+    type: str = "car"
+    count: int = 5
+    candidates: int = 200
+    collision_distance: float = 5.0
+    snap_distance: float = 0.0
+    max_range: float = 50.0
+
+
+@dataclass(frozen=True)
+class NoiseInjections:
+    """The parking paper's noise injections for ablation, on the inserted objects only (all off by default).
+
+    dropout_max : per object a dropout probability from U(0, dropout_max) (the paper: 0.003)
+    range_sigma : per object a sigma from U(range_sigma) along the beam, metres (the paper: 0.001..0.03; 0..0 off)
+    interior_points : per car up to this many points inside it (radius N(0.3, 0.5) m about its centre,
+        uniform angles), each put on the nearest firing and kept only where it is the nearest return there
+    cutoff_probability, cutoff_fraction : an object is cut vertically with this probability, losing this
+        share (U range) of its points on one side (the paper: 0.6, 0.2..0.8)
+    class_flip : share of all points given a wrong class (the paper: 0.02)
+    """
+
+    dropout_max: float = 0.0
+    range_sigma: tuple[float, float] = (0.0, 0.0)
+    interior_points: int = 0
+    cutoff_probability: float = 0.0
+    cutoff_fraction: tuple[float, float] = (0.2, 0.8)
+    class_flip: float = 0.0
+
+
+@dataclass(frozen=True)
+class RealScanScene:
+    """``scene.builder: real_scan``: a real scan as the background, objects cast in with the real sensor's own firings.
+
+    path, format : the scan (format guessed from the file when empty: nuscenes, kitti, semantickitti, npy, ply, las, pcd)
+    preset : a sensor preset (hdl32e, hdl64e, ...) filling what the file lacks (its step, frame time, elevations)
+    objects : placed explicitly; remove : boxes cut out of the real returns first
+    parking_rule, kitti_rule : rule-based population (off by default)
+    background_class : the class of real returns (SemanticKITTI labels are kept when ``keep_labels``)
+    real_boxes : labelled real objects (class, box), whose occlusion is updated when inserted objects hide them
+    ground : auto (Patchwork++ where installed, else RANSAC) | ransac | patchwork
+    max_range : firings are cast this far, metres (0: the preset's, else 100 m)
+    """
+
+    path: str = ""
+    format: str = ""
+    preset: str = ""
+    objects: list[ObjectBox] = field(default_factory=list)
+    remove: list[RemoveBox] = field(default_factory=list)
+    parking_rule: ParkingRule = field(default_factory=ParkingRule)
+    kitti_rule: KittiRule = field(default_factory=KittiRule)
+    noise: NoiseInjections = field(default_factory=NoiseInjections)
+    background_class: str = "unlabeled"
+    keep_labels: bool = True
+    real_boxes: list[ObjectBox] = field(default_factory=list)
+    ground: Literal["auto", "ransac", "patchwork"] = "auto"
+    max_range: float = 0.0
