@@ -9,7 +9,8 @@ minimum points (12 for cars, 6 for the rest); a frame without any box is skipped
 per kept frame).
 
 1. Speed: wall time per frame of the rig (build, export, three scans, boxes, write), against a
-   reference measured in the same run: the same frames scanned by the middle camera alone.
+   reference measured in the same run: the middle camera alone on the same builder and seeds (its
+   placement follows its own field of view, so its scenes hold other users).
    Frames per second per core are reported (the machine's cores are shared).
 2. Placement (the rig with the default and with sparse traffic, and one camera at its rated 10 m,
    pitched 12 deg down so that the ground within 10 m is in its 13.3 deg field): the share of frames kept and the boxes per kept frame with field-of-view-aware
@@ -92,7 +93,7 @@ def chart(rows: list, path) -> None:
     speed = [r for r in rows if r["part"] == "speed"]
     left.bar([r["sensor"] for r in speed], [r["wall_s"] * 1000 for r in speed], color=["tab:blue", "tab:grey"])
     left.set_ylabel("ms per frame (median)")
-    left.set_title("Rig vs one camera, same frames")
+    left.set_title("Rig vs one camera, same builder and seeds")
     for i, r in enumerate(speed):
         left.text(i, r["wall_s"] * 1000, f"{r['fps']:.1f} fps", ha="center", va="bottom")
     place = [r for r in rows if r["part"] == "placement"]
