@@ -27,10 +27,17 @@ Where Embree fails, and what is done about it (``tests/test_scan_failures.py``):
   object (:meth:`SceneBuffers.check`), and so do vertices farther than
   :data:`MAX_COORDINATE` from the local origin (an object scaled to infinity, which Blender
   clamps to 3.4e38): Embree's float32 arithmetic overflows from about 5e18 m and misses them silently.
+
+Set-up and reuse: Embree reads the float32 vertices and the indices where they lie
+(:mod:`.embree`), so a caster costs Embree's own build plus a few numpy passes. A run that scans
+many frames of one scene keeps the caster of the static objects in a :class:`CasterCache` and
+builds a small one per frame for the objects that move; a :class:`RayCaster` traces both and
+keeps the nearer hit.
 """
 
 from __future__ import annotations
 
+import hashlib
 import os
 import weakref
 from concurrent.futures import ThreadPoolExecutor
@@ -38,15 +45,19 @@ from dataclasses import dataclass
 
 import numpy as np
 from embreex import rtcore_scene
-from embreex.mesh_construction import TriangleMesh
 
-from ..buffers import SceneBuffers
+from ..buffers import MATERIAL_ID, SceneBuffers
 from ..errors import InputError
+from . import kernels
+from .embree import attach_triangles
 
 FAR = 1e30  # stands for "no limit" in Embree's float32 tfar
 JITTER = 2.0**-18  # radians (and metres per metre of origin coordinate) a re-traced ray is moved by: 64 float32 ulps
 MAX_COORDINATE = 1e9  # metres from the local origin; far beyond any scene (Embree overflows and loses triangles from ~5e18 m)
 PLANE_CHUNK = 1 << 20  # triangles per step when computing the planes (bounds the float64 temporaries)
+KERNEL_VARIABLE = "BPY_PIPELINE_SCAN_KERNEL"  # "numpy" forces the numpy path where no kernel is given (tests, comparisons)
+KERNELS = ("auto", "numba", "numpy")
+SPECULAR = (MATERIAL_ID["mirror"], MATERIAL_ID["glass"])
 
 
 @dataclass
@@ -57,16 +68,31 @@ class Hits:
     distance : (h,) float64 metres along the (unit) direction, >= 0
     triangle : (h,) int64 triangle index into the buffers
     normal : (h, 3) float64 unit geometric normal of the triangle (winding order)
+    direction : (h, 3) float64 the ray's direction (the query's, gathered once), or None
     """
 
     ray: np.ndarray
     distance: np.ndarray
     triangle: np.ndarray
     normal: np.ndarray
+    direction: np.ndarray | None = None
 
 
 def default_threads() -> int:
+    """The cores this process may run on (``os.sched_getaffinity`` where the system has it)."""
+    if hasattr(os, "sched_getaffinity"):
+        return max(1, len(os.sched_getaffinity(0)))
     return os.cpu_count() or 1
+
+
+def dot3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise dot products of ``(h, 3)`` arrays (or one ``(3,)`` with ``(h, 3)``), float64.
+
+    Always summed as ``(a0 b0 + a2 b2) + a1 b1``: the order numpy 1.26's einsum takes, written
+    out so the compiled kernel (:mod:`.kernels`) and any numpy version give the same bits.
+    """
+    a, b = np.asarray(a), np.asarray(b)
+    return (a[..., 0] * b[..., 0] + a[..., 2] * b[..., 2]) + a[..., 1] * b[..., 1]
 
 
 def closed_surface(triangles: np.ndarray) -> bool:
@@ -88,18 +114,71 @@ def closed_surface(triangles: np.ndarray) -> bool:
     return bool(np.array_equal(forward, np.sort(b * span + a)))
 
 
+@dataclass
+class EmbreePart:
+    """One Embree scene over some of the buffers' triangles.
+
+    triangle : (p,) int64 buffer triangle of each Embree primitive; ``None`` for the identity
+    keep : the arrays Embree reads in place (alive as long as the scene)
+    """
+
+    scene: rtcore_scene.EmbreeScene
+    triangle: np.ndarray | None
+    keep: tuple
+
+
+def embree_part(local: np.ndarray, triangles: np.ndarray, subset: np.ndarray | None, normal: np.ndarray) -> EmbreePart | None:
+    """The Embree scene of ``triangles[subset]`` (all when ``None``) without their zero-area ones, committed.
+
+    local : (n, 3) float64 vertices, local frame; normal : (s,) the subset's plane normals (zero: no area)
+    """
+    solid = np.flatnonzero(normal.any(axis=1))
+    if not len(solid):
+        return None
+    count = len(triangles) if subset is None else len(subset)
+    if subset is None:
+        index = None if len(solid) == count else solid
+    else:
+        index = subset[solid]
+    chosen = triangles if index is None else triangles[index]
+    scene = rtcore_scene.EmbreeScene()
+    keep = attach_triangles(scene, local, chosen)
+    # Embree commits the scene on the first query: do it once here, before threads share it.
+    scene.run(np.zeros((1, 3), np.float32), np.array([[0, 0, 1]], np.float32), output=1)
+    return EmbreePart(scene, None if index is None else index.astype(np.int64), keep)
+
+
+@dataclass
+class StaticPart:
+    """What :class:`CasterCache` keeps of the static objects: their Embree scene and planes, local frame.
+
+    triangle : (s,) int64 buffer triangles of the static objects; normal (s, 3), offset (s,) their planes
+    """
+
+    frame: np.ndarray
+    triangle: np.ndarray
+    digest: bytes
+    part: EmbreePart | None
+    normal: np.ndarray
+    offset: np.ndarray
+
+
 class RayCaster:
     """Nearest-hit queries against :class:`SceneBuffers`, in a local frame.
 
     frame : (4, 4) float64 local-to-world transform (a sensor pose); default: a translation to
         the centre of the vertices' bounds. ``intersect`` takes and returns local coordinates.
-    threads : threads for Embree (default: every core); embreex releases the GIL while tracing
+    threads : threads for Embree (default: :func:`default_threads`); embreex releases the GIL while tracing
     chunk : rays per embreex call
+    kernel : ``"auto"`` (the compiled diffuse path of :mod:`.kernels` when numba is importable),
+        ``"numba"`` (required) or ``"numpy"``; default: the environment variable
+        :data:`KERNEL_VARIABLE`, else ``"auto"``. Both give the same bytes.
+    static : the static objects' part kept by a :class:`CasterCache` (use :meth:`CasterCache.caster`)
     ``InputError`` (naming the object) for non-finite vertices, bad triangle indices, or vertices
     farther than :data:`MAX_COORDINATE` from the local origin.
     """
 
-    def __init__(self, buffers: SceneBuffers, frame=None, threads: int | None = None, chunk: int = 32768):
+    def __init__(self, buffers: SceneBuffers, frame=None, threads: int | None = None, chunk: int = 32768, kernel: str | None = None, *, static: StaticPart | None = None):
         if len(buffers.triangles):
             buffers.check()
         vertices = np.asarray(buffers.vertices, np.float64)
@@ -108,47 +187,90 @@ class RayCaster:
             frame[:3, 3] = (vertices.min(axis=0) + vertices.max(axis=0)) / 2 if len(vertices) else 0.0
         self.frame = np.asarray(frame, np.float64)
         self.origin = self.frame[:3, 3]
-        self.threads = threads or default_threads()
+        self.threads = int(threads) if threads else default_threads()
         self.chunk = chunk
+        self.kernels = choose_kernels(kernel)
+        self.buffers = buffers
         local = self.to_local(vertices)
         triangles = np.ascontiguousarray(buffers.triangles, np.int32)
         check_extent(local, triangles, buffers)
         self.triangle_object = np.asarray(buffers.triangle_object)
         self.objects = len(buffers.objects)
-        self.plane_normal, self.plane_offset = triangle_planes(local, triangles)  # (m, 3), (m,) local frame
-        solid = np.flatnonzero(self.plane_normal.any(axis=1))
-        # Zero-area triangles have no surface: leave them out; Embree's primID indexes the rest.
-        self.embree_triangle = None if len(solid) == len(triangles) else solid
-        self.scene = rtcore_scene.EmbreeScene()
-        if len(solid):
-            TriangleMesh(self.scene, np.ascontiguousarray(local, np.float32), triangles if self.embree_triangle is None else triangles[solid])
-        # Embree commits the scene on the first query: do it once here, before threads share it.
-        self.scene.run(np.zeros((1, 3), np.float32), np.array([[0, 0, 1]], np.float32), output=1)
+        used = np.bincount(self.triangle_object, minlength=self.objects)[: self.objects] > 0 if len(triangles) else np.zeros(self.objects, bool)
+        self.specular = bool(np.isin(buffers.objects.material[used], SPECULAR).any())  # mirrors or glass: the numpy path
+        if static is None:
+            self.plane_normal, self.plane_offset = triangle_planes(local, triangles)  # (m, 3), (m,) local frame
+            parts = [embree_part(local, triangles, None, self.plane_normal)]
+        else:
+            if not np.array_equal(static.frame, self.frame):
+                raise ValueError("RayCaster: the static part was built for another frame")
+            moving = np.ones(len(triangles), bool)
+            moving[static.triangle] = False
+            moving = np.flatnonzero(moving)
+            self.plane_normal, self.plane_offset = np.empty((len(triangles), 3)), np.empty(len(triangles))
+            self.plane_normal[static.triangle], self.plane_offset[static.triangle] = static.normal, static.offset
+            normal, offset = triangle_planes(local, triangles[moving])
+            self.plane_normal[moving], self.plane_offset[moving] = normal, offset
+            parts = [static.part, embree_part(local, triangles, moving, normal)]
+        self.parts = [p for p in parts if p is not None]
+        # Embree's primID indexes the solid triangles; with one part, map them here, with two, in _embree
+        self.embree_triangle = self.parts[0].triangle if len(self.parts) == 1 else None
         self._pool = None
         self._closed: dict[int, bool] = {}
-        self._buffers_triangles = buffers.triangles
+        self._corner_scales = None
 
     def to_local(self, points: np.ndarray) -> np.ndarray:
         """``(n, 3)`` world points into the local frame."""
         return (np.asarray(points, np.float64) - self.origin) @ self.frame[:3, :3]
 
     def closed(self, row: int) -> bool:
-        """Whether object ``row``'s triangles form closed surfaces (:func:`closed_surface`); cached."""
+        """Whether object ``row``'s triangles form closed surfaces (:func:`closed_surface`); kept per caster."""
         if row not in self._closed:
-            self._closed[row] = closed_surface(self._buffers_triangles[self.triangle_object == row])
+            self._closed[row] = closed_surface(self.buffers.triangles[self.triangle_object == row])
         return self._closed[row]
 
-    def _embree(self, origins32: np.ndarray, directions32: np.ndarray, far: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Embree alone, chunked over the thread pool: ``(tfar, primID, geomID)`` per ray.
+    def corner_scales(self) -> np.ndarray:
+        """``(m,)`` float64 largest local coordinate of each triangle's corners; 0 for diffuse ones (never re-launched from).
 
-        Only Embree runs in the worker threads: embreex takes the GIL back after every ray,
-        so numpy work on another thread would stall it.
+        Computed once per caster, for the mirror and glass triangles only (their re-launch offsets).
+        """
+        if self._corner_scales is None:
+            buffers = self.buffers
+            scales = np.zeros(len(buffers.triangles))
+            specular = np.flatnonzero(buffers.objects.material[buffers.triangle_object] != MATERIAL_ID["diffuse"])
+            if len(specular):
+                corners = self.to_local(buffers.vertices[buffers.triangles[specular].reshape(-1)]).reshape(-1, 9)
+                scales[specular] = np.abs(corners).max(axis=1)
+            self._corner_scales = scales
+        return self._corner_scales
+
+    def _embree(self, origins32: np.ndarray, directions32: np.ndarray, far: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Embree alone, chunked over the thread pool: ``(tfar, prim)`` per ray; ``far`` is left as it was.
+
+        prim : (n,) Embree primitive (map it with :meth:`_triangles`), -1 for a miss. embreex writes
+        each hit's distance into the ``dists`` array it is given, so every call gets a copy.
+        With two parts (static and moving), the moving one is traced up to the static hit and the
+        nearer hit is kept, as a buffer triangle index. Only Embree (and that merge) runs in the
+        worker threads: embreex takes the GIL back after every call, so numpy work on another
+        thread would stall it.
         """
 
         def run(start):
             s = slice(start, start + self.chunk)
-            out = self.scene.run(origins32[s], directions32[s], dists=far[s], output=1)
-            return out["tfar"], out["primID"], out["geomID"]
+            limit = np.array(far[s], np.float32)
+            best = None
+            for part in self.parts:
+                out = part.scene.run(origins32[s], directions32[s], dists=limit.copy() if best is None else best[0].copy(), output=1)
+                prim = out["primID"]
+                if len(self.parts) == 1:
+                    return out["tfar"], prim
+                hit = prim >= 0
+                triangle = np.where(hit, part.triangle[np.where(hit, prim, 0)] if part.triangle is not None else prim, -1)
+                if best is None:
+                    best = (out["tfar"], triangle)
+                else:
+                    best = (np.where(hit, out["tfar"], best[0]), np.where(hit, triangle, best[1]))
+            return best if best is not None else (limit, np.full(len(limit), -1, np.int32))
 
         starts = range(0, len(directions32), self.chunk)
         if self.threads > 1 and len(starts) > 1:
@@ -160,21 +282,13 @@ class RayCaster:
             parts = [run(start) for start in starts]
         if len(parts) == 1:
             return parts[0]
-        return tuple(np.concatenate(column) for column in zip(*parts)) if parts else (np.zeros(0, np.float32), np.zeros(0, np.int32), np.zeros(0, np.int32))
+        return tuple(np.concatenate(column) for column in zip(*parts)) if parts else (np.zeros(0, np.float32), np.zeros(0, np.int32))
 
-    def intersect(self, origins, directions, max_distance=FAR, directions32=None) -> Hits:
-        """Nearest hit of each ray (Embree on every core, then float64 refinement), local frame.
-
-        origins : (n, 3) or (3,) float64 local coordinates, metres ((3,): one shared origin)
-        directions : (n, 3) float64 unit vectors, local frame
-        max_distance : float or (n,) float64; hits beyond are misses
-        directions32 : the same directions as float32, when the caller already has them
-        """
-        directions = np.asarray(directions, np.float64)
+    def launch(self, origins, directions, max_distance=FAR, directions32=None):
+        """The float32 query of :meth:`intersect`: ``(local (3,) or (n, 3) float64, origins32, directions32, far32)``."""
         n = len(directions)
         local = np.asarray(origins, np.float64)
-        shared = local.ndim == 1
-        if shared and not local.any():
+        if local.ndim == 1 and not local.any():
             origins32 = np.zeros((n, 3), np.float32)
         else:
             origins32 = np.ascontiguousarray(np.broadcast_to(local, (n, 3)), np.float32)
@@ -182,22 +296,28 @@ class RayCaster:
         far[:] = np.minimum(max_distance, FAR)
         if directions32 is None:
             directions32 = np.ascontiguousarray(directions, np.float32)
-        tfar, prim, geom = self._embree(origins32, directions32, far)
-        ray = np.flatnonzero(geom >= 0)
-        triangle = self._triangles(prim[ray])
-        normal = self.plane_normal[triangle]
-        denom = np.einsum("ij,ij->i", directions[ray], normal)
-        suspect = self._slipped(ray, triangle, denom, geom)
+        return local, origins32, directions32, far
+
+    def intersect(self, origins, directions, max_distance=FAR, directions32=None) -> Hits:
+        """Nearest hit of each ray (Embree on every core, then float64 refinement), local frame; the numpy path.
+
+        origins : (n, 3) or (3,) float64 local coordinates, metres ((3,): one shared origin)
+        directions : (n, 3) float64 unit vectors, local frame
+        max_distance : float or (n,) float64; hits beyond are misses
+        directions32 : the same directions as float32, when the caller already has them
+        """
+        directions = np.asarray(directions, np.float64)
+        local, origins32, directions32, far = self.launch(origins, directions, max_distance, directions32)
+        shared = local.ndim == 1
+        tfar, prim = self._embree(origins32, directions32, far)
+        ray, triangle, normal, d, denom = self._gather(prim, directions)
+        front, back = self._faces(triangle, denom)
+        suspect = self.suspects(front, back, prim, lambda: (ray, self.triangle_object[triangle], denom))
         moved = None
         if len(suspect):
-            tfar, prim, geom = tfar.copy(), prim.copy(), geom.copy()
-            moved = np.zeros(n, bool)
-            moved[self._retrace(suspect, local, directions, far, tfar, prim, geom)] = True
-            ray = np.flatnonzero(geom >= 0)
-            triangle = self._triangles(prim[ray])
-            normal = self.plane_normal[triangle]
-            denom = np.einsum("ij,ij->i", directions[ray], normal)
-        o_dot_n = normal @ local if shared else np.einsum("ij,ij->i", local[ray], normal)
+            tfar, prim, moved = self.retrace(suspect, local, directions, far, tfar, prim)
+            ray, triangle, normal, d, denom = self._gather(prim, directions)
+        o_dot_n = dot3(local, normal) if shared else dot3(local[ray], normal)
         coarse = tfar[ray].astype(np.float64)
         with np.errstate(divide="ignore", invalid="ignore"):
             exact = (self.plane_offset[triangle] - o_dot_n) / denom
@@ -210,33 +330,49 @@ class RayCaster:
         limit = max_distance if np.ndim(max_distance) == 0 else np.asarray(max_distance)[ray]
         inside = distance <= limit
         if not inside.all():
-            ray, distance, triangle, normal = ray[inside], distance[inside], triangle[inside], normal[inside]
-        return Hits(ray, distance, triangle, normal)
+            ray, distance, triangle, normal, d = ray[inside], distance[inside], triangle[inside], normal[inside], d[inside]
+        return Hits(ray, distance, triangle, normal, d)
+
+    def _gather(self, prim: np.ndarray, directions: np.ndarray):
+        """``(ray, triangle, normal, direction, d.n)`` of the rays that hit, each gathered once."""
+        ray = np.flatnonzero(prim >= 0)
+        triangle = self._triangles(prim[ray])
+        normal = self.plane_normal[triangle]
+        d = directions[ray]
+        return ray, triangle, normal, d, dot3(d, normal)
+
+    def _faces(self, triangle: np.ndarray, denom: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(front, back)`` (k,) bool: the objects some ray hit from the front (d.n < 0), and from behind (d.n > 0)."""
+        obj = self.triangle_object[triangle]
+        front = np.bincount(obj[denom < 0], minlength=self.objects)[: self.objects] > 0
+        back = np.bincount(obj[denom > 0], minlength=self.objects)[: self.objects] > 0
+        return front, back
 
     def _triangles(self, prim: np.ndarray) -> np.ndarray:
-        """Buffer triangle indices (int64) of Embree primitive ids."""
+        """Buffer triangle indices (int64) of Embree primitive ids (of :meth:`_embree`)."""
         return prim.astype(np.int64) if self.embree_triangle is None else self.embree_triangle[prim]
 
-    def _slipped(self, ray: np.ndarray, triangle: np.ndarray, denom: np.ndarray, geom: np.ndarray) -> np.ndarray:
+    def suspects(self, front: np.ndarray, back: np.ndarray, prim: np.ndarray, back_hits) -> np.ndarray:
         """Rays that may have slipped through a vertex (see the module notes): indices among the n queried.
 
-        denom : d.n of each hit, > 0 where the ray met the triangle's back face
+        front, back : (k,) bool objects hit from the front and from behind (:meth:`_faces`)
+        prim : (n,) Embree's answer (-1: a miss); back_hits : a callable giving ``(ray, object, d.n)``
+        of the hits, called only when some object was hit from both sides
         """
-        back = denom > 0
-        if not back.any():
-            return np.zeros(0, np.int64)
-        obj = self.triangle_object[triangle]
-        seen_front = np.bincount(obj[denom < 0], minlength=self.objects) > 0
-        suspect = [ray[back & seen_front[obj]]]
-        inside_of = np.unique(obj[back & ~seen_front[obj]])
-        if any(self.closed(int(row)) for row in inside_of):  # the origin is enclosed: no ray can miss
-            suspect.append(np.flatnonzero(geom < 0))
-        return np.concatenate(suspect)
+        both = front & back
+        suspect = []
+        if both.any():
+            ray, obj, denom = back_hits()
+            suspect.append(ray[(denom > 0) & both[obj]])
+        if any(self.closed(int(row)) for row in np.flatnonzero(back & ~front)):  # the origin is enclosed: no ray can miss
+            suspect.append(np.flatnonzero(prim < 0))
+        return np.concatenate(suspect) if suspect else np.zeros(0, np.int64)
 
-    def _retrace(self, rays, local, directions, far, tfar, prim, geom) -> np.ndarray:
-        """Trace ``rays`` again, moved by :data:`JITTER` four ways across; keep the nearest hit
-        (updates tfar, prim, geom in place). Returns the rays whose hit now comes from a moved ray.
+    def retrace(self, rays, local, directions, far, tfar, prim) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Trace ``rays`` again, moved by :data:`JITTER` four ways across; keep the nearest hit.
 
+        far : (n,) float32 the query's own limits (never Embree's output). Returns new
+        ``(tfar, prim, moved)``, moved (n,) bool: the rays whose hit now comes from a moved ray.
         Four ways (two crossed axes, both senses), since a ray that slipped in where it only just
         enters the mesh can be moved out of it by one of them.
         """
@@ -248,20 +384,95 @@ class RayCaster:
         u = np.cross(d, axis)
         u /= np.linalg.norm(u, axis=1, keepdims=True)
         shift = JITTER * (1.0 + np.abs(o).max(axis=1))
-        far = np.ascontiguousarray(far[rays])
-        best_t, best_p, best_g = tfar[rays].copy(), prim[rays].copy(), geom[rays].copy()
+        limits = far[rays]
+        best_t, best_p = tfar[rays].copy(), prim[rays].copy()
         moved = np.zeros(len(rays), bool)
         for across in (u, -u, np.cross(d, u), -np.cross(d, u)):
             turned = d + JITTER * across
             turned /= np.linalg.norm(turned, axis=1, keepdims=True)
             o32 = np.ascontiguousarray(o + shift[:, None] * across, np.float32)
-            t2, p2, g2 = self._embree(o32, np.ascontiguousarray(turned, np.float32), far)
-            better = (g2 >= 0) & ((best_g < 0) | (t2 < best_t))
-            best_t[better], best_p[better], best_g[better] = t2[better], p2[better], g2[better]
+            t2, p2 = self._embree(o32, np.ascontiguousarray(turned, np.float32), limits)
+            better = (p2 >= 0) & ((best_p < 0) | (t2 < best_t))
+            best_t[better], best_p[better] = t2[better], p2[better]
             moved |= better
         take = rays[moved]
-        tfar[take], prim[take], geom[take] = best_t[moved], best_p[moved], best_g[moved]
-        return take
+        tfar, prim = tfar.copy(), prim.copy()
+        tfar[take], prim[take] = best_t[moved], best_p[moved]
+        flags = np.zeros(len(directions), bool)
+        flags[take] = True
+        return tfar, prim, flags
+
+
+def choose_kernels(kernel: str | None):
+    """The compiled kernels (:func:`.kernels.compiled`) the choice asks for, or ``None`` for the numpy path."""
+    kernel = kernel or os.environ.get(KERNEL_VARIABLE) or "auto"
+    if kernel not in KERNELS:
+        raise InputError(f"scan kernel {kernel!r} (argument or {KERNEL_VARIABLE}): use one of {', '.join(KERNELS)}")
+    if kernel == "numpy":
+        return None
+    compiled = kernels.compiled()
+    if compiled is None and kernel == "numba":
+        raise InputError("scan kernel 'numba': numba is not installed; pip install 'bpy_pipeline[fast]' or use 'auto'")
+    return compiled
+
+
+class CasterCache:
+    """A run's static objects' Embree scene and planes, kept from frame to frame by the run that owns it.
+
+    ``cache.caster(buffers, frame, moving)`` returns a :class:`RayCaster` of all of ``buffers``.
+    The triangles of the object rows not flagged in ``moving`` form the static part: when they
+    (their buffer positions and their world corners, compared through a digest) and ``frame``
+    are exactly those of the previous call, its Embree scene and planes are reused; otherwise
+    they are built and kept. The moving rows get a small Embree scene of their own each call;
+    the caster traces both and keeps the nearer hit (the same triangle, hence the same bytes,
+    as one caster of all the buffers, but for exact ties).
+
+    threads, kernel : as :class:`RayCaster`. ``builds`` and ``reuses`` count the static parts built and reused.
+    """
+
+    def __init__(self, threads: int | None = None, kernel: str | None = None):
+        self.threads, self.kernel = threads, kernel
+        self.kept: StaticPart | None = None
+        self.builds = self.reuses = 0
+
+    def caster(self, buffers: SceneBuffers, frame, moving: np.ndarray | None = None) -> RayCaster:
+        """A caster of ``buffers`` in ``frame`` ((4, 4) float64 local-to-world, e.g. a fixed pose for the run).
+
+        moving : (k,) bool per row of ``buffers.objects``: the objects rebuilt every call (None: none)
+        """
+        frame = np.asarray(frame, np.float64)
+        k = len(buffers.objects)
+        moving = np.zeros(k, bool) if moving is None else np.asarray(moving, bool)
+        if moving.shape != (k,):
+            raise InputError(f"CasterCache.caster: moving must give each of the {k} object rows a flag, not shape {moving.shape}")
+        if len(buffers.triangles):
+            buffers.check()
+        static = np.flatnonzero(~moving[buffers.triangle_object])
+        digest = static_digest(buffers, static)
+        kept = self.kept
+        if kept is None or not (np.array_equal(kept.frame, frame) and np.array_equal(kept.triangle, static) and kept.digest == digest):
+            caster = RayCaster(buffers, frame, self.threads, kernel=self.kernel) if not moving.any() else None
+            if caster is not None:  # nothing moves: the whole scene is the static part
+                self.kept = StaticPart(frame, static, digest, caster.parts[0] if caster.parts else None, caster.plane_normal, caster.plane_offset)
+                self.builds += 1
+                return caster
+            local = (np.asarray(buffers.vertices, np.float64) - frame[:3, 3]) @ frame[:3, :3]
+            triangles = np.ascontiguousarray(buffers.triangles, np.int32)
+            check_extent(local, triangles, buffers)
+            normal, offset = triangle_planes(local, triangles[static])
+            self.kept = StaticPart(frame, static, digest, embree_part(local, triangles, static, normal), normal, offset)
+            self.builds += 1
+        else:
+            self.reuses += 1
+        return RayCaster(buffers, frame, self.threads, kernel=self.kernel, static=self.kept)
+
+
+def static_digest(buffers: SceneBuffers, static: np.ndarray) -> bytes:
+    """A digest of the world corners ``(s, 3, 3)`` float64 of triangles ``static``, in steps of :data:`PLANE_CHUNK`."""
+    h = hashlib.blake2b(digest_size=16)
+    for start in range(0, len(static), PLANE_CHUNK):
+        h.update(np.ascontiguousarray(buffers.vertices[buffers.triangles[static[start : start + PLANE_CHUNK]]], np.float64).tobytes())
+    return h.digest()
 
 
 def check_extent(local: np.ndarray, triangles: np.ndarray, buffers: SceneBuffers) -> None:

@@ -19,7 +19,6 @@ direction never changed.
 from __future__ import annotations
 
 import math
-import weakref
 from dataclasses import dataclass
 from typing import Iterable, Iterator
 
@@ -27,8 +26,9 @@ import numpy as np
 
 from ..buffers import MATERIAL_ID, SceneBuffers
 from ..geometry.transforms import rotate
-from .points import BEAM_DTYPE, POINT_DTYPE, empty_points
-from .raycast import RayCaster
+from .points import BEAM_DTYPE, POINT_DTYPE
+from .kernels import fill_diffuse
+from .raycast import RayCaster, dot3
 from .sensors import Pattern, pattern_chunks
 
 DIFFUSE, MIRROR, GLASS, ABSORBER = (MATERIAL_ID[name] for name in ("diffuse", "mirror", "glass", "absorber"))
@@ -82,30 +82,19 @@ class Beams:
     gain: np.ndarray
     cos_incidence: np.ndarray
     direction: np.ndarray
+    single: bool = False  # every beam returned from its first segment: point and direction are those of the emitted ray
+
+    def select(self, keep: np.ndarray) -> "Beams":
+        """The beams ``keep`` (a boolean mask or indices) selects."""
+        return Beams(*(getattr(self, f)[keep] for f in ARRAY_FIELDS), single=self.single)
 
 
-_CORNER_SCALES: "weakref.WeakKeyDictionary[RayCaster, np.ndarray]" = weakref.WeakKeyDictionary()
 
-
-def _corner_scales(caster: RayCaster, buffers: SceneBuffers) -> np.ndarray:
-    """``(m,)`` float64 largest local coordinate of each triangle's corners; 0 for diffuse ones (never re-launched from).
-
-    Computed once per caster (a caster is one scene in one frame) for the specular triangles only.
-    """
-    scales = _CORNER_SCALES.get(caster)
-    if scales is None:
-        scales = np.zeros(len(buffers.triangles))
-        specular = np.flatnonzero(buffers.objects.material[buffers.triangle_object] != DIFFUSE)
-        if len(specular):
-            corners = caster.to_local(buffers.vertices[buffers.triangles[specular].reshape(-1)]).reshape(-1, 9)
-            scales[specular] = np.abs(corners).max(axis=1)
-        _CORNER_SCALES[caster] = scales
-    return scales
-
+ARRAY_FIELDS = tuple(f for f in Beams.__dataclass_fields__ if f != "single")
 
 def _relaunch_offset(caster: RayCaster, buffers: SceneBuffers, point: np.ndarray, triangle: np.ndarray) -> np.ndarray:
     """``(k,)`` metres to move re-launched rays off their surface (see :data:`OFFSET_ULPS`)."""
-    scale = np.maximum(np.abs(point).max(axis=1), _corner_scales(caster, buffers)[triangle])
+    scale = np.maximum(np.abs(point).max(axis=1), caster.corner_scales()[triangle])
     return OFFSET_ULPS * (1.0 + scale)
 
 
@@ -119,7 +108,7 @@ def _from_launch(caster: RayCaster, launch: np.ndarray, d: np.ndarray, hits, shi
     """
     normal = hits.normal
     with np.errstate(divide="ignore", invalid="ignore"):
-        exact = (caster.plane_offset[hits.triangle] - np.einsum("ij,ij->i", launch, normal)) / np.einsum("ij,ij->i", d, normal)
+        exact = (caster.plane_offset[hits.triangle] - dot3(launch, normal)) / dot3(d, normal)
     trust = np.abs(exact - hits.distance) <= 4.0 * shift
     return np.where(trust, exact, hits.distance)
 
@@ -176,7 +165,7 @@ def trace_beams(
         hits = caster.intersect(o, d, max_range - travelled, directions32)
         directions32 = None
         i = hits.ray
-        seg_d = d[i]
+        seg_d = hits.direction
         if launch is None:
             start, distance = (o if o.ndim == 1 else o[i]), hits.distance
         else:  # measure from where the beam really left the surface, not from the offset origin
@@ -185,13 +174,14 @@ def trace_beams(
         point = start + distance[:, None] * seg_d
         path = distance + (travelled[i] if rows is not None else 0.0)
         obj = buffers.triangle_object[hits.triangle]
-        facing = -np.einsum("ij,ij->i", seg_d, hits.normal)  # cos of incidence, > 0 on the front face
+        facing = -dot3(seg_d, hits.normal)  # cos of incidence, > 0 on the front face
         cos_incidence = np.abs(facing)
         material = objects.material[obj]
         beam = i if rows is None else rows[i]
         if rows is None and not (material != DIFFUSE).any():  # one segment, only diffuse hits: nothing to gather
-            done.append((beam, path, point, hits.triangle, np.zeros(len(i), np.uint8), np.full(len(i), -1, np.int32), np.ones(len(i)), cos_incidence, seg_d))
-            break
+            beams = Beams(beam, path, point, hits.triangle, np.zeros(len(i), np.uint8), np.full(len(i), -1, np.int32), np.ones(len(i)), cos_incidence, seg_d, single=True)
+            near = beams.path >= min_range
+            return beams if near.all() else beams.select(near)
         reflectivity = objects.reflectivity[obj].astype(np.float64)
         is_mirror, is_glass = material == MIRROR, material == GLASS
         mirror_front = is_mirror & (facing > 0)
@@ -222,7 +212,7 @@ def trace_beams(
         gain = gain[j] * np.where(turned, reflectivity[go], 1.0 - reflectivity[go])
         mirror = np.where((mirror[j] < 0) & turned, obj[go], mirror[j])
         normal, d = hits.normal[go], seg_d[go]
-        d_dot_n = np.einsum("ij,ij->i", d, normal)
+        d_dot_n = dot3(d, normal)
         d = np.where(turned[:, None], d - 2.0 * d_dot_n[:, None] * normal, d)
         launch = point[go]
         shift = _relaunch_offset(caster, buffers, launch, hits.triangle[go])
@@ -240,9 +230,7 @@ def trace_beams(
         order = slot[slot >= 0]
         beams = Beams(*(f[order] for f in fields))
     near = beams.path >= min_range
-    if not near.all():
-        beams = Beams(*(getattr(beams, f)[near] for f in Beams.__dataclass_fields__))
-    return beams
+    return beams if near.all() else beams.select(near)
 
 
 def scan_chunk(
@@ -270,21 +258,25 @@ def scan_chunk(
     directions = pattern.directions
     if sensor_to_local.ndim == 2 and pattern.origins is None and np.allclose(sensor_to_local, np.eye(4), rtol=0, atol=1e-12):
         origin, world_d = np.zeros(3), directions  # the caster works in this sensor's frame: rays go in as they are
-        beams = trace_beams(caster, buffers, origin, directions, min_range, max_range, max_bounces, directions.astype(np.float32), surfaces, rng)
+        directions32 = directions.astype(np.float32)
     else:
         rotation, translation = sensor_to_local[..., :3, :3], sensor_to_local[..., :3, 3]
         world_d = rotate(directions, rotation)
         origin = translation if pattern.origins is None else translation + rotate(pattern.origins, rotation)
-        beams = trace_beams(caster, buffers, origin, world_d, min_range, max_range, max_bounces, None, surfaces, rng)
+        directions32 = None
+    if getattr(caster, "kernels", None) is not None and not caster.specular:  # no mirror, no glass: the compiled diffuse path
+        return _fused_chunk(caster, buffers, pattern, origin, world_d, directions32, min_range, max_range)
+    beams = trace_beams(caster, buffers, origin, world_d, min_range, max_range, max_bounces, directions32, surfaces, rng)
     objects = buffers.objects
     obj = buffers.triangle_object[beams.triangle]
     ghost = beams.bounces > 0
-    points = empty_points(len(beams.ray))
-    if ideal:
+    points = np.empty(len(beams.ray), POINT_DTYPE)
+    emitted = beams.direction if ideal or beams.single else world_d[beams.ray]
+    if ideal or beams.single:
         xyz = beams.point
     else:  # where the sensor believes the return is: along the emitted ray at the total path length
         start = origin if origin.ndim == 1 else origin[beams.ray]
-        xyz = start + world_d[beams.ray] * beams.path[:, None]
+        xyz = start + emitted * beams.path[:, None]
     points["x"], points["y"], points["z"] = xyz.T
     points["range"] = beams.path
     reflectivity = objects.reflectivity[obj]
@@ -300,8 +292,40 @@ def scan_chunk(
     points["time"] = pattern.time[beams.ray]
     beam = np.empty(len(beams.ray), BEAM_DTYPE)
     beam["cos_incidence"], beam["reflectivity"], beam["gain"] = beams.cos_incidence, reflectivity, beams.gain
-    beam["direction"] = beams.direction if ideal else world_d[beams.ray]
+    beam["direction"] = beams.direction if ideal else emitted
     return points, beam, beams.ray
+
+
+NO_RAYS = np.zeros(0, np.bool_)
+IDENTITY = np.zeros(0, np.int64)
+
+
+def _fused_chunk(caster: RayCaster, buffers: SceneBuffers, pattern: Pattern, origin: np.ndarray, world_d: np.ndarray, directions32, min_range: float, max_range: float):
+    """:func:`scan_chunk` of a scene without mirrors or glass through the compiled kernel (:mod:`.kernels`).
+
+    Embree, then one pass that solves, tests, labels and fills each record. Slipped rays are
+    found from the objects the pass saw from both sides, traced again as the numpy path does
+    (:meth:`RayCaster.retrace`) and the pass repeated with them: the same bytes as the numpy path.
+    """
+    world_d = np.ascontiguousarray(world_d, np.float64)
+    n = len(world_d)
+    local, origins32, directions32, far = caster.launch(origin, world_d, max_range, directions32)
+    tfar, prim = caster._embree(origins32, directions32, far)
+    origins = np.ascontiguousarray(local.reshape(-1, 3), np.float64)
+    prim_triangle = IDENTITY if caster.embree_triangle is None else caster.embree_triangle
+    points, beam, ray = np.empty(n, POINT_DTYPE), np.empty(n, BEAM_DTYPE), np.empty(n, np.int64)
+    run = lambda tfar, prim, moved: fill_diffuse(caster.kernels, tfar, prim, prim_triangle, moved, origins, world_d, caster, buffers.objects, pattern.ring, pattern.time, min_range, max_range, points, beam, ray)  # noqa: E731
+    count, front, back = run(tfar, prim, NO_RAYS)
+
+    def back_hits():
+        hit_ray, triangle, _, _, denom = caster._gather(prim, world_d)
+        return hit_ray, caster.triangle_object[triangle], denom
+
+    suspect = caster.suspects(front, back, prim, back_hits)
+    if len(suspect):
+        tfar, prim, moved = caster.retrace(suspect, local, world_d, far, tfar, prim)
+        count, _, _ = run(tfar, prim, moved)
+    return points[:count], beam[:count], ray[:count]
 
 
 def scan_chunks(

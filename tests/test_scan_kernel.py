@@ -1,0 +1,165 @@
+"""The compiled diffuse path (lidar/kernels.py) and the numpy path give the same bytes.
+
+Every scene is scanned twice, once with ``kernel="numpy"`` and once with ``kernel="numba"``
+(skipped, with the reason, where numba is not installed): shared and per-ray origins, a caster
+whose frame is not the sensor's, a moving sensor, the range limits, an absorber, grazing rays,
+rays aimed at the vertices of closed meshes (some slip and are traced again) and a sensor
+inside a closed mesh. A scene with glass keeps the numpy path. The static-plus-moving caster of
+:class:`CasterCache` gives the bytes of one caster of the whole scene.
+"""
+
+import numpy as np
+import pytest
+
+from bpy_pipeline.buffers import MATERIAL_ID, SceneBuffers
+from bpy_pipeline.errors import InputError
+from bpy_pipeline.geometry import primitives
+from bpy_pipeline.geometry.transforms import pose_matrix
+from bpy_pipeline.lidar import scanner
+from bpy_pipeline.lidar.kernels import numba_available
+from bpy_pipeline.lidar.raycast import CasterCache, RayCaster
+from bpy_pipeline.lidar.scanner import scan, scan_chunk
+from bpy_pipeline.lidar.sensors import Pattern, resolve_sensor, sensor_pattern
+
+needs_numba = pytest.mark.skipif(not numba_available(), reason="numba is not installed (the 'fast' extra): only the numpy path exists here")
+
+
+def room() -> SceneBuffers:
+    """A closed box room seen from inside, a closed UV sphere and a box in it, an open wall seen from both sides, an absorber."""
+    sphere = primitives.uv_sphere(0.8, 24)
+    parts = {
+        "room": primitives.box(30.0, 24.0, 8.0),
+        "sphere": (sphere[0] + [4.0, 1.0, 0.5], sphere[1]),
+        "crate": (primitives.box(1.0, 2.0, 1.5)[0] + [-3.0, -2.0, -1.0], primitives.box(1.0, 2.0, 1.5)[1]),
+        "wall": (primitives.plane(3.0, 2.0)[0] @ pose_matrix([0, 0, 0], [90, 0, 30])[:3, :3].T + [1.0, -4.0, 0.0], primitives.plane(3.0, 2.0)[1]),
+        "absorber": (primitives.box(0.5, 0.5, 0.5)[0] + [-2.0, 3.0, 0.0], primitives.box(0.5, 0.5, 0.5)[1]),
+    }
+    buffers = SceneBuffers.from_meshes(parts)
+    buffers.objects.material[4] = MATERIAL_ID["absorber"]
+    buffers.objects.semantic[:] = np.arange(1, 6, dtype=np.uint16) * 10
+    buffers.objects.reflectivity[:] = np.float32([0.3, 0.9, 0.55, 0.71, 0.5])
+    return buffers
+
+
+def vertex_pattern(buffers: SceneBuffers, origin: np.ndarray) -> Pattern:
+    """Rays from ``origin`` aimed exactly at every vertex (some slip between the triangles there), plus a spinning sensor's."""
+    d = buffers.vertices - origin
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    spin = sensor_pattern(resolve_sensor({"preset": "custom", "channels": 32, "vertical_fov_deg": [-60, 60], "horizontal_resolution_deg": 1.0, "min_range": 0.0, "max_range": 100.0}))
+    directions = np.concatenate([d, spin.directions])
+    return Pattern(directions, np.arange(len(directions)).astype(np.uint16), np.linspace(0.0, 0.1, len(directions)))
+
+
+def both(run):
+    """``run(kernel)`` with the numpy path and with the compiled kernel: their results must be byte-identical."""
+    reference = run("numpy")
+    fused = run("numba")
+    for a, b in zip(reference, fused):
+        assert a.dtype == b.dtype and len(a) == len(b)
+        assert a.tobytes() == b.tobytes()
+    return reference
+
+
+@needs_numba
+@pytest.mark.parametrize("case", ["sensor frame", "other frame", "per-ray origins", "moving sensor", "range limits"])
+def test_the_kernel_gives_the_numpy_paths_bytes(case, monkeypatch):
+    buffers = room()
+    pose = pose_matrix([0.3, 0.2, 0.4], [3.0, -2.0, 20.0])
+    pattern = vertex_pattern(buffers, pose[:3, 3])
+    pattern = Pattern(pattern.directions @ pose[:3, :3], pattern.ring, pattern.time)  # sensor frame
+    min_range, max_range = (2.0, 9.0) if case == "range limits" else (0.0, 100.0)
+    frame = np.eye(4) if case == "other frame" else pose
+    if case == "per-ray origins":
+        rng = np.random.default_rng(2)
+        pattern = Pattern(pattern.directions, pattern.ring, pattern.time, rng.uniform(-0.05, 0.05, (len(pattern), 3)))
+    sensor = pose
+    if case == "moving sensor":
+        sensor = lambda t: np.stack([pose_matrix([0.3 + 2.0 * s, 0.2, 0.4], [3.0, -2.0, 20.0 + 30 * s]) for s in t])  # noqa: E731
+
+    def run(kernel):
+        caster = RayCaster(buffers, frame=frame, threads=2, chunk=700, kernel=kernel)
+        if kernel == "numba":  # the compiled path must be the one taken
+            monkeypatch.setattr(scanner, "trace_beams", lambda *a, **k: pytest.fail("numpy path taken"))
+        out = scan(caster, buffers, pattern, sensor, min_range, max_range)
+        monkeypatch.undo()
+        return out
+
+    points, beam = both(run)
+    assert len(points) > 0.3 * len(pattern.directions)
+    assert not np.isin(points["semantic"], [50]).any()  # the absorber returns nothing
+    if case == "range limits":
+        assert points["range"].min() >= 2.0 and points["range"].max() <= 9.0
+
+
+@needs_numba
+def test_slipped_and_enclosed_rays_are_traced_again_in_both_paths():
+    """Rays at the vertices of the room from inside and of the sphere from outside: the re-trace runs, bytes agree."""
+    buffers = room()
+    caster = RayCaster(buffers, frame=np.eye(4), kernel="numpy")
+    origin = np.array([0.3, 0.2, 0.4])
+    pattern = vertex_pattern(buffers, origin)
+    retraced = []
+    original = RayCaster.retrace
+
+    def counting(self, rays, *args):
+        retraced.append(len(rays))
+        return original(self, rays, *args)
+
+    RayCaster.retrace = counting
+    try:
+        both(lambda kernel: scan_chunk(RayCaster(buffers, frame=pose_matrix(origin, [0, 0, 0]), kernel=kernel), buffers, pattern, np.eye(4), 0.0, 100.0))
+    finally:
+        RayCaster.retrace = original
+    assert retraced and retraced[0] == retraced[-1] > 0  # the wall seen from both sides: the same suspects in both paths
+    assert caster.kernels is None
+
+
+@needs_numba
+def test_grazing_rays_and_a_sensor_in_the_surface():
+    buffers = SceneBuffers.from_meshes({"ground": primitives.plane(4000.0, 4000.0)})
+    elevation = np.radians([-0.1, -0.05, -0.01, -1e-6, 0.0, 1e-6, 0.1])
+    azimuth = np.radians(np.arange(0, 360, 15.0))
+    e, a = (x.ravel() for x in np.meshgrid(elevation, azimuth, indexing="ij"))
+    pattern = Pattern(np.column_stack([np.cos(e) * np.cos(a), np.cos(e) * np.sin(a), np.sin(e)]), np.zeros(len(e), np.uint16), np.zeros(len(e)))
+    for height in (1.5, 0.0):
+        pose = pose_matrix([0, 0, height], [0, 0, 0])
+        both(lambda kernel: scan(RayCaster(buffers, frame=pose, kernel=kernel), buffers, pattern, pose, 0.0, 1900.0))
+
+
+def test_glass_keeps_the_numpy_path_and_a_bad_kernel_name_is_refused():
+    buffers = room()
+    buffers.objects.material[2] = MATERIAL_ID["glass"]
+    assert RayCaster(buffers, frame=np.eye(4), kernel="numpy").specular
+    with pytest.raises(InputError, match="scan kernel 'fast'"):
+        RayCaster(buffers, frame=np.eye(4), kernel="fast")
+
+
+def test_the_numpy_path_is_forced_by_the_environment(monkeypatch):
+    monkeypatch.setenv("BPY_PIPELINE_SCAN_KERNEL", "numpy")
+    assert RayCaster(room(), frame=np.eye(4)).kernels is None
+
+
+@pytest.mark.parametrize("kernel", ["numpy", pytest.param("numba", marks=needs_numba)])
+def test_a_kept_static_caster_with_a_moving_part_gives_one_casters_bytes(kernel):
+    """Frame after frame, the crate and the sphere move; the room, the wall and the absorber are kept."""
+    base = room()
+    pose = pose_matrix([0.3, 0.2, 0.4], [0, 0, 10])
+    spec = resolve_sensor({"preset": "custom", "channels": 32, "vertical_fov_deg": [-60, 60], "horizontal_resolution_deg": 1.0, "min_range": 0.0, "max_range": 100.0})
+    pattern = sensor_pattern(spec)
+    cache = CasterCache(threads=2, kernel=kernel)
+    moving = np.array([False, True, True, False, False])
+    for frame in range(3):
+        buffers = room()
+        moves = np.isin(buffers.triangle_object, [1, 2])
+        buffers.vertices[np.unique(buffers.triangles[moves])] += [0.7 * frame, -0.3 * frame, 0.0]
+        kept = scan(cache.caster(buffers, pose, moving), buffers, pattern, pose, 0.0, 100.0)
+        whole = scan(RayCaster(buffers, frame=pose, kernel=kernel), buffers, pattern, pose, 0.0, 100.0)
+        for a, b in zip(kept, whole):
+            assert a.tobytes() == b.tobytes()
+        assert len(kept[0]) > 0.9 * len(pattern)
+    assert (cache.builds, cache.reuses) == (1, 2)
+    base.vertices[0] += 0.01  # a static object changed: built again
+    cache.caster(base, pose, moving)
+    assert cache.builds == 2
+    with pytest.raises(InputError, match="moving must give each of the 5 object rows"):
+        cache.caster(base, pose, moving[:2])
