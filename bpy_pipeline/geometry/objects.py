@@ -233,8 +233,15 @@ def robot_arm_object(rng: np.random.Generator, size=None) -> list[ObjectPart]:
     return fit_to_box([part], (v.max(axis=0) - v.min(axis=0)) if size is None else size)
 
 
+def box_object(rng: np.random.Generator, size=None) -> list[ObjectPart]:
+    """A plain box (a wall, a crate) of ``size`` (1 m cube by default)."""
+    v, t = primitives.box(*((1.0, 1.0, 1.0) if size is None else size))
+    return [ObjectPart(v, t, "diffuse", 0.5)]
+
+
 # type -> (class name, maker(rng, size) -> parts, nominal size (length, width, height) m)
 OBJECT_TYPES = {
+    "box": ("wall", box_object, (1.0, 1.0, 1.0)),
     "car": ("car", car_object, (4.6, 1.8, 1.625)),
     "person": ("person", person_object, (0.6, 0.5, 1.75)),
     "robot_arm": ("robot arm", robot_arm_object, (1.2, 0.6, 1.6)),

@@ -111,7 +111,8 @@ def organise(data: np.ndarray, rings: int, where: str, intensity_field: int = 3,
 
 def read_scan(path: str | Path, rings: int, fields: int = 5, intensity_field: int = 3, ring_field: int | None = 4, empty_radius: float = 0.5) -> OrganisedScan:
     """Read one organised sweep: a float32 ``.bin`` of ``fields`` per firing (nuScenes: x y z
-    intensity ring) or an ``.npy`` of ``(rings, columns, >= 4)`` (x y z intensity)."""
+    intensity ring, turned from LIDAR_TOP's x right, y forward to the sensor frame's x forward,
+    y left) or an ``.npy`` of ``(rings, columns, >= 4)`` (x y z intensity, the sensor frame)."""
     path = Path(path)
     try:
         if path.suffix == ".npy":
@@ -125,6 +126,8 @@ def read_scan(path: str | Path, rings: int, fields: int = 5, intensity_field: in
             if raw.size % fields:
                 raise InputError(f"{path}: {raw.size} floats are not records of {fields} fields (--fields)")
             data = raw.reshape(-1, fields)
+            if fields == 5 and ring_field == 4:  # nuScenes LIDAR_TOP is x right, y forward: to x forward, y left (io/real_scans.py)
+                data = np.column_stack([data[:, 1], -data[:, 0], data[:, 2:]])
     except OSError as err:
         raise InputError(f"{path}: cannot read the scan ({err.strerror or err})") from None
     except ValueError as err:

@@ -1,0 +1,107 @@
+"""A dense real scan resampled into a sparser sensor's pattern and mounting height (the parking paper, section 4.2).
+
+Two methods, both from the dense scan's returns (``(n, 3)`` points in its sensor frame) to the
+target sensor's firings (a :class:`~bpy_pipeline.lidar.sensors.SensorSpec`, mounted ``height``
+metres above or below the source: ``target_offset`` is the target's optical centre in the
+source frame):
+
+- :func:`project_to_cones`, the paper's: every point goes to the target ring whose cone is
+  nearest in elevation (seen from the target's centre), onto that cone at its range; each cone
+  is then scanned in the target's azimuth steps and the nearest point of each cell kept
+  ("removing all points located behind it"). Its points lie on the target's cones but keep the
+  source's azimuths and ranges: off the target's firing directions by up to half a step.
+- :func:`raycast_convert`, the alternative: the dense scan meshed as a range image
+  (:func:`mesh_range_image`: neighbouring firings joined where their ranges agree) and the
+  target's firings cast at the mesh from the target's centre. Points lie on the target's
+  firing directions; their ranges interpolate the dense surface.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..buffers import SceneBuffers
+from ..lidar.raycast import RayCaster
+from ..lidar.sensors import azimuths, elevations, spherical_directions
+
+
+def mesh_range_image(points: np.ndarray, valid: np.ndarray, max_jump: float = 0.1, min_jump: float = 0.3, wrap: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """Triangles between neighbouring firings of an organised scan.
+
+    points : (rings, columns, 3) float64 returns; valid : (rings, columns) bool
+    Two triangles per cell of 2 x 2 firings, each where its three corners returned and their
+    ranges differ by at most ``max_jump`` times the nearest plus ``min_jump`` metres (so a
+    silhouette is not joined to the background). ``wrap``: the last column meets the first.
+    Returns ``(vertices (rings * columns, 3), triangles (m, 3) int32)`` (vertex ``r * columns + c``).
+    """
+    rings, columns = valid.shape
+    rng_ = np.linalg.norm(points, axis=2)
+    idx = np.arange(rings * columns).reshape(rings, columns)
+    c1 = np.arange(columns if wrap else columns - 1)
+    c2 = (c1 + 1) % columns
+    a, b = idx[:-1][:, c1], idx[:-1][:, c2]  # ring r
+    c, d = idx[1:][:, c1], idx[1:][:, c2]  # ring r + 1
+    flat_v, flat_r = valid.reshape(-1), rng_.reshape(-1)
+
+    def ok(i, j, k):
+        r = np.stack([flat_r[i], flat_r[j], flat_r[k]])
+        return flat_v[i] & flat_v[j] & flat_v[k] & (r.max(axis=0) - r.min(axis=0) <= max_jump * r.min(axis=0) + min_jump)
+
+    tris = []
+    for i, j, k in ((a, c, b), (b, c, d)):
+        keep = ok(i, j, k)
+        tris.append(np.stack([i[keep], j[keep], k[keep]], 1))
+    return points.reshape(-1, 3), np.concatenate(tris).astype(np.int32)
+
+
+def target_rays(spec) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(directions (rings * columns, 3), ring (.,), column (.,))`` of a spinning target, ring-major."""
+    el, az = np.asarray(elevations(spec), float), np.asarray(azimuths(spec), float)
+    ring = np.repeat(np.arange(len(el)), len(az))
+    column = np.tile(np.arange(len(az)), len(el))
+    return spherical_directions(az[column], el[ring]), ring, column
+
+
+def project_to_cones(points: np.ndarray, spec, target_offset=(0.0, 0.0, 0.0), max_range: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The parking paper's conversion: ``(points (k, 3) in the target frame, ring (k,), column (k,))``, one per occupied cell."""
+    p = np.asarray(points, float) - np.asarray(target_offset, float)
+    r = np.linalg.norm(p, axis=1)
+    keep = (r > 1e-6) & (r <= (max_range or spec.max_range))
+    p, r = p[keep], r[keep]
+    el = np.degrees(np.arcsin(np.clip(p[:, 2] / r, -1, 1)))
+    az = np.degrees(np.arctan2(p[:, 1], p[:, 0]))
+    table = np.asarray(elevations(spec), float)
+    ring = np.abs(el[:, None] - table[None]).argmin(axis=1)
+    spacing = np.median(np.diff(table)) if len(table) > 1 else 1.0
+    inside = np.abs(el - table[ring]) <= spacing / 2  # beyond the outermost cones: not seen by the target
+    p, r, az, ring = p[inside], r[inside], az[inside], ring[inside]
+    columns = np.asarray(azimuths(spec), float)
+    step = abs(columns[1] - columns[0]) if len(columns) > 1 else 360.0
+    column = np.round(((az - columns[0]) / (columns[1] - columns[0] if len(columns) > 1 else 1.0))).astype(np.int64) % len(columns)
+    cell = ring * len(columns) + column
+    order = np.lexsort((r, cell))
+    first = np.ones(len(order), bool)
+    first[1:] = cell[order][1:] != cell[order][:-1]
+    pick = order[first]
+    projected = spherical_directions(az[pick], table[ring[pick]]) * r[pick, None]
+    del step
+    return projected, ring[pick], column[pick]
+
+
+def raycast_convert(grid_points: np.ndarray, valid: np.ndarray, spec, target_offset=(0.0, 0.0, 0.0), threads: int | None = None, max_jump: float = 0.1) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The meshed alternative: ``(points (k, 3) in the target frame, ring (k,), column (k,))`` of the target's firings that hit the mesh.
+
+    grid_points : (rings, columns, 3) the dense scan organised (source frame); valid : (rings, columns) bool
+    """
+    vertices, triangles = mesh_range_image(grid_points, valid, max_jump)
+    directions, ring, column = target_rays(spec)
+    if not len(triangles):
+        return np.zeros((0, 3)), np.zeros(0, np.int64), np.zeros(0, np.int64)
+    buffers = SceneBuffers.from_meshes({"dense scan": (vertices, triangles)})
+    frame = np.eye(4)
+    frame[:3, 3] = target_offset
+    caster = RayCaster(buffers, frame=frame, threads=threads)
+    hits = caster.intersect(np.zeros(3), directions, spec.max_range)
+    keep = hits.distance >= spec.min_range
+    ray, distance = hits.ray[keep], hits.distance[keep]
+    return directions[ray] * distance[:, None], ring[ray], column[ray]
