@@ -11,7 +11,7 @@ Example (runs as a test, tests/test_api.py)::
                   [2, 3, 7], [2, 7, 6], [0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5]])
     pose = np.eye(4)
     pose[2, 3] = 1.5
-    points = bp.scan({"room": (v, t, "wall")}, "vlp16", pose, seed=1)
+    points = bp.scan({"room": (v, t, "wall")}, "vlp16", pose, effects={"ideal": True}, seed=1)  # ideal: no noise, no drop
     assert len(points) == 16 * 1809                 # every ray of the VLP-16 (16 x 1809 at 10 Hz) hits the room
     print(points.dtype.names)                         # x y z intensity semantic instance ring time range bounces
 

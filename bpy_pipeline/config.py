@@ -119,6 +119,8 @@ class IntensityConfig:
     reference_range: float = 10.0  # m: `lidar`, a target of reference_reflectivity at normal incidence here reads 1
     reference_reflectivity: float = 1.0
     attenuation_rate: float = 0.004  # 1/m: `carla`, CARLA's atmosphere_attenuation_rate
+    scale: float = 1.0  # the model's value times this, clipped to 0..1 (Velodyne's 0..100 % diffuse in 0..255: 100 / 255)
+    steps: int = 0  # quantise to k / steps as the sensor's integer intensity does (255: nuScenes 0..255; 100: KITTI 0.01); 0 = continuous
 
 
 @dataclass(frozen=True)
@@ -167,6 +169,12 @@ class MirrorConfig:
 
 @dataclass(frozen=True)
 class EffectsConfig:
+    """``effects``: what the sensor adds to the exact trace. Unless ``ideal``, the sensor preset's profile
+    (``effects`` in lidar/sensors.yaml) fills the sections and keys the config does not give
+    (:func:`realistic_effects`); ``ideal: true`` leaves the profile out, so only the keys given apply
+    (none given: the exact, noise-free scan)."""
+
+    ideal: bool = False
     noise: NoiseConfig = field(default_factory=NoiseConfig)
     drop: DropConfig = field(default_factory=DropConfig)
     mirrors: MirrorConfig = field(default_factory=MirrorConfig)
@@ -314,6 +322,39 @@ def effects_from_dict(data, spec: SensorSpec | None = None) -> EffectsConfig:
     return effects
 
 
+def realistic_effects(data, spec: SensorSpec | None) -> dict | object:
+    """The config's raw ``effects`` mapping over the profile of its sensor's preset (lidar/sensors.yaml).
+
+    Unless ``ideal: true``: each section the profile has (noise, drop, intensity) is the profile's,
+    with the config's keys of that section replacing the profile's one by one; a config section
+    that names another ``model`` (or a ``model_file``) replaces the profile's section whole.
+    Merging a resolved config again changes nothing (``config_to_dict`` round trips).
+    Anything but a mapping is returned as given, for validation to name.
+    """
+    from .lidar.sensors import preset_effects
+
+    if data is not None and not isinstance(data, dict):
+        return data
+    data = dict(data or {})
+    if data.get("ideal") is True or spec is None:
+        return data
+    for section, profile in preset_effects(spec.name).items():
+        given = data.get(section)
+        if given is None:
+            data[section] = profile
+        elif isinstance(given, dict) and isinstance(profile, dict):
+            other_model = "model_file" in given or given.get("model", profile.get("model")) != profile.get("model")
+            data[section] = dict(given) if other_model else _merged(profile, given)
+    return data
+
+
+def _merged(base: dict, over: dict) -> dict:
+    out = dict(base)
+    for key, value in over.items():
+        out[key] = _merged(base[key], value) if isinstance(value, dict) and isinstance(base.get(key), dict) else value
+    return out
+
+
 def _check_effects(effects: EffectsConfig, spec: SensorSpec | None) -> None:
     """Ranges of the effects' parameters, and that a model file holds the models asked of it."""
     from .lidar.effects import read_model_file
@@ -338,6 +379,11 @@ def _check_effects(effects: EffectsConfig, spec: SensorSpec | None) -> None:
     for key in ("alpha", "attenuation_rate"):
         check_positive(getattr(intensity, key), f"effects.intensity.{key}", allow_zero=True)
     check_positive(intensity.reference_range, "effects.intensity.reference_range")
+    check_positive(intensity.scale, "effects.intensity.scale")
+    if not 0 <= intensity.steps <= 65535:
+        raise InputError(f"effects.intensity.steps: must lie in 0..65535 (0 = continuous), got {intensity.steps}")
+    if not 0 <= drop.threshold.floor < 1:
+        raise InputError(f"effects.drop.threshold.floor: must lie in 0..1 (a share of returns lost at any range), got {drop.threshold.floor}")
     if not 0 < intensity.reference_reflectivity <= 1:
         raise InputError(f"effects.intensity.reference_reflectivity: must lie in (0, 1], got {intensity.reference_reflectivity}")
     model = DROP_MODELS.get(drop.model)
@@ -420,6 +466,7 @@ def config_from_dict(data) -> Config:
     spec = rig[0].spec if rig and "preset" not in sensor_data else resolve_sensor(base | sensor_data, "sensor")
     sensor = SensorConfig(spec, **pose, trajectory=trajectory, divergence=divergence, reflector=reflector, rig=rig)
     _check_reflector(reflector, sensor.spec)
+    data["effects"] = realistic_effects(data.get("effects"), spec)  # the preset's effects profile unless effects.ideal
     config = from_dict(Config, data, "")
     config = dataclasses.replace(config, scene=scene, sensor=sensor)
     if config.frames < 1:

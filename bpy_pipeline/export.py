@@ -56,6 +56,45 @@ def _owner(instance):
     return parent, _ancestors(parent)
 
 
+DEFAULT_REFLECTIVITY = 0.5  # an object with neither lidar_reflectivity nor a material
+
+
+def _reflectivity(owner, where: str) -> float:
+    """The object's lidar reflectivity (0..1): its ``lidar_reflectivity`` custom property (the override),
+    else the albedo of its first material's base colour, else :data:`DEFAULT_REFLECTIVITY`.
+
+    Near-infrared assumption: a lidar sees 905 nm (or 1550 nm), not visible light; the base colour's
+    albedo (the mean of its linear R, G, B: Principled BSDF ``Base Color`` when not linked to a
+    texture, else the viewport ``diffuse_color``) stands in for the NIR reflectance. That holds
+    roughly for greys, concrete, asphalt and most paints; it underestimates vegetation (bright in
+    NIR) and some dark paints, and says nothing about retro-reflectors: set ``lidar_reflectivity``
+    on such objects.
+    """
+    if "lidar_reflectivity" not in owner:
+        material = next((slot.material for slot in getattr(owner, "material_slots", ()) if slot.material is not None), None)
+        return DEFAULT_REFLECTIVITY if material is None else _albedo(material)
+    try:
+        reflectivity = float(owner["lidar_reflectivity"])
+    except (TypeError, ValueError):
+        reflectivity = -1.0
+    if not 0.0 <= reflectivity <= 1.0:
+        raise InputError(f"{where}: lidar_reflectivity must be a number in 0..1, got {owner.get('lidar_reflectivity')!r}")
+    return reflectivity
+
+
+def _albedo(material) -> float:
+    """Mean of the linear R, G, B of a material's base colour, clipped to 0..1."""
+    rgba = material.diffuse_color
+    tree = getattr(material, "node_tree", None)
+    if tree is not None:
+        for node in tree.nodes:
+            socket = node.inputs.get("Base Color") if node.type == "BSDF_PRINCIPLED" else None
+            if socket is not None and not socket.is_linked:
+                rgba = socket.default_value
+                break
+    return float(min(max((rgba[0] + rgba[1] + rgba[2]) / 3.0, 0.0), 1.0))
+
+
 class _Labeller:
     """Builds the object table: one row per owner object, validated against the class table."""
 
@@ -81,12 +120,7 @@ class _Labeller:
         material = str(owner.get("lidar_material", "diffuse"))
         if material not in MATERIAL_ID:
             raise InputError(f"{where}: lidar_material {material!r} is not one of {', '.join(MATERIALS)}")
-        try:
-            reflectivity = float(owner.get("lidar_reflectivity", 0.5))
-        except (TypeError, ValueError):
-            reflectivity = -1.0
-        if not 0.0 <= reflectivity <= 1.0:
-            raise InputError(f"{where}: lidar_reflectivity must be a number in 0..1, got {owner.get('lidar_reflectivity')!r}")
+        reflectivity = _reflectivity(owner, where)
         instance = owner.get("lidar_instance")
         if instance is not None and (not isinstance(instance, int) or instance < 1):
             raise InputError(f"{where}: lidar_instance must be a positive integer, got {instance!r}")

@@ -192,7 +192,7 @@ def test_pipeline_writes_boxes_that_hold_the_hall_points(tmp_path):
     from bpy_pipeline.pipeline import run
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
-    config = load_config(None, ["scene.builder=industrial_hall", "frames=2", "sensor.columns=1024", "output.formats=[ply]", "output.preview=false", "sensor.reflector.edge_drop.mask=none"])
+    config = load_config(None, ["scene.builder=industrial_hall", "frames=2", "sensor.columns=1024", "output.formats=[ply]", "output.preview=false", "sensor.reflector.edge_drop.mask=none", "effects.ideal=true"])
     run(config, tmp_path, log=lambda *_: None)
     manifest = read_dataset(tmp_path)
     checked = 0

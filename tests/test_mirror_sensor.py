@@ -309,7 +309,7 @@ def test_pipeline_frame_of_the_mirror_sensor(tmp_path):
         "scene.builder=primitives",
         "scene.shapes=[{type: plane, size: [30, 30], class: floor}, {type: cylinder, size: [0.25, 1.75], position: [1.2, 0.4, 0.875], class: person}]",
         "sensor.preset=os1_128", "sensor.columns=2048", "sensor.position=[0, 0, 4]", "sensor.reflector={enabled: true}",
-        "output.formats=[ply, range_image]", "output.preview=false",
+        "output.formats=[ply, range_image]", "output.preview=false", "effects.ideal=true",
     ])
     manifest = run(config, tmp_path, log=lambda *_: None)
     assert sorted(manifest["frames"][0]["files"]) == ["ply/000000.ply", "range_image/000000.npy", "range_image/000000.png"]

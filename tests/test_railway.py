@@ -32,7 +32,7 @@ def instance_of(manifest, name):
 def test_gauge_measured_from_the_rail_points(tmp_path):
     # a station on the centreline, looking down at both rails' inner faces
     points, manifest = scan_world(tmp_path, *TLS, "sensor.vertical_fov_deg=[-70, -50]", "sensor.sampling_factor=0.5",
-                                  "scene.stations.offset=0", "scene.track.gauge=1.5", "scene.detail.stones=false")
+                                  "scene.stations.offset=0", "scene.track.gauge=1.5", "scene.detail.stones=false", "effects.ideal=true")
     rails = points[points["instance"] == instance_of(manifest, "rails.t0")]
     y, z = rails["y"].astype(float), rails["z"].astype(float)
     head = z > z.max() - 0.030  # the rail heads (43 mm high): their inner faces carry the gauge

@@ -41,9 +41,24 @@ def carla_intensity(range_m: np.ndarray, attenuation_rate: float) -> np.ndarray:
 
 
 def compute_intensity(range_m: np.ndarray, beam: np.ndarray, intensity) -> np.ndarray:
-    """The configured intensity model (``config.IntensityConfig``) of each point, (p,) float32 in 0..1."""
+    """The configured intensity model (``config.IntensityConfig``) of each point, (p,) float32 in 0..1.
+
+    Then, as the sensor reports it: times ``scale`` (clipped to 1) and, with ``steps`` > 0, rounded
+    to a multiple of ``1 / steps`` (an 8-bit intensity: 255, so ``round(255 I)`` is the sensor's integer).
+    """
     if intensity.model == "lidar":
-        return lidar_intensity(range_m, beam, intensity.alpha, intensity.reference_range, intensity.reference_reflectivity)
-    if intensity.model == "carla":
-        return carla_intensity(range_m, intensity.attenuation_rate)
-    return np.clip(reflectance(beam), 0.0, 1.0)
+        value = lidar_intensity(range_m, beam, intensity.alpha, intensity.reference_range, intensity.reference_reflectivity)
+    elif intensity.model == "carla":
+        value = carla_intensity(range_m, intensity.attenuation_rate)
+    else:
+        value = np.clip(reflectance(beam), 0.0, 1.0)
+    return sensor_units(value, intensity.scale, intensity.steps)
+
+
+def sensor_units(value: np.ndarray, scale: float = 1.0, steps: int = 0) -> np.ndarray:
+    """(p,) float32 intensities 0..1 times ``scale``, clipped to 1, rounded to ``k / steps`` when ``steps`` > 0."""
+    if scale != 1.0:
+        value = np.minimum(np.asarray(value, np.float32) * np.float32(scale), np.float32(1.0))
+    if steps > 0:
+        value = np.rint(np.asarray(value, np.float32) * np.float32(steps)) / np.float32(steps)
+    return value

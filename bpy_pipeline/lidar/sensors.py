@@ -18,6 +18,7 @@ order; flash cameras use the image row, 0 at the top.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import math
 from dataclasses import dataclass, field
@@ -122,10 +123,32 @@ def pattern_chunks(patterns: Pattern | Iterable[Pattern], chunk_rays: int) -> It
 
 
 # ----------------------------------------------------------------------------- presets and overrides
+PROFILE_KEYS = ("effects", "sources")  # a preset's effects profile and where its numbers come from; not SensorSpec fields
+
+
 @lru_cache(maxsize=1)
-def presets() -> dict[str, dict]:
-    """Preset name -> field mapping, as read from ``sensors.yaml``."""
+def _presets_file() -> dict[str, dict]:
     return yaml.safe_load(PRESETS_PATH.read_text())
+
+
+def presets() -> dict[str, dict]:
+    """Preset name -> SensorSpec field mapping, as read from ``sensors.yaml`` (without the profile keys)."""
+    return {name: {k: v for k, v in fields.items() if k not in PROFILE_KEYS} for name, fields in _presets_file().items()}
+
+
+def preset_effects(name: str) -> dict:
+    """The effects profile of preset ``name`` (an ``effects`` section as in a config; ``{}`` for ``custom``).
+
+    What the sensor adds to the ideal scan: range noise, ray drop, intensity scale and steps, fitted
+    to a real scan of that sensor or taken from its datasheet (:func:`preset_sources` says which).
+    A copy: changing it changes nothing else.
+    """
+    return copy.deepcopy(_presets_file().get(name, {}).get("effects") or {})
+
+
+def preset_sources(name: str) -> dict[str, str]:
+    """Dotted effects key (``noise.sigma``) -> where the profile's number comes from (a fit, a datasheet)."""
+    return dict(_presets_file().get(name, {}).get("sources") or {})
 
 
 # Fields that decide the same quantity: when an override names one of a group, the preset's

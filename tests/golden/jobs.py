@@ -58,7 +58,8 @@ def digests(out: Path) -> dict:
 
 def run_job(name: str, out: Path, extra: list[str] = ()) -> dict:
     """Run job ``name`` into ``out`` (PLY and SemanticKITTI, ideal effects beyond what the job sets)."""
-    args = [sys.executable, str(ROOT / "run.py"), "--out", str(out), *JOBS[name], "--set", "output.formats=[ply,semantickitti]", *extra]
+    # effects.ideal: the recorded bytes are those of the ideal scan (before presets carried their realistic effects)
+    args = [sys.executable, str(ROOT / "run.py"), "--out", str(out), *JOBS[name], "--set", "output.formats=[ply,semantickitti]", "--set", "effects.ideal=true", *extra]
     done = subprocess.run(args, cwd=ROOT, capture_output=True, text=True, timeout=600)
     if done.returncode != 0:
         raise RuntimeError(f"{name}: {done.stderr.strip()}")

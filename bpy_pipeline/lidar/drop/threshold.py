@@ -23,6 +23,7 @@ class ThresholdDrop:
     range_at_10: float = 40.0  # m for a 10 % reflectivity target (Ouster OS1: 40; sparse 3D camera: 10)
     range_at_80: float = 120.0  # m for an 80 % target (0: unknown, the lidar equation's R^2 decides)
     softness: float = 0.1  # width of the transition in ln(received power); 0 for a hard cut
+    floor: float = 0.0  # share of returns lost whatever the target (a fitted scan's near-range drop); 0 for none
 
 
 @dataclass(frozen=True)
@@ -87,7 +88,12 @@ def threshold_model(effects, models=None) -> ThresholdModel:
 
 
 def probability(points, beam, effects, models) -> np.ndarray:
-    return np.float32(1.0) - threshold_model(effects, models).detection_probability(reflectance(beam), points["range"])
+    """``1 - (1 - floor) P(detect)``: lost below the threshold, and ``floor`` of the rest lost anyway."""
+    keep = threshold_model(effects, models).detection_probability(reflectance(beam), points["range"])
+    floor = effects.drop.threshold.floor
+    if floor > 0:
+        keep *= np.float32(1.0 - floor)
+    return np.float32(1.0) - keep
 
 
 register_drop_model("threshold", DropModel(probability, fitted="threshold", inline=lambda drop: drop.threshold != ThresholdDrop(), inline_keys="threshold"))
