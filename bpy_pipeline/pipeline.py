@@ -409,7 +409,7 @@ LONG_STAGE_S = 3.0  # a stage that takes longer gets a line of its own
 def make_frame(run: Run, index: int) -> Frame:
     """Frame ``index`` through every stage before writing, timed; the builder's warnings and long stages are logged."""
     frame = Frame(index, run.config, frame_rng(run.config.seed, index))
-    for stage, timing in STAGES:
+    for stage, timing in BUILDERS.get(run.config.scene.builder).stages or STAGES:
         start = time.perf_counter()
         stage(frame, run)
         took = time.perf_counter() - start

@@ -6,6 +6,6 @@ each builder's ``build`` imports its Blender code from :mod:`bpy_pipeline.scenes
 """
 
 from .base import BUILDERS, Builder, BuildContext, BuildResult, Distribution, build_scene, register_builder
-from . import railway, primitives, blend, parking, industrial_hall, street  # noqa: F401  (registration)
+from . import railway, primitives, blend, parking, industrial_hall, street, real_scan  # noqa: F401  (registration)
 
 __all__ = ["BUILDERS", "Builder", "BuildContext", "BuildResult", "Distribution", "build_scene", "register_builder"]

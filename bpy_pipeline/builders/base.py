@@ -91,6 +91,8 @@ class Builder:
     release_sensor : ``release_sensor(params, raw_scene, sensor_data) -> params``: when the config places
         the sensor itself (sensor.position or trajectory), the parameters that stop the scene placing it
         (``InputError`` where both do)
+    stages : ``((stage(frame, run), timing name), ...)`` in place of the pipeline's stages, for a builder
+        that makes a frame's points itself without a Blender scene (``real_scan``); ``None``: the pipeline's
     """
 
     params: type
@@ -101,6 +103,7 @@ class Builder:
     sensor: dict = field(default_factory=dict)
     boxes: bool = False
     release_sensor: Callable[[Any, dict, dict], Any] | None = None
+    stages: tuple | None = None
 
 
 BUILDERS: Registry[Builder] = Registry("scene builder", "scene.builder")

@@ -49,7 +49,8 @@ OCCLUSION_LEVELS = (0.8, 0.4, 0.1)
 class MixedFrame:
     """points : (p,) POINT_DTYPE in the scan's sensor frame, one per firing at most, in firing order;
     boxes : (b,) BOX_DTYPE; info : plain data for the manifest; firings : the recovered :class:`Firings`;
-    firing : (p,) int64 firing of each point; inserted : (p,) bool, True for inserted returns."""
+    firing : (p,) int64 firing of each point; inserted : (p,) bool, True for inserted returns;
+    placements : the inserted objects' :class:`~.placement.Placement`; buffers : their scene buffers (sensor frame)."""
 
     points: np.ndarray
     boxes: np.ndarray
@@ -58,6 +59,7 @@ class MixedFrame:
     firing: np.ndarray
     inserted: np.ndarray
     placements: list = field(default_factory=list)
+    buffers: object = None
 
 
 def real_labels(scan: RealScan, firings: Firings, section: RealScanScene, table: ClassTable) -> tuple[np.ndarray, np.ndarray]:
@@ -258,7 +260,7 @@ def mix_frame(section: RealScanScene, rng: np.random.Generator, effects=None, th
         "dropped_inserted": int(len(dropped_firings)),
         "timings_ms": timings,
     }
-    return MixedFrame(points, boxes, info, firings, firing, inserted, placements)
+    return MixedFrame(points, boxes, info, firings, firing, inserted, placements, buffers)
 
 
 def azimuth_coverage(firings: Firings, bins: int = 720) -> np.ndarray:
