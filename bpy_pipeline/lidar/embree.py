@@ -40,10 +40,13 @@ def _library():
     here = os.path.dirname(embreex.__file__)
     patterns = ("embreex.libs/libembree4*", "embreex/.dylibs/libembree4*", "embreex/libembree4*", "embreex.libs/embree4*.dll", "embreex/embree4*.dll")
     found = [p for pattern in patterns for p in sorted(glob.glob(os.path.join(os.path.dirname(here), pattern)))]
-    for path in found:
+    # An Embree the process already exports (a distribution Blender links the system libembree4 for
+    # Cycles) is the one embreex's own calls bound to: its device must not meet the bundled copy's code.
+    for path in ([None] if os.name == "posix" else []) + found:
         try:
             lib = ctypes.CDLL(path)
-        except OSError:
+            lib.rtcNewGeometry
+        except (OSError, AttributeError):
             continue
         v, u, z = ctypes.c_void_p, ctypes.c_uint, ctypes.c_size_t
         lib.rtcNewGeometry.restype, lib.rtcNewGeometry.argtypes = v, [v, ctypes.c_int]
