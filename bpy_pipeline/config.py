@@ -454,7 +454,12 @@ def config_from_dict(data) -> Config:
         scene = SceneConfig(scene.builder, builder.release_sensor(scene.params, raw_scene, sensor_data))
     if "preset" not in sensor_data and builder.sensor:  # the builder's own sensor, refined by the fields given
         defaults = builder.sensor
+        given = sensor_data
+        if "rig" in given:  # a rig of the config's own: the builder's sensor fields do not apply to it
+            defaults = {k: v for k, v in defaults.items() if k in ("position", "rotation_deg")}
         sensor_data = {**defaults, **sensor_data, **({"reflector": {**defaults["reflector"], **(sensor_data.get("reflector") or {})}} if "reflector" in defaults else {})}
+        if "trajectory" in given and "position" not in given:  # a trajectory given replaces the builder's position
+            sensor_data.pop("position", None)
     hints = typing.get_type_hints(SensorConfig)
     trajectory = _trajectory_from_dict(sensor_data.pop("trajectory", None), sensor_data)
     divergence = from_dict(Divergence, sensor_data.pop("divergence", None) or {}, "sensor.divergence")
