@@ -119,6 +119,7 @@ class IntensityConfig:
     reference_range: float = 10.0  # m: `lidar`, a target of reference_reflectivity at normal incidence here reads 1
     reference_reflectivity: float = 1.0
     attenuation_rate: float = 0.004  # 1/m: `carla`, CARLA's atmosphere_attenuation_rate
+    incidence_exponent: float = 1.0  # `reflectance` and `lidar`: rho cos(theta)^k; 1 Lambertian, 0 as real road returns read (KITTI, nuScenes)
     scale: float = 1.0  # the model's value times this, clipped to 0..1 (Velodyne's 0..100 % diffuse in 0..255: 100 / 255)
     steps: int = 0  # quantise to k / steps as the sensor's integer intensity does (255: nuScenes 0..255; 100: KITTI 0.01); 0 = continuous
 
@@ -380,6 +381,7 @@ def _check_effects(effects: EffectsConfig, spec: SensorSpec | None) -> None:
         check_positive(getattr(intensity, key), f"effects.intensity.{key}", allow_zero=True)
     check_positive(intensity.reference_range, "effects.intensity.reference_range")
     check_positive(intensity.scale, "effects.intensity.scale")
+    check_positive(intensity.incidence_exponent, "effects.intensity.incidence_exponent", allow_zero=True)
     if not 0 <= intensity.steps <= 65535:
         raise InputError(f"effects.intensity.steps: must lie in 0..65535 (0 = continuous), got {intensity.steps}")
     if not 0 <= drop.threshold.floor < 1:

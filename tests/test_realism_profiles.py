@@ -117,3 +117,26 @@ def test_reflectivity_from_the_material_base_colour(bpy_scene):
     buffers = export_scene(load_class_table())
     got = dict(zip(buffers.objects.names, buffers.objects.reflectivity))
     assert got["grey"] == pytest.approx(0.2) and got["red"] == pytest.approx(0.3) and got["tagged"] == pytest.approx(0.05) and got["bare"] == pytest.approx(0.5)
+
+
+def test_incidence_exponent_sets_how_intensity_and_drop_follow_incidence():
+    """``incidence_exponent`` 0: a wall reads its reflectivity at any incidence (as real roads do); 1: rho cos."""
+    lambert = bpy_pipeline.scan(ROOM, "vlp16", effects={"ideal": True}, seed=2)
+    flat = bpy_pipeline.scan(ROOM, "vlp16", effects={"ideal": True, "intensity": {"incidence_exponent": 0.0}}, seed=2)
+    assert len(lambert) == len(flat) and np.allclose(flat["intensity"], 0.3)
+    cos = lambert["intensity"] / np.float32(0.3)
+    assert cos.min() < 0.5 and np.all(cos <= 1 + 1e-6)  # grazing returns read less under Lambert's law
+    from bpy_pipeline.lidar.drop.threshold import probability
+
+    effects = load_config({"scene": {"builder": "primitives"}, "sensor": {"preset": "vlp16"}, "effects": {"ideal": True, "drop": {"model": "threshold"}}}).effects
+    from bpy_pipeline.lidar.points import BEAM_DTYPE, empty_points
+
+    points, beam = empty_points(2), np.zeros(2, BEAM_DTYPE)
+    points["range"] = 30.0
+    beam["reflectivity"], beam["cos_incidence"], beam["gain"] = 0.2, (1.0, 0.1), 1.0
+    steep, grazing = probability(points, beam, effects, None)
+    assert grazing > steep  # Lambertian: a grazing return is weaker and lost more often
+    from dataclasses import replace
+
+    flat_effects = replace(effects, intensity=replace(effects.intensity, incidence_exponent=0.0))
+    assert np.allclose(*probability(points, beam, flat_effects, None))

@@ -15,12 +15,16 @@ import numpy as np
 MIN_RANGE = 1e-3  # m: ranges are clamped here before dividing by them
 
 
-def reflectance(beam: np.ndarray) -> np.ndarray:
-    """``rho cos(theta) g`` of each point; beam : (p,) BEAM_DTYPE; returns (p,) float32."""
-    return beam["reflectivity"] * beam["cos_incidence"] * beam["gain"]
+def reflectance(beam: np.ndarray, incidence_exponent: float = 1.0) -> np.ndarray:
+    """``rho cos(theta)^k g`` of each point (``k``: ``incidence_exponent``, 1 for a Lambertian target);
+    beam : (p,) BEAM_DTYPE; returns (p,) float32."""
+    if incidence_exponent == 1.0:
+        return beam["reflectivity"] * beam["cos_incidence"] * beam["gain"]
+    cos = np.maximum(beam["cos_incidence"], np.float32(0.0)) ** np.float32(incidence_exponent)
+    return beam["reflectivity"] * cos * beam["gain"]
 
 
-def lidar_intensity(range_m: np.ndarray, beam: np.ndarray, alpha: float, reference_range: float, reference_reflectivity: float = 1.0) -> np.ndarray:
+def lidar_intensity(range_m: np.ndarray, beam: np.ndarray, alpha: float, reference_range: float, reference_reflectivity: float = 1.0, incidence_exponent: float = 1.0) -> np.ndarray:
     """The lidar equation ``rho cos g exp(-2 alpha R) / R^2`` over its value for the reference target.
 
     range_m : (p,) metres; alpha : 1/m atmospheric extinction; the reference is a Lambertian
@@ -29,7 +33,7 @@ def lidar_intensity(range_m: np.ndarray, beam: np.ndarray, alpha: float, referen
     """
     r = np.maximum(np.asarray(range_m, np.float32), np.float32(MIN_RANGE))
     scale = np.float32(reference_range**2 / reference_reflectivity)
-    power = reflectance(beam) * scale / (r * r)
+    power = reflectance(beam, incidence_exponent) * scale / (r * r)
     if alpha > 0:
         power *= np.exp(np.float32(-2.0 * alpha) * (r - np.float32(reference_range)))
     return np.minimum(power, np.float32(1.0))
@@ -47,11 +51,11 @@ def compute_intensity(range_m: np.ndarray, beam: np.ndarray, intensity) -> np.nd
     to a multiple of ``1 / steps`` (an 8-bit intensity: 255, so ``round(255 I)`` is the sensor's integer).
     """
     if intensity.model == "lidar":
-        value = lidar_intensity(range_m, beam, intensity.alpha, intensity.reference_range, intensity.reference_reflectivity)
+        value = lidar_intensity(range_m, beam, intensity.alpha, intensity.reference_range, intensity.reference_reflectivity, intensity.incidence_exponent)
     elif intensity.model == "carla":
         value = carla_intensity(range_m, intensity.attenuation_rate)
     else:
-        value = np.clip(reflectance(beam), 0.0, 1.0)
+        value = np.clip(reflectance(beam, intensity.incidence_exponent), 0.0, 1.0)
     return sensor_units(value, intensity.scale, intensity.steps)
 
 

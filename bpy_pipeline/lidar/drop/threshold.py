@@ -88,8 +88,10 @@ def threshold_model(effects, models=None) -> ThresholdModel:
 
 
 def probability(points, beam, effects, models) -> np.ndarray:
-    """``1 - (1 - floor) P(detect)``: lost below the threshold, and ``floor`` of the rest lost anyway."""
-    keep = threshold_model(effects, models).detection_probability(reflectance(beam), points["range"])
+    """``1 - (1 - floor) P(detect)``: lost below the threshold, and ``floor`` of the rest lost anyway.
+    The apparent reflectance is the intensity model's (``rho cos^k g``, ``effects.intensity.incidence_exponent``):
+    what the sensor reports is what a fit on its intensities saw."""
+    keep = threshold_model(effects, models).detection_probability(reflectance(beam, effects.intensity.incidence_exponent), points["range"])
     floor = effects.drop.threshold.floor
     if floor > 0:
         keep *= np.float32(1.0 - floor)
