@@ -1,12 +1,24 @@
 """Scan speed: the full scan (records and labels) beside raw embreex on the same scene and rays.
 
-Both use every core: the reference is embreex's own ``EmbreeScene.run(..., output=1)`` on the
-same float32 rays, chunked over a thread pool, with nothing else done. The ratio of the two
-rates is the figure that matters (target: at least 0.8).
+Scenes: an Ouster OS1-128 (131 k rays) in the middle of a closed 40 m box (numpy buffers), and
+the default railway job's scene and sensor (railway_tls, 1.44 M rays); with ``--small`` the
+railway sensor is sampled at 0.1. Outside ``--small`` a third scene adds a 1-million-triangle
+Geometry Nodes terrain under the railway, for the caster's set-up cost.
+
+All in one process and one run, every core for Embree:
+- ``raw embreex``: embreex's own ``EmbreeScene.run(..., output=1)`` on the caster's float32 rays
+  in the same chunks over a thread pool of the same size, nothing else done (the reference);
+- ``scan``: :func:`bpy_pipeline.lidar.scanner.scan` with the compiled kernel (numba, when
+  installed) and with ``kernel="numpy"``; ``ratio`` = raw time / scan time (target >= 0.8);
+- ``post_ns_per_hit``: (scan time - raw time) / hits, wall time of the work after Embree (one core);
+  ``kernel_ns_per_hit``: the kernel pass alone on Embree's answer;
+- set-up per triangle: ``RayCaster(...)`` (target <= 150 ns), embreex's ``TriangleMesh`` plus
+  commit (the copy it makes), and a :class:`~bpy_pipeline.lidar.raycast.CasterCache` handing back
+  the kept caster for the next frame.
 Run: python benchmarks/bench_scan.py [--small]
 """
 
-import os
+import time
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
@@ -16,74 +28,142 @@ import bpy  # noqa: E402
 from embreex import rtcore_scene  # noqa: E402
 from embreex.mesh_construction import TriangleMesh  # noqa: E402
 
+from bpy_pipeline.buffers import SceneBuffers  # noqa: E402
 from bpy_pipeline.config import load_config  # noqa: E402
 from bpy_pipeline.export import export_scene  # noqa: E402
+from bpy_pipeline.geometry import primitives  # noqa: E402
 from bpy_pipeline.geometry.transforms import pose_matrix  # noqa: E402
 from bpy_pipeline.labels import load_class_table  # noqa: E402
-from bpy_pipeline.lidar.raycast import RayCaster  # noqa: E402
+from bpy_pipeline.lidar import kernels  # noqa: E402
+from bpy_pipeline.lidar.points import BEAM_DTYPE, POINT_DTYPE  # noqa: E402
+from bpy_pipeline.lidar.raycast import CasterCache, RayCaster, default_threads  # noqa: E402
 from bpy_pipeline.lidar.scanner import scan  # noqa: E402
-from bpy_pipeline.lidar.sensors import sensor_pattern  # noqa: E402
-from bpy_pipeline.pipeline import frame_rng  # noqa: E402
+from bpy_pipeline.lidar.sensors import resolve_sensor, sensor_pattern  # noqa: E402
+from bpy_pipeline.pipeline import frame_rng, sensor_pose  # noqa: E402
 from bpy_pipeline.scenes import build_scene  # noqa: E402
-from bench_export import gn_object, grid  # noqa: E402
+
+REPEAT = 5
 
 
-def raw_embreex(vertices32, triangles, origins32, directions32, threads, chunk=16384):
-    """Reference: embreex alone, every core, same chunking; returns hit count."""
+def raw_embreex(caster: RayCaster, directions32: np.ndarray, max_range: float):
+    """Reference: embreex alone on the caster's local float32 vertices, same chunks and threads; returns (run, hits)."""
+    buffers = caster.buffers
     scene = rtcore_scene.EmbreeScene()
-    TriangleMesh(scene, vertices32, triangles)
+    TriangleMesh(scene, np.ascontiguousarray(caster.to_local(buffers.vertices), np.float32), buffers.triangles)
+    origins32 = np.zeros_like(directions32)
     scene.run(origins32[:1], directions32[:1], output=1)  # commit before going parallel
-    spans = [slice(i, i + chunk) for i in range(0, len(origins32), chunk)]
+    spans = [slice(i, i + caster.chunk) for i in range(0, len(directions32), caster.chunk)]
+    pool = ThreadPoolExecutor(caster.threads)
 
     def run():
-        with ThreadPoolExecutor(threads) as pool:
-            return sum(int((out["geomID"] >= 0).sum()) for out in pool.map(lambda s: scene.run(origins32[s], directions32[s], output=1), spans))
+        return sum(int((out["geomID"] >= 0).sum()) for out in pool.map(lambda s: scene.run(origins32[s], directions32[s], dists=max_range, output=1), spans))
 
     return run
 
 
-def measure(config, terrain_side: int) -> dict:
-    """Scan the default railway (plus a GN terrain grid of ~2 side^2 triangles when side > 0)."""
+def set_up(buffers: SceneBuffers, pose: np.ndarray, threads: int) -> dict:
+    """Seconds per triangle to build a caster, embreex's copy-and-commit alone, and a cached caster's hand-back."""
+    m = len(buffers.triangles)
+    caster_s = best_of(lambda: RayCaster(buffers, frame=pose, threads=threads), REPEAT)
+    local32 = np.ascontiguousarray((buffers.vertices - pose[:3, 3]) @ pose[:3, :3], np.float32)
+
+    def triangle_mesh():
+        scene = rtcore_scene.EmbreeScene()
+        TriangleMesh(scene, local32, buffers.triangles)
+        scene.run(np.zeros((1, 3), np.float32), np.float32([[0, 0, 1]]), output=1)
+
+    copy_s = best_of(triangle_mesh, REPEAT)
+    cache = CasterCache(threads)
+    cache.caster(buffers, pose)
+    kept_s = best_of(lambda: cache.caster(buffers, pose), REPEAT)
+    return {"caster_ns_per_triangle": caster_s / m * 1e9, "triangle_mesh_ns_per_triangle": copy_s / m * 1e9, "cached_ns_per_triangle": kept_s / m * 1e9}
+
+
+def measure(label: str, buffers: SceneBuffers, pattern, pose: np.ndarray, min_range: float, max_range: float, threads: int) -> dict:
+    rays = len(pattern)
+    fused = RayCaster(buffers, frame=pose, threads=threads, kernel="auto")
+    plain = RayCaster(buffers, frame=pose, threads=threads, kernel="numpy")
+    points, _ = scan(fused, buffers, pattern, pose, min_range, max_range)  # compiles (or loads) the kernel
+    reference, _ = scan(plain, buffers, pattern, pose, min_range, max_range)
+    assert points.tobytes() == reference.tobytes(), "the kernel and numpy paths disagree"
+    raw = raw_embreex(fused, pattern.directions.astype(np.float32), max_range)
+    raw_hits = raw()
+    timed = {"raw": raw, "numpy": lambda: scan(plain, buffers, pattern, pose, min_range, max_range)}
+    if fused.kernels is not None:
+        timed["kernel"] = lambda: scan(fused, buffers, pattern, pose, min_range, max_range)
+    best = {name: np.inf for name in timed}
+    for _ in range(REPEAT):  # interleaved, so a busy moment of the shared machine hits every method alike
+        for name, fn in timed.items():
+            start = time.perf_counter()
+            fn()
+            best[name] = min(best[name], time.perf_counter() - start)
+    hits = len(points)
+    row = {"scene": label, "triangles": len(buffers.triangles), "rays": rays, "hits": hits, "raw_hits": raw_hits, "threads": threads,
+           "raw_embreex_rays_per_s": rays / best["raw"], "numpy_ratio": best["raw"] / best["numpy"],
+           "numpy_post_ns_per_hit": (best["numpy"] - best["raw"]) / hits * 1e9}  # fmt: skip
+    if "kernel" in best:
+        row.update({"kernel_ratio": best["raw"] / best["kernel"], "kernel_post_ns_per_hit": (best["kernel"] - best["raw"]) / hits * 1e9,
+                    "kernel_pass_ns_per_hit": kernel_pass(fused, buffers, pattern, min_range, max_range) / hits * 1e9})  # fmt: skip
+    row.update(set_up(buffers, pose, threads))
+    return row
+
+
+def kernel_pass(caster: RayCaster, buffers: SceneBuffers, pattern, min_range: float, max_range: float) -> float:
+    """Seconds of the kernel's pass alone over Embree's answer (one core)."""
+    d = np.ascontiguousarray(pattern.directions)
+    local, o32, d32, far = caster.launch(np.zeros(3), d, max_range)
+    tfar, prim = caster._embree(o32, d32, far)
+    n = len(d)
+    points, beam, ray = np.empty(n, POINT_DTYPE), np.empty(n, BEAM_DTYPE), np.empty(n, np.int64)
+    origins = np.zeros((1, 3))
+    identity = np.zeros(0, np.int64) if caster.embree_triangle is None else caster.embree_triangle
+    none = np.zeros(0, np.bool_)
+    return best_of(lambda: kernels.fill_diffuse(caster.kernels, tfar, prim, identity, none, origins, d, caster, buffers.objects, pattern.ring, pattern.time, min_range, max_range, points, beam, ray), REPEAT)
+
+
+def box_scene(small: bool):
+    """An OS1-128 in the middle of a closed 40 m box (walls 10 m high), its pose and pattern."""
+    cells = 20 if small else 80
+    vertices, triangles = primitives.box(40.0, 40.0, 10.0)
+    parts = {"box": (vertices, triangles)}
+    for k in range(cells):  # pillars along the walls, so the scene has some triangles to build
+        angle = 2 * np.pi * k / cells
+        v, t = primitives.cylinder(0.3, 9.0, 32)
+        parts[f"pillar{k}"] = (v + [15 * np.cos(angle), 15 * np.sin(angle), 0.0], t)
+    buffers = SceneBuffers.from_meshes(parts)
+    spec = resolve_sensor({"preset": "os1_128"})
+    return buffers, sensor_pattern(spec), pose_matrix([0.2, -0.3, 0.1], [0, 0, 0]), spec
+
+
+def railway_scene(small: bool, terrain_side: int = 0):
+    overrides = ["sensor.sampling_factor=0.1"] if small else []
+    config = load_config(None, overrides)
+    bpy.ops.wm.read_factory_settings(use_empty=True)
     build_scene(config.scene, frame_rng(0, 0))
     if terrain_side:
+        from bench_export import gn_object, grid
+
         terrain = gn_object("terrain", grid(terrain_side))
         terrain.scale = (200.0, 200.0, 1.0)
         terrain.location = (0.0, 0.0, -0.01)
     buffers = export_scene(load_class_table())
-    pattern = sensor_pattern(config.sensor.spec)
-    pose = pose_matrix(config.sensor.position, config.sensor.rotation_deg)
-    threads = os.cpu_count()
-
-    caster = RayCaster(buffers, frame=pose, threads=threads)
-    full = lambda: scan(caster, buffers, pattern, pose, 0.2, 150.0)  # noqa: E731
-    points, _ = full()
-    t_full = best_of(full)
-
-    vertices32 = np.ascontiguousarray(buffers.vertices - pose[:3, 3], np.float32)
-    directions32 = np.ascontiguousarray(pattern.directions @ pose[:3, :3].T, np.float32)
-    origins32 = np.zeros_like(directions32)
-    raw = raw_embreex(vertices32, buffers.triangles, origins32, directions32, threads)
-    raw_hits = raw()
-    t_raw = best_of(raw)
-
-    rays = len(pattern)
-    return {
-        "triangles": len(buffers.triangles), "rays": rays, "hits": len(points), "raw_hits": raw_hits,
-        "raw_embreex_rays_per_s": rays / t_raw, "scan_rays_per_s": rays / t_full, "ratio": t_raw / t_full,
-    }
+    spec = config.sensor.spec
+    return buffers, sensor_pattern(spec), sensor_pose(config), spec
 
 
 def main():
     args = arguments(__doc__)
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    resolution = 0.4 if args.small else 0.1
-    config = load_config(None, ["sensor.preset=custom", "sensor.channels=320", "sensor.vertical_fov_deg=[-70, 90]",
-                                f"sensor.horizontal_resolution_deg={resolution}", "sensor.min_range=0.2", "sensor.max_range=150", "sensor.position=[0, -4, 2]"])
+    threads = default_threads()
     rows = []
-    for label, side in (("default railway", 0), ("railway on a GN terrain grid", 200 if args.small else 708)):
-        rows.append({"scene": label, **measure(config, side)})
-    print(f"ratio = scan / raw embreex throughput, target >= 0.8; {os.cpu_count()} threads")
-    report("scan" + ("_small" if args.small else ""), rows, args.out, {"threads": os.cpu_count()})
+    buffers, pattern, pose, spec = box_scene(args.small)
+    rows.append(measure("os1_128 in a 40 m box", buffers, pattern, pose, spec.min_range, spec.max_range, threads))
+    buffers, pattern, pose, spec = railway_scene(args.small)
+    rows.append(measure("default railway (railway_tls)", buffers, pattern, pose, spec.min_range, spec.max_range, threads))
+    if not args.small:
+        buffers, pattern, pose, spec = railway_scene(False, 708)
+        rows.append(measure("railway on a 1 M-triangle GN terrain", buffers, pattern, pose, spec.min_range, spec.max_range, threads))
+    print(f"ratio = raw embreex time / scan time (target >= 0.8); {threads} threads; numba {'installed' if kernels.numba_available() else 'not installed'}")
+    report("scan" + ("_small" if args.small else ""), rows, args.out, {"threads": threads, "numba": kernels.numba_available(), "repeat": REPEAT})
 
 
 if __name__ == "__main__":

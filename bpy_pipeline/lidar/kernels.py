@@ -111,6 +111,45 @@ def _fill_diffuse(
     return k
 
 
+def _back_face_rays(prim, prim_triangle, directions, plane_normal, triangle_object, both, out):
+    """Rays whose hit is a back face (d.n > 0) of an object flagged in ``both`` (k,) bool; returns how many, in ``out``."""
+    identity = prim_triangle.shape[0] == 0
+    k = 0
+    for i in range(prim.shape[0]):
+        p = prim[i]
+        if p < 0:
+            continue
+        t = p if identity else prim_triangle[p]
+        if not both[triangle_object[t]]:
+            continue
+        denom = (directions[i, 0] * plane_normal[t, 0] + directions[i, 2] * plane_normal[t, 2]) + directions[i, 1] * plane_normal[t, 1]
+        if denom > 0.0:
+            out[k] = i
+            k += 1
+    return k
+
+
+def _triangle_planes(vertices, triangles, normal, offset):
+    """Unit normals and offsets n . v0 of ``triangles`` (m, 3) over ``vertices`` (n, 3) float64, into ``normal`` (m, 3), ``offset`` (m,).
+
+    The operations of :func:`.raycast.triangle_planes` (numpy's cross product, norm and
+    einsum) in their order: the same bits.
+    """
+    for i in range(triangles.shape[0]):
+        a, b, c = triangles[i, 0], triangles[i, 1], triangles[i, 2]
+        x0, y0, z0 = vertices[a, 0], vertices[a, 1], vertices[a, 2]
+        e1x, e1y, e1z = vertices[b, 0] - x0, vertices[b, 1] - y0, vertices[b, 2] - z0
+        e2x, e2y, e2z = vertices[c, 0] - x0, vertices[c, 1] - y0, vertices[c, 2] - z0
+        cx = e1y * e2z - e1z * e2y
+        cy = e1z * e2x - e1x * e2z
+        cz = e1x * e2y - e1y * e2x
+        area = np.sqrt((cx * cx + cy * cy) + cz * cz)
+        scale = area if area > 0 else 1.0
+        nx, ny, nz = cx / scale, cy / scale, cz / scale
+        normal[i, 0], normal[i, 1], normal[i, 2] = nx, ny, nz
+        offset[i] = ((0.0 + nx * x0) + nz * z0) + ny * y0  # einsum starts from +0.0 (a -0.0 product becomes 0.0)
+
+
 @cache
 def compiled() -> SimpleNamespace | None:
     """The compiled kernels (numba, compiled on first use and cached on disk), or ``None`` without numba."""
@@ -119,7 +158,7 @@ def compiled() -> SimpleNamespace | None:
     import numba
 
     jit = numba.njit(nogil=True, cache=True, error_model="numpy", fastmath=False)
-    return SimpleNamespace(fill_diffuse=jit(_fill_diffuse))
+    return SimpleNamespace(fill_diffuse=jit(_fill_diffuse), back_face_rays=jit(_back_face_rays), triangle_planes=jit(_triangle_planes))
 
 
 def fill_diffuse(kernels: SimpleNamespace, tfar, prim, prim_triangle, moved, origins, directions, caster, objects, ring, time, min_range, max_distance, points, beam, ray):
@@ -133,3 +172,9 @@ def fill_diffuse(kernels: SimpleNamespace, tfar, prim, prim_triangle, moved, ori
         beam["cos_incidence"], beam["reflectivity"], beam["gain"], beam["direction"], ray, front, back,
     )  # fmt: skip
     return count, front, back
+
+
+def back_face_rays(kernels: SimpleNamespace, prim, prim_triangle, directions, caster, both) -> np.ndarray:
+    """``(s,)`` int64 rays whose hit is a back face of an object flagged in ``both`` (:func:`_back_face_rays`)."""
+    out = np.empty(len(prim), np.int64)
+    return out[: kernels.back_face_rays(prim, prim_triangle, directions, caster.plane_normal, caster.triangle_object, both, out)]

@@ -157,7 +157,7 @@ class StaticPart:
 
     frame: np.ndarray
     triangle: np.ndarray
-    digest: bytes
+    digest: object  # static_digest's bytes, or ("key", the caller's key)
     part: EmbreePart | None
     normal: np.ndarray
     offset: np.ndarray
@@ -187,6 +187,7 @@ class RayCaster:
             frame[:3, 3] = (vertices.min(axis=0) + vertices.max(axis=0)) / 2 if len(vertices) else 0.0
         self.frame = np.asarray(frame, np.float64)
         self.origin = self.frame[:3, 3]
+        self.world_to_local = np.linalg.inv(self.frame)  # (4, 4), once per caster
         self.threads = int(threads) if threads else default_threads()
         self.chunk = chunk
         self.kernels = choose_kernels(kernel)
@@ -199,7 +200,7 @@ class RayCaster:
         used = np.bincount(self.triangle_object, minlength=self.objects)[: self.objects] > 0 if len(triangles) else np.zeros(self.objects, bool)
         self.specular = bool(np.isin(buffers.objects.material[used], SPECULAR).any())  # mirrors or glass: the numpy path
         if static is None:
-            self.plane_normal, self.plane_offset = triangle_planes(local, triangles)  # (m, 3), (m,) local frame
+            self.plane_normal, self.plane_offset = triangle_planes(local, triangles, self.kernels)  # (m, 3), (m,) local frame
             parts = [embree_part(local, triangles, None, self.plane_normal)]
         else:
             if not np.array_equal(static.frame, self.frame):
@@ -209,7 +210,7 @@ class RayCaster:
             moving = np.flatnonzero(moving)
             self.plane_normal, self.plane_offset = np.empty((len(triangles), 3)), np.empty(len(triangles))
             self.plane_normal[static.triangle], self.plane_offset[static.triangle] = static.normal, static.offset
-            normal, offset = triangle_planes(local, triangles[moving])
+            normal, offset = triangle_planes(local, triangles[moving], self.kernels)
             self.plane_normal[moving], self.plane_offset[moving] = normal, offset
             parts = [static.part, embree_part(local, triangles, moving, normal)]
         self.parts = [p for p in parts if p is not None]
@@ -312,7 +313,7 @@ class RayCaster:
         tfar, prim = self._embree(origins32, directions32, far)
         ray, triangle, normal, d, denom = self._gather(prim, directions)
         front, back = self._faces(triangle, denom)
-        suspect = self.suspects(front, back, prim, lambda: (ray, self.triangle_object[triangle], denom))
+        suspect = self.suspects(front, back, prim, lambda both: ray[(denom > 0) & both[self.triangle_object[triangle]]])
         moved = None
         if len(suspect):
             tfar, prim, moved = self.retrace(suspect, local, directions, far, tfar, prim)
@@ -356,14 +357,14 @@ class RayCaster:
         """Rays that may have slipped through a vertex (see the module notes): indices among the n queried.
 
         front, back : (k,) bool objects hit from the front and from behind (:meth:`_faces`)
-        prim : (n,) Embree's answer (-1: a miss); back_hits : a callable giving ``(ray, object, d.n)``
-        of the hits, called only when some object was hit from both sides
+        prim : (n,) Embree's answer (-1: a miss); back_hits : a callable giving, for the objects
+        flagged in its (k,) bool argument, the rays that hit their back faces; called only when
+        some object was hit from both sides
         """
         both = front & back
         suspect = []
         if both.any():
-            ray, obj, denom = back_hits()
-            suspect.append(ray[(denom > 0) & both[obj]])
+            suspect.append(back_hits(both))
         if any(self.closed(int(row)) for row in np.flatnonzero(back & ~front)):  # the origin is enclosed: no ray can miss
             suspect.append(np.flatnonzero(prim < 0))
         return np.concatenate(suspect) if suspect else np.zeros(0, np.int64)
@@ -421,8 +422,9 @@ class CasterCache:
 
     ``cache.caster(buffers, frame, moving)`` returns a :class:`RayCaster` of all of ``buffers``.
     The triangles of the object rows not flagged in ``moving`` form the static part: when they
-    (their buffer positions and their world corners, compared through a digest) and ``frame``
-    are exactly those of the previous call, its Embree scene and planes are reused; otherwise
+    (their buffer positions and their vertices, compared through :func:`static_digest`, or the
+    caller's ``key``) and ``frame`` are exactly those of the previous call, its Embree scene and
+    planes are reused; otherwise
     they are built and kept. The moving rows get a small Embree scene of their own each call;
     the caster traces both and keeps the nearer hit (the same triangle, hence the same bytes,
     as one caster of all the buffers, but for exact ties).
@@ -435,10 +437,12 @@ class CasterCache:
         self.kept: StaticPart | None = None
         self.builds = self.reuses = 0
 
-    def caster(self, buffers: SceneBuffers, frame, moving: np.ndarray | None = None) -> RayCaster:
+    def caster(self, buffers: SceneBuffers, frame, moving: np.ndarray | None = None, key=None) -> RayCaster:
         """A caster of ``buffers`` in ``frame`` ((4, 4) float64 local-to-world, e.g. a fixed pose for the run).
 
         moving : (k,) bool per row of ``buffers.objects``: the objects rebuilt every call (None: none)
+        key : optional; when given, the caller's word that equal keys mean equal static geometry
+            (e.g. the builder's parameters and seed): the digest of the static part is skipped
         """
         frame = np.asarray(frame, np.float64)
         k = len(buffers.objects)
@@ -448,7 +452,7 @@ class CasterCache:
         if len(buffers.triangles):
             buffers.check()
         static = np.flatnonzero(~moving[buffers.triangle_object])
-        digest = static_digest(buffers, static)
+        digest = ("key", key) if key is not None else static_digest(buffers, static)
         kept = self.kept
         if kept is None or not (np.array_equal(kept.frame, frame) and np.array_equal(kept.triangle, static) and kept.digest == digest):
             caster = RayCaster(buffers, frame, self.threads, kernel=self.kernel) if not moving.any() else None
@@ -459,7 +463,7 @@ class CasterCache:
             local = (np.asarray(buffers.vertices, np.float64) - frame[:3, 3]) @ frame[:3, :3]
             triangles = np.ascontiguousarray(buffers.triangles, np.int32)
             check_extent(local, triangles, buffers)
-            normal, offset = triangle_planes(local, triangles[static])
+            normal, offset = triangle_planes(local, triangles[static], choose_kernels(self.kernel))
             self.kept = StaticPart(frame, static, digest, embree_part(local, triangles, static, normal), normal, offset)
             self.builds += 1
         else:
@@ -468,15 +472,24 @@ class CasterCache:
 
 
 def static_digest(buffers: SceneBuffers, static: np.ndarray) -> bytes:
-    """A digest of the world corners ``(s, 3, 3)`` float64 of triangles ``static``, in steps of :data:`PLANE_CHUNK`."""
-    h = hashlib.blake2b(digest_size=16)
-    for start in range(0, len(static), PLANE_CHUNK):
-        h.update(np.ascontiguousarray(buffers.vertices[buffers.triangles[static[start : start + PLANE_CHUNK]]], np.float64).tobytes())
+    """A sha256 of triangles ``static`` ((s, 3) indices) and of the vertex rows they span ((lo..hi, 3) float64, world).
+
+    Equal digests mean the same static geometry. The span also holds any moving object whose
+    vertices lie between the static ones': the digest then changes with it and the static part
+    is built again (correct, only slower); exporting the moving objects last avoids that.
+    """
+    h = hashlib.sha256()
+    if len(static):
+        index = np.ascontiguousarray(buffers.triangles[static])
+        h.update(index)
+        h.update(np.ascontiguousarray(buffers.vertices[index.min() : index.max() + 1], np.float64))
     return h.digest()
 
 
 def check_extent(local: np.ndarray, triangles: np.ndarray, buffers: SceneBuffers) -> None:
     """``InputError`` naming the first object with a vertex beyond :data:`MAX_COORDINATE` of the local origin."""
+    if not np.abs(local).max(initial=0.0) > MAX_COORDINATE:
+        return
     too_far = np.abs(local).max(axis=1, initial=0.0) > MAX_COORDINATE
     if too_far.any():
         bad = np.flatnonzero(too_far[triangles].any(axis=1))
@@ -488,14 +501,18 @@ def check_extent(local: np.ndarray, triangles: np.ndarray, buffers: SceneBuffers
             )
 
 
-def triangle_planes(vertices: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def triangle_planes(vertices: np.ndarray, triangles: np.ndarray, compiled=None) -> tuple[np.ndarray, np.ndarray]:
     """Unit normals ``(m, 3)`` float64 (winding order; zero for zero-area triangles) and offsets ``(m,)`` n . v0.
 
     vertices : (n, 3) float64; triangles : (m, 3) int indices. Computed in steps of
     :data:`PLANE_CHUNK` triangles so the temporaries stay small for 10-million-triangle scenes.
+    compiled : :func:`.kernels.compiled`'s kernels: one pass, the same bits (``tests/test_scan_kernel.py``)
     """
     m = len(triangles)
     normal, offset = np.empty((m, 3)), np.empty(m)
+    if compiled is not None and m:
+        compiled.triangle_planes(np.ascontiguousarray(vertices, np.float64), np.ascontiguousarray(triangles), normal, offset)
+        return normal, offset
     for start in range(0, m, PLANE_CHUNK):
         s = slice(start, start + PLANE_CHUNK)
         v0, v1, v2 = (vertices[triangles[s, k]] for k in range(3))

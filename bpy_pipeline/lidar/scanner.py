@@ -27,7 +27,7 @@ import numpy as np
 from ..buffers import MATERIAL_ID, SceneBuffers
 from ..geometry.transforms import rotate
 from .points import BEAM_DTYPE, POINT_DTYPE
-from .kernels import fill_diffuse
+from .kernels import back_face_rays, fill_diffuse
 from .raycast import RayCaster, dot3
 from .sensors import Pattern, pattern_chunks
 
@@ -317,11 +317,7 @@ def _fused_chunk(caster: RayCaster, buffers: SceneBuffers, pattern: Pattern, ori
     run = lambda tfar, prim, moved: fill_diffuse(caster.kernels, tfar, prim, prim_triangle, moved, origins, world_d, caster, buffers.objects, pattern.ring, pattern.time, min_range, max_range, points, beam, ray)  # noqa: E731
     count, front, back = run(tfar, prim, NO_RAYS)
 
-    def back_hits():
-        hit_ray, triangle, _, _, denom = caster._gather(prim, world_d)
-        return hit_ray, caster.triangle_object[triangle], denom
-
-    suspect = caster.suspects(front, back, prim, back_hits)
+    suspect = caster.suspects(front, back, prim, lambda both: back_face_rays(caster.kernels, prim, prim_triangle, world_d, caster, both))
     if len(suspect):
         tfar, prim, moved = caster.retrace(suspect, local, world_d, far, tfar, prim)
         count, _, _ = run(tfar, prim, moved)
@@ -358,7 +354,7 @@ def scan_chunks(
     Rays go through in chunks of at most ``chunk_rays``, so memory does not grow with the ray
     count; each chunk's Embree queries use every core (:meth:`RayCaster.intersect`).
     """
-    world_to_local = np.linalg.inv(caster.frame)
+    world_to_local = caster.world_to_local
     for chunk in pattern_chunks(patterns, chunk_rays):
         poses = pose(chunk.time) if callable(pose) else pose
         points, beam, _ = scan_chunk(
@@ -372,7 +368,15 @@ def collect(chunks: Iterable[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray
     chunks = list(chunks)
     if not chunks:
         return np.zeros(0, POINT_DTYPE), np.zeros(0, BEAM_DTYPE)
-    return np.concatenate([c[0] for c in chunks]), np.concatenate([c[1] for c in chunks])
+    if len(chunks) == 1:
+        return chunks[0][0], chunks[0][1]
+    return join([c[0] for c in chunks]), join([c[1] for c in chunks])
+
+
+def join(parts: list[np.ndarray]) -> np.ndarray:
+    """Structured arrays of one dtype joined as raw bytes (numpy's concatenate copies them field by field)."""
+    raw = np.dtype((np.void, parts[0].dtype.itemsize))
+    return np.concatenate([np.ascontiguousarray(p).view(raw) for p in parts]).view(parts[0].dtype)
 
 
 def scan(*args, **kwargs) -> tuple[np.ndarray, np.ndarray]:
