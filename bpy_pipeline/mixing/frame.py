@@ -29,7 +29,7 @@ from ..io.real_scans import RealScan, read_real_scan
 from ..labels import ClassTable, load_class_table
 from ..lidar.points import BEAM_DTYPE, POINT_DTYPE
 from . import noise as injections
-from .cast import Hits, cast_firings, merge_returns, object_buffers, object_parts
+from .cast import Hits, cast_firings, merge_returns, near_objects, object_buffers, object_parts
 from .firings import Firings, angles_deg, recover_firings
 from .ground import PointIndex, find_ground, in_box
 from .placement import Placement, Scene, explicit_placements, kitti_rule, parking_rule, real_placements
@@ -283,9 +283,9 @@ def frame_boxes(firings, valid, placements, instances, buffers, visible_rays, po
     counts = np.bincount(points["instance"], minlength=max(instances, default=0) + 1)
     for k, (p, inst) in enumerate(zip(placements, instances)):
         rows = np.flatnonzero(buffers.objects.instance == inst)
-        alone = cast_firings(firings, _subset(buffers, rows), section.max_range or 100.0, threads)
+        alone = cast_firings(firings, _subset(buffers, rows), section.max_range or 100.0, threads, rows=near_objects(firings, buffers, inst))
         tri = buffers.triangles[np.isin(buffers.triangle_object, rows)]
-        samples, _ = surface_samples(buffers.vertices[tri], 0.1)
+        samples, _ = surface_samples(buffers.vertices[tri], 0.25)
         az, sel = angles_deg(samples / np.maximum(np.linalg.norm(samples, axis=1, keepdims=True), 1e-9))
         inside = covered[((az + 180.0) / 360.0 * len(covered)).astype(np.int64) % len(covered)] & (sel >= el_lo) & (sel <= el_hi)
         b = boxes[k]
