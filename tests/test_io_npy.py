@@ -1,4 +1,4 @@
-"""Pointcept NPY folders: file names, shapes, dtypes, the -1 instance convention, atomic folders."""
+"""Pointcept NPY folders: file names, shapes, dtypes, training ids with -1 ignored, no instances on stuff, atomic folders."""
 
 import numpy as np
 import pytest
@@ -6,6 +6,8 @@ import pytest
 from bpy_pipeline.errors import InputError
 from bpy_pipeline.io import npy as npy_module
 from bpy_pipeline.io import read_npy_folder, write_npy_folder
+from bpy_pipeline.io.class_maps import load_class_maps
+from bpy_pipeline.labels import load_class_table
 from bpy_pipeline.lidar.points import empty_points
 from samples import random_points
 
@@ -23,13 +25,19 @@ def test_files_shapes_dtypes_and_round_trip(tmp_path, n):
     assert instance.shape == (n,) and instance.dtype == np.int32
     np.testing.assert_array_equal(coord, np.stack([pts["x"], pts["y"], pts["z"]], axis=1))
     np.testing.assert_array_equal(strength[:, 0], pts["intensity"])
-    np.testing.assert_array_equal(segment, pts["semantic"])
-    np.testing.assert_array_equal(instance, np.where(pts["instance"] == 0, -1, pts["instance"].astype(np.int64)))
+    table, maps = load_class_table(), load_class_maps()
+    np.testing.assert_array_equal(segment, [table.learning_map[int(s)] - 1 for s in pts["semantic"]])
+    thing = maps.things[pts["semantic"]]
+    np.testing.assert_array_equal(instance, np.where((pts["instance"] == 0) | ~thing, -1, pts["instance"].astype(np.int64)))
     if n:
         assert (instance == -1).any() and (instance > 0).any() and not (instance == 0).any()
-    back = read_npy_folder(tmp_path / "000000")
-    for name in ("x", "y", "z", "intensity", "semantic", "instance"):
+        assert (segment == -1).any() and segment.max() == max(table.learning_map[int(s)] for s in pts["semantic"]) - 1
+    back = read_npy_folder(tmp_path / "000000", maps)
+    for name in ("x", "y", "z", "intensity"):
         np.testing.assert_array_equal(back[name], pts[name], err_msg=name)
+    kept = segment >= 0  # raw ids come back where the training id is one raw id's (ignored ones are unlabeled)
+    np.testing.assert_array_equal(back["semantic"][kept], pts["semantic"][kept])
+    assert not back["semantic"][~kept].any()
     assert not back["time"].any()
 
 
@@ -74,3 +82,15 @@ def test_reader_checks_files(tmp_path):
     np.save(tmp_path / "segment.npy", np.zeros(5, np.int32))
     with pytest.raises(InputError, match="segment.npy"):
         read_npy_folder(tmp_path)
+
+
+def test_pointcept_segment_of_named_classes(tmp_path):
+    table = load_class_table()
+    by_name = {name: i for i, name in table.names.items()}
+    pts = empty_points(4)
+    pts["semantic"] = [by_name["unlabeled"], by_name["reflection"], by_name["ground"], by_name["car"]]
+    pts["instance"] = [0, 7, 5, 9]  # ground (stuff) has an instance in the record; Pointcept gets none
+    write_npy_folder(tmp_path / "f", pts)
+    segment, instance = np.load(tmp_path / "f" / "segment.npy"), np.load(tmp_path / "f" / "instance.npy")
+    assert segment.tolist() == [-1, -1, table.learning_map[by_name["ground"]] - 1, table.learning_map[by_name["car"]] - 1]
+    assert instance.tolist() == [-1, -1, -1, 9]

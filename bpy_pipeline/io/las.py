@@ -1,13 +1,17 @@
 """LAS 1.4 point clouds, point data record format 6, written with numpy alone.
 
-File layout: a 375-byte header (:data:`HEADER_DTYPE`), one Extra Bytes VLR (user id
-``LASF_Spec``, record id 4) describing four extra dimensions, then ``n`` records of 41 bytes:
-the 30-byte PDRF 6 record (:data:`PDRF6_DTYPE`) followed by the extra bytes. Mapping from
-:data:`POINT_DTYPE`::
+File layout: a 375-byte header (:data:`HEADER_DTYPE`), two VLRs (the Extra Bytes VLR, user id
+``LASF_Spec`` record id 4, describing five extra dimensions; the Classification Lookup VLR,
+``LASF_Spec`` record id 0, naming every classification code of the file), then ``n`` records of
+43 bytes: the 30-byte PDRF 6 record (:data:`PDRF6_DTYPE`) followed by the extra bytes. Mapping
+from :data:`POINT_DTYPE`::
 
     x y z      -> X Y Z int32, coordinate = X * scale + offset (m)
     intensity  -> intensity uint16, round(intensity * 65535) for intensity in 0..1
-    semantic   -> classification uint8 (ids above 255 raise InputError)
+    semantic   -> classification uint8: the ASPRS class where one has the same meaning (ground 2,
+                  building 6, rail 10, road surface 11, wire guard 13, wire conductor 14, tower 15,
+                  wire-structure connector 16, overhead structure 19; labels.yaml ``asprs``), else
+                  the user-definable code 64 + raw id; and extra dimension "semantic" uint16 (raw id)
     time       -> gps_time float64 (s from frame start; global encoding says GPS week time)
     instance   -> extra dimension "instance" uint32
     ring       -> extra dimension "ring" uint16
@@ -15,8 +19,11 @@ the 30-byte PDRF 6 record (:data:`PDRF6_DTYPE`) followed by the extra bytes. Map
     bounces    -> extra dimension "bounces" uint8
     every point: return number 1 of 1, other fields zero
 
-Points are in the sensor (or world) frame of the run, not a geographic one, so the file has no
-CRS VLR. Reference: ASPRS LAS Specification 1.4 R15.
+The synthetic flag (classification flag bit 0) is not set: ASPRS defines it for points added to
+a survey that was scanned, while every point here is synthetic, and readers that drop or grey out
+flagged points would hide the whole cloud. The file says where it comes from in its generating
+software field instead. Points are in the sensor (or world) frame of the run, not a geographic
+one, so the file has no CRS VLR. Reference: ASPRS LAS Specification 1.4 R15.
 """
 
 from __future__ import annotations
@@ -31,6 +38,7 @@ from ..errors import InputError
 from ..lidar.points import POINT_DTYPE
 from ._records import as_points, chunks
 from .atomic import atomic_write
+from .class_maps import ASPRS_NAMES, ClassMaps, load_class_maps
 
 HEADER_DTYPE = np.dtype(
     [
@@ -112,6 +120,7 @@ assert PDRF6_DTYPE.itemsize == 30
 
 # (name, numpy type, LAS extra-bytes data type code, description)
 EXTRA_DIMENSIONS = (
+    ("semantic", "<u2", 3, "bpy_pipeline raw class id"),
     ("instance", "<u4", 5, "object instance id, 0 for none"),
     ("ring", "<u2", 3, "laser channel"),
     ("range", "<f4", 9, "metres along the beam"),
@@ -120,6 +129,33 @@ EXTRA_DIMENSIONS = (
 RECORD_DTYPE = np.dtype(PDRF6_DTYPE.descr + [(name, code) for name, code, _, _ in EXTRA_DIMENSIONS])
 GLOBAL_ENCODING_WKT = 1 << 4  # the LAS 1.4 spec requires the WKT bit for PDRF 6..10
 SOFTWARE = b"bpy_pipeline"
+
+
+CLASSIFICATION_LOOKUP_DTYPE = np.dtype([("class_number", "u1"), ("description", "S15")])
+
+
+def classification_lookup_vlr(codes: np.ndarray, maps: ClassMaps) -> bytes:
+    """The Classification Lookup VLR (``LASF_Spec``, record id 0): 256 entries of 16 bytes, each code used named.
+
+    codes : the classification codes present; a standard ASPRS code gets its ASPRS name, a
+    user-definable one (64 + raw id) the project's class name.
+    """
+    from ..labels import load_class_table
+
+    names = load_class_table().names
+    table = np.zeros(256, CLASSIFICATION_LOOKUP_DTYPE)
+    table["class_number"] = np.arange(256)
+    for code in np.unique(codes):
+        code = int(code)
+        raws = [names[r] for r in sorted(names) if int(maps.asprs[r]) == code]
+        text = ASPRS_NAMES.get(code) if code < 64 else (raws[0] if raws else f"class {code}")
+        table[code]["description"] = (text or "reserved")[:15].encode("ascii", "replace")
+    header = np.zeros((), VLR_HEADER_DTYPE)
+    header["user_id"] = b"LASF_Spec"
+    header["record_id"] = 0
+    header["record_length_after_header"] = table.nbytes
+    header["description"] = b"Classification lookup"
+    return header.tobytes() + table.tobytes()
 
 
 def extra_bytes_vlr() -> bytes:
@@ -150,6 +186,7 @@ def write_las(
     scale: float = 0.001,
     offset=None,
     creation_date: datetime.date | None = None,
+    maps: ClassMaps | None = None,
 ) -> Path:
     """Write ``points`` as a LAS 1.4 file (point data record format 6 with extra bytes).
 
@@ -167,6 +204,8 @@ def write_las(
     creation_date : datetime.date or None
         Written as the header's creation day and year; None (default) writes zeros so the same
         points give the same bytes on any day.
+    maps : ClassMaps or None
+        The class table's maps (ASPRS codes); default :func:`~.class_maps.load_class_maps`.
 
     Returns
     -------
@@ -175,20 +214,14 @@ def write_las(
     """
     path = Path(path)
     pts = as_points(points, str(path))
+    maps = load_class_maps() if maps is None else maps
     n = len(pts)
-    # First pass, chunk by chunk: finiteness and the coordinate extents (for the offset, the int32 check and the header).
-    low, high = np.full(3, np.inf), np.full(3, -np.inf)
-    for part in chunks(n):
-        xyz = np.stack([pts["x"][part], pts["y"][part], pts["z"][part]], axis=1).astype(np.float64)
-        if not (np.isfinite(xyz).all() and np.isfinite(pts["intensity"][part]).all()):
-            raise InputError(f"{path}: LAS cannot store non-finite coordinates or intensity")
-        low, high = np.minimum(low, xyz.min(axis=0)), np.maximum(high, xyz.max(axis=0))
+    # The extents from each column's minimum and maximum (a NaN or an infinity makes them non-finite).
+    low = np.array([pts[c].min() if n else np.inf for c in "xyz"], np.float64)
+    high = np.array([pts[c].max() if n else -np.inf for c in "xyz"], np.float64)
+    if n and not (np.isfinite(low).all() and np.isfinite(high).all() and np.isfinite([pts["intensity"].min(), pts["intensity"].max()]).all()):
+        raise InputError(f"{path}: LAS cannot store non-finite coordinates or intensity")
     semantic = pts["semantic"]
-    if n and int(semantic.max()) > 255:
-        raise InputError(
-            f"{path}: LAS 1.4 point format 6 has an 8-bit classification (0..255); "
-            f"got semantic ids up to {int(semantic.max())}"
-        )
     scale = np.broadcast_to(np.asarray(scale, np.float64), (3,)).copy()
     if not (np.isfinite(scale).all() and (scale > 0).all()):
         raise InputError(f"{path}: LAS scale must be positive and finite, got {scale.tolist()}")
@@ -203,8 +236,8 @@ def write_las(
             f"{path}: coordinates do not fit LAS int32 with scale {scale.tolist()} and offset {offset.tolist()}; "
             "use a larger scale or an offset nearer the points"
         )
-
-    vlr = extra_bytes_vlr()
+    classification = maps.asprs[semantic]
+    vlrs = extra_bytes_vlr() + classification_lookup_vlr(classification, maps)
     header = np.zeros((), HEADER_DTYPE)
     header["file_signature"] = b"LASF"
     header["global_encoding"] = GLOBAL_ENCODING_WKT
@@ -215,8 +248,8 @@ def write_las(
         header["creation_day"] = creation_date.timetuple().tm_yday
         header["creation_year"] = creation_date.year
     header["header_size"] = HEADER_DTYPE.itemsize
-    header["offset_to_point_data"] = HEADER_DTYPE.itemsize + len(vlr)
-    header["number_of_vlrs"] = 1
+    header["offset_to_point_data"] = HEADER_DTYPE.itemsize + len(vlrs)
+    header["number_of_vlrs"] = 2
     header["point_data_format"] = 6
     header["point_data_record_length"] = RECORD_DTYPE.itemsize
     header["scale"], header["offset"] = scale, offset
@@ -228,19 +261,29 @@ def write_las(
 
     with atomic_write(path) as tmp, open(tmp, "wb") as f:
         f.write(header.tobytes())
-        f.write(vlr)
-        for part in chunks(n):
-            xyz = np.stack([pts["x"][part], pts["y"][part], pts["z"][part]], axis=1).astype(np.float64)
-            records = np.zeros(part.stop - part.start, RECORD_DTYPE)
-            records["X"], records["Y"], records["Z"] = np.rint((xyz - offset) / scale).astype(np.int32).T
-            records["intensity"] = np.rint(np.clip(pts["intensity"][part].astype(np.float64), 0.0, 1.0) * 65535.0).astype(np.uint16)
-            records["returns"] = 1 | (1 << 4)
-            records["classification"] = semantic[part].astype(np.uint8)
-            records["gps_time"] = pts["time"][part]
-            for name, _, _, _ in EXTRA_DIMENSIONS:
-                records[name] = pts[name][part]
+        f.write(vlrs)
+        for part in chunks(n):  # one structured array a chunk (all of a frame up to a million points), one write
+            records = las_records(pts[part], classification[part], offset, scale)
             records.tofile(f)
     return path
+
+
+def las_records(pts: np.ndarray, classification: np.ndarray, offset: np.ndarray, scale: np.ndarray) -> np.ndarray:
+    """``(n,)`` :data:`RECORD_DTYPE` records of ``(n,)`` POINT_DTYPE points (coordinates checked to fit int32)."""
+    records = np.zeros(len(pts), RECORD_DTYPE)
+    work = np.empty(len(pts), np.float64)
+    for axis, name in enumerate("xyz"):
+        np.subtract(pts[name], offset[axis], out=work, dtype=np.float64)
+        np.divide(work, scale[axis], out=work)
+        records[name.upper()] = np.rint(work, out=work)
+    np.clip(pts["intensity"], 0.0, 1.0, out=work, dtype=np.float64)
+    records["intensity"] = np.rint(np.multiply(work, 65535.0, out=work), out=work)
+    records["returns"] = 1 | (1 << 4)
+    records["classification"] = classification
+    records["gps_time"] = pts["time"]
+    for name, _, _, _ in EXTRA_DIMENSIONS:
+        records[name] = pts[name]
+    return records
 
 
 # LAS extra-bytes data type codes 1..10 -> numpy types.
@@ -253,7 +296,8 @@ def read_las(path: str | os.PathLike) -> np.ndarray:
     The inverse of :func:`write_las` (coordinates come back as ``X * scale + offset`` cast to
     float32, intensity as ``intensity / 65535``, semantic from classification, time from
     gps_time); extra dimensions named like :data:`POINT_DTYPE` fields are read from the Extra
-    Bytes VLR, others are skipped, and absent ones are zero. Other point formats, compressed
+    Bytes VLR (``semantic``, the raw class id, replaces the classification), others are skipped,
+    and absent ones are zero. Other point formats, compressed
     (LAZ) files and older versions raise ``InputError``; use ``laspy`` for those.
     """
     path = Path(path)
@@ -297,7 +341,7 @@ def read_las(path: str | os.PathLike) -> np.ndarray:
     for axis, name in enumerate("xyz"):
         out[name] = records[name.upper()] * header["scale"][axis] + header["offset"][axis]
     out["intensity"] = records["intensity"] / 65535.0
-    out["semantic"] = records["classification"]
+    out["semantic"] = records["classification"]  # another writer's file: its classification (overwritten by a "semantic" extra dimension)
     out["time"] = records["gps_time"]
     for name, _, _, _ in EXTRA_DIMENSIONS:
         if name in record.names:

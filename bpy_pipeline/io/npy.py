@@ -4,9 +4,10 @@ Folder contents (Pointcept's ``DefaultDataset`` asset names)::
 
     coord.npy     (n, 3) float32   x y z, metres
     strength.npy  (n, 1) float32   intensity, 0..1
-    segment.npy   (n,)   int32     semantic (raw class id)
-    instance.npy  (n,)   int32     instance id; -1 where the point record says 0 (no instance),
-                                   Pointcept's ignore index, so "no object" is never an instance
+    segment.npy   (n,)   int32     training id - 1 (``learning_map`` of assets_manifest/labels.yaml):
+                                   0..K-1, and -1 (Pointcept's ignore index) for unlabeled and ghost points
+    instance.npy  (n,)   int32     instance id of "things" (labels.yaml ``things``); -1 (ignored) for
+                                   stuff classes and where the point record says 0 (no instance)
 
 ring, time, range and bounces are not part of the layout and are not kept.
 """
@@ -22,12 +23,13 @@ from ..errors import InputError
 from ..lidar.points import POINT_DTYPE
 from ._records import as_points, chunks
 from .atomic import atomic_dir
+from .class_maps import ClassMaps, load_class_maps
 
 NPY_FILES = ("coord", "strength", "segment", "instance")
 IGNORE_INDEX = -1
 
 
-def write_npy_folder(folder: str | os.PathLike, points: np.ndarray) -> list[Path]:
+def write_npy_folder(folder: str | os.PathLike, points: np.ndarray, maps: ClassMaps | None = None) -> list[Path]:
     """Write ``points`` as a Pointcept frame folder (see the module docstring for the files).
 
     Parameters
@@ -37,6 +39,7 @@ def write_npy_folder(folder: str | os.PathLike, points: np.ndarray) -> list[Path
         replacing an existing folder of the same name as a whole.
     points : (n,) POINT_DTYPE
         Points (``n`` may be 0); ``instance`` must fit int32 (< 2**31).
+    maps : the class table's maps (default: :func:`~.class_maps.load_class_maps`)
 
     Returns
     -------
@@ -45,14 +48,15 @@ def write_npy_folder(folder: str | os.PathLike, points: np.ndarray) -> list[Path
     """
     folder = Path(folder)
     pts = as_points(points, str(folder))
+    maps = load_class_maps() if maps is None else maps
     n = len(pts)
     if n and int(pts["instance"].max()) > np.iinfo(np.int32).max:
         raise InputError(f"{folder}: Pointcept instance.npy is int32; got instance ids up to {int(pts['instance'].max())}")
     columns = {  # name -> (dtype, shape of a row, the rows of a slice of the points)
         "coord": (np.float32, (3,), lambda s: np.stack([pts["x"][s], pts["y"][s], pts["z"][s]], axis=1).astype(np.float32)),
         "strength": (np.float32, (1,), lambda s: pts["intensity"][s].astype(np.float32).reshape(-1, 1)),
-        "segment": (np.int32, (), lambda s: pts["semantic"][s].astype(np.int32)),
-        "instance": (np.int32, (), lambda s: np.where(pts["instance"][s] == 0, IGNORE_INDEX, pts["instance"][s].astype(np.int64)).astype(np.int32)),
+        "segment": (np.int32, (), lambda s: maps.segment(pts["semantic"][s])),
+        "instance": (np.int32, (), lambda s: np.where((pts["instance"][s] == 0) | ~maps.things[pts["semantic"][s]], IGNORE_INDEX, pts["instance"][s].astype(np.int64)).astype(np.int32)),
     }
     with atomic_dir(folder) as tmp:
         for name in NPY_FILES:  # the bytes of np.save, written a chunk at a time
@@ -64,12 +68,14 @@ def write_npy_folder(folder: str | os.PathLike, points: np.ndarray) -> list[Path
     return [folder / f"{name}.npy" for name in NPY_FILES]
 
 
-def read_npy_folder(folder: str | os.PathLike) -> np.ndarray:
+def read_npy_folder(folder: str | os.PathLike, maps: ClassMaps | None = None) -> np.ndarray:
     """Read a Pointcept frame folder as ``(n,)`` :data:`POINT_DTYPE`.
 
     ``coord.npy`` is required; ``strength``, ``segment`` and ``instance`` are read when
     present. Negative segment and instance values (Pointcept's ignore index) become 0
-    (unlabeled, no instance). ring, time, range and bounces are zero.
+    (unlabeled, no instance). ``segment`` is taken as is (another dataset's ids), or, with
+    ``maps`` (a folder this package wrote), turned back into raw ids (the first raw id of each
+    training id; ignored points are unlabeled). ring, time, range and bounces are zero.
     ``InputError`` naming the file for a missing coord file or mismatched shapes.
     """
     folder = Path(folder)
@@ -92,6 +98,8 @@ def read_npy_folder(folder: str | os.PathLike) -> np.ndarray:
         values = values.reshape(n)
         if field == "intensity":
             out[field] = values
+        elif field == "semantic" and maps is not None:
+            out[field] = maps.raw_of_segment(values)
         else:
             out[field] = np.where(values < 0, 0, values)
     return out

@@ -1,11 +1,17 @@
 """PLY point clouds: binary little-endian, one vertex property per :data:`POINT_DTYPE` field.
 
-The vertex element of a written file is exactly the bytes of the ``(n,)`` :data:`POINT_DTYPE`
-array (37-byte packed records), so it is written with one ``tofile`` and read with one
-``fromfile``. Property names and types::
+Property names and types are chosen so the viewers users open them in load every field:
+Open3D (0.20's tensor reader keeps only uchar, int, float and double properties; it skips
+ushort and uint) and CloudCompare (in command-line mode it loads a property as a scalar
+field only under its ``scalar_`` naming convention, and strips the prefix)::
 
-    x y z float (m), intensity float (0..1), semantic ushort, instance uint, ring ushort,
-    time double (s from frame start), range float (m), bounces uchar
+    x y z float (m), intensity float (0..1), scalar_semantic int, scalar_instance int,
+    scalar_ring int, scalar_time double (s from frame start), scalar_range float (m),
+    scalar_bounces uchar
+
+The vertex element is one packed structured array (:data:`PLY_DTYPE`, 41 bytes a point) written
+with one ``tofile``. :func:`read_ply` reads these files and others (a ``scalar_`` prefix is
+dropped when matching properties to :data:`POINT_DTYPE` fields) back into POINT_DTYPE records.
 """
 
 from __future__ import annotations
@@ -17,7 +23,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..lidar.points import POINT_DTYPE
-from ._records import as_points
+from ._records import as_points, chunks
 from .atomic import atomic_write
 
 # PLY scalar type names (both spellings of the spec) -> numpy type character codes.
@@ -36,7 +42,27 @@ PLY_NAMES = {"i1": "char", "u1": "uchar", "i2": "short", "u2": "ushort", "i4": "
 FORMATS = {"binary_little_endian": "<", "binary_big_endian": ">", "ascii": None}
 
 
-def ply_header(n: int, dtype: np.dtype = POINT_DTYPE) -> bytes:
+PREFIX = "scalar_"  # CloudCompare's naming convention for scalar fields
+PLY_DTYPE = np.dtype(
+    [("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("intensity", "<f4"), (PREFIX + "semantic", "<i4"), (PREFIX + "instance", "<i4"),
+     (PREFIX + "ring", "<i4"), (PREFIX + "time", "<f8"), (PREFIX + "range", "<f4"), (PREFIX + "bounces", "u1")]
+)  # fmt: skip
+
+
+def point_field(prop: str) -> str:
+    """The :data:`POINT_DTYPE` field a PLY property stands for (``scalar_semantic`` -> ``semantic``)."""
+    return prop[len(PREFIX):] if prop.startswith(PREFIX) and prop[len(PREFIX):] in POINT_DTYPE.names else prop
+
+
+def ply_records(points: np.ndarray) -> np.ndarray:
+    """``(n,)`` :data:`PLY_DTYPE` records of ``(n,)`` POINT_DTYPE points (instance ids must be < 2**31)."""
+    out = np.empty(len(points), PLY_DTYPE)
+    for name in PLY_DTYPE.names:
+        out[name] = points[point_field(name)]
+    return out
+
+
+def ply_header(n: int, dtype: np.dtype = PLY_DTYPE) -> bytes:
     """The ASCII header (``end_header`` and its newline included) for ``n`` vertices of ``dtype``."""
     lines = ["ply", "format binary_little_endian 1.0", "comment bpy_pipeline point record: metres, seconds", f"element vertex {n}"]
     for name in dtype.names:
@@ -63,9 +89,12 @@ def write_ply(path: str | os.PathLike, points: np.ndarray) -> Path:
     """
     path = Path(path)
     pts = as_points(points, str(path))
+    if len(pts) and int(pts["instance"].max()) > np.iinfo(np.int32).max:
+        raise InputError(f"{path}: PLY scalar_instance is int (Open3D reads no uint); got instance ids up to {int(pts['instance'].max())}")
     with atomic_write(path) as tmp, open(tmp, "wb") as f:
         f.write(ply_header(len(pts)))
-        pts.tofile(f)
+        for part in chunks(len(pts)):
+            ply_records(pts[part]).tofile(f)
     return path
 
 
@@ -113,7 +142,7 @@ def read_ply(path: str | os.PathLike) -> np.ndarray:
     """Read the vertices of a PLY file as an ``(n,)`` :data:`POINT_DTYPE` array.
 
     Reads binary (little or big endian) and ASCII files. Vertex properties are matched to
-    :data:`POINT_DTYPE` fields by name and cast; fields the file does not have are zero and
+    :data:`POINT_DTYPE` fields by name (a ``scalar_`` prefix dropped) and cast; fields the file does not have are zero and
     extra properties are ignored. Elements before ``vertex`` are skipped if they have only
     scalar properties (binary) or are read line by line (ASCII). ``InputError`` naming the
     file for anything it cannot read (not a PLY, list properties on the vertex, truncated data).
@@ -138,12 +167,12 @@ def read_ply(path: str | os.PathLike) -> np.ndarray:
                     table = np.loadtxt(f, dtype=np.float64, ndmin=2, max_rows=count) if count else np.zeros((0, len(props)))
                     if table.shape != (count, len(props)):
                         raise InputError(f"{path}: expected {count} ASCII vertex rows of {len(props)} values, got {table.shape}")
-                    data = {prop: table[:, i] for i, (prop, _) in enumerate(props)}
+                    data = {point_field(prop): table[:, i] for i, (prop, _) in enumerate(props)}
                 else:
                     arr = np.fromfile(f, dtype=dtype, count=count)
                     if len(arr) != count:
                         raise InputError(f"{path}: truncated PLY: {len(arr)} of {count} vertices present")
-                    data = {prop: arr[prop] for prop in dtype.names}
+                    data = {point_field(prop): arr[prop] for prop in dtype.names}
                 out = np.zeros(count, POINT_DTYPE)
                 for field in POINT_DTYPE.names:
                     if field in data:
