@@ -5,7 +5,9 @@ module per model); this module holds range noise, the fitted models and their fi
 all of them in order (:func:`apply_effects`).
 
 Each effect is a small model chosen in the config (``config.EffectsConfig``), takes the
-explicit ``numpy.random.Generator`` of the frame, and can be switched off. Points are in the
+explicit ``numpy.random.Generator`` of the frame, and can be switched off. A sensor preset's
+profile (``effects`` in ``sensors.yaml``, fitted to a real scan or from a datasheet) fills what the
+config does not give, unless ``effects.ideal: true`` (docs/realism.md). Points are in the
 sensor frame, so a beam's direction is the point's direction from the origin (the scanner
 reports mirrored returns along the emitted beam at the total path length).
 
@@ -18,6 +20,8 @@ Intensity (``effects.intensity.model``)
     ``reference_reflectivity`` at normal incidence at ``reference_range`` reads 1 (nearer or
     brighter returns saturate at 1, as a receiver does).
     ``carla``: CARLA's ``exp(-a R)`` (``attenuation_rate`` a, CARLA's 0.004 per metre by default).
+    Then as the sensor writes it: ``cos^k`` instead of ``cos`` (``incidence_exponent``), times
+    ``scale`` clipped to 1, rounded to ``k / steps`` (255: an 8-bit intensity; 100: KITTI).
 
 Ray drop (``effects.drop.model``)
     ``none``; ``uniform`` (each point lost with ``probability``; the parking paper drew up to
