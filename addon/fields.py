@@ -15,6 +15,12 @@ config type hint            Blender property
 a nested dataclass          ``PointerProperty`` to its own group
 ==========================  ====================================
 
+Units follow the field's name (:func:`unit_of`): ``*_deg`` fields are angles (subtype ``ANGLE``,
+``EULER`` for a rotation vector: Blender shows degrees and stores radians; :func:`read` and
+:func:`write` convert), lengths in metres (``width``, ``height``, ``position``, ``max_range``, ...:
+subtype ``DISTANCE``, ``TRANSLATION`` for a 3-vector) show the scene's length unit, and other
+3-vectors carry X/Y/Z labels (``XYZ``).
+
 Anything else (lists of shapes, unions) is not shown and passes through untouched from the
 config the panel was loaded from. Blender stores floats in 32 bits; :func:`read` hands back the
 loaded config's exact value where the panel still shows it, and otherwise the shortest decimal
@@ -25,6 +31,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import math
 import typing
 from dataclasses import dataclass, field
 from typing import Literal
@@ -35,7 +42,21 @@ import numpy as np
 from .bpy_pipeline.errors import InputError
 from .bpy_pipeline.schema import key_of, to_plain
 
-UNITS = {"deg": "°", "hz": "Hz", "s": "s"}
+UNITS = {"hz": "Hz", "s": "s"}  # label suffixes; degrees and metres are shown by Blender's own units
+# The last word of a field name that makes it a length in metres (``contact_wire_height``, ``max_range``,
+# ``track.start``); ratios, counts and distributions (``mean``, ``std``) are plain numbers.
+LENGTH_WORDS = frozenset(
+    "width height length size spacing offset sag diameter thickness depth radius range distance clearance "
+    "shoulder berm gauge stagger span sigma position start mid end bottom top separation aperture step jitter".split()
+)
+
+
+def unit_of(attr: str) -> str:
+    """``"angle"`` (``*_deg``: degrees in the config), ``"length"`` (metres) or ``""`` for a field name."""
+    words = attr.split("_")
+    if len(words) > 1 and words[-1] == "deg":
+        return "angle"
+    return "length" if words[-1] in LENGTH_WORDS else ""
 
 
 @dataclass
@@ -48,6 +69,7 @@ class FieldView:
     items: tuple = ()  # enum identifiers
     size: int = 0  # vector length
     group: GroupView | None = None
+    unit: str = ""  # "angle" (the property holds radians, the config degrees) | "length" | ""
 
 
 @dataclass
@@ -65,11 +87,22 @@ class GroupView:
 
 
 def label(attr: str) -> str:
-    """``contact_wire_height`` -> ``Contact wire height``; ``rotation_deg`` -> ``Rotation (°)``."""
+    """``contact_wire_height`` -> ``Contact wire height``; ``rotation_deg`` -> ``Rotation`` (Blender shows °); ``rotation_hz`` -> ``Rotation (Hz)``."""
     words = attr.split("_")
+    if len(words) > 1 and words[-1] == "deg":
+        return " ".join(words[:-1]).capitalize()
     unit = UNITS.get(words[-1]) if len(words) > 1 else None
     text = " ".join(words[:-1] if unit else words).capitalize()
     return f"{text} ({unit})" if unit else text
+
+
+def to_panel(view: FieldView, value):
+    """A config value (degrees, metres) as the property holds it (radians for angles)."""
+    if view.unit != "angle":
+        return value
+    if view.kind == "vector":
+        return tuple(math.radians(float(v)) for v in value)
+    return math.radians(float(value))
 
 
 def _kind(hint) -> tuple[str, tuple, int] | None:
@@ -112,7 +145,8 @@ def _property(view: FieldView, default, update=None):
     if view.kind == "int":
         return bpy.props.IntProperty(name=name, default=int(default), **extra)
     if view.kind == "float":
-        return bpy.props.FloatProperty(name=name, default=float(default), precision=4, step=1, **extra)
+        subtype = {"angle": "ANGLE", "length": "DISTANCE"}.get(view.unit, "NONE")
+        return bpy.props.FloatProperty(name=name, default=to_panel(view, float(default)), subtype=subtype, precision=3, step=1, **extra)
     if view.kind == "str":
         subtype = "FILE_PATH" if view.attr.endswith(("path", "file")) else "NONE"
         return bpy.props.StringProperty(name=name, default=str(default), subtype=subtype, **extra)
@@ -122,7 +156,12 @@ def _property(view: FieldView, default, update=None):
     if view.kind == "flags":
         return bpy.props.EnumProperty(name=name, items=items, default=set(default), options={"ENUM_FLAG"}, **extra)
     if view.kind == "vector":
-        return bpy.props.FloatVectorProperty(name=name, size=view.size, default=tuple(float(v) for v in default), precision=4, **extra)
+        if view.size == 3:  # X/Y/Z labels; EULER and TRANSLATION carry degrees and the length unit
+            subtype, unit = {"angle": ("EULER", "ROTATION"), "length": ("TRANSLATION", "LENGTH")}.get(view.unit, ("XYZ", "NONE"))
+        else:  # (min, max) pairs and the like: units, no component names
+            subtype, unit = "NONE", {"angle": "ROTATION", "length": "LENGTH"}.get(view.unit, "NONE")
+        default = to_panel(view, tuple(float(v) for v in default))
+        return bpy.props.FloatVectorProperty(name=name, size=view.size, default=default, subtype=subtype, unit=unit, precision=3, **extra)
     return bpy.props.PointerProperty(type=view.group.property_group)
 
 
@@ -143,6 +182,8 @@ def group_view(cls, name: str, defaults: dict, only=None, skip=(), extra: dict |
         if kind is None or key_of(f) not in defaults:
             continue
         fv = FieldView(f.name, key_of(f), *kind)
+        if fv.kind in ("float", "vector"):
+            fv.unit = unit_of(f.name)
         if not _fits(fv, defaults[fv.key]):
             continue  # e.g. an optional vector that is None by default: passes through, not shown
         if fv.kind == "group":
@@ -154,11 +195,24 @@ def group_view(cls, name: str, defaults: dict, only=None, skip=(), extra: dict |
     return view
 
 
-def exact_float(panel_value: float, loaded=None) -> float:
-    """The config value for a float the panel shows: ``loaded`` when its float32 is the panel's, else the shortest decimal."""
-    if isinstance(loaded, (int, float)) and not isinstance(loaded, bool) and np.float32(loaded) == np.float32(panel_value):
-        return float(loaded)
-    return float(str(np.float32(panel_value)))
+def exact_float(panel_value: float, loaded=None, angle: bool = False) -> float:
+    """The config value for a float the panel shows: ``loaded`` when its float32 is the panel's, else the shortest decimal.
+
+    angle : the panel holds radians and the config degrees
+    """
+    if isinstance(loaded, (int, float)) and not isinstance(loaded, bool):
+        if np.float32(math.radians(loaded) if angle else loaded) == np.float32(panel_value):
+            return float(loaded)
+    return float(str(np.float32(math.degrees(panel_value) if angle else panel_value)))
+
+
+def leaves(view: GroupView, prefix: str = "") -> list[str]:
+    """Dotted YAML key paths of every shown field that is not a group (``track.start``, ``noise.sigma``)."""
+    out = []
+    for fv in view.fields:
+        path = f"{prefix}{fv.key}"
+        out += leaves(fv.group, f"{path}.") if fv.kind == "group" else [path]
+    return out
 
 
 def read(group, view: GroupView, base: dict) -> dict:
@@ -167,10 +221,10 @@ def read(group, view: GroupView, base: dict) -> dict:
     for fv in view.fields:
         value, loaded = getattr(group, fv.attr), base.get(fv.key)
         if fv.kind == "float":
-            value = exact_float(value, loaded)
+            value = exact_float(value, loaded, fv.unit == "angle")
         elif fv.kind == "vector":
             loaded = loaded if isinstance(loaded, (list, tuple)) and len(loaded) == fv.size else [None] * fv.size
-            value = [exact_float(v, b) for v, b in zip(value, loaded)]
+            value = [exact_float(v, b, fv.unit == "angle") for v, b in zip(value, loaded)]
         elif fv.kind == "flags":
             kept = [v for v in (loaded or []) if v in value]  # keep the loaded order of what is still ticked
             value = kept + [v for v in fv.items if v in value and v not in kept]
@@ -192,7 +246,9 @@ def write(group, view: GroupView, data: dict, where: str) -> None:
         if fv.kind == "flags":
             value = set(value)
         elif fv.kind == "vector":
-            value = tuple(float(v) for v in value)
+            value = to_panel(fv, tuple(float(v) for v in value))
+        elif fv.kind == "float":
+            value = to_panel(fv, value)
         try:
             setattr(group, fv.attr, value)
         except (TypeError, ValueError, OverflowError) as err:

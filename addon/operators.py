@@ -69,6 +69,27 @@ def scene_built() -> bool:
     return collection is not None and len(collection.all_objects) > 0
 
 
+OTHERS_ITEMS = [
+    ("LEAVE_OUT", "Leave them out", "Scan only the built scene (as run.py does): the other objects are hidden from the scan while it runs"),
+    ("SCAN", "Scan them too", "The other objects are part of the scan, labelled by their tags or names"),
+]
+
+
+def others_to_leave_out(context, choice: str) -> list:
+    """The objects outside the built scene that ``choice`` leaves out (none for My scene)."""
+    from .panels import other_geometry
+
+    if choice != "LEAVE_OUT" or context.scene.lidar.builder == panel.MY_SCENE:
+        return []
+    return other_geometry(context.scene)
+
+
+def hide(objects: list, hidden: bool) -> None:
+    """Hide ``objects`` from the scan (``hide_render``: what export skips) or show them again."""
+    for obj in objects:
+        obj.hide_render = hidden
+
+
 def start_job(context, frames: int | None = None, build: bool | None = None) -> FrameJob:
     """A job for the panel's config (``frames`` overrides its frame count); ``build`` defaults to every builder but My scene."""
     settings = context.scene.lidar
@@ -111,8 +132,24 @@ class LIDAR_OT_scan(bpy.types.Operator):
     bl_label = "Scan"
     bl_options = {"REGISTER"}
 
+    others: bpy.props.EnumProperty(name="Other objects", items=OTHERS_ITEMS, default="LEAVE_OUT")
+
+    def invoke(self, context, event):
+        if context.window is not None and others_to_leave_out(context, "LEAVE_OUT"):
+            return context.window_manager.invoke_props_dialog(self, width=420)
+        return self.execute(context)
+
+    def draw(self, context):  # the dialog Scan opens when the scene holds objects outside the built scene
+        others = others_to_leave_out(context, "LEAVE_OUT")
+        layout = self.layout
+        layout.label(text=f"{len(others)} object(s) are not part of the built scene:", icon="ERROR")
+        layout.label(text=", ".join(o.name for o in others[:6]) + (" ..." if len(others) > 6 else ""))
+        layout.prop(self, "others", expand=True)
+
     def execute(self, context):
         settings = context.scene.lidar
+        left_out = others_to_leave_out(context, self.others)
+        hide(left_out, True)
         try:
             build = settings.builder != panel.MY_SCENE and not scene_built()
             job = start_job(context, frames=1, build=build)
@@ -120,6 +157,8 @@ class LIDAR_OT_scan(bpy.types.Operator):
         except InputError as err:
             self.report({"ERROR"}, str(err))
             return {"CANCELLED"}
+        finally:
+            hide(left_out, False)
         settings.status = f"scan: {job.points} points in {job.out_dir}"
         self.report({"INFO"} if job.points else {"WARNING"}, settings.status if job.points else "scan: no points (nothing in range?)")
         return {"FINISHED"}
@@ -132,7 +171,11 @@ class LIDAR_OT_generate(bpy.types.Operator):
     bl_label = "Generate frames"
     bl_options = {"REGISTER"}
 
+    others: bpy.props.EnumProperty(name="Other objects", items=OTHERS_ITEMS, default="LEAVE_OUT")
+
     def execute(self, context):  # scripts and background mode: every frame, blocking
+        left_out = others_to_leave_out(context, self.others)
+        hide(left_out, True)
         try:
             job = start_job(context)
             while job.step():
@@ -140,6 +183,8 @@ class LIDAR_OT_generate(bpy.types.Operator):
         except InputError as err:
             self.report({"ERROR"}, str(err))
             return {"CANCELLED"}
+        finally:
+            hide(left_out, False)
         context.scene.lidar.status = job.message()
         self.report({"INFO"}, job.message())
         return {"FINISHED"}
@@ -147,9 +192,12 @@ class LIDAR_OT_generate(bpy.types.Operator):
     def invoke(self, context, event):
         if context.window is None:
             return self.execute(context)
+        self._left_out = others_to_leave_out(context, self.others)
+        hide(self._left_out, True)
         try:
             self._job = start_job(context)
         except InputError as err:
+            hide(self._left_out, False)
             self.report({"ERROR"}, str(err))
             return {"CANCELLED"}
         wm = context.window_manager
@@ -198,6 +246,7 @@ class LIDAR_OT_generate(bpy.types.Operator):
         wm.progress_end()
         context.workspace.status_text_set(None)
         context.scene.lidar.status = self._job.message()
+        hide(self._left_out, False)
 
 
 class LIDAR_OT_show_cloud(bpy.types.Operator):
@@ -213,7 +262,9 @@ class LIDAR_OT_show_cloud(bpy.types.Operator):
         except InputError as err:
             self.report({"ERROR"}, str(err))
             return {"CANCELLED"}
-        objects = cloud.show_frame(points, pose, load_class_table().color_lut())
+        table = load_class_table()
+        objects = cloud.show_frame(points, pose, table.color_lut())
+        fill_legend(context.scene.lidar, points, table)
         space = context.space_data
         if space is not None and space.type == "VIEW_3D" and space.shading.type == "SOLID":
             space.shading.color_type = "ATTRIBUTE"
@@ -238,6 +289,18 @@ class LIDAR_OT_show_cloud(bpy.types.Operator):
             raise InputError(f"show cloud: the last frame in {out} has no PLY file; press Scan or add ply to the formats")
         world = manifest["config"]["output"]["frame"] == "world"
         return read_ply(out / ply), np.eye(4) if world else np.asarray(frame["sensor_pose"], np.float64)
+
+
+def fill_legend(settings, points: np.ndarray, table) -> None:
+    """The legend of the shown cloud: each class present, its table colour (sRGB) and point count."""
+    settings.legend.clear()
+    ids, counts = np.unique(points["semantic"], return_counts=True)
+    lut = table.color_lut()
+    for class_id, count in zip(ids.tolist(), counts.tolist()):
+        entry = settings.legend.add()
+        entry.name = table.names.get(class_id, f"class {class_id}")
+        entry.class_id, entry.points = class_id, count
+        entry.color = tuple(float(c) / 255.0 for c in lut[class_id])
 
 
 class LIDAR_OT_config_load(bpy.types.Operator, ImportHelper):

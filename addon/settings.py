@@ -83,6 +83,14 @@ def _enum_items(names) -> list[tuple[str, str, str]]:
     return [(n, n.replace("_", " ").capitalize(), "") for n in names]
 
 
+class LIDAR_PG_legend_entry(bpy.types.PropertyGroup):
+    """One class of the shown cloud: its colour in the class table (sRGB, as labels.yaml gives it) and point count."""
+
+    class_id: bpy.props.IntProperty(name="Class id")
+    points: bpy.props.IntProperty(name="Points")
+    color: bpy.props.FloatVectorProperty(name="Colour", subtype="COLOR_GAMMA", size=3, min=0.0, max=1.0)
+
+
 def make_views() -> Views:
     """Generate every ``PropertyGroup`` class from the installed config (call from ``register``)."""
     defaults = cfg.config_to_dict(cfg.config_from_dict({}))
@@ -135,12 +143,13 @@ def make_views() -> Views:
         "label_reflectivity": bpy.props.FloatProperty(name="Reflectivity", min=0.0, max=1.0, default=0.5),
         "loaded": bpy.props.StringProperty(options={"HIDDEN"}, description="The last loaded config (JSON)"),
         "status": bpy.props.StringProperty(name="Status", options={"SKIP_SAVE"}),
+        "legend": bpy.props.CollectionProperty(type=LIDAR_PG_legend_entry, description="The classes of the shown cloud"),
     }
     if trajectory is not None:
         annotations["trajectory"] = bpy.props.PointerProperty(type=trajectory.property_group)
         annotations["trajectory_curve"] = bpy.props.PointerProperty(name="Curve", type=bpy.types.Object, poll=_is_curve)
     views.settings = type("LIDAR_PG_settings", (bpy.types.PropertyGroup,), {"__annotations__": annotations})
-    views.classes = [c for group in groups for c in group.classes()] + [views.settings]
+    views.classes = [c for group in groups for c in group.classes()] + [LIDAR_PG_legend_entry, views.settings]
     return views
 
 

@@ -104,7 +104,8 @@ def missing_wheels(wheels: list[str], platforms: list[str]) -> list[str]:
     """``"<distribution> <python tag> <platform>"`` for every binary wheel a platform lacks.
 
     Every distribution with a binary wheel needs one per platform and per Python tag the
-    wheels name (cp311 for Blender 4.2 to 5.0, cp313 for 5.1 and newer).
+    wheels name (cp311 for Blender 4.2 to 5.0, cp313 for 5.1 and newer and Debian 13's 4.3, cp314 for
+    distribution Blenders on Python 3.14).
     """
     names = [Path(w).name for w in wheels]
     binary = [(wheel_tags(n)[0], wheel_tags(n)[2], wheel_platforms(n)) for n in names if wheel_platforms(n) != {"*"}]

@@ -81,6 +81,9 @@ class FakeLayout:
     def label(self, text="", **_):
         self.log.append(f"label {text}")
 
+    def separator(self, **_):
+        pass
+
     def _sub(self, *_, **__):
         return FakeLayout(self.log)
 

@@ -120,7 +120,9 @@ def test_installs_from_the_zip_with_its_own_wheels(session):
     assert {"__init__.py", "bpy_pipeline/config.py", "assets_manifest/labels.yaml"} <= set(report["extension_files"])
     operators = {"LIDAR_OT_build_scene", "LIDAR_OT_scan", "LIDAR_OT_show_cloud", "LIDAR_OT_generate", "LIDAR_OT_config_load", "LIDAR_OT_config_save", "LIDAR_OT_config_reset", "LIDAR_OT_tag_selected", "LIDAR_OT_clear_tags"}
     assert operators <= set(report["classes"])
-    assert {c for c in report["classes"] if c.startswith("LIDAR_PT_")} == {"LIDAR_PT_run", "LIDAR_PT_scene", "LIDAR_PT_sensor", "LIDAR_PT_effects", "LIDAR_PT_labels", "LIDAR_PT_output"}
+    sections = {"LIDAR_PT_run", "LIDAR_PT_scene", "LIDAR_PT_sensor", "LIDAR_PT_effects", "LIDAR_PT_output", "LIDAR_PT_legend", "LIDAR_PT_labels"}
+    advanced = {"LIDAR_PT_scene_advanced", "LIDAR_PT_sensor_advanced", "LIDAR_PT_effects_advanced", "LIDAR_PT_output_advanced"}
+    assert {c for c in report["classes"] if c.startswith("LIDAR_PT_")} == sections | advanced
     assert set(report["builders"]) == (set(cfg.BUILDERS) - {"blend"}) | {"my_scene"}
     assert report["panels_drawn"] > 20  # every panel drew, naming only properties and operators that exist
     # every builder: the panel's defaults are the config's, and its parameters are drawn
