@@ -203,6 +203,35 @@ class BoxesConfig:
 
 
 @dataclass(frozen=True)
+class CameraConfig:
+    """``output.kitti.camera``: the pinhole camera of the KITTI layout (``image_2``, ``calib`` P2), fixed to the LiDAR.
+
+    ``resolution`` [width, height] px; ``fov_deg`` horizontal field of view (square pixels, principal
+    point at the image centre; KITTI's own P2: 81.4 deg on 1242 px); ``position`` (m) and
+    ``rotation_deg`` (Blender XYZ Euler, degrees) in the sensor frame: with zeros it looks along the
+    sensor's x axis from the sensor's origin.
+    """
+
+    resolution: tuple[int, int] = (1242, 375)
+    fov_deg: float = 81.4
+    position: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    rotation_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+
+@dataclass(frozen=True)
+class KittiConfig:
+    """``output.kitti``: the KITTI object layout and the train/val split of every dataset index.
+
+    ``val_fraction`` of the frames go to ``ImageSets/val.txt`` (and Pointcept's ``npy_val.json``),
+    drawn from the run's seed, so any frame range gives the same split (at least one val frame from
+    two frames on).
+    """
+
+    val_fraction: float = 0.25
+    camera: CameraConfig = field(default_factory=CameraConfig)
+
+
+@dataclass(frozen=True)
 class OutputConfig:
     formats: list[str] = field(default_factory=lambda: ["ply", "semantickitti"])  # writers of io/writers.py
     frame: Literal["sensor", "world"] = "sensor"
@@ -212,6 +241,7 @@ class OutputConfig:
     skip_empty: bool = False  # a frame with fewer than min_objects labelled objects is recorded as skipped, no files
     min_objects: int = 1  # objects of output.boxes.classes with their minimum points (skip_empty)
     frames_kept: bool = False  # skip_empty: `frames` counts kept frames; indices go on past it (full runs only)
+    kitti: KittiConfig = field(default_factory=KittiConfig)  # KITTI layout camera, train/val split
 
 
 @dataclass(frozen=True)
