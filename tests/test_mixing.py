@@ -212,8 +212,10 @@ def test_kitti_scan_rings_from_scan_order_and_the_kitti_rule(real_scan):
     assert m.info["firings"]["approximate"]
     # inserted objects outside the front field of view are truncated; boxes carry it
     assert (m.boxes["truncation"] >= 0).all() and (m.boxes["truncation"] <= 1).all()
-    for p in m.placements:
-        assert abs(p.centre[1]) >= 10 or p.yaw in (0.0, math.pi) or True  # equation (1) allows any yaw beyond 10 m
+    for p, record in zip(m.placements, m.info["objects"]):  # equation (1): within 10 m of the sensor's line, along it or against it
+        if abs(p.centre[1]) < 10:
+            assert p.yaw in (0.0, math.pi)
+        assert m.boxes[m.boxes["instance"] == record["instance"]]["class_name"] == "car"
 
 
 def test_real_boxes_hidden_by_an_inserted_object_get_their_occlusion_updated(sweep):
@@ -255,3 +257,30 @@ def test_bad_input_names_the_key(tmp_path, real_scan):
         mix_frame(RealScanScene(path=str(path), objects=[ObjectBox("spaceship")]), np.random.default_rng(0))
     with pytest.raises(InputError, match="scene.objects.class"):
         mix_frame(RealScanScene(path=str(path), objects=[replace(ObjectBox("car"), class_name="dragon")]), np.random.default_rng(0))
+
+
+def test_sensor_conversion_on_a_flat_ground_is_exact_for_the_meshed_cast():
+    from bpy_pipeline.lidar.raycast import RayCaster
+    from bpy_pipeline.buffers import SceneBuffers
+    from bpy_pipeline.geometry import primitives
+    from bpy_pipeline.lidar.sensors import resolve_sensor
+    from bpy_pipeline.mixing.convert import project_to_cones, raycast_convert, target_rays
+
+    ground = SceneBuffers.from_meshes({"ground": primitives.plane(400.0, 400.0)})
+    source, target = resolve_sensor({"preset": "hdl64e"}, "s"), resolve_sensor({"preset": "vlp16"}, "t")
+    directions, ring, column = target_rays(source)
+    frame = np.eye(4)
+    frame[2, 3] = 1.73
+    hits = RayCaster(ground, frame=frame).intersect(np.zeros(3), directions, source.max_range)
+    grid, valid = np.zeros((ring.max() + 1, column.max() + 1, 3)), np.zeros((ring.max() + 1, column.max() + 1), bool)
+    grid[ring[hits.ray], column[hits.ray]] = directions[hits.ray] * hits.distance[:, None]
+    valid[ring[hits.ray], column[hits.ray]] = True
+    offset = (0.0, 0.0, 1.51 - 1.73)
+    points, r, c = raycast_convert(grid, valid, target, offset)
+    assert len(points) > 1000
+    np.testing.assert_allclose(points[:, 2], -1.51, atol=1e-6)  # on the ground, seen from the target's height
+    tdir, _, _ = target_rays(target)
+    cols = len(np.unique(target_rays(target)[2]))
+    assert angle_between(points / np.linalg.norm(points, axis=1, keepdims=True), tdir[r * cols + c]).max() < 1e-9
+    cones, cr, cc = project_to_cones(grid[valid], target, offset)
+    assert len(np.unique(cr * 10_000 + cc)) == len(cones)  # one point per target cell

@@ -6,6 +6,10 @@ Pure (numpy and embreex); never imports bpy. The stages, one module each: :mod:`
 cast), :mod:`.noise` (the parking paper's noise injections), :mod:`.frame` (:func:`mix_frame`),
 :mod:`.convert` (a dense scan resampled into a sparser sensor) and :mod:`.references` (the two
 papers' insertion methods, for comparison).
+
+The papers: *Annotation-free Generation of Training Data Using Mixed Domains for Segmentation of
+3D LiDAR Point Clouds* ("the parking paper": synthetic cars in recorded scans of a car park) and
+*Point Cloud Wall Projection for Realistic Road Data Augmentation* ("the KITTI paper").
 """
 
 from .frame import MixedFrame, mix_frame

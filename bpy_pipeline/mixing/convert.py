@@ -76,7 +76,6 @@ def project_to_cones(points: np.ndarray, spec, target_offset=(0.0, 0.0, 0.0), ma
     inside = np.abs(el - table[ring]) <= spacing / 2  # beyond the outermost cones: not seen by the target
     p, r, az, ring = p[inside], r[inside], az[inside], ring[inside]
     columns = np.asarray(azimuths(spec), float)
-    step = abs(columns[1] - columns[0]) if len(columns) > 1 else 360.0
     column = np.round(((az - columns[0]) / (columns[1] - columns[0] if len(columns) > 1 else 1.0))).astype(np.int64) % len(columns)
     cell = ring * len(columns) + column
     order = np.lexsort((r, cell))
@@ -84,7 +83,6 @@ def project_to_cones(points: np.ndarray, spec, target_offset=(0.0, 0.0, 0.0), ma
     first[1:] = cell[order][1:] != cell[order][:-1]
     pick = order[first]
     projected = spherical_directions(az[pick], table[ring[pick]]) * r[pick, None]
-    del step
     return projected, ring[pick], column[pick]
 
 

@@ -211,7 +211,6 @@ def mix_frame(section: RealScanScene, rng: np.random.Generator, effects=None, th
         centres = np.array([p.centre for p in placements])
         pts, owner = injections.interior_points(centres, noise, rng)
         f, r = injections.nearest_firing(firings, pts)
-        taken = np.concatenate([real_rows, h_firing])
         current = np.full(len(firings), np.inf)
         current[real_rows] = firings.range[real_rows]
         current[h_firing] = new["range"]
@@ -234,7 +233,6 @@ def mix_frame(section: RealScanScene, rng: np.random.Generator, effects=None, th
             old, real_rows = old[~drop_real], real_rows[~drop_real]
             drop_new = np.isin(h_firing, extra_firing)
             new, h_firing = new[~drop_new], h_firing[~drop_new]
-        del taken
 
     points = np.concatenate([old, new, extra_points])
     firing = np.concatenate([real_rows, h_firing, extra_firing])
