@@ -382,7 +382,7 @@ def rig_annotate_stage(frame: Frame, run: Run) -> None:
     unfiltered = []
     for sub, member in zip(frame.rig.frames, run.members):
         start = time.perf_counter()
-        world = world_boxes(sub.buffers, member.config, sub.pose, sub.points, headings, sub.index, sub.rng, member.rays)
+        world = world_boxes(sub.buffers, member.config, sub.pose, sub.points, headings, sub.index, sub.rng, member.rays, skip_unseen=True)
         unfiltered.append(world)
         kept = box_labels.keep_boxes(world, section.min_points, section.min_points_default)
         sub.boxes = box_labels.boxes_in_frame(kept, sub.pose if member.config.output.frame == "sensor" else np.eye(4))
@@ -476,9 +476,14 @@ def frame_boxes(buffers: SceneBuffers, config: Config, pose: np.ndarray, points:
     return box_labels.boxes_in_frame(boxes, pose if config.output.frame == "sensor" else np.eye(4))
 
 
-def world_boxes(buffers: SceneBuffers, config: Config, pose: np.ndarray, points: np.ndarray, headings: dict | None = None, frame: int = 0, rng: np.random.Generator | None = None, rays: SensorRays | None = None) -> np.ndarray:
+def world_boxes(buffers: SceneBuffers, config: Config, pose: np.ndarray, points: np.ndarray, headings: dict | None = None, frame: int = 0, rng: np.random.Generator | None = None, rays: SensorRays | None = None, skip_unseen: bool = False) -> np.ndarray:
     """Every box of ``output.boxes.classes`` in the world frame with truncation, occlusion and its points, none dropped
-    (:func:`frame_boxes` keeps those with their minimum points and moves them into the points' frame)."""
+    (:func:`frame_boxes` keeps those with their minimum points and moves them into the points' frame).
+
+    skip_unseen : leave out of the visibility trace the boxes no ray of the sensor can pass near (outside its
+        field of view or range, :func:`~.rig.out_of_reach`): they get what the trace would give them
+        (truncation 1, no visible or unoccluded ray); a rig's narrow sensors see a few of a street's boxes each
+    """
     from .io import boxes as box_labels
 
     section = config.output.boxes
@@ -488,7 +493,15 @@ def world_boxes(buffers: SceneBuffers, config: Config, pose: np.ndarray, points:
         patterns = (rays or SensorRays(config)).patterns(frame)
         steps = [v for v in angular_resolution(spec) if v is not None and np.isfinite(v)]
         cell = float(np.clip(max(steps) if steps else 1.0, 0.2, 5.0))
-        box_labels.visibility(buffers, boxes, patterns, pose, spec.min_range, spec.max_range, cell, surfaces=scan_surfaces(config), rng=rng)
+        near = np.ones(len(boxes), bool)
+        if skip_unseen and not config.sensor.reflector.enabled and config.effects.mirrors.glass.reflect_fraction in (0.0, 1.0):  # no draw depends on which boxes are traced
+            from .rig import out_of_reach
+
+            near = ~out_of_reach(spec, pose, boxes["centre"], np.linalg.norm(boxes["size"], axis=1) / 2 + 1e-3)
+            boxes["truncation"] = 1.0
+        traced = boxes[near]
+        box_labels.visibility(buffers, traced, patterns, pose, spec.min_range, spec.max_range, cell, surfaces=scan_surfaces(config), rng=rng)
+        boxes[near] = traced
         boxes["occlusion"] = box_labels.occlusion_levels(boxes["visible"], boxes["unoccluded"], section.occlusion_levels)
         box_labels.count_points(boxes, points)
     return boxes

@@ -215,3 +215,15 @@ def config_sem(name: str) -> int:
     from bpy_pipeline.labels import load_class_table
 
     return load_class_table().id_of(name)
+
+
+def test_out_of_reach_is_conservative():
+    from bpy_pipeline.lidar.sensors import resolve_sensor
+    from bpy_pipeline.rig import out_of_reach
+
+    spec = resolve_sensor({"preset": "flash96x16_carla"})  # +-40 deg, +-6.67 deg, 35 m
+    centres = np.array([[10, 0, 0], [-10, 0, 0], [10, 9.5, 0], [10, 7.5, 0], [50, 0, 0], [36, 0, 0], [0.5, 0, 0], [10, 0, 3.0], [10, 0, 1.5]], float)
+    radii = np.array([1.0, 1.0, 0.5, 1.0, 1.0, 2.0, 1.0, 1.0, 1.0])
+    assert out_of_reach(spec, np.eye(4), centres, radii).tolist() == [False, True, True, False, True, False, False, True, False]
+    spinning = resolve_sensor({"preset": "vlp16"})
+    assert out_of_reach(spinning, np.eye(4), centres, radii).tolist() == [False, False, False, False, False, False, False, False, False]
