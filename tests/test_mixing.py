@@ -284,3 +284,64 @@ def test_sensor_conversion_on_a_flat_ground_is_exact_for_the_meshed_cast():
     assert angle_between(points / np.linalg.norm(points, axis=1, keepdims=True), tdir[r * cols + c]).max() < 1e-9
     cones, cr, cc = project_to_cones(grid[valid], target, offset)
     assert len(np.unique(cr * 10_000 + cc)) == len(cones)  # one point per target cell
+
+
+def kitti_boxes(path):
+    """The six labelled cars of KITTI frame 000008 as ObjectBoxes in the velodyne (sensor) frame."""
+    import json
+
+    data = json.loads(path.read_text())
+    cam_to_velo = np.linalg.inv(np.array(data["R0_rect"]) @ np.array(data["Tr_velo_to_cam"]))
+    out, counts = [], []
+    for b in data["boxes"]:
+        x, y, z, length, h, w, ry = b["box_cam_xyz_lhw_ry"]
+        centre = (cam_to_velo @ [x, y - h / 2, z, 1.0])[:3]  # camera boxes stand on their bottom centre, y down
+        out.append(ObjectBox("car", tuple(centre), (length, w, h), math.degrees(-ry - math.pi / 2)))
+        counts.append(b["num_lidar_pts"])
+    return out, np.array(counts)
+
+
+def test_kitti_labelled_cars_hold_their_points_and_get_occluded(real_scan):
+    path = real_scan(KITTI)
+    boxes, counts = kitti_boxes(real_scan("kitti_000008_boxes.json"))
+    scan = read_real_scan(path)
+    inside = np.array([in_box(scan.points, b.center, b.size, b.yaw_deg).sum() for b in boxes])
+    assert (np.abs(inside - counts) <= 0.1 * counts + 3).all(), (inside, counts)  # the reader's axes are KITTI's
+    # a wall inserted between the sensor and the nearest car hides it; its box says so
+    near = boxes[int(np.argmin([np.hypot(b.center[0], b.center[1]) for b in boxes]))]
+    c = np.asarray(near.center)
+    wall = ObjectBox("box", tuple(c * 0.6), (0.1, 3.0, 2.0), math.degrees(math.atan2(c[1], c[0])))
+    before = mix_frame(RealScanScene(path=str(path), preset="hdl64e", real_boxes=boxes), np.random.default_rng(0))
+    after = mix_frame(RealScanScene(path=str(path), preset="hdl64e", real_boxes=boxes, objects=[wall]), np.random.default_rng(0))
+    k = [i for i, b in enumerate(boxes) if b is near][0]
+    real_before, real_after = before.boxes[before.boxes["instance"] == 0], after.boxes[after.boxes["instance"] == 0]
+    assert real_after[k]["visible"] < 0.5 * real_before[k]["visible"] and real_after[k]["occlusion"] > real_before[k]["occlusion"]
+    # the KITTI rule snaps a new car's yaw to the nearest labelled car within snap_distance
+    rule = KittiRule(enabled=True, count=2, snap_distance=100.0)
+    m = mix_frame(RealScanScene(path=str(path), preset="hdl64e", real_boxes=boxes, kitti_rule=rule), np.random.default_rng(0))
+    yaws = {round(math.radians(b.yaw_deg), 9) for b in boxes}
+    assert m.placements and all(round(p.yaw, 9) in yaws for p in m.placements)
+
+
+def test_semantickitti_labels_are_kept_and_labelled_vehicles_get_boxes(tmp_path):
+    # a SemanticKITTI-style scan: a ground grid and one labelled car (raw id 10, instance 7) 10 m ahead
+    xs, ys = np.meshgrid(np.arange(-30, 30, 0.5), np.arange(-30, 30, 0.5))
+    ground = np.column_stack([xs.ravel(), ys.ravel(), np.full(xs.size, -1.7)])
+    cx, cy, cz = np.meshgrid(np.linspace(8, 12, 20), np.linspace(-0.9, 0.9, 10), np.linspace(-1.5, -0.2, 6))
+    car = np.column_stack([cx.ravel(), cy.ravel(), cz.ravel()])
+    points = np.concatenate([ground, car])
+    scan = np.column_stack([points, np.full(len(points), 0.3)]).astype(np.float32)
+    (tmp_path / "velodyne").mkdir()
+    (tmp_path / "labels").mkdir()
+    scan.tofile(tmp_path / "velodyne" / "000000.bin")
+    labels = np.concatenate([np.full(len(ground), 40, np.uint32), np.full(len(car), 10 | (7 << 16), np.uint32)])
+    labels.tofile(tmp_path / "labels" / "000000.label")
+    section = RealScanScene(path=str(tmp_path / "velodyne" / "000000.bin"), preset="hdl64e", objects=[ObjectBox("box", (5.0, 0.0, -1.0), (0.1, 3.0, 1.6), 0.0)])
+    m = mix_frame(section, np.random.default_rng(0))
+    real = ~m.inserted
+    assert set(np.unique(m.points["semantic"][real])) == {20, 26}  # car, road in assets_manifest/labels.yaml
+    assert set(np.unique(m.points["instance"][real & (m.points["semantic"] == 20)])) == {7}
+    assert (m.points["instance"][m.inserted] == 8).all()  # above every real instance
+    vehicle = m.boxes[(m.boxes["instance"] == 0) & (m.boxes["class_name"] == "car")]
+    assert len(vehicle) == 1 and abs(vehicle[0]["centre"][0] - 10.0) < 0.1 and vehicle[0]["unoccluded"] == len(car)
+    assert vehicle[0]["visible"] < vehicle[0]["unoccluded"]  # the inserted wall hides part of it

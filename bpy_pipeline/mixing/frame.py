@@ -12,7 +12,8 @@ instance above every real one. Boxes (:data:`~bpy_pipeline.io.boxes.BOX_DTYPE`):
 object with truncation (the share of its surface outside the firings' azimuth span) and
 occlusion (visible / unoccluded firings: those whose return is the object, against those that
 hit it when it is alone); each of ``real_boxes`` with its occlusion updated from the share of its
-real returns the inserted objects hid (the KITTI paper's synthetic annotation).
+real returns the inserted objects hid (the KITTI paper's synthetic annotation); a SemanticKITTI scan's labelled vehicles (car, van,
+truck, bus instances) get boxes of their own the same way, and the KITTI rule snaps to them too.
 """
 
 from __future__ import annotations
@@ -32,7 +33,7 @@ from . import noise as injections
 from .cast import Hits, cast_firings, merge_returns, near_objects, object_buffers, object_parts
 from .firings import Firings, angles_deg, recover_firings
 from .ground import PointIndex, find_ground, in_box
-from .placement import Placement, Scene, explicit_placements, kitti_rule, parking_rule, real_placements
+from .placement import Scene, explicit_placements, kitti_rule, parking_rule, real_placements
 from .section import RealScanScene
 
 # SemanticKITTI raw ids -> the project's class names (assets_manifest/labels.yaml); others: the background class
@@ -75,6 +76,34 @@ def real_labels(scan: RealScan, firings: Firings, section: RealScanScene, table:
         semantic[have] = np.array([lut.get(int(k), background) for k in low], np.uint16) if len(low) else semantic[have]
         instance[have] = raw >> 16
     return semantic, instance
+
+
+VEHICLES = ("car", "van", "truck", "bus")
+
+
+def labelled_boxes(firings: Firings, semantic: np.ndarray, instance: np.ndarray, table: ClassTable, min_points: int = 10) -> list:
+    """Boxes of the labelled real vehicles of a SemanticKITTI scan (one per instance of a vehicle class),
+    fitted around their returns at the heading of the smallest rectangle around their footprint."""
+    from ..io.boxes import footprint_heading
+    from .placement import Placement
+
+    ids = {table.id_of(name): name for name in VEHICLES}
+    out = []
+    returns = firings.returns
+    for inst in np.unique(instance[firings.valid & (instance > 0) & np.isin(semantic, list(ids))]):
+        rows = np.flatnonzero(firings.valid & (instance == inst))
+        if len(rows) < min_points:
+            continue
+        xyz = returns[rows]
+        yaw = footprint_heading(xyz[:, :2])
+        c, s_ = math.cos(yaw), math.sin(yaw)
+        local = xyz[:, :2] @ np.array([[c, -s_], [s_, c]])
+        lo, hi = local.min(axis=0), local.max(axis=0)
+        centre_xy = np.array([[c, -s_], [s_, c]]) @ ((lo + hi) / 2)
+        z0, z1 = xyz[:, 2].min(), xyz[:, 2].max()
+        cls = ids[int(np.bincount(semantic[rows]).argmax())]
+        out.append(Placement(cls, cls, np.array([centre_xy[0], centre_xy[1], (z0 + z1) / 2]), np.array([*(hi - lo), z1 - z0]) + 0.02, yaw, "labels"))
+    return out
 
 
 def _effects(points: np.ndarray, beam: np.ndarray, effects, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
@@ -135,7 +164,7 @@ def mix_frame(section: RealScanScene, rng: np.random.Generator, effects=None, th
         work = Firings(**{**firings.__dict__, "valid": valid})
         scene = Scene(work, ground, PointIndex(xyz[~ground.ground]), PointIndex(xyz[ground.ground]), list(placements))
         start = _timed(timings, "ground", start)
-        real = real_placements(section.real_boxes)
+        real = real_placements(section.real_boxes) + labelled_boxes(firings, semantic_real, instance_real, table)
         if section.parking_rule.enabled:
             placed, rule_log["parking"] = parking_rule(scene, section.parking_rule, rng)
             placements += placed
@@ -244,7 +273,8 @@ def mix_frame(section: RealScanScene, rng: np.random.Generator, effects=None, th
         points["semantic"] = injections.class_flips(points["semantic"], classes, noise, rng)
     start = _timed(timings, "records", start)
 
-    boxes = frame_boxes(firings, valid, placements, instances, buffers, visible_rays, points, section, returns, occluded, semantic_real, instance_real, threads)
+    labelled = labelled_boxes(firings, semantic_real, instance_real, table) if scan.labels is not None and section.keep_labels else []
+    boxes = frame_boxes(firings, valid, placements, instances, buffers, visible_rays, points, section, returns, occluded, labelled, threads)
     _timed(timings, "boxes", start)
     info = {
         "scan": {"path": str(scan.path), "format": scan.format, "points": int(len(scan)), "notes": list(scan.notes)},
@@ -269,9 +299,9 @@ def azimuth_coverage(firings: Firings, bins: int = 720) -> np.ndarray:
     return covered
 
 
-def frame_boxes(firings, valid, placements, instances, buffers, visible_rays, points, section, returns, occluded, semantic_real, instance_real, threads) -> np.ndarray:
-    """Boxes of the inserted objects and of the section's labelled real objects (module notes)."""
-    real = real_placements(section.real_boxes)
+def frame_boxes(firings, valid, placements, instances, buffers, visible_rays, points, section, returns, occluded, labelled, threads) -> np.ndarray:
+    """Boxes of the inserted objects, of the section's ``real_boxes`` and of the scan's labelled vehicles (module notes)."""
+    real = real_placements(section.real_boxes) + list(labelled)
     boxes = np.zeros(len(placements) + len(real), BOX_DTYPE)
     if not len(boxes):
         return boxes
