@@ -9,7 +9,10 @@ exact answer hits, and the rays that hit another surface or none.
 
 - ``embreex raw``: ``EmbreeScene.run`` on float32 rays over a thread pool, Embree's float32 distance
 - ``RayCaster.intersect``: the pipeline's caster (sensor frame, float64 re-solve, vertex re-traces)
-- ``scan (records)``: the whole scan, point records and labels included (float32 x y z)
+- ``Open3D RaycastingScene``: ``open3d.t.geometry.RaycastingScene.cast_rays`` (Embree inside), float32
+  distances and no labels; skipped with a note where open3d is not importable
+- ``scan (records)``: the whole scan, point records and labels included (float32 x y z), with the
+  compiled kernel when numba is installed; ``scan (records, numpy path)``: the same with ``kernel="numpy"``
 - ``trimesh + embreex``: ``trimesh.ray.ray_pyembree.RayMeshIntersector.intersects_location``
 - ``Blender BVHTree``: ``mathutils.bvhtree.BVHTree.FromPolygons`` and ``ray_cast`` in a Python
   loop, world coordinates, as BlAInder does; timed on a subset of the rays and extrapolated
@@ -43,7 +46,8 @@ from embreex.mesh_construction import TriangleMesh  # noqa: E402
 from bpy_pipeline.buffers import SceneBuffers  # noqa: E402
 from bpy_pipeline.geometry import primitives  # noqa: E402
 from bpy_pipeline.geometry.transforms import pose_matrix  # noqa: E402
-from bpy_pipeline.lidar.raycast import RayCaster  # noqa: E402
+from bpy_pipeline.lidar import kernels  # noqa: E402
+from bpy_pipeline.lidar.raycast import RayCaster, default_threads  # noqa: E402
 from bpy_pipeline.lidar.scanner import scan, scan_chunk  # noqa: E402
 from bpy_pipeline.lidar.sensors import resolve_sensor, sensor_pattern  # noqa: E402
 
@@ -111,8 +115,30 @@ def raycaster(setup: Setup, threads: int):
     return seconds, build, setup.score(hits.ray, point, setup.buffers.triangle_object[hits.triangle])
 
 
-def full_scan(setup: Setup, threads: int):
-    caster = RayCaster(setup.buffers, frame=setup.pose, threads=threads)
+def open3d_raycast(setup: Setup, threads: int):
+    """Open3D's ``RaycastingScene.cast_rays`` (Embree inside), world float32, no maximum distance: hits beyond are dropped."""
+    import open3d as o3d
+
+    vertices32 = np.ascontiguousarray(setup.buffers.vertices, np.float32)
+    start = time.perf_counter()
+    scene = o3d.t.geometry.RaycastingScene(nthreads=threads)
+    scene.add_triangles(o3d.core.Tensor(vertices32), o3d.core.Tensor(np.ascontiguousarray(setup.buffers.triangles, np.uint32)))
+    o32 = np.tile(setup.origin.astype(np.float32), (len(setup.directions), 1))
+    d32 = np.ascontiguousarray(setup.directions, np.float32)
+    rays = o3d.core.Tensor(np.ascontiguousarray(np.hstack([o32, d32])))
+    scene.cast_rays(rays[:1], nthreads=threads)  # builds its scene
+    build = time.perf_counter() - start
+    seconds = best_of(lambda: scene.cast_rays(rays, nthreads=threads))
+    out = scene.cast_rays(rays, nthreads=threads)
+    t, triangle = out["t_hit"].numpy(), out["primitive_ids"].numpy()
+    ray = np.flatnonzero(t <= setup.max_range)
+    point = o32[ray].astype(np.float64) + d32[ray].astype(np.float64) * t[ray, None].astype(np.float64)
+    return seconds, build, setup.score(ray, point, setup.buffers.triangle_object[triangle[ray]])
+
+
+def full_scan(setup: Setup, threads: int, kernel: str = "auto"):
+    caster = RayCaster(setup.buffers, frame=setup.pose, threads=threads, kernel=kernel)
+    scan(caster, setup.buffers, setup.pattern, setup.pose, 0.0, setup.max_range)  # compiles (or loads) the kernel first
     seconds = best_of(lambda: scan(caster, setup.buffers, setup.pattern, setup.pose, 0.0, setup.max_range))
     points, _, ray = scan_chunk(caster, setup.buffers, setup.pattern, np.eye(4), 0.0, setup.max_range)
     xyz = np.column_stack([points["x"], points["y"], points["z"]]).astype(np.float64) @ setup.pose[:3, :3].T + setup.origin
@@ -236,7 +262,14 @@ def slipped_vertex_rays() -> tuple[dict, int]:
     hits = RayCaster(buffers, frame=np.eye(4)).intersect(origins, directions)
     got = far.copy()
     got[hits.ray] = hits.distance
-    out["RayCaster.intersect"] = out["scan (records)"] = slipped(got)
+    out["RayCaster.intersect"] = out["scan (records)"] = out["scan (records, numpy path)"] = slipped(got)
+    if importlib.util.find_spec("open3d") is not None:
+        import open3d as o3d
+
+        o3d_scene = o3d.t.geometry.RaycastingScene()
+        o3d_scene.add_triangles(o3d.core.Tensor(vertices.astype(np.float32)), o3d.core.Tensor(triangles.astype(np.uint32)))
+        t_hit = o3d_scene.cast_rays(o3d.core.Tensor(np.hstack([origins, directions]).astype(np.float32)))["t_hit"].numpy()
+        out["Open3D RaycastingScene"] = slipped(np.where(np.isfinite(t_hit), t_hit, np.inf))
     location, ray, _ = RayMeshIntersector(trimesh.Trimesh(vertices, triangles, process=False)).intersects_location(origins, directions, multiple_hits=False)
     got = far.copy()
     got[ray] = np.linalg.norm(location - origins[ray], axis=1)
@@ -269,17 +302,21 @@ def chart(rows: list[dict], path) -> None:
 
 def main():
     args = arguments(__doc__)
-    threads = os.cpu_count() or 1
+    threads = default_threads()
+    RayCaster(SceneBuffers.from_meshes({"warm-up": primitives.box(1, 1, 1)}), frame=np.eye(4))  # numba's import and kernel load (~0.6 s, once a process) out of the timings
     setup = Setup(args.small)
     count = 5000 if args.small else 50000  # rays timed for Blender's ray casts (a Python loop)
     methods = [
         ("embreex raw", embreex_raw, threads, "float32 distance"),
         ("RayCaster.intersect", raycaster, threads, "sensor frame, float64 re-solve"),
-        ("scan (records)", full_scan, threads, "point records: float32 x y z"),
+        ("scan (records)", full_scan, threads, "point records: float32 x y z" + ("; compiled kernel" if kernels.numba_available() else "; numba absent: numpy path")),
+        ("scan (records, numpy path)", lambda s, t: full_scan(s, t, "numpy"), threads, "point records, kernel='numpy'"),
         ("trimesh + embreex", trimesh_embree, 1, "trimesh.ray.ray_pyembree"),
         ("Blender BVHTree", lambda s, t: blender_bvhtree(s, t, count), 1, f"Python loop; {count:,} rays timed, extrapolated"),
         ("Blender scene.ray_cast", lambda s, t: blender_scene_ray_cast(s, t, count), 1, f"Python loop; {count:,} rays timed, extrapolated"),
     ]
+    if importlib.util.find_spec("open3d") is not None:
+        methods.insert(1, ("Open3D RaycastingScene", open3d_raycast, threads, "open3d.t.geometry.RaycastingScene.cast_rays, float32 distance, no labels"))
     rows = []
     common = {"rays": len(setup.directions), "triangles": len(setup.buffers.triangles), "hits": int((setup.exact_row >= 0).sum())}
     for name, fn, used_threads, note in methods:
@@ -289,6 +326,8 @@ def main():
     for r in rows:
         r["slipped_vertex_rays"] = slips.get(r["method"])
     rows.append({"method": "embreex (robust off)", **common, "slipped_vertex_rays": slips["embreex (robust off)"], "note": "watertightness only"})
+    if importlib.util.find_spec("open3d") is None:
+        rows.append({"method": "Open3D RaycastingScene", **common, "note": "not run: open3d is not installed (pip install open3d; Debian needs libusb-1.0-0)"})
     if importlib.util.find_spec("rtree") is None:
         rows.append({"method": "trimesh ray_triangle", **common, "note": "not run: needs the rtree package (not a dependency)"})
     reference = rows[0]["rays_per_s"]

@@ -34,7 +34,7 @@ def numba_available() -> bool:
 def _fill_diffuse(
     tfar, prim, prim_triangle, moved, origins, directions,
     plane_normal, plane_offset, triangle_object, material, semantic, instance, reflectivity,
-    ring, time, min_range, max_distance,
+    ring, time, min_range, max_distance, ray_base,
     x, y, z, intensity, semantic_out, instance_out, ring_out, time_out, range_out, bounces_out,
     cos_out, reflectivity_out, gain_out, direction_out, ray_out, front, back,
 ):  # fmt: skip
@@ -46,7 +46,7 @@ def _fill_diffuse(
     origins : (n, 3) float64 or (1, 3) shared; directions : (n, 3) float64 unit, local frame
     plane_normal (m, 3), plane_offset (m,) float64; triangle_object (m,); per object row:
     material, semantic, instance, reflectivity
-    ring (n,), time (n,): the rays' channel and firing time
+    ring (n,), time (n,): the rays' channel and firing time; ray_base : added to the ray indices written
     The outputs (x ... direction_out, ray_out) have room for n records; ``front`` and ``back``
     (k,) bool are set for the objects hit from the front (d.n < 0) and from behind (d.n > 0).
     """
@@ -106,7 +106,7 @@ def _fill_diffuse(
         direction_out[k, 0] = np.float32(dx)
         direction_out[k, 1] = np.float32(dy)
         direction_out[k, 2] = np.float32(dz)
-        ray_out[k] = i
+        ray_out[k] = ray_base + i
         k += 1
     return k
 
@@ -161,13 +161,13 @@ def compiled() -> SimpleNamespace | None:
     return SimpleNamespace(fill_diffuse=jit(_fill_diffuse), back_face_rays=jit(_back_face_rays), triangle_planes=jit(_triangle_planes))
 
 
-def fill_diffuse(kernels: SimpleNamespace, tfar, prim, prim_triangle, moved, origins, directions, caster, objects, ring, time, min_range, max_distance, points, beam, ray):
+def fill_diffuse(kernels: SimpleNamespace, tfar, prim, prim_triangle, moved, origins, directions, caster, objects, ring, time, min_range, max_distance, points, beam, ray, ray_base: int = 0):
     """Run :func:`_fill_diffuse` with the record arrays' fields; returns ``(count, front, back)``."""
     front, back = np.zeros(len(objects), np.bool_), np.zeros(len(objects), np.bool_)
     count = kernels.fill_diffuse(
         tfar, prim, prim_triangle, moved, origins, directions,
         caster.plane_normal, caster.plane_offset, caster.triangle_object, objects.material, objects.semantic, objects.instance, objects.reflectivity,
-        ring, time, float(min_range), float(max_distance),
+        ring, time, float(min_range), float(max_distance), int(ray_base),
         points["x"], points["y"], points["z"], points["intensity"], points["semantic"], points["instance"], points["ring"], points["time"], points["range"], points["bounces"],
         beam["cos_incidence"], beam["reflectivity"], beam["gain"], beam["direction"], ray, front, back,
     )  # fmt: skip

@@ -245,7 +245,7 @@ class RayCaster:
             self._corner_scales = scales
         return self._corner_scales
 
-    def _embree(self, origins32: np.ndarray, directions32: np.ndarray, far: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _embree(self, origins32: np.ndarray, directions32: np.ndarray, far: np.ndarray, then=None) -> tuple:
         """Embree alone, chunked over the thread pool: ``(tfar, prim)`` per ray; ``far`` is left as it was.
 
         prim : (n,) Embree primitive (map it with :meth:`_triangles`), -1 for a miss. embreex writes
@@ -253,10 +253,16 @@ class RayCaster:
         With two parts (static and moving), the moving one is traced up to the static hit and the
         nearer hit is kept, as a buffer triangle index. Only Embree (and that merge) runs in the
         worker threads: embreex takes the GIL back after every call, so numpy work on another
-        thread would stall it.
+        thread would stall it. ``then(start, tfar, prim)``, when given, runs in the worker on each
+        chunk's answer (a compiled kernel that releases the GIL); its results come back in order
+        as a third item, a list.
         """
 
         def run(start):
+            tfar, prim = trace(start)
+            return (tfar, prim) if then is None else (tfar, prim, then(start, tfar, prim))
+
+        def trace(start):
             s = slice(start, start + self.chunk)
             limit = np.array(far[s], np.float32)
             best = None
@@ -281,6 +287,11 @@ class RayCaster:
             parts = list(self._pool.map(run, starts))
         else:
             parts = [run(start) for start in starts]
+        if then is not None:
+            if not parts:
+                return np.zeros(0, np.float32), np.zeros(0, np.int32), []
+            tfar, prim = (parts[0][0], parts[0][1]) if len(parts) == 1 else (np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts]))
+            return tfar, prim, [p[2] for p in parts]
         if len(parts) == 1:
             return parts[0]
         return tuple(np.concatenate(column) for column in zip(*parts)) if parts else (np.zeros(0, np.float32), np.zeros(0, np.int32))
@@ -289,8 +300,8 @@ class RayCaster:
         """The float32 query of :meth:`intersect`: ``(local (3,) or (n, 3) float64, origins32, directions32, far32)``."""
         n = len(directions)
         local = np.asarray(origins, np.float64)
-        if local.ndim == 1 and not local.any():
-            origins32 = np.zeros((n, 3), np.float32)
+        if local.ndim == 1 and not local.any():  # one zero origin, repeated by strides (embreex only reads it)
+            origins32 = np.lib.stride_tricks.as_strided(np.zeros(3, np.float32), (n, 3), (0, 4), writeable=True)
         else:
             origins32 = np.ascontiguousarray(np.broadcast_to(local, (n, 3)), np.float32)
         far = np.empty(n, np.float32)

@@ -303,24 +303,42 @@ IDENTITY = np.zeros(0, np.int64)
 def _fused_chunk(caster: RayCaster, buffers: SceneBuffers, pattern: Pattern, origin: np.ndarray, world_d: np.ndarray, directions32, min_range: float, max_range: float):
     """:func:`scan_chunk` of a scene without mirrors or glass through the compiled kernel (:mod:`.kernels`).
 
-    Embree, then one pass that solves, tests, labels and fills each record. Slipped rays are
-    found from the objects the pass saw from both sides, traced again as the numpy path does
-    (:meth:`RayCaster.retrace`) and the pass repeated with them: the same bytes as the numpy path.
+    Each of the caster's threads traces a part of the rays with Embree, then fills their records in
+    one compiled pass (solve, trust test, range limits, labels) while another part is traced.
+    Slipped rays are found from the objects the passes saw from both sides, traced again as the
+    numpy path does (:meth:`RayCaster.retrace`) and the pass repeated over the chunk with them:
+    the same bytes as the numpy path.
     """
     world_d = np.ascontiguousarray(world_d, np.float64)
     n = len(world_d)
     local, origins32, directions32, far = caster.launch(origin, world_d, max_range, directions32)
-    tfar, prim = caster._embree(origins32, directions32, far)
     origins = np.ascontiguousarray(local.reshape(-1, 3), np.float64)
+    shared = len(origins) == 1
     prim_triangle = IDENTITY if caster.embree_triangle is None else caster.embree_triangle
+    objects = buffers.objects
+    # Records of rays start.. go from row start on (at most one per ray), then close up: memory
+    # the operating system never maps where rays missed, and no copy when every ray returns.
     points, beam, ray = np.empty(n, POINT_DTYPE), np.empty(n, BEAM_DTYPE), np.empty(n, np.int64)
-    run = lambda tfar, prim, moved: fill_diffuse(caster.kernels, tfar, prim, prim_triangle, moved, origins, world_d, caster, buffers.objects, pattern.ring, pattern.time, min_range, max_range, points, beam, ray)  # noqa: E731
-    count, front, back = run(tfar, prim, NO_RAYS)
 
+    def fill(start, tfar, prim, moved=NO_RAYS):
+        s = slice(start, start + len(prim))
+        return fill_diffuse(caster.kernels, tfar, prim, prim_triangle, moved, origins if shared else origins[s], world_d[s], caster, objects, pattern.ring[s], pattern.time[s], min_range, max_range, points[s], beam[s], ray[s], start)
+
+    tfar, prim, parts = caster._embree(origins32, directions32, far, fill)
+    front = np.logical_or.reduce([p[1] for p in parts]) if parts else np.zeros(len(objects), bool)
+    back = np.logical_or.reduce([p[2] for p in parts]) if parts else np.zeros(len(objects), bool)
     suspect = caster.suspects(front, back, prim, lambda both: back_face_rays(caster.kernels, prim, prim_triangle, world_d, caster, both))
     if len(suspect):
         tfar, prim, moved = caster.retrace(suspect, local, world_d, far, tfar, prim)
-        count, _, _ = run(tfar, prim, moved)
+        count = fill(0, tfar, prim, moved)[0]
+        return points[:count], beam[:count], ray[:count]
+    count = 0
+    for start, (part, _, _) in zip(range(0, n, caster.chunk), parts):
+        if start != count:
+            for records in (points, beam, ray):
+                raw = records.view(np.uint8).reshape(n, -1)
+                raw[count : count + part] = raw[start : start + part]
+        count += part
     return points[:count], beam[:count], ray[:count]
 
 
