@@ -95,7 +95,7 @@ def test_dropper_count_per_span_follows_the_rule():
         droppers = bpy.data.objects[f"span.t0.{span:02d}.droppers"]
         assert len(droppers.data.splines) == max(1, math.floor(wire.length / 4.5))
     for support in layout.supports:  # the support assemblies stand in their frames on the alignment
-        for part in ("mast.right", "cantilever.t0", "registration_arm.t0", "insulators"):
+        for part in ("mast.right", "cantilever.t0", "registration_arm.t0", "insulators.t0"):
             np.testing.assert_allclose(np.array(bpy.data.objects[f"support.{support.index:02d}.{part}"].matrix_world), support.frame, atol=1e-6)
 
 

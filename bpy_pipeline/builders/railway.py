@@ -86,6 +86,7 @@ class RailwayCatenary:
     contact_wire_height: float = 5.5  # above the rail heads
     system_height: float = 1.4  # messenger above the contact wire at the supports (1.1-1.8)
     stagger: float = 0.2  # contact wire zig-zag at the supports, +- (0.2-0.3)
+    registration_arm_length: float = 1.2  # m, horizontal reach of the registration arm (1-1.5 m on real lines)
     double_contact_probability: float = 0.0  # FC_DOUBLE_PROBABILITY, per track
     double_contact_spacing: float = 0.04  # FC_DOUBLE_SPACING: between the two contact wires
     sag_reference_length: float = 50.0  # SAG_REFERENCE_LENGTH

@@ -30,6 +30,9 @@ EARTH_BRACKET = (0.35, -1.5)  # m: earth wire beside and below the mast top
 GANTRY_CLEARANCE = 0.8  # m: gantry beam above the messenger attachment
 MIN_DROPPER = 0.15  # m: shortest dropper the system height must leave at mid-span
 MAX_MID_SPAN_OFFSET = 0.4  # m: on a curve, spans shorten so the wire strays no further inside at mid-span
+BEAM_RISE = 0.6  # m: a mast's beam to the cantilevers of its farther tracks, above the nearest cantilever's stay
+ARM_RISE = 0.2  # m: the registration arm's root above the contact wire (the arm slopes about 10 deg)
+ARM_SHARE = 0.6  # the arm spans at most this share of its cantilever (so the main tube stays above the arm)
 
 
 # ----------------------------------------------------------------------------- cross-section
@@ -208,7 +211,7 @@ def support_chainages(length: float, span: float, jitter: float, rng: np.random.
     return (length - total) / 2.0 + np.concatenate([[0.0], np.cumsum(spans)])
 
 
-def _masts(params, section: CrossSection, layout: str, gantry_top: float, rng: np.random.Generator) -> list[Mast]:
+def _masts(params, section: CrossSection, layout: str, gantry_top: float, beam_top: float, rng: np.random.Generator) -> list[Mast]:
     supports = params.supports
     n = len(section.offsets)
     right = section.offsets[0] - supports.mast_offset
@@ -218,7 +221,10 @@ def _masts(params, section: CrossSection, layout: str, gantry_top: float, rng: n
 
     def mast(side, lateral, outward, carries, kind):
         base = float(section.surface(lateral))
-        return Mast(side, lateral, outward, base, gantry_top if layout == "gantry" else base + supports.mast_height, kind, carries)
+        top = base + supports.mast_height
+        if len(carries) > 1:  # its beam to the farther tracks passes above the nearest cantilever
+            top = max(top, beam_top)
+        return Mast(side, lateral, outward, base, gantry_top if layout == "gantry" else top, kind, carries)
 
     if layout == "single":
         lateral, outward = (right, -1.0) if supports.side == "right" else (left, 1.0)
@@ -278,10 +284,11 @@ def plan(params, rng: np.random.Generator) -> RailwayLayout:
     contact_z = section.rail_top + cat.contact_wire_height
     messenger_z = contact_z + cat.system_height
     gantry_top = messenger_z + STAY_RISE + GANTRY_CLEARANCE
+    beam_top = messenger_z + STAY_RISE + BEAM_RISE + 0.2
     offsets = staggers(alignment, chainages, cat.stagger)
     supports = []
     for k, (s, frame) in enumerate(zip(chainages, frames)):
-        masts = tuple(_masts(params, section, layout, gantry_top, rng))
+        masts = tuple(_masts(params, section, layout, gantry_top, beam_top, rng))
         supports.append(Support(k, float(s), frame, layout == "gantry", masts, float(offsets[k])))
     double = rng.random(track.tracks) < cat.double_contact_probability
 
@@ -325,6 +332,64 @@ def _wire(kind: str, run: str, span: int, start, end, cat) -> Wire:
     diameter = {"contact_wire": cat.contact_wire_diameter, "messenger_wire": cat.messenger_wire_diameter, "feeder": cat.feeder_diameter, "earth_wire": cat.earth_wire_diameter}[kind]
     sag = catenary.sag_for_span(length, reference, cat.sag_reference_length, cat.sag_exponent)
     return Wire(kind, WIRE_CLASSES[kind], run, span, np.asarray(start, float), np.asarray(end, float), sag, diameter)
+
+
+# ----------------------------------------------------------------------------- cantilevers
+@dataclass(frozen=True)
+class CantileverPlan:
+    """Where one track's cantilever goes at one support (laterals and heights in the support frame, m).
+
+    track : the track it carries
+    attach_y : lateral where the messenger and the contact wire hang (track centre + stagger)
+    root_y : lateral of its root: the mast's face, or a drop tube hanging from ``drop_from``
+    drop_from : height of the drop tube's top (a gantry beam's underside, or the mast's own beam), ``None`` at a mast face
+    beam : ``(y0, y1, z)`` a level beam from the mast face to the drop tube (the farther tracks of a mast), or ``None``
+    arm_length : horizontal reach (m) of the registration arm, from its root towards the mast to the contact wire
+    """
+
+    track: int
+    attach_y: float
+    root_y: float
+    drop_from: float | None
+    beam: tuple[float, float, float] | None
+    arm_length: float
+
+
+MAST_FACE = 0.15  # m: half the mast's width, where a cantilever's root sits
+BEAM_RADIUS = 0.04  # m
+
+
+def cantilevers(support: Support, section: CrossSection, cat, track_spacing: float, beam_underside: float | None = None) -> list[CantileverPlan]:
+    """The cantilever of every track a support carries, sized from the stagger and the system height.
+
+    The registration arm reaches ``cat.registration_arm_length`` (about 1.2 m; 1-1.5 m on real lines) from
+    the contact wire back towards its root. A cantilever at a mast face carries the mast's nearest track;
+    the farther ones hang from drop tubes under a level beam ``BEAM_RISE`` above the nearest cantilever's
+    stay, as on a gantry, each drop tube ``reach`` m from its wires on the mast's side: far enough for
+    the arm (arm / ARM_SHARE) and short of the neighbouring track's wires (track spacing - 0.7 m). No two
+    tracks' fittings share any lateral band at the same height.
+    """
+    contact_z = section.rail_top + cat.contact_wire_height
+    stay_z = contact_z + cat.system_height + STAY_RISE
+    reach = min(cat.registration_arm_length / ARM_SHARE, track_spacing - 0.7 if len(section.offsets) > 1 else math.inf)
+    out = []
+    for mast in support.masts:
+        face = mast.lateral - mast.outward * MAST_FACE
+        order = sorted(mast.tracks, key=lambda i: abs(section.offsets[i] - mast.lateral))
+        for rank, i in enumerate(order):
+            attach = float(section.offsets[i] + support.stagger)
+            if support.gantry:  # every drop tube on the right of its wires: the tracks' fittings never overlap
+                root, drop, beam = attach - reach, beam_underside, None
+            elif rank == 0:
+                root, drop, beam = face, None, None
+            else:
+                root = attach + mast.outward * reach  # towards the mast
+                beam_z = stay_z + BEAM_RISE
+                root, drop, beam = root, beam_z - BEAM_RADIUS, (face, root, beam_z)
+            length = abs(attach - root)
+            arm = min(cat.registration_arm_length, ARM_SHARE * length)
+            out.append(CantileverPlan(i, attach, float(root), drop, beam, float(arm)))
+    return out
 
 
 # ----------------------------------------------------------------------------- stations

@@ -87,17 +87,21 @@ TUBE = 0.025  # m, radius of cantilever tubes
 ARM = 0.02  # m, radius of registration arms
 
 
-def cantilever(root_y: float, attach_y: float, contact_z: float, messenger_z: float, stay_rise: float, drop_from: float | None = None):
+def cantilever(root_y: float, attach_y: float, contact_z: float, messenger_z: float, stay_rise: float, drop_from: float | None = None,
+               arm_length: float = 1.2, arm_rise: float = 0.2):
     """The cantilever carrying one track's wires, its registration arm and its insulators, in the support frame.
 
-    root_y : lateral (m) of the cantilever's root: a mast's face, or a drop tube under a gantry beam
+    root_y : lateral (m) of the cantilever's root: a mast's face, or a drop tube under a beam
         (``drop_from``: the beam's underside height, m; the drop tube runs down from it)
     attach_y : lateral (m) where the messenger and the contact wire hang
     contact_z, messenger_z : heights (m) of the contact wire and the messenger at the support
+    arm_length : horizontal reach (m) of the registration arm from its root to the contact wire;
+        at most 0.6 of |attach_y - root_y| keeps the main tube above the arm
+    arm_rise : height (m) of the arm's root above the contact wire
     Returns ``{"cantilever": mesh, "registration arm": mesh, "insulator": mesh}``.
     A stay tube runs level at ``messenger_z + stay_rise`` from the root to above the wires, a main
-    tube rises to it from below the contact wire, a hanger drops to the messenger, and the
-    registration arm runs from the main tube down to the contact wire.
+    tube rises to it from below the contact wire, a hanger drops to the messenger; a registration
+    tube hangs from the main tube to the arm's root, and the arm runs from there down to the contact wire.
     """
     toward = np.sign(attach_y - root_y) or 1.0
     stay_z = messenger_z + stay_rise
@@ -107,11 +111,11 @@ def cantilever(root_y: float, attach_y: float, contact_z: float, messenger_z: fl
     parts = [tube(*stay, TUBE), tube(*main, TUBE), tube((0.0, attach_y, stay_z), (0.0, attach_y, messenger_z), TUBE * 0.6)]
     if drop_from is not None:
         parts.append(tube((0.0, root_y, drop_from), (0.0, root_y, low_z - 0.1), TUBE * 1.6))
-    arm_z = contact_z + 0.25
-    u = (arm_z - low_z) / (stay_z - low_z)
-    arm_root = (0.0, root_y + u * (attach_y - root_y), arm_z)
-    if abs(arm_root[1] - attach_y) < 0.6:  # a short cantilever: start the arm 0.6 m back
-        arm_root = (0.0, attach_y - toward * 0.6, arm_z)
+    arm_root_y = attach_y - toward * arm_length
+    arm_root = (0.0, arm_root_y, contact_z + arm_rise)
+    u = (arm_root_y - root_y) / (attach_y - root_y)
+    on_main = (0.0, arm_root_y, low_z + u * (stay_z - low_z))
+    parts.append(tube(on_main, arm_root, TUBE * 0.8))  # the registration tube
     arm = tube(arm_root, (0.0, attach_y, contact_z), ARM)
     insulators = []
     for a, b in (stay, main):

@@ -10,7 +10,8 @@ The layout (alignment, supports, spans, wires, droppers, stations) comes from th
   ``Part``: ``rails.t<i>`` and ``sleepers.t<i>`` per track, ``ballast``, ``ballast_stones.s<k>`` (around station k),
   ``embankment``, ``ground``;
 - per support ``support.<k>.mast.<side>`` (or ``support.<k>.gantry``), and per track it carries
-  ``support.<k>.cantilever.t<i>``, ``support.<k>.registration_arm.t<i>``, plus ``support.<k>.insulators``;
+  ``support.<k>.cantilever.t<i>``, ``support.<k>.registration_arm.t<i>``, ``support.<k>.insulators.t<i>``,
+  and ``support.<k>.insulators.<side>`` (the feeder's);
 - per span and run ``span.<run>.<k>.<wire>`` (contact_wire, messenger_wire, feeder, earth_wire)
   and ``span.<run>.<k>.droppers``: wires are bevelled curves of their real diameters, so every
   element has its class and an instance per span.
@@ -29,7 +30,7 @@ from ..geometry import railway_parts
 from ..geometry.catenary import parabolic_sag
 from ..geometry.lod import equal_perimeter_radius
 from ..geometry.primitives import merge
-from ..geometry.railway_layout import EARTH_BRACKET, FEEDER_BRACKET, MIN_WIRE_SIDES, STAY_RISE, RailwayLayout, level_of_detail, plan
+from ..geometry.railway_layout import ARM_RISE, BEAM_RADIUS, EARTH_BRACKET, FEEDER_BRACKET, MIN_WIRE_SIDES, STAY_RISE, RailwayLayout, cantilevers, level_of_detail, plan
 from .nodes import add_group_modifier
 from .objects import mesh_data, mesh_object, scene_collection, tag, wire_object
 from .railway_nodes import PARTS, track_group
@@ -160,7 +161,6 @@ def _supports(params, layout: RailwayLayout, detail, collection) -> None:
         support = layout.supports[k]
         frame = np.asarray(support.frame, float)
         label = f"support.{k:02d}"
-        insulators = []
         beam_underside = None
         if support.gantry:
             right, left = support.masts
@@ -174,19 +174,17 @@ def _supports(params, layout: RailwayLayout, detail, collection) -> None:
                 _placed(f"{label}.mast.{mast.side}", shared[key], frame, "mast", collection)
             if cat.feeders:  # the feeder hangs from its bracket on a rod insulator
                 y = mast.lateral + mast.outward * FEEDER_BRACKET[0]
-                insulators.append(railway_parts.insulator((0.0, y, mast.top - 0.075), (0.0, y, mast.top + FEEDER_BRACKET[1] + 0.02), 0.05, 3))
-            for i in mast.tracks:
-                attach_y = section.offsets[i] + support.stagger
-                if support.gantry:  # a drop tube under the beam, 0.9 m from the wires towards the middle
-                    root_y = attach_y - 0.9 * (np.sign(attach_y) or -1.0)
-                else:
-                    root_y = mast.lateral - mast.outward * 0.15
-                pieces = railway_parts.cantilever(root_y, attach_y, contact_z, messenger_z, STAY_RISE, beam_underside)
-                _placed(f"{label}.cantilever.t{i}", pieces["cantilever"], frame, "cantilever", collection)
-                _placed(f"{label}.registration_arm.t{i}", pieces["registration arm"], frame, "registration arm", collection)
-                insulators.append(pieces["insulator"])
-        if insulators:
-            _placed(f"{label}.insulators", merge(insulators), frame, "insulator", collection)
+                feeder = railway_parts.insulator((0.0, y, mast.top - 0.075), (0.0, y, mast.top + FEEDER_BRACKET[1] + 0.02), 0.05, 3)
+                _placed(f"{label}.insulators.{mast.side}", feeder, frame, "insulator", collection)
+        for plan_ in cantilevers(support, section, cat, params.track.track_spacing, beam_underside):
+            i = plan_.track
+            pieces = railway_parts.cantilever(plan_.root_y, plan_.attach_y, contact_z, messenger_z, STAY_RISE, plan_.drop_from, plan_.arm_length, ARM_RISE)
+            if plan_.beam is not None:  # a mast's beam out to the drop tube of a farther track
+                y0, y1, z = plan_.beam
+                pieces["cantilever"] = merge([pieces["cantilever"], railway_parts.tube((0.0, y0, z), (0.0, y1 + np.sign(y1 - y0) * BEAM_RADIUS, z), BEAM_RADIUS)])
+            _placed(f"{label}.cantilever.t{i}", pieces["cantilever"], frame, "cantilever", collection)
+            _placed(f"{label}.registration_arm.t{i}", pieces["registration arm"], frame, "registration arm", collection)
+            _placed(f"{label}.insulators.t{i}", pieces["insulator"], frame, "insulator", collection)
 
 
 def _bevel_sides(sides: int) -> int:
