@@ -1,12 +1,21 @@
-"""The built-in writers, registered by name (:mod:`.writers`): point formats, range image, preview, box labels."""
+"""The built-in writers, registered by name (:mod:`.writers`): point formats, range image, preview, box labels.
+
+Point formats (``output.formats``): ply, semantickitti (+ its yaml, calib, poses and times), las, npy
+(+ Pointcept split lists), pcd, range_image. Box label layouts (``output.boxes.formats``): kitti
+(KITTI object layout with camera images and ImageSets), openpcdet (custom layout), sustech
+(SUSTechPOINTS JSON + PCD).
+"""
 
 from __future__ import annotations
 
 from pathlib import Path
 
+from ..errors import InputError
 from ..labels import load_class_table
-from .boxes import write_frame_boxes, write_image_sets
-from .layout import write_frame_las, write_frame_npy, write_frame_ply, write_frame_preview, write_frame_semantickitti
+from . import kitti, npy, openpcdet, semantickitti, sustech
+from .layout import frame_stem, write_frame_las, write_frame_npy, write_frame_ply, write_frame_preview, write_frame_semantickitti
+from .pcd import write_pcd
+from .splits import split_frames
 from .range_image import write_frame_range_image
 from .writers import Writer, register_writer
 
@@ -30,25 +39,44 @@ def _write_preview(frame, out: Path) -> list[Path]:
     return [write_frame_preview(out, frame.index, frame.points, load_class_table().color_lut())]
 
 
-def _box_writer(name: str) -> Writer:
-    """Box labels in layout ``name`` (kitti, openpcdet), with the frame's points and an ImageSets index."""
+def _check_split(config) -> None:
+    split_frames([], config.seed, config.output.kitti.val_fraction)
 
-    def write(frame, out: Path) -> list[Path]:
-        return write_frame_boxes(out, frame.index, frame.boxes, frame.points, [name], frame.config.output.boxes.names)
 
-    def index(out: Path, records: list[dict], config) -> list[Path]:
-        return write_image_sets(out, [r["index"] for r in records], [name])
+def _check_kitti(config) -> None:
+    _check_split(config)
+    camera = config.output.kitti.camera
+    if len(camera.resolution) != 2 or min(int(v) for v in camera.resolution) < 1:
+        raise InputError(f"output.kitti.camera.resolution: expected [width, height] in pixels >= 1, got {list(camera.resolution)}")
+    if not 0.0 < float(camera.fov_deg) < 180.0:
+        raise InputError(f"output.kitti.camera.fov_deg: must be > 0 and < 180 degrees, got {camera.fov_deg}")
 
-    return Writer(write, index=index, boxes=True)
+
+def _write_kitti(frame, out: Path) -> list[Path]:
+    return kitti.write_frame(out, frame_stem(frame.index), frame.points, frame.boxes, frame.config.output.kitti.camera, load_class_table().color_lut(), frame.config.output.boxes.names)
+
+
+def _write_openpcdet(frame, out: Path) -> list[Path]:
+    return openpcdet.write_frame(out, frame_stem(frame.index), frame.points, frame.boxes, frame.config.output.boxes.names)
+
+
+def _write_sustech(frame, out: Path) -> list[Path]:
+    return sustech.write_frame(out, frame_stem(frame.index), frame.points, frame.boxes, frame.config.output.boxes.names)
+
+
+def _write_pcd(frame, out: Path) -> list[Path]:
+    return [write_pcd(Path(out) / "pcd" / f"{frame_stem(frame.index)}.pcd", frame.points)]
 
 
 register_writer("ply", _points_writer(write_frame_ply))
-register_writer("semantickitti", _points_writer(write_frame_semantickitti))
+register_writer("semantickitti", Writer(_points_writer(write_frame_semantickitti).write, index=semantickitti.write_index))
 register_writer("las", _points_writer(write_frame_las))
-register_writer("npy", _points_writer(write_frame_npy))
+register_writer("npy", Writer(_points_writer(write_frame_npy).write, _check_split, npy.write_index))
+register_writer("pcd", Writer(_write_pcd))
 register_writer("range_image", Writer(_write_range_image, _check_range_image))
 register_writer("preview", Writer(_write_preview))
-register_writer("kitti", _box_writer("kitti"))
-register_writer("openpcdet", _box_writer("openpcdet"))
+register_writer("kitti", Writer(_write_kitti, _check_kitti, kitti.write_index, boxes=True))
+register_writer("openpcdet", Writer(_write_openpcdet, _check_split, openpcdet.write_index, boxes=True))
+register_writer("sustech", Writer(_write_sustech, boxes=True))
 
 from . import rig_outputs  # noqa: F401,E402  (registers rig and flash_image)

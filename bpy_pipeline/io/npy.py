@@ -103,3 +103,23 @@ def read_npy_folder(folder: str | os.PathLike, maps: ClassMaps | None = None) ->
         else:
             out[field] = np.where(values < 0, 0, values)
     return out
+
+
+def write_index(out_dir: str | os.PathLike, records: list[dict], config) -> list[Path]:
+    """Pointcept split lists ``OUT/npy_train.json`` and ``OUT/npy_val.json`` (the seed's split, :mod:`.splits`).
+
+    Each lists frame folders relative to ``OUT`` (``npy/NNNNNN``): Pointcept's ``DefaultDataset`` with
+    ``data_root=OUT`` and ``split="npy_train.json"`` reads such a file as its list of frames.
+    """
+    import json
+
+    from .atomic import atomic_write
+    from .splits import split_frames
+
+    train, val = split_frames([r["index"] for r in records], config.seed, config.output.kitti.val_fraction)
+    written = []
+    for name, frames in (("npy_train.json", train), ("npy_val.json", val)):
+        with atomic_write(Path(out_dir) / name) as tmp:
+            tmp.write_text(json.dumps([f"npy/{i:06d}" for i in frames]) + "\n")
+        written.append(Path(out_dir) / name)
+    return written

@@ -134,3 +134,71 @@ def read_semantickitti(bin_path: str | os.PathLike, label_path: str | os.PathLik
         out["semantic"] = semantic
         out["instance"] = instance
     return out
+
+
+# ----------------------------------------------------------------------------- the dataset's index
+def label_counts(paths) -> np.ndarray:
+    """``(65536,)`` int64 points per raw semantic id over the ``.label`` files ``paths``."""
+    counts = np.zeros(1 << 16, np.int64)
+    for path in paths:
+        labels = np.fromfile(path, "<u4")
+        counts += np.bincount(labels & 0xFFFF, minlength=1 << 16)
+    return counts
+
+
+def pose_lines(poses: list[np.ndarray], tr: np.ndarray) -> str:
+    """``poses.txt``: each frame's camera pose relative to the first frame's camera, 3 x 4 row-major.
+
+    poses : (4, 4) sensor-to-world transforms; tr : (3, 4) ``Tr`` (velodyne to camera) of ``calib.txt``,
+    so the devkit's ``inv(Tr) @ pose @ Tr`` gives back the sensor's motion.
+    """
+    tr4 = np.vstack([tr, [0.0, 0.0, 0.0, 1.0]])
+    first = np.linalg.inv(np.asarray(poses[0], float))
+    rows = []
+    for pose in poses:
+        camera = tr4 @ first @ np.asarray(pose, float) @ np.linalg.inv(tr4)
+        rows.append(" ".join(f"{v:.12e}" for v in camera[:3].ravel()))
+    return "".join(row + "\n" for row in rows)
+
+
+def write_index(out_dir: str | os.PathLike, records: list[dict], config) -> list[Path]:
+    """The dataset files beside the scans: ``semantic-kitti.yaml`` and ``sequences/SS/{calib,poses,times}.txt``.
+
+    ``semantic-kitti.yaml`` holds the class table the devkit's way (:func:`~.class_maps.semantic_kitti_yaml`,
+    ``content`` counted over the written labels); ``calib.txt`` the camera of ``output.kitti.camera``
+    (P0..P3) and ``Tr``; ``poses.txt`` and ``times.txt`` one line per written scan, in file order, from
+    the records' sensor poses and the frame period (frame index x the sensor's frame time, or the moving
+    platform's time where a record has one).
+    """
+    import yaml
+
+    from ..lidar.sensors import frame_time
+    from .class_maps import semantic_kitti_yaml
+    from .kitti import calib_text, camera_matrices
+
+    out_dir = Path(out_dir)
+    sequence = int(config.output.sequence)
+    records = sorted(records, key=lambda r: r["index"])
+    folder = out_dir / "sequences" / f"{sequence:02d}"
+    counts = label_counts(out_dir / f for r in records for f in r["files"] if f.endswith(".label") and "/labels/" in f)
+    table = semantic_kitti_yaml(counts, {"train": [sequence], "valid": [], "test": []})
+    written = []
+    with atomic_write(out_dir / "semantic-kitti.yaml") as tmp:
+        tmp.write_text("# The class table of this dataset in the SemanticKITTI devkit's layout (color_map is BGR).\n"
+                       "# .label files hold raw ids; learning_map gives the training ids.\n" + yaml.safe_dump(table, sort_keys=False))
+    written.append(out_dir / "semantic-kitti.yaml")
+    if not records:
+        return written
+    k, tr = camera_matrices(config.output.kitti.camera)
+    period = frame_time(config.sensor.spec)
+    times = [float(r["trajectory"]["start_time_s"]) if isinstance(r.get("trajectory"), dict) and "start_time_s" in r["trajectory"] else r["index"] * period for r in records]
+    texts = {
+        "calib.txt": "".join(line.replace("Tr_velo_to_cam:", "Tr:") + "\n" for line in calib_text(k, tr).splitlines() if line.startswith(("P", "Tr_velo"))),
+        "poses.txt": pose_lines([np.asarray(r["sensor_pose"], float) for r in records], tr),
+        "times.txt": "".join(f"{t:.6e}\n" for t in times),
+    }
+    for name, text in texts.items():
+        with atomic_write(folder / name) as tmp:
+            tmp.write_text(text)
+        written.append(folder / name)
+    return written

@@ -1,0 +1,176 @@
+"""The KITTI object layout, as OpenPCDet's and mmdetection3d's KITTI loaders read it.
+
+Files (frame ``NNNNNN``)::
+
+    kitti/training/velodyne/NNNNNN.bin   float32 (n, 4): x y z (m, sensor frame), intensity (0..1)
+    kitti/training/label_2/NNNNNN.txt    type truncated occluded alpha bbox(4) h w l x y z rotation_y
+    kitti/training/calib/NNNNNN.txt      P0..P3 (the camera's 3 x 4 projection), R0_rect, Tr_velo_to_cam, Tr_imu_to_velo
+    kitti/training/image_2/NNNNNN.png    the camera's view (see :func:`render_image`)
+    kitti/ImageSets/{train,val,test}.txt frame stems; test is empty (no testing/ folder is written)
+
+The camera (``output.kitti.camera``) is a pinhole fixed to the LiDAR; ``Tr_velo_to_cam`` is its
+pose composed with KITTI's axis change (x_cam = -y, y_cam = -z, z_cam = x). Types come from
+``kitti_names`` in ``assets_manifest/labels.yaml`` (Car, Van, Truck, Pedestrian, Person_sitting,
+Cyclist, Tram, Misc), overridden by ``output.boxes.names``. As in KITTI, ``label_2`` lists the
+objects seen in the image: a box whose points all fall outside it is left out (the OpenPCDet
+custom layout keeps every box around the sensor); its 2D box is the extent of its points in the
+image, and its truncation is the larger of the LiDAR truncation and the share of its points
+outside the image. A frame without such an object gets one ``DontCare`` line (KITTI's own
+placeholder), because OpenPCDet's ``get_infos`` and mmdetection3d's converter concatenate the
+objects of a label file and fail on an empty one; the frame stays in the ImageSets.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from ..geometry.transforms import euler_xyz_matrix
+from .atomic import atomic_write
+from .class_maps import ClassMaps, load_class_maps
+from .preview import encode_png, splat
+from .splits import split_frames
+
+KITTI_AXES = np.array([[0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]])  # sensor (x fwd, y left, z up) -> camera (x right, y down, z fwd)
+IMAGE_BACKGROUND = (40, 40, 46)
+DONT_CARE = "DontCare -1 -1 -10 0.00 0.00 1.00 1.00 -1 -1 -1 -1000 -1000 -1000 -10"
+MIN_DEPTH = 0.1  # m in front of the camera for a point to project
+
+
+def wrap_angle(angle):
+    """Angle(s) in radians wrapped to [-pi, pi)."""
+    return (np.asarray(angle, float) + np.pi) % (2 * np.pi) - np.pi
+
+
+def camera_matrices(camera) -> tuple[np.ndarray, np.ndarray]:
+    """``(K (3, 3), Tr_velo_to_cam (3, 4))`` of an ``output.kitti.camera`` section (pixels; metres)."""
+    width, height = (int(v) for v in camera.resolution)
+    focal = (width / 2) / np.tan(np.radians(float(camera.fov_deg)) / 2)
+    k = np.array([[focal, 0.0, width / 2], [0.0, focal, height / 2], [0.0, 0.0, 1.0]])
+    rotation = euler_xyz_matrix(camera.rotation_deg)  # camera body (x forward) -> sensor
+    to_cam = KITTI_AXES @ rotation.T
+    return k, np.hstack([to_cam, -(to_cam @ np.asarray(camera.position, float))[:, None]])
+
+
+def project(xyz: np.ndarray, k: np.ndarray, tr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pixel coordinates ``(n, 2)`` (u right, v down) and depths ``(n,)`` (m along the optical axis) of ``(n, 3)`` sensor-frame points."""
+    cam = np.asarray(xyz, np.float64) @ tr[:, :3].T + tr[:, 3]
+    depth = cam[:, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        uv = (cam @ k.T)[:, :2] / depth[:, None]
+    return uv, depth
+
+
+def in_image(uv: np.ndarray, depth: np.ndarray, resolution) -> np.ndarray:
+    """``(n,)`` bool: in front of the camera and inside the image."""
+    width, height = resolution
+    return (depth > MIN_DEPTH) & (uv[:, 0] >= 0) & (uv[:, 0] < width) & (uv[:, 1] >= 0) & (uv[:, 1] < height)
+
+
+def calib_text(k: np.ndarray, tr: np.ndarray) -> str:
+    """A KITTI object calib file: the camera as P0..P3, identity rectification, ``Tr_velo_to_cam``."""
+    p = np.hstack([k, np.zeros((3, 1))])
+
+    def row(name, m):
+        return name + ": " + " ".join(f"{v:.12e}" for v in np.asarray(m, float).ravel())
+
+    rows = [row(f"P{i}", p) for i in range(4)] + [row("R0_rect", np.eye(3)), row("Tr_velo_to_cam", tr), row("Tr_imu_to_velo", np.hstack([np.eye(3), np.zeros((3, 1))]))]
+    return "\n".join(rows) + "\n"
+
+
+def label_lines(boxes: np.ndarray, points: np.ndarray, camera, maps: ClassMaps | None = None, names: dict | None = None) -> list[str]:
+    """KITTI label lines of ``boxes`` (BOX_DTYPE, level sensor frame) seen by ``camera`` in ``points`` (POINT_DTYPE).
+
+    A frame without a seen object gives ``[DONT_CARE]``.
+    """
+    maps = load_class_maps() if maps is None else maps
+    k, tr = camera_matrices(camera)
+    resolution = tuple(int(v) for v in camera.resolution)
+    xyz = np.stack([points["x"], points["y"], points["z"]], axis=1)
+    lines = []
+    for box in boxes:
+        mine = xyz[points["instance"] == box["instance"]]
+        uv, depth = project(mine, k, tr)
+        seen = in_image(uv, depth, resolution)
+        if not seen.any():
+            continue
+        left, top = uv[seen].min(axis=0)
+        right, bottom_px = uv[seen].max(axis=0)
+        truncation = max(float(box["truncation"]), 1.0 - seen.sum() / len(seen))
+        length, width, height = box["size"]
+        bottom = np.asarray(box["centre"], float) - [0.0, 0.0, height / 2]
+        x, y, z = tr[:, :3] @ bottom + tr[:, 3]
+        heading = tr[:, :3] @ [np.cos(box["heading"]), np.sin(box["heading"]), 0.0]  # the box's length axis in the camera frame
+        rotation_y = float(wrap_angle(np.arctan2(-heading[2], heading[0])))
+        alpha = float(wrap_angle(rotation_y - np.arctan2(x, z)))
+        lines.append(
+            f"{maps.kitti_name(str(box['class_name']), names)} {truncation:.4f} {int(box['occlusion'])} {alpha:.4f} "
+            f"{left:.2f} {top:.2f} {right:.2f} {bottom_px:.2f} {height:.4f} {width:.4f} {length:.4f} {x:.4f} {y:.4f} {z:.4f} {rotation_y:.4f}"
+        )
+    return lines or [DONT_CARE]
+
+
+def render_image(points: np.ndarray, camera, color_lut: np.ndarray, dot: int = 3) -> np.ndarray:
+    """``(height, width, 3) uint8``: the LiDAR points seen by the camera, coloured by class, nearer over farther.
+
+    A projection of the labelled cloud (not a rendering of the scene's surfaces): it gives the
+    loaders the image and its size, and shows what the 2D boxes enclose.
+    """
+    k, tr = camera_matrices(camera)
+    width, height = (int(v) for v in camera.resolution)
+    image = np.empty((height, width, 3), np.uint8)
+    image[:] = IMAGE_BACKGROUND
+    uv, depth = project(np.stack([points["x"], points["y"], points["z"]], axis=1), k, tr)
+    seen = in_image(uv, depth, (width, height))
+    if not seen.any():
+        return image
+    lut = np.asarray(color_lut, np.uint8)
+    semantic = np.minimum(points["semantic"][seen], len(lut) - 1)
+    col, row = np.floor(uv[seen]).astype(np.int64).T
+    offsets = np.arange(dot) - (dot - 1) // 2
+    du, dv = (a.ravel() for a in np.meshgrid(offsets, offsets))
+    col = np.clip(col[:, None] + du, 0, width - 1).ravel()
+    row = np.clip(row[:, None] + dv, 0, height - 1).ravel()
+    splat(image, col, row, np.repeat(-depth[seen], len(du)), np.repeat(lut[semantic], len(du), axis=0))
+    return image
+
+
+def _text(path: Path, text: str) -> Path:
+    with atomic_write(path) as tmp:
+        tmp.write_text(text)
+    return path
+
+
+def write_frame(out_dir: str | os.PathLike, stem: str, points: np.ndarray, boxes: np.ndarray, camera, color_lut: np.ndarray, names: dict | None = None) -> list[Path]:
+    """One frame of the KITTI layout under ``out_dir/kitti/training`` (see the module docstring); returns the paths."""
+    root = Path(out_dir) / "kitti" / "training"
+    k, tr = camera_matrices(camera)
+    velodyne = root / "velodyne" / f"{stem}.bin"
+    with atomic_write(velodyne) as tmp:
+        np.column_stack([points["x"], points["y"], points["z"], points["intensity"]]).astype("<f4").tofile(tmp)
+    image = root / "image_2" / f"{stem}.png"
+    data = encode_png(render_image(points, camera, color_lut), level=1)
+    with atomic_write(image) as tmp:
+        tmp.write_bytes(data)
+    lines = label_lines(boxes if boxes is not None else np.zeros(0, _box_dtype()), points, camera, names=names)
+    return [velodyne, _text(root / "label_2" / f"{stem}.txt", "".join(line + "\n" for line in lines)), _text(root / "calib" / f"{stem}.txt", calib_text(k, tr)), image]
+
+
+def _box_dtype():
+    from .boxes import BOX_DTYPE
+
+    return BOX_DTYPE
+
+
+def write_image_sets(out_dir: str | os.PathLike, folder: str, train: list[int], val: list[int], test: list[int] | None = None) -> list[Path]:
+    """``out_dir/folder/ImageSets/{train,val}.txt`` (and ``test.txt`` when ``test`` is given): one frame stem a line."""
+    sets = {"train": train, "val": val, **({"test": test} if test is not None else {})}
+    return [_text(Path(out_dir) / folder / "ImageSets" / f"{name}.txt", "".join(f"{i:06d}\n" for i in frames)) for name, frames in sets.items()]
+
+
+def write_index(out_dir: str | os.PathLike, records: list[dict], config) -> list[Path]:
+    """The KITTI ImageSets of the committed frames: the seed's train/val split (:mod:`.splits`), an empty test set."""
+    train, val = split_frames([r["index"] for r in records], config.seed, config.output.kitti.val_fraction)
+    return write_image_sets(out_dir, "kitti", train, val, [])

@@ -1,0 +1,49 @@
+"""OpenPCDet's custom-dataset layout (``pcdet/datasets/custom``), with train and val ImageSets.
+
+Files (frame ``NNNNNN``)::
+
+    openpcdet/points/NNNNNN.npy        (n, 4) float32: x y z (m, the points' frame), intensity (0..1)
+    openpcdet/labels/NNNNNN.txt        x y z dx dy dz heading_angle category_name (box centre, length,
+                                       width, height, yaw about z)
+    openpcdet/ImageSets/{train,val}.txt  frame stems, the seed's split (:mod:`.splits`)
+
+OpenPCDet's ``CustomDataset.get_label`` turns every line into a box and slices ``[:, :7]``, which
+fails on an empty file, so frames without a box are written (their points can serve as negatives
+elsewhere) but left out of the ImageSets. Category names are ``output.boxes.names`` or the class
+name capitalised (Car, Person, RobotArm): OpenPCDet's ``CLASS_NAMES`` must list them.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from .atomic import atomic_write
+from .kitti import write_image_sets
+from .splits import split_frames
+from .sustech import label_type
+
+
+def label_lines(boxes: np.ndarray, names: dict | None = None) -> list[str]:
+    """OpenPCDet custom-dataset lines ``x y z dx dy dz heading_angle category_name``."""
+    return [" ".join(f"{v:.4f}" for v in (*box["centre"], *box["size"], float(box["heading"]))) + f" {label_type(str(box['class_name']), names)}" for box in boxes]
+
+
+def write_frame(out_dir: str | os.PathLike, stem: str, points: np.ndarray, boxes, names: dict | None = None) -> list[Path]:
+    """``openpcdet/points/NNNNNN.npy`` and ``openpcdet/labels/NNNNNN.txt`` of one frame."""
+    root = Path(out_dir) / "openpcdet"
+    points_path, label = root / "points" / f"{stem}.npy", root / "labels" / f"{stem}.txt"
+    with atomic_write(points_path) as tmp, open(tmp, "wb") as handle:
+        np.save(handle, np.column_stack([points["x"], points["y"], points["z"], points["intensity"]]).astype(np.float32))
+    with atomic_write(label) as tmp:
+        tmp.write_text("".join(line + "\n" for line in label_lines(boxes if boxes is not None else [], names)))
+    return [points_path, label]
+
+
+def write_index(out_dir: str | os.PathLike, records: list[dict], config) -> list[Path]:
+    """``openpcdet/ImageSets/{train,val}.txt`` of the committed frames that hold a box."""
+    with_boxes = [r["index"] for r in records if r.get("boxes")]
+    train, val = split_frames(with_boxes, config.seed, config.output.kitti.val_fraction)
+    return write_image_sets(out_dir, "openpcdet", train, val)
