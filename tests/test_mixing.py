@@ -345,3 +345,20 @@ def test_semantickitti_labels_are_kept_and_labelled_vehicles_get_boxes(tmp_path)
     vehicle = m.boxes[(m.boxes["instance"] == 0) & (m.boxes["class_name"] == "car")]
     assert len(vehicle) == 1 and abs(vehicle[0]["centre"][0] - 10.0) < 0.1 and vehicle[0]["unoccluded"] == len(car)
     assert vehicle[0]["visible"] < vehicle[0]["unoccluded"]  # the inserted wall hides part of it
+
+
+def test_convert_a_real_kitti_scan_to_a_vlp16(real_scan):
+    from bpy_pipeline.lidar.sensors import resolve_sensor
+    from bpy_pipeline.mixing.convert import convert_scan
+
+    f = recover_firings(read_real_scan(real_scan(KITTI)), "hdl64e")
+    target = resolve_sensor({"preset": "vlp16"}, "t")
+    for method in ("cones", "raycast"):
+        out = convert_scan(f, target, (0.0, 0.0, 1.51 - 1.73), method)
+        assert 1000 < len(out) < f.valid.sum() / 4  # a 16-ring sensor keeps a fraction of the 64-ring scan
+        assert out["ring"].max() < 16
+        elevation = np.degrees(np.arcsin(out["z"] / out["range"]))
+        table = np.array(target.elevations_deg) if target.elevations_deg else np.linspace(-15, 15, 16)
+        assert np.abs(elevation - table[out["ring"]]).max() < 1e-3  # on the target's cones
+    with pytest.raises(InputError, match="method"):
+        convert_scan(f, target, method="nearest")

@@ -31,7 +31,7 @@ def mesh_range_image(points: np.ndarray, valid: np.ndarray, max_jump: float = 0.
     points : (rings, columns, 3) float64 returns; valid : (rings, columns) bool
     Two triangles per cell of 2 x 2 firings, each where its three corners returned and their
     ranges differ by at most ``max_jump`` times the nearest plus ``min_jump`` metres (so a
-    silhouette is not joined to the background). ``wrap``: the last column meets the first.
+    silhouette is not joined to the background), wound to face the sensor. ``wrap``: the last column meets the first.
     Returns ``(vertices (rings * columns, 3), triangles (m, 3) int32)`` (vertex ``r * columns + c``).
     """
     rings, columns = valid.shape
@@ -51,7 +51,12 @@ def mesh_range_image(points: np.ndarray, valid: np.ndarray, max_jump: float = 0.
     for i, j, k in ((a, c, b), (b, c, d)):
         keep = ok(i, j, k)
         tris.append(np.stack([i[keep], j[keep], k[keep]], 1))
-    return points.reshape(-1, 3), np.concatenate(tris).astype(np.int32)
+    vertices, triangles = points.reshape(-1, 3), np.concatenate(tris).astype(np.int32)
+    # wound to face the sensor, so rays from it meet front faces (back faces would be re-traced as slipped rays)
+    v0, v1, v2 = (vertices[triangles[:, m]] for m in range(3))
+    away = np.einsum("ij,ij->i", np.cross(v1 - v0, v2 - v0), v0 + v1 + v2) > 0
+    triangles[away] = triangles[away][:, ::-1]
+    return vertices, triangles
 
 
 def target_rays(spec) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -103,3 +108,38 @@ def raycast_convert(grid_points: np.ndarray, valid: np.ndarray, spec, target_off
     keep = hits.distance >= spec.min_range
     ray, distance = hits.ray[keep], hits.distance[keep]
     return directions[ray] * distance[:, None], ring[ray], column[ray]
+
+
+def firing_grid(firings) -> tuple[np.ndarray, np.ndarray]:
+    """A real scan's returns as a ``(rings, columns, 3)`` grid and its ``valid`` mask (the nearest return of a cell shared by several)."""
+    rings, columns = firings.shape
+    grid, valid = np.zeros((rings, columns, 3)), np.zeros((rings, columns), bool)
+    rows = np.flatnonzero(firings.valid)
+    order = rows[np.argsort(-firings.range[rows], kind="stable")]  # farthest first: the nearest writes last
+    grid[firings.ring[order], firings.column[order]] = firings.returns[order]
+    valid[firings.ring[order], firings.column[order]] = True
+    return grid, valid
+
+
+def convert_scan(firings, spec, target_offset=(0.0, 0.0, 0.0), method: str = "raycast", threads: int | None = None) -> np.ndarray:
+    """A real scan's firings (:class:`~.firings.Firings`) resampled into ``spec``'s pattern, mounted at
+    ``target_offset`` (m, the scan's frame): ``(k,)`` POINT_DTYPE records in the target's frame
+    (``ring``, ``range`` filled; intensity and labels are not carried over).
+
+    method : ``raycast`` (:func:`raycast_convert`) or ``cones`` (the parking paper's :func:`project_to_cones`)
+    """
+    from ..errors import InputError
+    from ..lidar.points import POINT_DTYPE
+
+    grid, valid = firing_grid(firings)
+    if method == "raycast":
+        points, ring, _ = raycast_convert(grid, valid, spec, target_offset, threads)
+    elif method == "cones":
+        points, ring, _ = project_to_cones(grid[valid], spec, target_offset)
+    else:
+        raise InputError(f"method: {method!r} is not raycast or cones")
+    out = np.zeros(len(points), POINT_DTYPE)
+    out["x"], out["y"], out["z"] = points.T
+    out["ring"] = ring
+    out["range"] = np.linalg.norm(points, axis=1)
+    return out
