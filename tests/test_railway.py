@@ -193,3 +193,15 @@ def test_stations_are_frames_of_one_built_line(tmp_path):
     np.testing.assert_allclose([f["sensor_pose"][1][3] for f in frames], 4.0)
     np.testing.assert_allclose([f["sensor_pose"][2][3] for f in frames], 2.0)  # 2 m above the ground beside the track
     assert frames[1]["timings_s"]["build"] < frames[0]["timings_s"]["build"]  # built once, scanned three times
+
+
+def test_ballast_fills_between_the_sleepers():
+    import bpy
+
+    config, layout = build("scene.detail.mode=fixed", "scene.track.crib_height=0.15")
+    track = config.scene.params.track
+    top = evaluated_vertices(bpy.data.objects["ballast"])[:, 2].max()
+    sleepers = evaluated_vertices(bpy.data.objects["sleepers.t0"])[:, 2]
+    assert top == pytest.approx(track.ballast_height + 0.15, abs=1e-4)  # the crib ballast's top
+    assert sleepers.min() == pytest.approx(track.ballast_height, abs=1e-4) and sleepers.max() > top + 0.05  # sleepers stand 7 cm proud
+    assert float(layout.section.surface(0.0)) == pytest.approx(top, abs=1e-6)

@@ -44,6 +44,7 @@ class RailwayTrack:
     sleeper_width: float = 0.26  # along the track
     sleeper_height: float = 0.22
     ballast_height: float = 0.35  # under the sleepers
+    crib_height: float = 0.17  # ballast between the sleepers, above their underside (0 to sleeper_height; 0: bare sleepers on the bed)
     ballast_shoulder: float = 0.5  # beyond the sleeper ends
     ballast_slope: float = 1.5  # horizontal per vertical
     tracks: int = 1  # 1..5
@@ -191,7 +192,10 @@ def release_sensor(params: RailwayScene, raw_scene: dict, sensor_data: dict) -> 
 def build(params: RailwayScene, context: BuildContext) -> BuildResult:
     from ..scenes import railway
 
-    return BuildResult(scene=railway.build(params, context.rng, context.view))
+    layout = railway.build(params, context.rng, context.view)
+    info = {"layout": layout.layout, "length_m": round(float(layout.alignment.length), 4), "supports": len(layout.supports),
+            "spans_m": [round(float(s), 4) for s in layout.spans]}
+    return BuildResult(info=info, scene=layout)
 
 
 register_builder("railway", Builder(RailwayScene, build, check, station, frames_per_scene, release_sensor=release_sensor))

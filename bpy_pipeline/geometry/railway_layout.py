@@ -48,7 +48,7 @@ class CrossSection:
     rail_head_width: float
     rail_height: float
     sleeper_top: float
-    ballast_height: float
+    ballast_height: float  # the bed's top: under the sleepers plus the crib ballast between them
     ballast_top_half: float
     ballast_toe_half: float
     embankment_top_half: float
@@ -62,7 +62,7 @@ class CrossSection:
         offsets = (np.arange(n) - (n - 1) / 2.0) * track.track_spacing
         rail = track.rail
         top = (n - 1) * track.track_spacing / 2 + track.sleeper_length / 2 + track.ballast_shoulder
-        toe = top + track.ballast_height * track.ballast_slope
+        toe = top + (track.ballast_height + track.crib_height) * track.ballast_slope
         berm = toe + track.embankment_berm
         return cls(
             offsets=offsets,
@@ -70,7 +70,7 @@ class CrossSection:
             rail_head_width=rail.head_width,
             rail_height=rail.foot_height + rail.web_height + rail.head_height,
             sleeper_top=track.ballast_height + track.sleeper_height,
-            ballast_height=track.ballast_height,
+            ballast_height=track.ballast_height + track.crib_height,
             ballast_top_half=top,
             ballast_toe_half=toe,
             embankment_top_half=berm,
@@ -430,6 +430,8 @@ def check_railway(params, where: str = "scene") -> None:
         _positive(getattr(track, key), f"{t}.{key}")
     for key in ("ballast_shoulder", "ballast_slope", "embankment_height", "embankment_slope", "embankment_berm"):
         _positive(getattr(track, key), f"{t}.{key}", allow_zero=True)
+    if not 0 <= track.crib_height <= track.sleeper_height:
+        raise InputError(f"{t}.crib_height: the ballast between the sleepers must lie in 0..sleeper_height ({track.sleeper_height} m), got {track.crib_height}")
     for key in ("foot_width", "foot_height", "web_width", "web_height", "head_width", "head_height"):
         _positive(getattr(track.rail, key), f"{t}.rail.{key}")
     if not 1 <= track.tracks <= 5:

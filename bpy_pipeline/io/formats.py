@@ -80,3 +80,4 @@ register_writer("openpcdet", Writer(_write_openpcdet, _check_split, openpcdet.wr
 register_writer("sustech", Writer(_write_sustech, boxes=True))
 
 from . import rig_outputs  # noqa: F401,E402  (registers rig and flash_image)
+from . import railway_layout  # noqa: F401,E402  (registers railway_layout)

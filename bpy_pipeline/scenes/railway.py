@@ -108,7 +108,7 @@ def _track(params, layout, detail, centreline, view, seed: int, collection) -> N
         "Rail Foot Width": rail.foot_width, "Rail Foot Height": rail.foot_height, "Rail Web Width": rail.web_width,
         "Rail Web Height": rail.web_height, "Rail Head Width": rail.head_width, "Rail Head Height": rail.head_height,
         "Sleeper Spacing": track.sleeper_spacing, "Sleeper Length": track.sleeper_length, "Sleeper Width": track.sleeper_width,
-        "Sleeper Height": track.sleeper_height, "Ballast Height": track.ballast_height, "Ballast Shoulder": track.ballast_shoulder,
+        "Sleeper Height": track.sleeper_height, "Ballast Height": track.ballast_height, "Crib Height": track.crib_height, "Ballast Shoulder": track.ballast_shoulder,
         "Ballast Slope": track.ballast_slope, "Embankment Height": track.embankment_height, "Embankment Slope": track.embankment_slope,
         "Embankment Berm": track.embankment_berm, "Ground Width": track.ground_width, "Stone Size": params.detail.stone_size, "Seed": seed,
     }

@@ -21,7 +21,7 @@ import bpy
 from .nodes import GroupBuilder, new_group
 
 PARTS = {"all": 0, "rails": 1, "sleepers": 2, "ballast": 3, "embankment": 4, "stones": 5, "ground": 6}
-VERSION = 1  # bump when the groups change, so a file holding older groups gets new ones
+VERSION = 2  # bump when the groups change, so a file holding older groups gets new ones
 
 
 def _get(name: str):
@@ -157,6 +157,7 @@ TRACK_INPUTS = [
     ("Sleeper Length", "NodeSocketFloat", 2.6, "m across the track"), ("Sleeper Width", "NodeSocketFloat", 0.26, "m along the track"),
     ("Sleeper Height", "NodeSocketFloat", 0.22),
     ("Ballast Height", "NodeSocketFloat", 0.35, "m of ballast under the sleepers"),
+    ("Crib Height", "NodeSocketFloat", 0.17, "m of ballast between the sleepers, above their underside"),
     ("Ballast Shoulder", "NodeSocketFloat", 0.5, "m of flat ballast beyond the sleeper ends"),
     ("Ballast Slope", "NodeSocketFloat", 1.5, "horizontal per vertical"),
     ("Embankment Height", "NodeSocketFloat", 0.0, "m of formation above the ground"),
@@ -205,14 +206,15 @@ def track_group() -> bpy.types.NodeTree:
     # the ballast bed under all tracks: a trapezoid, its top over the sleepers plus the shoulders
     extra_tracks = b.math("MULTIPLY", b.math("SUBTRACT", g("Tracks"), 1.0), g("Track Spacing"))
     top = b.math("ADD", b.math("ADD", extra_tracks, g("Sleeper Length")), b.math("MULTIPLY", g("Ballast Shoulder"), 2.0))
-    toe = b.math("ADD", top, b.math("MULTIPLY", b.math("MULTIPLY", g("Ballast Height"), g("Ballast Slope")), 2.0))
+    bed_height = b.math("ADD", g("Ballast Height"), g("Crib Height"))  # the crib ballast fills between the sleepers
+    toe = b.math("ADD", top, b.math("MULTIPLY", b.math("MULTIPLY", bed_height, g("Ballast Slope")), 2.0))
 
     def trapezoid(bottom_width, top_width, height, centre_height):
         shape = b.node("GeometryNodeCurvePrimitiveQuadrilateral", {"Bottom Width": bottom_width, "Top Width": top_width, "Height": height, "Offset": 0.0}, mode="TRAPEZOID")
         moved = b.node("GeometryNodeTransform", {"Geometry": b.out(shape), "Translation": b.combine(0.0, centre_height, 0.0)}, options={"mode": "COMPONENTS"})
         return profile_to_frame(b, b.out(moved))
 
-    bed_profile = trapezoid(toe, top, g("Ballast Height"), b.math("MULTIPLY", g("Ballast Height"), 0.5))
+    bed_profile = trapezoid(toe, top, bed_height, b.math("MULTIPLY", bed_height, 0.5))
     bed = b.out(b.node("GeometryNodeCurveToMesh", {"Curve": centre, "Profile Curve": bed_profile, "Fill Caps": True}))
 
     berm = b.math("ADD", toe, b.math("MULTIPLY", g("Embankment Berm"), 2.0))

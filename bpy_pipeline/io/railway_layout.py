@@ -1,0 +1,102 @@
+"""``output.formats: [railway_layout]``: the ground-truth layout of a railway frame as JSON. Pure.
+
+For parameter-extraction models (support positions, wire geometry) beside the labeled points:
+``OUT/railway_layout/NNNNNN.json`` per frame, world coordinates in metres::
+
+    {"frame": 3, "layout": "single", "rail_top_height": 0.742,
+     "centreline": [[x, y, z], ...],              # the track alignment at formation level, every <= 1 m
+     "tracks": [{"index": 0, "offset": 0.0, "double_contact": false}],
+     "supports": [{"index", "chainage", "type": "mast" | "gantry", "stagger",
+                   "masts": [{"side", "kind", "base": [x, y, z], "height"}],
+                   "cantilevers": [{"track", "attach": [x, y, z] (contact wire), "arm_length"}]}],
+     "wires": [{"class", "kind", "run", "span", "start", "end", "sag", "length", "tension_length",
+                "polyline": [[x, y, z], ...]}],  # every <= 1 m along the sag parabola
+     "droppers": [{"run", "span", "lower": [[x, y, z]...], "upper": [...]}]}
+
+``tension_length`` is the length of the wire's run from its first support to its last (the line has
+no anchors in between). The layout is the one the frame's scene was built from: :func:`plan` is
+pure and draws first from the generator of the frame that built the scene, so every frame of a run
+(one railway per run) gets it, whichever frame range a process writes.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from .atomic import atomic_write
+from .writers import Writer, register_writer
+
+POLYLINE_STEP = 1.0  # m between written wire and centreline points
+
+
+def _xyz(p) -> list[float]:
+    return [round(float(v), 5) for v in np.asarray(p, float).reshape(3)]
+
+
+def layout_record(layout, params) -> dict:
+    """The JSON-ready ground truth of a :class:`~bpy_pipeline.geometry.railway_layout.RailwayLayout`
+    planned from the ``RailwayScene`` ``params`` (see the module docstring)."""
+    from ..geometry.railway_layout import cantilevers
+
+    alignment, section, cat = layout.alignment, layout.section, params.catenary
+    s = np.linspace(0.0, alignment.length, max(2, int(np.ceil(alignment.length / POLYLINE_STEP)) + 1))
+    contact_z = section.rail_top + cat.contact_wire_height
+    supports = []
+    for support in layout.supports:
+        frame = np.asarray(support.frame, float)
+        world = lambda y, z: frame[:3, :3] @ np.array([0.0, y, z]) + frame[:3, 3]  # noqa: E731
+        masts = [{"side": m.side, "kind": m.kind, "base": _xyz(world(m.lateral, m.base)), "height": round(m.top - m.base, 5)} for m in support.masts]
+        arms = [{"track": c.track, "attach": _xyz(world(c.attach_y, contact_z)), "arm_length": round(c.arm_length, 5)}
+                for c in cantilevers(support, section, cat, params.track.track_spacing, None)]
+        supports.append({"index": support.index, "chainage": round(support.chainage, 5), "type": "gantry" if support.gantry else "mast",
+                         "stagger": round(support.stagger, 5), "masts": masts, "cantilevers": arms})
+    runs: dict[tuple, float] = {}
+    for wire in layout.wires:
+        runs[(wire.kind, wire.run)] = runs.get((wire.kind, wire.run), 0.0) + wire.length
+    wires = []
+    for wire in layout.wires:
+        t = np.linspace(0.0, 1.0, max(2, int(np.ceil(wire.length / POLYLINE_STEP)) + 1))
+        wires.append({"class": wire.class_name, "kind": wire.kind, "run": wire.run, "span": wire.span, "start": _xyz(wire.start), "end": _xyz(wire.end),
+                      "sag": round(wire.sag, 6), "length": round(wire.length, 5), "tension_length": round(runs[(wire.kind, wire.run)], 5),
+                      "polyline": [_xyz(p) for p in wire.points_at(t)]})
+    droppers = [{"run": d.run, "span": d.span, "lower": [_xyz(p) for p in d.lower], "upper": [_xyz(p) for p in d.upper]} for d in layout.droppers]
+    return {
+        "layout": layout.layout,
+        "rail_top_height": round(float(section.rail_top), 6),
+        "centreline": [_xyz(p) for p in alignment.point(s)],
+        "tracks": [{"index": i, "offset": round(float(o), 5), "double_contact": bool(layout.double_contact[i])} for i, o in enumerate(section.offsets)],
+        "supports": supports,
+        "wires": wires,
+        "droppers": droppers,
+    }
+
+
+def frame_layout(config, index: int):
+    """The railway layout frame ``index`` of ``config`` scans: planned from the generator of the frame that built its scene."""
+    from ..builders.base import BUILDERS
+    from ..geometry.railway_layout import plan
+    from ..pipeline import frame_rng
+
+    params = config.scene.params
+    per_scene = BUILDERS.get("railway").frames_per_scene(params)
+    return plan(params, frame_rng(config.seed, index - index % per_scene))
+
+
+def _check(config) -> None:
+    if config.scene.builder != "railway":
+        raise InputError(f"output.formats: railway_layout writes the layout of a railway scene, scene.builder is {config.scene.builder}")
+
+
+def _write(frame, out: Path) -> list[Path]:
+    record = {"frame": frame.index} | layout_record(frame_layout(frame.config, frame.index), frame.config.scene.params)
+    path = Path(out) / "railway_layout" / f"{frame.stem}.json"
+    with atomic_write(path) as tmp:
+        tmp.write_text(json.dumps(record, separators=(",", ":")))
+    return [path]
+
+
+register_writer("railway_layout", Writer(_write, _check))

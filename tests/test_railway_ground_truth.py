@@ -1,0 +1,60 @@
+"""The railway_layout writer: the ground-truth layout of every frame, checked against the labeled points."""
+
+import json
+
+import numpy as np
+import pytest
+
+from bpy_pipeline.config import load_config
+
+pytestmark = pytest.mark.bpy
+
+
+def segment_distance(points, polyline):
+    """``(n,)`` distance (m) from each point to the polyline ((k, 3))."""
+    a, b = polyline[:-1], polyline[1:]
+    ab = b - a
+    t = np.clip(((points[:, None] - a[None]) * ab[None]).sum(-1) / (ab**2).sum(-1)[None], 0, 1)
+    return np.linalg.norm(points[:, None] - (a[None] + t[..., None] * ab[None]), axis=-1).min(1)
+
+
+def test_every_frame_gets_the_layout_its_points_show(tmp_path):
+    import bpy
+
+    from bpy_pipeline.io import read_ply
+    from bpy_pipeline.pipeline import run
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    config = load_config(None, ["output.formats=[ply,railway_layout]", "output.preview=false", "output.frame=world", "frames=2",
+                                "scene.stations.count=2", "sensor.preset=railway_tls", "sensor.sampling_factor=0.25", "effects.ideal=true",
+                                "scene.supports.span_jitter=6"])
+    manifest = run(config, tmp_path, log=lambda *_: None)
+    truths = [json.loads((tmp_path / "railway_layout" / f"{k:06d}.json").read_text()) for k in range(2)]
+    assert truths[0] | {"frame": 1} == truths[1]  # one railway per run: one layout
+    assert manifest["frames"][0]["scene"]["supports"] == len(truths[0]["supports"])
+    points = read_ply(tmp_path / "ply" / "000000.ply")
+    objects = {o["name"]: o["instance"] for o in manifest["frames"][0]["objects"]}
+    xyz = lambda p: np.column_stack([p["x"], p["y"], p["z"]]).astype(float)  # noqa: E731
+    checked = 0
+    for wire in truths[0]["wires"]:
+        name = f"span.{wire['run']}.{wire['span']:02d}.{wire['kind']}"
+        hit = points[points["instance"] == objects.get(name, -1)]
+        if len(hit) >= 20:
+            # on the wire's surface: its radius plus the sensor-driven sampling's chord error (<= half the beam spacing)
+            assert np.percentile(segment_distance(xyz(hit), np.array(wire["polyline"])), 99) < 0.015 + (0.024 if wire["kind"] == "feeder" else 0.012) / 2, name
+            checked += 1
+    assert checked >= 3
+    for support in truths[0]["supports"]:
+        for mast in support["masts"]:
+            hit = points[points["instance"] == objects.get(f"support.{support['index']:02d}.mast.{mast['side']}", -1)]
+            if len(hit):
+                off = np.abs(xyz(hit)[:, :2] - np.array(mast["base"])[:2]).max(0)  # a straight line along x: (along, across)
+                assert off[0] < 0.25 and off[1] < 0.8  # the mast's width; across, its feeder bracket's 0.75 m reach
+                assert xyz(hit)[:, 2].max() <= mast["base"][2] + mast["height"] + 0.06
+
+
+def test_the_writer_refuses_another_builder():
+    from bpy_pipeline.errors import InputError
+
+    with pytest.raises(InputError, match="railway_layout"):
+        load_config(None, ["output.formats=[railway_layout]", "scene.builder=primitives"])
