@@ -1,0 +1,373 @@
+"""The datasets as the loaders users train with read them, step by step from their source.
+
+Followed (the search tool's snapshots):
+- OpenPCDet 8cacccec11db6f59bf6934600c9a175dae254806: ``pcdet/datasets/kitti/kitti_dataset.py``
+  (``set_split``, ``get_infos`` with ``count_inside_pts``, ``get_fov_flag``), ``pcdet/utils/calibration_kitti.py``,
+  ``pcdet/utils/object3d_kitti.py``; ``pcdet/datasets/custom/custom_dataset.py`` (``get_label``, ``get_infos``,
+  ``create_custom_infos``).
+- mmdetection3d fe25f7a51d36e3702f961e198894580d83c4387b: ``tools/dataset_converters/kitti_converter.py``
+  (``create_kitti_info_file``, ``_calculate_num_points_in_gt``), ``kitti_data_utils.py`` (``_read_imageset_file``,
+  ``get_kitti_image_info``, ``get_label_anno``).
+- Pointcept d74c646db6abec569d0f23e0c34e7ddfce142789: ``pointcept/datasets/defaults.py`` (``DefaultDataset.get_data_list``,
+  ``get_data``).
+- The SemanticKITTI devkit's label remapping (``remap_lut[label & 0xFFFF]`` from ``learning_map``) and its
+  ``inv(Tr) @ pose @ Tr`` reading of poses.txt.
+Torch, scikit-image and scipy are not needed: ``in_hull`` (a Delaunay test on a box's corners) and
+``points_in_rbbox`` are replaced by the equivalent point-in-oriented-box test; images are read with Pillow.
+
+The dataset: 4 parking frames (seed 1, few cars) where frame 2 has no car.
+"""
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+ROOT = Path(__file__).resolve().parents[1]
+EMPTY = 2  # the frame without a box
+
+
+@pytest.fixture(scope="module")
+def dataset(tmp_path_factory) -> Path:
+    pytest.importorskip("bpy", reason="the dataset is made by a real parking run")
+    out = tmp_path_factory.mktemp("loaders") / "out"
+    command = [sys.executable, str(ROOT / "run.py"), "--out", str(out), "--frames", "4", "--seed", "1", "--set", "scene.builder=parking",
+               "--set", "scene.cars={kind: normal, mean: 1, std: 2, min: 0, max: 6}", "--set", "output.formats=[ply,semantickitti,npy,pcd]",
+               "--set", "output.boxes.formats=[kitti,openpcdet,sustech]", "--set", "output.kitti.val_fraction=0.25"]
+    done = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-3000:]
+    records = [json.loads(p.read_text()) for p in sorted((out / "records").glob("*.json"))]
+    assert [len(r["boxes"]) == 0 for r in records] == [i == EMPTY for i in range(4)], "the run no longer has exactly frame 2 empty"
+    return out
+
+
+def image_shape(path: Path) -> np.ndarray:
+    from PIL import Image
+
+    with Image.open(path) as image:
+        return np.array(np.asarray(image).shape[:2], dtype=np.int32)
+
+
+def in_box(points: np.ndarray, box: np.ndarray) -> np.ndarray:
+    """OpenPCDet's ``in_hull(points, boxes_to_corners_3d(box))`` for a box ``[x, y, z, dx, dy, dz, heading]`` (centre)."""
+    c, s = np.cos(box[6]), np.sin(box[6])
+    local = points[:, :3] - box[:3]
+    x, y = c * local[:, 0] + s * local[:, 1], -s * local[:, 0] + c * local[:, 1]
+    return (np.abs(x) <= box[3] / 2) & (np.abs(y) <= box[4] / 2) & (np.abs(local[:, 2]) <= box[5] / 2)
+
+
+# ----------------------------------------------------------------------------- OpenPCDet, KITTI
+class Calibration:
+    """pcdet/utils/calibration_kitti.py: get_calib_from_file and the transforms get_infos uses."""
+
+    def __init__(self, calib_file):
+        lines = open(calib_file).readlines()
+        self.P2 = np.array(lines[2].strip().split(" ")[1:], dtype=np.float32).reshape(3, 4)
+        self.R0 = np.array(lines[4].strip().split(" ")[1:], dtype=np.float32).reshape(3, 3)
+        self.V2C = np.array(lines[5].strip().split(" ")[1:], dtype=np.float32).reshape(3, 4)
+
+    @staticmethod
+    def cart_to_hom(pts):
+        return np.hstack((pts, np.ones((pts.shape[0], 1), dtype=np.float32)))
+
+    def rect_to_lidar(self, pts_rect):
+        R0_ext = np.vstack((np.hstack((self.R0, np.zeros((3, 1), dtype=np.float32))), np.zeros((1, 4), dtype=np.float32)))
+        R0_ext[3, 3] = 1
+        V2C_ext = np.vstack((self.V2C, np.zeros((1, 4), dtype=np.float32)))
+        V2C_ext[3, 3] = 1
+        return np.dot(self.cart_to_hom(pts_rect), np.linalg.inv(np.dot(R0_ext, V2C_ext).T))[:, 0:3]
+
+    def lidar_to_rect(self, pts_lidar):
+        return np.dot(self.cart_to_hom(pts_lidar), np.dot(self.V2C.T, self.R0.T))
+
+    def rect_to_img(self, pts_rect):
+        pts_2d_hom = np.dot(self.cart_to_hom(pts_rect), self.P2.T)
+        pts_img = (pts_2d_hom[:, 0:2].T / self.cart_to_hom(pts_rect)[:, 2]).T
+        return pts_img, pts_2d_hom[:, 3 - 1] - self.P2.T[3, 2]
+
+
+class Object3d:
+    """pcdet/utils/object3d_kitti.py."""
+
+    def __init__(self, line):
+        label = line.strip().split(" ")
+        self.cls_type = label[0]
+        self.truncation, self.occlusion, self.alpha = float(label[1]), float(label[2]), float(label[3])
+        self.box2d = np.array([float(v) for v in label[4:8]], dtype=np.float32)
+        self.h, self.w, self.l = (float(v) for v in label[8:11])
+        self.loc = np.array([float(v) for v in label[11:14]], dtype=np.float32)
+        self.ry = float(label[14])
+        self.score = float(label[15]) if len(label) == 16 else -1.0
+        height = float(self.box2d[3]) - float(self.box2d[1]) + 1
+        self.level = 0 if height >= 40 and self.truncation <= 0.15 and self.occlusion <= 0 else 1 if height >= 25 and self.truncation <= 0.3 and self.occlusion <= 1 else 2 if height >= 25 and self.truncation <= 0.5 and self.occlusion <= 2 else -1
+
+
+def openpcdet_kitti_infos(root: Path, split: str) -> list[dict]:
+    """KittiDataset.set_split + get_infos(has_label=True, count_inside_pts=True)."""
+    root_split_path = root / ("training" if split != "test" else "testing")
+    split_dir = root / "ImageSets" / (split + ".txt")
+    sample_id_list = [x.strip() for x in open(split_dir).readlines()] if split_dir.exists() else None
+    infos = []
+    for sample_idx in sample_id_list:
+        info = {"point_cloud": {"num_features": 4, "lidar_idx": sample_idx}}
+        img_file = root_split_path / "image_2" / ("%s.png" % sample_idx)
+        assert img_file.exists()
+        info["image"] = {"image_idx": sample_idx, "image_shape": image_shape(img_file)}
+        calib = Calibration(root_split_path / "calib" / ("%s.txt" % sample_idx))
+        label_file = root_split_path / "label_2" / ("%s.txt" % sample_idx)
+        assert label_file.exists()
+        obj_list = [Object3d(line) for line in open(label_file).readlines()]
+        annotations = {
+            "name": np.array([obj.cls_type for obj in obj_list]),
+            "truncated": np.array([obj.truncation for obj in obj_list]),
+            "occluded": np.array([obj.occlusion for obj in obj_list]),
+            "bbox": np.concatenate([obj.box2d.reshape(1, 4) for obj in obj_list], axis=0),
+            "dimensions": np.array([[obj.l, obj.h, obj.w] for obj in obj_list]),
+            "location": np.concatenate([obj.loc.reshape(1, 3) for obj in obj_list], axis=0),
+            "rotation_y": np.array([obj.ry for obj in obj_list]),
+            "difficulty": np.array([obj.level for obj in obj_list], np.int32),
+        }
+        num_objects = len([obj.cls_type for obj in obj_list if obj.cls_type != "DontCare"])
+        num_gt = len(annotations["name"])
+        loc, dims, rots = annotations["location"][:num_objects], annotations["dimensions"][:num_objects], annotations["rotation_y"][:num_objects]
+        loc_lidar = calib.rect_to_lidar(loc)
+        l, h, w = dims[:, 0:1], dims[:, 1:2], dims[:, 2:3]
+        loc_lidar[:, 2] += h[:, 0] / 2
+        gt_boxes_lidar = np.concatenate([loc_lidar, l, w, h, -(np.pi / 2 + rots[..., np.newaxis])], axis=1)
+        annotations["gt_boxes_lidar"] = gt_boxes_lidar
+        points = np.fromfile(str(root_split_path / "velodyne" / ("%s.bin" % sample_idx)), dtype=np.float32).reshape(-1, 4)
+        pts_rect = calib.lidar_to_rect(points[:, 0:3])
+        pts_img, pts_rect_depth = calib.rect_to_img(pts_rect)
+        shape = info["image"]["image_shape"]
+        fov_flag = (pts_img[:, 0] >= 0) & (pts_img[:, 0] < shape[1]) & (pts_img[:, 1] >= 0) & (pts_img[:, 1] < shape[0]) & (pts_rect_depth >= 0)
+        pts_fov = points[fov_flag]
+        num_points_in_gt = -np.ones(num_gt, dtype=np.int32)
+        for k in range(num_objects):
+            num_points_in_gt[k] = in_box(pts_fov[:, :3], gt_boxes_lidar[k]).sum()
+        annotations["num_points_in_gt"] = num_points_in_gt
+        info["annos"] = annotations
+        infos.append(info)
+    return infos
+
+
+def sustech_boxes(out: Path, index: int) -> dict[str, np.ndarray]:
+    objects = json.loads((out / "sustech" / "label" / f"{index:06d}.json").read_text())
+    return {o["obj_id"]: np.array([*(o["psr"]["position"][a] for a in "xyz"), *(o["psr"]["scale"][a] for a in "xyz"), o["psr"]["rotation"]["z"]]) for o in objects}
+
+
+def test_openpcdet_kitti_get_infos(dataset):
+    root = dataset / "kitti"
+    train, val = openpcdet_kitti_infos(root, "train"), openpcdet_kitti_infos(root, "val")
+    assert openpcdet_kitti_infos(root, "test") == []  # an empty test set loads
+    assert sorted(int(i["point_cloud"]["lidar_idx"]) for i in train + val) == [0, 1, 2, 3] and len(val) == 1
+    seen = 0
+    for info in train + val:
+        annos, index = info["annos"], int(info["point_cloud"]["lidar_idx"])
+        assert tuple(info["image"]["image_shape"]) == (375, 1242)
+        if index == EMPTY:
+            assert annos["name"].tolist() == ["DontCare"] and annos["gt_boxes_lidar"].shape == (0, 7)
+            continue
+        truth = np.array(list(sustech_boxes(dataset, index).values()))
+        for box, count in zip(annos["gt_boxes_lidar"], annos["num_points_in_gt"]):
+            assert count > 0, "a labelled object holds no point of the camera's field of view"
+            match = np.abs(truth[:, :3] - box[:3]).sum(axis=1).argmin()  # the same box as the SUSTechPOINTS label
+            np.testing.assert_allclose(box[:6], truth[match, :6], atol=2e-3)
+            assert abs((box[6] - truth[match, 6] + np.pi) % (2 * np.pi) - np.pi) < 1e-3
+            seen += 1
+        assert set(annos["name"]) <= {"Car", "Van", "Truck", "Pedestrian", "Person_sitting", "Cyclist", "Tram", "Misc"}
+        assert (annos["bbox"][:, 2] > annos["bbox"][:, 0]).all() and (annos["bbox"][:, 3] - annos["bbox"][:, 1] > 0).all()
+    assert seen >= 2
+
+
+# ----------------------------------------------------------------------------- mmdetection3d, KITTI
+def _extend_matrix(mat):
+    return np.concatenate([mat, np.array([[0.0, 0.0, 0.0, 1.0]])], axis=0)
+
+
+def mmdet3d_kitti_infos(data_path: Path, image_ids: list[int]) -> list[dict]:
+    """get_kitti_image_info(training=True, velodyne=True, calib=True) + _calculate_num_points_in_gt (remove_outside)."""
+    infos = []
+    for idx in image_ids:
+        velodyne_path = data_path / "training" / "velodyne" / f"{idx:06d}.bin"
+        image_path = data_path / "training" / "image_2" / f"{idx:06d}.png"
+        assert velodyne_path.exists() and image_path.exists()
+        lines = open(data_path / "training" / "calib" / f"{idx:06d}.txt").readlines()
+        P2 = _extend_matrix(np.array([float(v) for v in lines[2].split(" ")[1:13]]).reshape([3, 4]))
+        rect = np.zeros([4, 4])
+        rect[3, 3] = 1.0
+        rect[:3, :3] = np.array([float(v) for v in lines[4].split(" ")[1:10]]).reshape([3, 3])
+        Trv2c = _extend_matrix(np.array([float(v) for v in lines[5].split(" ")[1:13]]).reshape([3, 4]))
+        _extend_matrix(np.array([float(v) for v in lines[6].split(" ")[1:13]]).reshape([3, 4]))  # Tr_imu_to_velo must parse
+        content = [line.strip().split(" ") for line in open(data_path / "training" / "label_2" / f"{idx:06d}.txt").readlines()]
+        num_objects = len([x[0] for x in content if x[0] != "DontCare"])
+        annos = {
+            "name": np.array([x[0] for x in content]),
+            "occluded": np.array([int(x[2]) for x in content]),
+            "bbox": np.array([[float(v) for v in x[4:8]] for x in content]).reshape(-1, 4),
+            "dimensions": np.array([[float(v) for v in x[8:11]] for x in content]).reshape(-1, 3)[:, [2, 0, 1]],
+            "location": np.array([[float(v) for v in x[11:14]] for x in content]).reshape(-1, 3),
+            "rotation_y": np.array([float(x[14]) for x in content]).reshape(-1),
+        }
+        shape = image_shape(image_path)
+        points_v = np.fromfile(velodyne_path, dtype=np.float32, count=-1).reshape([-1, 4])
+        # box_np_ops.remove_outside_points: keep the points whose projection lies in the image, in front
+        cam = np.c_[points_v[:, :3], np.ones(len(points_v))] @ (rect @ Trv2c).T
+        img = cam @ P2.T
+        uv = img[:, :2] / img[:, 2:3]
+        points_v = points_v[(img[:, 2] > 0) & (uv[:, 0] >= 0) & (uv[:, 0] < shape[1]) & (uv[:, 1] >= 0) & (uv[:, 1] < shape[0])]
+        dims, loc, rots = annos["dimensions"][:num_objects], annos["location"][:num_objects], annos["rotation_y"][:num_objects]
+        gt_boxes_camera = np.concatenate([loc, dims, rots[..., np.newaxis]], axis=1)
+        # box_np_ops.box_camera_to_lidar: xyz to lidar, (l, h, w) -> (l, w, h), r -> -r - pi/2; origin (0.5, 0.5, 0)
+        xyz_lidar = (np.c_[gt_boxes_camera[:, :3], np.ones(len(gt_boxes_camera))] @ np.linalg.inv((rect @ Trv2c).T))[:, :3]
+        lidar = np.concatenate([xyz_lidar, gt_boxes_camera[:, 3:4], gt_boxes_camera[:, 5:6], gt_boxes_camera[:, 4:5], -gt_boxes_camera[:, 6:7] - np.pi / 2], axis=1)
+        centred = lidar.copy()
+        centred[:, 2] += lidar[:, 5] / 2
+        num_points_in_gt = np.array([in_box(points_v[:, :3], box).sum() for box in centred], dtype=np.int64)
+        annos["num_points_in_gt"] = np.concatenate([num_points_in_gt, -np.ones([len(annos["dimensions"]) - num_objects])]).astype(np.int32)
+        infos.append({"image": {"image_idx": idx, "image_shape": shape}, "annos": annos, "gt_boxes_lidar": centred})
+    return infos
+
+
+def test_mmdet3d_kitti_converter(dataset):
+    folder = dataset / "kitti" / "ImageSets"
+    ids = {name: [int(line) for line in open(folder / f"{name}.txt").readlines()] for name in ("train", "val", "test")}
+    assert ids["test"] == [] and sorted(ids["train"] + ids["val"]) == [0, 1, 2, 3]
+    infos = mmdet3d_kitti_infos(dataset / "kitti", ids["train"] + ids["val"])
+    for info in infos:
+        annos = info["annos"]
+        if info["image"]["image_idx"] == EMPTY:
+            assert annos["num_points_in_gt"].tolist() == [-1]
+            continue
+        assert (annos["num_points_in_gt"] > 0).all()
+        assert (annos["bbox"][:, 3] - annos["bbox"][:, 1] >= 1).all()  # real 2D boxes, not zeros
+
+
+# ----------------------------------------------------------------------------- OpenPCDet, custom
+def openpcdet_custom_infos(root: Path, split: str) -> list[dict]:
+    """CustomDataset.set_split + get_infos(has_label=True) as create_custom_infos calls it."""
+    split_dir = root / "ImageSets" / (split + ".txt")
+    sample_id_list = [x.strip() for x in open(split_dir).readlines()] if split_dir.exists() else None
+    infos = []
+    for sample_idx in sample_id_list:
+        lines = open(root / "labels" / ("%s.txt" % sample_idx)).readlines()
+        gt_boxes, gt_names = [], []
+        for line in lines:
+            line_list = line.strip().split(" ")
+            gt_boxes.append(line_list[:-1])
+            gt_names.append(line_list[-1])
+        gt_boxes_lidar = np.array(gt_boxes, dtype=np.float32)
+        points = np.load(root / "points" / ("%s.npy" % sample_idx))
+        infos.append({"point_cloud": {"num_features": 4, "lidar_idx": sample_idx}, "annos": {"name": np.array(gt_names), "gt_boxes_lidar": gt_boxes_lidar[:, :7]}, "points": points})
+    return infos
+
+
+def test_openpcdet_custom_create_infos(dataset):
+    root = dataset / "openpcdet"
+    train, val = openpcdet_custom_infos(root, "train"), openpcdet_custom_infos(root, "val")
+    indices = sorted(int(i["point_cloud"]["lidar_idx"]) for i in train + val)
+    assert indices == [0, 1, 3] and len(val) >= 1  # the empty frame is written but not listed
+    assert (root / "labels" / f"{EMPTY:06d}.txt").read_text() == ""
+    with pytest.raises(IndexError):  # why: get_infos slices [:, :7], which an empty label file cannot give
+        np.array([], dtype=np.float32)[:, :7]
+    for info in train + val:
+        boxes, points = info["annos"]["gt_boxes_lidar"], info["points"]
+        assert points.dtype == np.float32 and points.shape[1] == 4
+        assert set(info["annos"]["name"]) == {"Car"}
+        for box in boxes:  # create_groundtruth_database's points_in_boxes
+            assert in_box(points, box).sum() >= 12
+
+
+# ----------------------------------------------------------------------------- Pointcept
+def test_pointcept_default_dataset_get_data(dataset):
+    from bpy_pipeline.io import read_semantickitti
+    from bpy_pipeline.io.class_maps import load_class_maps
+    from bpy_pipeline.labels import load_class_table
+
+    valid_assets = ["coord", "color", "normal", "strength", "segment", "instance", "pose"]
+    data_root = str(dataset)
+    data_list = []
+    for split in ["npy_train.json", "npy_val.json"]:  # DefaultDataset.get_data_list with split files
+        assert os.path.isfile(os.path.join(data_root, split))
+        with open(os.path.join(data_root, split)) as f:
+            data_list += [os.path.join(data_root, data) for data in json.load(f)]
+    assert sorted(os.path.basename(p) for p in data_list) == [f"{i:06d}" for i in range(4)]
+    table = load_class_table()
+    classes = max(table.learning_map.values())
+    for data_path in data_list:
+        data_dict = {}
+        for asset in os.listdir(data_path):
+            if asset.endswith(".npy") and asset[:-4] in valid_assets:
+                data_dict[asset[:-4]] = np.load(os.path.join(data_path, asset))
+        data_dict["coord"] = data_dict["coord"].astype(np.float32)
+        data_dict["segment"] = data_dict["segment"].reshape([-1]).astype(np.int32)
+        data_dict["instance"] = data_dict["instance"].reshape([-1]).astype(np.int32)
+        index = int(os.path.basename(data_path))
+        raw = read_semantickitti(dataset / "sequences" / "00" / "velodyne" / f"{index:06d}.bin", dataset / "sequences" / "00" / "labels" / f"{index:06d}.label")
+        np.testing.assert_array_equal(data_dict["coord"], np.stack([raw["x"], raw["y"], raw["z"]], axis=1))
+        expected = np.array([table.learning_map[int(s)] for s in raw["semantic"]]) - 1
+        np.testing.assert_array_equal(data_dict["segment"], expected)
+        assert data_dict["segment"].min() >= -1 and data_dict["segment"].max() < classes
+        car = table.id_of("car")
+        cars = raw["semantic"] == car
+        np.testing.assert_array_equal(data_dict["instance"][cars], raw["instance"][cars])
+        stuff = ~load_class_maps().things[raw["semantic"]]
+        assert stuff.any() and (data_dict["instance"][stuff] == -1).all()  # floor, walls, ceiling: no instances
+        if index == EMPTY:
+            assert not cars.any()
+
+
+# ----------------------------------------------------------------------------- SemanticKITTI
+def test_semantickitti_devkit_files(dataset):
+    config = yaml.safe_load((dataset / "semantic-kitti.yaml").read_text())
+    from bpy_pipeline.labels import load_class_table
+
+    table = load_class_table()
+    assert set(config) >= {"labels", "color_map", "content", "learning_map", "learning_map_inv", "learning_ignore", "split"}
+    assert config["color_map"][table.id_of("car")] == list(table.colors[table.id_of("car")][::-1])  # BGR
+    assert abs(sum(config["content"].values()) - 1.0) < 1e-9
+    maxkey = max(config["learning_map"])
+    remap_lut = np.zeros(maxkey + 100, dtype=np.int32)  # the devkit's remapping
+    remap_lut[list(config["learning_map"])] = list(config["learning_map"].values())
+    folder = dataset / "sequences" / "00"
+    scans = sorted((folder / "velodyne").glob("*.bin"))
+    for scan in scans:
+        label = np.fromfile(folder / "labels" / (scan.stem + ".label"), dtype=np.uint32)
+        sem = remap_lut[label & 0xFFFF]
+        assert sem.max() <= max(config["learning_map_inv"]) and config["learning_ignore"][0] is True
+        assert all(config["learning_map"][config["learning_map_inv"][t]] == t for t in np.unique(sem))
+    poses = np.loadtxt(folder / "poses.txt").reshape(-1, 3, 4)
+    times = np.loadtxt(folder / "times.txt")
+    assert len(poses) == len(times) == len(scans)
+    calib = {line.split(":")[0]: np.array(line.split(":")[1].split(), float) for line in (folder / "calib.txt").read_text().splitlines()}
+    tr = np.vstack([calib["Tr"].reshape(3, 4), [0, 0, 0, 1]])
+    records = [json.loads(p.read_text()) for p in sorted((dataset / "records").glob("*.json"))]
+    first = np.linalg.inv(np.array(records[0]["sensor_pose"]))
+    for pose, record in zip(poses, records):
+        velo = np.linalg.inv(tr) @ np.vstack([pose, [0, 0, 0, 1]]) @ tr  # the devkit's reading
+        np.testing.assert_allclose(velo, first @ np.array(record["sensor_pose"]), atol=1e-9)
+    assert (np.diff(times) > 0).all()
+
+
+# ----------------------------------------------------------------------------- SUSTechPOINTS and PCD
+def test_sustech_labels_and_pcd_clouds(dataset):
+    from bpy_pipeline.io import read_ply
+    from bpy_pipeline.io.pcd import read_pcd
+
+    for index in range(4):
+        objects = json.loads((dataset / "sustech" / "label" / f"{index:06d}.json").read_text())
+        assert (objects == []) == (index == EMPTY)
+        for o in objects:
+            assert set(o) == {"obj_id", "obj_type", "psr"} and set(o["psr"]) == {"position", "rotation", "scale"}
+        points = read_ply(dataset / "ply" / f"{index:06d}.ply")
+        assert read_pcd(dataset / "sustech" / "lidar" / f"{index:06d}.pcd").tobytes() == points.tobytes()
+        assert read_pcd(dataset / "pcd" / f"{index:06d}.pcd").tobytes() == points.tobytes()
+    o3d = pytest.importorskip("open3d", reason="Open3D reads the PCD as a viewer would (pip install open3d)")
+    cloud = o3d.t.io.read_point_cloud(str(dataset / "pcd" / "000000.pcd"))
+    points = read_ply(dataset / "ply" / "000000.ply")
+    for name in ("intensity", "semantic", "instance", "ring", "time", "range", "bounces"):
+        np.testing.assert_array_equal(cloud.point[name].numpy().ravel(), points[name], err_msg=name)
