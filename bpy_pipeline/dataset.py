@@ -194,7 +194,7 @@ class Dataset:
             "run_key": run_key(self.config),
             "versions": versions(),
             "sensor": spec_summary(self.config.sensor.spec),
-            "class_table": {int(k): v for k, v in __import__("bpy_pipeline.labels", fromlist=["x"]).load_class_table().names.items()},
+            "class_table": {int(k): v for k, v in __import__(f"{__package__}.labels", fromlist=["x"]).load_class_table().names.items()},  # relative: inside Blender the package is bl_ext.<repo>.<id>.bpy_pipeline
         }
 
     def _check_same_run(self, manifest: dict) -> None:
