@@ -11,6 +11,7 @@ from bpy_pipeline.buffers import ObjectTable, SceneBuffers
 from bpy_pipeline.geometry import human, primitives
 from bpy_pipeline.geometry.transforms import pose_matrix
 from bpy_pipeline.io import boxes as bx
+from bpy_pipeline.lidar.points import empty_points
 from bpy_pipeline.lidar.raycast import RayCaster
 from bpy_pipeline.lidar.scanner import scan
 from bpy_pipeline.lidar.sensors import iter_pattern, resolve_sensor
@@ -144,35 +145,92 @@ def test_thin_boxes_are_dropped_by_their_class_minimum():
     assert boxes["points"].tolist() == [3, 2, 0]
 
 
+def sample_boxes(rng, n=5, ahead=True):
+    boxes = np.zeros(n, bx.BOX_DTYPE)
+    boxes["class_name"] = ["car", "person", "robot arm", "car", "person"][:n]
+    boxes["instance"] = np.arange(1, n + 1)
+    boxes["centre"] = rng.uniform(-20, 20, (n, 3))
+    if ahead:  # in front of the camera, inside its 81 deg field of view
+        boxes["centre"][:, 0] = rng.uniform(8, 25, n)
+        boxes["centre"][:, 1] = rng.uniform(-0.5, 0.5, n) * boxes["centre"][:, 0]
+        boxes["centre"][:, 2] = rng.uniform(-1, 0.5, n)
+    boxes["size"] = rng.uniform(0.3, 5, (n, 3))
+    boxes["heading"] = rng.uniform(-np.pi, np.pi, n)
+    boxes["truncation"] = rng.uniform(0, 0.5, n)
+    boxes["occlusion"] = [0, 1, 2, 3, 0][:n]
+    return boxes
+
+
+def box_points(boxes):
+    """Three points at each box's centre carrying its instance."""
+    points = empty_points(3 * len(boxes))
+    for k, box in enumerate(boxes):
+        for name, value in zip("xyz", box["centre"]):
+            points[name][3 * k : 3 * k + 3] = value
+        points["instance"][3 * k : 3 * k + 3] = box["instance"]
+    return points
+
+
 def test_kitti_and_openpcdet_files_round_trip(tmp_path):
-    rng = np.random.default_rng(2)
-    boxes = np.zeros(5, bx.BOX_DTYPE)
-    boxes["class_name"] = ["car", "person", "robot arm", "car", "person"]
-    boxes["centre"] = rng.uniform(-20, 20, (5, 3))
-    boxes["size"] = rng.uniform(0.3, 5, (5, 3))
-    boxes["heading"] = rng.uniform(-np.pi, np.pi, 5)
-    boxes["truncation"] = rng.uniform(0, 1, 5)
-    boxes["occlusion"] = [0, 1, 2, 3, 0]
-    points = np.zeros(4, [("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("intensity", "<f4")])
-    written = bx.write_frame_boxes(tmp_path, 7, boxes, points, ["kitti", "openpcdet"], {"person": "Pedestrian"})
-    assert {p.relative_to(tmp_path).as_posix() for p in written} == {"kitti/label_2/000007.txt", "kitti/calib/000007.txt", "kitti/velodyne/000007.bin", "openpcdet/labels/000007.txt", "openpcdet/points/000007.npy"}
-    kitti = bx.read_kitti_labels(tmp_path / "kitti/label_2/000007.txt")
+    from bpy_pipeline.config import CameraConfig
+    from bpy_pipeline.io import kitti, openpcdet
+
+    boxes = sample_boxes(np.random.default_rng(2))
+    points = box_points(boxes)
+    lut = np.zeros((64, 3), np.uint8)
+    written = kitti.write_frame(tmp_path, "000007", points, boxes, CameraConfig(), lut, {"person": "Pedestrian"}) + openpcdet.write_frame(tmp_path, "000007", points, boxes, {"person": "Pedestrian"})
+    assert {p.relative_to(tmp_path).as_posix() for p in written} == {"kitti/training/label_2/000007.txt", "kitti/training/calib/000007.txt", "kitti/training/velodyne/000007.bin", "kitti/training/image_2/000007.png", "openpcdet/labels/000007.txt", "openpcdet/points/000007.npy"}
+    tr = np.array((tmp_path / "kitti/training/calib/000007.txt").read_text().splitlines()[5].split()[1:], float).reshape(3, 4)
+    read_kitti = bx.read_kitti_labels(tmp_path / "kitti/training/label_2/000007.txt", tr)
     pcdet = bx.read_openpcdet_labels(tmp_path / "openpcdet/labels/000007.txt")
-    assert kitti["class_name"].tolist() == pcdet["class_name"].tolist() == ["Car", "Pedestrian", "RobotArm", "Car", "Pedestrian"]
-    for read in (kitti, pcdet):
+    assert read_kitti["class_name"].tolist() == ["Car", "Pedestrian", "Misc", "Car", "Pedestrian"]  # labels.yaml kitti_names, names override
+    assert pcdet["class_name"].tolist() == ["Car", "Pedestrian", "RobotArm", "Car", "Pedestrian"]
+    for read in (read_kitti, pcdet):
         np.testing.assert_allclose(read["centre"], boxes["centre"], atol=1e-4)
         np.testing.assert_allclose(read["size"], boxes["size"], atol=1e-4)
         np.testing.assert_allclose(np.cos(read["heading"] - boxes["heading"]), 1.0, atol=1e-7)
-    assert kitti["occlusion"].tolist() == [0, 1, 2, 3, 0]
+    assert read_kitti["occlusion"].tolist() == [0, 1, 2, 3, 0]
     # KITTI's camera convention as OpenPCDet reads it: location = bottom centre, heading = -(rotation_y + pi / 2)
-    first = (tmp_path / "kitti/label_2/000007.txt").read_text().splitlines()[0].split()
+    first = (tmp_path / "kitti/training/label_2/000007.txt").read_text().splitlines()[0].split()
     x, y, z = map(float, first[11:14])
     np.testing.assert_allclose([z, -x, -y + float(first[8]) / 2], boxes["centre"][0], atol=1e-4)
     assert np.isclose(np.cos(-(float(first[14]) + np.pi / 2) - boxes["heading"][0]), 1.0)
-    assert np.load(tmp_path / "openpcdet/points/000007.npy").shape == (4, 4)
-    assert "Tr_velo_to_cam: 0.0" in (tmp_path / "kitti/calib/000007.txt").read_text()
-    bx.write_image_sets(tmp_path, range(3), ["openpcdet"])
-    assert (tmp_path / "openpcdet/ImageSets/train.txt").read_text() == "000000\n000001\n000002\n"
+    left, top, right, bottom = map(float, first[4:8])
+    assert 0 <= left <= right < 1242 and 0 <= top <= bottom < 375  # the points' pixel, not zeros
+    assert np.load(tmp_path / "openpcdet/points/000007.npy").shape == (15, 4)
+
+
+def test_kitti_camera_pose_and_frames_without_objects(tmp_path):
+    from bpy_pipeline.config import CameraConfig
+    from bpy_pipeline.io import kitti
+
+    boxes = sample_boxes(np.random.default_rng(3), 2)
+    boxes["centre"][:, :2] = [[0.0, 10.0], [-10.0, 0.0]]  # left of the sensor, behind it
+    points = box_points(boxes)
+    ahead = kitti.label_lines(boxes, points, CameraConfig())
+    assert ahead == [kitti.DONT_CARE]  # nothing in the forward camera: KITTI's placeholder, so loaders read the file
+    left = kitti.label_lines(boxes, points, CameraConfig(rotation_deg=(0.0, 0.0, 90.0)))
+    assert len(left) == 1 and left[0].startswith("Car")
+    k, tr = kitti.camera_matrices(CameraConfig(rotation_deg=(0.0, 0.0, 90.0)))
+    path = tmp_path / "l.txt"
+    path.write_text(left[0] + "\n")
+    read = bx.read_kitti_labels(path, tr)
+    np.testing.assert_allclose(read["centre"][0], boxes["centre"][0], atol=1e-4)
+    np.testing.assert_allclose(np.cos(read["heading"][0] - boxes["heading"][0]), 1.0, atol=1e-7)
+
+
+def test_split_depends_on_the_seed_and_the_frames_only():
+    from bpy_pipeline.errors import InputError
+    from bpy_pipeline.io.splits import split_frames
+
+    train, val = split_frames(range(20), 5, 0.25)
+    assert len(val) == 5 and sorted(train + val) == list(range(20))
+    assert split_frames(reversed(range(20)), 5, 0.25) == (train, val)
+    assert split_frames(range(20), 6, 0.25) != (train, val)
+    assert split_frames([3, 8], 5, 0.25)[1] and split_frames([3], 5, 0.25) == ([3], [])
+    assert split_frames(range(4), 5, 0.0) == ([0, 1, 2, 3], [])
+    with pytest.raises(InputError, match="output.kitti.val_fraction"):
+        split_frames(range(4), 5, 1.0)
 
 
 def test_a_tilted_frame_cannot_hold_upright_boxes():
@@ -199,8 +257,8 @@ def test_pipeline_writes_boxes_that_hold_the_hall_points(tmp_path):
     for frame in manifest["frames"]:
         points = read_ply(tmp_path / "ply" / f"{frame['index']:06d}.ply")
         labels = bx.read_openpcdet_labels(tmp_path / "openpcdet" / "labels" / f"{frame['index']:06d}.txt")
-        kitti = bx.read_kitti_labels(tmp_path / "kitti" / "label_2" / f"{frame['index']:06d}.txt")
-        assert len(labels) == len(kitti) == len(frame["boxes"]) >= 2 and "boxes" in frame["timings_s"]
+        kitti = bx.read_kitti_labels(tmp_path / "kitti" / "training" / "label_2" / f"{frame['index']:06d}.txt")
+        assert len(labels) == len(frame["boxes"]) >= 2 and len(kitti) <= len(labels) and "boxes" in frame["timings_s"]  # KITTI: the camera's view only
         xyz = np.column_stack([points["x"], points["y"], points["z"]]).astype(np.float64)
         for box, entry in zip(labels, frame["boxes"]):
             mine = points["instance"] == entry["instance"]

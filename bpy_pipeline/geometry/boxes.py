@@ -1,0 +1,158 @@
+"""3D bounding boxes of labelled objects (cars, people, robot arms): fitting them to an instance's
+triangles, moving them between frames, counting and keeping them. Pure numpy.
+
+A box is fitted to the exported triangles of one instance (so it holds every point the scan puts
+on that instance) around a heading the scene builder knows (a car's body, a person's facing, the
+arm's vertical plane), or, without one, the heading of the smallest rectangle around its footprint.
+What the sensor sees of each box (truncation, visible and unoccluded rays) is
+:mod:`bpy_pipeline.lidar.visibility`; the label files are written by the box writers of :mod:`bpy_pipeline.io`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..buffers import SceneBuffers
+from ..errors import InputError
+
+BOX_DTYPE = np.dtype(
+    [
+        ("class_name", "U32"),  # class from assets_manifest/labels.yaml
+        ("instance", "<u4"),
+        ("centre", "<f8", (3,)),  # metres, the frame of the points
+        ("size", "<f8", (3,)),  # length (along the heading), width, height, metres
+        ("heading", "<f8"),  # radians about z, from the frame's x axis
+        ("truncation", "<f4"),  # 0..1
+        ("occlusion", "u1"),  # 0..3
+        ("visible", "<u4"),  # rays whose first hit is this object
+        ("unoccluded", "<u4"),  # rays that hit this object when it is alone
+        ("points", "<u4"),  # labeled points of the instance in the final cloud
+    ]
+)
+
+
+def wrap_angle(angle):
+    """Angle(s) in radians wrapped to [-pi, pi)."""
+    return (np.asarray(angle, float) + np.pi) % (2 * np.pi) - np.pi
+
+
+def footprint_heading(xy: np.ndarray) -> float:
+    """Yaw (radians) of the smallest-area rectangle around ``(n, 2)`` points (rotating calipers on the hull)."""
+    points = np.unique(np.round(np.asarray(xy, float), 9), axis=0)
+    if len(points) < 3:
+        if len(points) == 2:
+            d = points[1] - points[0]
+            return float(np.arctan2(d[1], d[0]))
+        return 0.0
+    hull = _convex_hull(points)
+    edges = np.diff(np.vstack([hull, hull[:1]]), axis=0)
+    angles = np.arctan2(edges[:, 1], edges[:, 0])
+    best, best_area = 0.0, np.inf
+    for angle in angles:
+        c, s = np.cos(angle), np.sin(angle)
+        local = hull @ np.array([[c, -s], [s, c]])
+        area = np.prod(local.max(axis=0) - local.min(axis=0))
+        if area < best_area - 1e-12:
+            best, best_area = float(angle), area
+    return float(wrap_angle(best))
+
+
+def _cross2(u, v) -> float:
+    return float(u[0] * v[1] - u[1] * v[0])
+
+
+def _convex_hull(points: np.ndarray) -> np.ndarray:
+    """Andrew's monotone chain; ``points`` unique, sorted by x then y."""
+    order = np.lexsort((points[:, 1], points[:, 0]))
+    pts = points[order]
+
+    def half(seq):
+        out = []
+        for p in seq:
+            while len(out) >= 2 and _cross2(out[-1] - out[-2], p - out[-2]) <= 0:
+                out.pop()
+            out.append(p)
+        return out
+
+    lower, upper = half(pts), half(pts[::-1])
+    return np.array(lower[:-1] + upper[:-1])
+
+
+def instance_triangles(buffers: SceneBuffers) -> np.ndarray:
+    """``(m,)`` instance id of every triangle."""
+    return buffers.objects.instance[buffers.triangle_object]
+
+
+def fit_boxes(buffers: SceneBuffers, classes, headings: dict | None = None) -> np.ndarray:
+    """World-frame boxes (:data:`BOX_DTYPE`) of every instance whose class is in ``classes``.
+
+    headings : ``{instance: yaw radians}`` from the scene builder; instances without one get the
+        heading of their footprint's smallest rectangle
+    The box is the tightest upright box around the instance's vertices in its heading's frame;
+    it contains every triangle of the instance, hence every point a scan puts on it.
+    """
+    headings = headings or {}
+    objects = buffers.objects
+    wanted = {str(c) for c in classes}
+    rows = [r for r in range(len(objects)) if objects.class_names[r] in wanted]
+    by_instance: dict[int, list[int]] = {}
+    for r in rows:
+        by_instance.setdefault(int(objects.instance[r]), []).append(r)
+    tri_rows = buffers.triangle_object
+    out = np.zeros(len(by_instance), BOX_DTYPE)
+    for k, (instance, members) in enumerate(sorted(by_instance.items())):
+        triangles = buffers.triangles[np.isin(tri_rows, members)]
+        vertices = buffers.vertices[np.unique(triangles)]
+        yaw = headings.get(instance)
+        if yaw is None:
+            yaw = footprint_heading(vertices[:, :2])
+        c, s = np.cos(yaw), np.sin(yaw)
+        rotation = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        local = vertices @ rotation
+        low, high = local.min(axis=0), local.max(axis=0)
+        out[k]["class_name"] = objects.class_names[members[0]]
+        out[k]["instance"] = instance
+        out[k]["centre"] = rotation @ ((low + high) / 2)
+        out[k]["size"] = high - low
+        out[k]["heading"] = wrap_angle(yaw)
+    return out
+
+
+def boxes_in_frame(boxes: np.ndarray, frame: np.ndarray, where: str = "output.frame") -> np.ndarray:
+    """Boxes moved from the world into the frame whose ``(4, 4)`` frame-to-world transform is ``frame``.
+
+    Upright boxes stay upright only in a level frame: ``InputError`` (naming ``where``) when the
+    frame's z axis is more than 0.5 degrees from vertical.
+    """
+    frame = np.asarray(frame, float)
+    if frame[2, 2] < np.cos(np.radians(0.5)):
+        tilt = np.degrees(np.arccos(np.clip(frame[2, 2], -1, 1)))
+        raise InputError(f"{where}: 3D box labels need a level point frame, but the sensor is tilted {tilt:.1f} deg from vertical; write the points in the world frame (output.frame: world)")
+    out = boxes.copy()
+    out["centre"] = (boxes["centre"] - frame[:3, 3]) @ frame[:3, :3]
+    yaw = np.arctan2(frame[1, 0], frame[0, 0])
+    out["heading"] = wrap_angle(boxes["heading"] - yaw)
+    return out
+
+
+def points_in_box(xyz: np.ndarray, box, margin: float = 0.0) -> np.ndarray:
+    """``(n,)`` bool: which ``(n, 3)`` points lie inside ``box`` (one :data:`BOX_DTYPE` record) grown by ``margin``."""
+    c, s = np.cos(box["heading"]), np.sin(box["heading"])
+    local = np.asarray(xyz, float) - box["centre"]
+    x = c * local[:, 0] + s * local[:, 1]
+    y = -s * local[:, 0] + c * local[:, 1]
+    half = np.asarray(box["size"]) / 2 + margin
+    return (np.abs(x) <= half[0]) & (np.abs(y) <= half[1]) & (np.abs(local[:, 2]) <= half[2])
+
+
+def count_points(boxes: np.ndarray, points: np.ndarray) -> None:
+    """Fill ``points`` of ``boxes`` in place: how many records of ``points`` carry each box's instance."""
+    counts = np.bincount(points["instance"].astype(np.int64), minlength=int(boxes["instance"].max(initial=0)) + 1)
+    boxes["points"] = counts[boxes["instance"].astype(np.int64)]
+
+
+def keep_boxes(boxes: np.ndarray, min_points: dict | None = None, default: int = 6) -> np.ndarray:
+    """The boxes with at least their class's minimum number of points (``min_points[class]``, else ``default``)."""
+    min_points = min_points or {}
+    need = np.array([min_points.get(str(c), default) for c in boxes["class_name"]], np.int64)
+    return boxes[boxes["points"].astype(np.int64) >= need]

@@ -1,0 +1,194 @@
+"""What a sensor sees of each 3D box: truncation by its field of view and range, and the rays that reach
+the object through the scene and when it is alone (occlusion). Pure numpy and embreex.
+
+Per box and frame (world-frame :data:`~bpy_pipeline.geometry.boxes.BOX_DTYPE` records, filled in place):
+
+- ``truncation`` (0..1): the share of the object's surface area outside the sensor's field of
+  view (directions no ray of the pattern comes near, or beyond its range limits), the LiDAR
+  analogue of KITTI's "leaving image boundaries".
+- ``visible`` and ``unoccluded`` ray counts: the rays of the pattern that pass near an object are
+  traced once through the whole scene (``visible``: the object is the first thing hit) and once
+  against every object alone (``unoccluded``); :func:`occlusion_levels` turns ``visible /
+  unoccluded`` into KITTI's levels 0..3.
+
+All objects share the two casts of a frame: the rays passing near any box are traced through the
+scene once, and the "alone" cast is one caster holding every box's triangles, each object moved to
+its own cell of a grid far enough apart that a ray started at an object's bounding sphere can meet
+no other object, so each (ray, object) pair is one ray of one cast.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..buffers import SceneBuffers
+from ..geometry.boxes import instance_triangles
+from .raycast import RayCaster
+from .scanner import trace_beams
+from .sensors import Pattern
+
+SAMPLE_SPACING = 0.1  # m between surface samples for truncation (wider on objects that would need more than:)
+MAX_SAMPLES = 4000
+
+
+class Coverage:
+    """The directions a sensor pattern covers: cells of ``cell_deg`` in azimuth and elevation that hold a ray.
+
+    A direction is covered when its cell or a neighbouring one holds a ray, so the coverage is
+    exact up to one cell; ``cell_deg`` should be at least the pattern's angular spacing.
+    """
+
+    def __init__(self, directions: np.ndarray, cell_deg: float):
+        self.cell = float(cell_deg)
+        self.columns = int(np.ceil(360.0 / self.cell))
+        self.rows = int(np.ceil(180.0 / self.cell)) + 1
+        self.mask = np.zeros((self.rows, self.columns), bool)
+        self.add(directions)
+
+    def _cells(self, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        d = np.asarray(directions, float)
+        azimuth = np.degrees(np.arctan2(d[:, 1], d[:, 0])) + 180.0
+        elevation = np.degrees(np.arcsin(np.clip(d[:, 2] / np.maximum(np.linalg.norm(d, axis=1), 1e-12), -1, 1))) + 90.0
+        col = np.floor(azimuth / self.cell).astype(int) % self.columns
+        row = np.clip(np.floor(elevation / self.cell).astype(int), 0, self.rows - 1)
+        return row, col
+
+    def add(self, directions: np.ndarray) -> None:
+        if len(directions):
+            row, col = self._cells(directions)
+            self.mask[row, col] = True
+            self._grown = None
+
+    def covers(self, directions: np.ndarray) -> np.ndarray:
+        """``(n,)`` bool for ``(n, 3)`` directions (sensor frame)."""
+        if getattr(self, "_grown", None) is None:  # the mask grown by one cell (azimuth wraps around)
+            rows = self.mask | np.vstack([self.mask[1:], self.mask[-1:]]) | np.vstack([self.mask[:1], self.mask[:-1]])
+            self._grown = rows | np.roll(rows, 1, axis=1) | np.roll(rows, -1, axis=1)
+        row, col = self._cells(directions)
+        return self._grown[row, col]
+
+
+def subset_buffers(buffers: SceneBuffers, rows: list[int]) -> SceneBuffers:
+    """The triangles of object ``rows`` alone, with only the vertices they use."""
+    keep = np.isin(buffers.triangle_object, rows)
+    used, triangles = np.unique(buffers.triangles[keep], return_inverse=True)
+    return SceneBuffers(buffers.vertices[used], triangles.reshape(-1, 3).astype(np.int32), buffers.triangle_object[keep], buffers.objects)
+
+
+def visibility(
+    buffers: SceneBuffers,
+    boxes: np.ndarray,
+    patterns,
+    pose: np.ndarray,
+    min_range: float,
+    max_range: float,
+    cell_deg: float = 1.0,
+    caster: RayCaster | None = None,
+    surfaces=None,
+    rng: np.random.Generator | None = None,
+) -> None:
+    """Fill ``truncation``, ``visible`` and ``unoccluded`` of world-frame ``boxes`` in place.
+
+    patterns : the sensor's rays (one :class:`Pattern` or an iterable of chunks), sensor frame
+    pose : (4, 4) sensor-to-world transform at frame start
+    cell_deg : coverage cell for truncation (about the pattern's coarsest angular spacing): the
+        rays passing an object mark the directions they cover, taken from the sensor's centre
+        to where they pass it (so rays leaving from the sensor's own mirrors count right)
+    caster : a :class:`RayCaster` of ``buffers`` in the sensor's frame, if one exists already
+    surfaces, rng : the scanner's rules for mirrors and glass and a generator for glass that
+        reflects a fraction of beams (:func:`~bpy_pipeline.lidar.scanner.trace_beams`)
+    Only the rays that pass within an object's bounding sphere are traced, once through the
+    whole scene and once against the object alone, both the scanner's way (glass passed
+    through, no mirror bounces), so a car's windows count the same in both.
+    """
+    if len(boxes) == 0:
+        return
+    caster = caster or RayCaster(buffers, frame=pose)
+    instance_of_triangle = instance_triangles(buffers)
+    objects = buffers.objects
+    members = [[r for r in range(len(objects)) if objects.instance[r] == box["instance"]] for box in boxes]
+    # bounding spheres in the sensor frame
+    centres = (boxes["centre"] - pose[:3, 3]) @ pose[:3, :3]
+    radii = np.linalg.norm(boxes["size"], axis=1) / 2 + 1e-3
+    alone = [(RayCaster(sub, frame=pose), sub) for sub in (subset_buffers(buffers, rows) for rows in members)]
+    visible = np.zeros(len(boxes), np.int64)
+    unoccluded = np.zeros(len(boxes), np.int64)
+    seen = [[] for _ in range(len(boxes))]  # per object: where the rays passing it are, seen from the sensor
+    for chunk in [patterns] if isinstance(patterns, Pattern) else patterns:
+        origins = np.zeros((len(chunk), 3)) if chunk.origins is None else chunk.origins
+        # a cone test from the sensor's centre first (all objects at once), widened by the farthest
+        # ray origin, then the exact ray-sphere test on the rays it lets through
+        shift = 0.0 if chunk.origins is None else float(np.linalg.norm(origins, axis=1).max())
+        reach = radii + shift
+        distance = np.linalg.norm(centres, axis=1)
+        cos_limit = np.where(distance > reach, np.sqrt(np.clip(1.0 - (reach / np.maximum(distance, 1e-12)) ** 2, 0.0, 1.0)), -2.0)
+        towards = chunk.directions @ (centres / np.maximum(distance, 1e-12)[:, None]).T  # (n, k)
+        cone = towards >= cos_limit[None]
+        for k in range(len(boxes)):
+            candidates = np.flatnonzero(cone[:, k])
+            if len(candidates) == 0:
+                continue
+            offset = centres[k] - origins[candidates]
+            along = np.einsum("ij,ij->i", offset, chunk.directions[candidates])
+            miss2 = np.einsum("ij,ij->i", offset, offset) - along**2
+            passing = (miss2 <= radii[k] ** 2) & (along >= -radii[k]) & (along - radii[k] <= max_range)
+            near = candidates[passing]
+            if len(near) == 0:
+                continue
+            o = origins[near] if chunk.origins is not None else np.zeros(3)
+            d = chunk.directions[near]
+            seen[k].append(o + along[passing, None] * d)  # the ray's point closest to the object's centre
+            beams = trace_beams(caster, buffers, o, d, min_range, max_range, max_bounces=0, surfaces=surfaces, rng=rng)
+            hit_instance = instance_of_triangle[beams.triangle]
+            visible[k] += int(np.count_nonzero((hit_instance == boxes["instance"][k]) & (beams.bounces == 0)))
+            lone = trace_beams(*alone[k], o, d, min_range, max_range, max_bounces=0, surfaces=surfaces, rng=rng)
+            unoccluded[k] += len(lone.ray)  # the object alone: every return is on it
+    boxes["visible"] = visible
+    boxes["unoccluded"] = unoccluded
+    for k, rows in enumerate(members):
+        triangles = buffers.vertices[buffers.triangles[np.isin(buffers.triangle_object, rows)]]  # (m, 3, 3)
+        total = np.linalg.norm(np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0]), axis=1).sum() / 2
+        samples, area = surface_samples(triangles, max(SAMPLE_SPACING, float(np.sqrt(total / MAX_SAMPLES))))
+        samples = (samples - pose[:3, 3]) @ pose[:3, :3]
+        distance = np.linalg.norm(samples, axis=1)
+        inside = (distance >= min_range) & (distance <= max_range)
+        if seen[k]:  # the directions the rays passing the object cover, from the sensor's centre
+            inside &= Coverage(np.concatenate(seen[k]), cell_deg).covers(samples)
+        else:
+            inside[:] = False
+        total = area.sum()
+        boxes["truncation"][k] = float(1.0 - area[inside].sum() / total) if total > 0 else 1.0
+
+
+def surface_samples(triangles: np.ndarray, spacing: float) -> tuple[np.ndarray, np.ndarray]:
+    """Points spread over ``(m, 3, 3)`` triangles and the area each stands for: ``(p, 3)``, ``(p,)``.
+
+    A triangle wider than ``spacing`` (metres) is cut into n^2 equal triangles (n up to 24) and
+    sampled at their centroids, so the areas add up exactly and large faces are not one point.
+    """
+    edge = np.maximum(np.linalg.norm(triangles[:, 1] - triangles[:, 0], axis=1), np.linalg.norm(triangles[:, 2] - triangles[:, 0], axis=1))
+    level = np.clip(np.ceil(edge / spacing), 1, 24).astype(int)
+    area = np.linalg.norm(np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0]), axis=1) / 2
+    points, weights = [], []
+    for n in np.unique(level):
+        rows = np.flatnonzero(level == n)
+        i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+        up = i + j <= n - 1
+        down = i + j <= n - 2
+        u = np.concatenate([(i[up] + 1 / 3) / n, (i[down] + 2 / 3) / n])
+        v = np.concatenate([(j[up] + 1 / 3) / n, (j[down] + 2 / 3) / n])  # n^2 barycentric points
+        t = triangles[rows]
+        points.append((t[:, None, 0] + u[None, :, None] * (t[:, None, 1] - t[:, None, 0]) + v[None, :, None] * (t[:, None, 2] - t[:, None, 0])).reshape(-1, 3))
+        weights.append(np.repeat(area[rows] / n**2, len(u)))
+    if not points:
+        return np.zeros((0, 3)), np.zeros(0)
+    return np.concatenate(points), np.concatenate(weights)
+
+
+def occlusion_levels(visible: np.ndarray, unoccluded: np.ndarray, levels=(0.8, 0.4, 0.1)) -> np.ndarray:
+    """``(n,)`` uint8 occlusion level 0..3 from visible and unoccluded counts (an object no ray reaches is 3)."""
+    visible = np.asarray(visible, float)
+    unoccluded = np.asarray(unoccluded, float)
+    fraction = np.where(unoccluded > 0, visible / np.maximum(unoccluded, 1), 0.0)
+    t0, t1, t2 = levels
+    return np.select([fraction >= t0, fraction >= t1, fraction >= t2], [0, 1, 2], 3).astype(np.uint8)
