@@ -140,3 +140,29 @@ def test_incidence_exponent_sets_how_intensity_and_drop_follow_incidence():
 
     flat_effects = replace(effects, intensity=replace(effects.intensity, incidence_exponent=0.0))
     assert np.allclose(*probability(points, beam, flat_effects, None))
+
+
+@pytest.mark.slow
+def test_realism_benchmark_runs_small_and_its_figures_hold(tmp_path, real_scan):
+    """benchmarks/bench_realism.py --small (as CI runs it): the replay covers the real sweep, the
+    preset's drop model loses what the real sensor loses, and every KITTI car is counted."""
+    import json
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    for name in ("nuscenes_hdl32e_sweep.bin", "kitti_hdl64e_000008_frontfov.bin", "kitti_000008_boxes.json"):
+        real_scan(name)
+    root = Path(__file__).resolve().parents[1]
+    done = subprocess.run([sys.executable, str(root / "benchmarks" / "bench_realism.py"), "--small", "--out", str(tmp_path)], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    result = json.loads((tmp_path / "realism_small.json").read_text())
+    assert (tmp_path / "realism_small.png").stat().st_size > 10_000
+    rows = {(r["case"], r["quantity"]): r for r in result["rows"]}
+    returns = rows[("hdl32e replay", "returns (all rings)")]
+    assert 0.85 < returns["ideal"] / returns["real"] <= 1.0 and returns["sim"] < returns["ideal"]
+    drop = rows[("hdl32e sweep", "drop fraction (all firings with a target)")]
+    assert abs(drop["sim"] - drop["real"]) < 0.01
+    cars = result["notes"]["kitti"]["cars"]
+    assert len(cars) == 6 and all(c["default"]["points"] > 0 and c["default"]["points"] <= c["ideal"]["points"] for c in cars)
+    assert all(abs(c["real_in_box"] - c["real_label"]) <= 0.08 * c["real_label"] + 2 for c in cars)  # the boxes sit where the labels say
