@@ -205,14 +205,18 @@ class RayCaster:
         else:
             if not np.array_equal(static.frame, self.frame):
                 raise ValueError("RayCaster: the static part was built for another frame")
-            moving = np.ones(len(triangles), bool)
-            moving[static.triangle] = False
-            moving = np.flatnonzero(moving)
-            self.plane_normal, self.plane_offset = np.empty((len(triangles), 3)), np.empty(len(triangles))
-            self.plane_normal[static.triangle], self.plane_offset[static.triangle] = static.normal, static.offset
-            normal, offset = triangle_planes(local, triangles[moving], self.kernels)
-            self.plane_normal[moving], self.plane_offset[moving] = normal, offset
-            parts = [static.part, embree_part(local, triangles, moving, normal)]
+            if len(static.triangle) == len(triangles):  # nothing moves: the kept planes as they are (read only)
+                self.plane_normal, self.plane_offset = static.normal, static.offset
+                parts = [static.part]
+            else:
+                moving = np.ones(len(triangles), bool)
+                moving[static.triangle] = False
+                moving = np.flatnonzero(moving)
+                self.plane_normal, self.plane_offset = np.empty((len(triangles), 3)), np.empty(len(triangles))
+                self.plane_normal[static.triangle], self.plane_offset[static.triangle] = static.normal, static.offset
+                normal, offset = triangle_planes(local, triangles[moving], self.kernels)
+                self.plane_normal[moving], self.plane_offset[moving] = normal, offset
+                parts = [static.part, embree_part(local, triangles, moving, normal)]
         self.parts = [p for p in parts if p is not None]
         # Embree's primID indexes the solid triangles; with one part, map them here, with two, in _embree
         self.embree_triangle = self.parts[0].triangle if len(self.parts) == 1 else None
@@ -460,12 +464,12 @@ class CasterCache:
         moving = np.zeros(k, bool) if moving is None else np.asarray(moving, bool)
         if moving.shape != (k,):
             raise InputError(f"CasterCache.caster: moving must give each of the {k} object rows a flag, not shape {moving.shape}")
-        if len(buffers.triangles):
-            buffers.check()
-        static = np.flatnonzero(~moving[buffers.triangle_object])
+        static = np.flatnonzero(~moving[buffers.triangle_object]) if moving.any() else np.arange(len(buffers.triangles))
         digest = ("key", key) if key is not None else static_digest(buffers, static)
         kept = self.kept
         if kept is None or not (np.array_equal(kept.frame, frame) and np.array_equal(kept.triangle, static) and kept.digest == digest):
+            if len(buffers.triangles):
+                buffers.check()  # before any index is used to build (the reused path is checked by RayCaster)
             caster = RayCaster(buffers, frame, self.threads, kernel=self.kernel) if not moving.any() else None
             if caster is not None:  # nothing moves: the whole scene is the static part
                 self.kept = StaticPart(frame, static, digest, caster.parts[0] if caster.parts else None, caster.plane_normal, caster.plane_offset)
@@ -491,7 +495,8 @@ def static_digest(buffers: SceneBuffers, static: np.ndarray) -> bytes:
     """
     h = hashlib.sha256()
     if len(static):
-        index = np.ascontiguousarray(buffers.triangles[static])
+        every = len(static) == len(buffers.triangles)  # static is then 0..m-1
+        index = np.ascontiguousarray(buffers.triangles if every else buffers.triangles[static])
         h.update(index)
         h.update(np.ascontiguousarray(buffers.vertices[index.min() : index.max() + 1], np.float64))
     return h.digest()
