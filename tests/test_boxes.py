@@ -92,6 +92,21 @@ def test_occlusion_levels_of_constructed_cases():
     assert by_instance[12][0] < 0.2 and by_instance[12][1] >= 2  # only the top of the head shows
 
 
+def test_one_cast_for_all_objects_equals_a_caster_per_object():
+    from bpy_pipeline.lidar.visibility import visibility, visibility_per_object
+
+    buffers, people = people_and_pillar()
+    headings = {k: p.yaw for k, p in people.items()}
+    ours = bx.fit_boxes(buffers, ["person", "pillar", "wall"], headings)
+    reference = ours.copy()
+    visibility(buffers, ours, iter_pattern(SENSOR, 1 << 16), POSE, SENSOR.min_range, SENSOR.max_range, cell_deg=2.5)
+    visibility_per_object(buffers, reference, iter_pattern(SENSOR, 1 << 16), POSE, SENSOR.min_range, SENSOR.max_range, cell_deg=2.5)
+    assert (reference["unoccluded"] > 0).all() and (reference["visible"] < reference["unoccluded"]).any()
+    np.testing.assert_array_equal(ours["visible"], reference["visible"])
+    np.testing.assert_array_equal(ours["unoccluded"], reference["unoccluded"])
+    np.testing.assert_allclose(ours["truncation"], reference["truncation"], atol=1e-12)
+
+
 def test_every_box_contains_its_instances_points():
     buffers, people = people_and_pillar()
     boxes = bx.fit_boxes(buffers, ["person", "pillar", "wall"], {k: p.yaw for k, p in people.items()})

@@ -97,6 +97,144 @@ def visibility(
     caster : a :class:`RayCaster` of ``buffers`` in the sensor's frame, if one exists already
     surfaces, rng : the scanner's rules for mirrors and glass and a generator for glass that
         reflects a fraction of beams (:func:`~bpy_pipeline.lidar.scanner.trace_beams`)
+    The rays that pass within an object's bounding sphere are traced the scanner's way (glass
+    passed through, no mirror bounces), per chunk once through the whole scene for all objects
+    together and once against all objects alone (:class:`AloneCaster`), so a car's windows count
+    the same in both.
+    """
+    if len(boxes) == 0:
+        return
+    caster = caster or RayCaster(buffers, frame=pose)
+    objects = buffers.objects
+    members = [np.flatnonzero(objects.instance == box["instance"]) for box in boxes]
+    box_of_row = np.full(len(objects), -1, np.int64)
+    for k, rows in enumerate(members):
+        box_of_row[rows] = k
+    box_of_triangle = box_of_row[buffers.triangle_object]
+    centres = (boxes["centre"] - pose[:3, 3]) @ pose[:3, :3]  # bounding spheres in the sensor frame
+    radii = np.linalg.norm(boxes["size"], axis=1) / 2 + 1e-3
+    alone = AloneCaster(buffers, members, centres, radii, pose)
+    visible = np.zeros(len(boxes), np.int64)
+    unoccluded = np.zeros(len(boxes), np.int64)
+    seen_points, seen_boxes = [], []  # where the rays passing each object are, seen from the sensor
+    distance = np.linalg.norm(centres, axis=1)
+    for chunk in [patterns] if isinstance(patterns, Pattern) else patterns:
+        origins = np.zeros((len(chunk), 3)) if chunk.origins is None else chunk.origins
+        # a cone test from the sensor's centre first, widened by the farthest ray origin, then the
+        # exact ray-sphere test on the (ray, object) pairs it lets through
+        shift = 0.0 if chunk.origins is None else float(np.linalg.norm(origins, axis=1).max())
+        reach = radii + shift
+        cos_limit = np.where(distance > reach, np.sqrt(np.clip(1.0 - (reach / np.maximum(distance, 1e-12)) ** 2, 0.0, 1.0)), -2.0)
+        towards = chunk.directions @ (centres / np.maximum(distance, 1e-12)[:, None]).T  # (n, k)
+        ray, k = np.nonzero(towards >= cos_limit[None])
+        if len(ray) == 0:
+            continue
+        d = chunk.directions[ray]
+        offset = centres[k] - origins[ray]
+        along = np.einsum("ij,ij->i", offset, d)
+        miss2 = np.einsum("ij,ij->i", offset, offset) - along**2
+        passing = (miss2 <= radii[k] ** 2) & (along >= -radii[k]) & (along - radii[k] <= max_range)
+        ray, k, along, d = ray[passing], k[passing], along[passing], d[passing]
+        if len(ray) == 0:
+            continue
+        seen_points.append(origins[ray] + along[:, None] * d)  # the ray's point closest to the object's centre
+        seen_boxes.append(k)
+        # the whole scene, each passing ray once: a ray whose first hit is object k passes k's sphere
+        traced = np.unique(ray)
+        o = origins[traced] if chunk.origins is not None else np.zeros(3)
+        beams = trace_beams(caster, buffers, o, chunk.directions[traced], min_range, max_range, max_bounces=0, surfaces=surfaces, rng=rng)
+        hit = box_of_triangle[beams.triangle]
+        direct = (hit >= 0) & (beams.bounces == 0)
+        visible += np.bincount(hit[direct], minlength=len(boxes))
+        # every object alone, each (ray, object) pair once
+        unoccluded += alone.count(origins[ray], d, k, along, min_range, max_range, surfaces, rng)
+    boxes["visible"] = visible
+    boxes["unoccluded"] = unoccluded
+    if seen_points:  # grouped by object
+        points, owner = np.concatenate(seen_points), np.concatenate(seen_boxes)
+        order = np.argsort(owner, kind="stable")
+        seen_points = np.split(points[order], np.searchsorted(owner[order], np.arange(1, len(boxes))))
+    for k, rows in enumerate(members):
+        triangles = buffers.vertices[buffers.triangles[np.isin(buffers.triangle_object, rows)]]  # (m, 3, 3)
+        total = np.linalg.norm(np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0]), axis=1).sum() / 2
+        samples, area = surface_samples(triangles, max(SAMPLE_SPACING, float(np.sqrt(total / MAX_SAMPLES))))
+        samples = (samples - pose[:3, 3]) @ pose[:3, :3]
+        distance = np.linalg.norm(samples, axis=1)
+        inside = (distance >= min_range) & (distance <= max_range)
+        passed = seen_points[k] if k < len(seen_points) else None
+        if passed is not None and len(passed):  # the directions the rays passing the object cover, from the sensor's centre
+            inside &= Coverage(passed, cell_deg).covers(samples)
+        else:
+            inside[:] = False
+        total = area.sum()
+        boxes["truncation"][k] = float(1.0 - area[inside].sum() / total) if total > 0 else 1.0
+
+
+
+
+class AloneCaster:
+    """Every box's object alone, in one caster: object k moved to cell k of a grid.
+
+    Cells are ``4 r_max + 1`` m apart (r_max the largest bounding-sphere radius), so a ray started
+    inside object k's sphere and traced ``2 r_max`` metres meets object k and nothing else: one
+    cast answers "what would this ray hit if object k were alone?" for all pairs at once.
+    """
+
+    def __init__(self, buffers: SceneBuffers, members: list[np.ndarray], centres: np.ndarray, radii: np.ndarray, pose: np.ndarray):
+        self.radii = np.asarray(radii, float)
+        self.reach = 2.0 * float(radii.max()) + 1e-3
+        spacing = 4.0 * float(radii.max()) + 1.0
+        side = int(np.ceil(len(members) ** (1 / 3)))
+        cells = np.stack(np.unravel_index(np.arange(len(members)), (side, side, side)), axis=1) * spacing
+        self.move = cells - centres  # (k, 3) sensor frame: object k's translation
+        box_of_row = np.full(len(buffers.objects), -1, np.int64)
+        for k, rows in enumerate(members):
+            box_of_row[rows] = k
+        keep = box_of_row[buffers.triangle_object] >= 0
+        used, triangles = np.unique(buffers.triangles[keep], return_inverse=True)
+        owner = np.full(len(buffers.vertices), -1, np.int64)  # the box of each used vertex (one object's vertices are its own)
+        owner[buffers.triangles[keep].ravel()] = np.repeat(box_of_row[buffers.triangle_object[keep]], 3)
+        vertices = buffers.vertices[used] + self.move[owner[used]] @ np.asarray(pose, float)[:3, :3].T
+        self.buffers = SceneBuffers(vertices, triangles.reshape(-1, 3).astype(np.int32), buffers.triangle_object[keep], buffers.objects)
+        self.caster = RayCaster(self.buffers, frame=pose)
+
+    def count(self, origins, directions, box, along, min_range, max_range, surfaces, rng) -> np.ndarray:
+        """``(k,)`` returns per box of the pairs (ray origin ``(p, 3)``, direction ``(p, 3)``, box ``(p,)``,
+        ``along`` ``(p,)`` m to the point nearest the box's centre), each ray on its box alone,
+        within ``[min_range, max_range]`` of its origin."""
+        start = np.maximum(along - self.radii[box], min_range)  # where the pair's ray enters the sphere (not before min_range)
+        shifted = origins + start[:, None] * directions + self.move[box]
+        beams = trace_beams(self.caster, self.buffers, shifted, directions, 0.0, self.reach, max_bounces=0, surfaces=surfaces, rng=rng)
+        within = start[beams.ray] + beams.path <= max_range
+        return np.bincount(box[beams.ray[within]], minlength=len(self.move))
+
+
+def visibility_per_object(
+    buffers: SceneBuffers,
+    boxes: np.ndarray,
+    patterns,
+    pose: np.ndarray,
+    min_range: float,
+    max_range: float,
+    cell_deg: float = 1.0,
+    caster: RayCaster | None = None,
+    surfaces=None,
+    rng: np.random.Generator | None = None,
+) -> None:
+    """:func:`visibility` the earlier way, kept as its reference (tests and ``benchmarks/bench_writers.py``):
+    a caster per object and a loop over the objects, each tracing its own rays. Same arguments and results
+    (up to the draws of glass that reflects a fraction of beams).
+
+    Fill ``truncation``, ``visible`` and ``unoccluded`` of world-frame ``boxes`` in place.
+
+    patterns : the sensor's rays (one :class:`Pattern` or an iterable of chunks), sensor frame
+    pose : (4, 4) sensor-to-world transform at frame start
+    cell_deg : coverage cell for truncation (about the pattern's coarsest angular spacing): the
+        rays passing an object mark the directions they cover, taken from the sensor's centre
+        to where they pass it (so rays leaving from the sensor's own mirrors count right)
+    caster : a :class:`RayCaster` of ``buffers`` in the sensor's frame, if one exists already
+    surfaces, rng : the scanner's rules for mirrors and glass and a generator for glass that
+        reflects a fraction of beams (:func:`~bpy_pipeline.lidar.scanner.trace_beams`)
     Only the rays that pass within an object's bounding sphere are traced, once through the
     whole scene and once against the object alone, both the scanner's way (glass passed
     through, no mirror bounces), so a car's windows count the same in both.
