@@ -362,3 +362,18 @@ def test_convert_a_real_kitti_scan_to_a_vlp16(real_scan):
         assert np.abs(elevation - table[out["ring"]]).max() < 1e-3  # on the target's cones
     with pytest.raises(InputError, match="method"):
         convert_scan(f, target, method="nearest")
+
+
+def test_a_folder_of_scans_gives_one_scan_per_frame(real_scan, tmp_path):
+    import os
+
+    for k, name in enumerate((SWEEP, SWEEP)):
+        os.symlink(real_scan(name), tmp_path / f"{k:06d}.bin")
+    (tmp_path / "notes.txt").write_text("not a scan")
+    section = RealScanScene(path=str(tmp_path), format="nuscenes", parking_rule=ParkingRule(enabled=True))
+    a = mix_frame(section, np.random.default_rng(0), frame=0)
+    b = mix_frame(section, np.random.default_rng(0), frame=3)
+    assert a.info["scan"]["path"].endswith("000000.bin") and b.info["scan"]["path"].endswith("000001.bin")
+    assert a.points.tobytes() == b.points.tobytes()  # the same scan and generator: the same frame
+    with pytest.raises(InputError, match="no scan files"):
+        mix_frame(RealScanScene(path=str(tmp_path / "*.las")), np.random.default_rng(0))

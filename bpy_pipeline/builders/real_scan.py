@@ -22,7 +22,7 @@ def check(params: RealScanScene, where: str) -> None:
     from ..io.real_scans import FORMATS
 
     if not params.path:
-        raise InputError(f"{where}.path: the real_scan builder needs the path of a scan file ({', '.join(FORMATS)})")
+        raise InputError(f"{where}.path: the real_scan builder needs the path of a scan file ({', '.join(FORMATS)}), a folder of them or a glob pattern")
     if params.format and params.format not in FORMATS:
         raise InputError(f"{where}.format: {params.format!r} is not one of {', '.join(FORMATS)}")
     for k, o in enumerate(params.objects):
@@ -49,7 +49,7 @@ def real_scan_stage(frame, run) -> None:
     from ..pipeline import sensor_pose
 
     config = run.config
-    mixed = mix_frame(config.scene.params, frame.rng, config.effects, run.threads, run.table)
+    mixed = mix_frame(config.scene.params, frame.rng, config.effects, run.threads, run.table, frame=frame.index)
     frame.pose = sensor_pose(config, frame.index)
     frame.pose_at = frame.pose
     frame.buffers = mixed.buffers

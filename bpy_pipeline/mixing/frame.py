@@ -21,6 +21,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -124,10 +125,30 @@ def _timed(timings: dict, name: str, start: float) -> float:
     return now
 
 
-def mix_frame(section: RealScanScene, rng: np.random.Generator, effects=None, threads: int | None = None, table: ClassTable | None = None, scan: RealScan | None = None, firings: Firings | None = None) -> MixedFrame:
+def scan_paths(section: RealScanScene) -> list[Path]:
+    """The scans ``section.path`` names: one file, or every file of a folder (or a glob pattern) in name order."""
+    if not section.path:
+        raise InputError("scene.path: the real_scan builder needs the path of a scan file, a folder of them or a glob pattern")
+    path = Path(section.path)
+    if path.is_dir():
+        found = sorted(p for p in path.iterdir() if p.is_file() and p.suffix.lower() in SCAN_SUFFIXES)
+    elif any(ch in section.path for ch in "*?["):
+        found = sorted(p for p in path.parent.glob(path.name) if p.is_file())
+    else:
+        return [path]
+    if not found:
+        raise InputError(f"scene.path: no scan files ({', '.join(SCAN_SUFFIXES)}) in {section.path}")
+    return found
+
+
+SCAN_SUFFIXES = (".bin", ".npy", ".ply", ".las", ".laz", ".pcd")
+
+
+def mix_frame(section: RealScanScene, rng: np.random.Generator, effects=None, threads: int | None = None, table: ClassTable | None = None, scan: RealScan | None = None, firings: Firings | None = None, frame: int = 0) -> MixedFrame:
     """Insert ``section``'s objects into its real scan, exact per firing (module notes).
 
     rng : the frame's generator (placement rules, object shapes, effects and injections draw from it in a fixed order)
+    frame : the frame index; with a folder or pattern of scans, frame k uses scan k (mod their number)
     effects : a ``config.EffectsConfig`` for the inserted returns (``None``: exact, no drop or noise)
     scan, firings : already read (benchmarks reuse them across frames); read from ``section.path`` when ``None``
     """
@@ -135,9 +156,8 @@ def mix_frame(section: RealScanScene, rng: np.random.Generator, effects=None, th
     table = table or load_class_table()
     start = time.perf_counter()
     if scan is None:
-        if not section.path:
-            raise InputError("scene.path: the real_scan builder needs the path of a scan file")
-        scan = read_real_scan(section.path, section.format or None)
+        paths = scan_paths(section)
+        scan = read_real_scan(paths[frame % len(paths)], section.format or None)
     start = _timed(timings, "read", start)
     firings = firings or recover_firings(scan, section.preset or None)
     start = _timed(timings, "firings", start)

@@ -98,7 +98,8 @@ class NoiseInjections:
 class RealScanScene:
     """``scene.builder: real_scan``: a real scan as the background, objects cast in with the real sensor's own firings.
 
-    path, format : the scan (format guessed from the file when empty: nuscenes, kitti, semantickitti, npy, ply, las, pcd)
+    path, format : the scan (format guessed from the file when empty: nuscenes, kitti, semantickitti, npy, ply, las, pcd);
+        a folder or a glob pattern of scans gives frame k the k-th in name order (mod their number)
     preset : a sensor preset (hdl32e, hdl64e, ...) filling what the file lacks (its step, frame time, elevations)
     objects : placed explicitly; remove : boxes cut out of the real returns first
     parking_rule, kitti_rule : rule-based population (off by default)
