@@ -44,3 +44,14 @@ def test_real_scan_bad_input_exits_2_naming_the_key(tmp_path, real_scan):
     done = run("--out", str(tmp_path / "b"), "--set", "scene.builder=real_scan", "--set", f"scene.path={sweep}", "--set", "scene.objects=[{type: spaceship}]")
     assert done.returncode == 2 and "scene.objects[0].type" in done.stderr
     assert not (tmp_path / "b" / "sequences").exists()
+
+
+def test_real_scan_frame_range_gives_the_full_runs_bytes(real_scan, tmp_path):
+    sweep = real_scan("nuscenes_hdl32e_sweep.bin")
+    common = ["--frames", "3", "--set", "scene.builder=real_scan", "--set", f"scene.path={sweep}", "--set", "scene.parking_rule.enabled=true", "--set", "output.preview=false", "--set", "output.formats=[semantickitti]"]
+    full, part = run("--out", str(tmp_path / "full"), *common), run("--out", str(tmp_path / "part"), *common, "--frames-range", "2:3")
+    assert full.returncode == 0 and part.returncode == 0, full.stderr + part.stderr
+    for kind in ("velodyne/000002.bin", "labels/000002.label"):
+        assert (tmp_path / "full/sequences/00" / kind).read_bytes() == (tmp_path / "part/sequences/00" / kind).read_bytes()
+    labels = [np.fromfile(tmp_path / f"full/sequences/00/labels/{k:06d}.label", np.uint32) for k in range(3)]
+    assert len({x.tobytes() for x in labels}) == 3  # each frame places its own cars

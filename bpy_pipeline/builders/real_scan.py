@@ -42,6 +42,24 @@ def build(params: RealScanScene, context: BuildContext) -> BuildResult:
     return BuildResult()
 
 
+def kept_scan(section: RealScanScene, index: int, keep: dict):
+    """``(scan, firings)`` of frame ``index``'s file, read once while frames keep using the same file
+    (held in the run's ``keep``: reading and firing recovery draw nothing, so reuse gives the same bytes)."""
+    from ..io.real_scans import read_real_scan
+    from ..mixing.firings import recover_firings
+    from ..mixing.frame import scan_paths
+
+    paths = scan_paths(section)
+    path = paths[index % len(paths)]
+    key = (str(path), path.stat().st_mtime_ns if path.exists() else None, section.format, section.preset)
+    held = keep.get("real_scan")
+    if held is None or held[0] != key:
+        scan = read_real_scan(path, section.format or None)
+        keep.clear()
+        held = keep["real_scan"] = (key, scan, recover_firings(scan, section.preset or None))
+    return held[1], held[2]
+
+
 def real_scan_stage(frame, run) -> None:
     """The whole frame of a real scan: points (output frame), boxes, a stand-in for the buffers (the inserted objects)."""
     from ..io import boxes as box_labels
@@ -49,7 +67,8 @@ def real_scan_stage(frame, run) -> None:
     from ..pipeline import sensor_pose
 
     config = run.config
-    mixed = mix_frame(config.scene.params, frame.rng, config.effects, run.threads, run.table, frame=frame.index)
+    section = config.scene.params
+    mixed = mix_frame(section, frame.rng, config.effects, run.threads, run.table, *kept_scan(section, frame.index, run.keep), frame=frame.index)
     frame.pose = sensor_pose(config, frame.index)
     frame.pose_at = frame.pose
     frame.buffers = mixed.buffers
