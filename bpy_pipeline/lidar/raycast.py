@@ -268,10 +268,10 @@ class RayCaster:
 
         def trace(start):
             s = slice(start, start + self.chunk)
-            limit = np.array(far[s], np.float32)
+            limit = np.array(far[s], np.float32)  # a copy: embreex writes the hits' distances into it
             best = None
             for part in self.parts:
-                out = part.scene.run(origins32[s], directions32[s], dists=limit.copy() if best is None else best[0].copy(), output=1)
+                out = part.scene.run(origins32[s], directions32[s], dists=limit if best is None else best[0].copy(), output=1)
                 prim = out["primID"]
                 if len(self.parts) == 1:
                     return out["tfar"], prim
@@ -281,7 +281,7 @@ class RayCaster:
                     best = (out["tfar"], triangle)
                 else:
                     best = (np.where(hit, out["tfar"], best[0]), np.where(hit, triangle, best[1]))
-            return best if best is not None else (limit, np.full(len(limit), -1, np.int32))
+            return best if best is not None else (np.array(far[s], np.float32), np.full(len(limit), -1, np.int32))
 
         starts = range(0, len(directions32), self.chunk)
         if self.threads > 1 and len(starts) > 1:
