@@ -377,3 +377,17 @@ def test_a_folder_of_scans_gives_one_scan_per_frame(real_scan, tmp_path):
     assert a.points.tobytes() == b.points.tobytes()  # the same scan and generator: the same frame
     with pytest.raises(InputError, match="no scan files"):
         mix_frame(RealScanScene(path=str(tmp_path / "*.las")), np.random.default_rng(0))
+
+
+def test_real_scan_section_round_trips_through_the_config(real_scan):
+    from bpy_pipeline.config import config_from_dict, config_to_dict, load_config
+
+    scene = {"builder": "real_scan", "path": str(real_scan(SWEEP)), "objects": [{"type": "car", "center": [8, 4, -0.9], "class": "van"}],
+             "noise": {"range_sigma": [0.001, 0.03]}, "parking_rule": {"enabled": True, "count": {"kind": "normal", "mean": 3, "std": 1, "min": 0, "max": 10}}}
+    config = load_config({"scene": scene})
+    assert config.scene.params.objects[0].class_name == "van" and config.sensor.spec.name == "hdl32e"
+    assert config_from_dict(config_to_dict(config)) == config
+    with pytest.raises(InputError, match=r"scene.objects\[0\].type"):
+        load_config({"scene": {**scene, "objects": [{"type": "spaceship"}]}})
+    with pytest.raises(InputError, match="scene.format"):
+        load_config({"scene": {**scene, "format": "xyz"}})
