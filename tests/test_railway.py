@@ -129,7 +129,7 @@ def test_the_track_follows_a_curve_and_its_node_group_is_editable():
     from bpy_pipeline.compat import set_modifier_input
     from bpy_pipeline.geometry.alignment import arc_through
 
-    build("scene.track.mid=[0, 25, 0]", "scene.stations.count=0")
+    build("scene.track.mid=[0, 25, 0]", "scene.stations.count=0", "scene.track.design_speed=0")  # no cant: rails level across
     arc = arc_through((-75, 0, 0), (0, 25, 0), (75, 0, 0))
     rails = evaluated_vertices(bpy.data.objects["rails.t0"])
     s = arc.nearest_chainage(rails)
@@ -205,3 +205,32 @@ def test_ballast_fills_between_the_sleepers():
     assert top == pytest.approx(track.ballast_height + 0.15, abs=1e-4)  # the crib ballast's top
     assert sleepers.min() == pytest.approx(track.ballast_height, abs=1e-4) and sleepers.max() > top + 0.05  # sleepers stand 7 cm proud
     assert float(layout.section.surface(0.0)) == pytest.approx(top, abs=1e-6)
+
+
+@pytest.mark.parametrize("turn", [1, -1])
+def test_cant_on_a_600_m_curve_measured_from_the_rail_points(tmp_path, turn):
+    # a 300 m chord with a 19.05 m rise: R = 600 m; at 80 km/h the equilibrium cant is 11.8 * 80^2 / 600 = 125.9 mm
+    mid = 600.0 - math.sqrt(600.0**2 - 150.0**2)
+    points, manifest = scan_world(tmp_path, *TLS, "sensor.vertical_fov_deg=[-70, -50]", "sensor.sampling_factor=0.5", "scene.stations.offset=0",
+                                  "scene.track.start=[-150, 0, 0]", f"scene.track.mid=[0, {turn * mid}, 0]", "scene.track.end=[150, 0, 0]",
+                                  "scene.track.design_speed=80", "scene.detail.stones=false", "effects.ideal=true")
+    rails = points[points["instance"] == instance_of(manifest, "rails.t0")]
+    centre = np.array([0.0, turn * (mid - 600.0)])
+    radius = np.hypot(rails["x"] - centre[0], rails["y"] - centre[1])
+    z = rails["z"].astype(float)
+    inner, outer = z[radius < 600.0].max(), z[radius > 600.0].max()  # the heads' top corners: gauge + head width apart
+    assert len(rails) > 1000
+    assert outer - inner == pytest.approx(11.8 * 80**2 / 600.0 / 1000.0, abs=0.003)
+    ground = manifest["frames"][0]["sensor_pose"][2][3] - 2.0  # the station (offset 0) stands on the ballast, 0.35 + 0.17 m up
+    assert inner - (ground - 0.52) == pytest.approx(0.742, abs=0.003)  # the inner rail keeps its height above formation
+
+
+def test_cant_given_or_capped():
+    from bpy_pipeline.geometry.alignment import arc_through
+    from bpy_pipeline.geometry.railway_layout import cant
+
+    track = load_config(None, ["scene.track.design_speed=200"]).scene.params.track
+    curve = arc_through((-150, 0, 0), (0, 600.0 - math.sqrt(600.0**2 - 150.0**2), 0), (150, 0, 0))
+    assert cant(track, curve) == track.max_cant == 0.16  # 786 mm wanted, capped
+    given = load_config(None, ["scene.track.cant_from=value", "scene.track.cant=0.05"]).scene.params.track
+    assert cant(given, curve) == 0.05 and cant(given, arc_through((-1, 0, 0), (0, 0, 0), (1, 0, 0))) == 0.0

@@ -129,7 +129,7 @@ def test_sensor_driven_detail():
     assert detail.track_trim[0] == 0.0 and detail.track_trim[1] < layout.alignment.length  # the far end is not built
     assert detail.stone_radius == pytest.approx(0.045 / (2 * view.step))
     (k, (s0, s1)), = detail.stone_trims
-    assert k == 0 and s0 < 100 < s1 and s1 - s0 < 2 * detail.stone_radius + 2
+    assert k == 0 and s0 < 100 < s1 and s1 - s0 < 2 * (detail.stone_radius + layout.section.ballast_toe_half) + 2
     assert len(detail.supports) < len(layout.supports)
     fixed = level_of_detail(layout, params("scene.detail.mode=fixed"), view)
     assert all(s is not None for s in fixed.wires) and fixed.stone_radius == 0

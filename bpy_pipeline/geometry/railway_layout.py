@@ -97,6 +97,35 @@ class CrossSection:
         return np.where(d <= self.ballast_toe_half, ballast, ground)
 
 
+def plan_radius(alignment: Alignment) -> float:
+    """Radius (m) of the alignment's curve in plan; infinite on a straight line or a curve in a vertical plane."""
+    if alignment.straight or math.hypot(alignment.normal[0], alignment.normal[1]) >= 0.999:
+        return math.inf
+    return alignment.radius / max(abs(alignment.normal[2]), 1e-12)
+
+
+def cant(track, alignment: Alignment) -> float:
+    """The cant (m): the outer rail's rise over the inner on the curve, ``track.cant`` (``cant_from: value``) or
+    the equilibrium cant of ``track.design_speed`` (km/h), 11.8 v^2 / R mm (R in m), capped at ``track.max_cant``;
+    0 on a straight line."""
+    radius = plan_radius(alignment)
+    if not math.isfinite(radius):
+        return 0.0
+    wanted = track.cant if track.cant_from == "value" else 11.8 * track.design_speed**2 / radius / 1000.0
+    return float(min(max(wanted, 0.0), track.max_cant))
+
+
+def cant_angle(track, alignment: Alignment) -> float:
+    """Signed roll (radians) of the track about the direction of travel: positive raises its left rail (a curve
+    turning right), over the distance between the rail-head centres (gauge + head width)."""
+    e = cant(track, alignment)
+    if e == 0.0:
+        return 0.0
+    left_turn = float(np.dot(alignment.lateral(np.array([alignment.length / 2]))[0], alignment.centre - alignment.point(np.array([alignment.length / 2]))[0])) > 0
+    angle = math.asin(min(e / (track.gauge + track.rail.head_width), 1.0))
+    return -angle if left_turn else angle
+
+
 # ----------------------------------------------------------------------------- supports and wires
 @dataclass(frozen=True)
 class Mast:
@@ -430,6 +459,12 @@ def check_railway(params, where: str = "scene") -> None:
         _positive(getattr(track, key), f"{t}.{key}")
     for key in ("ballast_shoulder", "ballast_slope", "embankment_height", "embankment_slope", "embankment_berm"):
         _positive(getattr(track, key), f"{t}.{key}", allow_zero=True)
+    _positive(track.design_speed, f"{t}.design_speed", allow_zero=True)
+    _positive(track.max_cant, f"{t}.max_cant", allow_zero=True)
+    if not 0 <= track.cant <= track.max_cant:
+        raise InputError(f"{t}.cant: must lie in 0..max_cant ({track.max_cant} m), got {track.cant}")
+    if track.max_cant >= track.gauge:
+        raise InputError(f"{t}.max_cant: must stay well below the gauge ({track.gauge} m), got {track.max_cant}")
     if not 0 <= track.crib_height <= track.sleeper_height:
         raise InputError(f"{t}.crib_height: the ballast between the sleepers must lie in 0..sleeper_height ({track.sleeper_height} m), got {track.crib_height}")
     for key in ("foot_width", "foot_height", "web_width", "web_height", "head_width", "head_height"):

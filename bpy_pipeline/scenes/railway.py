@@ -30,7 +30,7 @@ from ..geometry import railway_parts
 from ..geometry.catenary import parabolic_sag
 from ..geometry.lod import equal_perimeter_radius
 from ..geometry.primitives import merge
-from ..geometry.railway_layout import ARM_RISE, BEAM_RADIUS, EARTH_BRACKET, FEEDER_BRACKET, MIN_WIRE_SIDES, STAY_RISE, RailwayLayout, cantilevers, level_of_detail, plan
+from ..geometry.railway_layout import ARM_RISE, BEAM_RADIUS, EARTH_BRACKET, FEEDER_BRACKET, MIN_WIRE_SIDES, STAY_RISE, RailwayLayout, cant_angle, cantilevers, level_of_detail, plan
 from .nodes import add_group_modifier
 from .objects import mesh_data, mesh_object, scene_collection, tag, wire_object
 from .railway_nodes import PARTS, track_group
@@ -53,9 +53,9 @@ def build(params, rng: np.random.Generator, view=None) -> RailwayLayout:
     view = _distinct_positions(view)
     layout = plan(params, rng)
     detail = level_of_detail(layout, params, view)
-    centreline = _centreline(layout, detail.centreline_tolerance, collection)
+    centreline = _centreline(layout, detail.centreline_tolerance, cant_angle(params.track, layout.alignment), collection)
     centreline["rail_top_height"] = float(layout.section.rail_top)
-    _track(params, layout, detail, centreline, view, int(rng.integers(0, 2**31 - 1)), collection)
+    _track(params, layout, detail, centreline, view, int(rng.integers(0, 2**31 - 1)), collection, cant_angle(params.track, layout.alignment))
     _supports(params, layout, detail, collection)
     _wires(layout, detail, collection)
     bpy.context.view_layer.update()
@@ -75,7 +75,8 @@ def _distinct_positions(view):
     return dataclasses.replace(view, positions=np.asarray(view.positions)[np.sort(first)])
 
 
-def _centreline(layout: RailwayLayout, tolerance: float, collection) -> bpy.types.Object:
+def _centreline(layout: RailwayLayout, tolerance: float, roll: float, collection) -> bpy.types.Object:
+    """The alignment as a poly curve; its points' tilt is the track's cant ``roll`` (radians, + raises the left rail)."""
     alignment = layout.alignment
     points = alignment.point(alignment.chainage_samples(tolerance))
     curve = bpy.data.curves.new(CENTRELINE, "CURVE")
@@ -83,6 +84,8 @@ def _centreline(layout: RailwayLayout, tolerance: float, collection) -> bpy.type
     spline = curve.splines.new("POLY")
     spline.points.add(len(points) - 1)
     spline.points.foreach_set("co", np.column_stack([points, np.ones(len(points))]).astype(np.float32).ravel())
+    if roll:
+        spline.points.foreach_set("tilt", np.full(len(points), roll, np.float32))
     obj = bpy.data.objects.new(CENTRELINE, curve)
     obj.hide_render = True  # a guide, not a surface: never scanned
     collection.objects.link(obj)
@@ -100,7 +103,7 @@ def _stone_centre(name: str, position, collection) -> bpy.types.Object:
     return obj
 
 
-def _track(params, layout, detail, centreline, view, seed: int, collection) -> None:
+def _track(params, layout, detail, centreline, view, seed: int, collection, roll: float = 0.0) -> None:
     track = params.track
     rail = track.rail
     inputs = {
@@ -110,7 +113,7 @@ def _track(params, layout, detail, centreline, view, seed: int, collection) -> N
         "Sleeper Spacing": track.sleeper_spacing, "Sleeper Length": track.sleeper_length, "Sleeper Width": track.sleeper_width,
         "Sleeper Height": track.sleeper_height, "Ballast Height": track.ballast_height, "Crib Height": track.crib_height, "Ballast Shoulder": track.ballast_shoulder,
         "Ballast Slope": track.ballast_slope, "Embankment Height": track.embankment_height, "Embankment Slope": track.embankment_slope,
-        "Embankment Berm": track.embankment_berm, "Ground Width": track.ground_width, "Stone Size": params.detail.stone_size, "Seed": seed,
+        "Embankment Berm": track.embankment_berm, "Ground Width": track.ground_width, "Stone Size": params.detail.stone_size, "Seed": seed, "Cant Angle": roll,
     }
     group = track_group()
     parts = [(f"rails.t{i}", "rails", "rail", i) for i in range(track.tracks)]

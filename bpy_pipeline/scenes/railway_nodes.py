@@ -21,7 +21,7 @@ import bpy
 from .nodes import GroupBuilder, new_group
 
 PARTS = {"all": 0, "rails": 1, "sleepers": 2, "ballast": 3, "embankment": 4, "stones": 5, "ground": 6}
-VERSION = 2  # bump when the groups change, so a file holding older groups gets new ones
+VERSION = 3  # bump when the groups change, so a file holding older groups gets new ones
 
 
 def _get(name: str):
@@ -170,6 +170,7 @@ TRACK_INPUTS = [
     ("Stone Radius", "NodeSocketFloat", 0.0, "m: stones within this distance of a centre (0: none)"),
     ("Stone Size", "NodeSocketFloat", 0.045, "m, the stones' mean diameter"),
     ("Seed", "NodeSocketInt", 0),
+    ("Cant Angle", "NodeSocketFloat", 0.0, "radians the sleepers roll about the track (+ raises the left end); the rails follow the centreline's tilt"),
 ]
 
 
@@ -184,10 +185,15 @@ def track_group() -> bpy.types.NodeTree:
     g = b.get
     source = b.node("GeometryNodeObjectInfo", {"Object": g("Centreline")}, transform_space="RELATIVE")
     trimmed = b.node("GeometryNodeTrimCurve", {"Curve": b.out(source, "Geometry"), "Start": g("Trim Start"), "End": g("Trim End")}, options={"mode": "LENGTH"})
-    centre = b.out(b.node("GeometryNodeSetCurveNormal", {"Curve": b.out(trimmed)}, options={"mode": "Z_UP"}))
+    canted = b.out(b.node("GeometryNodeSetCurveNormal", {"Curve": b.out(trimmed)}, options={"mode": "Z_UP"}))
+    # the centreline's tilt is the cant: rails and sleepers roll about each track's centre, raised by half
+    # the cant so the inner rail keeps its height; bed, embankment and ground stay level
+    centre = b.out(b.node("GeometryNodeSetCurveTilt", {"Curve": canted, "Tilt": 0.0}))
 
-    lines = b.node("GeometryNodeGroup", {"Curve": centre, "Tracks": g("Tracks"), "Track Spacing": g("Track Spacing"), "Track": g("Track")}, node_tree=centrelines_group())
-    tracks = b.out(lines)
+    lines = b.node("GeometryNodeGroup", {"Curve": canted, "Tracks": g("Tracks"), "Track Spacing": g("Track Spacing"), "Track": g("Track")}, node_tree=centrelines_group())
+    tilt = b.out(b.node("GeometryNodeInputCurveTilt"))
+    half_cant = b.math("MULTIPLY", b.math("ABSOLUTE", b.math("SINE", tilt)), b.math("MULTIPLY", b.math("ADD", g("Gauge"), g("Rail Head Width")), 0.5))
+    tracks = b.out(b.node("GeometryNodeSetPosition", {"Geometry": b.out(lines), "Offset": b.combine(0.0, 0.0, half_cant)}))
 
     sleeper_top = b.math("ADD", g("Ballast Height"), g("Sleeper Height"))
     profile_inputs = {"Gauge": g("Gauge"), "Base Height": sleeper_top}
@@ -197,7 +203,10 @@ def track_group() -> bpy.types.NodeTree:
     rails = b.out(b.node("GeometryNodeCurveToMesh", {"Curve": tracks, "Profile Curve": b.out(profile), "Fill Caps": True}))
 
     stations = b.node("GeometryNodeCurveToPoints", {"Curve": tracks, "Length": g("Sleeper Spacing")}, options={"mode": "LENGTH"})
-    facing = b.out(b.node("FunctionNodeAlignRotationToVector", {"Vector": b.out(stations, "Tangent")}, axis="X", pivot_axis="Z"))
+    along = b.out(b.node("FunctionNodeAlignRotationToVector", {"Vector": b.out(stations, "Tangent")}, axis="X", pivot_axis="Z"))
+    roll = b.out(b.node("FunctionNodeAxisAngleToRotation", {"Axis": (1.0, 0.0, 0.0), "Angle": g("Cant Angle")}))
+    rolled = b.out(b.node("FunctionNodeRotateRotation", {"Rotation": along, "Rotate By": roll}, rotation_space="LOCAL"))
+    facing = b.switch("ROTATION", b.compare("NOT_EQUAL", g("Cant Angle"), 0.0), along, rolled)
     block = b.node("GeometryNodeMeshCube", {"Size": b.combine(g("Sleeper Width"), g("Sleeper Length"), g("Sleeper Height"))})
     lifted = b.node("GeometryNodeTransform", {"Geometry": b.out(block, "Mesh"), "Translation": b.combine(0.0, 0.0, b.math("ADD", g("Ballast Height"), b.math("MULTIPLY", g("Sleeper Height"), 0.5)))}, options={"mode": "COMPONENTS"})
     placed = b.node("GeometryNodeInstanceOnPoints", {"Points": b.out(stations, "Points"), "Instance": b.out(lifted), "Rotation": facing})
