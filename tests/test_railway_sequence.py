@@ -73,3 +73,21 @@ def test_stations_revisited_scan_the_same_line(tmp_path):
     clouds, manifest = run_world(tmp_path, "sensor.preset=vlp16", "scene.stations.count=2", "scene.supports.span_jitter=8", frames=4)
     assert [f["sensor_pose"][0][3] for f in manifest["frames"]][:2] == [f["sensor_pose"][0][3] for f in manifest["frames"]][2:]
     assert clouds[0].tobytes() == clouds[2].tobytes() and clouds[1].tobytes() == clouds[3].tobytes()
+
+
+def test_a_profile_scanner_on_a_train_roof_cuts_the_line_across(tmp_path):
+    clouds, manifest = run_world(tmp_path, "sensor.preset=railway_profiler", "sensor.rotation_deg=[0, 0, 30]", "effects.ideal=true",
+                                 "sensor.trajectory={curve: track_centreline, speed: 10, height: 4.2, start_distance: 20}", frames=3)
+    classes = {}
+    for frame in manifest["frames"]:
+        cloud = clouds[frame["index"]]
+        assert cloud["ring"].max() == 19 and 0 <= cloud["time"].min() and cloud["time"].max() < 0.1  # 20 profiles in 0.1 s
+        names = {o["instance"]: o["name"] for o in frame["objects"]}
+        for name in {names.get(int(i), "") for i in np.unique(cloud["instance"])}:
+            kind = name.split(".")[-1] if name.startswith("span.") else name.split(".")[2] if name.startswith("support.") else name.split(".")[0]
+            classes[kind] = classes.get(kind, 0) + 1
+        # profile p is fired 5 cm further along the track than profile p - 1 (10 m/s, 200 Hz): a rail's points show it
+        rails = cloud[np.char.startswith(np.array([names.get(int(i), "") for i in cloud["instance"]]), "rails")]
+        first, last = rails[rails["ring"] == 0], rails[rails["ring"] == 19]
+        assert np.median(last["x"]) - np.median(first["x"]) == pytest.approx(19 * 0.05, abs=0.15)
+    assert {"contact_wire", "messenger_wire", "rails", "sleepers"} <= set(classes)
