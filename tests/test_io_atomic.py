@@ -63,8 +63,8 @@ class Exploding(np.ndarray):
 
 
 def test_writer_failing_mid_write_leaves_no_file(tmp_path, monkeypatch):
-    real = ply_module.as_points
-    monkeypatch.setattr(ply_module, "as_points", lambda points, where: real(points, where).view(Exploding))
+    real = ply_module.ply_records
+    monkeypatch.setattr(ply_module, "ply_records", lambda points: real(points).view(Exploding))
     target = tmp_path / "ply" / "000000.ply"
     with pytest.raises(OSError, match="No space"):
         write_ply(target, empty_points(10))
