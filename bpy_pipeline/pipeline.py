@@ -465,15 +465,16 @@ def frame_boxes(buffers: SceneBuffers, config: Config, pose: np.ndarray, points:
     """The frame's 3D box labels (:data:`~.io.boxes.BOX_DTYPE`) in the frame of the points, thin boxes dropped.
 
     headings : {instance: yaw} from the builder (others get their footprint's heading)
-    Truncation and occlusion come from the sensor's own rays at ``pose`` (io/boxes.py).
+    Truncation and occlusion come from the sensor's own rays at ``pose``, one visibility cast for all
+    objects (lidar/visibility.py); the boxes themselves are geometry/boxes.py.
     """
-    from .io import boxes as box_labels
+    from .geometry.boxes import boxes_in_frame, keep_boxes
 
     section = config.output.boxes
     boxes = world_boxes(buffers, config, pose, points, headings, frame, rng, rays)
     if len(boxes):
-        boxes = box_labels.keep_boxes(boxes, section.min_points, section.min_points_default)
-    return box_labels.boxes_in_frame(boxes, pose if config.output.frame == "sensor" else np.eye(4))
+        boxes = keep_boxes(boxes, section.min_points, section.min_points_default)
+    return boxes_in_frame(boxes, pose if config.output.frame == "sensor" else np.eye(4))
 
 
 def world_boxes(buffers: SceneBuffers, config: Config, pose: np.ndarray, points: np.ndarray, headings: dict | None = None, frame: int = 0, rng: np.random.Generator | None = None, rays: SensorRays | None = None, skip_unseen: bool = False) -> np.ndarray:
