@@ -1,4 +1,4 @@
-"""Preview PNG: decodes, bounded size, exactly the class colours plus background, equal aspect, occlusion."""
+"""Preview PNG: decodes, bounded size, the class colours present, equal aspect in the top view, occlusion, legend, boxes, scale bar."""
 
 import struct
 import zlib
@@ -8,7 +8,8 @@ import pytest
 
 from bpy_pipeline.errors import InputError
 from bpy_pipeline.io import render_preview, write_preview
-from bpy_pipeline.io.preview import BACKGROUND
+from bpy_pipeline.geometry.boxes import BOX_DTYPE
+from bpy_pipeline.io.preview import BACKGROUND, INK, SIZE
 from bpy_pipeline.labels import load_class_table
 from bpy_pipeline.lidar.points import empty_points
 
@@ -43,7 +44,11 @@ def colours(image):
 LUT = load_class_table().color_lut()
 
 
-def test_png_shows_exactly_the_present_class_colours(tmp_path):
+DIVIDER = (60, 60, 66)
+FRAME = {BACKGROUND, INK, DIVIDER}  # background, text, scale bar, boxes, the line between the views
+
+
+def test_png_shows_the_present_class_colours_and_no_other(tmp_path):
     rng = np.random.default_rng(0)
     pts = empty_points(2000)
     pts["x"], pts["y"], pts["z"] = rng.uniform(-50, 50, (3, 2000))
@@ -51,13 +56,13 @@ def test_png_shows_exactly_the_present_class_colours(tmp_path):
     pts["semantic"] = classes[rng.integers(0, 4, 2000)]
     image = decode_png(write_preview(tmp_path / "p.png", pts, LUT, size=(400, 200)).read_bytes())
     assert image.shape == (200, 400, 3)
-    assert colours(image) == {tuple(int(c) for c in LUT[k]) for k in classes} | {BACKGROUND}
-    assert (image[:, :200] != BACKGROUND).any(axis=2).any() and (image[:, 200:] != BACKGROUND).any(axis=2).any()
+    assert colours(image) - FRAME == {tuple(int(c) for c in LUT[k]) for k in classes}
+    assert (image[:, :199] != BACKGROUND).any(axis=2).any() and (image[:, 201:] != BACKGROUND).any(axis=2).any()
 
 
 def test_empty_cloud_is_a_valid_background_image(tmp_path):
     image = decode_png(write_preview(tmp_path / "p.png", empty_points(0), LUT).read_bytes())
-    assert image.shape == (800, 1600, 3) and colours(image) == {BACKGROUND}
+    assert image.shape == (SIZE[1], SIZE[0], 3) and colours(image) == {BACKGROUND}
 
 
 def test_size_is_bounded_for_huge_coordinates():
@@ -65,47 +70,63 @@ def test_size_is_bounded_for_huge_coordinates():
     pts["x"], pts["y"], pts["z"] = [-1e6, 0, 1e6], [5e5, 0, 1], [0, 1, 2]
     pts["semantic"] = 5
     image = render_preview(pts, LUT)
-    assert image.shape == (800, 1600, 3)
-    assert (image != BACKGROUND).any(axis=2).sum() == 6  # three points in each view
+    assert image.shape == (SIZE[1], SIZE[0], 3)
+    assert 1 <= (image == LUT[5]).all(axis=2).sum() <= 6
 
 
-def painted_box(image):
-    rows, cols = np.nonzero((image != BACKGROUND).any(axis=2))
+def painted_box(image, colour):
+    rows, cols = np.nonzero((image == colour).all(axis=2))
     return cols.max() - cols.min(), rows.max() - rows.min()
 
 
-def test_equal_aspect_in_both_views():
-    # Corners of a 10 m x 10 m square at z = 0 and z = 2: top view square, side view 10 : 2.
-    xs, ys, zs = np.meshgrid([0.0, 10.0], [0.0, 10.0], [0.0, 2.0], indexing="ij")
-    pts = empty_points(8)
-    pts["x"], pts["y"], pts["z"] = xs.ravel(), ys.ravel(), zs.ravel()
+def test_equal_aspect_in_the_top_view():
+    # a 10 m x 20 m grid of points (x forward is up the image): 20 m wide, 10 m tall on screen
+    xs, ys = np.meshgrid(np.linspace(0, 10, 41), np.linspace(-10, 10, 81), indexing="ij")
+    pts = empty_points(xs.size)
+    pts["x"], pts["y"] = xs.ravel(), ys.ravel()
     pts["semantic"] = 17
     image = render_preview(pts, LUT, size=(800, 400))
-    top_w, top_h = painted_box(image[:, :400])
-    side_w, side_h = painted_box(image[:, 400:])
-    assert abs(top_w - top_h) <= 1 and top_h > 300
-    assert abs(side_w / side_h - 5.0) < 0.1
+    width, height = painted_box(image[:, 401:], LUT[17])
+    assert abs(width / height - 2.0) < 0.05 and width > 300
 
 
-def test_nearer_points_cover_farther_ones():
+def test_higher_points_cover_lower_ones_from_above_and_the_perspective_shows_depth():
     pts = empty_points(4)
-    pts["x"], pts["y"], pts["z"] = [0, 0, 10, 10], [0, 0, 5, 5], [1, 3, 0, 0]
+    pts["x"], pts["y"], pts["z"] = [0, 0, 10, -10], [0, 0, 5, -5], [1, 3, 0, 0]
     pts["semantic"] = [1, 8, 2, 2]  # ground below a contact wire
-    image = render_preview(pts, LUT, size=(200, 100))
-    top = image[:, :100]
+    top = render_preview(pts, LUT, size=(200, 100))[:, 101:]
     assert tuple(LUT[8]) in colours(top) and tuple(LUT[1]) not in colours(top)
-    pts["z"] = [0, 0, 0, 5]
-    pts["y"] = [2, -2, 0, 0]  # same x and z: the one with smaller y faces the side viewer
-    pts["semantic"] = [1, 8, 2, 2]
-    side = render_preview(pts, LUT, size=(200, 100))[:, 100:]
-    assert tuple(LUT[8]) in colours(side) and tuple(LUT[1]) not in colours(side)
+    # in perspective the viewer is behind and above the sensor (-x): points along x stay apart on screen
+    pts = empty_points(4)
+    pts["x"] = [20.0, 40.0, 0.0, 60.0]
+    pts["z"] = [0.0, 0.0, 0.0, 0.0]
+    pts["semantic"] = [8, 1, 2, 2]
+    image = render_preview(pts, LUT, size=(400, 200))[:, :199]
+    assert tuple(LUT[8]) in colours(image) and tuple(LUT[1]) in colours(image)  # different pixels: both seen
+
+
+def test_legend_names_the_classes_and_boxes_are_drawn():
+    rng = np.random.default_rng(1)
+    pts = empty_points(3000)
+    pts["x"], pts["y"] = rng.uniform(-20, 20, (2, 3000))
+    pts["semantic"] = 1
+    plain = render_preview(pts, LUT, size=(600, 300))
+    labelled = render_preview(pts, LUT, size=(600, 300), names={1: "ground"})
+    corner = (slice(0, 30), slice(0, 120))
+    assert not (plain[corner] == INK).all(axis=2).any() and (labelled[corner] == INK).all(axis=2).sum() > 20
+    box = np.zeros(1, BOX_DTYPE)
+    box["centre"], box["size"], box["heading"] = (5.0, 5.0, 0.5), (4.0, 2.0, 1.5), 0.3
+    boxed = render_preview(pts, LUT, size=(600, 300), boxes=box)
+    top = (slice(0, 270), slice(301, 600))  # above the scale bar
+    assert (boxed[top] == INK).all(axis=2).sum() > (plain[top] == INK).all(axis=2).sum() + 40
+    assert (plain[270:, 301:] == INK).all(axis=2).any()  # the scale bar and its length
 
 
 def test_nan_points_are_skipped_and_unknown_classes_refused():
     pts = empty_points(3)
     pts["x"] = [0, np.nan, 1]
     pts["semantic"] = 3
-    assert colours(render_preview(pts, LUT, size=(100, 50))) == {tuple(LUT[3]), BACKGROUND}
+    assert colours(render_preview(pts, LUT, size=(100, 50))) - FRAME == {tuple(LUT[3])}
     pts["semantic"] = len(LUT)
     with pytest.raises(InputError, match="no colour"):
         render_preview(pts, LUT)

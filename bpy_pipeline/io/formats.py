@@ -36,7 +36,8 @@ def _check_range_image(config) -> None:
 
 
 def _write_preview(frame, out: Path) -> list[Path]:
-    return [write_frame_preview(out, frame.index, frame.points, load_class_table().color_lut())]
+    table = load_class_table()
+    return [write_frame_preview(out, frame.index, frame.points, table.color_lut(), frame.boxes, table.names)]
 
 
 def _check_split(config) -> None:

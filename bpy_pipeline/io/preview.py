@@ -1,10 +1,17 @@
-"""Preview images of a labelled cloud: top view (x-y) and side view (x-z), coloured by class.
+"""Preview images of a labelled cloud: a perspective view from behind and above the sensor, and a top view.
 
-The image is two equal panels side by side on a dark background: left, seen from above (x to
-the right, y up; higher points drawn over lower ones); right, seen from the side (x to the
-right, z up; points with smaller y, nearer a viewer on the -y side, drawn over the others).
-Each panel is fitted to the cloud with equal aspect (one metre is as many pixels along both
-axes). Rasterisation is vectorised; PNG encoding uses only ``zlib`` and ``struct``.
+The image is two panels side by side on a dark background:
+
+- left, a perspective view from behind and above the sensor (sensor frame: x forward), looking at the
+  middle of the cloud, nearer points drawn over farther ones;
+- right, a top view (x up the image, y to the left, as seen from above behind the sensor) cropped to
+  where most points are (the 1st to 99th percentile of x and y, so a few far ground rings do not
+  shrink the scene), with a scale bar.
+
+Points are coloured by class; a legend names the classes present; 3D boxes (BOX_DTYPE, the frame
+of the points) are drawn in both panels in white. Rasterisation is vectorised numpy; text uses a
+built-in 3 x 5 pixel font; PNG encoding uses only ``zlib`` and ``struct`` (level 1: the image is
+mostly background, and level 1 is about as small here at a fraction of the time).
 """
 
 from __future__ import annotations
@@ -17,14 +24,34 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from ._records import as_points, chunks
+from ._records import as_points
 from .atomic import atomic_write
 
 BACKGROUND = (24, 24, 28)  # not a class colour of assets_manifest/labels.yaml
+INK = (235, 235, 235)  # text, scale bar and boxes
 MARGIN = 8  # pixels around the cloud inside each panel
+PNG_LEVEL = 1
+SIZE = (1280, 560)  # (width, height) pixels
+FONT = {  # 3 x 5 glyphs, rows top to bottom
+    "a": ("010", "101", "111", "101", "101"), "b": ("110", "101", "110", "101", "110"), "c": ("011", "100", "100", "100", "011"),
+    "d": ("110", "101", "101", "101", "110"), "e": ("111", "100", "110", "100", "111"), "f": ("111", "100", "110", "100", "100"),
+    "g": ("011", "100", "101", "101", "011"), "h": ("101", "101", "111", "101", "101"), "i": ("111", "010", "010", "010", "111"),
+    "j": ("001", "001", "001", "101", "010"), "k": ("101", "101", "110", "101", "101"), "l": ("100", "100", "100", "100", "111"),
+    "m": ("101", "111", "111", "101", "101"), "n": ("110", "101", "101", "101", "101"), "o": ("010", "101", "101", "101", "010"),
+    "p": ("110", "101", "110", "100", "100"), "q": ("010", "101", "101", "110", "011"), "r": ("110", "101", "110", "101", "101"),
+    "s": ("011", "100", "010", "001", "110"), "t": ("111", "010", "010", "010", "010"), "u": ("101", "101", "101", "101", "111"),
+    "v": ("101", "101", "101", "101", "010"), "w": ("101", "101", "111", "111", "101"), "x": ("101", "101", "010", "101", "101"),
+    "y": ("101", "101", "010", "010", "010"), "z": ("111", "001", "010", "100", "111"), "0": ("111", "101", "101", "101", "111"),
+    "1": ("010", "110", "010", "010", "111"), "2": ("110", "001", "010", "100", "111"), "3": ("110", "001", "010", "001", "110"),
+    "4": ("101", "101", "111", "001", "001"), "5": ("111", "100", "110", "001", "110"), "6": ("011", "100", "110", "101", "010"),
+    "7": ("111", "001", "010", "010", "010"), "8": ("010", "101", "010", "101", "010"), "9": ("010", "101", "011", "001", "110"),
+    " ": ("000", "000", "000", "000", "000"), ".": ("000", "000", "000", "000", "010"), "-": ("000", "000", "111", "000", "000"),
+    "_": ("000", "000", "000", "000", "111"),
+}  # fmt: skip
+BOX_EDGES = ((0, 1), (1, 2), (2, 3), (3, 0), (4, 5), (5, 6), (6, 7), (7, 4), (0, 4), (1, 5), (2, 6), (3, 7))
 
 
-def encode_png(rgb: np.ndarray, level: int = 6) -> bytes:
+def encode_png(rgb: np.ndarray, level: int = PNG_LEVEL) -> bytes:
     """PNG file bytes of an ``(h, w, 3) uint8`` RGB image (8-bit truecolour, no filtering)."""
     rgb = np.ascontiguousarray(rgb, np.uint8)
     if rgb.ndim != 3 or rgb.shape[2] != 3:
@@ -40,45 +67,85 @@ def encode_png(rgb: np.ndarray, level: int = 6) -> bytes:
     return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", zlib.compress(rows.tobytes(), level)) + chunk(b"IEND", b"")
 
 
-def fit(u: np.ndarray, v: np.ndarray, width: int, height: int, bounds=None) -> tuple[np.ndarray, np.ndarray]:
-    """Pixel columns and rows ``(n,) int`` of points ``(u, v)`` (n,) fitted into a width x height panel.
-
-    Equal aspect, centred, ``v`` up; a cloud with zero extent along an axis is centred on it.
-    bounds : ``(u_min, u_max, v_min, v_max)`` of the whole cloud when ``u, v`` are a part of it
-    """
-    inner_w, inner_h = max(width - 2 * MARGIN, 1), max(height - 2 * MARGIN, 1)
-    u_min, u_max, v_min, v_max = (u.min(), u.max(), v.min(), v.max()) if bounds is None else bounds
-    spans = np.array([u_max - u_min, v_max - v_min])
-    with np.errstate(divide="ignore"):
-        ratios = np.array([(inner_w - 1) / spans[0], (inner_h - 1) / spans[1]])
-    ratios = ratios[np.isfinite(ratios)]
-    scale = ratios.min() if len(ratios) else 1.0
-    col = np.rint((width - 1) / 2 + (u - (u_min + u_max) / 2) * scale).astype(np.int64)
-    row = np.rint((height - 1) / 2 - (v - (v_min + v_max) / 2) * scale).astype(np.int64)
-    return np.clip(col, 0, width - 1), np.clip(row, 0, height - 1)
-
-
 def splat(image: np.ndarray, col: np.ndarray, row: np.ndarray, depth: np.ndarray, colors: np.ndarray, depth_image: np.ndarray | None = None) -> None:
     """Paint ``colors`` (n, 3) at pixels ``(row, col)`` of ``image`` in place; the largest ``depth`` wins.
 
     Of equal depths the later point wins. depth_image : ``(height, width)`` float64 depth of what
     ``image`` holds (-inf where empty), updated in place, so a cloud can be painted part by part.
-    Unbuffered per-pixel maxima (``np.maximum.at``), no sort: 10 million points take a second.
     """
     if len(col) == 0:
         return
     pixels = image.shape[0] * image.shape[1]
     pixel = row * image.shape[1] + col
     best = np.full(pixels, -np.inf) if depth_image is None else depth_image.reshape(-1)
-    np.maximum.at(best, pixel, depth)  # the deepest of what was there and of these points
-    wins = np.flatnonzero(depth >= best[pixel])  # the points that reach it (a tie with an earlier part: the later wins)
+    np.maximum.at(best, pixel, depth)
+    wins = np.flatnonzero(depth >= best[pixel])
     last = np.full(pixels, -1, np.int64)
-    np.maximum.at(last, pixel[wins], wins)  # of tied points, the later
+    np.maximum.at(last, pixel[wins], wins)
     painted = np.flatnonzero(last >= 0)
     image.reshape(-1, 3)[painted] = colors[last[painted]]
 
 
-def render_preview(points: np.ndarray, color_lut: np.ndarray, size: tuple[int, int] = (1600, 800), dot: int = 1) -> np.ndarray:
+def draw_text(image: np.ndarray, text: str, col: int, row: int, scale: int = 2, color=INK) -> int:
+    """Write ``text`` (lower-cased; unknown characters as spaces) with its top left at ``(col, row)``; returns the end column."""
+    for char in text.lower():
+        glyph = np.array([[c == "1" for c in line] for line in FONT.get(char, FONT[" "])])
+        mask = np.kron(glyph, np.ones((scale, scale), bool))
+        h, w = mask.shape
+        r0, c0 = max(row, 0), max(col, 0)
+        r1, c1 = min(row + h, image.shape[0]), min(col + w, image.shape[1])
+        if r1 > r0 and c1 > c0:
+            image[r0:r1, c0:c1][mask[r0 - row : r1 - row, c0 - col : c1 - col]] = color
+        col += w + scale
+    return col
+
+
+def draw_segments(image: np.ndarray, starts: np.ndarray, ends: np.ndarray, color=INK) -> None:
+    """Lines between pixel positions ``starts`` and ``ends`` (k, 2) as (col, row) floats; parts outside are clipped."""
+    if len(starts) == 0:
+        return
+    length = np.ceil(np.abs(ends - starts).max(axis=1)).astype(np.int64) + 1
+    length = np.minimum(length, 4 * sum(image.shape[:2]))
+    t = np.concatenate([np.linspace(0.0, 1.0, n) for n in length])
+    which = np.repeat(np.arange(len(starts)), length)
+    points = starts[which] + t[:, None] * (ends[which] - starts[which])
+    col, row = np.rint(points).astype(np.int64).T
+    keep = (col >= 0) & (col < image.shape[1]) & (row >= 0) & (row < image.shape[0])
+    image[row[keep], col[keep]] = color
+
+
+def box_corners(boxes: np.ndarray) -> np.ndarray:
+    """``(k, 8, 3)`` corners of BOX_DTYPE boxes: bottom face 0-3, top face 4-7."""
+    signs = np.array([[1, 1], [1, -1], [-1, -1], [-1, 1]], float)
+    out = np.zeros((len(boxes), 8, 3))
+    for k, box in enumerate(boxes):
+        c, s = np.cos(box["heading"]), np.sin(box["heading"])
+        local = signs * np.asarray(box["size"][:2]) / 2
+        xy = local @ np.array([[c, s], [-s, c]]) + np.asarray(box["centre"][:2])
+        out[k, :4, :2] = out[k, 4:, :2] = xy
+        out[k, :4, 2] = box["centre"][2] - box["size"][2] / 2
+        out[k, 4:, 2] = box["centre"][2] + box["size"][2] / 2
+    return out
+
+
+def nice_length(span: float) -> float:
+    """A 1, 2 or 5 times a power of ten near a fifth of ``span`` (m): the scale bar's length."""
+    target = max(span / 5, 1e-3)
+    power = 10.0 ** np.floor(np.log10(target))
+    return float(min((m * power for m in (1, 2, 5, 10)), key=lambda v: abs(v - target)))
+
+
+def look_at(eye: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """``(3, 3)`` world-to-camera rotation: rows right, down, forward (camera looks at ``target``, z up)."""
+    forward = target - eye
+    forward /= np.linalg.norm(forward)
+    right = np.cross(forward, [0.0, 0.0, 1.0])
+    right = right / np.linalg.norm(right) if np.linalg.norm(right) > 1e-9 else np.array([0.0, -1.0, 0.0])
+    down = np.cross(forward, right)
+    return np.stack([right, down, forward])
+
+
+def render_preview(points: np.ndarray, color_lut: np.ndarray, size: tuple[int, int] = SIZE, dot: int = 1, boxes: np.ndarray | None = None, names: dict | None = None) -> np.ndarray:
     """The preview as an ``(height, width, 3) uint8`` RGB array (see the module docstring).
 
     Parameters
@@ -91,6 +158,10 @@ def render_preview(points: np.ndarray, color_lut: np.ndarray, size: tuple[int, i
         Image size in pixels; each panel is ``width // 2`` wide.
     dot : int
         Side of the square drawn per point, in pixels.
+    boxes : (b,) BOX_DTYPE or None
+        Boxes to draw, in the frame of the points.
+    names : {class id: name} or None
+        Class names for the legend (none drawn without them).
     """
     pts = as_points(points, "preview")
     lut = np.asarray(color_lut, np.uint8)
@@ -101,49 +172,92 @@ def render_preview(points: np.ndarray, color_lut: np.ndarray, size: tuple[int, i
         raise InputError(f"preview: color_lut must be a (k, 3) uint8 table, got shape {lut.shape}")
     image = np.empty((height, width, 3), np.uint8)
     image[:] = BACKGROUND
-
-    def finite(part: slice):
-        """``x, y, z`` (float64) and semantic ids of the finite points of a slice of the cloud."""
-        x, y, z = (pts[name][part].astype(np.float64) for name in "xyz")
-        keep = np.isfinite(x) & np.isfinite(y) & np.isfinite(z)
-        return x[keep], y[keep], z[keep], pts["semantic"][part][keep]
-
-    # First pass, chunk by chunk: the cloud's extent (each panel is fitted to all of it).
-    low, high, top = np.full(3, np.inf), np.full(3, -np.inf), -1
-    for part in chunks(len(pts)):
-        x, y, z, semantic = finite(part)
-        if len(x):
-            xyz = (x, y, z)
-            low, high = np.minimum(low, [a.min() for a in xyz]), np.maximum(high, [a.max() for a in xyz])
-            top = max(top, int(semantic.max()))
-    if top < 0:
+    xyz = np.stack([pts["x"], pts["y"], pts["z"]], axis=1).astype(np.float64)
+    keep = np.isfinite(xyz).all(axis=1)
+    xyz, semantic = xyz[keep], pts["semantic"][keep]
+    if len(xyz) == 0:
         return image
-    if top >= len(lut):
-        raise InputError(f"preview: semantic id {top} has no colour (color_lut has {len(lut)} entries)")
+    if int(semantic.max()) >= len(lut):
+        raise InputError(f"preview: semantic id {int(semantic.max())} has no colour (color_lut has {len(lut)} entries)")
+    colors = lut[semantic]
     panel = width // 2
+    corners = box_corners(boxes) if boxes is not None and len(boxes) else np.zeros((0, 8, 3))
     offsets = np.arange(dot) - (dot - 1) // 2
     du, dv = (a.ravel() for a in np.meshgrid(offsets, offsets))
-    depth_image = np.full((height, width), -np.inf)
-    for part in chunks(len(pts)):  # then paint each chunk over what the earlier ones left
-        x, y, z, semantic = finite(part)
-        colors = np.repeat(lut[semantic], len(du), axis=0)
-        for left, (u, v, depth), bounds in ((0, (x, y, z), (low[0], high[0], low[1], high[1])), (panel, (x, z, -y), (low[0], high[0], low[2], high[2]))):
-            col, row = fit(u, v, panel, height, bounds)
-            col = np.clip(col[:, None] + du, 0, panel - 1).ravel() + left
-            row = np.clip(row[:, None] + dv, 0, height - 1).ravel()
-            splat(image, col, row, np.repeat(depth, len(du)), colors, depth_image)
+
+    def paint(col, row, depth, left, panel_width):
+        inside = (col >= 0) & (col < panel_width) & (row >= 0) & (row < height)
+        col, row, depth, color = col[inside], row[inside], depth[inside], colors[inside]
+        col = np.clip(col[:, None] + du, 0, panel_width - 1).ravel() + left
+        row = np.clip(row[:, None] + dv, 0, height - 1).ravel()
+        splat(image, col, row, np.repeat(depth, len(du)), np.repeat(color, len(du), axis=0))
+
+    # top view: x up, y left; cropped to the bulk of the points
+    low, high = np.percentile(xyz[:, :2], 1, axis=0), np.percentile(xyz[:, :2], 99, axis=0)
+    span = np.maximum(high - low, 1e-6)
+    low, high = low - 0.05 * span, high + 0.05 * span
+    inner_w, inner_h = panel - 2 * MARGIN, height - 2 * MARGIN
+    scale = min(inner_w / (high[1] - low[1]), inner_h / (high[0] - low[0]))
+    centre = (low + high) / 2
+
+    def top(p):
+        return (panel - 1) / 2 - (p[:, 1] - centre[1]) * scale, (height - 1) / 2 - (p[:, 0] - centre[0]) * scale
+
+    u, v = top(xyz)
+    paint(np.rint(u).astype(np.int64), np.rint(v).astype(np.int64), xyz[:, 2], panel, panel)
+    if len(corners):
+        cu, cv = top(corners[:, :4].reshape(-1, 3))
+        quad = np.stack([cu, cv], axis=1).reshape(-1, 4, 2) + [panel, 0]
+        draw_segments(image, quad.reshape(-1, 2), np.roll(quad, -1, axis=1).reshape(-1, 2))
+    bar = nice_length(inner_w / scale)
+    x0, y0 = panel + MARGIN + 6, height - MARGIN - 10
+    image[y0 : y0 + 3, x0 : x0 + int(round(bar * scale))] = INK
+    draw_text(image, f"{bar:g} m", x0 + int(round(bar * scale)) + 6, y0 - 3)
+
+    # perspective: from behind and above the sensor, looking at the middle of the cropped region
+    extent = float(np.hypot(*(high - low)))
+    target = np.array([centre[0], centre[1], float(np.median(xyz[:, 2]))])
+    eye = np.array([min(0.0, low[0]) - 0.35 * extent, 0.0, target[2] + 0.45 * extent])
+    rotation = look_at(eye, target)
+    focal = 0.5 * panel / np.tan(np.radians(30.0))
+
+    def perspective(p):
+        cam = (p - eye) @ rotation.T
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return (panel - 1) / 2 + focal * cam[:, 0] / cam[:, 2], (height - 1) / 2 + focal * cam[:, 1] / cam[:, 2], cam[:, 2]
+
+    u, v, depth = perspective(xyz)
+    front = depth > 0.1
+    paint(np.rint(np.where(front, u, -1)).astype(np.int64), np.rint(np.where(front, v, -1)).astype(np.int64), -depth, 0, panel)
+    if len(corners):
+        cu, cv, cd = perspective(corners.reshape(-1, 3))
+        pix = np.stack([cu, cv], axis=1).reshape(-1, 8, 2)
+        ok = (cd.reshape(-1, 8) > 0.1).all(axis=1)
+        edges = np.array(BOX_EDGES)
+        starts, ends = pix[ok][:, edges[:, 0]].reshape(-1, 2), pix[ok][:, edges[:, 1]].reshape(-1, 2)
+        ends = np.clip(ends, -1e4, 1e4)
+        draw_segments(image, np.clip(starts, -1e4, 1e4), ends)
+    image[:, panel - 1 : panel + 1] = (60, 60, 66)  # the divider
+
+    if names:  # legend: a swatch and the name of each class present, most points first
+        ids, counts = np.unique(semantic, return_counts=True)
+        row = MARGIN
+        for class_id in ids[np.argsort(-counts, kind="stable")]:
+            if row + 12 > height:
+                break
+            image[row : row + 10, MARGIN : MARGIN + 10] = lut[class_id]
+            draw_text(image, str(names.get(int(class_id), class_id)), MARGIN + 16, row)
+            row += 14
     return image
 
 
-def write_preview(
-    path: str | os.PathLike, points: np.ndarray, color_lut: np.ndarray, size: tuple[int, int] = (1600, 800), dot: int = 1
-) -> Path:
-    """Write the top and side view of ``points`` as a PNG (see :func:`render_preview` for the arguments).
+def write_preview(path: str | os.PathLike, points: np.ndarray, color_lut: np.ndarray, size: tuple[int, int] = SIZE, dot: int = 1, boxes: np.ndarray | None = None, names: dict | None = None) -> Path:
+    """Write the preview of ``points`` as a PNG (see :func:`render_preview` for the arguments).
 
     An empty cloud gives a valid image of background only. Returns the written path.
     """
     path = Path(path)
-    data = encode_png(render_preview(points, color_lut, size, dot))
+    data = encode_png(render_preview(points, color_lut, size, dot, boxes, names))
     with atomic_write(path) as tmp:
         tmp.write_bytes(data)
     return path
