@@ -89,3 +89,21 @@ def test_the_command_tiles_a_dataset_folder(tmp_path):
     assert main([str(tmp_path / "run"), str(tmp_path / "tiles"), "--size", "10", "--points", "100", "--method", "fps", "--class-aware"]) == 0
     index = json.loads((tmp_path / "tiles" / "000000" / "tiles.json").read_text())["tiles"]
     assert sum(e["core_points"] for e in index) == 2000 and all(e["written_points"] <= 100 for e in index)
+
+
+def test_coarse_classes_group_the_railway_classes(tmp_path):
+    from bpy_pipeline.io.tiles import coarse_classes
+    from bpy_pipeline.labels import load_class_table
+
+    names, lookup = coarse_classes()
+    table = load_class_table()
+    raw = {n: i for i, n in table.names.items()}
+    assert names[lookup[raw["dropper"]]] == names[lookup[raw["contact wire"]]] == "wire"
+    assert names[lookup[raw["steady arm"]]] == names[lookup[raw["mast"]]] == "support"
+    assert names[lookup[raw["car"]]] == "car" and lookup[raw["unlabeled"]] == -1
+    points = random_points(3000, np.random.default_rng(7), extent=10.0, instances=1000)
+    points["semantic"] = raw["dropper"]
+    index = export_tiles(points, tmp_path, "c", TileSettings(size=10.0, points=0, coarse=True), np.random.default_rng(0))
+    segment = np.load(tmp_path / "c" / index[0]["tile"] / "segment.npy")
+    assert (segment == names.index("wire")).all()
+    assert json.loads((tmp_path / "c" / "coarse.json").read_text())["names"] == names

@@ -3,7 +3,7 @@
 ``export_tiles(points, out, name, settings, rng)`` cuts one cloud (a frame's POINT_DTYPE records,
 e.g. a railway station's 23 M-point scan) into tiles (:mod:`bpy_pipeline.geometry.tiles`) and
 writes each as a Pointcept folder (:func:`~.npy.write_npy_folder`: coord, strength, segment,
-instance) plus ``core.npy`` ((n,) bool: the point lies in the tile's own core, not in the overlap
+instance; ``segment`` in the coarse classes of labels.yaml with ``coarse``, named in ``coarse.json``) plus ``core.npy`` ((n,) bool: the point lies in the tile's own core, not in the overlap
 it shares with a neighbour)::
 
     OUT/<name>/<name>_x<i>_y<j>/{coord,strength,segment,instance,core}.npy
@@ -42,6 +42,7 @@ class TileSettings:
     class_aware: bool = False
     max_range: float = 0.0
     min_points: int = 1
+    coarse: bool = False  # segment.npy holds the coarse classes of labels.yaml (coarse.json names them)
 
     def check(self) -> None:
         if not self.size > 0:
@@ -56,9 +57,40 @@ class TileSettings:
             raise InputError(f"tiles.max_range: must be >= 0 m (0: no crop), got {self.max_range}")
 
 
+def coarse_classes(path: Path | None = None) -> tuple[list[str], np.ndarray]:
+    """The coarse level of the class table: its class names (index = coarse segment id) and a ``(raw ids,)``
+    int32 lookup from raw ``semantic`` to coarse segment (-1 for unlabeled and ignored classes).
+    A class the ``coarse`` section does not list is its own coarse class."""
+    import yaml
+
+    from ..labels import LABELS_PATH
+
+    raw = yaml.safe_load(Path(path or LABELS_PATH).read_text())
+    names = {int(k): v for k, v in raw["labels"].items()}
+    ignored = {int(k) for k, v in raw["learning_map"].items() if int(v) == 0}
+    mapping = {str(k).replace("_", " ").lower(): str(v) for k, v in (raw.get("coarse") or {}).items()}
+    coarse: list[str] = []
+    lookup = np.full(max(names) + 1, -1, np.int32)
+    for raw_id, name in sorted(names.items()):
+        if raw_id in ignored:
+            continue
+        target = mapping.get(name.lower(), name)
+        if target not in coarse:
+            coarse.append(target)
+        lookup[raw_id] = coarse.index(target)
+    return coarse, lookup
+
+
 def export_tiles(points: np.ndarray, out: str | Path, name: str, settings: TileSettings, rng: np.random.Generator) -> list[dict]:
     """Write the tiles of ``points`` ((n,) POINT_DTYPE) under ``out/name``; returns the per-tile index (also ``tiles.json``)."""
     settings.check()
+    lookup = None
+    if settings.coarse:
+        coarse, lookup = coarse_classes()
+        root = Path(out) / name
+        root.mkdir(parents=True, exist_ok=True)
+        with atomic_write(root / "coarse.json") as tmp:
+            tmp.write_text(json.dumps({"names": coarse}, indent=1))
     if settings.max_range > 0:
         points = points[points["range"] <= settings.max_range]
     root = Path(out) / name
@@ -74,6 +106,10 @@ def export_tiles(points: np.ndarray, out: str | Path, name: str, settings: TileS
             keep = sample(xyz, settings.points, settings.method, rng, chosen["semantic"] if settings.class_aware else None)
         stem = f"{name}_x{tile.key[0]}_y{tile.key[1]}"
         write_npy_folder(root / stem, chosen[keep])
+        if lookup is not None:  # the coarse level replaces the fine training ids
+            with atomic_write(root / stem / "segment.npy") as tmp:
+                with open(tmp, "wb") as f:
+                    np.save(f, lookup[chosen["semantic"][keep]])
         with atomic_write(root / stem / "core.npy") as tmp:
             with open(tmp, "wb") as f:
                 np.save(f, tile.core[keep])
@@ -100,9 +136,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--method", default=defaults.method, choices=SAMPLING_METHODS)
     parser.add_argument("--class-aware", action="store_true")
     parser.add_argument("--max-range", type=float, default=defaults.max_range)
+    parser.add_argument("--coarse", action="store_true", help="segment.npy in the coarse classes of labels.yaml")
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args(argv)
-    settings = TileSettings(args.size, args.overlap, args.points, args.method, args.class_aware, args.max_range)
+    settings = TileSettings(args.size, args.overlap, args.points, args.method, args.class_aware, args.max_range, coarse=args.coarse)
     plys = sorted((args.dataset / "ply").glob("*.ply"))
     if not plys:
         raise SystemExit(f"{args.dataset}: no ply/*.ply frames (run with output.formats including ply)")
