@@ -154,22 +154,26 @@ def visibility(
         points, owner = np.concatenate(seen_points), np.concatenate(seen_boxes)
         order = np.argsort(owner, kind="stable")
         seen_points = np.split(points[order], np.searchsorted(owner[order], np.arange(1, len(boxes))))
-    for k, rows in enumerate(members):
-        triangles = buffers.vertices[buffers.triangles[np.isin(buffers.triangle_object, rows)]]  # (m, 3, 3)
-        total = np.linalg.norm(np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0]), axis=1).sum() / 2
-        samples, area = surface_samples(triangles, max(SAMPLE_SPACING, float(np.sqrt(total / MAX_SAMPLES))))
-        samples = (samples - pose[:3, 3]) @ pose[:3, :3]
-        distance = np.linalg.norm(samples, axis=1)
-        inside = (distance >= min_range) & (distance <= max_range)
+    # truncation: every object's surface sampled in one call (each at its own spacing), then per object the
+    # share of its area whose direction the passing rays cover, within the range limits
+    owner = box_of_triangle[box_of_triangle >= 0]
+    triangles = buffers.vertices[buffers.triangles[box_of_triangle >= 0]]  # (m, 3, 3)
+    tri_area = np.linalg.norm(np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0]), axis=1) / 2
+    total = np.bincount(owner, tri_area, minlength=len(boxes))
+    spacing = np.maximum(SAMPLE_SPACING, np.sqrt(total / MAX_SAMPLES))
+    samples, area, triangle = surface_samples(triangles, spacing[owner], return_triangle=True)
+    samples = (samples - pose[:3, 3]) @ pose[:3, :3]
+    distance = np.linalg.norm(samples, axis=1)
+    inside = (distance >= min_range) & (distance <= max_range)
+    sample_owner = owner[triangle]
+    order = np.argsort(sample_owner, kind="stable")
+    bounds = np.searchsorted(sample_owner[order], np.arange(len(boxes) + 1))
+    for k in range(len(boxes)):
+        mine = order[bounds[k] : bounds[k + 1]]
         passed = seen_points[k] if k < len(seen_points) else None
-        if passed is not None and len(passed):  # the directions the rays passing the object cover, from the sensor's centre
-            inside &= Coverage(passed, cell_deg).covers(samples)
-        else:
-            inside[:] = False
-        total = area.sum()
-        boxes["truncation"][k] = float(1.0 - area[inside].sum() / total) if total > 0 else 1.0
-
-
+        covered = Coverage(passed, cell_deg).covers(samples[mine]) & inside[mine] if passed is not None and len(passed) else np.zeros(len(mine), bool)
+        whole = area[mine].sum()
+        boxes["truncation"][k] = float(1.0 - area[mine][covered].sum() / whole) if whole > 0 else 1.0
 
 
 class AloneCaster:
@@ -298,16 +302,17 @@ def visibility_per_object(
         boxes["truncation"][k] = float(1.0 - area[inside].sum() / total) if total > 0 else 1.0
 
 
-def surface_samples(triangles: np.ndarray, spacing: float) -> tuple[np.ndarray, np.ndarray]:
+def surface_samples(triangles: np.ndarray, spacing, return_triangle: bool = False):
     """Points spread over ``(m, 3, 3)`` triangles and the area each stands for: ``(p, 3)``, ``(p,)``.
 
-    A triangle wider than ``spacing`` (metres) is cut into n^2 equal triangles (n up to 24) and
-    sampled at their centroids, so the areas add up exactly and large faces are not one point.
+    A triangle wider than ``spacing`` (metres; one value or ``(m,)``, one per triangle) is cut into
+    n^2 equal triangles (n up to 24) and sampled at their centroids, so the areas add up exactly
+    and large faces are not one point. ``return_triangle``: also the ``(p,)`` triangle of each sample.
     """
     edge = np.maximum(np.linalg.norm(triangles[:, 1] - triangles[:, 0], axis=1), np.linalg.norm(triangles[:, 2] - triangles[:, 0], axis=1))
     level = np.clip(np.ceil(edge / spacing), 1, 24).astype(int)
     area = np.linalg.norm(np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0]), axis=1) / 2
-    points, weights = [], []
+    points, weights, owners = [], [], []
     for n in np.unique(level):
         rows = np.flatnonzero(level == n)
         i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
@@ -318,8 +323,11 @@ def surface_samples(triangles: np.ndarray, spacing: float) -> tuple[np.ndarray, 
         t = triangles[rows]
         points.append((t[:, None, 0] + u[None, :, None] * (t[:, None, 1] - t[:, None, 0]) + v[None, :, None] * (t[:, None, 2] - t[:, None, 0])).reshape(-1, 3))
         weights.append(np.repeat(area[rows] / n**2, len(u)))
+        owners.append(np.repeat(rows, len(u)))
     if not points:
-        return np.zeros((0, 3)), np.zeros(0)
+        return (np.zeros((0, 3)), np.zeros(0), np.zeros(0, np.int64)) if return_triangle else (np.zeros((0, 3)), np.zeros(0))
+    if return_triangle:
+        return np.concatenate(points), np.concatenate(weights), np.concatenate(owners)
     return np.concatenate(points), np.concatenate(weights)
 
 
