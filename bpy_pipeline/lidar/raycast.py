@@ -300,6 +300,16 @@ class RayCaster:
             return parts[0]
         return tuple(np.concatenate(column) for column in zip(*parts)) if parts else (np.zeros(0, np.float32), np.zeros(0, np.int32))
 
+    def map(self, fn, items) -> list:
+        """``[fn(item) for item in items]`` on the caster's threads (for compiled kernels that release the GIL)."""
+        items = list(items)
+        if self.threads > 1 and len(items) > 1:
+            if self._pool is None:
+                self._pool = ThreadPoolExecutor(self.threads)
+                weakref.finalize(self, self._pool.shutdown)
+            return list(self._pool.map(fn, items))
+        return [fn(item) for item in items]
+
     def launch(self, origins, directions, max_distance=FAR, directions32=None):
         """The float32 query of :meth:`intersect`: ``(local (3,) or (n, 3) float64, origins32, directions32, far32)``."""
         n = len(directions)

@@ -303,9 +303,9 @@ IDENTITY = np.zeros(0, np.int64)
 def _fused_chunk(caster: RayCaster, buffers: SceneBuffers, pattern: Pattern, origin: np.ndarray, world_d: np.ndarray, directions32, min_range: float, max_range: float):
     """:func:`scan_chunk` of a scene without mirrors or glass through the compiled kernel (:mod:`.kernels`).
 
-    Each of the caster's threads traces a part of the rays with Embree, then fills their records in
-    one compiled pass (solve, trust test, range limits, labels) while another part is traced.
-    Slipped rays are found from the objects the passes saw from both sides, traced again as the
+    Embree traces the rays on the caster's threads, then the same threads fill the records in one
+    compiled pass each over their part (solve, trust test, range limits, labels), straight into
+    the rows they end up in. Slipped rays are found from the objects the passes saw from both sides, traced again as the
     numpy path does (:meth:`RayCaster.retrace`) and the pass repeated over the chunk with them:
     the same bytes as the numpy path.
     """
@@ -316,30 +316,40 @@ def _fused_chunk(caster: RayCaster, buffers: SceneBuffers, pattern: Pattern, ori
     shared = len(origins) == 1
     prim_triangle = IDENTITY if caster.embree_triangle is None else caster.embree_triangle
     objects = buffers.objects
-    # Records of rays start.. go from row start on (at most one per ray), then close up: memory
-    # the operating system never maps where rays missed, and no copy when every ray returns.
-    points, beam, ray = np.empty(n, POINT_DTYPE), np.empty(n, BEAM_DTYPE), np.empty(n, np.int64)
 
-    def fill(start, tfar, prim, moved=NO_RAYS):
-        s = slice(start, start + len(prim))
-        return fill_diffuse(caster.kernels, tfar, prim, prim_triangle, moved, origins if shared else origins[s], world_d[s], caster, objects, pattern.ring[s], pattern.time[s], min_range, max_range, points[s], beam[s], ray[s], start)
+    def fill(start, stop, tfar, prim, moved=NO_RAYS):
+        """Records of rays start..stop into exactly as many rows as Embree found hits: ``(count, front, back, records)``."""
+        s = slice(start, stop)
+        hits = int(np.count_nonzero(prim >= 0))
+        records = np.empty(hits, POINT_DTYPE), np.empty(hits, BEAM_DTYPE), np.empty(hits, np.int64)
+        count, front, back = fill_diffuse(caster.kernels, tfar, prim, prim_triangle, moved, origins if shared else origins[s], world_d[s], caster, objects, pattern.ring[s], pattern.time[s], min_range, max_range, *records, start)
+        return count, front, back, records
 
-    tfar, prim, parts = caster._embree(origins32, directions32, far, fill)
-    front = np.logical_or.reduce([p[1] for p in parts]) if parts else np.zeros(len(objects), bool)
-    back = np.logical_or.reduce([p[2] for p in parts]) if parts else np.zeros(len(objects), bool)
+    tfar, prim = caster._embree(origins32, directions32, far)
+    # Then the compiled pass on every thread: each part of the rays fills its own rows of one
+    # output, placed by how many hits the parts before it have (misses take no room).
+    starts = list(range(0, n, caster.chunk)) or [0]
+    counts = np.array([np.count_nonzero(prim[i : i + caster.chunk] >= 0) for i in starts], np.int64)
+    rows = np.concatenate([[0], np.cumsum(counts)])
+    points, beam, ray = np.empty(rows[-1], POINT_DTYPE), np.empty(rows[-1], BEAM_DTYPE), np.empty(rows[-1], np.int64)
+
+    def part(j):
+        s, r = slice(starts[j], starts[j] + caster.chunk), slice(rows[j], rows[j + 1])
+        return fill_diffuse(caster.kernels, tfar[s], prim[s], prim_triangle, NO_RAYS, origins if shared else origins[s], world_d[s], caster, objects, pattern.ring[s], pattern.time[s], min_range, max_range, points[r], beam[r], ray[r], starts[j])
+
+    parts = caster.map(part, range(len(starts)))
+    front = np.logical_or.reduce([p[1] for p in parts])
+    back = np.logical_or.reduce([p[2] for p in parts])
     suspect = caster.suspects(front, back, prim, lambda both: back_face_rays(caster.kernels, prim, prim_triangle, world_d, caster, both))
     if len(suspect):
         tfar, prim, moved = caster.retrace(suspect, local, world_d, far, tfar, prim)
-        count = fill(0, tfar, prim, moved)[0]
-        return points[:count], beam[:count], ray[:count]
-    count = 0
-    for start, (part, _, _) in zip(range(0, n, caster.chunk), parts):
-        if start != count:
-            for records in (points, beam, ray):
-                raw = records.view(np.uint8).reshape(n, -1)
-                raw[count : count + part] = raw[start : start + part]
-        count += part
-    return points[:count], beam[:count], ray[:count]
+        count, _, _, records = fill(0, n, tfar, prim, moved)
+        return tuple(r[:count] for r in records)
+    filled = np.array([p[0] for p in parts], np.int64)
+    if (filled == counts).all():
+        return points, beam, ray
+    keep = np.concatenate([np.arange(rows[j], rows[j] + filled[j]) for j in range(len(starts))])  # rows left empty by range limits or absorbers
+    return points[keep], beam[keep], ray[keep]
 
 
 def scan_chunks(
