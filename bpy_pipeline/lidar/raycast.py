@@ -249,7 +249,7 @@ class RayCaster:
             self._corner_scales = scales
         return self._corner_scales
 
-    def _embree(self, origins32: np.ndarray, directions32: np.ndarray, far: np.ndarray, then=None) -> tuple:
+    def _embree(self, origins32: np.ndarray, directions32: np.ndarray, far: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Embree alone, chunked over the thread pool: ``(tfar, prim)`` per ray; ``far`` is left as it was.
 
         prim : (n,) Embree primitive (map it with :meth:`_triangles`), -1 for a miss. embreex writes
@@ -257,16 +257,10 @@ class RayCaster:
         With two parts (static and moving), the moving one is traced up to the static hit and the
         nearer hit is kept, as a buffer triangle index. Only Embree (and that merge) runs in the
         worker threads: embreex takes the GIL back after every call, so numpy work on another
-        thread would stall it. ``then(start, tfar, prim)``, when given, runs in the worker on each
-        chunk's answer (a compiled kernel that releases the GIL); its results come back in order
-        as a third item, a list.
+        thread would stall it.
         """
 
         def run(start):
-            tfar, prim = trace(start)
-            return (tfar, prim) if then is None else (tfar, prim, then(start, tfar, prim))
-
-        def trace(start):
             s = slice(start, start + self.chunk)
             limit = np.array(far[s], np.float32)  # a copy: embreex writes the hits' distances into it
             best = None
@@ -283,25 +277,13 @@ class RayCaster:
                     best = (np.where(hit, out["tfar"], best[0]), np.where(hit, triangle, best[1]))
             return best if best is not None else (np.array(far[s], np.float32), np.full(len(limit), -1, np.int32))
 
-        starts = range(0, len(directions32), self.chunk)
-        if self.threads > 1 and len(starts) > 1:
-            if self._pool is None:
-                self._pool = ThreadPoolExecutor(self.threads)
-                weakref.finalize(self, self._pool.shutdown)
-            parts = list(self._pool.map(run, starts))
-        else:
-            parts = [run(start) for start in starts]
-        if then is not None:
-            if not parts:
-                return np.zeros(0, np.float32), np.zeros(0, np.int32), []
-            tfar, prim = (parts[0][0], parts[0][1]) if len(parts) == 1 else (np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts]))
-            return tfar, prim, [p[2] for p in parts]
+        parts = self.map(run, range(0, len(directions32), self.chunk))
         if len(parts) == 1:
             return parts[0]
         return tuple(np.concatenate(column) for column in zip(*parts)) if parts else (np.zeros(0, np.float32), np.zeros(0, np.int32))
 
     def map(self, fn, items) -> list:
-        """``[fn(item) for item in items]`` on the caster's threads (for compiled kernels that release the GIL)."""
+        """``[fn(item) for item in items]`` on the caster's threads (Embree, and compiled kernels: both release the GIL)."""
         items = list(items)
         if self.threads > 1 and len(items) > 1:
             if self._pool is None:
