@@ -5,7 +5,8 @@ The image is two panels side by side on a dark background:
 - left, a perspective view from behind and above the sensor (sensor frame: x forward), looking at the
   middle of the cloud, nearer points drawn over farther ones;
 - right, a top view (x up the image, y to the left, as seen from above behind the sensor) cropped to
-  where most points are (the 1st to 99th percentile of x and y, so a few far ground rings do not
+  where most points are (the 1st to 99th percentile of x and y; when one class holds more than 40 %
+  of the points, as a railway's ground does, of the other classes' points, so ground rings do not
   shrink the scene), with a scale bar.
 
 Points are coloured by class; a legend names the classes present; 3D boxes (BOX_DTYPE, the frame
@@ -192,8 +193,12 @@ def render_preview(points: np.ndarray, color_lut: np.ndarray, size: tuple[int, i
         row = np.clip(row[:, None] + dv, 0, height - 1).ravel()
         splat(image, col, row, np.repeat(depth, len(du)), np.repeat(color, len(du), axis=0))
 
-    # top view: x up, y left; cropped to the bulk of the points
-    low, high = np.percentile(xyz[:, :2], 1, axis=0), np.percentile(xyz[:, :2], 99, axis=0)
+    # top view: x up, y left; cropped to the bulk of the points, or of the points of the other classes
+    # when one class (a railway's ground rings) holds most of them
+    ids, counts = np.unique(semantic, return_counts=True)
+    focus = semantic != ids[counts.argmax()]
+    bulk = xyz[:, :2][focus] if counts.max() > 0.4 * len(semantic) and focus.sum() >= 100 else xyz[:, :2]
+    low, high = np.percentile(bulk, 1, axis=0), np.percentile(bulk, 99, axis=0)
     span = np.maximum(high - low, 1e-6)
     low, high = low - 0.05 * span, high + 0.05 * span
     inner_w, inner_h = panel - 2 * MARGIN, height - 2 * MARGIN
