@@ -145,7 +145,7 @@ def classification_lookup_vlr(codes: np.ndarray, maps: ClassMaps) -> bytes:
     names = load_class_table().names
     table = np.zeros(256, CLASSIFICATION_LOOKUP_DTYPE)
     table["class_number"] = np.arange(256)
-    for code in np.unique(codes):
+    for code in np.flatnonzero(np.bincount(codes, minlength=256)):  # the codes present (a count, not a sort)
         code = int(code)
         raws = [names[r] for r in sorted(names) if int(maps.asprs[r]) == code]
         text = ASPRS_NAMES.get(code) if code < 64 else (raws[0] if raws else f"class {code}")
