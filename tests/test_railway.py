@@ -234,3 +234,26 @@ def test_cant_given_or_capped():
     assert cant(track, curve) == track.max_cant == 0.16  # 786 mm wanted, capped
     given = load_config(None, ["scene.track.cant_from=value", "scene.track.cant=0.05"]).scene.params.track
     assert cant(given, curve) == 0.05 and cant(given, arc_through((-1, 0, 0), (0, 0, 0), (1, 0, 0))) == 0.0
+
+
+def test_trackside_fences_signals_and_a_platform(tmp_path):
+    import bpy
+
+    from bpy_pipeline.labels import load_class_table
+
+    sides = ["scene.trackside.fences=true", "scene.trackside.signal_spacing=60", "scene.trackside.platform_length=60", "scene.trackside.platform_chainage=110"]
+    points, manifest = scan_world(tmp_path, "sensor.preset=vlp16", "sensor.mount_height=2.5", "effects.ideal=true", *sides)
+    table = load_class_table()
+    found = {table.names[int(c)] for c in np.unique(points["semantic"])}
+    assert {"fence", "signal", "platform"} <= found
+    config, layout = build(*sides, "scene.detail.mode=fixed")
+    top = evaluated_vertices(bpy.data.objects["platform"])[:, 2].max()
+    assert top == pytest.approx(layout.section.rail_top + 0.76, abs=1e-4)
+    supports = np.array([s.chainage for s in layout.supports])
+    signals = [o for o in bpy.data.objects if o.name.startswith("signal.")]
+    assert len(signals) == 2  # every 60 m +- 15 m along 150 m
+    for obj in signals:
+        x = evaluated_vertices(obj)[:, 0].mean() + 75.0  # chainage on the straight line from x = -75
+        assert np.abs(supports - x).min() >= 2.9
+    fence = evaluated_vertices(bpy.data.objects["fence.left"])
+    assert np.allclose(fence[:, 1].mean(), 6.0, atol=0.05) and fence[:, 2].max() == pytest.approx(1.8, abs=1e-6)

@@ -138,6 +138,25 @@ class RailwayDetail:
 
 
 @dataclass(frozen=True)
+class RailwayTrackside:
+    """``scene.trackside``: fences, signals and a platform (each off by default), see geometry/trackside.py."""
+
+    fences: bool = False
+    fence_offset: float = 6.0  # m from the outermost track centres, both sides
+    fence_height: float = 1.8
+    fence_post_spacing: float = 2.5
+    signal_spacing: float = 0.0  # m between signals (+- a quarter); 0: none
+    signal_side: Literal["right", "left"] = "right"
+    signal_height: float = 4.5
+    platform_length: float = 0.0  # m; 0: none
+    platform_chainage: float = -1.0  # m, the platform's middle; < 0: the line's middle
+    platform_side: Literal["right", "left"] = "left"
+    platform_edge: float = 1.65  # m from the centre of the nearest track
+    platform_width: float = 4.0
+    platform_height: float = 0.76  # m above the rail heads
+
+
+@dataclass(frozen=True)
 class RailwayScene:
     """``scene.builder: railway``: tracks on an arc or a straight line, supports, catenary, scanner stations."""
 
@@ -146,6 +165,7 @@ class RailwayScene:
     catenary: RailwayCatenary = field(default_factory=RailwayCatenary)
     stations: RailwayStations = field(default_factory=RailwayStations)
     detail: RailwayDetail = field(default_factory=RailwayDetail)
+    trackside: RailwayTrackside = field(default_factory=RailwayTrackside)
     reroll_every: int = 0  # 0: one railway per run, drawn from frame 0's generator; k: a new one every k frames
 
     @property
@@ -158,6 +178,15 @@ class RailwayScene:
 def check(params: RailwayScene, where: str) -> None:
     from ..geometry.railway_layout import check_railway
 
+    side = params.trackside
+    for key in ("fence_offset", "fence_height", "fence_post_spacing", "signal_height", "platform_edge", "platform_width"):
+        if not getattr(side, key) > 0:
+            raise InputError(f"{where}.trackside.{key}: must be > 0 m, got {getattr(side, key)}")
+    for key in ("signal_spacing", "platform_length", "platform_height"):
+        if not getattr(side, key) >= 0:
+            raise InputError(f"{where}.trackside.{key}: must be >= 0 m, got {getattr(side, key)}")
+    if side.fences and side.fence_offset <= params.supports.mast_offset + 0.5:
+        raise InputError(f"{where}.trackside.fence_offset: a fence must stand beyond the masts ({params.supports.mast_offset + 0.5} m), got {side.fence_offset}")
     if params.reroll_every < 0:
         raise InputError(f"{where}.reroll_every: must be >= 0 (0: one railway per run; k: a new railway every k frames), got {params.reroll_every}")
     check_railway(params, where)

@@ -26,7 +26,7 @@ import bpy
 import mathutils
 import numpy as np
 
-from ..geometry import railway_parts
+from ..geometry import railway_parts, trackside
 from ..geometry.catenary import parabolic_sag
 from ..geometry.lod import equal_perimeter_radius
 from ..geometry.primitives import merge
@@ -40,7 +40,7 @@ STONE_CENTRES = "track_stone_centres"
 REFLECTIVITY = {
     "rail": 0.6, "sleeper": 0.4, "ballast": 0.35, "ground": 0.3, "mast": 0.5, "gantry": 0.5, "cantilever": 0.5,
     "registration arm": 0.5, "insulator": 0.4, "contact wire": 0.7, "messenger wire": 0.7, "dropper": 0.6,
-    "feeder wire": 0.6, "earth wire": 0.6,
+    "feeder wire": 0.6, "earth wire": 0.6, "fence": 0.4, "signal": 0.5, "platform": 0.35,
 }
 
 
@@ -58,6 +58,7 @@ def build(params, rng: np.random.Generator, view=None) -> RailwayLayout:
     _track(params, layout, detail, centreline, view, int(rng.integers(0, 2**31 - 1)), collection, cant_angle(params.track, layout.alignment))
     _supports(params, layout, detail, collection)
     _wires(layout, detail, collection)
+    _trackside(params, layout, rng, collection)
     bpy.context.view_layer.update()
     return layout
 
@@ -188,6 +189,20 @@ def _supports(params, layout: RailwayLayout, detail, collection) -> None:
             _placed(f"{label}.cantilever.t{i}", pieces["cantilever"], frame, "cantilever", collection)
             _placed(f"{label}.registration_arm.t{i}", pieces["registration arm"], frame, "registration arm", collection)
             _placed(f"{label}.insulators.t{i}", pieces["insulator"], frame, "insulator", collection)
+
+
+def _trackside(params, layout: RailwayLayout, rng: np.random.Generator, collection) -> None:
+    """Fences, signals and the platform of ``scene.trackside`` (nothing is drawn from ``rng`` without signals)."""
+    side, section, alignment = params.trackside, layout.section, layout.alignment
+    if side.fences:
+        for name, lateral in (("right", section.offsets[0] - side.fence_offset), ("left", section.offsets[-1] + side.fence_offset)):
+            tag(mesh_object(f"fence.{name}", trackside.fence(alignment, section.surface, side, lateral), collection), "fence", reflectivity=REFLECTIVITY["fence"])
+    for k, frame in enumerate(trackside.signal_frames(layout, side, rng)):
+        tag(mesh_object(f"signal.{k:02d}", trackside.signal(frame, side.signal_height, -1.0), collection), "signal", reflectivity=REFLECTIVITY["signal"])
+    nearest = section.offsets[-1] if side.platform_side == "left" else section.offsets[0]
+    mesh = trackside.platform(alignment, section.surface, side, section.rail_top, float(nearest))
+    if mesh is not None:
+        tag(mesh_object("platform", mesh, collection), "platform", reflectivity=REFLECTIVITY["platform"])
 
 
 def _bevel_sides(sides: int) -> int:
