@@ -33,7 +33,6 @@ Run: python benchmarks/bench_raycasters.py [--small]
 """
 
 import importlib.util
-import os
 import time
 from concurrent.futures import ThreadPoolExecutor
 
