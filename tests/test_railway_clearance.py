@@ -19,6 +19,7 @@ pytestmark = pytest.mark.bpy
 
 CASES = [("single", 1), ("single", 2), ("both_sides", 1), ("both_sides", 2), ("both_sides", 3), ("both_sides", 4),
          ("gantry", 2), ("gantry", 3), ("gantry", 4), ("gantry", 5)]
+AUXILIARY = {2: True, 3: True}  # track counts also built with an auxiliary messenger (PA)
 
 
 def segment_hits(a, b, triangles) -> bool:
@@ -70,7 +71,7 @@ def element(name: str):
 def joint(a, b) -> bool:
     """Whether elements ``a`` and ``b`` (from :func:`element`) are built touching."""
     (ka, ia, ra), (kb, ib, rb) = sorted([a, b])
-    wire = {"contact_wire", "messenger_wire", "feeder", "earth_wire", "droppers"}
+    wire = {"contact_wire", "messenger_wire", "auxiliary_messenger", "feeder", "earth_wire", "droppers"}
     if ka not in wire and kb not in wire:  # two fittings: one support, one track, or a mast with its fittings
         if ia != ib:
             return False
@@ -79,17 +80,17 @@ def joint(a, b) -> bool:
             return other is None or other.startswith("t") or other in ("right", "left")
         return ra == rb
     if ka in wire and kb in wire:  # wires: the same run in neighbouring spans, droppers on their own wires
-        track = lambda run: run.rstrip("b")  # noqa: E731
+        track = lambda run: run.rstrip("bp")  # noqa: E731  (t0b: a second contact wire; t0p: the droppers above a PA)
         if ka == kb:
             return ra == rb and abs(ia - ib) <= 1
-        return "droppers" in (ka, kb) and ia == ib and track(ra) == track(rb) and {ka, kb} <= {"droppers", "contact_wire", "messenger_wire"}
+        return "droppers" in (ka, kb) and ia == ib and track(ra) == track(rb) and {ka, kb} <= {"droppers", "contact_wire", "messenger_wire", "auxiliary_messenger"}
     fitting, wire_ = (a, b) if a[0] not in wire else (b, a)
     (kf, support, who), (kw, span, run) = fitting, wire_
     if support not in (span, span + 1):
         return False
     if kw in ("feeder", "earth_wire"):
         return kf in ("mast", "gantry") or (kf == "insulators" and who == run)
-    track = run.rstrip("b")
+    track = run.rstrip("bp")
     if kf == "registration_arm":
         return kw == "contact_wire" and who == track
     if kf in ("cantilever", "insulators"):
@@ -110,7 +111,8 @@ def test_no_two_elements_intersect(layout, tracks):
     curve = "[0, 3, 0]" if tracks % 2 else "[0, 0, 0]"  # odd track counts on a 260 m curve (pulled-off wires)
     config = load_config(None, [f"scene.supports.layout={layout}", f"scene.track.tracks={tracks}", "scene.track.start=[-55, 0, 0]",
                                 f"scene.track.mid={curve}", "scene.track.end=[55, 0, 0]", "scene.detail.mode=fixed", "scene.catenary.points_per_10m=10",
-                                "scene.catenary.double_contact_probability=0.5", "scene.supports.mast_type=mixed"])
+                                "scene.catenary.double_contact_probability=0.5", "scene.supports.mast_type=mixed",
+                                f"scene.catenary.auxiliary_messenger={str(AUXILIARY.get(tracks, False)).lower()}"])
     build_scene(config.scene, frame_rng(3, 0), None)
     buffers = export_scene(load_class_table())
     objects, bounds = {}, {}

@@ -157,3 +157,26 @@ def test_supports_and_wires_sit_on_the_lateral_perpendicular_of_a_curve():
         a, b = layout.supports[wire.span], layout.supports[wire.span + 1]
         np.testing.assert_allclose(wire.start, arc.offset([a.chainage], a.stagger, contact_z)[0], atol=1e-9)
         np.testing.assert_allclose(wire.end, arc.offset([b.chainage], b.stagger, contact_z)[0], atol=1e-9)
+
+
+def test_an_auxiliary_messenger_hangs_between_and_splits_the_droppers():
+    p = params("scene.catenary.auxiliary_messenger=true")
+    layout = plan(p, np.random.default_rng(0))
+    cat = p.catenary
+    contact_z = layout.section.rail_top + cat.contact_wire_height
+    aux = [w for w in layout.wires if w.kind == "auxiliary_messenger"]
+    contact = {w.span: w for w in layout.wires if w.kind == "contact_wire"}
+    messenger = {w.span: w for w in layout.wires if w.kind == "messenger_wire"}
+    assert aux and len(aux) == len(contact) and all(w.class_name == "auxiliary messenger" for w in aux)
+    for wire in aux:
+        assert wire.start[2] == pytest.approx(contact_z + 0.3) and wire.end[2] == pytest.approx(contact_z + 0.3)
+        t = np.linspace(0, 1, 21)
+        assert (wire.z_at(t) > contact[wire.span].z_at(t) + 0.075).all() and (wire.z_at(t) < messenger[wire.span].z_at(t) - 0.075).all()
+    lower = [d for d in layout.droppers if d.run == "t0"]
+    upper = [d for d in layout.droppers if d.run == "t0p"]
+    assert len(lower) == len(upper) == len(contact)
+    for d in upper:
+        np.testing.assert_allclose(d.upper[:, 2], messenger[d.span].z_at(d.t))
+        np.testing.assert_allclose(d.lower[:, 2], [w for w in aux if w.span == d.span][0].z_at(d.t))
+    with pytest.raises(InputError, match="auxiliary_messenger_height"):
+        load_config(None, ["scene.catenary.auxiliary_messenger=true", "scene.catenary.auxiliary_messenger_height=1.35"])

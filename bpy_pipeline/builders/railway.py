@@ -108,6 +108,10 @@ class RailwayCatenary:
     dropper_spacing: float = 5.0  # PENDULUM_SPACING
     dropper_jitter: float = 0.2  # PENDULUM_JITTER, +- along the span
     points_per_10m: int = 20  # CURVE_RESOLUTION_POINTS_PER_10M, for scene.detail.mode fixed
+    auxiliary_messenger: bool = False  # PA: a wire between messenger and contact wire, the droppers in two tiers
+    auxiliary_messenger_height: float = 0.3  # m above the contact wire at the supports (assumed)
+    auxiliary_messenger_sag: float = 0.1  # at the reference length (assumed: between the contact wire's and the messenger's)
+    auxiliary_messenger_diameter: float = 0.0105  # m (assumed: a 65 mm^2 bronze wire)
 
 
 @dataclass(frozen=True)

@@ -332,6 +332,11 @@ def plan(params, rng: np.random.Generator) -> RailwayLayout:
                 lateral_a, lateral_b = c + a.stagger, c + b.stagger
                 messenger = _wire("messenger_wire", f"t{i}", k, world(a.frame, lateral_a, messenger_z), world(b.frame, lateral_b, messenger_z), cat)
                 wires.append(messenger)
+                auxiliary = None
+                if cat.auxiliary_messenger:  # PA: the droppers hang the contact wire from it, and it from the messenger
+                    aux_z = contact_z + cat.auxiliary_messenger_height
+                    auxiliary = _wire("auxiliary_messenger", f"t{i}", k, world(a.frame, lateral_a, aux_z), world(b.frame, lateral_b, aux_z), cat)
+                    wires.append(auxiliary)
                 halves = (-cat.double_contact_spacing / 2, cat.double_contact_spacing / 2) if double[i] else (0.0,)
                 shifts = (-0.25, 0.25) if double[i] else (0.0,)
                 for j, (half, shift) in enumerate(zip(halves, shifts)):
@@ -339,7 +344,11 @@ def plan(params, rng: np.random.Generator) -> RailwayLayout:
                     contact = _wire("contact_wire", run, k, world(a.frame, lateral_a + half, contact_z), world(b.frame, lateral_b + half, contact_z), cat)
                     wires.append(contact)
                     t = catenary.dropper_positions(contact.length, cat.dropper_spacing, cat.dropper_jitter, rng, shift)
-                    droppers.append(Droppers(run, k, t, contact.points_at(t), messenger.points_at(t), cat.dropper_diameter))
+                    above = messenger if auxiliary is None else auxiliary
+                    droppers.append(Droppers(run, k, t, contact.points_at(t), above.points_at(t), cat.dropper_diameter))
+                    if auxiliary is not None and j == 0:  # the upper tier, from the auxiliary messenger to the messenger, a quarter spacing on (clear of a second contact wire's droppers)
+                        up = np.clip(t + 0.25 * cat.dropper_spacing / max(contact.length, 1e-9), 0.02, 0.98)
+                        droppers.append(Droppers(f"t{i}p", k, up, auxiliary.points_at(up), messenger.points_at(up), cat.dropper_diameter))
         for side in ("right", "left"):
             mast_a = next((m for m in a.masts if m.side == side), None)
             mast_b = next((m for m in b.masts if m.side == side), None)
@@ -352,13 +361,16 @@ def plan(params, rng: np.random.Generator) -> RailwayLayout:
     return RailwayLayout(alignment, section, layout, supports, wires, droppers, double)
 
 
-WIRE_CLASSES = {"contact_wire": "contact wire", "messenger_wire": "messenger wire", "feeder": "feeder wire", "earth_wire": "earth wire"}
+WIRE_CLASSES = {"contact_wire": "contact wire", "messenger_wire": "messenger wire", "feeder": "feeder wire", "earth_wire": "earth wire",
+                "auxiliary_messenger": "auxiliary messenger"}
 
 
 def _wire(kind: str, run: str, span: int, start, end, cat) -> Wire:
     length = float(np.linalg.norm((np.asarray(end) - np.asarray(start))[:2]))
-    reference = {"contact_wire": cat.contact_wire_sag, "messenger_wire": cat.messenger_wire_sag, "feeder": cat.feeder_sag, "earth_wire": cat.earth_wire_sag}[kind]
-    diameter = {"contact_wire": cat.contact_wire_diameter, "messenger_wire": cat.messenger_wire_diameter, "feeder": cat.feeder_diameter, "earth_wire": cat.earth_wire_diameter}[kind]
+    reference = {"contact_wire": cat.contact_wire_sag, "messenger_wire": cat.messenger_wire_sag, "feeder": cat.feeder_sag, "earth_wire": cat.earth_wire_sag,
+                 "auxiliary_messenger": cat.auxiliary_messenger_sag}[kind]
+    diameter = {"contact_wire": cat.contact_wire_diameter, "messenger_wire": cat.messenger_wire_diameter, "feeder": cat.feeder_diameter, "earth_wire": cat.earth_wire_diameter,
+                "auxiliary_messenger": cat.auxiliary_messenger_diameter}[kind]
     sag = catenary.sag_for_span(length, reference, cat.sag_reference_length, cat.sag_exponent)
     return Wire(kind, WIRE_CLASSES[kind], run, span, np.asarray(start, float), np.asarray(end, float), sag, diameter)
 
@@ -508,6 +520,13 @@ def check_railway(params, where: str = "scene") -> None:
     longest = sup.span + sup.span_jitter
     sag = lambda ref: catenary.sag_for_span(longest, ref, cat.sag_reference_length, cat.sag_exponent)  # noqa: E731
     clearance = cat.system_height - sag(cat.messenger_wire_sag) + sag(cat.contact_wire_sag)
+    if cat.auxiliary_messenger:
+        _positive(cat.auxiliary_messenger_diameter, f"{c}.auxiliary_messenger_diameter")
+        _positive(cat.auxiliary_messenger_sag, f"{c}.auxiliary_messenger_sag", allow_zero=True)
+        low = cat.auxiliary_messenger_height - sag(cat.auxiliary_messenger_sag) + sag(cat.contact_wire_sag)
+        high = clearance - cat.auxiliary_messenger_height + sag(cat.auxiliary_messenger_sag) - sag(cat.contact_wire_sag)
+        if min(low, high) < MIN_DROPPER / 2:
+            raise InputError(f"{c}.auxiliary_messenger_height: the auxiliary messenger must hang clear of the contact wire and the messenger over a {longest:g} m span (0.075 m each), got {cat.auxiliary_messenger_height}")
     if cat.enabled and clearance < MIN_DROPPER:
         raise InputError(f"{c}.system_height: the messenger would sag to {clearance:.3g} m above the contact wire over a {longest:g} m span; raise it or lower messenger_wire_sag")
     messenger = section.rail_top + cat.contact_wire_height + cat.system_height

@@ -40,7 +40,7 @@ STONE_CENTRES = "track_stone_centres"
 REFLECTIVITY = {
     "rail": 0.6, "sleeper": 0.4, "ballast": 0.35, "ground": 0.3, "mast": 0.5, "gantry": 0.5, "cantilever": 0.5,
     "registration arm": 0.5, "insulator": 0.4, "contact wire": 0.7, "messenger wire": 0.7, "dropper": 0.6,
-    "feeder wire": 0.6, "earth wire": 0.6, "fence": 0.4, "signal": 0.5, "platform": 0.35,
+    "feeder wire": 0.6, "earth wire": 0.6, "auxiliary messenger": 0.7, "fence": 0.4, "signal": 0.5, "platform": 0.35,
 }
 
 
