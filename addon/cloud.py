@@ -1,11 +1,14 @@
 """A scanned frame in the viewport: point-cloud objects coloured by class, ghost points apart.
 
-Direct returns go to one object, ghost points (``bounces > 0``: seen through a mirror) to a
-second one drawn with larger, paler points, so they stand out and can be hidden on their own.
-Both carry the point record as attributes (``semantic``, ``instance``, ``intensity``,
-``bounces``) and the class colour as the colour attribute ``Col`` (linear RGBA), which a
-material shows in Material Preview and Rendered mode and Solid mode shows with
-Color: Attribute. Each object sits at the sensor pose, holding the points in the sensor frame.
+One object per class and kind of return: ``LiDAR cloud <class>`` for direct returns and
+``LiDAR cloud ghosts <class>`` for ghost points (``bounces > 0``: seen through a mirror), drawn
+with larger, paler points so they stand out and can be hidden on their own. Each object's colour
+is its class colour (Solid mode, Color: Object, draws it in any Blender: per-point colours of
+Geometry Nodes points are not drawn by Solid mode in Blender 4.x) and its material, the class's
+(``LiDAR class colour NN name``), has that viewport colour and emits the points' ``Col`` in
+Material Preview and Rendered mode. Every object carries the point record as attributes
+(``semantic``, ``instance``, ``intensity``, ``bounces``), the colour as ``Col`` (linear RGBA),
+and sits at the sensor pose, holding the points in the sensor frame.
 
 A ``PointCloud`` datablock where Blender can fill one from Python (5.0 and newer); otherwise a
 mesh of vertices only, drawn as points by a Geometry Nodes "Mesh to Points" modifier.
@@ -53,15 +56,18 @@ def _collection() -> bpy.types.Collection:
     return collection
 
 
-def _material() -> bpy.types.Material:
-    material = bpy.data.materials.get(MATERIAL)
-    if material is not None:
+def _class_material(class_id: int, name: str, rgb8) -> bpy.types.Material:
+    """The material of one class: viewport colour = the class colour (linear), nodes emit the point's ``Col``."""
+    title = f"{MATERIAL} {class_id:02d} {name}"
+    material = bpy.data.materials.get(title) or bpy.data.materials.new(title)
+    material.diffuse_color = tuple(linear_rgba(np.asarray([rgb8], np.uint8))[0].tolist())
+    if material.node_tree is not None and material.node_tree.nodes.get("LiDAR colour"):
         return material
-    material = bpy.data.materials.new(MATERIAL)
     material.use_nodes = True
     nodes, links = material.node_tree.nodes, material.node_tree.links
     nodes.clear()
     attribute = nodes.new("ShaderNodeAttribute")
+    attribute.name = "LiDAR colour"
     attribute.attribute_name = COLOR
     emission = nodes.new("ShaderNodeEmission")
     output = nodes.new("ShaderNodeOutputMaterial")
@@ -70,6 +76,11 @@ def _material() -> bpy.types.Material:
     for i, node in enumerate((attribute, emission, output)):
         node.location = (250 * i, 0)
     return material
+
+
+def class_materials(color_lut: np.ndarray, names: dict[int, str]) -> list[bpy.types.Material]:
+    """One material per class id ``0 .. len(color_lut) - 1`` (index = class id)."""
+    return [_class_material(i, names.get(i, f"class {i}"), color_lut[i]) for i in range(len(color_lut))]
 
 
 def _points_group() -> bpy.types.NodeTree:
@@ -110,27 +121,27 @@ def _attributes(data, points: np.ndarray, rgba: np.ndarray) -> None:
         data.attributes.new(name, kind, "POINT").data.foreach_set(key, values)
 
 
-def cloud_object(name: str, points: np.ndarray, rgba: np.ndarray, radius: float, collection, pose: np.ndarray) -> bpy.types.Object:
-    """One point-cloud object of ``points`` ((p,) POINT_DTYPE, in the frame of ``pose`` (4, 4)) coloured ``rgba`` (p, 4)."""
+def cloud_object(name: str, points: np.ndarray, rgba: np.ndarray, radius: float, collection, pose: np.ndarray, material, color) -> bpy.types.Object:
+    """One point-cloud object of ``points`` ((p,) POINT_DTYPE, in the frame of ``pose`` (4, 4)) coloured ``rgba`` (p, 4);
+    ``material`` its class's, ``color`` (4,) linear RGBA the object's colour."""
     xyz = np.column_stack([points["x"], points["y"], points["z"]]).astype(np.float32)
-    material = _material()
     if native_point_clouds():
         data = bpy.data.pointclouds.new(name)
         data.resize(len(points))
         data.attributes["position"].data.foreach_set("vector", xyz.ravel())
         size = data.attributes.get("radius") or data.attributes.new("radius", "FLOAT", "POINT")
         size.data.foreach_set("value", np.full(len(points), radius, np.float32))
-        data.materials.append(material)
     else:
         data = bpy.data.meshes.new(name)
         data.vertices.add(len(points))
         data.vertices.foreach_set("co", xyz.ravel())
-        data.materials.append(material)
+    data.materials.append(material)
     _attributes(data, points, rgba)
     if isinstance(data, bpy.types.Mesh):  # what Solid mode's Color: Attribute shows
         data.color_attributes.active_color = data.color_attributes[COLOR]
     obj = bpy.data.objects.new(name, data)
     obj.matrix_world = Matrix(np.asarray(pose, np.float64).tolist())
+    obj.color = tuple(float(c) for c in color)
     collection.objects.link(obj)
     if obj.type == "MESH":
         modifier = obj.modifiers.new(POINTS_GROUP, "NODES")
@@ -140,18 +151,22 @@ def cloud_object(name: str, points: np.ndarray, rgba: np.ndarray, radius: float,
     return obj
 
 
-def show_frame(points: np.ndarray, pose: np.ndarray, color_lut: np.ndarray, name: str = "LiDAR cloud", radius: float = 0.02) -> list[bpy.types.Object]:
-    """Replace the clouds in the viewport by this frame's: ``[direct]`` or ``[direct, ghosts]``.
+def show_frame(points: np.ndarray, pose: np.ndarray, color_lut: np.ndarray, names: dict[int, str] | None = None, name: str = "LiDAR cloud", radius: float = 0.02) -> list[bpy.types.Object]:
+    """Replace the clouds in the viewport by this frame's: one object per class of direct returns, then per class of ghosts.
 
     points : (p,) POINT_DTYPE records; pose : (4, 4) the frame they are in (the sensor pose, or
-    the identity for world-frame output); color_lut : (k, 3) uint8 RGB by class id
+    the identity for world-frame output); color_lut : (k, 3) uint8 RGB by class id; names : class names by id
     """
+    names = names or {}
     collection = _collection()
+    materials = class_materials(color_lut, names)
     rgba = linear_rgba(color_lut[points["semantic"]])
     ghost = points["bounces"] > 0
-    objects = [cloud_object(name, points[~ghost], rgba[~ghost], radius, collection, pose)]
-    if ghost.any():
-        pale = rgba[ghost].copy()
-        pale[:, :3] += GHOST_PALENESS * (1.0 - pale[:, :3])
-        objects.append(cloud_object(f"{name} ghosts", points[ghost], pale, radius * GHOST_SCALE, collection, pose))
+    rgba[ghost, :3] += GHOST_PALENESS * (1.0 - rgba[ghost, :3])
+    objects = []
+    for kind, mask, size in (("", ~ghost, radius), ("ghosts ", ghost, radius * GHOST_SCALE)):
+        for class_id in np.unique(points["semantic"][mask]).tolist():
+            keep = mask & (points["semantic"] == class_id)
+            label = f"{name} {kind}{names.get(class_id, f'class {class_id}')}"
+            objects.append(cloud_object(label, points[keep], rgba[keep], size, collection, pose, materials[class_id], rgba[keep][0]))
     return objects

@@ -12,6 +12,7 @@ config type hint            Blender property
 ``Literal[...]``            ``EnumProperty``
 ``list[Literal[...]]``      ``EnumProperty`` (``ENUM_FLAG``)
 ``tuple[float, ...]``       ``FloatVectorProperty``
+``tuple[int, ...]``         ``IntVectorProperty``
 a nested dataclass          ``PointerProperty`` to its own group
 ==========================  ====================================
 
@@ -65,7 +66,7 @@ class FieldView:
 
     attr: str
     key: str
-    kind: str  # bool | int | float | str | enum | flags | vector | group
+    kind: str  # bool | int | float | str | enum | flags | vector | ivector | group
     items: tuple = ()  # enum identifiers
     size: int = 0  # vector length
     group: GroupView | None = None
@@ -115,6 +116,8 @@ def _kind(hint) -> tuple[str, tuple, int] | None:
         return "enum", args, 0
     if origin is list and len(args) == 1 and typing.get_origin(args[0]) is Literal:
         return "flags", typing.get_args(args[0]), 0
+    if origin is tuple and args and all(a is int for a in args):
+        return "ivector", (), len(args)
     if origin is tuple and args and all(a in (int, float) for a in args):
         return "vector", (), len(args)
     if dataclasses.is_dataclass(hint):
@@ -133,6 +136,7 @@ def _fits(view: FieldView, default) -> bool:
         "enum": default in view.items,
         "flags": isinstance(default, (list, tuple)) and set(default) <= set(view.items),
         "vector": isinstance(default, (list, tuple)) and len(default) == view.size,
+        "ivector": isinstance(default, (list, tuple)) and len(default) == view.size and all(isinstance(v, int) and not isinstance(v, bool) for v in default),
         "group": isinstance(default, dict),
     }[view.kind]
 
@@ -155,6 +159,8 @@ def _property(view: FieldView, default, update=None):
         return bpy.props.EnumProperty(name=name, items=items, default=default, **extra)
     if view.kind == "flags":
         return bpy.props.EnumProperty(name=name, items=items, default=set(default), options={"ENUM_FLAG"}, **extra)
+    if view.kind == "ivector":  # pixel sizes, counts: whole numbers, X/Y/Z labels for three
+        return bpy.props.IntVectorProperty(name=name, size=view.size, default=tuple(int(v) for v in default), subtype="XYZ" if view.size == 3 else "NONE", **extra)
     if view.kind == "vector":
         if view.size == 3:  # X/Y/Z labels; EULER and TRANSLATION carry degrees and the length unit
             subtype, unit = {"angle": ("EULER", "ROTATION"), "length": ("TRANSLATION", "LENGTH")}.get(view.unit, ("XYZ", "NONE"))
@@ -225,6 +231,8 @@ def read(group, view: GroupView, base: dict) -> dict:
         elif fv.kind == "vector":
             loaded = loaded if isinstance(loaded, (list, tuple)) and len(loaded) == fv.size else [None] * fv.size
             value = [exact_float(v, b, fv.unit == "angle") for v, b in zip(value, loaded)]
+        elif fv.kind == "ivector":
+            value = [int(v) for v in value]
         elif fv.kind == "flags":
             kept = [v for v in (loaded or []) if v in value]  # keep the loaded order of what is still ticked
             value = kept + [v for v in fv.items if v in value and v not in kept]
@@ -247,6 +255,8 @@ def write(group, view: GroupView, data: dict, where: str) -> None:
             value = set(value)
         elif fv.kind == "vector":
             value = to_panel(fv, tuple(float(v) for v in value))
+        elif fv.kind == "ivector":
+            value = tuple(int(v) for v in value)
         elif fv.kind == "float":
             value = to_panel(fv, value)
         try:

@@ -263,13 +263,13 @@ class LIDAR_OT_show_cloud(bpy.types.Operator):
             self.report({"ERROR"}, str(err))
             return {"CANCELLED"}
         table = load_class_table()
-        objects = cloud.show_frame(points, pose, table.color_lut())
+        objects = cloud.show_frame(points, pose, table.color_lut(), table.names)
         fill_legend(context.scene.lidar, points, table)
         space = context.space_data
         if space is not None and space.type == "VIEW_3D" and space.shading.type == "SOLID":
-            space.shading.color_type = "ATTRIBUTE"
+            space.shading.color_type = "OBJECT"  # one object per class, coloured by the class table
         ghosts = int((points["bounces"] > 0).sum())
-        self.report({"INFO"}, f"{len(points)} points ({ghosts} ghost) in {', '.join(o.name for o in objects)}")
+        self.report({"INFO"}, f"{len(points)} points ({ghosts} ghost) in {len(objects)} objects, one per class (legend: LiDAR tab)")
         return {"FINISHED"}
 
     @staticmethod

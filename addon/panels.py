@@ -115,7 +115,7 @@ class LIDAR_PT_run(LidarPanel, bpy.types.Panel):
         row.scale_y = 1.3
         row.operator("lidar.build_scene", icon="SCENE_DATA")
         row.operator("lidar.scan", icon="OUTLINER_OB_LIGHTPROBE")
-        row.operator("lidar.show_cloud", icon="OUTLINER_OB_POINTCLOUD")
+        layout.operator("lidar.show_cloud", icon="OUTLINER_OB_POINTCLOUD")
         row = layout.row(align=True)
         row.prop(settings, "frames")
         row.operator("lidar.generate", icon="RENDER_ANIMATION")

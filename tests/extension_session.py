@@ -24,6 +24,8 @@ class OnlyBundled:
     """Import finder: the bundled distributions come from the extension's wheels or not at all."""
 
     def find_spec(self, name, path=None, target=None):
+        if path is None and name == "bpy_pipeline":  # inside Blender it is bl_ext.<repo>.lidar_pipeline.bpy_pipeline
+            raise ImportError("bpy_pipeline: not importable by that name inside the extension; import it relatively")
         if path is None and name in BUNDLED:
             spec = importlib.machinery.PathFinder.find_spec(name, [str(SITE)])
             if spec is None:
@@ -197,6 +199,8 @@ for obj in bpy.data.collections["LiDAR Clouds"].objects:
         "bounces": sorted(set(bounces.tolist())),
         "classes": sorted(set(semantic.tolist())),
         "colors": len(np.unique(color.reshape(-1, 4), axis=0)),
+        "object_color": [round(c, 5) for c in obj.color],
+        "material": obj.data.materials[0].name if len(obj.data.materials) else None,
         "matrix_is_pose": np.allclose(np.array(obj.matrix_world), scan_manifest["frames"][0]["sensor_pose"], atol=1e-5),
         "drawn_as_points": evaluated.data.__class__.__name__ == "PointCloud" or any(m.type == "NODES" for m in obj.modifiers),
     }
@@ -351,7 +355,13 @@ for builder in settings.bl_rna.properties["builder"].enum_items.keys():
     if builder != "my_scene":
         settings.builder = builder
         drawn = [line for line in draw_all_panels() if line.startswith("prop ")]
-        built = sorted(bpy.ops.lidar.build_scene()) == ["FINISHED"] and len(bpy.data.collections["LiDAR Scene"].all_objects) >= 3
+        try:
+            built = sorted(bpy.ops.lidar.build_scene()) == ["FINISHED"] and len(bpy.data.collections["LiDAR Scene"].all_objects) >= 3
+        except RuntimeError as err:  # a builder that needs the user's input (real_scan: a scan file) says which key
+            built = str(err).strip().splitlines()[-1]
+        if isinstance(built, str):
+            builders[builder] = [True, len(drawn), built]  # its defaults are not a valid config on their own
+            continue
         builders[builder] = [panel.settings_config(settings).scene == cfg.config_from_dict({"scene": {"builder": builder}}).scene, len(drawn), built]
 report["every_builder"] = builders
 

@@ -239,13 +239,29 @@ class GuiSession:
     def wait(self, code: str, timeout: float = 60, every: float = 0.3) -> dict:
         """Ask ``code`` until it sets ``reply["done"]`` true; returns that reply."""
         deadline = time.monotonic() + timeout
+        log = self.work / "blender.log"
+        errors = log.read_text(errors="replace").count("Traceback")
         while True:
             reply = self.call(code)
             if reply.get("done"):
+                time.sleep(0.3)  # an operator may still fail after doing what was asked
+            text = log.read_text(errors="replace")
+            if text.count("Traceback") > errors:  # an operator failed: say why now, not at the timeout
+                raise RuntimeError(f"Blender reported an error: {text[-3000:]}")
+            if reply.get("done"):
                 return reply
             if time.monotonic() > deadline:
-                raise TimeoutError(f"not done within {timeout} s: {reply}")
+                raise TimeoutError(f"not done within {timeout} s: {reply}; Blender's reports: {self.reports()}")
             time.sleep(every)
+
+    def reports(self) -> str:
+        """The last lines of Blender's report log (what the status bar showed: operator errors)."""
+        return self.call("""
+with bpy.context.temp_override(**context_override()):
+    bpy.ops.ui.reports_to_textblock()
+text = bpy.data.texts.get('Recent Reports')
+reply['text'] = text.as_string()[-1500:] if text else ''
+""")["text"]
 
     def stop(self) -> None:
         for process in (self.blender, self.xvfb):

@@ -203,11 +203,11 @@ def find_panels(session, state):
 
 
 def main_buttons(session, state):
-    """The LiDAR panel's rows: [Build scene, Scan, Show cloud], [Frames, Generate frames], [Load, Save, Reset]."""
+    """The LiDAR panel's rows: [Build scene, Scan], [Show cloud], [Frames, Generate frames], [Load, Save, Reset]."""
     img, path, boxes = find_panels(session, state)
     assert boxes, "no panel in the sidebar"
     rows = button_rows(img, state["sidebar"], *boxes[0])
-    assert [len(r) for r in rows[:3]] == [3, 2, 3], (rows, boxes)
+    assert [len(r) for r in rows[:4]] == [2, 1, 2, 3], (rows, boxes)
     return rows
 
 
@@ -259,9 +259,24 @@ def test_gui_build_scene_scan_leaves_the_cube_out(gui, work):
 
 @pytest.fixture(scope="session")
 def full_default(work):
-    """The default job at full resolution with the bpy module: what the panel's Scan must write."""
-    out = work / "module" / "default_full"
-    result = module_run(out, [])
+    """What the panel's Build scene then Scan must write: the default config's scene built for frame 0,
+    then scanned as it is (``run_frames(build=False)``), with the bpy module.
+
+    Not ``python run.py``'s bytes: a run that builds draws the builder's random numbers from the
+    frame's generator before the effects do, a scan of a scene built earlier does not.
+    """
+    out = work / "module" / "default_built_then_scanned"
+    script = f"""
+import bpy
+bpy.ops.wm.read_factory_settings(use_empty=True)
+from bpy_pipeline import config as cfg
+from bpy_pipeline.pipeline import build_frame_scene, run_frames
+config = cfg.config_from_dict({{}})
+build_frame_scene(config, 0)
+for _ in run_frames(config, {str(out)!r}, build=False, mode="overwrite"):
+    pass
+"""
+    result = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=600, cwd=ROOT)
     assert result.returncode == 0, result.stderr
     return out
 
@@ -281,7 +296,7 @@ for obj in objs:
     n = len(data.vertices) if obj.type == 'MESH' else len(data.points)
     col = np.empty(n * 4, np.float32); data.attributes['Col'].data.foreach_get('color', col)
     sem = np.empty(n, np.int32); data.attributes['semantic'].data.foreach_get('value', sem)
-    out[obj.name] = {'type': obj.type, 'data': type(data).__name__, 'points': n, 'semantic': sem.tolist()[::97], 'colors': col.reshape(-1, 4)[::97].round(5).tolist()}
+    out[obj.name] = {'type': obj.type, 'data': type(data).__name__, 'points': n, 'semantic': sem.tolist()[::97], 'colors': col.reshape(-1, 4)[::97].round(5).tolist(), 'object_color': list(obj.color)}
 reply['clouds'] = out
 reply['legend'] = [(e.name, e.class_id, e.points, [round(c, 5) for c in e.color]) for e in bpy.context.scene.lidar.legend]
 """
@@ -292,7 +307,8 @@ area, region = ctx['area'], ctx['region']
 space = area.spaces.active
 space.shading.type = 'SOLID'
 space.shading.light = 'FLAT'
-space.shading.color_type = 'ATTRIBUTE'
+space.shading.color_type = 'OBJECT'
+bpy.context.scene.view_settings.view_transform = 'Standard'  # the screen shows the class colours unchanged (not AgX's)
 space.overlay.show_floor = False
 space.overlay.show_axis_x = space.overlay.show_axis_y = False
 bpy.context.view_layer.layer_collection.children['LiDAR Scene'].hide_viewport = True
@@ -323,16 +339,20 @@ def _linear(rgb8: np.ndarray) -> np.ndarray:
 def test_gui_show_cloud_by_class(gui):
     session, state = gui
     rows = main_buttons(session, state)
-    session.click(*centre(rows[0][2]))  # Show cloud
+    session.click(*centre(rows[1][0]))  # Show cloud
     session.wait("c = bpy.data.collections.get('LiDAR Clouds'); reply['done'] = bool(c and c.objects)", timeout=120)
     seen = session.call(CLOUD_CHECK)
     table = _table()
     lut = table.color_lut()
     (record,) = records(session.work / "out_scan")
     assert sum(c["points"] for c in seen["clouds"].values()) == record["points"]
-    direct = seen["clouds"]["LiDAR cloud"]  # direct returns: the class colour itself (ghosts are paler)
-    assert np.allclose(np.asarray(direct["colors"])[:, :3], _linear(lut[np.asarray(direct["semantic"])]), atol=1e-4)
-    classes = sorted(set(direct["semantic"]))
+    direct = {n: c for n, c in seen["clouds"].items() if not n.startswith("LiDAR cloud ghosts ")}  # ghosts are paler
+    for name, cloud in direct.items():  # one object per class: its name, points, colours and object colour are the class's
+        (class_id,) = set(cloud["semantic"])
+        assert name == f"LiDAR cloud {table.names[class_id]}"
+        assert np.allclose(np.asarray(cloud["colors"])[:, :3], _linear(lut[class_id]), atol=1e-4)
+        assert np.allclose(cloud["object_color"][:3], _linear(lut[class_id]), atol=1e-4)
+    classes = sorted({c["semantic"][0] for c in direct.values()})
     assert len(classes) >= 4
     legend = {name: (class_id, points, color) for name, class_id, points, color in seen["legend"]}
     assert {class_id for class_id, _, _ in legend.values()} >= set(classes)
@@ -360,7 +380,7 @@ def test_gui_generate_shows_progress_and_esc_keeps_finished_frames(gui):
     out = session.work / "out_generate"
     session.call(f"s = bpy.context.scene.lidar; s.out_dir = {str(out)!r}; s.frames = 30")
     rows = main_buttons(session, state)
-    session.click(*centre(rows[1][1]))  # Generate frames
+    session.click(*centre(rows[2][1]))  # Generate frames
     progress = session.wait(f"import pathlib; n = len(list(pathlib.Path({str(out)!r}).glob('records/*.json'))); reply.update(done=n >= 2, n=n, status=bpy.context.scene.lidar.status)", timeout=300, every=0.2)
     assert progress["status"].startswith("LiDAR: ") and "/30 frames done (Esc to cancel)" in progress["status"], progress
     _, path = session.screenshot("generate_progress")
@@ -474,14 +494,14 @@ def test_gui_load_and_save_config(gui, work):
     session.click(state["sidebar"]["x"] + 60, boxes[0][0] + 10, "ctrl")  # the LiDAR panel alone open again
     time.sleep(0.8)
     rows = main_buttons(session, state)
-    session.click(*centre(rows[2][0]))  # Load config
+    session.click(*centre(rows[3][0]))  # Load config
     choose_file(session, Path(job))
     session.key("Return", x=state["window"]["width"] // 2, y=state["window"]["height"] // 2)
     loaded = session.wait("s = bpy.context.scene.lidar; reply.update(done=s.status.startswith('loaded'), builder=s.builder, status=s.status)", timeout=30)
     assert loaded["builder"] == "primitives" and loaded["status"] == f"loaded {job}"
     saved = session.work / "saved.yaml"
     rows = main_buttons(session, state)
-    session.click(*centre(rows[2][1]))  # Save config
+    session.click(*centre(rows[3][1]))  # Save config
     choose_file(session, saved)
     _, path = session.screenshot("save_config")
     keep_shot(session.chroot.suite, path, "save_config", width=900)
