@@ -241,11 +241,12 @@ def test_trackside_fences_signals_and_a_platform(tmp_path):
 
     from bpy_pipeline.labels import load_class_table
 
-    sides = ["scene.trackside.fences=true", "scene.trackside.signal_spacing=60", "scene.trackside.platform_length=60", "scene.trackside.platform_chainage=110"]
+    sides = ["scene.trackside.fences=true", "scene.trackside.signal_spacing=60", "scene.trackside.platform_length=60", "scene.trackside.platform_chainage=110",
+             "scene.trackside.vegetation_per_100m=20"]
     points, manifest = scan_world(tmp_path, "sensor.preset=vlp16", "sensor.mount_height=2.5", "effects.ideal=true", *sides)
     table = load_class_table()
     found = {table.names[int(c)] for c in np.unique(points["semantic"])}
-    assert {"fence", "signal", "platform"} <= found
+    assert {"fence", "signal", "platform", "vegetation"} <= found
     config, layout = build(*sides, "scene.detail.mode=fixed")
     top = evaluated_vertices(bpy.data.objects["platform"])[:, 2].max()
     assert top == pytest.approx(layout.section.rail_top + 0.76, abs=1e-4)
@@ -255,5 +256,7 @@ def test_trackside_fences_signals_and_a_platform(tmp_path):
     for obj in signals:
         x = evaluated_vertices(obj)[:, 0].mean() + 75.0  # chainage on the straight line from x = -75
         assert np.abs(supports - x).min() >= 2.9
+    plants = evaluated_vertices(bpy.data.objects["vegetation"])
+    assert np.abs(plants[:, 1]).min() > 6.0 + 1.0 - 3.0 - 1e-6  # beyond the fences (a crown reaches 3 m towards them)
     fence = evaluated_vertices(bpy.data.objects["fence.left"])
     assert np.allclose(fence[:, 1].mean(), 6.0, atol=0.05) and fence[:, 2].max() == pytest.approx(1.8, abs=1e-6)

@@ -158,6 +158,7 @@ class RailwayTrackside:
     platform_edge: float = 1.65  # m from the centre of the nearest track
     platform_width: float = 4.0
     platform_height: float = 0.76  # m above the rail heads
+    vegetation_per_100m: float = 0.0  # trees and bushes per side and 100 m, beyond the fences (or 2 m beyond the masts); 0: none
 
 
 @dataclass(frozen=True)
@@ -186,7 +187,7 @@ def check(params: RailwayScene, where: str) -> None:
     for key in ("fence_offset", "fence_height", "fence_post_spacing", "signal_height", "platform_edge", "platform_width"):
         if not getattr(side, key) > 0:
             raise InputError(f"{where}.trackside.{key}: must be > 0 m, got {getattr(side, key)}")
-    for key in ("signal_spacing", "platform_length", "platform_height"):
+    for key in ("signal_spacing", "platform_length", "platform_height", "vegetation_per_100m"):
         if not getattr(side, key) >= 0:
             raise InputError(f"{where}.trackside.{key}: must be >= 0 m, got {getattr(side, key)}")
     if side.fences and side.fence_offset <= params.supports.mast_offset + 0.5:

@@ -104,3 +104,31 @@ def signal(frame: np.ndarray, height: float, facing: float):
     head = primitives.translated(primitives.box(0.25, 0.35, 1.0), (facing * 0.2, 0.0, height - 0.5))
     v, t = primitives.merge([mast, head])
     return v @ frame[:3, :3].T + frame[:3, 3], t
+
+
+def vegetation(alignment, surface_at, params, inner: float, outer: float, rng: np.random.Generator):
+    """Trees and bushes on both sides between ``inner`` and ``outer`` m from the alignment, ``vegetation_per_100m``
+    plants per side and 100 m: a third trees (a trunk of 0.15-0.3 m and a crown of 1.5-3 m radius, 5-12 m tall),
+    the rest bushes (a 0.5-1.5 m ball on the ground); ``None`` when there are none."""
+    p = params
+    count = int(round(p.vegetation_per_100m * alignment.length / 100.0))
+    if count <= 0 or outer <= inner:
+        return None
+    parts = []
+    for sign in (-1.0, 1.0):
+        s = rng.uniform(0.0, alignment.length, count)
+        lateral = sign * rng.uniform(inner, outer, count)
+        tree = rng.random(count) < 1 / 3
+        size = rng.uniform(0.0, 1.0, count)
+        base = alignment.offset(s, lateral, 0.0)
+        for k in range(count):
+            ground = base[k] + np.array([0.0, 0.0, float(surface_at(lateral[k]))])
+            if tree[k]:
+                height = 5.0 + 7.0 * size[k]
+                crown = 1.5 + 1.5 * size[k]
+                parts.append(tube(ground, ground + np.array([0.0, 0.0, height - crown]), 0.15 + 0.15 * size[k], 8))
+                parts.append(primitives.translated(primitives.uv_sphere(crown, 12), ground + np.array([0.0, 0.0, height - crown])))
+            else:
+                radius = 0.5 + 1.0 * size[k]
+                parts.append(primitives.translated(primitives.uv_sphere(radius, 10), ground + np.array([0.0, 0.0, 0.6 * radius])))
+    return primitives.merge(parts)

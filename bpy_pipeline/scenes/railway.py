@@ -40,7 +40,7 @@ STONE_CENTRES = "track_stone_centres"
 REFLECTIVITY = {
     "rail": 0.6, "sleeper": 0.4, "ballast": 0.35, "ground": 0.3, "mast": 0.5, "gantry": 0.5, "cantilever": 0.5,
     "registration arm": 0.5, "insulator": 0.4, "contact wire": 0.7, "messenger wire": 0.7, "dropper": 0.6,
-    "feeder wire": 0.6, "earth wire": 0.6, "auxiliary messenger": 0.7, "fence": 0.4, "signal": 0.5, "platform": 0.35,
+    "feeder wire": 0.6, "earth wire": 0.6, "auxiliary messenger": 0.7, "fence": 0.4, "signal": 0.5, "platform": 0.35, "vegetation": 0.45,
 }
 
 
@@ -192,13 +192,18 @@ def _supports(params, layout: RailwayLayout, detail, collection) -> None:
 
 
 def _trackside(params, layout: RailwayLayout, rng: np.random.Generator, collection) -> None:
-    """Fences, signals and the platform of ``scene.trackside`` (nothing is drawn from ``rng`` without signals)."""
+    """Fences, signals, vegetation and the platform of ``scene.trackside`` (nothing is drawn from ``rng`` without
+    signals or vegetation)."""
     side, section, alignment = params.trackside, layout.section, layout.alignment
     if side.fences:
         for name, lateral in (("right", section.offsets[0] - side.fence_offset), ("left", section.offsets[-1] + side.fence_offset)):
             tag(mesh_object(f"fence.{name}", trackside.fence(alignment, section.surface, side, lateral), collection), "fence", reflectivity=REFLECTIVITY["fence"])
     for k, frame in enumerate(trackside.signal_frames(layout, side, rng)):
         tag(mesh_object(f"signal.{k:02d}", trackside.signal(frame, side.signal_height, -1.0), collection), "signal", reflectivity=REFLECTIVITY["signal"])
+    inner = (side.fence_offset if side.fences else params.supports.mast_offset + 2.0) + float(section.offsets[-1]) + 1.0
+    plants = trackside.vegetation(alignment, section.surface, side, inner, params.track.ground_width / 2 - 1.0, rng)
+    if plants is not None:
+        tag(mesh_object("vegetation", plants, collection), "vegetation", reflectivity=REFLECTIVITY["vegetation"])
     nearest = section.offsets[-1] if side.platform_side == "left" else section.offsets[0]
     mesh = trackside.platform(alignment, section.surface, side, section.rail_top, float(nearest))
     if mesh is not None:
