@@ -54,7 +54,8 @@ def _check_kitti(config) -> None:
 
 
 def _write_kitti(frame, out: Path) -> list[Path]:
-    return kitti.write_frame(out, frame_stem(frame.index), frame.points, frame.boxes, frame.config.output.kitti.camera, load_class_table().color_lut(), frame.config.output.boxes.names)
+    image = (getattr(frame, "images", None) or {}).get("image_2")  # the camera stage's rendering, where the pipeline ran one
+    return kitti.write_frame(out, frame_stem(frame.index), frame.points, frame.boxes, frame.config.output.kitti.camera, load_class_table().color_lut(), frame.config.output.boxes.names, image)
 
 
 def _write_openpcdet(frame, out: Path) -> list[Path]:

@@ -5,7 +5,8 @@ Files (frame ``NNNNNN``)::
     kitti/training/velodyne/NNNNNN.bin   float32 (n, 4): x y z (m, sensor frame), intensity (0..1)
     kitti/training/label_2/NNNNNN.txt    type truncated occluded alpha bbox(4) h w l x y z rotation_y
     kitti/training/calib/NNNNNN.txt      P0..P3 (the camera's 3 x 4 projection), R0_rect, Tr_velo_to_cam, Tr_imu_to_velo
-    kitti/training/image_2/NNNNNN.png    the camera's view (see :func:`render_image`)
+    kitti/training/image_2/NNNNNN.png    the camera's view: Blender's rendering where the pipeline gives one
+                                         (:mod:`bpy_pipeline.scenes.camera`), else the labelled points it sees
     kitti/ImageSets/{train,val,test}.txt frame stems; test is empty (no testing/ folder is written)
 
 The camera (``output.kitti.camera``) is a pinhole fixed to the LiDAR; ``Tr_velo_to_cam`` is its
@@ -143,15 +144,21 @@ def _text(path: Path, text: str) -> Path:
     return path
 
 
-def write_frame(out_dir: str | os.PathLike, stem: str, points: np.ndarray, boxes: np.ndarray, camera, color_lut: np.ndarray, names: dict | None = None) -> list[Path]:
-    """One frame of the KITTI layout under ``out_dir/kitti/training`` (see the module docstring); returns the paths."""
+def write_frame(out_dir: str | os.PathLike, stem: str, points: np.ndarray, boxes: np.ndarray, camera, color_lut: np.ndarray, names: dict | None = None, image: np.ndarray | None = None) -> list[Path]:
+    """One frame of the KITTI layout under ``out_dir/kitti/training`` (see the module docstring); returns the paths.
+
+    image : ``(height, width, 3) uint8`` the camera's rendering of the scene (:func:`bpy_pipeline.scenes.camera.render_camera`);
+        without one, ``image_2`` is the projection of the labelled points (:func:`render_image`)
+    """
     root = Path(out_dir) / "kitti" / "training"
     k, tr = camera_matrices(camera)
     velodyne = root / "velodyne" / f"{stem}.bin"
     with atomic_write(velodyne) as tmp:
         np.column_stack([points["x"], points["y"], points["z"], points["intensity"]]).astype("<f4").tofile(tmp)
     image = root / "image_2" / f"{stem}.png"
-    data = encode_png(render_image(points, camera, color_lut), level=1)
+    if image is not None and np.shape(image) != (int(camera.resolution[1]), int(camera.resolution[0]), 3):
+        raise ValueError(f"image_2: expected a {camera.resolution[1]} x {camera.resolution[0]} RGB image, got shape {np.shape(image)}")
+    data = encode_png(render_image(points, camera, color_lut) if image is None else image, level=1)
     with atomic_write(image) as tmp:
         tmp.write_bytes(data)
     lines = label_lines(boxes if boxes is not None else np.zeros(0, _box_dtype()), points, camera, names=names)
