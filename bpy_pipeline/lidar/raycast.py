@@ -252,6 +252,7 @@ class RayCaster:
     def _embree(self, origins32: np.ndarray, directions32: np.ndarray, far: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Embree alone, chunked over the thread pool: ``(tfar, prim)`` per ray; ``far`` is left as it was.
 
+        directions32 : (n, 3) float32, or float64 converted chunk by chunk on the worker threads
         prim : (n,) Embree primitive (map it with :meth:`_triangles`), -1 for a miss. embreex writes
         each hit's distance into the ``dists`` array it is given, so every call gets a copy.
         With two parts (static and moving), the moving one is traced up to the static hit and the
@@ -263,9 +264,10 @@ class RayCaster:
         def run(start):
             s = slice(start, start + self.chunk)
             limit = np.array(far[s], np.float32)  # a copy: embreex writes the hits' distances into it
+            d32 = directions32[s] if directions32.dtype == np.float32 else np.ascontiguousarray(directions32[s], np.float32)
             best = None
             for part in self.parts:
-                out = part.scene.run(origins32[s], directions32[s], dists=limit if best is None else best[0].copy(), output=1)
+                out = part.scene.run(origins32[s], d32, dists=limit if best is None else best[0].copy(), output=1)
                 prim = out["primID"]
                 if len(self.parts) == 1:
                     return out["tfar"], prim
@@ -292,8 +294,11 @@ class RayCaster:
             return list(self._pool.map(fn, items))
         return [fn(item) for item in items]
 
-    def launch(self, origins, directions, max_distance=FAR, directions32=None):
-        """The float32 query of :meth:`intersect`: ``(local (3,) or (n, 3) float64, origins32, directions32, far32)``."""
+    def launch(self, origins, directions, max_distance=FAR, directions32=None, convert: bool = True):
+        """The float32 query of :meth:`intersect`: ``(local (3,) or (n, 3) float64, origins32, directions32, far32)``.
+
+        convert : False leaves float64 directions as they are (:meth:`_embree` converts them chunk by chunk)
+        """
         n = len(directions)
         local = np.asarray(origins, np.float64)
         if local.ndim == 1 and not local.any():  # one zero origin, repeated by strides (embreex only reads it)
@@ -303,7 +308,7 @@ class RayCaster:
         far = np.empty(n, np.float32)
         far[:] = np.minimum(max_distance, FAR)
         if directions32 is None:
-            directions32 = np.ascontiguousarray(directions, np.float32)
+            directions32 = np.ascontiguousarray(directions, np.float32) if convert else directions
         return local, origins32, directions32, far
 
     def intersect(self, origins, directions, max_distance=FAR, directions32=None) -> Hits:

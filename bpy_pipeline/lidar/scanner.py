@@ -258,15 +258,15 @@ def scan_chunk(
     directions = pattern.directions
     if sensor_to_local.ndim == 2 and pattern.origins is None and np.allclose(sensor_to_local, np.eye(4), rtol=0, atol=1e-12):
         origin, world_d = np.zeros(3), directions  # the caster works in this sensor's frame: rays go in as they are
-        directions32 = directions.astype(np.float32)
+        as_given = True
     else:
         rotation, translation = sensor_to_local[..., :3, :3], sensor_to_local[..., :3, 3]
         world_d = rotate(directions, rotation)
         origin = translation if pattern.origins is None else translation + rotate(pattern.origins, rotation)
-        directions32 = None
+        as_given = False
     if getattr(caster, "kernels", None) is not None and not caster.specular:  # no mirror, no glass: the compiled diffuse path
-        return _fused_chunk(caster, buffers, pattern, origin, world_d, directions32, min_range, max_range)
-    beams = trace_beams(caster, buffers, origin, world_d, min_range, max_range, max_bounces, directions32, surfaces, rng)
+        return _fused_chunk(caster, buffers, pattern, origin, world_d, min_range, max_range)
+    beams = trace_beams(caster, buffers, origin, world_d, min_range, max_range, max_bounces, directions.astype(np.float32) if as_given else None, surfaces, rng)
     objects = buffers.objects
     obj = buffers.triangle_object[beams.triangle]
     ghost = beams.bounces > 0
@@ -300,7 +300,7 @@ NO_RAYS = np.zeros(0, np.bool_)
 IDENTITY = np.zeros(0, np.int64)
 
 
-def _fused_chunk(caster: RayCaster, buffers: SceneBuffers, pattern: Pattern, origin: np.ndarray, world_d: np.ndarray, directions32, min_range: float, max_range: float):
+def _fused_chunk(caster: RayCaster, buffers: SceneBuffers, pattern: Pattern, origin: np.ndarray, world_d: np.ndarray, min_range: float, max_range: float):
     """:func:`scan_chunk` of a scene without mirrors or glass through the compiled kernel (:mod:`.kernels`).
 
     Embree traces the rays on the caster's threads, then the same threads fill the records in one
@@ -311,7 +311,7 @@ def _fused_chunk(caster: RayCaster, buffers: SceneBuffers, pattern: Pattern, ori
     """
     world_d = np.ascontiguousarray(world_d, np.float64)
     n = len(world_d)
-    local, origins32, directions32, far = caster.launch(origin, world_d, max_range, directions32)
+    local, origins32, directions32, far = caster.launch(origin, world_d, max_range, None, convert=False)  # float32 chunk by chunk, on the threads
     origins = np.ascontiguousarray(local.reshape(-1, 3), np.float64)
     shared = len(origins) == 1
     prim_triangle = IDENTITY if caster.embree_triangle is None else caster.embree_triangle
