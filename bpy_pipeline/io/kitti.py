@@ -155,14 +155,14 @@ def write_frame(out_dir: str | os.PathLike, stem: str, points: np.ndarray, boxes
     velodyne = root / "velodyne" / f"{stem}.bin"
     with atomic_write(velodyne) as tmp:
         np.column_stack([points["x"], points["y"], points["z"], points["intensity"]]).astype("<f4").tofile(tmp)
-    image = root / "image_2" / f"{stem}.png"
+    image_path = root / "image_2" / f"{stem}.png"
     if image is not None and np.shape(image) != (int(camera.resolution[1]), int(camera.resolution[0]), 3):
         raise ValueError(f"image_2: expected a {camera.resolution[1]} x {camera.resolution[0]} RGB image, got shape {np.shape(image)}")
     data = encode_png(render_image(points, camera, color_lut) if image is None else image, level=1)
-    with atomic_write(image) as tmp:
+    with atomic_write(image_path) as tmp:
         tmp.write_bytes(data)
     lines = label_lines(boxes if boxes is not None else np.zeros(0, _box_dtype()), points, camera, names=names)
-    return [velodyne, _text(root / "label_2" / f"{stem}.txt", "".join(line + "\n" for line in lines)), _text(root / "calib" / f"{stem}.txt", calib_text(k, tr)), image]
+    return [velodyne, _text(root / "label_2" / f"{stem}.txt", "".join(line + "\n" for line in lines)), _text(root / "calib" / f"{stem}.txt", calib_text(k, tr)), image_path]
 
 
 def _box_dtype():
