@@ -21,7 +21,7 @@ import bpy
 from .nodes import GroupBuilder, new_group
 
 PARTS = {"all": 0, "rails": 1, "sleepers": 2, "ballast": 3, "embankment": 4, "stones": 5, "ground": 6}
-VERSION = 3  # bump when the groups change, so a file holding older groups gets new ones
+VERSION = 4  # bump when the groups change, so a file holding older groups gets new ones
 
 
 def _get(name: str):
@@ -170,7 +170,7 @@ TRACK_INPUTS = [
     ("Stone Radius", "NodeSocketFloat", 0.0, "m: stones within this distance of a centre (0: none)"),
     ("Stone Size", "NodeSocketFloat", 0.045, "m, the stones' mean diameter"),
     ("Seed", "NodeSocketInt", 0),
-    ("Cant Angle", "NodeSocketFloat", 0.0, "radians the sleepers roll about the track (+ raises the left end); the rails follow the centreline's tilt"),
+    ("Cant Angle", "NodeSocketFloat", 0.0, "radians of the full cant (0: a level track); rails and sleepers follow the centreline's tilt"),
 ]
 
 
@@ -204,8 +204,10 @@ def track_group() -> bpy.types.NodeTree:
 
     stations = b.node("GeometryNodeCurveToPoints", {"Curve": tracks, "Length": g("Sleeper Spacing")}, options={"mode": "LENGTH"})
     along = b.out(b.node("FunctionNodeAlignRotationToVector", {"Vector": b.out(stations, "Tangent")}, axis="X", pivot_axis="Z"))
-    roll = b.out(b.node("FunctionNodeAxisAngleToRotation", {"Axis": (1.0, 0.0, 0.0), "Angle": g("Cant Angle")}))
-    rolled = b.out(b.node("FunctionNodeRotateRotation", {"Rotation": along, "Rotate By": roll}, rotation_space="LOCAL"))
+    # on a canted track, roll about the tangent until y (left) meets the curve's tilted normal (which points
+    # to the right, as Curve to Mesh's profile x), point by point
+    left = b.vector_math("SCALE", b.out(stations, "Normal"), scale=-1.0)
+    rolled = b.out(b.node("FunctionNodeAlignRotationToVector", {"Rotation": along, "Vector": left}, axis="Y", pivot_axis="X"))
     facing = b.switch("ROTATION", b.compare("NOT_EQUAL", g("Cant Angle"), 0.0), along, rolled)
     block = b.node("GeometryNodeMeshCube", {"Size": b.combine(g("Sleeper Width"), g("Sleeper Length"), g("Sleeper Height"))})
     lifted = b.node("GeometryNodeTransform", {"Geometry": b.out(block, "Mesh"), "Translation": b.combine(0.0, 0.0, b.math("ADD", g("Ballast Height"), b.math("MULTIPLY", g("Sleeper Height"), 0.5)))}, options={"mode": "COMPONENTS"})
