@@ -84,3 +84,36 @@ def test_chainage_samples_keep_the_chord_error():
         error = arc.radius - np.linalg.norm(chords_mid - arc.centre, axis=1)
         assert error.max() <= tolerance * (1 + 1e-9)
         assert error.max() > tolerance / 4  # not needlessly fine
+
+
+def test_transition_curves_keep_the_ends_and_follow_the_clothoid():
+    from bpy_pipeline.geometry.alignment import arc_through, with_transitions
+
+    arc = arc_through((-150, 0, 0), (0, 19.05, 0), (150, 0, 0))
+    curve = with_transitions(arc, 40.0)
+    np.testing.assert_allclose(curve.point([0.0, curve.length]), arc.point([0.0, arc.length]), atol=1e-6)
+    np.testing.assert_allclose(curve.tangent([0.0, curve.length]), arc.tangent([0.0, arc.length]), atol=1e-9)
+    assert curve.radius < arc.radius and curve.length > arc.length
+    kappa = curve.curvature([0.0, 10.0, 40.0, curve.length / 2, curve.length - 10.0, curve.length])
+    np.testing.assert_allclose(kappa, np.array([0, 0.25, 1, 1, 0.25, 0]) / curve.radius, atol=1e-12)
+    # the entry clothoid against its series (A^2 = R L), in the frame of the start tangent
+    A2, L = curve.radius * 40.0, 40.0
+    s = np.array([10.0, 25.0, 40.0])
+    t0 = arc.tangent([0.0])[0][:2]
+    n0 = np.array([-t0[1], t0[0]])
+    rel = curve.point(s)[:, :2] - curve.start[:2]
+    x, y = rel @ t0, rel @ n0
+    np.testing.assert_allclose(x, s - s**5 / (40 * A2**2) + s**9 / (3456 * A2**4), atol=1e-4)
+    np.testing.assert_allclose(np.abs(y), s**3 / (6 * A2) - s**7 / (336 * A2**3), atol=1e-4)
+    probe = curve.offset([5.0, 150.0, 290.0], [2.0, -3.0, 1.0])
+    np.testing.assert_allclose(curve.nearest_chainage(probe), [5.0, 150.0, 290.0], atol=1e-3)
+    assert with_transitions(arc, 0.0) is arc
+
+
+def test_transition_curves_refuse_what_cannot_hold_them():
+    from bpy_pipeline.geometry.alignment import arc_through, with_transitions
+
+    with pytest.raises(InputError, match="transition_length"):
+        with_transitions(arc_through((-150, 0, 0), (0, 19.05, 0), (150, 0, 0)), 200.0, "scene.track")
+    with pytest.raises(InputError, match="level curve"):
+        with_transitions(arc_through((-150, 0, 0), (0, 19.05, 5), (150, 0, 0)), 20.0, "scene.track")

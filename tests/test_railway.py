@@ -260,3 +260,30 @@ def test_trackside_fences_signals_and_a_platform(tmp_path):
     assert np.abs(plants[:, 1]).min() > 6.0 + 1.0 - 3.0 - 1e-6  # beyond the fences (a crown reaches 3 m towards them)
     fence = evaluated_vertices(bpy.data.objects["fence.left"])
     assert np.allclose(fence[:, 1].mean(), 6.0, atol=0.05) and fence[:, 2].max() == pytest.approx(1.8, abs=1e-6)
+
+
+def test_the_cant_ramps_along_transition_curves():
+    import bpy
+
+    from bpy_pipeline.geometry.railway_layout import cant
+
+    mid = 600.0 - math.sqrt(600.0**2 - 150.0**2)
+    config, layout = build("scene.detail.mode=fixed", "scene.track.start=[-150, 0, 0]", f"scene.track.mid=[0, {mid}, 0]", "scene.track.end=[150, 0, 0]",
+                           "scene.track.transition_length=40", "scene.track.design_speed=80")
+    alignment = layout.alignment
+    full = cant(config.scene.params.track, alignment)
+    assert full == pytest.approx(11.8 * 80**2 / alignment.radius / 1000.0) and alignment.radius < 600.0
+    rails = evaluated_vertices(bpy.data.objects["rails.t0"])
+    s = alignment.nearest_chainage(rails)
+    lateral = np.einsum("ij,ij->i", rails - alignment.point(s), alignment.lateral(s))
+    outward = -np.sign(np.einsum("ij,ij->i", alignment.lateral(s), alignment.centre - alignment.point(s)))
+    checked = 0
+    for ring in np.unique(np.round(s, 2)):  # the profile rings Curve to Mesh makes at each centreline point
+        near = np.abs(s - ring) < 0.02
+        outer, inner = near & (lateral * outward > 0), near & (lateral * outward < 0)
+        if outer.sum() < 10 or inner.sum() < 10:
+            continue
+        expected = full * float(alignment.curvature([ring])[0]) * alignment.radius
+        assert rails[outer, 2].max() - rails[inner, 2].max() == pytest.approx(expected, abs=0.004), ring
+        checked += 1
+    assert checked >= 20

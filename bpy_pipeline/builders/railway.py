@@ -53,6 +53,7 @@ class RailwayTrack:
     embankment_slope: float = 1.5  # horizontal per vertical
     embankment_berm: float = 1.0  # flat formation beyond the ballast toe
     ground_width: float = 80.0  # flat ground strip along the alignment
+    transition_length: float = 0.0  # m of clothoid at each end of a curve (0: none); the cant ramps along it
     cant_from: Literal["speed", "value"] = "speed"  # the cant on curves: of design_speed, or the cant value
     design_speed: float = 100.0  # km/h: on a curve the outer rail is raised by the equilibrium cant 11.8 v^2 / R mm
     cant: float = 0.0  # m, with cant_from: value

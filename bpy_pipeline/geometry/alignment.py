@@ -62,6 +62,11 @@ class Alignment:
         u = (self.start - self.centre) / self.radius
         return u, np.cross(self.normal, u)
 
+    def curvature(self, s) -> np.ndarray:
+        """``(n,)`` curvature (1/m) at chainages ``s``: 1 / radius on an arc, 0 on a straight line."""
+        s = np.asarray(s, float).reshape(-1)
+        return np.full(len(s), 0.0 if self.straight else 1.0 / self.radius)
+
     def point(self, s) -> np.ndarray:
         """``(n, 3)`` float64 points at chainages ``s`` (scalar or (n,)), metres."""
         s = np.asarray(s, float).reshape(-1)
@@ -183,3 +188,133 @@ def arc_through(start, mid, end, where: str = "alignment") -> Alignment:
     rc = c - centre
     sweep = float(np.mod(np.arctan2(rc @ v, rc @ u), 2 * np.pi))
     return Alignment(a, c, centre, radius, normal, sweep, radius * sweep)
+
+
+# ----------------------------------------------------------------------------- transition curves
+TABLE_STEP = 0.05  # m between the tabulated points of a transition alignment
+
+
+def _transition_headings(s: np.ndarray, length: float, transition: float, kappa: float) -> np.ndarray:
+    """Heading change (radians) at chainages ``s`` of clothoid - arc - clothoid: curvature rising linearly from 0
+    to ``kappa`` (1/m) over ``transition`` m, constant, then falling to 0 over the last ``transition`` m."""
+    s = np.asarray(s, float)
+    L, S = transition, length
+    entry = kappa * s**2 / (2 * L)
+    body = kappa * (L / 2 + (s - L))
+    rest = S - s
+    exit_ = kappa * (S - L) - kappa * rest**2 / (2 * L)
+    return np.where(s < L, entry, np.where(s <= S - L, body, exit_))
+
+
+def _transition_table(length: float, transition: float, kappa: float, step: float = TABLE_STEP) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(s (k,), xy (k, 2), heading (k,))`` in the curve's own frame (start at the origin heading +x, turning left)."""
+    count = max(2, int(np.ceil(length / step)) + 1)
+    s = np.linspace(0.0, length, count)
+    mid = (s[:-1] + s[1:]) / 2
+    theta_mid = _transition_headings(mid, length, transition, kappa)
+    h = np.diff(s)
+    xy = np.zeros((count, 2))
+    xy[1:, 0] = np.cumsum(h * np.cos(theta_mid))
+    xy[1:, 1] = np.cumsum(h * np.sin(theta_mid))
+    return s, xy, _transition_headings(s, length, transition, kappa)
+
+
+@dataclass(frozen=True)
+class TransitionAlignment(Alignment):
+    """A level curve of clothoid transitions and a circular arc between them, from the same start and end
+    points and tangents as the arc it replaces (:func:`with_transitions`). ``radius`` and ``centre`` are
+    the central arc's (smaller than the plain arc's); positions come from a table every 5 cm.
+
+    transition : m of each clothoid; table_s (k,), table_xy (k, 2) world plan positions, table_heading (k,) radians
+    """
+
+    transition: float = 0.0
+    table_s: np.ndarray = None
+    table_xy: np.ndarray = None
+    table_heading: np.ndarray = None
+
+    def curvature(self, s) -> np.ndarray:
+        """``(n,)`` plan curvature (1/m, >= 0) at chainages ``s``."""
+        s = np.clip(np.asarray(s, float).reshape(-1), 0.0, self.length)
+        k, L, S = 1.0 / self.radius, self.transition, self.length
+        return np.where(s < L, k * s / L, np.where(s <= S - L, k, k * (S - s) / L))
+
+    def point(self, s) -> np.ndarray:
+        s = np.clip(np.asarray(s, float).reshape(-1), 0.0, self.length)
+        x = np.interp(s, self.table_s, self.table_xy[:, 0])
+        y = np.interp(s, self.table_s, self.table_xy[:, 1])
+        return np.column_stack([x, y, np.full(len(s), self.start[2])])
+
+    def tangent(self, s) -> np.ndarray:
+        s = np.clip(np.asarray(s, float).reshape(-1), 0.0, self.length)
+        theta = np.interp(s, self.table_s, self.table_heading)
+        return np.column_stack([np.cos(theta), np.sin(theta), np.zeros(len(s))])
+
+    def chainage_samples(self, tolerance: float, s0: float = 0.0, s1: float | None = None) -> np.ndarray:
+        """Chainages whose chords stay within ``tolerance`` of the curve (the central arc's spacing everywhere)."""
+        s1 = self.length if s1 is None else s1
+        if s1 <= s0:
+            return np.array([s0, s0])
+        ratio = min(max(tolerance, 1e-12) / self.radius, 1.0)
+        step = max(2.0 * self.radius * np.arccos(1.0 - ratio), TABLE_STEP)
+        return np.linspace(s0, s1, max(1, int(np.ceil((s1 - s0) / step))) + 1)
+
+    def nearest_chainage(self, points) -> np.ndarray:
+        """Nearest chainage to each of ``points`` (n, 3): the nearest tabulated point within 1 m steps, then refined."""
+        points = np.asarray(points, float).reshape(-1, 3)[:, :2]
+        coarse = np.arange(0, len(self.table_s), max(1, int(round(1.0 / TABLE_STEP))))
+        out = np.empty(len(points))
+        for start in range(0, len(points), 2048):
+            p = points[start:start + 2048]
+            d = ((p[:, None] - self.table_xy[coarse][None]) ** 2).sum(-1)
+            best = coarse[np.argmin(d, axis=1)]
+            window = best[:, None] + np.arange(-40, 41)[None]
+            window = np.clip(window, 0, len(self.table_s) - 1)
+            fine = ((p[:, None] - self.table_xy[window]) ** 2).sum(-1)
+            i = window[np.arange(len(p)), np.argmin(fine, axis=1)]
+            along = np.column_stack([np.cos(self.table_heading[i]), np.sin(self.table_heading[i])])
+            out[start:start + 2048] = self.table_s[i] + ((p - self.table_xy[i]) * along).sum(1)  # onto the tangent there
+        return np.clip(out, 0.0, self.length)
+
+
+def with_transitions(arc: Alignment, transition: float, where: str = "alignment") -> Alignment:
+    """``arc`` with clothoid transitions of ``transition`` m at both ends: the same start and end points and
+    tangents and the same total turn, the central arc tighter. ``transition`` 0 (or a straight line) gives ``arc``.
+
+    ``InputError`` naming ``where`` when the arc is not level or too short for two transitions.
+    """
+    if transition <= 0 or arc.straight:
+        return arc
+    if abs(arc.normal[2]) < 0.999 or abs(arc.end[2] - arc.start[2]) > 1e-9:
+        raise InputError(f"{where}.transition_length: transition curves need a level curve (start, mid and end at one height)")
+    turn = arc.sweep
+    chord = float(np.linalg.norm((arc.end - arc.start)[:2]))
+
+    def chord_of(length):
+        kappa = turn / (length - transition)
+        _, xy, _ = _transition_table(length, transition, kappa, max(TABLE_STEP, length / 4000))
+        return float(np.linalg.norm(xy[-1]))
+
+    lo, hi = max(arc.length, 2 * transition * 1.0001), 2 * arc.length + 4 * transition
+    if chord_of(lo) > chord:
+        raise InputError(f"{where}.transition_length: two transitions of {transition:g} m do not fit a {turn * 180 / np.pi:.3g} deg curve between the points; shorten them")
+    for _ in range(80):
+        mid = (lo + hi) / 2
+        lo, hi = (mid, hi) if chord_of(mid) < chord else (lo, mid)
+    length = (lo + hi) / 2
+    kappa = turn / (length - transition)
+    s, xy, heading = _transition_table(length, transition, kappa)
+    left = 1.0 if arc.normal[2] > 0 else -1.0  # anticlockwise seen from above: turning left
+    t0 = arc.tangent(np.zeros(1))[0]
+    theta0 = float(np.arctan2(t0[1], t0[0]))
+    c, sn = np.cos(theta0), np.sin(theta0)
+    local = np.column_stack([xy[:, 0], left * xy[:, 1]])
+    world = arc.start[:2] + local @ np.array([[c, sn], [-sn, c]])
+    headings = theta0 + left * heading
+    middle = np.interp(length / 2, s, np.arange(len(s)))
+    i = int(round(middle))
+    normal_left = np.array([-np.sin(headings[i]), np.cos(headings[i])])
+    centre2 = world[i] + left * normal_left / kappa
+    centre = np.array([centre2[0], centre2[1], arc.start[2]])
+    end = np.array([world[-1, 0], world[-1, 1], arc.start[2]])
+    return TransitionAlignment(arc.start, end, centre, 1.0 / kappa, arc.normal, turn, length, transition, s, world, headings)

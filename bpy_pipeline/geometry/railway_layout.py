@@ -21,7 +21,7 @@ import numpy as np
 
 from ..errors import InputError
 from . import catenary
-from .alignment import Alignment, arc_through
+from .alignment import Alignment, arc_through, with_transitions
 from .lod import polygon_sides, section_error
 
 STAY_RISE = 0.3  # m: cantilever stay tube above the messenger attachment
@@ -95,6 +95,12 @@ class CrossSection:
         ballast = np.interp(d, [self.ballast_top_half, self.ballast_toe_half], [h, 0.0])
         ground = np.interp(d, [self.embankment_top_half, self.embankment_toe_half + 1e-12], [0.0, -H])
         return np.where(d <= self.ballast_toe_half, ballast, ground)
+
+
+def track_alignment(track, where: str = "scene.track") -> Alignment:
+    """The alignment of a ``scene.track`` section: the arc through start, mid and end, with clothoid transitions
+    of ``transition_length`` m at both ends when that is > 0."""
+    return with_transitions(arc_through(track.start, track.mid, track.end, where), track.transition_length, where)
 
 
 def plan_radius(alignment: Alignment) -> float:
@@ -301,7 +307,7 @@ def plan(params, rng: np.random.Generator) -> RailwayLayout:
     contact wires per track, dropper jitter per span and contact wire.
     """
     track, supports_cfg, cat = params.track, params.supports, params.catenary
-    alignment = arc_through(track.start, track.mid, track.end, "scene.track")
+    alignment = track_alignment(track)
     section = CrossSection.of(track)
     layout = resolve_layout(supports_cfg.layout, track.tracks, rng)
     span, jitter = supports_cfg.span, supports_cfg.span_jitter
@@ -448,7 +454,7 @@ def station_frames(params) -> np.ndarray:
     ``side`` along the lateral perpendicular; x points along the track. Pure: no generator involved.
     """
     stations = params.stations
-    alignment = arc_through(params.track.start, params.track.mid, params.track.end, "scene.track")
+    alignment = track_alignment(params.track)
     chainages = station_chainages(stations, alignment.length)
     if len(chainages) == 0:
         return np.zeros((0, 4, 4))
@@ -471,6 +477,7 @@ def check_railway(params, where: str = "scene") -> None:
         _positive(getattr(track, key), f"{t}.{key}")
     for key in ("ballast_shoulder", "ballast_slope", "embankment_height", "embankment_slope", "embankment_berm"):
         _positive(getattr(track, key), f"{t}.{key}", allow_zero=True)
+    _positive(track.transition_length, f"{t}.transition_length", allow_zero=True)
     _positive(track.design_speed, f"{t}.design_speed", allow_zero=True)
     _positive(track.max_cant, f"{t}.max_cant", allow_zero=True)
     if not 0 <= track.cant <= track.max_cant:
@@ -487,7 +494,7 @@ def check_railway(params, where: str = "scene") -> None:
         raise InputError(f"{t}.track_spacing: must exceed the sleeper length ({track.sleeper_length} m) or the tracks overlap, got {track.track_spacing}")
     if track.gauge <= track.rail.head_width:
         raise InputError(f"{t}.gauge: must exceed the rail head width ({track.rail.head_width} m), got {track.gauge}")
-    alignment = arc_through(track.start, track.mid, track.end, t)
+    alignment = track_alignment(track, t)
     section = CrossSection.of(track)
     if track.ground_width / 2 <= section.embankment_toe_half:
         raise InputError(f"{t}.ground_width: must exceed the embankment's width ({2 * section.embankment_toe_half:.3g} m), got {track.ground_width}")

@@ -79,14 +79,16 @@ def _distinct_positions(view):
 def _centreline(layout: RailwayLayout, tolerance: float, roll: float, collection) -> bpy.types.Object:
     """The alignment as a poly curve; its points' tilt is the track's cant ``roll`` (radians, + raises the left rail)."""
     alignment = layout.alignment
-    points = alignment.point(alignment.chainage_samples(tolerance))
+    points = alignment.point(alignment.chainage_samples(tolerance))  # one tilt per point below
     curve = bpy.data.curves.new(CENTRELINE, "CURVE")
     curve.dimensions = "3D"
     spline = curve.splines.new("POLY")
     spline.points.add(len(points) - 1)
     spline.points.foreach_set("co", np.column_stack([points, np.ones(len(points))]).astype(np.float32).ravel())
-    if roll:
-        spline.points.foreach_set("tilt", np.full(len(points), roll, np.float32))
+    if roll:  # full cant on the arc, ramping with the curvature along transition curves
+        s = alignment.chainage_samples(tolerance)
+        share = alignment.curvature(s) * alignment.radius
+        spline.points.foreach_set("tilt", (roll * share).astype(np.float32))
     obj = bpy.data.objects.new(CENTRELINE, curve)
     obj.hide_render = True  # a guide, not a surface: never scanned
     collection.objects.link(obj)
