@@ -151,7 +151,9 @@ def read_ply(path: Path) -> RealScan:
         vertex = PlyData.read(str(path))["vertex"]
     except Exception as err:  # plyfile raises several types on bad files
         raise InputError(f"{path}: not a readable PLY file with a vertex element ({err})") from None
-    return _from_fields({name: vertex[name] for name in vertex.data.dtype.names}, path, "ply")
+    from .ply import point_field  # this package's PLY names its label fields scalar_ring etc. (CloudCompare's convention)
+
+    return _from_fields({point_field(name): vertex[name] for name in vertex.data.dtype.names}, path, "ply")
 
 
 def read_las(path: Path) -> RealScan:
