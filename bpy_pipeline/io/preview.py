@@ -195,7 +195,9 @@ def render_preview(points: np.ndarray, color_lut: np.ndarray, size: tuple[int, i
 
     # top view: x up, y left; cropped to the bulk of the points, or of the points of the other classes
     # when one class (a railway's ground rings) holds most of them
-    ids, counts = np.unique(semantic, return_counts=True)
+    per_class = np.bincount(semantic, minlength=len(lut))  # points per class (a count, not a sort)
+    ids = np.flatnonzero(per_class)
+    counts = per_class[ids]
     focus = semantic != ids[counts.argmax()]
     bulk = xyz[:, :2][focus] if counts.max() > 0.4 * len(semantic) and focus.sum() >= 100 else xyz[:, :2]
     low, high = np.percentile(bulk, 1, axis=0), np.percentile(bulk, 99, axis=0)
@@ -245,7 +247,6 @@ def render_preview(points: np.ndarray, color_lut: np.ndarray, size: tuple[int, i
     image[:, panel - 1 : panel + 1] = (60, 60, 66)  # the divider
 
     if names:  # legend: a swatch and the name of each class present, most points first
-        ids, counts = np.unique(semantic, return_counts=True)
         row = MARGIN
         for class_id in ids[np.argsort(-counts, kind="stable")]:
             if row + 12 > height:
