@@ -287,3 +287,23 @@ def test_the_cant_ramps_along_transition_curves():
         assert rails[outer, 2].max() - rails[inner, 2].max() == pytest.approx(expected, abs=0.004), ring
         checked += 1
     assert checked >= 20
+
+
+def test_anchors_weights_and_section_insulators():
+    import bpy
+
+    config, layout = build("scene.detail.mode=fixed", "scene.catenary.anchors=true", "scene.catenary.section_insulator_every=2")
+    classes = {o.name: o.get("lidar_class") for o in bpy.data.objects}
+    last = len(layout.supports) - 1
+    for k in (0, last):
+        assert classes[f"support.{k:02d}.anchor.right"] == "anchor" and classes[f"support.{k:02d}.tensioning_weight.right"] == "tensioning weight"
+        weight = evaluated_vertices(bpy.data.objects[f"support.{k:02d}.tensioning_weight.right"])
+        mast_x = layout.supports[k].frame[0, 3]
+        assert (weight[:, 0].mean() - mast_x) * (1 if k else -1) == pytest.approx(0.6, abs=1e-6)  # behind the end mast, away from the line
+    insulators = [n for n, c in classes.items() if c == "section insulator"]
+    assert insulators == [f"span.t0.{k:02d}.section_insulator" for k in range(1, last, 2)]
+    for name in insulators:
+        span = int(name.split(".")[2])
+        droppers = next(d for d in layout.droppers if d.span == span and d.run == "t0")
+        wire = next(w for w in layout.wires if w.span == span and w.kind == "contact_wire")
+        assert (np.abs(droppers.t - 0.5) * wire.length >= 1.2).all()

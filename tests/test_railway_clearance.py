@@ -59,7 +59,7 @@ def meshes_intersect(va, ta, vb, tb, margin=0.01) -> bool:
 
 def element(name: str):
     """(kind, support or span, track or run or side) of an overhead-line object name, ``None`` for track parts."""
-    m = re.fullmatch(r"support\.(\d+)\.(mast|gantry|cantilever|registration_arm|insulators)(?:\.(\w+))?", name)
+    m = re.fullmatch(r"support\.(\d+)\.(mast|gantry|cantilever|registration_arm|insulators|anchor|tensioning_weight)(?:\.(\w+))?", name)
     if m:
         return m[2], int(m[1]), m[3]
     m = re.fullmatch(r"span\.(\w+)\.(\d+)\.(\w+)", name)
@@ -71,18 +71,24 @@ def element(name: str):
 def joint(a, b) -> bool:
     """Whether elements ``a`` and ``b`` (from :func:`element`) are built touching."""
     (ka, ia, ra), (kb, ib, rb) = sorted([a, b])
-    wire = {"contact_wire", "messenger_wire", "auxiliary_messenger", "feeder", "earth_wire", "droppers"}
+    wire = {"contact_wire", "messenger_wire", "auxiliary_messenger", "feeder", "earth_wire", "droppers", "section_insulator"}
     if ka not in wire and kb not in wire:  # two fittings: one support, one track, or a mast with its fittings
         if ia != ib:
             return False
+        if {ka, kb} == {"anchor", "tensioning_weight"}:  # the rope holds its weight
+            return ra == rb
         if "mast" in (ka, kb) or "gantry" in (ka, kb):
             other = rb if ka in ("mast", "gantry") else ra
+            if "tensioning_weight" in (ka, kb):
+                return False
             return other is None or other.startswith("t") or other in ("right", "left")
-        return ra == rb
+        return ra == rb and "anchor" not in (ka, kb) and "tensioning_weight" not in (ka, kb)
     if ka in wire and kb in wire:  # wires: the same run in neighbouring spans, droppers on their own wires
         track = lambda run: run.rstrip("bp")  # noqa: E731  (t0b: a second contact wire; t0p: the droppers above a PA)
         if ka == kb:
             return ra == rb and abs(ia - ib) <= 1
+        if "section_insulator" in (ka, kb):  # it clamps its own contact wire
+            return {ka, kb} == {"section_insulator", "contact_wire"} and ia == ib and track(ra) == track(rb)
         return "droppers" in (ka, kb) and ia == ib and track(ra) == track(rb) and {ka, kb} <= {"droppers", "contact_wire", "messenger_wire", "auxiliary_messenger"}
     fitting, wire_ = (a, b) if a[0] not in wire else (b, a)
     (kf, support, who), (kw, span, run) = fitting, wire_
@@ -112,7 +118,8 @@ def test_no_two_elements_intersect(layout, tracks):
     config = load_config(None, [f"scene.supports.layout={layout}", f"scene.track.tracks={tracks}", "scene.track.start=[-55, 0, 0]",
                                 f"scene.track.mid={curve}", "scene.track.end=[55, 0, 0]", "scene.detail.mode=fixed", "scene.catenary.points_per_10m=10",
                                 "scene.catenary.double_contact_probability=0.5", "scene.supports.mast_type=mixed",
-                                f"scene.catenary.auxiliary_messenger={str(AUXILIARY.get(tracks, False)).lower()}"])
+                                f"scene.catenary.auxiliary_messenger={str(AUXILIARY.get(tracks, False)).lower()}",
+                                "scene.catenary.anchors=true", "scene.catenary.section_insulator_every=2"])
     build_scene(config.scene, frame_rng(3, 0), None)
     buffers = export_scene(load_class_table())
     objects, bounds = {}, {}

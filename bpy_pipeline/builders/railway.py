@@ -109,6 +109,8 @@ class RailwayCatenary:
     dropper_spacing: float = 5.0  # PENDULUM_SPACING
     dropper_jitter: float = 0.2  # PENDULUM_JITTER, +- along the span
     points_per_10m: int = 20  # CURVE_RESOLUTION_POINTS_PER_10M, for scene.detail.mode fixed
+    anchors: bool = False  # the end masts anchor the wires: a pulley bracket and a tensioning weight stack behind each
+    section_insulator_every: int = 0  # a section insulator on the contact wires at the middle of every k-th span (0: none)
     auxiliary_messenger: bool = False  # PA: a wire between messenger and contact wire, the droppers in two tiers
     auxiliary_messenger_height: float = 0.3  # m above the contact wire at the supports (assumed)
     auxiliary_messenger_sag: float = 0.1  # at the reference length (assumed: between the contact wire's and the messenger's)
@@ -193,6 +195,8 @@ def check(params: RailwayScene, where: str) -> None:
             raise InputError(f"{where}.trackside.{key}: must be >= 0 m, got {getattr(side, key)}")
     if side.fences and side.fence_offset <= params.supports.mast_offset + 0.5:
         raise InputError(f"{where}.trackside.fence_offset: a fence must stand beyond the masts ({params.supports.mast_offset + 0.5} m), got {side.fence_offset}")
+    if params.catenary.section_insulator_every < 0:
+        raise InputError(f"{where}.catenary.section_insulator_every: must be >= 0 (0: none), got {params.catenary.section_insulator_every}")
     if params.reroll_every < 0:
         raise InputError(f"{where}.reroll_every: must be >= 0 (0: one railway per run; k: a new railway every k frames), got {params.reroll_every}")
     check_railway(params, where)

@@ -32,6 +32,7 @@ MIN_DROPPER = 0.15  # m: shortest dropper the system height must leave at mid-sp
 MAX_MID_SPAN_OFFSET = 0.4  # m: on a curve, spans shorten so the wire strays no further inside at mid-span
 BEAM_RISE = 0.6  # m: a mast's beam to the cantilevers of its farther tracks, above the nearest cantilever's stay
 ARM_RISE = 0.2  # m: the registration arm's root above the contact wire (the arm slopes about 10 deg)
+SECTION_INSULATOR_CLEARANCE = 1.2  # m: no dropper this close to a section insulator's middle (it is 1.8 m long)
 ARM_SHARE = 0.6  # the arm spans at most this share of its cantilever (so the main tube stays above the arm)
 
 
@@ -350,6 +351,8 @@ def plan(params, rng: np.random.Generator) -> RailwayLayout:
                     contact = _wire("contact_wire", run, k, world(a.frame, lateral_a + half, contact_z), world(b.frame, lateral_b + half, contact_z), cat)
                     wires.append(contact)
                     t = catenary.dropper_positions(contact.length, cat.dropper_spacing, cat.dropper_jitter, rng, shift)
+                    if cat.section_insulator_every > 0 and (k + 1) % cat.section_insulator_every == 0:  # a section insulator at mid-span
+                        t = t[np.abs(t - 0.5) * contact.length >= SECTION_INSULATOR_CLEARANCE]
                     above = messenger if auxiliary is None else auxiliary
                     droppers.append(Droppers(run, k, t, contact.points_at(t), above.points_at(t), cat.dropper_diameter))
                     if auxiliary is not None and j == 0:  # the upper tier, from the auxiliary messenger to the messenger, a quarter spacing on (clear of a second contact wire's droppers)

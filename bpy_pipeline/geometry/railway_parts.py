@@ -139,3 +139,26 @@ def gantry(left_y: float, right_y: float, base_left: float, base_right: float, t
 def bracket(mast_y: float, outward: float, reach: float, z: float):
     """A level bracket (a square bar, class mast) from a mast at ``mast_y`` ``reach`` m outwards at height ``z``."""
     return bar((0.0, mast_y, z), (0.0, mast_y + outward * reach, z), 0.05)
+
+
+WEIGHT = (0.2, 1.6)  # m: radius and height of a tensioning weight stack (about 25 cast-iron discs)
+
+
+def tensioning_weight(mast_y: float, behind: float, top: float):
+    """An anchor at a mast (lateral ``mast_y``, top ``top``, m): a bracket ``behind`` m along the track (away from the
+    line) carrying a pulley, its rope and the weight stack under it. Returns ``{"anchor": mesh, "tensioning weight": mesh}``."""
+    wheel_z = top - 0.6
+    x = behind
+    bracket = bar((0.0, mast_y, wheel_z + 0.3), (x, mast_y, wheel_z + 0.3), 0.06)
+    pulley = tube((x, mast_y - 0.03, wheel_z), (x, mast_y + 0.03, wheel_z), 0.25, 12)
+    hanger = tube((x, mast_y, wheel_z + 0.3), (x, mast_y, wheel_z + 0.25), 0.02, 6)
+    rope = tube((x, mast_y, wheel_z - 0.25), (x, mast_y, 2.4 + WEIGHT[1]), 0.008, 6)
+    stack = tube((x, mast_y, 2.4), (x, mast_y, 2.4 + WEIGHT[1]), WEIGHT[0], 16)
+    return {"anchor": primitives.merge([bracket, pulley, hanger, rope]), "tensioning weight": stack}
+
+
+def section_insulator(length: float = 1.8):
+    """A section insulator around a contact wire, centred on the origin along x: two runners and a body (m)."""
+    body = primitives.box(length * 0.5, 0.12, 0.08)
+    runners = [primitives.translated(primitives.box(length, 0.02, 0.03), (0.0, y, -0.01)) for y in (-0.05, 0.05)]
+    return primitives.merge([primitives.translated(body, (0.0, 0.0, 0.05)), *runners])

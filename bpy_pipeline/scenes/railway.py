@@ -22,6 +22,8 @@ pipeline passes a :class:`~bpy_pipeline.geometry.lod.SensorView`.
 
 from __future__ import annotations
 
+import math
+
 import bpy
 import mathutils
 import numpy as np
@@ -40,7 +42,7 @@ STONE_CENTRES = "track_stone_centres"
 REFLECTIVITY = {
     "rail": 0.6, "sleeper": 0.4, "ballast": 0.35, "ground": 0.3, "mast": 0.5, "gantry": 0.5, "cantilever": 0.5,
     "registration arm": 0.5, "insulator": 0.4, "contact wire": 0.7, "messenger wire": 0.7, "dropper": 0.6,
-    "feeder wire": 0.6, "earth wire": 0.6, "auxiliary messenger": 0.7, "fence": 0.4, "signal": 0.5, "platform": 0.35, "vegetation": 0.45,
+    "feeder wire": 0.6, "earth wire": 0.6, "auxiliary messenger": 0.7, "anchor": 0.5, "tensioning weight": 0.3, "section insulator": 0.4, "fence": 0.4, "signal": 0.5, "platform": 0.35, "vegetation": 0.45,
 }
 
 
@@ -58,6 +60,7 @@ def build(params, rng: np.random.Generator, view=None) -> RailwayLayout:
     _track(params, layout, detail, centreline, view, int(rng.integers(0, 2**31 - 1)), collection, cant_angle(params.track, layout.alignment))
     _supports(params, layout, detail, collection)
     _wires(layout, detail, collection)
+    _anchors_and_sections(params, layout, detail, collection)
     _trackside(params, layout, rng, collection)
     bpy.context.view_layer.update()
     return layout
@@ -193,6 +196,34 @@ def _supports(params, layout: RailwayLayout, detail, collection) -> None:
             _placed(f"{label}.insulators.t{i}", pieces["insulator"], frame, "insulator", collection)
 
 
+def _anchors_and_sections(params, layout: RailwayLayout, detail, collection) -> None:
+    """Tensioning weights at the end masts (``catenary.anchors``) and section insulators on the contact wires."""
+    cat = params.catenary
+    if cat.anchors and len(layout.supports) > 1:
+        for k, behind in ((0, -0.6), (len(layout.supports) - 1, 0.6)):
+            support = layout.supports[k]
+            if k not in detail.supports or support.gantry:
+                continue
+            for mast in support.masts:
+                pieces = railway_parts.tensioning_weight(mast.lateral, behind, mast.top)
+                frame = np.asarray(support.frame, float)
+                _placed(f"support.{k:02d}.anchor.{mast.side}", pieces["anchor"], frame, "anchor", collection)
+                _placed(f"support.{k:02d}.tensioning_weight.{mast.side}", pieces["tensioning weight"], frame, "tensioning weight", collection)
+    if cat.section_insulator_every > 0:
+        twins = {(w.run[:-1], w.span): w for w in layout.wires if w.kind == "contact_wire" and w.run.endswith("b")}
+        for wire, setting in zip(layout.wires, detail.wires):
+            if wire.kind != "contact_wire" or wire.run.endswith("b") or setting is None or (wire.span + 1) % cat.section_insulator_every:
+                continue
+            centre = wire.points_at([0.5])[0]
+            twin = twins.get((wire.run, wire.span))
+            if twin is not None:  # one insulator takes both wires of a twin contact wire
+                centre = (centre + twin.points_at([0.5])[0]) / 2
+            direction = wire.end - wire.start
+            yaw = math.atan2(direction[1], direction[0])
+            obj = mesh_object(f"span.{wire.run}.{wire.span:02d}.section_insulator", railway_parts.section_insulator(), collection, location=tuple(centre), rotation=(0.0, 0.0, yaw))
+            tag(obj, "section insulator", reflectivity=REFLECTIVITY["section insulator"])
+
+
 def _trackside(params, layout: RailwayLayout, rng: np.random.Generator, collection) -> None:
     """Fences, signals, vegetation and the platform of ``scene.trackside`` (nothing is drawn from ``rng`` without
     signals or vegetation)."""
@@ -228,7 +259,7 @@ def _wires(layout: RailwayLayout, detail, collection) -> None:
         obj = wire_object(f"span.{wire.run}.{wire.span:02d}.{wire.kind}", [points], radius, collection, sides)
         tag(obj, wire.class_name, reflectivity=REFLECTIVITY[wire.class_name])
     for droppers, built in zip(layout.droppers, detail.droppers):
-        if built:
+        if built and len(droppers.t):
             lines = [np.stack([a, b]) for a, b in zip(droppers.lower, droppers.upper)]
             obj = wire_object(f"span.{droppers.run}.{droppers.span:02d}.droppers", lines, equal_perimeter_radius(droppers.diameter / 2, MIN_WIRE_SIDES), collection, MIN_WIRE_SIDES)
             tag(obj, "dropper", reflectivity=REFLECTIVITY["dropper"])
