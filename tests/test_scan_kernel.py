@@ -126,10 +126,30 @@ def test_grazing_rays_and_a_sensor_in_the_surface():
         both(lambda kernel: scan(RayCaster(buffers, frame=pose, kernel=kernel), buffers, pattern, pose, 0.0, 1900.0))
 
 
-def test_glass_keeps_the_numpy_path_and_a_bad_kernel_name_is_refused():
+@needs_numba
+@pytest.mark.parametrize("ideal", [False, True])
+def test_glass_and_mirrors_continue_in_the_numpy_path_with_the_same_bytes(ideal):
+    """The crate is glass (some beams reflect, drawn from the generator), the wall a mirror: those rays go on in trace_beams."""
+    from bpy_pipeline.lidar.scanner import Surfaces
+
     buffers = room()
     buffers.objects.material[2] = MATERIAL_ID["glass"]
-    assert RayCaster(buffers, frame=np.eye(4), kernel="numpy").specular
+    buffers.objects.material[3] = MATERIAL_ID["mirror"]
+    pose = pose_matrix([0.3, 0.2, 0.4], [3.0, -2.0, 20.0])
+    pattern = vertex_pattern(buffers, pose[:3, 3])
+    pattern = Pattern(pattern.directions @ pose[:3, :3], pattern.ring, pattern.time)
+    surfaces = Surfaces(mirror_return_deg=2.0, glass_return_deg=5.0, glass_reflect=0.3, glass_passes=4)
+
+    def run(kernel):
+        caster = RayCaster(buffers, frame=pose, threads=2, chunk=700, kernel=kernel)
+        return scan(caster, buffers, pattern, pose, 0.5, 100.0, max_bounces=2, ghost_semantic=99, ideal=ideal, surfaces=surfaces, rng=np.random.default_rng(4))
+
+    points, _ = both(run)
+    assert (points["bounces"] > 0).sum() > 50 and (points["semantic"] == 99).any()  # mirrored returns are in it
+
+
+def test_a_bad_kernel_name_is_refused():
+    buffers = room()
     with pytest.raises(InputError, match="scan kernel 'fast'"):
         RayCaster(buffers, frame=np.eye(4), kernel="fast")
 

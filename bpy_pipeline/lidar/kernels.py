@@ -23,7 +23,7 @@ import numpy as np
 
 from ..buffers import MATERIAL_ID
 
-DIFFUSE, ABSORBER = MATERIAL_ID["diffuse"], MATERIAL_ID["absorber"]
+DIFFUSE, MIRROR, GLASS, ABSORBER = (MATERIAL_ID[name] for name in ("diffuse", "mirror", "glass", "absorber"))
 
 
 def numba_available() -> bool:
@@ -36,9 +36,9 @@ def _fill_diffuse(
     plane_normal, plane_offset, triangle_object, material, semantic, instance, reflectivity,
     ring, time, min_range, max_distance, ray_base,
     x, y, z, intensity, semantic_out, instance_out, ring_out, time_out, range_out, bounces_out,
-    cos_out, reflectivity_out, gain_out, direction_out, ray_out, front, back,
+    cos_out, reflectivity_out, gain_out, direction_out, ray_out, front, back, specular_out,
 ):  # fmt: skip
-    """Records of the rays whose hit returns from a diffuse surface; returns how many.
+    """Records of the rays whose hit returns from a diffuse surface; returns ``(records, specular rays)``.
 
     tfar : (n,) float32 Embree distances; prim : (n,) int32 Embree primitive, -1 for a miss
     prim_triangle : (p,) int64 buffer triangle of each primitive, or (0,) for the identity
@@ -49,12 +49,15 @@ def _fill_diffuse(
     ring (n,), time (n,): the rays' channel and firing time; ray_base : added to the ray indices written
     The outputs (x ... direction_out, ray_out) have room for n records; ``front`` and ``back``
     (k,) bool are set for the objects hit from the front (d.n < 0) and from behind (d.n > 0).
+    specular_out : (n,) int64, receives the rays (ray_base + i) whose hit within range is glass or
+    a mirror's front face: no record for them here; the numpy path continues them.
     """
     n = tfar.shape[0]
     shared = origins.shape[0] != n or n == 1
     identity = prim_triangle.shape[0] == 0
     any_moved = moved.shape[0] != 0
     k = 0
+    m = 0
     for i in range(n):
         p = prim[i]
         if p < 0:
@@ -85,6 +88,10 @@ def _fill_diffuse(
         kind = material[row]
         if kind == ABSORBER:
             continue
+        if kind == GLASS or (kind == MIRROR and denom < 0.0):  # d.n < 0: the mirror's front face
+            specular_out[m] = ray_base + i
+            m += 1
+            continue
         path = distance + 0.0  # the numpy path's total path length (0.0 added: -0.0 becomes 0.0)
         if path < min_range:
             continue
@@ -108,7 +115,7 @@ def _fill_diffuse(
         direction_out[k, 2] = np.float32(dz)
         ray_out[k] = ray_base + i
         k += 1
-    return k
+    return k, m
 
 
 def _back_face_rays(prim, prim_triangle, directions, plane_normal, triangle_object, both, out):
@@ -162,16 +169,17 @@ def compiled() -> SimpleNamespace | None:
 
 
 def fill_diffuse(kernels: SimpleNamespace, tfar, prim, prim_triangle, moved, origins, directions, caster, objects, ring, time, min_range, max_distance, points, beam, ray, ray_base: int = 0):
-    """Run :func:`_fill_diffuse` with the record arrays' fields; returns ``(count, front, back)``."""
+    """Run :func:`_fill_diffuse` with the record arrays' fields; returns ``(count, front, back, specular)``."""
     front, back = np.zeros(len(objects), np.bool_), np.zeros(len(objects), np.bool_)
-    count = kernels.fill_diffuse(
+    specular = np.empty(len(prim), np.int64)
+    count, m = kernels.fill_diffuse(
         tfar, prim, prim_triangle, moved, origins, directions,
         caster.plane_normal, caster.plane_offset, caster.triangle_object, objects.material, objects.semantic, objects.instance, objects.reflectivity,
         ring, time, float(min_range), float(max_distance), int(ray_base),
         points["x"], points["y"], points["z"], points["intensity"], points["semantic"], points["instance"], points["ring"], points["time"], points["range"], points["bounces"],
-        beam["cos_incidence"], beam["reflectivity"], beam["gain"], beam["direction"], ray, front, back,
+        beam["cos_incidence"], beam["reflectivity"], beam["gain"], beam["direction"], ray, front, back, specular,
     )  # fmt: skip
-    return count, front, back
+    return count, front, back, specular[:m]
 
 
 def back_face_rays(kernels: SimpleNamespace, prim, prim_triangle, directions, caster, both) -> np.ndarray:

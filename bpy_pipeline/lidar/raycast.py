@@ -57,7 +57,6 @@ MAX_COORDINATE = 1e9  # metres from the local origin; far beyond any scene (Embr
 PLANE_CHUNK = 1 << 20  # triangles per step when computing the planes (bounds the float64 temporaries)
 KERNEL_VARIABLE = "BPY_PIPELINE_SCAN_KERNEL"  # "numpy" forces the numpy path where no kernel is given (tests, comparisons)
 KERNELS = ("auto", "numba", "numpy")
-SPECULAR = (MATERIAL_ID["mirror"], MATERIAL_ID["glass"])
 
 
 @dataclass
@@ -197,8 +196,6 @@ class RayCaster:
         check_extent(local, triangles, buffers)
         self.triangle_object = np.asarray(buffers.triangle_object)
         self.objects = len(buffers.objects)
-        used = np.bincount(self.triangle_object, minlength=self.objects)[: self.objects] > 0 if len(triangles) else np.zeros(self.objects, bool)
-        self.specular = bool(np.isin(buffers.objects.material[used], SPECULAR).any())  # mirrors or glass: the numpy path
         if static is None:
             self.plane_normal, self.plane_offset = triangle_planes(local, triangles, self.kernels)  # (m, 3), (m,) local frame
             parts = [embree_part(local, triangles, None, self.plane_normal)]

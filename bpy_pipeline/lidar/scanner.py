@@ -28,7 +28,7 @@ from ..buffers import MATERIAL_ID, SceneBuffers
 from ..geometry.transforms import rotate
 from .points import BEAM_DTYPE, POINT_DTYPE
 from .kernels import back_face_rays, fill_diffuse
-from .raycast import RayCaster, dot3
+from .raycast import Hits, RayCaster, dot3
 from .sensors import Pattern, pattern_chunks
 
 DIFFUSE, MIRROR, GLASS, ABSORBER = (MATERIAL_ID[name] for name in ("diffuse", "mirror", "glass", "absorber"))
@@ -124,6 +124,7 @@ def trace_beams(
     directions32=None,
     surfaces: Surfaces | None = None,
     rng: np.random.Generator | None = None,
+    first: Hits | None = None,
 ) -> Beams:
     """Trace beams through mirrors and glass, in the caster's local frame.
 
@@ -132,6 +133,8 @@ def trace_beams(
     surfaces : the rules for mirrors and glass (default :class:`Surfaces`: no normal-incidence
         returns, glass always transmits)
     rng : needed only when ``surfaces.glass_reflect`` lies strictly between 0 and 1
+    first : the first segment's hits when the caller has them (the compiled path hands over the
+        rays that met glass or a mirror; rays not in it are not traced)
     Returns :class:`Beams` whose ``point`` is in the local frame.
 
     At each hit, by the hit object's material (``n`` the triangle's normal, ``d`` the ray):
@@ -162,8 +165,8 @@ def trace_beams(
     gain, mirror = np.ones(n), np.full(n, -1, np.int32)
     done = []
     while True:
-        hits = caster.intersect(o, d, max_range - travelled, directions32)
-        directions32 = None
+        hits = first if first is not None else caster.intersect(o, d, max_range - travelled, directions32)
+        directions32 = first = None
         i = hits.ray
         seg_d = hits.direction
         if launch is None:
@@ -264,9 +267,14 @@ def scan_chunk(
         world_d = rotate(directions, rotation)
         origin = translation if pattern.origins is None else translation + rotate(pattern.origins, rotation)
         as_given = False
-    if getattr(caster, "kernels", None) is not None and not caster.specular:  # no mirror, no glass: the compiled diffuse path
-        return _fused_chunk(caster, buffers, pattern, origin, world_d, min_range, max_range)
+    if getattr(caster, "kernels", None) is not None:  # the compiled path; glass and mirrors go on in trace_beams
+        return _fused_chunk(caster, buffers, pattern, origin, world_d, min_range, max_range, max_bounces, ghost_semantic, ideal, surfaces, rng)
     beams = trace_beams(caster, buffers, origin, world_d, min_range, max_range, max_bounces, directions.astype(np.float32) if as_given else None, surfaces, rng)
+    return _records(beams, buffers, pattern, origin, world_d, ghost_semantic, ideal)
+
+
+def _records(beams: Beams, buffers: SceneBuffers, pattern: Pattern, origin: np.ndarray, world_d: np.ndarray, ghost_semantic, ideal: bool):
+    """``(points, beam, ray)`` of :func:`scan_chunk` from traced ``beams`` (the numpy path)."""
     objects = buffers.objects
     obj = buffers.triangle_object[beams.triangle]
     ghost = beams.bounces > 0
@@ -300,14 +308,17 @@ NO_RAYS = np.zeros(0, np.bool_)
 IDENTITY = np.zeros(0, np.int64)
 
 
-def _fused_chunk(caster: RayCaster, buffers: SceneBuffers, pattern: Pattern, origin: np.ndarray, world_d: np.ndarray, min_range: float, max_range: float):
-    """:func:`scan_chunk` of a scene without mirrors or glass through the compiled kernel (:mod:`.kernels`).
+def _fused_chunk(caster: RayCaster, buffers: SceneBuffers, pattern: Pattern, origin: np.ndarray, world_d: np.ndarray, min_range: float, max_range: float,
+                 max_bounces: int = 3, ghost_semantic=None, ideal: bool = False, surfaces: Surfaces | None = None, rng: np.random.Generator | None = None):  # fmt: skip
+    """:func:`scan_chunk` through the compiled kernel (:mod:`.kernels`).
 
     Embree traces the rays on the caster's threads, then the same threads fill the records in one
     compiled pass each over their part (solve, trust test, range limits, labels), straight into
-    the rows they end up in. Slipped rays are found from the objects the passes saw from both sides, traced again as the
-    numpy path does (:meth:`RayCaster.retrace`) and the pass repeated over the chunk with them:
-    the same bytes as the numpy path.
+    the rows they end up in. Slipped rays are found from the objects the passes saw from both
+    sides, traced again as the numpy path does (:meth:`RayCaster.retrace`) and the pass repeated
+    over the chunk with them. Rays whose first hit is glass or a mirror's front face go on in
+    :func:`trace_beams` from that hit, and their records are merged in firing order: the same
+    bytes as the numpy path.
     """
     world_d = np.ascontiguousarray(world_d, np.float64)
     n = len(world_d)
@@ -317,14 +328,6 @@ def _fused_chunk(caster: RayCaster, buffers: SceneBuffers, pattern: Pattern, ori
     prim_triangle = IDENTITY if caster.embree_triangle is None else caster.embree_triangle
     objects = buffers.objects
 
-    def fill(start, stop, tfar, prim, moved=NO_RAYS):
-        """Records of rays start..stop into exactly as many rows as Embree found hits: ``(count, front, back, records)``."""
-        s = slice(start, stop)
-        hits = int(np.count_nonzero(prim >= 0))
-        records = np.empty(hits, POINT_DTYPE), np.empty(hits, BEAM_DTYPE), np.empty(hits, np.int64)
-        count, front, back = fill_diffuse(caster.kernels, tfar, prim, prim_triangle, moved, origins if shared else origins[s], world_d[s], caster, objects, pattern.ring[s], pattern.time[s], min_range, max_range, *records, start)
-        return count, front, back, records
-
     tfar, prim = caster._embree(origins32, directions32, far)
     # Then the compiled pass on every thread: each part of the rays fills its own rows of one
     # output, placed by how many hits the parts before it have (misses take no room).
@@ -333,23 +336,50 @@ def _fused_chunk(caster: RayCaster, buffers: SceneBuffers, pattern: Pattern, ori
     rows = np.concatenate([[0], np.cumsum(counts)])
     points, beam, ray = np.empty(rows[-1], POINT_DTYPE), np.empty(rows[-1], BEAM_DTYPE), np.empty(rows[-1], np.int64)
 
-    def part(j):
+    def part(j, moved=NO_RAYS):
         s, r = slice(starts[j], starts[j] + caster.chunk), slice(rows[j], rows[j + 1])
-        return fill_diffuse(caster.kernels, tfar[s], prim[s], prim_triangle, NO_RAYS, origins if shared else origins[s], world_d[s], caster, objects, pattern.ring[s], pattern.time[s], min_range, max_range, points[r], beam[r], ray[r], starts[j])
+        return fill_diffuse(caster.kernels, tfar[s], prim[s], prim_triangle, moved[s] if len(moved) else moved, origins if shared else origins[s], world_d[s], caster, objects, pattern.ring[s], pattern.time[s], min_range, max_range, points[r], beam[r], ray[r], starts[j])
 
     parts = caster.map(part, range(len(starts)))
     front = np.logical_or.reduce([p[1] for p in parts])
     back = np.logical_or.reduce([p[2] for p in parts])
     suspect = caster.suspects(front, back, prim, lambda both: back_face_rays(caster.kernels, prim, prim_triangle, world_d, caster, both))
-    if len(suspect):
+    moved = None
+    if len(suspect):  # the pass again, with the re-traced rays (their hit counts may differ)
         tfar, prim, moved = caster.retrace(suspect, local, world_d, far, tfar, prim)
-        count, _, _, records = fill(0, n, tfar, prim, moved)
-        return tuple(r[:count] for r in records)
+        counts = np.array([np.count_nonzero(prim[i : i + caster.chunk] >= 0) for i in starts], np.int64)
+        rows = np.concatenate([[0], np.cumsum(counts)])
+        points, beam, ray = np.empty(rows[-1], POINT_DTYPE), np.empty(rows[-1], BEAM_DTYPE), np.empty(rows[-1], np.int64)
+        parts = caster.map(lambda j: part(j, moved), range(len(starts)))
     filled = np.array([p[0] for p in parts], np.int64)
-    if (filled == counts).all():
+    if not (filled == counts).all():  # rows left empty by range limits, absorbers, glass and mirrors
+        keep = np.concatenate([np.arange(rows[j], rows[j] + filled[j]) for j in range(len(starts))])
+        points, beam, ray = points[keep], beam[keep], ray[keep]
+    specular = np.concatenate([p[3] for p in parts])
+    if not len(specular):
         return points, beam, ray
-    keep = np.concatenate([np.arange(rows[j], rows[j] + filled[j]) for j in range(len(starts))])  # rows left empty by range limits or absorbers
-    return points[keep], beam[keep], ray[keep]
+    first = _first_hits(caster, specular, tfar, prim, moved, local, world_d)
+    beams = trace_beams(caster, buffers, origin, world_d, min_range, max_range, max_bounces, None, surfaces, rng, first=first)
+    more = _records(beams, buffers, pattern, origin, world_d, ghost_semantic, ideal)
+    order = np.argsort(np.concatenate([ray, more[2]]), kind="stable")  # firing order (one record per ray at most)
+    return join([points, more[0]])[order], join([beam, more[1]])[order], np.concatenate([ray, more[2]])[order]
+
+
+def _first_hits(caster: RayCaster, rays: np.ndarray, tfar: np.ndarray, prim: np.ndarray, moved, local: np.ndarray, world_d: np.ndarray) -> Hits:
+    """The :class:`Hits` :meth:`RayCaster.intersect` gives for ``rays`` (sorted), from Embree's answer ``tfar``, ``prim``."""
+    triangle = caster._triangles(prim[rays])
+    normal = caster.plane_normal[triangle]
+    d = world_d[rays]
+    denom = dot3(d, normal)
+    o_dot_n = dot3(local, normal) if local.ndim == 1 else dot3(local[rays], normal)
+    coarse = tfar[rays].astype(np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        exact = (caster.plane_offset[triangle] - o_dot_n) / denom
+    trust = np.abs(exact - coarse) <= 1e-4 * (1.0 + coarse)
+    if moved is not None:
+        m = moved[rays]
+        trust[m] = np.isfinite(exact[m]) & (np.abs(denom[m]) > 1e-6)
+    return Hits(rays, np.maximum(np.where(trust, exact, coarse), 0.0), triangle, normal, d)
 
 
 def scan_chunks(
