@@ -1,8 +1,9 @@
 """Scan speed: the full scan (records and labels) beside raw embreex on the same scene and rays.
 
 Scenes: an Ouster OS1-128 (131 k rays) near the middle of a closed 40 m box (numpy buffers), and
-the default railway job's scene and sensor (railway_tls, 1.44 M rays); with ``--small`` the
-railway sensor is sampled at 0.1. Outside ``--small`` a third scene adds a 1-million-triangle
+the default railway job's scene and sensor (railway_tls, 1.44 M rays; with ``--small`` sampled
+at 0.1), and the parking builder's first frame with its sensor (cars with glass windows: the
+rays meeting glass go on in the numpy path). Outside ``--small`` a third scene adds a 1-million-triangle
 Geometry Nodes terrain under the railway, for the caster's set-up cost.
 
 All in one process and one run, every core for Embree:
@@ -130,6 +131,14 @@ def box_scene(small: bool):
     return buffers, sensor_pattern(spec), pose_matrix([0.2, -0.3, 0.1], [0, 0, 0]), spec
 
 
+def parking_scene():
+    """The parking builder's first frame (cars with glass windows) and its sensor."""
+    config = load_config(None, ["scene.builder=parking"])
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    build_scene(config.scene, frame_rng(0, 0))
+    return export_scene(load_class_table()), sensor_pattern(config.sensor.spec), sensor_pose(config), config.sensor.spec
+
+
 def railway_scene(small: bool, terrain_side: int = 0):
     overrides = ["sensor.sampling_factor=0.1"] if small else []
     config = load_config(None, overrides)
@@ -155,6 +164,8 @@ def main():
     rows.append(measure("os1_128 in a 40 m box", buffers, pattern, pose, spec.min_range, spec.max_range, threads, args.small))
     buffers, pattern, pose, spec = railway_scene(args.small)
     rows.append(measure("default railway (railway_tls)", buffers, pattern, pose, spec.min_range, spec.max_range, threads, args.small))
+    buffers, pattern, pose, spec = parking_scene()
+    rows.append(measure("parking, first frame (glass windows)", buffers, pattern, pose, spec.min_range, spec.max_range, threads, args.small))
     if not args.small:
         buffers, pattern, pose, spec = railway_scene(False, 708)
         rows.append(measure("railway on a 1 M-triangle GN terrain", buffers, pattern, pose, spec.min_range, spec.max_range, threads, args.small))

@@ -354,7 +354,7 @@ def _fused_chunk(caster: RayCaster, buffers: SceneBuffers, pattern: Pattern, ori
     filled = np.array([p[0] for p in parts], np.int64)
     if not (filled == counts).all():  # rows left empty by range limits, absorbers, glass and mirrors
         keep = np.concatenate([np.arange(rows[j], rows[j] + filled[j]) for j in range(len(starts))])
-        points, beam, ray = points[keep], beam[keep], ray[keep]
+        points, beam, ray = take(points, keep), take(beam, keep), ray[keep]
     specular = np.concatenate([p[3] for p in parts])
     if not len(specular):
         return points, beam, ray
@@ -362,7 +362,7 @@ def _fused_chunk(caster: RayCaster, buffers: SceneBuffers, pattern: Pattern, ori
     beams = trace_beams(caster, buffers, origin, world_d, min_range, max_range, max_bounces, None, surfaces, rng, first=first)
     more = _records(beams, buffers, pattern, origin, world_d, ghost_semantic, ideal)
     order = np.argsort(np.concatenate([ray, more[2]]), kind="stable")  # firing order (one record per ray at most)
-    return join([points, more[0]])[order], join([beam, more[1]])[order], np.concatenate([ray, more[2]])[order]
+    return take(join([points, more[0]]), order), take(join([beam, more[1]]), order), np.concatenate([ray, more[2]])[order]
 
 
 def _first_hits(caster: RayCaster, rays: np.ndarray, tfar: np.ndarray, prim: np.ndarray, moved, local: np.ndarray, world_d: np.ndarray) -> Hits:
@@ -429,6 +429,12 @@ def collect(chunks: Iterable[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray
     if len(chunks) == 1:
         return chunks[0][0], chunks[0][1]
     return join([c[0] for c in chunks]), join([c[1] for c in chunks])
+
+
+def take(records: np.ndarray, index: np.ndarray) -> np.ndarray:
+    """``records[index]`` for a structured array, copied as raw bytes (numpy copies fields one by one)."""
+    raw = np.dtype((np.void, records.dtype.itemsize))
+    return np.ascontiguousarray(records).view(raw)[index].view(records.dtype)
 
 
 def join(parts: list[np.ndarray]) -> np.ndarray:
