@@ -9,8 +9,9 @@ operation in the same order (no fused multiply-add, no reassociation), so both g
 bytes (``tests/test_scan_kernel.py`` runs both).
 
 Numba is optional (the ``fast`` extra): :func:`compiled` returns ``None`` when it is not
-importable, and the scanner then takes the numpy path. Mirrors, glass and re-traced
-(slipped) rays keep the numpy path's logic in :mod:`.scanner` and :mod:`.raycast`.
+importable, and the scanner then takes the numpy path. Rays whose first hit is glass or a
+mirror's front face are only listed here: :func:`.scanner.trace_beams` continues them; slipped
+rays are traced again by :meth:`.raycast.RayCaster.retrace` and the pass repeated.
 """
 
 from __future__ import annotations
