@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from bpy_pipeline.config import load_config
+from bpy_pipeline.errors import InputError
 from bpy_pipeline.geometry import catenary
 
 pytestmark = pytest.mark.bpy
@@ -307,3 +308,20 @@ def test_anchors_weights_and_section_insulators():
         droppers = next(d for d in layout.droppers if d.span == span and d.run == "t0")
         wire = next(w for w in layout.wires if w.span == span and w.kind == "contact_wire")
         assert (np.abs(droppers.t - 0.5) * wire.length >= 1.2).all()
+
+
+def test_a_cutting_with_undulating_ground():
+    import bpy
+
+    config, layout = build("scene.detail.mode=fixed", "scene.track.cut_depth=4", "scene.track.ground_roughness=0.5", "scene.track.ground_wavelength=30")
+    section = layout.section
+    ground = evaluated_vertices(bpy.data.objects["ground"])
+    d = np.abs(ground[:, 1])
+    bottom, slope, top = d <= section.embankment_top_half, (d > section.embankment_top_half + 0.1) & (d < section.embankment_toe_half - 0.1), d > section.embankment_toe_half + 5
+    assert np.allclose(ground[bottom, 2], 0.0) and np.allclose(ground[slope, 2], section.surface(ground[slope, 1]))  # formation, then the slopes
+    # undulating about the top by at most the amplitude (three waves of weights 1, 1/2, 1/4 over 1.75: std 0.46 x 0.5 m)
+    assert ground[top, 2].mean() == pytest.approx(4.0, abs=0.2) and 0.15 < ground[top, 2].std() < 0.35 and np.abs(ground[top, 2] - 4.0).max() <= 0.5 + 1e-6
+    mast = layout.supports[0].masts[0]
+    assert mast.base == pytest.approx(float(section.surface(mast.lateral)))  # the masts stand on the cutting's floor
+    with pytest.raises(InputError, match="cut_depth"):
+        load_config(None, ["scene.track.cut_depth=2", "scene.track.embankment_height=1"])

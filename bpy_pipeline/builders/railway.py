@@ -53,6 +53,10 @@ class RailwayTrack:
     embankment_slope: float = 1.5  # horizontal per vertical
     embankment_berm: float = 1.0  # flat formation beyond the ballast toe
     ground_width: float = 80.0  # flat ground strip along the alignment
+    cut_depth: float = 0.0  # m: the track in a cutting this deep (the ground beyond its slopes; 0: none)
+    cut_slope: float = 1.5  # horizontal per vertical
+    ground_roughness: float = 0.0  # m: amplitude of the ground's undulation beyond the slopes (0: flat)
+    ground_wavelength: float = 20.0  # m: the undulation's longest wavelength
     transition_length: float = 0.0  # m of clothoid at each end of a curve (0: none); the cant ramps along it
     cant_from: Literal["speed", "value"] = "speed"  # the cant on curves: of design_speed, or the cant value
     design_speed: float = 100.0  # km/h: on a curve the outer rail is raised by the equilibrium cant 11.8 v^2 / R mm

@@ -53,8 +53,9 @@ class CrossSection:
     ballast_top_half: float
     ballast_toe_half: float
     embankment_top_half: float
-    embankment_toe_half: float
+    embankment_toe_half: float  # where the embankment's (or the cutting's) slope meets the ground
     embankment_height: float
+    cut_depth: float = 0.0  # the ground this far above formation beyond a cutting's slopes (m)
 
     @classmethod
     def of(cls, track) -> "CrossSection":
@@ -75,9 +76,15 @@ class CrossSection:
             ballast_top_half=top,
             ballast_toe_half=toe,
             embankment_top_half=berm,
-            embankment_toe_half=berm + track.embankment_height * track.embankment_slope,
+            embankment_toe_half=berm + track.embankment_height * track.embankment_slope + track.cut_depth * track.cut_slope,
             embankment_height=track.embankment_height,
+            cut_depth=track.cut_depth,
         )
+
+    @property
+    def ground_height(self) -> float:
+        """Height (m, from formation) of the ground beyond the embankment (negative) or the cutting (positive)."""
+        return self.cut_depth if self.cut_depth > 0 else -self.embankment_height
 
     @property
     def rail_top(self) -> float:
@@ -90,11 +97,11 @@ class CrossSection:
         return self.offsets[track] + np.array([-half, half])
 
     def surface(self, lateral) -> np.ndarray:
-        """Height (m, from formation) of the top surface at ``lateral`` offsets: ballast, berm, embankment, ground."""
+        """Height (m, from formation) of the top surface at ``lateral`` offsets: ballast, berm, embankment or cutting, ground."""
         d = np.abs(np.asarray(lateral, float))
-        h, H = self.ballast_height, self.embankment_height
+        h = self.ballast_height
         ballast = np.interp(d, [self.ballast_top_half, self.ballast_toe_half], [h, 0.0])
-        ground = np.interp(d, [self.embankment_top_half, self.embankment_toe_half + 1e-12], [0.0, -H])
+        ground = np.interp(d, [self.embankment_top_half, self.embankment_toe_half + 1e-12], [0.0, self.ground_height])
         return np.where(d <= self.ballast_toe_half, ballast, ground)
 
 
@@ -487,6 +494,12 @@ def check_railway(params, where: str = "scene") -> None:
         raise InputError(f"{t}.cant: must lie in 0..max_cant ({track.max_cant} m), got {track.cant}")
     if track.max_cant >= track.gauge:
         raise InputError(f"{t}.max_cant: must stay well below the gauge ({track.gauge} m), got {track.max_cant}")
+    _positive(track.cut_depth, f"{t}.cut_depth", allow_zero=True)
+    _positive(track.cut_slope, f"{t}.cut_slope", allow_zero=True)
+    _positive(track.ground_roughness, f"{t}.ground_roughness", allow_zero=True)
+    _positive(track.ground_wavelength, f"{t}.ground_wavelength")
+    if track.cut_depth > 0 and track.embankment_height > 0:
+        raise InputError(f"{t}.cut_depth: a track runs on an embankment or in a cutting, not both (embankment_height is {track.embankment_height})")
     if not 0 <= track.crib_height <= track.sleeper_height:
         raise InputError(f"{t}.crib_height: the ballast between the sleepers must lie in 0..sleeper_height ({track.sleeper_height} m), got {track.crib_height}")
     for key in ("foot_width", "foot_height", "web_width", "web_height", "head_width", "head_height"):

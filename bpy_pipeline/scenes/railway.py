@@ -32,6 +32,7 @@ from ..geometry import railway_parts, trackside
 from ..geometry.catenary import parabolic_sag
 from ..geometry.lod import equal_perimeter_radius
 from ..geometry.primitives import merge
+from ..geometry.terrain import terrain_mesh
 from ..geometry.railway_layout import ARM_RISE, BEAM_RADIUS, EARTH_BRACKET, FEEDER_BRACKET, MIN_WIRE_SIDES, STAY_RISE, RailwayLayout, cant_angle, cantilevers, level_of_detail, plan
 from .nodes import add_group_modifier
 from .objects import mesh_data, mesh_object, scene_collection, tag, wire_object
@@ -124,7 +125,12 @@ def _track(params, layout, detail, centreline, view, seed: int, collection, roll
     group = track_group()
     parts = [(f"rails.t{i}", "rails", "rail", i) for i in range(track.tracks)]
     parts += [(f"sleepers.t{i}", "sleepers", "sleeper", i) for i in range(track.tracks)]
-    parts += [("ballast", "ballast", "ballast", -1), ("ground", "ground", "ground", -1)]
+    terrain = track.cut_depth > 0 or track.ground_roughness > 0  # the ground as a height field instead of the group's flat strip
+    parts += [("ballast", "ballast", "ballast", -1)] + ([] if terrain else [("ground", "ground", "ground", -1)])
+    if terrain and detail.ground_trim[1] > detail.ground_trim[0]:
+        mesh = terrain_mesh(layout.alignment, layout.section, track.ground_width, detail.ground_trim, track.ground_roughness, track.ground_wavelength,
+                            np.random.default_rng([seed, 1]))
+        tag(mesh_object("ground", mesh, collection), "ground", reflectivity=REFLECTIVITY["ground"])
     if track.embankment_height > 0:
         parts.append(("embankment", "embankment", "ground", -1))
     trims = {name: detail.ground_trim if part == "ground" else detail.track_trim for name, part, _, _ in parts}
