@@ -27,7 +27,7 @@ def test_every_frame_gets_the_layout_its_points_show(tmp_path):
     bpy.ops.wm.read_factory_settings(use_empty=True)
     config = load_config(None, ["output.formats=[ply,railway_layout]", "output.preview=false", "output.frame=world", "frames=2",
                                 "scene.stations.count=2", "sensor.preset=railway_tls", "sensor.sampling_factor=0.25", "effects.ideal=true",
-                                "scene.supports.span_jitter=6"])
+                                "scene.supports.span_jitter=6", "scene.trackside.signal_spacing=50"])
     manifest = run(config, tmp_path, log=lambda *_: None)
     truths = [json.loads((tmp_path / "railway_layout" / f"{k:06d}.json").read_text()) for k in range(2)]
     assert truths[0] | {"frame": 1} == truths[1]  # one railway per run: one layout
@@ -44,6 +44,14 @@ def test_every_frame_gets_the_layout_its_points_show(tmp_path):
             assert np.percentile(segment_distance(xyz(hit), np.array(wire["polyline"])), 99) < 0.015 + (0.024 if wire["kind"] == "feeder" else 0.012) / 2, name
             checked += 1
     assert checked >= 3
+    assert len(truths[0]["signals"]) == len([o for o in manifest["frames"][0]["objects"] if o["name"].startswith("signal.")]) >= 2
+    seen = 0
+    for k, signal in enumerate(truths[0]["signals"]):  # the signal the builder placed, from the same draws
+        hit = points[points["instance"] == objects.get(f"signal.{k:02d}", -1)]
+        if len(hit):
+            assert np.abs(xyz(hit)[:, :2] - np.array(signal["base"])[:2]).max() < 0.5
+            seen += 1
+    assert seen >= 1
     for support in truths[0]["supports"]:
         for mast in support["masts"]:
             hit = points[points["instance"] == objects.get(f"support.{support['index']:02d}.mast.{mast['side']}", -1)]

@@ -11,7 +11,8 @@ For parameter-extraction models (support positions, wire geometry) beside the la
                    "cantilevers": [{"track", "attach": [x, y, z] (contact wire), "arm_length"}]}],
      "wires": [{"class", "kind", "run", "span", "start", "end", "sag", "length", "tension_length",
                 "polyline": [[x, y, z], ...]}],  # every <= 1 m along the sag parabola
-     "droppers": [{"run", "span", "lower": [[x, y, z]...], "upper": [...]}]}
+     "droppers": [{"run", "span", "lower": [[x, y, z]...], "upper": [...]}],
+     "signals": [{"base": [x, y, z], "height"}]}   # with scene.trackside.signal_spacing
 
 ``tension_length`` is the length of the wire's run from its first support to its last (the line has
 no anchors in between). The layout is the one the frame's scene was built from: :func:`plan` is
@@ -76,14 +77,19 @@ def layout_record(layout, params) -> dict:
 
 
 def frame_layout(config, index: int):
-    """The railway layout frame ``index`` of ``config`` scans: planned from the generator of the frame that built its scene."""
+    """The railway layout frame ``index`` of ``config`` scans and its signals' ``(k, 4, 4)`` frames: drawn from the
+    generator of the frame that built its scene, in the builder's order (the plan, the track's seed, the signals)."""
     from ..builders.base import BUILDERS
     from ..geometry.railway_layout import plan
+    from ..geometry.trackside import signal_frames
     from ..pipeline import frame_rng
 
     params = config.scene.params
     per_scene = BUILDERS.get("railway").frames_per_scene(params)
-    return plan(params, frame_rng(config.seed, index - index % per_scene))
+    rng = frame_rng(config.seed, index - index % per_scene)
+    layout = plan(params, rng)
+    rng.integers(0, 2**31 - 1)  # the Track group's seed (scenes/railway.build)
+    return layout, signal_frames(layout, params.trackside, rng)
 
 
 def _check(config) -> None:
@@ -92,7 +98,9 @@ def _check(config) -> None:
 
 
 def _write(frame, out: Path) -> list[Path]:
-    record = {"frame": frame.index} | layout_record(frame_layout(frame.config, frame.index), frame.config.scene.params)
+    layout, signals = frame_layout(frame.config, frame.index)
+    record = {"frame": frame.index} | layout_record(layout, frame.config.scene.params)
+    record["signals"] = [{"base": _xyz(f[:3, 3]), "height": frame.config.scene.params.trackside.signal_height} for f in signals]
     path = Path(out) / "railway_layout" / f"{frame.stem}.json"
     with atomic_write(path) as tmp:
         tmp.write_text(json.dumps(record, separators=(",", ":")))
