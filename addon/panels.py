@@ -242,7 +242,7 @@ class LIDAR_PT_legend(LidarPanel, bpy.types.Panel):
     """The classes of the shown cloud with the colours of the class table (assets_manifest/labels.yaml)."""
 
     bl_label = "Cloud legend"
-    bl_order = 5
+    bl_parent_id = "LIDAR_PT_run"  # right under Show cloud
 
     @classmethod
     def poll(cls, context):
@@ -254,16 +254,16 @@ class LIDAR_PT_legend(LidarPanel, bpy.types.Panel):
             row = layout.row(align=True)
             swatch = row.row()
             swatch.ui_units_x = 2
-            swatch.enabled = False  # the table's colour, not an input
-            swatch.prop(entry, "color", text="")
+            swatch.prop(entry, "color", text="")  # the table's colour (Show cloud fills it again)
             row.label(text=f"{entry.class_id:>3}  {entry.name}")
             row.label(text=f"{entry.points} pts")
 
 
 class LIDAR_PT_labels(LidarPanel, bpy.types.Panel):
+    """Tags for the user's own objects (My scene, or objects added to a built scene)."""
+
     bl_label = "Labels"
-    bl_order = 6
-    bl_options = {"DEFAULT_CLOSED"}
+    bl_order = 5
 
     def draw(self, context):
         settings = context.scene.lidar
@@ -289,6 +289,7 @@ class LIDAR_PT_labels(LidarPanel, bpy.types.Panel):
 
 CLASSES = (
     LIDAR_PT_run,
+    LIDAR_PT_legend,
     LIDAR_PT_scene,
     LIDAR_PT_scene_advanced,
     LIDAR_PT_sensor,
@@ -297,6 +298,5 @@ CLASSES = (
     LIDAR_PT_effects_advanced,
     LIDAR_PT_output,
     LIDAR_PT_output_advanced,
-    LIDAR_PT_legend,
     LIDAR_PT_labels,
 )

@@ -6,7 +6,7 @@
 - :class:`GuiSession`: Xvfb and a Blender window in a chroot; ``xdotool`` clicks and types,
   ``import -window root`` takes screenshots, and tests/blender/gui_session.py (running inside
   Blender) answers what Blender holds.
-- :func:`panel_boxes`, :func:`button_rows`, :func:`sidebar_tabs`: where the sidebar's panels, buttons
+- :func:`panel_headers`, :func:`button_rows`, :func:`sidebar_tabs`: where the sidebar's panels, buttons
   and tabs are on a screenshot (Blender's default dark theme), so clicks follow the drawn layout.
 """
 
@@ -104,7 +104,6 @@ class Chroot:
 
 # ----------------------------------------------------------------------------- reading screenshots
 WIDGET = (80, 120)  # grey of buttons and number fields (84) and of a hovered one (113), default dark theme
-PANEL = (58, 64)  # a panel's background and header (61)
 
 
 def _grey(img: np.ndarray) -> np.ndarray:
@@ -130,12 +129,19 @@ def sidebar_tabs(img: np.ndarray, sidebar: dict) -> list[tuple[int, int]]:
     return [(sidebar["y"] + a, sidebar["y"] + b) for a, b in _runs(tab, 15)]
 
 
-def panel_boxes(img: np.ndarray, sidebar: dict) -> list[tuple[int, int]]:
-    """Vertical spans of the panels drawn in the sidebar (open or collapsed), top to bottom."""
-    x = sidebar["x"] + 12
-    column = _grey(img[sidebar["y"] : sidebar["y"] + sidebar["height"], x])
-    inside = (column >= PANEL[0]) & (column <= PANEL[1])
-    return [(sidebar["y"] + a, sidebar["y"] + b) for a, b in _runs(inside, 18)]
+def panel_headers(img: np.ndarray, sidebar: dict) -> list[int]:
+    """Screen y of each top-level panel header in the sidebar, top to bottom, found by the header's
+    drag grip (two rows of light dots over dark shadow pixels, near the right end of the header)."""
+    x0, x1 = sidebar["x"] + sidebar["width"] - 64, sidebar["x"] + sidebar["width"] - 28
+    grey = _grey(img[sidebar["y"] : sidebar["y"] + sidebar["height"] + 1, x0:x1])
+    dots = (grey[:-1] >= 120) & (grey[:-1] <= 175) & (grey[1:] >= 0) & (grey[1:] <= 30)
+    rows = np.flatnonzero(dots.sum(axis=1) >= 3)
+    headers: list[int] = []
+    for y in rows.tolist():
+        if headers and y - headers[-1] <= 6:
+            continue
+        headers.append(y)
+    return [sidebar["y"] + y + 2 for y in headers]
 
 
 def button_rows(img: np.ndarray, sidebar: dict, top: int, bottom: int) -> list[list[tuple[int, int, int, int]]]:
@@ -214,13 +220,22 @@ class GuiSession:
         assert result.returncode == 0, result.stderr
 
     def click(self, x: int, y: int, *modifiers: str) -> None:
-        self.xdo("mousemove", x, y)
-        time.sleep(0.2)
+        """A left click at (x, y) once Blender is idle (a round trip through its event loop first)."""
+        self.call("pass")
+        self.xdo("mousemove", x - 3, y)
+        time.sleep(0.15)
+        self.xdo("mousemove", x, y)  # two moves: the button under the cursor becomes the active one
+        time.sleep(0.3)
         for key in modifiers:
             self.xdo("keydown", key)
-        self.xdo("click", 1)
+            time.sleep(0.3)  # Blender reads the modifier state from its own key events
+        self.xdo("mousedown", 1)
+        time.sleep(0.1)
+        self.xdo("mouseup", 1)
         for key in modifiers:
+            time.sleep(0.2)
             self.xdo("keyup", key)
+        time.sleep(0.2)
 
     def key(self, *keys: str, x: int | None = None, y: int | None = None) -> None:
         if x is not None:
@@ -257,10 +272,13 @@ class GuiSession:
     def reports(self) -> str:
         """The last lines of Blender's report log (what the status bar showed: operator errors)."""
         return self.call("""
-with bpy.context.temp_override(**context_override()):
-    bpy.ops.ui.reports_to_textblock()
-text = bpy.data.texts.get('Recent Reports')
-reply['text'] = text.as_string()[-1500:] if text else ''
+try:
+    with bpy.context.temp_override(**context_override()):
+        bpy.ops.ui.reports_to_textblock()
+    text = bpy.data.texts.get('Recent Reports')
+    reply['text'] = text.as_string()[-1500:] if text else ''
+except Exception as err:
+    reply['text'] = f'(no report log: {err})'
 """)["text"]
 
     def stop(self) -> None:
