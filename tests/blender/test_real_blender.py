@@ -214,6 +214,10 @@ def main_buttons(session, state):
     """The LiDAR panel's rows: [Build scene, Scan], [Show cloud], [Frames, Generate frames], [Load, Save, Reset]."""
     img, path, boxes = find_panels(session, state)
     assert boxes, "no panel in the sidebar"
+    if len(boxes) > 1 and boxes[1][0] - boxes[0][0] <= 34:  # the LiDAR panel is collapsed: open it
+        session.click(state["sidebar"]["x"] + 60, boxes[0][0] + 10)
+        time.sleep(0.8)
+        img, path, boxes = find_panels(session, state)
     rows = button_rows(img, state["sidebar"], boxes[0][0] + 20, boxes[0][1])
     assert [len(r) for r in rows[:4]] == [2, 1, 2, 3], (rows, boxes)
     return rows
@@ -440,10 +444,12 @@ cube.select_set(True)
 bpy.context.view_layer.objects.active = cube
 """)
     img, path, boxes = find_panels(session, state)  # LiDAR, Scene, Sensor, Effects, Frames and output, Labels (last)
-    for _ in range(4):  # collapse the panels above Labels until its buttons are on screen
-        if len(boxes) >= 6:
+    bottom = state["sidebar"]["y"] + state["sidebar"]["height"]
+    for _ in range(8):  # collapse open panels above Labels (a plain click toggles one) until its buttons are on screen
+        if len(boxes) >= 6 and boxes[-1][0] + 150 < bottom:
             break
-        session.click(state["sidebar"]["x"] + 60, boxes[1][0] + 10)
+        opened = [i for i in range(len(boxes) - 1) if boxes[i + 1][0] - boxes[i][0] > 34]
+        session.click(state["sidebar"]["x"] + 60, boxes[opened[0] if opened else -1][0] + 10)
         time.sleep(0.8)
         img, path, boxes = find_panels(session, state)
     rows = button_rows(img, state["sidebar"], boxes[-1][0] + 20, boxes[-1][1])
@@ -483,14 +489,14 @@ def choose_file(session, path: Path) -> None:
     session.xdo("click", "--repeat", 2, 1)
     time.sleep(0.4)
     session.key("ctrl+a")
-    session.xdo("type", f"{path.parent}/")
+    session.xdo("type", "--delay", "40", f"{path.parent}/")
     session.key("Return")
     time.sleep(0.6)
     session.xdo("mousemove", *fields["filename"])
     session.xdo("click", "--repeat", 2, 1)
     time.sleep(0.4)
     session.key("ctrl+a")
-    session.xdo("type", path.name)
+    session.xdo("type", "--delay", "40", path.name)
     session.key("Return")
     time.sleep(0.6)
 
