@@ -133,9 +133,10 @@ def panel_headers(img: np.ndarray, sidebar: dict) -> list[int]:
     """Screen y of each top-level panel header in the sidebar, top to bottom, found by the header's
     drag grip (two rows of light dots over dark shadow pixels, near the right end of the header)."""
     x0, x1 = sidebar["x"] + sidebar["width"] - 64, sidebar["x"] + sidebar["width"] - 28
-    grey = _grey(img[sidebar["y"] : sidebar["y"] + sidebar["height"] + 1, x0:x1])
-    dots = (grey[:-1] >= 120) & (grey[:-1] <= 175) & (grey[1:] >= 0) & (grey[1:] <= 30)
-    rows = np.flatnonzero(dots.sum(axis=1) >= 3)
+    grey = _grey(img[sidebar["y"] : sidebar["y"] + sidebar["height"], x0:x1])
+    dots = (grey >= 90) & (grey <= 175)  # 4.3: four dots of 145; 5.x: anti-aliased dots of 96 to 137
+    on_header = np.abs(np.median(grey, axis=1) - 61) <= 3  # the header's grey around them (a button row is 84)
+    rows = np.flatnonzero((dots.sum(axis=1) >= 3) & on_header)
     headers: list[int] = []
     for y in rows.tolist():
         if headers and y - headers[-1] <= 6:

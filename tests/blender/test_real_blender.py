@@ -474,7 +474,8 @@ if reply['done']:
     reply['regions'] = {r.type: (r.x, r.y, r.width, r.height) for r in a.regions}
 """, timeout=30)
     x, y, _, height = reply["window"]
-    top = y
+    screen = session.call("reply['h'] = bpy.context.window_manager.windows[0].height")["h"]
+    top = screen - (y + height)  # Blender's window y counts from the bottom of the screen
 
     def at(region, share):
         rx, ry, rw, rh = reply["regions"][region]
@@ -484,6 +485,10 @@ if reply['done']:
 
 
 def choose_file(session, path: Path) -> None:
+    file_browser(session)  # wait for it
+    # Blender 5.x places the file browser's window partly above the screen when no window manager runs: move it down
+    session.xdo("search", "--name", "Blender File View", "windowmove", "88", "88")
+    time.sleep(0.8)
     fields = file_browser(session)
     session.xdo("mousemove", *fields["directory"])
     session.xdo("click", "--repeat", 2, 1)
