@@ -167,7 +167,7 @@ SHOT_SUITE = os.environ.get("BPY_PIPELINE_SCREENSHOTS_OF", "sid")
 
 
 def keep_shot(suite: str, path: Path, name: str, box: tuple[int, int, int, int] | None = None, width: int = 900) -> None:
-    """Copy a screenshot (cropped to ``box`` (x0, y0, x1, y1), scaled to ``width`` at most, 96 colours) to $BPY_PIPELINE_SCREENSHOTS."""
+    """Copy a screenshot (cropped to ``box`` (x0, y0, x1, y1), scaled to ``width`` at most, 256 colours) to $BPY_PIPELINE_SCREENSHOTS."""
     if not SHOTS or suite != SHOT_SUITE:
         return
     from PIL import Image
@@ -178,7 +178,7 @@ def keep_shot(suite: str, path: Path, name: str, box: tuple[int, int, int, int] 
     if image.width > width:
         image = image.resize((width, round(image.height * width / image.width)), Image.LANCZOS)
     Path(SHOTS).mkdir(parents=True, exist_ok=True)
-    image.quantize(96, dither=Image.Dither.NONE).save(Path(SHOTS) / f"{name}.png", optimize=True)
+    image.quantize(256, dither=Image.Dither.NONE).save(Path(SHOTS) / f"{name}.png", optimize=True)
 
 
 @pytest.fixture(scope="session")
@@ -252,7 +252,7 @@ def test_gui_build_scene_scan_leaves_the_cube_out(gui, work):
     session.click(*centre(rows[0][1]))  # Scan: the startup cube is not part of the built scene, a dialog asks
     time.sleep(2.0)
     _, path = session.screenshot("scan_warning")
-    keep_shot(session.chroot.suite, path, "scan_warning", (state["area"]["x"] + 250, 150, state["area"]["x"] + state["area"]["width"], 560), width=700)
+    keep_shot(session.chroot.suite, path, "scan_warning", (state["area"]["x"] + 250, 60, state["area"]["x"] + state["area"]["width"], 560), width=700)
     assert not (out / "records").exists() or not list((out / "records").glob("*.json")), "Scan ran without asking about the startup cube"
     started = time.monotonic()
     session.key("Return")  # the dialog's default: leave them out
@@ -444,16 +444,17 @@ cube.select_set(True)
 bpy.context.view_layer.objects.active = cube
 """)
     img, path, boxes = find_panels(session, state)  # LiDAR, Scene, Sensor, Effects, Frames and output, Labels (last)
-    bottom = state["sidebar"]["y"] + state["sidebar"]["height"]
+    tag_row = None
     for _ in range(8):  # collapse open panels above Labels (a plain click toggles one) until its buttons are on screen
-        if len(boxes) >= 6 and boxes[-1][0] + 150 < bottom:
+        rows = button_rows(img, state["sidebar"], boxes[-1][0] + 20, boxes[-1][1])
+        tag_row = next((r for r in reversed(rows) if len(r) == 2), None)
+        if tag_row is not None and len(boxes) >= 6:
             break
         opened = [i for i in range(len(boxes) - 1) if boxes[i + 1][0] - boxes[i][0] > 34]
         session.click(state["sidebar"]["x"] + 60, boxes[opened[0] if opened else -1][0] + 10)
         time.sleep(0.8)
         img, path, boxes = find_panels(session, state)
-    rows = button_rows(img, state["sidebar"], boxes[-1][0] + 20, boxes[-1][1])
-    tag_row = next(r for r in reversed(rows) if len(r) == 2)
+    assert tag_row is not None, boxes
     session.click(*centre(tag_row[0]))  # Tag selected
     tagged = session.wait("c = bpy.data.objects['Cube']; reply.update(done='lidar_class' in c, tags={k: c[k] for k in c.keys() if k.startswith('lidar_')})", timeout=30)
     assert tagged["tags"] == {"lidar_class": "car", "lidar_material": "mirror", "lidar_reflectivity": pytest.approx(0.75)}
@@ -563,7 +564,7 @@ def test_figures_frame_time(chroot, work):
     if target:
         path = Path(target)
         existing = json.loads(path.read_text()) if path.is_file() else {}
-        existing.setdefault("job", "default job (railway, vlp16 preset), 1 frame per scan, 3 frames in background; seconds per frame = build + export + scan + write from the frame records")
+        existing.setdefault("job", "default job (railway, its default sensor preset, full resolution); background: 3 frames; GUI: the Scan button after Build scene (its build time is not in the frame, the scene was built before); seconds per frame = build + export + scan + write from the frame records")
         existing.setdefault("blenders", {})[chroot.suite] = figures
         import bpy
 
