@@ -57,7 +57,7 @@ for s in "${SUITES[@]}"; do
   mount_chroot "$part"
   trap 'umount_chroot "$part"' EXIT
   chroot "$part" "${IN_CHROOT[@]}" sh -c \
-    "apt-get update -q && apt-get install -y -q --no-install-recommends $PACKAGES && { apt-get install -y -q --no-install-recommends $EXTRAS || true; }" >"$CACHE/$s.apt.log" 2>&1 \
+    "apt-get update -q && apt-get install -y -q --no-install-recommends $PACKAGES && { apt-get install -y -q --no-install-recommends $EXTRAS || true; } && apt-get clean" >"$CACHE/$s.apt.log" 2>&1 \
     || { tail -5 "$CACHE/$s.apt.log"; umount_chroot "$part"; skip "apt-get install in $s failed (log: $CACHE/$s.apt.log)"; }
   # pip reaches PyPI through the same CA bundle as this machine (its /etc/pip.conf sets cert=).
   [ -f /etc/ssl/certs/ca-certificates.crt ] && cp /etc/ssl/certs/ca-certificates.crt "$part/etc/ssl/certs/ca-certificates.crt"
