@@ -1,13 +1,14 @@
 #!/usr/bin/env bash
 # Set up ./.venv with bpy_pipeline and Blender's bpy module (Debian 12, Python 3.11).
 #   ./setup.sh        runtime: bpy 4.5 LTS, embreex, trimesh, pyyaml, numpy
-#   ./setup.sh test   the same plus the test tools (pytest, plyfile, laspy) and Ray (the distributed tests)
+#   ./setup.sh test   the same plus the test tools (pytest, plyfile, laspy), Ray (the distributed tests),
+#                     numba (the compiled scan path) and Patchwork++ / scipy (real-scan mixing)
 # On a bare Debian it installs, as root, what bpy's wheel and venv need from Debian:
 # python3-venv and the X11/GL client libraries bpy links against (no display is used).
 set -euo pipefail
 cd "$(dirname "$0")"
 extras="blender"
-[ "${1:-}" = "test" ] && extras="blender,test,distributed"
+[ "${1:-}" = "test" ] && extras="blender,test,distributed,fast,mixing"
 venv="${VENV:-.venv}"
 py="${PYTHON:-python3.11}"
 "$py" -c "import sys; assert sys.version_info[:2] == (3, 11)" 2>/dev/null || py=python3

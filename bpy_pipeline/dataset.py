@@ -369,10 +369,10 @@ def _ranges(indices: list[int]) -> list[list[int]]:
 
 def frame_record(frame, digests: dict[str, str]) -> dict:
     """The record of a written frame: its files and their sha256, points, pose, timings, objects, scene info, boxes."""
-    from .pipeline import frames_per_scene
+    from .builders import BUILDERS
 
     config = frame.config
-    per_scene = frames_per_scene(config)
+    stations = 0 if config.sensor.trajectory is not None else BUILDERS.get(config.scene.builder).stations(config.scene.params)
     record = {
         "index": frame.index,
         "files": list(digests),
@@ -381,8 +381,8 @@ def frame_record(frame, digests: dict[str, str]) -> dict:
         "triangles": int(len(frame.buffers.triangles)),
         "sensor_pose": frame.pose.tolist(),
     }
-    if per_scene > 1:
-        record["station"] = frame.index % per_scene
+    if stations:
+        record["station"] = frame.index % stations
     if frame.trajectory is not None:
         from .lidar.sensors import frame_time
 

@@ -10,6 +10,12 @@ REAL_SCANS = Path(os.environ.get("BPY_PIPELINE_REAL_SCANS", Path(__file__).resol
 HAS_BPY = importlib.util.find_spec("bpy") is not None
 
 
+@pytest.fixture(scope="session")
+def real_scans_folder() -> Path:
+    """The folder of the real scans (it may be absent; tests skip with a reason then)."""
+    return REAL_SCANS
+
+
 @pytest.fixture
 def real_scan():
     """Path of a file in ../shared/real_scans; skips with a reason where it is absent."""

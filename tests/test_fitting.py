@@ -162,10 +162,8 @@ def test_fit_rejects_what_is_not_an_organised_scan(tmp_path, capsys):
 
 # ----------------------------------------------------------------------------- the real HDL-32E sweep
 @pytest.fixture(scope="module")
-def real_samples(request):
-    from conftest import REAL_SCANS
-
-    path = REAL_SCANS / "nuscenes_hdl32e_sweep.bin"
+def real_samples(real_scans_folder):
+    path = real_scans_folder / "nuscenes_hdl32e_sweep.bin"
     if not path.exists():
         pytest.skip(f"real scan {path} is absent (set BPY_PIPELINE_REAL_SCANS to its folder)")
     scan = fitting.read_scan(path, 32)

@@ -186,11 +186,11 @@ def test_same_seed_same_scene():
 
 
 def test_stations_are_frames_of_one_built_line(tmp_path):
-    points, manifest = scan_world(tmp_path, "scene.stations.count=3", "frames=3", "sensor.sampling_factor=0.05")
+    points, manifest = scan_world(tmp_path, "scene.stations.count=3", "frames=4", "sensor.sampling_factor=0.05")
     frames = manifest["frames"]
-    assert [f["station"] for f in frames] == [0, 1, 2]
+    assert [f["station"] for f in frames] == [0, 1, 2, 0]  # the fourth frame scans from the first station again
     xs = [f["sensor_pose"][0][3] for f in frames]
-    np.testing.assert_allclose(xs, [-50, 0, 50])
+    np.testing.assert_allclose(xs, [-50, 0, 50, -50])
     np.testing.assert_allclose([f["sensor_pose"][1][3] for f in frames], 4.0)
     np.testing.assert_allclose([f["sensor_pose"][2][3] for f in frames], 2.0)  # 2 m above the ground beside the track
     assert frames[1]["timings_s"]["build"] < frames[0]["timings_s"]["build"]  # built once, scanned three times

@@ -74,6 +74,10 @@ def one_frame(params) -> int:
     return 1
 
 
+def no_stations(params) -> int:
+    return 0
+
+
 @dataclass(frozen=True)
 class Builder:
     """A scene builder's registry entry.
@@ -86,6 +90,8 @@ class Builder:
         where the config's ``sensor.position`` applies
     frames_per_scene : ``frames_per_scene(params) -> n``: one built scene serves n frames in a row
         (frame k scans the scene built for frame k - k mod n)
+    stations : ``stations(params) -> n``: how many fixed stations ``station`` cycles through (frame k
+        scans from station k mod n, recorded as the frame's ``station``); 0 where it places none
     sensor : the builder's own sensor, used when the config's ``sensor`` names no preset (fields given refine it)
     boxes : whether 3D box labels are written by default (``output.boxes.formats: auto``)
     release_sensor : ``release_sensor(params, raw_scene, sensor_data) -> params``: when the config places
@@ -100,6 +106,7 @@ class Builder:
     check: Callable[[Any, str], None] = no_check
     station: Callable[[Any, int], np.ndarray | None] = no_station
     frames_per_scene: Callable[[Any], int] = one_frame
+    stations: Callable[[Any], int] = no_stations
     sensor: dict = field(default_factory=dict)
     boxes: bool = False
     release_sensor: Callable[[Any, dict, dict], Any] | None = None

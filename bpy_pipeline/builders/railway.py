@@ -214,6 +214,13 @@ def station(params: RailwayScene, frame: int) -> np.ndarray | None:
     return stations[frame % len(stations)] if len(stations) else None
 
 
+def stations(params: RailwayScene) -> int:
+    """How many stations ``station`` cycles through (0 without ``scene.stations``)."""
+    from ..geometry.railway_layout import station_frames
+
+    return len(station_frames(params))
+
+
 ONE_SCENE_PER_RUN = 2**31 - 1  # frames: more than any run has, so frame k always scans the scene built for frame 0
 
 
@@ -245,4 +252,4 @@ def build(params: RailwayScene, context: BuildContext) -> BuildResult:
     return BuildResult(info=info, scene=layout)
 
 
-register_builder("railway", Builder(RailwayScene, build, check, station, frames_per_scene, release_sensor=release_sensor))
+register_builder("railway", Builder(RailwayScene, build, check, station, frames_per_scene, stations, release_sensor=release_sensor))
