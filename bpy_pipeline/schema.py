@@ -33,7 +33,7 @@ def _type_name(hint) -> str:
         return f"a list of {len(typing.get_args(hint))} numbers"
     if dataclasses.is_dataclass(hint):
         return "a mapping"
-    return {float: "a number", int: "an integer", bool: "true or false", str: "a string", dict: "a mapping"}.get(hint, str(hint))
+    return {float: "a number", int: "an integer", bool: "true or false", str: "a string", dict: "a mapping", type(None): "null"}.get(hint, str(hint))
 
 
 def convert(value, hint, path: str):
@@ -78,6 +78,8 @@ def convert(value, hint, path: str):
         return value
     if hint in (bool, str, dict) and isinstance(value, hint):
         return value
+    if hint is type(None) and value is None:  # `float | None` given as null
+        return None
     raise wrong
 
 

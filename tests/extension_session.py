@@ -3,7 +3,7 @@
 ``python tests/extension_session.py ZIP WORK`` with ``HOME`` and ``BLENDER_USER_RESOURCES``
 pointing into ``WORK``: installs ZIP with ``bpy.ops.extensions.package_install_files``, runs
 every operator of the panel on small scenes, cycles register / unregister, and writes what it
-saw to ``WORK/report.json`` for the test to check. embreex, yaml and trimesh may only be
+saw to ``WORK/report.json`` for the test to check. embreex and yaml may only be
 imported from the wheels the extension installed (the venv's copies are hidden), so the
 bundled wheels are what runs, against this Python's numpy.
 """
@@ -16,7 +16,7 @@ import os
 import sys
 from pathlib import Path
 
-BUNDLED = {"embreex", "yaml", "_yaml", "trimesh"}
+BUNDLED = {"embreex", "yaml", "_yaml"}
 SITE = Path(os.environ["BLENDER_USER_RESOURCES"]) / "extensions" / ".local" / "lib" / f"python{sys.version_info[0]}.{sys.version_info[1]}" / "site-packages"
 
 
@@ -115,10 +115,9 @@ extension_dir = Path(next(r.directory for r in bpy.context.preferences.extension
 report["extension_files"] = sorted(files_under(extension_dir))
 before = files_under(extension_dir)
 import embreex  # noqa: E402
-import trimesh  # noqa: E402
 import yaml  # noqa: E402
 
-report["bundled"] = {m.__name__: str(Path(m.__file__).resolve().is_relative_to(SITE.resolve())) for m in (embreex, yaml, trimesh)}
+report["bundled"] = {m.__name__: str(Path(m.__file__).resolve().is_relative_to(SITE.resolve())) for m in (embreex, yaml)}
 report["classes"] = lidar_classes()
 
 package = sys.modules[MODULE]

@@ -98,3 +98,19 @@ def test_missing_and_malformed_files_name_the_file(tmp_path):
     scalar.write_text("42\n")
     with pytest.raises(InputError, match="scalar.yaml: expected a mapping"):
         read_config_file(scalar)
+
+
+def test_optional_fields_take_null_and_name_it_in_errors():
+    from dataclasses import dataclass
+
+    from bpy_pipeline.errors import InputError
+    from bpy_pipeline.schema import from_dict
+
+    @dataclass(frozen=True)
+    class Section:
+        limit: float | None = 1.0
+
+    assert from_dict(Section, {"limit": None}, "s").limit is None
+    assert from_dict(Section, {"limit": 2}, "s").limit == 2.0
+    with pytest.raises(InputError, match=r"s.limit: expected a number or null, got 'x'"):
+        from_dict(Section, {"limit": "x"}, "s")

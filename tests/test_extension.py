@@ -84,7 +84,7 @@ def test_manifest_declares_the_extension():
 def test_manifest_wheels_cover_every_platform_and_blender_python():
     build = build_script()
     names = [Path(w).name for w in MANIFEST["wheels"]]
-    assert {build.wheel_tags(n)[0] for n in names} == {"embreex", "pyyaml", "trimesh"}  # numpy comes with Blender
+    assert {build.wheel_tags(n)[0] for n in names} == {"embreex", "pyyaml"}  # numpy comes with Blender; nothing at run time needs trimesh
     assert build.missing_wheels(MANIFEST["wheels"], MANIFEST["platforms"]) == []
     # cp311: Blender 4.2 to 5.0; cp313: Blender 5.1 and newer, Debian 13's 4.3; cp314: distribution Blenders on Python 3.14
     assert {build.wheel_tags(n)[2] for n in names if build.wheel_platforms(n) != {"*"}} == {"cp311", "cp313", "cp314"}
@@ -110,14 +110,14 @@ def test_zip_is_validated_and_holds_only_what_runs(extension_zip):
     assert not any("__pycache__" in n or n.endswith(".pyc") or n.startswith(("tests/", "benchmarks/")) for n in names)
     assert manifest["platforms"] == [THIS_PLATFORM]
     assert sorted(wheels) == sorted(w.removeprefix("./") for w in manifest["wheels"])
-    assert {Path(w).name.split("-")[2] for w in wheels} == {"cp311", "cp313", "cp314", "py3"}
+    assert {Path(w).name.split("-")[2] for w in wheels} == {"cp311", "cp313", "cp314"}
 
 
 @pytest.mark.bpy
 def test_installs_from_the_zip_with_its_own_wheels(session):
     report, _ = session
     assert report["install"] == ["FINISHED"] and report["enabled"]
-    assert report["bundled"] == {"embreex": "True", "yaml": "True", "trimesh": "True"}
+    assert report["bundled"] == {"embreex": "True", "yaml": "True"}
     assert {"__init__.py", "bpy_pipeline/config.py", "assets_manifest/labels.yaml"} <= set(report["extension_files"])
     operators = {"LIDAR_OT_build_scene", "LIDAR_OT_scan", "LIDAR_OT_show_cloud", "LIDAR_OT_generate", "LIDAR_OT_config_load", "LIDAR_OT_config_save", "LIDAR_OT_config_reset", "LIDAR_OT_tag_selected", "LIDAR_OT_clear_tags"}
     assert operators <= set(report["classes"])
