@@ -73,10 +73,15 @@ def _is_curve(_settings, obj) -> bool:
     return obj.type == "CURVE"
 
 
-def _preset_changed(sensor_group, _context) -> None:
-    """A new preset shows its own ranges and sampling (overrides of the old one do not carry over)."""
+def _preset_changed(sensor_group, context) -> None:
+    """A new preset shows its own ranges and sampling, and its effects profile (noise, drop, intensity;
+    ``ideal`` stays as set): overrides of the old one do not carry over."""
     values = sensors.spec_fields(sensors.resolve_sensor({"preset": sensor_group.preset}))
     fields.write(sensor_group, VIEWS.sensor, values, "sensor")
+    if sensor_group.preset != "custom":
+        effects = context.scene.lidar.effects
+        profile = cfg.config_to_dict(cfg.config_from_dict({"sensor": {"preset": sensor_group.preset}}))["effects"]
+        fields.write(effects, VIEWS.effects, profile | {"ideal": effects.ideal}, "effects")
 
 
 def _enum_items(names) -> list[tuple[str, str, str]]:

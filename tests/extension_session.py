@@ -127,6 +127,10 @@ read_dataset = sys.modules[f"{MODULE}.bpy_pipeline.io"].read_dataset
 settings = bpy.context.scene.lidar
 report["builders"] = sorted(settings.bl_rna.properties["builder"].enum_items.keys())
 report["fresh_panel_is_default_config"] = cfg.config_from_dict(panel.settings_to_dict(settings)) == cfg.config_from_dict({})
+settings.sensor.preset = "hdl32e"  # its own effects profile (range-proportional noise) replaces the default preset's
+report["preset_brings_its_profile"] = cfg.config_from_dict(panel.settings_to_dict(settings)).effects == cfg.config_from_dict({"sensor": {"preset": "hdl32e"}}).effects
+settings.sensor.preset = cfg.config_to_dict(cfg.config_from_dict({}))["sensor"]["preset"]
+report["preset_back_brings_default_effects"] = cfg.config_from_dict(panel.settings_to_dict(settings)).effects == cfg.config_from_dict({}).effects
 
 # ----------------------------------------------------------------------------- load a config; generate as run.py does
 job_yaml = WORK / "job.yaml"
