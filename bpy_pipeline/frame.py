@@ -47,6 +47,7 @@ class Frame:
     files: list[str] = field(default_factory=list)
     timings: dict[str, float] = field(default_factory=dict)
     record: dict = field(default_factory=dict)
+    images: dict[str, np.ndarray] = field(default_factory=dict)  # {name: (h, w, 3) uint8}: camera renderings (KITTI's image_2)
     rig: Any = None  # a sensor rig's per-sensor frames (:class:`~bpy_pipeline.rig.RigFrame`), ``None`` for one sensor
 
     @property

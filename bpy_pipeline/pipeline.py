@@ -392,6 +392,16 @@ def rig_annotate_stage(frame: Frame, run: Run) -> None:
     frame.boxes = box_labels.boxes_in_frame(merged, frame.pose if run.config.output.frame == "sensor" else np.eye(4))
 
 
+def camera_stage(frame: Frame, run: Run) -> None:
+    """KITTI's ``image_2`` rendered by Blender from ``output.kitti.camera`` (when it asks for a rendering)."""
+    config = run.config
+    if not config.output.kitti.camera.render or "kitti" not in config.output.boxes.formats or run.members:
+        return
+    from .scenes.camera import class_colors, render_camera
+
+    frame.images["image_2"] = render_camera(config.output.kitti.camera, frame.pose, class_colors(frame.buffers, run.table.color_lut()))
+
+
 # (stage, the timing it counts towards): the scan is lazy, so tracing is timed with the effects
 STAGES: tuple[tuple[Callable[[Frame, Run], None], str | None], ...] = (
     (build_stage, "build"),
@@ -400,6 +410,7 @@ STAGES: tuple[tuple[Callable[[Frame, Run], None], str | None], ...] = (
     (scan_stage, "scan"),
     (effects_stage, "scan"),
     (annotate_stage, "boxes"),
+    (camera_stage, "camera"),
 )
 
 
@@ -413,7 +424,7 @@ def make_frame(run: Run, index: int) -> Frame:
         start = time.perf_counter()
         stage(frame, run)
         took = time.perf_counter() - start
-        if timing != "boxes" or frame.boxes is not None:
+        if (timing != "boxes" or frame.boxes is not None) and (timing != "camera" or frame.images):  # stages that ran
             frame.timings[timing] = frame.timings.get(timing, 0.0) + took
         if run.log is not None and took > LONG_STAGE_S:
             run.log(f"note: frame {index}: {stage.__name__.removesuffix('_stage')} took {took:.1f} s")

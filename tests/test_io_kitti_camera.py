@@ -37,3 +37,35 @@ def test_rendered_box_lies_where_calib_projects_it(bpy_scene, camera):
     assert rows.min() >= uv[:, 1].min() - 1.5 and rows.max() <= uv[:, 1].max() + 0.5
     assert abs(np.mean(cols) - np.mean(uv[:, 0])) < 0.1 * (uv[:, 0].max() - uv[:, 0].min()) + 1
     assert "cube" in bpy.data.objects and bpy.context.scene.camera is None  # the scene is left as it was
+
+
+@pytest.mark.bpy
+def test_a_run_renders_image_2_when_asked(bpy_scene, tmp_path):
+    """output.kitti.camera.render: the parking frame's image_2 is Blender's rendering (class colours of the
+    scene's objects), not the projection of the points; its timing is recorded; without it, no rendering."""
+    from PIL import Image
+
+    from bpy_pipeline.config import load_config
+    from bpy_pipeline.labels import load_class_table
+    from bpy_pipeline.pipeline import run
+
+    images, timings = {}, {}
+    for render in (True, False):
+        bpy_scene.ops.wm.read_factory_settings(use_empty=True)
+        overrides = ["scene.builder=parking", "frames=1", "output.formats=[ply]", "output.preview=false", "output.boxes.formats=[kitti]",
+                     "output.kitti.camera.resolution=[320, 120]", f"output.kitti.camera.render={str(render).lower()}"]
+        out = tmp_path / str(render)
+        manifest = run(load_config(None, overrides), out, log=lambda *_: None)
+        images[render] = np.asarray(Image.open(out / "kitti" / "training" / "image_2" / "000000.png").convert("RGB"))
+        timings[render] = manifest["frames"][0]["timings_s"]
+    assert images[True].shape == images[False].shape == (120, 320, 3)
+    assert "camera" in timings[True] and "camera" not in timings[False]
+    lut = load_class_table().color_lut()
+    classes = {tuple(int(v) for v in lut[k]) for k in range(1, len(lut))}
+
+    def in_class_colours(image):  # share of pixels exactly in a class's colour
+        return float(np.mean([tuple(c) in classes for c in image.reshape(-1, 3)]))
+
+    # the garage's surfaces fill the rendering, each in its class's colour; the projection is mostly background
+    assert in_class_colours(images[True]) > 0.95 and in_class_colours(images[False]) < 0.6
+    assert len({tuple(c) for c in images[True].reshape(-1, 3)} & classes) >= 4

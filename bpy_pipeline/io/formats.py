@@ -54,7 +54,7 @@ def _check_kitti(config) -> None:
 
 
 def _write_kitti(frame, out: Path) -> list[Path]:
-    image = (getattr(frame, "images", None) or {}).get("image_2")  # the camera stage's rendering, where the pipeline ran one
+    image = frame.images.get("image_2")  # the camera stage's rendering (output.kitti.camera.render), else the points' projection
     return kitti.write_frame(out, frame_stem(frame.index), frame.points, frame.boxes, frame.config.output.kitti.camera, load_class_table().color_lut(), frame.config.output.boxes.names, image)
 
 

@@ -32,6 +32,12 @@ def camera_matrix_world(camera, pose: np.ndarray) -> np.ndarray:
     return np.asarray(pose, float) @ local
 
 
+def srgb_to_linear(values: np.ndarray) -> np.ndarray:
+    """sRGB components 0..1 (the class table's colours) to linear light, as Blender's colour properties hold them."""
+    values = np.asarray(values, float)
+    return np.where(values <= 0.04045, values / 12.92, ((values + 0.055) / 1.055) ** 2.4)
+
+
 def render_camera(camera, pose: np.ndarray, colors: dict[str, tuple[int, int, int]] | None = None) -> np.ndarray:
     """``(height, width, 3) uint8``: the current scene seen by ``camera`` (``output.kitti.camera``) on a sensor at ``pose``.
 
@@ -46,10 +52,10 @@ def render_camera(camera, pose: np.ndarray, colors: dict[str, tuple[int, int, in
     obj = bpy.data.objects.new(CAMERA_NAME, data)
     scene.collection.objects.link(obj)
     obj.matrix_world = camera_matrix_world(camera, pose).T.tolist()  # a nested sequence is read column by column
-    render, shading = scene.render, scene.display.shading
+    render, shading, view = scene.render, scene.display.shading, scene.view_settings
     saved = {"camera": scene.camera, "engine": render.engine, "x": render.resolution_x, "y": render.resolution_y, "percent": render.resolution_percentage,
              "path": render.filepath, "format": render.image_settings.file_format, "light": shading.light, "color_type": shading.color_type,
-             "aa": scene.display.render_aa}
+             "aa": scene.display.render_aa, "view": view.view_transform, "look": view.look, "dither": render.dither_intensity}
     saved_colors = {}
     try:
         scene.camera = obj
@@ -58,11 +64,13 @@ def render_camera(camera, pose: np.ndarray, colors: dict[str, tuple[int, int, in
         render.image_settings.file_format = "PNG"
         shading.light, shading.color_type = "FLAT", "OBJECT"
         scene.display.render_aa = "OFF"  # crisp class colours: each pixel is one object's
+        view.view_transform, view.look = "Standard", "None"  # pixels in the table's sRGB, not a filmic curve's
+        render.dither_intensity = 0.0  # exactly the class colours
         for name, rgb in (colors or {}).items():
             target = bpy.data.objects.get(name)
             if target is not None:
                 saved_colors[name] = tuple(target.color)
-                target.color = (*(c / 255.0 for c in rgb), 1.0)
+                target.color = (*srgb_to_linear(np.asarray(rgb) / 255.0), 1.0)  # object colours are scene-linear
         with tempfile.TemporaryDirectory() as folder:
             render.filepath = str(Path(folder) / "image_2.png")
             bpy.ops.render.render(write_still=True)
@@ -77,6 +85,7 @@ def render_camera(camera, pose: np.ndarray, colors: dict[str, tuple[int, int, in
         render.engine, render.resolution_x, render.resolution_y = saved["engine"], saved["x"], saved["y"]
         render.resolution_percentage, render.filepath, render.image_settings.file_format = saved["percent"], saved["path"], saved["format"]
         shading.light, shading.color_type, scene.display.render_aa = saved["light"], saved["color_type"], saved["aa"]
+        view.view_transform, view.look, render.dither_intensity = saved["view"], saved["look"], saved["dither"]
         for name, color in saved_colors.items():
             bpy.data.objects[name].color = color
         bpy.data.objects.remove(obj, do_unlink=True)
