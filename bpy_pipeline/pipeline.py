@@ -89,11 +89,13 @@ def frames_per_scene(config: Config) -> int:
 
 
 def scene_view(config: Config, first: int, count: int):
-    """The :class:`~.geometry.lod.SensorView` of frames ``first`` .. ``first + count - 1`` (static sensors;
-    ``None`` for a moving one, whose builders then model at a fixed detail)."""
+    """The :class:`~.geometry.lod.SensorView` of frames ``first`` .. ``first + count - 1`` (static sensors).
+    A moving sensor: the :class:`~.geometry.lod.PlannedPath` of the whole run for a builder that
+    ``follows_path`` (its scene serves every frame), else ``None`` (fixed detail)."""
+    from .geometry.lod import planned_path, view_of
+
     if config.sensor.trajectory is not None:
-        return None
-    from .geometry.lod import view_of
+        return planned_path(config.sensor, config.frames) if BUILDERS.get(config.scene.builder).follows_path else None
 
     from .rig import RigSensor, RigView, field_of_view
 

@@ -26,7 +26,8 @@ class BuildContext:
     rng : the generator the scene is drawn from (the frame's, or the first frame's of a scene that
         serves several frames)
     view : :class:`~bpy_pipeline.geometry.lod.SensorView` of the frames the scene serves (where it is
-        scanned from and how finely), or ``None`` (a moving sensor: fixed detail)
+        scanned from and how finely); for a moving sensor a :class:`~bpy_pipeline.geometry.lod.PlannedPath`
+        when the builder ``follows_path``, else ``None`` (fixed detail)
     keep : state the run owns across frames; a builder that re-randomises in place keeps its static
         scene here (and must give the same result as when built from nothing)
     """
@@ -99,6 +100,8 @@ class Builder:
         (``InputError`` where both do)
     stages : ``((stage(frame, run), timing name), ...)`` in place of the pipeline's stages, for a builder
         that makes a frame's points itself without a Blender scene (``real_scan``); ``None``: the pipeline's
+    follows_path : a moving sensor's scene is graded along its path: ``build`` gets a
+        :class:`~bpy_pipeline.geometry.lod.PlannedPath` as ``context.view`` (else ``None``)
     """
 
     params: type
@@ -111,6 +114,7 @@ class Builder:
     boxes: bool = False
     release_sensor: Callable[[Any, dict, dict], Any] | None = None
     stages: tuple | None = None
+    follows_path: bool = False
 
 
 BUILDERS: Registry[Builder] = Registry("scene builder", "scene.builder")

@@ -252,4 +252,4 @@ def build(params: RailwayScene, context: BuildContext) -> BuildResult:
     return BuildResult(info=info, scene=layout)
 
 
-register_builder("railway", Builder(RailwayScene, build, check, station, frames_per_scene, stations, release_sensor=release_sensor))
+register_builder("railway", Builder(RailwayScene, build, check, station, frames_per_scene, stations, release_sensor=release_sensor, follows_path=True))

@@ -22,7 +22,7 @@ import numpy as np
 from ..errors import InputError
 from . import catenary
 from .alignment import Alignment, arc_through, with_transitions
-from .lod import polygon_sides, section_error
+from .lod import PathView, SensorView, polygon_sides, section_error
 
 STAY_RISE = 0.3  # m: cantilever stay tube above the messenger attachment
 FEEDER_BRACKET = (0.6, -0.5)  # m: feeder beside (field side) and below the mast top
@@ -579,8 +579,11 @@ class RailwayDetailPlan:
     centreline_tolerance : m, chord error of the sampled alignment
     track_trim, ground_trim : (start, end) chainages (m) of the track parts and of the ground strip
     stone_radius : m around each optical centre where ballast stones are modelled (0: none)
-    stone_trims : ``(k, (start, end))``: the chainages where stones around optical centre k can lie, for the
-        centres near enough to the ballast (none without stones)
+    stone_trims : ``(k, (start, end))``: the chainages where stones of patch k can lie (none without stones):
+        around each static optical centre near enough to the ballast, or along a moving sensor's path in
+        consecutive stretches of at most ``STONE_STRETCH`` m of line that do not overlap
+    stone_centres : per entry of ``stone_trims``, ``(c, 3)`` world points: stones lie within ``stone_radius``
+        of one of them (the station; for a path, points along it every ``stone_radius / 8`` at most)
     supports : indices of the supports to build
     wires : per wire of ``layout.wires``, ``(samples, sides)``, or ``None`` when not built
     droppers : per dropper set of ``layout.droppers``, True when built
@@ -591,6 +594,7 @@ class RailwayDetailPlan:
     ground_trim: tuple[float, float]
     stone_radius: float
     stone_trims: list[tuple[int, tuple[float, float]]]
+    stone_centres: list[np.ndarray]
     supports: list[int]
     wires: list[tuple[int, int] | None]
     droppers: list[bool]
@@ -626,20 +630,23 @@ def level_of_detail(layout: RailwayLayout, params, view=None) -> RailwayDetailPl
     if view is None or params.detail.mode == "fixed":
         per_10m = params.catenary.points_per_10m
         wires = [(catenary.thesis_sample_count(w.length, per_10m), 6) for w in layout.wires]
-        return RailwayDetailPlan(0.005, everything, everything, 0.0, [], list(range(len(layout.supports))), wires, [True] * len(layout.droppers))
+        return RailwayDetailPlan(0.005, everything, everything, 0.0, [], [], list(range(len(layout.supports))), wires, [True] * len(layout.droppers))
     reach = view.max_range
     nearest = float(view.distance(alignment.point(alignment.nearest_chainage(view.positions))).min())
     centreline_tolerance = max(float(view.tolerance(max(nearest, 0.5))), MIN_TOLERANCE)
     track_trim = _within(alignment, view, reach, layout.section.embankment_toe_half)
     ground_trim = _within(alignment, view, reach, track.ground_width / 2)
     stone_radius = view.resolve_radius(params.detail.stone_size) if params.detail.stones else 0.0
-    stone_trims = []
-    if stone_radius > 0:
+    stone_trims, stone_centres = [], []
+    if stone_radius > 0 and isinstance(view, PathView):
+        stone_trims, stone_centres = _path_stones(alignment, view, stone_radius, layout.section.ballast_toe_half)
+    elif stone_radius > 0:
         for k, position in enumerate(view.positions):  # each centre's own stretch, so each frame exports only its own stones
-            own = type(view)(position[None], view.step, stone_radius)
+            own = SensorView(position[None], view.step, stone_radius)
             trim = _within(alignment, own, stone_radius, layout.section.ballast_toe_half)
             if trim[1] > trim[0]:
                 stone_trims.append((k, trim))
+                stone_centres.append(np.asarray(position, float)[None])
     supports = []
     for support in layout.supports:
         extent = max(abs(m.lateral) for m in support.masts) + max(m.top for m in support.masts)
@@ -655,4 +662,27 @@ def level_of_detail(layout: RailwayLayout, params, view=None) -> RailwayDetailPl
         chords = max(tolerance - section_error(wire.diameter / 2, sides), tolerance / 2)  # section and chords share it
         wires.append((catenary.samples_for_tolerance(wire.sag, chords), sides))
     droppers = [bool((view.segment_distance(d.lower, d.upper) <= reach).any()) for d in layout.droppers]
-    return RailwayDetailPlan(centreline_tolerance, track_trim, ground_trim, stone_radius, stone_trims, supports, wires, droppers)
+    return RailwayDetailPlan(centreline_tolerance, track_trim, ground_trim, stone_radius, stone_trims, stone_centres, supports, wires, droppers)
+
+
+STONE_STRETCH = 20.0  # m of line per stones object along a path: a frame exports the stretches in its reach
+
+
+def _path_stones(alignment: Alignment, view: PathView, radius: float, lateral: float) -> tuple[list, list]:
+    """Stones along a moving sensor's path: the line within ``radius`` (+ ``lateral`` m of ballast either
+    side) of the path, cut into consecutive stretches of at most ``STONE_STRETCH`` m (their trims touch
+    and never overlap, so no stone is made twice); each stretch's centres are the path's points near it."""
+    trim = _within(alignment, view, radius, lateral)
+    if not trim[1] > trim[0]:
+        return [], []
+    centres = view.samples(radius / 8.0)  # points of the path: the distance to them overshoots the path's by < radius / 128
+    cuts = np.linspace(trim[0], trim[1], int(np.ceil((trim[1] - trim[0]) / STONE_STRETCH)) + 1)
+    trims, groups = [], []
+    for k, (s0, s1) in enumerate(zip(cuts[:-1], cuts[1:])):
+        line = alignment.point(np.linspace(s0, s1, max(2, int(np.ceil(s1 - s0)) + 1)))
+        stretch = SensorView(line, view.step, view.max_range)
+        near = centres[stretch.distance(centres) <= radius + lateral + 1.0]
+        if len(near):
+            trims.append((k, (float(s0), float(s1))))
+            groups.append(near)
+    return trims, groups

@@ -39,6 +39,7 @@ from .objects import mesh_data, mesh_object, scene_collection, tag, wire_object
 from .railway_nodes import PARTS, track_group
 
 CENTRELINE = "track_centreline"
+PATH_TOLERANCE = 0.01  # m: the centreline a planned path follows, sampled this close (detail grading only)
 STONE_CENTRES = "track_stone_centres"
 REFLECTIVITY = {
     "rail": 0.6, "sleeper": 0.4, "ballast": 0.35, "ground": 0.3, "mast": 0.5, "gantry": 0.5, "cantilever": 0.5,
@@ -53,31 +54,20 @@ def build(params, rng: np.random.Generator, view=None) -> RailwayLayout:
     Returns the :class:`~bpy_pipeline.geometry.railway_layout.RailwayLayout` that was built.
     """
     collection = scene_collection()
-    view = _distinct_positions(view)
     layout = plan(params, rng)
+    if view is not None:  # a moving sensor's path may follow the centreline: known now, before anything is built
+        view = view.following({CENTRELINE: layout.alignment.point(layout.alignment.chainage_samples(PATH_TOLERANCE))})
+    view = view.distinct() if view is not None else None
     detail = level_of_detail(layout, params, view)
     centreline = _centreline(layout, detail.centreline_tolerance, cant_angle(params.track, layout.alignment), collection)
     centreline["rail_top_height"] = float(layout.section.rail_top)
-    _track(params, layout, detail, centreline, view, int(rng.integers(0, 2**31 - 1)), collection, cant_angle(params.track, layout.alignment))
+    _track(params, layout, detail, centreline, int(rng.integers(0, 2**31 - 1)), collection, cant_angle(params.track, layout.alignment))
     _supports(params, layout, detail, collection)
     _wires(layout, detail, collection)
     _anchors_and_sections(params, layout, detail, collection)
     _trackside(params, layout, rng, collection)
     bpy.context.view_layer.update()
     return layout
-
-
-def _distinct_positions(view):
-    """``view`` with each optical centre once, in first-seen order: frames that revisit a station
-    (a run longer than its station cycle) share that station's stones."""
-    if view is None:
-        return None
-    _, first = np.unique(np.round(np.asarray(view.positions, float), 6), axis=0, return_index=True)
-    if len(first) == len(view.positions):
-        return view
-    import dataclasses
-
-    return dataclasses.replace(view, positions=np.asarray(view.positions)[np.sort(first)])
 
 
 def _centreline(layout: RailwayLayout, tolerance: float, roll: float, collection) -> bpy.types.Object:
@@ -99,18 +89,19 @@ def _centreline(layout: RailwayLayout, tolerance: float, roll: float, collection
     return obj
 
 
-def _stone_centre(name: str, position, collection) -> bpy.types.Object:
-    """A one-vertex mesh object at ``position``: the centre the "Track" group scatters stones around."""
+def _stone_centre(name: str, points, collection) -> bpy.types.Object:
+    """A mesh object of vertices at ``points`` ((c, 3) world, m): the centres the "Track" group scatters stones around."""
+    points = np.asarray(points, np.float32).reshape(-1, 3)
     mesh = bpy.data.meshes.new(name)
-    mesh.vertices.add(1)
-    mesh.vertices.foreach_set("co", np.asarray(position, np.float32).ravel())
+    mesh.vertices.add(len(points))
+    mesh.vertices.foreach_set("co", points.ravel())
     obj = bpy.data.objects.new(name, mesh)
     obj.hide_render = True
     collection.objects.link(obj)
     return obj
 
 
-def _track(params, layout, detail, centreline, view, seed: int, collection, roll: float = 0.0) -> None:
+def _track(params, layout, detail, centreline, seed: int, collection, roll: float = 0.0) -> None:
     track = params.track
     rail = track.rail
     inputs = {
@@ -135,11 +126,11 @@ def _track(params, layout, detail, centreline, view, seed: int, collection, roll
         parts.append(("embankment", "embankment", "ground", -1))
     trims = {name: detail.ground_trim if part == "ground" else detail.track_trim for name, part, _, _ in parts}
     extras = {}
-    for k, trim in detail.stone_trims:  # one stones object per station: each frame exports its own
+    for (k, trim), points in zip(detail.stone_trims, detail.stone_centres):  # one stones object per station or stretch of path
         name = f"ballast_stones.s{k}"
         parts.append((name, "stones", "ballast", -1))
         trims[name] = trim
-        centre = _stone_centre(f"{STONE_CENTRES}.s{k}", view.positions[k], collection)
+        centre = _stone_centre(f"{STONE_CENTRES}.s{k}", points, collection)
         extras[name] = {"Stone Centres": centre, "Stone Radius": detail.stone_radius, "Seed": seed + k}
     for name, part, class_name, index in parts:
         trim = trims[name]
