@@ -6,6 +6,10 @@ yawed 30 deg, at 25 m/s; one frame = 200 profiles (1 s), 40 frames cover the lin
 200 m, 4 frames of 40 profiles). The whole line is built once for the run (one railway per run)
 and each frame exports what its stretch of path can reach. The reference is the sequence's own
 sensor time: ``realtime_factor`` = wall time of the frames / seconds of scanning they stand for.
+The sequence runs twice in the same process: ``path`` (the default: wires, trims and stones graded
+by the distance to the run's whole path) and ``fixed`` (``scene.detail.mode: fixed``, the whole line
+with wires at ``catenary.points_per_10m``); the notes give path / fixed ratios of triangles and time.
+``BENCH_RAILWAY_PARTS=mobile`` (or ``hits``) runs one part alone.
 
 ``hits``: three stations (100 m apart) of the thesis's terrestrial scanner (``railway_tls``, 0.05 deg;
 ``--small``: 0.2 deg) 4 m beside a straight single track, each looking along it over a 90 x 58 deg window (2 to 60 deg
@@ -20,6 +24,7 @@ Run: python benchmarks/bench_railway_mobile.py [--small]
 """
 
 import json
+import os
 import tempfile
 import time
 from pathlib import Path
@@ -52,7 +57,10 @@ def run(overrides: list[str], out: Path) -> tuple[dict, float]:
     return manifest, time.perf_counter() - start
 
 
-def mobile(small: bool, tmp: Path) -> dict:
+DETAIL = {"path": [], "fixed": ["scene.detail.mode=fixed"]}  # detail graded along the run's path / the whole line at points_per_10m
+
+
+def mobile(small: bool, tmp: Path, detail: str = "path") -> dict:
     length, frames, profiles = (200.0, 4, 40) if small else (1000.0, 40, 200)
     speed = 25.0
     manifest, wall = run([
@@ -60,13 +68,22 @@ def mobile(small: bool, tmp: Path) -> dict:
         "scene.track.tracks=2", "scene.supports.layout=both_sides", "scene.supports.span=48", "scene.supports.span_jitter=2",
         "sensor.preset=railway_profiler", f"sensor.columns={profiles}", "sensor.rotation_deg=[0, 0, 30]",
         f"sensor.trajectory={{curve: track_centreline, speed: {speed}, height: 4.2}}", f"frames={frames}", "output.formats=[ply]",
-    ], tmp / "mobile")
+        *DETAIL[detail],
+    ], tmp / f"mobile_{detail}")
     per = manifest["frames"]
     totals = {k: sum(f["timings_s"].get(k, 0.0) for f in per) for k in ("build", "export", "scan", "write")}
     sensor_time = frames * profiles / 200.0
-    return {"scenario": "mobile", "length_m": length, "frames": frames, "rays_per_frame": profiles * 5080, "points": sum(f["points"] for f in per),
+    triangles = [f["triangles"] for f in per]
+    return {"scenario": "mobile", "detail": detail, "length_m": length, "frames": frames, "rays_per_frame": profiles * 5080,
+            "points": sum(f["points"] for f in per), "triangles_per_frame_mean": float(np.mean(triangles)), "triangles_per_frame_max": int(max(triangles)),
             "wall_s": wall, **{f"{k}_s": v for k, v in totals.items()}, "sensor_time_s": sensor_time, "realtime_factor": wall / sensor_time,
             "distance_m": speed * sensor_time}
+
+
+def compare(rows: list[dict]) -> dict:
+    """Path-following against fixed detail, measured in the same run: ratios (path / fixed)."""
+    path, fixed = (next(r for r in rows if r["detail"] == d) for d in ("path", "fixed"))
+    return {f"{k}_ratio_path_over_fixed": path[k] / fixed[k] for k in ("triangles_per_frame_mean", "wall_s", "export_s", "scan_s", "points") if fixed[k]}
 
 
 def segment_distance(points, a, b):
@@ -156,12 +173,17 @@ def chart(curves: dict, path: Path) -> None:
 def main():
     args = arguments(__doc__)
     suffix = "_small" if args.small else ""
+    parts = os.environ.get("BENCH_RAILWAY_PARTS", "mobile,hits").split(",")  # e.g. mobile: rerun the sequence alone
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        report("railway_mobile" + suffix, [mobile(args.small, tmp)], args.out)
-        rows, curves = hits(args.small, tmp)
-    report("railway_hits" + suffix, rows, args.out, {"bins_m": BINS, "models": MODELS})
-    chart(curves, args.out / f"railway_hits{suffix}.png")
+        if "mobile" in parts:
+            mobile(True, tmp / "warm_up")  # the first run pays for loading the scanner: not in either row
+            rows = [mobile(args.small, tmp, detail) for detail in DETAIL]
+            report("railway_mobile" + suffix, rows, args.out, compare(rows))
+        if "hits" in parts:
+            rows, curves = hits(args.small, tmp)
+            report("railway_hits" + suffix, rows, args.out, {"bins_m": BINS, "models": MODELS})
+            chart(curves, args.out / f"railway_hits{suffix}.png")
 
 
 if __name__ == "__main__":
