@@ -59,7 +59,7 @@ def meshes_intersect(va, ta, vb, tb, margin=0.01) -> bool:
 
 def element(name: str):
     """(kind, support or span, track or run or side) of an overhead-line object name, ``None`` for track parts."""
-    m = re.fullmatch(r"support\.(\d+)\.(mast|gantry|cantilever|registration_arm|insulators|anchor|tensioning_weight)(?:\.(\w+))?", name)
+    m = re.fullmatch(r"support\.(\d+)\.(mast|gantry|cantilever|registration_arm|steady_arm|insulators|anchor|tensioning_weight)(?:\.(\w+))?", name)
     if m:
         return m[2], int(m[1]), m[3]
     m = re.fullmatch(r"span\.(\w+)\.(\d+)\.(\w+)", name)
@@ -84,7 +84,7 @@ def joint(a, b) -> bool:
             return other is None or other.startswith("t") or other in ("right", "left")
         return ra == rb and "anchor" not in (ka, kb) and "tensioning_weight" not in (ka, kb)
     if ka in wire and kb in wire:  # wires: the same run in neighbouring spans, droppers on their own wires
-        track = lambda run: run.rstrip("bp")  # noqa: E731  (t0b: a second contact wire; t0p: the droppers above a PA)
+        track = lambda run: run.rstrip("bp")  # noqa: E731  (t0b: a second contact wire; t0p: the droppers above a PA; t0s1: tension section 1)
         if ka == kb:
             return ra == rb and abs(ia - ib) <= 1
         if "section_insulator" in (ka, kb):  # it clamps its own contact wire
@@ -96,16 +96,17 @@ def joint(a, b) -> bool:
         return False
     if kw in ("feeder", "earth_wire"):
         return kf in ("mast", "gantry") or (kf == "insulators" and who == run)
-    track = run.rstrip("bp")
-    if kf == "registration_arm":
+    track = re.sub(r"s\d+$", "", run.rstrip("bp"))  # the track whose fittings carry every tension section's wires
+    if kf in ("registration_arm", "steady_arm"):
         return kw == "contact_wire" and who == track
     if kf in ("cantilever", "insulators"):
         return kw == "messenger_wire" and who == track
     return False
 
 
-@pytest.mark.parametrize("layout,tracks", CASES)
-def test_no_two_elements_intersect(layout, tracks):
+def clashes(overrides: list[str]) -> list[tuple[str, str]]:
+    """The pairs of overhead-line objects of the railway built from ``overrides`` that pass through each other
+    without being a joint."""
     import bpy
 
     from bpy_pipeline.export import export_scene
@@ -114,12 +115,7 @@ def test_no_two_elements_intersect(layout, tracks):
     from bpy_pipeline.scenes import build_scene
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
-    curve = "[0, 3, 0]" if tracks % 2 else "[0, 0, 0]"  # odd track counts on a 260 m curve (pulled-off wires)
-    config = load_config(None, [f"scene.supports.layout={layout}", f"scene.track.tracks={tracks}", "scene.track.start=[-55, 0, 0]",
-                                f"scene.track.mid={curve}", "scene.track.end=[55, 0, 0]", "scene.detail.mode=fixed", "scene.catenary.points_per_10m=10",
-                                "scene.catenary.double_contact_probability=0.5", "scene.supports.mast_type=mixed",
-                                f"scene.catenary.auxiliary_messenger={str(AUXILIARY.get(tracks, False)).lower()}",
-                                "scene.catenary.anchors=true", "scene.catenary.section_insulator_every=2"])
+    config = load_config(None, ["scene.detail.mode=fixed", "scene.catenary.points_per_10m=10", "scene.supports.mast_type=mixed", *overrides])
     build_scene(config.scene, frame_rng(3, 0), None)
     buffers = export_scene(load_class_table())
     objects, bounds = {}, {}
@@ -132,15 +128,43 @@ def test_no_two_elements_intersect(layout, tracks):
         bounds[name] = (buffers.vertices[tri].reshape(-1, 3).min(0), buffers.vertices[tri].reshape(-1, 3).max(0))
     names = sorted(objects)
     assert any(".registration_arm." in n for n in names) and any(".contact_wire" in n for n in names)
-    clashes = []
+    out = []
     for i, a in enumerate(names):
         for b in names[i + 1:]:
             (ka, va, ta), (kb, vb, tb) = objects[a], objects[b]
             if (bounds[a][0] > bounds[b][1] + 0.01).any() or (bounds[b][0] > bounds[a][1] + 0.01).any():
                 continue
             if not joint(ka, kb) and meshes_intersect(va, ta, vb, tb):
-                clashes.append((a, b))
-    assert not clashes, clashes[:10]
+                out.append((a, b))
+    return out
+
+
+@pytest.mark.parametrize("layout,tracks", CASES)
+def test_no_two_elements_intersect(layout, tracks):
+    curve = "[0, 3, 0]" if tracks % 2 else "[0, 0, 0]"  # odd track counts on a 260 m curve (pulled-off wires)
+    found = clashes([f"scene.supports.layout={layout}", f"scene.track.tracks={tracks}", "scene.track.start=[-55, 0, 0]",
+                     f"scene.track.mid={curve}", "scene.track.end=[55, 0, 0]", "scene.catenary.double_contact_probability=0.5",
+                     f"scene.catenary.auxiliary_messenger={str(AUXILIARY.get(tracks, False)).lower()}",
+                     "scene.catenary.anchors=true", "scene.catenary.section_insulator_every=2"])
+    assert not found, found[:10]
+
+
+@pytest.mark.parametrize("layout,tracks", CASES)
+def test_overlaps_and_steady_arms_stay_clear(layout, tracks):
+    # 200 m, 40 m spans, tension sections of 80 m: an overlap over span 2 (two runs side by side, the ending one
+    # rising 0.5 m to its anchor at support 3, the starting one anchored at support 2), steady arms apart
+    curve = "[0, 6, 0]" if tracks % 2 else "[0, 0, 0]"
+    overrides = [f"scene.supports.layout={layout}", f"scene.track.tracks={tracks}", "scene.track.start=[-100, 0, 0]", f"scene.track.mid={curve}",
+                 "scene.track.end=[100, 0, 0]", "scene.supports.span=40", "scene.supports.span_jitter=1", "scene.catenary.tension_length=80",
+                 "scene.catenary.steady_arms=true", "scene.catenary.double_contact_probability=0.5",
+                 f"scene.catenary.auxiliary_messenger={str(AUXILIARY.get(tracks, False)).lower()}"]
+    import bpy
+
+    found = clashes(overrides)
+    names = {o.name for o in bpy.data.objects}
+    assert {f"span.t0.02.contact_wire", f"span.t0s1.02.contact_wire", "span.t0s1.03.contact_wire"} <= names
+    assert any(".steady_arm." in n for n in names) and (layout == "gantry" or any(n.startswith("support.03.anchor.") for n in names))
+    assert not found, found[:10]
 
 
 def test_registration_arms_are_about_a_metre_long():

@@ -66,3 +66,33 @@ def test_the_writer_refuses_another_builder():
 
     with pytest.raises(InputError, match="railway_layout"):
         load_config(None, ["output.formats=[railway_layout]", "scene.builder=primitives"])
+
+
+def test_overlap_runs_and_steady_arms_are_where_the_layout_says(tmp_path):
+    import bpy
+
+    from bpy_pipeline.io import read_ply
+    from bpy_pipeline.pipeline import run
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    # 200 m, 40 m spans, tension sections of 80 m: one overlap over span 2, scanned from beside it
+    config = load_config(None, ["output.formats=[ply,railway_layout]", "output.preview=false", "output.frame=world", "frames=1",
+                                "scene.track.start=[-100, 0, 0]", "scene.track.mid=[0, 0, 0]", "scene.track.end=[100, 0, 0]",
+                                "scene.supports.span=40", "scene.supports.span_jitter=0", "scene.catenary.tension_length=80",
+                                "scene.catenary.steady_arms=true", "scene.stations.chainages=[100]", "sensor.preset=railway_tls",
+                                "sensor.sampling_factor=0.25", "effects.ideal=true"])
+    manifest = run(config, tmp_path, log=lambda *_: None)
+    truth = json.loads((tmp_path / "railway_layout" / "000000.json").read_text())
+    assert truth["overlaps"] == [{"span": 2, "track": 0, "ending": "t0", "starting": "t0s1"}]
+    points = read_ply(tmp_path / "ply" / "000000.ply")
+    objects = {o["name"]: o["instance"] for o in manifest["frames"][0]["objects"]}
+    xyz = lambda p: np.column_stack([p["x"], p["y"], p["z"]]).astype(float)  # noqa: E731
+    for wire in truth["wires"]:
+        if wire["span"] != 2 or wire["kind"] not in ("contact_wire", "messenger_wire"):
+            continue
+        hit = points[points["instance"] == objects[f"span.{wire['run']}.02.{wire['kind']}"]]
+        assert len(hit) >= 20, wire["run"]  # both runs of the overlap are scanned, each where its polyline runs
+        assert np.percentile(segment_distance(xyz(hit), np.array(wire["polyline"])), 99) < 0.015 + 0.006, (wire["run"], wire["kind"])
+    steady = [o for o in manifest["frames"][0]["objects"] if ".steady_arm." in o["name"]]
+    assert steady and all(o["class"] == "steady arm" for o in steady)
+    assert np.isin([o["instance"] for o in steady], points["instance"]).any()

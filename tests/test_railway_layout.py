@@ -180,3 +180,56 @@ def test_an_auxiliary_messenger_hangs_between_and_splits_the_droppers():
         np.testing.assert_allclose(d.lower[:, 2], [w for w in aux if w.span == d.span][0].z_at(d.t))
     with pytest.raises(InputError, match="auxiliary_messenger_height"):
         load_config(None, ["scene.catenary.auxiliary_messenger=true", "scene.catenary.auxiliary_messenger_height=1.35"])
+
+
+def test_tension_sections_overlap_over_one_span_with_the_ending_run_rising():
+    from bpy_pipeline.io.railway_layout import layout_record
+
+    p = params("scene.track.start=[0, 0, 0]", "scene.track.mid=[200, 0, 0]", "scene.track.end=[400, 0, 0]", "scene.supports.span=40",
+               "scene.supports.span_jitter=0", "scene.catenary.tension_length=150", "scene.track.tracks=2", "scene.supports.layout=both_sides")
+    layout = plan(p, np.random.default_rng(0))
+    cat = p.catenary
+    assert [(o.span, o.track, o.ending, o.starting) for o in layout.overlaps] == [(3, 0, "t0", "t0s1"), (3, 1, "t1", "t1s1"), (7, 0, "t0s1", "t0s2"), (7, 1, "t1s1", "t1s2")]
+    wires = {(w.run, w.span, w.kind): w for w in layout.wires}
+    for o in layout.overlaps:
+        ending, starting = wires[(o.ending, o.span, "contact_wire")], wires[(o.starting, o.span, "contact_wire")]
+        # side by side, overlap_spacing apart at both supports; the ending run rises at the far one, the starting one at the near one
+        assert np.linalg.norm((ending.start - starting.start)[:2]) == pytest.approx(cat.overlap_spacing)
+        assert np.linalg.norm((ending.end - starting.end)[:2]) == pytest.approx(cat.overlap_spacing)
+        assert ending.end[2] - ending.start[2] == pytest.approx(cat.overlap_rise) and starting.start[2] - starting.end[2] == pytest.approx(cat.overlap_rise)
+        # in service where they meet the spans beside: the ending run continues its previous span, the starting run its next
+        assert np.allclose(wires[(o.ending, o.span - 1, "contact_wire")].end, ending.start)
+        assert np.allclose(wires[(o.starting, o.span + 1, "contact_wire")].start, starting.end)
+        messenger = wires[(o.starting, o.span, "messenger_wire")]
+        assert messenger.start[2] - starting.start[2] == pytest.approx(cat.system_height)  # the whole run rises: its droppers keep their lengths
+        both = [d for d in layout.droppers if d.span == o.span and d.run in (o.ending, o.starting)]
+        assert len(both) == 2 and all(len(d.t) for d in both)
+    record = layout_record(layout, p)
+    lengths = {(w["run"], w["kind"]): w["tension_length"] for w in record["wires"] if w["kind"] == "contact_wire"}
+    spans = layout.spans
+    assert lengths[("t0", "contact_wire")] == pytest.approx(spans[:4].sum(), abs=0.05)  # first support to the end of its overlap span (stagger: a few mm more)
+    assert lengths[("t0s1", "contact_wire")] == pytest.approx(spans[3:8].sum(), abs=0.05)  # overlap to overlap
+    assert record["overlaps"][0] == {"span": 3, "track": 0, "ending": "t0", "starting": "t0s1"}
+    assert plan(params(), np.random.default_rng(0)).overlaps == ()  # off by default
+
+
+def test_a_steady_arm_is_a_part_apart_at_the_end_of_the_registration_arm():
+    from bpy_pipeline.geometry import railway_parts
+
+    whole = railway_parts.cantilever(-3.05, 0.2, 6.2, 7.6, 0.3, arm_length=1.2)
+    split = railway_parts.cantilever(-3.05, 0.2, 6.2, 7.6, 0.3, arm_length=1.2, steady_arm=0.5)
+    assert "steady arm" not in whole and "steady arm" in split
+    arm, steady = split["registration arm"][0], split["steady arm"][0]
+    assert arm[:, 1].max() == pytest.approx(0.2 - 0.5, abs=0.03)  # the registration arm stops at the hinge, 0.5 m short of the wire
+    assert steady[:, 1].min() == pytest.approx(0.2 - 0.5, abs=0.03) and steady[:, 1].max() == pytest.approx(0.2, abs=0.05)
+    assert steady[:, 2].min() == pytest.approx(6.2 - 0.015, abs=0.005)  # its clamp sits on the contact wire
+    assert whole["registration arm"][0][:, 1].max() == pytest.approx(0.2, abs=0.03)
+
+
+def test_overlap_and_steady_arm_settings_are_checked():
+    with pytest.raises(InputError, match="catenary.overlap_spacing"):
+        params("scene.catenary.overlap_spacing=2")
+    with pytest.raises(InputError, match="catenary.tension_length"):
+        params("scene.catenary.tension_length=-1")
+    with pytest.raises(InputError, match="catenary.steady_arm_length"):
+        params("scene.catenary.steady_arms=true", "scene.catenary.steady_arm_length=1.5")

@@ -119,6 +119,11 @@ class RailwayCatenary:
     auxiliary_messenger_height: float = 0.3  # m above the contact wire at the supports (assumed)
     auxiliary_messenger_sag: float = 0.1  # at the reference length (assumed: between the contact wire's and the messenger's)
     auxiliary_messenger_diameter: float = 0.0105  # m (assumed: a 65 mm^2 bronze wire)
+    steady_arms: bool = False  # the registration arm ends in a steady arm, a part apart (class steady arm), hinged steady_arm_length from the wire
+    steady_arm_length: float = 0.5  # m, horizontal reach of the steady arm (part of registration_arm_length)
+    tension_length: float = 0.0  # m: tension sections about this long, overlapping over one span at each end (0: one section for the line)
+    overlap_spacing: float = 0.2  # m between the two wire runs side by side over an overlap span
+    overlap_rise: float = 0.5  # m the run out of service rises over the overlap span towards its anchor
 
 
 @dataclass(frozen=True)
@@ -201,6 +206,15 @@ def check(params: RailwayScene, where: str) -> None:
         raise InputError(f"{where}.trackside.fence_offset: a fence must stand beyond the masts ({params.supports.mast_offset + 0.5} m), got {side.fence_offset}")
     if params.catenary.section_insulator_every < 0:
         raise InputError(f"{where}.catenary.section_insulator_every: must be >= 0 (0: none), got {params.catenary.section_insulator_every}")
+    cat = params.catenary
+    if cat.tension_length < 0:
+        raise InputError(f"{where}.catenary.tension_length: must be >= 0 m (0: one tension section for the whole line), got {cat.tension_length}")
+    if not 0 < cat.overlap_spacing < params.track.track_spacing / 4:
+        raise InputError(f"{where}.catenary.overlap_spacing: must lie in (0, {params.track.track_spacing / 4:g}) m (a quarter of the track spacing), got {cat.overlap_spacing}")
+    if not 0 < cat.overlap_rise <= 1.0:
+        raise InputError(f"{where}.catenary.overlap_rise: must lie in (0, 1] m, got {cat.overlap_rise}")
+    if cat.steady_arms and not 0.2 <= cat.steady_arm_length <= cat.registration_arm_length - 0.2:
+        raise InputError(f"{where}.catenary.steady_arm_length: must lie in [0.2, registration_arm_length - 0.2 = {cat.registration_arm_length - 0.2:g}] m, got {cat.steady_arm_length}")
     if params.reroll_every < 0:
         raise InputError(f"{where}.reroll_every: must be >= 0 (0: one railway per run; k: a new railway every k frames), got {params.reroll_every}")
     check_railway(params, where)

@@ -211,8 +211,21 @@ class Droppers:
 
 
 @dataclass(frozen=True)
+class Overlap:
+    """Where two tension sections of a track's catenary overlap: over span ``span`` (supports ``span`` and
+    ``span + 1``) the ``ending`` run rises out of service towards its anchor at the far support while the
+    ``starting`` run, beside it, comes down from its anchor at the near support into service."""
+
+    span: int
+    track: int
+    ending: str
+    starting: str
+
+
+@dataclass(frozen=True)
 class RailwayLayout:
-    """Everything :func:`plan` places. ``double_contact`` (tracks,) bool: which tracks carry two contact wires."""
+    """Everything :func:`plan` places. ``double_contact`` (tracks,) bool: which tracks carry two contact wires.
+    ``overlaps``: the tension-section overlaps (``catenary.tension_length``), none by default."""
 
     alignment: Alignment
     section: CrossSection
@@ -221,6 +234,7 @@ class RailwayLayout:
     wires: list[Wire]
     droppers: list[Droppers]
     double_contact: np.ndarray
+    overlaps: tuple = ()
 
     @property
     def spans(self) -> np.ndarray:
@@ -308,6 +322,25 @@ def staggers(alignment: Alignment, chainages: np.ndarray, stagger: float) -> np.
     return stagger * outward
 
 
+def overlap_spans(chainages: np.ndarray, tension_length: float) -> list[int]:
+    """Spans (index k: supports k and k + 1) where one tension section hands over to the next: the span
+    holding each multiple of ``tension_length`` (m) from the first support, never the first or last span,
+    at least two spans apart; none for ``tension_length`` 0."""
+    if tension_length <= 0 or len(chainages) < 4:
+        return []
+    out = []
+    for m in range(1, int((chainages[-1] - chainages[0]) / tension_length) + 1):
+        k = int(np.searchsorted(chainages, chainages[0] + m * tension_length, side="right")) - 1
+        if 1 <= k <= len(chainages) - 3 and (not out or k >= out[-1] + 2):
+            out.append(k)
+    return out
+
+
+def run_name(track: int, section: int, second: bool = False) -> str:
+    """A contact-line run: ``t<i>`` (track i's first tension section), ``t<i>s<m>`` (its section m), + ``b`` for its second contact wire."""
+    return f"t{track}" + (f"s{section}" if section else "") + ("b" if second else "")
+
+
 def plan(params, rng: np.random.Generator) -> RailwayLayout:
     """Place supports, wires and droppers for a ``RailwayScene`` config, drawing only from ``rng``.
 
@@ -339,32 +372,48 @@ def plan(params, rng: np.random.Generator) -> RailwayLayout:
         return frame[:3, :3] @ np.array([0.0, lateral, z]) + frame[:3, 3]
 
     wires, droppers = [], []
+    handovers = overlap_spans(chainages, cat.tension_length) if cat.enabled else []
+    overlaps = []
+
+    def run_span(i, sec, k, a, b, lateral_a, lateral_b, rise_a, rise_b):
+        """One tension section's wires and droppers of track ``i`` over span ``k``; ``rise_*`` lift an end out of service."""
+        base = run_name(i, sec)
+        messenger = _wire("messenger_wire", base, k, world(a.frame, lateral_a, messenger_z + rise_a), world(b.frame, lateral_b, messenger_z + rise_b), cat)
+        wires.append(messenger)
+        auxiliary = None
+        if cat.auxiliary_messenger:  # PA: the droppers hang the contact wire from it, and it from the messenger
+            aux_z = contact_z + cat.auxiliary_messenger_height
+            auxiliary = _wire("auxiliary_messenger", base, k, world(a.frame, lateral_a, aux_z + rise_a), world(b.frame, lateral_b, aux_z + rise_b), cat)
+            wires.append(auxiliary)
+        halves = (-cat.double_contact_spacing / 2, cat.double_contact_spacing / 2) if double[i] else (0.0,)
+        shifts = (-0.25, 0.25) if double[i] else (0.0,)
+        for j, (half, shift) in enumerate(zip(halves, shifts)):
+            run = run_name(i, sec, bool(j))
+            contact = _wire("contact_wire", run, k, world(a.frame, lateral_a + half, contact_z + rise_a), world(b.frame, lateral_b + half, contact_z + rise_b), cat)
+            wires.append(contact)
+            t = catenary.dropper_positions(contact.length, cat.dropper_spacing, cat.dropper_jitter, rng, shift)
+            if cat.section_insulator_every > 0 and (k + 1) % cat.section_insulator_every == 0:  # a section insulator at mid-span
+                t = t[np.abs(t - 0.5) * contact.length >= SECTION_INSULATOR_CLEARANCE]
+            above = messenger if auxiliary is None else auxiliary
+            droppers.append(Droppers(run, k, t, contact.points_at(t), above.points_at(t), cat.dropper_diameter))
+            if auxiliary is not None and j == 0:  # the upper tier, from the auxiliary messenger to the messenger, a quarter spacing on (clear of a second contact wire's droppers)
+                up = np.clip(t + 0.25 * cat.dropper_spacing / max(contact.length, 1e-9), 0.02, 0.98)
+                droppers.append(Droppers(base + "p", k, up, auxiliary.points_at(up), messenger.points_at(up), cat.dropper_diameter))
+
     for k in range(len(supports) - 1):
         a, b = supports[k], supports[k + 1]
         if cat.enabled:
+            sec = sum(1 for h in handovers if h < k)  # the tension section in service over span k
             for i, c in enumerate(section.offsets):
                 lateral_a, lateral_b = c + a.stagger, c + b.stagger
-                messenger = _wire("messenger_wire", f"t{i}", k, world(a.frame, lateral_a, messenger_z), world(b.frame, lateral_b, messenger_z), cat)
-                wires.append(messenger)
-                auxiliary = None
-                if cat.auxiliary_messenger:  # PA: the droppers hang the contact wire from it, and it from the messenger
-                    aux_z = contact_z + cat.auxiliary_messenger_height
-                    auxiliary = _wire("auxiliary_messenger", f"t{i}", k, world(a.frame, lateral_a, aux_z), world(b.frame, lateral_b, aux_z), cat)
-                    wires.append(auxiliary)
-                halves = (-cat.double_contact_spacing / 2, cat.double_contact_spacing / 2) if double[i] else (0.0,)
-                shifts = (-0.25, 0.25) if double[i] else (0.0,)
-                for j, (half, shift) in enumerate(zip(halves, shifts)):
-                    run = f"t{i}" + ("b" if j else "")
-                    contact = _wire("contact_wire", run, k, world(a.frame, lateral_a + half, contact_z), world(b.frame, lateral_b + half, contact_z), cat)
-                    wires.append(contact)
-                    t = catenary.dropper_positions(contact.length, cat.dropper_spacing, cat.dropper_jitter, rng, shift)
-                    if cat.section_insulator_every > 0 and (k + 1) % cat.section_insulator_every == 0:  # a section insulator at mid-span
-                        t = t[np.abs(t - 0.5) * contact.length >= SECTION_INSULATOR_CLEARANCE]
-                    above = messenger if auxiliary is None else auxiliary
-                    droppers.append(Droppers(run, k, t, contact.points_at(t), above.points_at(t), cat.dropper_diameter))
-                    if auxiliary is not None and j == 0:  # the upper tier, from the auxiliary messenger to the messenger, a quarter spacing on (clear of a second contact wire's droppers)
-                        up = np.clip(t + 0.25 * cat.dropper_spacing / max(contact.length, 1e-9), 0.02, 0.98)
-                        droppers.append(Droppers(f"t{i}p", k, up, auxiliary.points_at(up), messenger.points_at(up), cat.dropper_diameter))
+                if k not in handovers:
+                    run_span(i, sec, k, a, b, lateral_a, lateral_b, 0.0, 0.0)
+                else:  # the ending run rises beside the starting one, which comes down into service
+                    root = next(p.root_y for p in cantilevers(a, section, cat, track.track_spacing) if p.track == i)
+                    toward = float(np.sign(root - lateral_a)) or -1.0  # the starting run hangs on the root's side of the wire at the near support
+                    run_span(i, sec, k, a, b, lateral_a, lateral_b - toward * cat.overlap_spacing, 0.0, cat.overlap_rise)
+                    run_span(i, sec + 1, k, a, b, lateral_a + toward * cat.overlap_spacing, lateral_b, cat.overlap_rise, 0.0)
+                    overlaps.append(Overlap(k, i, run_name(i, sec), run_name(i, sec + 1)))
         for side in ("right", "left"):
             mast_a = next((m for m in a.masts if m.side == side), None)
             mast_b = next((m for m in b.masts if m.side == side), None)
@@ -374,7 +423,7 @@ def plan(params, rng: np.random.Generator) -> RailwayLayout:
                 if enabled:
                     ends = [world(s.frame, m.lateral + m.outward * out, m.top + down) for s, m in ((a, mast_a), (b, mast_b))]
                     wires.append(_wire(kind, side, k, *ends, cat))
-    return RailwayLayout(alignment, section, layout, supports, wires, droppers, double)
+    return RailwayLayout(alignment, section, layout, supports, wires, droppers, double, tuple(overlaps))
 
 
 WIRE_CLASSES = {"contact_wire": "contact wire", "messenger_wire": "messenger wire", "feeder": "feeder wire", "earth_wire": "earth wire",

@@ -87,8 +87,12 @@ TUBE = 0.025  # m, radius of cantilever tubes
 ARM = 0.02  # m, radius of registration arms
 
 
+STEADY_ARM = 0.012  # m, radius of steady arms
+CLAMP = (0.08, 0.03)  # m: length along the wire and half height of a steady arm's contact-wire clamp
+
+
 def cantilever(root_y: float, attach_y: float, contact_z: float, messenger_z: float, stay_rise: float, drop_from: float | None = None,
-               arm_length: float = 1.2, arm_rise: float = 0.2):
+               arm_length: float = 1.2, arm_rise: float = 0.2, steady_arm: float = 0.0):
     """The cantilever carrying one track's wires, its registration arm and its insulators, in the support frame.
 
     root_y : lateral (m) of the cantilever's root: a mast's face, or a drop tube under a beam
@@ -98,7 +102,10 @@ def cantilever(root_y: float, attach_y: float, contact_z: float, messenger_z: fl
     arm_length : horizontal reach (m) of the registration arm from its root to the contact wire;
         at most 0.6 of |attach_y - root_y| keeps the main tube above the arm
     arm_rise : height (m) of the arm's root above the contact wire
-    Returns ``{"cantilever": mesh, "registration arm": mesh, "insulator": mesh}``.
+    steady_arm : horizontal reach (m) of a steady arm apart from the registration arm (0: none): the
+        registration arm stops at a hinge that far from the wire, and a thinner steady arm runs from the
+        hinge down to a clamp on the contact wire (``"steady arm"`` in the result)
+    Returns ``{"cantilever": mesh, "registration arm": mesh, "insulator": mesh}`` (and ``"steady arm"``).
     A stay tube runs level at ``messenger_z + stay_rise`` from the root to above the wires, a main
     tube rises to it from below the contact wire, a hanger drops to the messenger; a registration
     tube hangs from the main tube to the arm's root, and the arm runs from there down to the contact wire.
@@ -116,14 +123,22 @@ def cantilever(root_y: float, attach_y: float, contact_z: float, messenger_z: fl
     u = (arm_root_y - root_y) / (attach_y - root_y)
     on_main = (0.0, arm_root_y, low_z + u * (stay_z - low_z))
     parts.append(tube(on_main, arm_root, TUBE * 0.8))  # the registration tube
-    arm = tube(arm_root, (0.0, attach_y, contact_z), ARM)
+    wire = np.array([0.0, attach_y, contact_z])
+    pieces = {}
+    if steady_arm > 0:
+        hinge = wire + (np.asarray(arm_root, float) - wire) * (steady_arm / arm_length)
+        arm = tube(arm_root, hinge, ARM)
+        clamp = primitives.translated(primitives.box(CLAMP[0], 2 * STEADY_ARM, 2 * CLAMP[1]), tuple(wire + (0.0, 0.0, CLAMP[1] * 0.5)))
+        pieces["steady arm"] = primitives.merge([tube(hinge, wire + (0.0, 0.0, CLAMP[1]), STEADY_ARM), clamp])
+    else:
+        arm = tube(arm_root, (0.0, attach_y, contact_z), ARM)
     insulators = []
     for a, b in (stay, main):
         a, b = np.asarray(a, float), np.asarray(b, float)
         direction = (b - a) / np.linalg.norm(b - a)
         insulators.append(insulator(a + 0.1 * direction, a + 0.5 * direction))
     insulators = primitives.merge(insulators)
-    return {"cantilever": primitives.merge(parts), "registration arm": arm, "insulator": insulators}
+    return {"cantilever": primitives.merge(parts), "registration arm": arm, "insulator": insulators} | pieces
 
 
 def gantry(left_y: float, right_y: float, base_left: float, base_right: float, top: float, kind: str):

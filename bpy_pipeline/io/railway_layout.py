@@ -12,10 +12,12 @@ For parameter-extraction models (support positions, wire geometry) beside the la
      "wires": [{"class", "kind", "run", "span", "start", "end", "sag", "length", "tension_length",
                 "polyline": [[x, y, z], ...]}],  # every <= 1 m along the sag parabola
      "droppers": [{"run", "span", "lower": [[x, y, z]...], "upper": [...]}],
+     "overlaps": [{"span", "track", "ending", "starting"}],   # runs handing over (catenary.tension_length)
      "signals": [{"base": [x, y, z], "height"}]}   # with scene.trackside.signal_spacing
 
-``tension_length`` is the length of the wire's run from its first support to its last (the line has
-no anchors in between). The layout is the one the frame's scene was built from: :func:`plan` is
+``tension_length`` is the length of the wire's run from its first support to its last: the whole line,
+or its tension section (run ``t<i>s<m>``) with ``catenary.tension_length``. With ``catenary.steady_arms``
+each cantilever also gives its ``steady_arm_length``. The layout is the one the frame's scene was built from: :func:`plan` is
 pure and draws first from the generator of the frame that built the scene, so every frame of a run
 (one railway per run) gets it, whichever frame range a process writes.
 """
@@ -52,6 +54,7 @@ def layout_record(layout, params) -> dict:
         world = lambda y, z: frame[:3, :3] @ np.array([0.0, y, z]) + frame[:3, 3]  # noqa: E731
         masts = [{"side": m.side, "kind": m.kind, "base": _xyz(world(m.lateral, m.base)), "height": round(m.top - m.base, 5)} for m in support.masts]
         arms = [{"track": c.track, "attach": _xyz(world(c.attach_y, contact_z)), "arm_length": round(c.arm_length, 5)}
+                | ({"steady_arm_length": round(min(cat.steady_arm_length, c.arm_length - 0.2), 5)} if cat.steady_arms else {})
                 for c in cantilevers(support, section, cat, params.track.track_spacing, None)]
         supports.append({"index": support.index, "chainage": round(support.chainage, 5), "type": "gantry" if support.gantry else "mast",
                          "stagger": round(support.stagger, 5), "masts": masts, "cantilevers": arms})
@@ -73,6 +76,7 @@ def layout_record(layout, params) -> dict:
         "supports": supports,
         "wires": wires,
         "droppers": droppers,
+        "overlaps": [{"span": o.span, "track": o.track, "ending": o.ending, "starting": o.starting} for o in layout.overlaps],
     }
 
 

@@ -7,12 +7,14 @@ The layout (alignment, supports, spans, wires, droppers, stations) comes from th
   the "Track" Geometry Nodes group follows it, and a trajectory can follow it too
   (``sensor.trajectory.curve: track_centreline``; the rail heads are ``rail_top_height`` above it);
 - one object per track part, each running the "Track" group (:mod:`.railway_nodes`) with its
-  ``Part``: ``rails.t<i>`` and ``sleepers.t<i>`` per track, ``ballast``, ``ballast_stones.s<k>`` (around station k),
+  ``Part``: ``rails.t<i>`` and ``sleepers.t<i>`` per track, ``ballast``, ``ballast_stones.s<k>`` (around station k, or stretch k of a moving sensor's path),
   ``embankment``, ``ground``;
 - per support ``support.<k>.mast.<side>`` (or ``support.<k>.gantry``), and per track it carries
-  ``support.<k>.cantilever.t<i>``, ``support.<k>.registration_arm.t<i>``, ``support.<k>.insulators.t<i>``,
+  ``support.<k>.cantilever.t<i>``, ``support.<k>.registration_arm.t<i>``, ``support.<k>.insulators.t<i>``
+  (``support.<k>.steady_arm.t<i>`` with ``catenary.steady_arms``), anchors and weights at the line's ends
+  and at the two supports of every tension-section overlap (``support.<k>.anchor.<side>``),
   and ``support.<k>.insulators.<side>`` (the feeder's);
-- per span and run ``span.<run>.<k>.<wire>`` (contact_wire, messenger_wire, feeder, earth_wire)
+- per span and run (``t<i>``; ``t<i>s<m>`` for tension section m) ``span.<run>.<k>.<wire>`` (contact_wire, messenger_wire, feeder, earth_wire)
   and ``span.<run>.<k>.droppers``: wires are bevelled curves of their real diameters, so every
   element has its class and an instance per span.
 
@@ -43,7 +45,7 @@ PATH_TOLERANCE = 0.01  # m: the centreline a planned path follows, sampled this 
 STONE_CENTRES = "track_stone_centres"
 REFLECTIVITY = {
     "rail": 0.6, "sleeper": 0.4, "ballast": 0.35, "ground": 0.3, "mast": 0.5, "gantry": 0.5, "cantilever": 0.5,
-    "registration arm": 0.5, "insulator": 0.4, "contact wire": 0.7, "messenger wire": 0.7, "dropper": 0.6,
+    "registration arm": 0.5, "steady arm": 0.5, "insulator": 0.4, "contact wire": 0.7, "messenger wire": 0.7, "dropper": 0.6,
     "feeder wire": 0.6, "earth wire": 0.6, "auxiliary messenger": 0.7, "anchor": 0.5, "tensioning weight": 0.3, "section insulator": 0.4, "fence": 0.4, "signal": 0.5, "platform": 0.35, "vegetation": 0.45,
 }
 
@@ -184,20 +186,26 @@ def _supports(params, layout: RailwayLayout, detail, collection) -> None:
                 _placed(f"{label}.insulators.{mast.side}", feeder, frame, "insulator", collection)
         for plan_ in cantilevers(support, section, cat, params.track.track_spacing, beam_underside):
             i = plan_.track
-            pieces = railway_parts.cantilever(plan_.root_y, plan_.attach_y, contact_z, messenger_z, STAY_RISE, plan_.drop_from, plan_.arm_length, ARM_RISE)
+            steady = min(cat.steady_arm_length, plan_.arm_length - 0.2) if cat.steady_arms else 0.0
+            pieces = railway_parts.cantilever(plan_.root_y, plan_.attach_y, contact_z, messenger_z, STAY_RISE, plan_.drop_from, plan_.arm_length, ARM_RISE, steady)
             if plan_.beam is not None:  # a mast's beam out to the drop tube of a farther track
                 y0, y1, z = plan_.beam
                 pieces["cantilever"] = merge([pieces["cantilever"], railway_parts.tube((0.0, y0, z), (0.0, y1 + np.sign(y1 - y0) * BEAM_RADIUS, z), BEAM_RADIUS)])
             _placed(f"{label}.cantilever.t{i}", pieces["cantilever"], frame, "cantilever", collection)
             _placed(f"{label}.registration_arm.t{i}", pieces["registration arm"], frame, "registration arm", collection)
             _placed(f"{label}.insulators.t{i}", pieces["insulator"], frame, "insulator", collection)
+            if "steady arm" in pieces:
+                _placed(f"{label}.steady_arm.t{i}", pieces["steady arm"], frame, "steady arm", collection)
 
 
 def _anchors_and_sections(params, layout: RailwayLayout, detail, collection) -> None:
     """Tensioning weights at the end masts (``catenary.anchors``) and section insulators on the contact wires."""
     cat = params.catenary
-    if cat.anchors and len(layout.supports) > 1:
-        for k, behind in ((0, -0.6), (len(layout.supports) - 1, 0.6)):
+    ends = [(0, -0.6), (len(layout.supports) - 1, 0.6)] if cat.anchors and len(layout.supports) > 1 else []
+    for span in sorted({o.span for o in layout.overlaps}):  # an overlap's runs are anchored at its two supports, each behind its own run
+        ends += [(span, -0.6), (span + 1, 0.6)]
+    if ends:
+        for k, behind in ends:
             support = layout.supports[k]
             if k not in detail.supports or support.gantry:
                 continue
