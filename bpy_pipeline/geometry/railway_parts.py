@@ -172,6 +172,21 @@ def tensioning_weight(mast_y: float, behind: float, top: float):
     return {"anchor": primitives.merge([bracket, pulley, hanger, rope]), "tensioning weight": stack}
 
 
+ROPE = 0.008  # m, radius of an anchor rope
+
+
+def anchor_ropes(ends, target):
+    """Ropes from each of the wire ends ``ends`` ((n, 3), m) to ``target`` ((3,), an anchor's pulley): where a
+    tension section's run leaves service and is pulled off to its anchor."""
+    target = np.asarray(target, float)
+    return primitives.merge([tube(np.asarray(end, float), target, ROPE, 6) for end in np.asarray(ends, float).reshape(-1, 3)])
+
+
+def pulley_top(mast_y: float, behind: float, top: float) -> tuple[float, float, float]:
+    """Where a rope leaves the pulley of :func:`tensioning_weight` towards the line (its rim's top), support frame (m)."""
+    return (behind, mast_y, top - 0.6 + 0.25)
+
+
 def section_insulator(length: float = 1.8):
     """A section insulator around a contact wire, centred on the origin along x: two runners and a body (m)."""
     body = primitives.box(length * 0.5, 0.12, 0.08)

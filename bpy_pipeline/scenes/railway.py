@@ -201,19 +201,31 @@ def _supports(params, layout: RailwayLayout, detail, collection) -> None:
 def _anchors_and_sections(params, layout: RailwayLayout, detail, collection) -> None:
     """Tensioning weights at the end masts (``catenary.anchors``) and section insulators on the contact wires."""
     cat = params.catenary
-    ends = [(0, -0.6), (len(layout.supports) - 1, 0.6)] if cat.anchors and len(layout.supports) > 1 else []
-    for span in sorted({o.span for o in layout.overlaps}):  # an overlap's runs are anchored at its two supports, each behind its own run
-        ends += [(span, -0.6), (span + 1, 0.6)]
-    if ends:
-        for k, behind in ends:
-            support = layout.supports[k]
-            if k not in detail.supports or support.gantry:
+    anchors: dict[tuple[int, str], tuple[float, list]] = {}  # (support, mast side) -> (behind, wire ends roped to it, world)
+    if cat.anchors and len(layout.supports) > 1:
+        for k, behind in ((0, -0.6), (len(layout.supports) - 1, 0.6)):
+            for mast in layout.supports[k].masts:
+                anchors[(k, mast.side)] = (behind, [])
+    for overlap in layout.overlaps:  # the starting run is pulled off to an anchor at the near support, the ending run at the far one
+        for k, run, behind, end in ((overlap.span, overlap.starting, -0.6, "start"), (overlap.span + 1, overlap.ending, 0.6, "end")):
+            mast = next((m for m in layout.supports[k].masts if overlap.track in m.tracks), None)
+            if mast is None:
                 continue
-            for mast in support.masts:
-                pieces = railway_parts.tensioning_weight(mast.lateral, behind, mast.top)
-                frame = np.asarray(support.frame, float)
-                _placed(f"support.{k:02d}.anchor.{mast.side}", pieces["anchor"], frame, "anchor", collection)
-                _placed(f"support.{k:02d}.tensioning_weight.{mast.side}", pieces["tensioning weight"], frame, "tensioning weight", collection)
+            ends = [getattr(w, end) for w in layout.wires if w.span == overlap.span and w.run in (run, run + "b")]
+            anchors.setdefault((k, mast.side), (behind, []))[1].extend(ends)
+    for (k, side), (behind, ends) in sorted(anchors.items()):
+        support = layout.supports[k]
+        if k not in detail.supports or support.gantry:
+            continue
+        mast = next(m for m in support.masts if m.side == side)
+        frame = np.asarray(support.frame, float)
+        pieces = railway_parts.tensioning_weight(mast.lateral, behind, mast.top)
+        anchor = pieces["anchor"]
+        if ends:  # the ropes from the wires' raised ends, in the support's frame
+            local = (np.asarray(ends, float) - frame[:3, 3]) @ frame[:3, :3]
+            anchor = merge([anchor, railway_parts.anchor_ropes(local, railway_parts.pulley_top(mast.lateral, behind, mast.top))])
+        _placed(f"support.{k:02d}.anchor.{side}", anchor, frame, "anchor", collection)
+        _placed(f"support.{k:02d}.tensioning_weight.{side}", pieces["tensioning weight"], frame, "tensioning weight", collection)
     if cat.section_insulator_every > 0:
         twins = {(w.run[:-1], w.span): w for w in layout.wires if w.kind == "contact_wire" and w.run.endswith("b")}
         for wire, setting in zip(layout.wires, detail.wires):
