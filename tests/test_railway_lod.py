@@ -36,6 +36,9 @@ def test_path_distance_is_to_the_nearest_point_of_the_polyline():
     assert view.distance([path[2]])[0] == pytest.approx(0.0, abs=1e-12)  # a vertex lies on it; a static view of the vertices only:
     midway = (path[2] + path[3]) / 2
     assert view.distance([midway])[0] == pytest.approx(0.0, abs=1e-9)
+    # a straight path and wires along it: parallel, collinear and point-like segments
+    straight = PathView(np.array([[5.0, 0, 0], [20, 0, 0]]), 0.001, 100.0)
+    assert straight.segment_distance([[0, 1, 0], [0, 0, 0], [0, 0, 0], [-3, 0, 4]], [[10, 1, 0], [1, 0, 0], [-4, 0, 0], [-3, 0, 4]]).tolist() == pytest.approx([1, 4, 5, 8.944272], abs=1e-6)
 
 
 def test_a_moving_sensor_gets_the_path_of_the_whole_run_whatever_the_frame_range():
