@@ -26,6 +26,7 @@ class Frame:
     pose_at : ``pose_at(t (n,) s) -> (n, 4, 4)`` per-ray poses of a moving sensor (the static pose otherwise)
     trajectory : the moving sensor's :class:`~bpy_pipeline.lidar.platform.Trajectory`, ``None`` when static
     buffers : the exported :class:`~bpy_pipeline.buffers.SceneBuffers`
+    caster : the scan's :class:`~bpy_pipeline.lidar.raycast.RayCaster` of ``buffers`` at ``pose`` (the boxes reuse it)
     chunks : the scan's ``(points, beam)`` chunks, consumed by the effects stage
     points : (p,) POINT_DTYPE records in the output frame (sensor or world)
     boxes : (b,) BOX_DTYPE box labels in the output frame, ``None`` when no box format is asked for
@@ -41,6 +42,7 @@ class Frame:
     pose_at: Callable | None = None
     trajectory: Any = None
     buffers: Any = None
+    caster: Any = None
     chunks: Iterable | None = None
     points: np.ndarray | None = None
     boxes: np.ndarray | None = None

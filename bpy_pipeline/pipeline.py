@@ -35,7 +35,7 @@ from .lidar.patterns import PATTERNS
 from .lidar.mirror_sensor import MirrorFrame, drop_at_edges, load_edge_mask, reflect_patterns
 from .lidar.platform import Trajectory
 from .lidar.points import POINT_DTYPE
-from .lidar.raycast import RayCaster
+from .lidar.raycast import CasterCache
 from .lidar.scanner import Surfaces, scan_chunks
 from .lidar.sensors import Pattern, angular_resolution, frame_time, iter_pattern, mount_offset, ray_count
 
@@ -195,6 +195,7 @@ class Run:
     rays : the sensor's rays (:class:`SensorRays`); scene_frame : the frame whose scene is built now
     trajectory : the moving sensor's path in the built scene (``None`` for a static sensor)
     threads : ray-casting threads (``None``: the cores available)
+    casters : the static objects' caster kept from frame to frame (:class:`~.lidar.raycast.CasterCache`)
     log : where warnings and the lines of long stages go (``None``: nowhere)
     """
 
@@ -209,11 +210,13 @@ class Run:
     threads: int | None = None
     log: Callable[[str], None] | None = None
     members: list = field(default_factory=list)  # a rig's sensors: one single-sensor Run each (rig.py)
+    casters: CasterCache | None = None
 
     def __post_init__(self):
         self.rules = parse_rules(self.config.labels.name_rules, "labels.name_rules", self.table.names)
         self.rays = self.rays or SensorRays(self.config)
         self.threads = self.threads or self.config.threads or None
+        self.casters = self.casters or CasterCache(self.threads)
         if self.config.sensor.rig and not self.members:
             self.members = [Run(member_config(self.config, k), build=False, table=self.table, threads=self.threads, log=self.log) for k in range(len(self.config.sensor.rig))]
 
@@ -270,7 +273,7 @@ def scan_stage(frame: Frame, run: Run) -> None:
         return _each_member(scan_stage, frame, run)
     frame.buffers.check()
     config, spec = run.config, run.config.sensor.spec
-    caster = RayCaster(frame.buffers, frame=frame.pose, threads=run.threads)
+    caster = frame.caster = run.casters.caster(frame.buffers, frame.pose, moving_objects(frame))
     ghost = run.table.id_of("reflection") if config.effects.mirrors.label == "reflection" else None
     options = {"max_bounces": config.effects.mirrors.max_bounces, "ghost_semantic": ghost, "ideal": config.effects.mirrors.ideal, "chunk_rays": CHUNK_RAYS, "surfaces": scan_surfaces(config), "rng": frame.rng}
     patterns = run.rays.patterns(frame.index)  # a mirror sensor's leave through its own mirrors
@@ -278,6 +281,17 @@ def scan_stage(frame: Frame, run: Run) -> None:
         frame.chunks = scan_footprint_chunks(caster, frame.buffers, patterns, frame.pose_at, config.sensor.divergence, spec.min_range, spec.max_range, **options)
     else:
         frame.chunks = scan_chunks(caster, frame.buffers, patterns, frame.pose_at, spec.min_range, spec.max_range, **options)
+
+
+def moving_objects(frame: Frame) -> np.ndarray | None:
+    """``(k,)`` bool per row of ``frame.buffers.objects``: the objects the builder placed for this frame
+    (those it gives 3D boxes: cars, robots, people, road users), traced by a small caster of their own
+    while the rest of the scene's is kept (:class:`~.lidar.raycast.CasterCache`). ``None`` when the frame
+    built nothing or placed none. A function of the frame alone, so frame k gives the same bytes after
+    frame k - 1 as alone."""
+    if frame.scene is None or not frame.scene.headings:
+        return None
+    return np.isin(frame.buffers.objects.instance, np.fromiter(frame.scene.headings, np.int64))
 
 
 def effects_stage(frame: Frame, run: Run) -> None:
@@ -312,7 +326,7 @@ def annotate_stage(frame: Frame, run: Run) -> None:
         return rig_annotate_stage(frame, run)
     if run.config.output.boxes.formats:
         headings = None if frame.scene is None else frame.scene.headings
-        frame.boxes = frame_boxes(frame.buffers, run.config, frame.pose, frame.points, headings, frame.index, frame.rng, run.rays)
+        frame.boxes = frame_boxes(frame.buffers, run.config, frame.pose, frame.points, headings, frame.index, frame.rng, run.rays, frame.caster)
 
 
 # ----------------------------------------------------------------------------- a sensor rig's stages
@@ -384,7 +398,7 @@ def rig_annotate_stage(frame: Frame, run: Run) -> None:
     unfiltered = []
     for sub, member in zip(frame.rig.frames, run.members):
         start = time.perf_counter()
-        world = world_boxes(sub.buffers, member.config, sub.pose, sub.points, headings, sub.index, sub.rng, member.rays, skip_unseen=True)
+        world = world_boxes(sub.buffers, member.config, sub.pose, sub.points, headings, sub.index, sub.rng, member.rays, skip_unseen=True, caster=sub.caster)
         unfiltered.append(world)
         kept = box_labels.keep_boxes(world, section.min_points, section.min_points_default)
         sub.boxes = box_labels.boxes_in_frame(kept, sub.pose if member.config.output.frame == "sensor" else np.eye(4))
@@ -474,23 +488,24 @@ def collect_points(parts: Iterable[np.ndarray], expected: int) -> np.ndarray:
     return out[:n]
 
 
-def frame_boxes(buffers: SceneBuffers, config: Config, pose: np.ndarray, points: np.ndarray, headings: dict | None = None, frame: int = 0, rng: np.random.Generator | None = None, rays: SensorRays | None = None) -> np.ndarray:
+def frame_boxes(buffers: SceneBuffers, config: Config, pose: np.ndarray, points: np.ndarray, headings: dict | None = None, frame: int = 0, rng: np.random.Generator | None = None, rays: SensorRays | None = None, caster=None) -> np.ndarray:
     """The frame's 3D box labels (:data:`~.io.boxes.BOX_DTYPE`) in the frame of the points, thin boxes dropped.
 
     headings : {instance: yaw} from the builder (others get their footprint's heading)
     Truncation and occlusion come from the sensor's own rays at ``pose``, one visibility cast for all
     objects (lidar/visibility.py); the boxes themselves are geometry/boxes.py.
+    caster : the scan's :class:`~.lidar.raycast.RayCaster` of ``buffers`` at ``pose``, reused by that cast (built when ``None``)
     """
     from .geometry.boxes import boxes_in_frame, keep_boxes
 
     section = config.output.boxes
-    boxes = world_boxes(buffers, config, pose, points, headings, frame, rng, rays)
+    boxes = world_boxes(buffers, config, pose, points, headings, frame, rng, rays, caster=caster)
     if len(boxes):
         boxes = keep_boxes(boxes, section.min_points, section.min_points_default)
     return boxes_in_frame(boxes, pose if config.output.frame == "sensor" else np.eye(4))
 
 
-def world_boxes(buffers: SceneBuffers, config: Config, pose: np.ndarray, points: np.ndarray, headings: dict | None = None, frame: int = 0, rng: np.random.Generator | None = None, rays: SensorRays | None = None, skip_unseen: bool = False) -> np.ndarray:
+def world_boxes(buffers: SceneBuffers, config: Config, pose: np.ndarray, points: np.ndarray, headings: dict | None = None, frame: int = 0, rng: np.random.Generator | None = None, rays: SensorRays | None = None, skip_unseen: bool = False, caster=None) -> np.ndarray:
     """Every box of ``output.boxes.classes`` in the world frame with truncation, occlusion and its points, none dropped
     (:func:`frame_boxes` keeps those with their minimum points and moves them into the points' frame).
 
@@ -514,7 +529,7 @@ def world_boxes(buffers: SceneBuffers, config: Config, pose: np.ndarray, points:
             near = ~out_of_reach(spec, pose, boxes["centre"], np.linalg.norm(boxes["size"], axis=1) / 2 + 1e-3)
             boxes["truncation"] = 1.0
         traced = boxes[near]
-        box_labels.visibility(buffers, traced, patterns, pose, spec.min_range, spec.max_range, cell, surfaces=scan_surfaces(config), rng=rng)
+        box_labels.visibility(buffers, traced, patterns, pose, spec.min_range, spec.max_range, cell, caster=caster, surfaces=scan_surfaces(config), rng=rng)
         boxes[near] = traced
         boxes["occlusion"] = box_labels.occlusion_levels(boxes["visible"], boxes["unoccluded"], section.occlusion_levels)
         box_labels.count_points(boxes, points)
