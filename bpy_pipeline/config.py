@@ -30,6 +30,7 @@ from .lidar.sensors import SensorSpec, frame_time, mount_offset, resolve_sensor
 from .lidar.sensors import rings as sensor_rings
 from .buffers import MATERIALS  # noqa: F401  (the panel's list)
 from .builders import BUILDERS as BUILDER_REGISTRY
+from .builders.population import population_from_dict, population_to_dict
 from .builders.railway import RailwayScene
 from .io.writers import frame_writers
 from .schema import check_positive, convert, from_dict, to_plain
@@ -48,6 +49,7 @@ class SceneConfig:
 
     builder: str = "railway"
     params: typing.Any = field(default_factory=RailwayScene)
+    population: typing.Any = None  # builders.population.Population: people, arms, cars placed per frame (None: none)
 
 
 # ----------------------------------------------------------------------------- sensor, effects, output
@@ -286,10 +288,11 @@ def scene_places_sensor(scene: SceneConfig) -> bool:
 def _scene_from_dict(data) -> SceneConfig:
     data = dict(_mapping(data, "scene", "builder: NAME and its parameters"))
     name = data.pop("builder", "railway")
+    population = population_from_dict(data.pop("population", None))
     builder = BUILDER_REGISTRY.get(name)
     params = from_dict(builder.params, data, "scene")
     builder.check(params, "scene")
-    return SceneConfig(name, params)
+    return SceneConfig(name, params, population)
 
 
 def sensor_trajectory(sensor: SensorConfig, path=None) -> Trajectory | None:
@@ -486,7 +489,7 @@ def config_from_dict(data) -> Config:
     builder = BUILDER_REGISTRY.get(scene.builder)
     sensor_data = dict(_mapping(data.pop("sensor", None), "sensor", "preset: NAME and its fields"))
     if builder.release_sensor is not None:
-        scene = SceneConfig(scene.builder, builder.release_sensor(scene.params, raw_scene, sensor_data))
+        scene = SceneConfig(scene.builder, builder.release_sensor(scene.params, raw_scene, sensor_data), scene.population)
     if "preset" not in sensor_data and builder.sensor:  # the builder's own sensor, refined by the fields given
         defaults = builder.sensor
         given = sensor_data
@@ -550,7 +553,8 @@ def _check_boxes(config: Config) -> Config:
 
     boxes = config.output.boxes
     if boxes.formats == "auto":
-        boxes = dataclasses.replace(boxes, formats=["kitti", "openpcdet"] if BUILDER_REGISTRY.get(config.scene.builder).boxes else [])
+        boxed = BUILDER_REGISTRY.get(config.scene.builder).boxes or config.scene.population is not None  # placed objects get boxes
+        boxes = dataclasses.replace(boxes, formats=["kitti", "openpcdet"] if boxed else [])
     table = load_class_table()
     classes = [table.names[table.id_of(c, f"output.boxes.classes[{i}]")] for i, c in enumerate(boxes.classes)]
     for key in ("names", "min_points"):
@@ -576,6 +580,8 @@ def config_to_dict(config: Config) -> dict:
     """The resolved config as plain YAML-ready data; ``config_from_dict`` of it gives ``config`` back."""
     out = to_plain(config)
     out["scene"] = {"builder": config.scene.builder, **out["scene"]["params"]}
+    if config.scene.population is not None:
+        out["scene"]["population"] = population_to_dict(config.scene.population)
     sensor = out["sensor"]
     if config.sensor.trajectory is not None or scene_places_sensor(config.scene):
         del sensor["position"]  # a trajectory, or the scene, places the sensor

@@ -23,6 +23,7 @@ import numpy as np
 from . import __version__
 from .buffers import SceneBuffers
 from .builders import BUILDERS, BuildContext
+from .builders.population import build_populated
 from .config import Config, sensor_trajectory
 from .errors import InputError
 from .frame import Frame
@@ -232,7 +233,7 @@ def build_stage(frame: Frame, run: Run) -> None:
     first = frame.index - frame.index % per_scene
     if run.build and run.scene_frame != first:
         rng = frame.rng if first == frame.index else frame_rng(config.seed, first)
-        frame.scene = BUILDERS.get(config.scene.builder).build(config.scene.params, BuildContext(rng, scene_view(config, first, per_scene), run.keep))
+        frame.scene = build_populated(config.scene, BuildContext(rng, scene_view(config, first, per_scene), run.keep))
         run.scene_frame = first
         run.trajectory = None
     if run.trajectory is None:
@@ -545,7 +546,7 @@ def build_frame_scene(config: Config, index: int = 0, rng: np.random.Generator |
     """
     per_scene = frames_per_scene(config)
     rng = frame_rng(config.seed, index) if rng is None else rng
-    return BUILDERS.get(config.scene.builder).build(config.scene.params, BuildContext(rng, scene_view(config, index, per_scene), {} if keep is None else keep))
+    return build_populated(config.scene, BuildContext(rng, scene_view(config, index, per_scene), {} if keep is None else keep))
 
 
 # ----------------------------------------------------------------------------- runs

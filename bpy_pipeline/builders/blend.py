@@ -22,9 +22,10 @@ def check(params: BlendScene, where: str) -> None:
 
 
 def build(params: BlendScene, context: BuildContext) -> BuildResult:
+    """Open the file once per run (kept while it is the current file and unchanged on disk); every frame scans it as it is."""
     from ..scenes import blend
 
-    blend.build(params)
+    context.kept("blend", params, lambda: blend.OpenedBlend(params))
     return BuildResult()
 
 
