@@ -334,7 +334,7 @@ def _fused_chunk(caster: RayCaster, buffers: SceneBuffers, pattern: Pattern, ori
     starts = list(range(0, n, caster.chunk)) or [0]
     counts = np.array([np.count_nonzero(prim[i : i + caster.chunk] >= 0) for i in starts], np.int64)
     rows = np.concatenate([[0], np.cumsum(counts)])
-    points, beam, ray = np.empty(rows[-1], POINT_DTYPE), np.empty(rows[-1], BEAM_DTYPE), np.empty(rows[-1], np.int64)
+    points, beam, ray = caster.pool.take(rows[-1], POINT_DTYPE), caster.pool.take(rows[-1], BEAM_DTYPE), caster.pool.take(rows[-1], np.int64)
 
     def part(j, moved=NO_RAYS):
         s, r = slice(starts[j], starts[j] + caster.chunk), slice(rows[j], rows[j + 1])
@@ -349,7 +349,7 @@ def _fused_chunk(caster: RayCaster, buffers: SceneBuffers, pattern: Pattern, ori
         tfar, prim, moved = caster.retrace(suspect, local, world_d, far, tfar, prim)
         counts = np.array([np.count_nonzero(prim[i : i + caster.chunk] >= 0) for i in starts], np.int64)
         rows = np.concatenate([[0], np.cumsum(counts)])
-        points, beam, ray = np.empty(rows[-1], POINT_DTYPE), np.empty(rows[-1], BEAM_DTYPE), np.empty(rows[-1], np.int64)
+        points, beam, ray = caster.pool.take(rows[-1], POINT_DTYPE), caster.pool.take(rows[-1], BEAM_DTYPE), caster.pool.take(rows[-1], np.int64)
         parts = caster.map(lambda j: part(j, moved), range(len(starts)))
     filled = np.array([p[0] for p in parts], np.int64)
     if not (filled == counts).all():  # rows left empty by range limits, absorbers, glass and mirrors
@@ -443,6 +443,19 @@ def join(parts: list[np.ndarray]) -> np.ndarray:
     return np.concatenate([np.ascontiguousarray(p).view(raw) for p in parts]).view(parts[0].dtype)
 
 
+WHOLE_PATTERN_RAYS = 1 << 21  # rays of one in-memory pattern :func:`scan` traces in one chunk
+
+
 def scan(*args, **kwargs) -> tuple[np.ndarray, np.ndarray]:
-    """All ``(points, beam)`` of :func:`scan_chunks`, each in one array."""
+    """All ``(points, beam)`` of :func:`scan_chunks`, each in one array.
+
+    Without ``chunk_rays``, one :class:`Pattern` (its rays already in memory) goes through in chunks
+    of :data:`WHOLE_PATTERN_RAYS`: a whole sensor frame at once, so its records need no join and
+    the threads meet twice per frame, not twice per 262 k rays (``benchmarks/bench_scan.py``). The extra memory is about 12 bytes per ray (Embree's distances and
+    triangles, the limits). Slipped rays are looked for per chunk, so a chunk size may decide, in
+    rare cases, whether a ray is traced again (the pipeline keeps its own fixed chunks).
+    """
+    patterns = args[2] if len(args) > 2 else kwargs.get("patterns")
+    if "chunk_rays" not in kwargs and len(args) < 10 and isinstance(patterns, Pattern):
+        kwargs["chunk_rays"] = WHOLE_PATTERN_RAYS
     return collect(scan_chunks(*args, **kwargs))
