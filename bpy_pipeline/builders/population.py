@@ -53,12 +53,14 @@ class PersonPopulation:
 class RobotArmPopulation:
     """``scene.population.robot_arm``: six-axis arms (the capsule chain of ``model``, default assets_manifest/robot_arm.yaml)
     with joint angles drawn within their limits, no self-collision; ``positions``: ``[x, y, yaw_deg]`` bases to
-    choose from (empty: anywhere on the floor)."""
+    choose from (empty: anywhere on the floor). ``assets``: a set of robot meshes (kind robot) placed at
+    their own size (``unit_scale``) instead."""
 
     count: int | Distribution = 1
     model: str = ""
     positions: list[tuple[float, float, float]] = field(default_factory=list)
     reflectivity: float = 0.55
+    assets: str = ""
 
 
 @dataclass(frozen=True)
@@ -79,6 +81,7 @@ class PlacementRules:
     cell : grid step of standing spots, m; seat_height : (min, max) m above the floor a seat top lies
     floor_band : m above the lowest surface a floor may lie; min_area : m^2, smallest surface used
     instance_base : the first instance id given to placed objects (kinds follow in blocks of 1000)
+    manifest : the assets manifest the kinds' ``assets`` sets come from (empty: assets_manifest/assets.yaml)
     """
 
     keep_out: float = 0.3
@@ -88,6 +91,7 @@ class PlacementRules:
     floor_band: float = 0.3
     min_area: float = 0.25
     instance_base: int = 10000
+    manifest: str = ""
 
 
 @dataclass(frozen=True)
@@ -166,12 +170,16 @@ def _draw_person(params: PersonPopulation, models, rng: np.random.Generator):
     return shape
 
 
-def _draw_arm(params: RobotArmPopulation, model, rng: np.random.Generator):
+def _draw_arm(params: RobotArmPopulation, models, rng: np.random.Generator):
     from ..geometry import kinematics
-    from ..geometry.population import arm_shape
+    from ..geometry.population import arm_shape, mesh_shape
 
-    q = kinematics.random_configuration(model, rng, np.eye(4), floor_z=0.0)
-    return arm_shape(model, q)
+    if isinstance(models, list):  # robot assets at their own size
+        k = int(rng.integers(len(models)))
+        vertices, triangles, detail = models[k].shape(rng)
+        return mesh_shape(vertices, triangles, models[k].file_height * models[k].unit_scale, {"asset": k, **detail})
+    q = kinematics.random_configuration(models, rng, np.eye(4), floor_z=0.0)  # models: the arm's ArmModel
+    return arm_shape(models, q)
 
 
 def _draw_car(params: CarPopulation, models, rng: np.random.Generator):
@@ -237,6 +245,11 @@ def population_from_dict(data, where: str = "scene.population") -> Population | 
     check_positive(p.floor_band, f"{where}.placement.floor_band", allow_zero=True)
     if not 0 <= p.seat_height[0] <= p.seat_height[1]:
         raise InputError(f"{where}.placement.seat_height: expected 0 <= min <= max, got {list(p.seat_height)}")
+    from ..assets import asset_set
+
+    for key, params in kinds:  # the asset sets named exist (checked before any Blender work)
+        if getattr(params, "assets", ""):
+            asset_set(params.assets, KINDS.get(key).manifest_kind, f"{where}.{key}.assets", p.manifest or None)
     return Population(tuple(kinds), placement)
 
 

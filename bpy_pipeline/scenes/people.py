@@ -184,7 +184,7 @@ def load_assets(path: str | Path | None = None, kind: str = "person") -> list[As
         where = f"{path}: assets[{i}]"
         if not isinstance(entry, dict) or not all(isinstance(entry.get(k), str) and entry.get(k) for k in ("name", "kind", "path", "sha256", "licence")):
             raise InputError(f"{where}: needs name, kind, path, sha256 and licence (strings)")
-        if entry["kind"] != kind:
+        if entry["kind"] != kind or "set" in entry:  # entries of a named set are for scene.population (bpy_pipeline/assets.py)
             continue
         file = (path.parent / entry["path"]).resolve()
         if file.suffix.lower() not in (".gltf", ".glb", ".obj"):

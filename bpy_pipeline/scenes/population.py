@@ -72,8 +72,8 @@ class PartsSlot:
 class Side:
     """What one kind needs in Blender: ``models`` for its draws, a pool of slots, ``show`` per placement."""
 
-    def __init__(self, name: str, params, collection):
-        self.name, self.params, self.collection = name, params, collection
+    def __init__(self, name: str, params, collection, manifest: str = ""):
+        self.name, self.params, self.collection, self.manifest = name, params, collection, manifest
         self.slots: list = []
         self.models = self.load()
 
@@ -109,18 +109,18 @@ class Side:
         return all(slot.alive() for slot in self.slots)
 
 
-def _asset_models(params, kind_name: str):
-    """The asset models of ``params.assets`` (a set of assets_manifest/assets.yaml), or ``None`` (procedural)."""
+def _asset_models(params, kind_name: str, manifest: str):
+    """The asset models of ``params.assets`` (a set of the assets manifest), or ``None`` (procedural)."""
     if not params.assets:
         return None
     from .assets import load_models
 
-    return load_models(params.assets, KINDS.get(kind_name).manifest_kind, f"scene.population.{kind_name}.assets")
+    return load_models(params.assets, KINDS.get(kind_name).manifest_kind, f"scene.population.{kind_name}.assets", manifest or None)
 
 
 class PersonSide(Side):
     def load(self):
-        return _asset_models(self.params, "person")
+        return _asset_models(self.params, "person", self.manifest)
 
     def new_slot(self, index, placed):
         if self.models:
@@ -145,14 +145,23 @@ class RobotArmSide(Side):
     def load(self):
         from ..geometry import kinematics
 
+        if self.params.assets:
+            return _asset_models(self.params, "robot_arm", self.manifest)
         return kinematics.load_arm(self.params.model) if self.params.model else kinematics.load_arm()
 
     def new_slot(self, index, placed):
+        if isinstance(self.models, list):
+            from .assets import AssetSlot
+
+            return AssetSlot(self.collection, f"robot_{index:03d}")
         from .robot_arm import RobotArm
 
         return RobotArm(self.models, self.collection, 50 + index)
 
     def show_one(self, slot, placed, instance, rng):
+        if isinstance(self.models, list):
+            slot.show(self.models[placed.shape.detail["asset"]], placed, "robot arm", instance, float(self.params.reflectivity))
+            return
         base = placed.matrix.copy()
         base[2, 3] += placed.shape.detail["lift"]
         slot.show(base, placed.shape.detail["q"], instance)
@@ -162,7 +171,7 @@ class RobotArmSide(Side):
 
 class CarSide(Side):
     def load(self):
-        models = _asset_models(self.params, "car")
+        models = _asset_models(self.params, "car", self.manifest)
         if models is not None:
             return models
         meshes = []
@@ -238,7 +247,7 @@ class PopulationScene:
     def __init__(self, population):
         self.population = population
         self.collection = scene_collection(COLLECTION)
-        self.sides = {name: SIDES[name](name, params, self.collection) for name, params in population.kinds}
+        self.sides = {name: SIDES[name](name, params, self.collection, population.placement.manifest) for name, params in population.kinds}
         self.cached: tuple = (None, None)  # (digest of the static triangles, Surfaces)
         self.last: dict = {}
 
