@@ -175,11 +175,12 @@ class RayCaster:
         ``"numba"`` (required) or ``"numpy"``; default: the environment variable
         :data:`KERNEL_VARIABLE`, else ``"auto"``. Both give the same bytes.
     static : the static objects' part kept by a :class:`CasterCache` (use :meth:`CasterCache.caster`)
+    record_pool : the :class:`RecordPool` its scans' records come from (default: its own; a cache shares one across frames)
     ``InputError`` (naming the object) for non-finite vertices, bad triangle indices, or vertices
     farther than :data:`MAX_COORDINATE` from the local origin.
     """
 
-    def __init__(self, buffers: SceneBuffers, frame=None, threads: int | None = None, chunk: int = 32768, kernel: str | None = None, *, static: StaticPart | None = None):
+    def __init__(self, buffers: SceneBuffers, frame=None, threads: int | None = None, chunk: int = 32768, kernel: str | None = None, *, static: StaticPart | None = None, record_pool: RecordPool | None = None):
         if len(buffers.triangles):
             buffers.check()
         vertices = np.asarray(buffers.vertices, np.float64)
@@ -222,7 +223,7 @@ class RayCaster:
         self._pool = None
         self._closed: dict[int, bool] = {}
         self._corner_scales = None
-        self.pool = RecordPool()
+        self.record_pool = record_pool if record_pool is not None else RecordPool()
 
     def to_local(self, points: np.ndarray) -> np.ndarray:
         """``(n, 3)`` world points into the local frame."""
@@ -262,7 +263,7 @@ class RayCaster:
         """
 
         n = len(directions32)
-        tfar_out, prim_out = self.pool.take(n, np.float32), self.pool.take(n, np.int32)  # each thread fills its rows: no join
+        tfar_out, prim_out = self.record_pool.take(n, np.float32), self.record_pool.take(n, np.int32)  # each thread fills its rows: no join
 
         def run(start):
             s = slice(start, start + self.chunk)
@@ -489,6 +490,7 @@ class CasterCache:
         self.threads, self.kernel = threads, kernel
         self.kept: StaticPart | None = None
         self.builds = self.reuses = 0
+        self.record_pool = RecordPool()  # the record memory of every frame's caster
 
     def caster(self, buffers: SceneBuffers, frame, moving: np.ndarray | None = None, key=None) -> RayCaster:
         """A caster of ``buffers`` in ``frame`` ((4, 4) float64 local-to-world, e.g. a fixed pose for the run).
@@ -508,7 +510,7 @@ class CasterCache:
         if kept is None or not (np.array_equal(kept.frame, frame) and np.array_equal(kept.triangle, static) and kept.digest == digest):
             if len(buffers.triangles):
                 buffers.check()  # before any index is used to build (the reused path is checked by RayCaster)
-            caster = RayCaster(buffers, frame, self.threads, kernel=self.kernel) if not moving.any() else None
+            caster = RayCaster(buffers, frame, self.threads, kernel=self.kernel, record_pool=self.record_pool) if not moving.any() else None
             if caster is not None:  # nothing moves: the whole scene is the static part
                 self.kept = StaticPart(frame, static, digest, caster.parts[0] if caster.parts else None, caster.plane_normal, caster.plane_offset)
                 self.builds += 1
@@ -521,7 +523,7 @@ class CasterCache:
             self.builds += 1
         else:
             self.reuses += 1
-        return RayCaster(buffers, frame, self.threads, kernel=self.kernel, static=self.kept)
+        return RayCaster(buffers, frame, self.threads, kernel=self.kernel, static=self.kept, record_pool=self.record_pool)
 
 
 def static_digest(buffers: SceneBuffers, static: np.ndarray) -> bytes:

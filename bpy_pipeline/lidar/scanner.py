@@ -334,7 +334,7 @@ def _fused_chunk(caster: RayCaster, buffers: SceneBuffers, pattern: Pattern, ori
     starts = list(range(0, n, caster.chunk)) or [0]
     counts = np.array([np.count_nonzero(prim[i : i + caster.chunk] >= 0) for i in starts], np.int64)
     rows = np.concatenate([[0], np.cumsum(counts)])
-    points, beam, ray = caster.pool.take(rows[-1], POINT_DTYPE), caster.pool.take(rows[-1], BEAM_DTYPE), caster.pool.take(rows[-1], np.int64)
+    points, beam, ray = caster.record_pool.take(rows[-1], POINT_DTYPE), caster.record_pool.take(rows[-1], BEAM_DTYPE), caster.record_pool.take(rows[-1], np.int64)
 
     def part(j, moved=NO_RAYS):
         s, r = slice(starts[j], starts[j] + caster.chunk), slice(rows[j], rows[j + 1])
@@ -349,7 +349,7 @@ def _fused_chunk(caster: RayCaster, buffers: SceneBuffers, pattern: Pattern, ori
         tfar, prim, moved = caster.retrace(suspect, local, world_d, far, tfar, prim)
         counts = np.array([np.count_nonzero(prim[i : i + caster.chunk] >= 0) for i in starts], np.int64)
         rows = np.concatenate([[0], np.cumsum(counts)])
-        points, beam, ray = caster.pool.take(rows[-1], POINT_DTYPE), caster.pool.take(rows[-1], BEAM_DTYPE), caster.pool.take(rows[-1], np.int64)
+        points, beam, ray = caster.record_pool.take(rows[-1], POINT_DTYPE), caster.record_pool.take(rows[-1], BEAM_DTYPE), caster.record_pool.take(rows[-1], np.int64)
         parts = caster.map(lambda j: part(j, moved), range(len(starts)))
     filled = np.array([p[0] for p in parts], np.int64)
     if not (filled == counts).all():  # rows left empty by range limits, absorbers, glass and mirrors
