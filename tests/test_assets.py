@@ -203,3 +203,34 @@ def test_a_missing_set_is_a_config_error_before_blender(tmp_path):
     result = subprocess.run([sys.executable, str(ROOT / "run.py"), "--out", str(tmp_path / "o"), "--set", "scene.builder=primitives", "--set", "scene.population={car: {count: 1, assets: sports_cars}}"], cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert result.returncode == 2
     assert result.stderr.strip().startswith("error: scene.population.car.assets: no car asset of set 'sports_cars'") and len(result.stderr.strip().splitlines()) == 1
+
+
+@pytest.mark.bpy
+def test_a_rig_without_animations_is_posed_within_its_bones_rotation_limits(bpy_scene):
+    import bpy
+
+    from bpy_pipeline.scenes.assets import apply_pose, draw_pose, load_models, _rotation_limits
+
+    model = load_models("project_people", "person", "test")[0]
+    rig = model.armature
+    limits = {"upper_arm_l": (-0.8, 0.3), "thigh_r": (-0.5, 0.9), "spine": (-0.2, 0.2)}
+    for bone, (lo, hi) in limits.items():
+        c = rig.pose.bones[bone].constraints.new("LIMIT_ROTATION")
+        c.use_limit_x = c.use_limit_y = c.use_limit_z = True
+        c.min_x, c.max_x, c.min_y, c.max_y, c.min_z, c.max_z = lo, hi, lo / 2, hi / 2, lo / 3, hi / 3
+    model.actions, model.limits = [], _rotation_limits(rig)  # as a file without animations
+    rng = np.random.default_rng(0)
+    seen = []
+    for _ in range(20):
+        pose = draw_pose(model, rng)
+        assert pose["name"] == "limits" and set(pose["angles"]) == set(limits)
+        apply_pose(rig, model, pose)
+        for bone, (lo, hi) in limits.items():
+            angles = np.array(rig.pose.bones[bone].rotation_euler)
+            assert (angles >= np.array([lo, lo / 2, lo / 3]) - 1e-6).all() and (angles <= np.array([hi, hi / 2, hi / 3]) + 1e-6).all()
+            seen.append(angles)
+        assert all(np.allclose(np.array(b.matrix_basis), np.eye(4)) for b in rig.pose.bones if b.name not in limits)
+    assert np.ptp(np.array(seen), axis=0).max() > 0.3  # the draws spread over the ranges
+    v1 = model.shape(np.random.default_rng(1))[0]
+    v2 = model.shape(np.random.default_rng(2))[0]
+    assert v1.shape == v2.shape and not np.allclose(v1, v2)  # the evaluated mesh follows the pose
