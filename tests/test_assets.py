@@ -234,3 +234,28 @@ def test_a_rig_without_animations_is_posed_within_its_bones_rotation_limits(bpy_
     v1 = model.shape(np.random.default_rng(1))[0]
     v2 = model.shape(np.random.default_rng(2))[0]
     assert v1.shape == v2.shape and not np.allclose(v1, v2)  # the evaluated mesh follows the pose
+
+
+@pytest.mark.bpy
+@pytest.mark.parametrize("suffix", [".fbx", ".blend"])
+def test_fbx_and_blend_car_files_import_upright_with_their_glass(bpy_scene, tmp_path, suffix):
+    """The shipped sedan re-saved as FBX (Blender's exporter, Y up) and as a .blend (Z up), both with up_axis auto."""
+    import bpy
+
+    from bpy_pipeline.scenes.assets import load_models
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    bpy.ops.import_scene.gltf(filepath=str(TEST_ASSETS / "car_sedan.glb"))
+    file = tmp_path / f"sedan{suffix}"
+    if suffix == ".fbx":
+        bpy.ops.export_scene.fbx(filepath=str(file), axis_up="Y", axis_forward="-Z")
+    else:
+        bpy.ops.wm.save_as_mainfile(filepath=str(file))
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    manifest = _manifest(tmp_path, [_entry(file, kind="car", set="saved")])
+    (model,) = load_models("saved", "car", "test", manifest)
+    v, t, _ = model.shape(np.random.default_rng(0))
+    extent = v.max(axis=0) - v.min(axis=0)
+    assert extent[2] == pytest.approx(1.0) and extent[0] / extent[2] == pytest.approx(4.631 / 1.625, rel=0.01)  # nose along x, upright
+    assert set(model.parts) == {"body", "glass"} and len(model.parts["glass"][2]) == 10  # the windows' ten triangles
+    assert model.unit_scale == 1.0

@@ -187,6 +187,12 @@ def test_assets_in_the_manifest_replace_the_procedural_people(bpy_scene, tmp_pat
     with pytest.raises(InputError, match="sha256"):
         load_assets(manifest)
     assert load_assets(tmp_path / "absent.yaml") == []
+    # the same mannequin written Z up lies down when read Y up: one clear error, not a hall of people "not placed"
+    lying = tmp_path / "lying.obj"
+    lying.write_text("".join(f"v {x} {z} {y}\n" for x, y, z in corners) + "".join("f " + " ".join(map(str, f)) + "\n" for f in faces))
+    manifest.write_text(f"assets:\n  - {{name: lying, kind: person, path: lying.obj, sha256: {hashlib.sha256(lying.read_bytes()).hexdigest()}, licence: CC0-1.0}}\n")
+    with pytest.raises(InputError, match=r"^asset 'lying': lying.obj does not stand upright as a person when read Y up"):
+        _hall(0, assets=str(manifest), people="{kind: normal, mean: 4, std: 0, min: 0, max: 12}")
 
 
 def test_the_intersection_check_sees_overlapping_bodies():

@@ -233,6 +233,11 @@ def import_asset(asset: Asset) -> tuple[bpy.types.Mesh, np.ndarray]:
 
         vertices, triangles = merge(parts)
         low, high = vertices.min(axis=0), vertices.max(axis=0)
+        from ..assets import upright
+
+        if not upright("person", high - low):  # a lying person would fit nowhere: say so instead of placing none
+            extent = ", ".join(f"{k} {v:.2f}" for k, v in zip("xyz", high - low))
+            raise InputError(f"asset {asset.name!r}: {asset.path.name} does not stand upright as a person when read Y up as glTF and OBJ are (extent {extent}); re-export it Y up, or give it a set and its up_axis in the manifest and place it with scene.population")
         vertices = (vertices - [(low[0] + high[0]) / 2, (low[1] + high[1]) / 2, low[2]]) / (high[2] - low[2])
         mesh = mesh_data(name, vertices, triangles)
         mesh.use_fake_user = True
