@@ -4,7 +4,8 @@
 #   ./setup.sh test   the same plus the test tools (pytest, plyfile, laspy), Ray (the distributed tests),
 #                     numba (the compiled scan path) and Patchwork++ / scipy (real-scan mixing)
 # On a bare Debian it installs, as root, what bpy's wheel and venv need from Debian:
-# python3-venv and the X11/GL client libraries bpy links against (no display is used).
+# python3-venv, the X11/GL client libraries bpy links against (no display is used) and Mesa's
+# software OpenGL through EGL, which Blender's renderer needs (the KITTI camera's image_2).
 set -euo pipefail
 cd "$(dirname "$0")"
 extras="blender"
@@ -20,11 +21,13 @@ fi
 packages=()
 "$py" -c "import ensurepip, venv" 2>/dev/null || packages+=(python3-venv)
 declare -A lib_package=([libX11.so.6]=libx11-6 [libXrender.so.1]=libxrender1 [libXfixes.so.3]=libxfixes3 [libXi.so.6]=libxi6
-  [libxkbcommon.so.0]=libxkbcommon0 [libXext.so.6]=libxext6 [libSM.so.6]=libsm6 [libGL.so.1]=libgl1)
+  [libxkbcommon.so.0]=libxkbcommon0 [libXext.so.6]=libxext6 [libSM.so.6]=libsm6 [libGL.so.1]=libgl1
+  [libEGL.so.1]=libegl1 [libEGL_mesa.so.0]=libegl-mesa0)
 known_libs=$( (/sbin/ldconfig -p 2>/dev/null || ldconfig -p 2>/dev/null) || true)
 for lib in "${!lib_package[@]}"; do
   grep -q "$lib" <<<"$known_libs" || packages+=("${lib_package[$lib]}")
 done
+ls /usr/lib/*/dri/swrast_dri.so /usr/lib*/dri/swrast_dri.so >/dev/null 2>&1 || packages+=(libgl1-mesa-dri)
 if [ ${#packages[@]} -gt 0 ]; then
   if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
     echo "setup.sh: installing from Debian: ${packages[*]}"

@@ -10,7 +10,7 @@ from bpy_pipeline.io import kitti
 
 @pytest.mark.bpy
 @pytest.mark.parametrize("camera", [CameraConfig(), CameraConfig(resolution=(640, 240), fov_deg=70.0, position=(0.2, -0.1, 0.3), rotation_deg=(0.0, 5.0, 20.0))])
-def test_rendered_box_lies_where_calib_projects_it(bpy_scene, camera):
+def test_rendered_box_lies_where_calib_projects_it(blender_renders, bpy_scene, camera):
     bpy = bpy_scene
     from bpy_pipeline.scenes.camera import render_camera
     from bpy_pipeline.scenes.objects import mesh_object, scene_collection
@@ -40,7 +40,7 @@ def test_rendered_box_lies_where_calib_projects_it(bpy_scene, camera):
 
 
 @pytest.mark.bpy
-def test_a_run_renders_image_2_when_asked(bpy_scene, tmp_path):
+def test_a_run_renders_image_2_when_asked(blender_renders, bpy_scene, tmp_path):
     """output.kitti.camera.render: the parking frame's image_2 is Blender's rendering (class colours of the
     scene's objects), not the projection of the points; its timing is recorded; without it, no rendering."""
     from PIL import Image
