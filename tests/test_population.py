@@ -243,3 +243,23 @@ def test_population_round_trips_through_the_saved_config():
     again = config_from_dict(config_to_dict(config))
     assert again.scene.population == config.scene.population
     assert config.scene.population.kinds[0][1].count.kind == "uniform" and config.output.boxes.formats == ["kitti", "openpcdet"]
+
+
+def test_the_visibility_rule_refuses_hidden_objects_and_objects_that_hide_others():
+    floor = primitives.plane(20, 20)
+    wall = primitives.translated(primitives.box(0.2, 10, 3), (2.0, 0, 1.5))
+    v, t = primitives.merge([floor, wall])
+    support = (v, t[:2])
+    sensor = np.array([0.0, 0.0, 1.0])
+    shape = person_shape(human.neutral_angles(), 1.75, 1.0, "standing")
+    placer = Placer(v, t, keep_out=0.1, sensor=sensor, min_visible=0.6)
+    assert placer.fits("person", shape, placement_matrix((4.0, 0.0), 0.0, 0.01), support) is None  # behind the wall
+    assert placer.rejections["hidden"] == 1
+    far = placer.fits("person", shape, placement_matrix((-4.0, 0.0), 0.0, 0.01), support)
+    assert far is not None and placer.visible_fraction(far.vertices) > 0.9
+    placer.commit(far)
+    assert placer.fits("person", shape, placement_matrix((-1.2, 0.0), 0.0, 0.01), support) is None  # in front of it
+    assert placer.rejections["hides"] == 1
+    assert placer.fits("person", shape, placement_matrix((0.0, -2.0), 0.0, 0.01), support) is not None  # beside: both seen
+    without = Placer(v, t, keep_out=0.1)  # the rule off: the hidden spot is taken
+    assert without.fits("person", shape, placement_matrix((4.0, 0.0), 0.0, 0.01), support) is not None

@@ -82,6 +82,9 @@ class PlacementRules:
     floor_band : m above the lowest surface a floor may lie; min_area : m^2, smallest surface used
     instance_base : the first instance id given to placed objects (kinds follow in blocks of 1000)
     manifest : the assets manifest the kinds' ``assets`` sets come from (empty: assets_manifest/assets.yaml)
+    min_visible : the parking paper's visibility rule: an object is refused when less than this share of its
+        sampled vertices is in the sensor's line of sight, or when it would leave one placed before below it
+        (0: not checked; a moving sensor: its first position)
     """
 
     keep_out: float = 0.3
@@ -92,6 +95,7 @@ class PlacementRules:
     min_area: float = 0.25
     instance_base: int = 10000
     manifest: str = ""
+    min_visible: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -243,6 +247,8 @@ def population_from_dict(data, where: str = "scene.population") -> Population | 
     for name in ("tries", "cell", "min_area", "instance_base"):
         check_positive(getattr(p, name), f"{where}.placement.{name}")
     check_positive(p.floor_band, f"{where}.placement.floor_band", allow_zero=True)
+    if not 0 <= p.min_visible <= 1:
+        raise InputError(f"{where}.placement.min_visible: must be in 0..1, got {p.min_visible}")
     if not 0 <= p.seat_height[0] <= p.seat_height[1]:
         raise InputError(f"{where}.placement.seat_height: expected 0 <= min <= max, got {list(p.seat_height)}")
     from ..assets import asset_set

@@ -55,6 +55,7 @@ class Placed:
     matrix: np.ndarray
     vertices: np.ndarray
     footprint: tuple  # (centre (2,), half (2,), yaw, z_low, z_high)
+    sight: tuple | None = None  # the visibility rule's (starts (s, 3), ends (s, 3), blocked (s,) bool) of its samples
 
     @property
     def yaw(self) -> float:
@@ -115,6 +116,42 @@ def segments_cross(p0: np.ndarray, p1: np.ndarray, tri: np.ndarray, eps: float =
     return False
 
 
+def segments_blocked(p0: np.ndarray, p1: np.ndarray, tri: np.ndarray, eps: float = 1e-7, chunk: int = 1 << 20) -> np.ndarray:
+    """``(e,)`` bool: each segment ``p0 -> p1`` passes through the inside of one of the triangles ``tri (t, 3, 3)``
+    (the per-segment form of :func:`segments_cross`)."""
+    blocked = np.zeros(len(p0), bool)
+    if not len(p0) or not len(tri):
+        return blocked
+    s_low, s_high = np.minimum(p0, p1), np.maximum(p0, p1)
+    t_low, t_high = tri.min(axis=1), tri.max(axis=1)
+    step = max(1, chunk // len(p0))
+    for k in range(0, len(tri), step):
+        overlap = ((s_low[:, None] <= t_high[None, k : k + step]) & (s_high[:, None] >= t_low[None, k : k + step])).all(axis=-1)
+        si, ti = np.nonzero(overlap & ~blocked[:, None])
+        if not len(si):
+            continue
+        ti = ti + k
+        o, d = p0[si], p1[si] - p0[si]
+        a, e1, e2 = tri[ti, 0], tri[ti, 1] - tri[ti, 0], tri[ti, 2] - tri[ti, 0]
+        h = np.cross(d, e2)
+        det = np.einsum("ij,ij->i", e1, h)
+        ok = np.abs(det) > 1e-12
+        det = np.where(ok, det, 1.0)
+        sa = o - a
+        u = np.einsum("ij,ij->i", sa, h) / det
+        q = np.cross(sa, e1)
+        v = np.einsum("ij,ij->i", d, q) / det
+        t = np.einsum("ij,ij->i", e2, q) / det
+        hit = ok & (u > eps) & (v > eps) & (u + v < 1 - eps) & (t > eps) & (t < 1 - eps)
+        blocked[si[hit]] = True
+    return blocked
+
+
+def sample_points(vertices: np.ndarray, count: int = 48) -> np.ndarray:
+    """``(<= count, 3)`` vertices at even index steps (the same for the same mesh)."""
+    return vertices[np.linspace(0, len(vertices) - 1, min(count, len(vertices))).astype(int)]
+
+
 def meshes_cross(va: np.ndarray, ta: np.ndarray, vb: np.ndarray, tb: np.ndarray) -> bool:
     """True when the surfaces of two triangle meshes cross (an edge of one through a triangle of the other)."""
     if not len(ta) or not len(tb):
@@ -136,9 +173,12 @@ class Placer:
 
     vertices (n, 3), triangles (m, 3): the static scene as exported (world, m)
     keep_out : m kept between placed footprints
+    sensor, min_visible : with a sensor position (3,) and ``min_visible`` > 0, the parking paper's rule: a shape
+        is refused when less than ``min_visible`` of its sampled vertices are in the sensor's line of sight
+        (past the static scene and the shapes placed before), or when it would leave one placed before below that
     """
 
-    def __init__(self, vertices: np.ndarray, triangles: np.ndarray, keep_out: float = 0.3):
+    def __init__(self, vertices: np.ndarray, triangles: np.ndarray, keep_out: float = 0.3, sensor: np.ndarray | None = None, min_visible: float = 0.0):
         self.vertices = np.asarray(vertices, float)
         self.triangles = np.asarray(triangles, np.int64).reshape(-1, 3)
         self.tri = self.vertices[self.triangles]
@@ -146,6 +186,24 @@ class Placer:
         self.keep_out = keep_out
         self.placed: list[Placed] = []
         self.rejections: Counter = Counter()
+        self.sensor = None if sensor is None else np.asarray(sensor, float)
+        self.min_visible = min_visible
+
+    def sight_lines(self, vertices: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(starts, ends, blocked)``: segments from the sensor to ``vertices``' samples (stopping 2 cm short),
+        and which the static scene and the objects placed so far block."""
+        points = sample_points(vertices)
+        direction = points - self.sensor
+        ends = points - direction / np.maximum(np.linalg.norm(direction, axis=1, keepdims=True), 1e-9) * 0.02
+        starts = np.repeat(self.sensor[None], len(points), axis=0)
+        blocked = segments_blocked(starts, ends, self.tri)
+        for other in self.placed:
+            blocked |= segments_blocked(starts, ends, other.vertices[other.shape.triangles])
+        return starts, ends, blocked
+
+    def visible_fraction(self, vertices: np.ndarray) -> float:
+        """Share of ``vertices``' samples (world) seen from the sensor past the static scene and the objects placed."""
+        return float(1.0 - self.sight_lines(vertices)[2].mean())
 
     def fits(self, kind: str, shape: Shape, matrix: np.ndarray, support: tuple[np.ndarray, np.ndarray] | None) -> Placed | None:
         """The placement of ``shape`` at ``matrix`` when it fits, else ``None`` (the reason counted in ``rejections``).
@@ -172,9 +230,26 @@ class Placer:
             if meshes_cross(world, shape.triangles, self.vertices[used], local.reshape(-1, 3)):
                 self.rejections["static"] += 1
                 return None
-        return Placed(kind, shape, matrix, world, box)
+        placed = Placed(kind, shape, matrix, world, box)
+        if self.sensor is not None and self.min_visible > 0:
+            placed.sight = self.sight_lines(world)
+            if 1.0 - placed.sight[2].mean() < self.min_visible:
+                self.rejections["hidden"] += 1
+                return None
+            occluder = world[shape.triangles]
+            for other in self.placed:
+                starts, ends, blocked = other.sight
+                if 1.0 - (blocked | segments_blocked(starts, ends, occluder)).mean() < self.min_visible:
+                    self.rejections["hides"] += 1
+                    return None
+        return placed
 
     def commit(self, placed: Placed) -> None:
+        if placed.sight is not None:  # the objects placed before lose the lines of sight it blocks
+            occluder = placed.vertices[placed.shape.triangles]
+            for other in self.placed:
+                starts, ends, blocked = other.sight
+                other.sight = (starts, ends, blocked | segments_blocked(starts, ends, occluder))
         self.placed.append(placed)
 
 

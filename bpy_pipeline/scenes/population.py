@@ -271,11 +271,17 @@ class PopulationScene:
             self.cached = (digest, find_places(buffers, self.population.placement))
         return buffers, self.cached[1]
 
-    def randomize(self, rng: np.random.Generator):
-        """Draw, place and show this frame's objects: ``(headings {instance: yaw}, info, warnings)``."""
+    def randomize(self, rng: np.random.Generator, view=None):
+        """Draw, place and show this frame's objects: ``(headings {instance: yaw}, info, warnings)``.
+
+        view : the frames' :class:`~bpy_pipeline.geometry.lod.SensorView` (its first position is the sensor the
+            visibility rule looks from), or ``None``
+        """
         rules = self.population.placement
         buffers, places = self.static_scene()
-        placer = Placer(buffers.vertices, buffers.triangles, rules.keep_out)
+        positions = getattr(view, "positions", None)
+        sensor = np.asarray(positions[0], float) if positions is not None and len(positions) else None
+        placer = Placer(buffers.vertices, buffers.triangles, rules.keep_out, sensor, rules.min_visible)
         floor_spots = [(s, s.spots, None) for s in places.floors]
         seat_spots = [(s, s.edges, s.outward) for s in places.seats]
 
@@ -315,7 +321,7 @@ def populate(population, context, result):
     held = context.keep.get(KEY)
     if held is None or held[0] != population or not held[1].alive():
         held = context.keep[KEY] = (population, PopulationScene(population))
-    headings, info, warnings = held[1].randomize(context.rng)
+    headings, info, warnings = held[1].randomize(context.rng, context.view)
     return dataclasses.replace(
         result,
         headings={**result.headings, **headings},
