@@ -259,3 +259,20 @@ def test_fbx_and_blend_car_files_import_upright_with_their_glass(bpy_scene, tmp_
     assert extent[2] == pytest.approx(1.0) and extent[0] / extent[2] == pytest.approx(4.631 / 1.625, rel=0.01)  # nose along x, upright
     assert set(model.parts) == {"body", "glass"} and len(model.parts["glass"][2]) == 10  # the windows' ten triangles
     assert model.unit_scale == 1.0
+
+
+@pytest.mark.bpy
+def test_asset_frames_are_the_same_whatever_came_before(bpy_scene, tmp_path):
+    from bpy_pipeline.config import load_config
+    from bpy_pipeline.pipeline import run_frames
+
+    population = {"car": {"count": 1, "assets": "project_cars"}, "person": {"count": {"min": 1, "max": 4}, "assets": "project_people"}}
+    data = {"seed": 9, "frames": 4, "scene": {"builder": "blend", "path": str(_hall(tmp_path)), "population": population}, "sensor": {"preset": "vlp16", "position": [0, 0, 2.5]}, "output": {"formats": ["ply"], "preview": False}}
+    config = load_config(data)
+    for _ in run_frames(config, tmp_path / "all"):
+        pass
+    for _ in run_frames(config, tmp_path / "alone", frames=[3]):
+        pass
+    for name in ("ply/000003.ply", "openpcdet/labels/000003.txt"):
+        assert (tmp_path / "all" / name).read_bytes() == (tmp_path / "alone" / name).read_bytes(), name
+    assert (tmp_path / "all" / "ply/000002.ply").read_bytes() != (tmp_path / "all" / "ply/000003.ply").read_bytes()
