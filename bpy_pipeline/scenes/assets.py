@@ -85,7 +85,9 @@ class AssetModel:
     def __init__(self, entry):
         self.entry = entry
         self.kind = entry.kind
+        actions_before = set(bpy.data.actions)
         objects = _import(entry)
+        self.imported_actions = [a for a in bpy.data.actions if a not in actions_before]  # this import's, not an earlier one's
         meshes = [o for o in objects if o.type == "MESH"]
         if not meshes:
             raise InputError(f"{entry.where}.path: {entry.path.name} holds no mesh")
@@ -160,7 +162,7 @@ class AssetModel:
             obj.hide_render = True  # never exported; still evaluated for its posed mesh
         self.meshes = meshes
         self.import_matrix = {o.name: np.array(o.matrix_world) for o in objects}
-        self.actions = _actions_of(self.armature)
+        self.actions = _actions_of(self.armature, self.imported_actions)
         self.limits = _rotation_limits(self.armature)
         self.parts = {}
 
@@ -198,19 +200,19 @@ def _fcurves(action):
 BONE_PATH = re.compile(r'pose\.bones\["(.+)"\]\.(rotation_quaternion|rotation_euler|location|scale)$')
 
 
-def _actions_of(armature) -> list:
-    """``[(name, keyframe times, [(bone, property, index, fcurve)])]`` of the actions that move this armature's bones."""
+def _actions_of(armature, actions) -> list:
+    """``[(name, keyframe times, [(bone, property, index, fcurve)])]`` of the ``actions`` that move this armature's bones."""
     out = []
     bones = set(armature.pose.bones.keys())
-    for action in sorted(bpy.data.actions, key=lambda a: a.name):
+    for action in sorted(actions, key=lambda a: a.name):
         channels, times = [], set()
         for fc in _fcurves(action):
             match = BONE_PATH.match(fc.data_path)
             if match and match.group(1) in bones:
                 channels.append((match.group(1), match.group(2), fc.array_index, fc))
                 times.update(round(k.co[0], 3) for k in fc.keyframe_points)
-        if channels:
-            out.append((action.name, sorted(times), channels))
+        if channels:  # named as in the file (Blender's .001 of a second import dropped)
+            out.append((re.sub(r"\.\d{3}$", "", action.name), sorted(times), channels))
     return out
 
 
