@@ -7,10 +7,12 @@ populated with imported car assets (the project's sedan GLB) and people, VLP-16.
 (``pipeline.make_frame``). Frame 0 opens the file, imports the assets and finds the surfaces; later
 frames only draw, place and pose. Reference, measured in the same run: the same frames with the scene
 and population rebuilt every frame (the .blend reopened, assets imported again); and the human-robot
-paper's 27.6 s per frame (Blender Geometry Nodes, seed 002). Medians over the frames after the first.
+paper's 27.6 s per frame ("Raphael: Realistic 3D Data Generation and Unsupervised Learning for Enhanced
+Human-Robot Detection in the Real World"). Medians over the frames after the first.
 Run: python benchmarks/bench_population.py [--small]
 """
 
+import os
 import statistics
 import sys
 import tempfile
@@ -83,6 +85,7 @@ def main() -> None:
         "paper_seconds_per_frame": PAPER_SECONDS,
         "stages": "build: open the .blend (first frame) and draw/place/pose the population; export: evaluated depsgraph to buffers; scan: Embree through the sensor's mirrors; boxes: 3D boxes with occlusion; write: PLY/NPY/labels",
         "medians_over": "the frames after the first",
+        "load_average_after": [round(x, 2) for x in os.getloadavg()],  # other jobs on the machine inflate every figure
     })
 
 
