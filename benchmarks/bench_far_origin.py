@@ -129,8 +129,8 @@ def measure(distance: float, directions, max_range: float, cells: int) -> list[d
         else:  # Embree's own distance, from the float32 ray it was given
             o32 = np.zeros((n, 3), np.float32) if caster is shifted else np.tile(origin.astype(np.float32), (n, 1))
             d32 = np.ascontiguousarray(directions if caster is shifted else world_d, np.float32)
-            t, prim, geom = caster._embree(o32, d32, np.full(n, min(max_range, FAR), np.float32))
-            ray = np.flatnonzero(geom >= 0)
+            t, prim = caster._embree(o32, d32, np.full(n, min(max_range, FAR), np.float32))
+            ray = np.flatnonzero(prim >= 0)
             triangle = caster._triangles(prim[ray])
             local = o32[ray].astype(np.float64) + d32[ray].astype(np.float64) * t[ray, None].astype(np.float64)
             hit_point = local @ sensor_pose[:3, :3].T + origin if caster is shifted else local

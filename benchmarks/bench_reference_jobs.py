@@ -12,7 +12,8 @@ and committing every frame) on this machine's cores:
   scan are present.
 
 ``fps_per_core`` divides by the cores the job may use (a single process uses both through its
-ray-casting threads). --small runs fewer frames and the thesis scan at a quarter of its sampling
+ray-casting threads). ``cores_used`` = CPU time / wall time of the job's processes: on a shared
+machine, how many cores the job actually got. --small runs fewer frames and the thesis scan at a quarter of its sampling
 factor (1/16 of the rays), scaled up.
 
     python benchmarks/bench_reference_jobs.py [--small]
@@ -21,6 +22,7 @@ factor (1/16 of the rays), scaled up.
 from __future__ import annotations
 
 import os
+import resource
 import subprocess
 import sys
 import tempfile
@@ -32,14 +34,17 @@ from common import ROOT, arguments, report
 REAL_SCANS = Path(os.environ.get("BPY_PIPELINE_REAL_SCANS", ROOT.parent / "shared" / "real_scans"))
 
 
-def timed(args: list[str], env: dict | None = None) -> float:
-    """Wall seconds of ``run.py ARGS --out TMP``."""
+def timed(args: list[str], env: dict | None = None) -> tuple[float, float]:
+    """``(wall s, CPU s)`` of ``run.py ARGS --out TMP`` (CPU: user + system of it and its workers)."""
     with tempfile.TemporaryDirectory() as out:
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
         start = time.perf_counter()
         done = subprocess.run([sys.executable, str(ROOT / "run.py"), "--out", str(Path(out) / "run"), *args], capture_output=True, text=True, env={**os.environ, **(env or {})})
         if done.returncode != 0:
             raise RuntimeError(f"run.py {' '.join(args)}: {done.stderr.strip()[-500:]}")
-        return time.perf_counter() - start
+        wall = time.perf_counter() - start
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
 
 
 def main() -> None:
@@ -61,9 +66,10 @@ def main() -> None:
         jobs.append(("mixed real-scan frame, 5 cars", ["--set", "scene.builder=real_scan", "--set", f"scene.path={sweep}", "--set", f"scene.objects={cars}"], 1, None, None))
     rows = []
     for name, run_args, frames, reference_s, source in jobs:
-        took = timed(run_args, {"OPENBLAS_NUM_THREADS": "1"})
+        took, cpu = timed(run_args, {"OPENBLAS_NUM_THREADS": "1"})
         per_frame = took / frames
-        row = {"job": name, "wall_s": took, "s_per_frame": per_frame, "fps": 1 / per_frame, "fps_per_core": 1 / per_frame / cores}
+        row = {"job": name, "wall_s": took, "s_per_frame": per_frame, "fps": 1 / per_frame, "fps_per_core": 1 / per_frame / cores, "cpu_s": cpu, "cores_used": cpu / took}
+        print(name, row, flush=True)
         if reference_s is not None:
             row.update({"reference_s_per_frame": reference_s, "faster_than_reference": reference_s / per_frame, "reference": source})
         rows.append(row)
