@@ -51,7 +51,8 @@ class PersonPopulation:
 
 @dataclass(frozen=True)
 class RobotArmPopulation:
-    """``scene.population.robot_arm``: six-axis arms (the capsule chain of ``model``, default assets_manifest/robot_arm.yaml)
+    """``scene.population.robot_arm``: six-axis arms (``model``: a robot_arm.yaml capsule chain, default
+    assets_manifest/robot_arm.yaml, or a URDF file whose links carry their own meshes)
     with joint angles drawn within their limits, no self-collision; ``positions``: ``[x, y, yaw_deg]`` bases to
     choose from (empty: anywhere on the floor). ``assets``: a set of robot meshes (kind robot) placed at
     their own size (``unit_scale``) instead."""
@@ -182,6 +183,11 @@ def _draw_arm(params: RobotArmPopulation, models, rng: np.random.Generator):
         k = int(rng.integers(len(models)))
         vertices, triangles, detail = models[k].shape(rng)
         return mesh_shape(vertices, triangles, models[k].file_height * models[k].unit_scale, {"asset": k, **detail})
+    from ..geometry.urdf import MeshedArm
+
+    if isinstance(models, MeshedArm):  # a URDF arm: its own link meshes
+        q = kinematics.random_configuration(models.model, rng, np.eye(4), floor_z=0.0)
+        return arm_shape(models.model, q, models.posed(q))
     q = kinematics.random_configuration(models, rng, np.eye(4), floor_z=0.0)  # models: the arm's ArmModel
     return arm_shape(models, q)
 

@@ -6,6 +6,7 @@ and turns link ``i`` about ``axis``:
 
     frame[0] = base                                  (the base link, on the floor)
     frame[i] = frame[i - 1] @ T(origin_i) @ R(axis_i, q_i)      i = 1..6
+                (@ F_i before R for a URDF joint turned by its rpy: ``ArmModel.fixed``)
 
 Link shapes are capsules in their link's frame; the same capsules are the self-collision model
 and (inscribed meshes) the links Blender shows, so a configuration the check accepts has links
@@ -41,6 +42,7 @@ class ArmModel:
     capsule_flat_start : (c,) bool, the capsule ends in a flat disc at ``a`` (the base on the floor)
     pairs : (p, 2) int capsule index pairs checked for self-collision
     clearance : metres two checked capsules must keep between them
+    fixed : (j, 3, 3) float64 fixed rotation of each joint's frame before it turns (a URDF joint's rpy), or None
     """
 
     name: str
@@ -56,6 +58,7 @@ class ArmModel:
     capsule_flat_start: np.ndarray
     pairs: np.ndarray
     clearance: float
+    fixed: np.ndarray | None = None
 
     @property
     def joints(self) -> int:
@@ -180,7 +183,7 @@ def forward(model: ArmModel, q: np.ndarray, base: np.ndarray | None = None) -> n
     rotations = axis_rotations(model.axes, q)  # (..., j, 3, 3)
     for i in range(model.joints):
         local = np.zeros(batch + (4, 4))
-        local[..., :3, :3] = rotations[..., i, :, :]
+        local[..., :3, :3] = rotations[..., i, :, :] if model.fixed is None else model.fixed[i] @ rotations[..., i, :, :]
         local[..., :3, 3] = model.origins[i]
         local[..., 3, 3] = 1.0
         frames[..., i + 1, :, :] = frames[..., i, :, :] @ local

@@ -320,11 +320,14 @@ def person_shape(angles: np.ndarray, height: float, build: float, pose: str) -> 
     return Shape(vertices, triangles, feet, detail)
 
 
-def arm_shape(model, q: np.ndarray) -> Shape:
-    """A robot arm at joint angles ``q`` (rad) with its base frame as the shape's frame (lowest point z = 0)."""
+def arm_shape(model, q: np.ndarray, mesh: tuple | None = None) -> Shape:
+    """A robot arm at joint angles ``q`` (rad) with its base frame as the shape's frame (lowest point z = 0).
+
+    mesh : the posed ``(vertices, triangles)`` in the base frame (a URDF arm's own meshes); default its capsules
+    """
     from .objects import arm_mesh
 
-    vertices, triangles = arm_mesh(model, q)
+    vertices, triangles = arm_mesh(model, q) if mesh is None else mesh
     lift = -vertices[:, 2].min()
     vertices = vertices + [0.0, 0.0, lift]
     r = float(model.capsule_radius[model.capsule_link == 0].max()) * 0.7

@@ -147,6 +147,10 @@ class RobotArmSide(Side):
 
         if self.params.assets:
             return _asset_models(self.params, "robot_arm", self.manifest)
+        if self.params.model.lower().endswith(".urdf"):  # the robot's own link meshes (ROS-Industrial style)
+            from .robot_arm import load_urdf_arm
+
+            return load_urdf_arm(self.params.model)
         return kinematics.load_arm(self.params.model) if self.params.model else kinematics.load_arm()
 
     def new_slot(self, index, placed):
@@ -154,8 +158,11 @@ class RobotArmSide(Side):
             from .assets import AssetSlot
 
             return AssetSlot(self.collection, f"robot_{index:03d}")
+        from ..geometry.urdf import MeshedArm
         from .robot_arm import RobotArm
 
+        if isinstance(self.models, MeshedArm):
+            return RobotArm(self.models.model, self.collection, 50 + index, self.models.meshes)
         return RobotArm(self.models, self.collection, 50 + index)
 
     def show_one(self, slot, placed, instance, rng):
