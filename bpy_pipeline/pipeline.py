@@ -476,15 +476,20 @@ def collect_points(parts: Iterable[np.ndarray], expected: int) -> np.ndarray:
     expected : the most points likely (the ray count); that many (at most
     :data:`MAX_RESERVED_POINTS`) are reserved up front, so the parts are never all held twice:
     the operating system maps the reserved pages only as points fill them. More points than
-    reserved double the reserve.
+    reserved double the reserve. Records are copied as raw bytes (numpy copies a structured array
+    field by field, 15x slower: 16 ms for a 611 k-point frame); a part of another dtype field by field.
     """
+    raw = np.dtype((np.void, POINT_DTYPE.itemsize))
     out, n = np.empty(min(max(expected, 1), MAX_RESERVED_POINTS), POINT_DTYPE), 0
     for part in parts:
         if n + len(part) > len(out):
             grown = np.empty(max(2 * len(out), n + len(part)), POINT_DTYPE)
-            grown[:n] = out[:n]
+            grown.view(raw)[:n] = out.view(raw)[:n]
             out = grown
-        out[n : n + len(part)] = part
+        if part.dtype == POINT_DTYPE:
+            out.view(raw)[n : n + len(part)] = np.ascontiguousarray(part).view(raw)
+        else:
+            out[n : n + len(part)] = part
         n += len(part)
     return out[:n]
 
