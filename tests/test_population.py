@@ -228,12 +228,22 @@ def test_bad_population_keys_exit_2_with_one_line_naming_the_key(tmp_path):
         "scene.population={placement: {keep_out: -1}}": "scene.population.placement.keep_out: must be >= 0",
         "scene.population={person: {count: 2, colour: red}}": "scene.population.person.colour: unknown key",
         "scene.population=[person]": "scene.population: expected a mapping",
+        "scene.population={robot_arm: {positions: [[0, 0]]}}": "scene.population.robot_arm.positions[0]: expected a list of 3 numbers",
+        "scene.population={placement: {min_visible: 2}}": "scene.population.placement.min_visible: must be in 0..1",
     }
     for assignment, message in cases.items():
         result = subprocess.run([sys.executable, str(ROOT / "run.py"), "--out", str(tmp_path / "o"), "--set", "scene.builder=primitives", "--set", assignment], cwd=ROOT, capture_output=True, text=True, timeout=120)
         assert result.returncode == 2, (assignment, result.stderr)
         lines = result.stderr.strip().splitlines()
         assert len(lines) == 1 and message in lines[0], (assignment, result.stderr)
+
+
+def test_a_scene_without_blender_refuses_a_population():
+    from bpy_pipeline.config import load_config
+    from bpy_pipeline.errors import InputError
+
+    with pytest.raises(InputError, match=r"^scene.population: the real_scan scene makes its points without a Blender scene"):
+        load_config({"scene": {"builder": "real_scan", "path": "x.bin", "population": {"person": {"count": 1}}}})
 
 
 def test_population_round_trips_through_the_saved_config():
