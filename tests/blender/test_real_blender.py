@@ -196,15 +196,23 @@ def sidebar_box(state: dict) -> tuple[int, int, int, int]:
     return s["x"], s["y"] - 4, s["x"] + s["width"], s["y"] + s["height"]
 
 
-def find_panels(session, state):
-    """A screenshot and the spans (top, bottom) of the sidebar's top-level panels, top to bottom."""
+def find_panels(session, state, attempts: int = 8):
+    """A screenshot and the spans (top, bottom) of the sidebar's top-level panels, top to bottom.
+
+    The sidebar is read until two screenshots in a row show the same panel headers (a loaded machine
+    may redraw a click's result a second or more later)."""
     sidebar = state["sidebar"]
-    session.xdo("mousemove", sidebar["x"] + 4, sidebar["y"] + sidebar["height"] - 4)  # over the sidebar: it redraws its panels
-    time.sleep(0.4)
-    session.xdo("mousemove", sidebar["x"] - 250, sidebar["y"] + 400)  # no button hovered or pressed
-    time.sleep(0.4)
-    img, path = session.screenshot("layout")
-    headers = panel_headers(img, state["sidebar"])
+    previous = None
+    for _ in range(attempts):
+        session.xdo("mousemove", sidebar["x"] + 4, sidebar["y"] + sidebar["height"] - 4)  # over the sidebar: it redraws its panels
+        time.sleep(0.4)
+        session.xdo("mousemove", sidebar["x"] - 250, sidebar["y"] + 400)  # no button hovered or pressed
+        time.sleep(0.4)
+        img, path = session.screenshot("layout")
+        headers = panel_headers(img, state["sidebar"])
+        if headers and headers == previous:
+            break
+        previous = headers
     bottom = state["sidebar"]["y"] + state["sidebar"]["height"]
     boxes = [(y - 10, (headers[i + 1] - 14) if i + 1 < len(headers) else bottom) for i, y in enumerate(headers)]
     return img, path, boxes
@@ -374,18 +382,20 @@ def test_gui_show_cloud_by_class(gui):
     # the screen: seen from above with flat lighting, points draw in their class colours
     session.call(TOP_VIEW)
     area = state["area"]
-    for dx in (0, 10):  # events make Blender redraw what the script changed
-        session.xdo("mousemove", area["x"] + 300 + dx, area["y"] + 300 + dx)
-        time.sleep(0.4)
-    time.sleep(1.0)
-    img, path = session.screenshot("cloud")
-    area = state["area"]
-    view = img[area["y"] + 40 : area["y"] + area["height"] - 10, area["x"] + 60 : state["sidebar"]["x"] - 10].reshape(-1, 3).astype(int)
-    counts = {}
-    for class_id in classes:
-        srgb = lut[class_id].astype(int)
-        counts[table.names[class_id]] = int((np.abs(view - srgb).max(axis=1) <= 6).sum())
-    shown = {name for name, n in counts.items() if n >= 20}
+    for _ in range(6):  # a loaded machine may draw the new view a few seconds later: look again until it shows
+        for dx in (0, 10):  # events make Blender redraw what the script changed
+            session.xdo("mousemove", area["x"] + 300 + dx, area["y"] + 300 + dx)
+            time.sleep(0.4)
+        time.sleep(1.0)
+        img, path = session.screenshot("cloud")
+        view = img[area["y"] + 40 : area["y"] + area["height"] - 10, area["x"] + 60 : state["sidebar"]["x"] - 10].reshape(-1, 3).astype(int)
+        counts = {}
+        for class_id in classes:
+            srgb = lut[class_id].astype(int)
+            counts[table.names[class_id]] = int((np.abs(view - srgb).max(axis=1) <= 6).sum())
+        shown = {name for name, n in counts.items() if n >= 20}
+        if len(shown) >= 3:
+            break
     assert len(shown) >= 3, counts
     FIGURES.setdefault(session.chroot.suite, {}).update(cloud_pixels_by_class=counts)
     keep_shot(session.chroot.suite, path, "show_cloud", width=900)
