@@ -209,8 +209,13 @@ def test_population_works_on_a_procedural_builder(bpy_scene):
     keep = {}
     result = build_frame_scene(config, 0, keep=keep)
     assert result.info["population"]["person"]["placed"] == 4 and result.info["cars_placed"] == 3
+    assert result.info["population"]["surfaces"] == "walkable_classes"  # the level's floor, not its ramp
     buffers = export_scene(load_class_table())
     parts = _instances(buffers)
+    floor = np.array([c == "floor" for c in buffers.objects.class_names])[buffers.triangle_object]
+    for i in (i for i in parts if i >= 10000):
+        v = parts[i][0]
+        assert on_surface(v[v[:, 2].argmin()][None], buffers.vertices, buffers.triangles[floor])[0]
     cars = [i for i in parts if 100 <= i < 10000]
     static = buffers.triangles[(buffers.objects.instance < 10000)[buffers.triangle_object]]
     for i in (i for i in parts if i >= 10000):
@@ -230,6 +235,7 @@ def test_bad_population_keys_exit_2_with_one_line_naming_the_key(tmp_path):
         "scene.population=[person]": "scene.population: expected a mapping",
         "scene.population={robot_arm: {positions: [[0, 0]]}}": "scene.population.robot_arm.positions[0]: expected a list of 3 numbers",
         "scene.population={placement: {min_visible: 2}}": "scene.population.placement.min_visible: must be in 0..1",
+        "scene.population={placement: {walkable_classes: [lava]}}": "scene.population.placement.walkable_classes[0]: unknown class 'lava'",
     }
     for assignment, message in cases.items():
         result = subprocess.run([sys.executable, str(ROOT / "run.py"), "--out", str(tmp_path / "o"), "--set", "scene.builder=primitives", "--set", assignment], cwd=ROOT, capture_output=True, text=True, timeout=120)

@@ -86,6 +86,8 @@ class PlacementRules:
     min_visible : the parking paper's visibility rule: an object is refused when less than this share of its
         sampled vertices is in the sensor's line of sight, or when it would leave one placed before below it
         (0: not checked; a moving sensor: its first position)
+    walkable_classes, seat_classes : without ``lidar_walkable`` (``lidar_seat``) objects, the upward faces of
+        objects of these classes are the floors (seats); none of them in the scene: surfaces are detected
     """
 
     keep_out: float = 0.3
@@ -97,6 +99,8 @@ class PlacementRules:
     instance_base: int = 10000
     manifest: str = ""
     min_visible: float = 0.0
+    walkable_classes: list[str] = field(default_factory=lambda: ["floor", "ground", "road", "sidewalk", "platform"])
+    seat_classes: list[str] = field(default_factory=list)
 
 
 @dataclass(frozen=True)
@@ -253,6 +257,12 @@ def population_from_dict(data, where: str = "scene.population") -> Population | 
     for name in ("tries", "cell", "min_area", "instance_base"):
         check_positive(getattr(p, name), f"{where}.placement.{name}")
     check_positive(p.floor_band, f"{where}.placement.floor_band", allow_zero=True)
+    from ..labels import load_class_table
+
+    table = load_class_table()
+    for key in ("walkable_classes", "seat_classes"):
+        for i, name in enumerate(getattr(p, key)):
+            table.id_of(name, f"{where}.placement.{key}[{i}]")
     if not 0 <= p.min_visible <= 1:
         raise InputError(f"{where}.placement.min_visible: must be in 0..1, got {p.min_visible}")
     if not 0 <= p.seat_height[0] <= p.seat_height[1]:

@@ -233,18 +233,31 @@ class Surfaces:
     source: str  # "lidar_walkable", "detected"
 
 
+def _class_rows(buffers, names) -> np.ndarray:
+    """``(m,)`` bool: triangles of objects whose class is one of ``names``."""
+    wanted = {n.lower() for n in names}
+    rows = np.array([c.lower() in wanted for c in buffers.objects.class_names], bool)
+    return rows[buffers.triangle_object] if len(rows) else np.zeros(len(buffers.triangles), bool)
+
+
 def find_places(buffers, rules) -> Surfaces:
-    """Floors and seats of the exported static scene: objects marked ``lidar_walkable`` / ``lidar_seat``, else detected."""
+    """Floors and seats of the exported static scene: objects marked ``lidar_walkable`` / ``lidar_seat``, else
+    objects of ``walkable_classes`` / ``seat_classes``, else the surfaces detected in all its triangles."""
     v, t = buffers.vertices, buffers.triangles
-    walk, seat = _custom_property_rows(buffers, "lidar_walkable"), _custom_property_rows(buffers, "lidar_seat")
     common = {"cell": rules.cell, "min_area": rules.min_area}
     detected = find_surfaces(v, t, **common)
     floors, seats = floor_and_seats(detected, tuple(rules.seat_height), rules.floor_band)
     source = "detected"
-    if walk.any():
-        floors, source = find_surfaces(v, t, walk, **common), "lidar_walkable"
-    if seat.any():
-        seats = find_surfaces(v, t, seat, headroom=0.4, **common)
+    for mask, name in ((_custom_property_rows(buffers, "lidar_walkable"), "lidar_walkable"), (_class_rows(buffers, rules.walkable_classes), "walkable_classes")):
+        found = find_surfaces(v, t, mask, **common) if mask.any() else []
+        if found:
+            floors, source = found, name
+            break
+    for mask in (_custom_property_rows(buffers, "lidar_seat"), _class_rows(buffers, rules.seat_classes)):
+        found = find_surfaces(v, t, mask, headroom=0.4, **common) if mask.any() else []
+        if found:
+            seats = found
+            break
     return Surfaces(floors, seats, source)
 
 
