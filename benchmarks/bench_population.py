@@ -20,7 +20,7 @@ import time
 
 import yaml
 
-from common import RESULTS, ROOT, arguments, report
+from common import ROOT, arguments, report
 
 PAPER_SECONDS = 27.6  # the human-robot paper: one virtual frame
 STAGES = ("build", "export", "scan", "boxes", "write")

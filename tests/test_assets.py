@@ -2,7 +2,6 @@
 glass windows, rigged people posed by their animations, a wrongly oriented file named in one line."""
 
 import hashlib
-import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -11,7 +10,7 @@ import numpy as np
 import pytest
 import yaml
 
-from bpy_pipeline.assets import AXES, MANIFEST, asset_set, auto_unit_scale, read_manifest, up_rotation, upright
+from bpy_pipeline.assets import AXES, asset_set, auto_unit_scale, read_manifest, up_rotation, upright
 from bpy_pipeline.errors import InputError
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -207,8 +206,6 @@ def test_a_missing_set_is_a_config_error_before_blender(tmp_path):
 
 @pytest.mark.bpy
 def test_a_rig_without_animations_is_posed_within_its_bones_rotation_limits(bpy_scene):
-    import bpy
-
     from bpy_pipeline.scenes.assets import apply_pose, draw_pose, load_models, _rotation_limits
 
     model = load_models("project_people", "person", "test")[0]

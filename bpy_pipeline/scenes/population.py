@@ -13,6 +13,7 @@ that loads what its draws need (the arm's model, asset meshes) and owns its pool
 
 from __future__ import annotations
 
+import abc
 import dataclasses
 import hashlib
 
@@ -69,7 +70,7 @@ class PartsSlot:
             return False
 
 
-class Side:
+class Side(abc.ABC):
     """What one kind needs in Blender: ``models`` for its draws, a pool of slots, ``show`` per placement."""
 
     def __init__(self, name: str, params, collection, manifest: str = ""):
@@ -78,13 +79,16 @@ class Side:
         self.models = self.load()
 
     def load(self):
+        """What the kind's draws need (asset models, the arm's model); ``None`` for procedural models."""
         return None
 
+    @abc.abstractmethod
     def new_slot(self, index: int, placed):
-        raise NotImplementedError
+        """A new pool object able to show ``placed``."""
 
+    @abc.abstractmethod
     def show_one(self, slot, placed, instance: int, rng) -> None:
-        raise NotImplementedError
+        """Move, pose and tag ``slot`` as ``placed`` with ``instance``."""
 
     def slot_for(self, index: int, placed):
         while len(self.slots) <= index:
