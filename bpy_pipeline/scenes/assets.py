@@ -29,6 +29,7 @@ from .objects import mesh_data, tag
 TEMPLATES = "LiDAR Asset Templates"
 GLASS_REFLECTIVITY = 0.08
 BODY_REFLECTIVITY = {"person": 0.35, "car": 0.45, "robot": 0.55}
+MAX_CACHED_POSES = 256  # posed meshes kept per rigged asset (a keyframe's mesh is evaluated once; the cache only saves time)
 
 
 def _matrix(m) -> Matrix:
@@ -182,6 +183,8 @@ class AssetModel:
             unit = v @ self.normal[:3, :3].T + self.normal[:3, 3]
             lift = -unit[:, 2].min()
             unit[:, 2] += lift
+            if len(self.cache) >= MAX_CACHED_POSES:  # poses within limits are new every draw: bound the memory
+                self.cache.pop(next(iter(self.cache)))
             self.cache[key] = (unit, t, lift)
         unit, t, lift = self.cache[key]
         return unit, t, {"pose": pose["name"], "pose_key": key, "lift": lift, "angles": pose.get("angles")}
