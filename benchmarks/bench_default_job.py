@@ -1,7 +1,7 @@
 """The default job (no --config): wall time split into build, export, scan and write.
 
 Measures ``python run.py`` end to end in a subprocess (Python start and bpy import included)
-and the in-process split from the manifest; best of three.
+and the in-process split from the frame's record; best of three.
 Run: python benchmarks/bench_default_job.py [--small]
 """
 
@@ -24,7 +24,7 @@ def main():
             start = time.perf_counter()
             subprocess.run([sys.executable, str(ROOT / "run.py"), "--out", out, *extra], check=True, capture_output=True)
             wall = time.perf_counter() - start
-            frame = json.loads((Path(out) / "manifest.json").read_text())["frames"][0]
+            frame = json.loads((Path(out) / "records" / "000000.json").read_text())  # the frame's committed record
             runs.append({"wall_s": wall, **frame["timings_s"], "points": frame["points"], "triangles": frame["triangles"]})
     best = min(runs, key=lambda r: r["wall_s"])
     best["startup_s"] = best["wall_s"] - sum(best[k] for k in ("build", "export", "scan", "write"))
