@@ -279,3 +279,18 @@ def test_the_visibility_rule_refuses_hidden_objects_and_objects_that_hide_others
     assert placer.fits("person", shape, placement_matrix((0.0, -2.0), 0.0, 0.01), support) is not None  # beside: both seen
     without = Placer(v, t, keep_out=0.1)  # the rule off: the hidden spot is taken
     assert without.fits("person", shape, placement_matrix((4.0, 0.0), 0.0, 0.01), support) is not None
+
+
+def test_keep_out_is_the_gap_between_footprints():
+    from bpy_pipeline.geometry.population import footprint
+
+    v, t = room()
+    floor = find_surfaces(v, t)[0]
+    support = (v, t[floor.triangles])
+    shape = person_shape(human.neutral_angles(), 1.75, 1.0, "standing")
+    centre, half, _, _, _ = footprint(shape, placement_matrix((0.0, 0.0), 0.0, 0.0))
+    width = 2 * half[1]
+    for gap, fits in ((0.25, False), (0.35, True)):
+        placer = Placer(v, t, keep_out=0.3)
+        placer.commit(placer.fits("person", shape, placement_matrix((-3.0, 3.0), 0.0, 0.01), support))
+        assert (placer.fits("person", shape, placement_matrix((-3.0, 3.0 - width - gap), 0.0, 0.01), support) is not None) == fits

@@ -5,8 +5,8 @@ point at z = 0) put at a spot of a :class:`~.surfaces.Surface` with a yaw. :clas
 when
 
 * its support points rest on an allowed surface (``surfaces.on_surface``),
-* its footprint (the rectangle around its mesh in its own frame, grown by ``keep_out`` m) overlaps
-  no footprint placed before it whose height range it shares, and
+* its footprint (the rectangle around its mesh in its own frame) stays ``keep_out`` m from every
+  footprint placed before it whose height range it shares, and
 * its mesh crosses no triangle of the static scene: no edge of either mesh passes through a triangle
   of the other (:func:`meshes_cross`, on the same triangles export hands to the scanner).
 
@@ -219,7 +219,7 @@ class Placer:
         box = footprint(shape, matrix)
         for other in self.placed:
             c, h, y, z0, z1 = other.footprint
-            if box[3] < z1 + self.keep_out and z0 < box[4] + self.keep_out and rectangles_overlap(box[0], box[1], box[2], c, h, y, 2 * self.keep_out):
+            if box[3] < z1 + self.keep_out and z0 < box[4] + self.keep_out and rectangles_overlap(box[0], box[1], box[2], c, h, y, self.keep_out):
                 self.rejections["keep_out"] += 1
                 return None
         world = shape.vertices @ rotation.T + move
