@@ -14,7 +14,9 @@ workers getting fewer than two cores. ``cpu_ratio`` = one process's CPU time / t
 
 - parking frames (small scans: per-frame Python work, boxes and writing dominate);
 - industrial-hall frames (the mirror LiDAR's 262 k rays: the scan dominates, and one process
-  already traces on both cores).
+  already traces on both cores);
+- a long parking run (1,000 frames), where each worker's own start-up and scene build (a second
+  Blender) weigh little against its frames.
 
 Run: python benchmarks/bench_workers.py [--small]
 """
@@ -72,10 +74,11 @@ def job(name: str, args: list[str], frames: int) -> dict:
 
 def main() -> None:
     args = arguments(__doc__.splitlines()[0])
-    parking, hall = (20, 4) if args.small else (200, 30)
+    parking, hall, long_parking = (20, 4, 40) if args.small else (200, 30, 1000)
     rows = [
         job("parking", ["--set", "scene.builder=parking"], parking),
         job("industrial hall", ["--set", "scene.builder=industrial_hall"], hall),
+        job("parking, long run (start-up amortised)", ["--set", "scene.builder=parking"], long_parking),
     ]
     report("workers" + ("_small" if args.small else ""), rows, args.out, {"cores": os.cpu_count(), "rounds": ROUNDS, "note": "wall time end to end with run.py (start-up included), best of the rounds; speedup = one process / two workers"})
 
