@@ -101,16 +101,18 @@ class SceneBuffers:
         rows = np.asarray(self.triangle_object)
         if rows.shape != (m,) or rows.min() < 0 or rows.max() >= len(self.objects):
             raise InputError(f"scene buffers: triangle_object must give each of the {m} triangles a row of the {len(self.objects)}-row object table")
-        out_of_range = (self.triangles < 0) | (self.triangles >= len(self.vertices))
-        if out_of_range.any():
+        if self.triangles.min() < 0 or self.triangles.max() >= len(self.vertices):
+            out_of_range = (self.triangles < 0) | (self.triangles >= len(self.vertices))
             bad_triangle, corner = (int(i[0]) for i in np.nonzero(out_of_range))
             name = self.objects.names[rows[bad_triangle]]
             raise InputError(
                 f"object {name!r}: a triangle refers to vertex {int(self.triangles[bad_triangle, corner])}, "
                 f"but the scene has vertices 0..{len(self.vertices) - 1}; fix or remove its mesh"
             )
-        bad_vertex = ~np.isfinite(self.vertices).all(axis=1)
-        if bad_vertex.any():
-            bad_triangle = np.flatnonzero(bad_vertex[self.triangles].any(axis=1))[0]
-            name = self.objects.names[self.triangle_object[bad_triangle]]
+        if not np.isfinite(self.vertices.min(initial=0.0) + self.vertices.max(initial=0.0)):  # a NaN or an infinity spreads to one of them
+            bad_vertex = ~np.isfinite(self.vertices).all(axis=1)
+            bad_triangles = np.flatnonzero(bad_vertex[self.triangles].any(axis=1))
+            if not len(bad_triangles):
+                raise InputError(f"scene buffers: vertex {int(np.flatnonzero(bad_vertex)[0])} (in no triangle) has NaN or infinite coordinates; leave it out")
+            name = self.objects.names[self.triangle_object[bad_triangles[0]]]
             raise InputError(f"object {name!r}: has NaN or infinite vertex coordinates; fix or remove it")

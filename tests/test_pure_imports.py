@@ -1,5 +1,6 @@
 """The pure part (config, geometry, lidar, io, buffers, labels) never imports bpy."""
 
+import importlib.util
 import pkgutil
 import subprocess
 import sys
@@ -11,11 +12,17 @@ ROOT = Path(__file__).resolve().parents[1]
 BPY_SIDE = {"bpy_pipeline.export", "bpy_pipeline.compat", "bpy_pipeline.scenes", "bpy_pipeline.pipeline_bpy"}
 
 
+OPTIONAL = {"bpy_pipeline.lidar.numba_kernels": "numba"}  # modules that need an optional package (the 'fast' extra)
+
+
 def pure_modules() -> list[str]:
     names = []
     for info in pkgutil.walk_packages(bpy_pipeline.__path__, "bpy_pipeline."):
-        if not any(info.name == b or info.name.startswith(b + ".") for b in BPY_SIDE):
-            names.append(info.name)
+        if any(info.name == b or info.name.startswith(b + ".") for b in BPY_SIDE):
+            continue
+        if info.name in OPTIONAL and importlib.util.find_spec(OPTIONAL[info.name]) is None:
+            continue
+        names.append(info.name)
     return names
 
 

@@ -253,6 +253,10 @@ def test_non_finite_vertices_are_an_input_error_naming_the_object(bad):
         buffers.check()
     with pytest.raises(InputError, match=r"^object 'broken_wall'"):
         RayCaster(buffers, frame=np.eye(4))
+    whole = np.nan_to_num(buffers.vertices, nan=0.0, posinf=0.0, neginf=0.0)  # the wall whole again; a non-finite vertex in no triangle
+    loose = SceneBuffers(np.vstack([whole, [[0.0, bad, 0.0]]]), buffers.triangles, buffers.triangle_object, buffers.objects)
+    with pytest.raises(InputError, match=r"^scene buffers: vertex 16 \(in no triangle\) has NaN or infinite coordinates"):
+        loose.check()
 
 
 def test_triangle_indices_out_of_range_are_an_input_error_naming_the_object():

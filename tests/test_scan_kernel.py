@@ -8,6 +8,8 @@ inside a closed mesh. A scene with glass keeps the numpy path. The static-plus-m
 :class:`CasterCache` gives the bytes of one caster of the whole scene.
 """
 
+from unittest import mock
+
 import numpy as np
 import pytest
 
@@ -15,7 +17,7 @@ from bpy_pipeline.buffers import MATERIAL_ID, SceneBuffers
 from bpy_pipeline.errors import InputError
 from bpy_pipeline.geometry import primitives
 from bpy_pipeline.geometry.transforms import pose_matrix
-from bpy_pipeline.lidar import scanner
+from bpy_pipeline.lidar import raycast, scanner
 from bpy_pipeline.lidar.kernels import numba_available
 from bpy_pipeline.lidar.raycast import CasterCache, RayCaster
 from bpy_pipeline.lidar.scanner import scan, scan_chunk
@@ -51,13 +53,29 @@ def vertex_pattern(buffers: SceneBuffers, origin: np.ndarray) -> Pattern:
 
 
 def both(run):
-    """``run(kernel)`` with the numpy path and with the compiled kernel: their results must be byte-identical."""
+    """``run(kernel)`` with the numpy path and with the compiled kernel, which calls Embree inside its
+    pass and, where it cannot (scene handles unknown), runs after embreex: all three byte-identical."""
     reference = run("numpy")
     fused = run("numba")
-    for a, b in zip(reference, fused):
-        assert a.dtype == b.dtype and len(a) == len(b)
-        assert a.tobytes() == b.tobytes()
+    with mock.patch.object(raycast, "scene_handle", lambda scene: 0):
+        after = run("numba")
+    for a, b, c in zip(reference, fused, after):
+        assert a.dtype == b.dtype == c.dtype and len(a) == len(b) == len(c)
+        assert a.tobytes() == b.tobytes() == c.tobytes()
     return reference
+
+
+@needs_numba
+def test_the_compiled_pass_calls_embree_itself_where_it_can():
+    from bpy_pipeline.lidar import embree, kernels
+
+    if not embree.shared_buffers_supported():
+        pytest.skip("this embreex's objects do not have the checked layout: Embree's answer comes from embreex")
+    assert kernels.compiled().traces
+    caster = RayCaster(room(), frame=np.eye(4), kernel="numba")
+    assert caster.embree_handles is not None and len(caster.embree_handles) == 1
+    with mock.patch.object(raycast, "scene_handle", lambda scene: 0):
+        assert RayCaster(room(), frame=np.eye(4), kernel="numba").embree_handles is None
 
 
 @needs_numba

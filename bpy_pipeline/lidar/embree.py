@@ -45,7 +45,7 @@ def _library():
     for path in ([None] if os.name == "posix" else []) + found:
         try:
             lib = ctypes.CDLL(path)
-            lib.rtcNewGeometry
+            lib.rtcNewGeometry, lib.rtcIntersect1  # the latter for the compiled pass (lidar/numba_kernels.py)
         except (OSError, AttributeError):
             continue
         v, u, z = ctypes.c_void_p, ctypes.c_uint, ctypes.c_size_t
@@ -92,6 +92,11 @@ def shared_buffers_supported() -> bool:
     return asked == device_handle
 
 
+def scene_handle(scene: rtcore_scene.EmbreeScene) -> int:
+    """The ``RTCScene`` of an embreex scene, or 0 where this embreex's layout is not the one checked."""
+    return _handles(scene)[0] if shared_buffers_supported() else 0
+
+
 def attach_triangles(scene: rtcore_scene.EmbreeScene, vertices: np.ndarray, triangles: np.ndarray) -> tuple:
     """Add one triangle geometry to an uncommitted embreex ``scene``; returns the buffers Embree reads.
 
@@ -101,7 +106,9 @@ def attach_triangles(scene: rtcore_scene.EmbreeScene, vertices: np.ndarray, tria
     """
     padded = np.zeros((len(vertices) + 1, 4), np.float32)  # x y z pad, and one spare row: Embree loads 16 bytes per vertex
     padded[:-1, :3] = vertices
-    index = np.ascontiguousarray(triangles, np.uint32)
+    triangles = np.ascontiguousarray(triangles)
+    # Embree's own copy (the caller may reuse its array); from int32 a plain copy of the same bits (indices >= 0)
+    index = triangles.view(np.uint32).copy() if triangles.dtype == np.int32 else triangles.astype(np.uint32)
     if not shared_buffers_supported():
         TriangleMesh(scene, padded[:-1, :3], index.astype(np.int32))
         return ()

@@ -51,7 +51,7 @@ from embreex import rtcore_scene
 from ..buffers import MATERIAL_ID, SceneBuffers
 from ..errors import InputError
 from . import kernels
-from .embree import attach_triangles
+from .embree import attach_triangles, scene_handle
 
 FAR = 1e30  # stands for "no limit" in Embree's float32 tfar
 JITTER = 2.0**-18  # radians (and metres per metre of origin coordinate) a re-traced ray is moved by: 64 float32 ulps
@@ -121,11 +121,13 @@ class EmbreePart:
 
     triangle : (p,) int64 buffer triangle of each Embree primitive; ``None`` for the identity
     keep : the arrays Embree reads in place (alive as long as the scene)
+    handle : the committed ``RTCScene`` for the compiled pass to call Embree on (0: not known, see :func:`.embree.scene_handle`)
     """
 
     scene: rtcore_scene.EmbreeScene
     triangle: np.ndarray | None
     keep: tuple
+    handle: int = 0
 
 
 def embree_part(local: np.ndarray, triangles: np.ndarray, subset: np.ndarray | None, normal: np.ndarray) -> EmbreePart | None:
@@ -146,7 +148,7 @@ def embree_part(local: np.ndarray, triangles: np.ndarray, subset: np.ndarray | N
     keep = attach_triangles(scene, local, chosen)
     # Embree commits the scene on the first query: do it once here, before threads share it.
     scene.run(np.zeros((1, 3), np.float32), np.array([[0, 0, 1]], np.float32), output=1)
-    return EmbreePart(scene, None if index is None else index.astype(np.int64), keep)
+    return EmbreePart(scene, None if index is None else index.astype(np.int64), keep, scene_handle(scene))
 
 
 @dataclass
@@ -220,6 +222,10 @@ class RayCaster:
         self.parts = [p for p in parts if p is not None]
         # Embree's primID indexes the solid triangles; with one part, map them here, with two, in _embree
         self.embree_triangle = self.parts[0].triangle if len(self.parts) == 1 else None
+        # For the compiled pass that calls Embree itself: the parts' scenes and primitive maps ((0,): the identity)
+        handles = [p.handle for p in self.parts]
+        self.embree_handles = np.array(handles, np.uint64) if all(handles) else None
+        self.part_triangle = tuple(p.triangle if p.triangle is not None else np.zeros(0, np.int64) for p in self.parts) + (np.zeros(0, np.int64),) * (2 - len(self.parts))
         self._pool = None
         self._closed: dict[int, bool] = {}
         self._corner_scales = None
@@ -382,7 +388,7 @@ class RayCaster:
         suspect = []
         if both.any():
             suspect.append(back_hits(both))
-        if any(self.closed(int(row)) for row in np.flatnonzero(back & ~front)):  # the origin is enclosed: no ray can miss
+        if any(self.closed(int(row)) for row in np.flatnonzero(back & ~front)) and len(prim) and prim.min() < 0:  # the origin is enclosed: no ray can miss
             suspect.append(np.flatnonzero(prim < 0))
         return np.concatenate(suspect) if suspect else np.zeros(0, np.int64)
 

@@ -27,7 +27,7 @@ import numpy as np
 from ..buffers import MATERIAL_ID, SceneBuffers
 from ..geometry.transforms import rotate
 from .points import BEAM_DTYPE, POINT_DTYPE
-from .kernels import back_face_rays, fill_diffuse
+from .kernels import back_face_rays, fill_diffuse, trace_fill
 from .raycast import Hits, RayCaster, dot3
 from .sensors import Pattern, pattern_chunks
 
@@ -259,7 +259,7 @@ def scan_chunk(
     effects, and for each point the index of its ray in the chunk.
     """
     directions = pattern.directions
-    if sensor_to_local.ndim == 2 and pattern.origins is None and np.allclose(sensor_to_local, np.eye(4), rtol=0, atol=1e-12):
+    if sensor_to_local.ndim == 2 and pattern.origins is None and np.abs(sensor_to_local - np.eye(4)).max() <= 1e-12:
         origin, world_d = np.zeros(3), directions  # the caster works in this sensor's frame: rays go in as they are
         as_given = True
     else:
@@ -312,9 +312,11 @@ def _fused_chunk(caster: RayCaster, buffers: SceneBuffers, pattern: Pattern, ori
                  max_bounces: int = 3, ghost_semantic=None, ideal: bool = False, surfaces: Surfaces | None = None, rng: np.random.Generator | None = None):  # fmt: skip
     """:func:`scan_chunk` through the compiled kernel (:mod:`.kernels`).
 
-    Embree traces the rays on the caster's threads, then the same threads fill the records in one
-    compiled pass each over their part (solve, trust test, range limits, labels), straight into
-    the rows they end up in. Slipped rays are found from the objects the passes saw from both
+    Each of the caster's threads takes a part of the rays and, ray by ray, calls Embree and fills
+    the record (solve, trust test, range limits, labels) in one compiled pass
+    (:func:`.kernels.trace_fill`); the parts' records are then joined. Where Embree cannot be
+    called from the pass, embreex traces first and the pass fills each part's records straight
+    into the rows they end up in (:func:`.kernels.fill_diffuse`). Slipped rays are found from the objects the passes saw from both
     sides, traced again as the numpy path does (:meth:`RayCaster.retrace`) and the pass repeated
     over the chunk with them. Rays whose first hit is glass or a mirror's front face go on in
     :func:`trace_beams` from that hit, and their records are merged in firing order: the same
@@ -328,33 +330,42 @@ def _fused_chunk(caster: RayCaster, buffers: SceneBuffers, pattern: Pattern, ori
     prim_triangle = IDENTITY if caster.embree_triangle is None else caster.embree_triangle
     objects = buffers.objects
 
-    tfar, prim = caster._embree(origins32, directions32, far)
-    # Then the compiled pass on every thread: each part of the rays fills its own rows of one
-    # output, placed by how many hits the parts before it have (misses take no room).
     starts = list(range(0, n, caster.chunk)) or [0]
-    counts = np.array([np.count_nonzero(prim[i : i + caster.chunk] >= 0) for i in starts], np.int64)
-    rows = np.concatenate([[0], np.cumsum(counts)])
-    points, beam, ray = caster.record_pool.take(rows[-1], POINT_DTYPE), caster.record_pool.take(rows[-1], BEAM_DTYPE), caster.record_pool.take(rows[-1], np.int64)
 
     def part(j, moved=NO_RAYS):
         s, r = slice(starts[j], starts[j] + caster.chunk), slice(rows[j], rows[j + 1])
         return fill_diffuse(caster.kernels, tfar[s], prim[s], prim_triangle, moved[s] if len(moved) else moved, origins if shared else origins[s], world_d[s], caster, objects, pattern.ring[s], pattern.time[s], min_range, max_range, points[r], beam[r], ray[r], starts[j])
 
-    parts = caster.map(part, range(len(starts)))
+    if caster.kernels.traces and caster.embree_handles is not None:
+        # Embree called inside the pass, each thread over its part of the rays: the records of part
+        # j go into rows from starts[j] (room for all its rays), Embree's answer into tfar and prim.
+        tfar, prim = caster.record_pool.take(n, np.float32), caster.record_pool.take(n, np.int32)
+        rows = np.array(starts + [n], np.int64)
+        points, beam, ray = caster.record_pool.take(n, POINT_DTYPE), caster.record_pool.take(n, BEAM_DTYPE), caster.record_pool.take(n, np.int64)
+
+        def traced(j):
+            s, r = slice(starts[j], starts[j] + caster.chunk), slice(rows[j], rows[j + 1])
+            return trace_fill(caster.kernels, caster, far[s], origins if shared else origins[s], world_d[s], objects, pattern.ring[s], pattern.time[s], min_range, max_range,
+                              points[r], beam[r], ray[r], tfar[s], prim[s], starts[j])  # fmt: skip
+
+        parts = caster.map(traced, range(len(starts)))
+    else:  # Embree's answer first, then the compiled pass: each part of the rays fills its rows, placed by the hits before it
+        tfar, prim = caster._embree(origins32, directions32, far)
+        rows = hit_rows(prim, starts, caster.chunk)
+        points, beam, ray = caster.record_pool.take(rows[-1], POINT_DTYPE), caster.record_pool.take(rows[-1], BEAM_DTYPE), caster.record_pool.take(rows[-1], np.int64)
+        parts = caster.map(part, range(len(starts)))
     front = np.logical_or.reduce([p[1] for p in parts])
     back = np.logical_or.reduce([p[2] for p in parts])
     suspect = caster.suspects(front, back, prim, lambda both: back_face_rays(caster.kernels, prim, prim_triangle, world_d, caster, both))
     moved = None
     if len(suspect):  # the pass again, with the re-traced rays (their hit counts may differ)
         tfar, prim, moved = caster.retrace(suspect, local, world_d, far, tfar, prim)
-        counts = np.array([np.count_nonzero(prim[i : i + caster.chunk] >= 0) for i in starts], np.int64)
-        rows = np.concatenate([[0], np.cumsum(counts)])
+        rows = hit_rows(prim, starts, caster.chunk)
         points, beam, ray = caster.record_pool.take(rows[-1], POINT_DTYPE), caster.record_pool.take(rows[-1], BEAM_DTYPE), caster.record_pool.take(rows[-1], np.int64)
         parts = caster.map(lambda j: part(j, moved), range(len(starts)))
     filled = np.array([p[0] for p in parts], np.int64)
-    if not (filled == counts).all():  # rows left empty by range limits, absorbers, glass and mirrors
-        keep = np.concatenate([np.arange(rows[j], rows[j] + filled[j]) for j in range(len(starts))])
-        points, beam, ray = take(points, keep), take(beam, keep), ray[keep]
+    if not (filled == np.diff(rows)).all():  # rows left empty by misses (when traced in the pass), range limits, absorbers, glass and mirrors
+        points, beam, ray = (compact(a, rows, filled, caster) for a in (points, beam, ray))
     specular = np.concatenate([p[3] for p in parts])
     if not len(specular):
         return points, beam, ray
@@ -363,6 +374,30 @@ def _fused_chunk(caster: RayCaster, buffers: SceneBuffers, pattern: Pattern, ori
     more = _records(beams, buffers, pattern, origin, world_d, ghost_semantic, ideal)
     order = np.argsort(np.concatenate([ray, more[2]]), kind="stable")  # firing order (one record per ray at most)
     return take(join([points, more[0]]), order), take(join([beam, more[1]]), order), np.concatenate([ray, more[2]])[order]
+
+
+def hit_rows(prim: np.ndarray, starts: list[int], chunk: int) -> np.ndarray:
+    """``(len(starts) + 1,)`` int64 first record row of each part of ``chunk`` rays from ``starts``, and the total: one row per hit."""
+    counts = [np.count_nonzero(prim[i : i + chunk] >= 0) for i in starts]
+    return np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+
+
+def compact(records: np.ndarray, rows: np.ndarray, filled: np.ndarray, caster: RayCaster) -> np.ndarray:
+    """The first ``filled[j]`` records from each ``rows[j]`` joined in order, into memory of the caster's pool.
+
+    records : (r,) any dtype; rows : (p + 1,) int64 part starts; filled : (p,) int64. Each part is
+    one contiguous copy, made on the caster's threads.
+    """
+    at = np.concatenate([[0], np.cumsum(filled)])
+    out = caster.record_pool.take(int(at[-1]), records.dtype)
+    raw = np.dtype((np.void, records.dtype.itemsize))
+    source, target = records.view(raw), out.view(raw)
+
+    def copy(j):
+        target[at[j] : at[j + 1]] = source[rows[j] : rows[j] + filled[j]]
+
+    caster.map(copy, range(len(filled)))
+    return out
 
 
 def _first_hits(caster: RayCaster, rays: np.ndarray, tfar: np.ndarray, prim: np.ndarray, moved, local: np.ndarray, world_d: np.ndarray) -> Hits:
