@@ -27,8 +27,8 @@ from .raycast import RayCaster
 from .scanner import trace_beams
 from .sensors import Pattern
 
-SAMPLE_SPACING = 0.1  # m between surface samples for truncation (wider on objects that would need more than:)
-MAX_SAMPLES = 4000
+SAMPLE_SPACING = 0.1  # m between surface samples for truncation (wider on objects that would need more than about:)
+MAX_SAMPLES = 4000  # x 2 (surface_samples' area bound)
 
 
 class Coverage:
@@ -161,7 +161,7 @@ def visibility(
     tri_area = np.linalg.norm(np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0]), axis=1) / 2
     total = np.bincount(owner, tri_area, minlength=len(boxes))
     spacing = np.maximum(SAMPLE_SPACING, np.sqrt(total / MAX_SAMPLES))
-    samples, area, triangle = surface_samples(triangles, spacing[owner], return_triangle=True)
+    samples, area, triangle = surface_samples(triangles, spacing[owner], return_triangle=True, area_bound=True)
     samples = (samples - pose[:3, 3]) @ pose[:3, :3]
     distance = np.linalg.norm(samples, axis=1)
     inside = (distance >= min_range) & (distance <= max_range)
@@ -290,7 +290,7 @@ def visibility_per_object(
     for k, rows in enumerate(members):
         triangles = buffers.vertices[buffers.triangles[np.isin(buffers.triangle_object, rows)]]  # (m, 3, 3)
         total = np.linalg.norm(np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0]), axis=1).sum() / 2
-        samples, area = surface_samples(triangles, max(SAMPLE_SPACING, float(np.sqrt(total / MAX_SAMPLES))))
+        samples, area = surface_samples(triangles, max(SAMPLE_SPACING, float(np.sqrt(total / MAX_SAMPLES))), area_bound=True)
         samples = (samples - pose[:3, 3]) @ pose[:3, :3]
         distance = np.linalg.norm(samples, axis=1)
         inside = (distance >= min_range) & (distance <= max_range)
@@ -302,16 +302,21 @@ def visibility_per_object(
         boxes["truncation"][k] = float(1.0 - area[inside].sum() / total) if total > 0 else 1.0
 
 
-def surface_samples(triangles: np.ndarray, spacing, return_triangle: bool = False):
+def surface_samples(triangles: np.ndarray, spacing, return_triangle: bool = False, area_bound: bool = False):
     """Points spread over ``(m, 3, 3)`` triangles and the area each stands for: ``(p, 3)``, ``(p,)``.
 
     A triangle wider than ``spacing`` (metres; one value or ``(m,)``, one per triangle) is cut into
     n^2 equal triangles (n up to 24) and sampled at their centroids, so the areas add up exactly
     and large faces are not one point. ``return_triangle``: also the ``(p,)`` triangle of each sample.
+    ``area_bound``: n is also at most ``ceil(sqrt(2 area) / spacing)`` (a right triangle's leg,
+    so half a square is cut as before), which stops a long thin triangle (a car body's sliver)
+    from being n^2 points along a line: about ``2 area / spacing^2`` samples in all.
     """
     edge = np.maximum(np.linalg.norm(triangles[:, 1] - triangles[:, 0], axis=1), np.linalg.norm(triangles[:, 2] - triangles[:, 0], axis=1))
-    level = np.clip(np.ceil(edge / spacing), 1, 24).astype(int)
     area = np.linalg.norm(np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0]), axis=1) / 2
+    if area_bound:
+        edge = np.minimum(edge, np.sqrt(2.0 * area))
+    level = np.clip(np.ceil(edge / spacing), 1, 24).astype(int)
     points, weights, owners = [], [], []
     for n in np.unique(level):
         rows = np.flatnonzero(level == n)
