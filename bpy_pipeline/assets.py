@@ -44,7 +44,7 @@ class AssetEntry:
 
     name: str
     kind: str
-    set: str
+    set: str  # "": an entry of no set (the industrial hall's own people, scenes/people.py)
     path: Path
     sha256: str
     licence: str
@@ -79,8 +79,6 @@ def read_manifest(path: str | Path | None = None) -> list[AssetEntry]:
         unknown = set(entry) - {"name", "kind", "set", "path", "sha256", "licence", "source", "up_axis", "unit_scale", "glass_materials"}
         if unknown:
             raise InputError(f"{where}.{sorted(unknown)[0]}: unknown key; allowed: name, kind, set, path, sha256, licence, source, up_axis, unit_scale, glass_materials")
-        if "set" not in entry:
-            continue  # an entry of no set: the industrial hall's external people (scenes/people.py)
         if entry["kind"] not in KINDS:
             raise InputError(f"{where}.kind: expected one of {', '.join(KINDS)}, got {entry['kind']!r}")
         file = (path.parent / entry["path"]).resolve()
@@ -100,13 +98,13 @@ def read_manifest(path: str | Path | None = None) -> list[AssetEntry]:
         digest = hashlib.sha256(file.read_bytes()).hexdigest()
         if digest != entry["sha256"].lower():
             raise InputError(f"{where}.sha256: {file.name} has sha256 {digest}, the manifest says {entry['sha256']}")
-        out.append(AssetEntry(entry["name"], entry["kind"], str(entry["set"]), file, digest, entry["licence"], str(entry.get("source", "")), "auto" if up == "AUTO" else up, None if scale == "auto" else float(scale), tuple(g.lower() for g in glass), where))
+        out.append(AssetEntry(entry["name"], entry["kind"], str(entry.get("set", "")), file, digest, entry["licence"], str(entry.get("source", "")), "auto" if up == "AUTO" else up, None if scale == "auto" else float(scale), tuple(g.lower() for g in glass), where))
     return out
 
 
 def asset_set(name: str, kind: str, where: str, path: str | Path | None = None) -> list[AssetEntry]:
     """The entries of set ``name`` (or the entry named ``name``) of ``kind``; ``InputError`` naming ``where`` when none is present."""
-    entries = read_manifest(path)
+    entries = [e for e in read_manifest(path) if e.set]
     chosen = [e for e in entries if e.kind == kind and name in (e.set, e.name)]
     if not chosen:
         sets = sorted({e.set for e in entries if e.kind == kind})

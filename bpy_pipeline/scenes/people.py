@@ -15,20 +15,17 @@ bodies when the manifest lists any: they are imported once and placed standing i
 
 from __future__ import annotations
 
-import hashlib
-from dataclasses import dataclass
 from pathlib import Path
 
 import bpy
 import numpy as np
-import yaml
 from mathutils import Matrix
 
+from ..assets import MANIFEST, AssetEntry, read_manifest
 from ..errors import InputError
 from ..geometry import human
 from .objects import mesh_data, tag
 
-ASSETS_PATH = Path(__file__).resolve().parents[2] / "assets_manifest" / "assets.yaml"
 BONE_TAILS = {"head": (0.0, 0.0, 1.0), "forearm_l": (0.0, 0.135, 0.38), "forearm_r": (0.0, -0.135, 0.38), "foot_l": (0.12, 0.085, 0.02), "foot_r": (0.12, -0.085, 0.02)}
 BONE_CHILD = {"pelvis": "spine", "spine": "head", "upper_arm_l": "forearm_l", "upper_arm_r": "forearm_r", "thigh_l": "shank_l", "shank_l": "foot_l", "thigh_r": "shank_r", "shank_r": "foot_r"}
 SKELETON = "LiDAR Person Skeleton"
@@ -150,55 +147,27 @@ class PersonRig:
             return False
 
 
-# ----------------------------------------------------------------------------- external assets
-@dataclass(frozen=True)
-class Asset:
-    """An external mesh of the assets manifest: ``path`` (glTF/GLB or OBJ), its ``sha256``, ``licence``, ``kind``."""
-
-    name: str
-    kind: str
-    path: Path
-    sha256: str
-    licence: str
-    source: str = ""
+IMPORTABLE = (".gltf", ".glb", ".obj")  # what import_asset reads
 
 
-def load_assets(path: str | Path | None = None, kind: str = "person") -> list[Asset]:
-    """The entries of ``kind`` in an assets manifest whose file is present and matches its sha256.
+def load_assets(path: str | Path | None = None, kind: str = "person") -> list[AssetEntry]:
+    """The entries of ``kind`` and no set in an assets manifest whose file is present and matches its sha256.
 
-    An entry whose file is missing is skipped (the procedural models stand in); a file whose
-    sha256 differs, or an entry without a licence, is an ``InputError`` naming the manifest.
+    Read and checked by :func:`bpy_pipeline.assets.read_manifest` (entries of a named set are for
+    ``scene.population``); an absent manifest gives none (the procedural models stand in), and so
+    does an entry whose file is missing. A file that is not glTF/GLB or OBJ is an ``InputError``.
     """
-    path = Path(path) if path else ASSETS_PATH
+    path = Path(path) if path else MANIFEST
     if not path.exists():
         return []
-    try:
-        data = yaml.safe_load(path.read_text()) or {}
-    except yaml.YAMLError:
-        raise InputError(f"{path}: not valid YAML") from None
-    entries = data.get("assets", []) if isinstance(data, dict) else None
-    if not isinstance(entries, list):
-        raise InputError(f"{path}: assets: expected a list of {{name, kind, path, sha256, licence}}")
-    out = []
-    for i, entry in enumerate(entries):
-        where = f"{path}: assets[{i}]"
-        if not isinstance(entry, dict) or not all(isinstance(entry.get(k), str) and entry.get(k) for k in ("name", "kind", "path", "sha256", "licence")):
-            raise InputError(f"{where}: needs name, kind, path, sha256 and licence (strings)")
-        if entry["kind"] != kind or "set" in entry:  # entries of a named set are for scene.population (bpy_pipeline/assets.py)
-            continue
-        file = (path.parent / entry["path"]).resolve()
-        if file.suffix.lower() not in (".gltf", ".glb", ".obj"):
-            raise InputError(f"{where}.path: expected a .gltf, .glb or .obj file, got {entry['path']!r}")
-        if not file.exists():
-            continue
-        digest = hashlib.sha256(file.read_bytes()).hexdigest()
-        if digest != entry["sha256"].lower():
-            raise InputError(f"{where}.sha256: {file.name} has sha256 {digest}, the manifest says {entry['sha256']}")
-        out.append(Asset(entry["name"], kind, file, digest, entry["licence"], str(entry.get("source", ""))))
-    return out
+    chosen = [e for e in read_manifest(path) if e.kind == kind and not e.set]
+    for entry in chosen:
+        if entry.path.suffix.lower() not in IMPORTABLE:
+            raise InputError(f"{entry.where}.path: expected a .gltf, .glb or .obj file for the hall's people, got {entry.path.name!r}")
+    return chosen
 
 
-def import_asset(asset: Asset) -> tuple[bpy.types.Mesh, np.ndarray]:
+def import_asset(asset: AssetEntry) -> tuple[bpy.types.Mesh, np.ndarray]:
     """The asset as one mesh datablock, feet on z = 0, centred on x = y = 0, height 1; and its capsule.
 
     Returns ``(mesh, capsule)`` where ``capsule`` is ``(a (3,), b (3,), radius)`` at height 1:
