@@ -59,7 +59,7 @@ def test_instance_ids_beyond_int32_refused(tmp_path):
 
 
 def test_open3d_reads_every_label(tmp_path):
-    o3d = pytest.importorskip("open3d", reason="Open3D is the viewer this checks (pip install open3d; Debian needs libusb-1.0-0)")
+    o3d = pytest.importorskip("open3d", exc_type=ImportError, reason="Open3D is the viewer this checks (pip install open3d; Debian needs libusb-1.0-0)")
     pts = random_points(400, np.random.default_rng(1), instances=1000)
     cloud = o3d.t.io.read_point_cloud(str(write_ply(tmp_path / "c.ply", pts)))
     np.testing.assert_array_equal(cloud.point["positions"].numpy(), np.stack([pts["x"], pts["y"], pts["z"]], axis=1))
