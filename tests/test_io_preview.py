@@ -130,3 +130,32 @@ def test_nan_points_are_skipped_and_unknown_classes_refused():
     pts["semantic"] = len(LUT)
     with pytest.raises(InputError, match="no colour"):
         render_preview(pts, LUT)
+
+
+def splat_by_pixel(image, col, row, depth, colors, depth_image):
+    """The rule written out one point at a time: a point paints its pixel when its depth is at least what the pixel holds."""
+    for k in range(len(col)):
+        if depth[k] >= depth_image[row[k], col[k]]:
+            depth_image[row[k], col[k]] = depth[k]
+            image[row[k], col[k]] = colors[k]
+
+
+def test_splat_keeps_the_nearest_point_and_the_later_of_equal_depths():
+    from bpy_pipeline.io.preview import splat
+
+    rng = np.random.default_rng(5)
+    n = 3000
+    col, row = rng.integers(0, 12, n), rng.integers(0, 9, n)  # many points a pixel
+    depth = rng.integers(0, 6, n).astype(float)  # many ties
+    colors = rng.integers(0, 256, (n, 3)).astype(np.uint8)
+    expected, held = np.zeros((9, 12, 3), np.uint8), np.full((9, 12), -np.inf)
+    held[0, :], held[1, :] = 10.0, 5.0  # a first part already painted there: nearer than all, as near as the nearest
+    expected_held = held.copy()
+    splat_by_pixel(expected, col, row, depth, colors, expected_held)
+    image = np.zeros((9, 12, 3), np.uint8)
+    splat(image, col, row, depth, colors, held)
+    assert (image == expected).all() and (held == expected_held).all()
+    alone, expected_alone = np.zeros((9, 12, 3), np.uint8), np.zeros((9, 12, 3), np.uint8)
+    splat(alone, col, row, depth, colors)
+    splat_by_pixel(expected_alone, col, row, depth, colors, np.full((9, 12), -np.inf))
+    assert (alone == expected_alone).all() and (alone != image).any()

@@ -49,6 +49,7 @@ FONT = {  # 3 x 5 glyphs, rows top to bottom
     " ": ("000", "000", "000", "000", "000"), ".": ("000", "000", "000", "000", "010"), "-": ("000", "000", "111", "000", "000"),
     "_": ("000", "000", "000", "000", "111"),
 }  # fmt: skip
+GLYPHS = {char: np.array([[c == "1" for c in line] for line in rows]) for char, rows in FONT.items()}  # (5, 3) bool each
 BOX_EDGES = ((0, 1), (1, 2), (2, 3), (3, 0), (4, 5), (5, 6), (6, 7), (7, 4), (0, 4), (1, 5), (2, 6), (3, 7))
 
 
@@ -90,8 +91,7 @@ def splat(image: np.ndarray, col: np.ndarray, row: np.ndarray, depth: np.ndarray
 def draw_text(image: np.ndarray, text: str, col: int, row: int, scale: int = 2, color=INK) -> int:
     """Write ``text`` (lower-cased; unknown characters as spaces) with its top left at ``(col, row)``; returns the end column."""
     for char in text.lower():
-        glyph = np.array([[c == "1" for c in line] for line in FONT.get(char, FONT[" "])])
-        mask = np.kron(glyph, np.ones((scale, scale), bool))
+        mask = GLYPHS.get(char, GLYPHS[" "]).repeat(scale, axis=0).repeat(scale, axis=1)
         h, w = mask.shape
         r0, c0 = max(row, 0), max(col, 0)
         r1, c1 = min(row + h, image.shape[0]), min(col + w, image.shape[1])
