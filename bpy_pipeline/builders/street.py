@@ -16,8 +16,17 @@ class StreetScene:
     drive lanes of ``lane_width`` each way, a ``parking_width`` strip by each kerb (0: none), kerbs
     ``kerb_width`` x ``kerb_height``, sidewalks ``sidewalk_width`` wide, zebra crossings
     ``crossing_width`` wide ``crossing_offset`` from the intersection, four traffic lights, ``signs``
-    traffic signs, and buildings (``building_width``, ``building_height`` drawn uniformly,
-    ``building_depth`` deep) along the sidewalks; each road reaches ``arm_length`` from the centre.
+    traffic signs; each road reaches ``arm_length`` from the centre (100 m: a car-roof sensor's
+    range). Beyond the sidewalks (geometry/street_dressing.py): terrain rolling by
+    ``terrain_relief`` (m) and rising by ``terrain_slope`` away from the road, on a ``terrain_step``
+    (m) grid (``terrain: false`` leaves it out); plots ``building_width`` wide, each a building
+    (``building_height``, ``building_depth`` deep) set back ``setback`` (m) behind a front yard,
+    or, a share ``open_share``, open ground with trees and bushes ``plot_depth`` deep;
+    ``yard_plants`` trees and bushes per 100 m^2 of yard; each plot's front a fence, hedge, low wall
+    or nothing by ``boundary_mix``. On the sidewalks' kerb side: street trees ``tree_spacing``
+    apart along a share ``street_trees`` of the arm sides, lamps every ``lamp_spacing`` m (0:
+    none), ``furniture_per_100m`` bins, bicycle stands and bollards per side; with probability
+    ``roadworks`` an arm side's parking strip holds cones and barriers.
 
     Road users, drawn every frame from the frame's generator: ``vehicles`` moving along the drive
     lanes (mix of car, van, truck, bus by ``vehicle_mix``), following the last vehicle of their lane
@@ -29,7 +38,7 @@ class StreetScene:
     sample points (within its field of view and range), so a narrow flash camera sees what is placed.
     """
 
-    arm_length: float = 40.0
+    arm_length: float = 100.0
     lanes_per_direction: int = 1
     lane_width: float = 3.5
     parking_width: float = 2.2
@@ -42,30 +51,46 @@ class StreetScene:
     building_depth: float = 10.0
     building_width: tuple[float, float] = (8.0, 16.0)
     building_height: tuple[float, float] = (6.0, 20.0)
+    setback: tuple[float, float] = (0.0, 8.0)
+    open_share: float = 0.3
+    plot_depth: float = 20.0
+    boundary_mix: dict = field(default_factory=lambda: {"fence": 0.35, "hedge": 0.3, "wall": 0.15, "none": 0.2})
+    street_trees: float = 0.6
+    tree_spacing: tuple[float, float] = (8.0, 16.0)
+    yard_plants: float = 1.5
+    lamp_spacing: float = 28.0
+    furniture_per_100m: float = 3.0
+    roadworks: float = 0.25
+    terrain: bool = True
+    terrain_step: float = 1.0
+    terrain_relief: float = 0.5
+    terrain_slope: float = 0.04
     layout_seed: int = 0
-    vehicles: Distribution = field(default_factory=lambda: Distribution("normal", 8.0, 3.0, 0.0, 40.0))
+    vehicles: Distribution = field(default_factory=lambda: Distribution("normal", 16.0, 5.0, 0.0, 60.0))
     vehicle_mix: dict = field(default_factory=lambda: {"car": 0.7, "van": 0.15, "truck": 0.08, "bus": 0.07})
     platoon_probability: float = 0.5
     platoon_gap: Distribution = field(default_factory=lambda: Distribution("uniform", 7.0, 0.0, 3.0, 12.0))
-    parked: Distribution = field(default_factory=lambda: Distribution("normal", 6.0, 3.0, 0.0, 40.0))
-    bicycles: Distribution = field(default_factory=lambda: Distribution("normal", 2.0, 1.5, 0.0, 20.0))
+    parked: Distribution = field(default_factory=lambda: Distribution("normal", 20.0, 6.0, 0.0, 80.0))
+    bicycles: Distribution = field(default_factory=lambda: Distribution("normal", 3.0, 2.0, 0.0, 20.0))
     motorcycles: Distribution = field(default_factory=lambda: Distribution("normal", 1.0, 1.0, 0.0, 20.0))
-    pedestrians: Distribution = field(default_factory=lambda: Distribution("normal", 8.0, 4.0, 0.0, 60.0))
+    pedestrians: Distribution = field(default_factory=lambda: Distribution("normal", 16.0, 6.0, 0.0, 80.0))
     crossing_share: float = 0.3
     clearance: float = 0.5
     fov_aware: bool = True
     min_in_view: float = 0.3
 
 
-MAY_BE_ZERO = {"parking_width", "signs", "layout_seed", "crossing_offset", "platoon_probability", "crossing_share", "clearance", "min_in_view"}
+MAY_BE_ZERO = {"parking_width", "signs", "layout_seed", "crossing_offset", "platoon_probability", "crossing_share", "clearance", "min_in_view",
+               "setback", "open_share", "street_trees", "tree_spacing", "yard_plants", "lamp_spacing", "furniture_per_100m", "roadworks",
+               "terrain_relief", "terrain_slope"}
 
 
 def check(params: StreetScene, where: str) -> None:
     check_sizes(params, where, MAY_BE_ZERO)
-    for key in ("platoon_probability", "crossing_share", "min_in_view"):
+    for key in ("platoon_probability", "crossing_share", "min_in_view", "open_share", "street_trees", "roadworks"):
         if getattr(params, key) > 1:
             raise InputError(f"{where}.{key}: must lie in 0..1, got {getattr(params, key)}")
-    for key in ("building_width", "building_height"):
+    for key in ("building_width", "building_height", "setback", "tree_spacing"):
         lo, hi = getattr(params, key)
         if lo > hi:
             raise InputError(f"{where}.{key}: expected [min, max] with min <= max, got {[lo, hi]}")
@@ -74,6 +99,13 @@ def check(params: StreetScene, where: str) -> None:
     if params.arm_length < reach:
         raise InputError(f"{where}.arm_length: must be at least {reach:.1f} m (the road's half width, kerb, crossing and 10 m of lane), got {params.arm_length}")
     from ..geometry.street import VEHICLES
+    from ..geometry.street_dressing import BOUNDARIES
+
+    mix = params.boundary_mix
+    if not mix or any(k not in BOUNDARIES for k in mix) or any(not isinstance(v, (int, float)) or v < 0 for v in mix.values()) or sum(mix.values()) <= 0:
+        raise InputError(f"{where}.boundary_mix: expected shares >= 0 (not all 0) of {', '.join(BOUNDARIES)}, got {mix}")
+    if params.tree_spacing[1] > 0 and params.tree_spacing[0] < 2.0:
+        raise InputError(f"{where}.tree_spacing: street trees stand at least 2 m apart, got {list(params.tree_spacing)}")
 
     unknown = [k for k in params.vehicle_mix if k not in VEHICLES]
     if unknown or not params.vehicle_mix or any(not isinstance(v, (int, float)) or v < 0 for v in params.vehicle_mix.values()) or sum(params.vehicle_mix.values()) <= 0:

@@ -237,6 +237,8 @@ class StreetLayout:
     crossings: list[tuple[int, int, float, float]]
     poles: np.ndarray
     walks: list[tuple[float, float, float, float]] = field(default_factory=list)
+    blocks: list = field(default_factory=list)
+    dressing: dict = field(default_factory=dict)
 
     def on_sidewalk(self, xy) -> bool:
         """True when ``xy`` (2,) lies on a sidewalk slab (kerbs excluded)."""
@@ -342,22 +344,17 @@ def street_layout(p, rng: np.random.Generator) -> StreetLayout:
         poles.append((x, y, 0.35))
     for k, mesh in enumerate(sign_meshes):
         add(f"street_traffic_sign_{k}", "traffic sign", REFLECTIVITY["traffic sign"], mesh)
-    # facades: buildings along both frontages of each corner block
-    depth = p.building_depth
-    for sx in (-1, 1):
-        for sy in (-1, 1):
-            for frontage in (0, 1):
-                s = outer if frontage == 0 else outer + depth  # the y frontage starts behind the x frontage's row
-                while s < A - 2.0:
-                    width = min(float(rng.uniform(*p.building_width)), A - s)
-                    height = float(rng.uniform(*p.building_height))
-                    if frontage == 0:
-                        mesh = box_mesh(*sorted((sx * s, sx * (s + width))), *sorted((sy * outer, sy * (outer + depth))), 0.0, height)
-                    else:
-                        mesh = box_mesh(*sorted((sx * outer, sx * (outer + depth))), *sorted((sy * s, sy * (s + width))), 0.0, height)
-                    add(f"street_building_{len(parts):03d}", "building", REFLECTIVITY["building"], mesh)
-                    s += width
-    return StreetLayout(parts, lanes, R, inner, outer, A, kh, crossings, np.array(poles, float).reshape(-1, 3), walk_rects)
+    # what real streets hold beside their roads: terrain, plots with buildings or gardens, fences, hedges,
+    # walls, street trees, lamps, furniture and road works (geometry/street_dressing.py)
+    from .street_dressing import dress
+
+    dressing = dress(p, R, inner, outer, kh, c1, rng)
+    for mesh in dressing.buildings:
+        add(f"street_building_{len(parts):03d}", "building", REFLECTIVITY["building"], mesh)
+    for name, class_name, reflectivity, mesh in dressing.parts:
+        add(name, class_name, reflectivity, mesh)
+    poles += dressing.circles
+    return StreetLayout(parts, lanes, R, inner, outer, A, kh, crossings, np.array(poles, float).reshape(-1, 3), walk_rects, dressing.blocks, dressing.counts)
 
 
 # ----------------------------------------------------------------------------- fields of view
@@ -447,7 +444,7 @@ def place_users(p, layout: StreetLayout, rng: np.random.Generator, views=(), tri
 
     views = list(views) if p.fov_aware else []
     out = Placement()
-    obstacles = [(np.array(pl[:2]), np.array([pl[2], pl[2]]), 0.0) for pl in layout.poles]
+    obstacles = [(np.array(pl[:2]), np.array([pl[2], pl[2]]), 0.0) for pl in layout.poles] + list(layout.blocks)
     drive = [i for i, lane in enumerate(layout.lanes) if lane.kind == "drive"]
     parking = [i for i, lane in enumerate(layout.lanes) if lane.kind == "parking"]
     last_in_lane: dict[int, RoadUser] = {}
