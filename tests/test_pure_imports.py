@@ -1,15 +1,27 @@
-"""The pure part (config, geometry, lidar, io, buffers, labels) never imports bpy."""
+"""The pure part (config, geometry, lidar, io, mixing, evaluate, buffers, labels) never imports bpy.
 
+Two checks: every module outside the Blender side imports with ``bpy`` blocked (a module-level
+import fails there), and no module of the pure packages holds an import of ``bpy``, ``bmesh``,
+``mathutils`` or of the Blender side anywhere, inside functions included (an import there would
+only fail when the function runs).
+"""
+
+import ast
 import importlib.util
 import pkgutil
 import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 import bpy_pipeline
 
 ROOT = Path(__file__).resolve().parents[1]
-BPY_SIDE = {"bpy_pipeline.export", "bpy_pipeline.compat", "bpy_pipeline.scenes", "bpy_pipeline.pipeline_bpy"}
+PACKAGE = ROOT / "bpy_pipeline"
+BPY_SIDE = {"bpy_pipeline.export", "bpy_pipeline.compat", "bpy_pipeline.scenes"}
+PURE_PACKAGES = ("geometry", "lidar", "io", "mixing", "evaluate")  # never import Blender, not even inside a function
+BLENDER_MODULES = ("bpy", "bmesh", "mathutils")
 
 
 OPTIONAL = {"bpy_pipeline.lidar.numba_kernels": "numba"}  # modules that need an optional package (the 'fast' extra)
@@ -24,6 +36,52 @@ def pure_modules() -> list[str]:
             continue
         names.append(info.name)
     return names
+
+
+def test_the_blender_side_names_modules_that_exist():
+    for name in BPY_SIDE:
+        assert importlib.util.find_spec(name) is not None, f"{name} is listed as the Blender side but does not exist"
+
+
+def blender_imports(source: str, package: str) -> list[tuple[int, str]]:
+    """``[(line, module)]``: the imports of Blender's modules or of the package's Blender side in ``source``
+    (a module of the package ``package``, dotted), anywhere in it."""
+    tree = ast.parse(source)
+    out = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            names = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.split(".")
+                base = base[: len(base) - (node.level - 1)]
+                names = [".".join(base + ([node.module] if node.module else []))]
+                names += [f"{names[0]}.{a.name}" for a in node.names]
+            else:
+                names = [node.module or ""]
+        else:
+            continue
+        for name in names:
+            if name.split(".")[0] in BLENDER_MODULES or any(name == b or name.startswith(b + ".") for b in BPY_SIDE):
+                out.append((node.lineno, name))
+    return out
+
+
+def test_the_pure_packages_import_no_blender_module_anywhere():
+    found = {}
+    for sub in PURE_PACKAGES:
+        for path in sorted((PACKAGE / sub).rglob("*.py")):
+            package = ".".join(("bpy_pipeline", *path.relative_to(PACKAGE).parent.parts))
+            for line, name in blender_imports(path.read_text(), package):
+                found.setdefault(f"{path.relative_to(ROOT)}:{line}", name)
+    assert not found, "Blender imports in the pure part: " + ", ".join(f"{k} imports {v}" for k, v in found.items())
+
+
+@pytest.mark.parametrize("source", ["def f():\n    import bpy\n", "def f():\n    from mathutils import Matrix\n", "from ..scenes import objects\n", "import bmesh\n"])
+def test_the_check_finds_a_blender_import(source):
+    """The check above fails on a real import of Blender in a pure module, inside a function too."""
+    assert blender_imports(source, "bpy_pipeline.lidar")
+    assert not blender_imports("def f():\n    from ..geometry import lod\n    import numpy\n", "bpy_pipeline.lidar")
 
 
 def test_pure_modules_import_and_run_with_bpy_blocked():

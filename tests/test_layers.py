@@ -1,0 +1,179 @@
+"""The package's layers hold, counting imports inside functions too, and no modules import each other around a circle.
+
+Layers, top to bottom (docs/layout.md): cli/api -> plan/stages -> builders, dataset -> mixing, io -> lidar -> geometry.
+An import is an edge from the importing module to the module it names (``from pkg import name`` names
+``pkg.name`` when that is a module), wherever the statement sits: module level, inside a function, or
+under ``if TYPE_CHECKING`` (an annotation-only import still ties the layers together for a reader).
+
+``python tests/test_layers.py`` prints the figures: the largest circle, the wrong-way imports and the
+imports inside functions.
+"""
+
+from __future__ import annotations
+
+import ast
+import sys
+from collections import Counter
+from pathlib import Path
+
+PACKAGE = Path(__file__).resolve().parents[1] / "bpy_pipeline"
+
+# layer -> what it must not import (prefixes of dotted names below bpy_pipeline)
+FORBIDDEN = {
+    "geometry": ("lidar", "io", "config", "pipeline", "builders", "scenes", "mixing", "plan", "stages", "dataset", "api", "cli", "rig", "frame"),
+    "lidar": ("io", "config", "pipeline", "builders", "scenes", "mixing", "plan", "stages", "dataset", "api", "cli", "rig", "frame"),
+    "io": ("pipeline", "builders", "scenes", "plan", "stages", "dataset", "api", "cli", "mixing", "lidar", "rig", "config"),
+}
+# what io may use of lidar: the point record and the sensor's layout (its spec, rings, columns, frame time)
+ALLOWED = {"io": ("lidar.points", "lidar.grid", "lidar.sensors")}
+
+
+def module_name(path: Path) -> str:
+    rel = path.relative_to(PACKAGE.parent).with_suffix("")
+    parts = list(rel.parts)
+    if parts[-1] == "__init__":
+        parts.pop()
+    return ".".join(parts)
+
+
+def modules() -> dict[str, Path]:
+    return {module_name(p): p for p in sorted(PACKAGE.rglob("*.py"))}
+
+
+def imports(path: Path, name: str, known: set[str]) -> list[tuple[str, int, bool]]:
+    """``[(imported module, line, inside a function)]`` of the package's own modules that ``path`` imports."""
+    tree = ast.parse(path.read_text(), str(path))
+    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+    out = []
+
+    def visit(node, in_function: bool):
+        for child in ast.iter_child_nodes(node):
+            inner = in_function or isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda))
+            if isinstance(child, ast.Import):
+                for alias in child.names:
+                    if alias.name.split(".")[0] == "bpy_pipeline":
+                        out.append((alias.name, child.lineno, in_function))
+            elif isinstance(child, ast.ImportFrom):
+                if child.level:
+                    base = package.split(".")
+                    base = base[: len(base) - (child.level - 1)]
+                    target = ".".join(base + ([child.module] if child.module else []))
+                else:
+                    target = child.module or ""
+                if target.split(".")[0] != "bpy_pipeline":
+                    continue
+                for alias in child.names:
+                    sub = f"{target}.{alias.name}"
+                    out.append((sub if sub in known else target, child.lineno, in_function))
+            visit(child, inner)
+
+    visit(tree, False)
+    return [(t, line, f) for t, line, f in out if t in known and t != name]
+
+
+def graph() -> tuple[dict[str, set[str]], list[tuple[str, str, int, bool]]]:
+    """``({module: modules it imports}, [(module, imported, line, inside a function)])``."""
+    found = modules()
+    known = set(found)
+    edges: dict[str, set[str]] = {m: set() for m in found}
+    rows = []
+    for name, path in found.items():
+        for target, line, in_function in imports(path, name, known):
+            edges[name].add(target)
+            rows.append((name, target, line, in_function))
+    return edges, rows
+
+
+def circles(edges: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components of more than one module (Tarjan), largest first."""
+    index, low, stack, on, out = {}, {}, [], set(), []
+    counter = [0]
+    sys.setrecursionlimit(10000)
+
+    def strong(v):
+        index[v] = low[v] = counter[0]
+        counter[0] += 1
+        stack.append(v)
+        on.add(v)
+        for w in edges[v]:
+            if w not in index:
+                strong(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            part = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                part.append(w)
+                if w == v:
+                    break
+            if len(part) > 1:
+                out.append(sorted(part))
+
+    for v in sorted(edges):
+        if v not in index:
+            strong(v)
+    return sorted(out, key=len, reverse=True)
+
+
+def short(name: str) -> str:
+    return name.removeprefix("bpy_pipeline.")
+
+
+def wrong_way(rows) -> list[tuple[str, str, int]]:
+    """``[(module, imported, line)]``: imports against the layers."""
+    out = []
+    for name, target, line, _ in rows:
+        layer, rel = short(name).split(".")[0], short(target)
+        forbidden = FORBIDDEN.get(layer, ())
+        if any(rel == f or rel.startswith(f + ".") for f in forbidden) and not any(rel == a or rel.startswith(a + ".") for a in ALLOWED.get(layer, ())):
+            out.append((short(name), rel, line))
+    return out
+
+
+def test_layers_import_one_way():
+    _, rows = graph()
+    bad = wrong_way(rows)
+    assert not bad, "imports against the layers:\n" + "\n".join(f"  {m}:{line} imports {t}" for m, t, line in bad)
+
+
+def test_no_circles_between_modules():
+    edges, _ = graph()
+    found = circles(edges)
+    assert not found, f"{len(found)} circles; the largest ties {len(found[0])} modules: " + ", ".join(short(m) for m in found[0])
+
+
+def test_the_graph_sees_imports_inside_functions(tmp_path):
+    """The parser counts a function-level import and resolves relative ones (else the checks above could not fail)."""
+    source = "from ..lidar import sensors\n\ndef f():\n    from ..config import Config\n    import bpy_pipeline.pipeline\n"
+    path = PACKAGE / "geometry" / "lod.py"
+    known = {"bpy_pipeline.lidar.sensors", "bpy_pipeline.config", "bpy_pipeline.pipeline", "bpy_pipeline.geometry.lod"}
+    probe = tmp_path / "lod.py"
+    probe.write_text(source)
+    found = imports(probe, "bpy_pipeline.geometry.lod", known)
+    assert found == [("bpy_pipeline.lidar.sensors", 1, False), ("bpy_pipeline.config", 4, True), ("bpy_pipeline.pipeline", 5, True)]
+    rows = [("bpy_pipeline.geometry.lod", t, line, f) for t, line, f in found]
+    assert [t for _, t, _ in wrong_way(rows)] == ["lidar.sensors", "config", "pipeline"]
+    assert path.exists()
+    assert circles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+
+
+def report() -> None:
+    edges, rows = graph()
+    found = circles(edges)
+    inside = sorted({(r[0], r[2]) for r in rows if r[3]})  # statements: (module, line)
+    bad = sorted(set(wrong_way(rows)))
+    print(f"modules: {len(edges)}; import statements of the package's own modules: {len({(r[0], r[2]) for r in rows})}; inside functions: {len(inside)}")
+    print(f"circles: {len(found)} holding {sum(map(len, found))} modules; largest: {len(found[0]) if found else 0}")
+    for part in found:
+        print(f"  {len(part)}: " + ", ".join(short(m) for m in part))
+    print(f"wrong-way imports: {len(bad)} statements, {len({(m, t) for m, t, _ in bad})} module pairs")
+    for m, t, line in bad:
+        print(f"  {m}:{line} -> {t}")
+    print("inside functions, by module: " + ", ".join(f"{short(m)} {n}" for m, n in Counter(r[0] for r in inside).most_common(12)))
+
+
+if __name__ == "__main__":
+    report()
