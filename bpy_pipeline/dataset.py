@@ -184,7 +184,7 @@ class Dataset:
 
     def _new_manifest(self) -> dict:
         from .lidar.sensors import spec_summary
-        from .pipeline import versions
+        from .frame import versions
 
         return {
             "format": DATASET_FORMAT,

@@ -113,3 +113,19 @@ def load_class_table(path: Path = LABELS_PATH) -> ClassTable:
         raise InputError(f"{path}: class names must be unique")
     rules = parse_rules(raw.get("name_rules", []), f"{path}: name_rules", names)
     return ClassTable(names, colors, learning_map, rules)
+
+
+@lru_cache(maxsize=4)
+def semantickitti_ids(path: Path = LABELS_PATH) -> dict[str, int]:
+    """``{project class name: SemanticKITTI raw id}`` from the ``semantickitti:`` section of the class table file
+    (every class of the table listed; ``InputError`` naming the file when the section is missing, incomplete or not ids)."""
+    table = load_class_table(path)
+    try:
+        raw = yaml.safe_load(Path(path).read_text()).get("semantickitti")
+        ids = {normalise(name): int(value) for name, value in raw.items()}
+    except (OSError, yaml.YAMLError, AttributeError, TypeError, ValueError) as err:
+        raise InputError(f"{path}: semantickitti: expected a mapping of class name to SemanticKITTI raw id ({err})") from None
+    missing = sorted(set(table.names.values()) - set(ids))
+    if missing:
+        raise InputError(f"{path}: semantickitti: no SemanticKITTI id for {', '.join(missing)}")
+    return ids

@@ -16,7 +16,6 @@ import sys
 from pathlib import Path
 from typing import Callable
 
-from .cli import split
 from .config import Config
 from .dataset import Dataset
 from .errors import InputError
@@ -30,6 +29,17 @@ def available_cores() -> int:
         return len(os.sched_getaffinity(0))
     except AttributeError:
         return os.cpu_count() or 1
+
+
+def split(frames: list, parts: int) -> list[list]:
+    """``frames`` in ``parts`` contiguous runs of nearly equal length (the first ones one longer)."""
+    size, extra = divmod(len(frames), parts)
+    out, start = [], 0
+    for k in range(parts):
+        end = start + size + (k < extra)
+        out.append(frames[start:end])
+        start = end
+    return out
 
 
 def aligned_ranges(frames: list[int], parts: int, per_scene: int) -> list[list[int]]:

@@ -166,7 +166,7 @@ def write_frame(out_dir: str | os.PathLike, stem: str, points: np.ndarray, boxes
 
 
 def _box_dtype():
-    from .boxes import BOX_DTYPE
+    from ..geometry.boxes import BOX_DTYPE
 
     return BOX_DTYPE
 
