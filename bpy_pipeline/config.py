@@ -225,15 +225,39 @@ class CameraConfig:
 
 @dataclass(frozen=True)
 class KittiConfig:
-    """``output.kitti``: the KITTI object layout and the train/val split of every dataset index.
+    """``output.kitti``: the KITTI object layout's camera.
 
-    ``val_fraction`` of the frames go to ``ImageSets/val.txt`` (and Pointcept's ``npy_val.json``),
-    drawn from the run's seed, so any frame range gives the same split (at least one val frame from
-    two frames on).
+    ``val_fraction`` (older configs): the val share of ``output.split``, train the rest, no test.
     """
 
-    val_fraction: float = 0.25
+    val_fraction: float | None = None
     camera: CameraConfig = field(default_factory=CameraConfig)
+
+
+@dataclass(frozen=True)
+class SplitConfig:
+    """``output.split``: train, val and test by scene, block of frames or contiguous fold (io/splits.py), never
+    frame by frame by default. ``by``: auto (scene where the run has several, else block) | scene | block |
+    frame | fold; ``train val test``: fractions (by scene, block, frame); ``block``: frames per block (0: 10);
+    ``folds``, ``fold``: contiguous folds, fold ``fold`` (-1: the last) is val; ``seed``: draws where the
+    split's sequence starts (null: its start). Every format and index follows it."""
+
+    by: Literal["auto", "scene", "block", "frame", "fold"] = "auto"
+    train: float = 0.7
+    val: float = 0.15
+    test: float = 0.15
+    block: int = 0
+    folds: int = 5
+    fold: int = -1
+    seed: int | None = None
+
+
+@dataclass(frozen=True)
+class SemanticKittiOutput:
+    """``output.semantickitti``: ``labels``: semantickitti (SemanticKITTI's raw ids, labels.yaml's
+    ``semantickitti:`` table, so stock loaders read the right classes) | project (the project's own ids)."""
+
+    labels: Literal["semantickitti", "project"] = "semantickitti"
 
 
 @dataclass(frozen=True)
@@ -241,12 +265,15 @@ class OutputConfig:
     formats: list[str] = field(default_factory=lambda: ["ply", "semantickitti"])  # writers of io/writers.py
     frame: Literal["sensor", "world"] = "sensor"
     preview: bool = True
-    sequence: int = 0  # SemanticKITTI sequence number (sequences/SS/)
+    sequence: int = 0  # older configs only: SemanticKITTI sequences follow output.split (0 is accepted)
     boxes: BoxesConfig = field(default_factory=BoxesConfig)
     skip_empty: bool = False  # a frame with fewer than min_objects labelled objects is recorded as skipped, no files
     min_objects: int = 1  # objects of output.boxes.classes with their minimum points (skip_empty)
     frames_kept: bool = False  # skip_empty: `frames` counts kept frames; indices go on past it (full runs only)
-    kitti: KittiConfig = field(default_factory=KittiConfig)  # KITTI layout camera, train/val split
+    kitti: KittiConfig = field(default_factory=KittiConfig)  # KITTI layout camera
+    split: SplitConfig = field(default_factory=SplitConfig)  # train/val/test of every format and index
+    class_map: dict = field(default_factory=dict)  # {task class: [classes] | rest, ignore: [classes]}: training ids for a task
+    semantickitti: SemanticKittiOutput = field(default_factory=SemanticKittiOutput)
 
 
 @dataclass(frozen=True)
@@ -525,6 +552,7 @@ def config_from_dict(data) -> Config:
     _check_effects(config.effects, config.sensor.spec)
     _check_mirrors(config.effects.mirrors)
     config = _check_boxes(config)
+    config = _check_split(config)
     _check_writers(config)
     if config.output.min_objects < 0:
         raise InputError(f"output.min_objects: must be >= 0, got {config.output.min_objects}")
@@ -547,6 +575,20 @@ def _check_writers(config: Config) -> None:
         raise InputError(f"output.formats: name at least one of {', '.join(point_writers)}")
     for name in frame_writers(config):
         WRITERS.get(name).check(config)
+
+
+def _check_split(config: Config) -> Config:
+    """Resolve ``output.split`` (io/splits.py: by the builder's scenes) and check ``output.class_map`` and ``output.sequence``."""
+    from .io.class_maps import task_training
+    from .io.splits import resolve
+
+    output = config.output
+    if output.sequence != 0:
+        raise InputError(f"output.sequence: SemanticKITTI sequences follow output.split now (train 00-07, 09, 10; val 08; test 11-21), got {output.sequence}")
+    task_training(output.class_map)
+    split = resolve(output.split, config.frames, BUILDER_REGISTRY.get(config.scene.builder).frames_per_scene(config.scene.params), output.kitti.val_fraction)
+    kitti = dataclasses.replace(output.kitti, val_fraction=None)
+    return dataclasses.replace(config, output=dataclasses.replace(output, split=split, kitti=kitti))
 
 
 def _check_boxes(config: Config) -> Config:

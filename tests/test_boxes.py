@@ -234,20 +234,6 @@ def test_kitti_camera_pose_and_frames_without_objects(tmp_path):
     np.testing.assert_allclose(np.cos(read["heading"][0] - boxes["heading"][0]), 1.0, atol=1e-7)
 
 
-def test_split_depends_on_the_seed_and_the_frames_only():
-    from bpy_pipeline.errors import InputError
-    from bpy_pipeline.io.splits import split_frames
-
-    train, val = split_frames(range(20), 5, 0.25)
-    assert len(val) == 5 and sorted(train + val) == list(range(20))
-    assert split_frames(reversed(range(20)), 5, 0.25) == (train, val)
-    assert split_frames(range(20), 6, 0.25) != (train, val)
-    assert split_frames([3, 8], 5, 0.25)[1] and split_frames([3], 5, 0.25) == ([3], [])
-    assert split_frames(range(4), 5, 0.0) == ([0, 1, 2, 3], [])
-    with pytest.raises(InputError, match="output.kitti.val_fraction"):
-        split_frames(range(4), 5, 1.0)
-
-
 def test_a_tilted_frame_cannot_hold_upright_boxes():
     from bpy_pipeline.errors import InputError
 

@@ -15,7 +15,17 @@ Followed (the search tool's snapshots):
 Torch, scikit-image and scipy are not needed: ``in_hull`` (a Delaunay test on a box's corners) and
 ``points_in_rbbox`` are replaced by the equivalent point-in-oriented-box test; images are read with Pillow.
 
-The dataset: 4 parking frames (seed 1, few cars) where frame 2 has no car.
+The dataset: 6 parking frames (seed 1, few cars) where frame 2 has no car, split by scene with the split's
+seed 5: val frame 0, test frame 3, train the rest (the empty frame in train).
+
+SemanticKITTI's stock loaders, followed at the same commits: Pointcept's ``pointcept/datasets/semantic_kitti.py``
+(``SemanticKITTIDataset.get_data_list``, ``get_data``, ``get_learning_map``), mmdetection3d's
+``configs/_base_/datasets/semantickitti.py`` (``labels_map``, ``max_label``, ann files), ``mmdet3d/datasets/
+seg3d_dataset.py`` (``get_seg_label_mapping``: ids missing from the map become 0), ``transforms/loading.py``
+(``LoadAnnotations3D``: ``mask % seg_offset``), ``tools/dataset_converters/update_infos_to_v2.py``
+(``update_kitti_infos``) and ``tools/create_data.py``; the devkit (semantic-kitti-api a9c749e,
+``config/semantic-kitti.yaml``, ``evaluate_semantics.py``: the sequences of ``split[valid]``).
+SUSTechPOINTS 566f81d: ``public/js/obj_cfg.js`` (its class list), ``public/js/lidar.js`` (intensity / 255).
 """
 
 import json
@@ -30,19 +40,34 @@ import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 EMPTY = 2  # the frame without a box
+FRAMES = 6
+SPLIT = {"train": [1, 2, 4, 5], "val": [0], "test": [3]}  # output.split.seed 5 over six scenes (io/splits.py)
+# SemanticKITTI's learning map as the stock loaders hard-code it (devkit ids; Pointcept: the devkit's training
+# id - 1 with ignore_index -1; mmdetection3d's labels_map: the same with 19 for ignored)
+DEVKIT_LEARNING_MAP = {0: 0, 1: 0, 10: 1, 11: 2, 13: 5, 15: 3, 16: 5, 18: 4, 20: 5, 30: 6, 31: 7, 32: 8, 40: 9, 44: 10, 48: 11, 49: 12, 50: 13,
+                       51: 14, 52: 0, 60: 9, 70: 15, 71: 16, 72: 17, 80: 18, 81: 19, 99: 0, 252: 1, 253: 7, 254: 6, 255: 8, 256: 5, 257: 5, 258: 4, 259: 5}
+POINTCEPT_LEARNING_MAP = {raw: train - 1 for raw, train in DEVKIT_LEARNING_MAP.items()}
+MMDET3D_LABELS_MAP = {raw: train - 1 if train else 19 for raw, train in DEVKIT_LEARNING_MAP.items()}
+SK_CLASSES = ["car", "bicycle", "motorcycle", "truck", "other-vehicle", "person", "bicyclist", "motorcyclist", "road", "parking", "sidewalk",
+              "other-ground", "building", "fence", "vegetation", "trunk", "terrain", "pole", "traffic-sign"]  # Pointcept's training ids 0..18
+SUSTECH_CLASS_LIST = {"Car", "Pedestrian", "Van", "Bus", "Truck", "ScooterRider", "Scooter", "BicycleRider", "Bicycle", "Motorcycle", "MotorcyleRider",
+                      "PoliceCar", "TourCar", "RoadWorker", "Child", "BabyCart", "Cart", "Cone", "FireHydrant", "SaftyTriangle", "PlatformCart",
+                      "ConstructionCart", "RoadBarrel", "TrafficBarrier", "LongVehicle", "BicycleGroup", "ConcreteTruck", "Tram", "Excavator",
+                      "Animal", "TrashCan", "ForkLift", "Trimotorcycle", "FreightTricycle", "Crane", "RoadRoller", "Bulldozer", "DontCare",
+                      "Misc", "Unknown", "Unknown1", "Unknown2", "Unknown3", "Unknown4", "Unknown5"}  # obj_cfg.js obj_type_map
 
 
 @pytest.fixture(scope="module")
 def dataset(tmp_path_factory) -> Path:
     pytest.importorskip("bpy", reason="the dataset is made by a real parking run")
     out = tmp_path_factory.mktemp("loaders") / "out"
-    command = [sys.executable, str(ROOT / "run.py"), "--out", str(out), "--frames", "4", "--seed", "1", "--set", "scene.builder=parking",
+    command = [sys.executable, str(ROOT / "run.py"), "--out", str(out), "--frames", str(FRAMES), "--seed", "1", "--set", "scene.builder=parking",
                "--set", "scene.cars={kind: normal, mean: 1, std: 2, min: 0, max: 6}", "--set", "output.formats=[ply,semantickitti,npy,pcd]",
-               "--set", "output.boxes.formats=[kitti,openpcdet,sustech]", "--set", "output.kitti.val_fraction=0.25"]
+               "--set", "output.boxes.formats=[kitti,openpcdet,sustech]", "--set", "output.split.seed=5"]
     done = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr[-3000:]
     records = [json.loads(p.read_text()) for p in sorted((out / "records").glob("*.json"))]
-    assert [len(r["boxes"]) == 0 for r in records] == [i == EMPTY for i in range(4)], "the run no longer has exactly frame 2 empty"
+    assert [len(r["boxes"]) == 0 for r in records] == [i == EMPTY for i in range(FRAMES)], "the run no longer has exactly frame 2 empty"
     return out
 
 
@@ -107,18 +132,24 @@ class Object3d:
         self.level = 0 if height >= 40 and self.truncation <= 0.15 and self.occlusion <= 0 else 1 if height >= 25 and self.truncation <= 0.3 and self.occlusion <= 1 else 2 if height >= 25 and self.truncation <= 0.5 and self.occlusion <= 2 else -1
 
 
-def openpcdet_kitti_infos(root: Path, split: str) -> list[dict]:
-    """KittiDataset.set_split + get_infos(has_label=True, count_inside_pts=True)."""
+def openpcdet_kitti_infos(root: Path, split: str, has_label: bool = True) -> list[dict]:
+    """KittiDataset.set_split + get_infos(has_label, count_inside_pts=has_label), as create_kitti_infos calls it
+    (``has_label=False`` for test). A missing ImageSets file leaves ``sample_id_list`` None, and
+    ``executor.map(process_single_scene, None)`` raises TypeError."""
     root_split_path = root / ("training" if split != "test" else "testing")
     split_dir = root / "ImageSets" / (split + ".txt")
     sample_id_list = [x.strip() for x in open(split_dir).readlines()] if split_dir.exists() else None
     infos = []
-    for sample_idx in sample_id_list:
+    for sample_idx in iter(sample_id_list):
         info = {"point_cloud": {"num_features": 4, "lidar_idx": sample_idx}}
         img_file = root_split_path / "image_2" / ("%s.png" % sample_idx)
         assert img_file.exists()
         info["image"] = {"image_idx": sample_idx, "image_shape": image_shape(img_file)}
         calib = Calibration(root_split_path / "calib" / ("%s.txt" % sample_idx))
+        assert (root_split_path / "velodyne" / ("%s.bin" % sample_idx)).exists()
+        if not has_label:
+            infos.append(info)
+            continue
         label_file = root_split_path / "label_2" / ("%s.txt" % sample_idx)
         assert label_file.exists()
         obj_list = [Object3d(line) for line in open(label_file).readlines()]
@@ -163,8 +194,8 @@ def sustech_boxes(out: Path, index: int) -> dict[str, np.ndarray]:
 def test_openpcdet_kitti_get_infos(dataset):
     root = dataset / "kitti"
     train, val = openpcdet_kitti_infos(root, "train"), openpcdet_kitti_infos(root, "val")
-    assert openpcdet_kitti_infos(root, "test") == []  # an empty test set loads
-    assert sorted(int(i["point_cloud"]["lidar_idx"]) for i in train + val) == [0, 1, 2, 3] and len(val) == 1
+    test = openpcdet_kitti_infos(root, "test", has_label=False)  # from kitti/testing
+    assert {name: sorted(int(i["point_cloud"]["lidar_idx"]) for i in infos) for name, infos in (("train", train), ("val", val), ("test", test))} == SPLIT
     seen = 0
     for info in train + val:
         annos, index = info["annos"], int(info["point_cloud"]["lidar_idx"])
@@ -179,7 +210,7 @@ def test_openpcdet_kitti_get_infos(dataset):
             np.testing.assert_allclose(box[:6], truth[match, :6], atol=2e-3)
             assert abs((box[6] - truth[match, 6] + np.pi) % (2 * np.pi) - np.pi) < 1e-3
             seen += 1
-        assert set(annos["name"]) <= {"Car", "Van", "Truck", "Pedestrian", "Person_sitting", "Cyclist", "Tram", "Misc"}
+        assert set(annos["name"]) <= {"Car", "Van", "Truck", "Pedestrian", "Person_sitting", "Cyclist", "Tram", "Misc", "DontCare"}  # DontCare: no box in the image
         assert (annos["bbox"][:, 2] > annos["bbox"][:, 0]).all() and (annos["bbox"][:, 3] - annos["bbox"][:, 1] > 0).all()
     assert seen >= 2
 
@@ -189,20 +220,24 @@ def _extend_matrix(mat):
     return np.concatenate([mat, np.array([[0.0, 0.0, 0.0, 1.0]])], axis=0)
 
 
-def mmdet3d_kitti_infos(data_path: Path, image_ids: list[int]) -> list[dict]:
-    """get_kitti_image_info(training=True, velodyne=True, calib=True) + _calculate_num_points_in_gt (remove_outside)."""
+def mmdet3d_kitti_infos(data_path: Path, image_ids: list[int], training: bool = True) -> list[dict]:
+    """get_kitti_image_info(training, label_info=training, velodyne=True, calib=True) + _calculate_num_points_in_gt (remove_outside)."""
     infos = []
+    folder = "training" if training else "testing"
     for idx in image_ids:
-        velodyne_path = data_path / "training" / "velodyne" / f"{idx:06d}.bin"
-        image_path = data_path / "training" / "image_2" / f"{idx:06d}.png"
-        assert velodyne_path.exists() and image_path.exists()
-        lines = open(data_path / "training" / "calib" / f"{idx:06d}.txt").readlines()
+        velodyne_path = data_path / folder / "velodyne" / f"{idx:06d}.bin"
+        image_path = data_path / folder / "image_2" / f"{idx:06d}.png"
+        assert velodyne_path.exists() and image_path.exists()  # exist_check=True raises ValueError otherwise
+        lines = open(data_path / folder / "calib" / f"{idx:06d}.txt").readlines()
         P2 = _extend_matrix(np.array([float(v) for v in lines[2].split(" ")[1:13]]).reshape([3, 4]))
         rect = np.zeros([4, 4])
         rect[3, 3] = 1.0
         rect[:3, :3] = np.array([float(v) for v in lines[4].split(" ")[1:10]]).reshape([3, 3])
         Trv2c = _extend_matrix(np.array([float(v) for v in lines[5].split(" ")[1:13]]).reshape([3, 4]))
         _extend_matrix(np.array([float(v) for v in lines[6].split(" ")[1:13]]).reshape([3, 4]))  # Tr_imu_to_velo must parse
+        if not training:
+            infos.append({"image": {"image_idx": idx, "image_shape": image_shape(image_path)}})
+            continue
         content = [line.strip().split(" ") for line in open(data_path / "training" / "label_2" / f"{idx:06d}.txt").readlines()]
         num_objects = len([x[0] for x in content if x[0] != "DontCare"])
         annos = {
@@ -233,14 +268,32 @@ def mmdet3d_kitti_infos(data_path: Path, image_ids: list[int]) -> list[dict]:
     return infos
 
 
+def mmdet3d_update_kitti_infos(data_list: list[dict]) -> list[dict]:
+    """update_infos_to_v2.update_kitti_infos's control flow: ``ignore_class_name`` is bound inside the loop and
+    printed after it, so an empty info list (an empty ImageSets file) raises UnboundLocalError."""
+    converted_list = []
+    for ori_info_dict in data_list:
+        ignore_class_name = set()
+        for name in ori_info_dict.get("annos", {}).get("name", []):
+            if name not in ("Pedestrian", "Cyclist", "Car", "Van", "Truck", "Person_sitting", "Tram", "Misc"):
+                ignore_class_name.add(name)
+        converted_list.append(ori_info_dict)
+    print(f"ignore classes: {ignore_class_name}")
+    return converted_list
+
+
 def test_mmdet3d_kitti_converter(dataset):
     folder = dataset / "kitti" / "ImageSets"
-    ids = {name: [int(line) for line in open(folder / f"{name}.txt").readlines()] for name in ("train", "val", "test")}
-    assert ids["test"] == [] and sorted(ids["train"] + ids["val"]) == [0, 1, 2, 3]
+    ids = {name: [int(line) for line in open(folder / f"{name}.txt").readlines()] for name in ("train", "val", "test")}  # _read_imageset_file: all three
+    assert ids == SPLIT
+    for name in ("train", "val", "test"):  # create_data.py kitti: update_pkl_infos on each info file
+        mmdet3d_update_kitti_infos(mmdet3d_kitti_infos(dataset / "kitti", ids[name], training=name != "test"))
+    with pytest.raises(UnboundLocalError):  # why an empty split gets no ImageSets file
+        mmdet3d_update_kitti_infos([])
     infos = mmdet3d_kitti_infos(dataset / "kitti", ids["train"] + ids["val"])
     for info in infos:
         annos = info["annos"]
-        if info["image"]["image_idx"] == EMPTY:
+        if annos["name"].tolist() == ["DontCare"]:  # frame 2, or a frame whose boxes are all outside the image
             assert annos["num_points_in_gt"].tolist() == [-1]
             continue
         assert (annos["num_points_in_gt"] > 0).all()
@@ -269,8 +322,8 @@ def openpcdet_custom_infos(root: Path, split: str) -> list[dict]:
 def test_openpcdet_custom_create_infos(dataset):
     root = dataset / "openpcdet"
     train, val = openpcdet_custom_infos(root, "train"), openpcdet_custom_infos(root, "val")
-    indices = sorted(int(i["point_cloud"]["lidar_idx"]) for i in train + val)
-    assert indices == [0, 1, 3] and len(val) >= 1  # the empty frame is written but not listed
+    assert [int(i["point_cloud"]["lidar_idx"]) for i in train] == [1, 4, 5] and [int(i["point_cloud"]["lidar_idx"]) for i in val] == [0]  # the empty frame is written but not listed
+    assert (root / "ImageSets" / "test.txt").read_text() == "000003\n"
     assert (root / "labels" / f"{EMPTY:06d}.txt").read_text() == ""
     with pytest.raises(IndexError):  # why: get_infos slices [:, :7], which an empty label file cannot give
         np.array([], dtype=np.float32)[:, :7]
@@ -284,18 +337,19 @@ def test_openpcdet_custom_create_infos(dataset):
 
 # ----------------------------------------------------------------------------- Pointcept
 def test_pointcept_default_dataset_get_data(dataset):
-    from bpy_pipeline.io import read_semantickitti
+    from bpy_pipeline.io import read_ply
     from bpy_pipeline.io.class_maps import load_class_maps
     from bpy_pipeline.labels import load_class_table
 
     valid_assets = ["coord", "color", "normal", "strength", "segment", "instance", "pose"]
     data_root = str(dataset)
     data_list = []
-    for split in ["npy_train.json", "npy_val.json"]:  # DefaultDataset.get_data_list with split files
+    for split in ["npy_train.json", "npy_val.json", "npy_test.json"]:  # DefaultDataset.get_data_list with split files
         assert os.path.isfile(os.path.join(data_root, split))
         with open(os.path.join(data_root, split)) as f:
-            data_list += [os.path.join(data_root, data) for data in json.load(f)]
-    assert sorted(os.path.basename(p) for p in data_list) == [f"{i:06d}" for i in range(4)]
+            names = [os.path.join(data_root, data) for data in json.load(f)]
+        assert [int(os.path.basename(p)) for p in names] == SPLIT[split[4:-5]]
+        data_list += names
     table = load_class_table()
     classes = max(table.learning_map.values())
     for data_path in data_list:
@@ -307,7 +361,7 @@ def test_pointcept_default_dataset_get_data(dataset):
         data_dict["segment"] = data_dict["segment"].reshape([-1]).astype(np.int32)
         data_dict["instance"] = data_dict["instance"].reshape([-1]).astype(np.int32)
         index = int(os.path.basename(data_path))
-        raw = read_semantickitti(dataset / "sequences" / "00" / "velodyne" / f"{index:06d}.bin", dataset / "sequences" / "00" / "labels" / f"{index:06d}.label")
+        raw = read_ply(dataset / "ply" / f"{index:06d}.ply")  # the project's raw ids
         np.testing.assert_array_equal(data_dict["coord"], np.stack([raw["x"], raw["y"], raw["z"]], axis=1))
         expected = np.array([table.learning_map[int(s)] for s in raw["semantic"]]) - 1
         np.testing.assert_array_equal(data_dict["segment"], expected)
@@ -321,36 +375,112 @@ def test_pointcept_default_dataset_get_data(dataset):
             assert not cars.any()
 
 
+def test_openpcdet_create_kitti_infos_needs_every_imageset(dataset, tmp_path):
+    """A split without frames gets no ImageSets file; OpenPCDet's create_kitti_infos then stops at that split (set_split
+    leaves None), as mmdetection3d's converter does at an empty one: both need frames in train, val and test."""
+    import shutil
+
+    root = tmp_path / "kitti"
+    shutil.copytree(dataset / "kitti", root)
+    (root / "ImageSets" / "test.txt").unlink()
+    with pytest.raises(TypeError):
+        openpcdet_kitti_infos(root, "test", has_label=False)
+
+
 # ----------------------------------------------------------------------------- SemanticKITTI
+def pointcept_semantic_kitti(data_root: Path, split: str) -> list[tuple[str, np.ndarray]]:
+    """Pointcept's SemanticKITTIDataset(split).get_data_list + get_data: ``[(name, segment)]``."""
+    split2seq = dict(train=[0, 1, 2, 3, 4, 5, 6, 7, 9, 10], val=[8], test=[11, 12, 13, 14, 15, 16, 17, 18, 19, 20, 21])
+    data_list = []
+    for seq in split2seq[split]:
+        seq = str(seq).zfill(2)
+        seq_folder = os.path.join(data_root, "dataset", "sequences", seq)
+        seq_files = sorted(os.listdir(os.path.join(seq_folder, "velodyne")))
+        data_list += [os.path.join(seq_folder, "velodyne", file) for file in seq_files]
+    out = []
+    for data_path in data_list:
+        scan = np.fromfile(data_path, dtype=np.float32).reshape(-1, 4)
+        label_file = data_path.replace("velodyne", "labels").replace(".bin", ".label")
+        segment = np.fromfile(label_file, dtype=np.int32).reshape(-1)
+        segment = np.vectorize(POINTCEPT_LEARNING_MAP.__getitem__)(segment & 0xFFFF).astype(np.int32)  # KeyError on an unknown id
+        assert len(segment) == len(scan)
+        out.append((f"{os.path.basename(os.path.dirname(os.path.dirname(data_path)))}_{os.path.splitext(os.path.basename(data_path))[0]}", segment))
+    return out
+
+
+def test_pointcept_semantic_kitti_dataset(dataset, tmp_path):
+    from bpy_pipeline.io import read_ply
+
+    data_root = tmp_path / "semantic_kitti"
+    data_root.mkdir()
+    (data_root / "dataset").symlink_to(dataset)  # the stock config's data_root holds dataset/sequences
+    table = yaml.safe_load((dataset / "semantic-kitti.yaml").read_text())["project_classes"]
+    expected = {"car": "car", "person": "person", "wall": "building", "pillar": "building", "floor": "other-ground", "ramp": "other-ground"}
+    for split, frames in SPLIT.items():
+        loaded = pointcept_semantic_kitti(data_root, split)
+        assert sorted(int(name.split("_")[1]) for name, _ in loaded) == frames
+        for name, segment in loaded:
+            points = read_ply(dataset / "ply" / f"{name.split('_')[1]}.ply")
+            from bpy_pipeline.labels import load_class_table
+
+            names = load_class_table().names
+            for project, stock in expected.items():
+                mine = np.array([names[int(s)] == project for s in points["semantic"]])
+                if mine.any():
+                    assert (segment[mine] == SK_CLASSES.index(stock)).all(), (project, table[project])
+            assert set(np.unique(segment)) <= set(range(-1, 19))
+
+
+def test_mmdet3d_semantic_kitti_dataset(dataset):
+    import pickle
+
+    seg_label_mapping = np.zeros(259 + 1, dtype=np.int64)  # SemanticKittiDataset.get_seg_label_mapping
+    for idx in MMDET3D_LABELS_MAP:
+        seg_label_mapping[idx] = MMDET3D_LABELS_MAP[idx]
+    for split, frames in SPLIT.items():
+        infos = pickle.loads((dataset / f"semantickitti_infos_{split}.pkl").read_bytes())  # mmengine.load
+        assert infos["metainfo"] == {"DATASET": "SemanticKITTI"}
+        assert sorted(int(Path(i["lidar_points"]["lidar_path"]).stem) for i in infos["data_list"]) == frames
+        for info in infos["data_list"]:
+            points = np.fromfile(dataset / info["lidar_points"]["lidar_path"], dtype=np.float32).reshape(-1, info["lidar_points"]["num_pts_feats"])
+            mask = np.fromfile(dataset / info["pts_semantic_mask_path"], dtype=np.int32).astype(np.int64) % 2**16  # LoadAnnotations3D
+            assert len(mask) == len(points)
+            assert set(np.unique(mask)) <= set(MMDET3D_LABELS_MAP), "an id mmdetection3d would silently read as car"
+            mapped = seg_label_mapping[mask]  # PointSegClassMapping
+            assert mapped.min() >= 0 and mapped.max() <= 19
+
+
 def test_semantickitti_devkit_files(dataset):
     config = yaml.safe_load((dataset / "semantic-kitti.yaml").read_text())
-    from bpy_pipeline.labels import load_class_table
 
-    table = load_class_table()
     assert set(config) >= {"labels", "color_map", "content", "learning_map", "learning_map_inv", "learning_ignore", "split"}
-    assert config["color_map"][table.id_of("car")] == list(table.colors[table.id_of("car")][::-1])  # BGR
+    assert config["learning_map"] == DEVKIT_LEARNING_MAP and config["color_map"][10] == [245, 150, 100]  # the devkit's own (BGR)
+    assert config["split"] == {"train": [0, 1, 2, 3], "valid": [8], "test": [11]}  # train frames 1, 2, 4, 5 round robin over 00-07, 09, 10
+    for split, numbers in config["split"].items():  # evaluate_semantics.py reads the labels of split[valid] (and the others)
+        for number in numbers:
+            assert any((dataset / "sequences" / f"{number:02d}" / "labels").glob("*.label")), (split, number)
     assert abs(sum(config["content"].values()) - 1.0) < 1e-9
     maxkey = max(config["learning_map"])
     remap_lut = np.zeros(maxkey + 100, dtype=np.int32)  # the devkit's remapping
     remap_lut[list(config["learning_map"])] = list(config["learning_map"].values())
-    folder = dataset / "sequences" / "00"
-    scans = sorted((folder / "velodyne").glob("*.bin"))
-    for scan in scans:
-        label = np.fromfile(folder / "labels" / (scan.stem + ".label"), dtype=np.uint32)
-        sem = remap_lut[label & 0xFFFF]
-        assert sem.max() <= max(config["learning_map_inv"]) and config["learning_ignore"][0] is True
-        assert all(config["learning_map"][config["learning_map_inv"][t]] == t for t in np.unique(sem))
-    poses = np.loadtxt(folder / "poses.txt").reshape(-1, 3, 4)
-    times = np.loadtxt(folder / "times.txt")
-    assert len(poses) == len(times) == len(scans)
-    calib = {line.split(":")[0]: np.array(line.split(":")[1].split(), float) for line in (folder / "calib.txt").read_text().splitlines()}
-    tr = np.vstack([calib["Tr"].reshape(3, 4), [0, 0, 0, 1]])
-    records = [json.loads(p.read_text()) for p in sorted((dataset / "records").glob("*.json"))]
-    first = np.linalg.inv(np.array(records[0]["sensor_pose"]))
-    for pose, record in zip(poses, records):
-        velo = np.linalg.inv(tr) @ np.vstack([pose, [0, 0, 0, 1]]) @ tr  # the devkit's reading
-        np.testing.assert_allclose(velo, first @ np.array(record["sensor_pose"]), atol=1e-9)
-    assert (np.diff(times) > 0).all()
+    records = {json.loads(p.read_text())["index"]: json.loads(p.read_text()) for p in sorted((dataset / "records").glob("*.json"))}
+    for number in sum(config["split"].values(), []):
+        folder = dataset / "sequences" / f"{number:02d}"
+        scans = sorted((folder / "velodyne").glob("*.bin"))
+        for scan in scans:
+            label = np.fromfile(folder / "labels" / (scan.stem + ".label"), dtype=np.uint32)
+            assert set(np.unique(label & 0xFFFF)) <= set(config["learning_map"])
+            sem = remap_lut[label & 0xFFFF]
+            assert sem.max() <= max(config["learning_map_inv"]) and config["learning_ignore"][0] is True
+        poses = np.loadtxt(folder / "poses.txt").reshape(-1, 3, 4)
+        times = np.atleast_1d(np.loadtxt(folder / "times.txt"))
+        assert len(poses) == len(times) == len(scans)
+        calib = {line.split(":")[0]: np.array(line.split(":")[1].split(), float) for line in (folder / "calib.txt").read_text().splitlines()}
+        tr = np.vstack([calib["Tr"].reshape(3, 4), [0, 0, 0, 1]])
+        first = np.linalg.inv(np.array(records[int(scans[0].stem)]["sensor_pose"]))
+        for pose, scan in zip(poses, scans):
+            velo = np.linalg.inv(tr) @ np.vstack([pose, [0, 0, 0, 1]]) @ tr  # the devkit's reading
+            np.testing.assert_allclose(velo, first @ np.array(records[int(scan.stem)]["sensor_pose"]), atol=1e-9)
 
 
 # ----------------------------------------------------------------------------- SUSTechPOINTS and PCD
@@ -358,14 +488,21 @@ def test_sustech_labels_and_pcd_clouds(dataset):
     from bpy_pipeline.io import read_ply
     from bpy_pipeline.io.pcd import read_pcd
 
-    for index in range(4):
+    types = set()
+    for index in range(FRAMES):
         objects = json.loads((dataset / "sustech" / "label" / f"{index:06d}.json").read_text())
         assert (objects == []) == (index == EMPTY)
         for o in objects:
             assert set(o) == {"obj_id", "obj_type", "psr"} and set(o["psr"]) == {"position", "rotation", "scale"}
+            types.add(o["obj_type"])
         points = read_ply(dataset / "ply" / f"{index:06d}.ply")
-        assert read_pcd(dataset / "sustech" / "lidar" / f"{index:06d}.pcd").tobytes() == points.tobytes()
+        sustech = read_pcd(dataset / "sustech" / "lidar" / f"{index:06d}.pcd")
+        np.testing.assert_array_equal(sustech["intensity"], points["intensity"] * np.float32(255))  # lidar.js: intensity / 255
+        assert sustech["intensity"].max() > 1.0
+        for name in ("x", "y", "z", "semantic", "instance"):
+            np.testing.assert_array_equal(sustech[name], points[name])
         assert read_pcd(dataset / "pcd" / f"{index:06d}.pcd").tobytes() == points.tobytes()
+    assert types and types <= SUSTECH_CLASS_LIST, types - SUSTECH_CLASS_LIST
     o3d = pytest.importorskip("open3d", exc_type=ImportError, reason="Open3D reads the PCD as a viewer would (pip install open3d; Debian needs libusb-1.0-0)")
     cloud = o3d.t.io.read_point_cloud(str(dataset / "pcd" / "000000.pcd"))
     points = read_ply(dataset / "ply" / "000000.ply")

@@ -94,11 +94,13 @@ def load_class_maps(path: Path = LABELS_PATH) -> ClassMaps:
     return ClassMaps(training, things, asprs.astype(np.uint8), kitti)
 
 
-def semantic_kitti_yaml(counts: np.ndarray | None = None, split: dict | None = None) -> dict:
-    """The dataset's ``semantic-kitti.yaml`` (the SemanticKITTI devkit's layout) from the class table.
+def semantic_kitti_yaml(counts: np.ndarray | None = None, split: dict | None = None, class_map: dict | None = None) -> dict:
+    """The dataset's ``semantic-kitti.yaml`` (the SemanticKITTI devkit's layout) in the project's raw ids
+    (``output.semantickitti.labels: project``; :func:`semantic_kitti_space_yaml` is the default).
 
     counts : (k,) points per raw id over the dataset, for ``content`` (fractions); uniform when ``None``
     split : ``{train: [...], valid: [...], test: [...]}`` sequence numbers
+    class_map : ``output.class_map``: the ``learning_map`` of the task (:func:`task_training`), else the table's
     ``color_map`` is BGR, as the devkit's files are (the project's table is RGB); ``learning_map_inv``
     maps each training id to the first raw id that trains as it; ``learning_ignore`` marks training id 0.
     """
@@ -106,16 +108,193 @@ def semantic_kitti_yaml(counts: np.ndarray | None = None, split: dict | None = N
     ids = sorted(table.names)
     counts = np.ones(max(ids) + 1) if counts is None else np.asarray(counts, float)
     total = counts.sum()
-    inverse: dict[int, int] = {}
+    task = task_training(class_map)
+    learning = {i: table.learning_map[i] if task is None else int(task.training[i]) for i in ids}
+    inverse: dict[int, int] = {0: 0} if task is not None else {}
     for raw_id in ids:
-        inverse.setdefault(table.learning_map[raw_id], raw_id)
+        inverse.setdefault(learning[raw_id], raw_id)
     return {
         "name": "bpy_pipeline",
         "labels": {i: table.names[i] for i in ids},
         "color_map": {i: [int(c) for c in table.colors[i][::-1]] for i in ids},
         "content": {i: float(counts[i] / total) if total > 0 and i < len(counts) else 0.0 for i in ids},
-        "learning_map": {i: table.learning_map[i] for i in ids},
+        "learning_map": learning,
         "learning_map_inv": dict(sorted(inverse.items())),
         "learning_ignore": {t: t == 0 for t in sorted(inverse)},
         "split": split or {"train": [], "valid": [], "test": []},
+    }
+
+
+SUSTECH_TYPES = ("Car", "Pedestrian", "Van", "Bus", "Truck", "ScooterRider", "Scooter", "BicycleRider", "Bicycle", "Motorcycle",
+                 "MotorcyleRider", "PoliceCar", "TourCar", "RoadWorker", "Child", "BabyCart", "Cart", "Cone", "FireHydrant",
+                 "SaftyTriangle", "PlatformCart", "ConstructionCart", "RoadBarrel", "TrafficBarrier", "LongVehicle", "BicycleGroup",
+                 "ConcreteTruck", "Tram", "Excavator", "Animal", "TrashCan", "ForkLift", "Trimotorcycle", "FreightTricycle", "Crane",
+                 "RoadRoller", "Bulldozer", "DontCare", "Misc", "Unknown", "Unknown1", "Unknown2", "Unknown3", "Unknown4", "Unknown5")
+# SUSTechPOINTS' class list (naurril/SUSTechPOINTS 566f81d, public/js/obj_cfg.js ``obj_type_map``), spelled as it spells them
+
+
+@lru_cache(maxsize=4)
+def load_sustech_names(path: Path = LABELS_PATH) -> dict[str, str]:
+    """``{class name: SUSTechPOINTS type}`` (labels.yaml ``sustech_names``); ``InputError`` for a type its class list lacks."""
+    try:
+        raw = (yaml.safe_load(Path(path).read_text()) or {}).get("sustech_names", {}) or {}
+    except (OSError, yaml.YAMLError) as err:
+        raise InputError(f"{path}: cannot read the class table ({err})") from None
+    table = load_class_table(path)
+    names = {table.names[table.id_of(k, f"{path}: sustech_names")]: str(v) for k, v in raw.items()}
+    bad = sorted(v for v in names.values() if v not in SUSTECH_TYPES)
+    if bad:
+        raise InputError(f"{path}: sustech_names: {', '.join(bad)} not in SUSTechPOINTS' class list ({', '.join(SUSTECH_TYPES)})")
+    return names
+
+
+# ----------------------------------------------------------------------------- SemanticKITTI's own label space
+# The SemanticKITTI devkit's class table (semantic-kitti-api, config/semantic-kitti.yaml): raw id -> name,
+# BGR colour and training id (0 ignored). The stock loaders (Pointcept's SemanticKITTIDataset,
+# mmdetection3d's SemanticKittiDataset) hard-code this table and never read a dataset's yaml.
+SEMANTIC_KITTI = {  # raw id: (name, BGR colour, training id)
+    0: ("unlabeled", (0, 0, 0), 0), 1: ("outlier", (0, 0, 255), 0), 10: ("car", (245, 150, 100), 1),
+    11: ("bicycle", (245, 230, 100), 2), 13: ("bus", (250, 80, 100), 5), 15: ("motorcycle", (150, 60, 30), 3),
+    16: ("on-rails", (255, 0, 0), 5), 18: ("truck", (180, 30, 80), 4), 20: ("other-vehicle", (255, 0, 0), 5),
+    30: ("person", (30, 30, 255), 6), 31: ("bicyclist", (200, 40, 255), 7), 32: ("motorcyclist", (90, 30, 150), 8),
+    40: ("road", (255, 0, 255), 9), 44: ("parking", (255, 150, 255), 10), 48: ("sidewalk", (75, 0, 75), 11),
+    49: ("other-ground", (75, 0, 175), 12), 50: ("building", (0, 200, 255), 13), 51: ("fence", (50, 120, 255), 14),
+    52: ("other-structure", (0, 150, 255), 0), 60: ("lane-marking", (170, 255, 150), 9), 70: ("vegetation", (0, 175, 0), 15),
+    71: ("trunk", (0, 60, 135), 16), 72: ("terrain", (80, 240, 150), 17), 80: ("pole", (150, 240, 255), 18),
+    81: ("traffic-sign", (0, 0, 255), 19), 99: ("other-object", (255, 255, 50), 0),
+    252: ("moving-car", (245, 150, 100), 1), 253: ("moving-bicyclist", (200, 40, 255), 7), 254: ("moving-person", (30, 30, 255), 6),
+    255: ("moving-motorcyclist", (90, 30, 150), 8), 256: ("moving-on-rails", (255, 0, 0), 5), 257: ("moving-bus", (250, 80, 100), 5),
+    258: ("moving-truck", (180, 30, 80), 4), 259: ("moving-other-vehicle", (255, 0, 0), 5),
+}  # fmt: skip
+SEMANTIC_KITTI_LEARNING_MAP_INV = {0: 0, 1: 10, 2: 11, 3: 15, 4: 18, 5: 20, 6: 30, 7: 31, 8: 32, 9: 40, 10: 44, 11: 48, 12: 49, 13: 50, 14: 51, 15: 70, 16: 71, 17: 72, 18: 80, 19: 81}  # fmt: skip
+LABEL_SPACES = ("semantickitti", "project")
+
+
+@lru_cache(maxsize=4)
+def semantic_kitti_lut(path: Path = LABELS_PATH) -> np.ndarray:
+    """``(65536,) uint16``: the SemanticKITTI raw id of each project raw id (labels.yaml ``semantickitti:``);
+    ids outside the class table are unlabeled (0). ``InputError`` naming the file for an id SemanticKITTI lacks."""
+    from ..labels import semantickitti_ids
+
+    table = load_class_table(path)
+    ids = semantickitti_ids(path)
+    lut = np.zeros(1 << 16, np.uint16)
+    for raw_id, name in table.names.items():
+        if ids[name] not in SEMANTIC_KITTI:
+            raise InputError(f"{path}: semantickitti.{name}: {ids[name]} is not a SemanticKITTI raw id; allowed: {', '.join(map(str, SEMANTIC_KITTI))}")
+        lut[raw_id] = ids[name]
+    return lut
+
+
+@dataclass(frozen=True)
+class TaskMap:
+    """Training ids of a task (``output.class_map``): ``training`` (65536,) int32 over project raw ids, 0 ignored,
+    1..K the task classes in ``names`` order."""
+
+    training: np.ndarray
+    names: tuple[str, ...]
+
+
+def task_training(class_map: dict | None, path: Path = LABELS_PATH) -> TaskMap | None:
+    """The :class:`TaskMap` of ``output.class_map`` (``None`` when empty: the class table's ``learning_map``).
+
+    class_map : ``{task class: [project classes] | "rest", ignore: [project classes]}``; ``rest`` is every class
+        named nowhere else that the table trains (not unlabeled nor reflection ghosts); a class named nowhere is
+        ignored. ``InputError`` naming the key otherwise.
+    """
+    if not class_map:
+        return None
+    if not isinstance(class_map, dict):
+        raise InputError(f"output.class_map: expected a mapping {{task class: [classes], ignore: [classes]}}, got {class_map!r}")
+    table = load_class_table(path)
+    owner: dict[int, str] = {}
+    rest = None
+    for key, value in class_map.items():
+        where = f"output.class_map.{key}"
+        if not isinstance(key, str) or not key.strip() or any(c.isspace() for c in key.strip()):
+            raise InputError(f"output.class_map: a task class is one word, got {key!r}")
+        if value == "rest":
+            if rest is not None or key == "ignore":
+                raise InputError(f"{where}: rest (every class named nowhere else) may be given to one task class, not ignore")
+            rest = key
+            continue
+        if not isinstance(value, list) or not value:
+            raise InputError(f"{where}: expected a list of class names from assets_manifest/labels.yaml, or rest")
+        for name in value:
+            raw_id = table.id_of(str(name), where)
+            if raw_id in owner:
+                raise InputError(f"{where}: {table.names[raw_id]} is already in output.class_map.{owner[raw_id]}")
+            owner[raw_id] = key
+    names = tuple(k for k in class_map if k != "ignore")
+    if not names:
+        raise InputError("output.class_map: name at least one task class besides ignore")
+    training = np.zeros(1 << 16, np.int32)
+    for raw_id in table.names:
+        key = owner.get(raw_id, rest if table.learning_map[raw_id] else None)
+        if key is not None and key != "ignore":
+            training[raw_id] = names.index(key) + 1
+    return TaskMap(training, names)
+
+
+def maps_for(class_map: dict | None) -> ClassMaps:
+    """The class table's maps with the training ids of ``output.class_map`` (the table's own when empty)."""
+    import json
+
+    return _maps_for(json.dumps(class_map or {}))
+
+
+@lru_cache(maxsize=8)
+def _maps_for(class_map_json: str) -> ClassMaps:
+    import json
+
+    maps = load_class_maps()
+    task = task_training(json.loads(class_map_json))
+    return maps if task is None else ClassMaps(task.training, maps.things, maps.asprs, maps.kitti_names)
+
+
+def semantic_kitti_space_yaml(counts: np.ndarray | None = None, split: dict | None = None, class_map: dict | None = None) -> dict:
+    """``semantic-kitti.yaml`` in SemanticKITTI's own raw ids (the devkit's file, so its tools and the stock
+    loaders agree), ``content`` counted over the written labels (``counts`` per SemanticKITTI raw id).
+
+    With ``class_map`` the ``learning_map`` gives the task's ids (``labels`` stay SemanticKITTI's); a SemanticKITTI
+    id whose project classes go to different task classes trains as ignored, listed under ``class_map_conflicts``.
+    ``project_classes`` names the SemanticKITTI id of each project class.
+    """
+    from ..labels import semantickitti_ids
+
+    ids = sorted(SEMANTIC_KITTI)
+    counts = np.ones(max(ids) + 1) if counts is None else np.asarray(counts, float)
+    total = counts.sum()
+    task = task_training(class_map)
+    conflicts: dict[int, list[str]] = {}
+    if task is None:
+        learning = {i: SEMANTIC_KITTI[i][2] for i in ids}
+        inverse = dict(SEMANTIC_KITTI_LEARNING_MAP_INV)
+    else:
+        table, lut = load_class_table(), semantic_kitti_lut()
+        learning = {i: 0 for i in ids}
+        classes: dict[int, list[str]] = {}
+        for raw_id, name in sorted(table.names.items()):
+            classes.setdefault(int(lut[raw_id]), []).append(name)
+        for sk, names in classes.items():
+            trains = {int(task.training[table.id_of(n)]) for n in names}
+            if len(trains) == 1:
+                learning[sk] = trains.pop()
+            else:
+                conflicts[sk] = names
+        inverse = {0: 0}
+        for raw_id in ids:
+            inverse.setdefault(learning[raw_id], raw_id)
+        inverse = {t: inverse.get(t, 0) for t in range(len(task.names) + 1)}
+    return {
+        "name": "bpy_pipeline (SemanticKITTI label space)",
+        "labels": {i: SEMANTIC_KITTI[i][0] for i in ids},
+        "color_map": {i: list(SEMANTIC_KITTI[i][1]) for i in ids},
+        "content": {i: float(counts[i] / total) if total > 0 and i < len(counts) else 0.0 for i in ids},
+        "learning_map": learning,
+        "learning_map_inv": inverse,
+        "learning_ignore": {t: t == 0 for t in inverse},
+        "split": split or {"train": [], "valid": [], "test": []},
+        "project_classes": dict(sorted(semantickitti_ids().items(), key=lambda kv: load_class_table().id_of(kv[0]))),
+        **({"class_map_conflicts": conflicts} if conflicts else {}),
     }

@@ -13,10 +13,11 @@ from pathlib import Path
 from ..errors import InputError
 from ..labels import load_class_table
 from . import kitti, npy, openpcdet, semantickitti, sustech
-from .layout import frame_stem, write_frame_las, write_frame_npy, write_frame_ply, write_frame_preview, write_frame_semantickitti
+from .class_maps import maps_for, semantic_kitti_lut
+from .layout import frame_stem, write_frame_las, write_frame_ply, write_frame_preview
 from .pcd import write_pcd
-from .splits import split_frames
 from .range_image import write_frame_range_image
+from .splits import sequence_of, split_of
 from .writers import Writer, register_writer
 
 
@@ -40,12 +41,7 @@ def _write_preview(frame, out: Path) -> list[Path]:
     return [write_frame_preview(out, frame.index, frame.points, table.color_lut(), frame.boxes, table.names)]
 
 
-def _check_split(config) -> None:
-    split_frames([], config.seed, config.output.kitti.val_fraction)
-
-
 def _check_kitti(config) -> None:
-    _check_split(config)
     camera = config.output.kitti.camera
     if len(camera.resolution) != 2 or min(int(v) for v in camera.resolution) < 1:
         raise InputError(f"output.kitti.camera.resolution: expected [width, height] in pixels >= 1, got {list(camera.resolution)}")
@@ -53,9 +49,24 @@ def _check_kitti(config) -> None:
         raise InputError(f"output.kitti.camera.fov_deg: must be > 0 and < 180 degrees, got {camera.fov_deg}")
 
 
+def _write_npy(frame, out: Path) -> list[Path]:
+    """``npy/NNNNNN/*.npy``: ``segment`` in the training ids of ``output.class_map`` (the table's without one)."""
+    return npy.write_npy_folder(Path(out) / "npy" / frame_stem(frame.index), frame.points, maps_for(frame.config.output.class_map))
+
+
+def _write_semantickitti(frame, out: Path) -> list[Path]:
+    """``sequences/SS/{velodyne,labels}/NNNNNN.*``: the sequence of the frame's split, SemanticKITTI's raw ids
+    unless ``output.semantickitti.labels: project``."""
+    config = frame.config
+    lut = None if config.output.semantickitti.labels == "project" else semantic_kitti_lut()
+    frame_stem(frame.index)
+    return list(semantickitti.write_semantickitti(out, sequence_of(frame.index, config.output.split, config.frames), frame.index, frame.points, lut))
+
+
 def _write_kitti(frame, out: Path) -> list[Path]:
     image = frame.images.get("image_2")  # the camera stage's rendering (output.kitti.camera.render), else the points' projection
-    return kitti.write_frame(out, frame_stem(frame.index), frame.points, frame.boxes, frame.config.output.kitti.camera, load_class_table().color_lut(), frame.config.output.boxes.names, image)
+    folder = "testing" if split_of(frame.index, frame.config.output.split, frame.config.frames) == "test" else "training"
+    return kitti.write_frame(out, frame_stem(frame.index), frame.points, frame.boxes, frame.config.output.kitti.camera, load_class_table().color_lut(), frame.config.output.boxes.names, image, folder)
 
 
 def _write_openpcdet(frame, out: Path) -> list[Path]:
@@ -71,14 +82,14 @@ def _write_pcd(frame, out: Path) -> list[Path]:
 
 
 register_writer("ply", _points_writer(write_frame_ply))
-register_writer("semantickitti", Writer(_points_writer(write_frame_semantickitti).write, index=semantickitti.write_index))
+register_writer("semantickitti", Writer(_write_semantickitti, index=semantickitti.write_index))
 register_writer("las", _points_writer(write_frame_las))
-register_writer("npy", Writer(_points_writer(write_frame_npy).write, _check_split, npy.write_index))
+register_writer("npy", Writer(_write_npy, index=npy.write_index))
 register_writer("pcd", Writer(_write_pcd))
 register_writer("range_image", Writer(_write_range_image, _check_range_image))
 register_writer("preview", Writer(_write_preview))
 register_writer("kitti", Writer(_write_kitti, _check_kitti, kitti.write_index, boxes=True))
-register_writer("openpcdet", Writer(_write_openpcdet, _check_split, openpcdet.write_index, boxes=True))
+register_writer("openpcdet", Writer(_write_openpcdet, index=openpcdet.write_index, boxes=True))
 register_writer("sustech", Writer(_write_sustech, boxes=True))
 
 from . import rig_outputs  # noqa: F401,E402  (registers rig and flash_image)

@@ -7,7 +7,8 @@ Files (frame ``NNNNNN``)::
     kitti/training/calib/NNNNNN.txt      P0..P3 (the camera's 3 x 4 projection), R0_rect, Tr_velo_to_cam, Tr_imu_to_velo
     kitti/training/image_2/NNNNNN.png    the camera's view: Blender's rendering where the pipeline gives one
                                          (:mod:`bpy_pipeline.scenes.camera`), else the labelled points it sees
-    kitti/ImageSets/{train,val,test}.txt frame stems; test is empty (no testing/ folder is written)
+    kitti/testing/...                    the same files for the frames of the test split (``output.split``)
+    kitti/ImageSets/{train,val,test}.txt frame stems of each split that holds a frame (none for an empty split)
 
 The camera (``output.kitti.camera``) is a pinhole fixed to the LiDAR; ``Tr_velo_to_cam`` is its
 pose composed with KITTI's axis change (x_cam = -y, y_cam = -z, z_cam = x). Types come from
@@ -32,7 +33,7 @@ from ..geometry.transforms import euler_xyz_matrix
 from .atomic import atomic_write
 from .class_maps import ClassMaps, load_class_maps
 from .preview import encode_png, splat
-from .splits import split_frames
+from .splits import SPLITS, split_indices
 
 KITTI_AXES = np.array([[0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]])  # sensor (x fwd, y left, z up) -> camera (x right, y down, z fwd)
 IMAGE_BACKGROUND = (40, 40, 46)
@@ -144,13 +145,15 @@ def _text(path: Path, text: str) -> Path:
     return path
 
 
-def write_frame(out_dir: str | os.PathLike, stem: str, points: np.ndarray, boxes: np.ndarray, camera, color_lut: np.ndarray, names: dict | None = None, image: np.ndarray | None = None) -> list[Path]:
-    """One frame of the KITTI layout under ``out_dir/kitti/training`` (see the module docstring); returns the paths.
+def write_frame(out_dir: str | os.PathLike, stem: str, points: np.ndarray, boxes: np.ndarray, camera, color_lut: np.ndarray, names: dict | None = None,
+                image: np.ndarray | None = None, folder: str = "training") -> list[Path]:
+    """One frame of the KITTI layout under ``out_dir/kitti/<folder>`` (see the module docstring); returns the paths.
 
     image : ``(height, width, 3) uint8`` the camera's rendering of the scene (:func:`bpy_pipeline.scenes.camera.render_camera`);
         without one, ``image_2`` is the projection of the labelled points (:func:`render_image`)
+    folder : ``training``, or ``testing`` for a frame of the test split (where the loaders read test frames)
     """
-    root = Path(out_dir) / "kitti" / "training"
+    root = Path(out_dir) / "kitti" / folder
     k, tr = camera_matrices(camera)
     velodyne = root / "velodyne" / f"{stem}.bin"
     with atomic_write(velodyne) as tmp:
@@ -171,13 +174,21 @@ def _box_dtype():
     return BOX_DTYPE
 
 
-def write_image_sets(out_dir: str | os.PathLike, folder: str, train: list[int], val: list[int], test: list[int] | None = None) -> list[Path]:
-    """``out_dir/folder/ImageSets/{train,val}.txt`` (and ``test.txt`` when ``test`` is given): one frame stem a line."""
-    sets = {"train": train, "val": val, **({"test": test} if test is not None else {})}
-    return [_text(Path(out_dir) / folder / "ImageSets" / f"{name}.txt", "".join(f"{i:06d}\n" for i in frames)) for name, frames in sets.items()]
+def write_image_sets(out_dir: str | os.PathLike, folder: str, sets: dict[str, list[int]]) -> list[Path]:
+    """``out_dir/folder/ImageSets/{train,val,test}.txt``: one frame stem a line, for each split of ``sets`` that holds a frame.
+
+    An empty split gets no file (and loses one a previous index wrote): mmdetection3d's converter fails on an empty list.
+    """
+    written = []
+    for name in SPLITS:
+        path = Path(out_dir) / folder / "ImageSets" / f"{name}.txt"
+        if sets.get(name):
+            written.append(_text(path, "".join(f"{i:06d}\n" for i in sets[name])))
+        else:
+            path.unlink(missing_ok=True)
+    return written
 
 
 def write_index(out_dir: str | os.PathLike, records: list[dict], config) -> list[Path]:
-    """The KITTI ImageSets of the committed frames: the seed's train/val split (:mod:`.splits`), an empty test set."""
-    train, val = split_frames([r["index"] for r in records], config.seed, config.output.kitti.val_fraction)
-    return write_image_sets(out_dir, "kitti", train, val, [])
+    """``kitti/ImageSets/{train,val,test}.txt`` of the committed frames, by ``output.split`` (:mod:`.splits`); no file for an empty split."""
+    return write_image_sets(out_dir, "kitti", split_indices([r["index"] for r in records], config.output.split, config.frames))

@@ -106,7 +106,7 @@ def read_npy_folder(folder: str | os.PathLike, maps: ClassMaps | None = None) ->
 
 
 def write_index(out_dir: str | os.PathLike, records: list[dict], config) -> list[Path]:
-    """Pointcept split lists ``OUT/npy_train.json`` and ``OUT/npy_val.json`` (the seed's split, :mod:`.splits`).
+    """Pointcept split lists ``OUT/npy_{train,val,test}.json`` by ``output.split`` (:mod:`.splits`); none for an empty split.
 
     Each lists frame folders relative to ``OUT`` (``npy/NNNNNN``): Pointcept's ``DefaultDataset`` with
     ``data_root=OUT`` and ``split="npy_train.json"`` reads such a file as its list of frames.
@@ -114,12 +114,15 @@ def write_index(out_dir: str | os.PathLike, records: list[dict], config) -> list
     import json
 
     from .atomic import atomic_write
-    from .splits import split_frames
+    from .splits import split_indices
 
-    train, val = split_frames([r["index"] for r in records], config.seed, config.output.kitti.val_fraction)
     written = []
-    for name, frames in (("npy_train.json", train), ("npy_val.json", val)):
-        with atomic_write(Path(out_dir) / name) as tmp:
+    for name, frames in split_indices([r["index"] for r in records], config.output.split, config.frames).items():
+        path = Path(out_dir) / f"npy_{name}.json"
+        if not frames:
+            path.unlink(missing_ok=True)
+            continue
+        with atomic_write(path) as tmp:
             tmp.write_text(json.dumps([f"npy/{i:06d}" for i in frames]) + "\n")
-        written.append(Path(out_dir) / name)
+        written.append(path)
     return written

@@ -5,7 +5,7 @@ Files (frame ``NNNNNN``)::
     openpcdet/points/NNNNNN.npy        (n, 4) float32: x y z (m, the points' frame), intensity (0..1)
     openpcdet/labels/NNNNNN.txt        x y z dx dy dz heading_angle category_name (box centre, length,
                                        width, height, yaw about z)
-    openpcdet/ImageSets/{train,val}.txt  frame stems, the seed's split (:mod:`.splits`)
+    openpcdet/ImageSets/{train,val,test}.txt  frame stems by output.split (:mod:`.splits`); none for an empty split
 
 OpenPCDet's ``CustomDataset.get_label`` turns every line into a box and slices ``[:, :7]``, which
 fails on an empty file, so frames without a box are written (their points can serve as negatives
@@ -22,7 +22,7 @@ import numpy as np
 
 from .atomic import atomic_write
 from .kitti import write_image_sets
-from .splits import split_frames
+from .splits import split_indices
 from .sustech import label_type
 
 
@@ -43,7 +43,6 @@ def write_frame(out_dir: str | os.PathLike, stem: str, points: np.ndarray, boxes
 
 
 def write_index(out_dir: str | os.PathLike, records: list[dict], config) -> list[Path]:
-    """``openpcdet/ImageSets/{train,val}.txt`` of the committed frames that hold a box."""
+    """``openpcdet/ImageSets/{train,val,test}.txt`` of the committed frames that hold a box, by ``output.split``."""
     with_boxes = [r["index"] for r in records if r.get("boxes")]
-    train, val = split_frames(with_boxes, config.seed, config.output.kitti.val_fraction)
-    return write_image_sets(out_dir, "openpcdet", train, val)
+    return write_image_sets(out_dir, "openpcdet", split_indices(with_boxes, config.output.split, config.frames))

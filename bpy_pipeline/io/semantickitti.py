@@ -54,7 +54,7 @@ def check_instances(instance: np.ndarray, where: str = "SemanticKITTI labels") -
         )
 
 
-def write_semantickitti(root: str | os.PathLike, sequence: int, frame: int, points: np.ndarray) -> tuple[Path, Path]:
+def write_semantickitti(root: str | os.PathLike, sequence: int, frame: int, points: np.ndarray, semantic_lut: np.ndarray | None = None) -> tuple[Path, Path]:
     """Write one frame as ``root/sequences/SS/velodyne/NNNNNN.bin`` and ``.../labels/NNNNNN.label``.
 
     Parameters
@@ -68,6 +68,9 @@ def write_semantickitti(root: str | os.PathLike, sequence: int, frame: int, poin
     points : (n,) POINT_DTYPE
         ``x y z`` (m) and ``intensity`` (0..1) go to the ``.bin`` as float32 ``(n, 4)``;
         ``semantic`` and ``instance`` (<= 65535, else ``InputError``) to the ``.label``.
+    semantic_lut : (65536,) uint16, optional
+        The label space written: ``semantic_lut[semantic]`` (SemanticKITTI's raw ids:
+        :func:`~.class_maps.semantic_kitti_lut`); ``None`` writes ``semantic`` as it is.
 
     Returns
     -------
@@ -83,7 +86,8 @@ def write_semantickitti(root: str | os.PathLike, sequence: int, frame: int, poin
             for i, name in enumerate(("x", "y", "z", "intensity")):
                 scan[:, i] = pts[name][part]
             scan.tofile(f_bin)
-            pack_labels(pts["semantic"][part], pts["instance"][part], str(label_path)).tofile(f_label)
+            semantic = pts["semantic"][part] if semantic_lut is None else semantic_lut[pts["semantic"][part]]
+            pack_labels(semantic, pts["instance"][part], str(label_path)).tofile(f_label)
     return bin_path, label_path
 
 
@@ -161,44 +165,98 @@ def pose_lines(poses: list[np.ndarray], tr: np.ndarray) -> str:
     return "".join(row + "\n" for row in rows)
 
 
-def write_index(out_dir: str | os.PathLike, records: list[dict], config) -> list[Path]:
-    """The dataset files beside the scans: ``semantic-kitti.yaml`` and ``sequences/SS/{calib,poses,times}.txt``.
+MMDET3D_INFOS = "semantickitti_infos_{}.pkl"  # mmdetection3d's ann_file names (configs/_base_/datasets/semantickitti.py)
 
-    ``semantic-kitti.yaml`` holds the class table the devkit's way (:func:`~.class_maps.semantic_kitti_yaml`,
-    ``content`` counted over the written labels); ``calib.txt`` the camera of ``output.kitti.camera``
-    (P0..P3) and ``Tr``; ``poses.txt`` and ``times.txt`` one line per written scan, in file order, from
-    the records' sensor poses and the frame period (frame index x the sensor's frame time, or the moving
-    platform's time where a record has one).
+
+def frame_sequences(records: list[dict]) -> dict[int, list[dict]]:
+    """``{sequence: records in frame order}`` of the records whose files hold a SemanticKITTI scan."""
+    out: dict[int, list[dict]] = {}
+    for record in sorted(records, key=lambda r: r["index"]):
+        for rel in record["files"]:
+            parts = Path(rel).parts
+            if len(parts) == 4 and parts[0] == "sequences" and parts[2] == "velodyne":
+                out.setdefault(int(parts[1]), []).append(record)
+                break
+    return dict(sorted(out.items()))
+
+
+def mmdet3d_infos(sequences: dict[int, list[dict]], numbers) -> dict:
+    """mmdetection3d's SemanticKITTI info file (``tools/dataset_converters/semantickitti_converter.py``'s layout)
+    over the written scans of sequences ``numbers``: paths relative to the dataset root (its ``data_root``)."""
+    data_list = []
+    for sequence in numbers:
+        for record in sequences.get(sequence, []):
+            stem = f"{record['index']:06d}"
+            data_list.append({
+                "lidar_points": {"lidar_path": f"sequences/{sequence:02d}/velodyne/{stem}.bin", "num_pts_feats": 4},
+                "pts_semantic_mask_path": f"sequences/{sequence:02d}/labels/{stem}.label",
+                "sample_id": f"{sequence}{record['index']}",
+            })  # fmt: skip
+    return {"metainfo": {"DATASET": "SemanticKITTI"}, "data_list": data_list}
+
+
+def write_index(out_dir: str | os.PathLike, records: list[dict], config) -> list[Path]:
+    """The dataset files beside the scans: ``semantic-kitti.yaml``, ``sequences/SS/{calib,poses,times}.txt`` and
+    mmdetection3d's ``semantickitti_infos_{train,val,test}.pkl``.
+
+    ``semantic-kitti.yaml`` holds the class table the devkit's way, in the label space written
+    (``output.semantickitti.labels``: :func:`~.class_maps.semantic_kitti_space_yaml` or, for ``project``,
+    :func:`~.class_maps.semantic_kitti_yaml`), ``content`` counted over the written labels and ``split`` the
+    sequences that hold scans (:mod:`.splits`: train 00-07, 09, 10; valid 08; test 11-21). Each such sequence
+    gets ``calib.txt`` (``output.kitti.camera``: P0..P3 and ``Tr``), ``poses.txt`` and ``times.txt``, one line per
+    scan in file order, from the records' sensor poses and the frame period (frame index x the sensor's frame
+    time, or the moving platform's time where a record has one). The stock sequences of a split that holds scans
+    but got none of them get empty ``velodyne/`` and ``labels/`` folders: Pointcept lists every one of them.
+    A split without scans gets no info file.
     """
+    import pickle
+
     import yaml
 
     from ..lidar.sensors import frame_time
-    from .class_maps import semantic_kitti_yaml
+    from .class_maps import semantic_kitti_space_yaml, semantic_kitti_yaml
     from .kitti import calib_text, camera_matrices
+    from .splits import SEQUENCES, split_of_sequence
 
     out_dir = Path(out_dir)
-    sequence = int(config.output.sequence)
-    records = sorted(records, key=lambda r: r["index"])
-    folder = out_dir / "sequences" / f"{sequence:02d}"
+    sequences = frame_sequences(records)
     counts = label_counts(out_dir / f for r in records for f in r["files"] if f.endswith(".label") and "/labels/" in f)
-    table = semantic_kitti_yaml(counts, {"train": [sequence], "valid": [], "test": []})
+    by_split = {name: [s for s in sequences if split_of_sequence(s) == name] for name in SEQUENCES}
+    split = {"train": by_split["train"], "valid": by_split["val"], "test": by_split["test"]}
+    project = config.output.semantickitti.labels == "project"
+    table = (semantic_kitti_yaml if project else semantic_kitti_space_yaml)(counts, split, config.output.class_map or None)
+    space = "the project's raw ids (output.semantickitti.labels: project)" if project else "SemanticKITTI's raw ids (labels.yaml semantickitti:, listed under project_classes)"
     written = []
     with atomic_write(out_dir / "semantic-kitti.yaml") as tmp:
-        tmp.write_text("# The class table of this dataset in the SemanticKITTI devkit's layout (color_map is BGR).\n"
-                       "# .label files hold raw ids; learning_map gives the training ids.\n" + yaml.safe_dump(table, sort_keys=False))
+        tmp.write_text(f"# The class table of this dataset in the SemanticKITTI devkit's layout (color_map is BGR).\n"
+                       f"# .label files hold {space}; learning_map gives the training ids.\n" + yaml.safe_dump(table, sort_keys=False))
     written.append(out_dir / "semantic-kitti.yaml")
-    if not records:
+    for name, numbers in by_split.items():
+        path = out_dir / MMDET3D_INFOS.format(name)
+        if not numbers:
+            path.unlink(missing_ok=True)
+            continue
+        with atomic_write(path) as tmp:
+            tmp.write_bytes(pickle.dumps(mmdet3d_infos(sequences, numbers), protocol=2))  # mmengine.dump's protocol
+        written.append(path)
+        for sequence in SEQUENCES[name]:
+            for folder in ("velodyne", "labels"):
+                (out_dir / "sequences" / f"{sequence:02d}" / folder).mkdir(parents=True, exist_ok=True)
+    if not sequences:
         return written
     k, tr = camera_matrices(config.output.kitti.camera)
     period = frame_time(config.sensor.spec)
-    times = [float(r["trajectory"]["start_time_s"]) if isinstance(r.get("trajectory"), dict) and "start_time_s" in r["trajectory"] else r["index"] * period for r in records]
-    texts = {
-        "calib.txt": "".join(line.replace("Tr_velo_to_cam:", "Tr:") + "\n" for line in calib_text(k, tr).splitlines() if line.startswith(("P", "Tr_velo"))),
-        "poses.txt": pose_lines([np.asarray(r["sensor_pose"], float) for r in records], tr),
-        "times.txt": "".join(f"{t:.6e}\n" for t in times),
-    }
-    for name, text in texts.items():
-        with atomic_write(folder / name) as tmp:
-            tmp.write_text(text)
-        written.append(folder / name)
+    calib = "".join(line.replace("Tr_velo_to_cam:", "Tr:") + "\n" for line in calib_text(k, tr).splitlines() if line.startswith(("P", "Tr_velo")))
+    for sequence, scans in sequences.items():
+        folder = out_dir / "sequences" / f"{sequence:02d}"
+        times = [float(r["trajectory"]["start_time_s"]) if isinstance(r.get("trajectory"), dict) and "start_time_s" in r["trajectory"] else r["index"] * period for r in scans]
+        texts = {
+            "calib.txt": calib,
+            "poses.txt": pose_lines([np.asarray(r["sensor_pose"], float) for r in scans], tr),
+            "times.txt": "".join(f"{t:.6e}\n" for t in times),
+        }
+        for name, text in texts.items():
+            with atomic_write(folder / name) as tmp:
+                tmp.write_text(text)
+            written.append(folder / name)
     return written
