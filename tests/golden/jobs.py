@@ -48,9 +48,8 @@ def digests(out: Path) -> dict:
         for name in POINT_DTYPE.names:
             canonical[name] = records[name]
         entry = {"points": hashlib.sha256(canonical.tobytes()).hexdigest()}
-        for kind, rel in (("bin", f"sequences/00/velodyne/{ply.stem}.bin"), ("label", f"sequences/00/labels/{ply.stem}.label")):
-            path = out / rel
-            if path.exists():
+        for kind, pattern in (("bin", f"sequences/*/velodyne/{ply.stem}.bin"), ("label", f"sequences/*/labels/{ply.stem}.label")):
+            for path in sorted(out.glob(pattern)):  # the frame's sequence follows its split (output.split)
                 entry[kind] = hashlib.sha256(path.read_bytes()).hexdigest()
         result[ply.stem] = entry
     return result
