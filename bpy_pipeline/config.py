@@ -591,20 +591,6 @@ def _check_split(config: Config) -> Config:
     return dataclasses.replace(config, output=dataclasses.replace(output, split=split, kitti=kitti))
 
 
-def _check_split(config: Config) -> Config:
-    """Resolve ``output.split`` (io/splits.py: by the builder's scenes) and check ``output.class_map`` and ``output.sequence``."""
-    from .io.class_maps import task_training
-    from .io.splits import resolve
-
-    output = config.output
-    if output.sequence != 0:
-        raise InputError(f"output.sequence: SemanticKITTI sequences follow output.split now (train 00-07, 09, 10; val 08; test 11-21), got {output.sequence}")
-    task_training(output.class_map)
-    split = resolve(output.split, config.frames, BUILDER_REGISTRY.get(config.scene.builder).frames_per_scene(config.scene.params), output.kitti.val_fraction)
-    kitti = dataclasses.replace(output.kitti, val_fraction=None)
-    return dataclasses.replace(config, output=dataclasses.replace(output, split=split, kitti=kitti))
-
-
 def _check_boxes(config: Config) -> Config:
     """Resolve ``output.boxes.formats: auto`` and check the box classes and thresholds."""
     from .labels import load_class_table
