@@ -11,7 +11,7 @@ The public API (stable names; :mod:`bpy_pipeline.api` has a runnable example):
 The pure part (config, geometry, lidar, io) runs anywhere; ``scenes``, ``export`` and ``run`` need ``bpy``.
 """
 
-__version__ = "0.1.0"
+from ._version import __version__  # noqa: E402,F401
 
 from .api import load_config, run, scan  # noqa: E402
 from .io import read_dataset, read_las, read_npy_folder, read_ply, read_semantickitti  # noqa: E402

@@ -1,16 +1,65 @@
-"""The frame: one value handed from stage to stage (pose, scene, buffers, points, boxes, timings).
+"""The frame and the run: the values a frame plan's stages pass along (:mod:`bpy_pipeline.plan`).
 
-A stage is a function ``stage(frame, run) -> None`` that fills in its part of the frame
-(:mod:`bpy_pipeline.pipeline` lists them in order); a frame holds everything one frame's writers
-and its record need, so a stage is testable alone and a frame range needs no hidden state.
+A stage is ``stage(frame, run) -> None``: it fills in its part of the :class:`Frame` (pose, scene
+buffers, points, boxes, ...) and may use what the :class:`Run` keeps across frames (the current
+built scene, the sensor's rays, the static caster). A frame holds everything its writers and its
+record need, so a stage is testable alone and a frame range needs no hidden state.
 """
 
 from __future__ import annotations
 
+import platform
 from dataclasses import dataclass, field
-from typing import Any, Callable, Iterable
+from typing import TYPE_CHECKING, Callable, Iterable, Protocol
 
 import numpy as np
+
+from . import _version
+from .builders.base import BuildResult
+from .labels import ClassTable, load_class_table, parse_rules
+from .lidar.platform import Trajectory
+from .lidar.raycast import CasterCache
+from .lidar.sensor_rays import SensorRays
+
+if TYPE_CHECKING:
+    from .buffers import SceneBuffers
+    from .config import Config
+    from .lidar.raycast import RayCaster
+    from .rig import RigFrame
+
+
+def frame_rng(seed: int, frame: int) -> np.random.Generator:
+    """The generator of frame ``frame`` of a run seeded with ``seed``."""
+    return np.random.default_rng(np.random.SeedSequence([seed, frame]))
+
+
+def versions() -> dict:
+    """Versions of everything that shapes the output."""
+    import embreex
+
+    out = {"bpy_pipeline": _version.__version__, "python": platform.python_version(), "numpy": np.__version__}
+    out["embreex"] = getattr(embreex, "__version__", "unknown")
+    try:
+        import bpy
+
+        out["blender"] = bpy.app.version_string
+    except ImportError:
+        out["blender"] = None
+    return out
+
+
+@dataclass(frozen=True)
+class StaticPose:
+    """``pose_at`` of a sensor that does not move during the frame: ``pose_at(t (n,) s) -> (n, 4, 4)``, every row ``pose``."""
+
+    pose: np.ndarray
+
+    def __call__(self, t) -> np.ndarray:
+        return np.broadcast_to(self.pose, (len(np.atleast_1d(t)), 4, 4)).copy()
+
+
+def _identity() -> np.ndarray:
+    return np.eye(4)
 
 
 @dataclass
@@ -18,41 +67,111 @@ class Frame:
     """One frame of a run.
 
     index : frame index in the run (0-based)
-    config : the run's :class:`~bpy_pipeline.config.Config`
-    rng : the frame's generator (``pipeline.frame_rng(seed, index)``); every random draw of the frame
-    scene : what the builder reported when this frame built the scene (``None`` when it scans a scene
-        built for an earlier frame, or the user's scene as it is)
+    config : the run's :class:`~bpy_pipeline.config.Config` (a rig member's frame: that sensor's)
+    rng : the frame's generator (:func:`frame_rng`); every random draw of the frame
+    scene : the :class:`~bpy_pipeline.builders.base.BuildResult` of the scene the frame scans (built for
+        this frame or for an earlier one it shares with; empty for the user's scene as it is)
+    built : True when this frame built ``scene`` (its warnings are this frame's)
     pose : (4, 4) float64 sensor-to-world transform at the frame's start (mount height included)
-    pose_at : ``pose_at(t (n,) s) -> (n, 4, 4)`` per-ray poses of a moving sensor (the static pose otherwise)
+    pose_at : ``pose_at(t (n,) s) -> (n, 4, 4)`` sensor-to-world poses at firing times (a static sensor's: ``pose``)
     trajectory : the moving sensor's :class:`~bpy_pipeline.lidar.platform.Trajectory`, ``None`` when static
-    buffers : the exported :class:`~bpy_pipeline.buffers.SceneBuffers`
+    buffers : the exported :class:`~bpy_pipeline.buffers.SceneBuffers` (a real scan's: its inserted objects)
     caster : the scan's :class:`~bpy_pipeline.lidar.raycast.RayCaster` of ``buffers`` at ``pose`` (the boxes reuse it)
     chunks : the scan's ``(points, beam)`` chunks, consumed by the effects stage
-    points : (p,) POINT_DTYPE records in the output frame (sensor or world)
+    points : (p,) POINT_DTYPE records in the output frame (sensor or world; a rig's: RIG_POINT_DTYPE)
     boxes : (b,) BOX_DTYPE box labels in the output frame, ``None`` when no box format is asked for
-    files : paths of the frame's files relative to the output folder, once written
+    images : {name: (h, w, 3) uint8} camera renderings (KITTI's ``image_2``)
+    flash : {file suffix: (returns, rows, columns) FLASH_IMAGE_DTYPE} flash cameras' images (``flash_image``)
+    rig : a sensor rig's per-sensor frames (:class:`~bpy_pipeline.rig.RigFrame`), ``None`` for one sensor
+    mixed : a real-scan frame's working state (:class:`~bpy_pipeline.mixing.frame.MixState`), ``None`` otherwise
+    files, record : the frame's files (relative to the output folder) and record, once committed
     timings : seconds per timed stage
     """
 
     index: int
-    config: Any
+    config: Config
     rng: np.random.Generator
-    scene: Any = None
-    pose: np.ndarray | None = None
-    pose_at: Callable | None = None
-    trajectory: Any = None
-    buffers: Any = None
-    caster: Any = None
+    scene: BuildResult = field(default_factory=BuildResult)
+    built: bool = False
+    pose: np.ndarray = field(default_factory=_identity)
+    pose_at: Callable[[np.ndarray], np.ndarray] | None = None
+    trajectory: Trajectory | None = None
+    buffers: SceneBuffers | None = None
+    caster: RayCaster | None = None
     chunks: Iterable | None = None
     points: np.ndarray | None = None
     boxes: np.ndarray | None = None
     files: list[str] = field(default_factory=list)
     timings: dict[str, float] = field(default_factory=dict)
     record: dict = field(default_factory=dict)
-    images: dict[str, np.ndarray] = field(default_factory=dict)  # {name: (h, w, 3) uint8}: camera renderings (KITTI's image_2)
-    rig: Any = None  # a sensor rig's per-sensor frames (:class:`~bpy_pipeline.rig.RigFrame`), ``None`` for one sensor
+    images: dict[str, np.ndarray] = field(default_factory=dict)
+    flash: dict[str, np.ndarray] = field(default_factory=dict)
+    rig: RigFrame | None = None
+    mixed: object = None
+
+    def __post_init__(self):
+        self.pose = np.asarray(self.pose, np.float64)
+        if self.pose.shape != (4, 4):
+            raise ValueError(f"Frame.pose: expected a (4, 4) transform, got shape {self.pose.shape}")
+        if self.pose_at is None:
+            self.pose_at = StaticPose(self.pose)
+
+    def place(self, pose: np.ndarray, pose_at: Callable[[np.ndarray], np.ndarray] | None = None, trajectory: Trajectory | None = None) -> None:
+        """Set the sensor's pose at the frame's start (4, 4), and ``pose_at`` (a moving sensor's; a static one's otherwise)."""
+        self.pose = np.asarray(pose, np.float64).reshape(4, 4)
+        self.pose_at = StaticPose(self.pose) if pose_at is None else pose_at
+        self.trajectory = trajectory
+
+    @property
+    def moving(self) -> bool:
+        """True when the sensor moves during the frame (each ray cast from its own pose)."""
+        return self.trajectory is not None
 
     @property
     def stem(self) -> str:
         """``NNNNNN``: the six-digit file stem of the frame."""
         return f"{self.index:06d}"
+
+
+class StageFunction(Protocol):
+    """What a stage does: fills in its part of the frame (:class:`bpy_pipeline.plan.Stage` names and times it)."""
+
+    def __call__(self, frame: Frame, run: "Run") -> None: ...
+
+
+@dataclass
+class Run:
+    """What one run keeps across its frames (never the module).
+
+    config : the run's config; build : build ``config.scene`` (``False``: scan the open scene as it is)
+    table, rules : the class table and the name rules objects are labelled by
+    keep : the builder's state across frames (:class:`~bpy_pipeline.builders.base.BuildContext`)
+    rays : the sensor's rays (:class:`~bpy_pipeline.lidar.sensor_rays.SensorRays`)
+    result : the :class:`~bpy_pipeline.builders.base.BuildResult` of the scene built now (every frame's ``scene``)
+    scene_frame : the frame whose scene is built now (``None``: none yet)
+    trajectory : the moving sensor's path in the built scene (``None`` for a static sensor)
+    threads : ray-casting threads (``None``: the cores available)
+    log : where warnings and the lines of long stages go (``None``: nowhere)
+    members : a rig's sensors, one single-sensor :class:`Run` each (made by the rig stage on its first frame, :mod:`bpy_pipeline.stages.rig`)
+    casters : the static objects' caster kept from frame to frame (:class:`~bpy_pipeline.lidar.raycast.CasterCache`)
+    """
+
+    config: Config
+    build: bool = True
+    table: ClassTable = field(default_factory=load_class_table)
+    rules: list = field(default_factory=list)
+    keep: dict = field(default_factory=dict)
+    rays: SensorRays | None = None
+    result: BuildResult = field(default_factory=BuildResult)
+    scene_frame: int | None = None
+    trajectory: Trajectory | None = None
+    threads: int | None = None
+    log: Callable[[str], None] | None = None
+    members: list["Run"] = field(default_factory=list)
+    casters: CasterCache | None = None
+
+    def __post_init__(self):
+        self.rules = parse_rules(self.config.labels.name_rules, "labels.name_rules", self.table.names)
+        self.rays = self.rays or SensorRays(self.config)
+        self.threads = self.threads or self.config.threads or None
+        self.casters = self.casters or CasterCache(self.threads)

@@ -25,11 +25,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import InputError
+from .geometry.boxes import BOX_DTYPE, keep_boxes
 from .geometry.lod import SensorView
 from .geometry.street import FieldOfView
 from .geometry.transforms import pose_matrix, transform_points
 from .lidar.points import POINT_DTYPE
-from .lidar.sensors import SensorSpec, elevations, mount_offset, resolve_sensor
+from .lidar.sensors import SensorSpec, angular_resolution, elevations, mount_offset, resolve_sensor
 
 RIG_POINT_DTYPE = np.dtype(POINT_DTYPE.descr + [("sensor", "u1")])
 MAX_SENSORS = 255
@@ -133,8 +134,6 @@ def split_cloud(merged: np.ndarray) -> list[np.ndarray]:
 
 def field_of_view(spec: SensorSpec, pose: np.ndarray) -> FieldOfView:
     """The :class:`~.geometry.street.FieldOfView` of a sensor of ``spec`` at ``pose`` (4, 4), for placement."""
-    from .lidar.sensors import angular_resolution
-
     table = elevations(spec)
     step = angular_resolution(spec)[1] or 0.0
     if spec.pattern in ("rosette", "file"):
@@ -186,8 +185,6 @@ def merged_boxes(member_boxes: list[np.ndarray], min_points: dict, default: int)
     points, visible and unoccluded summed over the sensors, truncation the smallest; kept where the
     summed points reach the class's minimum.
     """
-    from .io import boxes as box_labels
-
     by_instance: dict[int, np.ndarray] = {}
     for boxes in member_boxes:
         for box in boxes:
@@ -199,8 +196,8 @@ def merged_boxes(member_boxes: list[np.ndarray], min_points: dict, default: int)
                 for name in ("points", "visible", "unoccluded"):
                     held[name] += box[name]
                 held["truncation"] = min(held["truncation"], box["truncation"])
-    out = np.array([by_instance[k] for k in sorted(by_instance)], dtype=box_labels.BOX_DTYPE) if by_instance else np.zeros(0, box_labels.BOX_DTYPE)
-    return box_labels.keep_boxes(out, min_points, default)
+    out = np.array([by_instance[k] for k in sorted(by_instance)], dtype=BOX_DTYPE) if by_instance else np.zeros(0, BOX_DTYPE)
+    return keep_boxes(out, min_points, default)
 
 
 @dataclass

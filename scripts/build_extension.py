@@ -148,7 +148,7 @@ def run_tool(tool: Path, *args: str) -> str:
 def build(platforms: list[str] | None = None, out_dir: Path = ROOT / "dist", cache: Path = ROOT / "wheels", tool: Path | None = None) -> list[Path]:
     """Stage, validate and build; returns the zip files written into ``out_dir``."""
     manifest = tomllib.loads(MANIFEST.read_text())
-    version = re.search(r'__version__ = "([^"]+)"', (ROOT / "bpy_pipeline" / "__init__.py").read_text()).group(1)
+    version = re.search(r'__version__ = "([^"]+)"', (ROOT / "bpy_pipeline" / "_version.py").read_text()).group(1)
     if manifest["version"] != version:
         raise BuildError(f"{MANIFEST.name}: version {manifest['version']} differs from bpy_pipeline {version}")
     platforms = list(platforms or manifest["platforms"])

@@ -98,8 +98,10 @@ class Builder:
     release_sensor : ``release_sensor(params, raw_scene, sensor_data) -> params``: when the config places
         the sensor itself (sensor.position or trajectory), the parameters that stop the scene placing it
         (``InputError`` where both do)
-    stages : ``((stage(frame, run), timing name), ...)`` in place of the pipeline's stages, for a builder
-        that makes a frame's points itself without a Blender scene (``real_scan``); ``None``: the pipeline's
+    plan : how its frames are made (:data:`bpy_pipeline.plan.PLANS`): ``scene`` (a Blender scene scanned by one
+        sensor or a rig) or ``real_scan`` (a real scan as the background, objects cast in by its firings)
+    stages : ``((stage(frame, run), timing name), ...)`` in place of the plan's stages (kept for builders
+        written before the frame plan); ``None``: the plan's
     follows_path : a moving sensor's scene is graded along its path: ``build`` gets a
         :class:`~bpy_pipeline.geometry.lod.PlannedPath` as ``context.view`` (else ``None``)
     """
@@ -115,6 +117,7 @@ class Builder:
     release_sensor: Callable[[Any, dict, dict], Any] | None = None
     stages: tuple | None = None
     follows_path: bool = False
+    plan: str = "scene"
 
 
 BUILDERS: Registry[Builder] = Registry("scene builder", "scene.builder")

@@ -27,6 +27,7 @@ from typing import Any, Callable
 import numpy as np
 
 from ..errors import InputError
+from ..geometry.placement import sample_count
 from ..registry import Registry
 from ..schema import check_positive, from_dict, to_plain
 from .base import Distribution, check_distribution
@@ -286,22 +287,16 @@ def population_to_dict(population: Population | None) -> dict | None:
 
 def count_of(params, rng: np.random.Generator) -> int:
     """How many of a kind a frame wants: the fixed count, or a draw of its distribution."""
-    from ..geometry.placement import sample_count
-
     return params.count if isinstance(params.count, int) else sample_count(params.count, rng)
 
 
-def build_populated(scene, context):
-    """Build ``scene`` (a :class:`~bpy_pipeline.config.SceneConfig`) with its builder, then place its population."""
-    from .base import BUILDERS
+def __getattr__(name: str):
+    """``build_populated`` is the build stage's now (:mod:`bpy_pipeline.stages.scene`); the old name stays importable this round."""
+    if name == "build_populated":
+        from ..stages.scene import build_populated
 
-    result = BUILDERS.get(scene.builder).build(scene.params, context)
-    population = getattr(scene, "population", None)
-    if population is None or not population.kinds:
-        return result
-    from ..scenes.population import populate
-
-    return populate(population, context, result)
+        return build_populated
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
-__all__ = ["KINDS", "Population", "PopulationKind", "population_from_dict", "population_to_dict", "build_populated"]
+__all__ = ["KINDS", "Population", "PopulationKind", "population_from_dict", "population_to_dict"]

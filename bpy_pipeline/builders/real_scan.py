@@ -1,26 +1,23 @@
 """``scene.builder: real_scan``: a real scan as the background, synthetic objects cast in by its own firings.
 
-No Blender scene: the frame's one stage (:func:`real_scan_stage`) reads the scan, places and
-meshes the objects in numpy, casts every real firing at them (bpy_pipeline.mixing) and applies
-the configured effects (``effects``: the sensor preset's fitted drop and noise unless
-``effects.ideal``) to the inserted returns only.
+No Blender scene: the real-scan frame plan (:mod:`bpy_pipeline.stages.mixing`: background, place,
+cast, effects, annotate) reads the scan, places and meshes the objects in numpy, casts every real
+firing at them (bpy_pipeline.mixing) and applies the configured effects (``effects``: the sensor
+preset's fitted drop and noise unless ``effects.ideal``) to the inserted returns only.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
-
 from ..errors import InputError
+from ..geometry.objects import OBJECT_TYPES
+from ..io.real_scans import FORMATS
 from ..mixing.section import RealScanScene
 from .base import Builder, BuildContext, BuildResult, register_builder
 
 
 def check(params: RealScanScene, where: str) -> None:
-    from ..geometry.objects import OBJECT_TYPES
-    from ..io.real_scans import FORMATS
-
     if not params.path:
         raise InputError(f"{where}.path: the real_scan builder needs the path of a scan file ({', '.join(FORMATS)}), a folder of them or a glob pattern")
     if params.format and params.format not in FORMATS:
@@ -38,54 +35,18 @@ def check(params: RealScanScene, where: str) -> None:
 
 
 def build(params: RealScanScene, context: BuildContext) -> BuildResult:
-    """Nothing to build in Blender: :func:`real_scan_stage` makes the frame."""
+    """Nothing to build in Blender: the real-scan frame plan makes the frame."""
     return BuildResult()
 
 
-def kept_scan(section: RealScanScene, index: int, keep: dict):
-    """``(scan, firings)`` of frame ``index``'s file, read once while frames keep using the same file
-    (held in the run's ``keep``: reading and firing recovery draw nothing, so reuse gives the same bytes)."""
-    from ..io.real_scans import read_real_scan
-    from ..mixing.firings import recover_firings
-    from ..mixing.frame import scan_paths
+def __getattr__(name: str):
+    """The frame's stages moved to the real-scan frame plan (:mod:`bpy_pipeline.stages.mixing`); their old names stay importable this round."""
+    if name in ("kept_scan", "real_scan_stage"):
+        from ..stages import mixing
 
-    paths = scan_paths(section)
-    path = paths[index % len(paths)]
-    key = (str(path), path.stat().st_mtime_ns if path.exists() else None, section.format, section.preset)
-    held = keep.get("real_scan")
-    if held is None or held[0] != key:
-        scan = read_real_scan(path, section.format or None)
-        keep.clear()
-        held = keep["real_scan"] = (key, scan, recover_firings(scan, section.preset or None))
-    return held[1], held[2]
-
-
-def real_scan_stage(frame, run) -> None:
-    """The whole frame of a real scan: points (output frame), boxes, a stand-in for the buffers (the inserted objects)."""
-    from ..io import boxes as box_labels
-    from ..mixing import mix_frame
-    from ..pipeline import sensor_pose
-
-    config = run.config
-    section = config.scene.params
-    mixed = mix_frame(section, frame.rng, config.effects, run.threads, run.table, *kept_scan(section, frame.index, run.keep), frame=frame.index)
-    frame.pose = sensor_pose(config, frame.index)
-    frame.pose_at = frame.pose
-    frame.buffers = mixed.buffers
-    frame.scene = BuildResult({int(b["instance"]): float(b["heading"]) for b in mixed.boxes}, mixed.info)
-    points = mixed.points
-    if config.output.frame == "world":
-        from ..geometry.transforms import transform_points
-
-        xyz = transform_points(np.column_stack([points["x"], points["y"], points["z"]]).astype(np.float64), frame.pose)
-        points["x"], points["y"], points["z"] = xyz.T
-    frame.points = points
-    section = config.output.boxes
-    if section.formats:
-        boxes = mixed.boxes[np.isin(mixed.boxes["class_name"], list(section.classes))]
-        boxes = box_labels.keep_boxes(boxes, section.min_points, section.min_points_default) if len(boxes) else boxes
-        frame.boxes = boxes if config.output.frame == "sensor" else box_labels.boxes_in_frame(boxes, np.linalg.inv(frame.pose))
+        return getattr(mixing, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 # the nuScenes sweep's sensor by default (give sensor.preset: hdl64e for KITTI scans)
-register_builder("real_scan", Builder(RealScanScene, build, check, sensor={"preset": "hdl32e"}, boxes=True, stages=((real_scan_stage, "scan"),)))
+register_builder("real_scan", Builder(RealScanScene, build, check, sensor={"preset": "hdl32e"}, boxes=True, plan="real_scan"))

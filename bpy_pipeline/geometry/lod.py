@@ -17,6 +17,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 
@@ -76,18 +77,15 @@ class SensorView:
         return self
 
 
-def view_of(spec, positions) -> SensorView:
-    """The :class:`SensorView` of a :class:`~bpy_pipeline.lidar.sensors.SensorSpec` at ``positions`` ((k, 3), m)."""
-    from ..lidar.sensors import angular_resolution, elevations
-
-    azimuth, elevation = angular_resolution(spec)
-    if elevation is None:  # an uneven elevation table: its coarsest gap
-        table = np.sort(elevations(spec))
-        elevation = float(np.diff(table).max()) if len(table) > 1 else azimuth
-    steps = [s for s in (azimuth, elevation) if s is not None and math.isfinite(s) and s > 0]
+def view_from_steps(azimuth_deg: float | None, elevation_deg: float | None, max_range: float, positions) -> SensorView:
+    """The :class:`SensorView` of a sensor whose neighbouring beams are ``azimuth_deg`` and ``elevation_deg``
+    apart (degrees; ``None`` or not finite: no such spacing) reaching ``max_range`` (m), at ``positions`` ((k, 3), m).
+    The coarser of the two steps counts; a sensor with neither is assumed fine (:data:`FINEST_STEP_DEG`).
+    :func:`bpy_pipeline.lidar.view.view_of` gives it for a sensor spec."""
+    steps = [s for s in (azimuth_deg, elevation_deg) if s is not None and math.isfinite(s) and s > 0]
     step = math.radians(max(steps) if steps else FINEST_STEP_DEG)
     positions = np.asarray(positions, float).reshape(-1, 3)
-    return SensorView(positions, step, float(spec.max_range))
+    return SensorView(positions, step, float(max_range))
 
 
 def polygon_sides(radius: float, tolerance: float, minimum: int = 4) -> int:
@@ -225,10 +223,14 @@ class PlannedPath:
 
     sensor : the config's ``sensor`` section (:class:`~bpy_pipeline.config.SensorConfig`, with a trajectory)
     frames : frames of the whole run (the scene serves them all: any frame range gets the same view)
+    follow : ``follow(path (k, 3) world polyline or None) -> PathView``: the view along the path once the
+        curve is known (``None``: the trajectory's own waypoints); made by the layer that knows the
+        config (:func:`bpy_pipeline.stages.view.planned_path`), so this module needs none of it
     """
 
     sensor: object
     frames: int
+    follow: Callable[[np.ndarray | None], PathView] | None = dataclasses.field(default=None, compare=False, repr=False)
 
     @property
     def curve(self) -> str:
@@ -238,19 +240,26 @@ class PlannedPath:
     def following(self, curves: dict) -> PathView | None:
         """The :class:`PathView` once ``curves`` ({name: (k, 3) world polyline}) of the scene are known;
         ``None`` (fixed detail) when the path follows a curve not among them."""
-        from ..config import sensor_trajectory
-        from ..lidar.sensors import frame_time
-
         if self.curve and self.curve not in curves:
             return None
-        spec = self.sensor.spec
-        trajectory = sensor_trajectory(self.sensor, curves[self.curve] if self.curve else None)
-        trajectory.check_frames(self.frames, frame_time(spec))
-        path = path_positions(trajectory, self.frames * frame_time(spec))
-        view = view_of(spec, path)
-        return PathView(view.positions, view.step, view.max_range, fastest_speed(trajectory) / float(spec.rotation_hz))
+        return self.follow(curves[self.curve] if self.curve else None)
 
 
-def planned_path(sensor, frames: int) -> PlannedPath:
-    """The :class:`PlannedPath` of a config's ``sensor`` section (with a trajectory) over ``frames`` frames."""
-    return PlannedPath(sensor, int(frames))
+def path_view(trajectory, frames: int, frame_time: float, step: float, max_range: float, rotation_hz: float) -> PathView:
+    """The :class:`PathView` of ``trajectory`` (a :class:`~bpy_pipeline.lidar.platform.Trajectory`) over ``frames``
+    frames of ``frame_time`` s, beams ``step`` rad apart, reaching ``max_range`` m, turning at ``rotation_hz``."""
+    path = path_positions(trajectory, frames * frame_time)
+    return PathView(np.asarray(path, float).reshape(-1, 3), step, float(max_range), fastest_speed(trajectory) / float(rotation_hz))
+
+
+def __getattr__(name: str):
+    """Names that moved up a layer this round, still importable from here (compat; removed next round)."""
+    if name == "view_of":
+        from ..lidar.view import view_of
+
+        return view_of
+    if name == "planned_path":
+        from ..stages.view import planned_path
+
+        return planned_path
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

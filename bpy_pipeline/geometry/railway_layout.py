@@ -225,7 +225,9 @@ class Overlap:
 @dataclass(frozen=True)
 class RailwayLayout:
     """Everything :func:`plan` places. ``double_contact`` (tracks,) bool: which tracks carry two contact wires.
-    ``overlaps``: the tension-section overlaps (``catenary.tension_length``), none by default."""
+    ``overlaps``: the tension-section overlaps (``catenary.tension_length``), none by default.
+    ``signals``: ``(k, 4, 4)`` frames of the signals the built scene placed (drawn when it is built, after
+    the plan; ``None`` for a plan not built)."""
 
     alignment: Alignment
     section: CrossSection
@@ -235,6 +237,7 @@ class RailwayLayout:
     droppers: list[Droppers]
     double_contact: np.ndarray
     overlaps: tuple = ()
+    signals: np.ndarray | None = None
 
     @property
     def spans(self) -> np.ndarray:

@@ -17,9 +17,9 @@ For parameter-extraction models (support positions, wire geometry) beside the la
 
 ``tension_length`` is the length of the wire's run from its first support to its last: the whole line,
 or its tension section (run ``t<i>s<m>``) with ``catenary.tension_length``. With ``catenary.steady_arms``
-each cantilever also gives its ``steady_arm_length``. The layout is the one the frame's scene was built from: :func:`plan` is
-pure and draws first from the generator of the frame that built the scene, so every frame of a run
-(one railway per run) gets it, whichever frame range a process writes.
+each cantilever also gives its ``steady_arm_length``. The layout is the one the frame's scene was built from,
+read from the frame's :class:`~bpy_pipeline.builders.base.BuildResult` (``frame.scene.scene``, signals
+included): the writer draws nothing, so a change to the builder's draws cannot part the file from the scene.
 """
 
 from __future__ import annotations
@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from ..geometry.railway_layout import cantilevers
 from .atomic import atomic_write
 from .writers import Writer, register_writer
 
@@ -43,8 +44,6 @@ def _xyz(p) -> list[float]:
 def layout_record(layout, params) -> dict:
     """The JSON-ready ground truth of a :class:`~bpy_pipeline.geometry.railway_layout.RailwayLayout`
     planned from the ``RailwayScene`` ``params`` (see the module docstring)."""
-    from ..geometry.railway_layout import cantilevers
-
     alignment, section, cat = layout.alignment, layout.section, params.catenary
     s = np.linspace(0.0, alignment.length, max(2, int(np.ceil(alignment.length / POLYLINE_STEP)) + 1))
     contact_z = section.rail_top + cat.contact_wire_height
@@ -80,31 +79,17 @@ def layout_record(layout, params) -> dict:
     }
 
 
-def frame_layout(config, index: int):
-    """The railway layout frame ``index`` of ``config`` scans and its signals' ``(k, 4, 4)`` frames: drawn from the
-    generator of the frame that built its scene, in the builder's order (the plan, the track's seed, the signals)."""
-    from ..builders.base import BUILDERS
-    from ..geometry.railway_layout import plan
-    from ..geometry.trackside import signal_frames
-    from ..pipeline import frame_rng
-
-    params = config.scene.params
-    per_scene = BUILDERS.get("railway").frames_per_scene(params)
-    rng = frame_rng(config.seed, index - index % per_scene)
-    layout = plan(params, rng)
-    rng.integers(0, 2**31 - 1)  # the Track group's seed (scenes/railway.build)
-    return layout, signal_frames(layout, params.trackside, rng)
-
-
 def _check(config) -> None:
     if config.scene.builder != "railway":
         raise InputError(f"output.formats: railway_layout writes the layout of a railway scene, scene.builder is {config.scene.builder}")
 
 
 def _write(frame, out: Path) -> list[Path]:
-    layout, signals = frame_layout(frame.config, frame.index)
+    layout = frame.scene.scene  # the layout the frame's scene was built from (frame.scene: its BuildResult)
+    if layout is None or layout.signals is None:
+        raise InputError(f"output.formats: railway_layout writes the layout of a railway the run built; frame {frame.index} scans a scene it did not build")
     record = {"frame": frame.index} | layout_record(layout, frame.config.scene.params)
-    record["signals"] = [{"base": _xyz(f[:3, 3]), "height": frame.config.scene.params.trackside.signal_height} for f in signals]
+    record["signals"] = [{"base": _xyz(f[:3, 3]), "height": frame.config.scene.params.trackside.signal_height} for f in layout.signals]
     path = Path(out) / "railway_layout" / f"{frame.stem}.json"
     with atomic_write(path) as tmp:
         tmp.write_text(json.dumps(record, separators=(",", ":")))

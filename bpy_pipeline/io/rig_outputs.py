@@ -11,8 +11,9 @@
 or ``flash_image/NNNNNN_sK.npy`` (sensor K of a rig), a ``(returns, rows, columns)`` structured
 array (``depth`` float32 m, ``intensity`` float32, ``semantic`` uint16, ``instance`` uint32; see
 :mod:`~bpy_pipeline.lidar.flash_returns`), and a PNG beside it: depth (grey, near bright) above
-intensity, first return. The images are traced from the frame's exported scene when written (a few
-sub-rays per pixel of a 96 x 16 camera: milliseconds).
+intensity, first return. The images are traced from the frame's exported scene by the flash stage
+(:mod:`bpy_pipeline.stages.flash`: a few sub-rays per pixel of a 96 x 16 camera, milliseconds); the
+writer only writes them.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from ..lidar.sensors import FLASH_PATTERNS, check_flash
 from .atomic import atomic_write
 from .boxes import openpcdet_lines
 from .layout import frame_stem
@@ -71,7 +73,8 @@ def _check_rig(config) -> None:
 
 # ----------------------------------------------------------------------------- flash images
 def flash_image_array(images) -> np.ndarray:
-    """``(returns, rows, columns)`` :data:`FLASH_IMAGE_DTYPE` of :class:`~bpy_pipeline.lidar.flash_returns.FlashImages`."""
+    """``(returns, rows, columns)`` :data:`FLASH_IMAGE_DTYPE` of :class:`~bpy_pipeline.lidar.flash_returns.FlashImages`
+    (anything with ``depth``, ``intensity``, ``semantic`` and ``instance`` arrays of one shape)."""
     out = np.zeros(images.depth.shape, FLASH_IMAGE_DTYPE)
     for name in FLASH_IMAGE_DTYPE.names:
         out[name] = getattr(images, name)
@@ -92,24 +95,12 @@ def render_flash(image: np.ndarray, scale: int = 4) -> np.ndarray:
     return np.repeat(np.repeat(out, scale, axis=0), scale, axis=1)
 
 
-def flash_cameras(frame) -> list[tuple[str, object, object, np.ndarray]]:
-    """``[(file suffix, spec, buffers, pose)]`` of the frame's flash cameras: the sensor, or a rig's flash sensors."""
-    from ..lidar.flash_returns import FLASH_PATTERNS
-
-    if frame.rig is None:
-        return [("", frame.config.sensor.spec, frame.buffers, frame.pose)]
-    return [(f"_s{k}", sub.config.sensor.spec, sub.buffers, sub.pose) for k, sub in enumerate(frame.rig.frames) if sub.config.sensor.spec.pattern in FLASH_PATTERNS]
-
-
 def _write_flash(frame, out: Path) -> list[Path]:
-    from ..lidar.flash_returns import flash_images
-    from ..pipeline import scan_surfaces
-
+    """The frame's flash images (``frame.flash``: {file suffix: (returns, rows, columns) FLASH_IMAGE_DTYPE}, cast
+    by the flash stage, :mod:`bpy_pipeline.stages.flash`), each as ``.npy`` and a PNG beside it."""
     written = []
-    for suffix, spec, buffers, pose in flash_cameras(frame):
-        images = flash_images(buffers, spec, pose, FLASH_SUB_RAYS, FLASH_SEPARATION, FLASH_RETURNS, scan_surfaces(frame.config), frame.config.threads or None)
+    for suffix, array in frame.flash.items():
         path = Path(out) / "flash_image" / f"{frame_stem(frame.index)}{suffix}.npy"
-        array = flash_image_array(images)
         with atomic_write(path) as tmp:
             with open(tmp, "wb") as handle:
                 np.save(handle, array, allow_pickle=False)
@@ -122,8 +113,6 @@ def _write_flash(frame, out: Path) -> list[Path]:
 
 
 def _check_flash(config) -> None:
-    from ..lidar.flash_returns import FLASH_PATTERNS, check_flash
-
     if config.sensor.rig:
         if not any(s.spec.pattern in FLASH_PATTERNS for s in config.sensor.rig):
             raise InputError(f"output.formats: flash_image needs a flash camera (pattern {' or '.join(FLASH_PATTERNS)}) in sensor.rig")
@@ -144,4 +133,4 @@ def read_flash_image(path) -> np.ndarray:
 
 
 register_writer("rig", Writer(_write_rig, _check_rig))
-register_writer("flash_image", Writer(_write_flash, _check_flash))
+register_writer("flash_image", Writer(_write_flash, _check_flash, needs=("flash",)))

@@ -2,7 +2,8 @@
 
 A writer is ``write(frame, out) -> list[Path]``: it writes one :class:`~bpy_pipeline.frame.Frame`
 (its points, boxes and config) under the folder ``out`` and returns the paths it wrote. ``check``
-validates the config for it (``InputError`` naming the key); ``index`` rewrites a per-dataset index
+validates the config for it (``InputError`` naming the key); ``needs`` names what else the frame must
+carry, which the frame plan (:mod:`bpy_pipeline.plan`) makes in a stage: a writer only writes. ``index`` rewrites a per-dataset index
 (ImageSets, a class table file) from the committed frames' records, after a run or a resume.
 Adding a format is one module that defines its writer and calls :func:`register_writer`, plus its
 name in the import line of :mod:`bpy_pipeline.io.formats`.
@@ -29,6 +30,7 @@ class Writer:
     check: Callable[[Any], None] = no_check
     index: Callable[[Path, list[dict], Any], list[Path]] | None = None
     boxes: bool = False  # writes box labels: named in output.boxes.formats, not output.formats
+    needs: tuple[str, ...] = ()  # what the frame must carry besides points and boxes (``flash``: flash images), made by the stage the frame plan adds for it
 
 
 WRITERS: Registry[Writer] = Registry("output format", "output.formats")

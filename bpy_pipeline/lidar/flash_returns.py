@@ -28,12 +28,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import InputError
 from .raycast import RayCaster
 from .scanner import trace_beams
-from .sensors import SensorSpec, azimuths, elevations
-
-FLASH_PATTERNS = ("pinhole", "grid")
+from .sensors import FLASH_PATTERNS, SensorSpec, azimuths, check_flash, elevations  # noqa: F401  (FLASH_PATTERNS, check_flash: re-exported)
 
 
 @dataclass(frozen=True)
@@ -49,12 +46,6 @@ class FlashImages:
     def returns_per_pixel(self) -> np.ndarray:
         """``(rows, columns)`` int: how many returns each pixel holds."""
         return (self.depth > 0).sum(axis=0)
-
-
-def check_flash(spec: SensorSpec, where: str) -> None:
-    """``InputError`` naming ``where`` unless ``spec`` is a flash camera (a pinhole or grid image)."""
-    if spec.pattern not in FLASH_PATTERNS:
-        raise InputError(f"{where}: needs a flash camera (pattern {' or '.join(FLASH_PATTERNS)}), not the {spec.pattern} pattern")
 
 
 def footprint_directions(spec: SensorSpec, sub: int) -> np.ndarray:

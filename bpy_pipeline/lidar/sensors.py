@@ -33,10 +33,12 @@ from ..errors import InputError
 from ..schema import from_dict, key_of
 from .patterns import PATTERNS
 from .patterns.base import derive_rows
+from .rays import Pattern, load_numeric_npy, load_rays, pattern_chunks  # noqa: F401  (re-exported: the names lived here)
 
 PRESETS_PATH = Path(__file__).with_name("sensors.yaml")
 DEFAULT_PRESET = "vlp16"
 MAX_RAYS = 1_000_000_000  # per frame; beyond this a pattern is a typo, not a sensor
+FLASH_PATTERNS = ("pinhole", "grid")  # the patterns of flash cameras: one image a frame, every pixel at once
 
 
 @dataclass(frozen=True)
@@ -92,34 +94,6 @@ class SensorSpec:
     point_rate_hz: float = 100000.0
     frame_time_s: float = 0.0
     rays_file: str = ""
-
-
-@dataclass(frozen=True)
-class Pattern:
-    """The rays of one frame.
-
-    directions : (n, 3) float64 unit vectors, sensor frame
-    ring : (n,) uint16 channel index
-    time : (n,) float64 seconds from frame start at which each ray fires
-    origins : (n, 3) float64 ray origins, sensor frame, metres; ``None`` when every ray leaves
-        the sensor's origin (a sensor looking through its own mirrors has per-ray origins)
-    """
-
-    directions: np.ndarray
-    ring: np.ndarray
-    time: np.ndarray
-    origins: np.ndarray | None = None
-
-    def __len__(self) -> int:
-        return len(self.directions)
-
-
-def pattern_chunks(patterns: Pattern | Iterable[Pattern], chunk_rays: int) -> Iterator[Pattern]:
-    """One pattern, or consecutive chunks of one, cut into chunks of at most ``chunk_rays`` rays, in order."""
-    for pattern in [patterns] if isinstance(patterns, Pattern) else patterns:
-        for start in range(0, len(pattern), chunk_rays):
-            s = slice(start, start + chunk_rays)
-            yield Pattern(pattern.directions[s], pattern.ring[s], pattern.time[s], None if pattern.origins is None else pattern.origins[s])
 
 
 # ----------------------------------------------------------------------------- presets and overrides
@@ -237,36 +211,10 @@ def check_sensor(spec: SensorSpec, where: str = "sensor") -> None:
         raise InputError(f"{where}.{pattern.density_key(spec)}: gives {rays:,} rays a frame, more than {MAX_RAYS:,}; coarsen it")
 
 
-def load_numeric_npy(path, where: str, kinds: str, expected: str) -> np.ndarray:
-    """An array from an ``.npy`` file whose dtype kind is one of ``kinds``; ``InputError`` naming ``where`` and the file."""
-    try:
-        array = np.load(path, allow_pickle=False)
-    except OSError as err:
-        raise InputError(f"{where}: cannot read {path} ({err.strerror or err})") from None
-    except ValueError:
-        raise InputError(f"{where}: {path} is not a numeric .npy array") from None
-    if not isinstance(array, np.ndarray) or array.dtype.kind not in kinds:
-        raise InputError(f"{where}: {path} holds {getattr(array, 'dtype', type(array).__name__)}, expected {expected}")
-    return array
-
-
-def load_rays(path: str, where: str = "sensor.rays_file") -> np.ndarray:
-    """``(n, 3)`` float64 unit directions from an ``.npy`` file; ``InputError`` naming ``where`` and the file."""
-    if not path:
-        raise InputError(f"{where}: the file pattern needs the path of an (n, 3) .npy of ray directions")
-    rays = load_numeric_npy(path, where, "iuf", "numbers")
-    if rays.ndim != 2 or rays.shape[1] != 3:
-        raise InputError(f"{where}: {path} has shape {rays.shape}, expected (n, 3) ray directions")
-    if len(rays) == 0:
-        raise InputError(f"{where}: {path} holds no rays")
-    rays = rays.astype(np.float64)
-    finite = np.isfinite(rays).all(axis=1)
-    if not finite.all():
-        raise InputError(f"{where}: {path} row {int(np.argmin(finite))} is not finite")
-    norm = np.linalg.norm(rays, axis=1)
-    if not (norm > 0).all():
-        raise InputError(f"{where}: {path} row {int(np.argmin(norm > 0))} has zero length and names no direction")
-    return rays / norm[:, None]
+def check_flash(spec: SensorSpec, where: str) -> None:
+    """``InputError`` naming ``where`` unless ``spec`` is a flash camera (a pinhole or grid image)."""
+    if spec.pattern not in FLASH_PATTERNS:
+        raise InputError(f"{where}: needs a flash camera (pattern {' or '.join(FLASH_PATTERNS)}), not the {spec.pattern} pattern")
 
 
 # ----------------------------------------------------------------------------- geometry of a spec

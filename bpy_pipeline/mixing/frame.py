@@ -1,9 +1,12 @@
-"""A mixed frame: a real scan with synthetic objects cast in by its own firings (:func:`mix_frame`).
+"""A mixed frame: a real scan with synthetic objects cast in by its own firings, in five steps over a :class:`MixState`.
 
-Stages, each timed in ``info["timings_ms"]``: read (file -> :class:`~bpy_pipeline.io.real_scans.RealScan`),
-firings (:mod:`.firings`), ground (:mod:`.ground`), placement (:mod:`.placement`), meshes, cast
-(:mod:`.cast`), effects (the fitted drop and noise models on inserted returns only, then the
-noise injections of :mod:`.noise`), records and boxes.
+The steps (:data:`MIX_STEPS`): :func:`mix_background` (read the file -> :class:`~bpy_pipeline.io.real_scans.RealScan`,
+firings :mod:`.firings`), :func:`mix_place` (ground :mod:`.ground`, placement :mod:`.placement`, meshes),
+:func:`mix_cast` (:mod:`.cast`), :func:`mix_effects` (the fitted drop and noise models on inserted returns
+only, the noise injections of :mod:`.noise`, then the records) and :func:`mix_annotate` (boxes, the record);
+each part timed in ``info["timings_ms"]`` (read, firings, ground, placement, meshes, cast, effects, records,
+boxes). The real-scan frame plan runs them as its stages (:mod:`bpy_pipeline.stages.mixing`);
+:func:`mix_frame` runs them in a row.
 
 Labels: real returns get ``background_class`` or, from a SemanticKITTI file with
 ``keep_labels``, their class mapped by name to the project's table (:data:`SEMANTICKITTI_NAMES`;
@@ -26,15 +29,18 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from ..io.boxes import BOX_DTYPE, occlusion_levels, surface_samples
+from ..geometry.boxes import BOX_DTYPE, footprint_heading
 from ..io.real_scans import RealScan, read_real_scan
 from ..labels import ClassTable, load_class_table
+from ..lidar.effects import apply_effects
 from ..lidar.points import BEAM_DTYPE, POINT_DTYPE
+from ..lidar.sensors import resolve_sensor
+from ..lidar.visibility import occlusion_levels, subset_buffers, surface_samples
 from . import noise as injections
 from .cast import Hits, cast_firings, merge_returns, near_objects, object_buffers, object_parts
 from .firings import Firings, angles_deg, recover_firings
 from .ground import PointIndex, find_ground, in_box
-from .placement import Scene, explicit_placements, kitti_rule, parking_rule, real_placements
+from .placement import Placement, Scene, explicit_placements, kitti_rule, parking_rule, real_placements
 from .section import RealScanScene
 
 # SemanticKITTI raw ids -> the project's class names (assets_manifest/labels.yaml); others: the background class
@@ -85,9 +91,6 @@ VEHICLES = ("car", "van", "truck", "bus")
 def labelled_boxes(firings: Firings, semantic: np.ndarray, instance: np.ndarray, table: ClassTable, min_points: int = 10) -> list:
     """Boxes of the labelled real vehicles of a SemanticKITTI scan (one per instance of a vehicle class),
     fitted around their returns at the heading of the smallest rectangle around their footprint."""
-    from ..io.boxes import footprint_heading
-    from .placement import Placement
-
     ids = {table.id_of(name): name for name in VEHICLES}
     out = []
     returns = firings.returns
@@ -109,8 +112,6 @@ def labelled_boxes(firings: Firings, semantic: np.ndarray, instance: np.ndarray,
 
 def _effects(points: np.ndarray, beam: np.ndarray, effects, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     """The fitted drop and noise models on the inserted returns; ``(points, kept firing rows)`` (a dropped firing stays empty)."""
-    from ..lidar.effects import apply_effects
-
     tag = points["time"].copy()
     points["time"] = np.arange(len(points), dtype=np.float64)  # carry each record's row through the drop
     out = apply_effects(points, beam, effects, rng)
@@ -144,38 +145,92 @@ def scan_paths(section: RealScanScene) -> list[Path]:
 SCAN_SUFFIXES = (".bin", ".npy", ".ply", ".las", ".laz", ".pcd")
 
 
-def mix_frame(section: RealScanScene, rng: np.random.Generator, effects=None, threads: int | None = None, table: ClassTable | None = None, scan: RealScan | None = None, firings: Firings | None = None, frame: int = 0) -> MixedFrame:
-    """Insert ``section``'s objects into its real scan, exact per firing (module notes).
+@dataclass
+class MixState:
+    """A real-scan frame on its way through the mixing steps (:data:`MIX_STEPS`), each filling in its part.
 
-    rng : the frame's generator (placement rules, object shapes, effects and injections draw from it in a fixed order)
-    frame : the frame index; with a folder or pattern of scans, frame k uses scan k (mod their number)
-    effects : a ``config.EffectsConfig`` for the inserted returns (``None``: exact, no drop or noise)
-    scan, firings : already read (benchmarks reuse them across frames); read from ``section.path`` when ``None``
+    section, rng, effects, threads, table : as :func:`mix_frame`; scan, firings : the real sweep and its firings
+    max_range : m, the cast's limit; timings : ms per step (``info["timings_ms"]``); clock : the last step's end (s)
+    valid, removed : (f,) bool per firing: a real return kept, one removed by ``section.remove``
+    semantic_real, instance_real : (f,) the real firings' labels; placements, rule_log : the inserted objects, the rules' log
+    instances, semantic_ids : per placement; buffers : the inserted objects' scene buffers (sensor frame)
+    hits, kept, occluded : the cast's hits, those kept, the real firings they hide
+    new, h_firing : the inserted returns (POINT_DTYPE) and their firings; dropped_firings, visible_rays : for the record and boxes
+    points, firing, inserted : the frame's records in firing order, their firings, which are inserted
+    boxes, info : the frame's boxes (BOX_DTYPE, sensor frame) and its record
     """
-    timings: dict = {}
-    table = table or load_class_table()
-    start = time.perf_counter()
-    if scan is None:
+
+    section: RealScanScene
+    rng: np.random.Generator
+    effects: object = None
+    threads: int | None = None
+    table: ClassTable | None = None
+    scan: RealScan | None = None
+    firings: Firings | None = None
+    frame: int = 0
+    timings: dict = field(default_factory=dict)
+    clock: float = 0.0
+    max_range: float = 100.0
+    valid: np.ndarray | None = None
+    removed: np.ndarray | None = None
+    semantic_real: np.ndarray | None = None
+    instance_real: np.ndarray | None = None
+    placements: list = field(default_factory=list)
+    rule_log: dict = field(default_factory=dict)
+    instances: list = field(default_factory=list)
+    semantic_ids: list = field(default_factory=list)
+    buffers: object = None
+    hits: Hits | None = None
+    kept: np.ndarray | None = None
+    occluded: np.ndarray | None = None
+    new: np.ndarray | None = None
+    h_firing: np.ndarray | None = None
+    dropped_firings: np.ndarray | None = None
+    visible_rays: np.ndarray | None = None
+    points: np.ndarray | None = None
+    firing: np.ndarray | None = None
+    inserted: np.ndarray | None = None
+    boxes: np.ndarray | None = None
+    info: dict | None = None
+
+    def lap(self, name: str) -> None:
+        """Time the step ``name`` ended now (ms since the last one ended)."""
+        self.clock = _timed(self.timings, name, self.clock)
+
+    def result(self) -> MixedFrame:
+        return MixedFrame(self.points, self.boxes, self.info, self.firings, self.firing, self.inserted, self.placements, self.buffers)
+
+
+def mix_background(state: MixState) -> None:
+    """The real sweep: read (unless given), its firings recovered, ``section.remove`` cut out, its returns labelled."""
+    section = state.section
+    state.table = state.table or load_class_table()
+    state.clock = time.perf_counter()
+    if state.scan is None:
         paths = scan_paths(section)
-        scan = read_real_scan(paths[frame % len(paths)], section.format or None)
-    start = _timed(timings, "read", start)
-    firings = firings or recover_firings(scan, section.preset or None)
-    start = _timed(timings, "firings", start)
-    max_range = section.max_range or 100.0
+        state.scan = read_real_scan(paths[state.frame % len(paths)], section.format or None)
+    state.lap("read")
+    state.firings = state.firings or recover_firings(state.scan, section.preset or None)
+    state.lap("firings")
+    state.max_range = section.max_range or 100.0
     if section.preset and not section.max_range:
-        from ..lidar.sensors import resolve_sensor
-
-        max_range = resolve_sensor({"preset": section.preset}, "scene.preset").max_range
-
+        state.max_range = resolve_sensor({"preset": section.preset}, "scene.preset").max_range
+    firings = state.firings
     valid = firings.valid.copy()
     returns = firings.returns
     removed = np.zeros(len(firings), bool)
     for box in section.remove:
         removed |= valid & in_box(returns, box.center, box.size, box.yaw_deg)
     valid &= ~removed
-    semantic_real, instance_real = real_labels(scan, firings, section, table)
+    state.valid, state.removed = valid, removed
+    state.semantic_real, state.instance_real = real_labels(state.scan, firings, section, state.table)
 
-    # ground and obstacles from the remaining real returns
+
+def mix_place(state: MixState) -> None:
+    """The objects to insert (explicit boxes, then the parking and KITTI rules on the ground found in the
+    remaining real returns) and their meshes (each object's shape drawn from the generator)."""
+    section, firings, valid, rng, table = state.section, state.firings, state.valid, state.rng, state.table
+    returns = firings.returns
     placements = explicit_placements(section.objects)
     rule_log = {}
     if section.parking_rule.enabled or section.kitti_rule.enabled:
@@ -183,8 +238,8 @@ def mix_frame(section: RealScanScene, rng: np.random.Generator, effects=None, th
         ground = find_ground(xyz, section.ground)
         work = Firings(**{**firings.__dict__, "valid": valid})
         scene = Scene(work, ground, PointIndex(xyz[~ground.ground]), PointIndex(xyz[ground.ground]), list(placements))
-        start = _timed(timings, "ground", start)
-        real = real_placements(section.real_boxes) + labelled_boxes(firings, semantic_real, instance_real, table)
+        state.lap("ground")
+        real = real_placements(section.real_boxes) + labelled_boxes(firings, state.semantic_real, state.instance_real, table)
         if section.parking_rule.enabled:
             placed, rule_log["parking"] = parking_rule(scene, section.parking_rule, rng)
             placements += placed
@@ -192,23 +247,31 @@ def mix_frame(section: RealScanScene, rng: np.random.Generator, effects=None, th
             placed, rule_log["kitti"] = kitti_rule(scene, section.kitti_rule, xyz[ground.ground], real, rng)
             placements += placed
         rule_log["ground"] = {"method": ground.method, "normal": [round(float(v), 5) for v in ground.normal], "offset": round(ground.offset, 4), "points": int(ground.ground.sum())}
-    start = _timed(timings, "placement", start)
-
-    # meshes and the cast
-    first_instance = int(instance_real.max(initial=0)) + 1
-    instances = [first_instance + k for k in range(len(placements))]
-    semantic_ids = [table.id_of(p.class_name, "scene.objects.class") for p in placements]
+    state.lap("placement")
+    first_instance = int(state.instance_real.max(initial=0)) + 1
+    state.instances = [first_instance + k for k in range(len(placements))]
+    state.semantic_ids = [table.id_of(p.class_name, "scene.objects.class") for p in placements]
     parts = [object_parts(p, rng) for p in placements]
-    buffers = object_buffers(placements, parts, instances, semantic_ids)
-    start = _timed(timings, "meshes", start)
-    work = Firings(**{**firings.__dict__, "valid": valid})
-    hits = cast_firings(work, buffers, max_range, threads, rng=rng)
-    kept, occluded = merge_returns(work, hits)
-    start = _timed(timings, "cast", start)
+    state.buffers = object_buffers(placements, parts, state.instances, state.semantic_ids)
+    state.placements, state.rule_log = placements, rule_log
+    state.lap("meshes")
 
-    # inserted returns: records, then effects on them alone
+
+def mix_cast(state: MixState) -> None:
+    """Every real firing cast at the inserted objects: their hits, those kept (nearer than the real return) and the real returns they hide."""
+    work = Firings(**{**state.firings.__dict__, "valid": state.valid})
+    state.hits = cast_firings(work, state.buffers, state.max_range, state.threads, rng=state.rng)
+    state.kept, state.occluded = merge_returns(work, state.hits)
+    state.lap("cast")
+
+
+def mix_effects(state: MixState) -> None:
+    """The inserted returns as records, given the fitted drop and noise models (``effects``) and the noise
+    injections; then the real returns that stay, interior points and class flips: the frame's records in firing order."""
+    firings, rng, section = state.firings, state.rng, state.section
+    hits, kept = state.hits, state.kept
     h = Hits(*(a[kept] for a in (hits.firing, hits.path, hits.row, hits.cos_incidence, hits.gain, hits.bounces)))
-    objects = buffers.objects
+    objects = state.buffers.objects
     new = np.zeros(len(h.firing), POINT_DTYPE)
     xyz_new = firings.origin[h.firing] + h.path[:, None] * firings.direction[h.firing]
     new["x"], new["y"], new["z"] = xyz_new.T
@@ -224,10 +287,10 @@ def mix_frame(section: RealScanScene, rng: np.random.Generator, effects=None, th
     beam["gain"] = h.gain
     beam["direction"] = firings.direction[h.firing]
     new["intensity"] = np.clip(beam["reflectivity"] * beam["cos_incidence"] * beam["gain"], 0, 1)
-    visible_rays = np.bincount(new["instance"], minlength=max(instances, default=0) + 1)
+    state.visible_rays = np.bincount(new["instance"], minlength=max(state.instances, default=0) + 1)
     dropped_firings = np.zeros(0, np.int64)
-    if effects is not None and len(new):
-        new, rows = _effects(new, beam, effects, rng)
+    if state.effects is not None and len(new):
+        new, rows = _effects(new, beam, state.effects, rng)
         dropped_firings = np.setdiff1d(h.firing, h.firing[rows])
         h_firing = h.firing[rows]
     else:
@@ -243,18 +306,26 @@ def mix_frame(section: RealScanScene, rng: np.random.Generator, effects=None, th
             new[k] += step * d[:, axis].astype(np.float32)
         new["range"] += step
         new, h_firing = new[keep], h_firing[keep]
-    start = _timed(timings, "effects", start)
+    state.dropped_firings = dropped_firings
+    state.hits = h
+    state.lap("effects")
+    _merge_records(state, new, h_firing)
+    state.lap("records")
 
-    # real returns that stay: valid, not occluded by a kept hit (a dropped inserted firing stays empty)
-    stay = valid & ~occluded
+
+def _merge_records(state: MixState, new: np.ndarray, h_firing: np.ndarray) -> None:
+    """The real returns that stay (valid, not hidden by a kept hit; a dropped inserted firing stays empty), the
+    interior points (on the nearest firing, kept only where nearer than its return), all in firing order, class flips last."""
+    firings, rng, noise, placements = state.firings, state.rng, state.section.noise, state.placements
+    returns = firings.returns
+    stay = state.valid & ~state.occluded
     real_rows = np.flatnonzero(stay)
     old = np.zeros(len(real_rows), POINT_DTYPE)
     old["x"], old["y"], old["z"] = returns[real_rows].T
     old["intensity"] = firings.intensity[real_rows]
-    old["semantic"], old["instance"] = semantic_real[real_rows], instance_real[real_rows]
+    old["semantic"], old["instance"] = state.semantic_real[real_rows], state.instance_real[real_rows]
     old["ring"], old["time"], old["range"] = firings.ring[real_rows], firings.time[real_rows], firings.range[real_rows]
 
-    # interior points: on the nearest firing, kept only where nearer than its return
     extra_points, extra_firing = np.zeros(0, POINT_DTYPE), np.zeros(0, np.int64)
     if noise.interior_points > 0 and placements:
         centres = np.array([p.centre for p in placements])
@@ -274,8 +345,8 @@ def mix_frame(section: RealScanScene, rng: np.random.Generator, effects=None, th
             xyz = firings.origin[extra_firing] + r[pick, None] * firings.direction[extra_firing]
             extra_points["x"], extra_points["y"], extra_points["z"] = xyz.T
             extra_points["range"] = r[pick]
-            extra_points["semantic"] = np.array(semantic_ids, np.uint16)[owner[pick]]
-            extra_points["instance"] = np.array(instances, np.uint32)[owner[pick]]
+            extra_points["semantic"] = np.array(state.semantic_ids, np.uint16)[owner[pick]]
+            extra_points["instance"] = np.array(state.instances, np.uint32)[owner[pick]]
             extra_points["ring"], extra_points["time"] = firings.ring[extra_firing], firings.time[extra_firing]
             # the firing's earlier return (real or inserted) gives way
             drop_real = np.isin(real_rows, extra_firing)
@@ -291,24 +362,45 @@ def mix_frame(section: RealScanScene, rng: np.random.Generator, effects=None, th
     if noise.class_flip > 0:
         classes = np.unique(points["semantic"])
         points["semantic"] = injections.class_flips(points["semantic"], classes, noise, rng)
-    start = _timed(timings, "records", start)
+    state.points, state.firing, state.inserted = points, firing, inserted
 
-    labelled = labelled_boxes(firings, semantic_real, instance_real, table) if scan.labels is not None and section.keep_labels else []
-    boxes = frame_boxes(firings, valid, placements, instances, buffers, visible_rays, points, section, returns, occluded, labelled, threads)
-    _timed(timings, "boxes", start)
-    info = {
+
+def mix_annotate(state: MixState) -> None:
+    """The frame's boxes (:func:`mixed_boxes`) and its record (``info``)."""
+    firings, section, scan = state.firings, state.section, state.scan
+    labelled = labelled_boxes(firings, state.semantic_real, state.instance_real, state.table) if scan.labels is not None and section.keep_labels else []
+    state.boxes = mixed_boxes(firings, state.valid, state.placements, state.instances, state.buffers, state.visible_rays, state.points, section, firings.returns, state.occluded, labelled, state.threads)
+    state.lap("boxes")
+    state.info = {
         "scan": {"path": str(scan.path), "format": scan.format, "points": int(len(scan)), "notes": list(scan.notes)},
         "firings": firings.info(),
-        "removed": int(removed.sum()),
-        "objects": [dict(p.info(), instance=i) for p, i in zip(placements, instances)],
-        "rules": rule_log,
-        "inserted_points": int(inserted.sum()),
-        "occluded_real": int(occluded.sum()),
-        "filled_empty": int((~valid[h.firing]).sum()),
-        "dropped_inserted": int(len(dropped_firings)),
-        "timings_ms": timings,
+        "removed": int(state.removed.sum()),
+        "objects": [dict(p.info(), instance=i) for p, i in zip(state.placements, state.instances)],
+        "rules": state.rule_log,
+        "inserted_points": int(state.inserted.sum()),
+        "occluded_real": int(state.occluded.sum()),
+        "filled_empty": int((~state.valid[state.hits.firing]).sum()),
+        "dropped_inserted": int(len(state.dropped_firings)),
+        "timings_ms": state.timings,
     }
-    return MixedFrame(points, boxes, info, firings, firing, inserted, placements, buffers)
+
+
+MIX_STEPS = (mix_background, mix_place, mix_cast, mix_effects, mix_annotate)  # in this order: the generator's draws follow it
+
+
+def mix_frame(section: RealScanScene, rng: np.random.Generator, effects=None, threads: int | None = None, table: ClassTable | None = None, scan: RealScan | None = None, firings: Firings | None = None, frame: int = 0) -> MixedFrame:
+    """Insert ``section``'s objects into its real scan, exact per firing (module notes): :data:`MIX_STEPS` in turn
+    (the real-scan frame plan runs the same steps as its stages, :mod:`bpy_pipeline.stages.mixing`).
+
+    rng : the frame's generator (placement rules, object shapes, effects and injections draw from it in a fixed order)
+    frame : the frame index; with a folder or pattern of scans, frame k uses scan k (mod their number)
+    effects : a ``config.EffectsConfig`` for the inserted returns (``None``: exact, no drop or noise)
+    scan, firings : already read (benchmarks reuse them across frames); read from ``section.path`` when ``None``
+    """
+    state = MixState(section, rng, effects, threads, table, scan, firings, frame)
+    for step in MIX_STEPS:
+        step(state)
+    return state.result()
 
 
 def azimuth_coverage(firings: Firings, bins: int = 720) -> np.ndarray:
@@ -319,7 +411,7 @@ def azimuth_coverage(firings: Firings, bins: int = 720) -> np.ndarray:
     return covered
 
 
-def frame_boxes(firings, valid, placements, instances, buffers, visible_rays, points, section, returns, occluded, labelled, threads) -> np.ndarray:
+def mixed_boxes(firings, valid, placements, instances, buffers, visible_rays, points, section, returns, occluded, labelled, threads) -> np.ndarray:
     """Boxes of the inserted objects, of the section's ``real_boxes`` and of the scan's labelled vehicles (module notes)."""
     real = real_placements(section.real_boxes) + list(labelled)
     boxes = np.zeros(len(placements) + len(real), BOX_DTYPE)
@@ -353,6 +445,7 @@ def frame_boxes(firings, valid, placements, instances, buffers, visible_rays, po
 
 
 def _subset(buffers, rows):
-    from ..io.boxes import _subset as subset
+    return subset_buffers(buffers, list(int(r) for r in rows))
 
-    return subset(buffers, list(int(r) for r in rows))
+
+frame_boxes = mixed_boxes  # the old name (it collided with the sensor frames' boxes, stages.annotate.sensor_boxes)

@@ -22,7 +22,7 @@ import math
 import numpy as np
 
 from ..buffers import SceneBuffers
-from ..io.boxes import surface_samples
+from ..lidar.visibility import subset_buffers, surface_samples
 from ..lidar.raycast import RayCaster
 from ..lidar.sensors import azimuth_step, resolve_sensor, sensor_pattern
 from .firings import Firings, angle_between, angles_deg
@@ -60,11 +60,9 @@ def parking_paper_insert(firings: Firings, valid: np.ndarray, buffers: SceneBuff
 
 def _object_alone(buffers: SceneBuffers, k: int) -> SceneBuffers:
     """The parts of the k-th placement (instances are consecutive, one per placement)."""
-    from ..io.boxes import _subset
-
     instances = np.unique(buffers.objects.instance)
     rows = np.flatnonzero(buffers.objects.instance == instances[k])
-    return _subset(buffers, list(int(r) for r in rows))
+    return subset_buffers(buffers, list(int(r) for r in rows))
 
 
 def _box_corners(p: Placement) -> np.ndarray:

@@ -7,8 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..builders import BuildContext, BuildResult
-from ..builders import build_scene as _build
+from ..builders.base import BuildContext, BuildResult
+from ..builders.base import build_scene as _build
 
 
 def build_scene(scene_config, rng: np.random.Generator, view=None, keep: dict | None = None) -> BuildResult:

@@ -166,7 +166,7 @@ class IndustrialHall:
 
     # ------------------------------------------------------------------ a frame
     def randomize(self, rng: np.random.Generator, view=None):
-        from ..builders import BuildResult
+        from ..builders.base import BuildResult
 
         p = self.params
         robots = []

@@ -150,7 +150,7 @@ class ParkingGarage:
         return bays[k, :2].copy(), float(np.angle(np.exp(1j * bay_yaw)))
 
     def randomize(self, rng: np.random.Generator, view=None):
-        from ..builders import BuildResult
+        from ..builders.base import BuildResult
 
         p = self.params
         # where the sensor is this frame (a moving sensor's view is None: the first station stands in)

@@ -24,6 +24,7 @@ pipeline passes a :class:`~bpy_pipeline.geometry.lod.SensorView`.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import bpy
@@ -53,7 +54,8 @@ REFLECTIVITY = {
 def build(params, rng: np.random.Generator, view=None) -> RailwayLayout:
     """Build the railway of a ``RailwayScene`` config; ``view`` (a SensorView) drives the level of detail.
 
-    Returns the :class:`~bpy_pipeline.geometry.railway_layout.RailwayLayout` that was built.
+    Returns the :class:`~bpy_pipeline.geometry.railway_layout.RailwayLayout` that was built, with the
+    ``(k, 4, 4)`` frames of the signals it placed (the ground truth writers read it, never re-draw it).
     """
     collection = scene_collection()
     layout = plan(params, rng)
@@ -67,9 +69,9 @@ def build(params, rng: np.random.Generator, view=None) -> RailwayLayout:
     _supports(params, layout, detail, collection)
     _wires(layout, detail, collection)
     _anchors_and_sections(params, layout, detail, collection)
-    _trackside(params, layout, rng, collection)
+    signals = _trackside(params, layout, rng, collection)
     bpy.context.view_layer.update()
-    return layout
+    return dataclasses.replace(layout, signals=signals)
 
 
 def _centreline(layout: RailwayLayout, tolerance: float, roll: float, collection) -> bpy.types.Object:
@@ -241,14 +243,15 @@ def _anchors_and_sections(params, layout: RailwayLayout, detail, collection) -> 
             tag(obj, "section insulator", reflectivity=REFLECTIVITY["section insulator"])
 
 
-def _trackside(params, layout: RailwayLayout, rng: np.random.Generator, collection) -> None:
+def _trackside(params, layout: RailwayLayout, rng: np.random.Generator, collection) -> np.ndarray:
     """Fences, signals, vegetation and the platform of ``scene.trackside`` (nothing is drawn from ``rng`` without
-    signals or vegetation)."""
+    signals or vegetation); returns the signals' ``(k, 4, 4)`` frames."""
     side, section, alignment = params.trackside, layout.section, layout.alignment
     if side.fences:
         for name, lateral in (("right", section.offsets[0] - side.fence_offset), ("left", section.offsets[-1] + side.fence_offset)):
             tag(mesh_object(f"fence.{name}", trackside.fence(alignment, section.surface, side, lateral), collection), "fence", reflectivity=REFLECTIVITY["fence"])
-    for k, frame in enumerate(trackside.signal_frames(layout, side, rng)):
+    signals = np.asarray(trackside.signal_frames(layout, side, rng), float).reshape(-1, 4, 4)
+    for k, frame in enumerate(signals):
         tag(mesh_object(f"signal.{k:02d}", trackside.signal(frame, side.signal_height, -1.0), collection), "signal", reflectivity=REFLECTIVITY["signal"])
     inner = (side.fence_offset if side.fences else params.supports.mast_offset + 2.0) + float(section.offsets[-1]) + 1.0
     plants = trackside.vegetation(alignment, section.surface, side, inner, params.track.ground_width / 2 - 1.0, rng)
@@ -258,6 +261,7 @@ def _trackside(params, layout: RailwayLayout, rng: np.random.Generator, collecti
     mesh = trackside.platform(alignment, section.surface, side, section.rail_top, float(nearest))
     if mesh is not None:
         tag(mesh_object("platform", mesh, collection), "platform", reflectivity=REFLECTIVITY["platform"])
+    return signals
 
 
 def _bevel_sides(sides: int) -> int:

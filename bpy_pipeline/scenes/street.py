@@ -52,7 +52,7 @@ class Intersection:
                 bpy.data.meshes.remove(mesh)
 
     def populate(self, rng: np.random.Generator, view=None):
-        from ..builders import BuildResult
+        from ..builders.base import BuildResult
 
         views = tuple(getattr(view, "fields", ()) or ())
         placement = street.place_users(self.params, self.layout, rng, views)

@@ -150,7 +150,6 @@ def channels(spec) -> int:
 
 def sampled_extent(spec) -> tuple[np.ndarray, np.ndarray]:
     """Elevations and azimuths (degrees) of every ray of frame 0, for patterns without rows."""
-    from ..sensors import sensor_pattern
-
-    sample = sensor_pattern(spec).directions
+    entry = PATTERNS.get(spec.pattern)
+    sample = entry.rays(spec)(0, entry.count(spec), 0).directions  # frame 0 whole (lidar.sensors.sensor_pattern)
     return np.degrees(np.arcsin(np.clip(sample[:, 2], -1, 1))), np.degrees(np.arctan2(sample[:, 1], sample[:, 0]))

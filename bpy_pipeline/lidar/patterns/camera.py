@@ -14,6 +14,7 @@ import numpy as np
 
 from ...errors import InputError
 from .base import RayPattern, channels, check_rows, derive_columns, register_pattern
+from ..rays import Pattern
 
 
 def focal(spec) -> float:
@@ -60,8 +61,6 @@ def density_key(spec) -> str:
 
 
 def _chunks(spec, directions_of):
-    from ..sensors import Pattern
-
     def chunk(start: int, stop: int, frame: int):
         row, col = np.divmod(np.arange(start, stop), spec.columns)
         return Pattern(directions_of(row, col), row.astype(np.uint16), np.zeros(len(row)))

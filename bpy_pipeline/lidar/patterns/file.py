@@ -10,23 +10,18 @@ import math
 import numpy as np
 
 from .base import RayPattern, register_pattern, sampled_extent
+from ..rays import Pattern, load_rays
 
 
 def count(spec) -> int:
-    from ..sensors import load_rays
-
     return len(load_rays(spec.rays_file))
 
 
 def check(spec, where: str) -> None:
-    from ..sensors import load_rays
-
     load_rays(spec.rays_file, f"{where}.rays_file")
 
 
 def rays(spec):
-    from ..sensors import Pattern, load_rays
-
     directions = load_rays(spec.rays_file)
 
     def chunk(start: int, stop: int, frame: int):

@@ -19,6 +19,7 @@ import numpy as np
 
 from ...errors import InputError
 from .base import MAX_RINGS, RayPattern, register_pattern
+from ..rays import Pattern
 
 
 def angle_step(spec) -> float:
@@ -70,8 +71,6 @@ def frame_time(spec) -> float:
 
 def rays(spec):
     """Profile-major rays: ray j of profile p fires at ``(p + j / k) / rotation_hz`` (k rays a profile)."""
-    from ..sensors import Pattern
-
     theta = np.radians(angles(spec))
     cos_t, sin_t = np.cos(theta), np.sin(theta)
     k = len(theta)

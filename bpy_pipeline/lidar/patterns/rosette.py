@@ -14,6 +14,7 @@ import numpy as np
 
 from ...errors import InputError
 from .base import RayPattern, register_pattern, sampled_extent
+from ..rays import Pattern
 
 
 def frame_time(spec) -> float:
@@ -41,8 +42,6 @@ def resolution(spec) -> tuple[float, float]:
 
 
 def rays(spec):
-    from ..sensors import Pattern
-
     (f1, f2), (d1, d2) = spec.rotor_hz, spec.deflection_deg
     rate, period = spec.point_rate_hz, frame_time(spec)
 

@@ -18,6 +18,7 @@ import numpy as np
 
 from ...errors import InputError
 from .base import RayPattern, channels, check_rows, derive_columns, derive_rows, register_pattern
+from ..rays import Pattern
 
 
 def _is_window(spec) -> bool:
@@ -93,8 +94,6 @@ def density_key(spec) -> str:
 def rays(spec):
     """Column-major rays: a column fires at ``column * step / (360 rotation_hz)``; a terrestrial
     scanner's rows one after another within the column."""
-    from ..sensors import Pattern
-
     el, az = np.radians(elevations(spec)), np.radians(azimuths(spec))
     cos_el, sin_el, cos_az, sin_az = np.cos(el), np.sin(el), np.cos(az), np.sin(az)
     rows = len(el)

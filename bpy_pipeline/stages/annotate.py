@@ -1,0 +1,67 @@
+"""The annotate stage: 3D box labels with truncation and occlusion (semantic labels come with the scan). No Blender.
+
+The boxes are fitted around each labelled object's triangles (:mod:`bpy_pipeline.geometry.boxes`);
+their truncation and occlusion come from one visibility cast of the sensor's own rays
+(:mod:`bpy_pipeline.lidar.visibility`), here, before any writer runs: writers only write.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..buffers import SceneBuffers
+from ..config import Config
+from ..frame import Frame, Run
+from ..geometry.boxes import boxes_in_frame, count_points, fit_boxes, keep_boxes
+from ..lidar.sensor_rays import SensorRays
+from ..lidar.sensors import angular_resolution
+from ..lidar.visibility import occlusion_levels, visibility
+from ..rig import out_of_reach
+from .view import scan_surfaces
+
+
+def world_boxes(buffers: SceneBuffers, config: Config, pose: np.ndarray, points: np.ndarray, headings: dict | None = None, frame: int = 0, rng: np.random.Generator | None = None, rays: SensorRays | None = None, skip_unseen: bool = False, caster=None) -> np.ndarray:
+    """Every box of ``output.boxes.classes`` in the world frame with truncation, occlusion and its points, none dropped
+    (:func:`sensor_boxes` keeps those with their minimum points and moves them into the points' frame).
+
+    headings : {instance: yaw} from the builder (others get their footprint's heading)
+    skip_unseen : leave out of the visibility trace the boxes no ray of the sensor can pass near (outside its
+        field of view or range, :func:`~bpy_pipeline.rig.out_of_reach`): they get what the trace would give them
+        (truncation 1, no visible or unoccluded ray); a rig's narrow sensors see a few of a street's boxes each
+    caster : the scan's :class:`~bpy_pipeline.lidar.raycast.RayCaster` of ``buffers`` at ``pose``, reused by the cast (built when ``None``)
+    """
+    section = config.output.boxes
+    boxes = fit_boxes(buffers, section.classes, headings)
+    if len(boxes):
+        spec = config.sensor.spec
+        patterns = (rays or SensorRays(config)).patterns(frame)
+        steps = [v for v in angular_resolution(spec) if v is not None and np.isfinite(v)]
+        cell = float(np.clip(max(steps) if steps else 1.0, 0.2, 5.0))
+        near = np.ones(len(boxes), bool)
+        if skip_unseen and not config.sensor.reflector.enabled and config.effects.mirrors.glass.reflect_fraction in (0.0, 1.0):  # no draw depends on which boxes are traced
+            near = ~out_of_reach(spec, pose, boxes["centre"], np.linalg.norm(boxes["size"], axis=1) / 2 + 1e-3)
+            boxes["truncation"] = 1.0
+        traced = boxes[near]
+        visibility(buffers, traced, patterns, pose, spec.min_range, spec.max_range, cell, caster=caster, surfaces=scan_surfaces(config), rng=rng)
+        boxes[near] = traced
+        boxes["occlusion"] = occlusion_levels(boxes["visible"], boxes["unoccluded"], section.occlusion_levels)
+        count_points(boxes, points)
+    return boxes
+
+
+def sensor_boxes(buffers: SceneBuffers, config: Config, pose: np.ndarray, points: np.ndarray, headings: dict | None = None, frame: int = 0, rng: np.random.Generator | None = None, rays: SensorRays | None = None, caster=None) -> np.ndarray:
+    """The frame's 3D box labels (:data:`~bpy_pipeline.geometry.boxes.BOX_DTYPE`) in the frame of the points, thin boxes dropped
+    (:func:`world_boxes`, then those with their class's minimum points, in the output frame)."""
+    section = config.output.boxes
+    boxes = world_boxes(buffers, config, pose, points, headings, frame, rng, rays, caster=caster)
+    if len(boxes):
+        boxes = keep_boxes(boxes, section.min_points, section.min_points_default)
+    return boxes_in_frame(boxes, pose if config.output.frame == "sensor" else np.eye(4))
+
+
+frame_boxes = sensor_boxes  # the name pipeline.py gave it (mixing's boxes are mixing.frame.mixed_boxes)
+
+
+def annotate_stage(frame: Frame, run: Run) -> None:
+    """The frame's 3D box labels (in the plan when a box format is asked for)."""
+    frame.boxes = sensor_boxes(frame.buffers, run.config, frame.pose, frame.points, frame.scene.headings, frame.index, frame.rng, run.rays, frame.caster)
