@@ -127,6 +127,8 @@ def fit_effects(args) -> int:
     out = Path(args.out)
     if not out.parent.is_dir() and (out.parent.exists() or any(p.exists() and not p.is_dir() for p in out.parents)):
         raise InputError(f"--out: {out.parent} is not a folder (a file stands in the path); give a path in a folder")
+    if args.fields < 4 or not 0 <= args.intensity_field < args.fields or args.ring_field >= args.fields or args.rings < 1:
+        raise InputError(f"fit: need --fields >= 4 (x y z intensity), 0 <= --intensity-field < --fields, --ring-field < --fields and --rings >= 1; got --fields {args.fields}, --intensity-field {args.intensity_field}, --ring-field {args.ring_field}, --rings {args.rings}")
     ring_field = None if args.ring_field < 0 else args.ring_field
     scans = [fitting.read_scan(path, args.rings, args.fields, args.intensity_field, ring_field, args.empty_radius) for path in args.scans]
     scan = scans[0] if len(scans) == 1 else fitting.stack_scans(scans)
@@ -194,7 +196,9 @@ COMMANDS = [_add_run, _add_sensors, _add_fit]
 
 
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="bpy-pipeline", description="Synthetic labeled LiDAR point clouds: generate frames and the tools around them.")
+    from .cli import OneLineParser  # errors in one line, exit code 2
+
+    p = OneLineParser(prog="bpy-pipeline", description="Synthetic labeled LiDAR point clouds: generate frames and the tools around them.")
     sub = p.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for add in COMMANDS:
         add(sub)
@@ -203,15 +207,10 @@ def parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     """Run one command; returns the exit code (2 on bad input)."""
+    from .cli import guarded  # InputError, Ctrl-C and SIGTERM: one line, exit 2, 130, 143
+
     args = parser().parse_args(sys.argv[1:] if argv is None else argv)
-    try:
-        return args.func(args)
-    except InputError as err:
-        print(f"error: {err}", file=sys.stderr)
-        return err.exit_code
-    except KeyboardInterrupt:
-        print("interrupted: every frame written so far is committed; --resume continues the run", file=sys.stderr)
-        return 130
+    return guarded(args.func, args)
 
 
 if __name__ == "__main__":

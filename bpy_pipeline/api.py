@@ -60,12 +60,24 @@ def scene_buffers(meshes: SceneBuffers | Mapping) -> SceneBuffers:
     """Scene buffers of ``meshes``: buffers as they are, or ``{name: (vertices (n, 3) m, triangles (m, 3))}``
     with an optional class name, material and reflectivity after the triangles
     (``(v, t, "car", "diffuse", 0.3)``); objects are ``unlabeled``, ``diffuse``, 0.5 by default."""
+    from .geometry.checks import check_fraction, check_mesh
+
     if isinstance(meshes, SceneBuffers):
+        check_mesh(meshes.vertices, meshes.triangles, "meshes (scene buffers)")
+        for k, value in enumerate(np.asarray(meshes.objects.reflectivity).tolist()):
+            check_fraction(value, f"meshes (scene buffers) object {meshes.objects.names[k]!r} reflectivity")
         return meshes
+    if not isinstance(meshes, Mapping):
+        raise InputError(f"meshes: expected scene buffers or a mapping {{name: (vertices (n, 3), triangles (m, 3)[, class, material, reflectivity])}}, got {type(meshes).__name__}")
     from .labels import load_class_table
 
     table = load_class_table()
-    buffers = SceneBuffers.from_meshes({name: mesh[:2] for name, mesh in meshes.items()})
+    checked = {}
+    for name, mesh in meshes.items():
+        if not isinstance(mesh, (tuple, list)) or not 2 <= len(mesh) <= 5:
+            raise InputError(f"meshes[{name!r}]: expected (vertices (n, 3), triangles (m, 3)[, class, material, reflectivity]), got {type(mesh).__name__}")
+        checked[name] = check_mesh(mesh[0], mesh[1], f"meshes[{name!r}]")
+    buffers = SceneBuffers.from_meshes(checked)
     classes, materials, reflectivity = [], [], []
     for name, mesh in meshes.items():
         extra = list(mesh[2:]) + [None] * 3
@@ -74,7 +86,7 @@ def scene_buffers(meshes: SceneBuffers | Mapping) -> SceneBuffers:
         if material not in MATERIAL_ID:
             raise InputError(f"meshes[{name!r}] material: expected one of {', '.join(MATERIAL_ID)}, got {material!r}")
         materials.append(MATERIAL_ID[material])
-        reflectivity.append(0.5 if extra[2] is None else float(extra[2]))
+        reflectivity.append(0.5 if extra[2] is None else check_fraction(extra[2], f"meshes[{name!r}] reflectivity"))
     objects = buffers.objects
     buffers.objects = ObjectTable(objects.names, objects.parents, classes, np.array([table.id_of(c) for c in classes], np.uint16), objects.instance, np.array(materials, np.uint8), np.array(reflectivity, np.float32))
     return buffers
@@ -90,12 +102,22 @@ def scan(meshes: SceneBuffers | Mapping, sensor: str | Mapping = "vlp16", pose: 
     seed, frame : the frame's generator is the one frame ``frame`` of a run seeded ``seed`` gets
     """
     from .frame import Frame
+    from .geometry.checks import check_pose
     from .pipeline import Run, effects_stage, frame_rng, scan_stage
 
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise InputError(f"seed: expected an integer >= 0, got {seed!r}")
+    if isinstance(frame, bool) or not isinstance(frame, (int, np.integer)) or frame < 0:
+        raise InputError(f"frame: expected an integer >= 0, got {frame!r}")
+    if not isinstance(sensor, (str, Mapping)):
+        raise InputError(f"sensor: expected a preset name or a mapping as the config's sensor section, got {type(sensor).__name__}")
+    if effects is not None and not isinstance(effects, Mapping):
+        raise InputError(f"effects: expected a mapping as the config's effects section, got {type(effects).__name__}")
+    pose = np.eye(4) if pose is None else check_pose(pose, "pose")
     section = {"preset": sensor} if isinstance(sensor, str) else dict(sensor)
     config = config_from_dict({"seed": seed, "sensor": section, **({} if effects is None else {"effects": dict(effects)}), "output": {"formats": ["ply"]}})
     out = Frame(frame, config, frame_rng(seed, frame), buffers=scene_buffers(meshes))
-    out.pose = out.pose_at = np.eye(4) if pose is None else np.asarray(pose, np.float64)
+    out.pose = out.pose_at = pose
     run = Run(config, build=False)
     scan_stage(out, run)
     effects_stage(out, run)

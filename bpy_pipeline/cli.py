@@ -10,6 +10,8 @@ come before ``--`` and are ignored). Bad input prints one line and exits with co
 from __future__ import annotations
 
 import argparse
+import signal
+import socket
 import sys
 
 from .errors import InputError
@@ -38,18 +40,30 @@ def add_run_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     return p
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """An ArgumentParser whose errors are one line (``error: PROG: what; --help lists the options``), exit code 2."""
+
+    def error(self, message: str):
+        print(f"error: {self.prog}: {message}; --help lists the options", file=sys.stderr)
+        sys.exit(2)
+
+
 def parser() -> argparse.ArgumentParser:
-    return add_run_arguments(argparse.ArgumentParser(prog="run.py", description="Generate labeled LiDAR frames from a procedural Blender scene."))
+    return add_run_arguments(OneLineParser(prog="run.py", description="Generate labeled LiDAR frames from a procedural Blender scene."))
 
 
-def frame_selection(args, frames: int) -> list[int]:
-    """The frame indices ``--frames-range`` and ``--shard`` select of a run of ``frames`` frames."""
-    selected = list(range(frames))
+def frame_selection(args, frames: int) -> range:
+    """The frame indices ``--frames-range`` and ``--shard`` select of a run of ``frames`` frames, as a range
+    (never a list: a run may have up to 10**9 frames)."""
+    selected = range(frames)
     if args.frames_range:
+        parts = args.frames_range.split(":")
         try:
-            a, b = (int(v) if v else d for v, d in zip(args.frames_range.split(":"), (0, frames)))
+            if len(parts) != 2:
+                raise ValueError
+            a, b = (int(v) if v.strip() else d for v, d in zip(parts, (0, frames)))
         except ValueError:
-            raise InputError(f"--frames-range: expected A:B (frame indices, B excluded), got {args.frames_range!r}") from None
+            raise InputError(f"--frames-range: expected A:B (frame indices, B excluded; no step), got {args.frames_range!r}") from None
         if not 0 <= a < b <= frames:
             raise InputError(f"--frames-range: expected 0 <= A < B <= {frames} (the run's frames), got {args.frames_range}")
         selected = selected[a:b]
@@ -60,8 +74,15 @@ def frame_selection(args, frames: int) -> list[int]:
             raise InputError(f"--shard: expected I/N (the I-th of N parts, 0-based), got {args.shard!r}") from None
         if not 0 <= i < n:
             raise InputError(f"--shard: expected 0 <= I < N, got {args.shard}")
-        selected = split(selected, n)[i]
+        selected = shard_of(selected, i, n)
     return selected
+
+
+def shard_of(frames: range, i: int, parts: int) -> range:
+    """Part ``i`` of :func:`split` ``(frames, parts)`` without making the other parts."""
+    size, extra = divmod(len(frames), parts)
+    start = i * size + min(i, extra)
+    return frames[start : start + size + (i < extra)]
 
 
 def split(frames: list[int], parts: int) -> list[list[int]]:
@@ -93,8 +114,14 @@ def load_run_config(args):
     return load_config(args.config, overrides)
 
 
-def progress(total: int):
-    """A per-frame log function: a tqdm bar on a terminal (frames done, rate, ETA), else one line per frame."""
+def progress(total: int, estimate=None):
+    """A per-frame log function: a tqdm bar on a terminal (frames done, rate, ETA), else one line per frame.
+
+    estimate : the run's :class:`~.estimate.Estimate`; its seconds per frame give the ETA until frames are
+        measured (tqdm's own rate takes over from the first frame on); a line with it is logged first
+    """
+    if estimate is not None:
+        print(f"note: {estimate.line()}", flush=True)  # stdout: stderr holds only warnings and the one error line
     if sys.stderr.isatty():
         try:
             from tqdm import tqdm
@@ -102,6 +129,8 @@ def progress(total: int):
             tqdm = None
         if tqdm is not None:
             bar = tqdm(total=total, unit="frame", file=sys.stderr)
+            if estimate is not None:
+                bar.set_postfix_str(f"estimated {estimate.seconds:.0f} s")
 
             def log(text: str) -> None:
                 if text.startswith("frame "):
@@ -116,15 +145,22 @@ def progress(total: int):
 
 def run_main(args) -> int:
     """``run``: make the selected frames of the run into ``--out``; returns the exit code."""
+    if not args.out.strip():
+        raise InputError("--out: empty; give a folder (default: ./out)")
+    if not 1 <= args.workers <= MAX_WORKERS:
+        raise InputError(f"--workers: must be 1 .. {MAX_WORKERS}, got {args.workers}")
     config = load_run_config(args)
     frames = frame_selection(args, config.frames)
     mode = "join" if args.join else "resume" if args.resume else "overwrite" if args.overwrite else "new"
-    if args.workers < 1:
-        raise InputError(f"--workers: must be >= 1, got {args.workers}")
+    from .estimate import check_limits, estimate_run
+
+    estimate = None if args.join else check_limits(estimate_run(config, len(frames)), config)  # before any work
+    if args.ray:
+        check_ray_address(args.ray)
     if args.workers > 1 or args.ray:
         from .parallel import run_parallel
 
-        return run_parallel(config, args.out, frames, mode, workers=args.workers, ray_address=args.ray, log=progress(len(frames)))
+        return run_parallel(config, args.out, frames, mode, workers=args.workers, ray_address=args.ray, log=progress(len(frames), estimate))
     try:
         import bpy
     except ImportError:
@@ -132,18 +168,59 @@ def run_main(args) -> int:
     bpy.ops.wm.read_factory_settings(use_empty=True)
     from .pipeline import run
 
-    run(config, args.out, log=progress(len(frames)), frames=frames, mode=mode)
+    run(config, args.out, log=progress(len(frames), estimate), frames=frames, mode=mode)
     return 0
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Run the pipeline; returns the process exit code (2 on bad input)."""
-    args = parser().parse_args(script_arguments(sys.argv if argv is None else argv))
+MAX_WORKERS = 256
+RAY_CONNECT_TIMEOUT_S = 10.0  # --ray HOST:PORT: the head must answer within this
+
+
+def check_ray_address(address: str, timeout: float = RAY_CONNECT_TIMEOUT_S) -> None:
+    """Refuse, within ``timeout`` seconds, a ``--ray HOST:PORT`` nobody answers at (Ray itself retries for ever)."""
+    if address == "auto":
+        return
+    host, sep, port = address.rpartition(":")
+    if not sep or not host or not port.isdigit() or not 0 < int(port) < 65536:
+        raise InputError(f"--ray: expected auto or HOST:PORT (the head's address, port 1..65535), got {address!r}")
     try:
-        return run_main(args)
+        socket.create_connection((host.strip("[]"), int(port)), timeout=timeout).close()
+    except (OSError, UnicodeError) as err:
+        why = "no answer" if isinstance(err, TimeoutError) else (getattr(err, "strerror", None) or str(err) or type(err).__name__)
+        raise InputError(f"--ray: no Ray head answers at {address} within {timeout:g} s ({why}); start one with `ray start --head --port={port}`") from None
+
+
+class Terminated(BaseException):
+    """SIGTERM, raised in the main thread so that the run unwinds as on Ctrl-C (frames kept, lock released)."""
+
+
+def _terminate(signum, frame) -> None:
+    raise Terminated()
+
+
+def guarded(func, args) -> int:
+    """``func(args)`` with bad input, Ctrl-C and SIGTERM turned into one line and an exit code (2, 130, 143)."""
+    try:
+        previous = signal.signal(signal.SIGTERM, _terminate)
+    except ValueError:  # not the main thread
+        previous = None
+    try:
+        return func(args)
     except InputError as err:
         print(f"error: {err}", file=sys.stderr)
         return err.exit_code
     except KeyboardInterrupt:
         print("interrupted: every frame written so far is committed; --resume continues the run", file=sys.stderr)
         return 130
+    except Terminated:
+        print("terminated (SIGTERM): every frame written so far is committed; --resume continues the run", file=sys.stderr)
+        return 143
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the pipeline; returns the process exit code (2 on bad input, 130 on Ctrl-C, 143 on SIGTERM)."""
+    args = parser().parse_args(script_arguments(sys.argv if argv is None else argv))
+    return guarded(run_main, args)

@@ -284,6 +284,24 @@ class LabelsConfig:
 
 
 @dataclass(frozen=True)
+class LimitsConfig:
+    """``limits``: the most work a run may ask for; above any, the run is refused before Blender builds
+    anything, with the estimate's figures and the key to raise (bpy_pipeline/estimate.py). Never
+    changes a frame's bytes (not part of the run key)."""
+
+    rays_per_frame: float = 5e7  # every ray of every sensor of a frame (the thesis scanner at full resolution: 2.3e7)
+    triangles: float = 5e7  # triangles of a frame's scene, estimated from the config
+    objects: float = 1e4  # objects of a frame's scene (placed people, cars, shapes, ...)
+    seconds: float = 7 * 86400.0  # estimated seconds of the selected frames in one process
+    bytes: float = 1e12  # estimated bytes written by the selected frames
+
+
+MAX_FRAMES = 10**9  # frame indices are 6+ digit file names and records; a billion frames is centuries of scanning
+MAX_CONFIG_BYTES = 16 << 20  # a config file larger than this is refused before it is parsed
+MAX_CONFIG_DEPTH = 64  # nesting of mappings and lists in a config (the deepest real one is under 10)
+
+
+@dataclass(frozen=True)
 class Config:
     seed: int = 0
     frames: int = 1
@@ -295,6 +313,7 @@ class Config:
     effects: EffectsConfig = field(default_factory=EffectsConfig)
     output: OutputConfig = field(default_factory=OutputConfig)
     labels: LabelsConfig = field(default_factory=LabelsConfig)
+    limits: LimitsConfig = field(default_factory=LimitsConfig)
 
 
 # ----------------------------------------------------------------------------- validation
@@ -541,8 +560,13 @@ def config_from_dict(data) -> Config:
     data["effects"] = realistic_effects(data.get("effects"), spec)  # the preset's effects profile unless effects.ideal
     config = from_dict(Config, data, "")
     config = dataclasses.replace(config, scene=scene, sensor=sensor)
-    if config.frames < 1:
-        raise InputError(f"frames: must be >= 1, got {config.frames}")
+    if not 1 <= config.frames <= MAX_FRAMES:
+        raise InputError(f"frames: must be 1 .. {MAX_FRAMES:,} (a billion frames is centuries of scanning; run parts of a larger set as separate runs), got {config.frames}")
+    for name in (f.name for f in dataclasses.fields(LimitsConfig)):
+        if not getattr(config.limits, name) > 0:
+            raise InputError(f"limits.{name}: must be > 0, got {getattr(config.limits, name)}")
+    if config.output.kitti.val_fraction is not None and not 0.0 <= config.output.kitti.val_fraction < 1.0:
+        raise InputError(f"output.kitti.val_fraction: must be >= 0 and < 1 (the share of frames in val; 0: none), got {config.output.kitti.val_fraction}")
     if config.seed < 0:
         raise InputError(f"seed: must be >= 0, got {config.seed}")
     if config.threads < 0:
@@ -646,6 +670,7 @@ def apply_override(data: dict, assignment: str) -> None:
     if not sep or not key.strip():
         raise InputError(f"--set {assignment!r}: expected key.path=value")
     try:
+        check_yaml_depth(text, f"--set {key}")
         value = yaml.safe_load(text)
     except yaml.YAMLError:
         raise InputError(f"--set {key}: the value {text!r} is not valid YAML") from None
@@ -671,12 +696,19 @@ def read_config_file(path: str | Path) -> dict:
     """Raw mapping from a YAML file; ``InputError`` naming the file when missing or malformed."""
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        if path.is_dir():
+            raise InputError(f"{path}: is a folder, not a config file")
+        with open(path, "rb") as handle:  # bounded: /dev/zero or a huge file is refused, not read for ever
+            raw = handle.read(MAX_CONFIG_BYTES + 1)
+        if len(raw) > MAX_CONFIG_BYTES:
+            raise InputError(f"{path}: larger than {MAX_CONFIG_BYTES >> 20} MB, not a config file")
+        text = raw.decode("utf-8")
     except OSError as err:
         raise InputError(f"{path}: cannot read the config file ({err.strerror or err})") from None
     except UnicodeDecodeError as err:
         raise InputError(f"{path}: not UTF-8 text (byte {err.start}); save the config as UTF-8 YAML") from None
     try:
+        check_yaml_depth(text, str(path))
         data = yaml.safe_load(text)
     except yaml.YAMLError as err:
         mark = getattr(err, "problem_mark", None)
@@ -687,12 +719,37 @@ def read_config_file(path: str | Path) -> dict:
     return data or {}
 
 
+def check_yaml_depth(text: str, where: str) -> None:
+    """``InputError`` when the YAML ``text`` nests mappings and lists deeper than :data:`MAX_CONFIG_DEPTH`
+    (read as events, without building the tree: PyYAML's tree builder recurses)."""
+    depth = 0
+    for event in yaml.parse(text, Loader=yaml.SafeLoader):
+        if isinstance(event, (yaml.MappingStartEvent, yaml.SequenceStartEvent)):
+            depth += 1
+            if depth > MAX_CONFIG_DEPTH:
+                raise InputError(f"{where}: nested deeper than {MAX_CONFIG_DEPTH} levels, not a config")
+        elif isinstance(event, (yaml.MappingEndEvent, yaml.SequenceEndEvent)):
+            depth -= 1
+
+
+def check_tree_depth(data, where: str = "config") -> None:
+    """``InputError`` when a config mapping nests deeper than :data:`MAX_CONFIG_DEPTH` (iterative; a cycle counts as deep)."""
+    stack = [(data, 1)]
+    while stack:
+        node, depth = stack.pop()
+        if isinstance(node, (dict, list, tuple)):
+            if depth > MAX_CONFIG_DEPTH:
+                raise InputError(f"{where}: nested deeper than {MAX_CONFIG_DEPTH} levels, not a config")
+            stack.extend((child, depth + 1) for child in (node.values() if isinstance(node, dict) else node))
+
+
 def load_config(path_or_dict: str | Path | dict | None = None, overrides: list[str] = ()) -> Config:
     """The validated config of a YAML file, or of a mapping as read from one (``None``: the defaults),
     with ``key.path=value`` overrides applied (values parsed as YAML)."""
     import copy
 
     if isinstance(path_or_dict, dict):
+        check_tree_depth(path_or_dict)
         data = copy.deepcopy(path_or_dict)
     else:
         data = read_config_file(path_or_dict) if path_or_dict else {}

@@ -25,11 +25,13 @@ from __future__ import annotations
 
 import datetime
 import errno
+import fcntl
 import hashlib
 import json
 import os
 import shutil
 import socket
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
@@ -52,6 +54,7 @@ def run_key(config: Config) -> str:
     data = config_to_dict(config)
     data.pop("frames", None)
     data.pop("threads", None)
+    data.pop("limits", None)  # bounds on the work, never on a frame's bytes
     return hashlib.sha256(json.dumps(data, sort_keys=True, default=to_json).encode()).hexdigest()
 
 
@@ -84,6 +87,117 @@ def _error(path: Path, doing: str, err: OSError) -> InputError:
     return InputError(f"--out: cannot {doing} {path} ({err.strerror or err})")
 
 
+# ---------------------------------------------------------------------------- the lock
+LOCK_TRIES = 20  # attempts to take a lock that keeps changing under us before giving up
+GARBAGE_LOCK_AGE_S = 60.0  # an unreadable lock file nobody holds is taken over once this old
+
+
+def _holder(path: Path) -> dict | None:
+    """The lock file's JSON (``None`` when empty, unreadable or not a mapping)."""
+    try:
+        holder = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+    return holder if isinstance(holder, dict) else None
+
+
+def _same_file(fd: int, path: Path) -> bool:
+    try:
+        a, b = os.fstat(fd), os.stat(path)
+    except FileNotFoundError:
+        return False
+    return (a.st_dev, a.st_ino) == (b.st_dev, b.st_ino)
+
+
+def _flock(fd: int, path: Path) -> bool:
+    """Try an exclusive ``flock`` without waiting: True when taken, False when another process holds it."""
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return False
+    except OSError as err:
+        raise InputError(f"--out: {path}: the file system does not support file locks ({err.strerror or err}); write to a local or NFSv4 folder") from None
+    return True
+
+
+def take_lock(path: Path, say: Callable[[str], None] = lambda text: None) -> int:
+    """Take the run lock ``path``; returns the open file descriptor that holds it (keep it open for the run).
+
+    The lock is the file's ``flock``, held for the whole run and dropped by the kernel when the process dies;
+    the file's JSON (``pid``, ``host``, ``started``) only says who holds it. A new lock is written in full to a
+    private file and flock-ed before :func:`os.link` makes it visible, so no reader sees it empty. A lock file
+    whose flock is free is stale: it is replaced by an atomic rename of our own file over it *while we hold
+    its flock*, and whoever takes a flock re-checks that the file is still the one at ``path``; so two
+    processes taking over the same stale lock cannot both win. Refused (one line) when its flock is held,
+    when it names a live pid on this host (a run that does not flock), when it names another host (whose
+    flock this file system may not share), and when it is empty or unreadable but younger than
+    :data:`GARBAGE_LOCK_AGE_S`.
+    """
+    me = {"pid": os.getpid(), "host": socket.gethostname(), "started": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")}
+    mine = path.with_name(f"{path.name}.tmp-{os.getpid()}-{os.urandom(4).hex()}")
+    try:
+        fd = os.open(mine, os.O_RDWR | os.O_CREAT | os.O_EXCL, 0o644)
+    except OSError as err:
+        raise _error(path, "create the lock file", err) from None
+    try:
+        os.write(fd, json.dumps(me).encode())
+        os.fsync(fd)
+        _flock(fd, path)  # ours alone: nobody else knows the file
+        for _ in range(LOCK_TRIES):
+            try:
+                os.link(mine, path)  # atomic: fails when a lock exists
+                return fd
+            except FileExistsError:
+                pass
+            except OSError as err:
+                raise _error(path, "create the lock file", err) from None
+            try:
+                old = os.open(path, os.O_RDONLY)
+            except FileNotFoundError:
+                continue  # released meanwhile: try again
+            try:
+                if not _flock(old, path):
+                    holder = _holder(path) or {}
+                    raise InputError(f"--out: {path.parent} is being written by pid {holder.get('pid', '?')} on {holder.get('host', '?')} (since {holder.get('started', '?')}); wait for it, or stop that run")
+                if not _same_file(old, path):
+                    continue  # replaced or removed since we opened it: look again
+                holder = _holder(path)
+                if holder is None:
+                    age = time.time() - os.fstat(old).st_mtime
+                    if age < GARBAGE_LOCK_AGE_S:
+                        raise InputError(f"--out: {path} is empty or unreadable and nobody holds it ({age:.0f} s old; taken over from {GARBAGE_LOCK_AGE_S:.0f} s on); remove {path} if no run writes {path.parent}")
+                    say(f"warning: {path.parent}: taking over an unreadable lock nobody holds ({age:.0f} s old)")
+                elif holder.get("host") != me["host"]:
+                    raise InputError(f"--out: {path.parent} is locked by pid {holder.get('pid', '?')} on {holder.get('host', '?')} (since {holder.get('started', '?')}); this host cannot tell whether that run lives: remove {path} if it is dead")
+                elif isinstance(holder.get("pid"), int) and holder["pid"] != me["pid"] and _pid_alive(holder["pid"]):
+                    raise InputError(f"--out: {path.parent} is locked by the live pid {holder['pid']} on this host (since {holder.get('started', '?')}), which holds no file lock; stop it, or remove {path} if it is not a bpy_pipeline run")
+                else:
+                    say(f"warning: {path.parent}: taking over the lock of a run that ended without releasing it (pid {holder.get('pid', '?')})")
+                try:
+                    os.rename(mine, path)  # atomic, under the old lock's flock: a late taker finds another file at path
+                except OSError as err:
+                    raise _error(path, "replace the stale lock file", err) from None
+                return fd
+            finally:
+                os.close(old)
+        raise InputError(f"--out: {path} kept changing while {LOCK_TRIES} attempts tried to take it; another process is starting on {path.parent}")
+    except BaseException:
+        os.close(fd)
+        raise
+    finally:
+        mine.unlink(missing_ok=True)  # linked (or renamed) into place, or not needed
+
+
+def release_lock(path: Path, fd: int) -> None:
+    """Remove the lock file ``path`` if it is still the one ``fd`` holds, then drop the flock."""
+    try:
+        if fd >= 0 and _same_file(fd, path):
+            path.unlink(missing_ok=True)
+    finally:
+        if fd >= 0:
+            os.close(fd)
+
+
 @dataclass
 class Dataset:
     """An output folder opened for writing frames (see the module docstring); use :meth:`open` as a context manager.
@@ -98,6 +212,7 @@ class Dataset:
     log: Callable[[str], None] | None = None
     committed: dict[int, dict] = field(default_factory=dict)
     locked: bool = False
+    lock_fd: int = -1  # the open, flock-ed lock file while locked
     created: bool = False  # the folder did not exist before this run
 
     # ------------------------------------------------------------------ opening
@@ -135,32 +250,14 @@ class Dataset:
         return dataset
 
     def _lock(self) -> None:
-        path = self.out / LOCK
-        me = {"pid": os.getpid(), "host": socket.gethostname(), "started": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")}
-        for _ in range(2):
-            try:
-                fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
-            except FileExistsError:
-                try:
-                    holder = json.loads(path.read_text())
-                except (OSError, ValueError):
-                    holder = {}
-                if holder.get("host") == me["host"] and isinstance(holder.get("pid"), int) and not _pid_alive(holder["pid"]):
-                    self._say(f"warning: {self.out}: taking over the lock of a run that ended without releasing it (pid {holder['pid']})")
-                    path.unlink(missing_ok=True)
-                    continue
-                raise InputError(f"--out: {self.out} is being written by pid {holder.get('pid', '?')} on {holder.get('host', '?')} (since {holder.get('started', '?')}); wait for it, or remove {path} if that run is dead") from None
-            except OSError as err:
-                raise _error(path, "create the lock file", err) from None
-            with os.fdopen(fd, "w") as handle:
-                json.dump(me, handle)
-            self.locked = True
-            return
+        """Take ``OUT/.lock`` for this run, or refuse with one line (see :func:`take_lock`)."""
+        self.lock_fd = take_lock(self.out / LOCK, self._say)
+        self.locked = True
 
     def _unlock(self) -> None:
         if self.locked:
-            (self.out / LOCK).unlink(missing_ok=True)
-            self.locked = False
+            release_lock(self.out / LOCK, self.lock_fd)
+            self.lock_fd, self.locked = -1, False
 
     def _prepare(self) -> None:
         """Refuse, resume or overwrite an existing run; clean up what a killed run left; write the manifest."""
@@ -175,6 +272,9 @@ class Dataset:
         self._clean_partial_frames()
         if old is not None:  # resume
             self._check_same_run(old)
+            had = (old.get("config") or {}).get("frames")
+            if isinstance(had, int) and self.config.frames < had:  # a resume may extend a run, never shrink it
+                raise InputError(f"--resume: {self.out} holds a run of {had} frames, this config has frames: {self.config.frames}; give --frames {had} or more (more extends the run), or --overwrite")
             self.committed = self._verified(self._read_records())
             manifest = {**old, "config": config_to_dict(self.config)}  # the frame count may have grown
         else:
@@ -203,7 +303,7 @@ class Dataset:
         if manifest.get("run_key") != run_key(self.config):
             old = manifest.get("config") or {}
             new = config_to_dict(self.config)
-            keys = [k for k in sorted(set(old) | set(new)) if k not in ("frames", "threads") and old.get(k) != new.get(k)]
+            keys = [k for k in sorted(set(old) | set(new)) if k not in ("frames", "threads", "limits") and old.get(k) != new.get(k)]
             raise InputError(f"--resume: {self.out} holds a run with another config or seed (differs in: {', '.join(keys) or 'versions'}); give --overwrite to replace it")
 
     def _remove_old(self, manifest: dict) -> None:

@@ -83,7 +83,14 @@ def run_parallel(config: Config, out: str, frames: list[int], mode: str, workers
         threads = max(1, (config.threads or available_cores()) // len(ranges))
         env = {**os.environ, **SINGLE_THREAD_ENV}
         procs = [subprocess.Popen(worker_command(out, r, threads), env=env, cwd=os.getcwd()) for r in ranges]
-        codes = [p.wait() for p in procs]
+        try:
+            codes = [p.wait() for p in procs]
+        except BaseException:  # Ctrl-C or SIGTERM: the workers stop too (each keeps its committed frames)
+            for p in procs:
+                p.terminate()
+            for p in procs:
+                p.wait()
+            raise
     failed = [f"{r[0]}:{r[-1] + 1} (exit {c})" for r, c in zip(ranges, codes) if c != 0]
     if failed:
         log(f"warning: workers failed for frames {', '.join(failed)}; their committed frames are kept, --resume makes the rest")

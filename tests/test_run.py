@@ -106,7 +106,7 @@ BAD = {
     "config not utf-8": (["--config", "{tmp}/latin1.yaml"], "latin1.yaml: not UTF-8 text"),
     "scene as a scalar": (["--set", "scene=railway"], "scene: expected a mapping"),
     "sensor as a list": (["--set", "sensor=[1, 2]"], "sensor: expected a mapping"),
-    "rays beyond memory": (["--set", "sensor.preset=railway_tls", "--set", "sensor.sampling_factor=6.3"], "rays per frame need about"),
+    "rays beyond memory": (["--set", "sensor.preset=railway_tls", "--set", "sensor.sampling_factor=6.3", "--set", "limits.rays_per_frame=1e10"], "rays per frame need about"),
     "a hall of 100000 people": (["--set", "scene.builder=industrial_hall", "--set", "scene.people={mean: 100000, std: 0, min: 0, max: 100000}"], "scene.people.max: must be <= 500"),
     "scene out of range": (["--set", "scene.builder=primitives", "--set", "sensor.preset=vlp16", "--set", "sensor.position=[5000, 0, 1]"], "no object of the scene lies within max_range"),
 }

@@ -114,6 +114,9 @@ def read_urdf(path: str | Path) -> UrdfArm:
         parent, child = joint.find("parent"), joint.find("child")
         if parent is None or child is None:
             raise InputError(f"{where}: joint {joint.get('name')!r}: needs <parent link> and <child link>")
+        for end in (parent, child):
+            if end.get("link") not in links:
+                raise InputError(f"{where}: joint {joint.get('name')!r}: link {end.get('link')!r} is not a <link> of the file")
         children.setdefault(parent.get("link"), []).append(joint)
     child_links = {j.find("child").get("link") for j in joints}
     roots = [name for name in links if name not in child_links]
@@ -135,6 +138,7 @@ def read_urdf(path: str | Path) -> UrdfArm:
     add_visuals(roots[0], np.eye(4))
     pending = np.eye(4)  # fixed joints since the last moving one (their transform into the current link)
     current = roots[0]
+    seen = {current}
     while True:
         following = children.get(current, [])
         if not following:
@@ -164,7 +168,7 @@ def read_urdf(path: str | Path) -> UrdfArm:
             else:
                 if limit is None or limit.get("lower") is None or limit.get("upper") is None:
                     raise InputError(f"{here}: a revolute joint needs <limit lower upper>")
-                lo, hi = float(limit.get("lower")), float(limit.get("upper"))
+                lo, hi = (_numbers(limit.get(k), f"{here}.limit.{k}", count=1)[0] for k in ("lower", "upper"))
                 if not lo < hi:
                     raise InputError(f"{here}.limit: lower must be below upper, got {[lo, hi]}")
             lower.append(lo)
@@ -175,6 +179,9 @@ def read_urdf(path: str | Path) -> UrdfArm:
             add_visuals(child, pending)
         else:
             raise InputError(f"{here}: joint type {kind!r} cannot be posed (revolute, continuous or fixed)")
+        if child in seen:
+            raise InputError(f"{here}: link {child!r} comes twice along the chain (a loop); a serial chain visits each link once")
+        seen.add(child)
         current = child
     if not names:
         raise InputError(f"{where}: no revolute joint: nothing to pose")

@@ -316,17 +316,24 @@ def read_las(path: str | os.PathLike) -> np.ndarray:
         )
     fields = list(PDRF6_DTYPE.descr)
     position = int(header["header_size"])
-    for _ in range(int(header["number_of_vlrs"])):
+    for k in range(int(header["number_of_vlrs"])):
+        if position + VLR_HEADER_DTYPE.itemsize > len(raw):
+            raise InputError(f"{path}: LAS header number_of_vlrs claims {int(header['number_of_vlrs'])} VLRs; the file ends in VLR {k}")
         vlr = np.frombuffer(raw, VLR_HEADER_DTYPE, count=1, offset=position)[0]
         position += VLR_HEADER_DTYPE.itemsize
         size = int(vlr["record_length_after_header"])
+        if position + size > len(raw):
+            raise InputError(f"{path}: LAS VLR {k} claims {size} bytes; the file ends before them")
         if vlr["user_id"] == b"LASF_Spec" and int(vlr["record_id"]) == 4:
             for d in np.frombuffer(raw, EXTRA_BYTES_DTYPE, count=size // EXTRA_BYTES_DTYPE.itemsize, offset=position):
                 name = d["name"].decode("ascii", "replace")
                 code = EXTRA_BYTES_TYPES.get(int(d["data_type"]))
                 fields.append((name, code) if code else (f"_skip{len(fields)}", f"V{int(d['options'])}"))
         position += size
-    record = np.dtype(fields)
+    try:
+        record = np.dtype(fields)
+    except (ValueError, TypeError) as err:
+        raise InputError(f"{path}: LAS Extra Bytes VLR describes fields numpy cannot lay out ({err})") from None
     length = int(header["point_data_record_length"])
     if record.itemsize > length:
         raise InputError(f"{path}: records of {length} bytes are shorter than their {record.itemsize}-byte description")
@@ -334,8 +341,8 @@ def read_las(path: str | os.PathLike) -> np.ndarray:
                        "offsets": [record.fields[name][1] for name in record.names], "itemsize": length})
     n = int(header["point_count"])
     start = int(header["offset_to_point_data"])
-    if start + n * length > len(raw):
-        raise InputError(f"{path}: truncated LAS file: {n} points of {length} bytes do not fit")
+    if start + n * length > len(raw) or start < int(header["header_size"]):
+        raise InputError(f"{path}: LAS header point_count claims {n} points of {length} bytes from byte {start}; the file holds {max(len(raw) - start, 0) // max(length, 1)}")
     records = np.frombuffer(raw, record, count=n, offset=start)
     out = np.zeros(n, POINT_DTYPE)
     for axis, name in enumerate("xyz"):

@@ -65,18 +65,26 @@ def write_pcd(path: str | os.PathLike, points: np.ndarray) -> Path:
     return path
 
 
-def read_pcd(path: str | os.PathLike) -> np.ndarray:
-    """Read a binary or ASCII PCD file as ``(n,)`` POINT_DTYPE (fields matched by name; others zero)."""
+MAX_PCD_HEADER = 1 << 16  # bytes before DATA; a longer header is not a PCD file
+PCD_NUMPY = {("F", 4): "<f4", ("F", 8): "<f8", ("U", 1): "u1", ("U", 2): "<u2", ("U", 4): "<u4", ("U", 8): "<u8",
+             ("I", 1): "i1", ("I", 2): "<i2", ("I", 4): "<i4", ("I", 8): "<i8"}  # fmt: skip
+
+
+def read_pcd_fields(path: str | os.PathLike) -> dict[str, np.ndarray]:
+    """The fields of a binary or ASCII PCD file, ``{name: (n,) or (n, count) array}``, with the header checked
+    against the bytes: FIELDS, SIZE, TYPE and COUNT agree, ``POINTS`` = ``WIDTH`` x ``HEIGHT``, and the data
+    holds exactly ``POINTS`` records (binary: ``POINTS`` x record size bytes; ASCII: ``POINTS`` rows of one
+    value per field column). A lie is an ``InputError`` naming the file, the field, the claim and what was found."""
     path = Path(path)
     try:
         raw = path.read_bytes()
     except OSError as err:
-        raise InputError(f"{path}: cannot read PCD file ({err.strerror})") from None
+        raise InputError(f"{path}: cannot read PCD file ({err.strerror or err})") from None
     header, position = {}, 0
     while True:
-        end = raw.find(b"\n", position)
+        end = raw.find(b"\n", position, MAX_PCD_HEADER)
         if end < 0:
-            raise InputError(f"{path}: PCD header has no DATA line")
+            raise InputError(f"{path}: PCD header has no DATA line (in its first {MAX_PCD_HEADER} bytes)")
         words = raw[position:end].decode("ascii", "replace").split()
         position = end + 1
         if words and not words[0].startswith("#"):
@@ -84,24 +92,62 @@ def read_pcd(path: str | os.PathLike) -> np.ndarray:
             if words[0].upper() == "DATA":
                 break
     try:
-        fields, sizes, types = header["FIELDS"], [int(s) for s in header["SIZE"]], header["TYPE"]
+        fields, sizes, types = header["FIELDS"], [int(x) for x in header["SIZE"]], [t.upper() for t in header["TYPE"]]
         counts = [int(c) for c in header.get("COUNT", ["1"] * len(fields))]
         n = int(header["POINTS"][0])
-        kind = header["DATA"][0]
+        kind = header["DATA"][0].lower()
     except (KeyError, ValueError, IndexError):
-        raise InputError(f"{path}: PCD header lacks FIELDS, SIZE, TYPE, POINTS or DATA") from None
-    dtype = np.dtype([(f, f"<{t.lower()}{s}", (c,)) if c > 1 else (f, f"<{t.lower()}{s}") for f, s, t, c in zip(fields, sizes, types, counts)])
+        raise InputError(f"{path}: PCD header lacks FIELDS, SIZE, TYPE, POINTS or DATA, or they are not numbers") from None
+    if not (len(fields) == len(sizes) == len(types) == len(counts)) or not fields:
+        raise InputError(f"{path}: PCD header: FIELDS ({len(fields)}), SIZE ({len(sizes)}), TYPE ({len(types)}) and COUNT ({len(counts)}) must list the same fields")
+    if len(set(fields)) != len(fields):
+        raise InputError(f"{path}: PCD header: FIELDS names a field twice ({' '.join(fields)})")
+    for name, size, kind_, count in zip(fields, sizes, types, counts):
+        if (kind_, size) not in PCD_NUMPY or count < 1:
+            raise InputError(f"{path}: PCD field {name!r}: TYPE {kind_} SIZE {size} COUNT {count} is not a known type (F 4/8, I or U 1/2/4/8, COUNT >= 1)")
+    if n < 0:
+        raise InputError(f"{path}: PCD POINTS: must be >= 0, got {n}")
+    try:
+        width, height = int(header.get("WIDTH", [n])[0]), int(header.get("HEIGHT", [1])[0])
+    except ValueError:
+        raise InputError(f"{path}: PCD WIDTH and HEIGHT must be integers") from None
+    if width * height != n:
+        raise InputError(f"{path}: PCD header: WIDTH x HEIGHT = {width} x {height} = {width * height}, but POINTS says {n}")
+    dtype = np.dtype([(f, PCD_NUMPY[(t, s)], (c,)) if c > 1 else (f, PCD_NUMPY[(t, s)]) for f, s, t, c in zip(fields, sizes, types, counts)])
     if kind == "binary":
-        if len(raw) - position < n * dtype.itemsize:
-            raise InputError(f"{path}: truncated PCD: {n} points of {dtype.itemsize} bytes do not fit")
+        have = len(raw) - position
+        if have != n * dtype.itemsize:
+            raise InputError(f"{path}: PCD POINTS claims {n} points of {dtype.itemsize} bytes ({n * dtype.itemsize} bytes); the data holds {have} bytes ({have / dtype.itemsize:.6g} points)")
         data = np.frombuffer(raw, dtype, count=n, offset=position)
-    elif kind == "ascii":
-        table = np.loadtxt(raw[position:].decode("ascii").splitlines(), ndmin=2) if n else np.zeros((0, len(fields)))
-        data = {f: table[:, i] for i, f in enumerate(fields)}
-    else:
-        raise InputError(f"{path}: PCD DATA {kind!r} is not read here (binary or ascii)")
+        return {f: data[f] for f in fields}
+    if kind == "ascii":
+        columns = sum(counts)
+        rows = [line.split() for line in raw[position:].decode("ascii", "replace").splitlines() if line.strip()]
+        if len(rows) != n:
+            raise InputError(f"{path}: PCD POINTS claims {n} points; the ASCII data holds {len(rows)} rows")
+        bad = next((k for k, r in enumerate(rows) if len(r) != columns), None)
+        if bad is not None:
+            raise InputError(f"{path}: PCD ASCII row {bad}: {len(rows[bad])} values, the fields need {columns}")
+        try:
+            table = np.array(rows, np.float64).reshape(n, columns)
+        except ValueError:
+            raise InputError(f"{path}: PCD ASCII data holds a value that is not a number") from None
+        out, at = {}, 0
+        for f, c in zip(fields, counts):
+            out[f] = table[:, at] if c == 1 else table[:, at : at + c]
+            at += c
+        return out
+    raise InputError(f"{path}: PCD DATA {kind!r} is not read here (binary or ascii; re-save with pcl_convert_pcd_ascii_binary)")
+
+
+def read_pcd(path: str | os.PathLike) -> np.ndarray:
+    """Read a binary or ASCII PCD file as ``(n,)`` POINT_DTYPE (fields matched by name; others zero; :func:`read_pcd_fields` checks it)."""
+    data = read_pcd_fields(path)
+    n = len(next(iter(data.values())))
     out = np.zeros(n, POINT_DTYPE)
     for name in POINT_DTYPE.names:
-        if name in fields:
+        if name in data:
+            if data[name].ndim != 1:
+                raise InputError(f"{path}: PCD field {name!r} has COUNT {data[name].shape[1]}; the point record holds one value")
             out[name] = data[name]
     return out

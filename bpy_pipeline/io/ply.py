@@ -125,6 +125,8 @@ def parse_header(f, path: Path) -> tuple[str, list[tuple[str, int, list[tuple[st
                     raise InputError(f"{path}: unsupported PLY format {fmt!r}; allowed: {', '.join(FORMATS)}")
             elif key == "element":
                 elements.append((words[1], int(words[2]), []))
+                if elements[-1][1] < 0:
+                    raise InputError(f"{path}: PLY element {words[1]!r}: count {words[2]} is negative")
             elif key == "property" and words[1] == "list":
                 elements[-1][2].append((words[4], (PLY_TYPES[words[2]], PLY_TYPES[words[3]])))
             elif key == "property":
@@ -153,34 +155,46 @@ def read_ply(path: str | os.PathLike) -> np.ndarray:
     except OSError as err:
         raise InputError(f"{path}: cannot open PLY file ({err.strerror})") from None
     with f:
-        fmt, elements = parse_header(f, path)
-        order = FORMATS[fmt]
-        for name, count, props in elements:
-            if any(isinstance(code, tuple) for _, code in props):
-                if name == "vertex":
-                    raise InputError(f"{path}: list properties on the vertex element are not supported")
-                if order is not None:
-                    raise InputError(f"{path}: cannot skip element {name!r} with list properties before 'vertex'")
-            dtype = np.dtype([(prop, (order or "<") + code) for prop, code in props if not isinstance(code, tuple)])
+        try:
+            return _read_vertices(f, path)
+        except (ValueError, TypeError) as err:  # a value that is not a number, properties numpy cannot lay out
+            raise InputError(f"{path}: PLY data does not match its header ({str(err).splitlines()[0]})") from None
+
+
+def _read_vertices(f, path: Path) -> np.ndarray:
+    """The vertices of the open PLY file ``f`` (see :func:`read_ply`)."""
+    fmt, elements = parse_header(f, path)
+    order = FORMATS[fmt]
+    for name, count, props in elements:
+        if any(isinstance(code, tuple) for _, code in props):
             if name == "vertex":
-                if order is None:
-                    table = np.loadtxt(f, dtype=np.float64, ndmin=2, max_rows=count) if count else np.zeros((0, len(props)))
-                    if table.shape != (count, len(props)):
-                        raise InputError(f"{path}: expected {count} ASCII vertex rows of {len(props)} values, got {table.shape}")
-                    data = {point_field(prop): table[:, i] for i, (prop, _) in enumerate(props)}
-                else:
-                    arr = np.fromfile(f, dtype=dtype, count=count)
-                    if len(arr) != count:
-                        raise InputError(f"{path}: truncated PLY: {len(arr)} of {count} vertices present")
-                    data = {point_field(prop): arr[prop] for prop in dtype.names}
-                out = np.zeros(count, POINT_DTYPE)
-                for field in POINT_DTYPE.names:
-                    if field in data:
-                        out[field] = data[field]
-                return out
+                raise InputError(f"{path}: list properties on the vertex element are not supported")
+            if order is not None:
+                raise InputError(f"{path}: cannot skip element {name!r} with list properties before 'vertex'")
+        dtype = np.dtype([(prop, (order or "<") + code) for prop, code in props if not isinstance(code, tuple)])
+        if name == "vertex":
             if order is None:
-                for _ in range(count):
-                    f.readline()
+                table = np.loadtxt(f, dtype=np.float64, ndmin=2, max_rows=count) if count else np.zeros((0, len(props)))
+                if table.shape != (count, len(props)):
+                    raise InputError(f"{path}: expected {count} ASCII vertex rows of {len(props)} values, got {table.shape}")
+                data = {point_field(prop): table[:, i] for i, (prop, _) in enumerate(props)}
             else:
-                f.seek(count * dtype.itemsize, os.SEEK_CUR)
+                left = os.fstat(f.fileno()).st_size - f.tell()
+                if count * dtype.itemsize > left:
+                    raise InputError(f"{path}: PLY element vertex claims {count} vertices of {dtype.itemsize} bytes; the file holds {left // max(dtype.itemsize, 1)}")
+                arr = np.fromfile(f, dtype=dtype, count=count)
+                if len(arr) != count:
+                    raise InputError(f"{path}: truncated PLY: {len(arr)} of {count} vertices present")
+                data = {point_field(prop): arr[prop] for prop in dtype.names}
+            out = np.zeros(count, POINT_DTYPE)
+            for field in POINT_DTYPE.names:
+                if field in data:
+                    out[field] = data[field]
+            return out
+        if order is None:
+            for k in range(count):
+                if not f.readline():
+                    raise InputError(f"{path}: PLY element {name!r} claims {count} rows; the file ends after {k}")
+        else:
+            f.seek(count * dtype.itemsize, os.SEEK_CUR)
     raise InputError(f"{path}: PLY file has no vertex element")

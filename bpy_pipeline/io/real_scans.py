@@ -75,16 +75,25 @@ def guess_format(path: Path) -> str:
     raise InputError(f"scene.format: cannot guess the format of {path}; give one of {', '.join(FORMATS)}")
 
 
+MAX_RINGS = 1024  # ring ids of a real scan are below this (the densest spinning LiDARs have 128 channels)
+
+
 def _floats(path: Path, fields: int, what: str) -> np.ndarray:
-    raw = np.fromfile(path, np.float32)
-    if raw.size % fields:
-        raise InputError(f"{path}: {raw.size} floats are not records of {fields} fields ({what})")
-    return raw.reshape(-1, fields).astype(np.float64)
+    """``(n, fields)`` float64 records of a float32 file whose size must be a whole number of records."""
+    size = path.stat().st_size
+    record = 4 * fields
+    if size % record:
+        raise InputError(f"{path}: {size} bytes are not whole records of {fields} fields of float32 ({what}): {size % record} bytes left over")
+    return np.fromfile(path, np.float32).reshape(-1, fields).astype(np.float64)
 
 
 def read_nuscenes(path: Path) -> RealScan:
     data = _floats(path, 5, "nuScenes: x y z intensity ring")
-    ring = data[:, 4].astype(np.int64)
+    ring_values = data[:, 4]
+    bad = ~((ring_values >= 0) & (ring_values < MAX_RINGS) & (ring_values == np.round(ring_values)))
+    if bad.any():
+        raise InputError(f"{path}: field ring: expected whole numbers 0 .. {MAX_RINGS - 1}; record {int(np.flatnonzero(bad)[0])} has {ring_values[bad][0]:g} ({int(bad.sum())} records out of range)")
+    ring = ring_values.astype(np.int64)
     rings = int(ring.max()) + 1 if len(ring) else 0
     organised = rings > 0 and len(data) % rings == 0 and bool((ring == np.tile(np.arange(rings), len(data) // rings)).all())
     return RealScan(
@@ -108,6 +117,8 @@ def read_kitti(path: Path, labels: bool = False) -> RealScan:
         found = label_path(path)
         if found is None:
             raise InputError(f"{path}: no .label file beside it or in ../labels/ (scene.format: semantickitti needs one; use kitti for the scan alone)")
+        if found.stat().st_size % 4:
+            raise InputError(f"{found}: {found.stat().st_size} bytes are not whole uint32 labels: {found.stat().st_size % 4} bytes left over")
         scan.labels = np.fromfile(found, np.uint32)
         if len(scan.labels) != len(data):
             raise InputError(f"{found}: {len(scan.labels)} labels for {len(data)} points of {path}")
@@ -117,8 +128,12 @@ def read_kitti(path: Path, labels: bool = False) -> RealScan:
 def read_npy(path: Path) -> RealScan:
     try:
         array = np.load(path)
-    except (ValueError, OSError) as err:
+    except (ValueError, OSError, EOFError) as err:
         raise InputError(f"{path}: not a numpy array file ({err})") from None
+    if not isinstance(array, np.ndarray):
+        raise InputError(f"{path}: expected one array (.npy), got an archive of several (.npz)")
+    if array.dtype.kind not in "fiu":
+        raise InputError(f"{path}: expected an array of numbers, got {array.dtype}")
     if array.ndim == 3 and array.shape[2] >= 4:
         rings, columns = array.shape[:2]
         flat = array.transpose(1, 0, 2).reshape(-1, array.shape[2]).astype(np.float64)  # column after column
@@ -139,7 +154,13 @@ def _from_fields(fields: dict, path: Path, fmt: str, intensity_scale: float | No
     xyz = np.column_stack([np.asarray(fields[k], np.float64) for k in "xyz"])
     intensity = np.asarray(fields.get("intensity", np.zeros(len(xyz))), np.float64)
     scale = intensity_scale or (255.0 if intensity.max(initial=0) > 1 else 1.0)
-    ring = np.asarray(fields["ring"], np.int64) if "ring" in fields else None
+    ring = None
+    if "ring" in fields:
+        values = np.asarray(fields["ring"], np.float64)
+        bad = ~((values >= 0) & (values < MAX_RINGS) & (values == np.round(values)))
+        if bad.any():
+            raise InputError(f"{path}: field ring: expected whole numbers 0 .. {MAX_RINGS - 1}; point {int(np.flatnonzero(bad)[0])} has {values[bad][0]:g}")
+        ring = values.astype(np.int64)
     notes = [f"{fmt}: taken as the sensor frame (x forward, y left, z up)", f"intensity / {scale:g}"]
     return RealScan(xyz, intensity / scale, ring, None, False, None, fmt, str(path), notes)
 
@@ -162,9 +183,20 @@ def read_las(path: Path) -> RealScan:
     except ImportError:
         raise InputError(f"{path}: reading LAS needs laspy (pip install 'bpy-pipeline[las]')") from None
     try:
+        with laspy.open(str(path)) as reader:
+            header = reader.header
+            claimed, offset, record = int(header.point_count), int(header.offset_to_point_data), int(header.point_format.size)
+        compressed = path.suffix.lower() == ".laz" or bool(getattr(header, "are_points_compressed", False))
+        if not compressed and claimed * record > path.stat().st_size - offset:
+            have = (path.stat().st_size - offset) // max(record, 1)
+            raise InputError(f"{path}: LAS header point count claims {claimed} records of {record} bytes; the file holds {have}")
         las = laspy.read(str(path))
-    except Exception as err:
-        raise InputError(f"{path}: not a readable LAS file ({err})") from None
+    except InputError:
+        raise
+    except Exception as err:  # noqa: BLE001 - laspy raises many types on bad files
+        raise InputError(f"{path}: not a readable LAS file ({type(err).__name__}: {str(err).splitlines()[0] if str(err) else ''})") from None
+    if len(las.points) != claimed:
+        raise InputError(f"{path}: LAS header point count claims {claimed} records; {len(las.points)} were read")
     fields = {"x": las.x, "y": las.y, "z": las.z, "intensity": las.intensity}
     names = set(las.point_format.dimension_names)
     if "ring" in names:
@@ -172,40 +204,14 @@ def read_las(path: Path) -> RealScan:
     return _from_fields(fields, path, "las", 65535.0)
 
 
-PCD_TYPES = {("F", 4): "<f4", ("F", 8): "<f8", ("U", 1): "u1", ("U", 2): "<u2", ("U", 4): "<u4", ("I", 1): "i1", ("I", 2): "<i2", ("I", 4): "<i4", ("U", 8): "<u8", ("I", 8): "<i8"}
-
-
 def read_pcd(path: Path) -> RealScan:
-    raw = path.read_bytes()
-    header, offset = {}, 0
-    while True:
-        end = raw.find(b"\n", offset)
-        if end < 0:
-            raise InputError(f"{path}: PCD header has no DATA line")
-        line = raw[offset:end].decode("ascii", "replace").strip()
-        offset = end + 1
-        if not line or line.startswith("#"):
-            continue
-        key, *values = line.split()
-        header[key.upper()] = values
-        if key.upper() == "DATA":
-            break
-    try:
-        names, sizes, kinds = header["FIELDS"], [int(s) for s in header["SIZE"]], header["TYPE"]
-        counts = [int(c) for c in header.get("COUNT", ["1"] * len(names))]
-        points = int(header.get("POINTS", header.get("WIDTH"))[0])
-        dtype = np.dtype([(n, PCD_TYPES[(k, s)], (c,) if c > 1 else ()) for n, k, s, c in zip(names, kinds, sizes, counts)])
-    except (KeyError, ValueError, TypeError):
-        raise InputError(f"{path}: PCD header needs FIELDS, SIZE, TYPE and POINTS with known types") from None
-    mode = header["DATA"][0].lower()
-    if mode == "binary":
-        data = np.frombuffer(raw, dtype, count=points, offset=offset)
-    elif mode == "ascii":
-        table = np.loadtxt(raw[offset:].decode("ascii").splitlines(), ndmin=2)
-        data = {n: table[:, i] for i, n in enumerate(names)}
-    else:
-        raise InputError(f"{path}: PCD DATA {mode} is not supported (binary or ascii; re-save with pcl_convert_pcd_ascii_binary)")
-    return _from_fields({n: data[n] for n in names}, path, "pcd")
+    from .pcd import read_pcd_fields  # the header checked against the bytes
+
+    data = read_pcd_fields(path)
+    for k in ("x", "y", "z", "intensity", "ring"):
+        if k in data and data[k].ndim != 1:
+            raise InputError(f"{path}: PCD field {k!r} has COUNT {data[k].shape[1]}; expected 1")
+    return _from_fields(data, path, "pcd")
 
 
 READERS = {
@@ -243,4 +249,7 @@ def read_real_scan(path, format: str | None = None) -> RealScan:
         scan.notes.append(f"{int((~finite).sum())} non-finite points {'taken as empty firings' if scan.organised else 'left out'}")
     if len(scan) == 0:
         raise InputError(f"{path}: the scan holds no points")
+    bad = ~np.isfinite(scan.intensity)
+    if bad.any():
+        raise InputError(f"{path}: field intensity: {int(bad.sum())} of {len(scan)} values are not finite (first at point {int(np.flatnonzero(bad)[0])})")
     return scan
