@@ -192,7 +192,23 @@ def _add_fit(sub) -> None:
     p.set_defaults(func=fit_effects)
 
 
-COMMANDS = [_add_run, _add_sensors, _add_fit]
+def _add_config(sub) -> None:
+    p = sub.add_parser("config", help="print the resolved config with the source of each value",
+                       description="Print the resolved config: each value with where it comes from (default < preset < builder < profile < config < --set; bpy_pipeline/resolved.py).")
+    p.add_argument("--resolved", action="store_true", required=True, help="the resolved tree (the only view so far)")
+    p.add_argument("--config", help="YAML config file (default: the embedded railway scene)")
+    p.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE", help="override one config key (repeatable)")
+    p.set_defaults(func=print_resolved)
+
+
+def print_resolved(args) -> int:
+    from .resolved import render, resolved
+
+    print(render(*resolved(args.config, args.set)), end="")
+    return 0
+
+
+COMMANDS = [_add_run, _add_sensors, _add_fit, _add_config]
 
 
 def parser() -> argparse.ArgumentParser:
