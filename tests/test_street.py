@@ -47,7 +47,8 @@ def test_layout_areas_are_apart_and_lanes_lie_on_the_road():
             for side in (-1, 1):
                 assert layout.on_road(lane.at(s, side * (lane.width / 2 - 1e-6)))
     classes = {p.class_name for p in layout.parts}
-    assert classes == {"road", "kerb", "sidewalk", "traffic light", "traffic sign", "building"}
+    assert {"road", "kerb", "sidewalk", "traffic light", "traffic sign", "building"} <= classes
+    assert {"terrain", "vegetation", "trunk", "fence", "pole"} <= classes  # what real streets hold (street_dressing)
 
 
 def test_users_keep_to_their_lanes_sidewalks_and_crossings_and_never_overlap():
@@ -196,3 +197,59 @@ def test_same_seed_same_bytes_whatever_frame_a_run_starts_at(bpy_scene, tmp_path
     assert c["sha256"] == json.loads((tmp_path / "a" / "records" / "000001.json").read_text())["sha256"]
     boxes = {b["class"] for i in range(2) for b in json.loads((tmp_path / "a" / "records" / f"{i:06d}.json").read_text()).get("boxes", [])}
     assert "car" in boxes
+
+
+# ----------------------------------------------------------------------------- what real streets hold (street_dressing)
+def test_dressing_is_present_labelled_and_drawn_from_the_layout_seed_alone():
+    from bpy_pipeline.labels import load_class_table
+
+    params = StreetScene()
+    first = street.street_layout(params, np.random.default_rng(params.layout_seed))
+    again = street.street_layout(params, np.random.default_rng(params.layout_seed))
+    other = street.street_layout(params, np.random.default_rng(params.layout_seed + 1))
+    assert [(p.name, p.class_name) for p in first.parts] == [(p.name, p.class_name) for p in again.parts]
+    assert all(np.array_equal(a.mesh[0], b.mesh[0]) and np.array_equal(a.mesh[1], b.mesh[1]) for a, b in zip(first.parts, again.parts))
+    assert first.dressing == again.dressing and first.dressing != other.dressing
+    table = load_class_table()
+    for part in first.parts:
+        table.id_of(part.class_name)  # every class is in labels.yaml
+    classes = {p.class_name for p in first.parts}
+    assert {"terrain", "vegetation", "trunk", "fence", "pole", "bin", "bicycle stand"} <= classes
+    for what in ("trees", "bushes", "hedges", "fences", "lamps"):
+        assert first.dressing.get(what, 0) > 0, what
+    # the roads reach the sensor's range: terrain and buildings out to the arm's end
+    terrain = np.vstack([p.mesh[0] for p in first.parts if p.class_name == "terrain"])
+    assert np.abs(terrain[:, :2]).max() == pytest.approx(params.arm_length)
+    # the terrain leaves the sidewalk at its height and stays gentle
+    assert terrain[:, 2].min() > params.kerb_height - 0.6 and terrain[:, 2].max() < params.kerb_height + 0.04 * params.arm_length + 1.0
+
+
+def test_street_trees_clear_the_traffic_and_obstacles_keep_users_off_the_furniture():
+    from bpy_pipeline.geometry.vegetation import tree
+
+    trunk, crown = tree((0.0, 0.0, 0.15), 9.0, 3.0, "round", np.random.default_rng(0), clear_below=4.5)
+    assert crown[0][:, 2].min() >= 0.15 + 4.5 - 0.3  # cards reach half their edge below their centres
+    assert trunk[0][:, 2].min() < 0.15  # the trunk goes into the ground
+    params, layout, placement = _placed(seed=4)
+    for user in placement.users:
+        for x, y, r in layout.poles:
+            assert not rectangles_overlap(user.centre, user.half, user.yaw, (x, y), (r, r), 0.0), (user.kind, x, y)
+        for centre, half, yaw in layout.blocks:
+            assert not rectangles_overlap(user.centre, user.half, user.yaw, centre, half, yaw), user.kind
+
+
+def test_ego_vehicle_places_the_roof_sensor_in_its_lane_and_keeps_its_footprint_free():
+    from bpy_pipeline.builders.street import EGO_HALF, ego_station
+
+    params = StreetScene(ego_vehicle=True, **BUSY)
+    poses = [ego_station(params, k) for k in range(20)]
+    xs = [p[0, 3] for p in poses]
+    assert len(set(np.round(xs, 6))) == 20 and all(-params.ego_span <= x <= params.ego_span for x in xs)  # 7.3 m steps cycling over 120 m
+    assert all(p[1, 3] == -params.lane_width / 2 and p[2, 3] == params.ego_height for p in poses)
+    layout = street.street_layout(params, np.random.default_rng(0))
+    reserved = [(poses[3][:2, 3], np.array(EGO_HALF), 0.0)]
+    placement = street.place_users(params, layout, np.random.default_rng(1), reserved=reserved)
+    assert placement.users
+    for user in placement.users:
+        assert not rectangles_overlap(user.centre, user.half, user.yaw, *reserved[0], params.clearance)
+    assert ego_station(StreetScene(), 0) is None

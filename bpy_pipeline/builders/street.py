@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from ..errors import InputError
 from .base import Builder, BuildContext, BuildResult, Distribution, check_distribution, check_sizes, register_builder
 
@@ -36,6 +38,12 @@ class StreetScene:
     crossings. Footprints keep ``clearance`` from each other and from poles. With ``fov_aware``, a
     candidate is kept only if one sensor of the run sees at least ``min_in_view`` of its box's
     sample points (within its field of view and range), so a narrow flash camera sees what is placed.
+
+    ``ego_vehicle``: the sensor rides on the roof of a car in the right-hand lane of the road along
+    x, ``ego_height`` (m) above the road (KITTI's HDL-64E: 1.73), heading +x; frame k places it
+    ``k * ego_step`` metres further along, cycling over ``[-ego_span, ego_span]``, so consecutive
+    frames see the street from different places. The ego car's footprint is kept free of road users;
+    its body is not built (recorded scans leave the ego vehicle out).
     """
 
     arm_length: float = 100.0
@@ -78,9 +86,13 @@ class StreetScene:
     clearance: float = 0.5
     fov_aware: bool = True
     min_in_view: float = 0.3
+    ego_vehicle: bool = False
+    ego_height: float = 1.73
+    ego_span: float = 60.0
+    ego_step: float = 7.3
 
 
-MAY_BE_ZERO = {"parking_width", "signs", "layout_seed", "crossing_offset", "platoon_probability", "crossing_share", "clearance", "min_in_view",
+MAY_BE_ZERO = {"ego_span", "parking_width", "signs", "layout_seed", "crossing_offset", "platoon_probability", "crossing_share", "clearance", "min_in_view",
                "setback", "open_share", "street_trees", "tree_spacing", "yard_plants", "lamp_spacing", "furniture_per_100m", "roadworks",
                "terrain_relief", "terrain_slope"}
 
@@ -114,6 +126,29 @@ def check(params: StreetScene, where: str) -> None:
         check_distribution(getattr(params, key), f"{where}.{key}", low=0.0)
 
 
+EGO_HALF = (2.3, 0.95)  # m: half the ego car's footprint (a 4.6 x 1.9 m estate car)
+
+
+def ego_station(params: StreetScene, frame: int) -> np.ndarray | None:
+    """The level frame ``(4, 4)`` of the ego car's roof sensor in frame ``frame``, or ``None`` without ``ego_vehicle``."""
+    if not params.ego_vehicle:
+        return None
+    span = 2.0 * params.ego_span
+    x = -params.ego_span + (frame * params.ego_step) % span if span > 0 else 0.0
+    pose = np.eye(4)
+    pose[:3, 3] = (x, -0.5 * params.lane_width, params.ego_height)
+    return pose
+
+
+def release_ego(params: StreetScene, raw_scene: dict, sensor_data: dict) -> StreetScene:
+    """With ``ego_vehicle`` the scene places the sensor: a ``sensor.position`` or trajectory as well is an error."""
+    if params.ego_vehicle:
+        for key in ("position", "trajectory"):
+            if sensor_data.get(key) is not None:
+                raise InputError(f"sensor.{key}: scene.ego_vehicle places the sensor on the ego car's roof; leave sensor.{key} out or set scene.ego_vehicle: false")
+    return params
+
+
 def build(params: StreetScene, context: BuildContext) -> BuildResult:
     """The static intersection once per run, then this frame's road users."""
     from ..scenes.street import Intersection
@@ -123,4 +158,4 @@ def build(params: StreetScene, context: BuildContext) -> BuildResult:
 
 # The sparse-camera thesis: three flash cameras on a 2 m post at a corner of the intersection,
 # looking across it (the platform's yaw 45 deg points the middle camera at the centre).
-register_builder("street", Builder(StreetScene, build, check, sensor={"rig": "flash_post_240", "position": [-7.6, -7.6, 0.15], "rotation_deg": [0.0, 0.0, 45.0]}, boxes=True))
+register_builder("street", Builder(StreetScene, build, check, station=ego_station, release_sensor=release_ego, sensor={"rig": "flash_post_240", "position": [-7.6, -7.6, 0.15], "rotation_deg": [0.0, 0.0, 45.0]}, boxes=True))

@@ -434,17 +434,18 @@ def _draw_size(kind: str, rng) -> np.ndarray:
     return np.array(NOMINAL_SIZE[kind]) * (1.0 + rng.uniform(-spread, spread, 3))
 
 
-def place_users(p, layout: StreetLayout, rng: np.random.Generator, views=(), tries: int = 40) -> Placement:
+def place_users(p, layout: StreetLayout, rng: np.random.Generator, views=(), tries: int = 40, reserved=()) -> Placement:
     """Road users of one frame for :class:`~bpy_pipeline.builders.street.StreetScene` ``p`` on ``layout``.
 
     views : the sensors' :class:`FieldOfView` s, used when ``p.fov_aware`` (otherwise ignored)
     Each user gets up to ``tries`` candidate positions; the first that is free (and in view) is kept.
+    reserved : rectangles ``(centre (2,), half (2,), yaw)`` kept free besides the layout's obstacles (the ego car)
     """
     from .placement import sample, sample_count
 
     views = list(views) if p.fov_aware else []
     out = Placement()
-    obstacles = [(np.array(pl[:2]), np.array([pl[2], pl[2]]), 0.0) for pl in layout.poles] + list(layout.blocks)
+    obstacles = [(np.array(pl[:2]), np.array([pl[2], pl[2]]), 0.0) for pl in layout.poles] + list(layout.blocks) + list(reserved)
     drive = [i for i, lane in enumerate(layout.lanes) if lane.kind == "drive"]
     parking = [i for i, lane in enumerate(layout.lanes) if lane.kind == "parking"]
     last_in_lane: dict[int, RoadUser] = {}
@@ -613,15 +614,25 @@ def segments_cross_triangles(a: np.ndarray, b: np.ndarray, triangles: np.ndarray
 
 
 def meshes_intersect(first: Mesh, second: Mesh) -> bool:
-    """True when an edge of one mesh passes through a triangle of the other (their bounding boxes overlapping first)."""
+    """True when an edge of one mesh passes through a triangle of the other.
+
+    Only the triangles of each mesh that reach into the other's bounding box take part, so a
+    small mesh against a large one (a pedestrian against the street's terrain) costs little.
+    """
     (v1, t1), (v2, t2) = first, second
     if (v1.min(0) > v2.max(0) + 1e-6).any() or (v2.min(0) > v1.max(0) + 1e-6).any():
         return False
+
+    def reaching(v, t, other):
+        corners = v[t]
+        keep = ((corners.min(axis=1) <= other.max(0) + 1e-6) & (corners.max(axis=1) >= other.min(0) - 1e-6)).all(axis=1)
+        return t[keep]
+
+    t1, t2 = reaching(v1, t1, v2), reaching(v2, t2, v1)
+    if len(t1) == 0 or len(t2) == 0:
+        return False
     for (va, ta), (vb, tb) in (((v1, t1), (v2, t2)), ((v2, t2), (v1, t1))):
         edges = np.unique(np.sort(np.concatenate([ta[:, [0, 1]], ta[:, [1, 2]], ta[:, [2, 0]]]), axis=1), axis=0)
-        low, high = vb.min(0) - 1e-6, vb.max(0) + 1e-6
-        near = ((np.minimum(va[edges[:, 0]], va[edges[:, 1]]) <= high) & (np.maximum(va[edges[:, 0]], va[edges[:, 1]]) >= low)).all(axis=1)
-        edges = edges[near]
-        if len(edges) and segments_cross_triangles(va[edges[:, 0]], va[edges[:, 1]], vb[tb]).any():
+        if segments_cross_triangles(va[edges[:, 0]], va[edges[:, 1]], vb[tb]).any():
             return True
     return False

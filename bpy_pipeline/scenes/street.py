@@ -55,7 +55,14 @@ class Intersection:
         from ..builders.base import BuildResult
 
         views = tuple(getattr(view, "fields", ()) or ())
-        placement = street.place_users(self.params, self.layout, rng, views)
+        reserved = []
+        if self.params.ego_vehicle:  # the ego car under the roof sensor: its footprint stays free
+            from ..builders.street import EGO_HALF
+
+            for v in views:
+                yaw = float(np.arctan2(v.pose[1, 0], v.pose[0, 0]))
+                reserved.append((v.pose[:2, 3].copy(), np.array(EGO_HALF), yaw))
+        placement = street.place_users(self.params, self.layout, rng, views, reserved=reserved)
         self._clear_users()
         headings = {}
         for k, user in enumerate(placement.users):
