@@ -20,11 +20,11 @@ def test_real_scan_run_writes_a_mixed_frame(real_scan, tmp_path):
     out = tmp_path / "run"
     done = run("--out", str(out), "--set", "scene.builder=real_scan", "--set", f"scene.path={sweep}", "--set", f"scene.objects={OBJECTS}", "--set", "effects.ideal=true", "--set", "output.preview=false")
     assert done.returncode == 0, done.stderr
-    xyzi = np.fromfile(out / "sequences/00/velodyne/000000.bin", np.float32).reshape(-1, 4)
+    xyzi = np.fromfile(out / "sequences/00/velodyne/000000.bin", np.float32).reshape(-1, 4)  # frame 0: the first train unit
     label = np.fromfile(out / "sequences/00/labels/000000.label", np.uint32)
     assert len(xyzi) == len(label) and 28000 < len(label) <= 34688  # at most one return per firing
     semantic, instance = label & 0xFFFF, label >> 16
-    car, person = 20, 21  # assets_manifest/labels.yaml
+    car, person = 10, 30  # SemanticKITTI's raw ids (assets_manifest/labels.yaml semantickitti:)
     assert (semantic == car).sum() > 100 and (semantic == person).sum() > 20
     assert set(np.unique(instance[semantic == car])) == {1} and set(np.unique(instance[semantic == person])) == {2}
     # the car's points sit in its box, in the scan's sensor frame (x forward, y left)
@@ -51,7 +51,7 @@ def test_real_scan_frame_range_gives_the_full_runs_bytes(real_scan, tmp_path):
     common = ["--frames", "3", "--set", "scene.builder=real_scan", "--set", f"scene.path={sweep}", "--set", "scene.parking_rule.enabled=true", "--set", "output.preview=false", "--set", "output.formats=[semantickitti]"]
     full, part = run("--out", str(tmp_path / "full"), *common), run("--out", str(tmp_path / "part"), *common, "--frames-range", "2:3")
     assert full.returncode == 0 and part.returncode == 0, full.stderr + part.stderr
-    for kind in ("velodyne/000002.bin", "labels/000002.label"):
-        assert (tmp_path / "full/sequences/00" / kind).read_bytes() == (tmp_path / "part/sequences/00" / kind).read_bytes()
-    labels = [np.fromfile(tmp_path / f"full/sequences/00/labels/{k:06d}.label", np.uint32) for k in range(3)]
+    for kind in ("velodyne/000002.bin", "labels/000002.label"):  # frame 2 is val: sequence 08 (output.split)
+        assert (tmp_path / "full/sequences/08" / kind).read_bytes() == (tmp_path / "part/sequences/08" / kind).read_bytes()
+    labels = [np.fromfile(next((tmp_path / "full").glob(f"sequences/*/labels/{k:06d}.label")), np.uint32) for k in range(3)]
     assert len({x.tobytes() for x in labels}) == 3  # each frame places its own cars
