@@ -2,14 +2,15 @@
 # Set up ./.venv with bpy_pipeline and Blender's bpy module (Debian 12, Python 3.11).
 #   ./setup.sh        runtime: bpy 4.5 LTS, embreex, trimesh, pyyaml, numpy
 #   ./setup.sh test   the same plus the test tools (pytest, plyfile, laspy), Ray (the distributed tests),
-#                     numba (the compiled scan path) and Patchwork++ / scipy (real-scan mixing)
+#                     numba (the compiled scan path), Patchwork++ / scipy (real-scan mixing) and LightGBM /
+#                     scikit-learn (bpy-pipeline evaluate)
 # On a bare Debian it installs, as root, what bpy's wheel and venv need from Debian:
 # python3-venv, the X11/GL client libraries bpy links against (no display is used) and Mesa's
 # software OpenGL through EGL, which Blender's renderer needs (the KITTI camera's image_2).
 set -euo pipefail
 cd "$(dirname "$0")"
 extras="blender"
-[ "${1:-}" = "test" ] && extras="blender,test,distributed,fast,mixing"
+[ "${1:-}" = "test" ] && extras="blender,test,distributed,fast,mixing,evaluate"
 venv="${VENV:-.venv}"
 py="${PYTHON:-python3.11}"
 "$py" -c "import sys; assert sys.version_info[:2] == (3, 11)" 2>/dev/null || py=python3

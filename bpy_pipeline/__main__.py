@@ -15,6 +15,10 @@ Commands:
     Ray drop and range noise models fitted to real organised scans (``lidar/fitting.py``),
     written for ``effects.drop.model_file`` / ``effects.noise.model_file``; prints each drop
     model's held-out error.
+``evaluate --train DATASET --test REAL [--reference REAL ...] --classes car,person --out report.json``
+    Train the reference segmentation model on generated datasets, test it on real labelled scans
+    and print per-class IoU with 95 % intervals, beside the same model trained on real frames
+    (leave one group out); docs/evaluate.md.
 
 Each command is a ``_add_<name>(subparsers)`` function that registers its parser and sets
 ``func`` (``args -> exit code``); add new commands the same way. Bad input (``InputError``)
@@ -208,7 +212,55 @@ def print_resolved(args) -> int:
     return 0
 
 
-COMMANDS = [_add_run, _add_sensors, _add_fit, _add_config]
+def run_evaluate(args) -> int:
+    """Train on ``--train``, test on ``--test`` (and the real reference), print the table, write the JSON report."""
+    import json
+
+    from .evaluate import evaluate, table
+    from .evaluate.run import json_safe
+    from .io.atomic import atomic_write
+
+    out = Path(args.out)
+    if out.is_dir() or (out.parent.exists() and not out.parent.is_dir()):
+        raise InputError(f"--out: {out} must be a file path in a folder")
+    if args.every < 1 or (args.max_frames is not None and args.max_frames < 1) or args.jobs < 1:
+        raise InputError("evaluate: --every, --max-frames and --jobs must be >= 1")
+    report = evaluate(args.train, args.test, args.classes, args.reference, args.model, args.seed, args.every, args.max_frames,
+                      args.max_points_per_scan, args.jobs, log=lambda m: print(m, file=sys.stderr))
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        with atomic_write(out) as tmp:
+            tmp.write_text(json.dumps(json_safe(report), indent=1) + "\n")
+    except OSError as err:
+        raise InputError(f"--out: cannot write {out} ({err.strerror or err})") from None
+    print(table(report))
+    print(f"written: {out}")
+    return 0
+
+
+def _add_evaluate(sub) -> None:
+    from .evaluate.models import MAX_POINTS_PER_SCAN, MODELS
+
+    p = sub.add_parser("evaluate", help="train a reference model on generated data, report IoU on real labelled scans",
+                       description="Train the reference per-point segmentation model on generated datasets, test it on real labelled scans "
+                       "and report per-class IoU with 95 %% intervals (bootstrap over objects); with --reference, the same model trained "
+                       "on real frames, leave one group out, on the same test scans (docs/evaluate.md).")
+    p.add_argument("--train", action="append", required=True, metavar="DATASET", help="generated dataset folder (ply/) or labelled scans (repeatable)")
+    p.add_argument("--test", action="append", required=True, metavar="REAL", help="real labelled scan: SemanticKITTI .bin (+ .label), X_points.npy (+ X_labels.npy), "
+                   "KITTI object .bin (+ label_2, calib), or a folder of them (repeatable)")
+    p.add_argument("--reference", action="append", metavar="REAL", help="real labelled scans to train the reference on, leave one group out (repeatable)")
+    p.add_argument("--classes", default="car,person", help="evaluation classes, SemanticKITTI training names, comma separated (default car,person)")
+    p.add_argument("--out", required=True, metavar="REPORT.json", help="JSON report to write")
+    p.add_argument("--model", default="lgbm", choices=list(MODELS), help="reference model (default lgbm)")
+    p.add_argument("--seed", type=int, default=0, help="model, sampling and bootstrap seed (default 0)")
+    p.add_argument("--every", type=int, default=1, help="use every N-th frame of the generated datasets (default 1)")
+    p.add_argument("--max-frames", type=int, default=None, help="at most this many frames of each generated dataset")
+    p.add_argument("--max-points-per-scan", type=int, default=MAX_POINTS_PER_SCAN, help=f"background points sampled from each training scan (default {MAX_POINTS_PER_SCAN})")
+    p.add_argument("--jobs", type=int, default=1, help="model threads (default 1)")
+    p.set_defaults(func=run_evaluate)
+
+
+COMMANDS = [_add_run, _add_sensors, _add_fit, _add_config, _add_evaluate]
 
 
 def parser() -> argparse.ArgumentParser:

@@ -32,6 +32,7 @@ from .buffers import MATERIAL_ID, ObjectTable, SceneBuffers
 from .config import Config, config_from_dict
 from .config import load_config as _load_config
 from .errors import InputError
+from .evaluate import evaluate  # noqa: F401  (train on generated scans, IoU on real ones: docs/evaluate.md)
 
 
 def load_config(path_or_dict: str | Path | Mapping | None = None, overrides: Iterable[str] = ()) -> Config:
