@@ -47,6 +47,9 @@ def run(config: Config, out: str | Path, frames: Iterable[int] | None = None, mo
 
     mode : ``new`` (refuse a folder holding another run), ``resume`` or ``overwrite`` (see :mod:`.dataset`)
     """
+    from .estimate import check_limits, estimate_run
+
+    check_limits(estimate_run(config, config.frames if frames is None else len(frames) if hasattr(frames, "__len__") else None), config)  # before any work
     try:
         import bpy
     except ImportError:

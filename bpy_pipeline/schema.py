@@ -9,6 +9,7 @@ be spelled differently in YAML than in Python.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import types
 import typing
 from typing import Literal
@@ -83,13 +84,19 @@ def convert(value, hint, path: str):
     raise wrong
 
 
+@functools.lru_cache(maxsize=None)
+def _hints(cls) -> dict:
+    """``typing.get_type_hints(cls)``, once per class (it evaluates the annotations: about 1 ms a call)."""
+    return typing.get_type_hints(cls)
+
+
 def from_dict(cls, data, path: str = ""):
     """Build dataclass ``cls`` from a mapping, filling defaults; ``InputError`` naming the key path."""
     if data is None:
         data = {}
     if not isinstance(data, dict):
         raise InputError(f"{path or 'config'}: expected a mapping, got {data!r}")
-    hints = typing.get_type_hints(cls)
+    hints = _hints(cls)
     fields = {key_of(f): f for f in dataclasses.fields(cls)}
     unknown = sorted(set(map(str, data)) - set(fields))
     if unknown:
