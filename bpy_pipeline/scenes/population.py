@@ -229,12 +229,15 @@ def _custom_property_rows(buffers, prop: str) -> np.ndarray:
 
 
 @dataclasses.dataclass
-class Surfaces:
+class StandingPlaces:
     """The standing places of one static geometry: ``floors`` and ``seats`` (lists of :class:`~.surfaces.Surface`)."""
 
     floors: list
     seats: list
     source: str  # "lidar_walkable", "detected"
+
+
+Surfaces = StandingPlaces  # the old name (it collided with the scanner's rules, lidar.scanner.Surfaces)
 
 
 def _class_rows(buffers, names) -> np.ndarray:
@@ -244,7 +247,7 @@ def _class_rows(buffers, names) -> np.ndarray:
     return rows[buffers.triangle_object] if len(rows) else np.zeros(len(buffers.triangles), bool)
 
 
-def find_places(buffers, rules) -> Surfaces:
+def find_places(buffers, rules) -> StandingPlaces:
     """Floors and seats of the exported static scene: objects marked ``lidar_walkable`` / ``lidar_seat``, else
     objects of ``walkable_classes`` / ``seat_classes``, else the surfaces detected in all its triangles."""
     v, t = buffers.vertices, buffers.triangles
@@ -262,7 +265,7 @@ def find_places(buffers, rules) -> Surfaces:
         if found:
             seats = found
             break
-    return Surfaces(floors, seats, source)
+    return StandingPlaces(floors, seats, source)
 
 
 class PopulationScene:
@@ -272,7 +275,7 @@ class PopulationScene:
         self.population = population
         self.collection = scene_collection(COLLECTION)
         self.sides = {name: SIDES[name](name, params, self.collection, population.placement.manifest) for name, params in population.kinds}
-        self.cached: tuple = (None, None)  # (digest of the static triangles, Surfaces)
+        self.cached: tuple = (None, None)  # (digest of the static triangles, StandingPlaces)
         self.last: dict = {}
 
     def alive(self) -> bool:
