@@ -188,15 +188,24 @@ def organised_firings(scan: RealScan, preset: str | None = None) -> Firings:
     )
 
 
+SCAN_ORDER_MAX_STEP_DEG = 1.0  # a scan order steps this little in azimuth between most consecutive returns
+SCAN_ORDER_MAX_RINGS = 256  # more "rings" than this (twice the densest spinning LiDARs' 128) is no scan order
+
+
 def _scan_order_rings(azimuth: np.ndarray) -> np.ndarray | None:
-    """Ring index of each return from the scan order: a new ring where the azimuth wraps around; ``None`` when the order shows no rings."""
+    """Ring index of each return from the scan order: a new ring where the azimuth wraps around; ``None`` when the
+    order shows no rings: no wrap, a median step between consecutive returns above :data:`SCAN_ORDER_MAX_STEP_DEG`,
+    or more than :data:`SCAN_ORDER_MAX_RINGS` wraps (returns sorted or shuffled otherwise, as some published
+    SemanticKITTI samples are: read in scan order they gave thousands of one-point "rings")."""
     if len(azimuth) < 3:
         return None
     d = _wrap(np.diff(azimuth))
+    if np.median(np.abs(d)) > SCAN_ORDER_MAX_STEP_DEG:
+        return None
     sense = 1.0 if np.median(d) >= 0 else -1.0
     turned = (sense * azimuth) % 360.0
     wraps = np.flatnonzero(np.diff(turned) < -180.0)
-    if len(wraps) == 0:
+    if len(wraps) == 0 or len(wraps) >= SCAN_ORDER_MAX_RINGS:
         return None
     ring = np.zeros(len(azimuth), np.int64)
     ring[wraps + 1] = 1
