@@ -28,6 +28,7 @@ from .lidar.mirror_sensor import check_reflector, load_edge_mask
 from .lidar.platform import Trajectory
 from .lidar.sensors import SensorSpec, frame_time, mount_offset, resolve_sensor
 from .lidar.sensors import rings as sensor_rings
+from .lidar.weather import WeatherConfig, check_weather
 from .buffers import MATERIALS  # noqa: F401  (the panel's list)
 from .builders import BUILDERS as BUILDER_REGISTRY
 from .builders.population import population_from_dict, population_to_dict
@@ -182,6 +183,7 @@ class EffectsConfig:
     drop: DropConfig = field(default_factory=DropConfig)
     mirrors: MirrorConfig = field(default_factory=MirrorConfig)
     intensity: IntensityConfig = field(default_factory=IntensityConfig)
+    weather: WeatherConfig = field(default_factory=WeatherConfig)  # fog, rain, snow (lidar/weather.py); off under ideal
 
 
 @dataclass(frozen=True)
@@ -447,6 +449,7 @@ def _check_effects(effects: EffectsConfig, spec: SensorSpec | None) -> None:
     from .lidar.effects import read_model_file
 
     noise, drop, intensity = effects.noise, effects.drop, effects.intensity
+    check_weather(effects.weather)
     for key in ("sigma", "sigma_per_metre", "angular_jitter_deg"):
         check_positive(getattr(noise, key), f"effects.noise.{key}", allow_zero=True)
     rings = None if spec is None else sensor_rings(spec)
@@ -577,6 +580,10 @@ def config_from_dict(data) -> Config:
         sensor_trajectory(sensor).check_frames(config.frames, frame_time(sensor.spec))
     _check_effects(config.effects, config.sensor.spec)
     _check_mirrors(config.effects.mirrors)
+    weather = config.effects.weather
+    if weather.divergence_mrad == 0 and config.sensor.divergence.mrad > 0:  # the weather's particles see the sensor's beam
+        weather = dataclasses.replace(weather, divergence_mrad=config.sensor.divergence.mrad)
+        config = dataclasses.replace(config, effects=dataclasses.replace(config.effects, weather=weather))
     config = _check_boxes(config)
     config = _check_split(config)
     _check_writers(config)

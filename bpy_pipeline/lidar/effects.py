@@ -64,6 +64,7 @@ from .drop import DROP_MODELS
 from .drop.carla import carla_keep_probability  # noqa: F401  (stable names)
 from .drop.threshold import ThresholdModel, threshold_model  # noqa: F401
 from .intensity import carla_intensity, compute_intensity, lidar_intensity, reflectance  # noqa: F401
+from .weather import apply_weather, fog_alpha, fog_soft_table
 
 MODEL_FORMAT = "bpy_pipeline effects model"
 MODEL_VERSION = 1
@@ -401,8 +402,17 @@ def _apply_chunk(points, beam, effects, rng, drop_models, noise_models) -> np.nd
     if keep is not None:
         beam, intensity = _copy_records(beam, keep), intensity[keep]
     points["intensity"] = intensity
+    if weather_active(effects):
+        points, keep = apply_weather(points, beam, effects, rng, threshold_model(effects, drop_models).detection_probability)
+        points, beam = points[keep], _copy_records(beam, keep)
     perturb(points, beam, effects.noise, rng, noise_models)
     return points
+
+
+def weather_active(effects) -> bool:
+    """True when ``effects.weather`` asks for fog, rain, snow or a wet ground and ``effects.ideal`` does not turn it off."""
+    weather = getattr(effects, "weather", None)
+    return weather is not None and not effects.ideal and weather.active
 
 
 def apply_effects(points: np.ndarray, beam: np.ndarray, effects, rng: np.random.Generator, threads: int | None = None) -> np.ndarray:
@@ -410,13 +420,16 @@ def apply_effects(points: np.ndarray, beam: np.ndarray, effects, rng: np.random.
 
     points : (p,) POINT_DTYPE records (sensor frame); beam : (p,) BEAM_DTYPE facts of the same points
     1. intensity of the true geometry; 2. ray drop (it sees the true range, as the receiver
-    does); 3. range noise, ring bias and angular jitter on the points that remain.
+    does); 3. weather (``effects.weather``, :mod:`.weather`: attenuation, scatterer returns, the noise
+    floor); 4. range noise, ring bias and angular jitter on the points that remain.
     The points go through in chunks of :data:`CHUNK_POINTS` on ``threads`` threads (default:
     every core); chunk k draws from its own generator, seeded by the k-th of one draw of seeds
     from ``rng``, so the same generator state gives the same bytes however the threads run.
     """
     drop_models = fitted_models(effects.drop, "effects.drop.model_file")
     noise_models = fitted_models(effects.noise, "effects.noise.model_file")
+    if weather_active(effects) and effects.weather.fog.visibility > 0:  # the fog's soft-target table, once, before the threads share it
+        fog_soft_table(fog_alpha(effects.weather.fog.visibility), effects.weather.fog.pulse_ns)
     for models in (drop_models, noise_models):
         for table in (models.drop_table, models.noise_table) if models is not None else ():
             if table is not None:

@@ -293,15 +293,26 @@ def wet_ground_factor(albedo: np.ndarray, cos_incidence: np.ndarray) -> np.ndarr
 
 # ----------------------------------------------------------------------------- particles along beams
 def _particles(limit: np.ndarray, per_m3: float, divergence: float, sample_diameters, rng: np.random.Generator):
-    """Particles in each beam's cone up to ``limit`` (p,) metres: ``(beam row, range m, diameter m)``.
+    """Particles in each beam's cone up to ``limit`` (p,) metres: ``(beam row, range m, diameter m)``, by beam and
+    then by range (nearest first).
 
     A beam of full-angle ``divergence`` (rad) holds ``per_m3 pi (phi / 2)^2 x^3 / 3`` particles out to
-    ``x``: a Poisson count per beam, ranges ``limit U^(1/3)`` (uniform in the cone's volume).
+    ``x``: a Poisson count per beam, ranges ``limit U^(1/3)`` (uniform in the cone's volume) with the
+    ``U`` of a beam drawn in order (normalised sums of exponential spacings: no sort).
     """
-    volume = np.pi * (divergence / 2.0) ** 2 * np.asarray(limit, np.float64) ** 3 / 3.0
+    limit = np.asarray(limit, np.float64)
+    volume = np.pi * (divergence / 2.0) ** 2 * limit**3 / 3.0
     count = rng.poisson(per_m3 * volume)
     rows = np.repeat(np.arange(len(limit)), count)
-    x = np.asarray(limit, np.float64)[rows] * np.cbrt(rng.random(len(rows)))
+    sizes = count + 1  # k spacings of k ordered uniforms and the last one
+    ends = np.cumsum(sizes)
+    sums = np.cumsum(rng.exponential(1.0, int(ends[-1]) if len(ends) else 0))
+    before = np.concatenate([[0.0], sums])[ends - sizes]
+    total = sums[ends - 1] - before if len(ends) else before
+    last = np.zeros(len(sums), bool)
+    last[ends - 1] = True
+    u = (sums[~last] - before[rows]) / total[rows]
+    x = limit[rows] * np.cbrt(u)
     return rows, x, sample_diameters(len(rows))
 
 
@@ -336,31 +347,34 @@ class _Medium:
         self.intensity[rows] = np.nan if intensity is None else intensity[better]
 
 
+def _starts(rows: np.ndarray) -> np.ndarray:
+    """Where each run of equal ``rows`` (sorted) begins."""
+    start = np.ones(len(rows), bool)
+    start[1:] = rows[1:] != rows[:-1]
+    return np.flatnonzero(start)
+
+
 def _strongest(rows: np.ndarray, power: np.ndarray) -> np.ndarray:
-    """Indices into ``rows`` of the strongest particle of each beam (the first of equals)."""
-    order = np.lexsort((-power, rows))
-    first = np.ones(len(order), bool)
-    first[1:] = rows[order][1:] != rows[order][:-1]
-    return order[first]
+    """Indices of the strongest particle of each beam (the nearest of equals); ``rows`` sorted."""
+    starts = _starts(rows)
+    best = np.maximum.reduceat(power, starts)
+    hit = np.flatnonzero(power == np.repeat(best, np.diff(np.append(starts, len(rows)))))
+    return hit[_starts(rows[hit])]
 
 
-def _shade(rows: np.ndarray, x: np.ndarray, share: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Occlusion along beams: ``(before, total)``: (k,) share of each particle's light left by the nearer
-    particles of its beam, (n,) share of each beam's light left past all of them."""
-    order = np.lexsort((x, rows))
-    log_left = np.log1p(-np.minimum(share[order], 1.0 - 1e-12))
+def _shade(rows: np.ndarray, share: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Occlusion along beams (particles by beam, nearest first): ``(before, total)``: (k,) share of each
+    particle's light left by the nearer particles of its beam, (n,) share of each beam's light left past all of them."""
+    if len(rows) == 0:
+        return np.ones(0), np.ones(n)
+    log_left = np.log1p(-np.minimum(share, 1.0 - 1e-12))
     cum = np.cumsum(log_left)
-    r = rows[order]
-    start = np.ones(len(order), bool)
-    start[1:] = r[1:] != r[:-1]
-    base = np.maximum.accumulate(np.where(start, np.arange(len(order)), 0))
-    offset = np.concatenate([[0.0], cum])[base]  # cumulative sum before each beam's first particle
-    before = np.empty(len(order))
-    before[order] = np.exp(cum - log_left - offset)
+    starts = _starts(rows)
+    offset = np.repeat(np.concatenate([[0.0], cum])[starts], np.diff(np.append(starts, len(rows))))
+    before = np.exp(cum - log_left - offset)
     total = np.ones(n)
-    last = np.ones(len(order), bool)
-    last[:-1] = r[1:] != r[:-1]
-    total[r[last]] = np.exp(cum[last] - offset[last])
+    ends = np.append(starts[1:], len(rows)) - 1
+    total[rows[ends]] = np.exp(cum[ends] - offset[ends])
     return before, total
 
 
@@ -429,7 +443,7 @@ def apply_weather(points: np.ndarray, beam: np.ndarray, effects, rng: np.random.
 
         rows, x, d = _particles(near, per_m3, divergence, diameters, rng)
         share = np.minimum(1.0, (d / (divergence * x)) ** 2)
-        before, left = _shade(rows, x, share, n)
+        before, left = _shade(rows, share, n)
         # beyond the sampled reach, the flakes' mean occlusion
         medium.transmit *= left * np.exp(-snow_extinction(snow) * np.maximum(r - near, 0.0))
         apparent = snow.flake_reflectivity * share * before * overlap(x)
