@@ -29,9 +29,10 @@ The emptied backgrounds are written to ``workdir/backgrounds`` as SemanticKITTI 
 reflectance) + ``NNNNNN.label`` (uint32, raw semantic id, instance 0), in the order given, and the pipeline
 runs ``scene.builder: real_scan`` over that folder with the ``hdl64e`` preset: frame k mixes background
 k mod n (the builder takes the folder's scans in name order, cycling). Each frame gets cars by the KITTI
-paper's rule (``kitti_rule``: random ground returns, clear of each other and of real non-ground returns,
-yaw by its equation (1)) and pedestrians by the parking paper's (``parking_rule``: a count, a distance
-and angle about the sensor, turned until the spot is empty ground, not mostly hidden); the preset's fitted
+paper's rule (``kitti_rule``: random ground returns 6-50 m away, clear of each other and of real non-ground
+returns, yaw by its equation (1)) and pedestrians by the parking paper's (``parking_rule``: a count, a
+distance of 4-20 m and an angle about the sensor, turned until the spot is empty ground, not mostly hidden);
+the near limits keep objects off the recording car, whose own returns a scan lacks. The preset's fitted
 drop and noise act on the inserted returns only.
 
 Leakage: :func:`make_mixed_dataset` reads the given background files (and a KITTI frame's own label_2 and
@@ -79,11 +80,12 @@ BACKGROUND_FOLDER = "backgrounds"
 PRESET = "hdl64e"
 
 # What each frame inserts (the pipeline's scene.kitti_rule and scene.parking_rule)
-CAR_RULE = {"enabled": True, "type": "car", "count": 5, "candidates": 200, "collision_distance": 5.0, "max_range": 50.0}
+EGO_CLEARANCE_M = 6.0  # no inserted car centre nearer the sensor (a 4.6 m car then ends >= 3.7 m away: off the recording car's roof-mount footprint)
+CAR_RULE = {"enabled": True, "type": "car", "count": 5, "candidates": 200, "collision_distance": 5.0, "max_range": 50.0, "min_range": EGO_CLEARANCE_M}
 PERSON_RULE = {
     "enabled": True, "type": "person",
     "count": {"kind": "normal", "mean": 5.0, "std": 2.0, "min": 2.0, "max": 10.0},
-    "distance": {"kind": "normal", "mean": 10.0, "std": 20.0, "min": 2.5, "max": 20.0},
+    "distance": {"kind": "normal", "mean": 10.0, "std": 20.0, "min": 4.0, "max": 20.0},  # the paper's 2.5 m min: inside a car's footprint
 }  # fmt: skip
 
 
@@ -307,7 +309,8 @@ def main() -> None:
                 "inserted_points": record["inserted_points"], "mixing_ms": round(sum(record["timings_ms"].values()), 1),
             })  # fmt: skip
     notes = {
-        "cpu_s_per_frame": facts["cpu_s_per_frame"], "cpu_s_emptying_all": facts["cpu_s_emptying"], "backgrounds": facts["backgrounds"],
+        "cpu_s_per_frame": facts["cpu_s_per_frame"], "cpu_s_emptying_all": facts["cpu_s_emptying"],
+        "backgrounds": [dict(b, source=Path(b["source"]).name) for b in facts["backgrounds"]],
         "what": "CPU s per frame: the whole pipeline run (Blender's empty scene reset, mixing, PLY writing) over its frames; mixing_ms: the record's stage wall times",
     }  # fmt: skip
     report("sim2real_mixed", rows, args.out if args.out else RESULTS, notes)

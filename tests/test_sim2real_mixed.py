@@ -41,6 +41,8 @@ def test_synthetic_cars_and_people_are_the_only_movable_points(mixed):
     car, person = table.id_of("car"), table.id_of("person")
     classes = [o["class"] for o in record["objects"]]
     assert classes.count("car") >= 2 and classes.count("person") >= 1  # the KITTI rule's cars, the parking rule's people
+    for o in record["objects"]:  # off the recording car
+        assert np.hypot(*o["center"][:2]) >= (sm.EGO_CLEARANCE_M if o["class"] == "car" else 4.0) - 1e-3, o
     movable = np.isin(points["semantic"], [car, person])
     assert (points["semantic"] == car).sum() > 100 and (points["semantic"] == person).sum() > 10
     # every car / person point is an inserted one: none of the source's 321 real car points is left
@@ -138,6 +140,14 @@ def test_bad_backgrounds_get_one_line(real_scan, tmp_path):
     (work / sm.BACKGROUND_FOLDER / "mine.bin").write_bytes(b"")
     with pytest.raises(InputError, match="holds other files"):
         sm.make_mixed_dataset([real_scan(SEQ01)], tmp_path / "out", 1, 0, work)
+
+
+def test_kitti_rule_min_range_checked():
+    from bpy_pipeline.builders.real_scan import check
+    from bpy_pipeline.mixing.section import KittiRule, RealScanScene
+
+    with pytest.raises(InputError, match=r"scene.kitti_rule.min_range: must be 0 .. kitti_rule.max_range \(50\), got 60"):
+        check(RealScanScene(path="scan.bin", kitti_rule=KittiRule(min_range=60.0)), "scene")
 
 
 def test_shuffled_scan_order_takes_the_presets_rings(real_scan):

@@ -32,6 +32,9 @@ def check(params: RealScanScene, where: str) -> None:
             raise InputError(f"{where}.remove[{k}].size: must be > 0, got {list(r.size)}")
     if params.max_range < 0:
         raise InputError(f"{where}.max_range: must be >= 0, got {params.max_range}")
+    rule = params.kitti_rule
+    if not 0 <= rule.min_range <= rule.max_range:
+        raise InputError(f"{where}.kitti_rule.min_range: must be 0 .. kitti_rule.max_range ({rule.max_range:g}), got {rule.min_range:g}")
 
 
 def build(params: RealScanScene, context: BuildContext) -> BuildResult:

@@ -170,7 +170,8 @@ def kitti_rule(scene: Scene, rule: KittiRule, ground_xyz: np.ndarray, real_boxes
     kind = rule.type
     cls = OBJECT_TYPES[kind][0] if kind in OBJECT_TYPES else "unlabeled"
     size = nominal_size(kind)
-    near = ground_xyz[np.hypot(ground_xyz[:, 0], ground_xyz[:, 1]) <= rule.max_range]
+    distance = np.hypot(ground_xyz[:, 0], ground_xyz[:, 1])
+    near = ground_xyz[(distance <= rule.max_range) & (distance >= rule.min_range)]
     if not len(near):
         return [], {"candidates": 0}
     pick = rng.choice(len(near), min(rule.candidates, len(near)), replace=False)

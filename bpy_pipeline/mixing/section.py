@@ -62,7 +62,8 @@ class KittiRule:
     others within ``collision_distance`` (d), candidates within d / 2 of a non-ground return are
     discarded, ``count`` kept; yaw by its equation (1) from the lateral offset (|y| < 10 m: 0 or 180 deg;
     10-30 m: 0, 180 or random; else random), snapped to the nearest labelled real vehicle within
-    ``snap_distance`` m (0: never)."""
+    ``snap_distance`` m (0: never). Candidates lie between ``min_range`` and ``max_range`` m of the sensor
+    in the plane (``min_range`` keeps objects clear of the recording vehicle, whose own returns a scan lacks)."""
 
     enabled: bool = False
     type: str = "car"
@@ -71,6 +72,7 @@ class KittiRule:
     collision_distance: float = 5.0
     snap_distance: float = 0.0
     max_range: float = 50.0
+    min_range: float = 0.0
 
 
 @dataclass(frozen=True)
