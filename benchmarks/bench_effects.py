@@ -25,6 +25,7 @@ from common import ROOT, arguments, report
 import bpy  # noqa: E402,F401
 
 from bpy_pipeline import pipeline  # noqa: E402
+from bpy_pipeline.stages import scan as scan_stages  # noqa: E402  (the effects stage's own apply_effects is the one patched)
 from bpy_pipeline.config import effects_from_dict, load_config  # noqa: E402
 from bpy_pipeline.export import export_scene  # noqa: E402
 from bpy_pipeline.labels import load_class_table  # noqa: E402
@@ -88,7 +89,7 @@ def main():
     buffers = export_scene(load_class_table(), (), keep_within=(pipeline.sensor_pose(config)[:3, 3], config.sensor.spec.max_range))
 
     captured = []
-    original = pipeline.apply_effects
+    original = scan_stages.apply_effects
 
     def capture(points, beam, effects, generator):  # the scan alone: keep what the effects would get
         captured.append((points, beam))
@@ -96,11 +97,11 @@ def main():
 
     def scan_alone():
         captured.clear()
-        pipeline.apply_effects = capture
+        scan_stages.apply_effects = capture
         try:
             return pipeline.scan_buffers(buffers, config, pipeline.frame_rng(0, 0))
         finally:
-            pipeline.apply_effects = original
+            scan_stages.apply_effects = original
 
     def effects_on_every_chunk(effects):  # as the pipeline applies them: chunk after chunk of the scan
         rng = np.random.default_rng(0)
