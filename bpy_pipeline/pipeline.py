@@ -2,8 +2,8 @@
 
 The frame plan is :mod:`bpy_pipeline.plan` (``plan(config) -> tuple[Stage, ...]``: single sensor, rig or
 real-scan background; :func:`run_frames`, :func:`run`), its values :mod:`bpy_pipeline.frame`
-(:class:`Frame`, :class:`Run`) and its stages :mod:`bpy_pipeline.stages`. New code imports from there.
-Nothing inside the package imports this module.
+(:class:`Frame`, :class:`Run`) and its stages :mod:`bpy_pipeline.stages`. New code imports from there;
+api.py, cli.py and parallel.py still import this module this round (nothing below them does).
 """
 
 from __future__ import annotations
