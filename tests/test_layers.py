@@ -25,6 +25,7 @@ FORBIDDEN = {
     "geometry": ("lidar", "io", "config", "pipeline", "builders", "scenes", "mixing", "plan", "stages", "dataset", "api", "cli", "rig", "frame"),
     "lidar": ("io", "config", "pipeline", "builders", "scenes", "mixing", "plan", "stages", "dataset", "api", "cli", "rig", "frame"),
     "io": ("pipeline", "builders", "scenes", "plan", "stages", "dataset", "api", "cli", "mixing", "lidar", "rig", "config"),
+    "mixing": ("pipeline", "builders", "scenes", "plan", "stages", "dataset", "api", "cli", "rig", "config", "frame", "evaluate"),
 }
 # what io may use of lidar: the point record and the sensor's layout (its spec, rings, columns, frame time)
 ALLOWED = {"io": ("lidar.points", "lidar.grid", "lidar.sensors")}

@@ -10,11 +10,12 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
-from typing import Any, Callable, Literal
+from typing import Any, Callable
 
 import numpy as np
 
 from ..errors import InputError
+from ..geometry.placement import Distribution, check_distribution  # noqa: F401  (re-exported: builders' parameters use them)
 from ..registry import Registry
 from ..schema import check_positive
 
@@ -145,28 +146,6 @@ def refuse_sensor_placement(name: str) -> Callable[[Any, dict, dict], Any]:
         return params
 
     return release
-
-
-@dataclass(frozen=True)
-class Distribution:
-    """A random quantity: ``normal`` (``mean``, ``std``; truncated to ``[min, max]`` by redrawing, a
-    count rounded and clipped instead) or ``uniform`` on ``[min, max]`` (geometry/placement.py)."""
-
-    kind: Literal["normal", "uniform"] = "normal"
-    mean: float = 0.0
-    std: float = 1.0
-    min: float = 0.0
-    max: float = 1.0
-
-
-def check_distribution(d: Distribution, where: str, low: float | None = None, high: float | None = None) -> None:
-    if d.min > d.max:
-        raise InputError(f"{where}.min: must not exceed max ({d.max}), got {d.min}")
-    check_positive(d.std, f"{where}.std", allow_zero=True)
-    if low is not None and d.min < low:
-        raise InputError(f"{where}.min: must be >= {low}, got {d.min}")
-    if high is not None and d.max > high:
-        raise InputError(f"{where}.max: must be <= {high}, got {d.max}")
 
 
 def check_sizes(params, where: str, may_be_zero: set) -> None:

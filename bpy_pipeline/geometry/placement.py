@@ -14,11 +14,35 @@ from __future__ import annotations
 
 from collections import Counter
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import Callable, Literal
 
 import numpy as np
 
+from ..errors import InputError
+from ..schema import check_positive
 from .collision import box_axes, ray_box_distance, rectangle_inside, rectangles_overlap
+
+
+@dataclass(frozen=True)
+class Distribution:
+    """A random quantity: ``normal`` (``mean``, ``std``; truncated to ``[min, max]`` by redrawing, a
+    count rounded and clipped instead) or ``uniform`` on ``[min, max]`` (geometry/placement.py)."""
+
+    kind: Literal["normal", "uniform"] = "normal"
+    mean: float = 0.0
+    std: float = 1.0
+    min: float = 0.0
+    max: float = 1.0
+
+
+def check_distribution(d: Distribution, where: str, low: float | None = None, high: float | None = None) -> None:
+    if d.min > d.max:
+        raise InputError(f"{where}.min: must not exceed max ({d.max}), got {d.min}")
+    check_positive(d.std, f"{where}.std", allow_zero=True)
+    if low is not None and d.min < low:
+        raise InputError(f"{where}.min: must be >= {low}, got {d.min}")
+    if high is not None and d.max > high:
+        raise InputError(f"{where}.max: must be <= {high}, got {d.max}")
 
 
 # ----------------------------------------------------------------------------- distributions

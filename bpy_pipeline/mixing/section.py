@@ -9,7 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Literal
 
-from ..builders.base import Distribution
+from ..geometry.placement import Distribution
 
 
 @dataclass(frozen=True)
