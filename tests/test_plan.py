@@ -39,6 +39,8 @@ def test_a_frame_is_typed_pose_4x4_and_pose_at_a_function_of_time():
     frame.place(pose)
     poses = frame.pose_at(np.array([0.0, 0.05, 0.1]))
     assert isinstance(frame.pose_at, StaticPose) and poses.shape == (3, 4, 4) and np.array_equal(poses[2], pose)
+    frame.pose_at = pose  # a matrix, as callers before the plan set it: still a function of time
+    assert callable(frame.pose_at) and np.array_equal(frame.pose_at([0.0])[0], pose)
     with pytest.raises(ValueError, match="4, 4"):
         Frame(0, config, frame_rng(0, 0), pose=np.eye(3))
     run = Run(config, build=False)
