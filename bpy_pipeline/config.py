@@ -340,7 +340,7 @@ def _scene_from_dict(data) -> SceneConfig:
     name = data.pop("builder", "railway")
     population = population_from_dict(data.pop("population", None))
     builder = BUILDER_REGISTRY.get(name)
-    if population is not None and builder.stages is not None:  # no Blender scene to place into
+    if population is not None and not builder.blender_scene:  # no Blender scene to place into
         raise InputError(f"scene.population: the {name} scene makes its points without a Blender scene; place objects with its own keys (scene.objects)")
     params = from_dict(builder.params, data, "scene")
     builder.check(params, "scene")

@@ -120,6 +120,11 @@ class Builder:
     follows_path: bool = False
     plan: str = "scene"
 
+    @property
+    def blender_scene(self) -> bool:
+        """True when its frames scan a Blender scene (so a population can be placed in it)."""
+        return self.stages is None and self.plan == "scene"
+
 
 BUILDERS: Registry[Builder] = Registry("scene builder", "scene.builder")
 
