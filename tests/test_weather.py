@@ -172,7 +172,7 @@ def test_rain_maximum_range_follows_goodins_curve(rate):
     z_clear = HDL64E_FLOOR.range_at(0.8)  # clear air: the datasheet's 120 m for an 80 % target
     assert abs(z_clear - 120.0) < 0.01
     hard = rainy[rainy["semantic"] != RAIN]
-    z = np.quantile(hard["range"], 0.999)
+    z = points["range"][hard["time"].astype(int)].max()  # the farthest target still seen (its true range: rain adds range noise)
     expected = goodin_max_range(z_clear, rate)
     assert abs(z - expected) <= 0.15 * expected, (rate, z, expected)
 

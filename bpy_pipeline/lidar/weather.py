@@ -292,17 +292,56 @@ def wet_ground_factor(albedo: np.ndarray, cos_incidence: np.ndarray) -> np.ndarr
 
 
 # ----------------------------------------------------------------------------- particles along beams
-def _particles(limit: np.ndarray, per_m3: float, divergence: float, sample_diameters, rng: np.random.Generator):
-    """Particles in each beam's cone up to ``limit`` (p,) metres: ``(beam row, range m, diameter m)``, by beam and
-    then by range (nearest first).
+@dataclass(frozen=True)
+class _Particles:
+    """A medium of particles: ``per_m3`` of them per cubic metre, diameters ``d0 + Exp(mean)`` truncated at ``cap`` (m),
+    returning like a diffuse target of ``reflectivity`` over their share ``(D / (phi x))^2`` of the footprint."""
 
-    A beam of full-angle ``divergence`` (rad) holds ``per_m3 pi (phi / 2)^2 x^3 / 3`` particles out to
-    ``x``: a Poisson count per beam, ranges ``limit U^(1/3)`` (uniform in the cone's volume) with the
-    ``U`` of a beam drawn in order (normalised sums of exponential spacings: no sort).
+    per_m3: float
+    d0: float
+    mean: float
+    cap: float
+    reflectivity: float
+
+    def tail(self, d: np.ndarray) -> np.ndarray:
+        """P(D >= d), (k,) float64."""
+        d = np.maximum(np.asarray(d, np.float64), self.d0)
+        full = 1.0 - math.exp(-(self.cap - self.d0) / self.mean)
+        return np.clip((np.exp(-(d - self.d0) / self.mean) - math.exp(-(self.cap - self.d0) / self.mean)) / full, 0.0, 1.0)
+
+    def draw_above(self, d: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """A diameter in [``d``, cap] (each) from the truncated exponential, by its inverse distribution (memoryless)."""
+        low = np.minimum(np.maximum(np.asarray(d, np.float64), self.d0), self.cap)
+        span = 1.0 - np.exp(-(self.cap - low) / self.mean)
+        return np.minimum(low - self.mean * np.log1p(-rng.random(len(low)) * span), self.cap)
+
+
+def _visible_particles(limit: np.ndarray, medium: _Particles, divergence: float, detect, extinction: float, rng: np.random.Generator):
+    """The particles of each beam's cone up to ``limit`` (p,) metres that can clear the noise floor:
+    ``(beam row, range m, diameter m)``, by beam, nearest first.
+
+    A particle at ``x`` of diameter ``D`` reads the apparent reflectance ``rho min(1, (D / (phi x))^2) xi(x) exp(-k x)``
+    (``k``: the medium's own ``extinction`` in front of it); below the smallest diameter ``D_min(x)`` that the floor
+    sees with probability 2 % it cannot be a return, so only the rest are drawn: a Poisson count per beam of mean
+    ``int_0^limit per_m3 pi (phi / 2)^2 x^2 P(D >= D_min(x)) dx``, ranges by that intensity's inverse (the uniforms
+    of a beam drawn in order: normalised sums of exponential spacings, no sort), then each diameter above ``D_min(x)``.
     """
     limit = np.asarray(limit, np.float64)
-    volume = np.pi * (divergence / 2.0) ** 2 * limit**3 / 3.0
-    count = rng.poisson(per_m3 * volume)
+    grid = np.concatenate([np.linspace(0.0, 2.0, 201)[:-1], np.geomspace(2.0, max(float(limit.max(initial=2.0)), 2.0) + 1e-9, 400)])
+    # the smallest apparent reflectance the floor sees at each grid range (bisection on the detection probability)
+    lo, hi = np.full(len(grid), 1e-12), np.full(len(grid), 10.0)
+    at = np.maximum(grid, MIN_RANGE).astype(np.float32)
+    for _ in range(50):
+        mid = np.sqrt(lo * hi)
+        ok = detect(mid.astype(np.float32), at) > 0.02
+        lo, hi = np.where(ok, lo, mid), np.where(ok, mid, hi)
+    full = medium.reflectivity * overlap(grid) * np.exp(-extinction * grid)  # a particle covering the whole footprint
+    with np.errstate(divide="ignore", invalid="ignore"):
+        d_min = np.where(full >= hi, divergence * grid * np.sqrt(hi / np.maximum(full, 1e-300)), np.inf)
+    density = medium.per_m3 * np.pi * (divergence / 2.0) ** 2 * grid**2 * np.where(np.isfinite(d_min), medium.tail(np.where(np.isfinite(d_min), d_min, 0.0)), 0.0)
+    cumulative = np.concatenate([[0.0], np.cumsum((density[1:] + density[:-1]) / 2 * np.diff(grid))])
+    mass = np.interp(limit, grid, cumulative)
+    count = rng.poisson(mass)
     rows = np.repeat(np.arange(len(limit)), count)
     sizes = count + 1  # k spacings of k ordered uniforms and the last one
     ends = np.cumsum(sizes)
@@ -312,18 +351,10 @@ def _particles(limit: np.ndarray, per_m3: float, divergence: float, sample_diame
     last = np.zeros(len(sums), bool)
     last[ends - 1] = True
     u = (sums[~last] - before[rows]) / total[rows]
-    x = limit[rows] * np.cbrt(u)
-    return rows, x, sample_diameters(len(rows))
-
-
-def _reach(reflectivity: float, max_diameter: float, divergence: float, floor) -> float:
-    """Farthest range (m) at which a particle of ``max_diameter`` can clear the noise floor (``floor(a, r)`` True when seen)."""
-    lo, hi = MIN_RANGE, 2000.0
-    for _ in range(60):
-        mid = math.sqrt(lo * hi)
-        share = min(1.0, (max_diameter / (divergence * mid)) ** 2)
-        lo, hi = (mid, hi) if floor(reflectivity * share, mid) else (lo, mid)
-    return hi
+    rising = np.concatenate([[True], np.diff(cumulative) > 0])  # a strictly increasing inverse
+    x = np.interp(u * mass[rows], cumulative[rising], grid[rising])
+    d = medium.draw_above(np.interp(x, grid, np.where(np.isfinite(d_min), d_min, medium.cap)), rng)
+    return rows, x, d
 
 
 # ----------------------------------------------------------------------------- applying it
@@ -362,20 +393,13 @@ def _strongest(rows: np.ndarray, power: np.ndarray) -> np.ndarray:
     return hit[_starts(rows[hit])]
 
 
-def _shade(rows: np.ndarray, share: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Occlusion along beams (particles by beam, nearest first): ``(before, total)``: (k,) share of each
-    particle's light left by the nearer particles of its beam, (n,) share of each beam's light left past all of them."""
-    if len(rows) == 0:
-        return np.ones(0), np.ones(n)
-    log_left = np.log1p(-np.minimum(share, 1.0 - 1e-12))
-    cum = np.cumsum(log_left)
-    starts = _starts(rows)
-    offset = np.repeat(np.concatenate([[0.0], cum])[starts], np.diff(np.append(starts, len(rows))))
-    before = np.exp(cum - log_left - offset)
-    total = np.ones(n)
-    ends = np.append(starts[1:], len(rows)) - 1
-    total[rows[ends]] = np.exp(cum[ends] - offset[ends])
-    return before, total
+def _offer_particles(medium: _Medium, r: np.ndarray, particles: _Particles, divergence: float, detect, extinction: float, kind: int, rng) -> None:
+    """The strongest visible particle of each beam, offered as its scatterer."""
+    rows, x, d = _visible_particles(r, particles, divergence, detect, extinction, rng)
+    if len(rows):
+        apparent = particles.reflectivity * np.minimum(1.0, (d / (divergence * x)) ** 2) * overlap(x) * np.exp(-extinction * x)
+        best = _strongest(rows, apparent / (x * x))
+        medium.offer(rows[best], x[best], apparent[best], kind)
 
 
 def apply_weather(points: np.ndarray, beam: np.ndarray, effects, rng: np.random.Generator, detect) -> tuple[np.ndarray, np.ndarray | None]:
@@ -399,57 +423,36 @@ def apply_weather(points: np.ndarray, beam: np.ndarray, effects, rng: np.random.
     medium = _Medium(np.ones(n), r.copy(), np.zeros(n), np.full(n, -1, np.int8), np.full(n, np.nan))
     divergence = (weather.divergence_mrad or DEFAULT_DIVERGENCE_MRAD) * 1e-3
 
-    def seen(apparent: float, range_m: float) -> bool:
-        return float(detect(np.float32([apparent]), np.float32([range_m]))[0]) > 0.02
-
     snow = weather.snow
     if snow.wet_ground:
         ids = np.array([table.id_of(name) for name in snow.wet_classes], np.int64)
         wet = np.isin(points["semantic"], ids)
         medium.transmit[wet] *= wet_ground_factor(beam["reflectivity"][wet], beam["cos_incidence"][wet])
-    fog = weather.fog
+    fog, rain = weather.fog, weather.rain
+    # the media's attenuation of the hard target first (a scatterer competes with what is left of it)
     if fog.visibility > 0:
         alpha = fog_alpha(fog.visibility)
         medium.transmit *= np.exp(-2.0 * alpha * r)
-        integral, distance = fog_soft(r, alpha, fog.pulse_ns)
-        factor = r * r * (fog.backscatter / fog.visibility) / (fog.gamma / math.pi) * integral  # i_soft / i_clear
-        at = np.clip(distance + fog.noise * rng.beta(2.0, 20.0, n), 0.0, r)
-        rows = np.flatnonzero(factor > 0)
-        # the soft return's power is factor x the clear return's (a / r^2); at its range that is apparent reflectance x at^2 / r^2
-        medium.offer(rows, at[rows], (a * factor * at * at / (r * r))[rows], 0, factor[rows])
-    rain = weather.rain
     if rain.rate > 0:
         medium.transmit *= np.exp(-2.0 * rain_alpha(rain.rate) * r)
-        lam = marshall_palmer_lambda(rain.rate)
-        per_m3 = 8000.0 * math.exp(-lam * rain.min_diameter_mm) / lam
-        d_max = 6e-3
-        reach = _reach(rain.droplet_reflectivity, d_max, divergence, seen)
-        rows, x, d = _particles(np.minimum(r, reach), per_m3, divergence, lambda k: np.minimum((rain.min_diameter_mm + rng.exponential(1.0 / lam, k)) * 1e-3, d_max), rng)
-        share = np.minimum(1.0, (d / (divergence * x)) ** 2)
-        apparent = rain.droplet_reflectivity * share * overlap(x)
-        if len(rows):
-            best = _strongest(rows, apparent / (x * x))
-            medium.offer(rows[best], x[best], apparent[best], 1)
     if snow.rate > 0:
         per_m3, mean = snow_density(snow)
-        reach = _reach(snow.flake_reflectivity, SNOW_MAX_DIAMETER, divergence, seen)
-        near = np.minimum(r, reach)
-
-        def diameters(k: int) -> np.ndarray:
-            d = rng.exponential(mean, k)
-            while (big := d > SNOW_MAX_DIAMETER).any():  # their cap: drawn again
-                d[big] = rng.exponential(mean, int(big.sum()))
-            return d
-
-        rows, x, d = _particles(near, per_m3, divergence, diameters, rng)
-        share = np.minimum(1.0, (d / (divergence * x)) ** 2)
-        before, left = _shade(rows, share, n)
-        # beyond the sampled reach, the flakes' mean occlusion
-        medium.transmit *= left * np.exp(-snow_extinction(snow) * np.maximum(r - near, 0.0))
-        apparent = snow.flake_reflectivity * share * before * overlap(x)
-        if len(rows):
-            best = _strongest(rows, apparent / (x * x))
-            medium.offer(rows[best], x[best], apparent[best], 2)
+        extinction = snow_extinction(snow)  # the flakes' mean occlusion of the footprint (the snowfall paper's, one way)
+        medium.transmit *= np.exp(-extinction * r)
+    if fog.visibility > 0:
+        integral, distance = fog_soft(r, alpha, fog.pulse_ns)
+        factor = r * r * (fog.backscatter / fog.visibility) / (fog.gamma / math.pi) * integral  # i_soft / i_clear
+        rows = np.flatnonzero(factor > medium.transmit)  # elsewhere the hard target's return is the stronger
+        at = np.clip(distance[rows] + fog.noise * rng.beta(2.0, 20.0, len(rows)), 0.0, r[rows])
+        # the soft return's power is factor x the clear return's (a / r^2); at its range that is apparent reflectance x at^2 / r^2
+        medium.offer(rows, at, (a * factor)[rows] * at * at / (r[rows] * r[rows]), 0, factor[rows])
+    if rain.rate > 0:
+        lam = marshall_palmer_lambda(rain.rate)
+        drops = _Particles(8000.0 * math.exp(-lam * rain.min_diameter_mm) / lam, rain.min_diameter_mm * 1e-3, 1e-3 / lam, 6e-3, rain.droplet_reflectivity)
+        _offer_particles(medium, r, drops, divergence, detect, 0.0, 1, rng)
+    if snow.rate > 0:
+        flakes = _Particles(per_m3, 0.0, mean, SNOW_MAX_DIAMETER, snow.flake_reflectivity)
+        _offer_particles(medium, r, flakes, divergence, detect, extinction, 2, rng)
     return _resolve(points, beam, effects, rng, detect, medium, r, a, table)
 
 
