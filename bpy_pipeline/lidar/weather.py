@@ -30,11 +30,15 @@ Snowfall, after Hahner et al., "LiDAR Snowfall Simulation for Robust 3D Object D
     the snowfall rate ``r_s`` (mm/h of water) fills the air with the volume share
     ``r_s / (3.6e6 rho_s v_s)`` of flakes (snow density ``rho_s`` 0.1 g/cm^3, terminal velocity
     ``v_s``); diameters are exponential with the Sekhon-Srivastava rate ``22.9 R^-0.45`` 1/cm of the
-    equivalent rain rate ``R = (r_s / (487 rho_s D v_s))^1.5`` (capped at 2 cm), so the flakes grow
-    and multiply with the rate. Flakes are sampled per beam in its cone (divergence ``phi``); each
-    occludes the share ``(D / (phi x))^2`` of the footprint from everything behind it and returns
-    like a 90 % target over that share (their value); the return is the component with the
-    strongest peak power. A wet ground (``wet_ground``) returns less: a water film over a diffuse
+    equivalent rain rate ``R = (r_s / (487 rho_s D v_s))^1.5`` (capped at 2 cm): the occupied share
+    grows with the rate, the flakes grow faster than they multiply (their number per m^3 falls).
+    Flakes are sampled per beam in its cone (divergence ``phi``); one covering the share
+    ``(D / (phi x))^2`` of the footprint returns like a 90 % target over that share (their value),
+    and the flakes occlude the footprint by their mean cross-section per metre (one way, as the
+    paper's unoccluded ratio); the return is the component with the strongest peak power (pulses
+    are compared by peak, not summed). Only the particles that can clear the noise floor are drawn
+    (a diameter above ``D_min(x)``, from the truncated exponential's tail), the same in
+    distribution as drawing all and discarding the rest. A wet ground (``wet_ground``) returns less: a water film over a diffuse
     surface of albedo ``A`` reflects ``(1 - r) (1 - r_i) A / (1 - r_i A)`` (Lekner and Dorf, "Why
     some things are darker when wet"; ``r`` water's Fresnel reflectance at the incidence,
     ``r_i = 1 - (1 - 0.066) / n^2`` the film's internal reflectance, ``n = 1.33``).
