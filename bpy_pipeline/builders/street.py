@@ -126,9 +126,6 @@ def check(params: StreetScene, where: str) -> None:
         check_distribution(getattr(params, key), f"{where}.{key}", low=0.0)
 
 
-EGO_HALF = (2.3, 0.95)  # m: half the ego car's footprint (a 4.6 x 1.9 m estate car)
-
-
 def ego_station(params: StreetScene, frame: int) -> np.ndarray | None:
     """The level frame ``(4, 4)`` of the ego car's roof sensor in frame ``frame``, or ``None`` without ``ego_vehicle``."""
     if not params.ego_vehicle:

@@ -5,6 +5,8 @@ Every function returns ``(vertices (n, 3) float64 metres, triangles (m, 3) int32
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 
@@ -90,3 +92,36 @@ def merge(parts):
 def translated(mesh, offset):
     """``(vertices + offset, triangles)``."""
     return mesh[0] + np.asarray(offset, float), mesh[1]
+
+
+def box_mesh(x0, x1, y0, y1, z0, z1) -> tuple[np.ndarray, np.ndarray]:
+    """An axis-aligned box from its bounds (m)."""
+    return translated(box(x1 - x0, y1 - y0, z1 - z0), ((x0 + x1) / 2, (y0 + y1) / 2, (z0 + z1) / 2))
+
+
+def wheel_mesh(x: float, y: float, radius: float, width: float, sides: int = 12) -> tuple[np.ndarray, np.ndarray]:
+    """A wheel (a short cylinder, axis along y) touching the ground at ``(x, y)``."""
+    v, t = cylinder(radius, width, sides)
+    return v[:, [0, 2, 1]] + [x, y, radius], t[:, ::-1].copy()
+
+
+def beam_mesh(p0, p1, thickness: float) -> tuple[np.ndarray, np.ndarray]:
+    """A square beam of ``thickness`` (m) from ``p0`` to ``p1`` (3,)."""
+    p0, p1 = np.asarray(p0, float), np.asarray(p1, float)
+    axis = p1 - p0
+    w = axis / np.linalg.norm(axis)
+    u = np.cross(w, [0.0, 1.0, 0.0] if abs(w[1]) < 0.9 else [1.0, 0.0, 0.0])
+    u /= np.linalg.norm(u)
+    v, t = box(thickness, thickness, float(np.linalg.norm(axis)))
+    return v @ np.column_stack([u, np.cross(w, u), w]).T + (p0 + p1) / 2, t
+
+
+def quad_mesh(a, b, c, d) -> tuple[np.ndarray, np.ndarray]:
+    return np.array([a, b, c, d], float), np.array([[0, 1, 2], [0, 2, 3]], np.int32)
+
+
+def transformed(mesh: Mesh, centre_xy, yaw: float, z: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """``mesh`` turned by ``yaw`` about z and moved to ``(centre_xy, z)``."""
+    c, s = math.cos(yaw), math.sin(yaw)
+    v = mesh[0] @ np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]]) + [centre_xy[0], centre_xy[1], z]
+    return v, mesh[1]

@@ -42,6 +42,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import primitives
+from .primitives import beam_mesh, box_mesh, quad_mesh, transformed, wheel_mesh  # noqa: F401 - street.box_mesh etc. stay importable
 from .collision import rectangles_overlap
 
 Mesh = tuple[np.ndarray, np.ndarray]  # vertices (n, 3) float64, triangles (m, 3) int32
@@ -61,45 +62,13 @@ NOMINAL_SIZE = {
 }
 SPREAD = {"car": 0.08, "van": 0.06, "truck": 0.1, "bus": 0.05, "bicycle": 0.03, "motorcycle": 0.05, "person": 0.08}
 # reflectivity at 905 nm (assumed; the parking builder's paint table for cars)
+EGO_HALF = (2.3, 0.95)  # m: half the ego car's footprint (a 4.6 x 1.9 m estate car), kept free under a roof sensor
 MARKING_THICKNESS = 0.005  # m: road markings stand this proud of the road; users on the road stand on it
 REFLECTIVITY = {"road": 0.12, "marking": 0.6, "sidewalk": 0.25, "kerb": 0.35, "building": 0.4, "glass": 0.08,
                 "tyre": 0.05, "pole": 0.3, "traffic light": 0.15, "traffic sign": 0.8, "frame": 0.3, "person": 0.35}
 
 
 # ----------------------------------------------------------------------------- small meshes
-def box_mesh(x0, x1, y0, y1, z0, z1) -> Mesh:
-    """An axis-aligned box from its bounds (m)."""
-    return primitives.translated(primitives.box(x1 - x0, y1 - y0, z1 - z0), ((x0 + x1) / 2, (y0 + y1) / 2, (z0 + z1) / 2))
-
-
-def wheel_mesh(x: float, y: float, radius: float, width: float, sides: int = 12) -> Mesh:
-    """A wheel (a short cylinder, axis along y) touching the ground at ``(x, y)``."""
-    v, t = primitives.cylinder(radius, width, sides)
-    return v[:, [0, 2, 1]] + [x, y, radius], t[:, ::-1].copy()
-
-
-def beam_mesh(p0, p1, thickness: float) -> Mesh:
-    """A square beam of ``thickness`` (m) from ``p0`` to ``p1`` (3,)."""
-    p0, p1 = np.asarray(p0, float), np.asarray(p1, float)
-    axis = p1 - p0
-    w = axis / np.linalg.norm(axis)
-    u = np.cross(w, [0.0, 1.0, 0.0] if abs(w[1]) < 0.9 else [1.0, 0.0, 0.0])
-    u /= np.linalg.norm(u)
-    v, t = primitives.box(thickness, thickness, float(np.linalg.norm(axis)))
-    return v @ np.column_stack([u, np.cross(w, u), w]).T + (p0 + p1) / 2, t
-
-
-def quad_mesh(a, b, c, d) -> Mesh:
-    return np.array([a, b, c, d], float), np.array([[0, 1, 2], [0, 2, 3]], np.int32)
-
-
-def transformed(mesh: Mesh, centre_xy, yaw: float, z: float = 0.0) -> Mesh:
-    """``mesh`` turned by ``yaw`` about z and moved to ``(centre_xy, z)``."""
-    c, s = math.cos(yaw), math.sin(yaw)
-    v = mesh[0] @ np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]]) + [centre_xy[0], centre_xy[1], z]
-    return v, mesh[1]
-
-
 # ----------------------------------------------------------------------------- vehicles
 def vehicle_parts(kind: str, size) -> dict[str, Mesh]:
     """``{"body", "glass", "tyres"}`` meshes of a vehicle of ``kind`` and ``size`` (length, width, height), own frame.
@@ -207,7 +176,8 @@ class Lane:
 
 @dataclass(frozen=True)
 class Part:
-    """One static object: name, class, material, reflectivity, instance id, mesh (world)."""
+    """One static object: name, class, material, reflectivity, instance id, mesh (world); for scattered items
+    (street_dressing.Scatter) also ``scatter``, the prototypes and per-item transforms that ``mesh`` places."""
 
     name: str
     class_name: str
@@ -215,6 +185,7 @@ class Part:
     instance: int
     mesh: Mesh
     material: str = "diffuse"
+    scatter: object = None
 
 
 @dataclass
@@ -270,8 +241,8 @@ def street_layout(p, rng: np.random.Generator) -> StreetLayout:
     parts: list[Part] = []
     instance = iter(range(1, 100000))
 
-    def add(name, class_name, reflectivity, mesh, material="diffuse", inst=None):
-        parts.append(Part(name, class_name, reflectivity, next(instance) if inst is None else inst, mesh, material))
+    def add(name, class_name, reflectivity, mesh, material="diffuse", inst=None, scatter=None):
+        parts.append(Part(name, class_name, reflectivity, next(instance) if inst is None else inst, mesh, material, scatter))
 
     # carriageway: the road along x whole, the road along y in two halves beside it
     road = [primitives.translated(primitives.plane(2 * A, 2 * R), (0.0, 0.0, 0.0))]
@@ -351,8 +322,8 @@ def street_layout(p, rng: np.random.Generator) -> StreetLayout:
     dressing = dress(p, R, inner, outer, kh, c1, rng)
     for mesh in dressing.buildings:
         add(f"street_building_{len(parts):03d}", "building", REFLECTIVITY["building"], mesh)
-    for name, class_name, reflectivity, mesh in dressing.parts:
-        add(name, class_name, reflectivity, mesh)
+    for name, class_name, reflectivity, mesh, scatter in dressing.parts:
+        add(name, class_name, reflectivity, mesh, scatter=scatter)
     poles += dressing.circles
     return StreetLayout(parts, lanes, R, inner, outer, A, kh, crossings, np.array(poles, float).reshape(-1, 3), walk_rects, dressing.blocks, dressing.counts)
 

@@ -2,9 +2,13 @@
 
 The static intersection (road, markings, kerbs, sidewalks, traffic lights and signs, buildings;
 ``geometry/street.py``) is built once per run from the scene's ``layout_seed``, so every frame
-scans the same street whichever frame a run starts at. Each frame removes the last frame's road
-users and places new ones from the frame's generator (lane following, platoons, parked cars,
-pedestrians on sidewalks and crossings, field-of-view aware when the run's sensors are known).
+scans the same street whichever frame a run starts at. Its scattered items (trunks, crowns and
+bushes, lamps and bollards, bins, bicycle stands, cones, barriers) are one object per kind whose
+live "Street Scatter" Geometry Nodes modifier instances the kind's prototypes on the object's
+points (scenes/street_nodes.py); a user can edit its inputs or move its points and rescan.
+Each frame removes the last frame's road users and places new ones from the frame's generator
+(lane following, platoons, parked cars, pedestrians on sidewalks and crossings, field-of-view
+aware when the run's sensors are known).
 
 A road user is one object per part (a vehicle's body, glass and tyres; a two-wheeler's frame,
 wheels and rider) sharing one instance id, so its 3D box holds all of it; the rider's points are
@@ -18,6 +22,7 @@ import numpy as np
 
 from ..geometry import street
 from .objects import mesh_data, mesh_object, scene_collection, tag
+from .street_nodes import prototypes_collection, scatter_object
 
 USER_INSTANCE = 1000  # road users' instance ids start here; static parts use 1 .. 999
 USERS_COLLECTION = "LiDAR Street Users"
@@ -30,8 +35,10 @@ class Intersection:
         self.params = params
         self.layout = street.street_layout(params, np.random.default_rng(params.layout_seed))
         self.collection = scene_collection()
+        prototypes = prototypes_collection(self.collection)
         self.static = [
-            tag(mesh_object(part.name, part.mesh, self.collection), part.class_name, part.material, part.reflectivity, part.instance)
+            tag(mesh_object(part.name, part.mesh, self.collection) if part.scatter is None else scatter_object(part.name, part.scatter, self.collection, prototypes),
+                part.class_name, part.material, part.reflectivity, part.instance)
             for part in self.layout.parts
         ]
         self.users = bpy.data.collections.new(USERS_COLLECTION)
@@ -57,11 +64,9 @@ class Intersection:
         views = tuple(getattr(view, "fields", ()) or ())
         reserved = []
         if self.params.ego_vehicle:  # the ego car under the roof sensor: its footprint stays free
-            from ..builders.street import EGO_HALF
-
             for v in views:
                 yaw = float(np.arctan2(v.pose[1, 0], v.pose[0, 0]))
-                reserved.append((v.pose[:2, 3].copy(), np.array(EGO_HALF), yaw))
+                reserved.append((v.pose[:2, 3].copy(), np.array(street.EGO_HALF), yaw))
         placement = street.place_users(self.params, self.layout, rng, views, reserved=reserved)
         self._clear_users()
         headings = {}
