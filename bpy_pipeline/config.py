@@ -28,6 +28,7 @@ from .lidar.mirror_sensor import check_reflector, load_edge_mask
 from .lidar.platform import Trajectory
 from .lidar.sensors import SensorSpec, frame_time, mount_offset, resolve_sensor
 from .lidar.sensors import rings as sensor_rings
+from .lidar.materials import MaterialsConfig, check_materials
 from .lidar.weather import WeatherConfig, check_weather
 from .buffers import MATERIALS  # noqa: F401  (the panel's list)
 from .builders import BUILDERS as BUILDER_REGISTRY
@@ -184,6 +185,7 @@ class EffectsConfig:
     mirrors: MirrorConfig = field(default_factory=MirrorConfig)
     intensity: IntensityConfig = field(default_factory=IntensityConfig)
     weather: WeatherConfig = field(default_factory=WeatherConfig)  # fog, rain, snow (lidar/weather.py); off under ideal
+    materials: MaterialsConfig = field(default_factory=MaterialsConfig)  # reflectance model per class (lidar/materials.py); opt-in
 
 
 @dataclass(frozen=True)
@@ -450,6 +452,7 @@ def _check_effects(effects: EffectsConfig, spec: SensorSpec | None) -> None:
 
     noise, drop, intensity = effects.noise, effects.drop, effects.intensity
     check_weather(effects.weather)
+    check_materials(effects.materials)
     for key in ("sigma", "sigma_per_metre", "angular_jitter_deg"):
         check_positive(getattr(noise, key), f"effects.noise.{key}", allow_zero=True)
     rings = None if spec is None else sensor_rings(spec)

@@ -64,6 +64,7 @@ from .drop import DROP_MODELS
 from .drop.carla import carla_keep_probability  # noqa: F401  (stable names)
 from .drop.threshold import ThresholdModel, threshold_model  # noqa: F401
 from .intensity import carla_intensity, compute_intensity, lidar_intensity, reflectance  # noqa: F401
+from .materials import apply_materials
 from .weather import apply_weather, fog_alpha, fog_soft_table
 
 MODEL_FORMAT = "bpy_pipeline effects model"
@@ -396,6 +397,8 @@ CHUNK_POINTS = 1 << 16  # records per work item: a chunk's fields stay in cache 
 
 
 def _apply_chunk(points, beam, effects, rng, drop_models, noise_models) -> np.ndarray:
+    if getattr(effects, "materials", None) is not None:  # per-class reflectance models (lidar/materials.py), opt-in
+        beam = apply_materials(points, beam, effects.materials, effects.intensity.incidence_exponent)
     intensity = compute_intensity(points["range"], beam, effects.intensity)
     keep = drop_mask(points, beam, effects, rng, drop_models)
     points = _copy_records(points, keep)

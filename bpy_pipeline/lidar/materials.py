@@ -1,0 +1,158 @@
+"""Per-material reflectance at the sensor's wavelength (``effects.materials``): what a surface returns against incidence.
+
+A material model turns a return's ``lidar_reflectivity`` ``rho`` and its cosine of incidence into the
+apparent reflectance ``a`` the receiver sees (what the intensity, drop and weather models read; a
+Lambertian target gives ``rho cos``). Points take a model by their class (``effects.materials.classes``,
+e.g. ``{car: glossy_paint, traffic sign: retroreflector}``); classes not named keep the scene's diffuse
+reflectance, and glass and mirrors are traced as before (lidar/scanner.py). Opt-in: no class has a model
+unless the config names one, so scans without it are unchanged.
+
+Models (:data:`MATERIAL_MODELS`, a registry; each owns the dataclass of its section):
+
+``glossy_paint``
+    A clear coat over pigment: a diffuse part ``diffuse cos`` plus a specular lobe
+    ``specular exp(-theta^2 / (2 lobe^2))`` back towards the sensor, seen only near normal
+    incidence (the Phong/Gaussian-lobe form of microfacet models). At oblique incidence the coat
+    sends the beam away and the dark diffuse part is all that returns: few returns and low
+    intensity, strong near normal. The object's ``rho`` is not used (the paint's colour in the
+    visible says little at 905 nm).
+``retroreflector``
+    Number plates, signs, lane paint with glass beads: a return of ``reflectivity`` (far above a
+    white diffuse target's 1) up to an entrance angle ``max_angle_deg``, falling as ``1 - (theta /
+    max)^2``; sensors saturate on it (Velodyne's calibrated reflectivity puts retro-reflectors at
+    101-255 above the diffuse 0-100).
+``dark_paint``
+    A diffuse ``reflectivity`` (black paint about 0.05) whatever the scene says.
+``wet``
+    The diffuse surface under a water film (Lekner and Dorf's "Why some things are darker when
+    wet", :func:`.weather.wet_ground_factor`): about half the dry return.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from ..errors import InputError
+from ..registry import Registry
+from .weather import wet_ground_factor
+
+
+@dataclass(frozen=True)
+class GlossyPaint:
+    """``effects.materials.glossy_paint``."""
+
+    diffuse: float = 0.03  # the pigment's diffuse reflectance under the coat at 905 nm (dark: KITTI cars read about 0-0.1)
+    specular: float = 0.6  # the coat's return at normal incidence
+    lobe_deg: float = 8.0  # one sigma of the specular lobe, degrees of incidence
+
+
+@dataclass(frozen=True)
+class Retroreflector:
+    """``effects.materials.retroreflector``."""
+
+    reflectivity: float = 10.0  # apparent reflectance at normal entrance, in units of a white diffuse target (saturates)
+    max_angle_deg: float = 60.0  # entrance angle beyond which the sheeting no longer returns
+
+
+@dataclass(frozen=True)
+class DarkPaint:
+    """``effects.materials.dark_paint``."""
+
+    reflectivity: float = 0.05
+
+
+@dataclass(frozen=True)
+class MaterialModel:
+    """A registry entry: ``apparent(rho (p,), cos_incidence (p,), params) -> (p,) float64`` and its parameters' dataclass."""
+
+    apparent: Callable[..., np.ndarray]
+    params: type | None = None
+
+
+MATERIAL_MODELS: Registry[MaterialModel] = Registry("material model", "effects.materials.classes")
+
+
+def _incidence(cos: np.ndarray) -> np.ndarray:
+    return np.arccos(np.clip(np.asarray(cos, np.float64), 0.0, 1.0))
+
+
+def glossy_paint(rho, cos, p: GlossyPaint) -> np.ndarray:
+    """``diffuse cos + specular exp(-theta^2 / (2 lobe^2))``."""
+    theta = _incidence(cos)
+    return p.diffuse * np.clip(cos, 0.0, 1.0) + p.specular * np.exp(-0.5 * (theta / math.radians(p.lobe_deg)) ** 2)
+
+
+def retroreflector(rho, cos, p: Retroreflector) -> np.ndarray:
+    """``reflectivity (1 - (theta / max)^2)`` within the entrance angle, 0 beyond."""
+    theta = _incidence(cos)
+    return p.reflectivity * np.clip(1.0 - (theta / math.radians(p.max_angle_deg)) ** 2, 0.0, 1.0)
+
+
+def dark_paint(rho, cos, p: DarkPaint) -> np.ndarray:
+    return p.reflectivity * np.clip(np.asarray(cos, np.float64), 0.0, 1.0)
+
+
+def wet(rho, cos, p=None) -> np.ndarray:
+    cos = np.clip(np.asarray(cos, np.float64), 0.0, 1.0)
+    return np.asarray(rho, np.float64) * cos * wet_ground_factor(rho, cos)
+
+
+MATERIAL_MODELS.register("glossy_paint", MaterialModel(glossy_paint, GlossyPaint))
+MATERIAL_MODELS.register("retroreflector", MaterialModel(retroreflector, Retroreflector))
+MATERIAL_MODELS.register("dark_paint", MaterialModel(dark_paint, DarkPaint))
+MATERIAL_MODELS.register("wet", MaterialModel(wet))
+
+
+@dataclass(frozen=True)
+class MaterialsConfig:
+    """``effects.materials``: a reflectance model per class, and each model's parameters."""
+
+    classes: dict = field(default_factory=dict)  # class name -> a name of MATERIAL_MODELS
+    glossy_paint: GlossyPaint = field(default_factory=GlossyPaint)
+    retroreflector: Retroreflector = field(default_factory=Retroreflector)
+    dark_paint: DarkPaint = field(default_factory=DarkPaint)
+
+
+def check_materials(materials: MaterialsConfig, where: str = "effects.materials") -> None:
+    """``InputError`` naming the key of an unknown class or model, or a parameter out of range."""
+    from ..labels import load_class_table
+
+    table = load_class_table()
+    for name, model in materials.classes.items():
+        table.id_of(str(name), f"{where}.classes")
+        if not isinstance(model, str) or model not in MATERIAL_MODELS:
+            raise InputError(f"{where}.classes.{name}: unknown material model {model!r}; allowed: {', '.join(MATERIAL_MODELS)}")
+    g, r, d = materials.glossy_paint, materials.retroreflector, materials.dark_paint
+    for key, value, lo, hi in (("glossy_paint.diffuse", g.diffuse, 0, 1), ("glossy_paint.specular", g.specular, 0, 10), ("glossy_paint.lobe_deg", g.lobe_deg, 0.1, 90),
+                               ("retroreflector.reflectivity", r.reflectivity, 0, 1000), ("retroreflector.max_angle_deg", r.max_angle_deg, 1, 90), ("dark_paint.reflectivity", d.reflectivity, 0, 1)):
+        if not lo <= value <= hi:
+            raise InputError(f"{where}.{key}: must lie in {lo}..{hi}, got {value}")
+
+
+def apply_materials(points: np.ndarray, beam: np.ndarray, materials: MaterialsConfig, incidence_exponent: float) -> np.ndarray:
+    """``beam`` with the reflectivity of the points of the classes named set so that ``rho cos^k`` (the intensity
+    model's apparent reflectance, ``k`` its ``incidence_exponent``) is their material's; a copy when any changes.
+
+    points : (p,) POINT_DTYPE (their ``semantic``); beam : (p,) BEAM_DTYPE
+    """
+    if not materials.classes or len(points) == 0:
+        return beam
+    from ..labels import load_class_table
+
+    table = load_class_table()
+    out = None
+    for name, model_name in materials.classes.items():
+        mine = points["semantic"] == table.id_of(str(name))
+        if not mine.any():
+            continue
+        out = beam.copy() if out is None else out
+        model = MATERIAL_MODELS.get(model_name)
+        params = getattr(materials, model_name, None)
+        cos = beam["cos_incidence"][mine].astype(np.float64)
+        a = model.apparent(beam["reflectivity"][mine], cos, params)
+        out["reflectivity"][mine] = a / np.maximum(cos, 1e-3) ** incidence_exponent
+    return beam if out is None else out
