@@ -126,6 +126,7 @@ class IntensityConfig:
     incidence_exponent: float = 1.0  # `reflectance` and `lidar`: rho cos(theta)^k; 1 Lambertian, 0 as real road returns read (KITTI, nuScenes)
     scale: float = 1.0  # the model's value times this, clipped to 0..1 (Velodyne's 0..100 % diffuse in 0..255: 100 / 255)
     steps: int = 0  # quantise to k / steps as the sensor's integer intensity does (255: nuScenes 0..255; 100: KITTI 0.01); 0 = continuous
+    offset: float = 0.0  # subtracted after scale, clipped at 0: a receiver that reads weak returns as 0 (KITTI's car paint); 0 = none
 
 
 @dataclass(frozen=True)
@@ -473,6 +474,8 @@ def _check_effects(effects: EffectsConfig, spec: SensorSpec | None) -> None:
         check_positive(getattr(intensity, key), f"effects.intensity.{key}", allow_zero=True)
     check_positive(intensity.reference_range, "effects.intensity.reference_range")
     check_positive(intensity.scale, "effects.intensity.scale")
+    if not 0 <= intensity.offset < 1:
+        raise InputError(f"effects.intensity.offset: must lie in 0..1, got {intensity.offset}")
     check_positive(intensity.incidence_exponent, "effects.intensity.incidence_exponent", allow_zero=True)
     if not 0 <= intensity.steps <= 65535:
         raise InputError(f"effects.intensity.steps: must lie in 0..65535 (0 = continuous), got {intensity.steps}")

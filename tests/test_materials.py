@@ -86,3 +86,13 @@ def test_bad_materials_name_the_key(materials, expected):
     with pytest.raises(InputError) as err:
         effects_from_dict({"materials": materials})
     assert str(err.value).startswith(expected), str(err.value)
+
+
+def test_an_intensity_offset_reads_weak_returns_as_zero():
+    points, beam = returns(10.0, [0], "wall", reflectivity=0.04)
+    bright, bright_beam = returns(10.0, [0], "wall", reflectivity=0.10)
+    eff = effects_from_dict({"intensity": {"incidence_exponent": 0.0, "scale": 6.0, "offset": 0.3, "steps": 100}})
+    assert np.all(apply_effects(points, beam, eff, np.random.default_rng(0))["intensity"] == 0.0)  # 6 x 0.04 - 0.3 < 0
+    np.testing.assert_allclose(apply_effects(bright, bright_beam, eff, np.random.default_rng(0))["intensity"], 0.30, atol=1e-6)
+    with pytest.raises(InputError, match="effects.intensity.offset: must lie in 0..1"):
+        effects_from_dict({"intensity": {"offset": -0.1}})

@@ -56,13 +56,16 @@ def compute_intensity(range_m: np.ndarray, beam: np.ndarray, intensity) -> np.nd
         value = carla_intensity(range_m, intensity.attenuation_rate)
     else:
         value = np.clip(reflectance(beam, intensity.incidence_exponent), 0.0, 1.0)
-    return sensor_units(value, intensity.scale, intensity.steps)
+    return sensor_units(value, intensity.scale, intensity.steps, getattr(intensity, "offset", 0.0))
 
 
-def sensor_units(value: np.ndarray, scale: float = 1.0, steps: int = 0) -> np.ndarray:
-    """(p,) float32 intensities 0..1 times ``scale``, clipped to 1, rounded to ``k / steps`` when ``steps`` > 0."""
+def sensor_units(value: np.ndarray, scale: float = 1.0, steps: int = 0, offset: float = 0.0) -> np.ndarray:
+    """(p,) float32 intensities 0..1 times ``scale`` less ``offset`` (a receiver that reads weak returns as 0),
+    clipped to 0..1, rounded to ``k / steps`` when ``steps`` > 0."""
     if scale != 1.0:
         value = np.minimum(np.asarray(value, np.float32) * np.float32(scale), np.float32(1.0))
+    if offset:
+        value = np.maximum(np.asarray(value, np.float32) - np.float32(offset), np.float32(0.0))
     if steps > 0:
         value = np.rint(np.asarray(value, np.float32) * np.float32(steps)) / np.float32(steps)
     return value
