@@ -23,6 +23,14 @@ generator) and laid out per corner block of the intersection of :mod:`.street`:
 
 Every item that stands where road users go is an obstacle for their placement: circles
 ``(x, y, radius)`` and rectangles ``(centre (2,), half (2,), yaw)``.
+
+Scattered items (trunks, crowns and bushes, lamps and bollards, bins, bicycle stands, cones,
+barriers) are *instances*: a :class:`Scatter` holds a few prototype meshes per kind (crowns: a few
+variants per shape drawn from the layout's generator) and per item a transform (position, yaw,
+scale, prototype). Its :meth:`Scatter.mesh` places the prototypes by those transforms: the pure
+reference that the "Street Scatter" Geometry Nodes group (scenes/street_nodes.py) instances
+in Blender. Terrain, plot boundaries (fences, walls, hedges) and buildings run along the
+plots and stay plain meshes.
 """
 
 from __future__ import annotations
@@ -33,6 +41,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import primitives, vegetation
+from .primitives import beam_mesh, box_mesh, transformed
 
 Mesh = tuple[np.ndarray, np.ndarray]
 
@@ -43,11 +52,55 @@ REFLECTIVITY = {"vegetation": 0.5, "trunk": 0.3, "terrain": 0.4, "pole": 0.3, "f
 BOUNDARIES = ("fence", "hedge", "wall", "none")
 
 
+def place(mesh: Mesh, position, yaw: float = 0.0, scale=(1.0, 1.0, 1.0)) -> Mesh:
+    """``mesh`` scaled by ``scale`` (3,) along its own axes, turned by ``yaw`` (radians) about z and moved to ``position`` (3,) m."""
+    c, s = math.cos(yaw), math.sin(yaw)
+    rotation = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    return (mesh[0] * np.asarray(scale, float)) @ rotation.T + np.asarray(position, float), mesh[1]
+
+
+@dataclass
+class Scatter:
+    """Items of one kind as prototypes placed by transforms (what a Geometry Nodes group instances).
+
+    prototypes : ``[Mesh]``, each in an item's own frame (m, z up, its origin where the item stands)
+    per item, in the order added: ``positions`` (k, 3) m, ``yaw`` (k,) radians about z, ``scale``
+    (k, 3) along the prototype's axes, ``prototype`` (k,) int, an index into ``prototypes``
+    """
+
+    prototypes: list[Mesh] = field(default_factory=list)
+    items: list[tuple[int, tuple, float, tuple]] = field(default_factory=list)
+
+    def add(self, prototype: int, position, yaw: float = 0.0, scale=(1.0, 1.0, 1.0)) -> None:
+        self.items.append((int(prototype), tuple(float(v) for v in position), float(yaw), tuple(float(v) for v in scale)))
+
+    @property
+    def positions(self) -> np.ndarray:
+        return np.array([i[1] for i in self.items], float).reshape(-1, 3)
+
+    @property
+    def yaw(self) -> np.ndarray:
+        return np.array([i[2] for i in self.items], float)
+
+    @property
+    def scale(self) -> np.ndarray:
+        return np.array([i[3] for i in self.items], float).reshape(-1, 3)
+
+    @property
+    def prototype(self) -> np.ndarray:
+        return np.array([i[0] for i in self.items], np.int32)
+
+    def mesh(self) -> Mesh:
+        """Every item's prototype placed by its transform (:func:`place`), merged in item order."""
+        return primitives.merge([place(self.prototypes[k], position, yaw, scale) for k, position, yaw, scale in self.items])
+
+
 @dataclass
 class Dressing:
-    """The dressing of one street: ``parts`` ``[(name, class, reflectivity, mesh)]`` and the obstacles it adds."""
+    """The dressing of one street: ``parts`` ``[(name, class, reflectivity, mesh, scatter)]`` (``scatter`` the
+    :class:`Scatter` whose :meth:`~Scatter.mesh` ``mesh`` is, or ``None`` for a plain mesh) and the obstacles it adds."""
 
-    parts: list[tuple[str, str, float, Mesh]] = field(default_factory=list)
+    parts: list[tuple[str, str, float, Mesh, Scatter | None]] = field(default_factory=list)
     circles: list[tuple[float, float, float]] = field(default_factory=list)
     blocks: list[tuple[np.ndarray, np.ndarray, float]] = field(default_factory=list)
     buildings: list[Mesh] = field(default_factory=list)
@@ -122,8 +175,6 @@ def cone_mesh(base, radius: float, height: float, sides: int = 10) -> Mesh:
 
 def hoop_mesh(base, yaw: float, width: float = 0.6, height: float = 0.8, thickness: float = 0.05) -> Mesh:
     """A bicycle stand's hoop: two posts and a top bar of ``thickness`` (m) square tube, across ``yaw``."""
-    from .street import beam_mesh
-
     c, s = math.cos(yaw), math.sin(yaw)
     base = np.asarray(base, float)
     a = base + [-s * width / 2, c * width / 2, 0.0]
@@ -132,23 +183,23 @@ def hoop_mesh(base, yaw: float, width: float = 0.6, height: float = 0.8, thickne
     return primitives.merge([beam_mesh(a - [0, 0, 0.1], a + up, thickness), beam_mesh(b - [0, 0, 0.1], b + up, thickness), beam_mesh(a + up, b + up, thickness)])
 
 
-def lamp_mesh(base, facing: float, height: float) -> Mesh:
-    """A street lamp at ``base`` (3,): a pole of ``height`` (m), an arm reaching 1.5 m towards ``facing`` (radians), a head."""
-    from .street import beam_mesh, box_mesh, transformed
+def unit_cylinder(sides: int) -> Mesh:
+    """A capped cylinder of radius 1 from z = 0 to z = 1 (a pole, trunk or bollard scaled to its radius and length)."""
+    return primitives.translated(primitives.cylinder(1.0, 1.0, sides), (0.0, 0.0, 0.5))
 
-    base = np.asarray(base, float)
-    pole = primitives.translated(primitives.cylinder(0.08, height + 0.3, 8), base + [0.0, 0.0, (height - 0.3) / 2])
-    tip = base + [1.5 * math.cos(facing), 1.5 * math.sin(facing), height + 0.25]
-    arm = beam_mesh(base + [0.0, 0.0, height - 0.1], tip, 0.06)
-    head = transformed(box_mesh(-0.35, 0.35, -0.15, 0.15, -0.12, 0.0), tip[:2], facing, tip[2])
-    return primitives.merge([pole, arm, head])
+
+def lamp_head_mesh() -> Mesh:
+    """A street lamp's arm and head in the lamp's frame: the origin at the pole's top (the lamp's height),
+    the arm reaching 1.5 m along +x from 0.1 m below it up to the head 0.25 m above it."""
+    tip = np.array([1.5, 0.0, 0.25])
+    arm = beam_mesh([0.0, 0.0, -0.1], tip, 0.06)
+    head = primitives.translated(box_mesh(-0.35, 0.35, -0.15, 0.15, -0.12, 0.0), tip)
+    return primitives.merge([arm, head])
 
 
 def fence_mesh(start, end, height: float, kind: str, z_at) -> Mesh:
     """A fence from ``start`` to ``end`` ((2,) m) on the ground ``z_at(x, y)``: ``bars`` (posts every 2.5 m,
     two rails and 2 cm bars every 12 cm) or ``boards`` (posts and a closed board panel 2 cm thick)."""
-    from .street import beam_mesh
-
     start, end = np.asarray(start, float), np.asarray(end, float)
     length = float(np.linalg.norm(end - start))
     along = (end - start) / length
@@ -183,8 +234,6 @@ def fence_mesh(start, end, height: float, kind: str, z_at) -> Mesh:
 
 def wall_mesh(start, end, height: float, thickness: float, z_at) -> Mesh:
     """A garden wall from ``start`` to ``end`` ((2,) m), ``height`` above the ground ``z_at`` and 0.3 m into it."""
-    from .street import box_mesh, transformed
-
     start, end = np.asarray(start, float), np.asarray(end, float)
     length = float(np.linalg.norm(end - start))
     mid = (start + end) / 2
@@ -196,11 +245,54 @@ def wall_mesh(start, end, height: float, thickness: float, z_at) -> Mesh:
 
 def barrier_mesh(centre, yaw: float, length: float = 2.0) -> Mesh:
     """A construction barrier: a 0.25 m board 1 m high on two A-frame feet, ``length`` along ``yaw``."""
-    from .street import box_mesh, transformed
-
     board = box_mesh(-length / 2, length / 2, -0.02, 0.02, 0.75, 1.0)
     feet = [box_mesh(x - 0.04, x + 0.04, -0.3, 0.3, 0.0, 1.0) for x in (-length / 2 + 0.1, length / 2 - 0.1)]
     return transformed(primitives.merge([board, *feet]), centre[:2], yaw, float(centre[2]))
+
+
+# ----------------------------------------------------------------------------- prototypes
+CROWN_VARIANTS = 3  # prototype crowns per shape (and bushes), drawn from the layout's generator
+REFERENCE_TREE = (11.0, 2.5)  # m: height and crown radius of the tree the prototype crowns are drawn for
+REFERENCE_BUSH = (0.9, 1.3)  # m: radius and height of the prototype bushes
+
+
+@dataclass
+class Prototypes:
+    """The scattered kinds' prototype meshes: ``plants`` (``CROWN_VARIANTS`` crowns per shape of
+    :data:`~.vegetation.CROWN_SHAPES`, in that order, centred on the origin, then as many bushes resting
+    on it) with ``plant_size`` (k, 2) their radius and height (m); ``poles`` (a unit 8-sided cylinder,
+    a lamp's arm and head); ``bins``, ``stands`` (a hoop across x), ``cones``, ``barriers`` (along x)."""
+
+    plants: list[Mesh]
+    plant_size: np.ndarray
+    poles: list[Mesh]
+    bins: list[Mesh]
+    stands: list[Mesh]
+    cones: list[Mesh]
+    barriers: list[Mesh]
+
+    def crown(self, shape: str, variant: int) -> int:
+        return vegetation.CROWN_SHAPES.index(shape) * CROWN_VARIANTS + variant
+
+    def bush(self, variant: int) -> int:
+        return len(vegetation.CROWN_SHAPES) * CROWN_VARIANTS + variant
+
+
+def prototypes(rng: np.random.Generator) -> Prototypes:
+    """The prototypes of :class:`Prototypes`; the crowns and bushes (leaf cards) are drawn from ``rng``."""
+    plants, size = [], []
+    height, crown_radius = REFERENCE_TREE
+    for shape in vegetation.CROWN_SHAPES:
+        radius, crown_height = vegetation.crown_size(shape, height, crown_radius)
+        for _ in range(CROWN_VARIANTS):
+            plants.append(vegetation.crown(shape, radius, crown_height, rng))
+            size.append((radius, crown_height))
+    radius, height = REFERENCE_BUSH
+    for _ in range(CROWN_VARIANTS):
+        plants.append(vegetation.bush((0.0, 0.0, 0.0), radius, height, rng))
+        size.append((radius, height))
+    return Prototypes(plants, np.array(size), [unit_cylinder(8), lamp_head_mesh()], [primitives.translated(primitives.cylinder(0.3, 1.0, 10), (0.0, 0.0, 0.5))],
+                      [hoop_mesh((0.0, 0.0, 0.0), 0.0)], [cone_mesh((0.0, 0.0, 0.0), 0.15, 0.75)], [barrier_mesh(np.zeros(3), 0.0)])
 
 
 # ----------------------------------------------------------------------------- the dressing
@@ -215,29 +307,37 @@ def dress(p, road_half: float, walk_inner: float, walk_outer: float, kerb_height
     """
     A = p.arm_length
     out = Dressing()
+    kinds = prototypes(rng)
     terrain = make_terrain(walk_outer, kerb_height, p.terrain_relief, p.terrain_slope, rng)
     z_at = terrain.z
-    plants_trunks: list[Mesh] = []
-    plants_crowns: list[Mesh] = []
+    trunks = Scatter([kinds.poles[0]])  # the unit cylinder, scaled to each trunk's radius and length
+    plants = Scatter(kinds.plants)
+    poles = Scatter(kinds.poles)  # lamp poles and bollards (the unit cylinder), lamps' arms and heads
+    bins, stands, cones, barriers = Scatter(kinds.bins), Scatter(kinds.stands), Scatter(kinds.cones), Scatter(kinds.barriers)
+    hedges: list[Mesh] = []
     fences: list[Mesh] = []
     walls: list[Mesh] = []
-    poles: list[Mesh] = []
-    bins: list[Mesh] = []
-    stands: list[Mesh] = []
-    cones: list[Mesh] = []
-    barriers: list[Mesh] = []
 
     def plant(x: float, y: float, ground: float, big: bool, street: bool = False) -> None:
-        """A tree (``big``) or a bush at ``(x, y, ground)``; a street tree's crown clears 4.5 m (buses and lamps' arms)."""
+        """A tree (``big``) or a bush at ``(x, y, ground)``; a street tree's crown clears 4.5 m (buses and lamps' arms).
+
+        Its foliage is a prototype crown (or bush) of its shape, turned at random and scaled to its size."""
         if big:
             shape = vegetation.CROWN_SHAPES[int(rng.integers(len(vegetation.CROWN_SHAPES)))]
             height = float(rng.uniform(8.0, 14.0) if street else rng.uniform(4.0, 14.0))
-            trunk, crown = vegetation.tree((x, y, ground), height, float(rng.uniform(1.5, 3.5)), shape, rng, clear_below=4.5 if street else 1.5)
-            plants_trunks.append(trunk)
-            plants_crowns.append(crown)
+            radius, crown_height = vegetation.crown_size(shape, height, float(rng.uniform(1.5, 3.5)), clear_below=4.5 if street else 1.5)
+            k = kinds.crown(shape, int(rng.integers(CROWN_VARIANTS)))
+            r0, h0 = kinds.plant_size[k]
+            top = height - crown_height / 2.0  # the crown's centre above the ground
+            plants.add(k, (x, y, ground + top), float(rng.uniform(0.0, 2 * math.pi)), (radius / r0, radius / r0, crown_height / h0))
+            r = vegetation.default_trunk_radius(height)  # from 0.2 m under the ground into the crown's middle
+            trunks.add(0, (x, y, ground - 0.2), 0.0, (r, r, top + 0.2))
             out.count("trees")
         else:
-            plants_crowns.append(vegetation.bush((x, y, ground - 0.1), float(rng.uniform(0.4, 1.4)), float(rng.uniform(0.6, 2.0)), rng))
+            radius, height = float(rng.uniform(0.4, 1.4)), float(rng.uniform(0.6, 2.0))
+            k = kinds.bush(int(rng.integers(CROWN_VARIANTS)))
+            r0, h0 = kinds.plant_size[k]
+            plants.add(k, (x, y, ground - 0.1), float(rng.uniform(0.0, 2 * math.pi)), (radius / r0, radius / r0, height / h0))
             out.count("bushes")
 
     def in_block(local_along: float, local_across: float, sx: int, sy: int, axis: int) -> tuple[float, float]:
@@ -253,7 +353,7 @@ def dress(p, road_half: float, walk_inner: float, walk_outer: float, kerb_height
             if p.terrain:
                 x0, x1 = sorted((sx * walk_outer, sx * A))
                 y0, y1 = sorted((sy * walk_outer, sy * A))
-                out.parts.append((f"street_terrain_{len(out.parts):03d}", "terrain", REFLECTIVITY["terrain"], terrain_mesh(terrain, x0, x1, y0, y1, p.terrain_step, rng)))
+                out.parts.append((f"street_terrain_{len(out.parts):03d}", "terrain", REFLECTIVITY["terrain"], terrain_mesh(terrain, x0, x1, y0, y1, p.terrain_step, rng), None))
             # plots along both frontages (the second starts behind the first's deepest plot)
             for axis in (0, 1):
                 s = walk_outer if axis == 0 else walk_outer + max_setback + p.building_depth
@@ -269,8 +369,6 @@ def dress(p, road_half: float, walk_inner: float, walk_outer: float, kerb_height
                         cx0, cy0 = in_block(s, a0, sx, sy, axis)
                         cx1, cy1 = in_block(s + width, a1, sx, sy, axis)
                         low = float(np.min(z_at(np.array([cx0, cx1, cx0, cx1]), np.array([cy0, cy0, cy1, cy1])))) - 0.3
-                        from .street import box_mesh
-
                         out.buildings.append(box_mesh(*sorted((cx0, cx1)), *sorted((cy0, cy1)), low, low + 0.3 + height))
                     # the yard (or open plot): plants drawn by area, kept 1 m off the boundary and the building
                     area = max(width - 2.0, 0.0) * max(depth - 2.0, 0.0)
@@ -289,7 +387,7 @@ def dress(p, road_half: float, walk_inner: float, walk_outer: float, kerb_height
                         height = float(rng.uniform(0.8, 2.0))
                         inward = np.array([0.0, 0.5 * sy] if axis == 0 else [0.5 * sx, 0.0])  # the hedge's axis 0.5 m into the plot
                         ground = min(float(z_at(*a)), float(z_at(*b))) - 0.05
-                        plants_crowns.append(vegetation.hedge([*(a + inward), ground], [*(b + inward), ground], float(rng.uniform(0.6, 1.0)), height, rng))
+                        hedges.append(vegetation.hedge([*(a + inward), ground], [*(b + inward), ground], float(rng.uniform(0.6, 1.0)), height, rng))
                         out.count("hedges")
                     elif kind == "wall":
                         walls.append(wall_mesh(a, b, float(rng.uniform(0.4, 1.6)), 0.25, z_at))
@@ -316,7 +414,9 @@ def dress(p, road_half: float, walk_inner: float, walk_outer: float, kerb_height
                         if all(abs(t - u) > 2.0 for u in taken):
                             x, y = in_block(t, walk_inner + 0.4, sx, sy, axis)
                             facing = math.atan2(-y, 0.0) if axis == 0 else math.atan2(0.0, -x)
-                            poles.append(lamp_mesh((x, y, kerb_height), facing, float(rng.uniform(6.0, 9.0))))
+                            height = float(rng.uniform(6.0, 9.0))
+                            poles.add(0, (x, y, kerb_height - 0.3), 0.0, (0.08, 0.08, height + 0.3))  # 0.3 m into the ground
+                            poles.add(1, (x, y, kerb_height + height), facing)
                             out.circles.append((x, y, 0.3))
                             taken.append(t)
                             out.count("lamps")
@@ -329,7 +429,7 @@ def dress(p, road_half: float, walk_inner: float, walk_outer: float, kerb_height
                     x, y = in_block(t, band, sx, sy, axis)
                     what = rng.random()
                     if what < 0.4:
-                        bins.append(primitives.translated(primitives.cylinder(0.3, 1.0, 10), (x, y, kerb_height + 0.5)))
+                        bins.add(0, (x, y, kerb_height))
                         out.circles.append((x, y, 0.4))
                         out.count("bins")
                     elif what < 0.7:
@@ -337,14 +437,14 @@ def dress(p, road_half: float, walk_inner: float, walk_outer: float, kerb_height
                         hoops = int(rng.integers(2, 5))
                         for k in range(hoops):
                             dx, dy = in_block(0.8 * k, 0.0, sx, sy, axis)
-                            stands.append(hoop_mesh((x + dx, y + dy, kerb_height), yaw))
+                            stands.add(0, (x + dx, y + dy, kerb_height), yaw)
                         mx, my = in_block(0.4 * (hoops - 1), 0.0, sx, sy, axis)
                         half = (0.4 * (hoops - 1) + 0.3, 0.5)
                         out.blocks.append((np.array([x + mx, y + my]), np.array(half if axis == 0 else half[::-1]), 0.0))
                         taken += [t + 0.8 * k for k in range(hoops)]
                         out.count("bicycle stands")
                     else:
-                        poles.append(primitives.translated(primitives.cylinder(0.1, 0.9, 8), (x, y, kerb_height + 0.45)))
+                        poles.add(0, (x, y, kerb_height), 0.0, (0.1, 0.1, 0.9))
                         out.circles.append((x, y, 0.25))
                         out.count("bollards")
                 # road works in the parking strip
@@ -354,19 +454,23 @@ def dress(p, road_half: float, walk_inner: float, walk_outer: float, kerb_height
                     length = float(rng.uniform(6.0, 12.0))
                     for t in np.arange(t0, t0 + length, 1.5):
                         x, y = in_block(t, lane_mid - 0.4, sx, sy, axis)
-                        cones.append(cone_mesh((x, y, 0.0), 0.15, 0.75))
+                        cones.add(0, (x, y, 0.0))
                     for t in np.arange(t0 + 0.5, t0 + length, 2.5):
                         x, y = in_block(t + 1.0, lane_mid + 0.4, sx, sy, axis)
-                        barriers.append(barrier_mesh(np.array([x, y, 0.0]), 0.0 if axis == 0 else math.pi / 2))
+                        barriers.add(0, (x, y, 0.0), 0.0 if axis == 0 else math.pi / 2)
                     cx, cy = in_block(t0 + length / 2 + 0.5, lane_mid, sx, sy, axis)
                     half = np.array([length / 2 + 1.5, p.parking_width / 2]) if axis == 0 else np.array([p.parking_width / 2, length / 2 + 1.5])
                     out.blocks.append((np.array([cx, cy]), half, 0.0))
                     out.count("road works")
-    for name, class_name, meshes in (("trunks", "trunk", plants_trunks), ("vegetation", "vegetation", plants_crowns), ("fences", "fence", fences),
-                                     ("walls", "fence", walls), ("lamps_bollards", "pole", poles), ("bins", "bin", bins),
-                                     ("bicycle_stands", "bicycle stand", stands), ("cones", "traffic cone", cones), ("barriers", "barrier", barriers)):
-        meshes = [m for m in meshes if len(m[1])]
+    for name, class_name, what in (("trunks", "trunk", trunks), ("plants", "vegetation", plants), ("hedges", "vegetation", hedges),
+                                   ("fences", "fence", fences), ("walls", "fence", walls), ("lamps_bollards", "pole", poles), ("bins", "bin", bins),
+                                   ("bicycle_stands", "bicycle stand", stands), ("cones", "traffic cone", cones), ("barriers", "barrier", barriers)):
+        reflectivity = REFLECTIVITY["wall" if name == "walls" else class_name]
+        if isinstance(what, Scatter):
+            if what.items:
+                out.parts.append((f"street_{name}", class_name, reflectivity, what.mesh(), what))
+            continue
+        meshes = [m for m in what if len(m[1])]
         if meshes:
-            reflectivity = REFLECTIVITY["wall" if name == "walls" else class_name]
-            out.parts.append((f"street_{name}", class_name, reflectivity, primitives.merge(meshes)))
+            out.parts.append((f"street_{name}", class_name, reflectivity, primitives.merge(meshes), None))
     return out

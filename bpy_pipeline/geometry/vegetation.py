@@ -71,29 +71,45 @@ def crown_volume(shape: str, radius: float, height: float) -> float:
     return 4.0 / 3.0 * math.pi * radius**2 * height / 2.0
 
 
+def crown_size(shape: str, height: float, crown_radius: float, clear_below: float = 1.5) -> tuple[float, float]:
+    """``(radius, crown_height)`` (m) of the crown of a tree ``height`` tall with ``crown_radius``: the crown
+    takes the upper part of the height (a cone or column more of it) and hangs no lower than ``clear_below``."""
+    if shape not in CROWN_SHAPES:
+        raise ValueError(f"crown shape {shape!r}; allowed: {', '.join(CROWN_SHAPES)}")
+    crown_height = {"round": 1.1 * 2 * crown_radius, "oval": 1.5 * 2 * crown_radius, "cone": 0.75 * height, "column": 0.7 * height}[shape]
+    crown_height = min(crown_height, 0.8 * height, height - clear_below)
+    radius = crown_radius if shape != "column" else min(crown_radius, 0.2 * crown_height)
+    return radius, crown_height
+
+
+def crown(shape: str, radius: float, crown_height: float, rng: np.random.Generator, density: float = 6.0, card: float = 0.4) -> Mesh:
+    """Foliage of a crown of ``shape``, ``radius`` and ``crown_height`` (m) centred on the origin, at ``density``
+    cards of edge ``card`` (m) per m^3."""
+    count = max(8, int(density * crown_volume(shape, radius, crown_height)))
+    return leaf_cards(crown_points(shape, np.zeros(3), radius, crown_height, count, rng), card, rng)
+
+
+def default_trunk_radius(height: float) -> float:
+    """The default trunk radius (m) of a tree ``height`` tall: 4 % of it, at least 0.08 m."""
+    return max(0.08, 0.04 * height)
+
+
 def tree(base, height: float, crown_radius: float, shape: str, rng: np.random.Generator,
          density: float = 6.0, card: float = 0.4, trunk_radius: float | None = None, clear_below: float = 1.5) -> tuple[Mesh, Mesh]:
     """``(trunk, crown)`` of a tree standing at ``base`` (3,), ``height`` (m) tall to the crown's top.
 
-    The crown takes the upper part of the height (a cone or column more of it), its foliage at
-    ``density`` cards per m^3; the trunk (8-sided, ``trunk_radius`` default 4 % of the height, at least
-    0.08 m) reaches from 0.2 m under the ground into the crown's middle, so it is seen between
-    the leaves as real trunks are. No foliage hangs lower than ``clear_below`` (m) above ``base`` (a
-    street tree's crown clears the traffic under it).
+    The crown (:func:`crown_size`) has its foliage at ``density`` cards per m^3; the trunk (8-sided,
+    ``trunk_radius`` default :func:`default_trunk_radius`) reaches from 0.2 m under the ground into the
+    crown's middle, so it is seen between the leaves as real trunks are. No foliage hangs lower
+    than ``clear_below`` (m) above ``base`` (a street tree's crown clears the traffic under it).
     """
-    if shape not in CROWN_SHAPES:
-        raise ValueError(f"crown shape {shape!r}; allowed: {', '.join(CROWN_SHAPES)}")
     base = np.asarray(base, float)
-    crown_height = {"round": 1.1 * 2 * crown_radius, "oval": 1.5 * 2 * crown_radius, "cone": 0.75 * height, "column": 0.7 * height}[shape]
-    crown_height = min(crown_height, 0.8 * height, height - clear_below)
-    radius = crown_radius if shape != "column" else min(crown_radius, 0.2 * crown_height)
-    centre = base + [0.0, 0.0, height - crown_height / 2.0]
-    count = max(8, int(density * crown_volume(shape, radius, crown_height)))
-    crown = leaf_cards(crown_points(shape, centre, radius, crown_height, count, rng), card, rng)
-    r = max(0.08, 0.04 * height) if trunk_radius is None else trunk_radius
+    radius, crown_height = crown_size(shape, height, crown_radius, clear_below)
     top = height - crown_height / 2.0
+    leaves = primitives.translated(crown(shape, radius, crown_height, rng, density, card), base + [0.0, 0.0, top])
+    r = default_trunk_radius(height) if trunk_radius is None else trunk_radius
     trunk = primitives.translated(primitives.cylinder(r, top + 0.2, 8), base + [0.0, 0.0, (top - 0.2) / 2.0])
-    return trunk, crown
+    return trunk, leaves
 
 
 def bush(base, radius: float, height: float, rng: np.random.Generator, density: float = 14.0, card: float = 0.3) -> Mesh:
