@@ -70,6 +70,7 @@ def main() -> None:
             "weather": name,
             "scan s": round(min(times[name]), 4),
             "cost over clear": round(min(times[name]) / min(times["clear"]), 3),
+            "added us per return": round((min(times[name]) - min(times["clear"])) / len(clear) * 1e6, 2),
             "returns": len(points),
             "kept share": round(len(points) / len(clear), 4),
             "clutter points": int(clutter.sum()),

@@ -302,3 +302,24 @@ def test_bad_weather_value_on_the_command_line_is_one_line_exit_2(tmp_path):
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("error: effects.weather.rain.rate: "), result.stderr
     assert not out.exists() or not any(p.is_file() for p in out.rglob("*"))
+
+
+def test_weather_frames_alone_and_over_workers_give_the_full_runs_bytes(tmp_path):
+    """Frames 1-2 of a foggy, snowy parking run alone, and the run over two workers, write the full run's bytes."""
+    weather = ["--set", "scene.builder=parking", "--set", "output.formats=[ply]", "--seed", "5", "--frames", "3",
+               "--set", "effects.weather.fog.visibility=30", "--set", "effects.weather.snow.rate=2", "--set", "effects.weather.rain.rate=10"]
+
+    def run(out, *extra):
+        done = subprocess.run([sys.executable, str(ROOT / "run.py"), "--out", str(out), *weather, *extra], cwd=ROOT, capture_output=True, text=True, timeout=600)
+        assert done.returncode == 0, done.stderr
+        return {p.name: p.read_bytes() for p in sorted((out / "ply").glob("*.ply"))}
+
+    full = run(tmp_path / "full")
+    alone = run(tmp_path / "part", "--frames-range", "1:3")
+    workers = run(tmp_path / "workers", "--workers", "2")
+    assert sorted(alone) == ["000001.ply", "000002.ply"] and alone == {k: full[k] for k in alone}
+    assert workers == full
+    from bpy_pipeline.io import read_ply
+
+    cloud = read_ply(tmp_path / "full" / "ply" / "000000.ply")
+    assert {FOG, SNOW} <= set(np.unique(cloud["semantic"]))
