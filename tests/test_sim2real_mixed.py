@@ -72,7 +72,6 @@ def test_background_labels_kept(mixed):
     assert (raw == 70).sum() == (labels == 15).sum() and (raw == 40).sum() == (labels == 9).sum()
 
 
-@pytest.mark.xfail(strict=True, reason="mixing/frame.py SEMANTICKITTI_NAMES has no raw 70 vegetation, 71 trunk (-> background), maps 72 terrain to ground, 51 fence to wall, 80 pole to mast")
 def test_background_vegetation_terrain_fence_pole_kept(mixed):
     _, points, _, labels, _ = mixed
     table = load_class_table()
