@@ -54,7 +54,7 @@ def scatter_group() -> bpy.types.NodeTree:
     def attribute(name: str, data_type: str) -> bpy.types.NodeSocket:
         return b.out(b.node("GeometryNodeInputNamedAttribute", {"Name": name}, data_type=data_type), "Attribute")
 
-    prototypes = b.node("GeometryNodeCollectionInfo", {"Collection": g("Prototypes"), "Separate Children": True, "Reset Children": True}, transform_space="ORIGINAL")
+    prototypes = b.node("GeometryNodeCollectionInfo", {"Collection": g("Prototypes"), "Separate Children": True, "Reset Children": True}, options={"transform_space": "ORIGINAL"})
     keep = b.out(b.node("FunctionNodeRandomValue", {"Probability": g("Density"), "Seed": g("Seed")}, data_type="BOOLEAN"), "Value")  # the available (boolean) one
     rotation = b.out(b.node("FunctionNodeEulerToRotation", {"Euler": b.combine(0.0, 0.0, attribute("yaw", "FLOAT"))}))
     scale = b.vector_math("SCALE", attribute("scale", "FLOAT_VECTOR"), scale=g("Scale"))
