@@ -91,9 +91,9 @@ def generate(out: Path, layouts: int, frames: int, sets: list[str]) -> dict:
     return {"frames": layouts * frames, "cpu_s": round(children_cpu() - before, 1), "wall_s": round(time.perf_counter() - start, 1)}
 
 
-def scans_of(folder: Path) -> list[labelled.LabelledScan]:
-    """Every generated frame below ``folder``, in layout then frame order."""
-    return [s for d in sorted(folder.glob("layout*")) for s in labelled.load_scans([d], CLASSES)]
+def scans_of(folder: Path, frames: int | None = None) -> list[labelled.LabelledScan]:
+    """The generated frames below ``folder`` (the first ``frames`` of each layout, or all), in layout then frame order."""
+    return [s for d in sorted(folder.glob("layout*")) for s in labelled.load_scans([d], CLASSES, max_frames=frames)]
 
 
 def summary(block: dict) -> dict:
@@ -131,24 +131,28 @@ def main() -> None:
     # real only: leave one group out over the real frames themselves
     predictions, folds = leave_one_group_out(test, test, CLASSES, seed, "lgbm", 20000, 1)
     result["real_only"] = {**summary(score(test, predictions, CLASSES, seed)), "folds": folds}
-    print("real only", result["real_only"])
+    print("real only", result["real_only"], flush=True)
 
     # synthetic only, at each level of detail
     result["synthetic"] = {}
     for name, sets in ablation.items():
         folder = work / name.split(" ")[0].replace(",", "")
         cost = generate(folder, layouts, frames, sets)
-        train = scans_of(folder)
+        per_layout = {}
+        for scan in scans_of(folder):  # kept per layout, so the curve below reuses their features
+            per_layout.setdefault(scan.group, []).append(scan)
+        train = [s for group in sorted(per_layout) for s in per_layout[group]]
         block = trained_on(train, test, seed)
         result["synthetic"][name] = {**summary(block), "cost": cost, "sets": sets,
                                      "false_positives": {c: block["classes"][c].get("false_positives") for c in CLASSES}}
-        print(name, result["synthetic"][name])
-        if name == "default":  # IoU against the number of frames (the first k of each layout)
+        print(name, result["synthetic"][name], flush=True)
+        if name == "default":  # IoU against the number of frames: the first k of each layout
             curve = []
-            for k in sorted({max(1, frames // 4), max(1, frames // 2), frames}):
-                subset = [s for d in sorted(folder.glob("layout*")) for s in labelled.load_scans([d], CLASSES, max_frames=k)]
+            for k in sorted({max(1, frames // 4), max(1, frames // 2)}):
+                subset = [s for group in sorted(per_layout) for s in per_layout[group][:k]]
                 b = trained_on(subset, test, seed)
                 curve.append({"frames": len(subset), "cpu_s": round(cost["cpu_s"] * len(subset) / cost["frames"], 1), **summary(b)})
+            curve.append({"frames": len(train), "cpu_s": cost["cpu_s"], **summary(block)})
             result["synthetic_curve"] = curve
 
     # mixed domain: real backgrounds from the other groups, synthetic objects cast in
@@ -174,7 +178,7 @@ def main() -> None:
     if tested:
         block = score([test[i] for i in tested], [mixed_predictions[i] for i in tested], CLASSES, seed)
         result["mixed"] = {**summary(block), "folds": mixed_folds, "tested": [test[i].name for i in tested]}
-        print("mixed", result["mixed"])
+        print("mixed", result["mixed"], flush=True)
 
     real = result["real_only"]
     result["ratio_synthetic_to_real"] = {c: (result["synthetic"]["default"][c]["iou"] / real[c]["iou"]) if real[c]["iou"] else math.nan for c in CLASSES}
