@@ -173,6 +173,8 @@ def _read_vertices(f, path: Path) -> np.ndarray:
                 raise InputError(f"{path}: cannot skip element {name!r} with list properties before 'vertex'")
         dtype = np.dtype([(prop, (order or "<") + code) for prop, code in props if not isinstance(code, tuple)])
         if name == "vertex":
+            if not props:
+                raise InputError(f"{path}: PLY element vertex has no properties (x, y and z are needed)")
             if order is None:
                 table = np.loadtxt(f, dtype=np.float64, ndmin=2, max_rows=count) if count else np.zeros((0, len(props)))
                 if table.shape != (count, len(props)):
@@ -181,7 +183,7 @@ def _read_vertices(f, path: Path) -> np.ndarray:
             else:
                 left = os.fstat(f.fileno()).st_size - f.tell()
                 if count * dtype.itemsize > left:
-                    raise InputError(f"{path}: PLY element vertex claims {count} vertices of {dtype.itemsize} bytes; the file holds {left // max(dtype.itemsize, 1)}")
+                    raise InputError(f"{path}: truncated PLY: element vertex claims {count} vertices of {dtype.itemsize} bytes; the file holds {left // max(dtype.itemsize, 1)}")
                 arr = np.fromfile(f, dtype=dtype, count=count)
                 if len(arr) != count:
                     raise InputError(f"{path}: truncated PLY: {len(arr)} of {count} vertices present")
