@@ -136,7 +136,7 @@ def main() -> None:
     # synthetic only, at each level of detail
     result["synthetic"] = {}
     for name, sets in ablation.items():
-        folder = work / name.split(" ")[0].replace(",", "")
+        folder = work / "".join(ch if ch.isalnum() else "_" for ch in name)
         cost = generate(folder, layouts, frames, sets)
         per_layout = {}
         for scan in scans_of(folder):  # kept per layout, so the curve below reuses their features
