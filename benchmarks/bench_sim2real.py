@@ -143,12 +143,18 @@ def main() -> None:
     parser.add_argument("--frames", type=int, default=20, help="frames per layout")
     parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results")
     parser.add_argument("--work", type=Path, default=None, help="keep the generated data here (default: a temporary folder)")
+    parser.add_argument("--ablation", default=",".join(ABLATION), help=f"levels of detail to train on, comma-separated (default: all of {', '.join(ABLATION)})")
+    parser.add_argument("--name", default="sim2real", help="results file name (NAME.json, NAME.png)")
     args = parser.parse_args()
     if not (REAL / TEST_FRAMES[0]).is_file():
         print(f"SKIP: the real scans are not at {REAL} (set BPY_PIPELINE_REAL_SCANS)")
         return
     layouts, frames = (2, 2) if args.small else (args.layouts, args.frames)
-    ablation = {k: ABLATION[k] for k in (["default"] if args.small else ABLATION)}
+    wanted = ["default"] if args.small else [k.strip() for k in args.ablation.split(",") if k.strip()]
+    unknown = [k for k in wanted if k not in ABLATION]
+    if unknown or "default" not in wanted:
+        parser.error(f"--ablation: 'default' and names of {', '.join(ABLATION)}; got {args.ablation!r}")
+    ablation = {k: ABLATION[k] for k in wanted}
     work = args.work or Path(tempfile.mkdtemp(prefix="sim2real_"))
     seed = 0
     test = labelled.load_scans([REAL / f for f in TEST_FRAMES], CLASSES)
@@ -213,10 +219,10 @@ def main() -> None:
     result["ratio_synthetic_to_real"] = {c: (result["synthetic"]["default"][c]["iou"] / real[c]["iou"]) if real[c]["iou"] else math.nan for c in CLASSES}
     result["load_average_at_end"] = os.getloadavg()[0]
     args.out.mkdir(parents=True, exist_ok=True)
-    path = args.out / ("sim2real_small.json" if args.small else "sim2real.json")
+    path = args.out / (f"{args.name}_small.json" if args.small else f"{args.name}.json")
     path.write_text(json.dumps(result, indent=2, default=float) + "\n")
     if not args.small:
-        chart(result, args.out / "sim2real.png")
+        chart(result, args.out / f"{args.name}.png")
     print(f"wrote {path}")
     if args.work is None:
         shutil.rmtree(work, ignore_errors=True)
