@@ -67,7 +67,7 @@ ABLATION = {
     "bare (the street before)": NO_DRESSING + ["scene.arm_length=40"] + OLD_USERS,
     "no vegetation": ["scene.street_trees=0", "scene.yard_plants=0", "scene.boundary_mix={fence: 0.35, wall: 0.15, none: 0.5}"],
     "no terrain": ["scene.terrain=false"],
-    "no fences, walls, furniture": ["scene.boundary_mix={hedge: 0.3, none: 0.7}", "scene.lamp_spacing=0", "scene.furniture_per_100m=0", "scene.roadworks=0"],
+    "no fences walls furniture": ["scene.boundary_mix={hedge: 0.3, none: 0.7}", "scene.lamp_spacing=0", "scene.furniture_per_100m=0", "scene.roadworks=0"],
     "40 m arms": ["scene.arm_length=40", "scene.ego_span=25"],
     "ideal scan (no noise, drop)": ["effects.ideal=true"],
 }
