@@ -1,4 +1,4 @@
-"""A hypothesis fuzzer over config trees and file headers, bounded to about a minute in all.
+"""A hypothesis fuzzer over config trees and file headers, bounded to about a minute in all (460 examples).
 
 Every input must end as a valid result or as one ``InputError`` line (the CLI's exit code 2): never
 another exception (a traceback), and never a result that disagrees with what the file claims
@@ -87,7 +87,7 @@ def mutated_trees(draw):
     return tree
 
 
-@settings(FUZZ, max_examples=250)
+@settings(FUZZ, max_examples=60)
 @given(mutated_trees())
 def test_config_trees_load_or_refuse_in_one_line(tree):
     from bpy_pipeline.config import load_config
@@ -113,7 +113,7 @@ def temp_file(data: bytes, suffix: str) -> Path:
 counts = st.one_of(st.integers(-3, 40), st.integers(0, 10**13), st.sampled_from(["x", "", "1e9", "-0"]))
 
 
-@settings(FUZZ, max_examples=250)
+@settings(FUZZ, max_examples=100)
 @given(
     fields=st.lists(st.sampled_from(["x", "y", "z", "intensity", "ring", "rgb"]), min_size=0, max_size=5),
     sizes=st.lists(st.sampled_from(["1", "2", "4", "8", "3", "x"]), max_size=5),
@@ -140,7 +140,7 @@ def test_pcd_headers_read_whole_or_refuse(fields, sizes, types, count_field, wid
     valid()
 
 
-@settings(FUZZ, max_examples=250)
+@settings(FUZZ, max_examples=100)
 @given(
     fmt=st.sampled_from(["binary_little_endian", "binary_big_endian", "ascii", "binary"]),
     elements=st.lists(st.tuples(st.sampled_from(["vertex", "face", "extra"]), counts, st.lists(st.sampled_from(["float x", "float y", "float z", "uchar intensity", "list uchar int vertex_indices", "double time", "bogus t"]), max_size=4)), max_size=3),
@@ -165,7 +165,7 @@ def test_ply_headers_read_whole_or_refuse(fmt, elements, payload):
     valid()
 
 
-@settings(FUZZ, max_examples=150)
+@settings(FUZZ, max_examples=60)
 @given(fmt=st.sampled_from(["kitti", "nuscenes", "semantickitti"]), payload=st.binary(max_size=400), floats=st.lists(st.floats(width=32), max_size=60))
 def test_scan_bins_read_whole_or_refuse(fmt, payload, floats):
     from bpy_pipeline.io.real_scans import read_real_scan
@@ -192,7 +192,7 @@ obj_lines = st.one_of(
 )
 
 
-@settings(FUZZ, max_examples=200)
+@settings(FUZZ, max_examples=80)
 @given(st.lists(obj_lines, max_size=12))
 def test_obj_meshes_fit_or_refuse(lines):
     from bpy_pipeline.mixing.cast import mesh_file_parts
@@ -225,7 +225,7 @@ def las_file(n_claimed: int, n_records: int, version: int, point_format: int, re
     return bytes(header) + bytes(max(record, 1) * n_records)
 
 
-@settings(FUZZ, max_examples=120)
+@settings(FUZZ, max_examples=60)
 @given(
     n_claimed=st.integers(0, 2**40), n_records=st.integers(0, 30), version=st.sampled_from([2, 4]), point_format=st.sampled_from([0, 6, 99]),
     record=st.integers(0, 64), offset=st.integers(0, 600), vlrs=st.integers(0, 2**32 - 1),
