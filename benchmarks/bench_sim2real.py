@@ -78,8 +78,14 @@ def children_cpu() -> float:
     return usage.ru_utime + usage.ru_stime
 
 
-def generate(out: Path, layouts: int, frames: int, sets: list[str]) -> dict:
-    """``layouts`` street layouts x ``frames`` frames of the ego HDL-64E into ``out/layoutK``; CPU seconds spent."""
+def generate(out: Path, layouts: int, frames: int, sets: list[str], reuse: bool = False) -> dict:
+    """``layouts`` street layouts x ``frames`` frames of the ego HDL-64E into ``out/layoutK``; CPU seconds spent
+    (written beside them as ``cost.json``; with ``reuse``, a folder made with the same arguments is read back)."""
+    key = {"layouts": layouts, "frames": frames, "sets": sets}
+    if reuse and (out / "cost.json").is_file():
+        kept = json.loads((out / "cost.json").read_text())
+        if kept.get("key") == key:
+            return kept["cost"]
     before, start = children_cpu(), time.perf_counter()
     for k in range(layouts):
         args = [sys.executable, str(ROOT / "run.py"), "--config", str(CONFIG), "--out", str(out / f"layout{k}"), "--frames", str(frames),
@@ -88,7 +94,9 @@ def generate(out: Path, layouts: int, frames: int, sets: list[str]) -> dict:
         for s in sets:
             args += ["--set", s]
         subprocess.run(args, check=True, stdout=subprocess.DEVNULL, cwd=ROOT)
-    return {"frames": layouts * frames, "cpu_s": round(children_cpu() - before, 1), "wall_s": round(time.perf_counter() - start, 1)}
+    cost = {"frames": layouts * frames, "cpu_s": round(children_cpu() - before, 1), "wall_s": round(time.perf_counter() - start, 1)}
+    (out / "cost.json").write_text(json.dumps({"key": key, "cost": cost}))
+    return cost
 
 
 def scans_of(folder: Path, frames: int | None = None) -> list[labelled.LabelledScan]:
@@ -101,10 +109,11 @@ def summary(block: dict) -> dict:
     return {c: {"iou": block["classes"][c]["iou"], "interval": block["classes"][c]["interval"]} for c in CLASSES}
 
 
-def trained_on(train: list, test: list, seed: int) -> dict:
+def trained_on(train: list, test: list, seed: int) -> tuple[dict, list]:
+    """The score block of a model trained on ``train`` over ``test``, and its predictions."""
     model = fit(train, CLASSES, seed)
-    block = score(test, [model.predict(s) for s in test], CLASSES, seed)
-    return block
+    predictions = [model.predict(s) for s in test]
+    return score(test, predictions, CLASSES, seed), predictions
 
 
 def chart(result: dict, path: Path) -> None:
@@ -123,7 +132,7 @@ def chart(result: dict, path: Path) -> None:
         curve = result.get("synthetic_curve", [])
         if curve:
             ax.plot([r["cpu_s"] for r in curve], [r[c]["iou"] for r in curve], "k--", lw=1, label="default, fewer frames")
-        for key, style in (("real_only", "g-"), ("mixed", "m:")):
+        for key, style in (("real_only", "g-"),):
             if key in result:
                 ax.axhline(result[key][c]["iou"], color=style[0], ls=style[1:], label=f"{key.replace('_', ' ')} {result[key][c]['iou']:.2f}")
         ax.set_xlabel("generation CPU seconds")
@@ -144,6 +153,7 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results")
     parser.add_argument("--work", type=Path, default=None, help="keep the generated data here (default: a temporary folder)")
     parser.add_argument("--ablation", default=",".join(ABLATION), help=f"levels of detail to train on, comma-separated (default: all of {', '.join(ABLATION)})")
+    parser.add_argument("--reuse", action="store_true", help="read back generated data that --work already holds for the same settings")
     parser.add_argument("--name", default="sim2real", help="results file name (NAME.json, NAME.png)")
     args = parser.parse_args()
     if not (REAL / TEST_FRAMES[0]).is_file():
@@ -165,6 +175,7 @@ def main() -> None:
 
     # real only: leave one group out over the real frames themselves
     predictions, folds = leave_one_group_out(test, test, CLASSES, seed, "lgbm", 20000, 1)
+    real_predictions = predictions
     result["real_only"] = {**summary(score(test, predictions, CLASSES, seed)), "folds": folds}
     print("real only", result["real_only"], flush=True)
 
@@ -172,12 +183,14 @@ def main() -> None:
     result["synthetic"] = {}
     for name, sets in ablation.items():
         folder = work / "".join(ch if ch.isalnum() else "_" for ch in name)
-        cost = generate(folder, layouts, frames, sets)
+        cost = generate(folder, layouts, frames, sets, args.reuse)
         per_layout = {}
         for scan in scans_of(folder):  # kept per layout, so the curve below reuses their features
             per_layout.setdefault(scan.group, []).append(scan)
         train = [s for group in sorted(per_layout) for s in per_layout[group]]
-        block = trained_on(train, test, seed)
+        block, predictions = trained_on(train, test, seed)
+        if name == "default":
+            default_predictions = predictions
         result["synthetic"][name] = {**summary(block), "cost": cost, "sets": sets,
                                      "false_positives": {c: block["classes"][c].get("false_positives") for c in CLASSES}}
         print(name, result["synthetic"][name], flush=True)
@@ -185,7 +198,7 @@ def main() -> None:
             curve = []
             for k in sorted({max(1, frames // 4), max(1, frames // 2)}):
                 subset = [s for group in sorted(per_layout) for s in per_layout[group][:k]]
-                b = trained_on(subset, test, seed)
+                b, _ = trained_on(subset, test, seed)
                 curve.append({"frames": len(subset), "cpu_s": round(cost["cpu_s"] * len(subset) / cost["frames"], 1), **summary(b)})
             curve.append({"frames": len(train), "cpu_s": cost["cpu_s"], **summary(block)})
             result["synthetic_curve"] = curve
@@ -198,7 +211,9 @@ def main() -> None:
     mixed_folds = []
     for group in sorted({s.group for s in test}):
         usable = [b for b, s in zip([REAL / f for f in TEST_FRAMES], test) if s.group != group and b in backgrounds]
-        if not usable:
+        if not any(b.suffix == ".npy" for b in usable):  # a KITTI object frame's points outside its boxes are unlabelled
+            mixed_folds.append({"test_group": group, "skipped": "no background with per-point labels outside the test group "
+                                f"({', '.join(b.name for b in usable) or 'none'}: a KITTI object frame labels its boxes only)"})
             continue
         fold_work = work / f"mixed_{len(mixed_folds)}"
         before = children_cpu() + resource.getrusage(resource.RUSAGE_SELF).ru_utime
@@ -211,8 +226,11 @@ def main() -> None:
         mixed_folds.append({"test_group": group, "backgrounds": [b.name for b in usable], "cpu_s": round(cost, 1)})
     tested = [i for i, p in enumerate(mixed_predictions) if p is not None]
     if tested:
-        block = score([test[i] for i in tested], [mixed_predictions[i] for i in tested], CLASSES, seed)
-        result["mixed"] = {**summary(block), "folds": mixed_folds, "tested": [test[i].name for i in tested]}
+        subset = [test[i] for i in tested]
+        block = score(subset, [mixed_predictions[i] for i in tested], CLASSES, seed)
+        same = {"synthetic": summary(score(subset, [default_predictions[i] for i in tested], CLASSES, seed)),
+                "real_only": summary(score(subset, [real_predictions[i] for i in tested], CLASSES, seed))}
+        result["mixed"] = {**summary(block), "folds": mixed_folds, "tested": [s.name for s in subset], "same_frames": same}
         print("mixed", result["mixed"], flush=True)
 
     real = result["real_only"]
