@@ -18,6 +18,8 @@ What each reader does with the file's axes:
 
 from __future__ import annotations
 
+import struct
+
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -177,11 +179,28 @@ def read_ply(path: Path) -> RealScan:
     return _from_fields({point_field(name): vertex[name] for name in vertex.data.dtype.names}, path, "ply")
 
 
+def check_las_layout(path: Path) -> None:
+    """``InputError`` when a LAS header's layout does not fit its file: the VLRs it claims (54 bytes each at
+    least) must lie between the header and the point data, and the point data must start inside the file
+    (laspy reads a claimed VLR count before anything else: 4 billion of them took hours)."""
+    with open(path, "rb") as f:
+        head = f.read(104)
+    if len(head) < 104 or head[:4] != b"LASF":
+        return  # laspy's own message names what is wrong
+    header_size, offset, vlrs = struct.unpack_from("<HII", head, 94)
+    size = path.stat().st_size
+    if offset > size:
+        raise InputError(f"{path}: LAS header puts the point data at byte {offset}; the file has {size} bytes")
+    if header_size > offset or vlrs * 54 > offset - header_size:
+        raise InputError(f"{path}: LAS header claims {vlrs} VLRs (54 bytes each at least) between bytes {header_size} and {offset}; they cannot fit")
+
+
 def read_las(path: Path) -> RealScan:
     try:
         import laspy
     except ImportError:
         raise InputError(f"{path}: reading LAS needs laspy (pip install 'bpy-pipeline[las]')") from None
+    check_las_layout(path)
     try:
         with laspy.open(str(path)) as reader:
             header = reader.header
