@@ -70,9 +70,8 @@ class Estimate:
     parts: dict = field(default_factory=dict)  # seconds a frame by stage, for the note
 
     def line(self) -> str:
-        return (f"estimate: {self.frames:,} frame{'s' if self.frames != 1 else ''} of {self.rays_per_frame:,} rays, "
-                f"{self.triangles:,} triangles, {self.objects:,} objects; {_size(self.bytes)} to write, "
-                f"about {_duration(self.seconds)} in one process ({self.seconds_per_frame:.2g} s a frame)")
+        return (f"estimate: {self.frames:,} x ({self.rays_per_frame:,} rays, {self.triangles:,} triangles, {self.objects:,} objects); "
+                f"{_size(self.bytes)} to write, about {_duration(self.seconds)} in one process ({self.seconds_per_frame:.2g} s each)")
 
 
 def _size(n: float) -> str:
