@@ -85,17 +85,6 @@ def shard_of(frames: range, i: int, parts: int) -> range:
     return frames[start : start + size + (i < extra)]
 
 
-def split(frames: list[int], parts: int) -> list[list[int]]:
-    """``frames`` in ``parts`` contiguous runs of nearly equal length (the first ones one longer)."""
-    size, extra = divmod(len(frames), parts)
-    out, start = [], 0
-    for k in range(parts):
-        end = start + size + (k < extra)
-        out.append(frames[start:end])
-        start = end
-    return out
-
-
 def load_run_config(args):
     """The run's config from ``--config`` and the overrides, or from ``--out``'s manifest for a worker (``--join``)."""
     from .config import config_from_dict, load_config

@@ -23,6 +23,7 @@ import numpy as np
 import pytest
 
 from bpy_pipeline import cli
+from bpy_pipeline.parallel import split
 from bpy_pipeline.errors import InputError
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -113,7 +114,7 @@ def test_frame_selection_is_a_range_even_for_a_billion_frames():
     assert isinstance(selected, range) and len(selected) == 10**6 and selected[0] == 999 * 10**6 and selected[-1] == 10**9 - 1
     for n in (1, 7, 10, 11):  # shard_of agrees with split, part by part
         frames = range(3, 3 + n * 3 + 1)
-        assert [list(cli.shard_of(frames, i, 4)) for i in range(4)] == [list(p) for p in cli.split(list(frames), 4)]
+        assert [list(cli.shard_of(frames, i, 4)) for i in range(4)] == [list(p) for p in split(list(frames), 4)]
 
 
 # ----------------------------------------------------------------------------- config files
