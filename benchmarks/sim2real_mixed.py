@@ -53,7 +53,6 @@ from __future__ import annotations
 import re
 import resource
 import sys
-import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
