@@ -19,7 +19,7 @@ from typing import Literal
 import yaml
 
 from .errors import InputError
-from .lidar.divergence import Divergence, check_divergence
+from .lidar.divergence import Divergence, check_divergence, check_return_mode
 from .lidar.drop import DROP_MODELS
 from .lidar.drop.carla import CarlaDrop
 from .lidar.drop.threshold import ThresholdDrop
@@ -566,6 +566,7 @@ def config_from_dict(data) -> Config:
     rig = _rig_from_dict(sensor_data)
     base = {} if "preset" in sensor_data else DEFAULT_SENSOR  # overrides without a preset refine the default
     spec = rig[0].spec if rig and "preset" not in sensor_data else resolve_sensor(base | sensor_data, "sensor")
+    check_return_mode(divergence, spec, "sensor.divergence")
     sensor = SensorConfig(spec, **pose, trajectory=trajectory, divergence=divergence, reflector=reflector, rig=rig)
     _check_reflector(reflector, sensor.spec)
     data["effects"] = realistic_effects(data.get("effects"), spec)  # the preset's effects profile unless effects.ideal

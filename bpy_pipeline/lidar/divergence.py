@@ -13,7 +13,9 @@ sub-ray hits of each beam back into one point:
    |cos incidence| x mirror gain) over ``rays``: the share of the footprint it sends back;
    its range is the energy-weighted mean of its sub-rays' ranges (the waveform's centroid);
 3. ``first``, ``last`` or ``strongest`` (most energy; ties go to the nearer) return per beam
-   is kept. Its point lies along the beam's *central* direction at the return's range (where
+   is kept; ``dual`` keeps two, as Velodyne's dual return mode reports them: the strongest and the
+   last, or, when the last is the strongest, the strongest and the second strongest (one point
+   when the beam has one return). Its point lies along the beam's *central* direction at the return's range (where
    the sensor believes it is, so thin objects look as wide as the footprint, as in real
    scans), its intensity is the return's energy, and its labels, bounces and beam facts are
    those of the return's strongest sub-ray, except that the facts' ``gain`` is scaled by the
@@ -22,6 +24,11 @@ sub-ray hits of each beam back into one point:
    models, detection thresholds) see the power the return really carries. With
    ``mirrors.ideal`` the point is that sub-ray's true hit instead. ``separation: 0`` makes
    every distinct sub-ray range its own return.
+
+Dual returns in the point record: the record (DESIGN.md) has no return-index field and writers keep
+every field their format holds, so the second return is an extra point: a beam's points are
+consecutive, its strongest first, and the second carries the same ``ring`` and ``time``. A reader
+tells them apart by that (:func:`return_index`); effects such as drop act on each return alone.
 
 The sub-ray pattern is deterministic (no seed): a central ray, then ``rays - 1`` rays in
 opposite pairs on a golden-angle (Vogel-like) spiral (:func:`footprint_offsets`), so each stands
@@ -57,14 +64,15 @@ class Divergence:
 
     mrad : full-angle beam divergence, milliradians (footprint diameter grows by mrad mm per metre)
     rays : sub-rays per beam over the footprint (1: the central ray only, i.e. off)
-    pick : which return of a beam is kept (``return`` in YAML): first, strongest or last
+    pick : which return of a beam is kept (``return`` in YAML): first, strongest or last; ``dual``:
+        the strongest and the last (the sensor's dual return mode; presets list it in ``return_modes``)
     separation : metres between sub-ray ranges that split a beam's hits into separate returns
     aperture : beam diameter at the sensor's exit window, metres
     """
 
     mrad: float = 0.0
     rays: int = 1
-    pick: Literal["first", "strongest", "last"] = field(default="first", metadata={"key": "return"})
+    pick: Literal["first", "strongest", "last", "dual"] = field(default="first", metadata={"key": "return"})
     separation: float = 0.5
     aperture: float = 0.0
 
@@ -86,6 +94,34 @@ def check_divergence(divergence: Divergence, where: str = "sensor.divergence") -
         raise InputError(f"{where}.aperture: must be >= 0 m, got {divergence.aperture}")
     if divergence.rays > 1 and divergence.mrad == 0 and divergence.aperture == 0:
         raise InputError(f"{where}.rays: {divergence.rays} sub-rays of a zero-width beam all coincide; set mrad (or aperture) > 0, or rays: 1")
+
+
+def check_return_mode(divergence: Divergence, spec, where: str = "sensor.divergence") -> None:
+    """``InputError`` when ``return: dual`` is asked of a preset whose ``return_modes`` (sensors.yaml) lack it,
+    or of a flash camera (its pixels share ring and time, so a second return could not be told apart)."""
+    if divergence.pick != "dual":
+        return
+    from .sensors import FLASH_PATTERNS
+
+    modes = preset_return_modes(spec.name)
+    if spec.pattern in FLASH_PATTERNS or (spec.name != "custom" and "dual" not in modes):
+        raise InputError(f"{where}.return: the {spec.name} sensor has no dual return mode; allowed: first, strongest, last")
+
+
+def preset_return_modes(name: str) -> tuple[str, ...]:
+    """The return modes preset ``name``'s sensor offers (its ``return_modes`` in sensors.yaml; ``()`` when it lists none)."""
+    from .sensors import _presets_file
+
+    return tuple(_presets_file().get(name, {}).get("return_modes") or ())
+
+
+def return_index(points: np.ndarray) -> np.ndarray:
+    """(p,) uint8: 0 for a beam's first point, 1 for the second of a dual-return beam (same ``ring`` and
+    ``time`` as the point before it, as :func:`scan_footprint_chunks` writes them)."""
+    same = np.zeros(len(points), np.uint8)
+    if len(points) > 1:
+        same[1:] = (points["ring"][1:] == points["ring"][:-1]) & (points["time"][1:] == points["time"][:-1])
+    return same
 
 
 def footprint_offsets(rays: int) -> np.ndarray:
@@ -164,8 +200,9 @@ def reduce_returns(beam: np.ndarray, distance: np.ndarray, intensity: np.ndarray
     beam : (h,) int64 beam of each sub-ray hit
     distance : (h,) float64 range of each hit, metres
     intensity : (h,) float64 scanner intensity of each hit, 0..1
-    rays : sub-rays per beam; pick : ``first`` | ``strongest`` | ``last``; separation : metres
-    Returns ``(row, distance, energy)``, one entry per beam that returned, in beam order:
+    rays : sub-rays per beam; pick : ``first`` | ``strongest`` | ``last`` | ``dual``; separation : metres
+    Returns ``(row, distance, energy)``, one entry per beam that returned (``dual``: two where the
+    beam has two returns or more, its strongest first), in beam order:
     ``row`` (k,) int64 the hit standing for the return (its strongest sub-ray, the nearer on a
     tie), ``distance`` (k,) float64 the return's energy-weighted mean range, and ``energy`` (k,)
     float64 the return's summed intensity over ``rays``.
@@ -197,8 +234,28 @@ def reduce_returns(beam: np.ndarray, distance: np.ndarray, intensity: np.ndarray
         chosen = np.flatnonzero(np.r_[opens[1:], True])
     else:
         ranked = np.lexsort((np.arange(len(energy)), -energy, return_beam))  # beam, then energy down, then nearer
-        chosen = ranked[np.r_[True, return_beam[ranked][1:] != return_beam[ranked][:-1]]]
+        heads = np.r_[True, return_beam[ranked][1:] != return_beam[ranked][:-1]]
+        chosen = ranked[heads]
+        if pick == "dual":
+            chosen = _dual(chosen, ranked, heads, opens)
     return representative[chosen], mean[chosen], energy[chosen]
+
+
+def _dual(strongest: np.ndarray, ranked: np.ndarray, heads: np.ndarray, opens: np.ndarray) -> np.ndarray:
+    """Returns kept by the dual mode, in beam order, the strongest of a beam first.
+
+    strongest : (b,) the strongest return of each beam; ranked : (q,) returns by beam, then energy
+    down; heads : (q,) True where ``ranked`` starts a beam; opens : (q,) True where a return (in
+    range order) starts a beam. The second is the beam's last return, or its second strongest
+    when the last is the strongest (Velodyne's rule); beams of one return keep one.
+    """
+    last = np.flatnonzero(np.r_[opens[1:], True])  # (b,) in beam order, as strongest
+    second_strongest = np.full(len(strongest), -1, np.int64)
+    head = np.flatnonzero(heads & np.r_[~heads[1:], False])  # ranked positions of beams with two returns or more
+    second_strongest[(np.cumsum(heads) - 1)[head]] = ranked[head + 1]
+    second = np.where(last != strongest, last, second_strongest)
+    pairs = np.column_stack([strongest, second]).ravel()
+    return pairs[pairs >= 0]
 
 
 def scan_footprint_chunks(

@@ -97,7 +97,7 @@ class SensorSpec:
 
 
 # ----------------------------------------------------------------------------- presets and overrides
-PROFILE_KEYS = ("effects", "sources")  # a preset's effects profile and where its numbers come from; not SensorSpec fields
+PROFILE_KEYS = ("effects", "sources", "return_modes")  # a preset's effects profile, where its numbers come from, the real sensor's return modes; not SensorSpec fields
 
 
 @lru_cache(maxsize=1)
