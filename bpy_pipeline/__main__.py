@@ -20,6 +20,10 @@ Commands:
     and print per-class IoU with 95 % intervals, beside the same model trained on real frames
     (leave one group out); docs/evaluate.md.
 
+``convert SCAN [--labels FILE] --to PRESET --out DIR [--method cones|mesh|hybrid]``
+    A dense real scan resampled into a sparser sensor's firings, each point keeping the class,
+    instance and intensity of the return it came from, written as a dataset (:mod:`.conversion`).
+
 Each command is a ``_add_<name>(subparsers)`` function that registers its parser and sets
 ``func`` (``args -> exit code``); add new commands the same way. Bad input (``InputError``)
 prints one line and exits with code 2.
@@ -260,7 +264,15 @@ def _add_evaluate(sub) -> None:
     p.set_defaults(func=run_evaluate)
 
 
-COMMANDS = [_add_run, _add_sensors, _add_fit, _add_config, _add_evaluate]
+def _add_convert(sub) -> None:
+    from .conversion import add_convert_arguments, convert_main
+
+    p = sub.add_parser("convert", help="a dense real scan, labels carried, in a sparser sensor's pattern",
+                       description="Resample a dense real scan (and its labels) into a sparser sensor preset's firings and write it as a dataset (docs/mixing.md).")
+    add_convert_arguments(p).set_defaults(func=convert_main)
+
+
+COMMANDS = [_add_run, _add_sensors, _add_fit, _add_config, _add_evaluate, _add_convert]
 
 
 def parser() -> argparse.ArgumentParser:
