@@ -25,6 +25,7 @@ class ObjectTable:
     instance : (k,) uint32 instance id (>= 1)
     material : (k,) uint8 index into :data:`MATERIALS`
     reflectivity : (k,) float32 in 0..1
+    surface : (k,) uint8 reflectance model of each object (lidar/materials.py ``model_id``: 0 none), or None
     """
 
     names: list[str]
@@ -34,6 +35,7 @@ class ObjectTable:
     instance: np.ndarray
     material: np.ndarray
     reflectivity: np.ndarray
+    surface: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.names)

@@ -19,6 +19,7 @@ import numpy as np
 from .buffers import MATERIAL_ID, MATERIALS, ObjectTable, SceneBuffers
 from .errors import InputError
 from .labels import ClassTable
+from .lidar.materials import MATERIAL_MODELS, model_from_material, model_id
 
 GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "META", "FONT"}
 
@@ -82,6 +83,28 @@ def _reflectivity(owner, where: str) -> float:
     return reflectivity
 
 
+def _surface(owner, where: str) -> str:
+    """The reflectance model (lidar/materials.py, ``""`` for none) the object's ``lidar_material``, else its first
+    material's ``lidar_material`` custom property, else that material's Principled BSDF roughness and metallic
+    (when not linked to a texture) select (:func:`~.lidar.materials.model_from_material`)."""
+    if "lidar_material" in owner:
+        return model_from_material(owner["lidar_material"], None, None, where)
+    material = next((slot.material for slot in getattr(owner, "material_slots", ()) if slot.material is not None), None)
+    if material is None:
+        return ""
+    if "lidar_material" in material:
+        return model_from_material(material["lidar_material"], None, None, f"{where}: material {material.name!r}")
+    inputs = {}
+    tree = getattr(material, "node_tree", None) if getattr(material, "use_nodes", False) else None
+    for node in tree.nodes if tree is not None else ():
+        if node.type == "BSDF_PRINCIPLED":
+            inputs = {k: node.inputs[k].default_value for k in ("Roughness", "Metallic") if k in node.inputs and not node.inputs[k].is_linked}
+            break
+    else:  # no node tree: the viewport's values
+        inputs = {"Roughness": material.roughness, "Metallic": material.metallic}
+    return model_from_material(None, inputs.get("Roughness"), inputs.get("Metallic"), f"{where}: material {material.name!r}")
+
+
 def _albedo(material) -> float:
     """Mean of the linear R, G, B of a material's base colour, clipped to 0..1."""
     rgba = material.diffuse_color
@@ -118,8 +141,11 @@ class _Labeller:
             class_name = next((r.class_name for r in self.rules if r.applies(names)), None) or self.table.classify(names)
             semantic = self.table.id_of(class_name, where)
         material = str(owner.get("lidar_material", "diffuse"))
+        surface = _surface(owner, where)
+        if material in MATERIAL_MODELS:  # a reflectance model on a diffuse surface (lidar/materials.py)
+            material = "diffuse"
         if material not in MATERIAL_ID:
-            raise InputError(f"{where}: lidar_material {material!r} is not one of {', '.join(MATERIALS)}")
+            raise InputError(f"{where}: lidar_material {material!r} is not one of {', '.join(MATERIALS + tuple(MATERIAL_MODELS))}")
         reflectivity = _reflectivity(owner, where)
         instance = owner.get("lidar_instance")
         if instance is not None and (not isinstance(instance, int) or instance < 1):
@@ -133,6 +159,7 @@ class _Labeller:
             "instance": instance,
             "material": MATERIAL_ID[material],
             "reflectivity": reflectivity,
+            "surface": model_id(surface),
         }
 
     def table_out(self) -> ObjectTable:
@@ -150,6 +177,7 @@ class _Labeller:
             instance=np.array([r["instance"] for r in rows], np.uint32),
             material=np.array([r["material"] for r in rows], np.uint8),
             reflectivity=np.array([r["reflectivity"] for r in rows], np.float32),
+            surface=np.array([r["surface"] for r in rows], np.uint8),
         )
 
 

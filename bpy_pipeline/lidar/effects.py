@@ -396,9 +396,9 @@ def _copy_records(records: np.ndarray, keep: np.ndarray | None = None) -> np.nda
 CHUNK_POINTS = 1 << 16  # records per work item: a chunk's fields stay in cache across the passes over it
 
 
-def _apply_chunk(points, beam, effects, rng, drop_models, noise_models) -> np.ndarray:
-    if getattr(effects, "materials", None) is not None:  # per-class reflectance models (lidar/materials.py), opt-in
-        beam = apply_materials(points, beam, effects.materials, effects.intensity.incidence_exponent)
+def _apply_chunk(points, beam, effects, rng, drop_models, noise_models, objects=None) -> np.ndarray:
+    if getattr(effects, "materials", None) is not None:  # per-class or per-object reflectance models (lidar/materials.py), opt-in
+        beam = apply_materials(points, beam, effects.materials, effects.intensity.incidence_exponent, objects)
     intensity = compute_intensity(points["range"], beam, effects.intensity)
     keep = drop_mask(points, beam, effects, rng, drop_models)
     points = _copy_records(points, keep)
@@ -418,7 +418,7 @@ def weather_active(effects) -> bool:
     return weather is not None and not effects.ideal and weather.active
 
 
-def apply_effects(points: np.ndarray, beam: np.ndarray, effects, rng: np.random.Generator, threads: int | None = None) -> np.ndarray:
+def apply_effects(points: np.ndarray, beam: np.ndarray, effects, rng: np.random.Generator, threads: int | None = None, objects=None) -> np.ndarray:
     """The configured effects (``config.EffectsConfig``) in a fixed order; returns new records.
 
     points : (p,) POINT_DTYPE records (sensor frame); beam : (p,) BEAM_DTYPE facts of the same points
@@ -442,8 +442,9 @@ def apply_effects(points: np.ndarray, beam: np.ndarray, effects, rng: np.random.
 
     def chunk(k: int) -> np.ndarray:
         part = slice(starts[k], starts[k] + CHUNK_POINTS)
-        return _apply_chunk(points[part], beam[part], effects, np.random.Generator(np.random.PCG64(seeds[k])), drop_models, noise_models)
+        return _apply_chunk(points[part], beam[part], effects, np.random.Generator(np.random.PCG64(seeds[k])), drop_models, noise_models, objects)
 
+    ``objects``: the scene's ObjectTable, for ``effects.materials.objects`` (per-object reflectance models).
     if len(starts) == 1:
         return chunk(0)
     with ThreadPoolExecutor(threads or os.cpu_count() or 1) as pool:

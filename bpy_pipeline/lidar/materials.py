@@ -3,9 +3,19 @@
 A material model turns a return's ``lidar_reflectivity`` ``rho`` and its cosine of incidence into the
 apparent reflectance ``a`` the receiver sees (what the intensity, drop and weather models read; a
 Lambertian target gives ``rho cos``). Points take a model by their class (``effects.materials.classes``,
-e.g. ``{car: glossy_paint, traffic sign: retroreflector}``); classes not named keep the scene's diffuse
-reflectance, and glass and mirrors are traced as before (lidar/scanner.py). Opt-in: no class has a model
-unless the config names one, so scans without it are unchanged.
+e.g. ``{car: glossy_paint, traffic sign: retroreflector}``), or by the object they hit
+(``effects.materials.objects: true``: each object's model as export.py read it from its Blender
+material, :func:`model_from_material`: a ``lidar_material`` custom property naming a model, else a
+Principled BSDF roughness at or below :data:`GLOSSY_ROUGHNESS` (clear coat, polished metal) is
+``glossy_paint``; an object's model wins over its class's). Classes and objects not named keep the
+scene's diffuse reflectance, and glass and mirrors are traced as before (lidar/scanner.py). Opt-in: no
+point has a model unless the config asks, so scans without it are unchanged.
+
+Per object: the scene's object table carries a model id per object (``ObjectTable.surface``, 0 for
+none, else 1 + the model's place in :data:`MATERIAL_MODELS`). A point knows its object's
+``instance`` and reflectivity (its beam record), not its row, so the model is looked up by that
+pair; parts of one instance with the same reflectivity but different models cannot be told apart
+and are refused in one line (give one a different ``lidar_reflectivity``).
 
 Models (:data:`MATERIAL_MODELS`, a registry; each owns the dataclass of its section):
 
@@ -107,11 +117,43 @@ MATERIAL_MODELS.register("dark_paint", MaterialModel(dark_paint, DarkPaint))
 MATERIAL_MODELS.register("wet", MaterialModel(wet))
 
 
+GLOSSY_ROUGHNESS = 0.3  # a Principled BSDF roughness at or below this is a clear coat or polished metal: glossy_paint
+
+
+def model_from_material(lidar_material, roughness, metallic, where: str) -> str:
+    """The reflectance model a Blender material's properties select (``""``: none, the diffuse reflectance).
+
+    lidar_material : the ``lidar_material`` custom property of the object or its material (``None`` if
+    unset): a name of :data:`MATERIAL_MODELS` is taken as it is, ``diffuse`` (or another tracing
+    material: glass, mirror, absorber) means no model. roughness, metallic : the Principled BSDF's inputs
+    (``None`` without one): roughness <= :data:`GLOSSY_ROUGHNESS` is ``glossy_paint`` whatever the
+    metallic (metal-flake paint and bare metal both send the beam away off normal), else none.
+    """
+    if lidar_material is not None:
+        name = str(lidar_material)
+        return name if name in MATERIAL_MODELS else ""
+    if roughness is None:
+        return ""
+    if not 0.0 <= float(roughness) <= 1.0 or (metallic is not None and not 0.0 <= float(metallic) <= 1.0):
+        raise InputError(f"{where}: roughness and metallic must lie in 0..1, got {roughness!r} and {metallic!r}")
+    return "glossy_paint" if float(roughness) <= GLOSSY_ROUGHNESS else ""
+
+
+def model_id(name: str) -> int:
+    """0 for ``""`` (no model), else 1 + the place of ``name`` in :data:`MATERIAL_MODELS` (the object table's ``surface``)."""
+    return 0 if not name else 1 + list(MATERIAL_MODELS).index(name)
+
+
+def model_name(identifier: int) -> str:
+    return "" if identifier == 0 else list(MATERIAL_MODELS)[identifier - 1]
+
+
 @dataclass(frozen=True)
 class MaterialsConfig:
-    """``effects.materials``: a reflectance model per class, and each model's parameters."""
+    """``effects.materials``: a reflectance model per class or per object, and each model's parameters."""
 
     classes: dict = field(default_factory=dict)  # class name -> a name of MATERIAL_MODELS
+    objects: bool = False  # each object's model from its Blender material (the object table's surface column)
     glossy_paint: GlossyPaint = field(default_factory=GlossyPaint)
     retroreflector: Retroreflector = field(default_factory=Retroreflector)
     dark_paint: DarkPaint = field(default_factory=DarkPaint)
@@ -133,26 +175,59 @@ def check_materials(materials: MaterialsConfig, where: str = "effects.materials"
             raise InputError(f"{where}.{key}: must lie in {lo}..{hi}, got {value}")
 
 
-def apply_materials(points: np.ndarray, beam: np.ndarray, materials: MaterialsConfig, incidence_exponent: float) -> np.ndarray:
-    """``beam`` with the reflectivity of the points of the classes named set so that ``rho cos^k`` (the intensity
+def object_models(points: np.ndarray, beam: np.ndarray, objects) -> np.ndarray:
+    """(p,) uint8 model id of each point's object (0: none), looked up by ``(instance, reflectivity)``.
+
+    objects : the scene's ``ObjectTable`` (its ``surface`` column); ``InputError`` naming two objects
+    of one instance and reflectivity whose models differ.
+    """
+    surface = getattr(objects, "surface", None)
+    out = np.zeros(len(points), np.uint8)
+    if surface is None or not np.any(surface):
+        return out
+    bits = np.asarray(objects.reflectivity, np.float32).view(np.uint32).astype(np.uint64)
+    keys = (np.asarray(objects.instance, np.uint64) << np.uint64(32)) | bits
+    order = np.argsort(keys, kind="stable")
+    sorted_keys, sorted_models = keys[order], np.asarray(surface, np.uint8)[order]
+    clash = (sorted_keys[1:] == sorted_keys[:-1]) & (sorted_models[1:] != sorted_models[:-1])
+    if clash.any():
+        a, b = order[np.flatnonzero(clash)[0]], order[np.flatnonzero(clash)[0] + 1]
+        raise InputError(f"object {objects.names[b]!r}: shares instance {int(objects.instance[a])} and lidar_reflectivity {float(objects.reflectivity[a]):g} with {objects.names[a]!r} "
+                         f"but has another reflectance model ({model_name(int(surface[b])) or 'diffuse'} against {model_name(int(surface[a])) or 'diffuse'}); give one a different lidar_reflectivity")
+    point_keys = (points["instance"].astype(np.uint64) << np.uint64(32)) | beam["reflectivity"].astype(np.float32).view(np.uint32).astype(np.uint64)
+    at = np.clip(np.searchsorted(sorted_keys, point_keys), 0, len(sorted_keys) - 1)
+    found = sorted_keys[at] == point_keys
+    out[found] = sorted_models[at[found]]
+    return out
+
+
+def apply_materials(points: np.ndarray, beam: np.ndarray, materials: MaterialsConfig, incidence_exponent: float, objects=None) -> np.ndarray:
+    """``beam`` with the reflectivity of the points of the classes (or objects) named set so that ``rho cos^k`` (the intensity
     model's apparent reflectance, ``k`` its ``incidence_exponent``) is their material's; a copy when any changes.
 
-    points : (p,) POINT_DTYPE (their ``semantic``); beam : (p,) BEAM_DTYPE
+    points : (p,) POINT_DTYPE (their ``semantic``, ``instance``); beam : (p,) BEAM_DTYPE; objects : the
+    scene's ObjectTable, read when ``materials.objects`` is set (an object's model wins over its class's)
     """
-    if not materials.classes or len(points) == 0:
+    if (not materials.classes and not materials.objects) or len(points) == 0:
         return beam
     from ..labels import load_class_table
 
     table = load_class_table()
-    out = None
-    for name, model_name in materials.classes.items():
-        mine = points["semantic"] == table.id_of(str(name))
-        if not mine.any():
-            continue
-        out = beam.copy() if out is None else out
-        model = MATERIAL_MODELS.get(model_name)
-        params = getattr(materials, model_name, None)
+    chosen = np.zeros(len(points), np.uint8)
+    for name, model_name_ in materials.classes.items():
+        chosen[points["semantic"] == table.id_of(str(name))] = model_id(model_name_)
+    if materials.objects and objects is not None:
+        per_object = object_models(points, beam, objects)
+        chosen = np.where(per_object > 0, per_object, chosen)
+    if not chosen.any():
+        return beam
+    out = beam.copy()
+    for identifier in np.unique(chosen[chosen > 0]):
+        name = model_name(int(identifier))
+        mine = chosen == identifier
+        model = MATERIAL_MODELS.get(name)
+        params = getattr(materials, name, None)
         cos = beam["cos_incidence"][mine].astype(np.float64)
         a = model.apparent(beam["reflectivity"][mine], cos, params)
         out["reflectivity"][mine] = a / np.maximum(cos, 1e-3) ** incidence_exponent
-    return beam if out is None else out
+    return out
