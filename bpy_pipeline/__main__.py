@@ -130,8 +130,9 @@ def fit_effects(args) -> int:
     options = replace(options, **changes)
     if options.min_range <= 0 or options.max_range <= options.min_range:
         raise InputError(f"fit: need 0 < --min-range < --max-range, got {options.min_range} and {options.max_range}")
-    if min(options.range_bins, options.incidence_bins, options.noise_range_bins, options.noise_incidence_bins, options.min_samples) < 1:
-        raise InputError("fit: bin counts and --min-samples must be >= 1")
+    if min(options.range_bins, options.incidence_bins, options.noise_range_bins, options.noise_incidence_bins, options.min_samples,
+           options.mlp_range_bins, options.mlp_incidence_bins, options.mlp_steps) < 1 or options.seed < 0:
+        raise InputError("fit: bin counts, --min-samples and --mlp-steps must be >= 1, --seed >= 0")
     out = Path(args.out)
     if not out.parent.is_dir() and (out.parent.exists() or any(p.exists() and not p.is_dir() for p in out.parents)):
         raise InputError(f"--out: {out.parent} is not a folder (a file stands in the path); give a path in a folder")
@@ -154,6 +155,7 @@ def fit_effects(args) -> int:
     print(f"threshold: exponent {t.exponent:g}, softness {t.softness:.3g}, 50 % range at 10 % / 80 %: {t.range_at(0.1):.1f} m / {t.range_at(0.8):.1f} m")
     kept = int((~np.isnan(models.drop_table.values)).sum())
     print(f"table: {options.range_bins} x {options.incidence_bins} bins, {kept} with >= {options.min_samples} samples")
+    print(f"mlp: {models.drop_mlp.parameters} weights over {options.mlp_range_bins} x {options.mlp_incidence_bins} bins with >= {options.min_samples} samples (drop; noise likewise), seed {options.seed}")
     print(f"noise: sigma {models.noise_range[0] * 1000:.1f} mm + {models.noise_range[1] * 1000:.2f} mm per m (from {src['noise_samples']} samples)")
     if "cross_validation" in report:
         cv = report["cross_validation"]
@@ -172,7 +174,7 @@ def fit_effects(args) -> int:
 def _add_fit(sub) -> None:
     p = sub.add_parser(
         "fit", help="fit ray drop and range noise to real organised scans",
-        description="Fit the uniform, threshold and table drop models and the range and table noise models to real "
+        description="Fit the uniform, threshold, table and mlp drop models and the range, table and mlp noise models to real "
         "organised scans (one sweep: gaps filled from ring neighbours; several sweeps of a static scene: per-pixel "
         "medians) and write a model file for effects.drop.model_file and effects.noise.model_file.",
     )
@@ -194,6 +196,10 @@ def _add_fit(sub) -> None:
         ("noise_incidence_bins", int, "noise table: incidence bins"),
         ("min_samples", int, "bins with fewer samples are discarded"),
         ("folds", int, "column blocks for the held-out comparison (0: skip)"),
+        ("mlp_range_bins", int, "mlp drop and noise models: log-spaced range bins they learn from"),
+        ("mlp_incidence_bins", int, "mlp models: incidence bins over 0..90 deg"),
+        ("mlp_steps", int, "mlp models: Adam steps"),
+        ("seed", int, "mlp models: seed of the weights' start (same seed, same file)"),
     ):
         default = getattr(__import__("bpy_pipeline.lidar.fitting", fromlist=["FitOptions"]).FitOptions, name)
         p.add_argument("--" + name.replace("_", "-"), dest=name, type=kind, default=None, help=f"{what} (default {default})")

@@ -133,7 +133,7 @@ class IntensityConfig:
 class NoiseConfig:
     """``effects.noise``: Gaussian range noise along the beam, per-ring bias, angular jitter."""
 
-    model: Literal["constant", "range", "table"] = "constant"
+    model: Literal["constant", "range", "table", "mlp"] = "constant"
     sigma: float = 0.0  # m, Gaussian along the beam (`range`: at zero range)
     sigma_per_metre: float = 0.0  # m of sigma per m of range (`range`)
     model_file: str = ""  # a file of `python -m bpy_pipeline fit`: `range` and `table` take their parameters from it
@@ -492,12 +492,12 @@ def _check_effects(effects: EffectsConfig, spec: SensorSpec | None) -> None:
     fitted = {
         "drop": (drop, {drop.model: (model.fitted, model.inline(drop), model.inline_keys)} if model.fitted else {}),
         "noise": (noise, {"range": ("noise_range", (noise.sigma, noise.sigma_per_metre) != (0.0, 0.0), "sigma / sigma_per_metre"),
-                          "table": ("noise_table", False, "")}),
+                          "table": ("noise_table", False, ""), "mlp": ("noise_mlp", False, "")}),
     }
     for name, (section, uses) in fitted.items():
         where = f"effects.{name}.model_file"
-        if section.model == "table" and not section.model_file:
-            raise InputError(f"{where}: the table {name} model needs a model file (python -m bpy_pipeline fit ... --out FILE.yaml)")
+        if section.model in ("table", "mlp") and not section.model_file:
+            raise InputError(f"{where}: the {section.model} {name} model needs a model file (python -m bpy_pipeline fit ... --out FILE.yaml)")
         if not section.model_file or section.model not in uses:
             continue
         attr, inline, keys = uses[section.model]

@@ -31,11 +31,12 @@ Ray drop (``effects.drop.model``)
     1 - zero_intensity``); ``threshold`` (a physical detection threshold: the received power
     ``rho cos g exp(-2 alpha R) / R^n`` against a sensitivity set by a datasheet's range at 10 %
     and 80 % reflectivity, so dark objects vanish nearer than bright ones); ``table`` (a drop
-    probability over (range, incidence angle) fitted to real scans, bilinear between bins).
+    probability over (range, incidence angle) fitted to real scans, bilinear between bins); ``mlp``
+    (the same fitted by a small perceptron over the bins, as the Raphael paper does).
 
 Range noise (``effects.noise``)
     Gaussian along the beam with sigma ``constant``, growing with ``range`` (``sigma +
-    sigma_per_metre R``) or from a ``table`` over (range, incidence angle); a fixed per-ring
+    sigma_per_metre R``), from a ``table`` over (range, incidence angle) or from an ``mlp`` over it; a fixed per-ring
     range bias (``ring_bias``, metres per ring, as each laser of a multi-beam sensor has its
     own); angular jitter (``angular_jitter_deg``, one sigma in azimuth and in elevation; the
     point turns about the sensor at its range, the small-angle view of a beam pointing
@@ -62,6 +63,7 @@ import yaml
 from ..errors import InputError
 from .drop import DROP_MODELS
 from .drop.carla import carla_keep_probability  # noqa: F401  (stable names)
+from .drop.mlp import MLP
 from .drop.threshold import ThresholdModel, threshold_model  # noqa: F401
 from .intensity import carla_intensity, compute_intensity, lidar_intensity, reflectance  # noqa: F401
 from .materials import apply_materials
@@ -207,6 +209,8 @@ class FittedModels:
     noise_range : ``(sigma, sigma_per_metre)`` of the ``range`` noise model, metres and m/m
     noise_table : range noise sigma (m) over (range, incidence)
     source : what the models were fitted on, and how (free-form, for people)
+    drop_mlp : drop probability over (range, incidence) from a small MLP (:mod:`.drop.mlp`)
+    noise_mlp : range noise sigma (m) over (range, incidence) from a small MLP
     """
 
     uniform: float | None = None
@@ -215,6 +219,8 @@ class FittedModels:
     noise_range: tuple[float, float] | None = None
     noise_table: BinnedTable | None = None
     source: dict = field(default_factory=dict)
+    drop_mlp: MLP | None = None
+    noise_mlp: MLP | None = None
 
     def to_dict(self) -> dict:
         drop, noise = {}, {}
@@ -228,6 +234,10 @@ class FittedModels:
             noise["range"] = {"sigma": float(self.noise_range[0]), "sigma_per_metre": float(self.noise_range[1])}
         if self.noise_table is not None:
             noise["table"] = self.noise_table.to_dict("sigma")
+        if self.drop_mlp is not None:
+            drop["mlp"] = self.drop_mlp.to_dict()
+        if self.noise_mlp is not None:
+            noise["mlp"] = self.noise_mlp.to_dict()
         return {"format": MODEL_FORMAT, "version": MODEL_VERSION, "source": self.source, "drop": drop, "noise": noise}
 
 
@@ -279,7 +289,9 @@ def _read_model_file(path: str, mtime_ns: int, size: int, key: str) -> FittedMod
         raise InputError(f"{where}: a model lacks a parameter or holds a non-number ({err})") from None
     drop_table = BinnedTable.from_dict(drop["table"], "probability", f"{where}: drop.table") if "table" in drop else None
     noise_table = BinnedTable.from_dict(noise["table"], "sigma", f"{where}: noise.table") if "table" in noise else None
-    return FittedModels(uniform, threshold, drop_table, noise_range, noise_table, data.get("source") or {})
+    drop_mlp = MLP.from_dict(drop["mlp"], f"{where}: drop.mlp") if "mlp" in drop else None
+    noise_mlp = MLP.from_dict(noise["mlp"], f"{where}: noise.mlp") if "mlp" in noise else None
+    return FittedModels(uniform, threshold, drop_table, noise_range, noise_table, data.get("source") or {}, drop_mlp, noise_mlp)
 
 
 def fitted_models(section, where: str = "model_file") -> FittedModels | None:
@@ -317,6 +329,10 @@ def noise_sigma(points: np.ndarray, beam: np.ndarray, noise, models: FittedModel
     if noise.model == "range":
         sigma, slope = models.noise_range if models is not None and models.noise_range is not None else (noise.sigma, noise.sigma_per_metre)
         return np.float32(sigma) + np.float32(slope) * points["range"]
+    if noise.model == "mlp":
+        if models is None or models.noise_mlp is None:
+            raise InputError("effects.noise.model_file: the mlp noise model needs a model file holding a noise mlp (python -m bpy_pipeline fit)")
+        return models.noise_mlp.lookup(points["range"], beam["cos_incidence"])
     if models is None or models.noise_table is None:
         raise InputError("effects.noise.model_file: the table noise model needs a model file holding a noise table (python -m bpy_pipeline fit)")
     return models.noise_table.lookup(points["range"], beam["cos_incidence"])
@@ -428,6 +444,7 @@ def apply_effects(points: np.ndarray, beam: np.ndarray, effects, rng: np.random.
     The points go through in chunks of :data:`CHUNK_POINTS` on ``threads`` threads (default:
     every core); chunk k draws from its own generator, seeded by the k-th of one draw of seeds
     from ``rng``, so the same generator state gives the same bytes however the threads run.
+    ``objects``: the scene's ObjectTable, for ``effects.materials.objects`` (per-object reflectance models).
     """
     drop_models = fitted_models(effects.drop, "effects.drop.model_file")
     noise_models = fitted_models(effects.noise, "effects.noise.model_file")
@@ -444,7 +461,6 @@ def apply_effects(points: np.ndarray, beam: np.ndarray, effects, rng: np.random.
         part = slice(starts[k], starts[k] + CHUNK_POINTS)
         return _apply_chunk(points[part], beam[part], effects, np.random.Generator(np.random.PCG64(seeds[k])), drop_models, noise_models, objects)
 
-    ``objects``: the scene's ObjectTable, for ``effects.materials.objects`` (per-object reflectance models).
     if len(starts) == 1:
         return chunk(0)
     with ThreadPoolExecutor(threads or os.cpu_count() or 1) as pool:

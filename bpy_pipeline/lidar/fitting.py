@@ -40,6 +40,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from .drop.mlp import MLP, fit_mlp
 from .drop.threshold import ThresholdModel
 from .effects import BinnedTable, FittedModels, apply_effects
 from .points import BEAM_DTYPE, empty_points
@@ -386,6 +387,68 @@ def fit_drop_table(samples: Samples, r_edges: np.ndarray, i_edges: np.ndarray, m
     return BinnedTable(r_edges, i_edges, p.reshape(shape), n.reshape(shape))
 
 
+def bin_means(range_m, cos_incidence, value, r_edges, i_edges, min_samples: int = 100, statistic=None) -> dict:
+    """Per (range, incidence) bin: mean range (m), mean incidence (deg), the bin's statistic of
+    ``value`` and its sample count, for the bins with at least ``min_samples`` samples (the
+    Raphael paper's ``(d_mean, phi_mean, P)`` rows; thinner bins are discarded).
+
+    statistic : ``None`` for the mean of ``value``, else ``f(values) -> float`` (the robust sigma)
+    Returns ``{"range", "incidence_deg", "value", "samples"}``, each (b,) over the kept bins.
+    """
+    index, inside = binned(range_m, cos_incidence, r_edges, i_edges)
+    size = (len(r_edges) - 1) * (len(i_edges) - 1)
+    index = index[inside]
+    angle = np.degrees(np.arccos(np.clip(np.asarray(cos_incidence)[inside], 0.0, 1.0)))
+    n = np.bincount(index, minlength=size)
+    keep = n >= min_samples
+    mean_r = np.bincount(index, weights=np.asarray(range_m)[inside], minlength=size) / np.maximum(n, 1)
+    mean_a = np.bincount(index, weights=angle, minlength=size) / np.maximum(n, 1)
+    values = np.asarray(value, np.float64)[inside]
+    if statistic is None:
+        stat = np.bincount(index, weights=values, minlength=size) / np.maximum(n, 1)
+    else:
+        order = np.argsort(index, kind="stable")
+        groups = np.split(values[order], np.cumsum(n)[:-1])
+        stat = np.array([statistic(g) if len(g) >= min_samples else np.nan for g in groups])
+    return {"range": mean_r[keep], "incidence_deg": mean_a[keep], "value": stat[keep], "samples": n[keep]}
+
+
+@dataclass(frozen=True)
+class MLPOptions:
+    """How the ``mlp`` models are fitted: the bins they learn from and the network."""
+
+    range_bins: int = 8  # log-spaced over the fit's range
+    incidence_bins: int = 4  # over 0..90 deg
+    hidden: tuple[int, ...] = (8,)  # tanh units per hidden layer (one layer of 8: the held-out choice, benchmarks/bench_fitting.py)
+    steps: int = 3000  # full-batch Adam steps
+    learning_rate: float = 0.01
+    decay: float = 1e-4  # L2 on the weights
+    seed: int = 0  # the weights' start; the same seed gives the same bytes
+
+
+def fit_drop_mlp(samples: Samples, r_edges: np.ndarray, options: MLPOptions = MLPOptions(), min_samples: int = 100) -> MLP:
+    """The Raphael paper's drop MLP: bins over (range, incidence) with ``min_samples`` or more
+    firings, each bin's ``(mean range, mean incidence, drop ratio)``, and a perceptron from the
+    first two to the third, the bins weighted by their firings (cross-entropy: the likelihood of
+    the binned data). ``r_edges``: the range bins' edges (m); incidence bins from ``options``."""
+    rows = bin_means(samples.range, samples.cos_incidence, samples.dropped.astype(float), r_edges, incidence_edges(options.incidence_bins), min_samples)
+    if len(rows["value"]) == 0:
+        raise InputError(f"fit: no (range, incidence) bin holds {min_samples} samples (--min-samples); use fewer --mlp-range-bins / --mlp-incidence-bins")
+    return fit_mlp(rows["range"], rows["incidence_deg"], rows["value"], rows["samples"], (float(r_edges[0]), float(r_edges[-1])), "probability",
+                   tuple(options.hidden), options.steps, options.learning_rate, options.decay, options.seed)
+
+
+def fit_noise_mlp(noise: "NoiseSamples", r_edges: np.ndarray, options: MLPOptions = MLPOptions(), min_samples: int = 100) -> MLP:
+    """The Raphael paper's noise MLP: each kept bin's robust range-noise sigma (m), learnt in ``ln sigma``
+    over (mean range, mean incidence), the bins weighted by their samples."""
+    rows = bin_means(noise.range, noise.cos_incidence, noise.residual, r_edges, incidence_edges(options.incidence_bins), min_samples, robust_sigma)
+    ok = rows["value"] > 0
+    if not ok.any():
+        raise InputError(f"fit: no (range, incidence) bin holds {min_samples} noise samples (--min-samples); use fewer --mlp-range-bins / --mlp-incidence-bins")
+    return fit_mlp(rows["range"][ok], rows["incidence_deg"][ok], rows["value"][ok], rows["samples"][ok], (float(r_edges[0]), float(r_edges[-1])), "positive",
+                   tuple(options.hidden), options.steps, options.learning_rate, options.decay, options.seed)
+
+
 def robust_sigma(residual: np.ndarray) -> float:
     """1.4826 x the median absolute deviation: the sigma of the Gaussian core."""
     return float(1.4826 * np.median(np.abs(residual - np.median(residual)))) if len(residual) else float("nan")
@@ -487,7 +550,8 @@ def predictor(name: str, train: Samples, options: dict):
     """Fit model ``name`` on ``train`` and return ``(p_drop(samples) -> (k,), parameter count)``.
 
     Names: ``uniform``, ``threshold`` (``threshold_n2``: exponent fixed at 2), ``table RxI``
-    (R log-spaced range bins over ``options['range']``, I incidence bins), ``carla`` (CARLA's
+    (R log-spaced range bins over ``options['range']``, I incidence bins), ``mlp RxI`` (the
+    perceptron over such bins; ``options['mlp']``: an :class:`MLPOptions`), ``carla`` (CARLA's
     defaults, nothing fitted).
     """
     if name == "uniform":
@@ -501,6 +565,12 @@ def predictor(name: str, train: Samples, options: dict):
         low, high = options["range"]
         table = fit_drop_table(train, np.geomspace(low, high, nr + 1), incidence_edges(ni), options.get("min_samples", 100))
         return (lambda s: table.lookup(s.range, s.cos_incidence)), int((~np.isnan(table.values)).sum())
+    if name.startswith("mlp"):
+        nr, ni = (int(v) for v in name.split()[1].split("x"))
+        low, high = options["range"]
+        mlp_options = replace(options.get("mlp", MLPOptions()), range_bins=nr, incidence_bins=ni)
+        model = fit_drop_mlp(train, np.geomspace(low, high, nr + 1), mlp_options, options.get("min_samples", 100))
+        return (lambda s: model.lookup(s.range, s.cos_incidence).astype(np.float64)), model.parameters
     if name == "carla":
         from .drop.carla import carla_keep_probability
         from .intensity import carla_intensity
@@ -589,10 +659,18 @@ class FitOptions:
     noise_incidence_bins: int = 2
     min_samples: int = 100  # bins with fewer samples are discarded (the human-robot paper's rule)
     folds: int = 8  # column blocks for the held-out comparison (0: none)
+    mlp_range_bins: int = 8  # the mlp models' bins (log-spaced over min_range..max_range)
+    mlp_incidence_bins: int = 4
+    mlp_steps: int = 3000  # Adam steps of each mlp fit
+    seed: int = 0  # the mlp weights' start (same seed, same bytes)
+
+    @property
+    def mlp(self) -> MLPOptions:
+        return MLPOptions(range_bins=self.mlp_range_bins, incidence_bins=self.mlp_incidence_bins, steps=self.mlp_steps, seed=self.seed)
 
 
 def fit_models(scan: OrganisedScan, options: FitOptions = FitOptions()) -> tuple[FittedModels, dict]:
-    """Fit the uniform, threshold and table drop models and the range and table noise models.
+    """Fit the uniform, threshold, table and mlp drop models and the range, table and mlp noise models.
 
     Returns the models (with a ``source`` record of the data and options) and a report: sample
     counts, and with ``folds`` > 1 the held-out log-loss of each drop model per fold.
@@ -610,6 +688,8 @@ def fit_models(scan: OrganisedScan, options: FitOptions = FitOptions()) -> tuple
         drop_table=fit_drop_table(samples, r_edges, incidence_edges(options.incidence_bins), options.min_samples),
         noise_range=fit_noise_range(noise, n_edges, options.min_samples),
         noise_table=fit_noise_table(noise, n_edges, incidence_edges(options.noise_incidence_bins), options.min_samples),
+        drop_mlp=fit_drop_mlp(samples, np.geomspace(options.min_range, options.max_range, options.mlp_range_bins + 1), options.mlp, options.min_samples),
+        noise_mlp=fit_noise_mlp(noise, np.geomspace(options.min_range, options.max_range, options.mlp_range_bins + 1), options.mlp, options.min_samples),
         source={
             "scans": list(scan.source),
             "rings": int(scan.shape[0]), "columns": int(scan.shape[1]), "sweeps": int(len(scan.valid)),
@@ -621,6 +701,6 @@ def fit_models(scan: OrganisedScan, options: FitOptions = FitOptions()) -> tuple
     )
     report = {"samples": samples, "noise": noise, "geometry": geometry}
     if options.folds > 1:
-        names = ["uniform", "threshold", f"table {options.range_bins}x{options.incidence_bins}"]
-        report["cross_validation"] = cross_validate(samples, names, options.folds, scan.shape[1], {"range": (options.min_range, options.max_range), "min_samples": options.min_samples})
+        names = ["uniform", "threshold", f"table {options.range_bins}x{options.incidence_bins}", f"mlp {options.mlp_range_bins}x{options.mlp_incidence_bins}"]
+        report["cross_validation"] = cross_validate(samples, names, options.folds, scan.shape[1], {"range": (options.min_range, options.max_range), "min_samples": options.min_samples, "mlp": options.mlp})
     return models, report
