@@ -89,3 +89,31 @@ def test_export_reads_roughness_metallic_and_lidar_material():
     got = dict(zip(buffers.objects.names, buffers.objects.surface))
     assert got == {"paint": model_id("glossy_paint"), "matte": 0, "plate": model_id("retroreflector"), "bare": model_id("dark_paint")}
     assert set(buffers.objects.material) == {0}  # all diffuse surfaces for the tracer
+
+
+def test_a_cars_plate_is_seen_far_beyond_its_glossy_body():
+    from bpy_pipeline.buffers import SceneBuffers
+    from bpy_pipeline.config import config_from_dict
+    from bpy_pipeline.geometry.objects import FITTINGS, STYLES, car_fittings, car_parts
+    from bpy_pipeline.pipeline import frame_rng, scan_buffers
+
+    parts = {**{k: car_parts(STYLES[0])[k] for k in ("body",)}, **car_fittings(STYLES[0])}
+    models = {"body": ("glossy_paint", 0.5), **FITTINGS}
+    turn = np.diag([-1.0, -1.0, 1.0])  # nose towards the sensor
+    scene = SceneBuffers.from_meshes({name: (v @ turn.T + [150.0, 0.0, -1.0], t) for name, (v, t) in parts.items()})
+    names = list(parts)
+    scene.objects.instance[:] = 1
+    scene.objects.reflectivity[:] = [models[n][1] for n in names]
+    scene.objects.semantic[:] = TABLE.id_of("car")
+    scene.objects.surface = np.array([model_id(models[n][0]) for n in names], np.uint8)
+    sensor = {"preset": "custom", "pattern": "spinning", "channels": 40, "vertical_fov_deg": [-1.0, 0.3], "horizontal_fov_deg": [-1.5, 1.5],
+              "horizontal_resolution_deg": 0.01, "min_range": 1.0, "max_range": 200.0}
+    drop = {"model": "threshold", "threshold": {"range_at_10": 50.0, "range_at_80": 120.0, "softness": 0.0}}
+    seen = {}
+    for on in (False, True):
+        config = config_from_dict({"sensor": sensor, "effects": {"drop": drop, "intensity": {"incidence_exponent": 0.0}, "materials": {"objects": on}}})
+        points, _ = scan_buffers(scene, config, frame_rng(0, 0))
+        seen[on] = points
+    assert len(seen[False]) == 0  # 150 m: beyond the diffuse range of a 0.5-0.8 target at this sensitivity
+    assert len(seen[True]) > 0 and (seen[True]["intensity"] == 1.0).all()  # the plate alone: retroreflective, saturating
+    assert np.abs(seen[True]["z"] - (-1.0 + 0.25 * 1.625 + 0.055)).max() < 0.15  # at the plate's height

@@ -138,6 +138,30 @@ def car_parts(style: CarStyle, height: float = NOMINAL_HEIGHT) -> dict:
     return {"body": primitives.merge(body), "windows": primitives.merge(windows), "interior": primitives.merge(interior), "tyres": primitives.merge(tyres)}
 
 
+# Fittings (opt-in: not in PARTS, so the builders' cars and their scans are unchanged): licence plates and
+# lamps, each with the reflectance model (lidar/materials.py) its ``lidar_material`` names.
+FITTINGS = {"plates": ("retroreflector", 0.8), "lights": ("glossy_paint", 0.6)}  # part -> (lidar_material, reflectivity)
+PLATE_SIZE = (0.52, 0.11)  # m: an EU plate (520 x 110 mm)
+
+
+def car_fittings(style: CarStyle, height: float = NOMINAL_HEIGHT) -> dict:
+    """Part name -> ``(vertices, triangles)``: ``plates`` (front and rear, 5 mm proud of the body's end faces,
+    centred, lower edge at 0.25 height) and ``lights`` (head and tail lamps, 0.20 m wide at the corners,
+    0.36-0.43 height, 1 cm proud), in the frame of :func:`car_parts`; within the car's box but for those millimetres.
+    """
+    H = height
+    L, W = style.length_ratio * H, style.width_ratio * H
+    pw, ph = PLATE_SIZE
+    z0 = 0.25 * H
+    plates = [_box(L / 2, L / 2 + 0.005, -pw / 2, pw / 2, z0, z0 + ph), _box(-L / 2 - 0.005, -L / 2, -pw / 2, pw / 2, z0, z0 + ph)]
+    lights = []
+    for x0, x1 in ((L / 2 - 0.06, L / 2 + 0.01), (-L / 2 - 0.01, -L / 2 + 0.06)):
+        for side in (-1, 1):
+            y = side * (W / 2 - 0.15)
+            lights.append(_box(x0, x1, y - 0.10, y + 0.10, 0.36 * H, 0.43 * H))
+    return {"plates": primitives.merge(plates), "lights": primitives.merge(lights)}
+
+
 def style_size(style: CarStyle, height: float = NOMINAL_HEIGHT) -> np.ndarray:
     """``(3,)`` length, width, height (m) of the nominal car of ``style``."""
     return np.array([style.length_ratio * height, style.width_ratio * height, height])
