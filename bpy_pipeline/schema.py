@@ -63,6 +63,8 @@ def convert(value, hint, path: str):
             raise wrong
         return tuple(convert(v, t, f"{path}[{i}]") for i, (v, t) in enumerate(zip(value, items)))
     if dataclasses.is_dataclass(hint):
+        if isinstance(value, str) and hasattr(hint, "named"):  # a section given by a profile's name
+            return hint.named(value, path)
         return from_dict(hint, value, path)
     if hint is float:
         if isinstance(value, str):  # YAML 1.1 reads 2e-3 (no dot) as a string

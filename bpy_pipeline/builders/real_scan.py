@@ -32,6 +32,9 @@ def check(params: RealScanScene, where: str) -> None:
             raise InputError(f"{where}.remove[{k}].size: must be > 0, got {list(r.size)}")
     if params.max_range < 0:
         raise InputError(f"{where}.max_range: must be >= 0, got {params.max_range}")
+    park = params.parking_rule
+    if not 0.0 <= park.near_rejection_probability <= 1.0 or park.near_rejection_distance < 0:
+        raise InputError(f"{where}.parking_rule.near_rejection_probability / near_rejection_distance: need 0..1 and >= 0 m, got {park.near_rejection_probability:g} and {park.near_rejection_distance:g}")
     rule = params.kitti_rule
     if not 0 <= rule.min_range <= rule.max_range:
         raise InputError(f"{where}.kitti_rule.min_range: must be 0 .. kitti_rule.max_range ({rule.max_range:g}), got {rule.min_range:g}")

@@ -128,18 +128,29 @@ def fits(scene: Scene, p: Placement, rule: ParkingRule) -> bool:
     return towards > 0 and hidden <= rule.max_hidden_fraction
 
 
+FULL_CIRCLE = ParkingRule().heading
+
+
 def parking_rule(scene: Scene, rule: ParkingRule, rng: np.random.Generator) -> tuple[list[Placement], dict]:
     """Objects placed by the parking paper's rule (geometry/placement.py's retry loop); returns ``(placements, log)``."""
     kind = rule.type
     cls = OBJECT_TYPES[kind][0] if kind in OBJECT_TYPES else "unlabeled"
     base = nominal_size(kind)
+    near_rejections = [0]
 
     def new_object():
         height = float(sample(rule.height, rng)) if kind == "car" else base[2]
         size = base * (height / base[2]) * np.array([rng.uniform(0.97, 1.03), rng.uniform(0.97, 1.03), 1.0])
         distance = float(sample(rule.distance, rng))
         angle = float(rng.uniform(-math.pi, math.pi))
-        return size, distance * np.array([math.cos(angle), math.sin(angle)]), float(rng.uniform(-math.pi, math.pi))
+        if rule.heading == FULL_CIRCLE:  # the paper's random yaw (the same draws as before headings existed)
+            yaw = float(rng.uniform(-math.pi, math.pi))
+        else:
+            yaw = angle + math.radians(float(sample(rule.heading, rng)))
+        if distance < rule.near_rejection_distance and rng.random() < rule.near_rejection_probability:
+            near_rejections[0] += 1
+            return None  # the paper's near rejection: refused before placement (a failure of insert_sequentially)
+        return size, distance * np.array([math.cos(angle), math.sin(angle)]), yaw
 
     def try_at(obj, angle_deg):
         size, xy, yaw = obj
@@ -152,7 +163,7 @@ def parking_rule(scene: Scene, rule: ParkingRule, rng: np.random.Generator) -> t
         return None
 
     log = insert_sequentially(sample_count(rule.count, rng), new_object, try_at, rule.rotations, rule.rotation_step_deg, rule.max_consecutive_failures)
-    return log.placed, {"objects_tried": log.objects_tried, "attempts": log.attempts, "stopped": log.stopped}
+    return log.placed, {"objects_tried": log.objects_tried, "attempts": log.attempts, "stopped": log.stopped, "near_rejections": near_rejections[0]}
 
 
 def kitti_yaw(lateral: float, rng: np.random.Generator) -> float:
