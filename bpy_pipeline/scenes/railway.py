@@ -38,7 +38,8 @@ from ..geometry.primitives import merge
 from ..geometry.terrain import terrain_mesh
 from ..geometry.railway_layout import ARM_RISE, BEAM_RADIUS, EARTH_BRACKET, FEEDER_BRACKET, MIN_WIRE_SIDES, STAY_RISE, RailwayLayout, cant_angle, cantilevers, level_of_detail, plan
 from .nodes import add_group_modifier
-from .objects import mesh_data, mesh_object, scene_collection, tag, wire_object
+from . import catenary_nodes
+from .objects import mesh_data, mesh_object, scene_collection, tag
 from .railway_nodes import PARTS, track_group
 
 CENTRELINE = "track_centreline"
@@ -270,17 +271,31 @@ def _bevel_sides(sides: int) -> int:
 
 
 def _wires(layout: RailwayLayout, detail, collection) -> None:
-    """Wires and droppers as bevelled curves: the mean width of their polygonal section is their diameter."""
+    """Wires and droppers as curves run by the "Catenary Wire" and "Catenary Droppers" groups (:mod:`.catenary_nodes`),
+    swept to the mean width of their real diameters."""
+    by_key = {(w.run, w.span, w.kind): w for w in layout.wires}
     for wire, setting in zip(layout.wires, detail.wires):
         if setting is None:
             continue
         samples, sides = setting
         points = parabolic_sag(wire.start, wire.end, wire.sag, samples, f"span {wire.run}.{wire.span}")
-        radius = equal_perimeter_radius(wire.diameter / 2, _bevel_sides(sides))
-        obj = wire_object(f"span.{wire.run}.{wire.span:02d}.{wire.kind}", [points], radius, collection, sides)
+        sides = _bevel_sides(sides)
+        obj = catenary_nodes.wire_object(f"span.{wire.run}.{wire.span:02d}.{wire.kind}", points, wire.sag, equal_perimeter_radius(wire.diameter / 2, sides), sides, collection)
         tag(obj, wire.class_name, reflectivity=REFLECTIVITY[wire.class_name])
     for droppers, built in zip(layout.droppers, detail.droppers):
         if built and len(droppers.t):
-            lines = [np.stack([a, b]) for a, b in zip(droppers.lower, droppers.upper)]
-            obj = wire_object(f"span.{droppers.run}.{droppers.span:02d}.droppers", lines, equal_perimeter_radius(droppers.diameter / 2, MIN_WIRE_SIDES), collection, MIN_WIRE_SIDES)
+            lower, upper = _dropper_wires(droppers, by_key)
+            name = f"span.{droppers.run}.{droppers.span:02d}.droppers"
+            obj = catenary_nodes.droppers_object(name, droppers, lower, upper, equal_perimeter_radius(droppers.diameter / 2, MIN_WIRE_SIDES), MIN_WIRE_SIDES, collection)
             tag(obj, "dropper", reflectivity=REFLECTIVITY["dropper"])
+
+
+def _dropper_wires(droppers, by_key: dict):
+    """The wires a set of droppers hangs between: (lower, upper). Run ``<base>p`` is the upper tier (auxiliary messenger to
+    messenger); ``<base>b`` the second contact wire of ``<base>``, hung from the same messenger (or auxiliary messenger)."""
+    run, span = droppers.run, droppers.span
+    if run.endswith("p"):
+        return by_key[(run[:-1], span, "auxiliary_messenger")], by_key[(run[:-1], span, "messenger_wire")]
+    base = run[:-1] if run.endswith("b") else run
+    upper = by_key.get((base, span, "auxiliary_messenger")) or by_key[(base, span, "messenger_wire")]
+    return by_key[(run, span, "contact_wire")], upper
