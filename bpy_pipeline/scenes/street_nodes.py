@@ -79,17 +79,19 @@ def _layer_collection(layer, collection):
     return None
 
 
-def prototypes_collection(parent: bpy.types.Collection) -> bpy.types.Collection:
-    """A new, empty :data:`PROTOTYPES` collection under ``parent``, excluded from the view layer (its
-    objects are seen only where a scatter instances them); a stale one and its kinds are removed first."""
-    stale = bpy.data.collections.get(PROTOTYPES)
+def prototypes_collection(parent: bpy.types.Collection, name: str = PROTOTYPES) -> bpy.types.Collection:
+    """A new, empty collection ``name`` under ``parent``, excluded from the view layer (its objects are
+    seen only where a group instances them); a stale one, its objects and its kinds are removed first."""
+    stale = bpy.data.collections.get(name)
     if stale is not None:
+        for obj in list(stale.objects):
+            bpy.data.objects.remove(obj, do_unlink=True)
         for child in list(stale.children):
             for obj in list(child.objects):
                 bpy.data.objects.remove(obj, do_unlink=True)
             bpy.data.collections.remove(child)
         bpy.data.collections.remove(stale)
-    collection = bpy.data.collections.new(PROTOTYPES)
+    collection = bpy.data.collections.new(name)
     parent.children.link(collection)
     layer = _layer_collection(bpy.context.view_layer.layer_collection, collection)
     if layer is not None:
