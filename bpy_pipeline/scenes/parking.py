@@ -1,7 +1,8 @@
 """``scene.builder: parking``: an underground car park level with cars placed by the parking paper's rule (bpy).
 
 The level (floor and ceiling slabs, walls, a pillar grid, a ramp, bays along the driveway;
-``geometry/indoor.py``) is built once per run. Each frame places cars around the sensor with the
+``geometry/indoor.py``) is built once per run, each piece an object running the "Parking Level"
+Geometry Nodes group (:mod:`.parking_nodes`) with the level's dimensions as its inputs. Each frame places cars around the sensor with the
 paper's insertion rule (``geometry/placement.py``): the count from N(5, 4), a distance from the
 sensor, a random yaw, turned 10 degrees about the sensor on failure up to 36 times, 10
 consecutive failures end it; a car is refused where it collides with the structure or another
@@ -28,7 +29,8 @@ from ..geometry.objects import COLOURS, GLASS_REFLECTIVITY, INTERIOR_REFLECTIVIT
 from ..geometry.indoor import parking_layout, parking_station
 from ..geometry.placement import FloorBoxPlacer, insert_sequentially, sample, sample_count, turn_about
 from ..lidar.raycast import RayCaster
-from .objects import mesh_data, mesh_object, scene_collection, tag
+from . import box_nodes, parking_nodes
+from .objects import mesh_data, scene_collection, tag
 
 INSTANCE = {"floor": 1, "ceiling": 2, "wall": 3, "pillar": 4, "ramp": 5, "car": 100}
 STATIC_REFLECTIVITY = {"floor": 0.25, "ceiling": 0.45, "wall": 0.5, "pillar": 0.5, "ramp": 0.3}
@@ -90,7 +92,9 @@ class ParkingGarage:
         self.layout = parking_layout(params)
         self.collection = scene_collection()
         meshes = self.layout.meshes()
-        self.static = [tag(mesh_object(name, mesh, self.collection), name, reflectivity=STATIC_REFLECTIVITY[name], instance=INSTANCE[name]) for name, mesh in meshes.items()]
+        prototypes = box_nodes.prototypes(self.collection)  # the level's pieces through the "Parking Level" group
+        self.static = [tag(parking_nodes.level_object(name, name, params, self.collection, prototypes), name, reflectivity=STATIC_REFLECTIVITY[name], instance=INSTANCE[name])
+                       for name in meshes]
         self.caster = RayCaster(_buffers(meshes), frame=np.eye(4))
         self.paints = []
         for name, rgb, _, _ in COLOURS:
