@@ -9,9 +9,14 @@ difference is at most one standard error. Cost: the model's drop decision (proba
 draw, effects.drop_mask) on a million points, best of five.
 A scan simulated with each held-out fit (apply_effects on the real firings' geometry) gives
 per-ring drop fractions and the drop fraction against range, beside the real ones.
+Second result, fitting_mlp.json / .png: the ``mlp`` model (the Raphael paper's perceptron over
+(range, incidence) bins with >= 100 firings) against the tables on the same held-out column
+blocks: log-loss, Brier score and calibration (held-out predictions in 10 quantile bins,
+predicted against observed drop; ECE = the firing-weighted mean gap).
 Run: python benchmarks/bench_fitting.py [--small]
 """
 
+import json
 import math
 import tempfile
 import time
@@ -136,6 +141,107 @@ def main():
     report(name, rows, args.out, notes)
     print(f"best: {best}; simplest within noise of the best: {pick}")
     chart(rows, pick, real_ring, raw_ring, sim_ring, centre, real_range, sim_range, count_range, noise_table, args.out / f"{name}.png")
+    mlp_comparison(samples, scan.shape[1], args)
+
+
+MLP_NAMES = ["uniform", "table 4x2", "table 8x4", "mlp 8x4", "mlp 16x8"]
+
+
+def calibration(p, dropped, bins=10):
+    """Held-out predictions in ``bins`` quantile bins: (mean predicted, observed, firings) each, and the ECE."""
+    order = np.argsort(p, kind="stable")
+    groups = np.array_split(order, bins)
+    pred = np.array([p[g].mean() for g in groups])
+    obs = np.array([dropped[g].mean() for g in groups])
+    n = np.array([len(g) for g in groups])
+    return pred, obs, n, float(np.sum(n * np.abs(pred - obs)) / n.sum())
+
+
+def mlp_comparison(samples, columns, args):
+    """The mlp against the tables on held-out column blocks: log-loss, Brier, calibration; fitting_mlp.json and .png."""
+    names = MLP_NAMES if not args.small else ["table 4x2", "mlp 8x4"]
+    start = time.perf_counter()
+    scores = fitting.cross_validate(samples, names, FOLDS, columns, {"range": RANGE, "min_samples": 100})
+    cv_s = time.perf_counter() - start
+    fold = fitting.column_folds(samples, FOLDS, columns)
+    y = samples.dropped.astype(float)
+    ref = "table 4x2"
+    rows, curves = [], {}
+    for name in names:
+        p = scores[name]["p_drop"]
+        brier = np.array([np.mean((p[fold == k] - y[fold == k]) ** 2) for k in range(FOLDS)])
+        brier_ref = np.array([np.mean((scores[ref]["p_drop"][fold == k] - y[fold == k]) ** 2) for k in range(FOLDS)])
+        diff = scores[name]["loss"] - scores[ref]["loss"]
+        pred, obs, n, ece = calibration(p, samples.dropped)
+        curves[name] = (pred, obs)
+        rows.append({
+            "model": name, "parameters": scores[name]["parameters"],
+            "held_out_nats_per_firing": float(scores[name]["loss"].mean()), "minus_table_4x2": float(diff.mean()),
+            "se": float(diff.std(ddof=1) / math.sqrt(FOLDS)), "brier": float(brier.mean()),
+            "brier_minus_table_4x2": float((brier - brier_ref).mean()), "brier_se": float((brier - brier_ref).std(ddof=1) / math.sqrt(FOLDS)),
+            "ece": ece, "calibration_predicted": [round(float(v), 4) for v in pred], "calibration_observed": [round(float(v), 4) for v in obs],
+        })
+    # the fitted surfaces on all firings, drop against range at three incidences
+    r = np.geomspace(*RANGE, 60)
+    surfaces = {}
+    table = fitting.fit_drop_table(samples, np.geomspace(*RANGE, 5), fitting.incidence_edges(2))
+    mlp = fitting.fit_drop_mlp(samples, np.geomspace(*RANGE, 9))
+    for angle in (15.0, 45.0, 75.0):
+        cos = np.full(len(r), math.cos(math.radians(angle)))
+        surfaces[angle] = (table.lookup(r, cos), mlp.lookup(r, cos))
+    edges = np.geomspace(*RANGE, 13)
+    centre = np.sqrt(edges[:-1] * edges[1:])
+    real = np.array([samples.dropped[(samples.range >= lo) & (samples.range < hi)].mean() for lo, hi in zip(edges[:-1], edges[1:])])
+    name = "fitting_mlp" + ("_small" if args.small else "")
+    notes = {
+        "command": "python benchmarks/bench_fitting.py" + (" --small" if args.small else ""),
+        "scan": SCAN.name, "samples_with_known_target": len(samples), "folds": f"{FOLDS} blocks of {columns // FOLDS} columns",
+        "mlp": "the Raphael paper's method: (range, incidence) bins with >= 100 firings, each bin's (mean range, mean incidence, drop ratio), "
+               "a perceptron with one tanh layer of 8 fitted to them by full-batch Adam (3000 steps, seed 0), bins weighted by firings",
+        "reference": "table 4x2 (the fit default); minus_* are paired fold-by-fold differences, se one standard error",
+        "cross_validation_s": cv_s,
+    }
+    report(name, [{k: v for k, v in row.items() if not k.startswith("calibration")} for row in rows], args.out, notes)
+    payload = json.loads((args.out / f"{name}.json").read_text())
+    payload["rows"] = rows  # with the calibration curves
+    (args.out / f"{name}.json").write_text(json.dumps(payload, indent=2) + "\n")
+    chart_mlp(rows, curves, r, surfaces, centre, real, args.out / f"{name}.png")
+
+
+def chart_mlp(rows, curves, r, surfaces, centre, real, path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(1, 3, figsize=(16, 4.8))
+    for i, row in enumerate(rows):
+        ax[0].errorbar(i, row["minus_table_4x2"], yerr=row["se"], fmt="o", capsize=3, color="tab:green" if row["model"].startswith("mlp") else "tab:blue")
+    ax[0].set_xticks(range(len(rows)), [f"{row['model']}\n({row['parameters']} par.)" for row in rows], fontsize=7)
+    ax[0].axhline(0, color="k", lw=0.5)
+    ax[0].set_yscale("symlog", linthresh=0.002)
+    ax[0].set_ylabel("held-out log-loss minus table 4x2 (nats / firing)")
+    ax[0].set_title("held-out column blocks (8 x 45 deg), paired +- 1 SE")
+    for name, (pred, obs) in curves.items():
+        ax[1].plot(pred, obs, "o-", ms=3, label=f"{name} (ECE {next(x['ece'] for x in rows if x['model'] == name):.4f})")
+    top = max(max(p.max(), o.max()) for p, o in curves.values())
+    ax[1].plot([0, top], [0, top], "k:", lw=0.8)
+    ax[1].set_xlabel("predicted drop probability (held out, decile means)")
+    ax[1].set_ylabel("observed drop fraction")
+    ax[1].set_title("calibration")
+    ax[1].legend(fontsize=7)
+    ax[2].plot(centre, real, "ko", label="real, all incidences")
+    for (angle, (table, mlp)), colour in zip(surfaces.items(), ("tab:blue", "tab:orange", "tab:red")):
+        ax[2].plot(r, table, "--", color=colour, lw=1, label=f"table 4x2, {angle:g} deg")
+        ax[2].plot(r, mlp, "-", color=colour, label=f"mlp 8x4, {angle:g} deg")
+    ax[2].set_xscale("log")
+    ax[2].set_xlabel("range, m")
+    ax[2].set_ylabel("drop probability")
+    ax[2].set_title("fitted surfaces (all columns)")
+    ax[2].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    print(f"chart: {path}")
 
 
 def chart(rows, pick, real_ring, raw_ring, sim_ring, centre, real_range, sim_range, count_range, noise_table, path):

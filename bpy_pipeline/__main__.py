@@ -24,6 +24,10 @@ Commands:
     A dense real scan resampled into a sparser sensor's firings, each point keeping the class,
     instance and intensity of the return it came from, written as a dataset (:mod:`.conversion`).
 
+``match REAL [REAL ...] --config BASE.yaml --out MATCHED.yaml``
+    Per-class object counts, distance and heading histograms fitted to labelled real frames, written
+    as the real_scan (or parking) builder's placement distributions (:mod:`.match`, docs/match.md).
+
 Each command is a ``_add_<name>(subparsers)`` function that registers its parser and sets
 ``func`` (``args -> exit code``); add new commands the same way. Bad input (``InputError``)
 prints one line and exits with code 2.
@@ -278,7 +282,16 @@ def _add_convert(sub) -> None:
     add_convert_arguments(p).set_defaults(func=convert_main)
 
 
-COMMANDS = [_add_run, _add_sensors, _add_fit, _add_config, _add_evaluate, _add_convert]
+def _add_match(sub) -> None:
+    from .match import add_match_arguments, match_main
+
+    p = sub.add_parser("match", help="fit object counts, distances and headings to labelled real scans; write them into a config",
+                       description="Fit per-class object counts, distance and heading histograms (and the points-per-object curve) to "
+                       "labelled real frames and write them as the builder's placement distributions (docs/match.md).")
+    add_match_arguments(p).set_defaults(func=match_main)
+
+
+COMMANDS = [_add_run, _add_sensors, _add_fit, _add_config, _add_evaluate, _add_convert, _add_match]
 
 
 def parser() -> argparse.ArgumentParser:

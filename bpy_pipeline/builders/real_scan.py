@@ -12,6 +12,7 @@ from pathlib import Path
 
 from ..errors import InputError
 from ..geometry.objects import OBJECT_TYPES
+from ..geometry.placement import check_distribution
 from ..io.real_scans import FORMATS
 from ..mixing.section import RealScanScene
 from .base import Builder, BuildContext, BuildResult, register_builder
@@ -38,6 +39,11 @@ def check(params: RealScanScene, where: str) -> None:
     rule = params.kitti_rule
     if not 0 <= rule.min_range <= rule.max_range:
         raise InputError(f"{where}.kitti_rule.min_range: must be 0 .. kitti_rule.max_range ({rule.max_range:g}), got {rule.min_range:g}")
+    for k, parking in enumerate([params.parking_rule, *params.parking_rules]):
+        key = f"{where}.parking_rule" if k == 0 else f"{where}.parking_rules[{k - 1}]"
+        check_distribution(parking.count, f"{key}.count", low=-0.5)
+        check_distribution(parking.distance, f"{key}.distance", low=0.0)
+        check_distribution(parking.heading, f"{key}.heading", low=-180.0, high=180.0)
 
 
 def build(params: RealScanScene, context: BuildContext) -> BuildResult:

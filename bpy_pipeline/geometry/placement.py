@@ -26,16 +26,31 @@ from .collision import box_axes, ray_box_distance, rectangle_inside, rectangles_
 @dataclass(frozen=True)
 class Distribution:
     """A random quantity: ``normal`` (``mean``, ``std``; truncated to ``[min, max]`` by redrawing, a
-    count rounded and clipped instead) or ``uniform`` on ``[min, max]`` (geometry/placement.py)."""
+    count rounded and clipped instead), ``uniform`` on ``[min, max]`` or ``histogram`` (a bin drawn
+    with probability proportional to ``weights``, then uniform within its ``edges``; a count: the
+    bin's integers, ``edges`` k - 0.5 .. k + 0.5 for value k, as ``bpy-pipeline match`` writes them)."""
 
-    kind: Literal["normal", "uniform"] = "normal"
+    kind: Literal["normal", "uniform", "histogram"] = "normal"
     mean: float = 0.0
     std: float = 1.0
     min: float = 0.0
     max: float = 1.0
+    edges: list[float] = field(default_factory=list)  # histogram: (b + 1,) increasing
+    weights: list[float] = field(default_factory=list)  # histogram: (b,) >= 0, not all 0
 
 
 def check_distribution(d: Distribution, where: str, low: float | None = None, high: float | None = None) -> None:
+    if d.kind == "histogram":
+        edges, weights = np.asarray(d.edges, float), np.asarray(d.weights, float)
+        if edges.ndim != 1 or len(edges) < 2 or not (np.diff(edges) > 0).all():
+            raise InputError(f"{where}.edges: a histogram needs at least 2 increasing edges, got {list(d.edges)}")
+        if weights.shape != (len(edges) - 1,) or (weights < 0).any() or weights.sum() <= 0:
+            raise InputError(f"{where}.weights: a histogram needs {len(edges) - 1} weights >= 0 (one per bin), not all 0, got {list(d.weights)}")
+        if low is not None and edges[0] < low:
+            raise InputError(f"{where}.edges: must be >= {low}, got {edges[0]}")
+        if high is not None and edges[-1] > high:
+            raise InputError(f"{where}.edges: must be <= {high}, got {edges[-1]}")
+        return
     if d.min > d.max:
         raise InputError(f"{where}.min: must not exceed max ({d.max}), got {d.min}")
     check_positive(d.std, f"{where}.std", allow_zero=True)
@@ -55,7 +70,9 @@ def sample(distribution, rng: np.random.Generator, size: int | None = None):
     """
     n = 1 if size is None else size
     lo, hi = distribution.min, distribution.max
-    if distribution.kind == "uniform" or distribution.std == 0:
+    if distribution.kind == "histogram":
+        values = _histogram_draw(distribution, rng, n)
+    elif distribution.kind == "uniform" or distribution.std == 0:
         values = rng.uniform(lo, hi, n) if distribution.kind == "uniform" else np.full(n, float(np.clip(distribution.mean, lo, hi)))
     else:
         values = rng.normal(distribution.mean, distribution.std, n)
@@ -68,8 +85,18 @@ def sample(distribution, rng: np.random.Generator, size: int | None = None):
     return float(values[0]) if size is None else values
 
 
+def _histogram_draw(distribution, rng: np.random.Generator, n: int) -> np.ndarray:
+    """``(n,)`` float64 draws of a ``histogram`` distribution: a bin by its weight, then uniform within it."""
+    edges, weights = np.asarray(distribution.edges, float), np.asarray(distribution.weights, float)
+    cdf = np.cumsum(weights) / weights.sum()
+    k = np.minimum(np.searchsorted(cdf, rng.random(n), side="right"), len(weights) - 1)
+    return edges[k] + rng.random(n) * (edges[k + 1] - edges[k])
+
+
 def sample_count(distribution, rng: np.random.Generator) -> int:
     """A count: a draw of ``distribution`` (normal: not truncated, as the paper's N(5, 4)), rounded, clipped to ``[min, max]``."""
+    if distribution.kind == "histogram":
+        return max(int(round(float(_histogram_draw(distribution, rng, 1)[0]))), 0)
     if distribution.kind == "uniform":
         return int(rng.integers(int(np.ceil(distribution.min)), int(np.floor(distribution.max)) + 1))
     return int(np.clip(round(rng.normal(distribution.mean, distribution.std)), distribution.min, distribution.max))

@@ -233,16 +233,17 @@ def mix_place(state: MixState) -> None:
     returns = firings.returns
     placements = explicit_placements(section.objects)
     rule_log = {}
-    if section.parking_rule.enabled or section.kitti_rule.enabled:
+    if section.parking_rule.enabled or section.kitti_rule.enabled or any(r.enabled for r in section.parking_rules):
         xyz = returns[valid]
         ground = find_ground(xyz, section.ground)
         work = Firings(**{**firings.__dict__, "valid": valid})
         scene = Scene(work, ground, PointIndex(xyz[~ground.ground]), PointIndex(xyz[ground.ground]), list(placements))
         state.lap("ground")
         real = real_placements(section.real_boxes) + labelled_boxes(firings, state.semantic_real, state.instance_real, table)
-        if section.parking_rule.enabled:
-            placed, rule_log["parking"] = parking_rule(scene, section.parking_rule, rng)
-            placements += placed
+        for k, rule in enumerate([section.parking_rule, *section.parking_rules]):
+            if rule.enabled:
+                placed, rule_log["parking" if k == 0 else f"parking_{k}"] = parking_rule(scene, rule, rng)
+                placements += placed
         if section.kitti_rule.enabled:
             placed, rule_log["kitti"] = kitti_rule(scene, section.kitti_rule, xyz[ground.ground], real, rng)
             placements += placed
