@@ -136,9 +136,9 @@ def histogram(values: np.ndarray, edges: Sequence[float]) -> dict:
 
 
 def count_histogram(counts: np.ndarray) -> dict:
-    """Objects per frame as a ``histogram`` Distribution over the integers 0 .. max (edges k - 0.5 .. k + 0.5)."""
+    """Objects per frame as a ``histogram`` Distribution over the integers 0 .. max (edges k .. k + 1 hold the count k)."""
     top = int(counts.max())
-    return {"kind": "histogram", "edges": [k - 0.5 for k in range(top + 2)], "weights": [int(v) for v in np.bincount(counts, minlength=top + 1)]}
+    return {"kind": "histogram", "edges": [float(k) for k in range(top + 2)], "weights": [int(v) for v in np.bincount(counts, minlength=top + 1)]}
 
 
 def distance_edges(distances: np.ndarray, step: float = 5.0) -> list[float]:

@@ -41,7 +41,7 @@ def check(params: RealScanScene, where: str) -> None:
         raise InputError(f"{where}.kitti_rule.min_range: must be 0 .. kitti_rule.max_range ({rule.max_range:g}), got {rule.min_range:g}")
     for k, parking in enumerate([params.parking_rule, *params.parking_rules]):
         key = f"{where}.parking_rule" if k == 0 else f"{where}.parking_rules[{k - 1}]"
-        check_distribution(parking.count, f"{key}.count", low=-0.5)
+        check_distribution(parking.count, f"{key}.count", low=0.0)
         check_distribution(parking.distance, f"{key}.distance", low=0.0)
         check_distribution(parking.heading, f"{key}.heading", low=-180.0, high=180.0)
 

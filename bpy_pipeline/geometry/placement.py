@@ -28,7 +28,7 @@ class Distribution:
     """A random quantity: ``normal`` (``mean``, ``std``; truncated to ``[min, max]`` by redrawing, a
     count rounded and clipped instead), ``uniform`` on ``[min, max]`` or ``histogram`` (a bin drawn
     with probability proportional to ``weights``, then uniform within its ``edges``; a count: the
-    bin's integers, ``edges`` k - 0.5 .. k + 0.5 for value k, as ``bpy-pipeline match`` writes them)."""
+    draw's integer part, so ``edges`` k .. k + 1 hold the count k, as ``bpy-pipeline match`` writes them)."""
 
     kind: Literal["normal", "uniform", "histogram"] = "normal"
     mean: float = 0.0
@@ -96,7 +96,7 @@ def _histogram_draw(distribution, rng: np.random.Generator, n: int) -> np.ndarra
 def sample_count(distribution, rng: np.random.Generator) -> int:
     """A count: a draw of ``distribution`` (normal: not truncated, as the paper's N(5, 4)), rounded, clipped to ``[min, max]``."""
     if distribution.kind == "histogram":
-        return max(int(round(float(_histogram_draw(distribution, rng, 1)[0]))), 0)
+        return max(int(np.floor(_histogram_draw(distribution, rng, 1)[0])), 0)
     if distribution.kind == "uniform":
         return int(rng.integers(int(np.ceil(distribution.min)), int(np.floor(distribution.max)) + 1))
     return int(np.clip(round(rng.normal(distribution.mean, distribution.std)), distribution.min, distribution.max))
