@@ -33,4 +33,3 @@ def unregister() -> None:
     settings.detach()
     while _registered:
         bpy.utils.unregister_class(_registered.pop())
-    operators.LAST.clear()

@@ -7,6 +7,8 @@ the operator is cancelled; any other error propagates (Blender shows its traceba
 from __future__ import annotations
 
 import dataclasses
+import os
+import tempfile
 from pathlib import Path
 
 import bpy
@@ -20,7 +22,40 @@ from .bpy_pipeline.errors import InputError
 from .bpy_pipeline.labels import load_class_table, normalise
 
 LIDAR_KEYS = ("lidar_class", "lidar_material", "lidar_reflectivity", "lidar_instance")
-LAST: dict = {}  # the last frame scanned in this session: points, pose, output frame ("sensor" | "world")
+
+
+def remember_frame(last, points: np.ndarray, pose: np.ndarray, output_frame: str, out_dir: Path) -> None:
+    """Keep a frame on ``last`` (``WindowManager.lidar_last``): ``points`` the ``(n,)`` records, ``pose`` 4x4 (metres).
+
+    The records go to ``last.points_file``, a ``.npy`` file in the system's temporary folder made for
+    this session on its first frame and replaced whole (write, then rename) by every later one.
+    """
+    if not last.points_file or not Path(last.points_file).parent.is_dir():
+        handle, name = tempfile.mkstemp(prefix="lidar_pipeline-last-", suffix=".npy")
+        os.close(handle)
+        last.points_file = name
+    partial = Path(last.points_file).with_suffix(".partial")
+    with open(partial, "wb") as file:
+        np.save(file, points, allow_pickle=False)
+    os.replace(partial, last.points_file)
+    last.pose = np.asarray(pose, np.float64).ravel().tolist()
+    last.output_frame, last.out_dir = output_frame, str(out_dir)
+
+
+def recall_frame(last) -> tuple[np.ndarray, np.ndarray] | None:
+    """The frame kept on ``last``: ``(points, pose)``, the pose the identity for world-frame points; ``None`` when none is."""
+    if not last.points_file or not Path(last.points_file).is_file():
+        return None
+    points = np.load(last.points_file, allow_pickle=False)
+    pose = np.asarray(last.pose, np.float64).reshape(4, 4) if last.output_frame == "sensor" else np.eye(4)
+    return points, pose
+
+
+def forget_frame(last) -> None:
+    """Drop the frame kept on ``last`` and its file (Show cloud then reads the output folder)."""
+    if last.points_file:
+        Path(last.points_file).unlink(missing_ok=True)
+    last.points_file = ""
 
 
 def output_dir(settings) -> Path:
@@ -35,12 +70,14 @@ def output_dir(settings) -> Path:
 class FrameJob:
     """The frames of a config, generated one :meth:`step` at a time; :meth:`cancel` keeps those done."""
 
-    def __init__(self, config: cfg.Config, out_dir: Path, build: bool):
+    def __init__(self, config: cfg.Config, out_dir: Path, build: bool, last=None):
+        """``last``: where each finished frame is remembered (``WindowManager.lidar_last``), or ``None``."""
         from .bpy_pipeline.pipeline import run_frames
 
         self.total, self.done, self.out_dir = config.frames, 0, out_dir
         self.output_frame = config.output.frame
         self.points = 0
+        self.last = last
         # the panel's output folder holds its latest scan or frames: each Scan and Generate replaces it
         self._frames = run_frames(config, out_dir, build, mode="overwrite")
 
@@ -52,7 +89,8 @@ class FrameJob:
             return False
         self.done += 1
         self.points = len(frame.points)
-        LAST.update(points=frame.points, pose=frame.pose, frame=self.output_frame, out_dir=str(self.out_dir))
+        if self.last is not None:
+            remember_frame(self.last, frame.points, frame.pose, self.output_frame, self.out_dir)
         return True
 
     def cancel(self) -> None:
@@ -98,7 +136,7 @@ def start_job(context, frames: int | None = None, build: bool | None = None) -> 
         config = dataclasses.replace(config, frames=frames)
     if build is None:
         build = settings.builder != panel.MY_SCENE
-    return FrameJob(config, output_dir(settings), build)
+    return FrameJob(config, output_dir(settings), build, context.window_manager.lidar_last)
 
 
 class LIDAR_OT_build_scene(bpy.types.Operator):
@@ -130,7 +168,7 @@ class LIDAR_OT_scan(bpy.types.Operator):
 
     bl_idname = "lidar.scan"
     bl_label = "Scan"
-    bl_options = {"REGISTER"}
+    bl_options = {"REGISTER", "UNDO"}  # Ctrl+Z takes back the scene it built, not the files it wrote (docs/panel.md)
 
     others: bpy.props.EnumProperty(name="Other objects", items=OTHERS_ITEMS, default="LEAVE_OUT")
 
@@ -169,9 +207,10 @@ class LIDAR_OT_generate(bpy.types.Operator):
 
     bl_idname = "lidar.generate"
     bl_label = "Generate frames"
-    bl_options = {"REGISTER"}
+    bl_options = {"REGISTER", "UNDO"}  # one undo step when every frame is done (docs/panel.md)
 
-    others: bpy.props.EnumProperty(name="Other objects", items=OTHERS_ITEMS, default="LEAVE_OUT")
+    # for scripts only: hidden, so the Adjust Last Operation panel offers nothing that would re-run every frame
+    others: bpy.props.EnumProperty(name="Other objects", items=OTHERS_ITEMS, default="LEAVE_OUT", options={"HIDDEN", "SKIP_SAVE"})
 
     def execute(self, context):  # scripts and background mode: every frame, blocking
         left_out = others_to_leave_out(context, self.others)
@@ -275,8 +314,9 @@ class LIDAR_OT_show_cloud(bpy.types.Operator):
     @staticmethod
     def _last_frame(context) -> tuple[np.ndarray, np.ndarray]:
         """This session's last frame, else the last frame of the output folder's PLY files."""
-        if LAST:
-            return LAST["points"], LAST["pose"] if LAST["frame"] == "sensor" else np.eye(4)
+        kept = recall_frame(context.window_manager.lidar_last)
+        if kept is not None:
+            return kept
         from .bpy_pipeline.io import read_dataset, read_ply
 
         out = output_dir(context.scene.lidar)

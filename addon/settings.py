@@ -25,6 +25,7 @@ import json
 import math
 import os
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import bpy
 from mathutils import Matrix, Vector
@@ -94,6 +95,21 @@ class LIDAR_PG_legend_entry(bpy.types.PropertyGroup):
     class_id: bpy.props.IntProperty(name="Class id")
     points: bpy.props.IntProperty(name="Points")
     color: bpy.props.FloatVectorProperty(name="Colour", subtype="COLOR_GAMMA", size=3, min=0.0, max=1.0)
+
+
+class LIDAR_PG_last_frame(bpy.types.PropertyGroup):
+    """The last frame Scan or Generate made in this Blender session (``WindowManager.lidar_last``).
+
+    A window manager's properties live as long as the session and are never written to a .blend
+    file nor into an undo step: Show cloud finds the frame after Ctrl+Z, and a saved file carries no
+    points. The ``(n,)`` point records are in ``points_file`` (``operators.remember_frame``), since no
+    property holds megabytes of bytes: RNA strings and long bytes ID properties stop at the first NUL.
+    """
+
+    points_file: bpy.props.StringProperty(name="Points file", subtype="FILE_PATH", description="The frame's point records (.npy, in the temporary folder)")
+    out_dir: bpy.props.StringProperty(name="Output folder", description="Where the frame was written")
+    output_frame: bpy.props.StringProperty(name="Output frame", description="sensor or world: the frame the points are in")
+    pose: bpy.props.FloatVectorProperty(name="Sensor pose", size=16, description="4x4 sensor-to-world matrix, row-major (metres)")
 
 
 def make_views() -> Views:
@@ -291,15 +307,23 @@ def register() -> list[type]:
     """Generate and register the groups, attach ``Scene.lidar``; returns the registered classes."""
     global VIEWS
     VIEWS = make_views()
-    return VIEWS.classes
+    return [*VIEWS.classes, LIDAR_PG_last_frame]
 
 
 def attach() -> None:
+    """``Scene.lidar`` (the panel's config, saved with the file) and ``WindowManager.lidar_last`` (this session's last frame)."""
     bpy.types.Scene.lidar = bpy.props.PointerProperty(type=VIEWS.settings)
+    bpy.types.WindowManager.lidar_last = bpy.props.PointerProperty(type=LIDAR_PG_last_frame)
 
 
 def detach() -> None:
     global VIEWS
+    if hasattr(bpy.types.WindowManager, "lidar_last"):
+        for wm in getattr(bpy.data, "window_managers", ()):  # the frame's file goes with the extension
+            if wm.lidar_last.points_file:
+                Path(wm.lidar_last.points_file).unlink(missing_ok=True)
+            wm.property_unset("lidar_last")
+        del bpy.types.WindowManager.lidar_last
     if hasattr(bpy.types.Scene, "lidar"):
         del bpy.types.Scene.lidar
     VIEWS = None

@@ -208,7 +208,7 @@ for obj in bpy.data.collections["LiDAR Clouds"].objects:
         "drawn_as_points": evaluated.data.__class__.__name__ == "PointCloud" or any(m.type == "NODES" for m in obj.modifiers),
     }
 report["clouds"] = clouds
-operators.LAST.clear()  # Show cloud from the files on disk
+operators.forget_frame(bpy.context.window_manager.lidar_last)  # Show cloud from the files on disk
 report["show_cloud_from_disk"] = sorted(bpy.ops.lidar.show_cloud())
 report["cloud_points_from_disk"] = sum(len(o.data.vertices) if o.type == "MESH" else len(o.data.points) for o in bpy.data.collections["LiDAR Clouds"].objects)
 
