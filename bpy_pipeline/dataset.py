@@ -23,6 +23,7 @@ when a run ends. A run's cost per frame does not grow with the number of frames.
 
 from __future__ import annotations
 
+import contextvars
 import datetime
 import errno
 import fcntl
@@ -31,6 +32,7 @@ import json
 import os
 import shutil
 import socket
+import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -38,7 +40,7 @@ from typing import Callable
 
 from .config import Config, config_to_dict
 from .errors import InputError
-from .io.atomic import atomic_write
+from .io.atomic import atomic_write, digests_while_writing
 from .io.manifest import MANIFEST_NAME, read_manifest, to_json, write_manifest
 from .io.writers import WRITERS, frame_writers
 
@@ -64,6 +66,43 @@ def sha256_file(path: Path) -> str:
         for block in iter(lambda: handle.read(1 << 20), b""):
             digest.update(block)
     return digest.hexdigest()
+
+
+BACKGROUND_WRITERS = ("preview",)  # written on a thread of their own while the frame's other files are written
+
+
+def write_frame_files(frame, staging: Path, names: list[str]) -> list[Path]:
+    """Every writer of ``names`` writes ``frame`` under ``staging``; their files in the order of ``names``.
+
+    The :data:`BACKGROUND_WRITERS` (the preview: numpy and zlib, which let go of the GIL) run on a
+    thread of their own while the others write, in the caller's context (its
+    :func:`~.io.atomic.digests_while_writing`), and are waited for before this returns or raises,
+    so nothing writes under ``staging`` afterwards. A failure of the others is raised first.
+    """
+    later = [n for n in names if n in BACKGROUND_WRITERS] if len(names) > 1 else []
+    results: dict[str, list[Path]] = {}
+    failed: list[BaseException] = []
+
+    def background():
+        try:
+            for name in later:
+                results[name] = WRITERS.get(name).write(frame, staging)
+        except BaseException as err:  # re-raised by the caller's thread
+            failed.append(err)
+
+    thread = threading.Thread(target=contextvars.copy_context().run, args=(background,), name=f"frame {frame.index} writer") if later else None
+    if thread is not None:
+        thread.start()
+    try:
+        for name in names:
+            if name not in later:
+                results[name] = WRITERS.get(name).write(frame, staging)
+    finally:
+        if thread is not None:
+            thread.join()
+    if failed:
+        raise failed[0]
+    return [path for name in names for path in results[name]]
 
 
 def _pid_alive(pid: int) -> bool:
@@ -368,11 +407,10 @@ class Dataset:
         staging = self.out / STAGING / frame.stem
         shutil.rmtree(staging, ignore_errors=True)
         try:
-            written = []
-            for name in frame_writers(self.config):
-                written += WRITERS.get(name).write(frame, staging)
+            with digests_while_writing() as hashed:  # sha256 of the files written through atomic.hashed_open, as they were written
+                written = write_frame_files(frame, staging, frame_writers(self.config))
             relative = [str(Path(p).relative_to(staging)) for p in written]
-            digests = {rel: sha256_file(staging / rel) for rel in relative}
+            digests = {rel: hashed.get(os.path.abspath(staging / rel)) or sha256_file(staging / rel) for rel in relative}  # others read back
             intent = self.out / MOVING / f"{frame.stem}.json"
             with atomic_write(intent) as tmp:
                 tmp.write_text(json.dumps(relative))

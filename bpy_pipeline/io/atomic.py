@@ -5,16 +5,90 @@ DESIGN.md, "Bad input": a frame that fails leaves no half-written file behind. E
 only when the write succeeded. The temporary name lives in the destination folder (so the rename
 stays on one file system and is atomic), starts with ``.`` and ends with ``.tmp``, so globs such
 as ``*.ply`` and most file browsers skip it.
+
+Digests while writing: inside :func:`digests_while_writing`, a file a writer writes through
+:func:`hashed_open` (into the temporary file :func:`atomic_write` gave it) gets its sha256 computed
+from the bytes as they are written; when :func:`atomic_write` renames it into place, the digest is
+recorded under the final path, if the file on disk holds exactly as many bytes as went through the
+hash (anything written past the hashing handle leaves the file without a digest: the caller then
+reads it back). The dataset's commit uses it instead of reading every file again.
 """
 
 from __future__ import annotations
 
+import contextvars
+import hashlib
 import os
 import secrets
 import shutil
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
+
+# {"done": {final path: sha256 hex}, "open": {temporary path: (sha256 hex, bytes)}} of the innermost digests_while_writing block
+_DIGESTS: contextvars.ContextVar[dict | None] = contextvars.ContextVar("bpy_pipeline_digests", default=None)
+
+
+def _key(path) -> str:
+    return os.path.abspath(os.fspath(path))
+
+
+@contextmanager
+def digests_while_writing() -> Iterator[dict[str, str]]:
+    """Yield ``{absolute final path: sha256 hex}``, filled as files written through :func:`hashed_open`
+    inside :func:`atomic_write` are renamed into place within the block (threads started with
+    :func:`contextvars.copy_context` of the block record into it too)."""
+    state = {"done": {}, "open": {}}
+    token = _DIGESTS.set(state)
+    try:
+        yield state["done"]
+    finally:
+        _DIGESTS.reset(token)
+
+
+class HashedFile:
+    """A binary file opened for writing whose bytes also go through sha256 (:func:`hashed_open`).
+
+    ``write(data)`` takes bytes or any contiguous buffer (a numpy array's ``memoryview``).
+    """
+
+    def __init__(self, path):
+        self.path = path
+        self.raw = open(path, "wb")
+        self.digest = hashlib.sha256()
+        self.size = 0
+
+    def write(self, data) -> int:
+        if hasattr(data, "view") and hasattr(data, "dtype"):  # a numpy array: its raw bytes, as ndarray.tofile writes them
+            import numpy as np
+
+            data = np.ascontiguousarray(data).reshape(-1).view(np.uint8)
+        view = memoryview(data).cast("B")
+        self.digest.update(view)
+        self.size += len(view)
+        return self.raw.write(view)
+
+    def close(self) -> None:
+        if self.raw.closed:
+            return
+        self.raw.close()
+        state = _DIGESTS.get()
+        if state is not None:
+            state["open"][_key(self.path)] = (self.digest.hexdigest(), self.size)
+
+    def __enter__(self) -> "HashedFile":
+        return self
+
+    def __exit__(self, kind, error, trace) -> None:
+        if kind is not None:
+            self.raw.close()  # nothing recorded for a failed write
+            return
+        self.close()
+
+
+def hashed_open(path) -> HashedFile:
+    """Open ``path`` (an :func:`atomic_write` temporary file) for writing, hashing what is written."""
+    return HashedFile(path)
 
 
 def temporary_sibling(path: Path, suffix: str = ".tmp") -> Path:
@@ -52,7 +126,11 @@ def atomic_write(path: str | os.PathLike) -> Iterator[Path]:
         yield tmp
         if not tmp.exists():
             raise FileNotFoundError(f"{path}: nothing was written to the temporary file {tmp.name}")
+        state = _DIGESTS.get()
+        hashed = state["open"].pop(_key(tmp), None) if state is not None else None
         os.replace(tmp, path)
+        if hashed is not None and os.stat(path).st_size == hashed[1]:
+            state["done"][_key(path)] = hashed[0]
     except BaseException:
         remove(tmp)
         raise

@@ -24,7 +24,7 @@ import numpy as np
 from ..errors import InputError
 from ..lidar.points import POINT_DTYPE
 from ._records import as_points, chunks
-from .atomic import atomic_write
+from .atomic import atomic_write, hashed_open
 
 # PLY scalar type names (both spellings of the spec) -> numpy type character codes.
 PLY_TYPES = {
@@ -91,10 +91,10 @@ def write_ply(path: str | os.PathLike, points: np.ndarray) -> Path:
     pts = as_points(points, str(path))
     if len(pts) and int(pts["instance"].max()) > np.iinfo(np.int32).max:
         raise InputError(f"{path}: PLY scalar_instance is int (Open3D reads no uint); got instance ids up to {int(pts['instance'].max())}")
-    with atomic_write(path) as tmp, open(tmp, "wb") as f:
+    with atomic_write(path) as tmp, hashed_open(tmp) as f:  # hashed as written (the dataset's commit reads no file back)
         f.write(ply_header(len(pts)))
         for part in chunks(len(pts)):
-            ply_records(pts[part]).tofile(f)
+            f.write(ply_records(pts[part]))
     return path
 
 

@@ -17,16 +17,18 @@ mostly background, and level 1 is about as small here at a fraction of the time)
 
 from __future__ import annotations
 
+import importlib.util
 import os
 import struct
 import zlib
+from functools import cache
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import InputError
 from ._records import as_points
-from .atomic import atomic_write
+from .atomic import atomic_write, hashed_open
 
 BACKGROUND = (24, 24, 28)  # not a class colour of assets_manifest/labels.yaml
 INK = (235, 235, 235)  # text, scale bar and boxes
@@ -69,17 +71,44 @@ def encode_png(rgb: np.ndarray, level: int = PNG_LEVEL) -> bytes:
     return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", zlib.compress(rows.tobytes(), level)) + chunk(b"IEND", b"")
 
 
+@cache
+def _splat_kernel():
+    """The compiled splat (numba, cached on disk), or ``None`` without numba or when
+    ``BPY_PIPELINE_SCAN_KERNEL=numpy`` asks for the numpy path (both paint the same pixels)."""
+    if os.environ.get("BPY_PIPELINE_SCAN_KERNEL") == "numpy" or importlib.util.find_spec("numba") is None:
+        return None
+    import numba
+
+    @numba.njit(cache=True, nogil=True)
+    def splat_into(flat, pixel, depth, colors, best):  # pragma: no cover (compiled)
+        for i in range(len(pixel)):  # in order: a point at least as deep as the pixel's best so far wins it
+            p = pixel[i]
+            if depth[i] >= best[p]:
+                best[p] = depth[i]
+                flat[p, 0] = colors[i, 0]
+                flat[p, 1] = colors[i, 1]
+                flat[p, 2] = colors[i, 2]
+
+    return splat_into
+
+
 def splat(image: np.ndarray, col: np.ndarray, row: np.ndarray, depth: np.ndarray, colors: np.ndarray, depth_image: np.ndarray | None = None) -> None:
     """Paint ``colors`` (n, 3) at pixels ``(row, col)`` of ``image`` in place; the largest ``depth`` wins.
 
     Of equal depths the later point wins. depth_image : ``(height, width)`` float64 depth of what
     ``image`` holds (-inf where empty), updated in place, so a cloud can be painted part by part.
+    With numba, one compiled pass in point order (a point at least as deep as the best so far
+    takes the pixel: the last of the deepest ends there, as in the numpy path below).
     """
     if len(col) == 0:
         return
     pixels = image.shape[0] * image.shape[1]
     pixel = row * image.shape[1] + col
     best = np.full(pixels, -np.inf) if depth_image is None else depth_image.reshape(-1)
+    kernel = _splat_kernel()
+    if kernel is not None and image.flags.c_contiguous and best.flags.c_contiguous and (depth_image is None or np.shares_memory(best, depth_image)):
+        kernel(image.reshape(-1, 3), np.ascontiguousarray(pixel, np.int64), np.ascontiguousarray(depth, np.float64), np.ascontiguousarray(colors, np.uint8), best)
+        return
     np.maximum.at(best, pixel, depth)
     wins = np.flatnonzero(depth >= best[pixel])
     last = np.full(pixels, -1, np.int64)
@@ -189,6 +218,9 @@ def render_preview(points: np.ndarray, color_lut: np.ndarray, size: tuple[int, i
     def paint(col, row, depth, left, panel_width):
         inside = (col >= 0) & (col < panel_width) & (row >= 0) & (row < height)
         col, row, depth, color = col[inside], row[inside], depth[inside], colors[inside]
+        if len(du) == 1:  # one pixel a point: already inside the panel
+            splat(image, col + left, row, depth, color)
+            return
         col = np.clip(col[:, None] + du, 0, panel_width - 1).ravel() + left
         row = np.clip(row[:, None] + dv, 0, height - 1).ravel()
         splat(image, col, row, np.repeat(depth, len(du)), np.repeat(color, len(du), axis=0))
@@ -200,7 +232,7 @@ def render_preview(points: np.ndarray, color_lut: np.ndarray, size: tuple[int, i
     counts = per_class[ids]
     focus = semantic != ids[counts.argmax()]
     bulk = xyz[:, :2][focus] if counts.max() > 0.4 * len(semantic) and focus.sum() >= 100 else xyz[:, :2]
-    low, high = np.percentile(bulk, 1, axis=0), np.percentile(bulk, 99, axis=0)
+    low, high = np.percentile(bulk, [1, 99], axis=0)  # one partition for both
     span = np.maximum(high - low, 1e-6)
     low, high = low - 0.05 * span, high + 0.05 * span
     inner_w, inner_h = panel - 2 * MARGIN, height - 2 * MARGIN
@@ -264,6 +296,6 @@ def write_preview(path: str | os.PathLike, points: np.ndarray, color_lut: np.nda
     """
     path = Path(path)
     data = encode_png(render_preview(points, color_lut, size, dot, boxes, names))
-    with atomic_write(path) as tmp:
-        tmp.write_bytes(data)
+    with atomic_write(path) as tmp, hashed_open(tmp) as f:
+        f.write(data)
     return path

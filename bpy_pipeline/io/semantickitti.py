@@ -19,7 +19,7 @@ import numpy as np
 from ..errors import InputError
 from ..lidar.points import POINT_DTYPE
 from ._records import as_points, chunks
-from .atomic import atomic_write
+from .atomic import atomic_write, hashed_open
 
 MAX_INSTANCE = 0xFFFF
 
@@ -80,14 +80,14 @@ def write_semantickitti(root: str | os.PathLike, sequence: int, frame: int, poin
     bin_path, label_path = scan_paths(root, sequence, frame)
     pts = as_points(points, str(bin_path))
     check_instances(pts["instance"], str(label_path))
-    with atomic_write(bin_path) as tmp_bin, atomic_write(label_path) as tmp_label, open(tmp_bin, "wb") as f_bin, open(tmp_label, "wb") as f_label:
+    with atomic_write(bin_path) as tmp_bin, atomic_write(label_path) as tmp_label, hashed_open(tmp_bin) as f_bin, hashed_open(tmp_label) as f_label:
         for part in chunks(len(pts)):
             scan = np.empty((part.stop - part.start, 4), "<f4")
             for i, name in enumerate(("x", "y", "z", "intensity")):
                 scan[:, i] = pts[name][part]
-            scan.tofile(f_bin)
+            f_bin.write(scan)
             semantic = pts["semantic"][part] if semantic_lut is None else semantic_lut[pts["semantic"][part]]
-            pack_labels(semantic, pts["instance"][part], str(label_path)).tofile(f_label)
+            f_label.write(np.ascontiguousarray(pack_labels(semantic, pts["instance"][part], str(label_path))))
     return bin_path, label_path
 
 

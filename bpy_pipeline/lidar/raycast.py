@@ -178,11 +178,13 @@ class RayCaster:
         :data:`KERNEL_VARIABLE`, else ``"auto"``. Both give the same bytes.
     static : the static objects' part kept by a :class:`CasterCache` (use :meth:`CasterCache.caster`)
     record_pool : the :class:`RecordPool` its scans' records come from (default: its own; a cache shares one across frames)
+    pool : the thread pool its work runs on (default: its own, made on first use; a cache shares one
+        across frames, so a frame's caster starts no threads)
     ``InputError`` (naming the object) for non-finite vertices, bad triangle indices, or vertices
     farther than :data:`MAX_COORDINATE` from the local origin.
     """
 
-    def __init__(self, buffers: SceneBuffers, frame=None, threads: int | None = None, chunk: int = 32768, kernel: str | None = None, *, static: StaticPart | None = None, record_pool: RecordPool | None = None):
+    def __init__(self, buffers: SceneBuffers, frame=None, threads: int | None = None, chunk: int = 32768, kernel: str | None = None, *, static: StaticPart | None = None, record_pool: RecordPool | None = None, pool: ThreadPoolExecutor | None = None):
         if len(buffers.triangles):
             buffers.check()
         vertices = np.asarray(buffers.vertices, np.float64)
@@ -226,7 +228,7 @@ class RayCaster:
         handles = [p.handle for p in self.parts]
         self.embree_handles = np.array(handles, np.uint64) if all(handles) else None
         self.part_triangle = tuple(p.triangle if p.triangle is not None else np.zeros(0, np.int64) for p in self.parts) + (np.zeros(0, np.int64),) * (2 - len(self.parts))
-        self._pool = None
+        self._pool = pool
         self._closed: dict[int, bool] = {}
         self._corner_scales = None
         self.record_pool = record_pool if record_pool is not None else RecordPool()
@@ -497,6 +499,16 @@ class CasterCache:
         self.kept: StaticPart | None = None
         self.builds = self.reuses = 0
         self.record_pool = RecordPool()  # the record memory of every frame's caster
+        self._pool: ThreadPoolExecutor | None = None  # the threads of every frame's caster (started once)
+
+    @property
+    def pool(self) -> ThreadPoolExecutor | None:
+        """The thread pool every caster of this cache runs on (``None`` with one thread); made on first use."""
+        threads = int(self.threads) if self.threads else default_threads()
+        if threads > 1 and self._pool is None:
+            self._pool = ThreadPoolExecutor(threads)
+            weakref.finalize(self, self._pool.shutdown)
+        return self._pool
 
     def caster(self, buffers: SceneBuffers, frame, moving: np.ndarray | None = None, key=None) -> RayCaster:
         """A caster of ``buffers`` in ``frame`` ((4, 4) float64 local-to-world, e.g. a fixed pose for the run).
@@ -516,7 +528,7 @@ class CasterCache:
         if kept is None or not (np.array_equal(kept.frame, frame) and np.array_equal(kept.triangle, static) and kept.digest == digest):
             if len(buffers.triangles):
                 buffers.check()  # before any index is used to build (the reused path is checked by RayCaster)
-            caster = RayCaster(buffers, frame, self.threads, kernel=self.kernel, record_pool=self.record_pool) if not moving.any() else None
+            caster = RayCaster(buffers, frame, self.threads, kernel=self.kernel, record_pool=self.record_pool, pool=self.pool) if not moving.any() else None
             if caster is not None:  # nothing moves: the whole scene is the static part
                 self.kept = StaticPart(frame, static, digest, caster.parts[0] if caster.parts else None, caster.plane_normal, caster.plane_offset)
                 self.builds += 1
@@ -529,7 +541,7 @@ class CasterCache:
             self.builds += 1
         else:
             self.reuses += 1
-        return RayCaster(buffers, frame, self.threads, kernel=self.kernel, static=self.kept, record_pool=self.record_pool)
+        return RayCaster(buffers, frame, self.threads, kernel=self.kernel, static=self.kept, record_pool=self.record_pool, pool=self.pool)
 
 
 def static_digest(buffers: SceneBuffers, static: np.ndarray) -> bytes:

@@ -3,7 +3,10 @@
 A plain sensor's rays are its pattern's, in chunks of :data:`CHUNK_RAYS`. A mirror sensor's rays
 (``sensor.reflector``) leave through its own mirrors: traced through them once and kept while the
 sensor stays the same (a rosette's rays change every frame and are traced again), with the
-mirror-edge drop mask made once beside them.
+mirror-edge drop mask made once beside them. A plain sensor's rays whose pattern is the same every
+frame (every pattern but the rosette) are made once too, up to :data:`MAX_KEPT_RAYS`, and handed
+out read-only: directions, rings and firing times are the pattern's, frame after frame, with no
+rebuild (a moving sensor's per-ray poses come from those times).
 """
 
 from __future__ import annotations
@@ -21,6 +24,7 @@ from .sensors import Pattern, iter_pattern, ray_count
 
 CHUNK_RAYS = 1 << 18  # rays generated and traced at a time: bounds memory for 23-million-ray scans
 MAX_KEPT_MIRROR_RAYS = 1 << 22  # a mirror sensor's rays up to this many are traced through its mirrors once and kept
+MAX_KEPT_RAYS = 1 << 21  # a plain sensor's rays up to this many (34 B each: 71 MB) are made once per run and kept
 
 
 @dataclass
@@ -29,10 +33,22 @@ class SensorRays:
 
     config : anything with a ``sensor`` section (a :class:`~bpy_pipeline.config.Config`)
     cached : the key, the reflected :class:`Pattern` and the edge mask of a mirror sensor
+    kept : a plain sensor's chunks of rays, made once (:meth:`patterns`), ``None`` until then
     """
 
     config: object
     cached: dict = field(default_factory=dict)
+    kept: list | None = None
+
+    def _kept(self, spec) -> list[Pattern]:
+        if self.kept is None:
+            chunks = list(iter_pattern(spec, CHUNK_RAYS, 0))
+            for chunk in chunks:
+                for array in (chunk.directions, chunk.ring, chunk.time, chunk.origins):
+                    if array is not None:
+                        array.flags.writeable = False  # shared by every frame of the run
+            self.kept = chunks
+        return self.kept
 
     def _mirror_sensor(self, frame: int) -> dict:
         spec, reflector = self.config.sensor.spec, self.config.sensor.reflector
@@ -54,7 +70,9 @@ class SensorRays:
         with per-ray origins, lost rays left out."""
         spec, reflector = self.config.sensor.spec, self.config.sensor.reflector
         if not reflector.enabled:
-            return iter_pattern(spec, CHUNK_RAYS, frame)
+            if PATTERNS.get(spec.pattern).per_frame or ray_count(spec) > MAX_KEPT_RAYS:
+                return iter_pattern(spec, CHUNK_RAYS, frame)
+            return self._kept(spec)
         if ray_count(spec) > MAX_KEPT_MIRROR_RAYS:
             return reflect_patterns(iter_pattern(spec, CHUNK_RAYS, frame), reflector)
         return [self._mirror_sensor(frame)["rays"]]

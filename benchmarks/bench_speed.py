@@ -1,0 +1,224 @@
+"""Speed as users see it: the scan and write stages against raw references, frames per second against older code.
+
+Every figure is a ratio against a reference measured in the same run (no timed asserts):
+
+- ``scan``: the os1_128 preset in a closed 40 m box (131,072 rays; ``scene.builder: primitives``), run
+  through ``run_frames`` as a user's run goes (PLY + SemanticKITTI + preview); the ``scan`` timing of
+  the frame records (scan and effects stages), median of frames 2-3, against raw embreex on the same
+  rays and triangles (``EmbreeScene.run(output=1)``, chunks of 32,768 rays over 2 threads, best of 3):
+  ``scan_ratio = raw / scan`` (target >= 0.8).
+- ``write``: the ``write`` timing of the same frames (PLY, SemanticKITTI, preview, hashes, commit)
+  against writing the same bytes raw (open, write, fsync per file, best of 3) into the same file
+  system: ``write_over_raw = write / raw`` (target <= 2).
+- ``fps``: ``run.py`` end to end (start-up included), one process: parking frames, and street frames
+  scanned by the ``hdl64e`` from a car roof (``examples/street/ego_hdl64e.yaml``), this checkout
+  against ``--old CHECKOUT`` (e.g. a ``git worktree`` of an older commit) in alternating rounds.
+  Code without ``scene.ego_vehicle`` runs the nearest config it accepts: the same street builder and
+  sensor, standing in the right-hand lane at the start of the ego's path (said in the results).
+- ``workers``: parking frames with ``--workers 2`` against one process, this checkout.
+
+The scan and write parts run in a subprocess per checkout (``--baseline CHECKOUT`` adds the same
+measurement of another checkout, interleaved); each subprocess reports which ``bpy_pipeline`` it imported.
+
+    python benchmarks/bench_speed.py [--small] [--old DIR] [--baseline DIR] [--parking N] [--street N] [--scaling N]
+
+``--small`` (< 60 s): the scan and write parts, 30 parking frames against one process with 2 workers,
+no older checkout unless given. Results: ``benchmarks/results/speed.json`` (``speed_small.json``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+BOX = ["scene.builder=primitives", "scene.shapes=[{type: box, size: [40, 40, 10], position: [0, 0, 4], class: wall}]",
+       "sensor.preset=os1_128", "sensor.position=[0.2, -0.3, 0.1]", "output.formats=[ply, semantickitti]", "output.preview=true"]  # fmt: skip
+EGO = ["--config", "examples/street/ego_hdl64e.yaml"]
+# the nearest a street without scene.ego_vehicle accepts: the same street and sensor, standing where the ego starts (right-hand lane)
+EGO_STATIC = ["--set", "scene.builder=street", "--set", "scene.layout_seed=0", "--set", "sensor.preset=hdl64e", "--set", "sensor.position=[-60, -1.75, 0]",
+              "--set", "output.formats=[ply, semantickitti]", "--set", "output.boxes.formats=[kitti, openpcdet]",
+              "--set", "output.boxes.classes=[car, van, truck, bus, person, bicycle, motorcycle, rider]"]  # fmt: skip
+
+
+def stage_part(frames: int) -> dict:
+    """In the checkout being measured: the box run's scan and write timings and their raw references."""
+    import numpy as np
+    from concurrent.futures import ThreadPoolExecutor
+
+    import bpy_pipeline
+    from embreex import rtcore_scene
+    from embreex.mesh_construction import TriangleMesh
+
+    from bpy_pipeline.config import load_config
+    from bpy_pipeline.lidar.sensors import sensor_pattern
+
+    try:
+        from bpy_pipeline.plan import run_frames
+    except ImportError:  # code before the frame plan
+        from bpy_pipeline.pipeline import run_frames
+    config = load_config(None, [*BOX, f"frames={frames}"])
+    with tempfile.TemporaryDirectory(dir=os.environ.get("BENCH_SPEED_TMP")) as tmp:
+        out = Path(tmp) / "run"
+        made = list(run_frames(config, out))
+        later = made[2:4] if len(made) >= 4 else made[-2:]
+        scan = statistics.median(f.timings["scan"] for f in later)
+        write = statistics.median(f.timings["write"] for f in later)
+        last = made[-1]
+        pose = last.pose
+        local = (np.asarray(last.buffers.vertices, np.float64) - pose[:3, 3]) @ pose[:3, :3]
+        scene = rtcore_scene.EmbreeScene()
+        TriangleMesh(scene, np.ascontiguousarray(local, np.float32), np.ascontiguousarray(last.buffers.triangles, np.int32))
+        d32 = np.ascontiguousarray(sensor_pattern(config.sensor.spec).directions, np.float32)
+        o32 = np.lib.stride_tricks.as_strided(np.zeros(3, np.float32), d32.shape, (0, 4))
+        scene.run(o32[:1], d32[:1], output=1)  # commit before going parallel
+        spans = [slice(i, i + 32768) for i in range(0, len(d32), 32768)]
+        limit = float(config.sensor.spec.max_range)
+        raw_scan = np.inf
+        with ThreadPoolExecutor(2) as pool:
+            for _ in range(3):
+                start = time.perf_counter()
+                list(pool.map(lambda s: scene.run(o32[s], d32[s], dists=limit, output=1), spans))
+                raw_scan = min(raw_scan, time.perf_counter() - start)
+        files = [out / rel for rel in last.files]
+        blobs = [p.read_bytes() for p in files]
+        raw_write = np.inf
+        for k in range(3):
+            target = Path(tmp) / f"raw{k}"
+            target.mkdir()
+            start = time.perf_counter()
+            for i, data in enumerate(blobs):
+                fd = os.open(target / f"{i}.bin", os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+                try:
+                    os.write(fd, data)
+                    os.fsync(fd)
+                finally:
+                    os.close(fd)
+            raw_write = min(raw_write, time.perf_counter() - start)
+    return {"code": str(Path(bpy_pipeline.__file__).parent), "rays": len(d32), "points": len(last.points), "scan_s": scan, "raw_embreex_s": raw_scan,
+            "scan_ratio": raw_scan / scan, "write_s": write, "raw_write_s": raw_write, "write_over_raw": write / raw_write,
+            "bytes_written": sum(len(b) for b in blobs), "files": [str(Path(f).relative_to(out)) for f in files],
+            "timings_frames_2_3": [{k: round(v, 4) for k, v in f.timings.items()} for f in later]}  # fmt: skip
+
+
+def in_checkout(code: Path, frames: int) -> dict:
+    """:func:`stage_part` in a subprocess importing ``code``'s bpy_pipeline (cwd and PYTHONPATH there)."""
+    env = {**os.environ, "PYTHONPATH": str(code), "OPENBLAS_NUM_THREADS": "1"}
+    done = subprocess.run([sys.executable, str(HERE / "bench_speed.py"), "--part", "stages", "--frames", str(frames)], cwd=code, env=env, capture_output=True, text=True)
+    if done.returncode != 0:
+        raise RuntimeError(f"stages in {code}: {done.stderr.strip()[-800:]}")
+    row = json.loads(done.stdout.strip().splitlines()[-1])
+    if not row["code"].startswith(str(code)):
+        raise RuntimeError(f"{code}: imported bpy_pipeline from {row['code']}")
+    return row
+
+
+def run_py(code: Path, args: list[str], workers: int = 1) -> dict:
+    """``run.py ARGS`` of checkout ``code`` end to end: wall s, CPU s (it and its workers), records' mean stage timings."""
+    with tempfile.TemporaryDirectory(dir=os.environ.get("BENCH_SPEED_TMP")) as tmp:
+        out = Path(tmp) / "run"
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
+        start = time.perf_counter()
+        command = [sys.executable, str(code / "run.py"), "--out", str(out), *args] + (["--workers", str(workers)] if workers > 1 else [])
+        done = subprocess.run(command, cwd=code, capture_output=True, text=True, env={**os.environ, "OPENBLAS_NUM_THREADS": "1", "PYTHONPATH": str(code)})
+        wall = time.perf_counter() - start
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        if done.returncode != 0:
+            raise RuntimeError(f"{code}: run.py {' '.join(args)}: {done.stderr.strip()[-800:]}")
+        records = [json.loads(p.read_text()) for p in sorted((out / "records").glob("*.json"))]
+    stages: dict[str, float] = {}
+    for record in records:
+        for key, value in (record.get("timings") or {}).items():
+            stages[key] = stages.get(key, 0.0) + value / len(records)
+    return {"wall_s": wall, "cpu_s": (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime), "frames": len(records), "fps": len(records) / wall, "stage_s_per_frame": stages}
+
+
+def accepts_ego(code: Path) -> bool:
+    """Whether checkout ``code``'s street builder knows ``ego_vehicle``."""
+    street = code / "bpy_pipeline" / "builders" / "street.py"
+    return street.exists() and "ego_vehicle" in street.read_text()
+
+
+def compare(name: str, new_args: list[str], old_args: list[str] | None, old: Path | None, rounds: int) -> dict:
+    """Alternating rounds of this checkout and ``old`` (when given); the best round of each."""
+    new_runs, old_runs = [], []
+    for _ in range(rounds):
+        new_runs.append(run_py(ROOT, new_args))
+        if old is not None:
+            old_runs.append(run_py(old, old_args))
+        print(name, "new", round(new_runs[-1]["fps"], 2), "old", round(old_runs[-1]["fps"], 2) if old_runs else "-", flush=True)
+    best_new = max(new_runs, key=lambda r: r["fps"])
+    row = {"job": name, "new": best_new, "new_args": new_args}
+    if old_runs:
+        best_old = max(old_runs, key=lambda r: r["fps"])
+        row.update({"old": best_old, "old_args": old_args, "fps_new_over_old": best_new["fps"] / best_old["fps"]})
+    return row
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--small", action="store_true", help="under a minute: stages, and a short workers comparison")
+    p.add_argument("--out", type=Path, default=HERE / "results")
+    p.add_argument("--old", type=Path, help="an older checkout for frames per second side by side (e.g. git worktree add ../old 7513fcb)")
+    p.add_argument("--baseline", type=Path, help="another checkout whose scan and write stages are measured beside this one's")
+    p.add_argument("--parking", type=int, help="parking frames for frames per second (default 120; --small 0)")
+    p.add_argument("--street", type=int, help="street frames (default 20; --small 0)")
+    p.add_argument("--scaling", type=int, help="parking frames for 2 workers against 1 (default 1000; --small 30)")
+    p.add_argument("--rounds", type=int, default=2, help="alternating rounds per comparison (best kept)")
+    p.add_argument("--part", help=argparse.SUPPRESS)
+    p.add_argument("--frames", type=int, default=4, help=argparse.SUPPRESS)
+    args = p.parse_args()
+    if args.part == "stages":
+        print(json.dumps(stage_part(args.frames)))
+        return
+    parking = args.parking if args.parking is not None else (0 if args.small else 120)
+    street = args.street if args.street is not None else (0 if args.small else 20)
+    scaling = args.scaling if args.scaling is not None else (30 if args.small else 1000)
+    rounds = 1 if args.small else args.rounds
+    results: dict = {"stages": []}
+    for _ in range(rounds):  # interleaved: this checkout, then the baseline
+        results["stages"].append({"checkout": "this", **in_checkout(ROOT, 4)})
+        if args.baseline is not None:
+            results["stages"].append({"checkout": "baseline", **in_checkout(args.baseline.resolve(), 4)})
+    for row in results["stages"]:
+        print(f"{row['checkout']}: scan {row['scan_s'] * 1e3:.1f} ms vs raw {row['raw_embreex_s'] * 1e3:.1f} ms (ratio {row['scan_ratio']:.2f}); "
+              f"write {row['write_s'] * 1e3:.1f} ms vs raw {row['raw_write_s'] * 1e3:.1f} ms ({row['write_over_raw']:.2f}x)", flush=True)  # fmt: skip
+    old = args.old.resolve() if args.old is not None else None
+    results["fps"] = []
+    if parking:
+        job = ["--set", "scene.builder=parking", "--frames", str(parking)]
+        results["fps"].append(compare(f"{parking} parking frames", job, job, old, rounds))
+    if street:
+        old_street = (EGO if accepts_ego(old) else EGO_STATIC) if old is not None else None
+        row = compare(f"{street} street frames, hdl64e on a car roof", [*EGO, "--frames", str(street)], None if old is None else [*old_street, "--frames", str(street)], old, rounds)
+        if old is not None and old_street is EGO_STATIC:
+            row["old_note"] = "the older code has no scene.ego_vehicle: its street builder with the hdl64e standing where the ego starts (right-hand lane, static)"
+        results["fps"].append(row)
+    results["workers"] = []
+    if scaling:
+        job = ["--set", "scene.builder=parking", "--frames", str(scaling)]
+        one, two = run_py(ROOT, job), run_py(ROOT, job, workers=2)
+        results["workers"].append({"frames": scaling, "one": one, "two": two, "speed_up": two["fps"] / one["fps"]})
+        print(f"{scaling} parking frames: one process {one['fps']:.2f} frames/s, 2 workers {two['fps']:.2f} ({two['fps'] / one['fps']:.2f}x)", flush=True)
+    for row in results["fps"]:
+        if "old" in row:
+            print(f"{row['job']}: {row['new']['fps']:.2f} frames/s against {row['old']['fps']:.2f} ({row['fps_new_over_old']:.2f}x)")
+    results["notes"] = {"load_average": os.getloadavg(), "cores": os.cpu_count(), "small": args.small, "old": str(old) if old else None,
+                        "baseline": str(args.baseline) if args.baseline else None}  # fmt: skip
+    args.out.mkdir(parents=True, exist_ok=True)
+    name = "speed_small.json" if args.small else "speed.json"
+    (args.out / name).write_text(json.dumps(results, indent=2, default=float) + "\n")
+    print("wrote", args.out / name)
+
+
+if __name__ == "__main__":
+    main()
