@@ -36,7 +36,7 @@ def place(b: GroupBuilder, count, position, scale, prototype, selection=None) ->
     points where ``selection`` holds are dropped first."""
     points = b.out(b.node("GeometryNodePoints", {"Count": count, "Position": position}))
     if selection is not None:
-        points = b.out(b.node("GeometryNodeDeleteGeometry", {"Geometry": points, "Selection": selection}, domain="POINT", mode="ALL"))
+        points = b.out(b.node("GeometryNodeDeleteGeometry", {"Geometry": points, "Selection": selection}, options={"domain": "POINT", "mode": "ALL"}))
     instance = b.out(b.node("GeometryNodeObjectInfo", {"Object": prototype, "As Instance": True}, options={"transform_space": "ORIGINAL"}), "Geometry")
     return b.out(b.node("GeometryNodeInstanceOnPoints", {"Points": points, "Instance": instance, "Scale": scale}))
 

@@ -85,7 +85,7 @@ def _sweep(b: GroupBuilder, curve, radius, sides, sweep) -> bpy.types.NodeSocket
 def _position(b: GroupBuilder, geometry, index) -> bpy.types.NodeSocket:
     """The position of point ``index`` of ``geometry``'s curves."""
     sample = b.node("GeometryNodeSampleIndex", {"Geometry": geometry, "Value": b.out(b.node("GeometryNodeInputPosition")), "Index": index},
-                    data_type="FLOAT_VECTOR", domain="POINT")
+                    options={"data_type": "FLOAT_VECTOR", "domain": "POINT"})
     return b.out(sample)
 
 
@@ -97,7 +97,7 @@ def wire_group() -> bpy.types.NodeTree:
     group = new_group(WIRE, WIRE_INPUTS, [("Geometry", "NodeSocketGeometry")], modifier=True)
     b = GroupBuilder(group)
     g = b.get
-    count = b.out(b.node("GeometryNodeAttributeDomainSize", {"Geometry": g("Geometry")}, component="CURVE"), "Point Count")
+    count = b.out(b.node("GeometryNodeAttributeDomainSize", {"Geometry": g("Geometry")}, options={"component": "CURVE"}), "Point Count")
     start = _position(b, g("Geometry"), 0)
     end = _position(b, g("Geometry"), b.math("SUBTRACT", count, 1.0))
     line = b.node("GeometryNodeCurvePrimitiveLine", {"Start": start, "End": end})
@@ -129,7 +129,7 @@ def droppers_group() -> bpy.types.NodeTree:
     lower = b.out(b.node("GeometryNodeCurveEndpointSelection", {"Start Size": 1, "End Size": 0}))
     # both ends take the t of the lower end (a dropper is a two-point spline; the upper wire's chord need not be parallel)
     first = b.math("SUBTRACT", b.math("ADD", b.out(b.node("GeometryNodeInputIndex")), lower), 1.0)
-    t_built = b.out(b.node("GeometryNodeFieldAtIndex", {"Index": first, "Value": t_point}, data_type="FLOAT", domain="POINT"))
+    t_built = b.out(b.node("GeometryNodeFieldAtIndex", {"Index": first, "Value": t_point}, options={"data_type": "FLOAT", "domain": "POINT"}))
     rehung = b.vector_math("ADD", b.vector_math("SCALE", _hang(b, cs, ce, g("Contact Sag"), t_built), scale=lower),  # 1 at the lower end, else 0
                            b.vector_math("SCALE", _hang(b, us, ue, g("Upper Sag"), t_built), scale=b.math("SUBTRACT", 1.0, lower)))
     built = b.out(b.node("GeometryNodeSetPosition", {"Geometry": g("Geometry"), "Position": rehung}))
@@ -143,10 +143,10 @@ def droppers_group() -> bpy.types.NodeTree:
     points = b.node("GeometryNodePoints", {"Count": n, "Position": _hang(b, cs, ce, g("Contact Sag"), t_even)})
     vertices = b.node("GeometryNodePointsToVertices", {"Points": b.out(points)})
     # a point stores its t so the clearance and the upper end read the clipped value
-    stored = b.node("GeometryNodeStoreNamedAttribute", {"Geometry": b.out(vertices), "Name": "t", "Value": t_even}, data_type="FLOAT", domain="POINT")
-    t_stored = b.out(b.node("GeometryNodeInputNamedAttribute", {"Name": "t"}, data_type="FLOAT"), "Attribute")
+    stored = b.node("GeometryNodeStoreNamedAttribute", {"Geometry": b.out(vertices), "Name": "t", "Value": t_even}, options={"data_type": "FLOAT", "domain": "POINT"})
+    t_stored = b.out(b.node("GeometryNodeInputNamedAttribute", {"Name": "t"}, options={"data_type": "FLOAT"}), "Attribute")
     near_middle = b.compare("LESS_THAN", b.math("MULTIPLY", b.math("ABSOLUTE", b.math("SUBTRACT", t_stored, 0.5)), span), g("Clearance"))
-    kept = b.node("GeometryNodeDeleteGeometry", {"Geometry": b.out(stored), "Selection": near_middle}, domain="POINT", mode="ALL")
+    kept = b.node("GeometryNodeDeleteGeometry", {"Geometry": b.out(stored), "Selection": near_middle}, options={"domain": "POINT", "mode": "ALL"})
     offset = b.vector_math("SUBTRACT", _hang(b, us, ue, g("Upper Sag"), t_stored), position)
     extruded = b.node("GeometryNodeExtrudeMesh", {"Mesh": b.out(kept), "Offset": offset, "Offset Scale": 1.0}, options={"mode": "VERTICES"})
     curves = b.node("GeometryNodeMeshToCurve", {"Mesh": b.out(b.node("GeometryNodeRemoveAttribute", {"Geometry": b.out(extruded, "Mesh"), "Name": "t"}))})

@@ -1,6 +1,7 @@
 """``scene.builder: industrial_hall``: a factory hall with desks and shelves, people and robot arms (bpy).
 
-The hall (floor, walls, ceiling, desks about 0.72 m high, shelf racks) is built once per run;
+The hall (floor, walls, ceiling, desks about 0.72 m high, shelf racks) is built once per run, each
+piece an object running the "Industrial Hall" Geometry Nodes group (:mod:`.hall_nodes`);
 each frame re-poses what moves: the robot arms (base position and yaw, joint angles drawn within
 the limits, rejected on self-collision) and the people (count, height, build, pose, position,
 yaw), placed one after another so that nobody intersects another person, a robot, a desk, a
@@ -17,10 +18,11 @@ import numpy as np
 
 from ..geometry import human, kinematics
 from ..geometry.collision import box_axes, capsule_box_gaps, capsule_gaps
-from ..geometry.indoor import boxes_mesh, hall_layout
+from ..geometry.indoor import hall_layout
 from ..geometry.placement import sample, sample_count
 from ..geometry.transforms import pose_matrix
-from .objects import mesh_object, scene_collection, tag
+from . import box_nodes, hall_nodes
+from .objects import scene_collection, tag
 from .people import AssetPerson, PersonRig, import_asset, load_assets
 from .robot_arm import RobotArm
 
@@ -38,15 +40,16 @@ class IndustrialHall:
         self.collection = scene_collection()
         self.layout = hall_layout(params)
         layout = self.layout
+        prototypes = box_nodes.prototypes(self.collection)  # every piece through the "Industrial Hall" group
         self.static = [
-            tag(mesh_object("floor", boxes_mesh(layout.floor), self.collection), "floor", reflectivity=0.3, instance=INSTANCE["floor"]),
-            tag(mesh_object("ceiling", boxes_mesh(layout.ceiling), self.collection), "ceiling", reflectivity=0.5, instance=INSTANCE["ceiling"]),
-            tag(mesh_object("walls", boxes_mesh(layout.walls), self.collection), "wall", reflectivity=0.5, instance=INSTANCE["wall"]),
+            tag(hall_nodes.hall_object("floor", "floor", params, self.collection, prototypes), "floor", reflectivity=0.3, instance=INSTANCE["floor"]),
+            tag(hall_nodes.hall_object("ceiling", "ceiling", params, self.collection, prototypes), "ceiling", reflectivity=0.5, instance=INSTANCE["ceiling"]),
+            tag(hall_nodes.hall_object("walls", "walls", params, self.collection, prototypes), "wall", reflectivity=0.5, instance=INSTANCE["wall"]),
         ]
         p = params
         for k, item in enumerate(self.layout.furniture):
             base = INSTANCE[item.class_name]
-            obj = mesh_object(item.name, item.mesh(), self.collection)
+            obj = hall_nodes.furniture_object(item, params, self.collection, prototypes)
             self.static.append(tag(obj, item.class_name, reflectivity=0.35 if item.class_name == "desk" else 0.45, instance=base + k))
         self.arm = kinematics.load_arm(p.robot_model) if p.robot_model else kinematics.load_arm()
         self.robots = [RobotArm(self.arm, self.collection, r) for r in range(p.robots)]
