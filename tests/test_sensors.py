@@ -351,7 +351,7 @@ def test_cli_lists_every_preset_on_one_line(capsys):
     assert list(rows) == list(presets()) and len(lines) == len(presets()) + 1
     assert "23,047,200" in rows["railway_tls"] and "-70.00..+90.00" in rows["railway_tls"]
     assert rows["vlp16"].split()[1:4] == ["spinning", "16", "-15.00..+15.00"]
-    assert "1,536" in rows["flash96x16"] and "0.1-10" in rows["flash96x16"]
+    assert "1,536" in rows["flash96x16"] and "0.1-35" in rows["flash96x16"]
     assert main(["sensors", "list"]) == 0 and capsys.readouterr().out.splitlines() == lines
 
 
