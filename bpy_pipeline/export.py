@@ -7,6 +7,10 @@ per distinct mesh and every instance of it is transformed in one batched matrix 
 Labels come from the custom properties of the object that owns the geometry: the object itself,
 or for instances the instanced object if it is tagged, else the instancer. Untagged objects get
 a class from the name rules (their name, then their ancestors' names) or ``unlabeled``.
+Geometry Nodes may label what they make through the named attribute ``lidar_instance`` (INT, see
+:data:`INSTANCE_ATTRIBUTE`): on an instancer's instances (read through ``GeometrySet``, Blender
+4.3 on) or on a mesh's faces or points; a value > 0 is the instance id of that geometry (its class
+stays its owner's), so one object may carry many instances, realized or not.
 """
 
 from __future__ import annotations
@@ -22,10 +26,12 @@ from .labels import ClassTable
 from .lidar.materials import MATERIAL_MODELS, model_from_material, model_id
 
 GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "META", "FONT"}
+INSTANCE_ATTRIBUTE = "lidar_instance"  # INT named attribute: the instance id of the instance, face or point (0: the owner's)
 
 
-def _mesh_arrays(obj) -> tuple[np.ndarray, np.ndarray]:
-    """``(vertices (n, 3) float64 local, triangles (m, 3) int32)`` of an evaluated object."""
+def _mesh_arrays(obj) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """``(vertices (n, 3) float64 local, triangles (m, 3) int32, ids (m,) int32 or None)`` of an evaluated object;
+    ``ids`` is the :data:`INSTANCE_ATTRIBUTE` of each triangle's face (or first point) where the mesh has it."""
     mesh = obj.to_mesh()
     try:
         mesh.calc_loop_triangles()
@@ -33,9 +39,38 @@ def _mesh_arrays(obj) -> tuple[np.ndarray, np.ndarray]:
         mesh.vertices.foreach_get("co", vertices)
         triangles = np.empty(len(mesh.loop_triangles) * 3, np.int32)
         mesh.loop_triangles.foreach_get("vertices", triangles)
+        triangles = triangles.reshape(-1, 3)
+        ids = None
+        attribute = mesh.attributes.get(INSTANCE_ATTRIBUTE)
+        if attribute is not None and attribute.data_type == "INT" and attribute.domain in ("FACE", "POINT"):
+            values = np.empty(len(attribute.data), np.int32)
+            attribute.data.foreach_get("value", values)
+            if attribute.domain == "FACE":
+                faces = np.empty(len(mesh.loop_triangles), np.int32)
+                mesh.loop_triangles.foreach_get("polygon_index", faces)
+                ids = values[faces]
+            else:
+                ids = values[triangles[:, 0]]
     finally:
         obj.to_mesh_clear()
-    return vertices.reshape(-1, 3).astype(np.float64), triangles.reshape(-1, 3)
+    return vertices.reshape(-1, 3).astype(np.float64), triangles, ids
+
+
+def _instance_ids(instancer) -> np.ndarray | None:
+    """``(k,)`` int32 :data:`INSTANCE_ATTRIBUTE` of an evaluated instancer's instances, in order; None where it
+    has none, or where this Blender cannot read instance attributes (``GeometrySet`` came with 4.3)."""
+    geometry_set = getattr(bpy.types, "GeometrySet", None)
+    if geometry_set is None or not any(m.type == "NODES" for m in instancer.original.modifiers):
+        return None  # only Geometry Nodes store attributes on instances (reading them costs Blender ~70 bytes a call it never frees)
+    geometry = instancer.evaluated_geometry() if hasattr(instancer, "evaluated_geometry") else geometry_set.from_evaluated_object(instancer)  # held while read
+    points = geometry.instances_pointcloud()
+    attribute = points.attributes.get(INSTANCE_ATTRIBUTE) if points is not None else None
+    if attribute is None or attribute.data_type != "INT":
+        return None
+    ids = np.empty(len(attribute.data), np.int32)
+    attribute.data.foreach_get("value", ids)
+    del points, geometry
+    return ids
 
 
 def _ancestors(obj) -> list[str]:
@@ -126,10 +161,15 @@ class _Labeller:
         self.rules = tuple(extra_rules)
         self.rows: dict[str, dict] = {}
 
-    def row(self, owner, names: list[str]) -> int:
-        key = owner.name_full
+    def row(self, owner, names: list[str], instance: int = 0) -> int:
+        """The row of ``owner``; of its geometry labelled ``instance`` (> 0, from a named attribute) when that differs from its tag."""
+        split = instance > 0 and instance != owner.get("lidar_instance")
+        key = f"{owner.name_full}#{instance}" if split else owner.name_full
         if key not in self.rows:
-            self.rows[key] = self._describe(owner, names) | {"index": len(self.rows)}
+            described = self._describe(owner, names)
+            if split:
+                described |= {"name": f"{owner.name}#{instance}", "instance": int(instance)}
+            self.rows[key] = described | {"index": len(self.rows)}
         return self.rows[key]["index"]
 
     def _describe(self, owner, names: list[str]) -> dict:
@@ -193,8 +233,15 @@ def export_scene(table: ClassTable, extra_rules=(), depsgraph=None, keep_within=
     labeller = _Labeller(table, extra_rules)
     meshes: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
     placements: dict[tuple, list[np.ndarray]] = defaultdict(list)  # (mesh key, row) -> world matrices
+    instancers: dict[str, list] = {}  # instancer -> [its instances' ids or None, instances seen]
     for instance in depsgraph.object_instances:
         obj = instance.object
+        labelled = 0
+        if instance.is_instance:  # the instancer's instances come in their order
+            seen = instancers.setdefault(instance.parent.name_full, [_instance_ids(instance.parent), 0])
+            if seen[0] is not None and seen[1] < len(seen[0]):
+                labelled = int(seen[0][seen[1]])
+            seen[1] += 1
         if obj.type not in GEOMETRY_TYPES or (not instance.is_instance and not instance.show_self):
             continue
         owner, names = _owner(instance)
@@ -206,12 +253,18 @@ def export_scene(table: ClassTable, extra_rules=(), depsgraph=None, keep_within=
         key = (obj.data.as_pointer(), "" if instance.is_instance else obj.name_full)
         if key not in meshes:
             meshes[key] = _mesh_arrays(obj)
-        if len(meshes[key][1]):
-            placements[(key, labeller.row(owner, names))].append(matrix)
+        local, tris, ids = meshes[key]
+        if ids is not None and not labelled:  # faces labelled one by one: one part per id
+            for value in np.unique(ids).tolist():
+                if (key, value) not in meshes:
+                    meshes[(key, value)] = (local, tris[ids == value], None)
+                placements[((key, value), labeller.row(owner, names, value))].append(matrix)
+        elif len(tris):
+            placements[(key, labeller.row(owner, names, labelled))].append(matrix)
 
     vertices, triangles, triangle_object, offset = [], [], [], 0
     for (key, row), matrices in placements.items():
-        local, tris = meshes[key]
+        local, tris, _ = meshes[key]
         stack = np.asarray(matrices)  # (g, 4, 4)
         world = np.einsum("gij,nj->gni", stack[:, :3, :3], local) + stack[:, None, :3, 3]
         vertices.append(world.reshape(-1, 3))

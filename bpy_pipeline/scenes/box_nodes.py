@@ -59,7 +59,16 @@ def select(b: GroupBuilder, condition, false, true) -> bpy.types.NodeSocket:
     return b.switch("FLOAT", condition, false, true)
 
 
-def finish(b: GroupBuilder, geometry, realize) -> None:
-    """Link ``geometry`` (instances) to the group's output, realized when the bool ``realize`` holds."""
+def label(b: GroupBuilder, geometry, instance) -> bpy.types.NodeSocket:
+    """``geometry``'s instances with the named attribute ``lidar_instance`` (INT) set to ``instance``: the export
+    labels each instance by it (and, realized, each face: Realize Instances carries it to the faces)."""
+    return b.out(b.node("GeometryNodeStoreNamedAttribute", {"Geometry": geometry, "Name": "lidar_instance", "Value": instance},
+                        options={"data_type": "INT", "domain": "INSTANCE"}))
+
+
+def finish(b: GroupBuilder, geometry, realize, instance=None) -> None:
+    """Link ``geometry`` (instances; labelled ``instance`` when given) to the group's output, realized when the bool ``realize`` holds."""
+    if instance is not None:
+        geometry = label(b, geometry, instance)
     real = b.out(b.node("GeometryNodeRealizeInstances", {"Geometry": geometry}))
     b.links.new(b.switch("GEOMETRY", realize, geometry, real), b.socket(b.outputs.inputs, "Geometry"))

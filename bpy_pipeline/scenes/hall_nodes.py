@@ -13,7 +13,7 @@ in the same order. ``Part`` picks the output:
   top of a ``Size`` rack.
 
 Each desk and rack keeps its own object (and so its class and instance, the object's ``lidar_*``
-tags); changing ``Levels`` or ``Size`` in a rack's modifier rebuilds that rack. People and robots
+tags, and ``Instance`` stored as the named attribute ``lidar_instance`` the export reads first); changing ``Levels`` or ``Size`` in a rack's modifier rebuilds that rack. People and robots
 still avoid the furniture of the YAML's hall (the placement reads the pure layout).
 """
 
@@ -26,7 +26,7 @@ from .box_nodes import select
 from .nodes import GroupBuilder, add_group_modifier, new_group
 
 GROUP = "Industrial Hall"
-VERSION = 1
+VERSION = 2  # 2: the Instance input, stored as lidar_instance
 PARTS = {"floor": 1, "ceiling": 2, "walls": 3, "desk": 4, "shelf": 5}
 SLAB = 0.3  # m, as geometry.indoor.hall_layout
 
@@ -41,6 +41,7 @@ INPUTS = [
     ("Size", "NodeSocketVector", (2.0, 0.6, 2.2), "m, a desk's or rack's length, depth and height"),
     ("Levels", "NodeSocketInt", 4, "boards of a rack", 1, 100),
     ("Box", "NodeSocketObject", None, "the unit box instanced for every piece"),
+    ("Instance", "NodeSocketInt", 0, "instance id of what the group makes, stored as the named attribute lidar_instance the export reads (0: the object's lidar_instance)", 0, 2**31 - 1),
     ("Realize", "NodeSocketBool", False, "realize the instances into one mesh (the export reads instances as they are)"),
 ]
 
@@ -99,25 +100,25 @@ def hall_group() -> bpy.types.NodeTree:
     shelf = box_nodes.place(b, m("ADD", levels, 4.0), xyz(select(b, upright, cx, ux), select(b, upright, cy, uy), select(b, upright, board_z, m("MULTIPLY", top, 0.5))),
                             xyz(select(b, upright, length, 0.06), select(b, upright, depth, 0.06), select(b, upright, 0.03, top)), box)
 
-    box_nodes.finish(b, box_nodes.pick(b, g("Part"), [floor, ceiling, walls, desk, shelf]), g("Realize"))
+    box_nodes.finish(b, box_nodes.pick(b, g("Part"), [floor, ceiling, walls, desk, shelf]), g("Realize"), g("Instance"))
     group["bpy_pipeline_version"] = VERSION
     return b.finish()
 
 
-def hall_object(name: str, part: str, params, collection, prototypes: dict, **inputs) -> bpy.types.Object:
+def hall_object(name: str, part: str, params, collection, prototypes: dict, instance: int = 0, **inputs) -> bpy.types.Object:
     """An object whose "Industrial Hall" modifier outputs ``part`` (a key of :data:`PARTS`) of the hall of ``params``
     (an ``IndustrialHallScene``); ``inputs`` sets ``Centre``, ``Size``, ``Levels`` of a desk or rack."""
     obj = bpy.data.objects.new(name, bpy.data.meshes.new(name))
     collection.objects.link(obj)
     hall = {"Length": params.length, "Width": params.width, "Height": params.height, "Wall Thickness": params.wall_thickness}
-    add_group_modifier(obj, hall_group(), hall | inputs | {"Part": PARTS[part], "Box": prototypes["box"]})
+    add_group_modifier(obj, hall_group(), hall | inputs | {"Part": PARTS[part], "Box": prototypes["box"], "Instance": int(instance)})
     return obj
 
 
-def furniture_object(item, params, collection, prototypes: dict) -> bpy.types.Object:
+def furniture_object(item, params, collection, prototypes: dict, instance: int = 0) -> bpy.types.Object:
     """The object of one desk or rack of ``hall_layout(params).furniture``, its dimensions read from ``params``."""
     board = item.parts[0 if item.class_name == "desk" else 4][0]  # the desk's top, the rack's first board: centred on the item
     centre = (float(board[0]), float(board[1]), 0.0)
     if item.class_name == "desk":
-        return hall_object(item.name, "desk", params, collection, prototypes, Centre=centre, Size=(*params.desk_size, params.desk_height))
-    return hall_object(item.name, "shelf", params, collection, prototypes, Centre=centre, Size=tuple(params.shelf_size), Levels=params.shelf_levels)
+        return hall_object(item.name, "desk", params, collection, prototypes, instance, Centre=centre, Size=(*params.desk_size, params.desk_height))
+    return hall_object(item.name, "shelf", params, collection, prototypes, instance, Centre=centre, Size=tuple(params.shelf_size), Levels=params.shelf_levels)

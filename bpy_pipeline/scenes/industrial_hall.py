@@ -42,14 +42,14 @@ class IndustrialHall:
         layout = self.layout
         prototypes = box_nodes.prototypes(self.collection)  # every piece through the "Industrial Hall" group
         self.static = [
-            tag(hall_nodes.hall_object("floor", "floor", params, self.collection, prototypes), "floor", reflectivity=0.3, instance=INSTANCE["floor"]),
-            tag(hall_nodes.hall_object("ceiling", "ceiling", params, self.collection, prototypes), "ceiling", reflectivity=0.5, instance=INSTANCE["ceiling"]),
-            tag(hall_nodes.hall_object("walls", "walls", params, self.collection, prototypes), "wall", reflectivity=0.5, instance=INSTANCE["wall"]),
+            tag(hall_nodes.hall_object("floor", "floor", params, self.collection, prototypes, INSTANCE["floor"]), "floor", reflectivity=0.3, instance=INSTANCE["floor"]),
+            tag(hall_nodes.hall_object("ceiling", "ceiling", params, self.collection, prototypes, INSTANCE["ceiling"]), "ceiling", reflectivity=0.5, instance=INSTANCE["ceiling"]),
+            tag(hall_nodes.hall_object("walls", "walls", params, self.collection, prototypes, INSTANCE["wall"]), "wall", reflectivity=0.5, instance=INSTANCE["wall"]),
         ]
         p = params
         for k, item in enumerate(self.layout.furniture):
             base = INSTANCE[item.class_name]
-            obj = hall_nodes.furniture_object(item, params, self.collection, prototypes)
+            obj = hall_nodes.furniture_object(item, params, self.collection, prototypes, base + k)
             self.static.append(tag(obj, item.class_name, reflectivity=0.35 if item.class_name == "desk" else 0.45, instance=base + k))
         self.arm = kinematics.load_arm(p.robot_model) if p.robot_model else kinematics.load_arm()
         self.robots = [RobotArm(self.arm, self.collection, r) for r in range(p.robots)]

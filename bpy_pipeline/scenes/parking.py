@@ -93,7 +93,7 @@ class ParkingGarage:
         self.collection = scene_collection()
         meshes = self.layout.meshes()
         prototypes = box_nodes.prototypes(self.collection)  # the level's pieces through the "Parking Level" group
-        self.static = [tag(parking_nodes.level_object(name, name, params, self.collection, prototypes), name, reflectivity=STATIC_REFLECTIVITY[name], instance=INSTANCE[name])
+        self.static = [tag(parking_nodes.level_object(name, name, params, self.collection, prototypes, INSTANCE[name]), name, reflectivity=STATIC_REFLECTIVITY[name], instance=INSTANCE[name])
                        for name in meshes]
         self.caster = RayCaster(_buffers(meshes), frame=np.eye(4))
         self.paints = []

@@ -15,7 +15,8 @@ meshes' triangles in the same order:
 - ramp: ``Ramp Length`` long in the +y bay row at the +x end, rising to the next level.
 
 ``Part`` picks what the group outputs (1 floor, 2 ceiling, 3 walls, 4 pillars, 5 ramp), so each
-piece keeps its own object and labels (the object's ``lidar_*`` tags). Changing ``Bay Width`` in
+piece keeps its own object and labels (the object's ``lidar_*`` tags; ``Instance`` stores the instance id as
+the named attribute ``lidar_instance`` on the instances, which the export reads first). Changing ``Bay Width`` in
 the modifier panel moves the pillars; the builder's cars still use the bays of the YAML's level
 (the placement reads the pure layout).
 """
@@ -29,7 +30,7 @@ from .box_nodes import select
 from .nodes import GroupBuilder, add_group_modifier, new_group
 
 GROUP = "Parking Level"
-VERSION = 1
+VERSION = 2  # 2: the Instance input, stored as lidar_instance
 PARTS = {"floor": 1, "ceiling": 2, "wall": 3, "pillar": 4, "ramp": 5}
 
 INPUTS = [
@@ -47,6 +48,7 @@ INPUTS = [
     ("Ramp Length", "NodeSocketFloat", 16.0, "m (0: no ramp)", 0.0, 1000.0),
     ("Box", "NodeSocketObject", None, "the unit box instanced for slabs, walls and pillars"),
     ("Wedge", "NodeSocketObject", None, "the ramp's unit wedge"),
+    ("Instance", "NodeSocketInt", 0, "instance id of what the group makes, stored as the named attribute lidar_instance the export reads (0: the object's lidar_instance)", 0, 2**31 - 1),
     ("Realize", "NodeSocketBool", False, "realize the instances into one mesh (the export reads instances as they are)"),
 ]
 
@@ -106,7 +108,7 @@ def level_group() -> bpy.types.NodeTree:
     ramp_geometry = box_nodes.place(b, b.switch("INT", ramp, 0, 1), xyz(ramp_x0, front, 0.0),
                                     xyz(g("Ramp Length"), m("SUBTRACT", half_y, front), m("ADD", h, slab)), g("Wedge"))
 
-    box_nodes.finish(b, box_nodes.pick(b, g("Part"), [floor, ceiling, walls, pillars, ramp_geometry]), g("Realize"))
+    box_nodes.finish(b, box_nodes.pick(b, g("Part"), [floor, ceiling, walls, pillars, ramp_geometry]), g("Realize"), g("Instance"))
     group["bpy_pipeline_version"] = VERSION
     return b.finish()
 
@@ -119,10 +121,11 @@ def inputs_of(p) -> dict:
             "Pillar Size": p.pillar_size, "Pillar Every": p.pillar_every, "Ramp Length": p.ramp_length}
 
 
-def level_object(name: str, part: str, params, collection, prototypes: dict) -> bpy.types.Object:
-    """An object whose "Parking Level" modifier outputs ``part`` (a key of :data:`PARTS`) of the level of ``params``."""
+def level_object(name: str, part: str, params, collection, prototypes: dict, instance: int = 0) -> bpy.types.Object:
+    """An object whose "Parking Level" modifier outputs ``part`` (a key of :data:`PARTS`) of the level of ``params``,
+    its instances labelled ``instance``."""
     mesh = bpy.data.meshes.new(name)
     obj = bpy.data.objects.new(name, mesh)
     collection.objects.link(obj)
-    add_group_modifier(obj, level_group(), inputs_of(params) | {"Part": PARTS[part], "Box": prototypes["box"], "Wedge": prototypes["wedge"]})
+    add_group_modifier(obj, level_group(), inputs_of(params) | {"Part": PARTS[part], "Box": prototypes["box"], "Wedge": prototypes["wedge"], "Instance": int(instance)})
     return obj

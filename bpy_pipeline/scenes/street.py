@@ -37,7 +37,7 @@ class Intersection:
         self.collection = scene_collection()
         prototypes = prototypes_collection(self.collection)
         self.static = [
-            tag(mesh_object(part.name, part.mesh, self.collection) if part.scatter is None else scatter_object(part.name, part.scatter, self.collection, prototypes),
+            tag(mesh_object(part.name, part.mesh, self.collection) if part.scatter is None else scatter_object(part.name, part.scatter, self.collection, prototypes, part.instance or 0),
                 part.class_name, part.material, part.reflectivity, part.instance)
             for part in self.layout.parts
         ]

@@ -15,7 +15,9 @@ Inputs a user edits in the modifier panel: ``Density`` (the share of items kept,
 Moving, adding or deleting the points in Edit Mode moves, adds or removes items. The export reads
 instances as they are (each prototype's mesh once, every placement a matrix), so ``Realize`` is
 off by default; labels are the object's ``lidar_*`` tags (the prototypes are untagged, so their
-instances take the scatter object's class and instance id).
+instances take the scatter object's class), and ``Instance`` (the part's instance id) is stored on
+every instance as the named attribute ``lidar_instance``, which the export reads first: realized or
+joined into another object, the items keep their instance id.
 """
 
 from __future__ import annotations
@@ -28,7 +30,7 @@ from .objects import mesh_object
 
 GROUP = "Street Scatter"
 PROTOTYPES = "LiDAR Street Prototypes"  # the collection (excluded from the view layer) holding each kind's prototypes
-VERSION = 1  # bump when the group changes, so a file holding an older one gets the new one
+VERSION = 2  # 2: the Instance input, stored as lidar_instance; bump when the group changes, so a file holding an older one gets the new one
 
 SCATTER_INPUTS = [
     ("Geometry", "NodeSocketGeometry"),
@@ -36,6 +38,7 @@ SCATTER_INPUTS = [
     ("Density", "NodeSocketFloat", 1.0, "share of the items kept (1: every item; less thins them at random)", 0.0, 1.0),
     ("Seed", "NodeSocketInt", 0, "which items Density keeps"),
     ("Scale", "NodeSocketFloat", 1.0, "every item's scale times this", 0.0, 100.0),
+    ("Instance", "NodeSocketInt", 0, "instance id of what the group makes, stored as the named attribute lidar_instance the export reads (0: the object's lidar_instance)", 0, 2**31 - 1),
     ("Realize", "NodeSocketBool", False, "realize the instances into one mesh (the export reads instances as they are)"),
 ]
 
@@ -63,8 +66,10 @@ def scatter_group() -> bpy.types.NodeTree:
         {"Points": g("Geometry"), "Selection": keep, "Instance": b.out(prototypes), "Pick Instance": True,
          "Instance Index": attribute("prototype", "INT"), "Rotation": rotation, "Scale": scale},
     )
-    real = b.node("GeometryNodeRealizeInstances", {"Geometry": b.out(instances)})
-    b.links.new(b.switch("GEOMETRY", g("Realize"), b.out(instances), b.out(real)), b.socket(b.outputs.inputs, "Geometry"))
+    labelled = b.out(b.node("GeometryNodeStoreNamedAttribute", {"Geometry": b.out(instances), "Name": "lidar_instance", "Value": g("Instance")},
+                            options={"data_type": "INT", "domain": "INSTANCE"}))
+    real = b.node("GeometryNodeRealizeInstances", {"Geometry": labelled})
+    b.links.new(b.switch("GEOMETRY", g("Realize"), labelled, b.out(real)), b.socket(b.outputs.inputs, "Geometry"))
     group["bpy_pipeline_version"] = VERSION
     return b.finish()
 
@@ -112,7 +117,7 @@ def points_mesh(name: str, scatter) -> bpy.types.Mesh:
     return mesh
 
 
-def scatter_object(name: str, scatter, collection: bpy.types.Collection, prototypes: bpy.types.Collection) -> bpy.types.Object:
+def scatter_object(name: str, scatter, collection: bpy.types.Collection, prototypes: bpy.types.Collection, instance: int = 0) -> bpy.types.Object:
     """The object of one scattered kind: ``scatter``'s items as points, its prototypes as the objects of a new
     collection ``"<name> prototypes"`` under ``prototypes``, and a live "Street Scatter" modifier instancing them."""
     kinds = bpy.data.collections.new(f"{name} prototypes")
@@ -121,5 +126,5 @@ def scatter_object(name: str, scatter, collection: bpy.types.Collection, prototy
         mesh_object(f"{name}.prototype.{k:02d}", mesh, kinds)  # zero-padded: Collection Info orders children by name
     obj = bpy.data.objects.new(name, points_mesh(name, scatter))
     collection.objects.link(obj)
-    add_group_modifier(obj, scatter_group(), {"Prototypes": kinds})
+    add_group_modifier(obj, scatter_group(), {"Prototypes": kinds, "Instance": int(instance)})
     return obj
