@@ -17,6 +17,7 @@ from bpy_pipeline.lidar.sensors import (
     elevations,
     iter_pattern,
     mount_offset,
+    preset_effects,
     presets,
     ray_count,
     resolve_sensor,
@@ -425,3 +426,14 @@ def test_hdl32e_preset_matches_a_real_nuscenes_sweep(real_scan):
     assert len(azimuths(spec)) == columns
     assert spec.horizontal_resolution_deg == pytest.approx(abs(measured_step), rel=0.01)
     assert np.diff(np.unwrap(np.radians(azimuth_deg(pattern.directions[::rings])))).max() < 0
+
+
+def test_the_thesis_table_4_3_example_resolves_to_its_numbers():
+    """examples/railway/thesis_table_4_3.yaml: the preset at the thesis's sampling factor 1.5 and 0.1 mm noise."""
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "examples" / "railway" / "thesis_table_4_3.yaml"
+    config = config_from_dict(yaml.safe_load(path.read_text()))
+    assert config.sensor.spec.sampling_factor == 1.5 and ray_count(config.sensor.spec) == 10800 * 4801 == 51_850_800
+    assert config.effects.noise.model == "constant" and config.effects.noise.sigma == pytest.approx(1e-4)
+    assert preset_effects("railway_tls")["noise"]["sigma"] == pytest.approx(0.002)  # the preset keeps table 4.3's ACCURACY
