@@ -19,6 +19,11 @@ intent whose frame has no record). Records are one file per frame, not lines of 
 worker processes and machines commit frames at once: a rename is atomic on every file system,
 an append is not on network ones. Per-dataset indexes (ImageSets) are derived from the records
 when a run ends. A run's cost per frame does not grow with the number of frames.
+
+Per frame, nothing is read back and no folder is made or removed: files written through
+:func:`~.io.atomic.hashed_open` get their sha256 as they are written, the preview is rendered on a
+thread while the other files are written (:func:`write_frame_files`, waited for before the
+intent), and a committed frame's emptied staging folders are renamed to the next frame's.
 """
 
 from __future__ import annotations
@@ -253,6 +258,7 @@ class Dataset:
     locked: bool = False
     lock_fd: int = -1  # the open, flock-ed lock file while locked
     created: bool = False  # the folder did not exist before this run
+    _spare: Path | None = field(default=None, repr=False)  # the last committed frame's staging folders, emptied (reused by the next)
 
     # ------------------------------------------------------------------ opening
     @classmethod
@@ -406,6 +412,12 @@ class Dataset:
         start = time.perf_counter()
         staging = self.out / STAGING / frame.stem
         shutil.rmtree(staging, ignore_errors=True)
+        spare, self._spare, committed = self._spare, None, False
+        if spare is not None:  # the last frame's emptied folders, renamed: no folder made or removed per frame
+            try:
+                os.replace(spare, staging)
+            except OSError:
+                shutil.rmtree(spare, ignore_errors=True)
         try:
             with digests_while_writing() as hashed:  # sha256 of the files written through atomic.hashed_open, as they were written
                 written = write_frame_files(frame, staging, frame_writers(self.config))
@@ -415,18 +427,25 @@ class Dataset:
             with atomic_write(intent) as tmp:
                 tmp.write_text(json.dumps(relative))
             for rel in relative:
-                (self.out / rel).parent.mkdir(parents=True, exist_ok=True)
-                (staging / rel).replace(self.out / rel)
+                try:
+                    (staging / rel).replace(self.out / rel)
+                except FileNotFoundError:  # the final folder is not there yet (made once, on the first frame that writes into it)
+                    (self.out / rel).parent.mkdir(parents=True, exist_ok=True)
+                    (staging / rel).replace(self.out / rel)
             frame.files = relative
             frame.timings["write"] = frame.timings.get("write", 0.0) + time.perf_counter() - start
             record = frame_record(frame, digests)
             with atomic_write(self.out / RECORDS / f"{frame.stem}.json") as tmp:
                 tmp.write_text(json.dumps(record, default=to_json, allow_nan=False) + "\n")
             intent.unlink()
+            committed = True
         except OSError as err:
             raise _error(self.out, f"write frame {frame.index} into", err) from None
         finally:
-            shutil.rmtree(staging, ignore_errors=True)
+            if committed:  # every file moved out: only folders are left, kept for the next frame
+                self._spare = staging
+            else:
+                shutil.rmtree(staging, ignore_errors=True)
         frame.record = record
         self.committed[frame.index] = record
         if record["points"] == 0:
@@ -452,6 +471,9 @@ class Dataset:
     # ------------------------------------------------------------------ closing
     def close(self) -> None:
         """Derive the per-dataset indexes and the summary from the records, and release the lock."""
+        if self._spare is not None:
+            shutil.rmtree(self._spare, ignore_errors=True)
+            self._spare = None
         if self.mode == "join":
             return
         try:
@@ -482,6 +504,9 @@ class Dataset:
             self.close()
 
     def _discard(self) -> None:
+        if self._spare is not None:
+            shutil.rmtree(self._spare, ignore_errors=True)
+            self._spare = None
         for name in (MANIFEST_NAME, RECORDS, STAGING, MOVING):
             path = self.out / name
             shutil.rmtree(path, ignore_errors=True) if path.is_dir() else path.unlink(missing_ok=True)
