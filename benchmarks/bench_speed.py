@@ -20,7 +20,7 @@ Every figure is a ratio against a reference measured in the same run (no timed a
 The scan and write parts run in a subprocess per checkout (``--baseline CHECKOUT`` adds the same
 measurement of another checkout, interleaved); each subprocess reports which ``bpy_pipeline`` it imported.
 
-    python benchmarks/bench_speed.py [--small] [--old DIR] [--baseline DIR] [--parking N] [--street N] [--scaling N]
+    python benchmarks/bench_speed.py [--small] [--old DIR] [--baseline DIR] [--frames N] [--parking N] [--street N] [--scaling N] [--merge]
 
 ``--small`` (< 60 s): the scan and write parts, 30 parking frames against one process with 2 workers,
 no older checkout unless given. Results: ``benchmarks/results/speed.json`` (``speed_small.json``).
@@ -51,7 +51,12 @@ EGO_STATIC = ["--set", "scene.builder=street", "--set", "scene.layout_seed=0", "
 
 
 def stage_part(frames: int) -> dict:
-    """In the checkout being measured: the box run's scan and write timings and their raw references."""
+    """In the checkout being measured: the box run's scan and write timings and their raw references.
+
+    Two readings: the issue's (median of frames 2-3 against the best of 3 raw runs after the run), and
+    an interleaved one robust to a shared machine (after each frame from the second, one raw trace
+    and one raw write of that frame's bytes; the median of the per-frame ratios).
+    """
     import numpy as np
     from concurrent.futures import ThreadPoolExecutor
 
@@ -67,46 +72,59 @@ def stage_part(frames: int) -> dict:
     except ImportError:  # code before the frame plan
         from bpy_pipeline.pipeline import run_frames
     config = load_config(None, [*BOX, f"frames={frames}"])
+    d32 = np.ascontiguousarray(sensor_pattern(config.sensor.spec).directions, np.float32)
+    o32 = np.lib.stride_tricks.as_strided(np.zeros(3, np.float32), d32.shape, (0, 4))
+    spans = [slice(i, i + 32768) for i in range(0, len(d32), 32768)]
+    limit = float(config.sensor.spec.max_range)
+    pool = ThreadPoolExecutor(2)
+    scene = None
+
+    def raw_trace() -> float:
+        start = time.perf_counter()
+        list(pool.map(lambda s: scene.run(o32[s], d32[s], dists=limit, output=1), spans))
+        return time.perf_counter() - start
+
+    def raw_write(blobs: list[bytes], target: Path) -> float:
+        target.mkdir()
+        start = time.perf_counter()
+        for i, data in enumerate(blobs):
+            fd = os.open(target / f"{i}.bin", os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+            try:
+                os.write(fd, data)
+                os.fsync(fd)
+            finally:
+                os.close(fd)
+        return time.perf_counter() - start
+
+    pairs = []
     with tempfile.TemporaryDirectory(dir=os.environ.get("BENCH_SPEED_TMP")) as tmp:
         out = Path(tmp) / "run"
-        made = list(run_frames(config, out))
-        later = made[2:4] if len(made) >= 4 else made[-2:]
+        made = []
+        for frame in run_frames(config, out):
+            made.append(frame)
+            if scene is None:  # the frame's triangles in its sensor frame, as the caster has them
+                pose = frame.pose
+                local = (np.asarray(frame.buffers.vertices, np.float64) - pose[:3, 3]) @ pose[:3, :3]
+                scene = rtcore_scene.EmbreeScene()
+                TriangleMesh(scene, np.ascontiguousarray(local, np.float32), np.ascontiguousarray(frame.buffers.triangles, np.int32))
+                scene.run(o32[:1], d32[:1], output=1)  # commit before going parallel
+                continue
+            blobs = [(out / rel).read_bytes() for rel in frame.files]
+            pairs.append((frame.timings["scan"], raw_trace(), frame.timings["write"], raw_write(blobs, Path(tmp) / f"raw{frame.index}")))
+        later = made[2:4]
         scan = statistics.median(f.timings["scan"] for f in later)
         write = statistics.median(f.timings["write"] for f in later)
         last = made[-1]
-        pose = last.pose
-        local = (np.asarray(last.buffers.vertices, np.float64) - pose[:3, 3]) @ pose[:3, :3]
-        scene = rtcore_scene.EmbreeScene()
-        TriangleMesh(scene, np.ascontiguousarray(local, np.float32), np.ascontiguousarray(last.buffers.triangles, np.int32))
-        d32 = np.ascontiguousarray(sensor_pattern(config.sensor.spec).directions, np.float32)
-        o32 = np.lib.stride_tricks.as_strided(np.zeros(3, np.float32), d32.shape, (0, 4))
-        scene.run(o32[:1], d32[:1], output=1)  # commit before going parallel
-        spans = [slice(i, i + 32768) for i in range(0, len(d32), 32768)]
-        limit = float(config.sensor.spec.max_range)
-        raw_scan = np.inf
-        with ThreadPoolExecutor(2) as pool:
-            for _ in range(3):
-                start = time.perf_counter()
-                list(pool.map(lambda s: scene.run(o32[s], d32[s], dists=limit, output=1), spans))
-                raw_scan = min(raw_scan, time.perf_counter() - start)
-        files = [out / rel for rel in last.files]
-        blobs = [p.read_bytes() for p in files]
-        raw_write = np.inf
-        for k in range(3):
-            target = Path(tmp) / f"raw{k}"
-            target.mkdir()
-            start = time.perf_counter()
-            for i, data in enumerate(blobs):
-                fd = os.open(target / f"{i}.bin", os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
-                try:
-                    os.write(fd, data)
-                    os.fsync(fd)
-                finally:
-                    os.close(fd)
-            raw_write = min(raw_write, time.perf_counter() - start)
-    return {"code": str(Path(bpy_pipeline.__file__).parent), "rays": len(d32), "points": len(last.points), "scan_s": scan, "raw_embreex_s": raw_scan,
-            "scan_ratio": raw_scan / scan, "write_s": write, "raw_write_s": raw_write, "write_over_raw": write / raw_write,
-            "bytes_written": sum(len(b) for b in blobs), "files": [str(Path(f).relative_to(out)) for f in files],
+        blobs = [(out / rel).read_bytes() for rel in last.files]
+        best_trace = min(raw_trace() for _ in range(3))
+        best_write = min(raw_write(blobs, Path(tmp) / f"best{k}") for k in range(3))
+    pool.shutdown()
+    return {"code": str(Path(bpy_pipeline.__file__).parent), "rays": len(d32), "points": len(last.points), "frames": frames,
+            "scan_s": scan, "raw_embreex_s": best_trace, "scan_ratio": best_trace / scan,
+            "write_s": write, "raw_write_s": best_write, "write_over_raw": write / best_write,
+            "interleaved_scan_ratio": statistics.median(r / s for s, r, _, _ in pairs),
+            "interleaved_write_over_raw": statistics.median(w / r for _, _, w, r in pairs),
+            "bytes_written": sum(len(b) for b in blobs), "files": list(last.files),
             "timings_frames_2_3": [{k: round(v, 4) for k, v in f.timings.items()} for f in later]}  # fmt: skip
 
 
@@ -175,7 +193,8 @@ def main() -> None:
     p.add_argument("--scaling", type=int, help="parking frames for 2 workers against 1 (default 1000; --small 30)")
     p.add_argument("--rounds", type=int, default=2, help="alternating rounds per comparison (best kept)")
     p.add_argument("--part", help=argparse.SUPPRESS)
-    p.add_argument("--frames", type=int, default=4, help=argparse.SUPPRESS)
+    p.add_argument("--frames", type=int, default=12, help="frames of the box run (scan and write stages; 0: skip them)")
+    p.add_argument("--merge", action="store_true", help="keep the parts of an earlier results file that this run skips")
     args = p.parse_args()
     if args.part == "stages":
         print(json.dumps(stage_part(args.frames)))
@@ -184,14 +203,16 @@ def main() -> None:
     street = args.street if args.street is not None else (0 if args.small else 20)
     scaling = args.scaling if args.scaling is not None else (30 if args.small else 1000)
     rounds = 1 if args.small else args.rounds
+    if args.small and args.frames == 12:
+        args.frames = 5
     results: dict = {"stages": []}
-    for _ in range(rounds):  # interleaved: this checkout, then the baseline
-        results["stages"].append({"checkout": "this", **in_checkout(ROOT, 4)})
+    for _ in range(rounds if args.frames else 0):  # interleaved: this checkout, then the baseline
+        results["stages"].append({"checkout": "this", **in_checkout(ROOT, args.frames)})
         if args.baseline is not None:
-            results["stages"].append({"checkout": "baseline", **in_checkout(args.baseline.resolve(), 4)})
+            results["stages"].append({"checkout": "baseline", **in_checkout(args.baseline.resolve(), args.frames)})
     for row in results["stages"]:
-        print(f"{row['checkout']}: scan {row['scan_s'] * 1e3:.1f} ms vs raw {row['raw_embreex_s'] * 1e3:.1f} ms (ratio {row['scan_ratio']:.2f}); "
-              f"write {row['write_s'] * 1e3:.1f} ms vs raw {row['raw_write_s'] * 1e3:.1f} ms ({row['write_over_raw']:.2f}x)", flush=True)  # fmt: skip
+        print(f"{row['checkout']}: scan {row['scan_s'] * 1e3:.1f} ms vs raw {row['raw_embreex_s'] * 1e3:.1f} ms (ratio {row['scan_ratio']:.2f}, interleaved {row['interleaved_scan_ratio']:.2f}); "
+              f"write {row['write_s'] * 1e3:.1f} ms vs raw {row['raw_write_s'] * 1e3:.1f} ms ({row['write_over_raw']:.2f}x, interleaved {row['interleaved_write_over_raw']:.2f}x)", flush=True)  # fmt: skip
     old = args.old.resolve() if args.old is not None else None
     results["fps"] = []
     if parking:
@@ -216,6 +237,12 @@ def main() -> None:
                         "baseline": str(args.baseline) if args.baseline else None}  # fmt: skip
     args.out.mkdir(parents=True, exist_ok=True)
     name = "speed_small.json" if args.small else "speed.json"
+    if args.merge and (args.out / name).exists():
+        earlier = json.loads((args.out / name).read_text())
+        for key in ("stages", "fps", "workers"):
+            if not results.get(key) and earlier.get(key):
+                results[key] = earlier[key]
+                results["notes"][f"{key}_from"] = earlier.get("notes")
     (args.out / name).write_text(json.dumps(results, indent=2, default=float) + "\n")
     print("wrote", args.out / name)
 

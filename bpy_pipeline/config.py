@@ -202,7 +202,7 @@ class BoxesConfig:
     """
 
     formats: list[str] | Literal["auto"] = "auto"  # box writers (io/writers.py)
-    classes: list[str] = field(default_factory=lambda: ["car", "person", "robot arm"])
+    classes: list[str] = field(default_factory=lambda: ["car", "person", "robot arm", "rider"])  # rider: an inserted cyclist (KITTI Cyclist)
     names: dict = field(default_factory=dict)
     min_points: dict = field(default_factory=lambda: {"car": 12})
     min_points_default: int = 6

@@ -8,12 +8,10 @@ preset's fitted drop and noise unless ``effects.ideal``) to the inserted returns
 
 from __future__ import annotations
 
-from pathlib import Path
-
 from ..errors import InputError
-from ..geometry.objects import OBJECT_TYPES
 from ..geometry.placement import check_distribution
 from ..io.real_scans import FORMATS
+from ..mixing.objects import check_type
 from ..mixing.section import RealScanScene
 from .base import Builder, BuildContext, BuildResult, register_builder
 
@@ -24,8 +22,7 @@ def check(params: RealScanScene, where: str) -> None:
     if params.format and params.format not in FORMATS:
         raise InputError(f"{where}.format: {params.format!r} is not one of {', '.join(FORMATS)}")
     for k, o in enumerate(params.objects):
-        if o.type not in OBJECT_TYPES and not Path(o.type).suffix.lower() in (".ply", ".obj"):
-            raise InputError(f"{where}.objects[{k}].type: {o.type!r} is not one of {', '.join(OBJECT_TYPES)} or a .ply / .obj mesh file")
+        check_type(o.type, f"{where}.objects[{k}].type")
         if any(s < 0 for s in o.size):
             raise InputError(f"{where}.objects[{k}].size: must be >= 0 (0: the type's nominal size), got {list(o.size)}")
     for k, r in enumerate(params.remove):
@@ -37,10 +34,14 @@ def check(params: RealScanScene, where: str) -> None:
     if not 0.0 <= park.near_rejection_probability <= 1.0 or park.near_rejection_distance < 0:
         raise InputError(f"{where}.parking_rule.near_rejection_probability / near_rejection_distance: need 0..1 and >= 0 m, got {park.near_rejection_probability:g} and {park.near_rejection_distance:g}")
     rule = params.kitti_rule
+    if rule.enabled:
+        check_type(rule.type, f"{where}.kitti_rule.type")
     if not 0 <= rule.min_range <= rule.max_range:
         raise InputError(f"{where}.kitti_rule.min_range: must be 0 .. kitti_rule.max_range ({rule.max_range:g}), got {rule.min_range:g}")
     for k, parking in enumerate([params.parking_rule, *params.parking_rules]):
         key = f"{where}.parking_rule" if k == 0 else f"{where}.parking_rules[{k - 1}]"
+        if parking.enabled:
+            check_type(parking.type, f"{key}.type")
         check_distribution(parking.count, f"{key}.count", low=0.0)
         check_distribution(parking.distance, f"{key}.distance", low=0.0)
         check_distribution(parking.heading, f"{key}.heading", low=-180.0, high=180.0)

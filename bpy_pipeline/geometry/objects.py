@@ -5,9 +5,13 @@ The parking builder (scenes/parking.py) shows these cars in Blender; the real-sc
 (bpy_pipeline.mixing) casts the real sensor's firings at them without any Blender scene.
 
 A car is four parts sharing one instance: the body (its paint's reflectivity), the windows
-(``glass``), the interior (dashboard and seats) and the tyres. Three body styles (sedan,
-hatchback, estate), each a nominal mesh at :data:`NOMINAL_HEIGHT` scaled to a car's height.
-A person is the capsule body of :mod:`.human`; a robot arm the capsule links of :mod:`.kinematics`.
+(``glass``), the interior (dashboard and seats) and the tyres. Three classic body styles (sedan,
+hatchback, estate: :data:`STYLES`), each a nominal mesh at :data:`NOMINAL_HEIGHT` scaled to a car's
+height, are what the builders draw; :data:`BODIES` holds 24 bodies (those three and 21 more: sedans,
+hatchbacks, estates, SUVs, pickups with an open bed, vans), each at its own length, width and height,
+drawn per object by real-scan insertion (``scene.car_bodies``, :data:`CAR_BODY_SETS`).
+A person is the capsule body of :mod:`.human`; a robot arm the capsule links of :mod:`.kinematics`;
+a cyclist a rider of :mod:`.human` seated on the bicycle of :mod:`.street`, one instance.
 """
 
 from __future__ import annotations
@@ -47,8 +51,17 @@ class CarStyle:
     roof_front: float
     roof_back: float
     rear_base: float  # base of the rear window
-    deck: float  # rear deck (trunk lid) height
+    deck: float  # rear deck (trunk lid) height; a pickup's bed walls
     belt: float  # beltline (bottom of the side windows)
+    # the defaults below are the classic styles' (their meshes keep their bytes)
+    height: float = NOMINAL_HEIGHT  # m: the body's own nominal height
+    kind: str = ""  # sedan | hatchback | estate | suv | pickup | van ("": the style's name)
+    clearance: float = 0.17  # underside of the body, fraction of the height
+    nose: float = 0.45  # top of the front face
+    tail: float = 0.45  # top of the rear face
+    deck_back: float = 0.04  # the rear deck ends this share of the length before the rear face
+    tyre: float = 0.197  # tyre radius
+    bed: bool = False  # an open load bed behind the cab (pickups) instead of a closed trunk
 
 
 STYLES = (
@@ -57,6 +70,40 @@ STYLES = (
     CarStyle("estate", 2.80, 1.12, 0.21, 0.02, -0.45, -0.49, 0.62, 0.58),
 )
 PARTS = ("body", "windows", "interior", "tyres")
+
+
+def _body(name: str, kind: str, length: float, width: float, height: float, profile: tuple, **shape) -> CarStyle:
+    """A body of ``length`` x ``width`` x ``height`` m (width without mirrors); ``profile`` the six
+    fractions windshield, roof_front, roof_back, rear_base, deck, belt of :class:`CarStyle`."""
+    return CarStyle(name, length / height, width / height, *profile, height=height, kind=kind, **shape)
+
+
+# Profiles (fractions of length and height, see CarStyle) and shape per family; sizes below.
+_SEDAN = ((0.20, -0.02, -0.26, -0.38, 0.62, 0.58), {"clearance": 0.11, "nose": 0.48, "tail": 0.50, "tyre": 0.215})
+_HATCH = ((0.24, 0.05, -0.38, -0.47, 0.60, 0.57), {"clearance": 0.11, "nose": 0.48, "tail": 0.48, "tyre": 0.21, "deck_back": 0.02})
+_ESTATE = ((0.21, 0.02, -0.45, -0.48, 0.62, 0.58), {"clearance": 0.11, "nose": 0.48, "tail": 0.50, "tyre": 0.215, "deck_back": 0.01})
+_SUV = ((0.23, 0.06, -0.44, -0.48, 0.60, 0.60), {"clearance": 0.14, "nose": 0.55, "tail": 0.55, "tyre": 0.21, "deck_back": 0.01})
+_PICKUP = ((0.22, 0.10, -0.10, -0.12, 0.56, 0.57), {"clearance": 0.16, "nose": 0.55, "tail": 0.52, "tyre": 0.205, "bed": True})
+_VAN = ((0.36, 0.28, -0.46, -0.48, 0.50, 0.52), {"clearance": 0.10, "nose": 0.45, "tail": 0.48, "tyre": 0.17, "deck_back": 0.01})
+_FAMILIES = {"sedan": _SEDAN, "hatchback": _HATCH, "estate": _ESTATE, "suv": _SUV, "pickup": _PICKUP, "van": _VAN}
+# (name, family, length, width, height) m: typical of recent European and North American models of each size class
+_SIZES = (
+    ("sedan_compact", "sedan", 4.45, 1.75, 1.44), ("sedan_midsize", "sedan", 4.70, 1.82, 1.45),
+    ("sedan_large", "sedan", 4.95, 1.86, 1.47), ("sedan_executive", "sedan", 5.15, 1.90, 1.48),
+    ("hatchback_mini", "hatchback", 3.60, 1.63, 1.50), ("hatchback_small", "hatchback", 4.05, 1.74, 1.45),
+    ("hatchback_compact", "hatchback", 4.30, 1.79, 1.46),
+    ("estate_compact", "estate", 4.55, 1.80, 1.48), ("estate_midsize", "estate", 4.78, 1.83, 1.50),
+    ("estate_large", "estate", 4.95, 1.88, 1.50),
+    ("suv_small", "suv", 4.20, 1.78, 1.60), ("suv_compact", "suv", 4.50, 1.84, 1.67),
+    ("suv_midsize", "suv", 4.80, 1.92, 1.76), ("suv_large", "suv", 5.05, 2.00, 1.85),
+    ("pickup_compact", "pickup", 5.10, 1.85, 1.78), ("pickup_midsize", "pickup", 5.35, 1.90, 1.83),
+    ("pickup_fullsize", "pickup", 5.90, 2.03, 1.96), ("pickup_heavy", "pickup", 6.20, 2.05, 2.00),
+    ("van_compact", "van", 4.50, 1.80, 1.82), ("van_midsize", "van", 4.97, 1.95, 1.95),
+    ("van_long", "van", 5.30, 2.00, 1.99),
+)
+BODIES = STYLES + tuple(_body(name, kind, L, W, H, _FAMILIES[kind][0], **_FAMILIES[kind][1]) for name, kind, L, W, H in _SIZES)
+# scene.car_bodies -> the bodies a car is drawn from (uniformly)
+CAR_BODY_SETS = {"all": BODIES, "classic": STYLES}
 
 
 # ----------------------------------------------------------------------------- car meshes (pure numpy)
@@ -102,11 +149,17 @@ def car_parts(style: CarStyle, height: float = NOMINAL_HEIGHT) -> dict:
     L, W = style.length_ratio * H, style.width_ratio * H
     xf, xr = L / 2, -L / 2
     xw, xr1, xr2, xb = style.windshield * L, style.roof_front * L, style.roof_back * L, style.rear_base * L
-    zc, belt, deck, roof = 0.17 * H, style.belt * H, style.deck * H, 0.97 * H
+    zc, belt, deck, roof = style.clearance * H, style.belt * H, style.deck * H, 0.97 * H
     ys, yt = W / 2 - 0.04, W / 2 - 0.10  # side glass at the beltline and at the roof (tumblehome)
+    if style.bed:  # an open load bed: its floor, side walls and tailgate, and the cab's back wall
+        floor = style.tail * H - 0.08 * H
+        rear = [_box(xr, xb, -W / 2, W / 2, zc, floor), _box(xr, xb, W / 2 - 0.05, W / 2, floor, deck), _box(xr, xb, -W / 2, -W / 2 + 0.05, floor, deck),
+                _box(xr, xr + 0.05, -W / 2 + 0.05, W / 2 - 0.05, floor, deck), _box(xb - 0.04, xb, -W / 2, W / 2, zc, deck)]
+    else:
+        rear = [_prism_xz([(xr, zc), (xb, zc), (xb, deck), (xr + style.deck_back * L, deck), (xr, style.tail * H)], -W / 2, W / 2)]  # trunk and rear
     body = [
-        _prism_xz([(xw, zc), (xf, zc), (xf, 0.45 * H), (xf - 0.06 * L, belt), (xw, belt)], -W / 2, W / 2),  # hood and front
-        _prism_xz([(xr, zc), (xb, zc), (xb, deck), (xr + 0.04 * L, deck), (xr, 0.45 * H)], -W / 2, W / 2),  # trunk and rear
+        _prism_xz([(xw, zc), (xf, zc), (xf, style.nose * H), (xf - 0.06 * L, belt), (xw, belt)], -W / 2, W / 2),  # hood and front
+        *rear,
         _box(xb, xw, -W / 2, W / 2, zc, zc + 0.08 * H),  # cabin floor
         _box(xb, xw, W / 2 - 0.05, W / 2, zc, belt),  # doors
         _box(xb, xw, -W / 2, -W / 2 + 0.05, zc, belt),
@@ -133,7 +186,7 @@ def car_parts(style: CarStyle, height: float = NOMINAL_HEIGHT) -> dict:
     for y0, y1 in ((0.03 * W, 0.44 * W), (-0.44 * W, -0.03 * W)):
         interior.append(_box(cabin(0.42), cabin(0.48), y0, y1, zc, 0.84 * H))  # front seat back
         interior.append(_box(cabin(0.46), cabin(0.70), y0, y1, zc, 0.45 * H))  # front seat cushion
-    radius, width = 0.197 * H, 0.13 * W
+    radius, width = style.tyre * H, 0.13 * W
     tyres = [_tyre(x, side * (W / 2 - 0.02 - width / 2), radius, width) for x in (xf - 0.17 * L, xr + 0.18 * L) for side in (-1, 1)]
     return {"body": primitives.merge(body), "windows": primitives.merge(windows), "interior": primitives.merge(interior), "tyres": primitives.merge(tyres)}
 
@@ -218,15 +271,28 @@ def fit_to_box(parts: list[ObjectPart], size) -> list[ObjectPart]:
     return [ObjectPart((p.vertices - centre) * scale, p.triangles, p.material, p.reflectivity) for p in parts]
 
 
-def car_object(rng: np.random.Generator, size=None) -> list[ObjectPart]:
-    """A car of a random style and paint, its parts centred on the origin (nose +x); scaled to ``size`` when given."""
-    style = STYLES[int(rng.integers(len(STYLES)))]
+def draw_body(rng: np.random.Generator, bodies: str = "all") -> int:
+    """Index of a body of ``CAR_BODY_SETS[bodies]``, uniform (one draw of ``rng``)."""
+    return int(rng.integers(len(CAR_BODY_SETS[bodies])))
+
+
+def body_size(index: int, bodies: str = "all") -> np.ndarray:
+    """``(3,)`` length, width, height (m) of body ``index`` of ``CAR_BODY_SETS[bodies]`` at its own nominal height."""
+    style = CAR_BODY_SETS[bodies][index]
+    return style_size(style, style.height)
+
+
+def car_object(rng: np.random.Generator, size=None, bodies: str = "classic", body: int = -1) -> list[ObjectPart]:
+    """A car of a random body of ``CAR_BODY_SETS[bodies]`` (or body ``body`` of it, drawn before: no draw) and a random
+    paint, its parts centred on the origin (nose +x); scaled to ``size`` when given, else at the body's own size."""
+    styles = CAR_BODY_SETS[bodies]
+    style = styles[int(rng.integers(len(styles)))] if body < 0 else styles[body]
     shares = np.array([c[2] for c in COLOURS])
     paint = COLOURS[int(rng.choice(len(COLOURS), p=shares / shares.sum()))][3]
-    mesh = car_parts(style)
+    mesh = car_parts(style, style.height)
     reflect = {"body": ("diffuse", paint), "windows": ("glass", GLASS_REFLECTIVITY), "interior": ("diffuse", INTERIOR_REFLECTIVITY), "tyres": ("diffuse", TYRE_REFLECTIVITY)}
     parts = [ObjectPart(mesh[name][0], mesh[name][1], *reflect[name]) for name in PARTS]
-    return fit_to_box(parts, style_size(style) if size is None else size)
+    return fit_to_box(parts, style_size(style, style.height) if size is None else size)
 
 
 PERSON_REFLECTIVITY = 0.4  # clothing (an assumption)
@@ -257,6 +323,29 @@ def robot_arm_object(rng: np.random.Generator, size=None) -> list[ObjectPart]:
     return fit_to_box([part], (v.max(axis=0) - v.min(axis=0)) if size is None else size)
 
 
+CYCLIST_SIZE = (1.76, 0.6, 1.73)  # m: length, width, height of a rider on a bicycle (the KITTI Cyclist class's mean box)
+BICYCLE_REFLECTIVITY, WHEEL_REFLECTIVITY = 0.3, 0.05  # a painted frame, black tyres (as geometry/street.py)
+
+
+def cyclist_object(rng: np.random.Generator, size=None) -> list[ObjectPart]:
+    """A rider (:mod:`.human`, a drawn seated pose and build) on a bicycle (:func:`.street.two_wheeler_parts`: two
+    wheels and a frame), facing +x: three parts (frame, wheels, rider) of one object; scaled to ``size`` when given."""
+    from .human import BUILDS, pose_person, sample_pose, body_mesh
+    from .street import saddle_height, two_wheeler_parts
+
+    nominal = np.asarray(CYCLIST_SIZE, float)
+    bike = two_wheeler_parts("bicycle", nominal)
+    build = BUILDS[("slim", "medium", "broad")[int(rng.integers(3))]]
+    angles = sample_pose("sitting", rng, build)
+    seat = saddle_height("bicycle", nominal)
+    rider = pose_person(angles, 0.95 * nominal[2], build, "sitting", (-0.1 * nominal[0] - 0.05, 0.0), 0.0, seat + 0.005)
+    v, t, _ = body_mesh(rider.a, rider.b, rider.radius, 8, 2)
+    parts = [ObjectPart(*bike["frame"], "diffuse", BICYCLE_REFLECTIVITY), ObjectPart(*bike["wheels"], "diffuse", WHEEL_REFLECTIVITY),
+             ObjectPart(v, np.asarray(t, np.int32), "diffuse", PERSON_REFLECTIVITY)]
+    vertices = np.concatenate([p.vertices for p in parts])
+    return fit_to_box(parts, (vertices.max(axis=0) - vertices.min(axis=0)) if size is None else size)
+
+
 def box_object(rng: np.random.Generator, size=None) -> list[ObjectPart]:
     """A plain box (a wall, a crate) of ``size`` (1 m cube by default)."""
     v, t = primitives.box(*((1.0, 1.0, 1.0) if size is None else size))
@@ -269,4 +358,6 @@ OBJECT_TYPES = {
     "car": ("car", car_object, (4.6, 1.8, 1.625)),
     "person": ("person", person_object, (0.6, 0.5, 1.75)),
     "robot_arm": ("robot arm", robot_arm_object, (1.2, 0.6, 1.6)),
+    # one instance, class rider: SemanticKITTI's bicyclist (31) and KITTI's Cyclist (labels.yaml)
+    "cyclist": ("rider", cyclist_object, CYCLIST_SIZE),
 }

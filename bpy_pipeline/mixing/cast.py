@@ -16,84 +16,29 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
 from ..buffers import MATERIAL_ID, ObjectTable, SceneBuffers
-from ..errors import InputError
-from ..geometry.checks import check_mesh
-from ..geometry.objects import OBJECT_TYPES, ObjectPart, fit_to_box
+from ..geometry.objects import OBJECT_TYPES, ObjectPart, car_object
 from ..lidar.raycast import RayCaster
 from ..lidar.scanner import Surfaces, trace_beams
 from .firings import Firings
+from .objects import mesh_file_parts  # noqa: F401 - re-exported: mixing.cast.mesh_file_parts stays importable
 from .placement import Placement
 
 
-def mesh_file_parts(path: str, size) -> list[ObjectPart]:
-    """A user mesh (.ply with faces, or .obj) as one diffuse part scaled to the box ``size``; a file whose
-    header, indices or values lie is refused with one line naming it."""
-    p = Path(path)
-    if not p.is_file():
-        raise InputError(f"scene.objects.type: {path!r} is neither car, person, robot_arm nor a mesh file")
-    if p.suffix.lower() == ".ply":
-        v, faces = _read_ply_mesh(p)
-    elif p.suffix.lower() == ".obj":
-        v, faces = _read_obj_mesh(p)
+def object_parts(p: Placement, rng: np.random.Generator, car_bodies: str = "classic") -> list[ObjectPart]:
+    """The parts of placement ``p`` in the sensor frame (the type's mesh scaled to the box, yawed, moved).
+
+    A car is drawn from ``CAR_BODY_SETS[car_bodies]`` (``scene.car_bodies``), or is body ``p.body`` of it when the
+    placement drew one; a mesh file's parts come from :mod:`.objects` (glass where its materials say so)."""
+    if p.type == "car":
+        parts = car_object(rng, p.size, car_bodies, getattr(p, "body", -1))
+    elif p.type in OBJECT_TYPES:
+        parts = OBJECT_TYPES[p.type][1](rng, p.size)
     else:
-        raise InputError(f"scene.objects.type: {path!r}: mesh files are .ply or .obj (export other formats to one of them)")
-    if any(len(f) < 3 for f in faces):
-        raise InputError(f"{p}: a face with fewer than 3 vertices")
-    triangles = np.array([[f[0], f[k], f[k + 1]] for f in faces for k in range(1, len(f) - 1)], np.int64).reshape(-1, 3)
-    if not len(triangles):
-        raise InputError(f"scene.objects.type: {path!r} has no faces")
-    v, triangles = check_mesh(v, triangles, str(p))
-    return fit_to_box([ObjectPart(v, triangles.astype(np.int32))], size)
-
-
-def _read_ply_mesh(p: Path) -> tuple[np.ndarray, list]:
-    from plyfile import PlyData
-
-    try:
-        ply = PlyData.read(str(p))
-        vertex, face = ply["vertex"], ply["face"]
-        v = np.column_stack([vertex[k] for k in "xyz"]).astype(np.float64)
-        faces = [np.asarray(f, np.int64) for f in face.data[face.data.dtype.names[0]]]
-    except Exception as err:  # noqa: BLE001 - plyfile raises many types on a lying header or short data
-        raise InputError(f"{p}: not a readable PLY mesh with vertex x y z and faces ({type(err).__name__}: {str(err).splitlines()[0] if str(err) else ''})") from None
-    return v, faces
-
-
-def _read_obj_mesh(p: Path) -> tuple[np.ndarray, list]:
-    """Vertices and faces of an OBJ (``v`` and ``f`` lines; 1-based or negative relative indices)."""
-    verts, faces = [], []
-    try:
-        text = p.read_text(errors="replace")
-    except OSError as err:
-        raise InputError(f"{p}: cannot read ({err.strerror or err})") from None
-    for number, line in enumerate(text.splitlines(), 1):
-        words = line.split()
-        try:
-            if words[:1] == ["v"]:
-                verts.append([float(x) for x in words[1:4]])
-                if len(verts[-1]) != 3:
-                    raise ValueError
-            elif words[:1] == ["f"]:
-                face = []
-                for w in words[1:]:
-                    k = int(w.split("/")[0])
-                    if k == 0:
-                        raise ValueError
-                    face.append(k - 1 if k > 0 else len(verts) + k)  # OBJ: 1-based, or negative from the last vertex
-                faces.append(np.array(face, np.int64))
-        except ValueError:
-            raise InputError(f"{p}: line {number}: malformed {words[0]!r} line {line.strip()[:60]!r}") from None
-    return np.asarray(verts, float).reshape(-1, 3), faces
-
-
-def object_parts(p: Placement, rng: np.random.Generator) -> list[ObjectPart]:
-    """The parts of placement ``p`` in the sensor frame (the type's mesh scaled to the box, yawed, moved)."""
-    parts = OBJECT_TYPES[p.type][1](rng, p.size) if p.type in OBJECT_TYPES else mesh_file_parts(p.type, p.size)
+        parts = mesh_file_parts(p.type, p.size)
     c, s = math.cos(p.yaw), math.sin(p.yaw)
     rotation = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
     return [ObjectPart(part.vertices @ rotation.T + p.centre, part.triangles, part.material, part.reflectivity) for part in parts]

@@ -13,17 +13,19 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..geometry.objects import OBJECT_TYPES
+from ..geometry.objects import body_size, draw_body
 from ..geometry.placement import insert_sequentially, sample, sample_count, turn_about
 from .firings import Firings, angles_deg
 from .ground import Ground, PointIndex, in_box
+from .objects import type_class, type_size
 from .section import KittiRule, ObjectBox, ParkingRule
 
 
 @dataclass
 class Placement:
     """One object to insert: ``type`` (car, person, robot_arm or a mesh file), its class, box centre (3,),
-    size (3,) length, width, height (m), yaw (radians) and how it was placed (``explicit``, ``parking``, ``kitti``)."""
+    size (3,) length, width, height (m), yaw (radians), how it was placed (``explicit``, ``parking``, ``kitti``) and,
+    for a car, the body drawn with its size (an index of ``CAR_BODY_SETS[scene.car_bodies]``; -1: drawn when meshed)."""
 
     type: str
     class_name: str
@@ -31,13 +33,15 @@ class Placement:
     size: np.ndarray
     yaw: float
     rule: str = "explicit"
+    body: int = -1
 
     def info(self) -> dict:
         return {"type": self.type, "class": self.class_name, "center": [round(float(v), 4) for v in self.centre], "size": [round(float(v), 4) for v in self.size], "yaw_deg": round(math.degrees(self.yaw), 3), "rule": self.rule}
 
 
 def nominal_size(kind: str) -> np.ndarray:
-    return np.asarray(OBJECT_TYPES[kind][2] if kind in OBJECT_TYPES else (1.0, 1.0, 1.0), float)
+    """``(3,)`` m: the object type's nominal size (a mesh file's own bounding box)."""
+    return type_size(kind)
 
 
 def explicit_placements(objects: list[ObjectBox]) -> list[Placement]:
@@ -46,7 +50,7 @@ def explicit_placements(objects: list[ObjectBox]) -> list[Placement]:
         size = np.asarray(o.size, float)
         if not (size > 0).all():
             size = nominal_size(o.type)
-        cls = o.class_name or (OBJECT_TYPES[o.type][0] if o.type in OBJECT_TYPES else "unlabeled")
+        cls = o.class_name or type_class(o.type)
         out.append(Placement(o.type, cls, np.asarray(o.center, float), size, math.radians(o.yaw_deg)))
     return out
 
@@ -105,6 +109,7 @@ class Scene:
     obstacles: PointIndex
     ground_points: PointIndex
     placed: list
+    car_bodies: str = "classic"  # scene.car_bodies: a rule's car takes a drawn body's size (all) or the classic draw
 
     def sector(self, centre, size) -> np.ndarray:
         """Firings whose azimuth lies within the box's angular half-width (plus a margin) of its centre."""
@@ -134,13 +139,15 @@ FULL_CIRCLE = ParkingRule().heading
 def parking_rule(scene: Scene, rule: ParkingRule, rng: np.random.Generator) -> tuple[list[Placement], dict]:
     """Objects placed by the parking paper's rule (geometry/placement.py's retry loop); returns ``(placements, log)``."""
     kind = rule.type
-    cls = OBJECT_TYPES[kind][0] if kind in OBJECT_TYPES else "unlabeled"
+    cls = type_class(kind)
     base = nominal_size(kind)
     near_rejections = [0]
+    bodies = kind == "car" and scene.car_bodies != "classic"
 
     def new_object():
-        height = float(sample(rule.height, rng)) if kind == "car" else base[2]
-        size = base * (height / base[2]) * np.array([rng.uniform(0.97, 1.03), rng.uniform(0.97, 1.03), 1.0])
+        body = draw_body(rng, scene.car_bodies) if bodies else -1
+        height = float(sample(rule.height, rng)) if kind == "car" and not bodies else base[2]
+        size = (body_size(body, scene.car_bodies) if bodies else base * (height / base[2])) * np.array([rng.uniform(0.97, 1.03), rng.uniform(0.97, 1.03), 1.0])
         distance = float(sample(rule.distance, rng))
         angle = float(rng.uniform(-math.pi, math.pi))
         if rule.heading == FULL_CIRCLE:  # the paper's random yaw (the same draws as before headings existed)
@@ -150,13 +157,13 @@ def parking_rule(scene: Scene, rule: ParkingRule, rng: np.random.Generator) -> t
         if distance < rule.near_rejection_distance and rng.random() < rule.near_rejection_probability:
             near_rejections[0] += 1
             return None  # the paper's near rejection: refused before placement (a failure of insert_sequentially)
-        return size, distance * np.array([math.cos(angle), math.sin(angle)]), yaw
+        return size, distance * np.array([math.cos(angle), math.sin(angle)]), yaw, body
 
     def try_at(obj, angle_deg):
-        size, xy, yaw = obj
+        size, xy, yaw, body = obj
         turned, turned_yaw = turn_about((0.0, 0.0), xy, yaw, angle_deg)
         z = float(scene.ground.height_at(turned)[0]) + size[2] / 2
-        p = Placement(kind, cls, np.array([turned[0], turned[1], z]), size, turned_yaw, "parking")
+        p = Placement(kind, cls, np.array([turned[0], turned[1], z]), size, turned_yaw, "parking", body)
         if fits(scene, p, rule):
             scene.placed.append(p)
             return p
@@ -179,8 +186,9 @@ def kitti_yaw(lateral: float, rng: np.random.Generator) -> float:
 def kitti_rule(scene: Scene, rule: KittiRule, ground_xyz: np.ndarray, real_boxes: list[Placement], rng: np.random.Generator) -> tuple[list[Placement], dict]:
     """Objects placed by the KITTI paper's rule (see :class:`~.section.KittiRule`); returns ``(placements, log)``."""
     kind = rule.type
-    cls = OBJECT_TYPES[kind][0] if kind in OBJECT_TYPES else "unlabeled"
+    cls = type_class(kind)
     size = nominal_size(kind)
+    bodies = kind == "car" and scene.car_bodies != "classic"
     distance = np.hypot(ground_xyz[:, 0], ground_xyz[:, 1])
     near = ground_xyz[(distance <= rule.max_range) & (distance >= rule.min_range)]
     if not len(near):
@@ -206,8 +214,10 @@ def kitti_rule(scene: Scene, rule: KittiRule, ground_xyz: np.ndarray, real_boxes
             d = [np.linalg.norm(b.centre[:2] - xyz[:2]) for b in real_boxes]
             if min(d) <= rule.snap_distance:
                 yaw = real_boxes[int(np.argmin(d))].yaw
-        z = float(scene.ground.height_at(xyz[:2])[0]) + size[2] / 2
-        p = Placement(kind, cls, np.array([xyz[0], xyz[1], z]), size.copy(), yaw, "kitti")
+        body = draw_body(rng, scene.car_bodies) if bodies else -1
+        drawn = body_size(body, scene.car_bodies) if bodies else size.copy()
+        z = float(scene.ground.height_at(xyz[:2])[0]) + drawn[2] / 2
+        p = Placement(kind, cls, np.array([xyz[0], xyz[1], z]), drawn, yaw, "kitti", body)
         out.append(p)
         scene.placed.append(p)
     return out, {"candidates": int(len(candidates)), "after_virtual": int(len(kept)), "after_non_ground": int(clear.sum()), "placed": len(out)}

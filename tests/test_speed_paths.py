@@ -1,0 +1,175 @@
+"""The speed round's shortcuts give the bytes of the long way: rays made once per run, the compiled
+preview splat, digests taken while writing, the preview written on a thread, a single effects part
+kept without a copy. No timings here (benchmarks/bench_speed.py measures)."""
+
+import hashlib
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bpy_pipeline.buffers import SceneBuffers
+from bpy_pipeline.config import load_config
+from bpy_pipeline.frame import Frame, Run, frame_rng
+from bpy_pipeline.geometry import primitives
+from bpy_pipeline.io import preview
+from bpy_pipeline.io.atomic import atomic_write, digests_while_writing, hashed_open
+from bpy_pipeline.io.ply import write_ply
+from bpy_pipeline.io.semantickitti import write_semantickitti
+from bpy_pipeline.lidar.points import POINT_DTYPE
+from bpy_pipeline.lidar.sensor_rays import CHUNK_RAYS, SensorRays
+from bpy_pipeline.lidar.sensors import iter_pattern
+from bpy_pipeline.stages.scan import collect_points, effects_stage, scan_stage
+from bpy_pipeline.stages.scene import pose_stage
+
+
+def cloud(n: int, seed: int = 0) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    points = np.zeros(n, POINT_DTYPE)
+    for k in "xyz":
+        points[k] = rng.normal(0, 10, n)
+    points["semantic"], points["instance"], points["intensity"] = rng.integers(0, 5, n), rng.integers(0, 50, n), rng.random(n)
+    return points
+
+
+@pytest.mark.parametrize("preset", ["vlp16", "os1_128"])
+def test_kept_rays_are_the_patterns_rays_every_frame_and_read_only(preset):
+    config = load_config(None, [f"sensor.preset={preset}"])
+    rays = SensorRays(config)
+    for frame in (0, 3):
+        kept = list(rays.patterns(frame))
+        fresh = list(iter_pattern(config.sensor.spec, CHUNK_RAYS, frame))
+        assert len(kept) == len(fresh)
+        for a, b in zip(kept, fresh):
+            for name in ("directions", "ring", "time"):
+                assert getattr(a, name).tobytes() == getattr(b, name).tobytes()
+            assert not a.directions.flags.writeable
+    assert rays.patterns(1)[0] is rays.patterns(2)[0]  # made once
+
+
+def test_a_rosette_is_not_kept():
+    config = load_config(None, ["sensor.preset=livox_mid40"])
+    assert config.sensor.spec.pattern == "rosette"
+    rays = SensorRays(config)
+    first, later = list(rays.patterns(0)), list(rays.patterns(1))
+    assert rays.kept is None
+    assert first[0].directions.tobytes() != later[0].directions.tobytes()
+
+
+def box_frames(config, rays: SensorRays | None, frames: int = 3) -> list[bytes]:
+    """Frames of a sensor in a closed box through the scan stages; ``rays`` None: a fresh SensorRays every frame (no kept rays)."""
+    buffers = SceneBuffers.from_meshes({"box": primitives.box(40.0, 40.0, 10.0)})
+    run = Run(config, build=False, rays=rays)
+    out = []
+    for index in range(frames):
+        if rays is None:
+            run.rays = SensorRays(config)
+        frame = Frame(index, config, frame_rng(config.seed, index), buffers=buffers)
+        for stage in (pose_stage, scan_stage, effects_stage):
+            stage(frame, run)
+        out.append(frame.points.tobytes())
+    return out
+
+
+@pytest.mark.parametrize("kernel", ["numba", "numpy"])
+def test_kept_rays_give_the_bytes_of_rays_made_every_frame(kernel, monkeypatch):
+    if kernel == "numba":
+        pytest.importorskip("numba")
+    monkeypatch.setenv("BPY_PIPELINE_SCAN_KERNEL", kernel)
+    config = load_config(None, ["sensor.preset=vlp16", "sensor.position=[0.2, -0.3, 0.1]"])
+    kept = box_frames(config, SensorRays(config))
+    fresh = box_frames(config, None)
+    assert kept == fresh
+    assert len(set(kept)) == 3  # the frames differ (their noise draws), so the comparison means something
+
+
+def test_compiled_and_numpy_paths_give_the_same_box_bytes(monkeypatch):
+    pytest.importorskip("numba")
+    config = load_config(None, ["sensor.preset=os1_128", "sensor.position=[0.2, -0.3, 0.1]"])
+    monkeypatch.setenv("BPY_PIPELINE_SCAN_KERNEL", "numba")
+    compiled = box_frames(config, SensorRays(config), 2)
+    monkeypatch.setenv("BPY_PIPELINE_SCAN_KERNEL", "numpy")
+    assert box_frames(config, SensorRays(config), 2) == compiled
+
+
+def test_compiled_splat_paints_the_pixels_of_the_numpy_splat(monkeypatch):
+    if preview._splat_kernel() is None:
+        pytest.skip("numba is not installed: only the numpy splat runs")
+    rng = np.random.default_rng(1)
+    n, h, w = 20000, 40, 60
+    col, row = rng.integers(0, w, n), rng.integers(0, h, n)
+    depth = rng.integers(0, 6, n).astype(np.float64)  # many equal depths on a pixel: the later point must win
+    colors = rng.integers(0, 256, (n, 3)).astype(np.uint8)
+    images = []
+    for kernel in (preview._splat_kernel(), None):
+        monkeypatch.setattr(preview, "_splat_kernel", lambda kernel=kernel: kernel)
+        image = np.zeros((h, w, 3), np.uint8)
+        depth_image = np.full((h, w), -np.inf)
+        depth_image[:5] = 3.0  # painted before: only points at least this deep go over it
+        preview.splat(image, col[: n // 2], row[: n // 2], depth[: n // 2], colors[: n // 2], depth_image)
+        preview.splat(image, col[n // 2 :], row[n // 2 :], depth[n // 2 :], colors[n // 2 :], depth_image)
+        fresh = np.zeros((h, w, 3), np.uint8)
+        preview.splat(fresh, col, row, depth, colors)
+        images.append((image.tobytes(), depth_image.tobytes(), fresh.tobytes()))
+    assert images[0] == images[1]
+    points = cloud(5000)
+    from bpy_pipeline.labels import load_class_table
+
+    table = load_class_table()
+    monkeypatch.setattr(preview, "_splat_kernel", lambda: None)
+    slow = preview.render_preview(points, table.color_lut(), names=table.names)
+    monkeypatch.undo()
+    assert preview.render_preview(points, table.color_lut(), names=table.names).tobytes() == slow.tobytes()
+
+
+def test_digests_taken_while_writing_are_the_files_sha256(tmp_path):
+    from bpy_pipeline.labels import load_class_table
+
+    points = cloud(3000)
+    with digests_while_writing() as digests:
+        files = [write_ply(tmp_path / "a.ply", points), *write_semantickitti(tmp_path, 0, 0, points), preview.write_preview(tmp_path / "p.png", points, load_class_table().color_lut())]
+    assert len(digests) == 4
+    for path in files:
+        assert digests[os.path.abspath(path)] == hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+def test_a_file_written_past_the_hashing_handle_gets_no_digest(tmp_path):
+    with digests_while_writing() as digests:
+        with atomic_write(tmp_path / "x.bin") as tmp:
+            with hashed_open(tmp) as f:
+                f.write(b"abc")
+            with open(tmp, "ab") as g:
+                g.write(b"more")
+        with atomic_write(tmp_path / "y.bin") as tmp:
+            with hashed_open(tmp) as f:
+                f.write(np.arange(5, dtype=np.int32))
+    assert os.path.abspath(tmp_path / "x.bin") not in digests
+    assert digests[os.path.abspath(tmp_path / "y.bin")] == hashlib.sha256(np.arange(5, dtype=np.int32).tobytes()).hexdigest()
+
+
+def test_frame_files_keep_the_writers_order_and_a_preview_failure_is_raised(tmp_path, monkeypatch):
+    from bpy_pipeline.dataset import write_frame_files
+    from bpy_pipeline.io import formats
+
+    config = load_config(None, ["output.formats=[ply, semantickitti]"])
+    frame = Frame(0, config, frame_rng(0, 0))
+    frame.points = cloud(2000)
+    written = write_frame_files(frame, tmp_path / "a", ["ply", "preview", "semantickitti"])
+    names = [Path(p).suffix for p in written]
+    assert names == [".ply", ".png", ".bin", ".label"]
+
+    def broken(*args, **kwargs):
+        raise ValueError("preview broke")
+
+    monkeypatch.setattr(formats, "write_frame_preview", broken)
+    with pytest.raises(ValueError, match="preview broke"):
+        write_frame_files(frame, tmp_path / "b", ["ply", "preview"])
+
+
+def test_a_single_effects_part_is_kept_and_several_are_joined():
+    part = cloud(100)
+    assert collect_points(iter([part]), 100) is part
+    parts = [cloud(50, 1), cloud(70, 2)]
+    assert collect_points(iter(parts), 10).tobytes() == np.concatenate(parts).tobytes()
+    assert len(collect_points(iter([]), 10)) == 0
