@@ -237,7 +237,7 @@ def mix_place(state: MixState) -> None:
         xyz = returns[valid]
         ground = find_ground(xyz, section.ground)
         work = Firings(**{**firings.__dict__, "valid": valid})
-        scene = Scene(work, ground, PointIndex(xyz[~ground.ground]), PointIndex(xyz[ground.ground]), list(placements))
+        scene = Scene(work, ground, PointIndex(xyz[~ground.ground]), PointIndex(xyz[ground.ground]), list(placements), section.car_bodies)
         state.lap("ground")
         real = real_placements(section.real_boxes) + labelled_boxes(firings, state.semantic_real, state.instance_real, table)
         for k, rule in enumerate([section.parking_rule, *section.parking_rules]):
@@ -252,7 +252,7 @@ def mix_place(state: MixState) -> None:
     first_instance = int(state.instance_real.max(initial=0)) + 1
     state.instances = [first_instance + k for k in range(len(placements))]
     state.semantic_ids = [table.id_of(p.class_name, "scene.objects.class") for p in placements]
-    parts = [object_parts(p, rng) for p in placements]
+    parts = [object_parts(p, rng, section.car_bodies) for p in placements]
     state.buffers = object_buffers(placements, parts, state.instances, state.semantic_ids)
     state.placements, state.rule_log = placements, rule_log
     state.lap("meshes")

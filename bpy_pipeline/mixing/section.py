@@ -14,13 +14,15 @@ from ..geometry.placement import Distribution
 
 @dataclass(frozen=True)
 class ObjectBox:
-    """One object: ``type`` car | person | robot_arm (or a user mesh file: .obj, .glb/.gltf, .ply), scaled to the box."""
+    """One object: ``type`` car | person | cyclist | robot_arm | box, or a mesh file (.glb, .gltf, .obj, .ply; glass where
+    a material's name says glass or window: :mod:`.objects`), scaled to the box (``size`` 0: the type's nominal size,
+    a file's own)."""
 
     type: str = "car"
     center: tuple[float, float, float] = (10.0, 0.0, 0.0)
     size: tuple[float, float, float] = (0.0, 0.0, 0.0)  # 0: the type's nominal size
     yaw_deg: float = 0.0
-    class_name: str = field(default="", metadata={"key": "class"})  # "" : the type's class (car, person, robot arm)
+    class_name: str = field(default="", metadata={"key": "class"})  # "" : the type's class (car, person, rider, robot arm; a file's by its name)
 
 
 @dataclass(frozen=True)
@@ -141,6 +143,9 @@ class RealScanScene:
     real_boxes : labelled real objects (class, box), whose occlusion is updated when inserted objects hide them
     ground : auto (Patchwork++ where installed, else RANSAC) | ransac | patchwork
     max_range : firings are cast this far, metres (0: the preset's, else 100 m)
+    car_bodies : all (the 24 bodies of geometry/objects.py BODIES: sedans, hatchbacks, estates, SUVs, pickups, vans, one
+        drawn per car; a rule's car takes its body's size) | classic (the builders' three styles at the rule's height:
+        the frames made before the body set, byte for byte). Explicit ``objects`` keep their box either way.
     """
 
     path: str = ""
@@ -157,3 +162,4 @@ class RealScanScene:
     real_boxes: list[ObjectBox] = field(default_factory=list)
     ground: Literal["auto", "ransac", "patchwork"] = "auto"
     max_range: float = 0.0
+    car_bodies: Literal["all", "classic"] = "all"
