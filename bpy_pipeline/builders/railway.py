@@ -174,6 +174,20 @@ class RailwayTrackside:
 
 
 @dataclass(frozen=True)
+class RailwayAssets:
+    """``scene.assets``: support assets from files (glTF/GLB, OBJ, PLY; IFC with ifcopenshell) in place of the
+    procedural ones, at every support the level of detail builds (geometry/railway_assets.py, docs/railway.md).
+    The asset's origin is its support's foot, its +Y facing the track, Z up, metres. ``classes``: ``{object or
+    material name glob: class}`` for its parts; else a name beginning with a support class names it (``insulator*``)."""
+
+    mast: str = ""  # replaces each mast of a single or both_sides layout (with its brackets)
+    cantilever: str = ""  # replaces each mast-face cantilever assembly (cantilever, registration arm, insulators, steady arm)
+    gantry: str = ""  # replaces each portal of a gantry layout
+    unit_scale: float = 1.0  # metres per file unit (OBJ and PLY drawn in mm: 0.001)
+    classes: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
 class RailwayScene:
     """``scene.builder: railway``: tracks on an arc or a straight line, supports, catenary, scanner stations."""
 
@@ -183,6 +197,7 @@ class RailwayScene:
     stations: RailwayStations = field(default_factory=RailwayStations)
     detail: RailwayDetail = field(default_factory=RailwayDetail)
     trackside: RailwayTrackside = field(default_factory=RailwayTrackside)
+    assets: RailwayAssets = field(default_factory=RailwayAssets)
     reroll_every: int = 0  # 0: one railway per run, drawn from frame 0's generator; k: a new one every k frames
 
     @property
@@ -218,6 +233,10 @@ def check(params: RailwayScene, where: str) -> None:
     if params.reroll_every < 0:
         raise InputError(f"{where}.reroll_every: must be >= 0 (0: one railway per run; k: a new railway every k frames), got {params.reroll_every}")
     check_railway(params, where)
+    from ..geometry.railway_assets import check_assets
+    from ..labels import load_class_table
+
+    check_assets(params.assets, f"{where}.assets", load_class_table().names.values())
 
 
 def station(params: RailwayScene, frame: int) -> np.ndarray | None:

@@ -38,7 +38,7 @@ from ..geometry.primitives import merge
 from ..geometry.terrain import terrain_mesh
 from ..geometry.railway_layout import ARM_RISE, BEAM_RADIUS, EARTH_BRACKET, FEEDER_BRACKET, MIN_WIRE_SIDES, STAY_RISE, RailwayLayout, cant_angle, cantilevers, level_of_detail, plan
 from .nodes import add_group_modifier
-from . import catenary_nodes
+from . import catenary_nodes, railway_assets
 from .objects import mesh_data, mesh_object, scene_collection, tag
 from .railway_nodes import PARTS, track_group
 
@@ -68,6 +68,7 @@ def build(params, rng: np.random.Generator, view=None) -> RailwayLayout:
     centreline["rail_top_height"] = float(layout.section.rail_top)
     _track(params, layout, detail, centreline, int(rng.integers(0, 2**31 - 1)), collection, cant_angle(params.track, layout.alignment))
     _supports(params, layout, detail, collection)
+    railway_assets.place(params, layout, detail, collection, REFLECTIVITY)  # scene.assets: support assets from files in place of these
     _wires(layout, detail, collection)
     _anchors_and_sections(params, layout, detail, collection)
     signals = _trackside(params, layout, rng, collection)
