@@ -580,3 +580,121 @@ def test_figures_frame_time(chroot, work):
 
         existing["module"] = f"bpy {bpy.app.version_string} (Python {sys.version.split()[0]})"
         path.write_text(json.dumps(existing, indent=1, sort_keys=True) + "\n")
+
+
+# ----------------------------------------------------------------------------- Geometry Nodes groups (issue 31)
+def test_node_groups_match_the_pure_functions_and_an_edited_input_rescans(chroot, work):
+    """tests/blender/nodes_check.py in this Blender: groups per builder, group against pure function,
+    and an input changed from Python (sag, bay width, tree density) changing the scan where it should."""
+    out = work / f"nodes-{chroot.suite}.json"
+    folder = work / f"nodes-{chroot.suite}"
+    folder.mkdir(exist_ok=True)
+    result = chroot.blender(["--background", "--factory-startup", "--python-exit-code", "1", "--python", str(ROOT / "tests" / "blender" / "nodes_check.py"), "--", str(out), str(folder)],
+                            work / f"home-{chroot.suite}", timeout=600)
+    assert result.returncode == 0 and out.is_file(), result.stdout[-3000:] + result.stderr[-3000:]
+    found = json.loads(out.read_text())
+    assert "error" not in found, found["error"]
+    FIGURES.setdefault(chroot.suite, {})["node_groups"] = found
+    counts = found["counts"]
+    assert counts["railway"]["groups"] == ["Catenary Droppers", "Catenary Wire", "Track"] and counts["railway"]["modifiers"] > 5
+    assert counts["parking"]["groups"] == ["Parking Level"] and counts["parking"]["modifiers"] == 5
+    assert counts["industrial_hall"]["groups"] == ["Industrial Hall"] and counts["industrial_hall"]["modifiers"] >= 3
+    assert counts["street"]["groups"] == ["Street Scatter"] and counts["street"]["modifiers"] == 7
+    difference = found["max_vertex_difference_m"]
+    assert difference["catenary wires"] <= 1e-5 and difference["parking"] <= 1e-5 and difference["industrial_hall"] <= 1e-5, difference
+    sag = found["railway_sag"]  # every contact wire 0.3 m lower at mid-span: its points lower, nothing else moved
+    assert sag["edited_changed"] and sag["edited_mean_z"][1] < sag["edited_mean_z"][0] - 0.05 and sag["other_moved_over_1mm"] == 0, sag
+    bays = found["parking_bay_width"]  # 2.8 m bays: the pillars moved to where the pure level with 2.8 m bays has them
+    assert bays["edited_changed"] and bays["pillar_points_off_the_new_pillars_m"] <= 1e-3 and bays["other_moved_over_1mm"] == 0, bays
+    assert found["street_density"]["edited_changed"], found["street_density"]
+
+
+NODE_EDITOR = """
+obj = next(o for o in bpy.data.objects if o.name.endswith('.contact_wire') and o.modifiers)
+for o in bpy.context.view_layer.objects:
+    o.select_set(False)
+obj.hide_set(False)
+obj.select_set(True)
+bpy.context.view_layer.objects.active = obj
+obj.modifiers.active = obj.modifiers[0]
+ctx = context_override()
+area = ctx['area']
+area.ui_type = 'GeometryNodeTree'
+space = area.spaces.active
+if space.node_tree is None or space.node_tree.name != obj.modifiers[0].node_group.name:
+    space.pin = True
+    space.node_tree = obj.modifiers[0].node_group
+region = next(r for r in area.regions if r.type == 'WINDOW')
+with bpy.context.temp_override(window=ctx['window'], screen=ctx['screen'], area=area, region=region):
+    bpy.ops.node.view_all()
+area.tag_redraw()
+reply['tree'] = space.node_tree.name if space.node_tree else None
+reply['nodes'] = len(space.node_tree.nodes) if space.node_tree else 0
+"""
+
+
+def test_gui_node_editor_shows_the_catenary_wire_group(gui):
+    session, state = gui
+    shown = session.call(NODE_EDITOR)
+    assert shown["tree"] == "Catenary Wire" and shown["nodes"] > 10, shown
+    area = state["area"]
+    for dx in (0, 10):  # events make Blender redraw
+        session.xdo("mousemove", area["x"] + 300 + dx, area["y"] + 300 + dx)
+        time.sleep(0.5)
+    time.sleep(1.0)
+    _, path = session.screenshot("node_editor")
+    keep_shot(session.chroot.suite, path, "node_editor_catenary_wire", (area["x"], area["y"], area["x"] + area["width"], area["y"] + area["height"]), width=1100)
+    session.call("context_override()['area'].ui_type = 'VIEW_3D'")
+
+
+SAG_EDIT = """
+from bpy_pipeline.compat import get_modifier_input, set_modifier_input
+edited = 0
+for obj in bpy.data.objects:
+    if obj.name.endswith('.contact_wire') and obj.modifiers:
+        set_modifier_input(obj.modifiers[0], 'Sag', get_modifier_input(obj.modifiers[0], 'Sag') + 0.3)
+        obj.update_tag()
+        edited += 1
+bpy.context.view_layer.update()
+reply['edited'] = edited
+"""
+
+
+def test_gui_an_input_changed_from_python_then_scan_scans_the_edited_scene(gui):
+    """Every contact wire's Sag 0.3 m more, set as from the Python console, then the panel's Scan: the
+    contact wire's points are lower, the beams that hit anything else land where they did."""
+    session, state = gui
+    rows = main_buttons(session, state)
+    session.click(*centre(rows[3][2]))  # Reset config: the default railway job (the load test left the primitives')
+    session.wait("reply['done'] = bpy.context.scene.lidar.status == 'default config'", timeout=30)
+    session.call("bpy.context.scene.lidar.effects.ideal = True")  # the ideal scan: no noise drawn in a point order the edit changes
+    clouds = {}
+    for step in ("before", "after"):
+        if step == "after":
+            assert session.call(SAG_EDIT)["edited"] > 0
+        out = session.work / f"out_rescan_{step}"
+        session.call(f"bpy.context.scene.lidar.out_dir = {str(out)!r}")
+        rows = main_buttons(session, state)
+        session.click(*centre(rows[0][1]))  # Scan
+        time.sleep(2.0)
+        done = f"import pathlib; reply['done'] = bool(sorted(pathlib.Path({str(out)!r}).glob('records/*.json')))"
+        if not session.call(done)["done"]:
+            session.key("Return")  # the dialog about objects outside the built scene: leave them out
+        session.wait(done, timeout=300)
+        from bpy_pipeline.io import read_ply
+
+        clouds[step] = read_ply(next((out / "ply").glob("*.ply")))
+    wire = _table().id_of("contact wire", "lane")
+    before, after = clouds["before"], clouds["after"]
+    key = lambda p: {(int(r), float(t)): i for i, (r, t) in enumerate(zip(p["ring"], p["time"]))}  # noqa: E731
+    a, b = key(before), key(after)
+    pairs = np.array([(a[k], b[k]) for k in a.keys() & b.keys()])
+    other = (before["semantic"][pairs[:, 0]] != wire) & (after["semantic"][pairs[:, 1]] != wire)
+    xyz = lambda p, i: np.column_stack([p["x"][i], p["y"][i], p["z"][i]]).astype(float)  # noqa: E731
+    moved = np.linalg.norm(xyz(before, pairs[other, 0]) - xyz(after, pairs[other, 1]), axis=1)
+    wires = [c[c["semantic"] == wire] for c in (before, after)]
+    figures = {"contact_wire_points": [len(w) for w in wires], "contact_wire_mean_z": [round(float(w["z"].mean()), 4) for w in wires],
+               "other_beams": int(other.sum()), "other_moved_over_1mm": int((moved > 1e-3).sum())}
+    FIGURES.setdefault(session.chroot.suite, {})["gui_edit_and_rescan"] = figures
+    assert min(figures["contact_wire_points"]) > 0 and figures["contact_wire_mean_z"][1] < figures["contact_wire_mean_z"][0] - 0.05, figures
+    assert figures["other_moved_over_1mm"] == 0, figures
