@@ -341,8 +341,9 @@ def scene_places_sensor(scene: SceneConfig) -> bool:
 def _scene_from_dict(data) -> SceneConfig:
     data = dict(_mapping(data, "scene", "builder: NAME and its parameters"))
     name = data.pop("builder", "railway")
-    population = population_from_dict(data.pop("population", None))
     builder = BUILDER_REGISTRY.get(name)
+    own = "population" in {f.name for f in dataclasses.fields(builder.params)}  # a builder with its own population keys (real_scan)
+    population = None if own else population_from_dict(data.pop("population", None))
     if population is not None and not builder.blender_scene:  # no Blender scene to place into
         raise InputError(f"scene.population: the {name} scene makes its points without a Blender scene; place objects with its own keys (scene.objects)")
     params = from_dict(builder.params, data, "scene")

@@ -248,11 +248,16 @@ def mix_place(state: MixState) -> None:
             placed, rule_log["kitti"] = kitti_rule(scene, section.kitti_rule, xyz[ground.ground], real, rng)
             placements += placed
         rule_log["ground"] = {"method": ground.method, "normal": [round(float(v), 5) for v in ground.normal], "offset": round(ground.offset, 4), "points": int(ground.ground.sum())}
+    if section.population.people or section.population.arms:  # people and arms on the floors and desks found in the scan (.supports)
+        from .supports import populate
+
+        placed, rule_log["population"] = populate(returns[valid], section.population, rng, placements)
+        placements += placed
     state.lap("placement")
     first_instance = int(state.instance_real.max(initial=0)) + 1
     state.instances = [first_instance + k for k in range(len(placements))]
     state.semantic_ids = [table.id_of(p.class_name, "scene.objects.class") for p in placements]
-    parts = [object_parts(p, rng, section.car_bodies) for p in placements]
+    parts = [getattr(p, "parts", None) or object_parts(p, rng, section.car_bodies) for p in placements]  # populated ones carry theirs
     state.buffers = object_buffers(placements, parts, state.instances, state.semantic_ids)
     state.placements, state.rule_log = placements, rule_log
     state.lap("meshes")

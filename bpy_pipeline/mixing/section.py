@@ -130,6 +130,72 @@ NOISE_PROFILES = {
 
 
 @dataclass(frozen=True)
+class SupportParams:
+    """How support surfaces are found in a real scan's points (:func:`~.supports.find_supports`): sequential RANSAC
+    of near-horizontal planes, DBSCAN of each plane's inliers in the plane.
+
+    threshold : m, a plane's inlier distance; iterations : RANSAC draws per plane; max_tilt_deg : a plane's normal
+        from +z at most; max_planes : planes taken out in turn; min_inliers : fewer ends the search
+    voxel : m, the cells a plane's inliers are thinned to (and a surface's spots); eps, min_samples : DBSCAN over
+        those cells (m; cells within eps, itself included); min_area : m^2, min_width : m (minor extent) of a surface
+    desk_height : m above the floor plane of a desk (or bench, seat); floor_band : m, surfaces this near the floor's
+        plane are floor; headroom, max_covered : a desk (and a floor other than the largest) has at most this share
+        of its cells with points up to ``headroom`` m above it (a shelf board under the next is not a desk)
+    sample : RANSAC scores each draw on at most this many points; seed : its own generator (the surfaces of a
+        scan do not depend on the frame's draws)
+    """
+
+    threshold: float = 0.05
+    iterations: int = 300
+    max_tilt_deg: float = 10.0
+    max_planes: int = 10
+    min_inliers: int = 30
+    voxel: float = 0.1
+    eps: float = 0.4
+    min_samples: int = 4
+    min_area: float = 0.25
+    min_width: float = 0.3
+    desk_height: tuple[float, float] = (0.4, 1.2)
+    floor_band: float = 0.2
+    headroom: float = 0.8
+    max_covered: float = 0.25
+    sample: int = 20000
+    seed: int = 0
+
+
+@dataclass(frozen=True)
+class RealPopulation:
+    """``scene.population`` of a real scan: ``people`` standing people on the ``people_on`` surfaces and ``arms``
+    robot arms on the ``arms_on`` surfaces (floor, desk, other) that :class:`SupportParams` finds in its points.
+
+    person_height : m, drawn per person (the population builder's N(1.72, 0.09) in 1.50-1.98)
+    tries : spots tried per object; keep_out : m between objects' boxes (those placed before included)
+    clearance : m above its surface from which real returns count as obstacles; max_points : real returns a
+        person's box may hold; margin : m an arm's capsules keep from real returns
+    reach, arm_reach : m around a foot (a footprint corner) or an arm base point within which surface points must
+        lie, at a local height within ``step`` m of the spot's
+    min_range, max_range : m from the sensor in the plane (0: no limit)
+    """
+
+    people: int = 0
+    arms: int = 0
+    people_on: list[str] = field(default_factory=lambda: ["floor"])
+    arms_on: list[str] = field(default_factory=lambda: ["desk"])
+    person_height: Distribution = field(default_factory=lambda: Distribution("normal", 1.72, 0.09, 1.50, 1.98))
+    tries: int = 60
+    keep_out: float = 0.3
+    clearance: float = 0.1
+    max_points: int = 0
+    margin: float = 0.03
+    reach: float = 0.3
+    arm_reach: float = 0.15
+    step: float = 0.05
+    min_range: float = 1.0
+    max_range: float = 0.0
+    supports: SupportParams = field(default_factory=SupportParams)
+
+
+@dataclass(frozen=True)
 class RealScanScene:
     """``scene.builder: real_scan``: a real scan as the background, objects cast in with the real sensor's own firings.
 
@@ -146,6 +212,8 @@ class RealScanScene:
     car_bodies : all (the 24 bodies of geometry/objects.py BODIES: sedans, hatchbacks, estates, SUVs, pickups, vans, one
         drawn per car; a rule's car takes its body's size) | classic (the builders' three styles at the rule's height:
         the frames made before the body set, byte for byte). Explicit ``objects`` keep their box either way.
+    population : people and robot arms on the floors and desks found in the scan's points (:class:`RealPopulation`,
+        :mod:`.supports`; off with no people and no arms)
     """
 
     path: str = ""
@@ -163,3 +231,4 @@ class RealScanScene:
     ground: Literal["auto", "ransac", "patchwork"] = "auto"
     max_range: float = 0.0
     car_bodies: Literal["all", "classic"] = "all"
+    population: RealPopulation = field(default_factory=RealPopulation)
