@@ -118,14 +118,57 @@ def stage_part(frames: int) -> dict:
         blobs = [(out / rel).read_bytes() for rel in last.files]
         best_trace = min(raw_trace() for _ in range(3))
         best_write = min(raw_write(blobs, Path(tmp) / f"best{k}") for k in range(3))
+    cpu = cpu_part(config, made[-1].buffers, raw_trace)
     pool.shutdown()
-    return {"code": str(Path(bpy_pipeline.__file__).parent), "rays": len(d32), "points": len(last.points), "frames": frames,
+    return {**cpu, "code": str(Path(bpy_pipeline.__file__).parent), "rays": len(d32), "points": len(last.points), "frames": frames,
             "scan_s": scan, "raw_embreex_s": best_trace, "scan_ratio": best_trace / scan,
             "write_s": write, "raw_write_s": best_write, "write_over_raw": write / best_write,
             "interleaved_scan_ratio": statistics.median(r / s for s, r, _, _ in pairs),
             "interleaved_write_over_raw": statistics.median(w / r for _, _, w, r in pairs),
             "bytes_written": sum(len(b) for b in blobs), "files": list(last.files),
             "timings_frames_2_3": [{k: round(v, 4) for k, v in f.timings.items()} for f in later]}  # fmt: skip
+
+
+def cpu_part(config, buffers, raw_trace, frames: int = 8) -> dict:
+    """CPU seconds (every thread of the process) of the scan stages of ``frames`` frames of the box, one after
+    another in one run, against the raw trace's, alternating: a reading the machine's load moves less than wall time."""
+    from bpy_pipeline.frame import Frame, Run, frame_rng
+    from bpy_pipeline.stages.scan import effects_stage, scan_stage
+    from bpy_pipeline.stages.scene import pose_stage
+
+    from bpy_pipeline.stages import scan as scan_module
+
+    effects_cpu = [0.0]
+    apply_effects = scan_module.apply_effects
+
+    def timed_effects(*args, **kwargs):  # the effects' share of the stage (drop, noise, intensity: numpy on their own threads)
+        start = time.process_time()
+        try:
+            return apply_effects(*args, **kwargs)
+        finally:
+            effects_cpu[0] += time.process_time() - start
+
+    scan_module.apply_effects = timed_effects
+    run = Run(config, build=False)
+    stage, raw, effects = [], [], []
+    for index in range(frames + 1):
+        effects_cpu[0] = 0.0
+        frame = Frame(index, config, frame_rng(config.seed, index), buffers=buffers)
+        pose_stage(frame, run)
+        start = time.process_time()
+        scan_stage(frame, run)
+        effects_stage(frame, run)
+        took = time.process_time() - start
+        start = time.process_time()
+        raw_trace()
+        if index:  # the first frame builds the caster and the kept rays
+            stage.append(took)
+            raw.append(time.process_time() - start)
+            effects.append(effects_cpu[0])
+    scan_module.apply_effects = apply_effects
+    traced = [s - e for s, e in zip(stage, effects)]
+    return {"scan_cpu_s": statistics.median(stage), "effects_cpu_s": statistics.median(effects), "raw_embreex_cpu_s": statistics.median(raw),
+            "cpu_scan_ratio": statistics.median(raw) / statistics.median(stage), "cpu_scan_without_effects_ratio": statistics.median(raw) / statistics.median(traced)}  # fmt: skip
 
 
 def in_checkout(code: Path, frames: int) -> dict:
@@ -211,7 +254,7 @@ def main() -> None:
         if args.baseline is not None:
             results["stages"].append({"checkout": "baseline", **in_checkout(args.baseline.resolve(), args.frames)})
     for row in results["stages"]:
-        print(f"{row['checkout']}: scan {row['scan_s'] * 1e3:.1f} ms vs raw {row['raw_embreex_s'] * 1e3:.1f} ms (ratio {row['scan_ratio']:.2f}, interleaved {row['interleaved_scan_ratio']:.2f}); "
+        print(f"{row['checkout']}: scan {row['scan_s'] * 1e3:.1f} ms vs raw {row['raw_embreex_s'] * 1e3:.1f} ms (ratio {row['scan_ratio']:.2f}, interleaved {row['interleaved_scan_ratio']:.2f}, CPU {row['cpu_scan_ratio']:.2f}); "
               f"write {row['write_s'] * 1e3:.1f} ms vs raw {row['raw_write_s'] * 1e3:.1f} ms ({row['write_over_raw']:.2f}x, interleaved {row['interleaved_write_over_raw']:.2f}x)", flush=True)  # fmt: skip
     old = args.old.resolve() if args.old is not None else None
     results["fps"] = []
