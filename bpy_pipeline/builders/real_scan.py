@@ -13,6 +13,7 @@ from ..geometry.placement import check_distribution
 from ..io.real_scans import FORMATS
 from ..mixing.objects import check_type
 from ..mixing.section import RealScanScene
+from ..mixing.supports import KINDS_OF_SURFACE as SURFACE_KINDS
 from .base import Builder, BuildContext, BuildResult, register_builder
 
 
@@ -45,6 +46,38 @@ def check(params: RealScanScene, where: str) -> None:
         check_distribution(parking.count, f"{key}.count", low=0.0)
         check_distribution(parking.distance, f"{key}.distance", low=0.0)
         check_distribution(parking.heading, f"{key}.heading", low=-180.0, high=180.0)
+    check_population(params.population, f"{where}.population")
+
+
+def check_population(pop, where: str) -> None:
+    """``scene.population`` of a real scan (:class:`~bpy_pipeline.mixing.section.RealPopulation`): one line naming the key."""
+    for key in ("people", "arms", "max_points"):
+        if getattr(pop, key) < 0:
+            raise InputError(f"{where}.{key}: must be >= 0, got {getattr(pop, key)}")
+    for key in ("people_on", "arms_on"):
+        bad = [k for k in getattr(pop, key) if k not in SURFACE_KINDS]
+        if bad or not getattr(pop, key):
+            raise InputError(f"{where}.{key}: a non-empty list of {', '.join(SURFACE_KINDS)}, got {list(getattr(pop, key))}")
+    for key in ("tries",):
+        if getattr(pop, key) < 1:
+            raise InputError(f"{where}.{key}: must be >= 1, got {getattr(pop, key)}")
+    for key in ("keep_out", "clearance", "margin", "reach", "arm_reach", "step", "min_range", "max_range"):
+        if not getattr(pop, key) >= 0:
+            raise InputError(f"{where}.{key}: must be >= 0 m, got {getattr(pop, key)}")
+    check_distribution(pop.person_height, f"{where}.person_height", low=0.3)
+    s = pop.supports
+    for key in ("threshold", "voxel", "eps", "min_area", "min_width", "headroom", "floor_band"):
+        if not getattr(s, key) > 0:
+            raise InputError(f"{where}.supports.{key}: must be > 0 m, got {getattr(s, key)}")
+    for key in ("iterations", "max_planes", "min_inliers", "min_samples", "sample"):
+        if getattr(s, key) < 1:
+            raise InputError(f"{where}.supports.{key}: must be >= 1, got {getattr(s, key)}")
+    if not 0 <= s.max_tilt_deg < 90:
+        raise InputError(f"{where}.supports.max_tilt_deg: must be 0 .. 90 (exclusive), got {s.max_tilt_deg}")
+    if not 0 <= s.max_covered <= 1:
+        raise InputError(f"{where}.supports.max_covered: must be 0 .. 1, got {s.max_covered}")
+    if not 0 <= s.desk_height[0] <= s.desk_height[1]:
+        raise InputError(f"{where}.supports.desk_height: expected 0 <= min <= max m, got {list(s.desk_height)}")
 
 
 def build(params: RealScanScene, context: BuildContext) -> BuildResult:

@@ -188,7 +188,7 @@ class RealPopulation:
     max_points: int = 0
     margin: float = 0.03
     reach: float = 0.3
-    arm_reach: float = 0.15
+    arm_reach: float = 0.2
     step: float = 0.05
     min_range: float = 1.0
     max_range: float = 0.0

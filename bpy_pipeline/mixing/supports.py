@@ -18,8 +18,8 @@ six-axis arm at a valid random pose) on theirs, as :class:`Populated` placements
 in the scan's sensor frame, so the real-scan builder casts the real firings at them (:mod:`.cast`).
 A candidate is refused when real returns more than ``clearance`` m above its surface fall in a
 person's box or within ``margin`` m of an arm's capsules (:class:`~.ground.PointIndex`), when its
-footprint leaves the surface (no surface points within reach of its feet or base, or their local
-height more than ``step`` m off), or when it comes within ``keep_out`` m of an object placed before.
+footprint leaves the surface (a foot or base point without surface points around it, on an edge, or
+at a local height more than ``step`` m off), or when it comes within ``keep_out`` m of an object placed before.
 
 Coordinates: the scan's sensor frame (x forward, y left, z up), metres; the sensor is assumed level
 (a horizontal surface is horizontal in its frame within ``max_tilt_deg``). Pure numpy and scipy.
@@ -249,12 +249,21 @@ class Surfaces:
 
     def local_height(self, k: int, xy: np.ndarray, reach: float) -> np.ndarray:
         """``(m,)`` median z of surface ``k``'s points within ``reach`` m (xy) of each of ``(m, 2)`` points; nan where none."""
+        return self.local(k, xy, reach)[0]
+
+    def local(self, k: int, xy: np.ndarray, reach: float) -> tuple[np.ndarray, np.ndarray]:
+        """``(height (m,), offset (m,))``: the median z of surface ``k``'s points within ``reach`` m (xy) of each of
+        ``(m, 2)`` points and how far their mean lies from it in the plane (about 0.42 ``reach`` on a straight edge,
+        near 0 inside); nan where none."""
         s = self.chosen[k]
-        out = np.full(len(xy), np.nan)
-        for j, near in enumerate(self.trees[k].query_ball_point(np.asarray(xy, float), reach)):
+        xy = np.asarray(xy, float)
+        height, offset = np.full(len(xy), np.nan), np.full(len(xy), np.nan)
+        for j, near in enumerate(self.trees[k].query_ball_point(xy, reach)):
             if len(near):
-                out[j] = float(np.median(self.points[s.index[near], 2]))
-        return out
+                rows = s.index[near]
+                height[j] = float(np.median(self.points[rows, 2]))
+                offset[j] = float(np.linalg.norm(self.points[rows, :2].mean(axis=0) - xy[j]))
+        return height, offset
 
     def spot(self, rng: np.random.Generator) -> tuple[int, np.ndarray]:
         """A surface (weighted by its cells) and a point of one of its cells (uniform in the cell)."""
@@ -296,10 +305,14 @@ def capsules_clear(obstacles: PointIndex, a: np.ndarray, b: np.ndarray, radius: 
     return bool((d > margin).all())
 
 
+EDGE = 0.3  # a footing point's surface points within reach must centre within this share of the reach on it (not on an edge)
+
+
 def _footing(surfaces: Surfaces, k: int, xy: np.ndarray, z: float, reach: float, step: float) -> bool:
-    """Whether every one of ``(m, 2)`` footing points has surface ``k`` within ``reach`` m at a height within ``step`` of ``z``."""
-    h = surfaces.local_height(k, xy, reach)
-    return bool(np.isfinite(h).all() and (np.abs(h - z) <= step).all())
+    """Whether every one of ``(m, 2)`` footing points lies inside surface ``k``: its points within ``reach`` m centred
+    on it (within ``EDGE`` of the reach: not on or past an edge) at a height within ``step`` m of ``z``."""
+    h, offset = surfaces.local(k, xy, reach)
+    return bool(np.isfinite(h).all() and (np.abs(h - z) <= step).all() and (offset <= EDGE * reach).all())
 
 
 def _draw_person(rng: np.random.Generator, spec: RealPopulation) -> dict:
