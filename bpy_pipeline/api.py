@@ -28,7 +28,7 @@ from typing import Iterable, Mapping
 
 import numpy as np
 
-from .buffers import MATERIAL_ID, ObjectTable, SceneBuffers
+from .buffers import ObjectTable, SceneBuffers
 from .config import Config, config_from_dict
 from .config import load_config as _load_config
 from .errors import InputError
@@ -63,7 +63,9 @@ def run(config: Config, out: str | Path, frames: Iterable[int] | None = None, mo
 def scene_buffers(meshes: SceneBuffers | Mapping) -> SceneBuffers:
     """Scene buffers of ``meshes``: buffers as they are, or ``{name: (vertices (n, 3) m, triangles (m, 3))}``
     with an optional class name, material and reflectivity after the triangles
-    (``(v, t, "car", "diffuse", 0.3)``); objects are ``unlabeled``, ``diffuse``, 0.5 by default."""
+    (``(v, t, "car", "diffuse", 0.3)``); objects are ``unlabeled``, ``diffuse``, 0.5 by default. The material is a tracing
+    one (diffuse, mirror, glass, absorber) or a reflectance model of lidar/materials.py (``glossy_paint``,
+    ``retroreflector``, ``dark_paint``, ``wet``: traced as diffuse, applied with ``effects.materials.objects: true``)."""
     from .geometry.checks import check_fraction, check_mesh
 
     if isinstance(meshes, SceneBuffers):
@@ -74,6 +76,7 @@ def scene_buffers(meshes: SceneBuffers | Mapping) -> SceneBuffers:
     if not isinstance(meshes, Mapping):
         raise InputError(f"meshes: expected scene buffers or a mapping {{name: (vertices (n, 3), triangles (m, 3)[, class, material, reflectivity])}}, got {type(meshes).__name__}")
     from .labels import load_class_table
+    from .lidar.materials import part_material
 
     table = load_class_table()
     checked = {}
@@ -82,17 +85,17 @@ def scene_buffers(meshes: SceneBuffers | Mapping) -> SceneBuffers:
             raise InputError(f"meshes[{name!r}]: expected (vertices (n, 3), triangles (m, 3)[, class, material, reflectivity]), got {type(mesh).__name__}")
         checked[name] = check_mesh(mesh[0], mesh[1], f"meshes[{name!r}]")
     buffers = SceneBuffers.from_meshes(checked)
-    classes, materials, reflectivity = [], [], []
+    classes, materials, reflectivity, surface = [], [], [], []
     for name, mesh in meshes.items():
         extra = list(mesh[2:]) + [None] * 3
         classes.append(table.names[table.id_of(extra[0] or "unlabeled", f"meshes[{name!r}] class")])
-        material = extra[1] or "diffuse"
-        if material not in MATERIAL_ID:
-            raise InputError(f"meshes[{name!r}] material: expected one of {', '.join(MATERIAL_ID)}, got {material!r}")
-        materials.append(MATERIAL_ID[material])
+        traced, model = part_material(extra[1] or "diffuse", f"meshes[{name!r}] material")  # a tracing material or a reflectance model
+        materials.append(traced)
+        surface.append(model)
         reflectivity.append(0.5 if extra[2] is None else check_fraction(extra[2], f"meshes[{name!r}] reflectivity"))
     objects = buffers.objects
-    buffers.objects = ObjectTable(objects.names, objects.parents, classes, np.array([table.id_of(c) for c in classes], np.uint16), objects.instance, np.array(materials, np.uint8), np.array(reflectivity, np.float32))
+    buffers.objects = ObjectTable(objects.names, objects.parents, classes, np.array([table.id_of(c) for c in classes], np.uint16), objects.instance, np.array(materials, np.uint8), np.array(reflectivity, np.float32),
+                                  np.array(surface, np.uint8) if any(surface) else None)
     return buffers
 
 

@@ -61,3 +61,39 @@ def test_counts_against_the_real_car_and_glossy_paint_against_diffuse(car_3, ben
     assert glossy["sim/real per car"][0] < diffuse["sim/real per car"][0]  # 15 m, oblique sides: the coat sends some beams away
     assert glossy["sim zero share"] > diffuse["sim zero share"]
     assert glossy["overlap"] > diffuse["overlap"]  # dark paint reads nearer KITTI's mostly-dark car returns
+
+
+def test_parts_may_name_a_reflectance_model_where_tracing_materials_were_the_only_choice():
+    """api.scan's meshes and the inserted objects' parts (mixing/cast.py) accept lidar/materials.py's model names."""
+    import bpy_pipeline
+    from bpy_pipeline.buffers import MATERIAL_ID
+    from bpy_pipeline.errors import InputError
+    from bpy_pipeline.geometry.objects import ObjectPart
+    from bpy_pipeline.lidar.materials import model_id
+    from bpy_pipeline.mixing.cast import object_buffers
+    from bpy_pipeline.mixing.placement import Placement
+
+    # two walls 30 m ahead, turned 60 deg from the beams: one glossy, one matte (same reflectivity)
+    c, s = np.cos(np.radians(60)), np.sin(np.radians(60))
+    wall = np.array([[0, -1, -1], [0, 1, -1], [0, 1, 1], [0, -1, 1]], float) @ np.array([[c, s, 0], [-s, c, 0], [0, 0, 1]]).T
+    tri = np.array([[0, 1, 2], [0, 2, 3]])
+    meshes = {"glossy": (wall + [30, -3, 0], tri, "car", "glossy_paint", 0.5), "matte": (wall * [1, -1, 1] + [30, 3, 0], tri, "car", "diffuse", 0.5)}  # its mirror image
+    sensor = {"preset": "custom", "pattern": "spinning", "channels": 16, "vertical_fov_deg": [-1.5, 1.5], "horizontal_fov_deg": [-10, 10],
+              "horizontal_resolution_deg": 0.1, "min_range": 1.0, "max_range": 100.0}
+    effects = {"drop": {"model": "threshold", "threshold": {"range_at_10": 50.0, "range_at_80": 120.0, "softness": 0.0}},
+               "intensity": {"incidence_exponent": 0.0}, "noise": {"sigma": 0.0, "sigma_per_metre": 0.0}}
+    seen = {on: bpy_pipeline.scan(meshes, sensor, effects={**effects, "materials": {"objects": on}}, seed=1) for on in (False, True)}
+    left = {on: int((seen[on]["y"] < 0).sum()) for on in seen}
+    right = {on: int((seen[on]["y"] > 0).sum()) for on in seen}
+    assert left[False] > 50 and right[False] == right[True] and abs(right[True] - left[False]) <= 0.05 * left[False]  # opt-in; the matte wall keeps all
+    assert left[True] == 0  # the glossy one, 60 deg off normal at 30 m, sends every beam away
+    with pytest.raises(InputError, match=r"^meshes\['x'\] material: expected one of diffuse, mirror, glass, absorber, glossy_paint.*got 'chrome'$"):
+        bpy_pipeline.scan({"x": (wall, tri, "car", "chrome", 0.5)}, sensor)
+    # inserted objects: a plate part traced as diffuse with the retroreflector model; a bad name is one line
+    v, t = wall + [10, 0, 0], tri
+    placement = Placement("car", "car", np.array([10.0, 0, 0]), np.array([1.0, 1, 1]), 0.0)
+    table = object_buffers([placement], [[ObjectPart(v, t, "diffuse", 0.5), ObjectPart(v, t, "retroreflector", 0.8)]], [5], [1]).objects
+    assert list(table.material) == [MATERIAL_ID["diffuse"]] * 2 and list(table.surface) == [0, model_id("retroreflector")]
+    assert object_buffers([placement], [[ObjectPart(v, t, "glass", 0.1)]], [5], [1]).objects.surface is None  # no model: as before
+    with pytest.raises(InputError, match=r"^inserted object 0 part 0 material: expected one of .*got 'chrome'$"):
+        object_buffers([placement], [[ObjectPart(v, t, "chrome", 0.5)]], [5], [1])

@@ -139,6 +139,20 @@ def model_from_material(lidar_material, roughness, metallic, where: str) -> str:
     return "glossy_paint" if float(roughness) <= GLOSSY_ROUGHNESS else ""
 
 
+def part_material(name: str, where: str) -> tuple[int, int]:
+    """``(material, surface)`` of a mesh part's material name: a tracing material of ``buffers.MATERIALS`` (diffuse,
+    mirror, glass, absorber) as it is with no model, or a name of :data:`MATERIAL_MODELS` (``glossy_paint``,
+    ``retroreflector``, ...) traced as ``diffuse`` with that model (the object table's ``surface``, read under
+    ``effects.materials.objects``); ``InputError`` naming ``where`` for another name."""
+    from ..buffers import MATERIAL_ID
+
+    if name in MATERIAL_ID:
+        return MATERIAL_ID[name], 0
+    if name in MATERIAL_MODELS:
+        return MATERIAL_ID["diffuse"], model_id(name)
+    raise InputError(f"{where}: expected one of {', '.join([*MATERIAL_ID, *MATERIAL_MODELS])}, got {name!r}")
+
+
 def model_id(name: str) -> int:
     """0 for ``""`` (no model), else 1 + the place of ``name`` in :data:`MATERIAL_MODELS` (the object table's ``surface``)."""
     return 0 if not name else 1 + list(MATERIAL_MODELS).index(name)

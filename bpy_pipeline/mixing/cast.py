@@ -19,8 +19,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..buffers import MATERIAL_ID, ObjectTable, SceneBuffers
+from ..buffers import ObjectTable, SceneBuffers
 from ..geometry.objects import OBJECT_TYPES, ObjectPart, car_object
+from ..lidar.materials import part_material
 from ..lidar.raycast import RayCaster
 from ..lidar.scanner import Surfaces, trace_beams
 from .firings import Firings
@@ -45,8 +46,12 @@ def object_parts(p: Placement, rng: np.random.Generator, car_bodies: str = "clas
 
 
 def object_buffers(placements: list[Placement], parts: list[list[ObjectPart]], instances: list[int], semantic: list[int]) -> SceneBuffers:
-    """Scene buffers of the inserted objects: one object row per part, the placement's class and instance."""
-    vertices, triangles, rows, names, classes, sem, inst, material, reflect = [], [], [], [], [], [], [], [], []
+    """Scene buffers of the inserted objects: one object row per part, the placement's class and instance.
+
+    A part's material is a tracing material (diffuse, mirror, glass, absorber) or a reflectance model of
+    lidar/materials.py (``glossy_paint``, ``retroreflector``, ...: traced as diffuse, the model in the table's
+    ``surface`` column, :func:`~bpy_pipeline.lidar.materials.part_material`)."""
+    vertices, triangles, rows, names, classes, sem, inst, material, reflect, surface = [], [], [], [], [], [], [], [], [], []
     offset = 0
     for k, (p, object_parts_) in enumerate(zip(placements, parts)):
         for j, part in enumerate(object_parts_):
@@ -55,14 +60,17 @@ def object_buffers(placements: list[Placement], parts: list[list[ObjectPart]], i
             classes.append(p.class_name)
             sem.append(semantic[k])
             inst.append(instances[k])
-            material.append(MATERIAL_ID[part.material])
+            traced, model = part_material(part.material, f"inserted object {k} part {j} material")
+            material.append(traced)
+            surface.append(model)
             reflect.append(part.reflectivity)
             vertices.append(part.vertices)
             triangles.append(np.asarray(part.triangles, np.int64) + offset)
             rows.append(np.full(len(part.triangles), row, np.int32))
             offset += len(part.vertices)
     k = len(names)
-    table = ObjectTable(names, [""] * k, classes, np.array(sem, np.uint16), np.array(inst, np.uint32), np.array(material, np.uint8), np.array(reflect, np.float32))
+    table = ObjectTable(names, [""] * k, classes, np.array(sem, np.uint16), np.array(inst, np.uint32), np.array(material, np.uint8), np.array(reflect, np.float32),
+                        np.array(surface, np.uint8) if any(surface) else None)
     if not k:
         return SceneBuffers(np.zeros((0, 3)), np.zeros((0, 3), np.int32), np.zeros(0, np.int32), table)
     return SceneBuffers(np.concatenate(vertices), np.concatenate(triangles).astype(np.int32), np.concatenate(rows), table)
