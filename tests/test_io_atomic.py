@@ -1,10 +1,9 @@
 """atomic_write / atomic_dir: nothing half-written under a final name, no temporary left behind."""
 
-import numpy as np
 import pytest
 
 from bpy_pipeline.io import atomic_dir, atomic_write, write_ply
-from bpy_pipeline.io import ply as ply_module
+from bpy_pipeline.io.atomic import HashedFile
 from bpy_pipeline.lidar.points import empty_points
 
 
@@ -54,17 +53,16 @@ def test_atomic_dir_replaces_whole_folder_or_nothing(tmp_path):
     assert [p.name for p in tmp_path.iterdir()] == ["frame"]
 
 
-class Exploding(np.ndarray):
-    """A points array whose write fails after some bytes reached the file (a full disk)."""
-
-    def tofile(self, f, *args):
-        f.write(b"partial")
-        raise OSError("No space left on device")
-
-
 def test_writer_failing_mid_write_leaves_no_file(tmp_path, monkeypatch):
-    real = ply_module.ply_records
-    monkeypatch.setattr(ply_module, "ply_records", lambda points: real(points).view(Exploding))
+    real = HashedFile.write
+
+    def failing(self, data):  # the header goes through, then the disk fills part-way into the records
+        if self.size:
+            self.raw.write(b"partial")
+            raise OSError("No space left on device")
+        return real(self, data)
+
+    monkeypatch.setattr(HashedFile, "write", failing)
     target = tmp_path / "ply" / "000000.ply"
     with pytest.raises(OSError, match="No space"):
         write_ply(target, empty_points(10))

@@ -54,6 +54,18 @@ def check_instances(instance: np.ndarray, where: str = "SemanticKITTI labels") -
         )
 
 
+def _xyzi_block(dtype: np.dtype) -> np.dtype | None:
+    """A view of ``dtype`` holding x, y, z, intensity as one 16-byte field ``b``, when they are consecutive little-endian float32; else ``None``."""
+    fields = dtype.fields or {}
+    names = ("x", "y", "z", "intensity")
+    if not all(n in fields and fields[n][0] == np.dtype("<f4") for n in names):
+        return None
+    first = fields["x"][1]
+    if [fields[n][1] for n in names] != [first, first + 4, first + 8, first + 12]:
+        return None
+    return np.dtype({"names": ["b"], "formats": ["V16"], "offsets": [first], "itemsize": dtype.itemsize})
+
+
 def write_semantickitti(root: str | os.PathLike, sequence: int, frame: int, points: np.ndarray, semantic_lut: np.ndarray | None = None) -> tuple[Path, Path]:
     """Write one frame as ``root/sequences/SS/velodyne/NNNNNN.bin`` and ``.../labels/NNNNNN.label``.
 
@@ -81,10 +93,14 @@ def write_semantickitti(root: str | os.PathLike, sequence: int, frame: int, poin
     pts = as_points(points, str(bin_path))
     check_instances(pts["instance"], str(label_path))
     with atomic_write(bin_path) as tmp_bin, atomic_write(label_path) as tmp_label, hashed_open(tmp_bin) as f_bin, hashed_open(tmp_label) as f_label:
+        block = _xyzi_block(pts.dtype)
         for part in chunks(len(pts)):
             scan = np.empty((part.stop - part.start, 4), "<f4")
-            for i, name in enumerate(("x", "y", "z", "intensity")):
-                scan[:, i] = pts[name][part]
+            if block is not None:  # x, y, z, intensity are 16 consecutive float32 bytes of each record: one copy a record
+                scan.view("V16")[:, 0] = pts[part].view(block)["b"]
+            else:
+                for i, name in enumerate(("x", "y", "z", "intensity")):
+                    scan[:, i] = pts[name][part]
             f_bin.write(scan)
             semantic = pts["semantic"][part] if semantic_lut is None else semantic_lut[pts["semantic"][part]]
             f_label.write(np.ascontiguousarray(pack_labels(semantic, pts["instance"][part], str(label_path))))
