@@ -6,7 +6,8 @@
    organised ``.npy`` (x y z intensity, zeros where empty) and read back as a real scan, so the finder sees
    points only. Truth per return: floor, desk top (the upward face of a desk's top), other.
 2. Real outdoor frames (no indoor real scan is available): SemanticKITTI sequence 01 frame 0 and frame 000700,
-   whose per-point labels give the floor (road, parking, sidewalk, other-ground).
+   whose per-point labels give the floor: walkable ground (road, parking, sidewalk, other-ground, terrain) and
+   paved ground (without terrain); RANSAC threshold 0.1 m (roads are cambered).
 
 Per surface kind: precision (returns of found surfaces of that kind that are the truth's) and recall (truth
 returns on a found surface of that kind). Then the hall populated (4 people on the floor, 2 arms on desks)
@@ -104,13 +105,17 @@ def scores(found: list, truth_mask: dict, n: int) -> dict:
     return out
 
 
-def semantickitti_floor(name: str) -> tuple[np.ndarray, np.ndarray] | None:
+GROUND = {"walkable": [9, 10, 11, 12, 17], "paved": [9, 10, 11, 12]}  # SemanticKITTI training ids: road, parking, sidewalk, other-ground (, terrain)
+
+
+def semantickitti_floor(name: str) -> tuple[np.ndarray, dict] | None:
+    """``(xyz (n, 3), {truth name: (n,) bool})`` of a SemanticKITTI frame: walkable ground (terrain too) and paved ground."""
     points, labels = REAL / f"{name}_points.npy", REAL / f"{name}_labels.npy"
     if not points.exists():
         return None
     xyz = np.load(points)[:, :3].astype(np.float64)
     label = np.load(labels).reshape(-1)
-    return xyz, np.isin(label, [9, 10, 11, 12])
+    return xyz, {key: np.isin(label, ids) for key, ids in GROUND.items()}
 
 
 def populated_frame(path: Path, fmt: str, preset: str, people: int, arms: int, seed: int = 1):
@@ -129,9 +134,10 @@ def chart(rows: list[dict], hall: dict, path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, (a, b) = plt.subplots(1, 2, figsize=(12, 5))
-    labels = [f"{r['scan']}\n{r['kind']}" for r in rows]
+    fig, (a, b) = plt.subplots(1, 2, figsize=(14, 5.5))
+    labels = [f"{r['scan'].replace('SemanticKITTI seq01_000000', 'SemKITTI 01/0').replace('SemanticKITTI ', 'SemKITTI ').replace('synthetic ', '')}\n{r['kind'].replace('floor vs ', 'floor: ')}" for r in rows]
     x = np.arange(len(rows))
+    a.tick_params(axis="x", labelrotation=0)
     a.bar(x - 0.2, [r["precision"] for r in rows], 0.4, label="precision")
     a.bar(x + 0.2, [r["recall"] for r in rows], 0.4, label="recall")
     a.set_xticks(x, labels, fontsize=8)
@@ -140,22 +146,25 @@ def chart(rows: list[dict], hall: dict, path: Path) -> None:
     a.legend(loc="lower right")
     xyz, truth, found, placed = hall["xyz"], hall["truth"], hall["found"], hall["placed"]
     b.scatter(xyz[:, 0], xyz[:, 1], s=0.2, c="0.8")
-    b.scatter(xyz[truth == 2, 0], xyz[truth == 2, 1], s=2, c="tab:orange", label="truth: desk tops")
+    b.scatter(xyz[truth == 2, 0], xyz[truth == 2, 1], s=10, c="tab:orange", label="truth: desk tops", zorder=3)
     for s in found:
         colour = {"floor": "tab:blue", "desk": "tab:red", "other": "tab:gray"}[s.kind]
-        b.scatter(s.cells[:, 0], s.cells[:, 1], s=1, c=colour, alpha=0.25 if s.kind == "floor" else 0.8)
-    b.scatter([], [], c="tab:blue", label="found: floor")
-    b.scatter([], [], c="tab:red", label="found: desk")
+        if s.kind == "desk":
+            b.scatter(s.cells[:, 0], s.cells[:, 1], s=3, c=colour, marker="s", zorder=4)
+        else:
+            b.scatter(s.cells[:, 0], s.cells[:, 1], s=1, c=colour, alpha=0.25, zorder=2)
+    b.scatter([], [], s=12, c="tab:blue", label="found: floor (cells)")
+    b.scatter([], [], s=12, c="tab:red", label="found: desk (cells)")
     for p in placed:
-        b.plot(p.centre[0], p.centre[1], "k^" if p.type == "person" else "ms", ms=7)
+        b.plot(p.centre[0], p.centre[1], "k^" if p.type == "person" else "ms", ms=6, zorder=5)
     b.plot([], [], "k^", label="person placed")
     b.plot([], [], "ms", label="arm placed")
-    b.plot(0, 0, "g*", ms=12, label="sensor")
+    b.plot(0, 0, "g*", ms=9, label="sensor")
     b.set_aspect("equal")
     b.set_xlim(-8, 10)
     b.set_ylim(-4, 10)
     b.set_title("synthetic hall (HDL-64E, read back as a point file), top view")
-    b.legend(fontsize=7, loc="upper right", markerscale=3)
+    b.legend(fontsize=7, loc="upper right")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
 
@@ -178,7 +187,8 @@ def main() -> None:
             rows.append({"scan": "synthetic hall", "kind": kind, **s, "points": len(xyz), "ms": round(ms, 1)})
         frame = populated_frame(path, "npy", "hdl64e", 4, 2)
         placed = [p for p in frame.placements if p.rule == "population"]
-        notes["hall_population"] = frame.info.get("placement", {}).get("population", {}) if isinstance(frame.info.get("placement"), dict) else {}
+        log = frame.info["rules"]["population"]
+        notes["hall_population"] = {k: log[k] for k in ("person", "robot_arm", "rejections")}
         notes["hall_inserted_points"] = int(frame.inserted.sum())
         notes["hall_placed"] = [p.info() for p in placed]
         hall = {"xyz": xyz, "truth": truth, "found": found, "placed": placed}
@@ -187,16 +197,20 @@ def main() -> None:
         if got is None:
             notes[name] = "absent"
             continue
-        xyz, floor = got
+        xyz, truths = got
         start = time.perf_counter()
         found = find_supports(xyz, SupportParams(threshold=0.1))
         ms = (time.perf_counter() - start) * 1e3
-        s = scores(found, {"floor": floor}, len(xyz))["floor"]
-        rows.append({"scan": name.replace("semantickitti_", "SemanticKITTI "), "kind": "floor", **s, "points": len(xyz), "ms": round(ms, 1)})
+        for key, truth in truths.items():
+            s = scores(found, {"floor": truth}, len(xyz))["floor"]
+            rows.append({"scan": name.replace("semantickitti_", "SemanticKITTI "), "kind": f"floor vs {key}", **s, "points": len(xyz), "ms": round(ms, 1)})
     kitti = REAL / "kitti_hdl64e_004747.bin"
     if kitti.exists():
         frame = populated_frame(kitti, "kitti", "hdl64e", 4, 0)
         notes["kitti_004747_placed"] = [p.info() for p in frame.placements if p.rule == "population"]
+        log = frame.info["rules"]["population"]
+        notes["kitti_004747_population"] = {k: log[k] for k in ("person", "rejections")}
+        notes["kitti_004747_surfaces"] = {kind: sum(s["kind"] == kind for s in log["supports"]) for kind in ("floor", "desk", "other")}
         notes["kitti_004747_inserted_points"] = int(frame.inserted.sum())
     report("real_twins", rows, args.out, notes)
     chart(rows, hall, args.out / "real_twins.png")
