@@ -1,7 +1,7 @@
 """The panel's settings: one ``PropertyGroup`` on the scene (``scene.lidar``) that mirrors the config.
 
 The groups are generated at registration from the config dataclasses (:mod:`.fields`), so
-the builders of ``config.BUILDERS``, the effects and the output options a panel shows are
+the builders of ``config.BUILDER_PARAMS``, the effects and the output options a panel shows are
 the ones the installed pipeline has. :func:`settings_to_dict` turns the panel into plain
 config data and :func:`settings_from_dict` shows config data in it; both go through
 ``config.config_from_dict`` / ``config.config_to_dict``, and keys the panel does not show
@@ -116,7 +116,7 @@ def make_views() -> Views:
     """Generate every ``PropertyGroup`` class from the installed config (call from ``register``)."""
     defaults = cfg.config_to_dict(cfg.config_from_dict({}))
     builders = {}
-    for name, params in cfg.BUILDERS.items():
+    for name, params in cfg.BUILDER_PARAMS.items():
         if name == "blend":
             continue  # "My scene" instead: the open file
         try:

@@ -42,7 +42,9 @@ DEFAULT_SENSOR = {"preset": "railway_tls", "sampling_factor": 0.25}
 
 
 # ----------------------------------------------------------------------------- scene
-BUILDERS = {name: entry.params for name, entry in BUILDER_REGISTRY.items()}  # name -> its parameters dataclass (the panel's list)
+# builder name -> its parameters dataclass (the panel's list); the registry itself is builders.BUILDERS
+BUILDER_PARAMS = {name: entry.params for name, entry in BUILDER_REGISTRY.items()}
+BUILDERS = BUILDER_PARAMS  # the old name (it collided with the registry, builders.BUILDERS); kept importable for this round
 
 
 @dataclass(frozen=True)
