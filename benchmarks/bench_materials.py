@@ -195,6 +195,41 @@ class Insertion:
         returned = frame.firings.valid[frame.firing]  # the firing returned in the real scan (not an empty lattice cell)
         return xyz[keep], frame.points["intensity"][keep], returned[keep]
 
+    def empty_by_part(self, seed: int = 0) -> dict:
+        """Per car and part (body, windows, interior, tyres), in the frustum: the exact cast's hits (no effects) and the
+        share of them on firings that were empty in the real scan (real drops and the recovered lattice's gaps alike)."""
+        from bpy_pipeline.geometry.objects import PARTS
+        from bpy_pipeline.mixing.cast import cast_firings
+
+        frame = mix_frame(self.section, np.random.default_rng(seed), None, scan=self.scan, firings=self.firings)
+        firings = frame.firings
+        hits = cast_firings(firings, frame.buffers, 100.0)
+        names = [frame.buffers.objects.names[r] for r in hits.row]
+        car_of, part_of = np.array([int(n.split("_")[1]) for n in names]), np.array([int(n.rsplit("_", 1)[1]) for n in names])
+        xyz = firings.origin[hits.firing] + hits.path[:, None] * firings.direction[hits.firing]
+        seen, empty = self.in_window(xyz), ~firings.valid[hits.firing]
+        out = {}
+        for k in range(len(self.boxes)):
+            for j, part in enumerate(PARTS):
+                mine = seen & (car_of == k) & (part_of == j)
+                if mine.sum() >= 5:
+                    out[f"car {k} {part}"] = {"hits": int(mine.sum()), "on empty firings": round(float(empty[mine].mean()), 2)}
+        return out
+
+    def road_empty_share(self) -> float:
+        """Share of empty firings among those that meet the road plane (the boxes' mean bottom) 5-12 m away, in the
+        frustum and 1 m clear of every box: the recovered lattice's gaps plus the real drop on near asphalt (about 0)."""
+        frame = mix_frame(self.section, np.random.default_rng(0), None, scan=self.scan, firings=self.firings)
+        firings = frame.firings
+        ground_z = float(np.mean([b["bottom_z"] for b in self.boxes]))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = (ground_z - firings.origin[:, 2]) / firings.direction[:, 2]
+        hit = firings.origin + np.where(np.isfinite(t) & (t > 0), t, 0.0)[:, None] * firings.direction
+        near = (t > 0) & (np.hypot(hit[:, 0], hit[:, 1]) >= 5) & (np.hypot(hit[:, 0], hit[:, 1]) <= 12) & self.in_window(hit)
+        for b in self.boxes:
+            near &= ~in_box(hit * [1, 1, 0] + [0, 0, b["centre"][2]], b, 1.0)
+        return round(float((~firings.valid[near]).mean()), 3)
+
     def score(self, effects: dict, seeds=INSERTION_SEEDS) -> dict:
         ratios, lower, sim_on = [], [], []
         for seed in seeds:
@@ -245,7 +280,9 @@ def insertion(small: bool, out) -> None:
     held_rows = [{"paint": name, **held.score(grid[name], seeds)} for name in dict.fromkeys(chosen)]
     cars = {f.name: [{"distance_m": round(float(np.linalg.norm(b["centre"][:2])), 1), "occluded": b["occluded"], "real_points": n} for b, n in zip(f.boxes, f.real_counts)] for f in (fit, held)}
     section = {"rows": rows + held_rows, "cars": cars, "best on 000008": best["paint"], "best glossy on 000008": glossy_best["paint"], "best paint alone on 000008": paint_only["paint"],
-               "seeds": list(seeds), "cut_margin_m": CUT_MARGIN, "ground_clearance_m": GROUND_CLEARANCE}
+               "seeds": list(seeds), "cut_margin_m": CUT_MARGIN, "ground_clearance_m": GROUND_CLEARANCE,
+               "hits on real-empty firings by part": {f.name: f.empty_by_part() for f in (fit, held)},
+               "empty share of firings towards the road 5-12 m": {f.name: f.road_empty_share() for f in (fit, held)}}
     path = out / "materials.json"
     payload = json.loads(path.read_text()) if path.exists() else {"benchmark": "materials", "rows": [], "notes": {}}
     payload["insertion"] = section
