@@ -77,7 +77,7 @@ def object_buffers(placements: list[Placement], parts: list[list[ObjectPart]], i
 
 
 @dataclass
-class Hits:
+class InsertedHits:
     """The inserted objects' returns, one per firing that hit them (h of f firings).
 
     firing : (h,) int64; path : (h,) float64 metres from the firing's origin; row : (h,) object row of the final hit
@@ -90,6 +90,9 @@ class Hits:
     cos_incidence: np.ndarray
     gain: np.ndarray
     bounces: np.ndarray
+
+
+Hits = InsertedHits  # the old name (it collided with the ray caster's lidar.raycast.Hits); kept importable for this round
 
 
 def bounding_spheres(buffers: SceneBuffers) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -124,7 +127,7 @@ def near_objects(firings: Firings, buffers: SceneBuffers, instance: int | None =
     return np.flatnonzero(near)
 
 
-def cast_firings(firings: Firings, buffers: SceneBuffers, max_range: float, threads: int | None = None, surfaces: Surfaces | None = None, rng=None, rows: np.ndarray | None = None) -> Hits:
+def cast_firings(firings: Firings, buffers: SceneBuffers, max_range: float, threads: int | None = None, surfaces: Surfaces | None = None, rng=None, rows: np.ndarray | None = None) -> InsertedHits:
     """Every firing (or the firings ``rows``) against ``buffers`` alone; the nearest hit of each.
 
     Only the firings that pass an object's bounding sphere (:func:`near_objects`) go to Embree; the others cannot hit.
@@ -133,15 +136,15 @@ def cast_firings(firings: Firings, buffers: SceneBuffers, max_range: float, thre
     rows = near_objects(firings, buffers) if rows is None else np.asarray(rows, np.int64)
     if not len(buffers.triangles) or not len(rows):
         z = np.zeros(0)
-        return Hits(np.zeros(0, np.int64), z, np.zeros(0, np.int32), z, z, np.zeros(0, np.uint8))
+        return InsertedHits(np.zeros(0, np.int64), z, np.zeros(0, np.int32), z, z, np.zeros(0, np.uint8))
     caster = RayCaster(buffers, frame=np.eye(4), threads=threads)
     origin = firings.origin[rows]
     shared = not origin.any()
     beams = trace_beams(caster, buffers, np.zeros(3) if shared else origin, firings.direction[rows], 0.0, max_range, 3, surfaces=surfaces or Surfaces(glass_return_deg=5.0), rng=rng)
-    return Hits(rows[beams.ray], beams.path, buffers.triangle_object[beams.triangle], beams.cos_incidence, beams.gain, beams.bounces)
+    return InsertedHits(rows[beams.ray], beams.path, buffers.triangle_object[beams.triangle], beams.cos_incidence, beams.gain, beams.bounces)
 
 
-def merge_returns(firings: Firings, hits: Hits) -> tuple[np.ndarray, np.ndarray]:
+def merge_returns(firings: Firings, hits: InsertedHits) -> tuple[np.ndarray, np.ndarray]:
     """Which hits are kept and which real returns they occlude: ``(kept (h,) bool, occluded (f,) bool)``.
 
     A hit is kept where its firing was empty or its path is shorter than the real return's range.

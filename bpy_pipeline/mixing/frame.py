@@ -37,7 +37,7 @@ from ..lidar.points import BEAM_DTYPE, POINT_DTYPE
 from ..lidar.sensors import resolve_sensor
 from ..lidar.visibility import occlusion_levels, subset_buffers, surface_samples
 from . import noise as injections
-from .cast import Hits, cast_firings, merge_returns, near_objects, object_buffers, object_parts
+from .cast import InsertedHits, cast_firings, merge_returns, near_objects, object_buffers, object_parts
 from .firings import Firings, angles_deg, recover_firings
 from .ground import PointIndex, find_ground, in_box
 from .placement import Placement, Scene, explicit_placements, kitti_rule, parking_rule, real_placements
@@ -180,7 +180,7 @@ class MixState:
     instances: list = field(default_factory=list)
     semantic_ids: list = field(default_factory=list)
     buffers: object = None
-    hits: Hits | None = None
+    hits: InsertedHits | None = None
     kept: np.ndarray | None = None
     occluded: np.ndarray | None = None
     new: np.ndarray | None = None
@@ -276,7 +276,7 @@ def mix_effects(state: MixState) -> None:
     injections; then the real returns that stay, interior points and class flips: the frame's records in firing order."""
     firings, rng, section = state.firings, state.rng, state.section
     hits, kept = state.hits, state.kept
-    h = Hits(*(a[kept] for a in (hits.firing, hits.path, hits.row, hits.cos_incidence, hits.gain, hits.bounces)))
+    h = InsertedHits(*(a[kept] for a in (hits.firing, hits.path, hits.row, hits.cos_incidence, hits.gain, hits.bounces)))
     objects = state.buffers.objects
     new = np.zeros(len(h.firing), POINT_DTYPE)
     xyz_new = firings.origin[h.firing] + h.path[:, None] * firings.direction[h.firing]
