@@ -7,7 +7,7 @@ front face reflects it (r = d - 2 (d.n) n) and its back face is a diffuse surfac
 lets it through unchanged, returns it from its own surface near normal incidence, or reflects
 a configured fraction of beams like a mirror. A reflected or transmitted beam goes on from
 the hit point, offset off the surface by an epsilon that follows float32's resolution there,
-until ``max_bounces`` reflections (or :attr:`Surfaces.glass_passes` passes through glass);
+until ``max_bounces`` reflections (or :attr:`MirrorGlassRules.glass_passes` passes through glass);
 one more loses the beam. Path length accumulates and counts against the maximum range.
 
 The reported point of a reflected beam lies where the sensor believes it is: along the
@@ -39,7 +39,7 @@ OFFSET_ULPS = 64.0 * np.finfo(np.float32).eps
 
 
 @dataclass(frozen=True)
-class Surfaces:
+class MirrorGlassRules:
     """How the trace treats mirrors and glass (the config's ``effects.mirrors``). Angles in degrees.
 
     mirror_return_deg : a mirror's front face met within this angle of normal incidence sends
@@ -55,6 +55,9 @@ class Surfaces:
     glass_return_deg: float = 0.0
     glass_reflect: float = 0.0
     glass_passes: int = 8
+
+
+Surfaces = MirrorGlassRules  # the old name (it collided with scenes.population.Surfaces); kept importable for this round
 
 
 @dataclass
@@ -122,7 +125,7 @@ def trace_beams(
     max_range: float,
     max_bounces: int = 3,
     directions32=None,
-    surfaces: Surfaces | None = None,
+    surfaces: MirrorGlassRules | None = None,
     rng: np.random.Generator | None = None,
     first: Hits | None = None,
 ) -> Beams:
@@ -130,7 +133,7 @@ def trace_beams(
 
     origin : (3,) or (n, 3) float64 local coordinates, metres
     directions : (n, 3) float64 unit vectors, local frame (``directions32``: the same as float32, optional)
-    surfaces : the rules for mirrors and glass (default :class:`Surfaces`: no normal-incidence
+    surfaces : the rules for mirrors and glass (default :class:`MirrorGlassRules`: no normal-incidence
         returns, glass always transmits)
     rng : needed only when ``surfaces.glass_reflect`` lies strictly between 0 and 1
     first : the first segment's hits when the caller has them (the compiled path hands over the
@@ -152,7 +155,7 @@ def trace_beams(
     Every segment is bounded by what is left of ``max_range``, so no trace outlives its range
     and the loop ends after at most ``max_bounces + glass_passes + 1`` Embree queries.
     """
-    surfaces = surfaces or Surfaces()
+    surfaces = surfaces or MirrorGlassRules()
     n = len(directions)
     objects = buffers.objects
     cos_mirror_return = math.cos(math.radians(surfaces.mirror_return_deg)) if surfaces.mirror_return_deg > 0 else math.inf
@@ -247,7 +250,7 @@ def scan_chunk(
     ghost_semantic=None,
     ideal: bool = False,
     *,
-    surfaces: Surfaces | None = None,
+    surfaces: MirrorGlassRules | None = None,
     rng: np.random.Generator | None = None,
 ):
     """Point records of one chunk of rays, in the caster's local frame.
@@ -309,7 +312,7 @@ IDENTITY = np.zeros(0, np.int64)
 
 
 def _fused_chunk(caster: RayCaster, buffers: SceneBuffers, pattern: Pattern, origin: np.ndarray, world_d: np.ndarray, min_range: float, max_range: float,
-                 max_bounces: int = 3, ghost_semantic=None, ideal: bool = False, surfaces: Surfaces | None = None, rng: np.random.Generator | None = None):  # fmt: skip
+                 max_bounces: int = 3, ghost_semantic=None, ideal: bool = False, surfaces: MirrorGlassRules | None = None, rng: np.random.Generator | None = None):  # fmt: skip
     """:func:`scan_chunk` through the compiled kernel (:mod:`.kernels`).
 
     Each of the caster's threads takes a part of the rays and, ray by ray, calls Embree and fills
@@ -429,7 +432,7 @@ def scan_chunks(
     ideal: bool = False,
     chunk_rays: int = 1 << 18,
     *,
-    surfaces: Surfaces | None = None,
+    surfaces: MirrorGlassRules | None = None,
     rng: np.random.Generator | None = None,
 ) -> Iterator[tuple[np.ndarray, np.ndarray]]:
     """``(points, beam)`` of a scan, chunk by chunk in firing order; points in the caster's frame.
@@ -440,7 +443,7 @@ def scan_chunks(
         firing times (n,) to (n, 4, 4) poses for a moving one
     ghost_semantic : class id given to points seen through mirrors; ``None`` keeps the final object's class
     ideal : report mirrored points at their true position instead of along the original beam
-    surfaces : the rules for mirrors and glass (:class:`Surfaces`); rng : the frame's generator,
+    surfaces : the rules for mirrors and glass (:class:`MirrorGlassRules`); rng : the frame's generator,
         needed only when some glass reflects a fraction of beams (:func:`trace_beams`)
     Points come out in the caster's local frame: give the caster the sensor's pose (at frame
     start, for a moving sensor) and they are in the sensor frame, motion-compensated to that pose.

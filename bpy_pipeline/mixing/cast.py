@@ -23,7 +23,7 @@ from ..buffers import ObjectTable, SceneBuffers
 from ..geometry.objects import OBJECT_TYPES, ObjectPart, car_object
 from ..lidar.materials import part_material
 from ..lidar.raycast import RayCaster
-from ..lidar.scanner import Surfaces, trace_beams
+from ..lidar.scanner import MirrorGlassRules, trace_beams
 from .firings import Firings
 from .objects import mesh_file_parts  # noqa: F401 - re-exported: mixing.cast.mesh_file_parts stays importable
 from .placement import Placement
@@ -127,7 +127,7 @@ def near_objects(firings: Firings, buffers: SceneBuffers, instance: int | None =
     return np.flatnonzero(near)
 
 
-def cast_firings(firings: Firings, buffers: SceneBuffers, max_range: float, threads: int | None = None, surfaces: Surfaces | None = None, rng=None, rows: np.ndarray | None = None) -> InsertedHits:
+def cast_firings(firings: Firings, buffers: SceneBuffers, max_range: float, threads: int | None = None, surfaces: MirrorGlassRules | None = None, rng=None, rows: np.ndarray | None = None) -> InsertedHits:
     """Every firing (or the firings ``rows``) against ``buffers`` alone; the nearest hit of each.
 
     Only the firings that pass an object's bounding sphere (:func:`near_objects`) go to Embree; the others cannot hit.
@@ -140,7 +140,7 @@ def cast_firings(firings: Firings, buffers: SceneBuffers, max_range: float, thre
     caster = RayCaster(buffers, frame=np.eye(4), threads=threads)
     origin = firings.origin[rows]
     shared = not origin.any()
-    beams = trace_beams(caster, buffers, np.zeros(3) if shared else origin, firings.direction[rows], 0.0, max_range, 3, surfaces=surfaces or Surfaces(glass_return_deg=5.0), rng=rng)
+    beams = trace_beams(caster, buffers, np.zeros(3) if shared else origin, firings.direction[rows], 0.0, max_range, 3, surfaces=surfaces or MirrorGlassRules(glass_return_deg=5.0), rng=rng)
     return InsertedHits(rows[beams.ray], beams.path, buffers.triangle_object[beams.triangle], beams.cos_incidence, beams.gain, beams.bounces)
 
 

@@ -10,7 +10,7 @@ from ..config import Config, sensor_trajectory
 from ..geometry.lod import PathView, PlannedPath, path_view
 from ..geometry.transforms import pose_matrix
 from ..lidar.platform import Trajectory
-from ..lidar.scanner import Surfaces
+from ..lidar.scanner import MirrorGlassRules
 from ..lidar.sensors import frame_time, mount_offset
 from ..lidar.view import view_of
 from ..rig import RigSensor, RigView, field_of_view
@@ -82,7 +82,7 @@ def scene_trajectory(config: Config) -> Trajectory | None:
     return sensor_trajectory(config.sensor, curve_polyline(section.curve))
 
 
-def scan_surfaces(config: Config) -> Surfaces:
+def scan_surfaces(config: Config) -> MirrorGlassRules:
     """The scanner's rules for mirrors and glass from ``effects.mirrors``."""
     mirrors = config.effects.mirrors
-    return Surfaces(mirrors.normal_return_deg, mirrors.glass.normal_return_deg, mirrors.glass.reflect_fraction, mirrors.glass.max_passes)
+    return MirrorGlassRules(mirrors.normal_return_deg, mirrors.glass.normal_return_deg, mirrors.glass.reflect_fraction, mirrors.glass.max_passes)
