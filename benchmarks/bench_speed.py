@@ -198,7 +198,7 @@ def run_py(code: Path, args: list[str], workers: int = 1) -> dict:
         records = [json.loads(p.read_text()) for p in sorted((out / "records").glob("*.json"))]
     stages: dict[str, float] = {}
     for record in records:
-        for key, value in (record.get("timings") or {}).items():
+        for key, value in (record.get("timings_s") or record.get("timings") or {}).items():
             stages[key] = stages.get(key, 0.0) + value / len(records)
     return {"wall_s": wall, "cpu_s": (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime), "frames": len(records), "fps": len(records) / wall, "stage_s_per_frame": stages}
 
