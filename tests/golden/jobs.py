@@ -1,9 +1,11 @@
 """The golden jobs: small runs of every builder whose frames must keep their bytes across refactors.
 
-``python tests/golden/jobs.py record`` runs each job and writes ``golden.json`` beside this file:
-per frame, the sha256 of the point records (canonical :data:`POINT_DTYPE` bytes, independent of
-the file formats) and of the SemanticKITTI files, with the versions that produced them.
-``tests/test_golden.py`` runs the same jobs and compares.
+``python tests/golden/jobs.py record`` runs each job with this Python's bpy and writes its digests
+into ``golden.json`` beside this file, under the Blender's major.minor (``"4.5"``, ``"5.3"``; the
+entries of other Blenders are kept): per frame, the sha256 of the point records (canonical
+:data:`POINT_DTYPE` bytes, independent of the file formats) and of the SemanticKITTI files, with the
+versions that produced them. ``tests/test_golden.py`` runs the same jobs and compares against the
+entry of the Blender it runs on.
 """
 
 from __future__ import annotations
@@ -25,6 +27,18 @@ JOBS = {
     "industrial_hall": ["--set", "scene.builder=industrial_hall", "--frames", "2", "--seed", "5", "--set", "sensor.columns=512"],
     "primitives": ["--set", "scene.builder=primitives", "--set", "sensor.preset=vlp16", "--set", "sensor.position=[0,0,1]", "--set", "effects.noise.sigma=0.01", "--set", "effects.drop.model=uniform", "--set", "effects.drop.probability=0.1"],
 }
+
+
+def blender_key() -> str:
+    """The Blender release series of this Python's bpy: ``"4.5"`` for 4.5.15 LTS (the key of the digests table)."""
+    import bpy
+
+    return "{}.{}".format(*bpy.app.version[:2])
+
+
+def read_golden() -> dict:
+    """``{"by_blender": {major.minor: {"versions": {...}, "jobs": {job: {frame: {kind: sha256}}}}}}``."""
+    return json.loads(GOLDEN.read_text()) if GOLDEN.is_file() else {"by_blender": {}}
 
 
 def versions() -> dict:
@@ -73,4 +87,7 @@ if __name__ == "__main__" and sys.argv[1:] == ["record"]:
         for name in JOBS:
             record["jobs"][name] = run_job(name, Path(tmp) / name)
             print(name, record["jobs"][name])
-    GOLDEN.write_text(json.dumps(record, indent=1) + "\n")
+    golden = read_golden()
+    golden["by_blender"][blender_key()] = record
+    golden["by_blender"] = dict(sorted(golden["by_blender"].items(), key=lambda kv: tuple(map(int, kv[0].split(".")))))
+    GOLDEN.write_text(json.dumps(golden, indent=1) + "\n")
