@@ -202,9 +202,13 @@ def render_preview(points: np.ndarray, color_lut: np.ndarray, size: tuple[int, i
         raise InputError(f"preview: color_lut must be a (k, 3) uint8 table, got shape {lut.shape}")
     image = np.empty((height, width, 3), np.uint8)
     image[:] = BACKGROUND
-    xyz = np.stack([pts["x"], pts["y"], pts["z"]], axis=1).astype(np.float64)
-    keep = np.isfinite(xyz).all(axis=1)
-    xyz, semantic = xyz[keep], pts["semantic"][keep]
+    xyz = np.empty((len(pts), 3))
+    for axis, name in enumerate("xyz"):
+        xyz[:, axis] = pts[name]
+    semantic = pts["semantic"]
+    if not np.isfinite(xyz).all():  # copies only when some point must go
+        keep = np.isfinite(xyz).all(axis=1)
+        xyz, semantic = xyz[keep], semantic[keep]
     if len(xyz) == 0:
         return image
     if int(semantic.max()) >= len(lut):
@@ -215,15 +219,17 @@ def render_preview(points: np.ndarray, color_lut: np.ndarray, size: tuple[int, i
     offsets = np.arange(dot) - (dot - 1) // 2
     du, dv = (a.ravel() for a in np.meshgrid(offsets, offsets))
 
+    best = np.full((height, width), -np.inf)  # depth per pixel; the two panels' pixels are apart, so one serves both
+
     def paint(col, row, depth, left, panel_width):
         inside = (col >= 0) & (col < panel_width) & (row >= 0) & (row < height)
         col, row, depth, color = col[inside], row[inside], depth[inside], colors[inside]
         if len(du) == 1:  # one pixel a point: already inside the panel
-            splat(image, col + left, row, depth, color)
+            splat(image, col + left, row, depth, color, best)
             return
         col = np.clip(col[:, None] + du, 0, panel_width - 1).ravel() + left
         row = np.clip(row[:, None] + dv, 0, height - 1).ravel()
-        splat(image, col, row, np.repeat(depth, len(du)), np.repeat(color, len(du), axis=0))
+        splat(image, col, row, np.repeat(depth, len(du)), np.repeat(color, len(du), axis=0), best)
 
     # top view: x up, y left; cropped to the bulk of the points, or of the points of the other classes
     # when one class (a railway's ground rings) holds most of them
@@ -232,7 +238,8 @@ def render_preview(points: np.ndarray, color_lut: np.ndarray, size: tuple[int, i
     counts = per_class[ids]
     focus = semantic != ids[counts.argmax()]
     bulk = xyz[:, :2][focus] if counts.max() > 0.4 * len(semantic) and focus.sum() >= 100 else xyz[:, :2]
-    low, high = np.percentile(bulk, [1, 99], axis=0)  # one partition for both
+    columns = [np.ascontiguousarray(bulk[:, axis]) for axis in (0, 1)]  # one partition of a contiguous column each
+    low, high = (np.array(v) for v in zip(*(np.percentile(c, [1, 99]) for c in columns)))
     span = np.maximum(high - low, 1e-6)
     low, high = low - 0.05 * span, high + 0.05 * span
     inner_w, inner_h = panel - 2 * MARGIN, height - 2 * MARGIN
