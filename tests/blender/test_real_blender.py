@@ -667,7 +667,9 @@ def test_gui_node_editor_shows_the_catenary_wire_group(gui):
 
 
 SAG_EDIT = """
-from bpy_pipeline.compat import get_modifier_input, set_modifier_input
+import importlib
+compat = importlib.import_module('bl_ext.user_default.lidar_pipeline.bpy_pipeline.compat')  # the installed extension's copy
+get_modifier_input, set_modifier_input = compat.get_modifier_input, compat.set_modifier_input
 edited = 0
 for obj in bpy.data.objects:
     if obj.name.endswith('.contact_wire') and obj.modifiers:
