@@ -27,8 +27,8 @@ CANTILEVER = {
     "arm": ((-0.02, 2.3, 5.8), (0.02, 3.4, 5.84), "Registration_Arm steel"),
     "Insulator.001": ((-0.04, 0.2, 6.8), (0.04, 0.5, 7.0), None),
 }
-SMALL_SCAN = ["sensor.preset=railway_tls", "sensor.sampling_factor=0.1", "effects.ideal=true", "scene.detail.stones=false",
-              "scene.track.start=[-40,0,0]", "scene.track.mid=[0,0,0]", "scene.track.end=[40,0,0]", "scene.catenary.enabled=false"]
+SMALL_SCAN = ["sensor.preset=railway_tls", "sensor.sampling_factor=0.3", "effects.ideal=true", "scene.detail.stones=false",
+              "scene.track.start=[-40,0,0]", "scene.track.mid=[0,0,0]", "scene.track.end=[40,0,0]", "scene.catenary.enabled=false", "scene.catenary.feeders=false"]
 
 
 def box(lo, hi) -> tuple[np.ndarray, np.ndarray]:
@@ -224,7 +224,7 @@ def test_the_scan_of_a_gltf_mast_lies_on_the_asset(tmp_path):
     checked = {"mast": 0, "insulator": 0}
     for class_name in checked:
         mine = points[points["semantic"] == table.id_of(class_name)]
-        owners = {o["instance"]: o["name"] for o in objects if o["class"] == class_name}
+        owners = {o["instance"]: o["name"] for o in objects if o["class"] == class_name and ".mast." in o["name"]}  # the asset's objects
         for instance, name in owners.items():
             hits = mine[mine["instance"] == instance]
             if not len(hits):
@@ -235,7 +235,8 @@ def test_the_scan_of_a_gltf_mast_lies_on_the_asset(tmp_path):
             gap = np.min([surface_distance(local, lo, hi) for lo, hi, _ in boxes[class_name]], axis=0)
             assert gap.max() < 2e-3, f"{name}: a {class_name} point {gap.max():.4f} m off the asset"
             checked[class_name] += len(hits)
-        assert len(mine) == sum(np.sum(mine["instance"] == i) for i in owners)  # every point of the class is an asset's
+        if class_name == "mast":  # every mast point is the asset's (the cantilevers keep their procedural insulators)
+            assert len(mine) == sum(np.sum(mine["instance"] == i) for i in owners)
     assert checked["mast"] > 200 and checked["insulator"] > 0, checked
 
 
@@ -250,24 +251,30 @@ def surface_distance(p: np.ndarray, lo, hi) -> np.ndarray:
 # ----------------------------------------------------------------------------- IFC
 def make_ifc(path: Path) -> Path:
     """An IFC4 file of a mast column (IfcColumn "Mast") and an insulator (a proxy named "Insulator A"), metres, Z up."""
-    ifcopenshell = pytest.importorskip("ifcopenshell", reason="ifcopenshell is not installed (pip install 'bpy-pipeline[ifc]')")
-    import ifcopenshell.api
+    pytest.importorskip("ifcopenshell", reason="ifcopenshell is not installed (pip install 'bpy-pipeline[ifc]')")
+    import ifcopenshell
+    import ifcopenshell.api.aggregate
+    import ifcopenshell.api.context
+    import ifcopenshell.api.geometry
+    import ifcopenshell.api.root
+    import ifcopenshell.api.spatial
+    import ifcopenshell.api.unit
 
-    model = ifcopenshell.api.run("root.create_file", version="IFC4")
-    project = ifcopenshell.api.run("root.create_entity", model, ifc_class="IfcProject", name="railway")
-    ifcopenshell.api.run("unit.assign_unit", model)
-    context = ifcopenshell.api.run("context.add_context", model, context_type="Model")
-    body = ifcopenshell.api.run("context.add_context", model, context_type="Model", context_identifier="Body", target_view="MODEL_VIEW", parent=context)
-    site = ifcopenshell.api.run("root.create_entity", model, ifc_class="IfcSite", name="site")
-    ifcopenshell.api.run("aggregate.assign_object", model, relating_object=project, products=[site])
+    api = ifcopenshell.api
+    model = ifcopenshell.file(schema="IFC4")
+    project = api.root.create_entity(model, ifc_class="IfcProject", name="railway")
+    api.unit.assign_unit(model)
+    context = api.context.add_context(model, context_type="Model")
+    body = api.context.add_context(model, context_type="Model", context_identifier="Body", target_view="MODEL_VIEW", parent=context)
+    site = api.root.create_entity(model, ifc_class="IfcSite", name="site")
+    api.aggregate.assign_object(model, relating_object=project, products=[site])
+    quads = [[0, 2, 3, 1], [4, 5, 7, 6], [0, 1, 5, 4], [2, 6, 7, 3], [0, 4, 6, 2], [1, 3, 7, 5]]
     for ifc_class, name, (lo, hi, _) in (("IfcColumn", "Mast", MAST["column"]), ("IfcBuildingElementProxy", "Insulator A", MAST["insulator_tip"])):
-        element = ifcopenshell.api.run("root.create_entity", model, ifc_class=ifc_class, name=name)
-        ifcopenshell.api.run("spatial.assign_container", model, relating_structure=site, products=[element])
-        v, t = box(lo, hi)
-        representation = ifcopenshell.api.run("geometry.add_mesh_representation", model, context=body,
-                                              vertices=[v.tolist()], faces=[[list(map(int, f)) for f in t]])
-        ifcopenshell.api.run("geometry.assign_representation", model, product=element, representation=representation)
-        ifcopenshell.api.run("geometry.edit_object_placement", model, product=element, matrix=np.eye(4))
+        element = api.root.create_entity(model, ifc_class=ifc_class, name=name)
+        api.spatial.assign_container(model, relating_structure=site, products=[element])
+        representation = api.geometry.add_mesh_representation(model, context=body, vertices=[box(lo, hi)[0].tolist()], faces=[quads])
+        api.geometry.assign_representation(model, product=element, representation=representation)
+        api.geometry.edit_object_placement(model, product=element, matrix=np.eye(4))
     model.write(str(path))
     return path
 
