@@ -22,7 +22,7 @@ measurement of another checkout, interleaved); each subprocess reports which ``b
 
     python benchmarks/bench_speed.py [--small] [--old DIR] [--baseline DIR] [--frames N] [--parking N] [--street N] [--scaling N] [--merge]
 
-``--small`` (< 60 s): the scan and write parts, 30 parking frames against one process with 2 workers,
+``--small`` (< 60 s): the scan and write parts (5 frames), 20 parking frames against one process with 2 workers,
 no older checkout unless given. Results: ``benchmarks/results/speed.json`` (``speed_small.json``).
 """
 
@@ -244,7 +244,7 @@ def main() -> None:
         return
     parking = args.parking if args.parking is not None else (0 if args.small else 120)
     street = args.street if args.street is not None else (0 if args.small else 20)
-    scaling = args.scaling if args.scaling is not None else (30 if args.small else 1000)
+    scaling = args.scaling if args.scaling is not None else (20 if args.small else 1000)
     rounds = 1 if args.small else args.rounds
     if args.small and args.frames == 12:
         args.frames = 5
