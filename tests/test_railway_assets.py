@@ -1,7 +1,9 @@
 """Support assets from files (``scene.assets``): a file's mast stands where each procedural one stood, the scan's
 points of its classes lie on it, names in the file give classes, and bad files are one line naming the key."""
 
+import json
 import math
+import struct
 import subprocess
 import sys
 from pathlib import Path
@@ -39,8 +41,40 @@ def box(lo, hi) -> tuple[np.ndarray, np.ndarray]:
     return v, np.array([t for a, b, c, d in quads for t in ((a, b, c), (a, c, d))], np.int32)
 
 
+def write_glb(path: Path, parts: dict) -> Path:
+    """Write ``parts`` ({object name: (lo, hi, material name or None)}, Blender's frame: Z up) as a binary glTF 2.0 file:
+    one node and mesh per part, named; glTF is Y up, so (x, y, z) is written (x, z, -y).
+
+    Written here, not by Blender's glTF exporter: a process that has run that exporter hangs at exit once it has
+    scanned (bpy 4.5), which would hang pytest after the scan test."""
+    blob, views, accessors, meshes, nodes, materials = bytearray(), [], [], [], [], []
+    for name, (lo, hi, material) in parts.items():
+        v, t = box(lo, hi)
+        for data, target in ((np.column_stack([v[:, 0], v[:, 2], -v[:, 1]]).astype(np.float32), 34962), (t.astype(np.uint32).ravel(), 34963)):
+            views.append({"buffer": 0, "byteOffset": len(blob), "byteLength": data.nbytes, "target": target})
+            blob += data.tobytes()
+        position = views[-2]
+        accessors.append({"bufferView": len(views) - 2, "componentType": 5126, "count": position["byteLength"] // 12, "type": "VEC3",
+                          "min": np.min(v[:, [0, 2, 1]] * (1, 1, -1), axis=0).tolist(), "max": np.max(v[:, [0, 2, 1]] * (1, 1, -1), axis=0).tolist()})
+        accessors.append({"bufferView": len(views) - 1, "componentType": 5125, "count": t.size, "type": "SCALAR"})
+        primitive = {"attributes": {"POSITION": len(accessors) - 2}, "indices": len(accessors) - 1}
+        if material:
+            materials.append({"name": material})
+            primitive["material"] = len(materials) - 1
+        meshes.append({"name": name, "primitives": [primitive]})
+        nodes.append({"name": name, "mesh": len(meshes) - 1})
+    doc = {"asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": list(range(len(nodes)))}], "nodes": nodes, "meshes": meshes,
+           "accessors": accessors, "bufferViews": views, "buffers": [{"byteLength": len(blob)}], **({"materials": materials} if materials else {})}
+    text = json.dumps(doc).encode()
+    text += b" " * (-len(text) % 4)
+    blob += b"\0" * (-len(blob) % 4)
+    path.write_bytes(struct.pack("<III", 0x46546C67, 2, 28 + len(text) + len(blob)) + struct.pack("<II", len(text), 0x4E4F534A) + text
+                     + struct.pack("<II", len(blob), 0x004E4942) + bytes(blob))
+    return path
+
+
 def make_asset(path: Path, parts: dict) -> Path:
-    """Write ``parts`` ({object name: (lo, hi, material name or None)}) with Blender's exporter for ``path``'s suffix."""
+    """Write ``parts`` ({object name: (lo, hi, material name or None)}) with Blender's OBJ or PLY exporter."""
     import bpy
 
     from bpy_pipeline.scenes.objects import mesh_data
@@ -51,10 +85,7 @@ def make_asset(path: Path, parts: dict) -> Path:
         if material:
             mesh.materials.append(bpy.data.materials.new(material))
         bpy.context.scene.collection.objects.link(bpy.data.objects.new(name, mesh))
-    suffix = path.suffix.lower()
-    if suffix == ".glb":
-        bpy.ops.export_scene.gltf(filepath=str(path), export_format="GLB")
-    elif suffix == ".obj":
+    if path.suffix.lower() == ".obj":
         bpy.ops.wm.obj_export(filepath=str(path))
     else:
         bpy.ops.wm.ply_export(filepath=str(path), ascii_format=False)
@@ -153,7 +184,7 @@ def test_the_command_exits_2_and_writes_nothing(tmp_path):
 # ----------------------------------------------------------------------------- Blender
 @pytest.mark.bpy
 def test_a_gltf_mast_stands_where_every_procedural_mast_stood(tmp_path):
-    glb = make_asset(tmp_path / "mast.glb", MAST)
+    glb = write_glb(tmp_path / "mast.glb", MAST)
     _, layout, procedural = build("scene.track.tracks=2", "scene.supports.layout=both_sides")
     feet = {}
     for name, obj in procedural.items():
@@ -177,7 +208,7 @@ def test_a_gltf_mast_stands_where_every_procedural_mast_stood(tmp_path):
 
 @pytest.mark.bpy
 def test_a_cantilever_asset_replaces_the_mast_face_assembly_and_names_give_classes(tmp_path):
-    glb = make_asset(tmp_path / "cantilever.glb", CANTILEVER)
+    glb = write_glb(tmp_path / "cantilever.glb", CANTILEVER)
     _, layout, before = build("scene.catenary.steady_arms=true")
     _, layout, placed = build("scene.catenary.steady_arms=true", f"scene.assets.cantilever={glb}")
     for k in range(len(layout.supports)):
@@ -197,7 +228,7 @@ def test_a_cantilever_asset_replaces_the_mast_face_assembly_and_names_give_class
 def test_obj_and_ply_assets_read_as_the_glb_does(tmp_path, suffix):
     from bpy_pipeline.scenes.railway_assets import asset_parts
 
-    glb = asset_parts(str(make_asset(tmp_path / "mast.glb", MAST)), "mast", 1.0, {}, "scene.assets.mast")
+    glb = asset_parts(str(write_glb(tmp_path / "mast.glb", MAST)), "mast", 1.0, {}, "scene.assets.mast")
     other = asset_parts(str(make_asset(tmp_path / f"mast{suffix}", MAST)), "mast", 1.0, {}, "scene.assets.mast")
     expected = {"mast", "insulator"} if suffix == ".obj" else {"mast"}  # PLY keeps no object names: one mesh of the slot's class
     assert set(other) == expected
@@ -213,7 +244,7 @@ def test_the_scan_of_a_gltf_mast_lies_on_the_asset(tmp_path):
     from bpy_pipeline.labels import load_class_table
     from bpy_pipeline.pipeline import run
 
-    glb = make_asset(tmp_path / "mast.glb", MAST)
+    glb = write_glb(tmp_path / "mast.glb", MAST)
     bpy.ops.wm.read_factory_settings(use_empty=True)
     config = load_config(None, ["output.formats=[ply]", "output.preview=false", "output.frame=world", *SMALL_SCAN, f"scene.assets.mast={glb}"])
     manifest = run(config, tmp_path / "out", log=lambda *_: None)
