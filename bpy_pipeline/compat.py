@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import bpy
+import numpy as np
 
 VERSION = tuple(bpy.app.version)
 
@@ -49,3 +52,30 @@ def set_node_option(node: bpy.types.Node, name: str, value: str) -> None:
     if socket is None or socket.type != "MENU":
         raise KeyError(f"node {node.bl_idname} has no option {name!r}")
     socket.default_value = value.replace("_", " ").title()
+
+
+def instance_attribute(instancer, attribute: str, modifier_input: str) -> Callable[[int], int] | None:
+    """The INT named attribute ``attribute`` of an evaluated instancer's instances, as a function of the
+    instance's index in the depsgraph's order (0 where it has no value); None where it has none.
+
+    From 5.3 each instance's own value is read (``instances_pointcloud()`` of its evaluated geometry).
+    In 4.5 that point cloud is never freed (Blender prints "Not freed memory blocks" when it exits; 5.3
+    frees it; the releases between are not checked), so before 5.3 every instance takes the value of the
+    instancer's last Geometry Nodes modifier input named ``modifier_input``: exact for groups that store
+    that input on every instance, as the builders' groups do; per-instance values need 5.3.
+    """
+    modifiers = [m for m in instancer.original.modifiers if m.type == "NODES" and m.node_group is not None]
+    if not modifiers:
+        return None  # only Geometry Nodes store attributes on instances
+    if VERSION < (5, 3, 0):
+        given = [m for m in modifiers if modifier_input in interface_inputs(m.node_group)]
+        value = int(get_modifier_input(given[-1], modifier_input)) if given else 0
+        return (lambda index: value) if value > 0 else None
+    geometry = instancer.evaluated_geometry()  # held while read
+    points = geometry.instances_pointcloud()
+    found = points.attributes.get(attribute) if points is not None else None
+    if found is None or found.data_type != "INT":
+        return None
+    ids = np.empty(len(found.data), np.int32)
+    found.data.foreach_get("value", ids)
+    return lambda index: int(ids[index]) if index < len(ids) else 0

@@ -8,8 +8,8 @@ Labels come from the custom properties of the object that owns the geometry: the
 or for instances the instanced object if it is tagged, else the instancer. Untagged objects get
 a class from the name rules (their name, then their ancestors' names) or ``unlabeled``.
 Geometry Nodes may label what they make through the named attribute ``lidar_instance`` (INT, see
-:data:`INSTANCE_ATTRIBUTE`): on an instancer's instances (read through ``GeometrySet``, Blender
-4.3 on) or on a mesh's faces or points; a value > 0 is the instance id of that geometry (its class
+:data:`INSTANCE_ATTRIBUTE`): on an instancer's instances (each instance's own from Blender 5.3,
+the group's ``Instance`` input before: :func:`~bpy_pipeline.compat.instance_attribute`) or on a mesh's faces or points; a value > 0 is the instance id of that geometry (its class
 stays its owner's), so one object may carry many instances, realized or not.
 """
 
@@ -21,6 +21,7 @@ import bpy
 import numpy as np
 
 from .buffers import MATERIAL_ID, MATERIALS, ObjectTable, SceneBuffers
+from .compat import instance_attribute
 from .errors import InputError
 from .labels import ClassTable
 from .lidar.materials import MATERIAL_MODELS, model_from_material, model_id
@@ -54,23 +55,6 @@ def _mesh_arrays(obj) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     finally:
         obj.to_mesh_clear()
     return vertices.reshape(-1, 3).astype(np.float64), triangles, ids
-
-
-def _instance_ids(instancer) -> np.ndarray | None:
-    """``(k,)`` int32 :data:`INSTANCE_ATTRIBUTE` of an evaluated instancer's instances, in order; None where it
-    has none, or where this Blender cannot read instance attributes (``GeometrySet`` came with 4.3)."""
-    geometry_set = getattr(bpy.types, "GeometrySet", None)
-    if geometry_set is None or not any(m.type == "NODES" for m in instancer.original.modifiers):
-        return None  # only Geometry Nodes store attributes on instances (reading them costs Blender ~70 bytes a call it never frees)
-    geometry = instancer.evaluated_geometry() if hasattr(instancer, "evaluated_geometry") else geometry_set.from_evaluated_object(instancer)  # held while read
-    points = geometry.instances_pointcloud()
-    attribute = points.attributes.get(INSTANCE_ATTRIBUTE) if points is not None else None
-    if attribute is None or attribute.data_type != "INT":
-        return None
-    ids = np.empty(len(attribute.data), np.int32)
-    attribute.data.foreach_get("value", ids)
-    del points, geometry
-    return ids
 
 
 def _ancestors(obj) -> list[str]:
@@ -233,14 +217,14 @@ def export_scene(table: ClassTable, extra_rules=(), depsgraph=None, keep_within=
     labeller = _Labeller(table, extra_rules)
     meshes: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
     placements: dict[tuple, list[np.ndarray]] = defaultdict(list)  # (mesh key, row) -> world matrices
-    instancers: dict[str, list] = {}  # instancer -> [its instances' ids or None, instances seen]
+    instancers: dict[str, list] = {}  # instancer -> [its instances' id by index, or None; instances seen]
     for instance in depsgraph.object_instances:
         obj = instance.object
         labelled = 0
         if instance.is_instance:  # the instancer's instances come in their order
-            seen = instancers.setdefault(instance.parent.name_full, [_instance_ids(instance.parent), 0])
-            if seen[0] is not None and seen[1] < len(seen[0]):
-                labelled = int(seen[0][seen[1]])
+            seen = instancers.setdefault(instance.parent.name_full, [instance_attribute(instance.parent, INSTANCE_ATTRIBUTE, "Instance"), 0])
+            if seen[0] is not None:
+                labelled = seen[0](seen[1])
             seen[1] += 1
         if obj.type not in GEOMETRY_TYPES or (not instance.is_instance and not instance.show_self):
             continue
