@@ -155,6 +155,7 @@ def test_bad_assets_are_one_line_naming_the_key(tmp_path):
     (tmp_path / "mast.txt").write_text("a mast\n")
     (tmp_path / "broken.glb").write_bytes(b"not a gltf file at all")
     (tmp_path / "broken.ifc").write_text("hello\n")
+    (tmp_path / "cut.glb").write_bytes(struct.pack("<III", 0x46546C67, 2, 4096) + b"{}")
     cases = {
         "scene.assets.mast": f"scene.assets.mast={tmp_path / 'missing.glb'}",
         "scene.assets.cantilever": f"scene.assets.cantilever={tmp_path / 'mast.txt'}",
@@ -168,6 +169,8 @@ def test_bad_assets_are_one_line_naming_the_key(tmp_path):
         assert str(err.value).startswith(key) and "\n" not in str(err.value)
     with pytest.raises(InputError, match=r"^scene\.assets\.mast: .*not an IFC"):
         load_config(None, [f"scene.assets.mast={tmp_path / 'broken.ifc'}"])
+    with pytest.raises(InputError, match=r"^scene\.assets\.mast: .*damaged binary glTF file \(its header says 4096 bytes, the file has 14\)"):
+        load_config(None, [f"scene.assets.mast={tmp_path / 'cut.glb'}"])
 
 
 @pytest.mark.bpy

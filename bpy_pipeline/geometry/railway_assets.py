@@ -114,6 +114,9 @@ def sniff(path: Path) -> str | None:
     if suffix == ".glb":
         if len(head) < 12 or head[:4] != b"glTF" or struct.unpack("<I", head[4:8])[0] != 2:
             return "not a binary glTF 2.0 file (no 'glTF' version 2 header)"
+        declared, size = struct.unpack("<I", head[8:12])[0], path.stat().st_size
+        if declared != size:
+            return f"a damaged binary glTF file (its header says {declared} bytes, the file has {size})"
     elif suffix == ".gltf":
         try:
             data = json.loads(path.read_text())
