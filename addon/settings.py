@@ -249,6 +249,20 @@ def _sensor_dict(settings, base: dict) -> dict:
     return section | pose
 
 
+PROFILE_SECTIONS = ("noise", "drop", "intensity")  # what a preset's effects profile sets (lidar/sensors.yaml)
+
+
+def _effects_dict(settings, base: dict) -> dict:
+    """The panel's effects. The panel shows the preset's profile as fields; with Ideal ticked, a profile
+    section the user left as the preset gives it is left out, so that ``ideal`` removes it as it does in a
+    config file (``ideal: true`` keeps only what the config gives)."""
+    effects = fields.read(settings.effects, VIEWS.effects, base)
+    if not effects.get("ideal") or settings.sensor.preset == "custom":
+        return effects
+    profile = cfg.config_to_dict(cfg.config_from_dict({"sensor": {"preset": settings.sensor.preset}}))["effects"]
+    return {k: v for k, v in effects.items() if k not in PROFILE_SECTIONS or v != profile.get(k)}
+
+
 def settings_to_dict(settings) -> dict:
     """The panel as plain config data (what ``config_from_dict`` takes and Save config writes)."""
     base = base_dict(settings)
@@ -256,7 +270,7 @@ def settings_to_dict(settings) -> dict:
     data["seed"], data["frames"] = settings.seed, settings.frames
     data["scene"] = _scene_dict(settings, base["scene"])
     data["sensor"] = _sensor_dict(settings, base["sensor"])
-    data["effects"] = fields.read(settings.effects, VIEWS.effects, base["effects"])
+    data["effects"] = _effects_dict(settings, base["effects"])
     data["output"] = fields.read(settings.output, VIEWS.output, base["output"])
     return data
 

@@ -131,6 +131,13 @@ settings.sensor.preset = "hdl32e"  # its own effects profile (range-proportional
 report["preset_brings_its_profile"] = cfg.config_from_dict(panel.settings_to_dict(settings)).effects == cfg.config_from_dict({"sensor": {"preset": "hdl32e"}}).effects
 settings.sensor.preset = cfg.config_to_dict(cfg.config_from_dict({}))["sensor"]["preset"]
 report["preset_back_brings_default_effects"] = cfg.config_from_dict(panel.settings_to_dict(settings)).effects == cfg.config_from_dict({}).effects
+settings.effects.ideal = True  # the panel's Ideal: the preset's noise and drop go, as ideal: true does in a config
+report["panel_ideal_is_config_ideal"] = cfg.config_from_dict(panel.settings_to_dict(settings)).effects == cfg.config_from_dict({"effects": {"ideal": True}}).effects
+sigma = settings.effects.noise.sigma
+settings.effects.noise.sigma = 0.05  # a value the user set stays
+report["panel_ideal_keeps_what_the_user_set"] = cfg.config_from_dict(panel.settings_to_dict(settings)).effects.noise.sigma == 0.05
+settings.effects.ideal, settings.effects.noise.sigma = False, sigma
+report["panel_back_to_realistic"] = cfg.config_from_dict(panel.settings_to_dict(settings)).effects == cfg.config_from_dict({}).effects
 
 # ----------------------------------------------------------------------------- load a config; generate as run.py does
 job_yaml = WORK / "job.yaml"

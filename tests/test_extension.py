@@ -165,6 +165,7 @@ def test_panel_yaml_round_trip_and_run_py(session, tmp_path):
     report, work = session
     assert report["fresh_panel_is_default_config"]
     assert report["preset_brings_its_profile"] and report["preset_back_brings_default_effects"]
+    assert report["panel_ideal_is_config_ideal"] and report["panel_ideal_keeps_what_the_user_set"] and report["panel_back_to_realistic"]
     assert report["load"] == ["FINISHED"] and report["loaded_equals_file"]
     assert report["save"] == ["FINISHED"] and report["saved_equals_file"] and report["resave_is_byte_identical"]
     assert report["generate"] == ["FINISHED"] and report["generate_manifest_frames"] == 2

@@ -689,9 +689,7 @@ def test_gui_an_input_changed_from_python_then_scan_scans_the_edited_scene(gui):
     rows = main_buttons(session, state)
     session.click(*centre(rows[3][2]))  # Reset config: the default railway job (the load test left the primitives')
     session.wait("reply['done'] = bpy.context.scene.lidar.status == 'default config'", timeout=30)
-    # no noise and no drop: their draws follow the point order, which the edit changes. The panel holds the
-    # preset's profile as fields, and ideal leaves out only what the config does not give, so both are zeroed
-    session.call("e = bpy.context.scene.lidar.effects; e.ideal = True; e.noise.sigma = 0.0; e.drop.model = 'none'")
+    session.call("bpy.context.scene.lidar.effects.ideal = True")  # the panel's Ideal: no noise drawn in a point order the edit changes
     clouds = {}
     for step in ("before", "after"):
         if step == "after":
