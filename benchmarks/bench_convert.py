@@ -18,7 +18,7 @@ Run: python benchmarks/bench_convert.py [--small]
 """
 
 import numpy as np
-from bench_mixing import scan_grid, street_scene
+from bench_mixing import street_scene
 from common import ROOT, arguments, best_of, report
 
 from bpy_pipeline.conversion import convert

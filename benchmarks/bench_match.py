@@ -20,7 +20,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-import yaml
 from common import ROOT, arguments, report
 
 from bpy_pipeline.geometry.placement import sample, sample_count

@@ -8,7 +8,6 @@ before; and a rack's levels edited in its modifier change what the export reads.
 
 import dataclasses
 
-import numpy as np
 import pytest
 
 from test_parking_nodes import exported, same_mesh

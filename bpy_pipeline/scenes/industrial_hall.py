@@ -39,7 +39,6 @@ class IndustrialHall:
         self.params = params
         self.collection = scene_collection()
         self.layout = hall_layout(params)
-        layout = self.layout
         prototypes = box_nodes.prototypes(self.collection)  # every piece through the "Industrial Hall" group
         self.static = [
             tag(hall_nodes.hall_object("floor", "floor", params, self.collection, prototypes, INSTANCE["floor"]), "floor", reflectivity=0.3, instance=INSTANCE["floor"]),
