@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import bpy
 
-from .nodes import GroupBuilder, add_group_modifier, new_group
+from .nodes import GroupBuilder, add_group_modifier, current_group, new_group, stamp
 
 WIRE = "Catenary Wire"
 DROPPERS = "Catenary Droppers"
@@ -59,15 +59,6 @@ DROPPER_INPUTS = [
 ]
 
 
-def _get(name: str):
-    group = bpy.data.node_groups.get(name)
-    if group is not None and group.get("bpy_pipeline_version") == VERSION:
-        return group
-    if group is not None:
-        group.name = name + ".old"
-    return None
-
-
 def _hang(b: GroupBuilder, start, end, sag, t) -> bpy.types.NodeSocket:
     """The point of the thesis's parabola at span parameter ``t``: start + t (end - start) - (0, 0, 4 sag t (1 - t))."""
     along = b.vector_math("ADD", start, b.vector_math("SCALE", b.vector_math("SUBTRACT", end, start), scale=t))
@@ -91,7 +82,7 @@ def _position(b: GroupBuilder, geometry, index) -> bpy.types.NodeSocket:
 
 def wire_group() -> bpy.types.NodeTree:
     """The "Catenary Wire" modifier group (see the module docstring); inputs :data:`WIRE_INPUTS`."""
-    group = _get(WIRE)
+    group = current_group(WIRE, VERSION)
     if group is not None:
         return group
     group = new_group(WIRE, WIRE_INPUTS, [("Geometry", "NodeSocketGeometry")], modifier=True)
@@ -106,13 +97,13 @@ def wire_group() -> bpy.types.NodeTree:
     t = b.math("DIVIDE", index, b.math("SUBTRACT", g("Samples"), 1.0))
     hung = b.node("GeometryNodeSetPosition", {"Geometry": b.out(resampled), "Position": _hang(b, start, end, g("Sag"), t)})
     b.links.new(_sweep(b, b.out(hung), g("Radius"), g("Sides"), g("Sweep")), b.socket(b.outputs.inputs, "Geometry"))
-    group["bpy_pipeline_version"] = VERSION
+    stamp(group, VERSION)
     return b.finish()
 
 
 def droppers_group() -> bpy.types.NodeTree:
     """The "Catenary Droppers" modifier group (see the module docstring); inputs :data:`DROPPER_INPUTS`."""
-    group = _get(DROPPERS)
+    group = current_group(DROPPERS, VERSION)
     if group is not None:
         return group
     group = new_group(DROPPERS, DROPPER_INPUTS, [("Geometry", "NodeSocketGeometry")], modifier=True)
@@ -154,7 +145,7 @@ def droppers_group() -> bpy.types.NodeTree:
 
     placed = b.switch("GEOMETRY", b.compare("GREATER_THAN", g("Spacing"), 0.0), built, even)
     b.links.new(_sweep(b, placed, g("Radius"), g("Sides"), g("Sweep")), b.socket(b.outputs.inputs, "Geometry"))
-    group["bpy_pipeline_version"] = VERSION
+    stamp(group, VERSION)
     return b.finish()
 
 

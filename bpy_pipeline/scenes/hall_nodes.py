@@ -23,7 +23,7 @@ import bpy
 
 from . import box_nodes
 from .box_nodes import select
-from .nodes import GroupBuilder, add_group_modifier, new_group
+from .nodes import GroupBuilder, add_group_modifier, current_group, new_group, stamp
 
 GROUP = "Industrial Hall"
 VERSION = 2  # 2: the Instance input, stored as lidar_instance
@@ -48,11 +48,9 @@ INPUTS = [
 
 def hall_group() -> bpy.types.NodeTree:
     """The "Industrial Hall" modifier group (see the module docstring); inputs :data:`INPUTS`."""
-    group = bpy.data.node_groups.get(GROUP)
-    if group is not None and group.get("bpy_pipeline_version") == VERSION:
-        return group
+    group = current_group(GROUP, VERSION)
     if group is not None:
-        group.name = GROUP + ".old"
+        return group
     group = new_group(GROUP, INPUTS, [("Geometry", "NodeSocketGeometry")], modifier=True)
     b = GroupBuilder(group)
     g, m, xyz = b.get, b.math, b.combine
@@ -101,7 +99,7 @@ def hall_group() -> bpy.types.NodeTree:
                             xyz(select(b, upright, length, 0.06), select(b, upright, depth, 0.06), select(b, upright, 0.03, top)), box)
 
     box_nodes.finish(b, box_nodes.pick(b, g("Part"), [floor, ceiling, walls, desk, shelf]), g("Realize"), g("Instance"))
-    group["bpy_pipeline_version"] = VERSION
+    stamp(group, VERSION)
     return b.finish()
 
 

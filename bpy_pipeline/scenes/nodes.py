@@ -121,6 +121,26 @@ class GroupBuilder:
         return self.group
 
 
+VERSION_KEY = "bpy_pipeline_version"  # custom property of a group: the version of the code that made it
+
+
+def current_group(name: str, version: int) -> bpy.types.NodeTree | None:
+    """The node group ``name`` if ``version`` of its builder made it, else None; an older one is renamed
+    ``name.old`` (what still uses it keeps it), so that a file holding it gets a new one."""
+    group = bpy.data.node_groups.get(name)
+    if group is not None and group.get(VERSION_KEY) == version:
+        return group
+    if group is not None:
+        group.name = name + ".old"
+    return None
+
+
+def stamp(group: bpy.types.NodeTree, version: int) -> bpy.types.NodeTree:
+    """``group``, marked as made by ``version`` of its builder (:func:`current_group`)."""
+    group[VERSION_KEY] = version
+    return group
+
+
 def new_group(name: str, inputs: list[tuple], outputs: list[tuple], modifier: bool = False) -> bpy.types.NodeTree:
     """An empty Geometry Nodes group with interface sockets ``(name, socket type, default, description, min, max)``
     (trailing items optional); ``modifier`` makes it usable in a Geometry Nodes modifier."""

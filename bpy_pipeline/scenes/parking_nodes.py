@@ -27,7 +27,7 @@ import bpy
 
 from . import box_nodes
 from .box_nodes import select
-from .nodes import GroupBuilder, add_group_modifier, new_group
+from .nodes import GroupBuilder, add_group_modifier, current_group, new_group, stamp
 
 GROUP = "Parking Level"
 VERSION = 2  # 2: the Instance input, stored as lidar_instance
@@ -55,11 +55,9 @@ INPUTS = [
 
 def level_group() -> bpy.types.NodeTree:
     """The "Parking Level" modifier group (see the module docstring); inputs :data:`INPUTS`."""
-    group = bpy.data.node_groups.get(GROUP)
-    if group is not None and group.get("bpy_pipeline_version") == VERSION:
-        return group
+    group = current_group(GROUP, VERSION)
     if group is not None:
-        group.name = GROUP + ".old"
+        return group
     group = new_group(GROUP, INPUTS, [("Geometry", "NodeSocketGeometry")], modifier=True)
     b = GroupBuilder(group)
     g, m, xyz = b.get, b.math, b.combine
@@ -109,7 +107,7 @@ def level_group() -> bpy.types.NodeTree:
                                     xyz(g("Ramp Length"), m("SUBTRACT", half_y, front), m("ADD", h, slab)), g("Wedge"))
 
     box_nodes.finish(b, box_nodes.pick(b, g("Part"), [floor, ceiling, walls, pillars, ramp_geometry]), g("Realize"), g("Instance"))
-    group["bpy_pipeline_version"] = VERSION
+    stamp(group, VERSION)
     return b.finish()
 
 

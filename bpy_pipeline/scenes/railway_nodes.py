@@ -18,24 +18,10 @@ import math
 
 import bpy
 
-from .nodes import GroupBuilder, new_group
+from .nodes import GroupBuilder, current_group, new_group, stamp
 
 PARTS = {"all": 0, "rails": 1, "sleepers": 2, "ballast": 3, "embankment": 4, "stones": 5, "ground": 6}
 VERSION = 4  # bump when the groups change, so a file holding older groups gets new ones
-
-
-def _get(name: str):
-    group = bpy.data.node_groups.get(name)
-    if group is not None and group.get("bpy_pipeline_version") == VERSION:
-        return group
-    if group is not None:
-        group.name = name + ".old"
-    return None
-
-
-def _stamp(group):
-    group["bpy_pipeline_version"] = VERSION
-    return group
 
 
 def profile_to_frame(b: GroupBuilder, curve) -> bpy.types.NodeSocket:
@@ -47,7 +33,7 @@ def profile_to_frame(b: GroupBuilder, curve) -> bpy.types.NodeSocket:
 def centrelines_group() -> bpy.types.NodeTree:
     """"Track Centrelines": the curve copied to each track centreline, ``(k - (Tracks - 1) / 2) * Spacing`` to the left."""
     name = "Track Centrelines"
-    group = _get(name)
+    group = current_group(name, VERSION)
     if group is not None:
         return group
     group = new_group(
@@ -68,13 +54,13 @@ def centrelines_group() -> bpy.types.NodeTree:
     left = b.vector_math("NORMALIZE", b.vector_math("CROSS_PRODUCT", (0.0, 0.0, 1.0), tangent))
     moved = b.node("GeometryNodeSetPosition", {"Geometry": b.out(copies, "Geometry"), "Offset": b.vector_math("SCALE", left, scale=offset)})
     b.links.new(b.out(moved), b.socket(b.outputs.inputs, "Curve"))
-    return _stamp(b.finish())
+    return stamp(b.finish(), VERSION)
 
 
 def rail_profile_group() -> bpy.types.NodeTree:
     """"Rail Profile": both rails of one track, foot on ``Base Height``, head inner faces ``Gauge`` apart."""
     name = "Rail Profile"
-    group = _get(name)
+    group = current_group(name, VERSION)
     if group is not None:
         return group
     group = new_group(
@@ -100,13 +86,13 @@ def rail_profile_group() -> bpy.types.NodeTree:
             b.links.new(b.out(placed), join.inputs[0])
         bottom = b.math("ADD", bottom, height)
     b.links.new(profile_to_frame(b, b.out(join)), b.socket(b.outputs.inputs, "Profile"))
-    return _stamp(b.finish())
+    return stamp(b.finish(), VERSION)
 
 
 def ballast_stones_group() -> bpy.types.NodeTree:
     """"Ballast Stones": stones of ``Stone Size`` on the upward faces of ``Bed``, within ``Radius`` of ``Centres``' points."""
     name = "Ballast Stones"
-    group = _get(name)
+    group = current_group(name, VERSION)
     if group is not None:
         return group
     group = new_group(
@@ -139,7 +125,7 @@ def ballast_stones_group() -> bpy.types.NodeTree:
     real = b.node("GeometryNodeRealizeInstances", {"Geometry": b.out(instances)})
     enabled = b.compare("GREATER_THAN", b.get("Radius"), 0.0)
     b.links.new(b.switch("GEOMETRY", enabled, None, b.out(real)), b.socket(b.outputs.inputs, "Stones"))
-    return _stamp(b.finish())
+    return stamp(b.finish(), VERSION)
 
 
 TRACK_INPUTS = [
@@ -177,7 +163,7 @@ TRACK_INPUTS = [
 def track_group() -> bpy.types.NodeTree:
     """The "Track" modifier group (see the module docstring); its inputs are :data:`TRACK_INPUTS`."""
     name = "Track"
-    group = _get(name)
+    group = current_group(name, VERSION)
     if group is not None:
         return group
     group = new_group(name, TRACK_INPUTS, [("Geometry", "NodeSocketGeometry")], modifier=True)
@@ -257,4 +243,4 @@ def track_group() -> bpy.types.NodeTree:
     for socket, value in zip(choices, [b.out(everything), *parts]):
         b.links.new(value, socket)
     b.links.new(b.out(pick), b.socket(b.outputs.inputs, "Geometry"))
-    return _stamp(b.finish())
+    return stamp(b.finish(), VERSION)

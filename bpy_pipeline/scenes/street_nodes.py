@@ -25,7 +25,7 @@ from __future__ import annotations
 import bpy
 import numpy as np
 
-from .nodes import GroupBuilder, add_group_modifier, new_group
+from .nodes import GroupBuilder, add_group_modifier, current_group, new_group, stamp
 from .objects import mesh_object
 
 GROUP = "Street Scatter"
@@ -45,11 +45,9 @@ SCATTER_INPUTS = [
 
 def scatter_group() -> bpy.types.NodeTree:
     """The "Street Scatter" modifier group (see the module docstring); its inputs are :data:`SCATTER_INPUTS`."""
-    group = bpy.data.node_groups.get(GROUP)
-    if group is not None and group.get("bpy_pipeline_version") == VERSION:
-        return group
+    group = current_group(GROUP, VERSION)
     if group is not None:
-        group.name = GROUP + ".old"
+        return group
     group = new_group(GROUP, SCATTER_INPUTS, [("Geometry", "NodeSocketGeometry")], modifier=True)
     b = GroupBuilder(group)
     g = b.get
@@ -70,7 +68,7 @@ def scatter_group() -> bpy.types.NodeTree:
                             options={"data_type": "INT", "domain": "INSTANCE"}))
     real = b.node("GeometryNodeRealizeInstances", {"Geometry": labelled})
     b.links.new(b.switch("GEOMETRY", g("Realize"), labelled, b.out(real)), b.socket(b.outputs.inputs, "Geometry"))
-    group["bpy_pipeline_version"] = VERSION
+    stamp(group, VERSION)
     return b.finish()
 
 
