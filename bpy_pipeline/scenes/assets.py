@@ -59,7 +59,7 @@ def _import(entry) -> list:
     return [o for o in bpy.data.objects if o not in before and o not in shapes and o.users_collection]
 
 
-def _world_arrays(obj, depsgraph) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def world_arrays(obj, depsgraph) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(vertices (n, 3) world, triangles (m, 3), material index (m,))`` of an evaluated mesh object."""
     evaluated = obj.evaluated_get(depsgraph)
     mesh = evaluated.to_mesh()
@@ -94,7 +94,7 @@ class AssetModel:
             raise InputError(f"{entry.where}.path: {entry.path.name} holds no mesh")
         self.armature = next((o for o in objects if o.type == "ARMATURE"), None)
         depsgraph = bpy.context.evaluated_depsgraph_get()
-        arrays = [_world_arrays(o, depsgraph) for o in meshes]
+        arrays = [world_arrays(o, depsgraph) for o in meshes]
         all_v = np.concatenate([a[0] for a in arrays])
         suffix = entry.path.suffix.lower()
         message = orientation_error(entry, all_v, suffix)
@@ -179,7 +179,7 @@ class AssetModel:
             depsgraph = bpy.context.evaluated_depsgraph_get()
             from ..geometry.primitives import merge
 
-            v, t = merge([_world_arrays(o, depsgraph)[:2] for o in self.meshes])
+            v, t = merge([world_arrays(o, depsgraph)[:2] for o in self.meshes])
             unit = v @ self.normal[:3, :3].T + self.normal[:3, 3]
             lift = -unit[:, 2].min()
             unit[:, 2] += lift

@@ -18,6 +18,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..geometry.railway_assets import SLOTS, part_class, placements
+from .assets import world_arrays
 from .objects import mesh_data, tag
 
 DATA_KINDS = ("objects", "meshes", "materials", "images", "textures", "cameras", "lights", "actions", "armatures", "collections", "node_groups")
@@ -42,22 +43,9 @@ def _mesh_pieces(objects) -> list[Piece]:
     for obj in objects:
         if obj.type != "MESH":
             continue
-        evaluated = obj.evaluated_get(depsgraph)
-        mesh = evaluated.to_mesh()
-        try:
-            mesh.calc_loop_triangles()
-            v = np.empty(len(mesh.vertices) * 3, np.float32)
-            mesh.vertices.foreach_get("co", v)
-            t = np.empty(len(mesh.loop_triangles) * 3, np.int32)
-            mesh.loop_triangles.foreach_get("vertices", t)
-            m = np.empty(len(mesh.loop_triangles), np.int32)
-            mesh.loop_triangles.foreach_get("material_index", m)
-        finally:
-            evaluated.to_mesh_clear()
-        world = np.array(evaluated.matrix_world)
+        vertices, triangles, material = world_arrays(obj, depsgraph)
         names = tuple(s.material.name if s.material else "" for s in obj.material_slots) or ("",)
-        vertices = v.reshape(-1, 3).astype(float) @ world[:3, :3].T + world[:3, 3]
-        out.append(Piece(obj.name, vertices, t.reshape(-1, 3), np.clip(m, 0, len(names) - 1), names))
+        out.append(Piece(obj.name, vertices, triangles, np.clip(material, 0, len(names) - 1), names))
     return out
 
 
