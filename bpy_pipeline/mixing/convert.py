@@ -75,27 +75,9 @@ def target_rays(spec) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def project_to_cones(points: np.ndarray, spec, target_offset=(0.0, 0.0, 0.0), max_range: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The parking paper's conversion: ``(points (k, 3) in the target frame, ring (k,), column (k,))``, one per occupied cell."""
-    p = np.asarray(points, float) - np.asarray(target_offset, float)
-    r = np.linalg.norm(p, axis=1)
-    keep = (r > 1e-6) & (r <= (max_range or spec.max_range))
-    p, r = p[keep], r[keep]
-    el = np.degrees(np.arcsin(np.clip(p[:, 2] / r, -1, 1)))
-    az = np.degrees(np.arctan2(p[:, 1], p[:, 0]))
-    table = np.asarray(elevations(spec), float)
-    ring = np.abs(el[:, None] - table[None]).argmin(axis=1)
-    spacing = np.median(np.diff(table)) if len(table) > 1 else 1.0
-    inside = np.abs(el - table[ring]) <= spacing / 2  # beyond the outermost cones: not seen by the target
-    p, r, az, ring = p[inside], r[inside], az[inside], ring[inside]
-    columns = np.asarray(azimuths(spec), float)
-    column = np.round(((az - columns[0]) / (columns[1] - columns[0] if len(columns) > 1 else 1.0))).astype(np.int64) % len(columns)
-    cell = ring * len(columns) + column
-    order = np.lexsort((r, cell))
-    first = np.ones(len(order), bool)
-    first[1:] = cell[order][1:] != cell[order][:-1]
-    pick = order[first]
-    projected = spherical_directions(az[pick], table[ring[pick]]) * r[pick, None]
-    return projected, ring[pick], column[pick]
+    """The parking paper's conversion: ``(points (k, 3) in the target frame, ring (k,), column (k,))``, one per occupied cell
+    (:func:`cones_with_source` without the source rows)."""
+    return cones_with_source(points, spec, target_offset, max_range)[:3]
 
 
 def raycast_convert(grid_points: np.ndarray, valid: np.ndarray, spec, target_offset=(0.0, 0.0, 0.0), threads: int | None = None, max_jump: float = 0.1) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
