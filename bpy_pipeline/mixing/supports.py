@@ -236,7 +236,7 @@ class Populated(Placement):
     detail: dict = field(default_factory=dict)
 
 
-class Surfaces:
+class SupportHeights:
     """The surfaces of some kinds, with each one's points in a k-d tree (xy) for local heights."""
 
     def __init__(self, points: np.ndarray, supports: list[Support], kinds, params: SupportParams):
@@ -308,7 +308,7 @@ def capsules_clear(obstacles: PointIndex, a: np.ndarray, b: np.ndarray, radius: 
 EDGE = 0.3  # a footing point's surface points within reach must centre within this share of the reach on it (not on an edge)
 
 
-def _footing(surfaces: Surfaces, k: int, xy: np.ndarray, z: float, reach: float, step: float) -> bool:
+def _footing(surfaces: SupportHeights, k: int, xy: np.ndarray, z: float, reach: float, step: float) -> bool:
     """Whether every one of ``(m, 2)`` footing points lies inside surface ``k``: its points within ``reach`` m centred
     on it (within ``EDGE`` of the reach: not on or past an edge) at a height within ``step`` m of ``z``."""
     h, offset = surfaces.local(k, xy, reach)
@@ -324,7 +324,7 @@ def _draw_person(rng: np.random.Generator, spec: RealPopulation) -> dict:
     return {"pose": pose, "build": float(build), "height": height, "angles": sample_pose(pose, rng, build)}
 
 
-def _place_person(shape: dict, k: int, xy: np.ndarray, z: float, yaw: float, surfaces: Surfaces, obstacles: PointIndex, spec: RealPopulation):
+def _place_person(shape: dict, k: int, xy: np.ndarray, z: float, yaw: float, surfaces: SupportHeights, obstacles: PointIndex, spec: RealPopulation):
     """``(placement, why)``: the person of ``shape`` standing at ``xy`` on surface ``k`` at height ``z``, or ``None`` and the reason."""
     from ..geometry.human import body_mesh, pose_person
 
@@ -355,7 +355,7 @@ def _draw_arm(rng: np.random.Generator, spec: RealPopulation) -> dict:
     return {"model": model, "q": random_configuration(model, rng, floor_z=0.0)}
 
 
-def _place_arm(shape: dict, k: int, xy: np.ndarray, z: float, yaw: float, surfaces: Surfaces, obstacles: PointIndex, spec: RealPopulation):
+def _place_arm(shape: dict, k: int, xy: np.ndarray, z: float, yaw: float, surfaces: SupportHeights, obstacles: PointIndex, spec: RealPopulation):
     """``(placement, why)``: the arm of ``shape`` with its base at ``xy`` on surface ``k`` at height ``z``, or ``None`` and the reason."""
     from ..geometry.kinematics import capsules_world, forward
     from ..geometry.objects import arm_mesh
@@ -401,7 +401,7 @@ def populate(points: np.ndarray, spec: RealPopulation, rng: np.random.Generator,
     log = {"supports": [s.info() for s in supports], "rejections": {}}
     for kind, (draw, place, wanted) in KINDS.items():
         count, on = wanted(spec)
-        surfaces = Surfaces(points, supports, on, spec.supports)
+        surfaces = SupportHeights(points, supports, on, spec.supports)
         rejections: Counter = Counter()
         done = 0
         for _ in range(count):
