@@ -39,7 +39,7 @@ CANTILEVER_PARTS = ("cantilever", "registration_arm", "insulators", "steady_arm"
 
 
 @dataclass(frozen=True)
-class Placement:
+class AssetPlacement:
     """One asset to place: ``name`` of its objects, ``pose`` ``(4, 4)`` world (the asset's origin and axes),
     ``replaces`` the names of the procedural objects it stands in for."""
 
@@ -57,7 +57,7 @@ def foot_pose(support_frame: np.ndarray, lateral: float, base: float, outward: f
     return np.asarray(support_frame, float) @ local
 
 
-def placements(layout, slot: str, supports, offsets) -> list[Placement]:
+def placements(layout, slot: str, supports, offsets) -> list[AssetPlacement]:
     """Where the ``slot`` asset stands at each support index of ``supports`` (the ones the level of detail builds).
 
     layout : a :class:`~.railway_layout.RailwayLayout`; offsets : ``(n,)`` track centre laterals (m, the cross-section's).
@@ -69,17 +69,17 @@ def placements(layout, slot: str, supports, offsets) -> list[Placement]:
         if slot == "gantry":
             if support.gantry:
                 right = next(m for m in support.masts if m.side == "right")
-                out.append(Placement(f"support.{k:02d}.gantry", foot_pose(frame, right.lateral, right.base, -1.0), (f"support.{k:02d}.gantry",)))
+                out.append(AssetPlacement(f"support.{k:02d}.gantry", foot_pose(frame, right.lateral, right.base, -1.0), (f"support.{k:02d}.gantry",)))
             continue
         if support.gantry:
             continue
         for mast in support.masts:
             pose = foot_pose(frame, mast.lateral, mast.base, mast.outward)
             if slot == "mast":
-                out.append(Placement(f"support.{k:02d}.mast.{mast.side}", pose, (f"support.{k:02d}.mast.{mast.side}",)))
+                out.append(AssetPlacement(f"support.{k:02d}.mast.{mast.side}", pose, (f"support.{k:02d}.mast.{mast.side}",)))
             elif slot == "cantilever" and mast.tracks:
                 i = min(mast.tracks, key=lambda t: abs(float(offsets[t]) - mast.lateral))  # the mast-face cantilever's track
-                out.append(Placement(f"support.{k:02d}.cantilever.t{i}", pose, tuple(f"support.{k:02d}.{p}.t{i}" for p in CANTILEVER_PARTS)))
+                out.append(AssetPlacement(f"support.{k:02d}.cantilever.t{i}", pose, tuple(f"support.{k:02d}.{p}.t{i}" for p in CANTILEVER_PARTS)))
     return out
 
 

@@ -45,7 +45,7 @@ KINDS_OF_SURFACE = ("floor", "desk", "other")
 
 
 @dataclass
-class Support:
+class FoundSurface:
     """One support surface.
 
     kind : floor | desk | other; index : (k,) int64 rows of the scan's points on it
@@ -139,8 +139,8 @@ def _ransac_horizontal(points: np.ndarray, params: SupportParams, rng: np.random
     return normal[best], float(offset[best])
 
 
-def find_supports(points: np.ndarray, params: SupportParams = SupportParams()) -> list[Support]:
-    """Support surfaces of a scan (module notes): floors first (largest first), then desks, then the others.
+def find_supports(points: np.ndarray, params: SupportParams = SupportParams()) -> list[FoundSurface]:
+    """The support surfaces of a scan (module notes): floors first (largest first), then desks, then the others.
 
     points : (n, 3) float64, the scan's returns in its sensor frame, metres
     """
@@ -198,7 +198,7 @@ def find_supports(points: np.ndarray, params: SupportParams = SupportParams()) -
             kind = "desk"
         else:
             kind = "other"
-        out.append(Support(kind, np.sort(rows), normal, offset, height, above, area, width, centres, covered))
+        out.append(FoundSurface(kind, np.sort(rows), normal, offset, height, above, area, width, centres, covered))
     order = sorted(range(len(out)), key=lambda k: (KINDS_OF_SURFACE.index(out[k].kind), -out[k].area, k))
     return [out[k] for k in order]
 
@@ -219,7 +219,7 @@ def _covered(points, all_keys, rows, centres, height, params) -> float:
     return float(np.isin(cells, all_keys[band]).mean())
 
 
-def support_labels(n: int, supports: list[Support]) -> np.ndarray:
+def support_labels(n: int, supports: list[FoundSurface]) -> np.ndarray:
     """``(n,)`` int64: the index into ``supports`` of each of ``n`` points' surface, -1 for none."""
     out = np.full(n, -1, np.int64)
     for k, s in enumerate(supports):
@@ -239,7 +239,7 @@ class Populated(Placement):
 class SupportHeights:
     """The surfaces of some kinds, with each one's points in a k-d tree (xy) for local heights."""
 
-    def __init__(self, points: np.ndarray, supports: list[Support], kinds, params: SupportParams):
+    def __init__(self, points: np.ndarray, supports: list[FoundSurface], kinds, params: SupportParams):
         cKDTree = _need_scipy()[0]
         self.chosen = [s for s in supports if s.kind in kinds]
         self.points = points
@@ -386,7 +386,7 @@ KINDS = {
 }
 
 
-def populate(points: np.ndarray, spec: RealPopulation, rng: np.random.Generator, placed: list | None = None, supports: list[Support] | None = None) -> tuple[list[Populated], dict]:
+def populate(points: np.ndarray, spec: RealPopulation, rng: np.random.Generator, placed: list | None = None, supports: list[FoundSurface] | None = None) -> tuple[list[Populated], dict]:
     """People and arms on the surfaces of a real scan (module notes); ``(placements, log)``.
 
     points : (n, 3) float64 the scan's kept returns (sensor frame, m); placed : objects placed before (kept ``keep_out`` from)
