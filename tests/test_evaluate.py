@@ -154,6 +154,21 @@ def test_model_learns_the_toy_world_and_is_deterministic():
     assert np.array_equal(pred, again)
 
 
+@pytest.mark.parametrize("model_name", ["lgbm", "forest"])
+def test_a_training_set_without_one_class_trains_and_never_predicts_it(model_name):
+    """Training data that hold no person (a matched highway, say) still train a model: it finds cars and calls nothing a person."""
+    rng = np.random.default_rng(4)
+    train = []
+    for i in range(2):
+        scan = _scene(rng, (8 + 3 * i, -4 + 2 * i), (5 + i, 3 - i), f"t{i}", f"g{i}")
+        scan.labels[scan.labels == 1] = 2  # the person's points become background
+        train.append(scan)
+    test = _scene(rng, (15.0, 6.0), (4.0, -6.0), "test", "gt")
+    model = fit(train, ("car", "person"), seed=0, max_points_per_scan=3000, model=model_name)
+    pred = model.predict(test)
+    assert (pred != 1).all() and metrics.score([test], [pred], ("car", "person"))["classes"]["car"]["iou"] > 0.8
+
+
 def test_leave_one_group_out_never_trains_on_the_test_group():
     rng = np.random.default_rng(4)
     scans = [_scene(rng, (8 + i, 0), (5, 3), f"a{i}", "a") for i in range(2)] + [_scene(rng, (12, 3), (6, -2), "b0", "b")]

@@ -30,7 +30,7 @@ def _lgbm(seed: int, n_jobs: int):
     except ImportError:
         raise InputError("--model lgbm: needs LightGBM (pip install 'bpy_pipeline[evaluate]'), or use --model forest") from None
     return lightgbm.LGBMClassifier(
-        objective="multiclass", n_estimators=100, learning_rate=0.08, num_leaves=31, min_child_samples=40,
+        n_estimators=100, learning_rate=0.08, num_leaves=31, min_child_samples=40,
         subsample=0.8, subsample_freq=1, colsample_bytree=0.8, reg_lambda=1.0,
         random_state=seed, n_jobs=n_jobs, deterministic=True, force_row_wise=True, verbose=-1,
     )  # fmt: skip
