@@ -91,7 +91,7 @@ def main():
     captured = []
     original = scan_stages.apply_effects
 
-    def capture(points, beam, effects, generator):  # the scan alone: keep what the effects would get
+    def capture(points, beam, effects, generator, **_):  # the scan alone: keep what the effects would get
         captured.append((points, beam))
         return points
 
