@@ -218,9 +218,10 @@ def prepare_folder(folder: Path) -> None:
         p.unlink()
 
 
-def mixed_config(folder: Path, frames: int, seed: int) -> dict:
-    """The pipeline config of the mixed dataset: ``real_scan`` over ``folder`` (module notes), PLY only, no preview, no boxes."""
-    return {
+def mixed_config(folder: Path, frames: int, seed: int, rules: dict | None = None) -> dict:
+    """The pipeline config of the mixed dataset: ``real_scan`` over ``folder`` (module notes), PLY only, no preview, no boxes;
+    ``rules`` (scene keys: ``kitti_rule``, ``parking_rule``, ``parking_rules``) replace the papers' rules where given."""
+    config = {
         "frames": frames,
         "seed": seed,
         "scene": {
@@ -230,6 +231,8 @@ def mixed_config(folder: Path, frames: int, seed: int) -> dict:
         "sensor": {"preset": PRESET},
         "output": {"formats": ["ply"], "preview": False, "boxes": {"formats": []}},
     }  # fmt: skip
+    config["scene"].update(rules or {})
+    return config
 
 
 def cpu_seconds() -> float:
@@ -238,7 +241,7 @@ def cpu_seconds() -> float:
     return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
 
 
-def make_mixed_dataset(backgrounds: list[Path], out: Path, frames_per_background: int, seed: int, workdir: Path) -> Path:
+def make_mixed_dataset(backgrounds: list[Path], out: Path, frames_per_background: int, seed: int, workdir: Path, rules: dict | None = None) -> Path:
     """Synthetic cars and pedestrians cast into the emptied real ``backgrounds`` (module notes); returns ``out``,
     the dataset folder (``ply/NNNNNN.ply`` with per-point ``semantic`` in the project's class ids, ``records/NNNNNN.json``
     with each frame's inserted objects under ``scene``, ``manifest.json`` with the timings ``make_mixed_dataset``
@@ -250,6 +253,7 @@ def make_mixed_dataset(backgrounds: list[Path], out: Path, frames_per_background
     frames_per_background : frames per background (>= 1); the dataset has len(backgrounds) * frames_per_background
     seed : the run's seed (placements, object shapes, drop and noise)
     workdir : scratch folder; the emptied backgrounds go to ``workdir/backgrounds``
+    rules : scene keys that replace the papers' rules (:func:`mixed_config`), e.g. what ``bpy-pipeline match`` fits
     """
     import json
 
@@ -267,7 +271,7 @@ def make_mixed_dataset(backgrounds: list[Path], out: Path, frames_per_background
         write_background(background, folder, k)
     emptying = cpu_seconds() - start
     frames = len(emptied) * int(frames_per_background)
-    config = bp.load_config(mixed_config(folder, frames, seed))
+    config = bp.load_config(mixed_config(folder, frames, seed, rules))
     start = cpu_seconds()
     bp.run(config, out, mode="overwrite" if (Path(out) / "manifest.json").exists() else "new", log=lambda line: None)
     mixing = cpu_seconds() - start
