@@ -1,6 +1,6 @@
 """The super-resolution mirror LiDAR: a spinning sensor that sees the world through its own ring of mirrors.
 
-The human-robot safety paper's sensor (../shared/seeds/002) is an Ouster OS1-128 (128 channels
+The sensor of *Raphael: Realistic 3D Data Generation and Unsupervised Learning for Enhanced Human-Robot Detection in the Real World* is an Ouster OS1-128 (128 channels
 over 45 deg, 2048 columns, 10 Hz) mounted overhead inside ``segments`` planar mirrors arranged
 around it. Every ray reflects once on the sensor's own mirrors before it enters the scene, so
 the whole 360 x 45 deg sweep is folded down onto the floor below: each segment maps its own
