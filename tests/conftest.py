@@ -18,6 +18,18 @@ def real_scans_folder() -> Path:
     return REAL_SCANS
 
 
+@pytest.fixture(scope="module")
+def real_samples(real_scans_folder):
+    """The real nuScenes HDL-32E sweep (``fitting.read_scan``) and its drop samples; skips with a reason where it is absent."""
+    from bpy_pipeline.lidar import fitting
+
+    path = real_scans_folder / "nuscenes_hdl32e_sweep.bin"
+    if not path.exists():
+        pytest.skip(f"real scan {path} is absent (set BPY_PIPELINE_REAL_SCANS to its folder)")
+    scan = fitting.read_scan(path, 32)
+    return scan, fitting.drop_samples(scan, fitting.scan_geometry(scan))
+
+
 @pytest.fixture
 def real_scan():
     """Path of a file in ../shared/real_scans; skips with a reason where it is absent."""

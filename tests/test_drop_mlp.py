@@ -98,15 +98,6 @@ def test_mlp_network_checks_its_shapes():
     assert model.predict(np.array([500.0]), np.array([30.0]))[0] == model.predict(np.array([100.0]), np.array([30.0]))[0]
 
 
-@pytest.fixture(scope="module")
-def real_samples(real_scans_folder):
-    path = real_scans_folder / "nuscenes_hdl32e_sweep.bin"
-    if not path.exists():
-        pytest.skip(f"real scan {path} is absent (set BPY_PIPELINE_REAL_SCANS to its folder)")
-    scan = fitting.read_scan(path, 32)
-    return scan, fitting.drop_samples(scan, fitting.scan_geometry(scan))
-
-
 def test_real_sweep_mlp_beats_or_equals_the_table_on_held_out_columns(real_samples):
     """8 blocks of 135 azimuth columns: each model fitted on 7, scored on the eighth. "Beats or
     equals": the MLP's mean held-out log-loss is at most the table's (the `fit` default 4 x 2)

@@ -161,15 +161,6 @@ def test_fit_rejects_what_is_not_an_organised_scan(tmp_path, capsys):
 
 
 # ----------------------------------------------------------------------------- the real HDL-32E sweep
-@pytest.fixture(scope="module")
-def real_samples(real_scans_folder):
-    path = real_scans_folder / "nuscenes_hdl32e_sweep.bin"
-    if not path.exists():
-        pytest.skip(f"real scan {path} is absent (set BPY_PIPELINE_REAL_SCANS to its folder)")
-    scan = fitting.read_scan(path, 32)
-    return scan, fitting.drop_samples(scan, fitting.scan_geometry(scan))
-
-
 def test_real_sweep_empty_firings_and_sensor_track(real_samples):
     """Of the 5,196 records within 0.5 m of the origin, 4,393 lie on the sensor's track (empty
     firings); 803 are returns off it, from the vehicle's own body: about 4,000 returns lie
