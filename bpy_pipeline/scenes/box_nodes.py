@@ -66,6 +66,12 @@ def label(b: GroupBuilder, geometry, instance) -> bpy.types.NodeSocket:
                         options={"data_type": "INT", "domain": "INSTANCE"}))
 
 
+FINISH_INPUTS = [  # the interface rows of what :func:`finish` reads, for a group's INPUTS
+    ("Instance", "NodeSocketInt", 0, "instance id of what the group makes, stored as the named attribute lidar_instance the export reads (0: the object's lidar_instance)", 0, 2**31 - 1),
+    ("Realize", "NodeSocketBool", False, "realize the instances into one mesh (the export reads instances as they are)"),
+]
+
+
 def finish(b: GroupBuilder, geometry, realize, instance=None) -> None:
     """Link ``geometry`` (instances; labelled ``instance`` when given) to the group's output, realized when the bool ``realize`` holds."""
     if instance is not None:

@@ -41,8 +41,7 @@ INPUTS = [
     ("Size", "NodeSocketVector", (2.0, 0.6, 2.2), "m, a desk's or rack's length, depth and height"),
     ("Levels", "NodeSocketInt", 4, "boards of a rack", 1, 100),
     ("Box", "NodeSocketObject", None, "the unit box instanced for every piece"),
-    ("Instance", "NodeSocketInt", 0, "instance id of what the group makes, stored as the named attribute lidar_instance the export reads (0: the object's lidar_instance)", 0, 2**31 - 1),
-    ("Realize", "NodeSocketBool", False, "realize the instances into one mesh (the export reads instances as they are)"),
+    *box_nodes.FINISH_INPUTS,
 ]
 
 

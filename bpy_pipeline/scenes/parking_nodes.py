@@ -48,8 +48,7 @@ INPUTS = [
     ("Ramp Length", "NodeSocketFloat", 16.0, "m (0: no ramp)", 0.0, 1000.0),
     ("Box", "NodeSocketObject", None, "the unit box instanced for slabs, walls and pillars"),
     ("Wedge", "NodeSocketObject", None, "the ramp's unit wedge"),
-    ("Instance", "NodeSocketInt", 0, "instance id of what the group makes, stored as the named attribute lidar_instance the export reads (0: the object's lidar_instance)", 0, 2**31 - 1),
-    ("Realize", "NodeSocketBool", False, "realize the instances into one mesh (the export reads instances as they are)"),
+    *box_nodes.FINISH_INPUTS,
 ]
 
 
