@@ -431,8 +431,9 @@ sys.path.insert(0, {root!r})
 from pathlib import Path
 from bpy_pipeline.dataset import take_lock
 from bpy_pipeline.errors import InputError
-lock = Path(sys.argv[1])
-while not Path(sys.argv[2]).exists():
+lock, go, done = (Path(a) for a in sys.argv[1:4])
+print("ready", flush=True)  # imported: the parent starts the race only when both are
+while not go.exists():
     pass
 try:
     fd = take_lock(lock)
@@ -440,19 +441,28 @@ except InputError:
     print("refused", flush=True)
     sys.exit(0)
 print("took", flush=True)
-time.sleep(0.3)  # hold it while the other one tries
+while not done.exists():  # hold it until the parent has both answers, however slowly the other one ran
+    time.sleep(0.01)
 """
 
 
 def race_once(folder: Path, script: Path) -> int:
-    """Two processes take one stale lock at the same moment; returns how many took it."""
+    """Two processes take one stale lock at the same moment; returns how many took it.
+
+    Both hold what they took until the parent has read both answers, so a slow second process can never
+    find the first one's lock already released (which would be a fair take-over, not a race)."""
     folder.mkdir()
     lock = stale_lock(folder, {"pid": dead_pid(), "host": socket.gethostname(), "started": "then"})
-    go = folder / "go"
-    procs = [subprocess.Popen([PY, str(script), str(lock), str(go)], stdout=subprocess.PIPE, text=True) for _ in range(2)]
-    time.sleep(0.4)  # both started and spinning on the go file
-    go.touch()
-    outs = [p.communicate(timeout=60)[0].strip() for p in procs]
+    go, done = folder / "go", folder / "done"
+    procs = [subprocess.Popen([PY, str(script), str(lock), str(go), str(done)], stdout=subprocess.PIPE, text=True) for _ in range(2)]
+    try:
+        assert [p.stdout.readline().strip() for p in procs] == ["ready", "ready"]
+        go.touch()
+        outs = [p.stdout.readline().strip() for p in procs]
+    finally:
+        done.touch()
+        for p in procs:
+            p.communicate(timeout=60)
     assert all(o in ("took", "refused") for o in outs), outs
     return outs.count("took")
 
