@@ -52,7 +52,7 @@ from __future__ import annotations
 
 import math
 import os
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Executor, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from functools import cached_property, lru_cache
 from pathlib import Path
@@ -61,12 +61,14 @@ import numpy as np
 import yaml
 
 from ..errors import InputError
+from . import effects_kernels
 from .drop import DROP_MODELS
 from .drop.carla import carla_keep_probability  # noqa: F401  (stable names)
 from .drop.mlp import MLP
 from .drop.threshold import ThresholdModel, threshold_model  # noqa: F401
 from .intensity import carla_intensity, compute_intensity, lidar_intensity, reflectance  # noqa: F401
 from .materials import apply_materials
+from .points import POINT_DTYPE
 from .weather import apply_weather, fog_alpha, fog_soft_table
 
 MODEL_FORMAT = "bpy_pipeline effects model"
@@ -338,6 +340,10 @@ def noise_sigma(points: np.ndarray, beam: np.ndarray, noise, models: FittedModel
     return models.noise_table.lookup(points["range"], beam["cos_incidence"])
 
 
+_NONE32 = np.zeros(0, np.float32)
+_NO_RINGS = np.zeros(0, np.uint16)
+
+
 def perturb(points: np.ndarray, beam: np.ndarray, noise, rng: np.random.Generator, models: FittedModels | None = None) -> None:
     """Range noise, per-ring bias and angular jitter applied to ``points`` in place (sensor frame).
 
@@ -353,6 +359,20 @@ def perturb(points: np.ndarray, beam: np.ndarray, noise, rng: np.random.Generato
     jitter = math.radians(noise.angular_jitter_deg)
     if n == 0 or not (has_noise or noise.ring_bias or jitter > 0):
         return
+    if noise.ring_bias:
+        bias = np.asarray(noise.ring_bias, np.float32)
+        ring = points["ring"]
+        if ring.max() >= len(bias):
+            raise InputError(f"effects.noise.ring_bias: {len(bias)} values but the scan has ring {int(ring.max())}; give one per ring")
+    fits = jitter == 0 and points.dtype == POINT_DTYPE and points.flags.c_contiguous and (np.isscalar(sigma) or (sigma.dtype == np.float32 and sigma.shape == (n,)))
+    kernels = effects_kernels.compiled() if fits else None
+    if kernels is not None:  # the same operations in one compiled pass over the records (effects_kernels.py)
+        draw = rng.standard_normal(n, dtype=np.float32) if has_noise else _NONE32
+        sigmas = _NONE32 if np.isscalar(sigma) else np.ascontiguousarray(sigma)
+        one = np.float32(sigma) if np.isscalar(sigma) else np.float32(0)
+        biases, rings = (bias, np.ascontiguousarray(ring)) if noise.ring_bias else (_NONE32, _NO_RINGS)
+        kernels.move_along_beam(points, beam["direction"], draw, one, sigmas, biases, rings)
+        return
     old = points["range"]
     new = old.copy()
     if has_noise:
@@ -360,10 +380,6 @@ def perturb(points: np.ndarray, beam: np.ndarray, noise, rng: np.random.Generato
         draw *= np.float32(sigma) if np.isscalar(sigma) else sigma
         new += draw
     if noise.ring_bias:
-        bias = np.asarray(noise.ring_bias, np.float32)
-        ring = points["ring"]
-        if ring.max() >= len(bias):
-            raise InputError(f"effects.noise.ring_bias: {len(bias)} values but the scan has ring {int(ring.max())}; give one per ring")
         new += bias[ring]
     np.maximum(new, np.float32(0), out=new)
     if jitter > 0:
@@ -434,16 +450,17 @@ def weather_active(effects) -> bool:
     return weather is not None and not effects.ideal and weather.active
 
 
-def apply_effects(points: np.ndarray, beam: np.ndarray, effects, rng: np.random.Generator, threads: int | None = None, objects=None) -> np.ndarray:
+def apply_effects(points: np.ndarray, beam: np.ndarray, effects, rng: np.random.Generator, threads: int | None = None, objects=None, pool: Executor | None = None) -> np.ndarray:
     """The configured effects (``config.EffectsConfig``) in a fixed order; returns new records.
 
     points : (p,) POINT_DTYPE records (sensor frame); beam : (p,) BEAM_DTYPE facts of the same points
     1. intensity of the true geometry; 2. ray drop (it sees the true range, as the receiver
     does); 3. weather (``effects.weather``, :mod:`.weather`: attenuation, scatterer returns, the noise
     floor); 4. range noise, ring bias and angular jitter on the points that remain.
-    The points go through in chunks of :data:`CHUNK_POINTS` on ``threads`` threads (default:
-    every core); chunk k draws from its own generator, seeded by the k-th of one draw of seeds
-    from ``rng``, so the same generator state gives the same bytes however the threads run.
+    The points go through in chunks of :data:`CHUNK_POINTS` on ``pool`` (an executor the caller keeps,
+    e.g. the run's: no threads started per call) or else on ``threads`` threads started for the call
+    (default: every core; 1: in this thread); chunk k draws from its own generator, seeded by the k-th
+    of one draw of seeds from ``rng``, so the same generator state gives the same bytes however the threads run.
     ``objects``: the scene's ObjectTable, for ``effects.materials.objects`` (per-object reflectance models).
     """
     drop_models = fitted_models(effects.drop, "effects.drop.model_file")
@@ -463,7 +480,12 @@ def apply_effects(points: np.ndarray, beam: np.ndarray, effects, rng: np.random.
 
     if len(starts) == 1:
         return chunk(0)
-    with ThreadPoolExecutor(threads or os.cpu_count() or 1) as pool:
+    if pool is not None:
         parts = list(pool.map(chunk, range(len(starts))))
+    elif threads == 1:
+        parts = [chunk(k) for k in range(len(starts))]
+    else:
+        with ThreadPoolExecutor(threads or os.cpu_count() or 1) as own:
+            parts = list(own.map(chunk, range(len(starts))))
     raw = np.dtype((np.void, points.dtype.itemsize))
     return np.concatenate([p.view(raw) for p in parts]).view(points.dtype)

@@ -63,7 +63,7 @@ def effects_stage(frame: Frame, run: Run) -> None:
             if mask is not None:  # returns lost where the beam split on an edge of the sensor's own mirrors
                 keep = drop_at_edges(points, mask, config.sensor.spec, frame.rng)
                 points, beam = points[keep], beam[keep]
-            points = apply_effects(points, beam, config.effects, frame.rng, objects=frame.buffers.objects)
+            points = apply_effects(points, beam, config.effects, frame.rng, threads=run.threads, objects=frame.buffers.objects, pool=run.casters.pool)  # the run's threads
             inside = (points["range"] >= spec.min_range) & (points["range"] <= spec.max_range)
             if not inside.all():  # noise never pushes a return past the sensor's limits: such returns are dropped
                 points = points[inside]
