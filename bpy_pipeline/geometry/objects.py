@@ -282,9 +282,13 @@ def body_size(index: int, bodies: str = "all") -> np.ndarray:
     return style_size(style, style.height)
 
 
-def car_object(rng: np.random.Generator, size=None, bodies: str = "classic", body: int = -1) -> list[ObjectPart]:
+def car_object(rng: np.random.Generator, size=None, bodies: str = "classic", body: int = -1, fittings: bool = False) -> list[ObjectPart]:
     """A car of a random body of ``CAR_BODY_SETS[bodies]`` (or body ``body`` of it, drawn before: no draw) and a random
-    paint, its parts centred on the origin (nose +x); scaled to ``size`` when given, else at the body's own size."""
+    paint, its parts centred on the origin (nose +x); scaled to ``size`` when given, else at the body's own size.
+
+    ``fittings``: the :func:`car_fittings` parts follow :data:`PARTS` (plates, then lights, with the materials of
+    :data:`FITTINGS`), moved and scaled as the car's own parts are (the fit ignores their millimetres out of the box);
+    no extra draw, so the car's parts are the same either way."""
     styles = CAR_BODY_SETS[bodies]
     style = styles[int(rng.integers(len(styles)))] if body < 0 else styles[body]
     shares = np.array([c[2] for c in COLOURS])
@@ -292,7 +296,14 @@ def car_object(rng: np.random.Generator, size=None, bodies: str = "classic", bod
     mesh = car_parts(style, style.height)
     reflect = {"body": ("diffuse", paint), "windows": ("glass", GLASS_REFLECTIVITY), "interior": ("diffuse", INTERIOR_REFLECTIVITY), "tyres": ("diffuse", TYRE_REFLECTIVITY)}
     parts = [ObjectPart(mesh[name][0], mesh[name][1], *reflect[name]) for name in PARTS]
-    return fit_to_box(parts, style_size(style, style.height) if size is None else size)
+    fitted = fit_to_box(parts, style_size(style, style.height) if size is None else size)
+    if not fittings:
+        return fitted
+    vertices = np.concatenate([p.vertices for p in parts])
+    low, high = vertices.min(axis=0), vertices.max(axis=0)
+    scale = np.asarray(style_size(style, style.height) if size is None else size, float) / np.maximum(high - low, 1e-9)
+    extra = car_fittings(style, style.height)
+    return fitted + [ObjectPart((extra[name][0] - (low + high) / 2) * scale, extra[name][1], *FITTINGS[name]) for name in FITTINGS]
 
 
 PERSON_REFLECTIVITY = 0.4  # clothing (an assumption)

@@ -148,9 +148,11 @@ def part_material(name: str, where: str) -> tuple[int, int]:
 
     if name in MATERIAL_ID:
         return MATERIAL_ID[name], 0
+    if name in GLASS_PANES:  # a car's window: glass, its transmittance from scene.car_glass
+        return MATERIAL_ID["glass"], 0
     if name in MATERIAL_MODELS:
         return MATERIAL_ID["diffuse"], model_id(name)
-    raise InputError(f"{where}: expected one of {', '.join([*MATERIAL_ID, *MATERIAL_MODELS])}, got {name!r}")
+    raise InputError(f"{where}: expected one of {', '.join([*MATERIAL_ID, *MATERIAL_MODELS, *GLASS_PANES])}, got {name!r}")
 
 
 def model_id(name: str) -> int:
@@ -245,3 +247,90 @@ def apply_materials(points: np.ndarray, beam: np.ndarray, materials: MaterialsCo
         a = model.apparent(beam["reflectivity"][mine], cos, params)
         out["reflectivity"][mine] = a / np.maximum(cos, 1e-3) ** incidence_exponent
     return out
+
+
+# ----------------------------------------------------------------------------- car glass and cabins (insertion)
+GLASS_INDEX = 1.52  # soda-lime (float) glass near 905 nm (about 1.51-1.52 over the near infrared)
+
+
+def fresnel_reflectance(cos_incidence, index: float = GLASS_INDEX) -> np.ndarray:
+    """(k,) unpolarised power reflectance of one air-glass surface (Fresnel: the mean of the s and p shares).
+
+    cos_incidence : (k,) |cos| of the angle of incidence; index : the glass's refractive index (air 1)."""
+    ci = np.clip(np.abs(np.asarray(cos_incidence, np.float64)), 0.0, 1.0)
+    st = np.sqrt(np.maximum(1.0 - ci**2, 0.0)) / index  # Snell: sin t = sin i / n (never total: air to glass)
+    ct = np.sqrt(np.maximum(1.0 - st**2, 0.0))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rs = ((ci - index * ct) / (ci + index * ct)) ** 2
+        rp = ((ct - index * ci) / (ct + index * ci)) ** 2
+    return np.where(ci > 0, 0.5 * (rs + rp), 1.0)
+
+
+def pane_transmission(cos_incidence, internal, index: float = GLASS_INDEX) -> np.ndarray:
+    """(k,) one-way power transmission of a pane: ``(1 - R)^2 internal^(1 / cos t)``.
+
+    Two surfaces of Fresnel reflectance ``R`` (:func:`fresnel_reflectance`; the inter-reflections, ``R^2`` about
+    0.2 % near normal, left out) and the glass's own absorption (tint, the ferrous-iron band of green glass, an
+    infrared-cut layer) along the refracted path: ``internal`` is the pane's internal transmittance at normal
+    incidence (a number or one per beam), the path grows as ``1 / cos t`` (``t`` the refracted angle)."""
+    ci = np.clip(np.abs(np.asarray(cos_incidence, np.float64)), 0.0, 1.0)
+    ct = np.sqrt(np.maximum(1.0 - (1.0 - ci**2) / index**2, 0.0))
+    r = fresnel_reflectance(ci, index)
+    return (1.0 - r) ** 2 * np.asarray(internal, np.float64) ** (1.0 / np.maximum(ct, 1e-9))
+
+
+def glass_round_trip(cos_incidence, internal, index: float = GLASS_INDEX) -> np.ndarray:
+    """(k,) ``pane_transmission^2``: the share of a beam's power that crosses a pane and comes back through it (the
+    echo of what lies behind crosses the same pane at the same angle)."""
+    return pane_transmission(cos_incidence, internal, index) ** 2
+
+
+@dataclass(frozen=True)
+class CarGlass:
+    """``scene.car_glass`` (real-scan insertion): what an inserted car's windows and cabin do to the beam.
+
+    A beam meeting a window passes with probability :func:`glass_round_trip` (Fresnel at its incidence times the
+    pane's internal transmittance, squared for the way back; a Monte Carlo split of the beam's power: the rest is
+    reflected away off the glass or absorbed in it, and gives no return), else it is lost; a beam that passes
+    meets the cabin, whose surfaces (black plastics and fabrics) have the low reflectivity ``interior``, or
+    passes out through the far window. ``windshield`` is the front pane's internal transmittance, ``tinted`` the
+    side and rear panes' (privacy glass). ``enabled: false`` (the default): the windows of before (every beam
+    passes, gain ``1 - reflectivity``) and the cabin at the interior's reflectivity of geometry/objects.py.
+    docs/realism.md's materials table gives the sources and which figures are fitted.
+    """
+
+    enabled: bool = False  # opt-in: on KITTI 004747 (held out) it puts no more cars within 0.7-1.4x (docs/realism.md)
+    index: float = GLASS_INDEX
+    windshield: float = 0.6  # fitted on KITTI 000008 (benchmarks/bench_materials.py --insertion)
+    tinted: float = 0.7  # fitted on KITTI 000008
+    interior: float = 0.15  # fitted on KITTI 000008 (0.05 and 0.15 tried; geometry/objects.py's cabin)
+
+    def __post_init__(self):
+        for key, lo, hi in (("index", 1.0, 3.0), ("windshield", 0.0, 1.0), ("tinted", 0.0, 1.0), ("interior", 0.0, 1.0)):
+            value = getattr(self, key)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not lo <= value <= hi:
+                raise InputError(f"scene.car_glass.{key}: must be a number in {lo:g}..{hi:g}, got {value!r}")
+
+
+GLASS_PANES = {"windshield_glass": "windshield", "tinted_glass": "tinted"}  # part material -> the CarGlass field of its internal transmittance (traced as glass)
+
+
+def pane_internal(materials: list[str], glass: CarGlass) -> np.ndarray:
+    """(k,) internal transmittance of each object row whose part material is a car pane (:data:`GLASS_PANES`), NaN
+    for every other row (plain ``glass`` keeps the trace's rule of before)."""
+    return np.array([float(getattr(glass, GLASS_PANES[m])) if m in GLASS_PANES else np.nan for m in materials])
+
+
+def glass_transmission(internal: np.ndarray, glass: CarGlass):
+    """The trace's ``MirrorGlassRules.glass_transmission`` for ``internal`` (:func:`pane_internal`, one per object
+    row): ``(cos (k,), rows (k,)) -> (k,)`` the round trip of each pane met, NaN for rows without a pane model."""
+    internal = np.asarray(internal, np.float64)
+
+    def transmission(cos_incidence: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        tau = internal[rows]
+        out = np.full(len(tau), np.nan)
+        pane = np.isfinite(tau)
+        out[pane] = glass_round_trip(np.asarray(cos_incidence)[pane], tau[pane], glass.index)
+        return out
+
+    return transmission

@@ -49,12 +49,17 @@ class MirrorGlassRules:
     glass_reflect : fraction, 0..1, of the other beams meeting glass that reflect like a mirror
         instead of passing through; drawn from the scan's ``rng`` when strictly between 0 and 1
     glass_passes : the most glass surfaces a beam passes through; meeting one more loses it
+    glass_transmission : None (every beam not returned or reflected passes, gain x (1 - reflectivity)), or
+        ``(cos (k,), object rows (k,)) -> (k,)`` the share of a pane's power that crosses it and back
+        (lidar/materials.py :func:`~.materials.glass_transmission`; NaN for a row it does not model, which keeps
+        the rule before): such a beam passes with that probability, drawn from ``rng``, gain unchanged, else is lost
     """
 
     mirror_return_deg: float = 0.0
     glass_return_deg: float = 0.0
     glass_reflect: float = 0.0
     glass_passes: int = 8
+    glass_transmission: object = None
 
 
 Surfaces = MirrorGlassRules  # the old name (it collided with scenes.population.Surfaces); kept importable for this round
@@ -207,6 +212,14 @@ def trace_beams(
             through &= ~turn
         reflect &= (reflectivity > 0) & (bounces[i] < max_bounces)
         through &= (reflectivity < 1) & (passes[i] < surfaces.glass_passes)
+        modelled = np.zeros(len(i), bool)
+        if surfaces.glass_transmission is not None and through.any():
+            if rng is None:
+                raise ValueError("trace_beams: glass_transmission needs a numpy Generator (rng)")
+            pick = np.flatnonzero(through)
+            share = surfaces.glass_transmission(cos_incidence[pick], obj[pick])
+            modelled[pick] = np.isfinite(share)
+            through[pick] &= ~np.isfinite(share) | (rng.random(len(pick)) < np.nan_to_num(share))
         if returns.any():
             done.append((beam[returns], path[returns], point[returns], hits.triangle[returns], bounces[i][returns], mirror[i][returns], gain[i][returns], cos_incidence[returns], seg_d[returns]))
         go = reflect | through
@@ -215,7 +228,7 @@ def trace_beams(
         j, turned = i[go], reflect[go]
         rows, travelled = beam[go], path[go]
         bounces, passes = bounces[j] + turned, passes[j] + ~turned
-        gain = gain[j] * np.where(turned, reflectivity[go], 1.0 - reflectivity[go])
+        gain = gain[j] * np.where(turned, reflectivity[go], np.where(modelled[go], 1.0, 1.0 - reflectivity[go]))
         mirror = np.where((mirror[j] < 0) & turned, obj[go], mirror[j])
         normal, d = hits.normal[go], seg_d[go]
         d_dot_n = dot3(d, normal)

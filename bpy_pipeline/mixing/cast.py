@@ -20,8 +20,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..buffers import ObjectTable, SceneBuffers
-from ..geometry.objects import OBJECT_TYPES, ObjectPart, car_object
-from ..lidar.materials import part_material
+from ..geometry.objects import OBJECT_TYPES, PARTS, ObjectPart, car_object
+from ..lidar.materials import CarGlass, glass_transmission, pane_internal, part_material
 from ..lidar.raycast import RayCaster
 from ..lidar.scanner import MirrorGlassRules, trace_beams
 from .firings import Firings
@@ -29,13 +29,39 @@ from .objects import mesh_file_parts  # noqa: F401 - re-exported: mixing.cast.me
 from .placement import Placement
 
 
-def object_parts(p: Placement, rng: np.random.Generator, car_bodies: str = "classic") -> list[ObjectPart]:
+def car_glass_parts(parts: list[ObjectPart], glass: CarGlass) -> list[ObjectPart]:
+    """A car of :func:`~bpy_pipeline.geometry.objects.car_object` (its own frame, nose +x) with its windows split
+    into panes and its cabin darkened (``scene.car_glass``, :class:`~bpy_pipeline.lidar.materials.CarGlass`).
+
+    The windows part becomes ``tinted_glass`` (side and rear panes; it keeps its place, so part j is still
+    ``PARTS[j]``) and a ``windshield_glass`` part appended after the others: the triangles whose normal points
+    more along x than along y and which lie ahead of the car's centre. The interior takes ``glass.interior``.
+    Unchanged when ``glass.enabled`` is false."""
+    if not glass.enabled:
+        return parts
+    windows, interior = PARTS.index("windows"), PARTS.index("interior")
+    w = parts[windows]
+    corners = w.vertices[w.triangles]
+    normal = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    front = (np.abs(normal[:, 0]) > np.abs(normal[:, 1])) & (corners[:, :, 0].mean(axis=1) > 0)
+    out = list(parts)
+    out[windows] = ObjectPart(w.vertices, w.triangles[~front], "tinted_glass", w.reflectivity)
+    out[interior] = ObjectPart(parts[interior].vertices, parts[interior].triangles, parts[interior].material, glass.interior)
+    out.append(ObjectPart(w.vertices, w.triangles[front], "windshield_glass", w.reflectivity))
+    return out
+
+
+def object_parts(p: Placement, rng: np.random.Generator, car_bodies: str = "classic", glass: CarGlass | None = None, fittings: bool = False) -> list[ObjectPart]:
     """The parts of placement ``p`` in the sensor frame (the type's mesh scaled to the box, yawed, moved).
 
     A car is drawn from ``CAR_BODY_SETS[car_bodies]`` (``scene.car_bodies``), or is body ``p.body`` of it when the
-    placement drew one; a mesh file's parts come from :mod:`.objects` (glass where its materials say so)."""
+    placement drew one, its windows and cabin as ``glass`` says (:func:`car_glass_parts`; None: as before), with plates
+    and lamps when ``fittings`` (geometry/objects.py ``car_fittings``); a mesh file's parts come from :mod:`.objects`
+    (glass where its materials say so)."""
     if p.type == "car":
-        parts = car_object(rng, p.size, car_bodies, getattr(p, "body", -1))
+        parts = car_object(rng, p.size, car_bodies, getattr(p, "body", -1), fittings)
+        if glass is not None:
+            parts = car_glass_parts(parts, glass)
     elif p.type in OBJECT_TYPES:
         parts = OBJECT_TYPES[p.type][1](rng, p.size)
     else:
@@ -74,6 +100,15 @@ def object_buffers(placements: list[Placement], parts: list[list[ObjectPart]], i
     if not k:
         return SceneBuffers(np.zeros((0, 3)), np.zeros((0, 3), np.int32), np.zeros(0, np.int32), table)
     return SceneBuffers(np.concatenate(vertices), np.concatenate(triangles).astype(np.int32), np.concatenate(rows), table)
+
+
+def glass_rules(parts: list[list[ObjectPart]], glass: CarGlass | None) -> MirrorGlassRules:
+    """The trace's rules for the inserted objects of :func:`object_buffers` (``parts``, in the same order): glass
+    returns within 5 deg of normal incidence, and the car panes' round-trip transmission when ``glass`` is enabled."""
+    if glass is None or not glass.enabled:
+        return MirrorGlassRules(glass_return_deg=5.0)
+    internal = pane_internal([part.material for object_parts_ in parts for part in object_parts_], glass)
+    return MirrorGlassRules(glass_return_deg=5.0, glass_transmission=glass_transmission(internal, glass) if np.isfinite(internal).any() else None)
 
 
 @dataclass

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -37,7 +37,7 @@ from ..lidar.points import BEAM_DTYPE, POINT_DTYPE
 from ..lidar.sensors import resolve_sensor
 from ..lidar.visibility import occlusion_levels, subset_buffers, surface_samples
 from . import noise as injections
-from .cast import InsertedHits, cast_firings, merge_returns, near_objects, object_buffers, object_parts
+from .cast import InsertedHits, cast_firings, glass_rules, merge_returns, near_objects, object_buffers, object_parts
 from .firings import Firings, angles_deg, recover_firings
 from .ground import PointIndex, find_ground, in_box
 from .placement import Placement, Scene, explicit_placements, kitti_rule, parking_rule, real_placements
@@ -110,11 +110,17 @@ def labelled_boxes(firings: Firings, semantic: np.ndarray, instance: np.ndarray,
     return out
 
 
-def _effects(points: np.ndarray, beam: np.ndarray, effects, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-    """The fitted drop and noise models on the inserted returns; ``(points, kept firing rows)`` (a dropped firing stays empty)."""
+def _effects(points: np.ndarray, beam: np.ndarray, effects, rng: np.random.Generator, objects=None) -> tuple[np.ndarray, np.ndarray]:
+    """The fitted drop and noise models on the inserted returns; ``(points, kept firing rows)`` (a dropped firing stays empty).
+
+    objects : the inserted objects' table; where a part names a reflectance model (a plate's ``retroreflector``) the
+    model is applied to its returns (``effects.materials.objects`` on for them: the parts were made with it)."""
     tag = points["time"].copy()
     points["time"] = np.arange(len(points), dtype=np.float64)  # carry each record's row through the drop
-    out = apply_effects(points, beam, effects, rng)
+    materials = getattr(effects, "materials", None)
+    if objects is not None and objects.surface is not None and materials is not None and not materials.objects:
+        effects = replace(effects, materials=replace(materials, objects=True))
+    out = apply_effects(points, beam, effects, rng, objects=objects)
     rows = out["time"].astype(np.int64)
     out["time"] = tag[rows]
     return out, rows
@@ -176,6 +182,7 @@ class MixState:
     semantic_real: np.ndarray | None = None
     instance_real: np.ndarray | None = None
     placements: list = field(default_factory=list)
+    surfaces: object = None  # the trace's MirrorGlassRules for the inserted objects (cast.glass_rules)
     rule_log: dict = field(default_factory=dict)
     instances: list = field(default_factory=list)
     semantic_ids: list = field(default_factory=list)
@@ -257,7 +264,8 @@ def mix_place(state: MixState) -> None:
     first_instance = int(state.instance_real.max(initial=0)) + 1
     state.instances = [first_instance + k for k in range(len(placements))]
     state.semantic_ids = [table.id_of(p.class_name, "scene.objects.class") for p in placements]
-    parts = [getattr(p, "parts", None) or object_parts(p, rng, section.car_bodies) for p in placements]  # populated ones carry theirs
+    parts = [getattr(p, "parts", None) or object_parts(p, rng, section.car_bodies, section.car_glass, section.car_fittings) for p in placements]  # populated ones carry theirs
+    state.surfaces = glass_rules(parts, section.car_glass)
     state.buffers = object_buffers(placements, parts, state.instances, state.semantic_ids)
     state.placements, state.rule_log = placements, rule_log
     state.lap("meshes")
@@ -266,7 +274,7 @@ def mix_place(state: MixState) -> None:
 def mix_cast(state: MixState) -> None:
     """Every real firing cast at the inserted objects: their hits, those kept (nearer than the real return) and the real returns they hide."""
     work = Firings(**{**state.firings.__dict__, "valid": state.valid})
-    state.hits = cast_firings(work, state.buffers, state.max_range, state.threads, rng=state.rng)
+    state.hits = cast_firings(work, state.buffers, state.max_range, state.threads, surfaces=state.surfaces, rng=state.rng)
     state.kept, state.occluded = merge_returns(work, state.hits)
     state.lap("cast")
 
@@ -296,7 +304,7 @@ def mix_effects(state: MixState) -> None:
     state.visible_rays = np.bincount(new["instance"], minlength=max(state.instances, default=0) + 1)
     dropped_firings = np.zeros(0, np.int64)
     if state.effects is not None and len(new):
-        new, rows = _effects(new, beam, state.effects, rng)
+        new, rows = _effects(new, beam, state.effects, rng, objects)
         dropped_firings = np.setdiff1d(h.firing, h.firing[rows])
         h_firing = h.firing[rows]
     else:

@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 from ..geometry.placement import Distribution
+from ..lidar.materials import CarGlass
 
 
 @dataclass(frozen=True)
@@ -214,6 +215,10 @@ class RealScanScene:
         the frames made before the body set, byte for byte). Explicit ``objects`` keep their box either way.
     population : people and robot arms on the floors and desks found in the scan's points (:class:`RealPopulation`,
         :mod:`.supports`; off with no people and no arms)
+    car_glass : what an inserted car's windows and cabin do to the beam (lidar/materials.py :class:`CarGlass`: Fresnel
+        and tint by incidence, a dark cabin; opt-in, ``enabled: true``; off: the windows of before)
+    car_fittings : licence plates (retroreflector) and lamps (glossy) on every inserted car, their models applied
+        to the inserted returns (geometry/objects.py ``car_fittings``)
     """
 
     path: str = ""
@@ -232,3 +237,5 @@ class RealScanScene:
     max_range: float = 0.0
     car_bodies: Literal["all", "classic"] = "all"
     population: RealPopulation = field(default_factory=RealPopulation)
+    car_glass: CarGlass = field(default_factory=CarGlass)
+    car_fittings: bool = True
