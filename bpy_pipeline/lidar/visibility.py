@@ -24,7 +24,7 @@ import numpy as np
 from ..buffers import SceneBuffers
 from ..geometry.boxes import instance_triangles
 from .raycast import RayCaster
-from .scanner import trace_beams
+from .scanner import scan_chunk, trace_beams
 from .sensors import Pattern
 
 SAMPLE_SPACING = 0.1  # m between surface samples for truncation (wider on objects that would need more than about:)
@@ -141,11 +141,16 @@ def visibility(
         seen_boxes.append(k)
         # the whole scene, each passing ray once: a ray whose first hit is object k passes k's sphere
         traced = np.unique(ray)
-        o = origins[traced] if chunk.origins is not None else np.zeros(3)
-        beams = trace_beams(caster, buffers, o, chunk.directions[traced], min_range, max_range, max_bounces=0, surfaces=surfaces, rng=rng)
-        hit = box_of_triangle[beams.triangle]
-        direct = (hit >= 0) & (beams.bounces == 0)
-        visible += np.bincount(hit[direct], minlength=len(boxes))
+        if chunk.origins is None and getattr(caster, "kernels", None) is not None:
+            # the compiled scan of those rays (Embree and the records in one pass; the same hits and draws as
+            # trace_beams: tests/test_scan_kernel.py): with no mirror bounces a record's object is its beam's last
+            visible += _direct_returns(caster, buffers, Pattern(chunk.directions[traced], chunk.ring[traced], chunk.time[traced]), box_of_row, min_range, max_range, surfaces, rng)
+        else:
+            o = origins[traced] if chunk.origins is not None else np.zeros(3)
+            beams = trace_beams(caster, buffers, o, chunk.directions[traced], min_range, max_range, max_bounces=0, surfaces=surfaces, rng=rng)
+            hit = box_of_triangle[beams.triangle]
+            direct = (hit >= 0) & (beams.bounces == 0)
+            visible += np.bincount(hit[direct], minlength=len(boxes))
         # every object alone, each (ray, object) pair once
         unoccluded += alone.count(origins[ray], d, k, along, min_range, max_range, surfaces, rng)
     boxes["visible"] = visible
@@ -174,6 +179,25 @@ def visibility(
         covered = Coverage(passed, cell_deg).covers(samples[mine]) & inside[mine] if passed is not None and len(passed) else np.zeros(len(mine), bool)
         whole = area[mine].sum()
         boxes["truncation"][k] = float(1.0 - area[mine][covered].sum() / whole) if whole > 0 else 1.0
+
+
+def _direct_returns(caster, buffers: SceneBuffers, pattern: Pattern, box_of_row: np.ndarray, min_range: float, max_range: float, surfaces, rng) -> np.ndarray:
+    """``(k,)`` rays of ``pattern`` (sensor frame = the caster's) whose return is from box k's objects, no mirror met.
+
+    :func:`~bpy_pipeline.lidar.scanner.scan_chunk` with no bounces: a record's instance is that of the object its
+    beam ended on, so with ``box_of_row`` ((rows,) box of each object row, -1 for none) this counts what
+    ``trace_beams`` and the boxes of its beams' triangles count."""
+    points, _, _ = scan_chunk(caster, buffers, pattern, IDENTITY4, min_range, max_range, max_bounces=0, surfaces=surfaces, rng=rng)
+    k = int(box_of_row.max()) + 1
+    owned = box_of_row >= 0
+    known, first = np.unique(buffers.objects.instance[owned].astype(np.int64), return_index=True)  # every row of an instance has one box
+    instance = points["instance"][points["bounces"] == 0].astype(np.int64)
+    at = np.minimum(np.searchsorted(known, instance), len(known) - 1)
+    mine = known[at] == instance
+    return np.bincount(box_of_row[owned][first][at[mine]], minlength=k)[:k]
+
+
+IDENTITY4 = np.eye(4)
 
 
 class AloneCaster:
