@@ -205,6 +205,8 @@ class PlacedBox:
     yaw: float
     samples: np.ndarray
     visible: np.ndarray
+    rays: tuple | None = field(default=None, repr=False, compare=False)  # (directions, distances) of the samples from the placer's sensor, kept once computed
+    axes: np.ndarray | None = field(default=None, repr=False, compare=False)  # box_axes(yaw), kept once computed
 
     @property
     def visible_fraction(self) -> float:
@@ -243,8 +245,16 @@ class FloorBoxPlacer:
         return offset / np.maximum(distance, 1e-12)[:, None], distance
 
     def _blocked_by_box(self, directions, distance, box: PlacedBox) -> np.ndarray:
-        hit = ray_box_distance(self.sensor, directions, box.centre, box_axes(box.yaw), box.half)
+        if box.axes is None:
+            box.axes = box_axes(box.yaw)
+        hit = ray_box_distance(self.sensor, directions, box.centre, box.axes, box.half)
         return hit < distance - 1e-6
+
+    def _box_rays(self, box: PlacedBox) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`_rays` of a box's samples, computed once per box (the sensor and the samples stay)."""
+        if box.rays is None:
+            box.rays = self._rays(box.samples)
+        return box.rays
 
     def try_place(self, centre_xy, yaw: float, half) -> PlacedBox | None:
         """The box standing on the floor at ``centre_xy`` with ``yaw`` and ``half`` extents, or ``None``.
@@ -276,14 +286,14 @@ class FloorBoxPlacer:
         visible = np.ones(len(samples), bool)
         if self.static_distance is not None and len(samples):
             visible &= self.static_distance(directions) >= distance - 1e-3
-        candidate = PlacedBox(centre, half, yaw, samples, visible)
+        candidate = PlacedBox(centre, half, yaw, samples, visible, (directions, distance))
         for box in self.boxes:
             visible &= ~self._blocked_by_box(directions, distance, box)
         if candidate.visible_fraction < self.min_visible:
             self.rejections["occluded"] += 1
             return None
         for box in self.boxes:
-            d, dist = self._rays(box.samples)
+            d, dist = self._box_rays(box)
             still = box.visible & ~self._blocked_by_box(d, dist, candidate)
             if still.mean() < self.min_visible:
                 self.rejections["occludes"] += 1
@@ -293,6 +303,6 @@ class FloorBoxPlacer:
     def commit(self, box: PlacedBox) -> None:
         """Keep ``box``: later boxes avoid it, and it now hides the samples of earlier boxes behind it."""
         for other in self.boxes:
-            d, dist = self._rays(other.samples)
+            d, dist = self._box_rays(other)
             other.visible &= ~self._blocked_by_box(d, dist, box)
         self.boxes.append(box)
