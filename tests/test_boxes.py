@@ -92,8 +92,13 @@ def test_occlusion_levels_of_constructed_cases():
     assert by_instance[12][0] < 0.2 and by_instance[12][1] >= 2  # only the top of the head shows
 
 
-def test_one_cast_for_all_objects_equals_a_caster_per_object():
+@pytest.mark.parametrize("kernel", ["numba", "numpy"])  # numba: the scene cast goes through the compiled scan
+def test_one_cast_for_all_objects_equals_a_caster_per_object(kernel, monkeypatch):
     from bpy_pipeline.lidar.visibility import visibility, visibility_per_object
+
+    if kernel == "numba":
+        pytest.importorskip("numba")
+    monkeypatch.setenv("BPY_PIPELINE_SCAN_KERNEL", kernel)
 
     buffers, people = people_and_pillar()
     headings = {k: p.yaw for k, p in people.items()}
