@@ -159,3 +159,26 @@ def test_splat_keeps_the_nearest_point_and_the_later_of_equal_depths():
     splat(alone, col, row, depth, colors)
     splat_by_pixel(expected_alone, col, row, depth, colors, np.full((9, 12), -np.inf))
     assert (alone == expected_alone).all() and (alone != image).any()
+
+
+def test_the_compiled_panel_paint_gives_the_numpy_paths_pixels(monkeypatch):
+    """A cloud with ties, points behind the perspective camera, points outside both panels and coordinates far off
+    (pixels beyond int64 in the numpy path): the compiled projection-and-splat and the numpy path paint the same image."""
+    from bpy_pipeline.io import preview
+
+    if preview._paint_kernel() is None:
+        pytest.skip("numba is not installed (or BPY_PIPELINE_SCAN_KERNEL=numpy): only the numpy path exists")
+    rng = np.random.default_rng(11)
+    pts = empty_points(20000)
+    for axis in "xyz":
+        pts[axis] = np.round(rng.normal(0, 8, len(pts)), 1)  # rounded: many equal depths and pixels
+    pts["x"][:200] = -40.0  # behind the perspective camera
+    pts["y"][200:300] = 1e25  # beyond any pixel, beyond int64 once projected
+    pts["semantic"] = rng.integers(0, len(LUT), len(pts))
+    boxes = np.zeros(2, BOX_DTYPE)
+    boxes["size"] = 2.0
+    compiled = render_preview(pts, LUT, boxes=boxes, names=load_class_table().names)
+    monkeypatch.setattr(preview, "_paint_kernel", lambda: None)
+    monkeypatch.setattr(preview, "_splat_kernel", lambda: None)
+    numpy_path = render_preview(pts, LUT, boxes=boxes, names=load_class_table().names)
+    assert (compiled == numpy_path).all() and len(colours(compiled) - FRAME) > 3
