@@ -29,7 +29,10 @@ bins). Each paint is the mean over :data:`INSERTION_SEEDS` seeds (each draws the
 grid is scored on 000008 only; its best is scored unchanged on 004747.
 Writes benchmarks/results/materials.json (``--insertion``: its ``insertion`` section, the rest kept).
 The insertion also scores the car glass (``scene.car_glass``) and plates and lamps (``scene.car_fittings``): see :func:`insertion`.
-Run: python benchmarks/bench_materials.py [--small] [--insertion]
+Reading (``--reading``): the receiver's reading apart from its detection (``effects.intensity.reading``, per-laser gain and
+offset, range compensation up to a distance): its parameters fitted on 000008's own points (:func:`reading_fit`), then
+a grid of paints and cabins on the insertion scored on 000008, its best held out on 004747 (materials.json's ``reading``).
+Run: python benchmarks/bench_materials.py [--small] [--insertion | --reading]
 """
 
 import argparse
@@ -361,12 +364,139 @@ def insertion(small: bool, out) -> None:
     path.write_text(json.dumps(payload, indent=2) + "\n")
 
 
+# --- the reading apart from detection (effects.intensity.reading): fitted on 000008's own points, then the insertion ---
+
+READING_FIT_GRID = {"offset": (0.0, 0.05, 0.1, 0.15, 0.2, 0.3), "compensated_range": (15.0, 20.0, 22.0, 25.0, 28.0, 32.0), "exponent": (1.0, 1.5, 2.0, 2.5, 3.0, 4.0)}
+ROAD_REFLECTIVITY = 0.10  # the asphalt of docs/realism.md's table (the profile's scale 3 came from it)
+
+
+def kitti_rings(points: np.ndarray) -> np.ndarray:
+    """(n,) laser ids of a KITTI scan's points: the file lists each laser's sweep in turn from the front (azimuth 0), so a
+    new laser starts where the azimuth crosses from negative to non-negative (000008, cropped: 46 lasers)."""
+    az = np.arctan2(points[:, 1], points[:, 0])
+    start = np.zeros(len(points), bool)
+    start[1:] = (az[:-1] < 0) & (az[1:] >= 0)
+    return np.cumsum(start)
+
+
+def reading_fit() -> dict:
+    """The reading model's parameters from KITTI 000008 alone (docs/realism.md): the road (a plane fitted to the low points
+    outside the car boxes) gives the per-laser gain spread (robust sd of the per-laser log medians, 5-25 m), the per-return
+    spread (robust sd of log readings about each laser's median, 8-20 m) and the near reading (median 6-20 m); the
+    non-road points above 0.3 m give the range fall-off and the offset: each point at 25-90 m is predicted from a
+    reading drawn from those at 10-25 m, ``(v + o) f(R) n - o`` (the gain cancels), and the grid
+    :data:`READING_FIT_GRID` is ranked by the mean histogram intersection over 25-30 / 30-40 / 40-60 / 60-90 m.
+    The scale is then ``(near road reading + o) / ROAD_REFLECTIVITY``. Also the zero shares the model must explain."""
+    real = np.fromfile(KITTI, np.float32).reshape(-1, 4)
+    xyz, value = real[:, :3].astype(np.float64), real[:, 3].astype(np.float64)
+    x, y, z = xyz.T
+    r = np.linalg.norm(xyz, axis=1)
+    ring = kitti_rings(xyz)
+    boxes = kitti_boxes()
+    on_car = np.zeros(len(xyz), bool)
+    for b in boxes:
+        on_car |= in_box(xyz, b, 0.1)
+    ground = (z < -1.4) & (z > -2.1) & ~on_car
+    for _ in range(3):
+        plane = np.linalg.lstsq(np.c_[x[ground], y[ground], np.ones(ground.sum())], z[ground], rcond=None)[0]
+        height = z - (plane[0] * x + plane[1] * y + plane[2])
+        ground = (np.abs(height) < 0.08) & ~on_car
+    robust = lambda v: float(np.subtract(*np.percentile(v, [75, 25])) / 1.349)  # noqa: E731
+    medians = np.array([np.median(value[ground & (ring == k) & (r > 5) & (r < 25)]) for k in np.unique(ring) if (ground & (ring == k) & (r > 5) & (r < 25)).sum() >= 30])
+    spread = []
+    for k in np.unique(ring):
+        m = ground & (ring == k) & (r > 8) & (r < 20) & (value > 0)
+        if m.sum() > 30:
+            spread.append(np.log(value[m]) - np.median(np.log(value[m])))
+    gain_sd, noise_sd = robust(np.log(medians)), robust(np.concatenate(spread))
+    near_road = float(np.median(value[ground & (r >= 6) & (r < 20)]))
+    other = ~ground & ~on_car & (height > 0.3)
+    near = value[other & (r >= 10) & (r < 25)]
+    far = other & (r >= 25) & (r < 90)
+    rf, vf = r[far], value[far]
+    edges = (25, 30, 40, 60, 90)
+    rng = np.random.default_rng(0)
+    draws, noise = rng.choice(near, size=(8, far.sum())), rng.standard_normal((8, far.sum()))
+    scores = []
+    for o in READING_FIT_GRID["offset"]:
+        for rc in READING_FIT_GRID["compensated_range"]:
+            for n in READING_FIT_GRID["exponent"]:
+                f = np.minimum(1.0, (rc / rf) ** n)
+                sims = [np.clip(np.rint(((draws[d] + o) * f * np.exp(noise_sd * noise[d]) - o) * 100) / 100, 0, 1) for d in range(8)]
+                per_bin = [float(np.mean([intersection(vf[(rf >= lo) & (rf < hi)], q[(rf >= lo) & (rf < hi)], BINS) for q in sims])) for lo, hi in zip(edges[:-1], edges[1:])]
+                scores.append((float(np.mean(per_bin)), o, rc, n, per_bin))
+    best = max(scores, key=lambda t: t[0])
+    zero_by_range = {f"{lo}-{hi} m": round(float((vf[(rf >= lo) & (rf < hi)] == 0).mean()), 3) for lo, hi in zip(edges[:-1], edges[1:])}
+    by_height = {}
+    for lo in np.arange(0.0, 1.6, 0.4):
+        m = on_car & (height >= lo) & (height < lo + 0.4)
+        by_height[f"{lo:.1f}-{lo + 0.4:.1f} m"] = {"points": int(m.sum()), "zero share": round(float((value[m] == 0).mean()), 3)}
+    return {"lasers seen on the road": len(medians), "gain_sd": round(gain_sd, 3), "noise_sd": round(noise_sd, 3), "near road reading": round(near_road, 3),
+            "offset": best[1], "compensated_range": best[2], "exponent": best[3], "scale": round((near_road + best[1]) / ROAD_REFLECTIVITY, 2),
+            "far intersection by bin (25-30, 30-40, 40-60, 60-90 m)": [round(v, 3) for v in best[4]],
+            "real zero share of non-road points by range": zero_by_range,
+            "real zero share of car points by height above the road": by_height,
+            "road zero share 6-25 m": round(float((value[ground & (r >= 6) & (r < 25)] == 0).mean()), 3)}
+
+
+def reading(small: bool, out) -> None:
+    """The reading model (``effects.intensity.reading``) on the insertion: its parameters from :func:`reading_fit` (000008),
+    a grid of paints and cabins scored on 000008 with the glass model, plates and lamps; the best (cars within 0.7-1.4x,
+    then overlap) and the best of last round's receivers held out on 004747 unchanged. Into materials.json's ``reading``."""
+    fitted = reading_fit()
+    print(fitted, flush=True)
+    fit_frame = Frame("000008 (fit)", np.fromfile(KITTI, np.float32).reshape(-1, 4), kitti_boxes(), slopes_000008)
+    real_4747 = np.fromfile(KITTI_4747, np.float32).reshape(-1, 4)
+    held_frame = Frame("004747 (held out)", real_4747, boxes_4747(real_4747[:, :3].astype(np.float64)), lambda xyz: slopes(xyz, calib_4747()))
+    fit = Insertion("000008 (fit)", KITTI, fit_frame.boxes, slopes_000008, fit_frame.window)
+    held = Insertion("004747 (held out)", KITTI_4747, held_frame.boxes, held_frame.image_slopes, held_frame.window)
+    seeds = INSERTION_SEEDS[:1] if small else INSERTION_SEEDS
+    receiver = {"scale": fitted["scale"], "offset": fitted["offset"], "reading": {"enabled": True, "compensated_range": fitted["compensated_range"],
+                "exponent": fitted["exponent"], "gain_sd": fitted["gain_sd"], "noise_sd": fitted["noise_sd"]}}
+    glass = lambda cabin: {"car_glass": CarGlass(enabled=True, windshield=0.6, tinted=0.7, interior=cabin), "car_fittings": True}  # noqa: E731
+    grid = {"diffuse, clear glass, plates and lamps (default)": ({}, {"car_glass": CarGlass(enabled=False), "car_fittings": True}),
+            "glass model, glossy 0.1 / 0.6 / 6 deg, 6 a - 0.3 (last round's best counts)": (glossy(0.1, 0.6, 6.0, 6.0, 0.3), glass(0.15)),
+            "glass model, glossy 0.06 / 0.3 / 10 deg, 4 a - 0.15 (last round's best overlap)": (glossy(0.06, 0.3, 10.0, 4.0, 0.15), glass(0.15))}
+    paints = {"diffuse": {}, "dark 0.05": {"materials": {"classes": {"car": "dark_paint"}, "dark_paint": {"reflectivity": 0.05}}},
+              "dark 0.1": {"materials": {"classes": {"car": "dark_paint"}, "dark_paint": {"reflectivity": 0.1}}}}
+    for d, s_, lobe in [(0.06, 0.3, 10.0)] if small else [(0.03, 0.3, 10.0), (0.06, 0.3, 10.0), (0.1, 0.3, 10.0), (0.06, 0.6, 6.0), (0.1, 0.6, 6.0)]:
+        paints[f"glossy {d} / {s_} / {lobe:g} deg"] = glossy(d, s_, lobe)
+    first = len(grid)
+    for cabin in (0.15,) if small else (0.05, 0.15):
+        for name, effects in paints.items():
+            grid[f"glass model (cabin {cabin}), {name}, reading model"] = ({**effects, "intensity": receiver}, glass(cabin))
+    rows = []
+    for name, (effects, scene) in grid.items():
+        rows.append({"paint": name, **fit.score(effects, seeds, scene)})
+        rows[-1]["closeness"] = closeness(rows[-1])
+        print(rows[-1], flush=True)
+    rank = lambda r: (r["within 0.7-1.4"], r["overlap"])  # noqa: E731
+    best = max(rows[first:], key=rank)
+    held_rows = []
+    for name in list(grid)[:first] + [best["paint"]]:
+        held_rows.append({"paint": name, **held.score(grid[name][0], seeds, grid[name][1])})
+        held_rows[-1]["closeness"] = closeness(held_rows[-1])
+        print(held_rows[-1], flush=True)
+    path = out / "materials.json"
+    payload = json.loads(path.read_text()) if path.exists() else {"benchmark": "materials", "rows": [], "notes": {}}
+    payload["reading"] = {"fit on 000008": fitted, "receiver": receiver, "rows": rows + held_rows, "best on 000008": best["paint"], "seeds": list(seeds)}
+    out.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(payload, indent=2) + "\n")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--small", action="store_true", help="a small size, for CI (checks the benchmark runs)")
     parser.add_argument("--out", type=Path, default=RESULTS, help="folder for the JSON results")
     parser.add_argument("--insertion", action="store_true", help="the insertion comparison only (into materials.json's insertion section)")
+    parser.add_argument("--reading", action="store_true", help="the reading model (effects.intensity.reading) fitted on 000008 and on the insertion (materials.json's reading section)")
     args = parser.parse_args()
+    if args.reading:
+        if not KITTI.exists() or not KITTI_4747.exists():
+            print(f"skipped: {KITTI} or {KITTI_4747} is absent")
+            return
+        reading(args.small, args.out)
+        return
     if args.insertion:
         if not KITTI.exists() or not KITTI_4747.exists():
             print(f"skipped: {KITTI} or {KITTI_4747} is absent")
@@ -400,11 +530,11 @@ def main() -> None:
     rows += held_rows + dual_rows(fit)
     cars = {frame.name: [{"distance_m": round(float(np.linalg.norm(b["centre"][:2])), 1), "occluded": b["occluded"], "real_points": b["real_points"]} for b in frame.boxes] for frame in (fit, held)}
     path = args.out / "materials.json"
-    kept = json.loads(path.read_text()).get("insertion") if path.exists() else None  # the --insertion section stays
+    kept = {k: v for k, v in json.loads(path.read_text()).items() if k in ("insertion", "reading")} if path.exists() else {}  # the --insertion and --reading sections stay
     report("materials", rows, args.out, {"cars": cars, "best on 000008": best["paint"], "best paint alone on 000008": paint_only["paint"]})
-    if kept is not None:
+    if kept:
         payload = json.loads(path.read_text())
-        payload["insertion"] = kept
+        payload.update(kept)
         path.write_text(json.dumps(payload, indent=2) + "\n")
 
 

@@ -23,6 +23,7 @@ from .lidar.divergence import Divergence, check_divergence, check_return_mode
 from .lidar.drop import DROP_MODELS
 from .lidar.drop.carla import CarlaDrop
 from .lidar.drop.threshold import ThresholdDrop
+from .lidar.intensity import ReadingModel, check_reading
 from .lidar.grid import check_grid, image_shape
 from .lidar.mirror_sensor import check_reflector, load_edge_mask
 from .lidar.platform import Trajectory
@@ -129,6 +130,7 @@ class IntensityConfig:
     scale: float = 1.0  # the model's value times this, clipped to 0..1 (Velodyne's 0..100 % diffuse in 0..255: 100 / 255)
     steps: int = 0  # quantise to k / steps as the sensor's integer intensity does (255: nuScenes 0..255; 100: KITTI 0.01); 0 = continuous
     offset: float = 0.0  # subtracted after scale, clipped at 0: a receiver that reads weak returns as 0 (KITTI's car paint); 0 = none
+    reading: ReadingModel = field(default_factory=ReadingModel)  # per-laser gain/offset reading apart from detection (lidar/intensity.py); opt-in
 
 
 @dataclass(frozen=True)
@@ -480,6 +482,7 @@ def _check_effects(effects: EffectsConfig, spec: SensorSpec | None) -> None:
     if not 0 <= intensity.offset < 1:
         raise InputError(f"effects.intensity.offset: must lie in 0..1, got {intensity.offset}")
     check_positive(intensity.incidence_exponent, "effects.intensity.incidence_exponent", allow_zero=True)
+    check_reading(intensity.reading, intensity.offset, intensity.model)
     if not 0 <= intensity.steps <= 65535:
         raise InputError(f"effects.intensity.steps: must lie in 0..65535 (0 = continuous), got {intensity.steps}")
     if not 0 <= drop.threshold.floor < 1:

@@ -431,7 +431,7 @@ CHUNK_POINTS = 1 << 16  # records per work item: a chunk's fields stay in cache 
 def _apply_chunk(points, beam, effects, rng, drop_models, noise_models, objects=None) -> np.ndarray:
     if getattr(effects, "materials", None) is not None:  # per-class or per-object reflectance models (lidar/materials.py), opt-in
         beam = apply_materials(points, beam, effects.materials, effects.intensity.incidence_exponent, objects)
-    intensity = compute_intensity(points["range"], beam, effects.intensity)
+    intensity = compute_intensity(points["range"], beam, effects.intensity, points["ring"], rng)
     keep = drop_mask(points, beam, effects, rng, drop_models)
     points = _copy_records(points, keep)
     if keep is not None:
