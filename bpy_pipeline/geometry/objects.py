@@ -260,6 +260,7 @@ class ObjectPart:
     triangles: np.ndarray  # (m, 3) int32
     material: str = "diffuse"
     reflectivity: float = 0.5
+    paint: object = None  # an inserted car part's own reflectance model (mixing/paint.py PartModel, scene.car_paint); None: the material's
 
 
 def fit_to_box(parts: list[ObjectPart], size) -> list[ObjectPart]:

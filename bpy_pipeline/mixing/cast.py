@@ -20,12 +20,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..buffers import ObjectTable, SceneBuffers
-from ..geometry.objects import OBJECT_TYPES, PARTS, ObjectPart, car_object
+from ..geometry.objects import FITTINGS, OBJECT_TYPES, PARTS, ObjectPart, car_object
 from ..lidar.materials import CarGlass, glass_transmission, pane_internal, part_material
 from ..lidar.raycast import RayCaster
 from ..lidar.scanner import MirrorGlassRules, trace_beams
 from .firings import Firings
 from .objects import mesh_file_parts  # noqa: F401 - re-exported: mixing.cast.mesh_file_parts stays importable
+from .paint import CarPaint, paint_car
 from .placement import Placement
 
 
@@ -51,24 +52,34 @@ def car_glass_parts(parts: list[ObjectPart], glass: CarGlass) -> list[ObjectPart
     return out
 
 
-def object_parts(p: Placement, rng: np.random.Generator, car_bodies: str = "classic", glass: CarGlass | None = None, fittings: bool = False) -> list[ObjectPart]:
+def car_part_names(fittings: bool, glass: CarGlass | None) -> list[str]:
+    """Names of the parts of a car of :func:`object_parts` in order: ``PARTS``, then ``FITTINGS`` when ``fittings``, then
+    ``windshield`` when ``glass`` is enabled (:func:`car_glass_parts` appends it)."""
+    return [*PARTS, *(FITTINGS if fittings else ()), *(("windshield",) if glass is not None and glass.enabled else ())]
+
+
+def object_parts(p: Placement, rng: np.random.Generator, car_bodies: str = "classic", glass: CarGlass | None = None, fittings: bool = False,
+                 paint: CarPaint | None = None, paint_rng: np.random.Generator | None = None) -> list[ObjectPart]:
     """The parts of placement ``p`` in the sensor frame (the type's mesh scaled to the box, yawed, moved).
 
     A car is drawn from ``CAR_BODY_SETS[car_bodies]`` (``scene.car_bodies``), or is body ``p.body`` of it when the
     placement drew one, its windows and cabin as ``glass`` says (:func:`car_glass_parts`; None: as before), with plates
-    and lamps when ``fittings`` (geometry/objects.py ``car_fittings``); a mesh file's parts come from :mod:`.objects`
-    (glass where its materials say so)."""
+    and lamps when ``fittings`` (geometry/objects.py ``car_fittings``), each part with its own reflectance model when
+    ``paint`` is enabled (:func:`~.paint.paint_car`, the body's pigment drawn from ``paint_rng``, the car's own
+    generator); a mesh file's parts come from :mod:`.objects` (glass where its materials say so)."""
     if p.type == "car":
         parts = car_object(rng, p.size, car_bodies, getattr(p, "body", -1), fittings)
         if glass is not None:
             parts = car_glass_parts(parts, glass)
+        if paint is not None and paint.enabled:
+            parts = paint_car(parts, car_part_names(fittings, glass), paint, paint_rng)
     elif p.type in OBJECT_TYPES:
         parts = OBJECT_TYPES[p.type][1](rng, p.size)
     else:
         parts = mesh_file_parts(p.type, p.size)
     c, s = math.cos(p.yaw), math.sin(p.yaw)
     rotation = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-    return [ObjectPart(part.vertices @ rotation.T + p.centre, part.triangles, part.material, part.reflectivity) for part in parts]
+    return [ObjectPart(part.vertices @ rotation.T + p.centre, part.triangles, part.material, part.reflectivity, part.paint) for part in parts]
 
 
 def object_buffers(placements: list[Placement], parts: list[list[ObjectPart]], instances: list[int], semantic: list[int]) -> SceneBuffers:

@@ -41,6 +41,7 @@ from .cast import InsertedHits, cast_firings, glass_rules, merge_returns, near_o
 from .firings import Firings, angles_deg, recover_firings
 from .ground import PointIndex, find_ground, in_box
 from .placement import Placement, Scene, explicit_placements, kitti_rule, parking_rule, real_placements
+from .paint import car_generator, paint_beam
 from .section import RealScanScene
 
 # SemanticKITTI raw ids -> the project's class names (assets_manifest/labels.yaml); others: the background class
@@ -110,16 +111,21 @@ def labelled_boxes(firings: Firings, semantic: np.ndarray, instance: np.ndarray,
     return out
 
 
-def _effects(points: np.ndarray, beam: np.ndarray, effects, rng: np.random.Generator, objects=None) -> tuple[np.ndarray, np.ndarray]:
+def _effects(points: np.ndarray, beam: np.ndarray, effects, rng: np.random.Generator, objects=None, paints=None, rows=None) -> tuple[np.ndarray, np.ndarray]:
     """The fitted drop and noise models on the inserted returns; ``(points, kept firing rows)`` (a dropped firing stays empty).
 
     objects : the inserted objects' table; where a part names a reflectance model (a plate's ``retroreflector``) the
-    model is applied to its returns (``effects.materials.objects`` on for them: the parts were made with it)."""
+    model is applied to its returns (``effects.materials.objects`` on for them: the parts were made with it).
+    paints, rows : each object row's own model (``scene.car_paint``, :func:`~.paint.paint_beam`: it wins over
+    ``effects.materials``) and each return's object row (p,); None or no model: as before."""
     tag = points["time"].copy()
     points["time"] = np.arange(len(points), dtype=np.float64)  # carry each record's row through the drop
     materials = getattr(effects, "materials", None)
     if objects is not None and objects.surface is not None and materials is not None and not materials.objects:
         effects = replace(effects, materials=replace(materials, objects=True))
+    if paints is not None and rows is not None and any(m is not None for m in paints) and materials is not None:
+        beam = paint_beam(points, beam, rows, paints, effects.materials, effects.intensity.incidence_exponent, objects)
+        effects = replace(effects, materials=replace(materials, classes={}, objects=False))  # applied above
     out = apply_effects(points, beam, effects, rng, objects=objects)
     rows = out["time"].astype(np.int64)
     out["time"] = tag[rows]
@@ -183,6 +189,7 @@ class MixState:
     instance_real: np.ndarray | None = None
     placements: list = field(default_factory=list)
     surfaces: object = None  # the trace's MirrorGlassRules for the inserted objects (cast.glass_rules)
+    paints: list = field(default_factory=list)  # per object row of buffers: its part's own model (paint.PartModel) or None
     rule_log: dict = field(default_factory=dict)
     instances: list = field(default_factory=list)
     semantic_ids: list = field(default_factory=list)
@@ -264,7 +271,10 @@ def mix_place(state: MixState) -> None:
     first_instance = int(state.instance_real.max(initial=0)) + 1
     state.instances = [first_instance + k for k in range(len(placements))]
     state.semantic_ids = [table.id_of(p.class_name, "scene.objects.class") for p in placements]
-    parts = [getattr(p, "parts", None) or object_parts(p, rng, section.car_bodies, section.car_glass, section.car_fittings) for p in placements]  # populated ones carry theirs
+    paint = section.car_paint if section.car_paint.enabled else None  # each car's pigment from its own generator (rng is not advanced)
+    parts = [getattr(p, "parts", None) or object_parts(p, rng, section.car_bodies, section.car_glass, section.car_fittings, paint, paint and car_generator(rng, k))
+             for k, p in enumerate(placements)]  # populated ones carry theirs
+    state.paints = [part.paint for object_parts_ in parts for part in object_parts_]  # the rows of object_buffers, in order
     state.surfaces = glass_rules(parts, section.car_glass)
     state.buffers = object_buffers(placements, parts, state.instances, state.semantic_ids)
     state.placements, state.rule_log = placements, rule_log
@@ -304,7 +314,7 @@ def mix_effects(state: MixState) -> None:
     state.visible_rays = np.bincount(new["instance"], minlength=max(state.instances, default=0) + 1)
     dropped_firings = np.zeros(0, np.int64)
     if state.effects is not None and len(new):
-        new, rows = _effects(new, beam, state.effects, rng, objects)
+        new, rows = _effects(new, beam, state.effects, rng, objects, state.paints, h.row)
         dropped_firings = np.setdiff1d(h.firing, h.firing[rows])
         h_firing = h.firing[rows]
     else:

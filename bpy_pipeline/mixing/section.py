@@ -11,6 +11,7 @@ from typing import Literal
 
 from ..geometry.placement import Distribution
 from ..lidar.materials import CarGlass
+from .paint import CarPaint
 
 
 @dataclass(frozen=True)
@@ -219,6 +220,8 @@ class RealScanScene:
         and tint by incidence, a dark cabin; opt-in, ``enabled: true``; off: the windows of before)
     car_fittings : licence plates (retroreflector) and lamps (glossy) on every inserted car, their models applied
         to the inserted returns (geometry/objects.py ``car_fittings``)
+    car_paint : a reflectance model per part of an inserted car (body, upper body and roof, glass, cabin, tyres, plates,
+        lamps), the body's paint drawn per car (:class:`~.paint.CarPaint`; opt-in, ``enabled: true``)
     """
 
     path: str = ""
@@ -239,3 +242,4 @@ class RealScanScene:
     population: RealPopulation = field(default_factory=RealPopulation)
     car_glass: CarGlass = field(default_factory=CarGlass)
     car_fittings: bool = True
+    car_paint: CarPaint = field(default_factory=CarPaint)
