@@ -218,6 +218,7 @@ def export_scene(table: ClassTable, extra_rules=(), depsgraph=None, keep_within=
     meshes: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
     placements: dict[tuple, list[np.ndarray]] = defaultdict(list)  # (mesh key, row) -> world matrices
     instancers: dict[str, list] = {}  # instancer -> [its instances' id by index, or None; instances seen]
+    bounds: dict[tuple, np.ndarray] = {}  # mesh key -> (8, 3) local bound box corners
     for instance in depsgraph.object_instances:
         obj = instance.object
         labelled = 0
@@ -232,9 +233,13 @@ def export_scene(table: ClassTable, extra_rules=(), depsgraph=None, keep_within=
         if owner.hide_render:
             continue
         matrix = np.array(instance.matrix_world, np.float64)
-        if keep_within is not None and not _near(obj, matrix, *keep_within):
-            continue
-        key = (obj.data.as_pointer(), "" if instance.is_instance else obj.name_full)
+        key = _mesh_key(obj, instance.is_instance)
+        if keep_within is not None:
+            corners = bounds.get(key)
+            if corners is None:  # read once per distinct evaluated mesh: the instances of a prototype share it
+                corners = bounds[key] = np.array(obj.bound_box, np.float64)
+            if not _near_corners(corners, matrix, *keep_within):
+                continue
         if key not in meshes:
             meshes[key] = _mesh_arrays(obj)
         local, tris, ids = meshes[key]
@@ -262,8 +267,31 @@ def export_scene(table: ClassTable, extra_rules=(), depsgraph=None, keep_within=
     return SceneBuffers(np.concatenate(vertices), np.concatenate(triangles).astype(np.int32), np.concatenate(triangle_object), objects)
 
 
+def _mesh_key(obj, is_instance: bool) -> tuple:
+    """The key of an evaluated object's geometry: objects with equal keys have equal evaluated meshes (read once a frame).
+
+    An instance's: its evaluated data. An object's own: its evaluated data and its name, since modifiers and
+    shape keys make one mesh evaluate differently per object; a mesh object with neither evaluates to its mesh
+    (objects sharing a mesh share its evaluated copy), so it shares its data's key with every object of that
+    data (the parking's car slots of one style: read once a frame, not once a car).
+    """
+    pointer = obj.data.as_pointer()
+    if is_instance:
+        return (pointer, "")
+    original = obj.original
+    if obj.type == "MESH" and not original.modifiers and getattr(original.data, "shape_keys", None) is None:
+        return (pointer, "")
+    return (pointer, obj.name_full)
+
+
 def _near(obj, matrix: np.ndarray, centre, radius: float) -> bool:
-    corners = np.array(obj.bound_box, np.float64) @ matrix[:3, :3].T + matrix[:3, 3]
+    """Whether ``obj``'s bounds placed by ``matrix`` (4, 4) come within ``radius`` m of ``centre`` (3,)."""
+    return _near_corners(np.array(obj.bound_box, np.float64), matrix, centre, radius)
+
+
+def _near_corners(local: np.ndarray, matrix: np.ndarray, centre, radius: float) -> bool:
+    """:func:`_near` of an object's bound box corners ``local`` (8, 3) in its own frame."""
+    corners = local @ matrix[:3, :3].T + matrix[:3, 3]
     low, high = corners.min(axis=0), corners.max(axis=0)
     nearest = np.clip(np.asarray(centre, float), low, high)
     return float(np.linalg.norm(nearest - centre)) <= radius

@@ -65,13 +65,17 @@ class CarSlot:
 
     def show(self, meshes: dict, car: Car, centre_xy, yaw: float, instance: int) -> None:
         body = self.objects["body"]
-        for part in PARTS:
-            self.objects[part].data = meshes[car.style][part]
+        for part in PARTS:  # assigned only when it changes: every assignment has the depsgraph rebuild relations
+            if self.objects[part].data != meshes[car.style][part]:
+                self.objects[part].data = meshes[car.style][part]
         body.location = (float(centre_xy[0]), float(centre_xy[1]), 0.0)
         body.rotation_euler = (0.0, 0.0, float(yaw))
         body.scale = tuple(float(s) for s in car.size / style_size(STYLES[car.style]))
-        body.material_slots[0].link = "OBJECT"
-        body.material_slots[0].material = self.paints[car.colour]
+        slot = body.material_slots[0]
+        if slot.link != "OBJECT":
+            slot.link = "OBJECT"
+        if slot.material != self.paints[car.colour]:
+            slot.material = self.paints[car.colour]
         tag(body, "car", "diffuse", COLOURS[car.colour][3], instance)
         tag(self.objects["windows"], "car", "glass", GLASS_REFLECTIVITY, instance)
         tag(self.objects["interior"], "car", "diffuse", INTERIOR_REFLECTIVITY, instance)
@@ -79,9 +83,11 @@ class CarSlot:
         self.set_hidden(False)
 
     def set_hidden(self, hidden: bool) -> None:
-        for obj in self.objects.values():
-            obj.hide_render = hidden
-            obj.hide_viewport = hidden
+        for obj in self.objects.values():  # only what changes (see show)
+            if obj.hide_render != hidden:
+                obj.hide_render = hidden
+            if obj.hide_viewport != hidden:
+                obj.hide_viewport = hidden
 
 
 class ParkingGarage:
