@@ -22,10 +22,10 @@ from ...geometry.indoor import hall_layout
 from ...geometry.placement import sample, sample_count
 from ...geometry.transforms import pose_matrix
 from ...scenes import box_nodes
-from . import hall_nodes
 from ...scenes.objects import scene_collection, tag
 from ...scenes.people import AssetPerson, PersonRig, import_asset, load_assets
 from ...scenes.robot_arm import RobotArm
+from . import hall_nodes
 
 INSTANCE = {"floor": 1, "wall": 2, "ceiling": 3, "desk": 10, "shelf": 40, "robot arm": 100, "person": 200}
 PERSON_REFLECTIVITY = (0.15, 0.6)  # clothing at 865-905 nm, uniform between (an assumption)

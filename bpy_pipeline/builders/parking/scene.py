@@ -30,8 +30,8 @@ from ...geometry.indoor import parking_layout, parking_station
 from ...geometry.placement import FloorBoxPlacer, insert_sequentially, sample, sample_count, turn_about
 from ...lidar.raycast import RayCaster
 from ...scenes import box_nodes
-from . import level_nodes as parking_nodes
 from ...scenes.objects import mesh_data, scene_collection, tag
+from . import level_nodes as parking_nodes
 
 INSTANCE = {"floor": 1, "ceiling": 2, "wall": 3, "pillar": 4, "ramp": 5, "car": 100}
 STATIC_REFLECTIVITY = {"floor": 0.25, "ceiling": 0.45, "wall": 0.5, "pillar": 0.5, "ramp": 0.3}

@@ -20,9 +20,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...errors import InputError
+from ...geometry.lod import PathView, SensorView, polygon_sides, section_error
 from . import catenary
 from .alignment import Alignment, arc_through, with_transitions
-from ...geometry.lod import PathView, SensorView, polygon_sides, section_error
 
 STAY_RISE = 0.3  # m: cantilever stay tube above the messenger attachment
 FEEDER_BRACKET = (0.6, -0.5)  # m: feeder beside (field side) and below the mast top

@@ -31,15 +31,15 @@ import bpy
 import mathutils
 import numpy as np
 
-from . import parts as railway_parts, trackside
-from .catenary import parabolic_sag
 from ...geometry.lod import equal_perimeter_radius
 from ...geometry.primitives import merge
+from ...scenes.nodes import add_group_modifier
+from ...scenes.objects import mesh_data, mesh_object, scene_collection, tag
+from . import parts as railway_parts, trackside
+from .catenary import parabolic_sag
 from .terrain import terrain_mesh
 from .layout import ARM_RISE, BEAM_RADIUS, EARTH_BRACKET, FEEDER_BRACKET, MIN_WIRE_SIDES, STAY_RISE, RailwayLayout, cant_angle, cantilevers, level_of_detail, plan
-from ...scenes.nodes import add_group_modifier
 from . import catenary_nodes, scene_assets as railway_assets
-from ...scenes.objects import mesh_data, mesh_object, scene_collection, tag
 from .track_nodes import PARTS, track_group
 
 CENTRELINE = "track_centreline"

@@ -41,8 +41,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ...geometry import primitives
-from . import vegetation
 from ...geometry.primitives import beam_mesh, box_mesh, transformed
+from . import vegetation
 
 Mesh = tuple[np.ndarray, np.ndarray]
 

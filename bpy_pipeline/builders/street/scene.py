@@ -20,8 +20,8 @@ from __future__ import annotations
 import bpy
 import numpy as np
 
-from . import layout as street
 from ...scenes.objects import mesh_data, mesh_object, scene_collection, tag
+from . import layout as street
 from .scatter_nodes import prototypes_collection, scatter_object
 
 USER_INSTANCE = 1000  # road users' instance ids start here; static parts use 1 .. 999
