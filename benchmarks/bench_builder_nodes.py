@@ -40,13 +40,13 @@ from common import arguments, report
 def railway_ways(length: float):
     import numpy as np
 
-    from bpy_pipeline.builders.railway import RailwayScene
-    from bpy_pipeline.geometry.catenary import parabolic_sag
+    from bpy_pipeline.builders.railway.params import RailwayScene
+    from bpy_pipeline.builders.railway.catenary import parabolic_sag
     from bpy_pipeline.geometry.lod import equal_perimeter_radius
-    from bpy_pipeline.geometry.railway_layout import MIN_WIRE_SIDES, level_of_detail, plan
-    from bpy_pipeline.scenes import catenary_nodes
+    from bpy_pipeline.builders.railway.layout import MIN_WIRE_SIDES, level_of_detail, plan
+    from bpy_pipeline.builders.railway import catenary_nodes
     from bpy_pipeline.scenes.objects import wire_object
-    from bpy_pipeline.scenes.railway import _bevel_sides, _dropper_wires
+    from bpy_pipeline.builders.railway.scene import _bevel_sides, _dropper_wires
     import dataclasses
 
     params = RailwayScene()
@@ -76,9 +76,10 @@ def railway_ways(length: float):
 
 
 def parking_ways():
-    from bpy_pipeline.builders.parking import ParkingScene
+    from bpy_pipeline.builders.parking.params import ParkingScene
     from bpy_pipeline.geometry.indoor import parking_layout
-    from bpy_pipeline.scenes import box_nodes, parking_nodes
+    from bpy_pipeline.scenes import box_nodes
+    from bpy_pipeline.builders.parking import level_nodes as parking_nodes
     from bpy_pipeline.scenes.objects import mesh_object
 
     params = ParkingScene()
@@ -93,9 +94,10 @@ def parking_ways():
 
 
 def hall_ways():
-    from bpy_pipeline.builders.industrial_hall import IndustrialHallScene
+    from bpy_pipeline.builders.industrial_hall.params import IndustrialHallScene
     from bpy_pipeline.geometry.indoor import boxes_mesh, hall_layout
-    from bpy_pipeline.scenes import box_nodes, hall_nodes
+    from bpy_pipeline.scenes import box_nodes
+    from bpy_pipeline.builders.industrial_hall import hall_nodes
     from bpy_pipeline.scenes.objects import mesh_object
 
     params = IndustrialHallScene()
@@ -120,10 +122,10 @@ def hall_ways():
 def street_ways():
     import numpy as np
 
-    from bpy_pipeline.builders.street import StreetScene
-    from bpy_pipeline.geometry import street
+    from bpy_pipeline.builders.street.params import StreetScene
+    from bpy_pipeline.builders.street import layout as street
     from bpy_pipeline.scenes.objects import mesh_object
-    from bpy_pipeline.scenes.street_nodes import prototypes_collection, scatter_object
+    from bpy_pipeline.builders.street.scatter_nodes import prototypes_collection, scatter_object
 
     params = StreetScene()
     layout = street.street_layout(params, np.random.default_rng(params.layout_seed))

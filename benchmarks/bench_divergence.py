@@ -41,7 +41,7 @@ from common import arguments, best_of, report  # noqa: E402
 
 import bpy  # noqa: E402
 
-from bpy_pipeline.builders.primitives import PrimitivesScene, Shape  # noqa: E402
+from bpy_pipeline.builders.primitives.params import PrimitivesScene, Shape  # noqa: E402
 from bpy_pipeline.config import SceneConfig  # noqa: E402
 from bpy_pipeline.export import export_scene  # noqa: E402
 from bpy_pipeline.labels import load_class_table  # noqa: E402

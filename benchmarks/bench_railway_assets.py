@@ -1,7 +1,7 @@
 """Railway build time with support assets from files (``scene.assets``) against the procedural supports, in one run.
 
 The scene is the thesis's (one track, 300 m on a 1.1 km curve, supports every 50 +- 5 m, full catenary), built
-whole in Blender (no sensor view: every support) by ``scenes.railway.build``; the time is the best of 5 builds,
+whole in Blender (no sensor view: every support) by ``builders.railway.scene.build``; the time is the best of 5 builds,
 the scenarios taken in turn.
 The assets are made here from the procedural supports of support 0 (mast with brackets; the mast-face
 cantilever with its registration arm and insulators), moved into the foot frame and written as GLB:
@@ -38,7 +38,7 @@ def build_seconds(params) -> tuple[float, int]:
     """Wall time (s) of one build, and the triangles of the support classes in the built scene."""
     import bpy
 
-    from bpy_pipeline.scenes import railway
+    from bpy_pipeline.builders.railway import scene as railway
     from bpy_pipeline.scenes.objects import COLLECTION
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
@@ -56,7 +56,7 @@ def build_seconds(params) -> tuple[float, int]:
 
 def import_seconds(files: dict) -> float:
     """Best of ``REPEAT`` wall times (s) of reading every file into its parts (what a build adds before placing)."""
-    from bpy_pipeline.scenes.railway_assets import asset_parts
+    from bpy_pipeline.builders.railway.scene_assets import asset_parts
 
     best = np.inf
     for _ in range(REPEAT):
@@ -72,7 +72,7 @@ def make_assets(folder: Path, small: bool, cuts: int) -> dict:
     import bpy
     from mathutils import Matrix
 
-    from bpy_pipeline.scenes import railway
+    from bpy_pipeline.builders.railway import scene as railway
     from bpy_pipeline.scenes.objects import COLLECTION
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
@@ -80,7 +80,7 @@ def make_assets(folder: Path, small: bool, cuts: int) -> dict:
     layout = railway.build(params, np.random.default_rng(0))
     support = layout.supports[0]
     mast = support.masts[0]
-    from bpy_pipeline.geometry.railway_assets import foot_pose
+    from bpy_pipeline.builders.railway.assets import foot_pose
 
     to_foot = Matrix(np.linalg.inv(foot_pose(support.frame, mast.lateral, mast.base, mast.outward)).tolist())
     objects = bpy.data.collections[COLLECTION].objects

@@ -2,7 +2,7 @@
 
 For level supports and the same mid-span sag, the largest vertical gap between the parabola
 z = 4 s x (L - x) / L^2 and the catenary a (cosh((x - L/2) / a) - cosh(L / 2a)) is measured
-numerically (:func:`bpy_pipeline.geometry.catenary.parabola_error`) over span lengths, for
+numerically (:func:`bpy_pipeline.builders.railway.catenary.parabola_error`) over span lengths, for
 sag-to-span ratios from railway wires (0.1 % contact wire pre-sag, 1 % messenger, 2 % feeder)
 up to power lines (5 %), and for the railway sag law itself (f_ref 0.5 m at 50 m, alpha 2).
 It is set against the thesis scanner's accuracy (2 mm, table 4.3) and the half beam spacing of
@@ -17,7 +17,7 @@ import time
 import numpy as np
 from common import arguments, report
 
-from bpy_pipeline.geometry.catenary import parabola_error, sag_for_span
+from bpy_pipeline.builders.railway.catenary import parabola_error, sag_for_span
 
 ACCURACY = 0.002  # m, the thesis scanner's accuracy (table 4.3)
 HALF_SPACING_10M = 0.5 * 10.0 * math.radians(0.05)  # m, half the beam spacing of 0.05 deg steps at 10 m

@@ -40,7 +40,7 @@ SENSOR_AT = np.array([-1.0, -3.0, 1.8])  # hall frame: a tripod in the aisle sou
 
 def hall_meshes(seed: int = 3) -> tuple[dict, dict]:
     """``(meshes {name: (v, t)}, truth class per mesh name prefix)`` of the hall in the sensor frame (sensor at the origin)."""
-    from bpy_pipeline.builders.industrial_hall import IndustrialHallScene
+    from bpy_pipeline.builders.industrial_hall.params import IndustrialHallScene
 
     params = IndustrialHallScene()
     layout = hall_layout(params)
@@ -83,7 +83,7 @@ def hall_scan(folder: Path, preset: str = "hdl64e", seed: int = 3) -> tuple[Path
     path = folder / "hall_scan.npy"
     np.save(path, grid)
     tops = {}
-    from bpy_pipeline.builders.industrial_hall import IndustrialHallScene
+    from bpy_pipeline.builders.industrial_hall.params import IndustrialHallScene
 
     for f in hall_layout(IndustrialHallScene()).furniture:
         if f.class_name == "desk":

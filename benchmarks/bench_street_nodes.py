@@ -5,7 +5,7 @@ static objects only. The same layout is built two ways, in turn, so a shared mac
 weighs on both alike: every part as a plain mesh object (the reference: how the street was built
 before its items were instanced), and the scattered kinds (trunks, crowns and bushes, lamps and
 bollards, bins, bicycle stands, cones, barriers) as point-cloud objects with a live "Street
-Scatter" modifier (``scenes/street_nodes.py``). Reported: median seconds to create the objects
+Scatter" modifier (``builders/street/scatter_nodes.py``). Reported: median seconds to create the objects
 and evaluate the depsgraph, and to export the scene (``export_scene``), and their ratios to the
 reference; the exported triangle counts must agree.
 
@@ -23,12 +23,12 @@ def main() -> None:
     import bpy
     import numpy as np
 
-    from bpy_pipeline.builders.street import StreetScene
+    from bpy_pipeline.builders.street.params import StreetScene
     from bpy_pipeline.export import export_scene
-    from bpy_pipeline.geometry import street
+    from bpy_pipeline.builders.street import layout as street
     from bpy_pipeline.labels import load_class_table
     from bpy_pipeline.scenes.objects import mesh_object, scene_collection, tag
-    from bpy_pipeline.scenes.street_nodes import prototypes_collection, scatter_object
+    from bpy_pipeline.builders.street.scatter_nodes import prototypes_collection, scatter_object
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     params = StreetScene(ego_vehicle=True)

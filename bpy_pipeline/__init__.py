@@ -12,6 +12,9 @@ The pure part (config, geometry, lidar, io) runs anywhere; ``scenes``, ``export`
 """
 
 from ._version import __version__  # noqa: E402,F401
+from . import _moved  # noqa: E402
+
+_moved.install(__name__)  # the modules that moved into the builders' packages, importable by their old paths this round
 
 from .api import load_config, run, scan  # noqa: E402
 from .io import read_dataset, read_las, read_npy_folder, read_ply, read_semantickitti  # noqa: E402

@@ -34,7 +34,7 @@ from .lidar.weather import WeatherConfig, check_weather
 from .buffers import MATERIALS  # noqa: F401  (the panel's list)
 from .builders import BUILDERS as BUILDER_REGISTRY
 from .builders.population import population_from_dict, population_to_dict
-from .builders.railway import RailwayScene
+from .builders.railway.params import RailwayScene
 from .io.writers import frame_writers
 from .schema import check_positive, convert, from_dict, to_plain
 

@@ -27,7 +27,7 @@ import numpy as np
 from .errors import InputError
 from .geometry.boxes import BOX_DTYPE, keep_boxes
 from .geometry.lod import SensorView
-from .geometry.street import FieldOfView
+from .geometry.field_of_view import FieldOfView
 from .geometry.transforms import pose_matrix, transform_points
 from .lidar.points import POINT_DTYPE
 from .lidar.sensors import SensorSpec, angular_resolution, elevations, mount_offset, resolve_sensor
@@ -133,7 +133,7 @@ def split_cloud(merged: np.ndarray) -> list[np.ndarray]:
 
 
 def field_of_view(spec: SensorSpec, pose: np.ndarray) -> FieldOfView:
-    """The :class:`~.geometry.street.FieldOfView` of a sensor of ``spec`` at ``pose`` (4, 4), for placement."""
+    """The :class:`~.geometry.field_of_view.FieldOfView` of a sensor of ``spec`` at ``pose`` (4, 4), for placement."""
     table = elevations(spec)
     step = angular_resolution(spec)[1] or 0.0
     if spec.pattern in ("rosette", "file"):

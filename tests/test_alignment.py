@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from bpy_pipeline.errors import InputError
-from bpy_pipeline.geometry.alignment import arc_through
+from bpy_pipeline.builders.railway.alignment import arc_through
 
 CASES = [
     ((0, 0, 0), (50, 10, 0), (100, 0, 0)),  # a left... right-hand curve in plan
@@ -87,7 +87,7 @@ def test_chainage_samples_keep_the_chord_error():
 
 
 def test_transition_curves_keep_the_ends_and_follow_the_clothoid():
-    from bpy_pipeline.geometry.alignment import arc_through, with_transitions
+    from bpy_pipeline.builders.railway.alignment import arc_through, with_transitions
 
     arc = arc_through((-150, 0, 0), (0, 19.05, 0), (150, 0, 0))
     curve = with_transitions(arc, 40.0)
@@ -111,7 +111,7 @@ def test_transition_curves_keep_the_ends_and_follow_the_clothoid():
 
 
 def test_transition_curves_refuse_what_cannot_hold_them():
-    from bpy_pipeline.geometry.alignment import arc_through, with_transitions
+    from bpy_pipeline.builders.railway.alignment import arc_through, with_transitions
 
     with pytest.raises(InputError, match="transition_length"):
         with_transitions(arc_through((-150, 0, 0), (0, 19.05, 0), (150, 0, 0)), 200.0, "scene.track")

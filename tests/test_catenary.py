@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from bpy_pipeline.errors import InputError
-from bpy_pipeline.geometry import catenary
+from bpy_pipeline.builders.railway import catenary
 from bpy_pipeline.geometry.lod import SensorView, equal_perimeter_radius, polygon_sides
 
 

@@ -1,7 +1,7 @@
-"""The railway's catenary through the "Catenary Wire" and "Catenary Droppers" groups (scenes/catenary_nodes.py).
+"""The railway's catenary through the "Catenary Wire" and "Catenary Droppers" groups (builders/railway/catenary_nodes.py).
 
 One source of truth: each wire's and dropper set's object, evaluated through the depsgraph, gives
-the points of the pure functions (``geometry/catenary.py``: the thesis's parabola and dropper
+the points of the pure functions (``builders/railway/catenary.py``: the thesis's parabola and dropper
 rule; the layout's jittered droppers), within 1e-6 m plus the float32 rounding of the coordinate,
 for several parameter sets; the swept tubes lie their radius from the pure centrelines; and the
 modifier inputs edit what the export reads.
@@ -12,7 +12,7 @@ import math
 import numpy as np
 import pytest
 
-from bpy_pipeline.geometry import catenary
+from bpy_pipeline.builders.railway import catenary
 
 pytestmark = pytest.mark.bpy
 EPS32 = float(np.finfo(np.float32).eps)
@@ -121,7 +121,7 @@ def test_the_wire_group_hangs_the_thesis_parabola(railway):
 def test_wire_group_against_the_pure_parabola(start, end, sag, samples):
     import bpy
 
-    from bpy_pipeline.scenes import catenary_nodes
+    from bpy_pipeline.builders.railway import catenary_nodes
     from bpy_pipeline.scenes.objects import scene_collection
 
     collection = scene_collection("catenary test")

@@ -1,4 +1,4 @@
-"""The industrial hall's slabs, walls, desks and racks through the "Industrial Hall" group (scenes/hall_nodes.py).
+"""The industrial hall's slabs, walls, desks and racks through the "Industrial Hall" group (builders/industrial_hall/hall_nodes.py).
 
 One source of truth: every piece's object, evaluated through the depsgraph as the export reads it,
 gives the vertices and triangles of the pure ``hall_layout`` boxes (geometry/indoor.py) within
@@ -18,9 +18,9 @@ pytestmark = pytest.mark.bpy
 def build(**changes):
     import bpy
 
-    from bpy_pipeline.builders.industrial_hall import IndustrialHallScene
+    from bpy_pipeline.builders.industrial_hall.params import IndustrialHallScene
     from bpy_pipeline.geometry.indoor import hall_layout
-    from bpy_pipeline.scenes.industrial_hall import IndustrialHall
+    from bpy_pipeline.builders.industrial_hall.scene import IndustrialHall
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     params = dataclasses.replace(IndustrialHallScene(), robots=0, **changes)
@@ -54,7 +54,7 @@ def test_the_group_builds_the_pure_hall(changes):
 def test_labels_as_before():
     from bpy_pipeline.export import export_scene
     from bpy_pipeline.labels import load_class_table
-    from bpy_pipeline.scenes.industrial_hall import INSTANCE
+    from bpy_pipeline.builders.industrial_hall.scene import INSTANCE
 
     _, layout = build()
     objects = export_scene(load_class_table()).objects

@@ -1,6 +1,9 @@
 """The package's layers hold, counting imports inside functions too, and no modules import each other around a circle.
 
 Layers, top to bottom (docs/layout.md): cli/api -> plan/stages -> builders, dataset -> mixing, io -> lidar -> geometry.
+A builder is one package, ``builders/<name>/``: its pure geometry (every file but ``params.py``, ``__init__.py`` and
+the Blender side ``scene*.py`` / ``*_nodes.py``) keeps geometry's rule, its own package's geometry aside; the shared
+Blender helpers (``scenes``) serve every builder and import no builder's package.
 An import is an edge from the importing module to the module it names (``from pkg import name`` names
 ``pkg.name`` when that is a module), wherever the statement sits: module level, inside a function, or
 under ``if TYPE_CHECKING`` (an annotation-only import still ties the layers together for a reader).
@@ -27,8 +30,29 @@ FORBIDDEN = {
     "io": ("pipeline", "builders", "scenes", "plan", "stages", "dataset", "api", "cli", "mixing", "lidar", "rig", "config"),
     "mixing": ("pipeline", "builders", "scenes", "plan", "stages", "dataset", "api", "cli", "rig", "config", "frame", "evaluate"),
 }
+BUILDER_PACKAGES = tuple(sorted(p.parent.name for p in (PACKAGE / "builders").glob("*/__init__.py")))
+FORBIDDEN["scenes"] = tuple(f"builders.{b}" for b in BUILDER_PACKAGES)
 # what io may use of lidar: the point record and the sensor's layout (its spec, rings, columns, frame time)
 ALLOWED = {"io": ("lidar.points", "lidar.grid", "lidar.sensors")}
+
+
+def builder_geometry(rel: str) -> bool:
+    """``builders.<builder>.<file>`` that is the builder's pure geometry (not params, not its Blender side)."""
+    parts = rel.split(".")
+    if len(parts) != 3 or parts[0] != "builders" or parts[1] not in BUILDER_PACKAGES:
+        return False
+    leaf = parts[2]
+    return leaf != "params" and leaf != "scene" and not leaf.startswith("scene_") and not leaf.endswith("_nodes")
+
+
+def rules(rel: str) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """``(forbidden, allowed)`` prefixes for the module ``rel`` (dotted, below bpy_pipeline)."""
+    if builder_geometry(rel):  # geometry's rule; its own package's geometry is fine
+        package = rel.rpartition(".")[0]
+        own = tuple(f"{package}.{p.stem}" for p in sorted((PACKAGE / package.replace(".", "/")).glob("*.py")) if builder_geometry(f"{package}.{p.stem}"))
+        return FORBIDDEN["geometry"], own
+    layer = rel.split(".")[0]
+    return FORBIDDEN.get(layer, ()), ALLOWED.get(layer, ())
 
 
 def module_name(path: Path) -> str:
@@ -134,9 +158,9 @@ def wrong_way(rows) -> list[tuple[str, str, int]]:
     for name, target, line, _, compat in rows:
         if compat:
             continue
-        layer, rel = short(name).split(".")[0], short(target)
-        forbidden = FORBIDDEN.get(layer, ())
-        if any(rel == f or rel.startswith(f + ".") for f in forbidden) and not any(rel == a or rel.startswith(a + ".") for a in ALLOWED.get(layer, ())):
+        rel = short(target)
+        forbidden, allowed = rules(short(name))
+        if any(rel == f or rel.startswith(f + ".") for f in forbidden) and not any(rel == a or rel.startswith(a + ".") for a in allowed):
             out.append((short(name), rel, line))
     return out
 
@@ -168,6 +192,17 @@ def test_the_graph_sees_imports_inside_functions(tmp_path):
     found = imports(probe, "bpy_pipeline.geometry.lod", known)
     assert found == [("bpy_pipeline.config", 2, True, True), ("bpy_pipeline.config", 7, True, False)]  # only the module's own __getattr__ is compat
     assert path.exists()
+    # a builder's geometry keeps geometry's rule, its own package's geometry aside; shared scenes import no builder's package
+    rows = [("bpy_pipeline.builders.railway.layout", "bpy_pipeline.builders.railway.catenary", 1, False, False),
+            ("bpy_pipeline.builders.railway.layout", "bpy_pipeline.geometry.lod", 2, False, False),
+            ("bpy_pipeline.builders.railway.layout", "bpy_pipeline.lidar.sensors", 3, True, False),
+            ("bpy_pipeline.builders.railway.layout", "bpy_pipeline.builders.railway.scene", 4, True, False),
+            ("bpy_pipeline.builders.railway.layout", "bpy_pipeline.builders.street.layout", 5, False, False),
+            ("bpy_pipeline.builders.railway.params", "bpy_pipeline.builders.railway.scene", 6, True, False),
+            ("bpy_pipeline.builders.railway.scene", "bpy_pipeline.scenes.objects", 7, False, False),
+            ("bpy_pipeline.scenes.box_nodes", "bpy_pipeline.builders.street.scatter_nodes", 8, False, False),
+            ("bpy_pipeline.scenes.population", "bpy_pipeline.builders.population", 9, False, False)]
+    assert [line for _, _, line in wrong_way(rows)] == [3, 4, 5, 8]
     assert circles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
 
 

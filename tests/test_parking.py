@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from bpy_pipeline.builders.base import Distribution
-from bpy_pipeline.builders.parking import ParkingScene
+from bpy_pipeline.builders.parking.params import ParkingScene
 from bpy_pipeline.geometry.collision import rectangles_overlap
 from bpy_pipeline.geometry.indoor import parking_layout, parking_station
 from bpy_pipeline.geometry.placement import FloorBoxPlacer, insert_sequentially, sample, sample_count, turn_about

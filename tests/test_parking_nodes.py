@@ -1,4 +1,4 @@
-"""The car park's level through the "Parking Level" group (scenes/parking_nodes.py).
+"""The car park's level through the "Parking Level" group (builders/parking/level_nodes.py).
 
 One source of truth: each piece's object (floor, ceiling, walls, pillars, ramp), evaluated through
 the depsgraph as the export reads it, gives the vertices and triangles of the pure
@@ -50,9 +50,9 @@ def same_mesh(got, want) -> float:
 def build(**changes):
     import bpy
 
-    from bpy_pipeline.builders.parking import ParkingScene
+    from bpy_pipeline.builders.parking.params import ParkingScene
     from bpy_pipeline.geometry.indoor import parking_layout
-    from bpy_pipeline.scenes.parking import ParkingGarage
+    from bpy_pipeline.builders.parking.scene import ParkingGarage
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     params = dataclasses.replace(ParkingScene(), **changes)
@@ -82,7 +82,7 @@ def test_the_group_builds_the_pure_level(changes):
 def test_labels_as_before_and_prototypes_unseen():
     from bpy_pipeline.export import export_scene
     from bpy_pipeline.labels import load_class_table
-    from bpy_pipeline.scenes.parking import INSTANCE
+    from bpy_pipeline.builders.parking.scene import INSTANCE
 
     build()
     objects = export_scene(load_class_table()).objects

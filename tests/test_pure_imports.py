@@ -1,9 +1,14 @@
-"""The pure part (config, geometry, lidar, io, mixing, evaluate, buffers, labels) never imports bpy.
+"""The pure part (config, geometry, lidar, io, mixing, evaluate, buffers, labels, the builders' pure files) never imports bpy.
 
 Two checks: every module outside the Blender side imports with ``bpy`` blocked (a module-level
 import fails there), and no module of the pure packages holds an import of ``bpy``, ``bmesh``,
 ``mathutils`` or of the Blender side anywhere, inside functions included (an import there would
 only fail when the function runs).
+
+A builder's package (``builders/<name>/``) marks its Blender side by the file name: ``scene.py``,
+``scene_*.py`` and ``*_nodes.py`` import bpy; its other files are pure. Its geometry (every pure file but
+``params.py``) is held like the pure packages; ``params.py`` imports no Blender module anywhere and its
+``scene`` only inside ``build`` (the builder's entry is pure, its ``build`` runs in Blender).
 """
 
 import ast
@@ -19,7 +24,7 @@ import bpy_pipeline
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "bpy_pipeline"
-BPY_SIDE = {"bpy_pipeline.export", "bpy_pipeline.compat", "bpy_pipeline.scenes"}
+BPY_SIDE = {"bpy_pipeline.export", "bpy_pipeline.compat", "bpy_pipeline.scenes"}  # and the builders' Blender files (blender_file)
 PURE_PACKAGES = ("geometry", "lidar", "io", "mixing", "evaluate")  # never import Blender, not even inside a function
 BLENDER_MODULES = ("bpy", "bmesh", "mathutils")
 
@@ -27,10 +32,32 @@ BLENDER_MODULES = ("bpy", "bmesh", "mathutils")
 OPTIONAL = {"bpy_pipeline.lidar.numba_kernels": "numba"}  # modules that need an optional package (the 'fast' extra)
 
 
+def blender_file(name: str) -> bool:
+    """A builder package's Blender side, marked by its name: ``builders.<builder>.scene``, ``.scene_*``, ``.*_nodes``."""
+    parts = name.split(".")
+    if len(parts) != 4 or parts[:2] != ["bpy_pipeline", "builders"]:
+        return False
+    return parts[3] == "scene" or parts[3].startswith("scene_") or parts[3].endswith("_nodes")
+
+
+def blender_side(name: str) -> bool:
+    return blender_file(name) or any(name == b or name.startswith(b + ".") for b in BPY_SIDE)
+
+
+def builder_geometry() -> list[Path]:
+    """The pure files of the builders' packages but their ``params.py`` and ``__init__.py``: held like the pure packages."""
+    out = []
+    for path in sorted((PACKAGE / "builders").glob("*/*.py")):
+        name = ".".join(("bpy_pipeline", *path.relative_to(PACKAGE).with_suffix("").parts))
+        if not blender_file(name) and path.name not in ("params.py", "__init__.py"):
+            out.append(path)
+    return out
+
+
 def pure_modules() -> list[str]:
     names = []
     for info in pkgutil.walk_packages(bpy_pipeline.__path__, "bpy_pipeline."):
-        if any(info.name == b or info.name.startswith(b + ".") for b in BPY_SIDE):
+        if blender_side(info.name):
             continue
         if info.name in OPTIONAL and importlib.util.find_spec(OPTIONAL[info.name]) is None:
             continue
@@ -62,26 +89,55 @@ def blender_imports(source: str, package: str) -> list[tuple[int, str]]:
         else:
             continue
         for name in names:
-            if name.split(".")[0] in BLENDER_MODULES or any(name == b or name.startswith(b + ".") for b in BPY_SIDE):
+            if name.split(".")[0] in BLENDER_MODULES or blender_side(name):
                 out.append((node.lineno, name))
     return out
 
 
+def test_the_builders_blender_side_is_named_so():
+    """A builder's files that import Blender (bpy or the Blender side) at module level are the ones named ``scene*`` / ``*_nodes``."""
+    files = sorted((PACKAGE / "builders").glob("*/*.py"))
+    assert {p.parent.name for p in files} >= {"railway", "street", "parking", "industrial_hall", "primitives", "blend", "real_scan"}
+    for path in files:
+        name = ".".join(("bpy_pipeline", *path.relative_to(PACKAGE).with_suffix("").parts))
+        source = path.read_text()
+        module_level = {n.lineno for n in ast.parse(source).body if isinstance(n, (ast.Import, ast.ImportFrom))}
+        imports_blender = any(line in module_level for line, _ in blender_imports(source, name.rpartition(".")[0]))
+        assert imports_blender == blender_file(name), f"{path.relative_to(ROOT)}: " + ("imports Blender but is not named scene*.py or *_nodes.py" if imports_blender else "is named as the Blender side but imports no Blender module")
+    assert builder_geometry() and all(p.name not in ("scene.py", "params.py") for p in builder_geometry())
+
+
+def test_the_builders_params_import_no_blender_module():
+    """A builder's ``params.py`` names no Blender module anywhere and its Blender side only inside functions (``build``)."""
+    found = {}
+    for path in sorted((PACKAGE / "builders").glob("*/params.py")):
+        package = ".".join(("bpy_pipeline", *path.relative_to(PACKAGE).parent.parts))
+        tree = ast.parse(path.read_text())
+        module_level = {n.lineno for n in tree.body if isinstance(n, (ast.Import, ast.ImportFrom))}
+        for line, name in blender_imports(path.read_text(), package):
+            if name.split(".")[0] in BLENDER_MODULES or line in module_level:
+                found.setdefault(f"{path.relative_to(ROOT)}:{line}", name)
+    assert not found, "Blender imports in a builder's params: " + ", ".join(f"{k} imports {v}" for k, v in found.items())
+
+
 def test_the_pure_packages_import_no_blender_module_anywhere():
     found = {}
-    for sub in PURE_PACKAGES:
-        for path in sorted((PACKAGE / sub).rglob("*.py")):
-            package = ".".join(("bpy_pipeline", *path.relative_to(PACKAGE).parent.parts))
-            for line, name in blender_imports(path.read_text(), package):
-                found.setdefault(f"{path.relative_to(ROOT)}:{line}", name)
+    paths = [path for sub in PURE_PACKAGES for path in sorted((PACKAGE / sub).rglob("*.py"))] + builder_geometry()
+    for path in paths:
+        package = ".".join(("bpy_pipeline", *path.relative_to(PACKAGE).parent.parts))
+        for line, name in blender_imports(path.read_text(), package):
+            found.setdefault(f"{path.relative_to(ROOT)}:{line}", name)
     assert not found, "Blender imports in the pure part: " + ", ".join(f"{k} imports {v}" for k, v in found.items())
 
 
-@pytest.mark.parametrize("source", ["def f():\n    import bpy\n", "def f():\n    from mathutils import Matrix\n", "from ..scenes import objects\n", "import bmesh\n"])
+@pytest.mark.parametrize("source", ["def f():\n    import bpy\n", "def f():\n    from mathutils import Matrix\n", "from ..scenes import objects\n", "import bmesh\n",
+                                    "from ..builders.railway import scene\n", "def f():\n    from ..builders.street.scatter_nodes import scatter_group\n"])
 def test_the_check_finds_a_blender_import(source):
-    """The check above fails on a real import of Blender in a pure module, inside a function too."""
+    """The check above fails on a real import of Blender in a pure module, inside a function too (a builder's Blender files too)."""
     assert blender_imports(source, "bpy_pipeline.lidar")
     assert not blender_imports("def f():\n    from ..geometry import lod\n    import numpy\n", "bpy_pipeline.lidar")
+    assert not blender_imports("from ..builders.railway import layout, catenary\nfrom ..builders.street.params import StreetScene\n", "bpy_pipeline.lidar")
+    assert blender_imports("from .scene_assets import asset_parts\n", "bpy_pipeline.builders.railway") and not blender_imports("from .layout import plan\n", "bpy_pipeline.builders.railway")
 
 
 def test_pure_modules_import_and_run_with_bpy_blocked():

@@ -7,7 +7,7 @@ import pytest
 
 from bpy_pipeline.config import load_config
 from bpy_pipeline.errors import InputError
-from bpy_pipeline.geometry import catenary
+from bpy_pipeline.builders.railway import catenary
 
 pytestmark = pytest.mark.bpy
 TLS = ["sensor.preset=railway_tls"]
@@ -67,7 +67,7 @@ def test_sag_measured_from_the_contact_wire_points(tmp_path):
 def manifest_spans(manifest):
     """``(span index, start (3,), end (3,))`` of each contact wire, rebuilt from the resolved config."""
     from bpy_pipeline.config import config_from_dict
-    from bpy_pipeline.geometry.railway_layout import plan
+    from bpy_pipeline.builders.railway.layout import plan
     from bpy_pipeline.pipeline import frame_rng
 
     config = config_from_dict(manifest["config"])
@@ -128,7 +128,7 @@ def test_the_track_follows_a_curve_and_its_node_group_is_editable():
     import bpy
 
     from bpy_pipeline.compat import set_modifier_input
-    from bpy_pipeline.geometry.alignment import arc_through
+    from bpy_pipeline.builders.railway.alignment import arc_through
 
     build("scene.track.mid=[0, 25, 0]", "scene.stations.count=0", "scene.track.design_speed=0")  # no cant: rails level across
     arc = arc_through((-75, 0, 0), (0, 25, 0), (75, 0, 0))
@@ -227,8 +227,8 @@ def test_cant_on_a_600_m_curve_measured_from_the_rail_points(tmp_path, turn):
 
 
 def test_cant_given_or_capped():
-    from bpy_pipeline.geometry.alignment import arc_through
-    from bpy_pipeline.geometry.railway_layout import cant
+    from bpy_pipeline.builders.railway.alignment import arc_through
+    from bpy_pipeline.builders.railway.layout import cant
 
     track = load_config(None, ["scene.track.design_speed=200"]).scene.params.track
     curve = arc_through((-150, 0, 0), (0, 600.0 - math.sqrt(600.0**2 - 150.0**2), 0), (150, 0, 0))
@@ -266,7 +266,7 @@ def test_trackside_fences_signals_and_a_platform(tmp_path):
 def test_the_cant_ramps_along_transition_curves():
     import bpy
 
-    from bpy_pipeline.geometry.railway_layout import cant
+    from bpy_pipeline.builders.railway.layout import cant
 
     mid = 600.0 - math.sqrt(600.0**2 - 150.0**2)
     config, layout = build("scene.detail.mode=fixed", "scene.track.start=[-150, 0, 0]", f"scene.track.mid=[0, {mid}, 0]", "scene.track.end=[150, 0, 0]",

@@ -13,7 +13,7 @@ import pytest
 
 from bpy_pipeline.config import load_config
 from bpy_pipeline.errors import InputError
-from bpy_pipeline.geometry.railway_assets import foot_pose, part_class
+from bpy_pipeline.builders.railway.assets import foot_pose, part_class
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -97,7 +97,7 @@ def build(*overrides):
     """Build the railway of the config in Blender; ``(params, layout, {object name: object})`` of its scene collection."""
     import bpy
 
-    from bpy_pipeline.scenes import railway
+    from bpy_pipeline.builders.railway import scene as railway
     from bpy_pipeline.scenes.objects import COLLECTION
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
@@ -229,7 +229,7 @@ def test_a_cantilever_asset_replaces_the_mast_face_assembly_and_names_give_class
 @pytest.mark.bpy
 @pytest.mark.parametrize("suffix", [".obj", ".ply"])
 def test_obj_and_ply_assets_read_as_the_glb_does(tmp_path, suffix):
-    from bpy_pipeline.scenes.railway_assets import asset_parts
+    from bpy_pipeline.builders.railway.scene_assets import asset_parts
 
     glb = asset_parts(str(write_glb(tmp_path / "mast.glb", MAST)), "mast", 1.0, {}, "scene.assets.mast")
     other = asset_parts(str(make_asset(tmp_path / f"mast{suffix}", MAST)), "mast", 1.0, {}, "scene.assets.mast")
@@ -315,7 +315,7 @@ def make_ifc(path: Path) -> Path:
 
 @pytest.mark.bpy
 def test_an_ifc_mast_reads_by_product_name(tmp_path):
-    from bpy_pipeline.scenes.railway_assets import asset_parts
+    from bpy_pipeline.builders.railway.scene_assets import asset_parts
 
     ifc = make_ifc(tmp_path / "mast.ifc")
     load_config(None, [f"scene.assets.mast={ifc}"])  # checks

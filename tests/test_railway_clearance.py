@@ -194,7 +194,7 @@ def test_registration_arms_are_about_a_metre_long():
 
 def test_the_joint_rules_catch_a_clash():
     # a registration arm through another track's main tube, as the old two-track single-mast layout had
-    from bpy_pipeline.geometry import railway_parts
+    from bpy_pipeline.builders.railway import parts as railway_parts
 
     near = railway_parts.cantilever(-3.05, 0.2, 6.2, 7.6, 0.3, arm_length=2.1)  # the old 2.1 m arm
     far = railway_parts.cantilever(-3.05, 4.2, 6.2, 7.6, 0.3)  # rooted at the mast face, under the near track's

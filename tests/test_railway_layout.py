@@ -7,9 +7,9 @@ import pytest
 
 from bpy_pipeline.config import load_config
 from bpy_pipeline.errors import InputError
-from bpy_pipeline.geometry import catenary
+from bpy_pipeline.builders.railway import catenary
 from bpy_pipeline.geometry.lod import SensorView, section_error, view_of
-from bpy_pipeline.geometry.railway_layout import level_of_detail, plan, station_frames
+from bpy_pipeline.builders.railway.layout import level_of_detail, plan, station_frames
 
 
 def params(*overrides):
@@ -72,7 +72,7 @@ def test_stations_beside_the_track():
     np.testing.assert_allclose(frames[:, 1, 3], -2.0 - 4.0)  # 4 m beyond the right track's centreline (at -2)
     curved = params("scene.track.mid=[0, 30, 0]", "scene.stations.chainages=[10, 80]")
     frames = station_frames(curved)
-    from bpy_pipeline.geometry.alignment import arc_through
+    from bpy_pipeline.builders.railway.alignment import arc_through
 
     arc = arc_through((-75, 0, 0), (0, 30, 0), (75, 0, 0))
     np.testing.assert_allclose(frames[:, :3, 3], arc.offset([10, 80], 4.0, 0.0))  # on the lateral perpendicular
@@ -214,7 +214,7 @@ def test_tension_sections_overlap_over_one_span_with_the_ending_run_rising():
 
 
 def test_a_steady_arm_is_a_part_apart_at_the_end_of_the_registration_arm():
-    from bpy_pipeline.geometry import railway_parts
+    from bpy_pipeline.builders.railway import parts as railway_parts
 
     whole = railway_parts.cantilever(-3.05, 0.2, 6.2, 7.6, 0.3, arm_length=1.2)
     split = railway_parts.cantilever(-3.05, 0.2, 6.2, 7.6, 0.3, arm_length=1.2, steady_arm=0.5)

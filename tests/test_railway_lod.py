@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from bpy_pipeline.config import load_config
-from bpy_pipeline.geometry import catenary
+from bpy_pipeline.builders.railway import catenary
 from bpy_pipeline.geometry.lod import PathView, PlannedPath, section_error
-from bpy_pipeline.geometry.railway_layout import STONE_STRETCH, level_of_detail, plan
+from bpy_pipeline.builders.railway.layout import STONE_STRETCH, level_of_detail, plan
 from bpy_pipeline.pipeline import scene_view
 
 LINE = ["scene.track.start=[0, 0, 0]", "scene.track.mid=[300, 0, 0]", "scene.track.end=[600, 0, 0]", "scene.track.tracks=2"]

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from bpy_pipeline.config import load_config
-from bpy_pipeline.geometry.railway_parts import H_SECTION
+from bpy_pipeline.builders.railway.parts import H_SECTION
 from bpy_pipeline.lidar.sensors import preset_sources, presets
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "railway" / "mobile.yaml"

@@ -142,7 +142,7 @@ def test_bad_backgrounds_get_one_line(real_scan, tmp_path):
 
 
 def test_kitti_rule_min_range_checked():
-    from bpy_pipeline.builders.real_scan import check
+    from bpy_pipeline.builders.real_scan.params import check
     from bpy_pipeline.mixing.section import KittiRule, RealScanScene
 
     with pytest.raises(InputError, match=r"scene.kitti_rule.min_range: must be 0 .. kitti_rule.max_range \(50\), got 60"):

@@ -8,9 +8,10 @@ import numpy as np
 import pytest
 
 from bpy_pipeline.builders.base import Distribution
-from bpy_pipeline.builders.street import StreetScene
+from bpy_pipeline.builders.street.params import StreetScene
 from bpy_pipeline.errors import InputError
-from bpy_pipeline.geometry import primitives, street
+from bpy_pipeline.geometry import primitives
+from bpy_pipeline.builders.street import layout as street
 from bpy_pipeline.geometry.collision import rectangles_overlap
 from bpy_pipeline.geometry.transforms import pose_matrix
 from bpy_pipeline.lidar.sensors import resolve_sensor
@@ -225,7 +226,7 @@ def test_dressing_is_present_labelled_and_drawn_from_the_layout_seed_alone():
 
 
 def test_street_trees_clear_the_traffic_and_obstacles_keep_users_off_the_furniture():
-    from bpy_pipeline.geometry.vegetation import tree
+    from bpy_pipeline.builders.street.vegetation import tree
 
     trunk, crown = tree((0.0, 0.0, 0.15), 9.0, 3.0, "round", np.random.default_rng(0), clear_below=4.5)
     assert crown[0][:, 2].min() >= 0.15 + 4.5 - 0.3  # cards reach half their edge below their centres
@@ -239,8 +240,8 @@ def test_street_trees_clear_the_traffic_and_obstacles_keep_users_off_the_furnitu
 
 
 def test_ego_vehicle_places_the_roof_sensor_in_its_lane_and_keeps_its_footprint_free():
-    from bpy_pipeline.builders.street import ego_station
-    from bpy_pipeline.geometry.street import EGO_HALF
+    from bpy_pipeline.builders.street.params import ego_station
+    from bpy_pipeline.builders.street.layout import EGO_HALF
 
     params = StreetScene(ego_vehicle=True, **BUSY)
     poses = [ego_station(params, k) for k in range(20)]

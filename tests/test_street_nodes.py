@@ -1,7 +1,7 @@
-"""The street's scattered items through the "Street Scatter" Geometry Nodes group (scenes/street_nodes.py).
+"""The street's scattered items through the "Street Scatter" Geometry Nodes group (builders/street/scatter_nodes.py).
 
 One source of truth: each scattered kind's object, evaluated through the depsgraph, gives the
-vertices of the pure ``Scatter.mesh`` (geometry/street_dressing.py), in item order, whether its
+vertices of the pure ``Scatter.mesh`` (builders/street/dressing.py), in item order, whether its
 instances are read as the export reads them or realized; its labels are the part's; a scan of
 the exported scene equals a scan of the pure meshes; and the modifier's inputs edit the scene the
 export reads.
@@ -12,8 +12,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from bpy_pipeline.geometry import street
-from bpy_pipeline.geometry.street_dressing import Scatter
+from bpy_pipeline.builders.street import layout as street
+from bpy_pipeline.builders.street.dressing import Scatter
 
 EPS32 = float(np.finfo(np.float32).eps)
 
@@ -239,7 +239,7 @@ def test_editing_an_input_or_a_point_edits_what_the_export_reads(street_frame):
 
 
 def test_same_layout_seed_same_prototypes_and_transforms():
-    from bpy_pipeline.builders.street import StreetScene
+    from bpy_pipeline.builders.street.params import StreetScene
 
     params = StreetScene()
     first, again = (street.street_layout(params, np.random.default_rng(params.layout_seed)) for _ in range(2))

@@ -1,8 +1,11 @@
-"""Scene builders: the registry (:data:`BUILDERS`) and the built-in builders, one module each.
+"""Scene builders: the registry (:data:`BUILDERS`) and the built-in builders, one package each.
 
-Adding a builder is one new module that defines its parameters dataclass and calls
-:func:`register_builder`, plus its name in the import line below. The modules here are pure;
-each builder's ``build`` imports its Blender code from :mod:`bpy_pipeline.scenes` when called.
+A builder's package ``builders/<name>/`` holds ``params.py`` (its parameters dataclass, ``check``,
+``build`` and :func:`register_builder`), its pure geometry (``layout.py`` and other modules) and its
+Blender side, marked by the file name: ``scene.py``, ``scene_*.py`` and ``*_nodes.py`` import bpy,
+every other file is pure. ``build`` imports the package's ``scene`` when called. The package
+re-exports its ``params`` (``bpy_pipeline.builders.<name>`` was that module before). Adding a builder
+is one new package plus its name in the import line below.
 """
 
 from .base import BUILDERS, Builder, BuildContext, BuildResult, Distribution, build_scene, register_builder

@@ -2,7 +2,7 @@
 
 Both layouts are boxes (``centre (3,)``, ``half (3,)``, metres, axis-aligned) grouped by class,
 plus what placement needs: the floor area inside the walls, obstacles on the floor plan, the
-parking bays, the hall's furniture. ``scenes/parking.py`` and ``scenes/industrial_hall.py`` turn
+parking bays, the hall's furniture. ``builders/parking/scene.py`` and ``builders/industrial_hall/scene.py`` turn
 them into Blender objects; the car placement traces rays against the same meshes.
 """
 

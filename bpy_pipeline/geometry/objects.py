@@ -1,7 +1,7 @@
 """Meshes of the objects inserted into scenes and real scans: cars, people, robot arms. Pure numpy.
 
 Every mesh is ``(vertices (n, 3) float64 metres, triangles (m, 3) int32)`` with outward winding.
-The parking builder (scenes/parking.py) shows these cars in Blender; the real-scan mixing
+The parking builder (builders/parking/scene.py) shows these cars in Blender; the real-scan mixing
 (bpy_pipeline.mixing) casts the real sensor's firings at them without any Blender scene.
 
 A car is four parts sharing one instance: the body (its paint's reflectivity), the windows
@@ -11,7 +11,7 @@ height, are what the builders draw; :data:`BODIES` holds 24 bodies (those three 
 hatchbacks, estates, SUVs, pickups with an open bed, vans), each at its own length, width and height,
 drawn per object by real-scan insertion (``scene.car_bodies``, :data:`CAR_BODY_SETS`).
 A person is the capsule body of :mod:`.human`; a robot arm the capsule links of :mod:`.kinematics`;
-a cyclist a rider of :mod:`.human` seated on the bicycle of :mod:`.street`, one instance.
+a cyclist a rider of :mod:`.human` seated on the bicycle of :mod:`.vehicles`, one instance.
 """
 
 from __future__ import annotations
@@ -336,14 +336,14 @@ def robot_arm_object(rng: np.random.Generator, size=None) -> list[ObjectPart]:
 
 
 CYCLIST_SIZE = (1.76, 0.6, 1.73)  # m: length, width, height of a rider on a bicycle (the KITTI Cyclist class's mean box)
-BICYCLE_REFLECTIVITY, WHEEL_REFLECTIVITY = 0.3, 0.05  # a painted frame, black tyres (as geometry/street.py)
+BICYCLE_REFLECTIVITY, WHEEL_REFLECTIVITY = 0.3, 0.05  # a painted frame, black tyres (as the street builder's, builders/street/layout.py)
 
 
 def cyclist_object(rng: np.random.Generator, size=None) -> list[ObjectPart]:
-    """A rider (:mod:`.human`, a drawn seated pose and build) on a bicycle (:func:`.street.two_wheeler_parts`: two
+    """A rider (:mod:`.human`, a drawn seated pose and build) on a bicycle (:func:`.vehicles.two_wheeler_parts`: two
     wheels and a frame), facing +x: three parts (frame, wheels, rider) of one object; scaled to ``size`` when given."""
     from .human import BUILDS, pose_person, sample_pose, body_mesh
-    from .street import saddle_height, two_wheeler_parts
+    from .vehicles import saddle_height, two_wheeler_parts
 
     nominal = np.asarray(CYCLIST_SIZE, float)
     bike = two_wheeler_parts("bicycle", nominal)

@@ -20,6 +20,8 @@ or its tension section (run ``t<i>s<m>``) with ``catenary.tension_length``. With
 each cantilever also gives its ``steady_arm_length``. The layout is the one the frame's scene was built from,
 read from the frame's :class:`~bpy_pipeline.builders.base.BuildResult` (``frame.scene.scene``, signals
 included): the writer draws nothing, so a change to the builder's draws cannot part the file from the scene.
+The layout object gives its cantilevers itself (``RailwayLayout.support_cantilevers``): this writer imports
+nothing of the railway builder (io sits below the builders).
 """
 
 from __future__ import annotations
@@ -30,7 +32,6 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from ..geometry.railway_layout import cantilevers
 from .atomic import atomic_write
 from .writers import Writer, register_writer
 
@@ -42,7 +43,7 @@ def _xyz(p) -> list[float]:
 
 
 def layout_record(layout, params) -> dict:
-    """The JSON-ready ground truth of a :class:`~bpy_pipeline.geometry.railway_layout.RailwayLayout`
+    """The JSON-ready ground truth of a :class:`~bpy_pipeline.builders.railway.layout.RailwayLayout`
     planned from the ``RailwayScene`` ``params`` (see the module docstring)."""
     alignment, section, cat = layout.alignment, layout.section, params.catenary
     s = np.linspace(0.0, alignment.length, max(2, int(np.ceil(alignment.length / POLYLINE_STEP)) + 1))
@@ -54,7 +55,7 @@ def layout_record(layout, params) -> dict:
         masts = [{"side": m.side, "kind": m.kind, "base": _xyz(world(m.lateral, m.base)), "height": round(m.top - m.base, 5)} for m in support.masts]
         arms = [{"track": c.track, "attach": _xyz(world(c.attach_y, contact_z)), "arm_length": round(c.arm_length, 5)}
                 | ({"steady_arm_length": round(min(cat.steady_arm_length, c.arm_length - 0.2), 5)} if cat.steady_arms else {})
-                for c in cantilevers(support, section, cat, params.track.track_spacing, None)]
+                for c in layout.support_cantilevers(support, params)]
         supports.append({"index": support.index, "chainage": round(support.chainage, 5), "type": "gantry" if support.gantry else "mast",
                          "stagger": round(support.stagger, 5), "masts": masts, "cantilevers": arms})
     runs: dict[tuple, float] = {}

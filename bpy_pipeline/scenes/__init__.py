@@ -1,6 +1,8 @@
-"""Scene builders' Blender side (bpy): each turns its config section into tagged objects in the current scene.
+"""The Blender side (bpy) that several builders share: objects and tags, node-group helpers, boxes by nodes,
+people, the robot arm, assets, curves, the camera, the population; and :func:`build_scene`.
 
-The builders' registry entries and parameters are pure and live in :mod:`bpy_pipeline.builders`.
+Each builder's own Blender side lives in its package (``builders/<name>/scene.py``, ``*_nodes.py``);
+the registry entries and parameters are pure (:mod:`bpy_pipeline.builders`).
 """
 
 from __future__ import annotations

@@ -13,9 +13,8 @@ import numpy as np
 
 from ..geometry import primitives
 from ..geometry.indoor import _prism_along_y
-from .nodes import GroupBuilder
+from .nodes import GroupBuilder, excluded_collection
 from .objects import mesh_object
-from .street_nodes import prototypes_collection
 
 PROTOTYPES = "LiDAR Box Prototypes"
 BOX = "box prototype"
@@ -25,7 +24,7 @@ UNIT_WEDGE = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]])  # (x, z): the ramp'
 
 def prototypes(parent: bpy.types.Collection) -> dict:
     """The unit box and wedge as objects of an excluded :data:`PROTOTYPES` collection under ``parent``: ``{"box": obj, "wedge": obj}``."""
-    collection = prototypes_collection(parent, PROTOTYPES)
+    collection = excluded_collection(parent, PROTOTYPES)
     box = mesh_object(BOX, primitives.box(1.0, 1.0, 1.0), collection)
     wedge = mesh_object(WEDGE, _prism_along_y(UNIT_WEDGE, 0.0, 1.0), collection)
     return {"box": box, "wedge": wedge}

@@ -155,3 +155,33 @@ def new_group(name: str, inputs: list[tuple], outputs: list[tuple], modifier: bo
             if len(spec) > 5:
                 item.min_value, item.max_value = spec[4], spec[5]
     return group
+
+
+def _layer_collection(layer, collection):
+    if layer.collection == collection:
+        return layer
+    for child in layer.children:
+        found = _layer_collection(child, collection)
+        if found is not None:
+            return found
+    return None
+
+
+def excluded_collection(parent: bpy.types.Collection, name: str) -> bpy.types.Collection:
+    """A new, empty collection ``name`` under ``parent``, excluded from the view layer (its objects are
+    seen only where a group instances them); a stale one, its objects and its kinds are removed first."""
+    stale = bpy.data.collections.get(name)
+    if stale is not None:
+        for obj in list(stale.objects):
+            bpy.data.objects.remove(obj, do_unlink=True)
+        for child in list(stale.children):
+            for obj in list(child.objects):
+                bpy.data.objects.remove(obj, do_unlink=True)
+            bpy.data.collections.remove(child)
+        bpy.data.collections.remove(stale)
+    collection = bpy.data.collections.new(name)
+    parent.children.link(collection)
+    layer = _layer_collection(bpy.context.view_layer.layer_collection, collection)
+    if layer is not None:
+        layer.exclude = True
+    return collection

@@ -89,7 +89,7 @@ def exported_pieces(names) -> dict:
 
 
 def main() -> dict:
-    from bpy_pipeline.geometry.catenary import parabolic_sag
+    from bpy_pipeline.builders.railway.catenary import parabolic_sag
     from bpy_pipeline.geometry.indoor import boxes_mesh, hall_layout, parking_layout
 
     found: dict = {"blender": bpy.app.version_string, "counts": {}, "max_vertex_difference_m": {}}

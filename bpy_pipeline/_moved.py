@@ -1,0 +1,73 @@
+"""Modules that moved, importable by their old dotted path for this round (the next round removes this table).
+
+A builder is one package now (``builders/<name>/``): its pure geometry came from ``geometry/`` and its
+Blender side from ``scenes/``. :data:`MOVED` maps each old path to the module that holds it now, both
+below this package; :func:`install` puts a finder on ``sys.meta_path`` that answers an old path with the
+new module object itself (``import bpy_pipeline.geometry.catenary`` gives
+``bpy_pipeline.builders.railway.catenary``, the same module, not a copy). An old ``builders/<name>.py``
+is the package ``builders/<name>/`` now, which re-exports its ``params``.
+
+The table is relative to this package, so it also serves the copy bundled in the Blender extension
+(``bl_ext.<repo>.<id>.bpy_pipeline``).
+"""
+
+from __future__ import annotations
+
+import importlib
+import importlib.abc
+import importlib.util
+import sys
+
+MOVED = {
+    # railway
+    "geometry.railway_layout": "builders.railway.layout",
+    "geometry.alignment": "builders.railway.alignment",
+    "geometry.catenary": "builders.railway.catenary",
+    "geometry.railway_parts": "builders.railway.parts",
+    "geometry.trackside": "builders.railway.trackside",
+    "geometry.terrain": "builders.railway.terrain",
+    "geometry.railway_assets": "builders.railway.assets",
+    "scenes.railway": "builders.railway.scene",
+    "scenes.railway_assets": "builders.railway.scene_assets",
+    "scenes.railway_nodes": "builders.railway.track_nodes",
+    "scenes.catenary_nodes": "builders.railway.catenary_nodes",
+    # street
+    "geometry.street": "builders.street.layout",
+    "geometry.street_dressing": "builders.street.dressing",
+    "geometry.vegetation": "builders.street.vegetation",
+    "scenes.street": "builders.street.scene",
+    "scenes.street_nodes": "builders.street.scatter_nodes",
+    # parking, industrial_hall, primitives, blend
+    "scenes.parking": "builders.parking.scene",
+    "scenes.parking_nodes": "builders.parking.level_nodes",
+    "scenes.industrial_hall": "builders.industrial_hall.scene",
+    "scenes.hall_nodes": "builders.industrial_hall.hall_nodes",
+    "scenes.primitives": "builders.primitives.scene",
+    "scenes.blend": "builders.blend.scene",
+}
+
+
+class MovedModules(importlib.abc.MetaPathFinder, importlib.abc.Loader):
+    """Finds an old path of :data:`MOVED` (under ``package``) and loads it as the new module: ``exec_module``
+    puts the new module in ``sys.modules`` under the old name, which the import system then returns."""
+
+    def __init__(self, package: str):
+        self.package = package
+        self.moved = {f"{package}.{old}": f"{package}.{new}" for old, new in MOVED.items()}
+
+    def find_spec(self, name, path=None, target=None):
+        if name not in self.moved:
+            return None
+        return importlib.util.spec_from_loader(name, self)
+
+    def create_module(self, spec):
+        return None  # a placeholder module; exec_module replaces it
+
+    def exec_module(self, module):
+        sys.modules[module.__name__] = importlib.import_module(self.moved[module.__name__])
+
+
+def install(package: str) -> None:
+    """Make the old paths below ``package`` (this package's ``__name__``) importable, once."""
+    if not any(isinstance(f, MovedModules) and f.package == package for f in sys.meta_path):
+        sys.meta_path.append(MovedModules(package))

@@ -1,0 +1,91 @@
+"""``scene.builder: industrial_hall``: a factory hall with desks, shelves, people and a robot arm, watched from above."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ...errors import InputError
+from ..base import Builder, BuildContext, BuildResult, Distribution, check_distribution, check_sizes, refuse_sensor_placement, register_builder
+
+
+@dataclass(frozen=True)
+class IndustrialHallScene:
+    """``scene.builder: industrial_hall``: a factory hall watched from above (the human-robot paper, seed 002), in metres.
+
+    Floor, walls and ceiling; ``desk_rows`` x ``desks_per_row`` desks (``desk_size`` length x depth,
+    ``desk_height`` high: the paper finds seats at about 0.7 m) west of the centre, ``shelves``
+    shelf racks (``shelf_size`` length x depth x height, ``shelf_levels`` boards) along the +y wall.
+    The sensor hangs at ``sensor_height`` above the hall's centre (``place_sensor``). Per frame,
+    within ``area_radius`` of the point below it (0: anywhere; the default mirror sensor sees a
+    cone of 44.5 degrees around the nadir, a floor disc of 4.4 m radius from 4.5 m):
+    ``robots`` six-axis arms (assets_manifest/robot_arm.yaml, or ``robot_model``) on the floor with
+    random joint angles within their limits and no self-collision, then ``people`` persons of
+    heights drawn from ``person_height``, in poses drawn with ``poses`` weights (standing, walking,
+    sitting on a desk edge, crouching), on walkable floor or desk tops, ``person_clearance`` apart
+    from each other, the robots and the furniture. ``assets``: a manifest of external person
+    meshes (empty: assets_manifest/assets.yaml); the procedural people are used when it lists none.
+    """
+
+    length: float = 16.0
+    width: float = 12.0
+    height: float = 5.0
+    wall_thickness: float = 0.3
+    desk_rows: int = 2
+    desks_per_row: int = 3
+    desk_size: tuple[float, float] = (1.6, 0.8)
+    desk_height: float = 0.72
+    shelves: int = 3
+    shelf_size: tuple[float, float, float] = (2.0, 0.6, 2.2)
+    shelf_levels: int = 4
+    place_sensor: bool = True
+    sensor_height: float = 4.5
+    area_radius: float = 4.5  # people and robots stand within this of the point below the sensor (0: anywhere)
+    robots: int = 1
+    robot_model: str = ""
+    people: Distribution = field(default_factory=lambda: Distribution("normal", 4.4, 2.0, 0.0, 12.0))
+    person_height: Distribution = field(default_factory=lambda: Distribution("normal", 1.72, 0.09, 1.50, 1.98))
+    poses: dict = field(default_factory=lambda: {"standing": 0.35, "walking": 0.35, "sitting": 0.15, "crouching": 0.15})
+    person_clearance: float = 0.05
+    placement_tries: int = 60
+    max_consecutive_failures: int = 10  # people in a row that fit nowhere end the frame's placement (with a warning)
+    assets: str = ""
+
+
+
+MAX_PEOPLE = 500  # per frame: far more than a hall of 16 x 12 m holds, and placement tries grow with it
+MAY_BE_ZERO = {"person_clearance", "robots", "shelves", "desk_rows", "desks_per_row", "area_radius"}
+
+
+def check(params: IndustrialHallScene, where: str) -> None:
+    from ...geometry.human import POSES
+
+    check_sizes(params, where, MAY_BE_ZERO)
+    check_distribution(params.people, f"{where}.people", low=0.0, high=MAX_PEOPLE)
+    check_distribution(params.person_height, f"{where}.person_height", low=0.5, high=2.5)
+    if not params.poses or any(k not in POSES for k in params.poses):
+        raise InputError(f"{where}.poses: expected weights for some of {', '.join(POSES)}, got {params.poses!r}")
+    if any(isinstance(w, bool) or not isinstance(w, (int, float)) or w < 0 for w in params.poses.values()) or sum(params.poses.values()) <= 0:
+        raise InputError(f"{where}.poses: weights must be numbers >= 0, not all zero, got {params.poses!r}")
+    if params.sensor_height >= params.height:
+        raise InputError(f"{where}.sensor_height: must be below the ceiling ({params.height} m), got {params.sensor_height}")
+
+
+def station(params: IndustrialHallScene, frame: int) -> np.ndarray | None:
+    """The sensor hanging above the hall's centre (``place_sensor``)."""
+    from ...geometry.indoor import hall_station
+
+    return hall_station(params) if params.place_sensor else None
+
+
+def build(params: IndustrialHallScene, context: BuildContext) -> BuildResult:
+    """The static hall once per run, then robots and people drawn and posed for this frame."""
+    from .scene import IndustrialHall
+
+    return context.kept("industrial_hall", params, lambda: IndustrialHall(params)).randomize(context.rng, context.view)
+
+
+# the human-robot paper's sensor: an OS1-128 at 2048 columns through its own ring of 8 mirrors
+SENSOR = {"preset": "os1_128", "columns": 2048, "reflector": {"enabled": True}}
+register_builder("industrial_hall", Builder(IndustrialHallScene, build, check, station, sensor=SENSOR, boxes=True, release_sensor=refuse_sensor_placement("industrial_hall")))

@@ -1,0 +1,95 @@
+"""``scene.builder: parking``: one level of an underground car park with cars placed by the parking paper's rule."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+
+from ...errors import InputError
+from ..base import Builder, BuildContext, BuildResult, Distribution, check_distribution, check_sizes, refuse_sensor_placement, register_builder
+
+
+@dataclass(frozen=True)
+class ParkingScene:
+    """``scene.builder: parking``: one level of an underground car park (the parking paper, seed 000), in metres.
+
+    A driveway along x with parking bays on both sides, a pillar between every ``pillar_every``
+    bays on the bays' front line, walls, floor and ceiling slabs, a ramp to the next level in
+    place of the last bays on the +y side (``ramp_length`` 0: none). The sensor rides a cleaning
+    robot along the driveway centre: ``sensor_height`` above the floor (the paper's VLP-16:
+    1.51 m), ``sensor_start`` from the driveway's start at frame 0, ``sensor_step`` further each
+    frame, back to the start past the end. Cars per frame follow the paper's insertion rule
+    (geometry/placement.py): ``cars`` of them (N(5, 4) clipped at 0), each at a distance from the
+    sensor drawn from ``car_distance`` (the paper: N(10, 20) m up to 20 m), height from
+    ``car_height`` (U(1.55, 1.70) m), a random yaw, turned ``rotation_step_deg`` about the sensor up
+    to ``rotations`` times; ``max_consecutive_failures`` objects in a row that fit nowhere end it.
+    A car closer than ``near_rejection_distance`` is refused outright with
+    ``near_rejection_probability`` (the paper's refinement: 10 % under 5 m). A car must keep
+    ``car_clearance`` from pillars, ramp and other cars and show at least ``min_visible_fraction``
+    of its sensor-facing side, without hiding more than that of any car placed before it.
+    ``placement: bays`` snaps each candidate into the nearest free bay instead of placing it freely.
+    """
+
+    length: float = 60.0
+    driveway_width: float = 6.5
+    bay_width: float = 2.5
+    bay_depth: float = 5.0
+    ceiling_height: float = 2.6
+    slab_thickness: float = 0.3
+    wall_thickness: float = 0.3
+    pillar_size: float = 0.6
+    pillar_every: int = 3
+    ramp_length: float = 16.0
+    place_sensor: bool = True
+    sensor_height: float = 1.51
+    sensor_start: float = 4.0
+    sensor_step: float = 2.0
+    cars: Distribution = field(default_factory=lambda: Distribution("normal", 5.0, 4.0, 0.0, 40.0))
+    car_distance: Distribution = field(default_factory=lambda: Distribution("normal", 10.0, 20.0, 2.5, 20.0))
+    car_height: Distribution = field(default_factory=lambda: Distribution("uniform", 1.625, 0.0, 1.55, 1.70))
+    near_rejection_distance: float = 5.0
+    near_rejection_probability: float = 0.1
+    placement: Literal["free", "bays"] = "free"
+    rotation_step_deg: float = 10.0
+    rotations: int = 36
+    max_consecutive_failures: int = 10
+    min_visible_fraction: float = 0.3
+    car_clearance: float = 0.3
+
+
+
+MAY_BE_ZERO = {"ramp_length", "sensor_start", "sensor_step", "near_rejection_distance", "car_clearance", "min_visible_fraction", "near_rejection_probability", "max_consecutive_failures"}
+
+
+def check(params: ParkingScene, where: str) -> None:
+    check_sizes(params, where, MAY_BE_ZERO)
+    for key in ("near_rejection_probability", "min_visible_fraction"):
+        if getattr(params, key) > 1:
+            raise InputError(f"{where}.{key}: must lie in 0..1, got {getattr(params, key)}")
+    check_distribution(params.cars, f"{where}.cars", low=0.0)
+    check_distribution(params.car_distance, f"{where}.car_distance", low=0.0)
+    check_distribution(params.car_height, f"{where}.car_height", low=0.5, high=4.0)
+    if params.ramp_length > params.length - 8.0:
+        raise InputError(f"{where}.ramp_length: must leave at least 8 m of the level's length ({params.length} m) for the driveway, got {params.ramp_length}")
+    if params.sensor_height >= params.ceiling_height:
+        raise InputError(f"{where}.sensor_height: must be below the ceiling ({params.ceiling_height} m), got {params.sensor_height}")
+
+
+def station(params: ParkingScene, frame: int) -> np.ndarray | None:
+    """The cleaning robot's pose along the driveway in frame ``frame`` (``place_sensor``)."""
+    from ...geometry.indoor import parking_station
+
+    return parking_station(params, frame) if params.place_sensor else None
+
+
+def build(params: ParkingScene, context: BuildContext) -> BuildResult:
+    """The static level once per run, then cars drawn and placed for this frame."""
+    from .scene import ParkingGarage
+
+    return context.kept("parking", params, lambda: ParkingGarage(params)).randomize(context.rng, context.view)
+
+
+# the paper's VLP-16 at 20 Hz: 0.4 deg, 16 channels, +-15 deg (its table 1)
+register_builder("parking", Builder(ParkingScene, build, check, station, sensor={"preset": "vlp16", "rotation_hz": 20.0}, boxes=True, release_sensor=refuse_sensor_placement("parking")))

@@ -1,0 +1,288 @@
+"""``scene.builder: railway``: tracks, supports and catenary along an arc, scanned from stations beside the track."""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+
+from ...errors import InputError
+from ..base import Builder, BuildContext, BuildResult, register_builder
+
+Vec3 = tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class RailProfile:
+    """A simplified flat-bottom rail: three stacked rectangles (m). The default weighs about 60 kg/m
+    (7.63e-3 m^2 of steel; UIC 60: 172 mm high, 150 mm foot, 72 mm head, 16.5 mm web)."""
+
+    foot_width: float = 0.150
+    foot_height: float = 0.018
+    web_width: float = 0.0165
+    web_height: float = 0.111
+    head_width: float = 0.072
+    head_height: float = 0.043
+
+
+@dataclass(frozen=True)
+class RailwayTrack:
+    """``scene.track``: the railway thesis's table 4.1, in metres (the thesis gives no values; these are
+    European standard-gauge ones). The alignment is the arc through start, mid and end (straight when
+    they are collinear), at formation level (the underside of the ballast); tracks are spread evenly
+    across it, track 0 the rightmost in the direction of travel."""
+
+    start: Vec3 = (-75.0, 0.0, 0.0)
+    mid: Vec3 = (0.0, 0.0, 0.0)
+    end: Vec3 = (75.0, 0.0, 0.0)
+    gauge: float = 1.435  # between the inner faces of the rail heads
+    rail: RailProfile = field(default_factory=RailProfile)
+    sleeper_spacing: float = 0.6
+    sleeper_length: float = 2.6  # concrete monoblock sleeper (B70-like): across the track
+    sleeper_width: float = 0.26  # along the track
+    sleeper_height: float = 0.22
+    ballast_height: float = 0.35  # under the sleepers
+    crib_height: float = 0.17  # ballast between the sleepers, above their underside (0 to sleeper_height; 0: bare sleepers on the bed)
+    ballast_shoulder: float = 0.5  # beyond the sleeper ends
+    ballast_slope: float = 1.5  # horizontal per vertical
+    tracks: int = 1  # 1..5
+    track_spacing: float = 4.0  # between neighbouring track centrelines
+    embankment_height: float = 0.0  # formation above the surrounding ground
+    embankment_slope: float = 1.5  # horizontal per vertical
+    embankment_berm: float = 1.0  # flat formation beyond the ballast toe
+    ground_width: float = 80.0  # flat ground strip along the alignment
+    cut_depth: float = 0.0  # m: the track in a cutting this deep (the ground beyond its slopes; 0: none)
+    cut_slope: float = 1.5  # horizontal per vertical
+    ground_roughness: float = 0.0  # m: amplitude of the ground's undulation beyond the slopes (0: flat)
+    ground_wavelength: float = 20.0  # m: the undulation's longest wavelength
+    transition_length: float = 0.0  # m of clothoid at each end of a curve (0: none); the cant ramps along it
+    cant_from: Literal["speed", "value"] = "speed"  # the cant on curves: of design_speed, or the cant value
+    design_speed: float = 100.0  # km/h: on a curve the outer rail is raised by the equilibrium cant 11.8 v^2 / R mm
+    cant: float = 0.0  # m, with cant_from: value
+    max_cant: float = 0.16  # m: the cant never exceeds this (EN 13803: 160 mm on ballasted track)
+
+
+@dataclass(frozen=True)
+class RailwaySupports:
+    """``scene.supports``: masts (H-section or lattice) with cantilevers and registration arms, or portal
+    gantries, every ``span`` +- ``span_jitter`` metres along the alignment (the thesis: 40 to 65 m).
+    ``layout``: ``single`` one mast per support on ``side`` carrying up to two tracks; ``both_sides`` a mast
+    on each side, each carrying the nearer half of the tracks (up to four); ``gantry`` a portal over
+    2 to 5 tracks; ``auto`` single for one track, single or both_sides (even odds) for two, gantry beyond.
+    On a curve of radius R (in plan) spans shorten to sqrt(8 R (stagger + 0.4 m)), so the contact wire,
+    pulled outwards at every support, strays at most 0.4 m inside the track at mid-span."""
+
+    layout: Literal["auto", "single", "both_sides", "gantry"] = "auto"
+    side: Literal["right", "left"] = "right"
+    span: float = 50.0
+    span_jitter: float = 5.0
+    mast_type: Literal["h_section", "lattice", "mixed"] = "h_section"
+    mast_offset: float = 3.2  # from the centreline of the nearest track
+    mast_height: float = 8.5  # above the ground it stands on
+
+
+@dataclass(frozen=True)
+class RailwayCatenary:
+    """``scene.catenary``: the catenary manager of the thesis (table 4.2), in metres. Sag of a wire over a
+    span L: f(L) = <wire>_sag (L / sag_reference_length) ^ sag_exponent; droppers n = max(1, floor(L /
+    dropper_spacing)) per contact wire. ``points_per_10m`` samples the wires when ``scene.detail.mode`` is
+    ``fixed``; the sensor-driven default samples them as finely as the sensor can tell apart."""
+
+    enabled: bool = True  # ENABLE_CATENARY: contact and messenger wires, droppers
+    feeders: bool = True  # ENABLE_FEEDERS
+    earth_wire: bool = True  # ENABLE_CdPA
+    contact_wire_height: float = 5.5  # above the rail heads
+    system_height: float = 1.4  # messenger above the contact wire at the supports (1.1-1.8)
+    stagger: float = 0.2  # contact wire zig-zag at the supports, +- (0.2-0.3)
+    registration_arm_length: float = 1.2  # m, horizontal reach of the registration arm (1-1.5 m on real lines)
+    double_contact_probability: float = 0.0  # FC_DOUBLE_PROBABILITY, per track
+    double_contact_spacing: float = 0.04  # FC_DOUBLE_SPACING: between the two contact wires
+    sag_reference_length: float = 50.0  # SAG_REFERENCE_LENGTH
+    sag_exponent: float = 2.0  # SAG_EXPONENT_ALPHA (2: sag grows with L^2 at a fixed tension)
+    contact_wire_sag: float = 0.05  # SAG_* at the reference length (contact wire: pre-sag, 1/1000 of the span)
+    messenger_wire_sag: float = 0.5
+    feeder_sag: float = 1.0
+    earth_wire_sag: float = 0.8
+    contact_wire_diameter: float = 0.012  # DIAM_*: 107 mm^2 grooved copper
+    messenger_wire_diameter: float = 0.011
+    feeder_diameter: float = 0.024
+    earth_wire_diameter: float = 0.012
+    dropper_diameter: float = 0.005
+    dropper_spacing: float = 5.0  # PENDULUM_SPACING
+    dropper_jitter: float = 0.2  # PENDULUM_JITTER, +- along the span
+    points_per_10m: int = 20  # CURVE_RESOLUTION_POINTS_PER_10M, for scene.detail.mode fixed
+    anchors: bool = False  # the end masts anchor the wires: a pulley bracket and a tensioning weight stack behind each
+    section_insulator_every: int = 0  # a section insulator on the contact wires at the middle of every k-th span (0: none)
+    auxiliary_messenger: bool = False  # PA: a wire between messenger and contact wire, the droppers in two tiers
+    auxiliary_messenger_height: float = 0.3  # m above the contact wire at the supports (assumed)
+    auxiliary_messenger_sag: float = 0.1  # at the reference length (assumed: between the contact wire's and the messenger's)
+    auxiliary_messenger_diameter: float = 0.0105  # m (assumed: a 65 mm^2 bronze wire)
+    steady_arms: bool = False  # the registration arm ends in a steady arm, a part apart (class steady arm), hinged steady_arm_length from the wire
+    steady_arm_length: float = 0.5  # m, horizontal reach of the steady arm (part of registration_arm_length)
+    tension_length: float = 0.0  # m: tension sections about this long, overlapping over one span at each end (0: one section for the line)
+    overlap_spacing: float = 0.2  # m between the two wire runs side by side over an overlap span
+    overlap_rise: float = 0.5  # m the run out of service rises over the overlap span towards its anchor
+
+
+@dataclass(frozen=True)
+class RailwayStations:
+    """``scene.stations``: static scanner stations beside the track, ``offset`` metres beyond the outermost
+    track on ``side``, on the ground there, facing along the track (the preset's mount_height lifts the
+    sensor above it: 2 m for railway_tls). Frame k scans from station k mod n, and one built line serves
+    n frames in a row (frames = stations scans one line from every station). ``chainages`` (m from the
+    start point) place them; else ``count`` stations sit at the middles of equal parts of the line.
+    ``count: 0`` uses sensor.position instead."""
+
+    count: int = 1
+    chainages: list[float] = field(default_factory=list)
+    side: Literal["right", "left"] = "left"  # the masts stand on the right: the scanner sees them across the track
+    offset: float = 4.0
+
+
+@dataclass(frozen=True)
+class RailwayDetail:
+    """``scene.detail``: ``sensor`` (the default) models no finer than the scanner resolves: wire sampling
+    and cross-sections within half the beam spacing at their distance, ballast stones of ``stone_size``
+    only where two beams fall on one, nothing beyond the sensor's range. ``fixed`` samples wires at
+    catenary.points_per_10m, builds the whole line and no stones."""
+
+    mode: Literal["sensor", "fixed"] = "sensor"
+    stones: bool = True
+    stone_size: float = 0.045  # m, ballast grading 31.5/63 mm
+
+
+@dataclass(frozen=True)
+class RailwayTrackside:
+    """``scene.trackside``: fences, signals and a platform (each off by default), see builders/railway/trackside.py."""
+
+    fences: bool = False
+    fence_offset: float = 6.0  # m from the outermost track centres, both sides
+    fence_height: float = 1.8
+    fence_post_spacing: float = 2.5
+    signal_spacing: float = 0.0  # m between signals (+- a quarter); 0: none
+    signal_side: Literal["right", "left"] = "right"
+    signal_height: float = 4.5
+    platform_length: float = 0.0  # m; 0: none
+    platform_chainage: float = -1.0  # m, the platform's middle; < 0: the line's middle
+    platform_side: Literal["right", "left"] = "left"
+    platform_edge: float = 1.65  # m from the centre of the nearest track
+    platform_width: float = 4.0
+    platform_height: float = 0.76  # m above the rail heads
+    vegetation_per_100m: float = 0.0  # trees and bushes per side and 100 m, beyond the fences (or 2 m beyond the masts); 0: none
+
+
+@dataclass(frozen=True)
+class RailwayAssets:
+    """``scene.assets``: support assets from files (glTF/GLB, OBJ, PLY; IFC with ifcopenshell) in place of the
+    procedural ones, at every support the level of detail builds (builders/railway/assets.py, docs/railway.md).
+    The asset's origin is its support's foot, its +Y facing the track, Z up, metres. ``classes``: ``{object or
+    material name glob: class}`` for its parts; else a name beginning with a support class names it (``insulator*``)."""
+
+    mast: str = ""  # replaces each mast of a single or both_sides layout (with its brackets)
+    cantilever: str = ""  # replaces each mast-face cantilever assembly (cantilever, registration arm, insulators, steady arm)
+    gantry: str = ""  # replaces each portal of a gantry layout
+    unit_scale: float = 1.0  # metres per file unit (OBJ and PLY drawn in mm: 0.001)
+    classes: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class RailwayScene:
+    """``scene.builder: railway``: tracks on an arc or a straight line, supports, catenary, scanner stations."""
+
+    track: RailwayTrack = field(default_factory=RailwayTrack)
+    supports: RailwaySupports = field(default_factory=RailwaySupports)
+    catenary: RailwayCatenary = field(default_factory=RailwayCatenary)
+    stations: RailwayStations = field(default_factory=RailwayStations)
+    detail: RailwayDetail = field(default_factory=RailwayDetail)
+    trackside: RailwayTrackside = field(default_factory=RailwayTrackside)
+    assets: RailwayAssets = field(default_factory=RailwayAssets)
+    reroll_every: int = 0  # 0: one railway per run, drawn from frame 0's generator; k: a new one every k frames
+
+    @property
+    def place_sensor(self) -> bool:
+        """True when the stations place the sensor (then sensor.position is not used, nor saved)."""
+        return self.stations.count > 0 or bool(self.stations.chainages)
+
+
+
+def check(params: RailwayScene, where: str) -> None:
+    from .layout import check_railway
+
+    side = params.trackside
+    for key in ("fence_offset", "fence_height", "fence_post_spacing", "signal_height", "platform_edge", "platform_width"):
+        if not getattr(side, key) > 0:
+            raise InputError(f"{where}.trackside.{key}: must be > 0 m, got {getattr(side, key)}")
+    for key in ("signal_spacing", "platform_length", "platform_height", "vegetation_per_100m"):
+        if not getattr(side, key) >= 0:
+            raise InputError(f"{where}.trackside.{key}: must be >= 0 m, got {getattr(side, key)}")
+    if side.fences and side.fence_offset <= params.supports.mast_offset + 0.5:
+        raise InputError(f"{where}.trackside.fence_offset: a fence must stand beyond the masts ({params.supports.mast_offset + 0.5} m), got {side.fence_offset}")
+    if params.catenary.section_insulator_every < 0:
+        raise InputError(f"{where}.catenary.section_insulator_every: must be >= 0 (0: none), got {params.catenary.section_insulator_every}")
+    cat = params.catenary
+    if cat.tension_length < 0:
+        raise InputError(f"{where}.catenary.tension_length: must be >= 0 m (0: one tension section for the whole line), got {cat.tension_length}")
+    if not 0 < cat.overlap_spacing < params.track.track_spacing / 4:
+        raise InputError(f"{where}.catenary.overlap_spacing: must lie in (0, {params.track.track_spacing / 4:g}) m (a quarter of the track spacing), got {cat.overlap_spacing}")
+    if not 0 < cat.overlap_rise <= 1.0:
+        raise InputError(f"{where}.catenary.overlap_rise: must lie in (0, 1] m, got {cat.overlap_rise}")
+    if cat.steady_arms and not 0.2 <= cat.steady_arm_length <= cat.registration_arm_length - 0.2:
+        raise InputError(f"{where}.catenary.steady_arm_length: must lie in [0.2, registration_arm_length - 0.2 = {cat.registration_arm_length - 0.2:g}] m, got {cat.steady_arm_length}")
+    if params.reroll_every < 0:
+        raise InputError(f"{where}.reroll_every: must be >= 0 (0: one railway per run; k: a new railway every k frames), got {params.reroll_every}")
+    check_railway(params, where)
+    from .assets import check_assets
+    from ...labels import load_class_table
+
+    check_assets(params.assets, f"{where}.assets", load_class_table().names.values())
+
+
+def station(params: RailwayScene, frame: int) -> np.ndarray | None:
+    """Station ``frame`` mod n of ``scene.stations`` (x along the track, z up), ``None`` without stations."""
+    from .layout import station_frames
+
+    stations = station_frames(params)
+    return stations[frame % len(stations)] if len(stations) else None
+
+
+def stations(params: RailwayScene) -> int:
+    """How many stations ``station`` cycles through (0 without ``scene.stations``)."""
+    from .layout import station_frames
+
+    return len(station_frames(params))
+
+
+ONE_SCENE_PER_RUN = 2**31 - 1  # frames: more than any run has, so frame k always scans the scene built for frame 0
+
+
+def frames_per_scene(params: RailwayScene) -> int:
+    """One built line serves every frame of the run (stations in turn, or a trajectory), drawn once from
+    frame 0's generator; ``reroll_every: k`` builds a new line from frame k's generator every k frames
+    (k = the number of stations: each station cycle scans its own line)."""
+    return params.reroll_every if params.reroll_every > 0 else ONE_SCENE_PER_RUN
+
+
+def release_sensor(params: RailwayScene, raw_scene: dict, sensor_data: dict) -> RailwayScene:
+    """A sensor.position or trajectory given explicitly replaces the default stations; stations
+    configured explicitly as well are an error (one of them places the sensor)."""
+    if not any(sensor_data.get(k) is not None for k in ("position", "trajectory")):
+        return params
+    given = sensor_data.get("trajectory") is not None and "trajectory" or "position"
+    stations = raw_scene.get("stations")
+    if isinstance(stations, dict) and (stations.get("count", 0) or stations.get("chainages")):
+        raise InputError(f"sensor.{given}: scene.stations place the scanner of this railway; give one of them (scene.stations.count: 0 to use sensor.{given})")
+    return dataclasses.replace(params, stations=dataclasses.replace(params.stations, count=0, chainages=[]))
+
+
+def build(params: RailwayScene, context: BuildContext) -> BuildResult:
+    from . import scene as railway
+
+    layout = railway.build(params, context.rng, context.view)
+    info = {"layout": layout.layout, "length_m": round(float(layout.alignment.length), 4), "supports": len(layout.supports),
+            "spans_m": [round(float(s), 4) for s in layout.spans]}
+    return BuildResult(info=info, scene=layout)
+
+
+register_builder("railway", Builder(RailwayScene, build, check, station, frames_per_scene, stations, release_sensor=release_sensor, follows_path=True))

@@ -1,0 +1,7 @@
+"""The ``real_scan`` builder. ``params`` (the ``scene`` section's check, ``build``, the registration): pure. No Blender side: the real-scan frame plan (:mod:`bpy_pipeline.stages.mixing`) makes its frames.
+
+The package's names are its ``params``' (``bpy_pipeline.builders.real_scan`` was that module before the builders became packages).
+"""
+
+from .params import *  # noqa: F401,F403
+from .params import __getattr__  # noqa: F401  (kept_scan, real_scan_stage: names that moved to stages.mixing, importable here this round)

@@ -1,0 +1,492 @@
+"""An urban intersection and its road users: layout, meshes and placement rules. Pure numpy.
+
+World frame: the intersection's centre at the origin, z up, the road surface at z = 0. Two
+straight roads cross there, one along x and one along y, each ``arm_length`` metres from the
+centre to its end. Traffic keeps right: on the road along x, lanes driving +x lie at y < 0.
+Across a road (from its centre line out)::
+
+    | drive lanes (lanes_per_direction x lane_width) | parking strip | kerb | sidewalk | facades
+
+so a road's half width is ``R = lanes_per_direction * lane_width + parking_width``; the kerb
+is a ``kerb_width`` strip ``kerb_height`` high at ``|y| = R``, the sidewalk a slab of the same
+height out to ``R + kerb_width + sidewalk_width``, the buildings' facades stand at its outer
+edge. A zebra crossing spans each arm ``crossing_offset`` metres from the intersection's edge.
+
+Road users are upright boxes on the ground for placement (centre, half size, yaw), and meshes in
+their own frame (x forward, y left, z up, origin on the ground below the box centre):
+
+- vehicles (car, van, truck, bus): body, glass, tyres; headings along their lane;
+- pedestrians: the articulated body of :mod:`.human` walking or standing, on sidewalks and crossings;
+- bicycles and motorcycles with a seated rider, near the right edge of the rightmost lane.
+
+Placement rules (:func:`place_users`):
+
+- *lane following*: a vehicle's heading is its lane's; with probability ``platoon_probability``
+  it follows the last vehicle placed in a lane at a gap drawn from ``platoon_gap`` (the KITTI
+  wall-projection paper's pose rule: a synthetic vehicle near a real one takes its yaw; here
+  the lane gives the yaw, and the platoon keeps the gap);
+- *parked cars*: in the parking strips, nose along the traffic of their side, never on a crossing
+  or in the intersection;
+- *pedestrians*: on a sidewalk (heading along it) or on a crossing (heading across the road);
+- *no overlap*: every footprint keeps ``clearance`` from every other and from poles;
+- *field-of-view aware*: when the sensors' :class:`FieldOfView` s are given, a candidate is kept
+  only if at least ``min_in_view`` of the sample points of its box lie inside one sensor's field
+  of view and range, so a narrow sensor sees what is placed.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ...geometry import primitives
+from ...geometry.primitives import beam_mesh, box_mesh, quad_mesh, transformed, wheel_mesh  # noqa: F401 - street.box_mesh etc. stay importable
+from ...geometry.collision import rectangles_overlap
+from ...geometry.field_of_view import FieldOfView, box_samples, in_view_fraction  # noqa: F401 - FieldOfView etc. stay importable from here and from geometry.street (its old path)
+from ...geometry.vehicles import saddle_height, two_wheeler_parts, vehicle_parts
+
+Mesh = tuple[np.ndarray, np.ndarray]  # vertices (n, 3) float64, triangles (m, 3) int32
+
+# road user kinds -> class of their main part (assets_manifest/labels.yaml)
+VEHICLES = ("car", "van", "truck", "bus")
+TWO_WHEELERS = ("bicycle", "motorcycle")
+# nominal sizes (length, width, height, m) and the share of each drawn size's spread (+-)
+NOMINAL_SIZE = {
+    "car": (4.4, 1.8, 1.5),
+    "van": (5.2, 2.0, 2.2),
+    "truck": (8.5, 2.5, 3.4),
+    "bus": (12.0, 2.55, 3.2),
+    "bicycle": (1.75, 0.6, 1.75),  # with its rider
+    "motorcycle": (2.1, 0.8, 1.6),
+    "person": (0.6, 0.6, 1.75),
+}
+SPREAD = {"car": 0.08, "van": 0.06, "truck": 0.1, "bus": 0.05, "bicycle": 0.03, "motorcycle": 0.05, "person": 0.08}
+# reflectivity at 905 nm (assumed; the parking builder's paint table for cars)
+EGO_HALF = (2.3, 0.95)  # m: half the ego car's footprint (a 4.6 x 1.9 m estate car), kept free under a roof sensor
+MARKING_THICKNESS = 0.005  # m: road markings stand this proud of the road; users on the road stand on it
+REFLECTIVITY = {"road": 0.12, "marking": 0.6, "sidewalk": 0.25, "kerb": 0.35, "building": 0.4, "glass": 0.08,
+                "tyre": 0.05, "pole": 0.3, "traffic light": 0.15, "traffic sign": 0.8, "frame": 0.3, "person": 0.35}
+
+
+# ----------------------------------------------------------------------------- the layout
+@dataclass(frozen=True)
+class Lane:
+    """A lane's centre line from ``start`` (2,) to ``end`` (2,), metres; traffic runs start -> end."""
+
+    start: np.ndarray
+    end: np.ndarray
+    width: float
+    kind: str  # drive | parking
+    road: int  # 0: the road along x, 1: along y
+
+    @property
+    def heading(self) -> float:
+        d = self.end - self.start
+        return math.atan2(d[1], d[0])
+
+    @property
+    def length(self) -> float:
+        return float(np.linalg.norm(self.end - self.start))
+
+    def at(self, s: float, lateral: float = 0.0) -> np.ndarray:
+        """(2,) point ``s`` metres along the lane, ``lateral`` metres to its left."""
+        d = (self.end - self.start) / self.length
+        return self.start + s * d + lateral * np.array([-d[1], d[0]])
+
+
+@dataclass(frozen=True)
+class Part:
+    """One static object: name, class, material, reflectivity, instance id, mesh (world); for scattered items
+    (street_dressing.Scatter) also ``scatter``, the prototypes and per-item transforms that ``mesh`` places."""
+
+    name: str
+    class_name: str
+    reflectivity: float
+    instance: int
+    mesh: Mesh
+    material: str = "diffuse"
+    scatter: object = None
+
+
+@dataclass
+class StreetLayout:
+    """The static intersection: parts, lanes, walkable areas and obstacles.
+
+    half_road : R (m), a road's half width to the kerb; walk_inner, walk_outer : the sidewalks'
+    distance from the road's centre line (m); crossings : per arm ``(axis, sign, s0, s1)`` the
+    crossing spans along the road from ``s0`` to ``s1`` (m from the centre); poles : (k, 3)
+    x, y, radius of every pole (lights, signs)
+    """
+
+    parts: list[Part]
+    lanes: list[Lane]
+    half_road: float
+    walk_inner: float
+    walk_outer: float
+    arm_length: float
+    kerb_height: float
+    crossings: list[tuple[int, int, float, float]]
+    poles: np.ndarray
+    walks: list[tuple[float, float, float, float]] = field(default_factory=list)
+    blocks: list = field(default_factory=list)
+    dressing: dict = field(default_factory=dict)
+
+    def on_sidewalk(self, xy) -> bool:
+        """True when ``xy`` (2,) lies on a sidewalk slab (kerbs excluded)."""
+        x, y = (float(v) for v in xy)
+        return any(x0 <= x <= x1 and y0 <= y <= y1 for x0, x1, y0, y1 in self.walks)
+
+    def on_crossing(self, xy) -> bool:
+        """True when ``xy`` lies on a zebra crossing."""
+        x, y = (float(v) for v in xy)
+        for axis, sign, s0, s1 in self.crossings:
+            along, across = (x, y) if axis == 0 else (y, x)
+            if s0 <= sign * along <= s1 and abs(across) <= self.half_road:
+                return True
+        return False
+
+    def on_road(self, xy) -> bool:
+        """True when ``xy`` lies on the carriageway (inside a kerb)."""
+        a = np.abs(np.asarray(xy, float))
+        return bool((a <= self.arm_length).all() and a.min() <= self.half_road)
+
+
+def street_layout(p, rng: np.random.Generator) -> StreetLayout:
+    """The static intersection of :class:`~bpy_pipeline.builders.street.StreetScene` ``p``, its buildings drawn from ``rng``."""
+    lw, n, pw = p.lane_width, p.lanes_per_direction, p.parking_width
+    R = n * lw + pw
+    A = p.arm_length
+    kw, kh, sw = p.kerb_width, p.kerb_height, p.sidewalk_width
+    inner, outer = R + kw, R + kw + sw
+    parts: list[Part] = []
+    instance = iter(range(1, 100000))
+
+    def add(name, class_name, reflectivity, mesh, material="diffuse", inst=None, scatter=None):
+        parts.append(Part(name, class_name, reflectivity, next(instance) if inst is None else inst, mesh, material, scatter))
+
+    # carriageway: the road along x whole, the road along y in two halves beside it
+    road = [primitives.translated(primitives.plane(2 * A, 2 * R), (0.0, 0.0, 0.0))]
+    for sign in (-1, 1):
+        road.append(primitives.translated(primitives.plane(2 * R, A - R), (0.0, sign * (A + R) / 2, 0.0)))
+    add("street_road", "road", REFLECTIVITY["road"], primitives.merge(road))
+    # kerbs and sidewalks: along each arm, on both sides, up to the corner squares
+    kerbs, walks, walk_rects = [], [], []
+    for sx in (-1, 1):
+        for sy in (-1, 1):
+            # kerb along the x road (y = sy R) from the corner to the arm's end, and along the y road
+            kerbs.append(box_mesh(*sorted((sx * R, sx * A)), *sorted((sy * R, sy * inner)), 0.0, kh))
+            kerbs.append(box_mesh(*sorted((sx * R, sx * inner)), *sorted((sy * inner, sy * A)), 0.0, kh))
+            walk_rects.append((*sorted((sx * inner, sx * A)), *sorted((sy * inner, sy * outer))))
+            walk_rects.append((*sorted((sx * inner, sx * outer)), *sorted((sy * outer, sy * A))))
+            walks += [box_mesh(*rect, 0.0, kh) for rect in walk_rects[-2:]]
+    add("street_kerbs", "kerb", REFLECTIVITY["kerb"], primitives.merge(kerbs))
+    add("street_sidewalks", "sidewalk", REFLECTIVITY["sidewalk"], primitives.merge(walks))
+    # markings: zebra crossings and dashed centre lines, 5 mm thick, class road
+    crossings, marks = [], []
+    c0, c1 = R + kw + p.crossing_offset, R + kw + p.crossing_offset + p.crossing_width
+    for axis in (0, 1):
+        for sign in (-1, 1):
+            crossings.append((axis, sign, c0, c1))
+            for k in range(int((2 * R) // 1.0)):
+                across0 = -R + 0.25 + k * 1.0
+                if across0 + 0.5 > R - 0.1:
+                    break
+                lo, hi = sorted((sign * c0, sign * c1))
+                marks.append(box_mesh(lo, hi, across0, across0 + 0.5, 0.0, MARKING_THICKNESS) if axis == 0 else box_mesh(across0, across0 + 0.5, lo, hi, 0.0, MARKING_THICKNESS))
+            for s in np.arange(c1 + 1.0, A - 3.0, 6.0):  # dashed centre line beyond the crossing
+                lo, hi = sorted((sign * s, sign * (s + 3.0)))
+                marks.append(box_mesh(lo, hi, -0.06, 0.06, 0.0, MARKING_THICKNESS) if axis == 0 else box_mesh(-0.06, 0.06, lo, hi, 0.0, MARKING_THICKNESS))
+    add("street_markings", "road", REFLECTIVITY["marking"], primitives.merge(marks))
+    # lanes: drive lanes through the intersection, parking strips beyond the crossings
+    lanes = []
+    for axis in (0, 1):
+        for direction in (1, -1):
+            for k in range(n):
+                offset = -direction * (k + 0.5) * lw  # keep right
+                a, b = np.array([-direction * A, offset]), np.array([direction * A, offset])
+                lanes.append(Lane(a if axis == 0 else a[::-1].copy(), b if axis == 0 else b[::-1].copy(), lw, "drive", axis))
+            if pw > 0:
+                offset = -direction * (n * lw + pw / 2)
+                for end in (1, -1):  # one parking strip per arm and side, from beyond the crossing to the arm's end
+                    s0, s1 = c1 + 1.0, A - 1.0
+                    a = np.array([end * s0 if direction * end > 0 else end * s1, offset])
+                    b = np.array([end * s1 if direction * end > 0 else end * s0, offset])
+                    lanes.append(Lane(a if axis == 0 else a[::-1].copy(), b if axis == 0 else b[::-1].copy(), pw, "parking", axis))
+    # traffic lights at the four corners, facing the approaching traffic; signs along the sidewalks
+    poles = []
+    light_meshes, sign_meshes = [], []
+    for sx in (-1, 1):
+        for sy in (-1, 1):
+            x, y = sx * (inner + 0.5), sy * (inner + 0.5)
+            pole = primitives.translated(primitives.cylinder(0.07, 3.0, 8), (x, y, kh + 1.5))
+            head = box_mesh(x - 0.15, x + 0.15, y - 0.15, y + 0.15, kh + 3.0, kh + 3.9)
+            light_meshes.append(primitives.merge([pole, head]))
+            poles.append((x, y, 0.2))
+    for k, mesh in enumerate(light_meshes):
+        add(f"street_traffic_light_{k}", "traffic light", REFLECTIVITY["traffic light"], mesh)
+    for k in range(p.signs):
+        axis, sx, sy = int(rng.integers(2)), int(rng.choice([-1, 1])), int(rng.choice([-1, 1]))
+        s = float(rng.uniform(c1 + 2.0, A - 2.0))
+        x, y = (sx * s, sy * (inner + 0.4)) if axis == 0 else (sx * (inner + 0.4), sy * s)
+        pole = primitives.translated(primitives.cylinder(0.04, 2.2, 8), (x, y, kh + 1.1))
+        facing = 0.0 if axis == 1 else math.pi / 2
+        plate = transformed(box_mesh(-0.02, 0.02, -0.3, 0.3, 0.0, 0.6), (x, y), facing, kh + 2.2)
+        sign_meshes.append(primitives.merge([pole, plate]))
+        poles.append((x, y, 0.35))
+    for k, mesh in enumerate(sign_meshes):
+        add(f"street_traffic_sign_{k}", "traffic sign", REFLECTIVITY["traffic sign"], mesh)
+    # what real streets hold beside their roads: terrain, plots with buildings or gardens, fences, hedges,
+    # walls, street trees, lamps, furniture and road works (builders/street/dressing.py)
+    from .dressing import dress
+
+    dressing = dress(p, R, inner, outer, kh, c1, rng)
+    for mesh in dressing.buildings:
+        add(f"street_building_{len(parts):03d}", "building", REFLECTIVITY["building"], mesh)
+    for name, class_name, reflectivity, mesh, scatter in dressing.parts:
+        add(name, class_name, reflectivity, mesh, scatter=scatter)
+    poles += dressing.circles
+    return StreetLayout(parts, lanes, R, inner, outer, A, kh, crossings, np.array(poles, float).reshape(-1, 3), walk_rects, dressing.blocks, dressing.counts)
+
+
+# ----------------------------------------------------------------------------- road users
+@dataclass
+class RoadUser:
+    """One placed road user: kind, centre (2,) m, yaw (radians), size (3,) m (box), z of its base, the lane or area it uses.
+
+    pose_angles : a pedestrian's or rider's joint angles (degrees), ``None`` for vehicles
+    """
+
+    kind: str
+    centre: np.ndarray
+    yaw: float
+    size: np.ndarray
+    z: float
+    where: str  # lane:<i> | parking:<i> | sidewalk | crossing
+    pose_angles: np.ndarray | None = None
+    build: float = 1.0
+
+    @property
+    def half(self) -> np.ndarray:
+        return self.size[:2] / 2
+
+
+@dataclass
+class Placement:
+    """What :func:`place_users` did: the users and, per kind, how many were wanted, placed, refused for the view."""
+
+    users: list[RoadUser] = field(default_factory=list)
+    wanted: dict = field(default_factory=dict)
+    out_of_view: dict = field(default_factory=dict)
+    collisions: int = 0
+    platoons: int = 0
+
+
+def _draw_size(kind: str, rng) -> np.ndarray:
+    spread = SPREAD[kind]
+    return np.array(NOMINAL_SIZE[kind]) * (1.0 + rng.uniform(-spread, spread, 3))
+
+
+def place_users(p, layout: StreetLayout, rng: np.random.Generator, views=(), tries: int = 40, reserved=()) -> Placement:
+    """Road users of one frame for :class:`~bpy_pipeline.builders.street.StreetScene` ``p`` on ``layout``.
+
+    views : the sensors' :class:`FieldOfView` s, used when ``p.fov_aware`` (otherwise ignored)
+    Each user gets up to ``tries`` candidate positions; the first that is free (and in view) is kept.
+    reserved : rectangles ``(centre (2,), half (2,), yaw)`` kept free besides the layout's obstacles (the ego car)
+    """
+    from ...geometry.placement import sample, sample_count
+
+    views = list(views) if p.fov_aware else []
+    out = Placement()
+    obstacles = [(np.array(pl[:2]), np.array([pl[2], pl[2]]), 0.0) for pl in layout.poles] + list(layout.blocks) + list(reserved)
+    drive = [i for i, lane in enumerate(layout.lanes) if lane.kind == "drive"]
+    parking = [i for i, lane in enumerate(layout.lanes) if lane.kind == "parking"]
+    last_in_lane: dict[int, RoadUser] = {}
+
+    def free(centre, half, yaw) -> bool:
+        for c, h, y in obstacles:
+            if rectangles_overlap(centre, half, yaw, c, h, y, p.clearance):
+                return False
+        for u in out.users:
+            if rectangles_overlap(centre, half, yaw, u.centre, u.half, u.yaw, p.clearance):
+                return False
+        return True
+
+    def accept(user: RoadUser) -> bool:
+        if not free(user.centre, user.half, user.yaw):
+            out.collisions += 1
+            return False
+        if in_view_fraction(views, user.centre, user.half, user.yaw, user.size[2], user.z) < p.min_in_view:
+            out.out_of_view[user.kind] = out.out_of_view.get(user.kind, 0) + 1
+            return False
+        out.users.append(user)
+        return True
+
+    shares = np.array([p.vehicle_mix.get(k, 0.0) for k in VEHICLES], float)
+    shares = shares / shares.sum()
+    # moving vehicles along the drive lanes, platooning
+    wanted = sample_count(p.vehicles, rng)
+    out.wanted["vehicles"] = wanted
+    for _ in range(wanted):
+        kind = VEHICLES[int(rng.choice(len(VEHICLES), p=shares))]
+        size = _draw_size(kind, rng)
+        for _ in range(tries):
+            i = drive[int(rng.integers(len(drive)))]
+            lane = layout.lanes[i]
+            leader = last_in_lane.get(i)
+            if leader is not None and rng.random() < p.platoon_probability:
+                s_leader = float(np.dot(leader.centre - lane.start, (lane.end - lane.start) / lane.length))
+                s = s_leader - (leader.size[0] + size[0]) / 2 - float(sample(p.platoon_gap, rng))
+                platoon = True
+            else:
+                s = float(rng.uniform(size[0] / 2, lane.length - size[0] / 2))
+                platoon = False
+            if not size[0] / 2 <= s <= lane.length - size[0] / 2:
+                continue
+            user = RoadUser(kind, lane.at(s), lane.heading, size, MARKING_THICKNESS, f"lane:{i}")
+            if accept(user):
+                last_in_lane[i] = user
+                out.platoons += platoon
+                break
+    # parked cars in the parking strips
+    wanted = sample_count(p.parked, rng) if parking else 0
+    out.wanted["parked"] = wanted
+    for _ in range(wanted):
+        kind = "car" if rng.random() < 0.85 else "van"
+        size = _draw_size(kind, rng)
+        for _ in range(tries):
+            lane = layout.lanes[i := parking[int(rng.integers(len(parking)))]]
+            s = float(rng.uniform(size[0] / 2, lane.length - size[0] / 2))
+            if accept(RoadUser(kind, lane.at(s, lateral=float(rng.uniform(-0.1, 0.1))), lane.heading, size, MARKING_THICKNESS, f"parking:{i}")):
+                break
+    # cyclists and motorcyclists at the right edge of the rightmost drive lanes
+    rightmost = [i for i in drive if abs(abs(_lane_offset(layout.lanes[i])) - (p.lanes_per_direction - 0.5) * p.lane_width) < 1e-6]
+    for kind, dist in (("bicycle", p.bicycles), ("motorcycle", p.motorcycles)):
+        wanted = sample_count(dist, rng)
+        out.wanted[kind] = wanted
+        for _ in range(wanted):
+            size = _draw_size(kind, rng)
+            for _ in range(tries):
+                lane = layout.lanes[i := rightmost[int(rng.integers(len(rightmost)))]]
+                s = float(rng.uniform(size[0] / 2, lane.length - size[0] / 2))
+                lateral = -(lane.width / 2 - size[1] / 2 - 0.3) if kind == "bicycle" else float(rng.uniform(-0.5, 0.5))
+                if accept(RoadUser(kind, lane.at(s, lateral), lane.heading, size, MARKING_THICKNESS, f"lane:{i}")):
+                    break
+    # pedestrians on sidewalks and crossings
+    wanted = sample_count(p.pedestrians, rng)
+    out.wanted["person"] = wanted
+    for _ in range(wanted):
+        size = _draw_size("person", rng)
+        size[:2] = 0.7  # the footprint a walking body needs
+        for _ in range(tries):
+            if rng.random() < p.crossing_share:
+                axis, sign, s0, s1 = layout.crossings[int(rng.integers(len(layout.crossings)))]
+                along = sign * float(rng.uniform(s0 + 0.4, s1 - 0.4))
+                across = float(rng.uniform(-layout.half_road + 0.4, layout.half_road - 0.4))
+                centre = np.array([along, across]) if axis == 0 else np.array([across, along])
+                yaw = (math.pi / 2 if axis == 0 else 0.0) + (math.pi if rng.random() < 0.5 else 0.0)
+                where, z = "crossing", MARKING_THICKNESS
+            else:
+                centre = _sidewalk_point(layout, rng)
+                axis = 0 if abs(centre[1]) < abs(centre[0]) else 1
+                yaw = (0.0 if axis == 0 else math.pi / 2) + (math.pi if rng.random() < 0.5 else 0.0) + float(rng.normal(0.0, 0.15))
+                where, z = "sidewalk", layout.kerb_height
+            if accept(RoadUser("person", centre, yaw, size, z, where)):
+                break
+    return out
+
+
+def _lane_offset(lane: Lane) -> float:
+    """Signed distance of a drive lane's centre line from its road's centre line."""
+    return float(lane.start[1] if lane.road == 0 else lane.start[0])
+
+
+def _sidewalk_point(layout: StreetLayout, rng) -> np.ndarray:
+    """A point drawn uniformly on the sidewalk bands (0.4 m from their edges)."""
+    lo, hi, A = layout.walk_inner + 0.4, layout.walk_outer - 0.4, layout.arm_length - 0.5
+    band = float(rng.uniform(lo, hi)) * float(rng.choice([-1, 1]))
+    along = float(rng.uniform(lo, A)) * float(rng.choice([-1, 1]))
+    return np.array([along, band]) if rng.random() < 0.5 else np.array([band, along])
+
+
+# ----------------------------------------------------------------------------- the users' meshes
+def user_meshes(user: RoadUser, rng: np.random.Generator) -> list[tuple[str, str, str, float, Mesh]]:
+    """``[(part, class, material, reflectivity, mesh (world))]`` of one placed road user.
+
+    A vehicle's paint reflectivity is drawn from ``rng`` (0.05 black .. 0.7 white); a pedestrian
+    walks or stands (:func:`~.human.sample_pose`); a rider sits on the saddle, hands towards the bar.
+    """
+    from ...geometry import human
+
+    if user.kind in VEHICLES:
+        paint = float(rng.choice([0.7, 0.05, 0.3, 0.5, 0.2, 0.45]))
+        parts = vehicle_parts(user.kind, user.size)
+        return [(name, user.kind, "glass" if name == "glass" else "diffuse", {"body": paint, "glass": REFLECTIVITY["glass"], "tyres": REFLECTIVITY["tyre"]}[name], transformed(mesh, user.centre, user.yaw, user.z))
+                for name, mesh in parts.items() if len(mesh[1])]
+    build = float(rng.choice(list(human.BUILDS.values())))
+    if user.kind == "person":
+        angles = human.sample_pose("walking" if rng.random() < 0.7 else "standing", rng, build)
+        person = human.pose_person(angles, float(user.size[2]), build, "walking", user.centre, user.yaw, user.z)
+        v, t, _ = human.body_mesh(person.a, person.b, person.radius, 8, 2)
+        return [("body", "person", "diffuse", REFLECTIVITY["person"], (v, t))]
+    parts = two_wheeler_parts(user.kind, user.size)
+    out = [(name, user.kind, "diffuse", REFLECTIVITY["frame"] if name == "frame" else REFLECTIVITY["tyre"], transformed(mesh, user.centre, user.yaw, user.z)) for name, mesh in parts.items()]
+    angles = human.sample_pose("sitting", rng, build)
+    seat = saddle_height(user.kind, user.size)
+    c, s = math.cos(user.yaw), math.sin(user.yaw)
+    hip = user.centre + np.array([c, s]) * (-0.1 * user.size[0] - 0.05)
+    rider = human.pose_person(angles, 0.95 * float(user.size[2]), build, "sitting", hip, user.yaw, user.z + seat + 0.005)
+    v, t, _ = human.body_mesh(rider.a, rider.b, rider.radius, 8, 2)
+    out.append(("rider", "rider", "diffuse", REFLECTIVITY["person"], (v, t)))
+    return out
+
+
+# ----------------------------------------------------------------------------- checks
+def segments_cross_triangles(a: np.ndarray, b: np.ndarray, triangles: np.ndarray, eps: float = 1e-6) -> np.ndarray:
+    """``(n,)`` bool: whether segment ``a[i]``-``b[i]`` ((n, 3) each) passes through the interior of any of
+    ``triangles`` (m, 3, 3). Touching (an end on a face, a segment in a face's plane) does not count."""
+    hit = np.zeros(len(a), bool)
+    if len(a) == 0 or len(triangles) == 0:
+        return hit
+    d = b - a
+    e1, e2 = triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0]
+    for start in range(0, len(a), 256):
+        da, aa = d[start : start + 256, None], a[start : start + 256, None]
+        h = np.cross(da, e2[None])
+        det = np.einsum("ijk,jk->ij", h, e1)
+        ok = np.abs(det) > 1e-12
+        inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
+        s = aa - triangles[None, :, 0]
+        u = inv * np.einsum("ijk,ijk->ij", s, h)
+        q = np.cross(s, e1[None])
+        v = inv * np.einsum("ijk,ijk->ij", da * np.ones_like(q), q)
+        t = inv * np.einsum("jk,ijk->ij", e2, q)
+        inside = ok & (u > eps) & (v > eps) & (u + v < 1 - eps) & (t > eps) & (t < 1 - eps)
+        hit[start : start + 256] = inside.any(axis=1)
+    return hit
+
+
+def meshes_intersect(first: Mesh, second: Mesh) -> bool:
+    """True when an edge of one mesh passes through a triangle of the other.
+
+    Only the triangles of each mesh that reach into the other's bounding box take part, so a
+    small mesh against a large one (a pedestrian against the street's terrain) costs little.
+    """
+    (v1, t1), (v2, t2) = first, second
+    if (v1.min(0) > v2.max(0) + 1e-6).any() or (v2.min(0) > v1.max(0) + 1e-6).any():
+        return False
+
+    def reaching(v, t, other):
+        corners = v[t]
+        keep = ((corners.min(axis=1) <= other.max(0) + 1e-6) & (corners.max(axis=1) >= other.min(0) - 1e-6)).all(axis=1)
+        return t[keep]
+
+    t1, t2 = reaching(v1, t1, v2), reaching(v2, t2, v1)
+    if len(t1) == 0 or len(t2) == 0:
+        return False
+    for (va, ta), (vb, tb) in (((v1, t1), (v2, t2)), ((v2, t2), (v1, t1))):
+        edges = np.unique(np.sort(np.concatenate([ta[:, [0, 1]], ta[:, [1, 2]], ta[:, [2, 0]]]), axis=1), axis=0)
+        if segments_cross_triangles(va[edges[:, 0]], va[edges[:, 1]], vb[tb]).any():
+            return True
+    return False

@@ -1,0 +1,158 @@
+"""``scene.builder: street``: an urban intersection with road users placed along its lanes, sidewalks and crossings."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ...errors import InputError
+from ..base import Builder, BuildContext, BuildResult, Distribution, check_distribution, check_sizes, register_builder
+
+
+@dataclass(frozen=True)
+class StreetScene:
+    """``scene.builder: street``: two roads crossing (builders/street/layout.py has the layout and the rules), in metres.
+
+    Static scene (drawn once from ``layout_seed``, the same in every frame): ``lanes_per_direction``
+    drive lanes of ``lane_width`` each way, a ``parking_width`` strip by each kerb (0: none), kerbs
+    ``kerb_width`` x ``kerb_height``, sidewalks ``sidewalk_width`` wide, zebra crossings
+    ``crossing_width`` wide ``crossing_offset`` from the intersection, four traffic lights, ``signs``
+    traffic signs; each road reaches ``arm_length`` from the centre (100 m: a car-roof sensor's
+    range). Beyond the sidewalks (builders/street/dressing.py): terrain rolling by
+    ``terrain_relief`` (m) and rising by ``terrain_slope`` away from the road, on a ``terrain_step``
+    (m) grid (``terrain: false`` leaves it out); plots ``building_width`` wide, each a building
+    (``building_height``, ``building_depth`` deep) set back ``setback`` (m) behind a front yard,
+    or, a share ``open_share``, open ground with trees and bushes ``plot_depth`` deep;
+    ``yard_plants`` trees and bushes per 100 m^2 of yard; each plot's front a fence, hedge, low wall
+    or nothing by ``boundary_mix``. On the sidewalks' kerb side: street trees ``tree_spacing``
+    apart along a share ``street_trees`` of the arm sides, lamps every ``lamp_spacing`` m (0:
+    none), ``furniture_per_100m`` bins, bicycle stands and bollards per side; with probability
+    ``roadworks`` an arm side's parking strip holds cones and barriers.
+
+    Road users, drawn every frame from the frame's generator: ``vehicles`` moving along the drive
+    lanes (mix of car, van, truck, bus by ``vehicle_mix``), following the last vehicle of their lane
+    with probability ``platoon_probability`` at a gap from ``platoon_gap``; ``parked`` cars and vans
+    in the parking strips; ``bicycles`` and ``motorcycles`` with riders near the right edge of the
+    rightmost lanes; ``pedestrians`` on the sidewalks or, a share ``crossing_share`` of them, on the
+    crossings. Footprints keep ``clearance`` from each other and from poles. With ``fov_aware``, a
+    candidate is kept only if one sensor of the run sees at least ``min_in_view`` of its box's
+    sample points (within its field of view and range), so a narrow flash camera sees what is placed.
+
+    ``ego_vehicle``: the sensor rides on the roof of a car in the right-hand lane of the road along
+    x, ``ego_height`` (m) above the road (KITTI's HDL-64E: 1.73), heading +x; frame k places it
+    ``k * ego_step`` metres further along, cycling over ``[-ego_span, ego_span]``, so consecutive
+    frames see the street from different places. The ego car's footprint is kept free of road users;
+    its body is not built (recorded scans leave the ego vehicle out).
+    """
+
+    arm_length: float = 100.0
+    lanes_per_direction: int = 1
+    lane_width: float = 3.5
+    parking_width: float = 2.2
+    kerb_width: float = 0.15
+    kerb_height: float = 0.15
+    sidewalk_width: float = 3.5
+    crossing_width: float = 4.0
+    crossing_offset: float = 1.0
+    signs: int = 4
+    building_depth: float = 10.0
+    building_width: tuple[float, float] = (8.0, 16.0)
+    building_height: tuple[float, float] = (6.0, 20.0)
+    setback: tuple[float, float] = (0.0, 8.0)
+    open_share: float = 0.3
+    plot_depth: float = 20.0
+    boundary_mix: dict = field(default_factory=lambda: {"fence": 0.35, "hedge": 0.3, "wall": 0.15, "none": 0.2})
+    street_trees: float = 0.6
+    tree_spacing: tuple[float, float] = (8.0, 16.0)
+    yard_plants: float = 1.5
+    lamp_spacing: float = 28.0
+    furniture_per_100m: float = 3.0
+    roadworks: float = 0.25
+    terrain: bool = True
+    terrain_step: float = 1.0
+    terrain_relief: float = 0.5
+    terrain_slope: float = 0.04
+    layout_seed: int = 0
+    vehicles: Distribution = field(default_factory=lambda: Distribution("normal", 16.0, 5.0, 0.0, 60.0))
+    vehicle_mix: dict = field(default_factory=lambda: {"car": 0.7, "van": 0.15, "truck": 0.08, "bus": 0.07})
+    platoon_probability: float = 0.5
+    platoon_gap: Distribution = field(default_factory=lambda: Distribution("uniform", 7.0, 0.0, 3.0, 12.0))
+    parked: Distribution = field(default_factory=lambda: Distribution("normal", 20.0, 6.0, 0.0, 80.0))
+    bicycles: Distribution = field(default_factory=lambda: Distribution("normal", 3.0, 2.0, 0.0, 20.0))
+    motorcycles: Distribution = field(default_factory=lambda: Distribution("normal", 1.0, 1.0, 0.0, 20.0))
+    pedestrians: Distribution = field(default_factory=lambda: Distribution("normal", 16.0, 6.0, 0.0, 80.0))
+    crossing_share: float = 0.3
+    clearance: float = 0.5
+    fov_aware: bool = True
+    min_in_view: float = 0.3
+    ego_vehicle: bool = False
+    ego_height: float = 1.73
+    ego_span: float = 60.0
+    ego_step: float = 7.3
+
+
+MAY_BE_ZERO = {"ego_span", "parking_width", "signs", "layout_seed", "crossing_offset", "platoon_probability", "crossing_share", "clearance", "min_in_view",
+               "setback", "open_share", "street_trees", "tree_spacing", "yard_plants", "lamp_spacing", "furniture_per_100m", "roadworks",
+               "terrain_relief", "terrain_slope"}
+
+
+def check(params: StreetScene, where: str) -> None:
+    check_sizes(params, where, MAY_BE_ZERO)
+    for key in ("platoon_probability", "crossing_share", "min_in_view", "open_share", "street_trees", "roadworks"):
+        if getattr(params, key) > 1:
+            raise InputError(f"{where}.{key}: must lie in 0..1, got {getattr(params, key)}")
+    for key in ("building_width", "building_height", "setback", "tree_spacing"):
+        lo, hi = getattr(params, key)
+        if lo > hi:
+            raise InputError(f"{where}.{key}: expected [min, max] with min <= max, got {[lo, hi]}")
+    half_road = params.lanes_per_direction * params.lane_width + params.parking_width
+    reach = half_road + params.kerb_width + params.crossing_offset + params.crossing_width + 10.0
+    if params.arm_length < reach:
+        raise InputError(f"{where}.arm_length: must be at least {reach:.1f} m (the road's half width, kerb, crossing and 10 m of lane), got {params.arm_length}")
+    from .layout import VEHICLES
+    from .dressing import BOUNDARIES
+
+    mix = params.boundary_mix
+    if not mix or any(k not in BOUNDARIES for k in mix) or any(not isinstance(v, (int, float)) or v < 0 for v in mix.values()) or sum(mix.values()) <= 0:
+        raise InputError(f"{where}.boundary_mix: expected shares >= 0 (not all 0) of {', '.join(BOUNDARIES)}, got {mix}")
+    if params.tree_spacing[1] > 0 and params.tree_spacing[0] < 2.0:
+        raise InputError(f"{where}.tree_spacing: street trees stand at least 2 m apart, got {list(params.tree_spacing)}")
+
+    unknown = [k for k in params.vehicle_mix if k not in VEHICLES]
+    if unknown or not params.vehicle_mix or any(not isinstance(v, (int, float)) or v < 0 for v in params.vehicle_mix.values()) or sum(params.vehicle_mix.values()) <= 0:
+        raise InputError(f"{where}.vehicle_mix: expected shares >= 0 (not all 0) of {', '.join(VEHICLES)}, got {params.vehicle_mix}")
+    for key in ("vehicles", "parked", "bicycles", "motorcycles", "pedestrians", "platoon_gap"):
+        check_distribution(getattr(params, key), f"{where}.{key}", low=0.0)
+
+
+def ego_station(params: StreetScene, frame: int) -> np.ndarray | None:
+    """The level frame ``(4, 4)`` of the ego car's roof sensor in frame ``frame``, or ``None`` without ``ego_vehicle``."""
+    if not params.ego_vehicle:
+        return None
+    span = 2.0 * params.ego_span
+    x = -params.ego_span + (frame * params.ego_step) % span if span > 0 else 0.0
+    pose = np.eye(4)
+    pose[:3, 3] = (x, -0.5 * params.lane_width, params.ego_height)
+    return pose
+
+
+def release_ego(params: StreetScene, raw_scene: dict, sensor_data: dict) -> StreetScene:
+    """With ``ego_vehicle`` the scene places the sensor: a ``sensor.position`` or trajectory as well is an error."""
+    if params.ego_vehicle:
+        for key in ("position", "trajectory"):
+            if sensor_data.get(key) is not None:
+                raise InputError(f"sensor.{key}: scene.ego_vehicle places the sensor on the ego car's roof; leave sensor.{key} out or set scene.ego_vehicle: false")
+    return params
+
+
+def build(params: StreetScene, context: BuildContext) -> BuildResult:
+    """The static intersection once per run, then this frame's road users."""
+    from .scene import Intersection
+
+    return context.kept("street", params, lambda: Intersection(params)).populate(context.rng, context.view)
+
+
+# The sparse-camera thesis: three flash cameras on a 2 m post at a corner of the intersection,
+# looking across it (the platform's yaw 45 deg points the middle camera at the centre).
+register_builder("street", Builder(StreetScene, build, check, station=ego_station, release_sensor=release_ego, sensor={"rig": "flash_post_240", "position": [-7.6, -7.6, 0.15], "rotation_deg": [0.0, 0.0, 45.0]}, boxes=True))

@@ -1,0 +1,97 @@
+"""``scene.builder: street``: the intersection and its road users as Blender objects (bpy).
+
+The static intersection (road, markings, kerbs, sidewalks, traffic lights and signs, buildings;
+``builders/street/layout.py``) is built once per run from the scene's ``layout_seed``, so every frame
+scans the same street whichever frame a run starts at. Its scattered items (trunks, crowns and
+bushes, lamps and bollards, bins, bicycle stands, cones, barriers) are one object per kind whose
+live "Street Scatter" Geometry Nodes modifier instances the kind's prototypes on the object's
+points (builders/street/scatter_nodes.py); a user can edit its inputs or move its points and rescan.
+Each frame removes the last frame's road users and places new ones from the frame's generator
+(lane following, platoons, parked cars, pedestrians on sidewalks and crossings, field-of-view
+aware when the run's sensors are known).
+
+A road user is one object per part (a vehicle's body, glass and tyres; a two-wheeler's frame,
+wheels and rider) sharing one instance id, so its 3D box holds all of it; the rider's points are
+labelled ``rider``, the box takes the vehicle's class (its first object, by name).
+"""
+
+from __future__ import annotations
+
+import bpy
+import numpy as np
+
+from ...scenes.objects import mesh_data, mesh_object, scene_collection, tag
+from . import layout as street
+from .scatter_nodes import prototypes_collection, scatter_object
+
+USER_INSTANCE = 1000  # road users' instance ids start here; static parts use 1 .. 999
+USERS_COLLECTION = "LiDAR Street Users"
+
+
+class Intersection:
+    """The built intersection; :meth:`populate` places one frame's road users."""
+
+    def __init__(self, params):
+        self.params = params
+        self.layout = street.street_layout(params, np.random.default_rng(params.layout_seed))
+        self.collection = scene_collection()
+        prototypes = prototypes_collection(self.collection)
+        self.static = [
+            tag(mesh_object(part.name, part.mesh, self.collection) if part.scatter is None else scatter_object(part.name, part.scatter, self.collection, prototypes, part.instance or 0),
+                part.class_name, part.material, part.reflectivity, part.instance)
+            for part in self.layout.parts
+        ]
+        self.users = bpy.data.collections.new(USERS_COLLECTION)
+        self.collection.children.link(self.users)
+        bpy.context.view_layer.update()
+
+    def alive(self) -> bool:
+        try:
+            return all(obj.name in bpy.data.objects for obj in self.static) and self.users.name in bpy.data.collections
+        except ReferenceError:
+            return False
+
+    def _clear_users(self) -> None:
+        for obj in list(self.users.objects):
+            mesh = obj.data
+            bpy.data.objects.remove(obj, do_unlink=True)
+            if mesh is not None and mesh.users == 0:
+                bpy.data.meshes.remove(mesh)
+
+    def populate(self, rng: np.random.Generator, view=None):
+        from ..base import BuildResult
+
+        views = tuple(getattr(view, "fields", ()) or ())
+        reserved = []
+        if self.params.ego_vehicle:  # the ego car under the roof sensor: its footprint stays free
+            for v in views:
+                yaw = float(np.arctan2(v.pose[1, 0], v.pose[0, 0]))
+                reserved.append((v.pose[:2, 3].copy(), np.array(street.EGO_HALF), yaw))
+        placement = street.place_users(self.params, self.layout, rng, views, reserved=reserved)
+        self._clear_users()
+        headings = {}
+        for k, user in enumerate(placement.users):
+            instance = USER_INSTANCE + k
+            for part, class_name, material, reflectivity, mesh in street.user_meshes(user, rng):
+                name = f"street_user_{k:03d}_{user.kind}_{part}" if part != "rider" else f"street_user_{k:03d}_{user.kind}_~rider"
+                obj = bpy.data.objects.new(name, mesh_data(name, *mesh))
+                self.users.objects.link(obj)
+                tag(obj, class_name, material, reflectivity, instance)
+            headings[instance] = float(user.yaw)
+        bpy.context.view_layer.update()
+        kinds = {}
+        for user in placement.users:
+            kinds[user.kind] = kinds.get(user.kind, 0) + 1
+        info = {
+            "users": kinds,
+            "wanted": placement.wanted,
+            "out_of_view": placement.out_of_view,
+            "collisions_refused": placement.collisions,
+            "platooning": placement.platoons,
+            "fov_aware": bool(views) and bool(self.params.fov_aware),
+            "placed": [
+                {"instance": USER_INSTANCE + k, "kind": u.kind, "where": u.where, "centre": np.round(u.centre, 3).tolist(), "yaw": round(float(u.yaw), 4), "size": np.round(u.size, 3).tolist()}
+                for k, u in enumerate(placement.users)
+            ],
+        }
+        return BuildResult(headings=headings, info=info)

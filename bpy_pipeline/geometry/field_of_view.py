@@ -1,0 +1,50 @@
+"""What a sensor sees, for placement: its field of view and range, and the share of a box's sample points inside it. Pure numpy.
+
+Shared by the street builder's field-of-view aware placement (:mod:`bpy_pipeline.builders.street.layout`)
+and the sensor rig (:mod:`bpy_pipeline.rig`, a field of view per member).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class FieldOfView:
+    """What one sensor sees: its pose (4, 4) sensor-to-world, azimuth and elevation limits (deg, sensor frame), range (m)."""
+
+    pose: np.ndarray
+    azimuth: tuple[float, float]
+    elevation: tuple[float, float]
+    min_range: float
+    max_range: float
+
+    def contains(self, points) -> np.ndarray:
+        """``(n,)`` bool: which world ``points`` (n, 3) lie inside the field of view and range."""
+        local = (np.asarray(points, float) - self.pose[:3, 3]) @ self.pose[:3, :3]
+        r = np.linalg.norm(local, axis=1)
+        az = np.degrees(np.arctan2(local[:, 1], local[:, 0]))
+        el = np.degrees(np.arcsin(np.clip(local[:, 2] / np.maximum(r, 1e-12), -1, 1)))
+        full = self.azimuth[1] - self.azimuth[0] >= 360.0
+        in_az = full | ((az >= self.azimuth[0]) & (az <= self.azimuth[1]))
+        return in_az & (el >= self.elevation[0]) & (el <= self.elevation[1]) & (r >= self.min_range) & (r <= self.max_range)
+
+
+def box_samples(centre_xy, half, yaw: float, height: float, z: float = 0.0, per_axis: int = 3) -> np.ndarray:
+    """``(per_axis^3, 3)`` points on a grid through an upright box (the sample a field-of-view test counts)."""
+    u = np.linspace(-0.9, 0.9, per_axis)
+    gx, gy, gz = np.meshgrid(u * half[0], u * half[1], (u + 1) / 2 * height + z, indexing="ij")
+    c, s = math.cos(yaw), math.sin(yaw)
+    x, y = gx.ravel(), gy.ravel()
+    return np.column_stack([centre_xy[0] + c * x - s * y, centre_xy[1] + s * x + c * y, gz.ravel()])
+
+
+def in_view_fraction(views, centre_xy, half, yaw, height, z=0.0) -> float:
+    """The largest share of a box's sample points that one of ``views`` sees (1 when ``views`` is empty)."""
+    if not views:
+        return 1.0
+    samples = box_samples(centre_xy, half, yaw, height, z)
+    return max(float(v.contains(samples).mean()) for v in views)

@@ -1,0 +1,92 @@
+"""Road vehicles' and two-wheelers' meshes in their own frame (x forward, y left, z up, origin on the ground). Pure numpy.
+
+Shared by the street builder (:mod:`bpy_pipeline.builders.street.layout`, its road users) and the
+object catalogue (:mod:`.objects`, a cyclist is a rider on :func:`two_wheeler_parts`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import primitives
+from .primitives import beam_mesh, box_mesh, quad_mesh, wheel_mesh
+
+Mesh = tuple[np.ndarray, np.ndarray]  # vertices (n, 3) float64, triangles (m, 3) int32
+
+
+def vehicle_parts(kind: str, size) -> dict[str, Mesh]:
+    """``{"body", "glass", "tyres"}`` meshes of a vehicle of ``kind`` and ``size`` (length, width, height), own frame.
+
+    Every part lies within the box ``[-L/2, L/2] x [-W/2, W/2] x [0, H]``. Car: a lower body to the
+    belt line and a narrower cabin; van: a cabin over nearly its length; truck: a cab and a cargo
+    box; bus: one box with a window band. Glass sits 1 cm outside the body it covers.
+    """
+    L, W, H = (float(s) for s in size)
+    x0, x1, y = -L / 2, L / 2, W / 2
+    radius = {"car": 0.31, "van": 0.34, "truck": 0.5, "bus": 0.5}[kind]
+    clearance = 0.55 * radius
+    tyre_w = 0.2 if kind in ("car", "van") else 0.3
+    axles = {"car": (0.33, -0.33), "van": (0.34, -0.34), "truck": (0.38, -0.3), "bus": (0.36, -0.28)}[kind]
+    tyres = primitives.merge([wheel_mesh(a * L, side * (y - 0.02 - tyre_w / 2), radius, tyre_w) for a in axles for side in (-1, 1)])
+    body, glass = [], []
+    if kind == "car":
+        belt = 0.58 * H
+        body.append(box_mesh(x0, x1, -y, y, clearance, belt))
+        cx0, cx1, cy = x0 + 0.26 * L, x1 - 0.3 * L, y - 0.08
+        body.append(box_mesh(cx0, cx1, -cy, cy, belt, H))
+        glass.append(quad_mesh((cx1 + 0.01, -cy, belt + 0.05), (cx1 + 0.01, cy, belt + 0.05), (cx1 + 0.01, cy, H - 0.05), (cx1 + 0.01, -cy, H - 0.05)))
+        for side in (-1, 1):
+            gy = side * (cy + 0.01)
+            glass.append(quad_mesh((cx0 + 0.1, gy, belt + 0.05), (cx1 - 0.1, gy, belt + 0.05), (cx1 - 0.1, gy, H - 0.06), (cx0 + 0.1, gy, H - 0.06)))
+    elif kind == "van":
+        hood = x1 - 0.14 * L
+        body.append(box_mesh(hood, x1, -y, y, clearance, 0.5 * H))
+        body.append(box_mesh(x0, hood, -y, y, clearance, H))
+        glass.append(quad_mesh((hood + 0.01, -y + 0.1, 0.55 * H), (hood + 0.01, y - 0.1, 0.55 * H), (hood + 0.01, y - 0.1, 0.92 * H), (hood + 0.01, -y + 0.1, 0.92 * H)))
+    elif kind == "truck":
+        cab = x1 - 2.2
+        body.append(box_mesh(cab, x1, -y + 0.05, y - 0.05, clearance, 0.92 * H))
+        body.append(box_mesh(x0, cab - 0.3, -y, y, clearance + 0.4, H))
+        body.append(box_mesh(x0 + 0.2, cab, -0.4, 0.4, clearance, clearance + 0.4))  # chassis under the cargo box
+        glass.append(quad_mesh((x1 + 0.01, -y + 0.2, 0.55 * H), (x1 + 0.01, y - 0.2, 0.55 * H), (x1 + 0.01, y - 0.2, 0.85 * H), (x1 + 0.01, -y + 0.2, 0.85 * H)))
+    else:  # bus
+        body.append(box_mesh(x0, x1, -y, y, clearance, H))
+        for side in (-1, 1):
+            gy = side * (y + 0.01)
+            glass.append(quad_mesh((x0 + 0.5, gy, 0.4 * H), (x1 - 0.5, gy, 0.4 * H), (x1 - 0.5, gy, 0.85 * H), (x0 + 0.5, gy, 0.85 * H)))
+        glass.append(quad_mesh((x1 + 0.01, -y + 0.1, 0.3 * H), (x1 + 0.01, y - 0.1, 0.3 * H), (x1 + 0.01, y - 0.1, 0.9 * H), (x1 + 0.01, -y + 0.1, 0.9 * H)))
+    return {"body": primitives.merge(body), "glass": primitives.merge(glass), "tyres": tyres}
+
+
+def two_wheeler_parts(kind: str, size) -> dict[str, Mesh]:
+    """``{"frame", "wheels"}`` of a bicycle or motorcycle of ``size`` (length, width, height of the whole with its rider).
+
+    The saddle's top is at :func:`saddle_height`, its centre at x = -0.1 L; the rider sits there.
+    """
+    L = float(size[0])
+    radius = 0.34 if kind == "bicycle" else 0.3
+    width = 0.04 if kind == "bicycle" else 0.12
+    front, rear = L / 2 - radius, -L / 2 + radius
+    wheels = primitives.merge([wheel_mesh(front, -width / 2, radius, width), wheel_mesh(rear, -width / 2, radius, width)])
+    seat = saddle_height(kind, size)
+    hub = radius
+    if kind == "bicycle":
+        t = 0.035
+        saddle = (-0.1 * L, 0.0, seat - 0.04)
+        bar = (front - 0.08, 0.0, seat + 0.1)
+        crank = (0.02 * L, 0.0, radius)
+        frame = [beam_mesh((rear, 0, hub), saddle, t), beam_mesh((rear, 0, hub), crank, t), beam_mesh(crank, saddle, t),
+                 beam_mesh(crank, (front - 0.15, 0, seat - 0.05), t), beam_mesh(saddle, (front - 0.15, 0, seat - 0.05), t),
+                 beam_mesh((front, 0, hub), bar, t), box_mesh(bar[0] - 0.03, bar[0] + 0.03, -0.28, 0.28, bar[2] - 0.015, bar[2] + 0.015),
+                 box_mesh(saddle[0] - 0.13, saddle[0] + 0.1, -0.07, 0.07, seat - 0.04, seat)]
+    else:
+        frame = [box_mesh(rear + 0.15, front - 0.2, -0.18, 0.18, radius * 0.6, seat - 0.12),  # engine and tank
+                 box_mesh(-0.1 * L - 0.3, -0.1 * L + 0.2, -0.15, 0.15, seat - 0.12, seat),  # seat
+                 beam_mesh((front, 0, hub), (front - 0.2, 0, seat + 0.2), 0.06),
+                 box_mesh(front - 0.24, front - 0.16, -0.38, 0.38, seat + 0.18, seat + 0.24)]
+    return {"frame": primitives.merge(frame), "wheels": wheels}
+
+
+def saddle_height(kind: str, size) -> float:
+    """Height (m) of the saddle's top of a two-wheeler of ``size``: the rider's seat."""
+    return (0.5 if kind == "bicycle" else 0.45) * float(size[2])
