@@ -21,9 +21,9 @@ an append is not on network ones. Per-dataset indexes (ImageSets) are derived fr
 when a run ends. A run's cost per frame does not grow with the number of frames.
 
 Per frame, nothing is read back and no folder is made or removed: files written through
-:func:`~.io.atomic.hashed_open` get their sha256 as they are written, the preview is rendered on a
-thread while the other files are written (:func:`write_frame_files`, waited for before the
-intent), and a committed frame's emptied staging folders are renamed to the next frame's.
+:func:`~.io.atomic.hashed_open` get their sha256 as they are written (small text files are read
+back), the preview and the KITTI layout are written on threads of their own while the other files
+are written (:func:`write_frame_files`, waited for before the intent), and a committed frame's emptied staging folders are renamed to the next frame's.
 """
 
 from __future__ import annotations
@@ -73,40 +73,41 @@ def sha256_file(path: Path) -> str:
     return digest.hexdigest()
 
 
-BACKGROUND_WRITERS = ("preview",)  # written on a thread of their own while the frame's other files are written
+BACKGROUND_WRITERS = ("preview", "kitti")  # each written on a thread of its own while the frame's other files are written
 
 
 def write_frame_files(frame, staging: Path, names: list[str]) -> list[Path]:
     """Every writer of ``names`` writes ``frame`` under ``staging``; their files in the order of ``names``.
 
-    The :data:`BACKGROUND_WRITERS` (the preview: numpy and zlib, which let go of the GIL) run on a
-    thread of their own while the others write, in the caller's context (its
-    :func:`~.io.atomic.digests_while_writing`), and are waited for before this returns or raises,
-    so nothing writes under ``staging`` afterwards. A failure of the others is raised first.
+    The :data:`BACKGROUND_WRITERS` (the preview and the KITTI layout with its camera image: numpy and zlib,
+    which let go of the GIL) each run on a thread of their own while the others write, in the caller's
+    context (its :func:`~.io.atomic.digests_while_writing`), and are all waited for before this returns
+    or raises, so nothing writes under ``staging`` afterwards. A failure of the others is raised first,
+    then the background writers' in the order of ``names``.
     """
     later = [n for n in names if n in BACKGROUND_WRITERS] if len(names) > 1 else []
     results: dict[str, list[Path]] = {}
-    failed: list[BaseException] = []
+    failed: dict[str, BaseException] = {}
 
-    def background():
+    def background(name: str):
         try:
-            for name in later:
-                results[name] = WRITERS.get(name).write(frame, staging)
+            results[name] = WRITERS.get(name).write(frame, staging)
         except BaseException as err:  # re-raised by the caller's thread
-            failed.append(err)
+            failed[name] = err
 
-    thread = threading.Thread(target=contextvars.copy_context().run, args=(background,), name=f"frame {frame.index} writer") if later else None
-    if thread is not None:
+    threads = [threading.Thread(target=contextvars.copy_context().run, args=(background, name), name=f"frame {frame.index} {name} writer") for name in later]
+    for thread in threads:
         thread.start()
     try:
         for name in names:
             if name not in later:
                 results[name] = WRITERS.get(name).write(frame, staging)
     finally:
-        if thread is not None:
+        for thread in threads:
             thread.join()
-    if failed:
-        raise failed[0]
+    for name in later:
+        if name in failed:
+            raise failed[name]
     return [path for name in names for path in results[name]]
 
 

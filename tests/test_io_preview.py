@@ -166,7 +166,7 @@ def test_the_compiled_panel_paint_gives_the_numpy_paths_pixels(monkeypatch):
     (pixels beyond int64 in the numpy path): the compiled projection-and-splat and the numpy path paint the same image."""
     from bpy_pipeline.io import preview
 
-    if preview._paint_kernel() is None:
+    if preview._paint_kernels() is None:
         pytest.skip("numba is not installed (or BPY_PIPELINE_SCAN_KERNEL=numpy): only the numpy path exists")
     rng = np.random.default_rng(11)
     pts = empty_points(20000)
@@ -178,7 +178,7 @@ def test_the_compiled_panel_paint_gives_the_numpy_paths_pixels(monkeypatch):
     boxes = np.zeros(2, BOX_DTYPE)
     boxes["size"] = 2.0
     compiled = render_preview(pts, LUT, boxes=boxes, names=load_class_table().names)
-    monkeypatch.setattr(preview, "_paint_kernel", lambda: None)
+    monkeypatch.setattr(preview, "_paint_kernels", lambda: None)
     monkeypatch.setattr(preview, "_splat_kernel", lambda: None)
     numpy_path = render_preview(pts, LUT, boxes=boxes, names=load_class_table().names)
     assert (compiled == numpy_path).all() and len(colours(compiled) - FRAME) > 3

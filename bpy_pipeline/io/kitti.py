@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from ..geometry.transforms import euler_xyz_matrix
-from .atomic import atomic_write
+from .atomic import atomic_write, hashed_open
 from .class_maps import ClassMaps, load_class_maps
 from .preview import encode_png, splat
 from .splits import SPLITS, split_indices
@@ -156,14 +156,14 @@ def write_frame(out_dir: str | os.PathLike, stem: str, points: np.ndarray, boxes
     root = Path(out_dir) / "kitti" / folder
     k, tr = camera_matrices(camera)
     velodyne = root / "velodyne" / f"{stem}.bin"
-    with atomic_write(velodyne) as tmp:
-        np.column_stack([points["x"], points["y"], points["z"], points["intensity"]]).astype("<f4").tofile(tmp)
+    with atomic_write(velodyne) as tmp, hashed_open(tmp) as f:  # hashed as written: the commit reads it back no more
+        f.write(np.column_stack([points["x"], points["y"], points["z"], points["intensity"]]).astype("<f4"))
     image_path = root / "image_2" / f"{stem}.png"
     if image is not None and np.shape(image) != (int(camera.resolution[1]), int(camera.resolution[0]), 3):
         raise ValueError(f"image_2: expected a {camera.resolution[1]} x {camera.resolution[0]} RGB image, got shape {np.shape(image)}")
     data = encode_png(render_image(points, camera, color_lut) if image is None else image, level=1)
-    with atomic_write(image_path) as tmp:
-        tmp.write_bytes(data)
+    with atomic_write(image_path) as tmp, hashed_open(tmp) as f:
+        f.write(data)
     lines = label_lines(boxes if boxes is not None else np.zeros(0, _box_dtype()), points, camera, names=names)
     return [velodyne, _text(root / "label_2" / f"{stem}.txt", "".join(line + "\n" for line in lines)), _text(root / "calib" / f"{stem}.txt", calib_text(k, tr)), image_path]
 

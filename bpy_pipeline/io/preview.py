@@ -93,32 +93,41 @@ def _splat_kernel():
 
 
 @cache
-def _paint_kernel():
-    """The compiled projection-to-pixels and splat of one panel (numba, cached on disk), or ``None`` (as :func:`_splat_kernel`)."""
+def _paint_kernels():
+    """The compiled projection-to-pixels and splat of each panel (numba, cached on disk): ``(top, perspective)``,
+    or ``None`` (as :func:`_splat_kernel`). Each computes a point's pixel with the numpy path's operations in
+    its order (no fused multiply-add, no fast-math), so both paint the same pixels."""
     if _splat_kernel() is None:
         return None
     import numba
 
-    @numba.njit(cache=True, nogil=True)
-    def paint_into(flat, best, u, v, depth, colors, front, width, panel_width, height, left):  # pragma: no cover (compiled)
-        # numpy's path: col, row = rint(u), rint(v) as int64; kept where 0 <= col < panel_width and 0 <= row < height
-        # (the float tests on the rounded values decide alike, and also for NaN and out-of-range values,
-        # which numpy's int64 cast turns into the smallest int64); then splat in point order
-        for i in range(len(u)):
-            if not front[i]:
-                continue
-            col = np.rint(u[i])
-            row = np.rint(v[i])
-            if not (col >= 0.0 and col < panel_width and row >= 0.0 and row < height):
-                continue
+    @numba.njit(cache=True, nogil=True, inline="always")
+    def put(flat, best, u, v, depth, colors, i, width, panel_width, height, left):  # pragma: no cover (compiled)
+        # numpy's path: col, row = rint(u), rint(v) as int64, kept where 0 <= col < panel_width and 0 <= row < height
+        # (the float tests on the rounded values decide alike, also for NaN and out-of-range values, which
+        # numpy's int64 cast turns into the smallest int64); then the splat's rule in point order
+        col = np.rint(u)
+        row = np.rint(v)
+        if col >= 0.0 and col < panel_width and row >= 0.0 and row < height:
             p = np.int64(row) * width + np.int64(col) + left
-            if depth[i] >= best[p]:
-                best[p] = depth[i]
+            if depth >= best[p]:
+                best[p] = depth
                 flat[p, 0] = colors[i, 0]
                 flat[p, 1] = colors[i, 1]
                 flat[p, 2] = colors[i, 2]
 
-    return paint_into
+    @numba.njit(cache=True, nogil=True)
+    def top(flat, best, xyz, colors, centre0, centre1, scale, half_w, half_h, width, panel_width, height, left):  # pragma: no cover
+        for i in range(len(xyz)):  # u = half_w - (y - centre1) * scale, v = half_h - (x - centre0) * scale, depth z
+            put(flat, best, half_w - (xyz[i, 1] - centre1) * scale, half_h - (xyz[i, 0] - centre0) * scale, xyz[i, 2], colors, i, width, panel_width, height, left)
+
+    @numba.njit(cache=True, nogil=True)
+    def perspective(flat, best, cam, colors, focal, half_w, half_h, width, panel_width, height, left):  # pragma: no cover
+        for i in range(len(cam)):  # in front (depth > 0.1): u = half_w + focal * x / depth, v = half_h + focal * y / depth, depth -depth
+            if cam[i, 2] > 0.1:
+                put(flat, best, half_w + focal * cam[i, 0] / cam[i, 2], half_h + focal * cam[i, 1] / cam[i, 2], -cam[i, 2], colors, i, width, panel_width, height, left)
+
+    return top, perspective
 
 
 def splat(image: np.ndarray, col: np.ndarray, row: np.ndarray, depth: np.ndarray, colors: np.ndarray, depth_image: np.ndarray | None = None) -> None:
@@ -250,18 +259,7 @@ def render_preview(points: np.ndarray, color_lut: np.ndarray, size: tuple[int, i
 
     best = np.full((height, width), -np.inf)  # depth per pixel; the two panels' pixels are apart, so one serves both
 
-    kernel = _paint_kernel() if len(du) == 1 else None
-    everyone = np.ones(len(xyz), np.bool_) if kernel is not None else None
-
-    def paint_projected(u, v, depth, left, panel_width, front=None):
-        """Paint the points at the projected ``(u, v)`` (float pixels) of a panel; ``front``: the points in front of its camera."""
-        if kernel is not None:  # one compiled pass: the same pixels as the numpy path below
-            kernel(image.reshape(-1, 3), best.reshape(-1), np.ascontiguousarray(u, np.float64), np.ascontiguousarray(v, np.float64),
-                   np.ascontiguousarray(depth, np.float64), colors, everyone if front is None else front, width, panel_width, height, left)  # fmt: skip
-            return
-        if front is not None:
-            u, v = np.where(front, u, -1), np.where(front, v, -1)
-        paint(np.rint(u).astype(np.int64), np.rint(v).astype(np.int64), depth, left, panel_width)
+    kernels = _paint_kernels() if len(du) == 1 else None  # one pixel a point: each panel in one compiled pass
 
     def paint(col, row, depth, left, panel_width):
         inside = (col >= 0) & (col < panel_width) & (row >= 0) & (row < height)
@@ -291,8 +289,12 @@ def render_preview(points: np.ndarray, color_lut: np.ndarray, size: tuple[int, i
     def top(p):
         return (panel - 1) / 2 - (p[:, 1] - centre[1]) * scale, (height - 1) / 2 - (p[:, 0] - centre[0]) * scale
 
-    u, v = top(xyz)
-    paint_projected(u, v, xyz[:, 2], panel, panel)
+    if kernels is not None:
+        kernels[0](image.reshape(-1, 3), best.reshape(-1), np.ascontiguousarray(xyz), colors, float(centre[0]), float(centre[1]), float(scale),
+                   (panel - 1) / 2, (height - 1) / 2, width, panel, height, panel)  # fmt: skip
+    else:
+        u, v = top(xyz)
+        paint(np.rint(u).astype(np.int64), np.rint(v).astype(np.int64), xyz[:, 2], panel, panel)
     if len(corners):
         cu, cv = top(corners[:, :4].reshape(-1, 3))
         quad = np.stack([cu, cv], axis=1).reshape(-1, 4, 2) + [panel, 0]
@@ -314,8 +316,13 @@ def render_preview(points: np.ndarray, color_lut: np.ndarray, size: tuple[int, i
         with np.errstate(divide="ignore", invalid="ignore"):
             return (panel - 1) / 2 + focal * cam[:, 0] / cam[:, 2], (height - 1) / 2 + focal * cam[:, 1] / cam[:, 2], cam[:, 2]
 
-    u, v, depth = perspective(xyz)
-    paint_projected(u, v, -depth, 0, panel, depth > 0.1)
+    if kernels is not None:
+        kernels[1](image.reshape(-1, 3), best.reshape(-1), np.ascontiguousarray((xyz - eye) @ rotation.T), colors, float(focal),
+                   (panel - 1) / 2, (height - 1) / 2, width, panel, height, 0)  # fmt: skip
+    else:
+        u, v, depth = perspective(xyz)
+        front = depth > 0.1
+        paint(np.rint(np.where(front, u, -1)).astype(np.int64), np.rint(np.where(front, v, -1)).astype(np.int64), -depth, 0, panel)
     if len(corners):
         cu, cv, cd = perspective(corners.reshape(-1, 3))
         pix = np.stack([cu, cv], axis=1).reshape(-1, 8, 2)
