@@ -22,8 +22,9 @@ when a run ends. A run's cost per frame does not grow with the number of frames.
 
 Per frame, nothing is read back and no folder is made or removed: files written through
 :func:`~.io.atomic.hashed_open` get their sha256 as they are written (small text files are read
-back), the preview and the KITTI layout are written on threads of their own while the other files
-are written (:func:`write_frame_files`, waited for before the intent), and a committed frame's emptied staging folders are renamed to the next frame's.
+back), the preview is rendered and written on a thread of its own while the other files are
+written (:func:`write_frame_files`, waited for before the intent), and a committed frame's emptied
+staging folders are renamed to the next frame's.
 """
 
 from __future__ import annotations
@@ -73,15 +74,17 @@ def sha256_file(path: Path) -> str:
     return digest.hexdigest()
 
 
-BACKGROUND_WRITERS = ("preview", "kitti")  # each written on a thread of its own while the frame's other files are written
+# each written on a thread of its own while the frame's other files are written. Not the KITTI layout: its label
+# lines and projections are Python-heavy and held the GIL against the main thread's writes (a parking frame's
+# write stage 45 -> 51 ms, alternating runs of 40 frames at load 4-7)
+BACKGROUND_WRITERS = ("preview",)
 
 
 def write_frame_files(frame, staging: Path, names: list[str]) -> list[Path]:
     """Every writer of ``names`` writes ``frame`` under ``staging``; their files in the order of ``names``.
 
-    The :data:`BACKGROUND_WRITERS` (the preview and the KITTI layout with its camera image: numpy and zlib,
-    which let go of the GIL) each run on a thread of their own while the others write, in the caller's
-    context (its :func:`~.io.atomic.digests_while_writing`), and are all waited for before this returns
+    The :data:`BACKGROUND_WRITERS` (the preview: numpy, a compiled pass and zlib, which let go of the GIL)
+    each run on a thread of their own while the others write, in the caller's context (its :func:`~.io.atomic.digests_while_writing`), and are all waited for before this returns
     or raises, so nothing writes under ``staging`` afterwards. A failure of the others is raised first,
     then the background writers' in the order of ``names``.
     """
