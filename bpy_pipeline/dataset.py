@@ -78,17 +78,24 @@ def sha256_file(path: Path) -> str:
 # lines and projections are Python-heavy and held the GIL against the main thread's writes (a parking frame's
 # write stage 45 -> 51 ms, alternating runs of 40 frames at load 4-7)
 BACKGROUND_WRITERS = ("preview",)
+# a frame of fewer points writes them in the caller's thread: a thread's GIL hand-overs (the main thread waits for the
+# GIL after each of its file operations) cost more than the overlap gains there: a parking frame's 14 k points,
+# write stage 45 ms inline against 61 ms with the preview's thread; the 131 k-point box frame 111 against 95 ms
+# (alternating runs, medians, load 4-6)
+BACKGROUND_MIN_POINTS = 65536
 
 
 def write_frame_files(frame, staging: Path, names: list[str]) -> list[Path]:
     """Every writer of ``names`` writes ``frame`` under ``staging``; their files in the order of ``names``.
 
-    The :data:`BACKGROUND_WRITERS` (the preview: numpy, a compiled pass and zlib, which let go of the GIL)
-    each run on a thread of their own while the others write, in the caller's context (its :func:`~.io.atomic.digests_while_writing`), and are all waited for before this returns
-    or raises, so nothing writes under ``staging`` afterwards. A failure of the others is raised first,
+    In a frame of at least :data:`BACKGROUND_MIN_POINTS` points, the :data:`BACKGROUND_WRITERS` (the
+    preview: numpy, a compiled pass and zlib, which let go of the GIL) each run on a thread of their own
+    while the others write, in the caller's context (its :func:`~.io.atomic.digests_while_writing`), and
+    are all waited for before this returns or raises, so nothing writes under ``staging`` afterwards. A failure of the others is raised first,
     then the background writers' in the order of ``names``.
     """
-    later = [n for n in names if n in BACKGROUND_WRITERS] if len(names) > 1 else []
+    points = len(frame.points) if frame.points is not None else 0
+    later = [n for n in names if n in BACKGROUND_WRITERS] if len(names) > 1 and points >= BACKGROUND_MIN_POINTS else []
     results: dict[str, list[Path]] = {}
     failed: dict[str, BaseException] = {}
 

@@ -148,9 +148,13 @@ def test_a_file_written_past_the_hashing_handle_gets_no_digest(tmp_path):
     assert digests[os.path.abspath(tmp_path / "y.bin")] == hashlib.sha256(np.arange(5, dtype=np.int32).tobytes()).hexdigest()
 
 
-def test_frame_files_keep_the_writers_order_and_a_preview_failure_is_raised(tmp_path, monkeypatch):
+@pytest.mark.parametrize("threaded", [True, False])
+def test_frame_files_keep_the_writers_order_and_a_preview_failure_is_raised(tmp_path, monkeypatch, threaded):
+    from bpy_pipeline import dataset
     from bpy_pipeline.dataset import write_frame_files
     from bpy_pipeline.io import formats
+
+    monkeypatch.setattr(dataset, "BACKGROUND_MIN_POINTS", 0 if threaded else 10**9)  # the preview on its thread, or inline
 
     config = load_config(None, ["output.formats=[ply, semantickitti]"])
     frame = Frame(0, config, frame_rng(0, 0))
