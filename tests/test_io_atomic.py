@@ -67,3 +67,20 @@ def test_writer_failing_mid_write_leaves_no_file(tmp_path, monkeypatch):
     with pytest.raises(OSError, match="No space"):
         write_ply(target, empty_points(10))
     assert list(target.parent.iterdir()) == []
+
+
+def test_text_written_hashed_has_the_bytes_and_digest_of_write_text(tmp_path):
+    """write_text_hashed writes what Path.write_text writes (encoding, newlines) and records its sha256 at the rename."""
+    import hashlib
+    import os
+
+    from bpy_pipeline.io.atomic import atomic_write, digests_while_writing, write_text_hashed
+
+    text = "Car 0.0000 0 -1.5708 10.00 20.00\nPedestrian 1\n\nDontCare -1\n"
+    (tmp_path / "plain.txt").write_text(text)
+    with digests_while_writing() as digests:
+        with atomic_write(tmp_path / "hashed.txt") as tmp:
+            write_text_hashed(tmp, text)
+    data = (tmp_path / "hashed.txt").read_bytes()
+    assert data == (tmp_path / "plain.txt").read_bytes()
+    assert digests[os.path.abspath(tmp_path / "hashed.txt")] == hashlib.sha256(data).hexdigest()

@@ -91,6 +91,17 @@ def hashed_open(path) -> HashedFile:
     return HashedFile(path)
 
 
+def write_text_hashed(path, text: str) -> None:
+    """Write ``text`` to ``path`` (an :func:`atomic_write` temporary file) with the bytes ``Path.write_text`` writes
+    (the locale's encoding, or UTF-8 in Python's UTF-8 mode; newlines as ``os.linesep``), hashed as written."""
+    import locale
+    import sys
+
+    encoding = "utf-8" if sys.flags.utf8_mode else locale.getpreferredencoding(False)
+    with hashed_open(path) as handle:
+        handle.write((text.replace("\n", os.linesep) if os.linesep != "\n" else text).encode(encoding))
+
+
 def temporary_sibling(path: Path, suffix: str = ".tmp") -> Path:
     """A fresh, unused name next to ``path``: ``.<name>.<random hex><suffix>``."""
     path = Path(path)

@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from ..geometry.transforms import euler_xyz_matrix
-from .atomic import atomic_write, hashed_open
+from .atomic import atomic_write, hashed_open, write_text_hashed
 from .class_maps import ClassMaps, load_class_maps
 from .preview import encode_png, splat
 from .splits import SPLITS, split_indices
@@ -141,7 +141,7 @@ def render_image(points: np.ndarray, camera, color_lut: np.ndarray, dot: int = 3
 
 def _text(path: Path, text: str) -> Path:
     with atomic_write(path) as tmp:
-        tmp.write_text(text)
+        write_text_hashed(tmp, text)  # the bytes of tmp.write_text(text), hashed as written
     return path
 
 

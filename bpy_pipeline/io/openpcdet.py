@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .atomic import atomic_write
+from .atomic import atomic_write, hashed_open, write_text_hashed
 from .kitti import write_image_sets
 from .splits import split_indices
 from .sustech import label_type
@@ -35,10 +35,10 @@ def write_frame(out_dir: str | os.PathLike, stem: str, points: np.ndarray, boxes
     """``openpcdet/points/NNNNNN.npy`` and ``openpcdet/labels/NNNNNN.txt`` of one frame."""
     root = Path(out_dir) / "openpcdet"
     points_path, label = root / "points" / f"{stem}.npy", root / "labels" / f"{stem}.txt"
-    with atomic_write(points_path) as tmp, open(tmp, "wb") as handle:
+    with atomic_write(points_path) as tmp, hashed_open(tmp) as handle:  # hashed as written: np.save writes the same bytes through write()
         np.save(handle, np.column_stack([points["x"], points["y"], points["z"], points["intensity"]]).astype(np.float32))
     with atomic_write(label) as tmp:
-        tmp.write_text("".join(line + "\n" for line in label_lines(boxes if boxes is not None else [], names)))
+        write_text_hashed(tmp, "".join(line + "\n" for line in label_lines(boxes if boxes is not None else [], names)))
     return [points_path, label]
 
 
