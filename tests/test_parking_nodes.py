@@ -107,3 +107,79 @@ def test_a_bay_width_edited_in_the_modifier_moves_the_pillars():
     before = layout.meshes()["pillar"][0]
     assert len(wider[0]) != len(before) or not np.allclose(wider[0], before)  # the edit changes the grid
     assert same_mesh(exported(["pillar"])["pillar"], wider) <= 0.0
+
+
+def garage_with_cars_in_bays():
+    """A kept garage (as a run keeps it across frames) whose cars snap to bays, eight wanted a frame."""
+    import bpy
+
+    from bpy_pipeline.config import load_config
+    from bpy_pipeline.stages.scene import build_frame_scene
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    config = load_config(None, ["scene.builder=parking", "scene.placement=bays", "scene.cars={kind: normal, mean: 8, std: 0, min: 0, max: 40}"])
+    keep = {}
+    build_frame_scene(config, 0, keep=keep)
+    return config, keep
+
+
+def car_centres(garage) -> np.ndarray:
+    """(n, 2) the placed cars' box centres, checked against their body objects' locations (what the export reads)."""
+    import bpy
+
+    centres = np.array([box.centre[:2] for _, box in garage.last.placed]).reshape(-1, 2)
+    bodies = np.array([bpy.data.objects[f"car_{k:03d}"].location[:2] for k in range(len(centres))]).reshape(-1, 2)
+    np.testing.assert_allclose(bodies, centres, atol=1e-5)  # float32 locations
+    return centres
+
+
+def in_bays(centres: np.ndarray, bays: np.ndarray) -> np.ndarray:
+    """Whether each centre is (within 1e-9 m) the centre of one of ``bays``."""
+    return np.array([np.linalg.norm(bays[:, :2] - c, axis=1).min() <= 1e-9 for c in centres], bool)
+
+
+def test_a_bay_width_edited_in_the_modifier_moves_the_cars_to_the_new_bays():
+    """The pillar piece's Bay Width set to 2.8 m from Python, then the kept garage's next frame: every car in a bay
+    of the pure level with 2.8 m bays (built from the values read back from the modifier), not in the old ones."""
+    import bpy
+
+    from bpy_pipeline.compat import set_modifier_input
+    from bpy_pipeline.geometry.indoor import parking_layout
+    from bpy_pipeline.stages.scene import build_frame_scene
+
+    config, keep = garage_with_cars_in_bays()
+    garage = keep["parking"][1]
+    old = parking_layout(config.scene.params).bays
+    assert garage.params is config.scene.params and in_bays(car_centres(garage), old).all()  # unedited: the YAML's level itself
+    set_modifier_input(bpy.data.objects["pillar"].modifiers[0], "Bay Width", 2.8)
+    build_frame_scene(config, 1, keep=keep)
+    assert keep["parking"][1] is garage  # the same level, edited, not rebuilt
+    assert garage.params == dataclasses.replace(config.scene.params, bay_width=2.8)
+    new = parking_layout(garage.params).bays
+    centres = car_centres(garage)
+    assert len(centres) >= 4 and in_bays(centres, new).all() and not in_bays(centres, old).all(), centres
+
+
+def test_an_unedited_level_keeps_the_yaml_values_despite_float32_inputs():
+    """2.35 m bays read back from the modifier as float32 (2.3499999) are not an edit: the garage keeps the YAML's floats."""
+    import bpy
+
+    from bpy_pipeline.builders.parking.level_nodes import edited_params
+
+    params, _ = build(bay_width=2.35, length=83.7, pillar_every=4)
+    pieces = [bpy.data.objects[n] for n in ("floor", "ceiling", "wall", "pillar", "ramp")]
+    assert edited_params(pieces, params) is params
+
+
+def test_an_impossible_edit_is_one_line_naming_the_input():
+    import bpy
+
+    from bpy_pipeline.compat import set_modifier_input
+    from bpy_pipeline.errors import InputError
+    from bpy_pipeline.stages.scene import build_frame_scene
+
+    config, keep = garage_with_cars_in_bays()
+    set_modifier_input(bpy.data.objects["ramp"].modifiers[0], "Ramp Length", 55.0)
+    with pytest.raises(InputError, match=r"ramp_length: must leave at least 8 m") as error:
+        build_frame_scene(config, 1, keep=keep)
+    assert "\n" not in str(error.value)

@@ -17,14 +17,18 @@ meshes' triangles in the same order:
 ``Part`` picks what the group outputs (1 floor, 2 ceiling, 3 walls, 4 pillars, 5 ramp), so each
 piece keeps its own object and labels (the object's ``lidar_*`` tags; ``Instance`` stores the instance id as
 the named attribute ``lidar_instance`` on the instances, which the export reads first). Changing ``Bay Width`` in
-the modifier panel moves the pillars; the builder's cars still use the bays of the YAML's level
-(the placement reads the pure layout).
+the modifier panel moves the pillars; :func:`edited_params` reads the pieces' inputs back, so the builder's
+next car placement uses the bays, pillars and ramp of the edited level (the pure layout of those values).
 """
 
 from __future__ import annotations
 
-import bpy
+import dataclasses
 
+import bpy
+import numpy as np
+
+from ...compat import get_modifier_input
 from ...scenes import box_nodes
 from ...scenes.box_nodes import select
 from ...scenes.nodes import GroupBuilder, add_group_modifier, current_group, new_group, stamp
@@ -110,12 +114,45 @@ def level_group() -> bpy.types.NodeTree:
     return b.finish()
 
 
+FIELDS = {"Length": "length", "Driveway Width": "driveway_width", "Bay Width": "bay_width", "Bay Depth": "bay_depth",
+          "Ceiling Height": "ceiling_height", "Slab Thickness": "slab_thickness", "Wall Thickness": "wall_thickness",
+          "Pillar Size": "pillar_size", "Pillar Every": "pillar_every", "Ramp Length": "ramp_length"}  # input -> ParkingScene field (:func:`inputs_of`)
+
 
 def inputs_of(p) -> dict:
     """The group's dimension inputs from a ``ParkingScene`` ``p``."""
-    return {"Length": p.length, "Driveway Width": p.driveway_width, "Bay Width": p.bay_width, "Bay Depth": p.bay_depth,
-            "Ceiling Height": p.ceiling_height, "Slab Thickness": p.slab_thickness, "Wall Thickness": p.wall_thickness,
-            "Pillar Size": p.pillar_size, "Pillar Every": p.pillar_every, "Ramp Length": p.ramp_length}
+    return {name: getattr(p, field) for name, field in FIELDS.items()}
+
+
+def _same(a, b) -> bool:
+    """Whether a modifier's value ``a`` is the built value ``b``: ints exactly, floats after float32 rounding
+    (Blender stores float inputs in single precision, so 2.35 reads back as 2.3499999)."""
+    if isinstance(b, (int, np.integer)) and not isinstance(b, bool):
+        return int(a) == int(b)
+    return np.float32(a) == np.float32(b)
+
+
+def edited_params(objects, params):
+    """``params`` (a ``ParkingScene``) with every dimension a piece's "Parking Level" modifier holds changed
+    from its built value; where pieces disagree, the first of ``objects`` whose value changed wins.
+
+    ``objects`` : the level's pieces (any order; those without the group are skipped). A value equal to
+    the built one after float32 rounding is not an edit, so an unedited level gives ``params`` itself
+    (the same floats, the same bytes); an edited float is the shortest decimal its float32 reads as
+    (typed 2.8, stored 2.7999999523, read 2.8).
+    """
+    changes = {}
+    for obj in objects:
+        for modifier in obj.modifiers:
+            if modifier.type != "NODES" or modifier.node_group is None or modifier.node_group.name != GROUP:
+                continue
+            for name, field in FIELDS.items():
+                if field in changes:
+                    continue
+                value = get_modifier_input(modifier, name)
+                if not _same(value, getattr(params, field)):
+                    changes[field] = int(value) if field == "pillar_every" else float(str(np.float32(value)))  # the shortest decimal: 2.8, not 2.7999999523
+    return dataclasses.replace(params, **changes) if changes else params
 
 
 def level_object(name: str, part: str, params, collection, prototypes: dict, instance: int = 0) -> bpy.types.Object:

@@ -95,7 +95,7 @@ class ParkingGarage:
     """The built level and its car pool; :meth:`randomize` places the cars of a frame."""
 
     def __init__(self, params):
-        self.params = params
+        self.built = self.params = params  # built: the YAML's level; params: the level as its modifiers hold it now (:meth:`follow_edits`)
         self.layout = parking_layout(params)
         self.collection = scene_collection()
         meshes = self.layout.meshes()
@@ -126,6 +126,19 @@ class ParkingGarage:
             return all(obj.name in bpy.data.objects for obj in self.static)
         except ReferenceError:
             return False
+
+    def follow_edits(self) -> None:
+        """Take the level's dimensions from its pieces' "Parking Level" modifiers (a user may have edited them since
+        the build): where they changed, the layout (bays, pillars, ramp: what placement avoids and snaps to) and
+        the visibility meshes become the pure ones of the edited values. Unedited: nothing changes."""
+        from .params import check
+
+        params = parking_nodes.edited_params(self.static, self.built)
+        if params == self.params:
+            return
+        check(params, f"the {parking_nodes.GROUP!r} modifier inputs of the parking level")
+        self.params, self.layout = params, parking_layout(params)
+        self.caster = RayCaster(_buffers(self.layout.meshes()), frame=np.eye(4))
 
     def static_distance(self, origin):
         """``f(directions (n, 3)) -> (n,)`` distance from ``origin`` to the level's first surface (inf: none)."""
@@ -163,6 +176,7 @@ class ParkingGarage:
     def randomize(self, rng: np.random.Generator, view=None):
         from ..base import BuildResult
 
+        self.follow_edits()
         p = self.params
         # where the sensor is this frame (a moving sensor's view is None: the first station stands in)
         sensor = np.asarray(view.positions[0], float) if view is not None and len(view.positions) else parking_station(p, 0)[:3, 3]
