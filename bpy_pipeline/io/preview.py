@@ -101,31 +101,37 @@ def _paint_kernels():
         return None
     import numba
 
-    @numba.njit(cache=True, nogil=True, inline="always")
-    def put(flat, best, u, v, depth, colors, i, width, panel_width, height, left):  # pragma: no cover (compiled)
-        # numpy's path: col, row = rint(u), rint(v) as int64, kept where 0 <= col < panel_width and 0 <= row < height
-        # (the float tests on the rounded values decide alike, also for NaN and out-of-range values, which
-        # numpy's int64 cast turns into the smallest int64); then the splat's rule in point order
-        col = np.rint(u)
-        row = np.rint(v)
-        if col >= 0.0 and col < panel_width and row >= 0.0 and row < height:
-            p = np.int64(row) * width + np.int64(col) + left
-            if depth >= best[p]:
-                best[p] = depth
-                flat[p, 0] = colors[i, 0]
-                flat[p, 1] = colors[i, 1]
-                flat[p, 2] = colors[i, 2]
-
+    # numpy's path: col, row = rint(u), rint(v) as int64, kept where 0 <= col < panel_width and 0 <= row < height
+    # (the float tests on the rounded values decide alike, also for NaN and out-of-range values, which numpy's
+    # int64 cast turns into the smallest int64); then the splat's rule in point order. Written out in both
+    # kernels: a jitted helper called from them would keep numba from caching them on disk.
     @numba.njit(cache=True, nogil=True)
     def top(flat, best, xyz, colors, centre0, centre1, scale, half_w, half_h, width, panel_width, height, left):  # pragma: no cover
         for i in range(len(xyz)):  # u = half_w - (y - centre1) * scale, v = half_h - (x - centre0) * scale, depth z
-            put(flat, best, half_w - (xyz[i, 1] - centre1) * scale, half_h - (xyz[i, 0] - centre0) * scale, xyz[i, 2], colors, i, width, panel_width, height, left)
+            col = np.rint(half_w - (xyz[i, 1] - centre1) * scale)
+            row = np.rint(half_h - (xyz[i, 0] - centre0) * scale)
+            if col >= 0.0 and col < panel_width and row >= 0.0 and row < height:
+                p = np.int64(row) * width + np.int64(col) + left
+                if xyz[i, 2] >= best[p]:
+                    best[p] = xyz[i, 2]
+                    flat[p, 0] = colors[i, 0]
+                    flat[p, 1] = colors[i, 1]
+                    flat[p, 2] = colors[i, 2]
 
     @numba.njit(cache=True, nogil=True)
     def perspective(flat, best, cam, colors, focal, half_w, half_h, width, panel_width, height, left):  # pragma: no cover
         for i in range(len(cam)):  # in front (depth > 0.1): u = half_w + focal * x / depth, v = half_h + focal * y / depth, depth -depth
             if cam[i, 2] > 0.1:
-                put(flat, best, half_w + focal * cam[i, 0] / cam[i, 2], half_h + focal * cam[i, 1] / cam[i, 2], -cam[i, 2], colors, i, width, panel_width, height, left)
+                col = np.rint(half_w + focal * cam[i, 0] / cam[i, 2])
+                row = np.rint(half_h + focal * cam[i, 1] / cam[i, 2])
+                if col >= 0.0 and col < panel_width and row >= 0.0 and row < height:
+                    p = np.int64(row) * width + np.int64(col) + left
+                    depth = -cam[i, 2]
+                    if depth >= best[p]:
+                        best[p] = depth
+                        flat[p, 0] = colors[i, 0]
+                        flat[p, 1] = colors[i, 1]
+                        flat[p, 2] = colors[i, 2]
 
     return top, perspective
 
