@@ -150,6 +150,15 @@ def main() -> dict:
     set_input(bpy.data.objects["street_plants"], "Density", 0.5)
     after = scan(config, "street_after")
     found["street_density"] = compare(before, after, "vegetation")
+    # street: every lane 1 m narrower (the road's "Street Road" modifier; a wider road hides under the kerbs), scanned again
+    config, _ = built("street")
+    from bpy_pipeline.builders.street.layout import road_meshes
+
+    ordered = lambda v: v[np.lexsort(np.round(v, 4).T[::-1])]  # noqa: E731 - the vertices in one order (ties kept by rounding)
+    pure = dict(zip(("street_road", "street_kerbs", "street_sidewalks"), road_meshes(config.scene.params)[:3]))
+    found["max_vertex_difference_m"]["street road"] = max(float(np.abs(ordered(evaluated(bpy.data.objects[n])) - ordered(m[0])).max()) for n, m in pure.items())
+    set_input(bpy.data.objects["street_road"], "Lane Width", config.scene.params.lane_width - 1.0)
+    found["street_lane_width"] = compare(before, scan(config, "street_wider"), "road")
     return found
 
 

@@ -153,6 +153,39 @@ class StreetLayout:
         return bool((a <= self.arm_length).all() and a.min() <= self.half_road)
 
 
+def road_meshes(p) -> tuple[Mesh, Mesh, Mesh, list[tuple[float, float, float, float]]]:
+    """The carriageway, the kerbs and the sidewalks of :class:`~bpy_pipeline.builders.street.StreetScene` ``p``
+    (meshes, m, world) and the sidewalks' rectangles ``(x0, x1, y0, y1)`` (m). The reference of the "Street Road"
+    Geometry Nodes group (builders/street/road_nodes.py).
+
+    road : the road along x whole (2 arm_length x 2 R), the road along y in two halves beside it;
+    kerbs : per arm and side a ``kerb_width`` x ``kerb_height`` box at ``|across| = R``, the x road's from the
+    corner (``R``), the y road's from ``R + kerb_width``; sidewalks : per arm and side a slab ``kerb_height`` high
+    from ``R + kerb_width`` to ``R + kerb_width + sidewalk_width`` across, the x road's from ``R + kerb_width``,
+    the y road's from ``R + kerb_width + sidewalk_width`` along.
+    """
+    lw, n, pw = p.lane_width, p.lanes_per_direction, p.parking_width
+    R = n * lw + pw
+    A = p.arm_length
+    kw, kh, sw = p.kerb_width, p.kerb_height, p.sidewalk_width
+    inner, outer = R + kw, R + kw + sw
+    # carriageway: the road along x whole, the road along y in two halves beside it
+    road = [primitives.translated(primitives.plane(2 * A, 2 * R), (0.0, 0.0, 0.0))]
+    for sign in (-1, 1):
+        road.append(primitives.translated(primitives.plane(2 * R, A - R), (0.0, sign * (A + R) / 2, 0.0)))
+    # kerbs and sidewalks: along each arm, on both sides, up to the corner squares
+    kerbs, walks, walk_rects = [], [], []
+    for sx in (-1, 1):
+        for sy in (-1, 1):
+            # kerb along the x road (y = sy R) from the corner to the arm's end, and along the y road
+            kerbs.append(box_mesh(*sorted((sx * R, sx * A)), *sorted((sy * R, sy * inner)), 0.0, kh))
+            kerbs.append(box_mesh(*sorted((sx * R, sx * inner)), *sorted((sy * inner, sy * A)), 0.0, kh))
+            walk_rects.append((*sorted((sx * inner, sx * A)), *sorted((sy * inner, sy * outer))))
+            walk_rects.append((*sorted((sx * inner, sx * outer)), *sorted((sy * outer, sy * A))))
+            walks += [box_mesh(*rect, 0.0, kh) for rect in walk_rects[-2:]]
+    return primitives.merge(road), primitives.merge(kerbs), primitives.merge(walks), walk_rects
+
+
 def street_layout(p, rng: np.random.Generator) -> StreetLayout:
     """The static intersection of :class:`~bpy_pipeline.builders.street.StreetScene` ``p``, its buildings drawn from ``rng``."""
     lw, n, pw = p.lane_width, p.lanes_per_direction, p.parking_width
@@ -166,23 +199,10 @@ def street_layout(p, rng: np.random.Generator) -> StreetLayout:
     def add(name, class_name, reflectivity, mesh, material="diffuse", inst=None, scatter=None):
         parts.append(Part(name, class_name, reflectivity, next(instance) if inst is None else inst, mesh, material, scatter))
 
-    # carriageway: the road along x whole, the road along y in two halves beside it
-    road = [primitives.translated(primitives.plane(2 * A, 2 * R), (0.0, 0.0, 0.0))]
-    for sign in (-1, 1):
-        road.append(primitives.translated(primitives.plane(2 * R, A - R), (0.0, sign * (A + R) / 2, 0.0)))
-    add("street_road", "road", REFLECTIVITY["road"], primitives.merge(road))
-    # kerbs and sidewalks: along each arm, on both sides, up to the corner squares
-    kerbs, walks, walk_rects = [], [], []
-    for sx in (-1, 1):
-        for sy in (-1, 1):
-            # kerb along the x road (y = sy R) from the corner to the arm's end, and along the y road
-            kerbs.append(box_mesh(*sorted((sx * R, sx * A)), *sorted((sy * R, sy * inner)), 0.0, kh))
-            kerbs.append(box_mesh(*sorted((sx * R, sx * inner)), *sorted((sy * inner, sy * A)), 0.0, kh))
-            walk_rects.append((*sorted((sx * inner, sx * A)), *sorted((sy * inner, sy * outer))))
-            walk_rects.append((*sorted((sx * inner, sx * outer)), *sorted((sy * outer, sy * A))))
-            walks += [box_mesh(*rect, 0.0, kh) for rect in walk_rects[-2:]]
-    add("street_kerbs", "kerb", REFLECTIVITY["kerb"], primitives.merge(kerbs))
-    add("street_sidewalks", "sidewalk", REFLECTIVITY["sidewalk"], primitives.merge(walks))
+    road, kerbs, walks, walk_rects = road_meshes(p)
+    add("street_road", "road", REFLECTIVITY["road"], road)
+    add("street_kerbs", "kerb", REFLECTIVITY["kerb"], kerbs)
+    add("street_sidewalks", "sidewalk", REFLECTIVITY["sidewalk"], walks)
     # markings: zebra crossings and dashed centre lines, 5 mm thick, class road
     crossings, marks = [], []
     c0, c1 = R + kw + p.crossing_offset, R + kw + p.crossing_offset + p.crossing_width

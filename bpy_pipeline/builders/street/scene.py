@@ -5,7 +5,9 @@ The static intersection (road, markings, kerbs, sidewalks, traffic lights and si
 scans the same street whichever frame a run starts at. Its scattered items (trunks, crowns and
 bushes, lamps and bollards, bins, bicycle stands, cones, barriers) are one object per kind whose
 live "Street Scatter" Geometry Nodes modifier instances the kind's prototypes on the object's
-points (builders/street/scatter_nodes.py); a user can edit its inputs or move its points and rescan.
+points (builders/street/scatter_nodes.py); the carriageway, kerbs and sidewalks are objects whose
+edges are the roads' centre lines and whose live "Street Road" modifier sweeps their profiles along them
+(builders/street/road_nodes.py); a user can edit their inputs or move their points and rescan.
 Each frame removes the last frame's road users and places new ones from the frame's generator
 (lane following, platoons, parked cars, pedestrians on sidewalks and crossings, field-of-view
 aware when the run's sensors are known).
@@ -22,10 +24,12 @@ import numpy as np
 
 from ...scenes.objects import mesh_data, mesh_object, scene_collection, tag
 from . import layout as street
+from .road_nodes import road_object
 from .scatter_nodes import prototypes_collection, scatter_object
 
 USER_INSTANCE = 1000  # road users' instance ids start here; static parts use 1 .. 999
 USERS_COLLECTION = "LiDAR Street Users"
+SWEPT = {"street_road": "road", "street_kerbs": "kerbs", "street_sidewalks": "sidewalks"}  # parts the "Street Road" group builds
 
 
 class Intersection:
@@ -36,14 +40,18 @@ class Intersection:
         self.layout = street.street_layout(params, np.random.default_rng(params.layout_seed))
         self.collection = scene_collection()
         prototypes = prototypes_collection(self.collection)
-        self.static = [
-            tag(mesh_object(part.name, part.mesh, self.collection) if part.scatter is None else scatter_object(part.name, part.scatter, self.collection, prototypes, part.instance or 0),
-                part.class_name, part.material, part.reflectivity, part.instance)
-            for part in self.layout.parts
-        ]
+        self.static = [tag(self._static_object(part, prototypes), part.class_name, part.material, part.reflectivity, part.instance) for part in self.layout.parts]
         self.users = bpy.data.collections.new(USERS_COLLECTION)
         self.collection.children.link(self.users)
         bpy.context.view_layer.update()
+
+    def _static_object(self, part, prototypes) -> bpy.types.Object:
+        """``part``'s object: swept by "Street Road" (road, kerbs, sidewalks), scattered by "Street Scatter", else its mesh."""
+        if part.name in SWEPT:
+            return road_object(part.name, SWEPT[part.name], self.params, self.collection, part.instance or 0)
+        if part.scatter is not None:
+            return scatter_object(part.name, part.scatter, self.collection, prototypes, part.instance or 0)
+        return mesh_object(part.name, part.mesh, self.collection)
 
     def alive(self) -> bool:
         try:
