@@ -2,7 +2,7 @@
 
 One source of truth: each piece's object (floor, ceiling, walls, pillars, ramp), evaluated through
 the depsgraph as the export reads it, gives the vertices and triangles of the pure
-``parking_layout(...).meshes()`` (geometry/indoor.py) within 1e-6 m plus the float32 rounding of
+``level_layout(...).meshes()`` (builders/parking/layout.py: geometry/indoor.py's level with doorways) within 1e-6 m plus the float32 rounding of
 the coordinate, for several parameter sets; and a bay width edited in the modifier moves the
 pillars the export reads.
 """
@@ -50,14 +50,14 @@ def same_mesh(got, want) -> float:
 def build(**changes):
     import bpy
 
+    from bpy_pipeline.builders.parking.layout import level_layout
     from bpy_pipeline.builders.parking.params import ParkingScene
-    from bpy_pipeline.geometry.indoor import parking_layout
     from bpy_pipeline.builders.parking.scene import ParkingGarage
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     params = dataclasses.replace(ParkingScene(), **changes)
     ParkingGarage(params)
-    return params, parking_layout(params)
+    return params, level_layout(params)
 
 
 @pytest.mark.parametrize("changes", [
@@ -65,6 +65,9 @@ def build(**changes):
     {"ramp_length": 0.0},
     {"length": 83.7, "bay_width": 2.35, "bay_depth": 4.8, "pillar_every": 4, "pillar_size": 0.45, "driveway_width": 7.1, "ramp_length": 11.3},
     {"length": 25.0, "ceiling_height": 3.1, "slab_thickness": 0.25, "wall_thickness": 0.2, "pillar_every": 1, "ramp_length": 9.0},
+    {"wall_openings": 1},
+    {"wall_openings": 3, "opening_width": 2.4, "opening_height": 2.3, "length": 71.0, "wall_thickness": 0.35, "driveway_width": 7.1},
+    {"wall_openings": 7, "opening_width": 0.9, "opening_height": 1.95, "length": 25.0, "ceiling_height": 3.1, "ramp_length": 0.0},
 ])
 def test_the_group_builds_the_pure_level(changes):
     import bpy

@@ -136,6 +136,12 @@ def main() -> dict:
     pillars = after[after["semantic"] == class_id("pillar")]
     world = np.column_stack([pillars["x"], pillars["y"], pillars["z"]]).astype(float)  # output.frame: world
     found["parking_bay_width"]["pillar_points_off_the_new_pillars_m"] = float(box_distance(world, wider[0]).max(initial=0.0))
+    # parking: walls with three doorways each against the pure level's
+    from bpy_pipeline.builders.parking.layout import level_layout
+
+    config, _ = built("parking", "scene.wall_openings=3", "scene.opening_width=2.4")
+    pure = level_layout(config.scene.params).meshes()["wall"]
+    found["max_vertex_difference_m"]["parking doorways"] = float(np.abs(exported_pieces(["wall"])["wall"] - pure[0][pure[1]].reshape(-1, 3)).max())
 
     # hall: pieces against the pure boxes
     config, _ = built("industrial_hall")

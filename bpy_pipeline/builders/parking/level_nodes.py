@@ -8,7 +8,9 @@ meshes' triangles in the same order:
 - floor: one slab of ``Slab Thickness`` under the floor, the walls' outer size;
 - ceiling: one slab above ``Ceiling Height``, open above the ramp (two slabs when there is one);
 - walls: four, ``Wall Thickness`` thick, around the driveway (``Driveway Width``) and a bay depth
-  (``Bay Depth``) plus 0.5 m on either side, ``Length`` long;
+  (``Bay Depth``) plus 0.5 m on either side, ``Length`` long; the two long walls cut by
+  ``Wall Openings`` doorways each (``Opening Width`` by ``Opening Height``, evenly spaced; segments
+  and lintels in :func:`.layout.level_layout`'s order);
 - pillars: between every ``Pillar Every`` bays of ``Bay Width`` along both bay rows' front lines,
   ``Pillar Size`` square, in groups of bays as many as fit in ``Length`` (a pillar gap
   ``Pillar Size`` + 0.2 m); none where the ramp is;
@@ -34,7 +36,7 @@ from ...scenes.box_nodes import select
 from ...scenes.nodes import GroupBuilder, add_group_modifier, current_group, new_group, stamp
 
 GROUP = "Parking Level"
-VERSION = 2  # 2: the Instance input, stored as lidar_instance
+VERSION = 3  # 2: the Instance input, stored as lidar_instance; 3: doorways in the long walls
 PARTS = {"floor": 1, "ceiling": 2, "wall": 3, "pillar": 4, "ramp": 5}
 
 INPUTS = [
@@ -50,6 +52,9 @@ INPUTS = [
     ("Pillar Size", "NodeSocketFloat", 0.6, "m, the square pillars' side", 0.0, 10.0),
     ("Pillar Every", "NodeSocketInt", 3, "bays between two pillars", 1, 1000),
     ("Ramp Length", "NodeSocketFloat", 16.0, "m (0: no ramp)", 0.0, 1000.0),
+    ("Wall Openings", "NodeSocketInt", 0, "doorways in each long wall, evenly spaced (0: none)", 0, 1000),
+    ("Opening Width", "NodeSocketFloat", 1.2, "m, a doorway's width", 0.0, 100.0),
+    ("Opening Height", "NodeSocketFloat", 2.1, "m, a doorway's height (a lintel above it up to the ceiling)", 0.0, 100.0),
     ("Box", "NodeSocketObject", None, "the unit box instanced for slabs, walls and pillars"),
     ("Wedge", "NodeSocketObject", None, "the ramp's unit wedge"),
     *box_nodes.FINISH_INPUTS,
@@ -77,12 +82,26 @@ def level_group() -> bpy.types.NodeTree:
 
     floor = box_nodes.place(b, 1, xyz(0.0, 0.0, m("MULTIPLY", slab, -0.5)), xyz(m("MULTIPLY", outer_x, 2.0), m("MULTIPLY", outer_y, 2.0), slab), box)
 
-    # walls: two along x at y = +-(half_y + t / 2), then two along y at x = +-(half_x + t / 2)
-    along_x = b.compare("LESS_THAN", i, 1.5)
-    wall_centre = xyz(select(b, along_x, m("MULTIPLY", side, m("ADD", half_x, m("MULTIPLY", t, 0.5))), 0.0),
-                      select(b, along_x, 0.0, m("MULTIPLY", side, m("ADD", half_y, m("MULTIPLY", t, 0.5)))), m("MULTIPLY", h, 0.5))
-    wall_size = xyz(select(b, along_x, t, m("MULTIPLY", outer_x, 2.0)), select(b, along_x, m("MULTIPLY", half_y, 2.0), t), h)
-    walls = box_nodes.place(b, 4, wall_centre, wall_size, box)
+    # walls: the long walls' segments at y = +-(half_y + t / 2) (k doorways: k + 1 segments a wall, segment j of
+    # both walls in turn), the end walls at x = +-(half_x + t / 2), then a lintel over each doorway (both walls in turn)
+    k, half_w, top = g("Wall Openings"), m("MULTIPLY", g("Opening Width"), 0.5), g("Opening Height")
+    segments = m("MULTIPLY", m("ADD", k, 1.0), 2.0)
+    is_segment, is_end = b.compare("LESS_THAN", i, m("SUBTRACT", segments, 0.5)), b.compare("LESS_THAN", i, m("ADD", segments, 1.5))
+    j = m("FLOOR", m("DIVIDE", i, 2.0))  # a segment's number along its wall
+    j_lintel = m("FLOOR", m("DIVIDE", m("SUBTRACT", i, m("ADD", segments, 2.0)), 2.0))
+    step = m("DIVIDE", g("Length"), m("MULTIPLY", m("ADD", k, 1.0), 2.0))  # half the doorways' spacing
+    doorway = lambda n: m("MULTIPLY", m("SUBTRACT", m("ADD", m("MULTIPLY", n, 2.0), 1.0), k), step)  # noqa: E731 - doorway n's centre x: (2 n + 1 - k) L / (2 (k + 1)), no cancellation
+    start = select(b, b.compare("LESS_THAN", j, 0.5), m("ADD", doorway(m("SUBTRACT", j, 1.0)), half_w), m("MULTIPLY", outer_x, -1.0))
+    end = select(b, b.compare("GREATER_THAN", j, m("SUBTRACT", k, 0.5)), m("SUBTRACT", doorway(j), half_w), outer_x)
+
+    def three(segment, end_wall, lintel):
+        return select(b, is_segment, select(b, is_end, lintel, end_wall), segment)
+
+    long_y = m("MULTIPLY", side, m("ADD", half_y, m("MULTIPLY", t, 0.5)))
+    wall_centre = xyz(three(m("MULTIPLY", m("ADD", start, end), 0.5), m("MULTIPLY", side, m("ADD", half_x, m("MULTIPLY", t, 0.5))), doorway(j_lintel)),
+                      three(long_y, 0.0, long_y), three(m("MULTIPLY", h, 0.5), m("MULTIPLY", h, 0.5), m("MULTIPLY", m("ADD", top, h), 0.5)))
+    wall_size = xyz(three(m("SUBTRACT", end, start), t, g("Opening Width")), three(t, m("MULTIPLY", half_y, 2.0), t), three(h, h, m("SUBTRACT", h, top)))
+    walls = box_nodes.place(b, m("MULTIPLY", segments, 2.0), wall_centre, wall_size, box)  # 2 (k + 1) + 2 + 2 k
 
     # ceiling: west of the ramp over the full width, then beside the ramp (one slab without a ramp)
     x0 = select(b, ramp, outer_x, ramp_x0)
@@ -116,7 +135,10 @@ def level_group() -> bpy.types.NodeTree:
 
 FIELDS = {"Length": "length", "Driveway Width": "driveway_width", "Bay Width": "bay_width", "Bay Depth": "bay_depth",
           "Ceiling Height": "ceiling_height", "Slab Thickness": "slab_thickness", "Wall Thickness": "wall_thickness",
-          "Pillar Size": "pillar_size", "Pillar Every": "pillar_every", "Ramp Length": "ramp_length"}  # input -> ParkingScene field (:func:`inputs_of`)
+          "Pillar Size": "pillar_size", "Pillar Every": "pillar_every", "Ramp Length": "ramp_length",
+          "Wall Openings": "wall_openings", "Opening Width": "opening_width", "Opening Height": "opening_height"}  # input -> ParkingScene field (:func:`inputs_of`)
+
+INTS = {"pillar_every", "wall_openings"}
 
 
 def inputs_of(p) -> dict:
@@ -151,7 +173,7 @@ def edited_params(objects, params):
                     continue
                 value = get_modifier_input(modifier, name)
                 if not _same(value, getattr(params, field)):
-                    changes[field] = int(value) if field == "pillar_every" else float(str(np.float32(value)))  # the shortest decimal: 2.8, not 2.7999999523
+                    changes[field] = int(value) if field in INTS else float(str(np.float32(value)))  # the shortest decimal: 2.8, not 2.7999999523
     return dataclasses.replace(params, **changes) if changes else params
 
 

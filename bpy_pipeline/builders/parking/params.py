@@ -17,7 +17,9 @@ class ParkingScene:
 
     A driveway along x with parking bays on both sides, a pillar between every ``pillar_every``
     bays on the bays' front line, walls, floor and ceiling slabs, a ramp to the next level in
-    place of the last bays on the +y side (``ramp_length`` 0: none). The sensor rides a cleaning
+    place of the last bays on the +y side (``ramp_length`` 0: none). Each long wall has
+    ``wall_openings`` doorways, ``opening_width`` by ``opening_height``, evenly spaced along it
+    (0: none; :func:`.layout.level_layout`). The sensor rides a cleaning
     robot along the driveway centre: ``sensor_height`` above the floor (the paper's VLP-16:
     1.51 m), ``sensor_start`` from the driveway's start at frame 0, ``sensor_step`` further each
     frame, back to the start past the end. Cars per frame follow the paper's insertion rule
@@ -42,6 +44,9 @@ class ParkingScene:
     pillar_size: float = 0.6
     pillar_every: int = 3
     ramp_length: float = 16.0
+    wall_openings: int = 0
+    opening_width: float = 1.2
+    opening_height: float = 2.1
     place_sensor: bool = True
     sensor_height: float = 1.51
     sensor_start: float = 4.0
@@ -60,7 +65,7 @@ class ParkingScene:
 
 
 
-MAY_BE_ZERO = {"ramp_length", "sensor_start", "sensor_step", "near_rejection_distance", "car_clearance", "min_visible_fraction", "near_rejection_probability", "max_consecutive_failures"}
+MAY_BE_ZERO = {"ramp_length", "wall_openings", "sensor_start", "sensor_step", "near_rejection_distance", "car_clearance", "min_visible_fraction", "near_rejection_probability", "max_consecutive_failures"}
 
 
 def check(params: ParkingScene, where: str) -> None:
@@ -73,6 +78,10 @@ def check(params: ParkingScene, where: str) -> None:
     check_distribution(params.car_height, f"{where}.car_height", low=0.5, high=4.0)
     if params.ramp_length > params.length - 8.0:
         raise InputError(f"{where}.ramp_length: must leave at least 8 m of the level's length ({params.length} m) for the driveway, got {params.ramp_length}")
+    if params.opening_height >= params.ceiling_height:
+        raise InputError(f"{where}.opening_height: must be below the ceiling ({params.ceiling_height} m), got {params.opening_height}")
+    if params.wall_openings and params.opening_width >= params.length / (params.wall_openings + 1):
+        raise InputError(f"{where}.opening_width: {params.wall_openings} doorways a wall leave no wall between them unless under {params.length / (params.wall_openings + 1):.3f} m (length / (wall_openings + 1)), got {params.opening_width}")
     if params.sensor_height >= params.ceiling_height:
         raise InputError(f"{where}.sensor_height: must be below the ceiling ({params.ceiling_height} m), got {params.sensor_height}")
 

@@ -26,12 +26,13 @@ import numpy as np
 
 from ...buffers import MATERIAL_ID, ObjectTable, SceneBuffers
 from ...geometry.objects import COLOURS, GLASS_REFLECTIVITY, INTERIOR_REFLECTIVITY, PARTS, STYLES, TYRE_REFLECTIVITY, car_parts, style_size
-from ...geometry.indoor import parking_layout, parking_station
+from ...geometry.indoor import parking_station
 from ...geometry.placement import FloorBoxPlacer, insert_sequentially, sample, sample_count, turn_about
 from ...lidar.raycast import RayCaster
 from ...scenes import box_nodes
 from ...scenes.objects import mesh_data, scene_collection, tag
 from . import level_nodes as parking_nodes
+from .layout import level_layout
 
 INSTANCE = {"floor": 1, "ceiling": 2, "wall": 3, "pillar": 4, "ramp": 5, "car": 100}
 STATIC_REFLECTIVITY = {"floor": 0.25, "ceiling": 0.45, "wall": 0.5, "pillar": 0.5, "ramp": 0.3}
@@ -96,7 +97,7 @@ class ParkingGarage:
 
     def __init__(self, params):
         self.built = self.params = params  # built: the YAML's level; params: the level as its modifiers hold it now (:meth:`follow_edits`)
-        self.layout = parking_layout(params)
+        self.layout = level_layout(params)
         self.collection = scene_collection()
         meshes = self.layout.meshes()
         prototypes = box_nodes.prototypes(self.collection)  # the level's pieces through the "Parking Level" group
@@ -137,7 +138,7 @@ class ParkingGarage:
         if params == self.params:
             return
         check(params, f"the {parking_nodes.GROUP!r} modifier inputs of the parking level")
-        self.params, self.layout = params, parking_layout(params)
+        self.params, self.layout = params, level_layout(params)
         self.caster = RayCaster(_buffers(self.layout.meshes()), frame=np.eye(4))
 
     def static_distance(self, origin):
