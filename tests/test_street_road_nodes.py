@@ -1,9 +1,11 @@
-"""The street's carriageway, kerbs and sidewalks through the "Street Road" Geometry Nodes group (builders/street/road_nodes.py).
+"""The street's carriageway, kerbs and sidewalks through the "Street Road" Geometry Nodes group
+(builders/street/road_nodes.py), and its buildings through "Street Facade" (builders/street/facade_nodes.py).
 
 One source of truth: each swept part, evaluated through the depsgraph, has the vertices of the pure
-:func:`~bpy_pipeline.builders.street.layout.road_meshes` for several parameter sets; the built street
-labels them as the pure parts; and changing the road's ``Lane Width`` in its modifier moves the road
-(to where the pure function puts the wider road) and nothing else.
+:func:`~bpy_pipeline.builders.street.layout.road_meshes` (every building: its pure box) for several
+parameter sets; the built street labels them as the pure parts; and changing the road's ``Lane Width``
+(a building's ``Height``) in its modifier moves the road (the building) to where the pure function
+puts it, and nothing else.
 """
 
 import dataclasses
@@ -74,6 +76,35 @@ def test_group_vs_pure_vertices_for_several_parameter_sets(k):
         assert area == pytest.approx(_area(mesh), rel=1e-5), part
 
 
+FACADE_SETS = [
+    StreetScene(),
+    StreetScene(layout_seed=3, building_depth=14.0, building_height=(3.0, 40.0), building_width=(6.0, 30.0), setback=(0.0, 2.0), arm_length=150.0),
+    StreetScene(layout_seed=11, building_depth=6.5, building_height=(10.0, 12.0), open_share=0.0, sidewalk_width=5.0),
+]
+
+
+@pytest.mark.bpy
+@pytest.mark.parametrize("k", range(len(FACADE_SETS)))
+def test_facade_group_vs_pure_building_boxes_for_several_parameter_sets(k):
+    import bpy
+
+    from bpy_pipeline.builders.street.facade_nodes import facade_object
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    params = FACADE_SETS[k]
+    buildings = [p for p in street.street_layout(params, np.random.default_rng(params.layout_seed)).parts if p.front is not None]
+    assert len(buildings) >= 10
+    for part in buildings:
+        facade_object(part.name, part.front, bpy.context.scene.collection, part.instance)
+    bpy.context.view_layer.update()
+    worst = -1.0
+    for part in buildings:
+        v, faces, area = _evaluated(bpy.data.objects[part.name])
+        worst = max(worst, _excess(v, part.mesh[0], params.arm_length))
+        assert 2 * faces == len(part.mesh[1]) and area == pytest.approx(_area(part.mesh), rel=1e-5), part.name
+    assert worst <= 0.0
+
+
 @pytest.fixture(scope="module")
 def street_frame():
     """The default street's first frame built with the bpy module: its layout."""
@@ -92,17 +123,24 @@ def street_frame():
 SWEPT = ("street_road", "street_kerbs", "street_sidewalks")
 
 
+def _buildings(layout) -> list:
+    return [p for p in layout.parts if p.front is not None]
+
+
 @pytest.mark.bpy
 def test_the_street_has_live_road_and_scatter_groups(street_frame):
     import bpy
 
     from bpy_pipeline.compat import get_modifier_input, interface_inputs
 
-    _, params = street_frame
+    layout, params = street_frame
     modifiers = [(obj.name, m) for obj in bpy.data.objects if obj.name.startswith("street_") for m in obj.modifiers if m.type == "NODES"]
     road = sorted(name for name, m in modifiers if m.node_group.name == "Street Road")
     assert road == sorted(SWEPT)
-    assert {m.node_group.name for _, m in modifiers} == {"Street Road", "Street Scatter"} and len(modifiers) == 3 + 7
+    facades = sorted(name for name, m in modifiers if m.node_group.name == "Street Facade")
+    assert facades == sorted(p.name for p in _buildings(layout)) and all(name.startswith("street_building_") for name in facades)
+    assert {m.node_group.name for _, m in modifiers} == {"Street Facade", "Street Road", "Street Scatter"}
+    assert len(modifiers) == 3 + 7 + len(facades) == 45  # the default layout's 35 buildings
     assert {"Part", "Lanes", "Lane Width", "Parking Width", "Kerb Width", "Kerb Height", "Sidewalk Width", "Instance"} <= set(interface_inputs(bpy.data.node_groups["Street Road"]))
     modifier = bpy.data.objects["street_road"].modifiers[0]
     assert get_modifier_input(modifier, "Lane Width") == pytest.approx(params.lane_width) and get_modifier_input(modifier, "Lanes") == params.lanes_per_direction
@@ -116,7 +154,7 @@ def test_the_export_labels_the_swept_parts_as_the_pure_parts(street_frame):
     layout, params = street_frame
     buffers = export_scene(load_class_table())
     objects = buffers.objects
-    for part in (p for p in layout.parts if p.name in SWEPT):
+    for part in (p for p in layout.parts if p.name in SWEPT or p.front is not None):
         assert objects.names.count(part.name) == 1, part.name  # the face attribute lidar_instance equals the tag: no split
         r = objects.names.index(part.name)
         assert (objects.class_names[r], int(objects.instance[r])) == (part.class_name, part.instance)
@@ -163,3 +201,39 @@ def test_a_wider_lane_in_the_modifier_moves_the_road_and_nothing_else(street_fra
         if name != "street_road":
             assert np.array_equal(before[name], after[name]), name  # nothing else moved
     assert np.array_equal(pieces()["street_road"], before["street_road"])  # back as built
+
+
+@pytest.mark.bpy
+def test_a_taller_building_in_its_modifier_moves_its_roof_and_nothing_else(street_frame):
+    import bpy
+
+    from bpy_pipeline.compat import set_modifier_input
+    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.labels import load_class_table
+
+    layout, params = street_frame
+    table = load_class_table()
+    part = _buildings(layout)[0]
+    obj = bpy.data.objects[part.name]
+
+    def height(value):
+        set_modifier_input(obj.modifiers[0], "Height", value)
+        obj.update_tag()
+        bpy.context.view_layer.update()
+
+    def pieces():
+        buffers = export_scene(table)
+        return {name: buffers.vertices[buffers.triangles[buffers.triangle_object == r]] for r, name in enumerate(buffers.objects.names)}
+
+    before = pieces()
+    height(part.front[3] + 5.0)
+    try:
+        after = pieces()
+    finally:
+        height(part.front[3])
+    taller = part.mesh[0].copy()
+    taller[taller[:, 2] > taller[:, 2].min(), 2] += 5.0  # the pure box 5 m taller
+    assert _excess(np.unique(after[part.name].reshape(-1, 3), axis=0), np.unique(taller, axis=0), params.arm_length) <= 0.0
+    for name in before:
+        if name != part.name:
+            assert np.array_equal(before[name], after[name]), name

@@ -163,6 +163,10 @@ def main() -> dict:
     ordered = lambda v: v[np.lexsort(np.round(v, 4).T[::-1])]  # noqa: E731 - the vertices in one order (ties kept by rounding)
     pure = dict(zip(("street_road", "street_kerbs", "street_sidewalks"), road_meshes(config.scene.params)[:3]))
     found["max_vertex_difference_m"]["street road"] = max(float(np.abs(ordered(evaluated(bpy.data.objects[n])) - ordered(m[0])).max()) for n, m in pure.items())
+    from bpy_pipeline.builders.street.layout import street_layout
+
+    buildings = [p for p in street_layout(config.scene.params, np.random.default_rng(config.scene.params.layout_seed)).parts if p.front is not None]
+    found["max_vertex_difference_m"]["street facades"] = max(float(np.abs(ordered(evaluated(bpy.data.objects[p.name])) - ordered(p.mesh[0])).max()) for p in buildings)
     set_input(bpy.data.objects["street_road"], "Lane Width", config.scene.params.lane_width - 1.0)
     found["street_lane_width"] = compare(before, scan(config, "street_wider"), "road")
     return found

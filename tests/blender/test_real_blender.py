@@ -599,7 +599,7 @@ def test_node_groups_match_the_pure_functions_and_an_edited_input_rescans(chroot
     assert counts["railway"]["groups"] == ["Catenary Droppers", "Catenary Wire", "Track"] and counts["railway"]["modifiers"] > 5
     assert counts["parking"]["groups"] == ["Parking Level"] and counts["parking"]["modifiers"] == 5
     assert counts["industrial_hall"]["groups"] == ["Industrial Hall"] and counts["industrial_hall"]["modifiers"] >= 3
-    assert counts["street"]["groups"] == ["Street Road", "Street Scatter"] and counts["street"]["modifiers"] == 10
+    assert counts["street"]["groups"] == ["Street Facade", "Street Road", "Street Scatter"] and counts["street"]["modifiers"] == 7 + 3 + 35  # 35 buildings
     difference = found["max_vertex_difference_m"]
     assert difference["catenary wires"] <= 1e-5 and difference["parking"] <= 1e-5 and difference["parking doorways"] <= 1e-5 and difference["industrial_hall"] <= 1e-5, difference
     sag = found["railway_sag"]  # every contact wire 0.3 m lower at mid-span: its points lower, nothing else moved
@@ -610,6 +610,7 @@ def test_node_groups_match_the_pure_functions_and_an_edited_input_rescans(chroot
     lanes = found["street_lane_width"]  # every lane 1 m narrower: fewer road points, no other beam's point moved
     assert lanes["edited_changed"] and lanes["edited_points"][1] < lanes["edited_points"][0] and lanes["other_moved_over_1mm"] == 0, lanes
     assert difference["street road"] <= 1e-6 + 2.4e-5, difference  # Trim Curve's float32 arithmetic along 200 m centre lines
+    assert difference["street facades"] <= 1e-5, difference
 
 
 NODE_EDITOR = """

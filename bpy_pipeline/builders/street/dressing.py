@@ -29,8 +29,9 @@ barriers) are *instances*: a :class:`Scatter` holds a few prototype meshes per k
 variants per shape drawn from the layout's generator) and per item a transform (position, yaw,
 scale, prototype). Its :meth:`Scatter.mesh` places the prototypes by those transforms: the pure
 reference that the "Street Scatter" Geometry Nodes group (builders/street/scatter_nodes.py) instances
-in Blender. Terrain, plot boundaries (fences, walls, hedges) and buildings run along the
-plots and stay plain meshes.
+in Blender. Terrain and plot boundaries (fences, walls, hedges) run along the plots and stay plain
+meshes; buildings are boxes whose facade lines (``Dressing.fronts``) the "Street Facade" group
+(builders/street/facade_nodes.py) sweeps in Blender.
 """
 
 from __future__ import annotations
@@ -105,6 +106,7 @@ class Dressing:
     circles: list[tuple[float, float, float]] = field(default_factory=list)
     blocks: list[tuple[np.ndarray, np.ndarray, float]] = field(default_factory=list)
     buildings: list[Mesh] = field(default_factory=list)
+    fronts: list[tuple[np.ndarray, np.ndarray, float, float]] = field(default_factory=list)  # per building: start (3,), end (3,), depth, height (m); see dress
     counts: dict = field(default_factory=dict)
 
     def count(self, what: str, n: int = 1) -> None:
@@ -304,7 +306,11 @@ def dress(p, road_half: float, walk_inner: float, walk_outer: float, kerb_height
     road_half : R (m), the carriageway's half width to the kerb; walk_inner / walk_outer : the
     sidewalks' inner and outer distance from a road's centre line (m); crossing_end : distance from
     the centre (m) where the crossings end (nothing stands on the sidewalk's corner squares before it).
-    Buildings are in ``buildings`` (class ``building``), everything else in ``parts``.
+    Buildings are in ``buildings`` (class ``building``), everything else in ``parts``. Each building's
+    ``fronts`` entry is its facade line along the plot, ``(start (3,), end (3,), depth, height)`` (m): the
+    building is the box standing ``height`` above the line (which lies at the box's bottom, under the
+    ground) and reaching ``depth`` to the left of start -> end (away from the road): the reference of the
+    "Street Facade" Geometry Nodes group (builders/street/facade_nodes.py).
     """
     A = p.arm_length
     out = Dressing()
@@ -371,6 +377,11 @@ def dress(p, road_half: float, walk_inner: float, walk_outer: float, kerb_height
                         cx1, cy1 = in_block(s + width, a1, sx, sy, axis)
                         low = float(np.min(z_at(np.array([cx0, cx1, cx0, cx1]), np.array([cy0, cy0, cy1, cy1])))) - 0.3
                         out.buildings.append(box_mesh(*sorted((cx0, cx1)), *sorted((cy0, cy1)), low, low + 0.3 + height))
+                        start, end = (np.array([*in_block(t, a0, sx, sy, axis), low]) for t in (s, s + width))
+                        away = np.array(in_block(0.0, 1.0, sx, sy, axis)) - np.array(in_block(0.0, 0.0, sx, sy, axis))
+                        if (end - start)[0] * away[1] - (end - start)[1] * away[0] < 0:  # keep the building on the line's left
+                            start, end = end, start
+                        out.fronts.append((start, end, float(p.building_depth), 0.3 + height))
                     # the yard (or open plot): plants drawn by area, kept 1 m off the boundary and the building
                     area = max(width - 2.0, 0.0) * max(depth - 2.0, 0.0)
                     for _ in range(int(rng.poisson(p.yard_plants * area / 100.0))):

@@ -36,6 +36,7 @@ Placement rules (:func:`place_users`):
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 
@@ -108,6 +109,7 @@ class Part:
     mesh: Mesh
     material: str = "diffuse"
     scatter: object = None
+    front: tuple | None = None  # a building's facade line (dressing.Dressing.fronts), swept by "Street Facade"
 
 
 @dataclass
@@ -262,8 +264,9 @@ def street_layout(p, rng: np.random.Generator) -> StreetLayout:
     from .dressing import dress
 
     dressing = dress(p, R, inner, outer, kh, c1, rng)
-    for mesh in dressing.buildings:
+    for mesh, front in zip(dressing.buildings, dressing.fronts, strict=True):
         add(f"street_building_{len(parts):03d}", "building", REFLECTIVITY["building"], mesh)
+        parts[-1] = dataclasses.replace(parts[-1], front=front)
     for name, class_name, reflectivity, mesh, scatter in dressing.parts:
         add(name, class_name, reflectivity, mesh, scatter=scatter)
     poles += dressing.circles

@@ -7,7 +7,9 @@ bushes, lamps and bollards, bins, bicycle stands, cones, barriers) are one objec
 live "Street Scatter" Geometry Nodes modifier instances the kind's prototypes on the object's
 points (builders/street/scatter_nodes.py); the carriageway, kerbs and sidewalks are objects whose
 edges are the roads' centre lines and whose live "Street Road" modifier sweeps their profiles along them
-(builders/street/road_nodes.py); a user can edit their inputs or move their points and rescan.
+(builders/street/road_nodes.py); each building is its facade line along its plot, swept to its
+depth and height by a live "Street Facade" modifier (builders/street/facade_nodes.py); a user can
+edit their inputs or move their points and rescan.
 Each frame removes the last frame's road users and places new ones from the frame's generator
 (lane following, platoons, parked cars, pedestrians on sidewalks and crossings, field-of-view
 aware when the run's sensors are known).
@@ -24,6 +26,7 @@ import numpy as np
 
 from ...scenes.objects import mesh_data, mesh_object, scene_collection, tag
 from . import layout as street
+from .facade_nodes import facade_object
 from .road_nodes import road_object
 from .scatter_nodes import prototypes_collection, scatter_object
 
@@ -46,9 +49,12 @@ class Intersection:
         bpy.context.view_layer.update()
 
     def _static_object(self, part, prototypes) -> bpy.types.Object:
-        """``part``'s object: swept by "Street Road" (road, kerbs, sidewalks), scattered by "Street Scatter", else its mesh."""
+        """``part``'s object: swept by "Street Road" (road, kerbs, sidewalks) or "Street Facade" (buildings),
+        scattered by "Street Scatter", else its mesh."""
         if part.name in SWEPT:
             return road_object(part.name, SWEPT[part.name], self.params, self.collection, part.instance or 0)
+        if part.front is not None:
+            return facade_object(part.name, part.front, self.collection, part.instance or 0)
         if part.scatter is not None:
             return scatter_object(part.name, part.scatter, self.collection, prototypes, part.instance or 0)
         return mesh_object(part.name, part.mesh, self.collection)
