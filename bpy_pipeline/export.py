@@ -27,6 +27,7 @@ from .labels import ClassTable
 from .lidar.materials import MATERIAL_MODELS, model_from_material, model_id
 
 GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "META", "FONT"}
+VIRTUAL_DEFORM = ("ARMATURE", "LATTICE", "CURVE")  # parent types that deform a child's mesh without a modifier
 INSTANCE_ATTRIBUTE = "lidar_instance"  # INT named attribute: the instance id of the instance, face or point (0: the owner's)
 
 
@@ -270,16 +271,17 @@ def export_scene(table: ClassTable, extra_rules=(), depsgraph=None, keep_within=
 def _mesh_key(obj, is_instance: bool) -> tuple:
     """The key of an evaluated object's geometry: objects with equal keys have equal evaluated meshes (read once a frame).
 
-    An instance's: its evaluated data. An object's own: its evaluated data and its name, since modifiers and
-    shape keys make one mesh evaluate differently per object; a mesh object with neither evaluates to its mesh
-    (objects sharing a mesh share its evaluated copy), so it shares its data's key with every object of that
-    data (the parking's car slots of one style: read once a frame, not once a car).
+    An instance's: its evaluated data. An object's own: its evaluated data and its name, since modifiers,
+    shape keys and deforming parents make one mesh evaluate differently per object; a mesh object with none
+    evaluates to its mesh (objects sharing a mesh share its evaluated copy), so it shares its data's key with
+    every object of that data (the parking's car slots of one style: read once a frame, not once a car).
     """
     pointer = obj.data.as_pointer()
     if is_instance:
         return (pointer, "")
     original = obj.original
-    if obj.type == "MESH" and not original.modifiers and getattr(original.data, "shape_keys", None) is None:
+    # not an armature, lattice or curve child: Blender deforms those by a virtual modifier the list does not show
+    if obj.type == "MESH" and not original.modifiers and getattr(original.data, "shape_keys", None) is None and original.parent_type not in VIRTUAL_DEFORM:
         return (pointer, "")
     return (pointer, obj.name_full)
 
