@@ -10,8 +10,9 @@ builders worked before their groups), and through the groups the builders now us
   "Parking Level" modifiers instancing the unit box and wedge;
 - industrial_hall: the default hall's slabs, walls, desks and racks as meshes, against
   "Industrial Hall" modifiers;
-- street: the default street's static parts, the scattered kinds as meshes, against "Street
-  Scatter" modifiers (as benchmarks/bench_street_nodes.py).
+- street: the default street's static parts, the scattered kinds, the carriageway, kerbs,
+  sidewalks and buildings as meshes, against "Street Scatter", "Street Road" and "Street Facade"
+  modifiers (as benchmarks/bench_street_nodes.py for the scattered kinds).
 
 Reported: median seconds to create the objects and evaluate the depsgraph, and to export them
 (``export_scene``), their ratios to the reference, the exported triangle counts (must agree but
@@ -23,7 +24,10 @@ frames too: each builder's job (``python run.py --frames 2``, ideal effects, PLY
 with the code in DIR and with this one, twice each; the frames' build and export seconds from
 their records (the first frame builds the static scene), as medians and ratios.
 
-Run: python benchmarks/bench_builder_nodes.py [--small] [--before DIR]
+With ``--builder NAME`` (repeatable) only those builders, reported as ``builder_nodes_<names>`` (the
+whole table stays as it was).
+
+Run: python benchmarks/bench_builder_nodes.py [--small] [--before DIR [--runs N]] [--builder street]
 """
 
 import json
@@ -125,7 +129,10 @@ def street_ways():
     from bpy_pipeline.builders.street.params import StreetScene
     from bpy_pipeline.builders.street import layout as street
     from bpy_pipeline.scenes.objects import mesh_object
+    from bpy_pipeline.builders.street.facade_nodes import facade_object
+    from bpy_pipeline.builders.street.road_nodes import road_object
     from bpy_pipeline.builders.street.scatter_nodes import prototypes_collection, scatter_object
+    from bpy_pipeline.builders.street.scene import SWEPT
 
     params = StreetScene()
     layout = street.street_layout(params, np.random.default_rng(params.layout_seed))
@@ -133,9 +140,16 @@ def street_ways():
     def build(collection, nodes: bool):
         prototypes = prototypes_collection(collection)
         for part in layout.parts:
-            scatter_object(part.name, part.scatter, collection, prototypes) if nodes and part.scatter is not None else mesh_object(part.name, part.mesh, collection)
+            if nodes and part.name in SWEPT:
+                road_object(part.name, SWEPT[part.name], params, collection, part.instance)
+            elif nodes and part.front is not None:
+                facade_object(part.name, part.front, collection, part.instance)
+            elif nodes and part.scatter is not None:
+                scatter_object(part.name, part.scatter, collection, prototypes)
+            else:
+                mesh_object(part.name, part.mesh, collection)
 
-    return build, {"scattered kinds": sum(p.scatter is not None for p in layout.parts)}
+    return build, {"scattered kinds": sum(p.scatter is not None for p in layout.parts), "swept parts": sum(p.name in SWEPT for p in layout.parts), "buildings": sum(p.front is not None for p in layout.parts)}
 
 
 def counts(builder: str) -> dict:
@@ -169,10 +183,10 @@ def frame_times(root: Path, builder: str) -> list[dict]:
     return [{k: r["timings_s"][k] for k in ("build", "export")} for r in records]
 
 
-def whole_frames(before: Path, repeats: int) -> list[dict]:
+def whole_frames(before: Path, repeats: int, builders=tuple(FRAME_JOBS)) -> list[dict]:
     here = Path(__file__).resolve().parents[1]
     rows = []
-    for builder in FRAME_JOBS:
+    for builder in builders:
         runs = {"before": [], "groups": []}
         for _ in range(repeats):
             for way, root in (("before", before), ("groups", here)):
@@ -193,6 +207,8 @@ def main() -> None:
 
     before = argparse.ArgumentParser(add_help=False)
     before.add_argument("--before", type=Path)
+    before.add_argument("--builder", action="append", choices=list(FRAME_JOBS))
+    before.add_argument("--runs", type=int, default=2, help="runs of each way's whole-frame job (with --before)")
     known, rest = before.parse_known_args()
     sys.argv = [sys.argv[0], *rest]
     args = arguments(__doc__.splitlines()[0])
@@ -206,7 +222,10 @@ def main() -> None:
     repeats = 2 if args.small else 5
     length = 200.0 if args.small else 1000.0
     rows = []
-    for builder, ways in (("railway", lambda: railway_ways(length)), ("parking", parking_ways), ("industrial_hall", hall_ways), ("street", street_ways)):
+    chosen = known.builder or list(FRAME_JOBS)
+    suffix = "" if known.builder is None else "_" + "_".join(chosen)
+    every = (("railway", lambda: railway_ways(length)), ("parking", parking_ways), ("industrial_hall", hall_ways), ("street", street_ways))
+    for builder, ways in (w for w in every if w[0] in chosen):
         bpy.ops.wm.read_factory_settings(use_empty=True)
         build, notes = ways()
         times = {False: ([], []), True: ([], [])}
@@ -226,9 +245,9 @@ def main() -> None:
                "groups export s": round(median[True][1], 4), "export ratio": round(median[True][1] / median[False][1], 3),
                "triangles meshes": triangles[False], "triangles groups": triangles[True]}
         rows.append(row | counts(builder) | {"layout": ", ".join(f"{k} {v}" for k, v in notes.items())})
-    report("builder_nodes", rows, args.out, notes={"repeats": repeats, "railway length m": length})
+    report("builder_nodes" + suffix, rows, args.out, notes={"repeats": repeats, "railway length m": length})
     if known.before is not None:
-        report("builder_nodes_frames", whole_frames(known.before, 2), args.out, notes={"before": "the code before the groups (b53ee32)", "runs": 2})
+        report("builder_nodes_frames" + suffix, whole_frames(known.before, known.runs, chosen), args.out, notes={"before": f"the code in {known.before.name} (before the groups)", "runs": known.runs})
 
 
 if __name__ == "__main__":
