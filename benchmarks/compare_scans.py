@@ -2,7 +2,7 @@
 
 ``python benchmarks/compare_scans.py BEFORE AFTER`` (two ``--out`` folders of ``run.py`` with PLY output)
 prints, per frame, the point counts, the largest distance between the points of the same beam
-(ring and time), and the points whose semantic or instance label differs. Used to show that a
+(ring, time and place among the points of that ring and time), and the points whose semantic or instance label differs. Used to show that a
 change of how a scene is built (e.g. pieces placed by Geometry Nodes) leaves the scan as it was.
 """
 
@@ -17,6 +17,19 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 
+def beam_keys(record) -> np.recarray:
+    """(n,) keys naming each point's beam: its ring, its firing time and its place among the points of equal
+    ring and time (sensors that fire a ring's beams at once, dual returns), in the file's order."""
+    ring_time = np.rec.fromarrays([record["ring"], record["time"]])
+    order = np.argsort(ring_time, kind="stable")
+    sorted_keys = ring_time[order]
+    starts = np.r_[True, sorted_keys[1:] != sorted_keys[:-1]]
+    first = np.maximum.accumulate(np.where(starts, np.arange(len(order)), 0))
+    nth = np.empty(len(order), dtype=np.int64)
+    nth[order] = np.arange(len(order)) - first
+    return np.rec.fromarrays([record["ring"], record["time"], nth])
+
+
 def compare(before: Path, after: Path) -> dict:
     """``{frame stem: {"points": (n_before, n_after), "matched", "max_moved_m", "label_changes", "same_beams"}}``."""
     from bpy_pipeline.io import read_ply
@@ -24,8 +37,7 @@ def compare(before: Path, after: Path) -> dict:
     out = {}
     for ply in sorted((before / "ply").glob("*.ply")):
         a, b = read_ply(ply), read_ply(after / "ply" / ply.name)
-        key = lambda r: np.rec.fromarrays([r["ring"], r["time"]])  # noqa: E731 - a beam: its ring and its firing time
-        ka, kb = key(a), key(b)
+        ka, kb = beam_keys(a), beam_keys(b)
         common, ia, ib = np.intersect1d(ka, kb, return_indices=True)
         xyz = lambda r, i: np.column_stack([r["x"][i], r["y"][i], r["z"][i]]).astype(float)  # noqa: E731
         moved = np.linalg.norm(xyz(a, ia) - xyz(b, ib), axis=1)
