@@ -564,27 +564,13 @@ def main() -> None:
     parser.add_argument("--reading", action="store_true", help="the reading model (effects.intensity.reading) fitted on 000008 and on the insertion (materials.json's reading section)")
     parser.add_argument("--parts", action="store_true", help="a reflectance model per car part (scene.car_paint) on the insertion, fitted on 000008, held out on 004747 (materials.json's parts section)")
     args = parser.parse_args()
-    if args.parts:
-        if not KITTI.exists() or not KITTI_4747.exists():
-            print(f"skipped: {KITTI} or {KITTI_4747} is absent")
-            return
-        parts(args.small, args.out)
-        return
-    if args.reading:
-        if not KITTI.exists() or not KITTI_4747.exists():
-            print(f"skipped: {KITTI} or {KITTI_4747} is absent")
-            return
-        reading(args.small, args.out)
-        return
-    if args.insertion:
-        if not KITTI.exists() or not KITTI_4747.exists():
-            print(f"skipped: {KITTI} or {KITTI_4747} is absent")
-            return
-        insertion(args.small, args.out)
-        return
     if not KITTI.exists() or not KITTI_4747.exists():
         print(f"skipped: {KITTI} or {KITTI_4747} is absent")
         return
+    for mode, run in (("parts", parts), ("reading", reading), ("insertion", insertion)):
+        if getattr(args, mode):
+            run(args.small, args.out)
+            return
     fit = Frame("000008 (fit)", np.fromfile(KITTI, np.float32).reshape(-1, 4), kitti_boxes(), slopes_000008)
     real_4747 = np.fromfile(KITTI_4747, np.float32).reshape(-1, 4)
     held = Frame("004747 (held out)", real_4747, boxes_4747(real_4747[:, :3].astype(np.float64)), lambda xyz: slopes(xyz, calib_4747()))
