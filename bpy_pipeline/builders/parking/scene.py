@@ -95,8 +95,10 @@ class CarSlot:
 class ParkingGarage:
     """The built level and its car pool; :meth:`randomize` places the cars of a frame."""
 
-    def __init__(self, params):
+    def __init__(self, params, check=None):
+        """``check(params, where)`` refuses an edited level in one line (the builder's ``check``; None: no check)."""
         self.built = self.params = params  # built: the YAML's level; params: the level as its modifiers hold it now (:meth:`follow_edits`)
+        self.check = check
         self.layout = level_layout(params)
         self.collection = scene_collection()
         meshes = self.layout.meshes()
@@ -132,12 +134,11 @@ class ParkingGarage:
         """Take the level's dimensions from its pieces' "Parking Level" modifiers (a user may have edited them since
         the build): where they changed, the layout (bays, pillars, ramp: what placement avoids and snaps to) and
         the visibility meshes become the pure ones of the edited values. Unedited: nothing changes."""
-        from .params import check
-
         params = parking_nodes.edited_params(self.static, self.built)
         if params == self.params:
             return
-        check(params, f"the {parking_nodes.GROUP!r} modifier inputs of the parking level")
+        if self.check is not None:
+            self.check(params, f"the {parking_nodes.GROUP!r} modifier inputs of the parking level")
         self.params, self.layout = params, level_layout(params)
         self.caster = RayCaster(_buffers(self.layout.meshes()), frame=np.eye(4))
 
