@@ -2,6 +2,8 @@
 paint is drawn per car from a seeded generator of its own, a config naming one part changes that part's points only, the
 default leaves the cars as they were, and bad values are one line and exit 2."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -112,6 +114,9 @@ def test_a_part_named_changes_only_that_parts_points(real_scan):
     ("parts", {"cabin": {"model": "velvet"}}, r"^scene\.car_paint\.parts\.cabin\.model: expected one of"),
     ("parts", {"upper": {"model": "glossy_paint", "lobe_deg": 500}}, r"^scene\.car_paint\.parts\.upper\.lobe_deg: must lie in"),
     ("parts", {"glass": {"model": "dark_paint", "shine": 1}}, r"^scene\.car_paint\.parts\.glass\.shine: unknown key"),
+    ("parts", {"upper": {"model": "glossy_paint", "detection": 1.5}}, r"^scene\.car_paint\.parts\.upper\.detection: must be a reflectivity in 0\.\.1"),
+    ("parts", {"cabin": {"model": "dark_paint", "detection": -0.1}}, r"^scene\.car_paint\.parts\.cabin\.detection: must be a reflectivity in 0\.\.1"),
+    ("parts", {"glass": {"model": "wet", "detection": "bright"}}, r"^scene\.car_paint\.parts\.glass\.detection: must be a reflectivity in 0\.\.1"),
 ])
 def test_bad_car_paint_values_are_one_line_and_exit_2(tmp_path, capsys, key, value, match):
     with pytest.raises(InputError, match=match):
@@ -133,3 +138,66 @@ def test_the_default_parts_are_registered():
     assert set(DEFAULT_PARTS) == set(CAR_PARTS)  # one place names the parts
     for part in CAR_PARTS:
         part_model(DEFAULT_PARTS[part], part, 0.1)
+
+
+def far_dark_returns(n: int = 2000):
+    """n returns of one part 30 m away at cos 0.9, reflectivity 0.01, on 64 lasers; the hdl64e profile's drop model and
+    the fitted reading model (scale 4.5, offset 0.15, range-compensated to 28 m)."""
+    from bpy_pipeline.lidar.points import BEAM_DTYPE, POINT_DTYPE
+
+    points = np.zeros(n, POINT_DTYPE)
+    points["x"], points["range"], points["ring"] = 30.0, 30.0, np.arange(n) % 64
+    beam = np.zeros(n, BEAM_DTYPE)
+    beam["cos_incidence"], beam["reflectivity"], beam["gain"], beam["direction"] = 0.9, 0.01, 1.0, [1.0, 0.0, 0.0]
+    effects = bpy_pipeline.load_config({"sensor": {"preset": "hdl64e"}, "effects": {"intensity": {"scale": 4.5, "offset": 0.15, "reading": {"enabled": True}}}}).effects
+    return points, beam, effects
+
+
+def test_a_part_dark_to_read_but_detectable_is_kept_at_30_m_and_reads_0():
+    from bpy_pipeline.mixing.frame import _effects
+    from bpy_pipeline.mixing.paint import detection_reflectivity
+
+    points, beam, effects = far_dark_returns()
+    rows = np.zeros(len(points), np.int64)
+    dark = part_model({"model": "dark_paint", "reflectivity": 0.01}, "p")
+    seen = part_model({"model": "dark_paint", "reflectivity": 0.01, "detection": 0.3}, "p")
+    assert dark.detection is None and seen.detection == 0.3 and detection_reflectivity(beam, rows, [dark]) is None
+    floor = detection_reflectivity(beam, rows, [seen])
+    assert floor.dtype == np.float32 and np.all(floor == np.float32(0.3))
+    assert np.all(detection_reflectivity(beam, rows, [part_model({"model": "dark_paint", "reflectivity": 0.01, "detection": 0.001}, "p")]) == np.float32(0.01))  # max(own, detection)
+    lost, _ = _effects(points.copy(), beam.copy(), effects, np.random.default_rng(0), None, [dark], rows)
+    kept, kept_rows = _effects(points.copy(), beam.copy(), effects, np.random.default_rng(0), None, [seen], rows)
+    assert len(lost) < 0.1 * len(points)  # as dark to the drop model as to the reading: dropped at 30 m
+    assert len(kept) > 0.9 * len(points)  # the detection reflectivity keeps it ...
+    assert np.all(kept["intensity"] == 0)  # ... and it still reads 0 (4.5 * 0.01 < 0.15)
+    brighter = replace_reflectivity(beam, 0.3)
+    read, _ = _effects(points.copy(), brighter, effects, np.random.default_rng(0), None, [part_model({"model": "dark_paint", "reflectivity": 0.3}, "p")], rows)
+    assert np.mean(read["intensity"] > 0) > 0.9  # a part as bright as the detection value reads above 0: the reading is the part's own
+    again, again_rows = _effects(points.copy(), beam.copy(), effects, np.random.default_rng(0), None, [seen], rows)
+    assert again.tobytes() == kept.tobytes() and np.array_equal(again_rows, kept_rows)  # same seed, same bytes
+    other, _ = _effects(points.copy(), beam.copy(), effects, np.random.default_rng(1), None, [seen], rows)
+    assert other.tobytes() != kept.tobytes()  # another seed, other draws
+
+
+def replace_reflectivity(beam, value):
+    out = beam.copy()
+    out["reflectivity"] = value
+    return out
+
+
+def test_detection_unset_leaves_the_frame_byte_identical(real_scan):
+    scan = real_scan("kitti_hdl64e_000008_frontfov.bin")
+    section = RealScanScene(path=str(scan), format="kitti", preset="hdl64e", objects=[ObjectBox("car", (8.0, 0.5, -0.95), (4.5, 1.8, 1.5), 20.0)],
+                            car_glass=CarGlass(enabled=True), car_paint=CarPaint(enabled=True))
+    effects = bpy_pipeline.load_config({"sensor": {"preset": "hdl64e"}, "effects": {"intensity": {"scale": 4.5, "offset": 0.15, "reading": {"enabled": True}}}}).effects
+
+    def run(paint):
+        state = MixState(replace(section, car_paint=paint), np.random.default_rng(0), effects, 1)
+        for step in MIX_STEPS:
+            step(state)
+        return state.points
+
+    base = run(CarPaint(enabled=True))
+    zero = run(CarPaint(enabled=True, parts={"cabin": {**DEFAULT_PARTS["cabin"], "detection": 0.0}}))  # max(own, 0): nothing changes
+    assert base.tobytes() == zero.tobytes()
+    assert run(CarPaint(enabled=True)).tobytes() == base.tobytes()

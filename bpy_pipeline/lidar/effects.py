@@ -428,11 +428,15 @@ def _copy_records(records: np.ndarray, keep: np.ndarray | None = None) -> np.nda
 CHUNK_POINTS = 1 << 16  # records per work item: a chunk's fields stay in cache across the passes over it
 
 
-def _apply_chunk(points, beam, effects, rng, drop_models, noise_models, objects=None) -> np.ndarray:
+def _apply_chunk(points, beam, effects, rng, drop_models, noise_models, objects=None, detection=None) -> np.ndarray:
     if getattr(effects, "materials", None) is not None:  # per-class or per-object reflectance models (lidar/materials.py), opt-in
         beam = apply_materials(points, beam, effects.materials, effects.intensity.incidence_exponent, objects)
     intensity = compute_intensity(points["range"], beam, effects.intensity, points["ring"], rng)
-    keep = drop_mask(points, beam, effects, rng, drop_models)
+    seen = beam
+    if detection is not None:  # the drop decision sees these reflectivities, the reading the beam's (mixing/paint.py)
+        seen = beam.copy()
+        seen["reflectivity"] = detection
+    keep = drop_mask(points, seen, effects, rng, drop_models)
     points = _copy_records(points, keep)
     if keep is not None:
         beam, intensity = _copy_records(beam, keep), intensity[keep]
@@ -450,7 +454,8 @@ def weather_active(effects) -> bool:
     return weather is not None and not effects.ideal and weather.active
 
 
-def apply_effects(points: np.ndarray, beam: np.ndarray, effects, rng: np.random.Generator, threads: int | None = None, objects=None, pool: Executor | None = None) -> np.ndarray:
+def apply_effects(points: np.ndarray, beam: np.ndarray, effects, rng: np.random.Generator, threads: int | None = None, objects=None, pool: Executor | None = None,
+                  detection: np.ndarray | None = None) -> np.ndarray:
     """The configured effects (``config.EffectsConfig``) in a fixed order; returns new records.
 
     points : (p,) POINT_DTYPE records (sensor frame); beam : (p,) BEAM_DTYPE facts of the same points
@@ -462,6 +467,8 @@ def apply_effects(points: np.ndarray, beam: np.ndarray, effects, rng: np.random.
     (default: every core; 1: in this thread); chunk k draws from its own generator, seeded by the k-th
     of one draw of seeds from ``rng``, so the same generator state gives the same bytes however the threads run.
     ``objects``: the scene's ObjectTable, for ``effects.materials.objects`` (per-object reflectance models).
+    ``detection``: (p,) float32 reflectivities the drop decision sees instead of the beam's (None: the beam's), the
+    reading still the beam's (``scene.car_paint`` parts' ``detection``, mixing/paint.py).
     """
     drop_models = fitted_models(effects.drop, "effects.drop.model_file")
     noise_models = fitted_models(effects.noise, "effects.noise.model_file")
@@ -476,7 +483,8 @@ def apply_effects(points: np.ndarray, beam: np.ndarray, effects, rng: np.random.
 
     def chunk(k: int) -> np.ndarray:
         part = slice(starts[k], starts[k] + CHUNK_POINTS)
-        return _apply_chunk(points[part], beam[part], effects, np.random.Generator(np.random.PCG64(seeds[k])), drop_models, noise_models, objects)
+        return _apply_chunk(points[part], beam[part], effects, np.random.Generator(np.random.PCG64(seeds[k])), drop_models, noise_models, objects,
+                            None if detection is None else detection[part])
 
     if len(starts) == 1:
         return chunk(0)

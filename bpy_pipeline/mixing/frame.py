@@ -41,7 +41,7 @@ from .cast import InsertedHits, cast_firings, glass_rules, merge_returns, near_o
 from .firings import Firings, angles_deg, recover_firings
 from .ground import PointIndex, find_ground, in_box
 from .placement import Placement, Scene, explicit_placements, kitti_rule, parking_rule, real_placements
-from .paint import car_generator, paint_beam
+from .paint import car_generator, detection_reflectivity, paint_beam
 from .section import RealScanScene
 
 # SemanticKITTI raw ids -> the project's class names (assets_manifest/labels.yaml); others: the background class
@@ -126,7 +126,10 @@ def _effects(points: np.ndarray, beam: np.ndarray, effects, rng: np.random.Gener
     if paints is not None and rows is not None and any(m is not None for m in paints) and materials is not None:
         beam = paint_beam(points, beam, rows, paints, effects.materials, effects.intensity.incidence_exponent, objects)
         effects = replace(effects, materials=replace(materials, classes={}, objects=False))  # applied above
-    out = apply_effects(points, beam, effects, rng, objects=objects)
+        detection = detection_reflectivity(beam, rows, paints)  # a part's detection reflectivity: the drop decision's, not the reading's
+    else:
+        detection = None
+    out = apply_effects(points, beam, effects, rng, objects=objects, detection=detection)
     rows = out["time"].astype(np.int64)
     out["time"] = tag[rows]
     return out, rows

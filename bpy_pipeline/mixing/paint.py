@@ -19,7 +19,9 @@ plate's retroreflector). The body's pigment (``glossy_paint``'s ``diffuse``, ``d
 part's own reflectivity) is drawn per car from ``paints`` (name -> ``[share, reflectance at 905 nm]``) unless the body
 sets it, by a generator of its own per car (:func:`car_generator`: the frame's generator jumped, never advanced, so the
 rest of the frame draws as before). Applied to the inserted returns with the effects (:func:`paint_beam`), where a
-part's model wins over ``effects.materials``. Opt-in (``enabled``; its defaults fitted on KITTI 000008): held out on
+part's model wins over ``effects.materials``. A part may also set ``detection`` (0..1): the reflectivity the drop decision
+sees at least, ``max(own, detection)``, while the reading stays the part's own (:func:`detection_reflectivity`; the
+receiver's reading floor lies above its detection floor, docs/realism.md); unset by default. Opt-in (``enabled``; its defaults fitted on KITTI 000008): held out on
 004747 it lifts the reflectance overlap but loses the 28-37 m cars' points (docs/realism.md); off: nothing is drawn or changed.
 """
 
@@ -77,6 +79,7 @@ class PartModel:
 
     model: str
     params: object = None
+    detection: float | None = None  # the reflectivity the drop decision sees at least (the part's ``detection``; None: its own)
 
     def apparent(self, rho: np.ndarray, cos: np.ndarray) -> np.ndarray:
         """(p,) apparent reflectance of returns of reflectivity ``rho`` (p,) at ``cos`` (p,) of incidence."""
@@ -92,17 +95,21 @@ def part_model(spec, where: str, pigment: float | None = None) -> PartModel | No
         return None
     rest = dict(spec)
     name = rest.pop("model", None)
+    detection = rest.pop("detection", None)
+    if detection is not None and (isinstance(detection, bool) or not isinstance(detection, (int, float)) or not 0.0 <= detection <= 1.0):
+        raise InputError(f"{where}.detection: must be a reflectivity in 0..1, got {detection!r}")
+    detection = None if detection is None else float(detection)
     if not isinstance(name, str) or name not in MATERIAL_MODELS:
         raise InputError(f"{where}.model: expected one of {', '.join(MATERIAL_MODELS)}, got {name!r}")
     params_type = MATERIAL_MODELS.get(name).params
     if params_type is None:
         if rest:
             raise InputError(f"{where}.{sorted(rest)[0]}: unknown key; {name} has no parameters")
-        return PartModel(name)
+        return PartModel(name, None, detection)
     known = params_type.__dataclass_fields__
     unknown = sorted(set(rest) - set(known))
     if unknown:
-        raise InputError(f"{where}.{unknown[0]}: unknown key; allowed: model, {', '.join(known)}")
+        raise InputError(f"{where}.{unknown[0]}: unknown key; allowed: model, detection, {', '.join(known)}")
     for key, value in rest.items():
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise InputError(f"{where}.{key}: must be a number, got {value!r}")
@@ -113,7 +120,7 @@ def part_model(spec, where: str, pigment: float | None = None) -> PartModel | No
         check_materials(replace(MaterialsConfig(), **{name: params}), "@")
     except InputError as err:
         raise InputError(str(err).replace(f"@.{name}.", f"{where}.", 1)) from None
-    return PartModel(name, params)
+    return PartModel(name, params, detection)
 
 
 @dataclass(frozen=True)
@@ -205,3 +212,16 @@ def paint_beam(points: np.ndarray, beam: np.ndarray, rows: np.ndarray, paints: l
         a = model.apparent(beam["reflectivity"][mine].astype(np.float64), cos)
         out["reflectivity"][mine] = a / np.maximum(cos, 1e-3) ** incidence_exponent
     return out
+
+
+def detection_reflectivity(beam: np.ndarray, rows: np.ndarray, paints: list) -> np.ndarray | None:
+    """(p,) float32: the reflectivity the drop decision sees for each return, ``max(own, detection)`` on a part whose
+    model sets ``detection`` (its reading stays the beam's own), the beam's elsewhere; None when no part sets one.
+
+    beam : (p,) BEAM_DTYPE after :func:`paint_beam`; rows : (p,) object row of each return; paints : per object row."""
+    floor = np.array([np.nan if m is None or m.detection is None else m.detection for m in paints], np.float32)
+    if not np.isfinite(floor).any():
+        return None
+    mine = floor[np.asarray(rows, np.int64)]
+    own = beam["reflectivity"].astype(np.float32)
+    return np.where(np.isfinite(mine), np.maximum(own, np.nan_to_num(mine)), own).astype(np.float32)
