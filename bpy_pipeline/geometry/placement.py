@@ -20,7 +20,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..schema import check_positive
-from .collision import box_axes, ray_box_distance, rectangle_inside, rectangles_overlap
+from .collision import box_axes, rectangle_inside, rectangles_overlap
 
 
 @dataclass(frozen=True)
@@ -176,20 +176,47 @@ def turn_about(pivot_xy, position_xy, yaw: float, angle_deg: float) -> tuple[np.
 def facing_samples(origin, centre, half, yaw: float, per_side: int = 4) -> np.ndarray:
     """``(m, 3)`` points on the faces of an upright box that face ``origin`` (a grid of ``per_side`` x ``per_side`` cell centres each)."""
     axes = box_axes(yaw)
-    centre, half = np.asarray(centre, float), np.asarray(half, float)
-    u = (np.arange(per_side) + 0.5) / per_side * 2.0 - 1.0
-    gu, gv = np.meshgrid(u, u, indexing="ij")
+    centre, half, origin = np.asarray(centre, float), np.asarray(half, float), np.asarray(origin, float)
+    gu, gv = _face_grid(per_side)
     points = []
-    for k in range(3):
+    for k, (i, j) in enumerate(_OTHER_AXES):
         for sign in (-1.0, 1.0):
             normal = sign * axes[:, k]
             face_centre = centre + normal * half[k]
-            if np.dot(np.asarray(origin, float) - face_centre, normal) <= 0:
+            if np.dot(origin - face_centre, normal) <= 0:
                 continue
-            i, j = [m for m in range(3) if m != k]
-            grid = face_centre + gu.reshape(-1, 1) * half[i] * axes[:, i] + gv.reshape(-1, 1) * half[j] * axes[:, j]
-            points.append(grid)
+            points.append(face_centre + gu * half[i] * axes[:, i] + gv * half[j] * axes[:, j])
     return np.concatenate(points) if points else np.zeros((0, 3))
+
+
+_OTHER_AXES = ((1, 2), (0, 2), (0, 1))
+_FACE_GRIDS: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+
+
+def _face_grid(per_side: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(per_side^2, 1)`` cell-centre coordinates ``u``, ``v`` in -1..1 of a face's grid (kept per ``per_side``)."""
+    if per_side not in _FACE_GRIDS:
+        u = (np.arange(per_side) + 0.5) / per_side * 2.0 - 1.0
+        gu, gv = np.meshgrid(u, u, indexing="ij")
+        gu, gv = gu.reshape(-1, 1), gv.reshape(-1, 1)
+        gu.flags.writeable = gv.flags.writeable = False
+        _FACE_GRIDS[per_side] = (gu, gv)
+    return _FACE_GRIDS[per_side]
+
+
+def _ray_box_distance(origin: np.ndarray, directions: np.ndarray, centre: np.ndarray, axes: np.ndarray, half: np.ndarray) -> np.ndarray:
+    """:func:`~bpy_pipeline.geometry.collision.ray_box_distance` with no distance limit, the same operations on
+    float64 arrays without its per-call conversions (the caller ignores division warnings): ``(n,)`` metres, inf on a miss."""
+    local_o = (origin - centre) @ axes
+    local_d = directions @ axes
+    inv = 1.0 / local_d
+    t1 = (-half - local_o) * inv
+    t2 = (half - local_o) * inv
+    near = np.fmax.reduce(np.minimum(t1, t2), axis=-1)  # np.nanmax's own reduction
+    far = np.fmin.reduce(np.maximum(t1, t2), axis=-1)
+    parallel_out = ((local_d == 0) & (np.abs(local_o) > half)).any(axis=-1)
+    start = np.maximum(near, 0.0)
+    return np.where((far >= start) & ~parallel_out, start, np.inf)
 
 
 @dataclass
@@ -247,7 +274,8 @@ class FloorBoxPlacer:
     def _blocked_by_box(self, directions, distance, box: PlacedBox) -> np.ndarray:
         if box.axes is None:
             box.axes = box_axes(box.yaw)
-        hit = ray_box_distance(self.sensor, directions, box.centre, box.axes, box.half)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            hit = _ray_box_distance(self.sensor, directions, box.centre, box.axes, box.half)
         return hit < distance - 1e-6
 
     def _box_rays(self, box: PlacedBox) -> tuple[np.ndarray, np.ndarray]:

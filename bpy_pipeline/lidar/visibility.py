@@ -155,10 +155,6 @@ def visibility(
         unoccluded += alone.count(origins[ray], d, k, along, min_range, max_range, surfaces, rng)
     boxes["visible"] = visible
     boxes["unoccluded"] = unoccluded
-    if seen_points:  # grouped by object
-        points, owner = np.concatenate(seen_points), np.concatenate(seen_boxes)
-        order = np.argsort(owner, kind="stable")
-        seen_points = np.split(points[order], np.searchsorted(owner[order], np.arange(1, len(boxes))))
     # truncation: every object's surface sampled in one call (each at its own spacing), then per object the
     # share of its area whose direction the passing rays cover, within the range limits
     owner = box_of_triangle[box_of_triangle >= 0]
@@ -166,19 +162,57 @@ def visibility(
     tri_area = np.linalg.norm(np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0]), axis=1) / 2
     total = np.bincount(owner, tri_area, minlength=len(boxes))
     spacing = np.maximum(SAMPLE_SPACING, np.sqrt(total / MAX_SAMPLES))
-    samples, area, triangle = surface_samples(triangles, spacing[owner], return_triangle=True, area_bound=True)
+    samples, area, triangle = surface_samples(triangles, spacing[owner], return_triangle=True, area_bound=True, area=tri_area)
     samples = (samples - pose[:3, 3]) @ pose[:3, :3]
     distance = np.linalg.norm(samples, axis=1)
     inside = (distance >= min_range) & (distance <= max_range)
     sample_owner = owner[triangle]
+    covered = np.zeros(len(samples), bool)
+    if seen_points:  # every object's coverage at once (what :class:`Coverage` gives per object, cell for cell), for the
+        # samples within the range limits of objects some ray passes (no other sample can count)
+        point_owner = np.concatenate(seen_boxes)
+        passed = np.bincount(point_owner, minlength=len(boxes)) > 0
+        covered = covered_by_owner(np.concatenate(seen_points), point_owner, samples, sample_owner, len(boxes), cell_deg, where=inside & passed[sample_owner])
     order = np.argsort(sample_owner, kind="stable")
     bounds = np.searchsorted(sample_owner[order], np.arange(len(boxes) + 1))
     for k in range(len(boxes)):
         mine = order[bounds[k] : bounds[k + 1]]
-        passed = seen_points[k] if k < len(seen_points) else None
-        covered = Coverage(passed, cell_deg).covers(samples[mine]) & inside[mine] if passed is not None and len(passed) else np.zeros(len(mine), bool)
         whole = area[mine].sum()
-        boxes["truncation"][k] = float(1.0 - area[mine][covered].sum() / whole) if whole > 0 else 1.0
+        boxes["truncation"][k] = float(1.0 - area[mine][covered[mine]].sum() / whole) if whole > 0 else 1.0
+
+
+COVERAGE_GROUP = 64  # objects whose coverage masks (181 x 360 cells at 1 degree) are held at once
+
+
+def covered_by_owner(points: np.ndarray, point_owner: np.ndarray, samples: np.ndarray, sample_owner: np.ndarray, count: int, cell_deg: float, where: np.ndarray | None = None) -> np.ndarray:
+    """``(s,)`` bool: is each sample's direction covered by the passing points of its own object?
+
+    points, point_owner : ``(p, 3)`` sensor-frame points where rays pass the objects and ``(p,)`` their object (0..count-1)
+    samples, sample_owner : ``(s, 3)`` sensor-frame surface samples and ``(s,)`` their object
+    The same answer as ``Coverage(points of k, cell_deg).covers(samples of k)`` per object k (the same cells, the
+    same one-cell growth), with each direction's cell computed once and the objects' masks filled together.
+    where : ``(s,)`` bool, the samples to look at (the others come back False), or ``None`` for all
+    """
+    covered = np.zeros(len(samples), bool)
+    if where is not None:  # only these samples can count: the others' cells are never looked up
+        samples, sample_owner = samples[where], sample_owner[where]
+    grid = Coverage(np.zeros((0, 3)), cell_deg)
+    point_row, point_col = grid._cells(points)
+    row, col = grid._cells(samples)
+    found = np.zeros(len(samples), bool)
+    for first in range(0, count, COVERAGE_GROUP):
+        last = min(first + COVERAGE_GROUP, count)
+        mask = np.zeros((last - first, grid.rows, grid.columns), bool)
+        mine = (point_owner >= first) & (point_owner < last)
+        mask[point_owner[mine] - first, point_row[mine], point_col[mine]] = True
+        rows = mask | np.concatenate([mask[:, 1:], mask[:, -1:]], axis=1) | np.concatenate([mask[:, :1], mask[:, :-1]], axis=1)
+        grown = rows | np.roll(rows, 1, axis=2) | np.roll(rows, -1, axis=2)
+        at = (sample_owner >= first) & (sample_owner < last)
+        found[at] = grown[sample_owner[at] - first, row[at], col[at]]
+    if where is None:
+        return found
+    covered[where] = found
+    return covered
 
 
 def _direct_returns(caster, buffers: SceneBuffers, pattern: Pattern, box_of_row: np.ndarray, min_range: float, max_range: float, surfaces, rng) -> np.ndarray:
@@ -200,6 +234,16 @@ def _direct_returns(caster, buffers: SceneBuffers, pattern: Pattern, box_of_row:
 IDENTITY4 = np.eye(4)
 
 
+def _used_vertices(triangles: np.ndarray, count: int) -> tuple[np.ndarray, np.ndarray]:
+    """``np.unique(triangles, return_inverse=True)`` for ``triangles`` indexing ``count`` vertices, without the sort:
+    the ``(u,)`` vertices used, increasing, and ``triangles`` renumbered into them (``(3 m,)``, flattened)."""
+    flat = np.asarray(triangles).ravel()
+    mark = np.zeros(count, bool)
+    mark[flat] = True
+    renumber = np.cumsum(mark) - 1
+    return np.flatnonzero(mark), renumber[flat]
+
+
 class AloneCaster:
     """Every box's object alone, in one caster: object k moved to cell k of a grid.
 
@@ -219,7 +263,7 @@ class AloneCaster:
         for k, rows in enumerate(members):
             box_of_row[rows] = k
         keep = box_of_row[buffers.triangle_object] >= 0
-        used, triangles = np.unique(buffers.triangles[keep], return_inverse=True)
+        used, triangles = _used_vertices(buffers.triangles[keep], len(buffers.vertices))
         owner = np.full(len(buffers.vertices), -1, np.int64)  # the box of each used vertex (one object's vertices are its own)
         owner[buffers.triangles[keep].ravel()] = np.repeat(box_of_row[buffers.triangle_object[keep]], 3)
         vertices = buffers.vertices[used] + self.move[owner[used]] @ np.asarray(pose, float)[:3, :3].T
@@ -326,7 +370,7 @@ def visibility_per_object(
         boxes["truncation"][k] = float(1.0 - area[inside].sum() / total) if total > 0 else 1.0
 
 
-def surface_samples(triangles: np.ndarray, spacing, return_triangle: bool = False, area_bound: bool = False):
+def surface_samples(triangles: np.ndarray, spacing, return_triangle: bool = False, area_bound: bool = False, area: np.ndarray | None = None):
     """Points spread over ``(m, 3, 3)`` triangles and the area each stands for: ``(p, 3)``, ``(p,)``.
 
     A triangle wider than ``spacing`` (metres; one value or ``(m,)``, one per triangle) is cut into
@@ -335,22 +379,26 @@ def surface_samples(triangles: np.ndarray, spacing, return_triangle: bool = Fals
     ``area_bound``: n is also at most ``ceil(sqrt(2 area) / spacing)`` (a right triangle's leg,
     so half a square is cut as before), which stops a long thin triangle (a car body's sliver)
     from being n^2 points along a line: about ``2 area / spacing^2`` samples in all.
+    ``area``: the ``(m,)`` triangles' areas (m^2) if the caller has them already (the formula here, same values).
     """
-    edge = np.maximum(np.linalg.norm(triangles[:, 1] - triangles[:, 0], axis=1), np.linalg.norm(triangles[:, 2] - triangles[:, 0], axis=1))
-    area = np.linalg.norm(np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0]), axis=1) / 2
+    first = triangles[:, 0]
+    edge1 = triangles[:, 1] - first
+    edge2 = triangles[:, 2] - first
+    edge = np.maximum(np.linalg.norm(edge1, axis=1), np.linalg.norm(edge2, axis=1))
+    if area is None:
+        area = np.linalg.norm(np.cross(edge1, edge2), axis=1) / 2
     if area_bound:
         edge = np.minimum(edge, np.sqrt(2.0 * area))
     level = np.clip(np.ceil(edge / spacing), 1, 24).astype(int)
     points, weights, owners = [], [], []
     for n in np.unique(level):
         rows = np.flatnonzero(level == n)
-        i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
-        up = i + j <= n - 1
-        down = i + j <= n - 2
-        u = np.concatenate([(i[up] + 1 / 3) / n, (i[down] + 2 / 3) / n])
-        v = np.concatenate([(j[up] + 1 / 3) / n, (j[down] + 2 / 3) / n])  # n^2 barycentric points
-        t = triangles[rows]
-        points.append((t[:, None, 0] + u[None, :, None] * (t[:, None, 1] - t[:, None, 0]) + v[None, :, None] * (t[:, None, 2] - t[:, None, 0])).reshape(-1, 3))
+        u, v = _centroids(int(n))
+        # first + u edge1 + v edge2, added in that order, in two (r, n^2, 3) buffers
+        block = np.multiply(u[None, :, None], edge1[rows][:, None])
+        block += first[rows][:, None]
+        block += np.multiply(v[None, :, None], edge2[rows][:, None])
+        points.append(block.reshape(-1, 3))
         weights.append(np.repeat(area[rows] / n**2, len(u)))
         owners.append(np.repeat(rows, len(u)))
     if not points:
@@ -358,6 +406,22 @@ def surface_samples(triangles: np.ndarray, spacing, return_triangle: bool = Fals
     if return_triangle:
         return np.concatenate(points), np.concatenate(weights), np.concatenate(owners)
     return np.concatenate(points), np.concatenate(weights)
+
+
+_CENTROIDS: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+
+
+def _centroids(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The ``(n^2,)`` barycentric ``u``, ``v`` of the centroids of a triangle cut into n^2 equal ones (kept per n)."""
+    if n not in _CENTROIDS:
+        i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+        up = i + j <= n - 1
+        down = i + j <= n - 2
+        u = np.concatenate([(i[up] + 1 / 3) / n, (i[down] + 2 / 3) / n])
+        v = np.concatenate([(j[up] + 1 / 3) / n, (j[down] + 2 / 3) / n])
+        u.flags.writeable = v.flags.writeable = False
+        _CENTROIDS[n] = (u, v)
+    return _CENTROIDS[n]
 
 
 def occlusion_levels(visible: np.ndarray, unoccluded: np.ndarray, levels=(0.8, 0.4, 0.1)) -> np.ndarray:

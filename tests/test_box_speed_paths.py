@@ -1,0 +1,76 @@
+"""The faster ways of the boxes stage and the parking placement give the bits of the ways they replace.
+
+- truncation's coverage of every object at once (:func:`covered_by_owner`) against one :class:`Coverage` per object;
+- :func:`surface_samples` given the triangles' areas against computing them;
+- the vertices an object set uses, without a sort, against ``np.unique``;
+- the placer's slab test against :func:`~bpy_pipeline.geometry.collision.ray_box_distance`, rays along the box's
+  faces and axes included (the whole visibility against its per-object reference: tests/test_boxes.py).
+"""
+
+import numpy as np
+
+from bpy_pipeline.geometry.collision import box_axes, ray_box_distance
+from bpy_pipeline.geometry.placement import _ray_box_distance, facing_samples
+from bpy_pipeline.lidar.visibility import Coverage, _used_vertices, covered_by_owner, surface_samples
+
+
+def _unit(v):
+    return v / np.linalg.norm(v, axis=1, keepdims=True)
+
+
+def test_coverage_of_all_objects_at_once_is_each_objects_coverage():
+    rng = np.random.default_rng(4)
+    count = 70  # more than one group of masks
+    points = _unit(rng.normal(size=(3000, 3))) * rng.uniform(1, 30, (3000, 1))
+    points[:200, 2] = np.abs(points[:200, 2]) + 50  # near the pole: rows clamp there
+    owner = rng.integers(0, count - 5, len(points))  # the last objects pass no ray
+    samples = _unit(rng.normal(size=(20000, 3))) * rng.uniform(1, 30, (20000, 1))
+    sample_owner = rng.integers(0, count, len(samples))
+    where = rng.random(len(samples)) < 0.7
+    for cell in (1.0, 0.7, 2.0):
+        expected = np.zeros(len(samples), bool)
+        for k in range(count):
+            mine = sample_owner == k
+            if (owner == k).any():
+                expected[mine] = Coverage(points[owner == k], cell).covers(samples[mine])
+        assert expected.any() and not expected.all()
+        assert np.array_equal(covered_by_owner(points, owner, samples, sample_owner, count, cell), expected)
+        assert np.array_equal(covered_by_owner(points, owner, samples, sample_owner, count, cell, where=where), expected & where)
+
+
+def test_surface_samples_with_given_areas_are_the_same_bits():
+    rng = np.random.default_rng(5)
+    triangles = rng.normal(size=(500, 3, 3)) * rng.uniform(0.01, 3, (500, 1, 1))
+    area = np.linalg.norm(np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0]), axis=1) / 2
+    spacing = rng.uniform(0.05, 0.5, 500)
+    a = surface_samples(triangles, spacing, return_triangle=True, area_bound=True)
+    b = surface_samples(triangles, spacing, return_triangle=True, area_bound=True, area=area)
+    for x, y in zip(a, b):
+        assert x.tobytes() == y.tobytes()
+    # the centroids of a cut triangle: n^2 of them, their areas adding up to the triangle's
+    points, weights, owner = a
+    assert np.allclose(np.bincount(owner, weights, minlength=500), area)
+
+
+def test_used_vertices_is_unique_with_inverse():
+    rng = np.random.default_rng(6)
+    triangles = rng.integers(0, 5000, (3000, 3)).astype(np.int32)
+    used, inverse = np.unique(triangles, return_inverse=True)
+    used2, inverse2 = _used_vertices(triangles, 6000)
+    assert np.array_equal(used, used2) and np.array_equal(inverse.ravel(), inverse2)
+
+
+def test_placer_slab_test_is_ray_box_distance():
+    rng = np.random.default_rng(7)
+    for trial in range(200):
+        yaw = float(rng.choice([0.0, np.pi / 2, rng.uniform(-np.pi, np.pi)]))
+        axes = box_axes(yaw)
+        centre = rng.uniform(-5, 5, 3)
+        half = rng.uniform(0.2, 2.5, 3)
+        sensor = rng.uniform(-5, 5, 3) if trial % 3 else centre + rng.uniform(-0.1, 0.1, 3)  # some start inside
+        directions = _unit(rng.normal(size=(64, 3)))
+        directions[:8] = axes.T[rng.integers(0, 3, 8)] * rng.choice([-1.0, 1.0], (8, 1))  # along the box's axes
+        directions[8:12] = _unit(facing_samples(sensor, centre, half, yaw)[:4] - sensor) if len(facing_samples(sensor, centre, half, yaw)) else directions[8:12]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            fast = _ray_box_distance(sensor, directions, centre, axes, half)
+        assert fast.tobytes() == ray_box_distance(sensor, directions, centre, axes, half).tobytes()
