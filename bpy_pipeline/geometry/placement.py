@@ -265,6 +265,27 @@ class FloorBoxPlacer:
         self.per_side = samples_per_side
         self.boxes: list[PlacedBox] = []
         self.rejections: Counter = Counter()
+        self._obstacle_reach = None  # kept from the first try (the obstacles stay)
+
+    def _inside(self, centre_xy: np.ndarray, half_xy: np.ndarray, yaw: float) -> bool:
+        """:func:`rectangle_inside` of the region, answered from the centre and the circumscribed circle where they
+        settle it by more than a micrometre (far beyond rounding): a centre outside the region puts a corner
+        outside, a circle inside puts every corner inside."""
+        low, high = self.region
+        if (centre_xy < low[:2] - 1e-6).any() or (centre_xy > high[:2] + 1e-6).any():
+            return False
+        r = float(np.hypot(half_xy[0], half_xy[1])) + 1e-6
+        if (centre_xy - r >= low[:2]).all() and (centre_xy + r <= high[:2]).all():
+            return True
+        return rectangle_inside(centre_xy, half_xy, yaw, *self.region)
+
+    def _near(self, centre_xy: np.ndarray, half: np.ndarray, centres: np.ndarray, radii: np.ndarray) -> np.ndarray:
+        """The rows of ``centres`` (o, 2) whose circles of ``radii`` (o,) come within 2 micrometres of the candidate's
+        circle grown by ``clearance / 2``, in order: for the others :func:`rectangles_overlap` answers no from its own
+        circle test (a micrometre), so only these need it."""
+        grow = self.clearance / 2.0
+        reach = radii + np.hypot(half[0] + grow, half[1] + grow) + 2e-6
+        return np.flatnonzero(np.hypot(centres[:, 0] - centre_xy[0], centres[:, 1] - centre_xy[1]) <= reach)
 
     def _rays(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         offset = points - self.sensor
@@ -293,17 +314,22 @@ class FloorBoxPlacer:
         """
         half = np.asarray(half, float)
         centre_xy = np.asarray(centre_xy, float)
-        if not rectangle_inside(centre_xy, half[:2], yaw, *self.region):
+        if not self._inside(centre_xy, half[:2], yaw):
             self.rejections["outside"] += 1
             return None
         nearest = np.abs((self.sensor[:2] - centre_xy) @ box_axes(yaw)[:2, :2])
         if np.linalg.norm(np.maximum(nearest - half[:2], 0.0)) < self.keep_out:
             self.rejections["outside"] += 1
             return None
-        for o_centre, o_half, o_yaw in self.obstacles:
-            if rectangles_overlap(centre_xy, half[:2], yaw, o_centre, o_half, o_yaw, self.clearance):
-                self.rejections["obstacle"] += 1
-                return None
+        if self.obstacles:
+            if self._obstacle_reach is None:  # (centres (o, 2), circumscribed radii grown by clearance / 2 (o,))
+                grow = self.clearance / 2.0
+                self._obstacle_reach = (np.array([o[0][:2] for o in self.obstacles], float), np.array([np.hypot(o[1][0] + grow, o[1][1] + grow) for o in self.obstacles], float))
+            for k in self._near(centre_xy, half, *self._obstacle_reach):
+                o_centre, o_half, o_yaw = self.obstacles[k]
+                if rectangles_overlap(centre_xy, half[:2], yaw, o_centre, o_half, o_yaw, self.clearance):
+                    self.rejections["obstacle"] += 1
+                    return None
         for box in self.boxes:
             if rectangles_overlap(centre_xy, half[:2], yaw, box.centre[:2], box.half[:2], box.yaw, self.clearance):
                 self.rejections["collision"] += 1
