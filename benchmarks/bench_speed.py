@@ -218,10 +218,10 @@ def compare(name: str, new_args: list[str], old_args: list[str] | None, old: Pat
             old_runs.append(run_py(old, old_args))
         print(name, "new", round(new_runs[-1]["fps"], 2), "old", round(old_runs[-1]["fps"], 2) if old_runs else "-", flush=True)
     best_new = max(new_runs, key=lambda r: r["fps"])
-    row = {"job": name, "new": best_new, "new_args": new_args}
+    row = {"job": name, "new": best_new, "new_args": new_args, "new_rounds": new_runs}
     if old_runs:
         best_old = max(old_runs, key=lambda r: r["fps"])
-        row.update({"old": best_old, "old_args": old_args, "fps_new_over_old": best_new["fps"] / best_old["fps"]})
+        row.update({"old": best_old, "old_args": old_args, "fps_new_over_old": best_new["fps"] / best_old["fps"], "old_rounds": old_runs})
     return row
 
 
@@ -238,6 +238,7 @@ def main() -> None:
     p.add_argument("--part", help=argparse.SUPPRESS)
     p.add_argument("--frames", type=int, default=12, help="frames of the box run (scan and write stages; 0: skip them)")
     p.add_argument("--merge", action="store_true", help="keep the parts of an earlier results file that this run skips")
+    p.add_argument("--name", help="the results file's name in --out (default speed.json; --small speed_small.json)")
     args = p.parse_args()
     if args.part == "stages":
         print(json.dumps(stage_part(args.frames)))
@@ -279,7 +280,7 @@ def main() -> None:
     results["notes"] = {"load_average": os.getloadavg(), "cores": os.cpu_count(), "small": args.small, "old": str(old) if old else None,
                         "baseline": str(args.baseline) if args.baseline else None}  # fmt: skip
     args.out.mkdir(parents=True, exist_ok=True)
-    name = "speed_small.json" if args.small else "speed.json"
+    name = args.name or ("speed_small.json" if args.small else "speed.json")
     if args.merge and (args.out / name).exists():
         earlier = json.loads((args.out / name).read_text())
         for key in ("stages", "fps", "workers"):
