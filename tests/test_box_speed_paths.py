@@ -36,6 +36,7 @@ def test_coverage_of_all_objects_at_once_is_each_objects_coverage():
         assert expected.any() and not expected.all()
         assert np.array_equal(covered_by_owner(points, owner, samples, sample_owner, count, cell), expected)
         assert np.array_equal(covered_by_owner(points, owner, samples, sample_owner, count, cell, where=where), expected & where)
+        assert np.array_equal(covered_by_owner(points, owner, samples, sample_owner, count, cell, where=where, distance=np.linalg.norm(samples, axis=1)), expected & where)
 
 
 def test_surface_samples_with_given_areas_are_the_same_bits():

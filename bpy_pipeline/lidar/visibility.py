@@ -45,10 +45,12 @@ class Coverage:
         self.mask = np.zeros((self.rows, self.columns), bool)
         self.add(directions)
 
-    def _cells(self, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _cells(self, directions: np.ndarray, norm: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """``(n,)`` row and column of ``(n, 3)`` directions; ``norm``: their ``(n,)`` lengths if the caller has them."""
         d = np.asarray(directions, float)
         azimuth = np.degrees(np.arctan2(d[:, 1], d[:, 0])) + 180.0
-        elevation = np.degrees(np.arcsin(np.clip(d[:, 2] / np.maximum(np.linalg.norm(d, axis=1), 1e-12), -1, 1))) + 90.0
+        norm = np.linalg.norm(d, axis=1) if norm is None else norm
+        elevation = np.degrees(np.arcsin(np.clip(d[:, 2] / np.maximum(norm, 1e-12), -1, 1))) + 90.0
         col = np.floor(azimuth / self.cell).astype(int) % self.columns
         row = np.clip(np.floor(elevation / self.cell).astype(int), 0, self.rows - 1)
         return row, col
@@ -172,7 +174,7 @@ def visibility(
         # samples within the range limits of objects some ray passes (no other sample can count)
         point_owner = np.concatenate(seen_boxes)
         passed = np.bincount(point_owner, minlength=len(boxes)) > 0
-        covered = covered_by_owner(np.concatenate(seen_points), point_owner, samples, sample_owner, len(boxes), cell_deg, where=inside & passed[sample_owner])
+        covered = covered_by_owner(np.concatenate(seen_points), point_owner, samples, sample_owner, len(boxes), cell_deg, where=inside & passed[sample_owner], distance=distance)
     order = np.argsort(sample_owner, kind="stable")
     bounds = np.searchsorted(sample_owner[order], np.arange(len(boxes) + 1))
     for k in range(len(boxes)):
@@ -184,7 +186,7 @@ def visibility(
 COVERAGE_GROUP = 64  # objects whose coverage masks (181 x 360 cells at 1 degree) are held at once
 
 
-def covered_by_owner(points: np.ndarray, point_owner: np.ndarray, samples: np.ndarray, sample_owner: np.ndarray, count: int, cell_deg: float, where: np.ndarray | None = None) -> np.ndarray:
+def covered_by_owner(points: np.ndarray, point_owner: np.ndarray, samples: np.ndarray, sample_owner: np.ndarray, count: int, cell_deg: float, where: np.ndarray | None = None, distance: np.ndarray | None = None) -> np.ndarray:
     """``(s,)`` bool: is each sample's direction covered by the passing points of its own object?
 
     points, point_owner : ``(p, 3)`` sensor-frame points where rays pass the objects and ``(p,)`` their object (0..count-1)
@@ -192,13 +194,15 @@ def covered_by_owner(points: np.ndarray, point_owner: np.ndarray, samples: np.nd
     The same answer as ``Coverage(points of k, cell_deg).covers(samples of k)`` per object k (the same cells, the
     same one-cell growth), with each direction's cell computed once and the objects' masks filled together.
     where : ``(s,)`` bool, the samples to look at (the others come back False), or ``None`` for all
+    distance : the ``(s,)`` samples' ``np.linalg.norm(samples, axis=1)`` (m) if the caller has it
     """
     covered = np.zeros(len(samples), bool)
     if where is not None:  # only these samples can count: the others' cells are never looked up
         samples, sample_owner = samples[where], sample_owner[where]
+        distance = None if distance is None else distance[where]
     grid = Coverage(np.zeros((0, 3)), cell_deg)
     point_row, point_col = grid._cells(points)
-    row, col = grid._cells(samples)
+    row, col = grid._cells(samples, distance)
     found = np.zeros(len(samples), bool)
     for first in range(0, count, COVERAGE_GROUP):
         last = min(first + COVERAGE_GROUP, count)
