@@ -220,8 +220,11 @@ def export_scene(table: ClassTable, extra_rules=(), depsgraph=None, keep_within=
     placements: dict[tuple, list[np.ndarray]] = defaultdict(list)  # (mesh key, row) -> world matrices
     instancers: dict[str, list] = {}  # instancer -> [its instances' id by index, or None; instances seen]
     bounds: dict[tuple, np.ndarray] = {}  # mesh key -> (8, 3) local bound box corners
+    drawn_as_instance = _drawn_as_instance(depsgraph)
     for instance in depsgraph.object_instances:
         obj = instance.object
+        if not instance.is_instance and obj.name_full in drawn_as_instance:
+            continue  # its Geometry Nodes mesh comes again as its own instance: read it there, once
         labelled = 0
         if instance.is_instance:  # the instancer's instances come in their order
             seen = instancers.setdefault(instance.parent.name_full, [instance_attribute(instance.parent, INSTANCE_ATTRIBUTE, "Instance"), 0])
@@ -266,6 +269,18 @@ def export_scene(table: ClassTable, extra_rules=(), depsgraph=None, keep_within=
     if not vertices:
         return SceneBuffers(np.zeros((0, 3)), np.zeros((0, 3), np.int32), np.zeros(0, np.int32), objects)
     return SceneBuffers(np.concatenate(vertices), np.concatenate(triangles).astype(np.int32), np.concatenate(triangle_object), objects)
+
+
+def _drawn_as_instance(depsgraph) -> set[str]:
+    """Names of the non-mesh objects (a curve with a Geometry Nodes modifier, say) whose evaluated mesh the
+    depsgraph lists twice: as the object itself (``to_mesh`` gives that mesh) and as an instance of the
+    object's own geometry (instance object named as its instancer). Read only as the instance, so its
+    triangles are not in the scene twice (42 % of a default railway's triangles were: its wires)."""
+    candidates = {obj.name_full for obj in depsgraph.scene_eval.objects if obj.type in GEOMETRY_TYPES - {"MESH"} and any(m.type == "NODES" for m in obj.modifiers)}
+    if not candidates:
+        return set()
+    return {instance.parent.name_full for instance in depsgraph.object_instances
+            if instance.is_instance and instance.parent.name_full in candidates and instance.object.type == "MESH" and instance.object.name_full == instance.parent.name_full}
 
 
 def _mesh_key(obj, is_instance: bool) -> tuple:

@@ -191,3 +191,24 @@ def test_a_sag_edited_in_the_modifier_moves_what_the_export_reads(railway):
         set_input(obj, "Sag", wire.sag)
     assert lowest() == pytest.approx(before, abs=1e-6)
     assert math.isfinite(before)
+
+
+def test_a_wire_is_in_the_exported_scene_once(railway):
+    """A curve with a Geometry Nodes modifier is listed by the depsgraph as itself and as an instance of its own
+    mesh; the export reads it once: each wire's triangles equal its evaluated mesh's, and no triangle repeats."""
+    import bpy
+
+    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.labels import load_class_table
+
+    buffers = export_scene(load_class_table())
+    for wire in railway.wires[:6]:
+        name = f"span.{wire.run}.{wire.span:02d}.{wire.kind}"
+        obj = bpy.data.objects[name]
+        mesh = obj.evaluated_get(bpy.context.evaluated_depsgraph_get()).to_mesh()
+        expected = sum(len(p.vertices) - 2 for p in mesh.polygons)
+        obj.evaluated_get(bpy.context.evaluated_depsgraph_get()).to_mesh_clear()
+        rows = [k for k, n in enumerate(buffers.objects.names) if n == name]
+        assert expected > 0 and int(np.isin(buffers.triangle_object, rows).sum()) == expected, name
+    corners = np.sort(buffers.vertices[buffers.triangles].round(6).reshape(len(buffers.triangles), -1), axis=1)
+    assert len(np.unique(corners, axis=0)) == len(corners)
