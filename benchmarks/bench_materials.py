@@ -297,6 +297,21 @@ def closeness(row: dict) -> float:
     return round(float(np.mean(np.abs(np.log(np.maximum(row["sim/real per car"], 1e-3))))), 3)
 
 
+def insertions() -> tuple[Insertion, Insertion]:
+    """The insertion's two real frames: 000008 (fit) and 004747 (held out), their label boxes and camera windows."""
+    fit_frame = Frame("000008 (fit)", np.fromfile(KITTI, np.float32).reshape(-1, 4), kitti_boxes(), slopes_000008)
+    real_4747 = np.fromfile(KITTI_4747, np.float32).reshape(-1, 4)
+    held_frame = Frame("004747 (held out)", real_4747, boxes_4747(real_4747[:, :3].astype(np.float64)), lambda xyz: slopes(xyz, calib_4747()))
+    return (Insertion("000008 (fit)", KITTI, fit_frame.boxes, slopes_000008, fit_frame.window),
+            Insertion("004747 (held out)", KITTI_4747, held_frame.boxes, held_frame.image_slopes, held_frame.window))
+
+
+def receiver_of(fitted: dict) -> dict:
+    """``effects.intensity`` of the reading model fitted by :func:`reading_fit`."""
+    return {"scale": fitted["scale"], "offset": fitted["offset"], "reading": {"enabled": True, "compensated_range": fitted["compensated_range"],
+            "exponent": fitted["exponent"], "gain_sd": fitted["gain_sd"], "noise_sd": fitted["noise_sd"]}}
+
+
 def insertion(small: bool, out) -> None:
     """The insertion comparison (module notes): grids on 000008, their best held out on 004747; into materials.json's ``insertion``.
 
@@ -305,11 +320,7 @@ def insertion(small: bool, out) -> None:
        firings, then :func:`closeness`; 2. plates and lamps (``scene.car_fittings``) on the best glass (and on the
        clear glass of before: the default); 3. paints and receivers (as before) on the best glass, ranked by cars
        within, then overlap. Held out: the rows chosen, unchanged."""
-    fit_frame = Frame("000008 (fit)", np.fromfile(KITTI, np.float32).reshape(-1, 4), kitti_boxes(), slopes_000008)
-    real_4747 = np.fromfile(KITTI_4747, np.float32).reshape(-1, 4)
-    held_frame = Frame("004747 (held out)", real_4747, boxes_4747(real_4747[:, :3].astype(np.float64)), lambda xyz: slopes(xyz, calib_4747()))
-    fit = Insertion("000008 (fit)", KITTI, fit_frame.boxes, slopes_000008, fit_frame.window)
-    held = Insertion("004747 (held out)", KITTI_4747, held_frame.boxes, held_frame.image_slopes, held_frame.window)
+    fit, held = insertions()
     seeds = INSERTION_SEEDS[:1] if small else INSERTION_SEEDS
     grid = {"diffuse, clear glass (before)": ({}, BEFORE), "diffuse, clear glass, plates and lamps (default)": ({}, {"car_glass": CarGlass(enabled=False), "car_fittings": True})}
     for w, t, r in GLASS_GRID[:1] if small else GLASS_GRID:
@@ -451,14 +462,9 @@ def reading(small: bool, out) -> None:
     then overlap) and the best of last round's receivers held out on 004747 unchanged. Into materials.json's ``reading``."""
     fitted = reading_fit()
     print(fitted, flush=True)
-    fit_frame = Frame("000008 (fit)", np.fromfile(KITTI, np.float32).reshape(-1, 4), kitti_boxes(), slopes_000008)
-    real_4747 = np.fromfile(KITTI_4747, np.float32).reshape(-1, 4)
-    held_frame = Frame("004747 (held out)", real_4747, boxes_4747(real_4747[:, :3].astype(np.float64)), lambda xyz: slopes(xyz, calib_4747()))
-    fit = Insertion("000008 (fit)", KITTI, fit_frame.boxes, slopes_000008, fit_frame.window)
-    held = Insertion("004747 (held out)", KITTI_4747, held_frame.boxes, held_frame.image_slopes, held_frame.window)
+    fit, held = insertions()
     seeds = INSERTION_SEEDS[:1] if small else INSERTION_SEEDS
-    receiver = {"scale": fitted["scale"], "offset": fitted["offset"], "reading": {"enabled": True, "compensated_range": fitted["compensated_range"],
-                "exponent": fitted["exponent"], "gain_sd": fitted["gain_sd"], "noise_sd": fitted["noise_sd"]}}
+    receiver = receiver_of(fitted)
     glass = lambda cabin: {"car_glass": CarGlass(enabled=True, windshield=0.6, tinted=0.7, interior=cabin), "car_fittings": True}  # noqa: E731
     grid = {"diffuse, clear glass, plates and lamps (default)": ({}, {"car_glass": CarGlass(enabled=False), "car_fittings": True}),
             "glass model, glossy 0.1 / 0.6 / 6 deg, 6 a - 0.3 (last round's best counts)": (glossy(0.1, 0.6, 6.0, 6.0, 0.3), glass(0.15)),
@@ -515,16 +521,8 @@ def parts(small: bool, out) -> None:
 
     path = out / "materials.json"
     payload = json.loads(path.read_text()) if path.exists() else {"benchmark": "materials", "rows": [], "notes": {}}
-    receiver = payload.get("reading", {}).get("receiver")
-    if receiver is None:
-        fitted = reading_fit()
-        receiver = {"scale": fitted["scale"], "offset": fitted["offset"], "reading": {"enabled": True, "compensated_range": fitted["compensated_range"],
-                    "exponent": fitted["exponent"], "gain_sd": fitted["gain_sd"], "noise_sd": fitted["noise_sd"]}}
-    fit_frame = Frame("000008 (fit)", np.fromfile(KITTI, np.float32).reshape(-1, 4), kitti_boxes(), slopes_000008)
-    real_4747 = np.fromfile(KITTI_4747, np.float32).reshape(-1, 4)
-    held_frame = Frame("004747 (held out)", real_4747, boxes_4747(real_4747[:, :3].astype(np.float64)), lambda xyz: slopes(xyz, calib_4747()))
-    fit = Insertion("000008 (fit)", KITTI, fit_frame.boxes, slopes_000008, fit_frame.window)
-    held = Insertion("004747 (held out)", KITTI_4747, held_frame.boxes, held_frame.image_slopes, held_frame.window)
+    receiver = payload.get("reading", {}).get("receiver") or receiver_of(reading_fit())
+    fit, held = insertions()
     seeds = INSERTION_SEEDS[:1] if small else INSERTION_SEEDS
     glass = CarGlass(enabled=True, windshield=0.6, tinted=0.7)
     effects = {"intensity": receiver}
@@ -582,16 +580,8 @@ def detection(small: bool, out) -> None:
 
     path = out / "materials.json"
     payload = json.loads(path.read_text()) if path.exists() else {"benchmark": "materials", "rows": [], "notes": {}}
-    receiver = payload.get("reading", {}).get("receiver")
-    if receiver is None:
-        fitted = reading_fit()
-        receiver = {"scale": fitted["scale"], "offset": fitted["offset"], "reading": {"enabled": True, "compensated_range": fitted["compensated_range"],
-                    "exponent": fitted["exponent"], "gain_sd": fitted["gain_sd"], "noise_sd": fitted["noise_sd"]}}
-    fit_frame = Frame("000008 (fit)", np.fromfile(KITTI, np.float32).reshape(-1, 4), kitti_boxes(), slopes_000008)
-    real_4747 = np.fromfile(KITTI_4747, np.float32).reshape(-1, 4)
-    held_frame = Frame("004747 (held out)", real_4747, boxes_4747(real_4747[:, :3].astype(np.float64)), lambda xyz: slopes(xyz, calib_4747()))
-    fit = Insertion("000008 (fit)", KITTI, fit_frame.boxes, slopes_000008, fit_frame.window)
-    held = Insertion("004747 (held out)", KITTI_4747, held_frame.boxes, held_frame.image_slopes, held_frame.window)
+    receiver = payload.get("reading", {}).get("receiver") or receiver_of(reading_fit())
+    fit, held = insertions()
     seeds = INSERTION_SEEDS[:1] if small else INSERTION_SEEDS
     glass = CarGlass(enabled=True, windshield=0.6, tinted=0.7)
     effects = {"intensity": receiver}
