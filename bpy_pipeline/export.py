@@ -11,10 +11,15 @@ Geometry Nodes may label what they make through the named attribute ``lidar_inst
 :data:`INSTANCE_ATTRIBUTE`): on an instancer's instances (each instance's own from Blender 5.3,
 the group's ``Instance`` input before: :func:`~bpy_pipeline.compat.instance_attribute`) or on a mesh's faces or points; a value > 0 is the instance id of that geometry (its class
 stays its owner's), so one object may carry many instances, realized or not.
+An object with a ``lidar_parts`` list of names may label faces or points with the named attribute
+``lidar_part`` (INT, :data:`PART_ATTRIBUTE`): p > 0 makes them the row named ``lidar_parts[p - 1]``, labelled
+as an object of that name with the owner's tags would be (the railway's instanced masts keep their
+per-support rows and automatic instance ids).
 """
 
 from __future__ import annotations
 
+import itertools
 from collections import defaultdict
 
 import bpy
@@ -29,11 +34,27 @@ from .lidar.materials import MATERIAL_MODELS, model_from_material, model_id
 GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "META", "FONT"}
 VIRTUAL_DEFORM = ("ARMATURE", "LATTICE", "CURVE")  # parent types that deform a child's mesh without a modifier
 INSTANCE_ATTRIBUTE = "lidar_instance"  # INT named attribute: the instance id of the instance, face or point (0: the owner's)
+PART_ATTRIBUTE = "lidar_part"  # INT named attribute of faces or points: p > 0 labels them as the row named ``owner["lidar_parts"][p - 1]``
 
 
-def _mesh_arrays(obj) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-    """``(vertices (n, 3) float64 local, triangles (m, 3) int32, ids (m,) int32 or None)`` of an evaluated object;
-    ``ids`` is the :data:`INSTANCE_ATTRIBUTE` of each triangle's face (or first point) where the mesh has it."""
+def _triangle_values(mesh, name: str, triangles: np.ndarray) -> np.ndarray | None:
+    """``(m,)`` int32: the INT named attribute ``name`` of each loop triangle's face (or first point); None where the mesh has none."""
+    attribute = mesh.attributes.get(name)
+    if attribute is None or attribute.data_type != "INT" or attribute.domain not in ("FACE", "POINT"):
+        return None
+    values = np.empty(len(attribute.data), np.int32)
+    attribute.data.foreach_get("value", values)
+    if attribute.domain == "FACE":
+        faces = np.empty(len(mesh.loop_triangles), np.int32)
+        mesh.loop_triangles.foreach_get("polygon_index", faces)
+        return values[faces]
+    return values[triangles[:, 0]]
+
+
+def _mesh_arrays(obj) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None]:
+    """``(vertices (n, 3) float64 local, triangles (m, 3) int32, ids (m,) int32 or None, parts (m,) int32 or None)`` of an
+    evaluated object; ``ids`` is the :data:`INSTANCE_ATTRIBUTE` and ``parts`` the :data:`PART_ATTRIBUTE` of each triangle
+    where the mesh has them."""
     mesh = obj.to_mesh()
     try:
         mesh.calc_loop_triangles()
@@ -42,20 +63,11 @@ def _mesh_arrays(obj) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
         triangles = np.empty(len(mesh.loop_triangles) * 3, np.int32)
         mesh.loop_triangles.foreach_get("vertices", triangles)
         triangles = triangles.reshape(-1, 3)
-        ids = None
-        attribute = mesh.attributes.get(INSTANCE_ATTRIBUTE)
-        if attribute is not None and attribute.data_type == "INT" and attribute.domain in ("FACE", "POINT"):
-            values = np.empty(len(attribute.data), np.int32)
-            attribute.data.foreach_get("value", values)
-            if attribute.domain == "FACE":
-                faces = np.empty(len(mesh.loop_triangles), np.int32)
-                mesh.loop_triangles.foreach_get("polygon_index", faces)
-                ids = values[faces]
-            else:
-                ids = values[triangles[:, 0]]
+        ids = _triangle_values(mesh, INSTANCE_ATTRIBUTE, triangles)
+        parts = _triangle_values(mesh, PART_ATTRIBUTE, triangles) if "lidar_parts" in obj.original else None
     finally:
         obj.to_mesh_clear()
-    return vertices.reshape(-1, 3).astype(np.float64), triangles, ids
+    return vertices.reshape(-1, 3).astype(np.float64), triangles, ids, parts
 
 
 def _ancestors(obj) -> list[str]:
@@ -157,6 +169,14 @@ class _Labeller:
             self.rows[key] = described | {"index": len(self.rows)}
         return self.rows[key]["index"]
 
+    def part_row(self, owner, names: list[str], part: str) -> int:
+        """The row of ``owner``'s geometry named ``part`` (:data:`PART_ATTRIBUTE`): labelled as an object ``part`` of
+        ``owner``'s tags would be (its own automatic instance id, by its name)."""
+        key = f"{owner.name_full}/{part}"
+        if key not in self.rows:
+            self.rows[key] = self._describe(owner, names) | {"name": part, "index": len(self.rows)}
+        return self.rows[key]["index"]
+
     def _describe(self, owner, names: list[str]) -> dict:
         where = f"object {owner.name!r}"
         if "lidar_class" in owner:
@@ -246,18 +266,31 @@ def export_scene(table: ClassTable, extra_rules=(), depsgraph=None, keep_within=
                 continue
         if key not in meshes:
             meshes[key] = _mesh_arrays(obj)
-        local, tris, ids = meshes[key]
-        if ids is not None and not labelled:  # faces labelled one by one: one part per id
+        local, tris, ids, parts = meshes[key]
+        if parts is not None and not labelled:  # named parts (a group's realized instances): one row per part, as if each were an object
+            part_names = list(owner["lidar_parts"])
+            for value in np.unique(parts).tolist():
+                sub = (key, "part", value)
+                if sub not in meshes:
+                    chosen = tris[parts == value]
+                    meshes[sub] = (local, chosen, None, None)
+                    used = local[np.unique(chosen)]
+                    bounds[sub] = np.array(list(itertools.product(*zip(used.min(axis=0), used.max(axis=0)))), np.float64)
+                if keep_within is not None and not _near_corners(bounds[sub], matrix, *keep_within):
+                    continue  # a part beyond the sensor's range, as an object of its own would be
+                name = part_names[value - 1] if 0 < value <= len(part_names) else None
+                placements[(sub, labeller.row(owner, names) if name is None else labeller.part_row(owner, names, name))].append(matrix)
+        elif ids is not None and not labelled:  # faces labelled one by one: one part per id
             for value in np.unique(ids).tolist():
                 if (key, value) not in meshes:
-                    meshes[(key, value)] = (local, tris[ids == value], None)
+                    meshes[(key, value)] = (local, tris[ids == value], None, None)
                 placements[((key, value), labeller.row(owner, names, value))].append(matrix)
         elif len(tris):
             placements[(key, labeller.row(owner, names, labelled))].append(matrix)
 
     vertices, triangles, triangle_object, offset = [], [], [], 0
     for (key, row), matrices in placements.items():
-        local, tris, _ = meshes[key]
+        local, tris = meshes[key][:2]
         stack = np.asarray(matrices)  # (g, 4, 4)
         world = np.einsum("gij,nj->gni", stack[:, :3, :3], local) + stack[:, None, :3, 3]
         vertices.append(world.reshape(-1, 3))

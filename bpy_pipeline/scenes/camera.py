@@ -66,7 +66,12 @@ def render_camera(camera, pose: np.ndarray, colors: dict[str, tuple[int, int, in
         scene.display.render_aa = "OFF"  # crisp class colours: each pixel is one object's
         view.view_transform, view.look = "Standard", "None"  # pixels in the table's sRGB, not a filmic curve's
         render.dither_intensity = 0.0  # exactly the class colours
-        for name, rgb in (colors or {}).items():
+        colors = dict(colors or {})
+        for owner in bpy.data.objects:  # an object of named parts (lidar_parts: the railway's instanced masts) takes its parts' colour
+            part = next((str(p) for p in owner.get("lidar_parts", ()) if str(p) in colors), None)
+            if part is not None and owner.name not in colors:
+                colors[owner.name] = colors[part]  # its parts share its class
+        for name, rgb in colors.items():
             target = bpy.data.objects.get(name)
             if target is not None:
                 saved_colors[name] = tuple(target.color)

@@ -110,6 +110,19 @@ def main() -> dict:
         set_input(obj, "Sweep", True)
         worst = max(worst, float(np.abs(points - parabolic_sag(wire.start, wire.end, wire.sag, len(points))).max()))
     found["max_vertex_difference_m"]["catenary wires"] = worst
+    # railway: every instanced mast ("Railway Supports") against the pure layout's mast in its support's frame
+    from bpy_pipeline.builders.railway.scene import _mast_mesh
+    from bpy_pipeline.builders.railway.support_nodes import realized_parts
+
+    worst, masts = 0.0, 0
+    for obj in [o for o in bpy.data.objects if o.name.startswith("supports.mast.")]:
+        for name, vertices in realized_parts(obj).items():
+            support = layout.supports[int(name.split(".")[1])]
+            mast = next(m for m in support.masts if m.side == name.split(".")[3])
+            pure = _mast_mesh(mast, config.scene.params.catenary)[0] @ support.frame[:3, :3].T + support.frame[:3, 3]
+            worst, masts = max(worst, float(np.abs(vertices - pure).max())), masts + 1
+    found["max_vertex_difference_m"]["railway masts"] = worst
+    found["railway_masts"] = masts
     # edit and rescan: every contact wire 0.3 m more sag
     before = scan(config, "railway_before")
     for obj in bpy.data.objects:

@@ -9,7 +9,10 @@ The layout (alignment, supports, spans, wires, droppers, stations) comes from th
 - one object per track part, each running the "Track" group (:mod:`.railway_nodes`) with its
   ``Part``: ``rails.t<i>`` and ``sleepers.t<i>`` per track, ``ballast``, ``ballast_stones.s<k>`` (around station k, or stretch k of a moving sensor's path),
   ``embankment``, ``ground``;
-- per support ``support.<k>.mast.<side>`` (or ``support.<k>.gantry``), and per track it carries
+- per support ``support.<k>.mast.<side>``: the masts are instanced at the supports' frames by the "Railway Supports"
+  group (:mod:`.support_nodes`) on one points object per mast prototype (``supports.mast.<side>.<n>``), whose
+  realized faces carry the part name ``support.<k>.mast.<side>`` the export labels them by; or ``support.<k>.gantry``
+  (an object); per track a support carries
   ``support.<k>.cantilever.t<i>``, ``support.<k>.registration_arm.t<i>``, ``support.<k>.insulators.t<i>``
   (``support.<k>.steady_arm.t<i>`` with ``catenary.steady_arms``), anchors and weights at the line's ends
   and at the two supports of every tension-section overlap (``support.<k>.anchor.<side>``),
@@ -39,7 +42,7 @@ from . import parts as railway_parts, trackside
 from .catenary import parabolic_sag
 from .terrain import terrain_mesh
 from .layout import ARM_RISE, BEAM_RADIUS, EARTH_BRACKET, FEEDER_BRACKET, MIN_WIRE_SIDES, STAY_RISE, RailwayLayout, cant_angle, cantilevers, level_of_detail, plan
-from . import catenary_nodes, scene_assets as railway_assets
+from . import catenary_nodes, scene_assets as railway_assets, support_nodes
 from .track_nodes import PARTS, track_group
 
 CENTRELINE = "track_centreline"
@@ -168,7 +171,8 @@ def _supports(params, layout: RailwayLayout, detail, collection) -> None:
     cat, section = params.catenary, layout.section
     contact_z = section.rail_top + cat.contact_wire_height
     messenger_z = contact_z + cat.system_height
-    shared: dict[tuple, bpy.types.Mesh] = {}  # identical masts (same side, kind, height) share one mesh datablock
+    instanced: dict[tuple, tuple] = {}  # identical masts (same side, kind, height): one prototype -> (mast, [frames], [names])
+    procedural_masts = not params.assets.mast  # scene.assets.mast: the files' masts stand in their place
     for k in detail.supports:
         support = layout.supports[k]
         frame = np.asarray(support.frame, float)
@@ -181,9 +185,10 @@ def _supports(params, layout: RailwayLayout, detail, collection) -> None:
         for mast in support.masts:
             if not support.gantry:
                 key = (mast.side, mast.kind, round(mast.top, 6), round(mast.base, 6), round(mast.lateral, 6))
-                if key not in shared:
-                    shared[key] = mesh_data(f"mast.{mast.side}.{mast.kind}", *_mast_mesh(mast, cat))
-                _placed(f"{label}.mast.{mast.side}", shared[key], frame, "mast", collection)
+                if procedural_masts:
+                    entry = instanced.setdefault(key, (mast, [], []))
+                    entry[1].append(frame)
+                    entry[2].append(f"{label}.mast.{mast.side}")
             if cat.feeders:  # the feeder hangs from its bracket on a rod insulator
                 y = mast.lateral + mast.outward * FEEDER_BRACKET[0]
                 feeder = railway_parts.insulator((0.0, y, mast.top - 0.075), (0.0, y, mast.top + FEEDER_BRACKET[1] + 0.02), 0.05, 3)
@@ -200,6 +205,16 @@ def _supports(params, layout: RailwayLayout, detail, collection) -> None:
             _placed(f"{label}.insulators.t{i}", pieces["insulator"], frame, "insulator", collection)
             if "steady arm" in pieces:
                 _placed(f"{label}.steady_arm.t{i}", pieces["steady arm"], frame, "steady arm", collection)
+    _instanced_masts(instanced, cat, collection)
+
+
+def _instanced_masts(instanced: dict, cat, collection) -> None:
+    """One "Railway Supports" object per mast prototype, at the frames of the supports that carry it (:mod:`.support_nodes`)."""
+    for n, (mast, frames, names) in enumerate(instanced.values()):
+        mesh = mesh_data(f"mast.{mast.side}.{mast.kind}", *_mast_mesh(mast, cat))
+        prototype = support_nodes.prototype_object(f"mast.{mast.side}.{mast.kind}.{n}", mesh, collection)
+        obj = support_nodes.supports_object(f"supports.mast.{mast.side}.{n}", prototype, np.stack(frames), names, collection)
+        tag(obj, "mast", reflectivity=REFLECTIVITY["mast"])
 
 
 def _anchors_and_sections(params, layout: RailwayLayout, detail, collection) -> None:

@@ -137,7 +137,8 @@ def place(params, layout, detail, collection, reflectivity: dict[str, float]) ->
 
     Each placement's parts become objects ``<support part name>`` (the slot's own class) and
     ``<support part name>.<class>`` (parts a name gave another class), each its own instance, sharing one mesh
-    per slot and class; the procedural objects a placement replaces are removed.
+    per slot and class; the procedural objects a placement replaces are removed (the masts are never built with a
+    mast asset: the railway builder instances none, see :mod:`.support_nodes`).
     """
     assets = params.assets
     for slot in SLOTS:
