@@ -127,6 +127,10 @@ def test_meshes_that_cross_are_found_and_touching_ones_are_not():
     ({"vehicle_mix": {"tram": 1.0}}, "scene.vehicle_mix"),
     ({"platoon_probability": 1.5}, "scene.platoon_probability"),
     ({"building_height": [20.0, 6.0]}, "scene.building_height"),
+    ({"yard_trees": 1e9}, "scene.yard_trees"),
+    ({"yard_trees": -1.0}, "scene.yard_trees"),
+    ({"yard_tree_clearance": 0.1}, "scene.yard_tree_clearance"),
+    ({"yard_tree_height": [14.0, 4.0]}, "scene.yard_tree_height"),
 ])
 def test_bad_street_parameters_name_their_key(change, key):
     from bpy_pipeline.config import load_config

@@ -169,6 +169,9 @@ def main() -> dict:
     set_input(bpy.data.objects["street_plants"], "Density", 0.5)
     after = scan(config, "street_after")
     found["street_density"] = compare(before, after, "vegetation")
+    # street: trees planted over the yards (the "Street Planting" modifier's Density, 0 by default)
+    set_input(bpy.data.objects["street_yard_trees"], "Density", 5.0)
+    found["street_planting"] = compare(after, scan(config, "street_planted"), "trunk")
     # street: every lane 1 m narrower (the road's "Street Road" modifier; a wider road hides under the kerbs), scanned again
     config, _ = built("street")
     from bpy_pipeline.builders.street.layout import road_meshes

@@ -600,7 +600,7 @@ def test_node_groups_match_the_pure_functions_and_an_edited_input_rescans(chroot
     assert found["railway_masts"] >= 3 and found["max_vertex_difference_m"]["railway masts"] <= 1e-5  # float32 realized: 3e-6 m measured
     assert counts["parking"]["groups"] == ["Parking Level"] and counts["parking"]["modifiers"] == 5
     assert counts["industrial_hall"]["groups"] == ["Industrial Hall"] and counts["industrial_hall"]["modifiers"] >= 3
-    assert counts["street"]["groups"] == ["Street Facade", "Street Road", "Street Scatter"] and counts["street"]["modifiers"] == 7 + 3 + 35  # 35 buildings
+    assert counts["street"]["groups"] == ["Street Facade", "Street Planting", "Street Road", "Street Scatter"] and counts["street"]["modifiers"] == 7 + 3 + 35 + 1  # 35 buildings, the yards
     difference = found["max_vertex_difference_m"]
     assert difference["catenary wires"] <= 1e-5 and difference["parking"] <= 1e-5 and difference["parking doorways"] <= 1e-5 and difference["industrial_hall"] <= 1e-5, difference
     sag = found["railway_sag"]  # every contact wire 0.3 m lower at mid-span: its points lower, nothing else moved
@@ -608,6 +608,8 @@ def test_node_groups_match_the_pure_functions_and_an_edited_input_rescans(chroot
     bays = found["parking_bay_width"]  # 2.8 m bays: the pillars moved to where the pure level with 2.8 m bays has them
     assert bays["edited_changed"] and bays["pillar_points_off_the_new_pillars_m"] <= 1e-3 and bays["other_moved_over_1mm"] == 0, bays
     assert found["street_density"]["edited_changed"], found["street_density"]
+    planted = found["street_planting"]  # Density 5 trees per 100 m^2 of yard: more trunk points (none other moved: occluded ones hit the new trees)
+    assert planted["edited_points"][1] > planted["edited_points"][0] and planted["other_moved_over_1mm"] == 0, planted
     lanes = found["street_lane_width"]  # every lane 1 m narrower: fewer road points, no other beam's point moved
     assert lanes["edited_changed"] and lanes["edited_points"][1] < lanes["edited_points"][0] and lanes["other_moved_over_1mm"] == 0, lanes
     assert difference["street road"] <= 1e-6 + 2.4e-5, difference  # Trim Curve's float32 arithmetic along 200 m centre lines

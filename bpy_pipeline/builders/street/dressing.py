@@ -98,6 +98,19 @@ class Scatter:
 
 
 @dataclass
+class Yards:
+    """Where and what the "Street Planting" group (builders/street/planting_nodes.py) plants: ``rects``
+    ``[(x0, x1, y0, y1)]`` (m), each yard or open plot 1 m inside its bounds; ``terrain`` their ground;
+    ``trunk`` the unit cylinder (radius 1, z 0..1); ``crowns`` the round leaf-card crowns (:data:`CROWN_VARIANTS`)
+    scaled to radius 1 and height 1, centred on the origin."""
+
+    rects: list[tuple[float, float, float, float]]
+    terrain: Terrain
+    trunk: Mesh
+    crowns: list[Mesh]
+
+
+@dataclass
 class Dressing:
     """The dressing of one street: ``parts`` ``[(name, class, reflectivity, mesh, scatter)]`` (``scatter`` the
     :class:`Scatter` whose :meth:`~Scatter.mesh` ``mesh`` is, or ``None`` for a plain mesh) and the obstacles it adds."""
@@ -107,6 +120,7 @@ class Dressing:
     blocks: list[tuple[np.ndarray, np.ndarray, float]] = field(default_factory=list)
     buildings: list[Mesh] = field(default_factory=list)
     fronts: list[tuple[np.ndarray, np.ndarray, float, float]] = field(default_factory=list)  # per building: start (3,), end (3,), depth, height (m); see dress
+    yards: Yards | None = None  # where the "Street Planting" group may add trees
     counts: dict = field(default_factory=dict)
 
     def count(self, what: str, n: int = 1) -> None:
@@ -148,20 +162,34 @@ def make_terrain(walk_outer: float, top: float, relief: float, slope: float, rng
     return Terrain(walk_outer, top, relief, slope, waves)
 
 
-def terrain_mesh(terrain: Terrain, x0: float, x1: float, y0: float, y1: float, step: float, rng: np.random.Generator) -> Mesh:
-    """A height-field mesh over ``[x0, x1] x [y0, y1]`` at about ``step`` metres, with 2 cm of roughness
-    inside (its border vertices keep their height so that neighbouring blocks meet the sidewalk)."""
+def _height_grid(terrain: Terrain, x0: float, x1: float, y0: float, y1: float, step: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``(x, y, z, triangles)``: the ground over ``[x0, x1] x [y0, y1]`` sampled at about ``step`` metres;
+    ``x, y, z`` (nx, ny) grids (m), ``triangles`` (2 (nx-1) (ny-1), 3) int32 into their raveled order."""
     nx, ny = max(2, int(math.ceil((x1 - x0) / step)) + 1), max(2, int(math.ceil((y1 - y0) / step)) + 1)
     gx, gy = np.meshgrid(np.linspace(x0, x1, nx), np.linspace(y0, y1, ny), indexing="ij")
-    z = terrain.z(gx, gy)
-    rough = rng.normal(0.0, 0.02, z.shape)
-    rough[[0, -1], :] = 0.0
-    rough[:, [0, -1]] = 0.0
-    vertices = np.column_stack([gx.ravel(), gy.ravel(), (z + rough).ravel()])
     i = np.arange(nx - 1)[:, None] * ny + np.arange(ny - 1)[None, :]
     i = i.ravel()
     triangles = np.concatenate([np.column_stack([i, i + ny, i + ny + 1]), np.column_stack([i, i + ny + 1, i + 1])])
-    return vertices, triangles.astype(np.int32)
+    return gx, gy, terrain.z(gx, gy), triangles.astype(np.int32)
+
+
+def terrain_mesh(terrain: Terrain, x0: float, x1: float, y0: float, y1: float, step: float, rng: np.random.Generator) -> Mesh:
+    """A height-field mesh over ``[x0, x1] x [y0, y1]`` at about ``step`` metres, with 2 cm of roughness
+    inside (its border vertices keep their height so that neighbouring blocks meet the sidewalk)."""
+    gx, gy, z, triangles = _height_grid(terrain, x0, x1, y0, y1, step)
+    rough = rng.normal(0.0, 0.02, z.shape)
+    rough[[0, -1], :] = 0.0
+    rough[:, [0, -1]] = 0.0
+    return np.column_stack([gx.ravel(), gy.ravel(), (z + rough).ravel()]), triangles
+
+
+def yard_ground(terrain: Terrain, yards, step: float = 2.0) -> Mesh:
+    """The ground of ``yards`` ``[(x0, x1, y0, y1)]`` (m; :attr:`Dressing.yards`), without the terrain's roughness,
+    sampled at about ``step`` metres: where the "Street Planting" group distributes its trees."""
+    if not yards:
+        return np.zeros((0, 3)), np.zeros((0, 3), np.int32)
+    grids = [_height_grid(terrain, *yard, step) for yard in yards]
+    return primitives.merge([(np.column_stack([gx.ravel(), gy.ravel(), z.ravel()]), triangles) for gx, gy, z, triangles in grids])
 
 
 # ----------------------------------------------------------------------------- furniture meshes
@@ -317,6 +345,8 @@ def dress(p, road_half: float, walk_inner: float, walk_outer: float, kerb_height
     kinds = prototypes(rng)
     terrain = make_terrain(walk_outer, kerb_height, p.terrain_relief, p.terrain_slope, rng)
     z_at = terrain.z
+    out.yards = Yards([], terrain, kinds.poles[0], [(kinds.plants[k][0] / kinds.plant_size[k][[0, 0, 1]], kinds.plants[k][1])
+                                                   for k in (kinds.crown("round", v) for v in range(CROWN_VARIANTS))])
     trunks = Scatter([kinds.poles[0]])  # the unit cylinder, scaled to each trunk's radius and length
     plants = Scatter(kinds.plants)
     poles = Scatter(kinds.poles)  # lamp poles and bollards (the unit cylinder), lamps' arms and heads
@@ -384,6 +414,9 @@ def dress(p, road_half: float, walk_inner: float, walk_outer: float, kerb_height
                         out.fronts.append((start, end, float(p.building_depth), 0.3 + height))
                     # the yard (or open plot): plants drawn by area, kept 1 m off the boundary and the building
                     area = max(width - 2.0, 0.0) * max(depth - 2.0, 0.0)
+                    if area > 0.0:
+                        (ax, ay), (bx, by) = in_block(s + 1.0, front + 1.0, sx, sy, axis), in_block(s + width - 1.0, walk_outer + depth - 1.0, sx, sy, axis)
+                        out.yards.rects.append((min(ax, bx), max(ax, bx), min(ay, by), max(ay, by)))
                     for _ in range(int(rng.poisson(p.yard_plants * area / 100.0))):
                         along = float(rng.uniform(s + 1.0, s + width - 1.0))
                         across = float(rng.uniform(front + 1.0, walk_outer + depth - 1.0))

@@ -134,6 +134,7 @@ class StreetLayout:
     walks: list[tuple[float, float, float, float]] = field(default_factory=list)
     blocks: list = field(default_factory=list)
     dressing: dict = field(default_factory=dict)
+    yards: object = None  # dressing.Yards: where the "Street Planting" group plants
 
     def on_sidewalk(self, xy) -> bool:
         """True when ``xy`` (2,) lies on a sidewalk slab (kerbs excluded)."""
@@ -270,7 +271,7 @@ def street_layout(p, rng: np.random.Generator) -> StreetLayout:
     for name, class_name, reflectivity, mesh, scatter in dressing.parts:
         add(name, class_name, reflectivity, mesh, scatter=scatter)
     poles += dressing.circles
-    return StreetLayout(parts, lanes, R, inner, outer, A, kh, crossings, np.array(poles, float).reshape(-1, 3), walk_rects, dressing.blocks, dressing.counts)
+    return StreetLayout(parts, lanes, R, inner, outer, A, kh, crossings, np.array(poles, float).reshape(-1, 3), walk_rects, dressing.blocks, dressing.counts, dressing.yards)
 
 
 # ----------------------------------------------------------------------------- road users

@@ -24,7 +24,10 @@ class StreetScene:
     (m) grid (``terrain: false`` leaves it out); plots ``building_width`` wide, each a building
     (``building_height``, ``building_depth`` deep) set back ``setback`` (m) behind a front yard,
     or, a share ``open_share``, open ground with trees and bushes ``plot_depth`` deep;
-    ``yard_plants`` trees and bushes per 100 m^2 of yard; each plot's front a fence, hedge, low wall
+    ``yard_plants`` trees and bushes per 100 m^2 of yard, placed by the layout's generator, and
+    ``yard_trees`` more trees per 100 m^2 (at most :data:`MAX_YARD_TREES`; 0: none) that the "Street
+    Planting" Geometry Nodes group distributes over the yards, at least ``yard_tree_clearance`` (m)
+    apart, ``yard_tree_height`` (m) tall; each plot's front a fence, hedge, low wall
     or nothing by ``boundary_mix``. On the sidewalks' kerb side: street trees ``tree_spacing``
     apart along a share ``street_trees`` of the arm sides, lamps every ``lamp_spacing`` m (0:
     none), ``furniture_per_100m`` bins, bicycle stands and bollards per side; with probability
@@ -66,6 +69,9 @@ class StreetScene:
     street_trees: float = 0.6
     tree_spacing: tuple[float, float] = (8.0, 16.0)
     yard_plants: float = 1.5
+    yard_trees: float = 0.0
+    yard_tree_clearance: float = 4.0
+    yard_tree_height: tuple[float, float] = (4.0, 14.0)
     lamp_spacing: float = 28.0
     furniture_per_100m: float = 3.0
     roadworks: float = 0.25
@@ -92,8 +98,9 @@ class StreetScene:
     ego_step: float = 7.3
 
 
+MAX_YARD_TREES = 100.0  # per 100 m^2: one tree a square metre (Distribute Points on Faces draws that many before thinning)
 MAY_BE_ZERO = {"ego_span", "parking_width", "signs", "layout_seed", "crossing_offset", "platoon_probability", "crossing_share", "clearance", "min_in_view",
-               "setback", "open_share", "street_trees", "tree_spacing", "yard_plants", "lamp_spacing", "furniture_per_100m", "roadworks",
+               "setback", "open_share", "street_trees", "tree_spacing", "yard_plants", "yard_trees", "lamp_spacing", "furniture_per_100m", "roadworks",
                "terrain_relief", "terrain_slope"}
 
 
@@ -102,7 +109,13 @@ def check(params: StreetScene, where: str) -> None:
     for key in ("platoon_probability", "crossing_share", "min_in_view", "open_share", "street_trees", "roadworks"):
         if getattr(params, key) > 1:
             raise InputError(f"{where}.{key}: must lie in 0..1, got {getattr(params, key)}")
-    for key in ("building_width", "building_height", "setback", "tree_spacing"):
+    if params.yard_trees > MAX_YARD_TREES:
+        raise InputError(f"{where}.yard_trees: at most {MAX_YARD_TREES:g} trees per 100 m^2 of yard, got {params.yard_trees}")
+    if params.yard_tree_clearance < 0.5:
+        raise InputError(f"{where}.yard_tree_clearance: at least 0.5 m (a trunk's width), got {params.yard_tree_clearance}")
+    if params.yard_tree_height[0] < 2.0:
+        raise InputError(f"{where}.yard_tree_height: trees of at least 2 m (their crowns clear 1.5 m), got {list(params.yard_tree_height)}")
+    for key in ("building_width", "building_height", "setback", "tree_spacing", "yard_tree_height"):
         lo, hi = getattr(params, key)
         if lo > hi:
             raise InputError(f"{where}.{key}: expected [min, max] with min <= max, got {[lo, hi]}")

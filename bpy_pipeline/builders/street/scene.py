@@ -9,7 +9,9 @@ points (builders/street/scatter_nodes.py); the carriageway, kerbs and sidewalks 
 edges are the roads' centre lines and whose live "Street Road" modifier sweeps their profiles along them
 (builders/street/road_nodes.py); each building is its facade line along its plot, swept to its
 depth and height by a live "Street Facade" modifier (builders/street/facade_nodes.py); a user can
-edit their inputs or move their points and rescan.
+edit their inputs or move their points and rescan; the ground of the yards, ``street_yard_trees``,
+has a live "Street Planting" modifier distributing ``scene.yard_trees`` more trees over it
+(builders/street/planting_nodes.py).
 Each frame removes the last frame's road users and places new ones from the frame's generator
 (lane following, platoons, parked cars, pedestrians on sidewalks and crossings, field-of-view
 aware when the run's sensors are known).
@@ -26,7 +28,9 @@ import numpy as np
 
 from ...scenes.objects import mesh_data, mesh_object, scene_collection, tag
 from . import layout as street
+from .dressing import REFLECTIVITY
 from .facade_nodes import facade_object
+from .planting_nodes import planting_object
 from .road_nodes import road_object
 from .scatter_nodes import prototypes_collection, scatter_object
 
@@ -44,6 +48,8 @@ class Intersection:
         self.collection = scene_collection()
         prototypes = prototypes_collection(self.collection)
         self.static = [tag(self._static_object(part, prototypes), part.class_name, part.material, part.reflectivity, part.instance) for part in self.layout.parts]
+        planting_instance = max((part.instance or 0 for part in self.layout.parts), default=0) + 1  # after every static part's id
+        self.static.append(planting_object(self.layout.yards, params, self.collection, prototypes, planting_instance, REFLECTIVITY))
         self.users = bpy.data.collections.new(USERS_COLLECTION)
         self.collection.children.link(self.users)
         bpy.context.view_layer.update()
