@@ -305,11 +305,12 @@ def export_scene(table: ClassTable, extra_rules=(), depsgraph=None, keep_within=
 
 
 def _drawn_as_instance(depsgraph) -> set[str]:
-    """Names of the non-mesh objects (a curve with a Geometry Nodes modifier, say) whose evaluated mesh the
-    depsgraph lists twice: as the object itself (``to_mesh`` gives that mesh) and as an instance of the
-    object's own geometry (instance object named as its instancer). Read only as the instance, so its
-    triangles are not in the scene twice (42 % of a default railway's triangles were: its wires)."""
-    candidates = {obj.name_full for obj in depsgraph.scene_eval.objects if obj.type in GEOMETRY_TYPES - {"MESH"} and any(m.type == "NODES" for m in obj.modifiers)}
+    """Names of the non-mesh objects (a bevelled curve, an extruded text, a curve with a Geometry Nodes
+    modifier) whose evaluated mesh the depsgraph lists twice: as the object itself (``to_mesh`` gives that
+    mesh) and as an instance of the object's own geometry (instance object named as its instancer). Read
+    only as the instance, so its triangles are not in the scene twice (42 % of a default railway's
+    triangles were: its wires; every bevelled curve and text of a user's .blend was)."""
+    candidates = {obj.name_full for obj in depsgraph.scene_eval.objects if obj.type in GEOMETRY_TYPES - {"MESH"}}
     if not candidates:
         return set()
     return {instance.parent.name_full for instance in depsgraph.object_instances
