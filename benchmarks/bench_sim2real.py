@@ -70,6 +70,7 @@ ABLATION = {
     "no fences walls furniture": ["scene.boundary_mix={hedge: 0.3, none: 0.7}", "scene.lamp_spacing=0", "scene.furniture_per_100m=0", "scene.roadworks=0"],
     "40 m arms": ["scene.arm_length=40", "scene.ego_span=25"],
     "ideal scan (no noise, drop)": ["effects.ideal=true"],
+    "more yard trees": ["scene.yard_trees=2"],  # the "Street Planting" group's trees added (2 per 100 m^2 of yard, 4 m apart)
 }
 
 

@@ -2,7 +2,7 @@
 
 The group draws its trees with Blender's own generator (Distribute Points on Faces), so no pure
 function gives them point for point; these tests check what its inputs promise, with the bpy module:
-how many trees for the density, none closer than the clearance, each standing on the yards' ground
+how many trees for the density, none closer than the clearance (to each other and to the layout's trunks), each standing on the yards' ground
 inside a yard, sizes within their ranges and built by the pure crown rule, labels from the
 prototypes' tags, the same trees for the same seed, none at density 0 (the default street's bytes),
 and an edited density in the modifier panel scanned as trunks and crowns.
@@ -70,6 +70,9 @@ def test_the_trees_keep_the_density_clearance_yards_and_sizes_they_are_given():
     assert np.abs(base[:, 2] - yards.terrain.z(base[:, 0], base[:, 1])).max() < 0.02  # on the ground (sampled every 2 m)
     gaps = np.linalg.norm(base[:, None, :2] - base[None, :, :2], axis=2) + np.eye(len(base)) * 1e9
     assert gaps.min() >= 3.0 - 1e-3
+    # and clear of the layout's own trees (Keep Clear Of: the trunks' cylinders)
+    layout_trunks = next(part for part in layout.parts if part.name == "street_trunks").mesh[0]
+    assert np.linalg.norm(base[:, None, :] - layout_trunks[None, :, :], axis=2).min() >= 3.0 - 1e-3
     # sizes: the crown's radius and height are its scale (unit prototypes), the height follows the pure crown rule
     from bpy_pipeline.builders.street.vegetation import crown_size
 
@@ -121,6 +124,8 @@ def test_same_seed_same_trees_and_none_at_density_zero():
     _street(yard_trees=2.0, layout_seed=1)
     other = _trees(bpy.data.objects["street_yard_trees"])
     assert len(other[0]) != len(first[0]) or not np.array_equal(other[0], first[0])
+    _street(yard_trees=2.0, yard_plants=0, street_trees=0)  # no layout trunks to keep clear of: the trees stand all the same
+    assert len(_trees(bpy.data.objects["street_yard_trees"])[0]) > len(first[0])
     _street()  # the default: the group plants nothing, and the ground it would plant on is no geometry of the scene
     assert all(len(m) == 0 for m in _trees(bpy.data.objects["street_yard_trees"]))
     from bpy_pipeline.export import export_scene

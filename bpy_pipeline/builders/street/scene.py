@@ -28,7 +28,6 @@ import numpy as np
 
 from ...scenes.objects import mesh_data, mesh_object, scene_collection, tag
 from . import layout as street
-from .dressing import REFLECTIVITY
 from .facade_nodes import facade_object
 from .planting_nodes import planting_object
 from .road_nodes import road_object
@@ -49,7 +48,8 @@ class Intersection:
         prototypes = prototypes_collection(self.collection)
         self.static = [tag(self._static_object(part, prototypes), part.class_name, part.material, part.reflectivity, part.instance) for part in self.layout.parts]
         planting_instance = max((part.instance or 0 for part in self.layout.parts), default=0) + 1  # after every static part's id
-        self.static.append(planting_object(self.layout.yards, params, self.collection, prototypes, planting_instance, REFLECTIVITY))
+        trunks = next((obj for obj in self.static if obj.name == "street_trunks"), None)
+        self.static.append(planting_object(self.layout.yards, params, self.collection, prototypes, planting_instance, trunks))
         self.users = bpy.data.collections.new(USERS_COLLECTION)
         self.collection.children.link(self.users)
         bpy.context.view_layer.update()
