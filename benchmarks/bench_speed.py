@@ -205,8 +205,8 @@ def run_py(code: Path, args: list[str], workers: int = 1) -> dict:
 
 def accepts_ego(code: Path) -> bool:
     """Whether checkout ``code``'s street builder knows ``ego_vehicle``."""
-    street = code / "bpy_pipeline" / "builders" / "street.py"
-    return street.exists() and "ego_vehicle" in street.read_text()
+    builders = code / "bpy_pipeline" / "builders"
+    return any(f.exists() and "ego_vehicle" in f.read_text() for f in (builders / "street.py", builders / "street" / "params.py"))  # a module, or a package since the layout issue
 
 
 def compare(name: str, new_args: list[str], old_args: list[str] | None, old: Path | None, rounds: int) -> dict:

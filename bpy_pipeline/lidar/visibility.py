@@ -183,16 +183,16 @@ def visibility(
         boxes["truncation"][k] = float(1.0 - area[mine][covered[mine]].sum() / whole) if whole > 0 else 1.0
 
 
-COVERAGE_GROUP = 64  # objects whose coverage masks (181 x 360 cells at 1 degree) are held at once
-
-
 def covered_by_owner(points: np.ndarray, point_owner: np.ndarray, samples: np.ndarray, sample_owner: np.ndarray, count: int, cell_deg: float, where: np.ndarray | None = None, distance: np.ndarray | None = None) -> np.ndarray:
     """``(s,)`` bool: is each sample's direction covered by the passing points of its own object?
 
     points, point_owner : ``(p, 3)`` sensor-frame points where rays pass the objects and ``(p,)`` their object (0..count-1)
     samples, sample_owner : ``(s, 3)`` sensor-frame surface samples and ``(s,)`` their object
     The same answer as ``Coverage(points of k, cell_deg).covers(samples of k)`` per object k (the same cells, the
-    same one-cell growth), with each direction's cell computed once and the objects' masks filled together.
+    same one-cell growth: rows clamped at the poles, columns wrapping), with each direction's cell computed once:
+    the points' occupied (object, row, column) cells are one sorted array of keys, and a sample is covered when
+    one of the nine cells around its own is among them (no mask of every cell is made: at the HDL-64E's cells
+    a frame's masks were 100 MB an object group).
     where : ``(s,)`` bool, the samples to look at (the others come back False), or ``None`` for all
     distance : the ``(s,)`` samples' ``np.linalg.norm(samples, axis=1)`` (m) if the caller has it
     """
@@ -201,18 +201,23 @@ def covered_by_owner(points: np.ndarray, point_owner: np.ndarray, samples: np.nd
         samples, sample_owner = samples[where], sample_owner[where]
         distance = None if distance is None else distance[where]
     grid = Coverage(np.zeros((0, 3)), cell_deg)
-    point_row, point_col = grid._cells(points)
-    row, col = grid._cells(samples, distance)
+    rows, columns = grid.rows, grid.columns
+    owned = (point_owner >= 0) & (point_owner < count)
+    point_row, point_col = grid._cells(points[owned])
+    occupied = np.unique((point_owner[owned].astype(np.int64) * rows + point_row) * columns + point_col)
     found = np.zeros(len(samples), bool)
-    for first in range(0, count, COVERAGE_GROUP):
-        last = min(first + COVERAGE_GROUP, count)
-        mask = np.zeros((last - first, grid.rows, grid.columns), bool)
-        mine = (point_owner >= first) & (point_owner < last)
-        mask[point_owner[mine] - first, point_row[mine], point_col[mine]] = True
-        rows = mask | np.concatenate([mask[:, 1:], mask[:, -1:]], axis=1) | np.concatenate([mask[:, :1], mask[:, :-1]], axis=1)
-        grown = rows | np.roll(rows, 1, axis=2) | np.roll(rows, -1, axis=2)
-        at = (sample_owner >= first) & (sample_owner < last)
-        found[at] = grown[sample_owner[at] - first, row[at], col[at]]
+    if len(occupied):  # each distinct (object, cell) of the samples looked up once, in order
+        row, col = grid._cells(samples, distance)
+        cells, inverse = np.unique((sample_owner.astype(np.int64) * rows + row) * columns + col, return_inverse=True)
+        cell_col, cell_row, base = cells % columns, (cells // columns) % rows, cells // (columns * rows) * rows
+        hit = np.zeros(len(cells), bool)
+        for dr in (-1, 0, 1):
+            near_row = (base + np.clip(cell_row + dr, 0, rows - 1)) * columns
+            for dc in (-1, 0, 1):
+                key = near_row + (cell_col + dc) % columns
+                at = np.minimum(np.searchsorted(occupied, key), len(occupied) - 1)
+                hit |= occupied[at] == key
+        found = hit[inverse.reshape(-1)]
     if where is None:
         return found
     covered[where] = found
