@@ -4,12 +4,13 @@
 - :func:`surface_samples` given the triangles' areas against computing them;
 - the vertices an object set uses, without a sort, against ``np.unique``;
 - the placer's slab test against :func:`~bpy_pipeline.geometry.collision.ray_box_distance`, rays along the box's
-  faces and axes included (the whole visibility against its per-object reference: tests/test_boxes.py).
+  faces and axes included (the whole visibility against its per-object reference: tests/test_boxes.py);
+- a capsule's mesh (every body segment of every person, every frame) built at once against ring by ring.
 """
 
 import numpy as np
 
-from bpy_pipeline.geometry.collision import box_axes, ray_box_distance
+from bpy_pipeline.geometry.collision import box_axes, capsule_mesh, ray_box_distance
 from bpy_pipeline.geometry.placement import _ray_box_distance, facing_samples
 from bpy_pipeline.lidar.visibility import Coverage, _used_vertices, covered_by_owner, surface_samples
 
@@ -75,3 +76,43 @@ def test_placer_slab_test_is_ray_box_distance():
         with np.errstate(divide="ignore", invalid="ignore"):
             fast = _ray_box_distance(sensor, directions, centre, axes, half)
         assert fast.tobytes() == ray_box_distance(sensor, directions, centre, axes, half).tobytes()
+
+
+def _capsule_ring_by_ring(a, b, radius, segments=10, rings=3, flat_start=False):
+    """The capsule mesh as it was built before, a ring and a band at a time with ``np.cross``: the reference."""
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    axis = b - a
+    length = float(np.linalg.norm(axis))
+    w = axis / length if length > 1e-12 else np.array([0.0, 0.0, 1.0])
+    helper = np.array([1.0, 0.0, 0.0]) if abs(w[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    u = np.cross(w, helper)
+    u /= np.linalg.norm(u)
+    v = np.cross(w, u)
+    phi = np.linspace(0.0, 2 * np.pi, segments, endpoint=False)
+    circle = np.cos(phi)[:, None] * u + np.sin(phi)[:, None] * v
+    rows = [(a, 0.0, radius)] if flat_start else [(a, -radius * np.cos(np.pi / 2 * k / (rings + 1)), radius * np.sin(np.pi / 2 * k / (rings + 1))) for k in range(1, rings + 1)] + [(a, 0.0, radius)]
+    rows += [(b, 0.0, radius)] + [(b, radius * np.cos(np.pi / 2 * k / (rings + 1)), radius * np.sin(np.pi / 2 * k / (rings + 1))) for k in range(rings, 0, -1)]
+    vertices = np.concatenate([[a if flat_start else a - radius * w], *[c + o * w + r * circle for c, o, r in rows], [b + radius * w]])
+    j = np.arange(segments)
+    k = (j + 1) % segments
+    tris = [np.stack([np.zeros(segments, int), 1 + k, 1 + j], 1)]
+    for r in range(len(rows) - 1):
+        lo, hi = 1 + r * segments, 1 + (r + 1) * segments
+        tris += [np.stack([lo + j, lo + k, hi + k], 1), np.stack([lo + j, hi + k, hi + j], 1)]
+    last = 1 + (len(rows) - 1) * segments
+    tris.append(np.stack([np.full(segments, len(vertices) - 1), last + j, last + k], 1))
+    return vertices, np.concatenate(tris).astype(np.int32)
+
+
+def test_a_capsule_built_at_once_is_the_same_bits_as_ring_by_ring():
+    rng = np.random.default_rng(6)
+    for i in range(600):
+        a, b = rng.normal(size=3) * rng.uniform(0.1, 100), rng.normal(size=3)
+        if i % 10 == 0:
+            b = a.copy()  # a sphere
+        options = {"segments": int(rng.integers(3, 16)), "rings": int(rng.integers(1, 5)), "flat_start": bool(rng.random() < 0.3)}
+        radius = float(rng.uniform(0.01, 1.0))
+        vertices, triangles = capsule_mesh(a, b, radius, **options)
+        want_vertices, want_triangles = _capsule_ring_by_ring(a, b, radius, **options)
+        assert vertices.dtype == want_vertices.dtype and vertices.tobytes() == want_vertices.tobytes(), (i, options)
+        assert triangles.dtype == want_triangles.dtype and triangles.tobytes() == want_triangles.tobytes(), (i, options)

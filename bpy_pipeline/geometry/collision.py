@@ -161,6 +161,12 @@ def ray_box_distance(origin, directions, centre, axes, half, max_distance=np.inf
     return np.where(hit, np.maximum(near, 0.0), np.inf)
 
 
+def _cross3(p: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """``np.cross`` of two (3,) float64 vectors, component for component the same products and differences
+    (the same bits) without its general-shape set-up (a capsule is made per body segment, per frame)."""
+    return np.array([p[1] * q[2] - p[2] * q[1], p[2] * q[0] - p[0] * q[2], p[0] * q[1] - p[1] * q[0]])
+
+
 def capsule_mesh(a, b, radius: float, segments: int = 10, rings: int = 3, flat_start: bool = False):
     """A closed triangle mesh inscribed in the capsule ``a``-``b`` of ``radius``: ``(vertices (n, 3), triangles (m, 3))``.
 
@@ -174,9 +180,9 @@ def capsule_mesh(a, b, radius: float, segments: int = 10, rings: int = 3, flat_s
     length = float(np.linalg.norm(axis))
     w = axis / length if length > 1e-12 else np.array([0.0, 0.0, 1.0])
     helper = np.array([1.0, 0.0, 0.0]) if abs(w[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    u = np.cross(w, helper)
+    u = _cross3(w, helper)
     u /= np.linalg.norm(u)
-    v = np.cross(w, u)
+    v = _cross3(w, u)
     phi = np.linspace(0.0, 2 * np.pi, segments, endpoint=False)
     circle = np.cos(phi)[:, None] * u + np.sin(phi)[:, None] * v  # (s, 3)
     # rings from the start pole to the end pole: (polar angle measured from -w at a, +w at b)
@@ -192,19 +198,21 @@ def capsule_mesh(a, b, radius: float, segments: int = 10, rings: int = 3, flat_s
     for k in range(rings, 0, -1):
         theta = np.pi / 2 * k / (rings + 1)
         rows.append((b, radius * np.cos(theta), radius * np.sin(theta)))
-    ring_vertices = [centre + offset * w + rho * circle for centre, offset, rho in rows]
+    centres = np.array([centre for centre, _, _ in rows])
+    offsets = np.array([offset for _, offset, _ in rows])
+    radii = np.array([rho for _, _, rho in rows])
+    ring_vertices = (centres[:, None, :] + (offsets[:, None] * w)[:, None, :]) + radii[:, None, None] * circle[None]  # (rows, s, 3)
     start_pole = a if flat_start else a - radius * w
     end_pole = b + radius * w
-    vertices = np.concatenate([[start_pole], *ring_vertices, [end_pole]])
+    vertices = np.concatenate([[start_pole], ring_vertices.reshape(-1, 3), [end_pole]])
     s = segments
     j = np.arange(s)
     k = (j + 1) % s
-    tris = [np.stack([np.zeros(s, int), 1 + k, 1 + j], 1)]  # start fan: normals point away from b
-    for r in range(len(rows) - 1):
-        lo, hi = 1 + r * s, 1 + (r + 1) * s
-        tris.append(np.stack([lo + j, lo + k, hi + k], 1))
-        tris.append(np.stack([lo + j, hi + k, hi + j], 1))
+    lo = 1 + np.arange(len(rows) - 1)[:, None] * s  # (rows - 1, 1): each band between two rings
+    hi = lo + s
+    bands = np.stack([np.stack([lo + j, lo + k, hi + k], -1), np.stack([lo + j, hi + k, hi + j], -1)], 1)  # (rows - 1, 2, s, 3)
     last = 1 + (len(rows) - 1) * s
     pole = len(vertices) - 1
-    tris.append(np.stack([np.full(s, pole), last + j, last + k], 1))
+    tris = [np.stack([np.zeros(s, int), 1 + k, 1 + j], 1),  # start fan: normals point away from b
+            bands.reshape(-1, 3), np.stack([np.full(s, pole), last + j, last + k], 1)]
     return vertices, np.concatenate(tris).astype(np.int32)
