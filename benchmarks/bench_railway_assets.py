@@ -47,10 +47,14 @@ def build_seconds(params) -> tuple[float, int]:
     seconds = time.perf_counter() - start
     support = {"mast", "cantilever", "registration arm", "insulator", "steady arm"}
     triangles = 0
+    depsgraph = bpy.context.evaluated_depsgraph_get()
     for obj in bpy.data.collections[COLLECTION].objects:
-        if obj.type == "MESH" and obj.get("lidar_class") in support and obj.name.startswith("support."):
-            obj.data.calc_loop_triangles()
-            triangles += len(obj.data.loop_triangles)
+        if obj.type == "MESH" and obj.get("lidar_class") in support and obj.name.startswith(("support.", "supports.")):  # supports.*: the instanced masts
+            evaluated = obj.evaluated_get(depsgraph)
+            mesh = evaluated.to_mesh()
+            mesh.calc_loop_triangles()
+            triangles += len(mesh.loop_triangles)
+            evaluated.to_mesh_clear()
     return seconds, triangles
 
 
@@ -84,7 +88,13 @@ def make_assets(folder: Path, small: bool, cuts: int) -> dict:
 
     to_foot = Matrix(np.linalg.inv(foot_pose(support.frame, mast.lateral, mast.base, mast.outward)).tolist())
     objects = bpy.data.collections[COLLECTION].objects
-    chosen = {"mast": [f"support.00.mast.{mast.side}"], "cantilever": ["support.00.cantilever.t0", "support.00.registration_arm.t0", "support.00.insulators.t0"]}
+    # the masts stand as instances of the "Railway Supports" group: support 0's is made an object of its own, from the pure mesh
+    from bpy_pipeline.builders.railway.scene import _mast_mesh
+    from bpy_pipeline.scenes.objects import mesh_object
+
+    mast_object = mesh_object(f"support.00.mast.{mast.side}", _mast_mesh(mast, params.catenary), bpy.data.collections[COLLECTION])
+    mast_object.matrix_world = Matrix(support.frame.tolist())
+    chosen = {"mast": [mast_object.name], "cantilever": ["support.00.cantilever.t0", "support.00.registration_arm.t0", "support.00.insulators.t0"]}
     files = {}
     for slot, names in chosen.items():
         bpy.ops.object.select_all(action="DESELECT")
