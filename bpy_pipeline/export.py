@@ -244,7 +244,7 @@ def export_scene(table: ClassTable, extra_rules=(), depsgraph=None, keep_within=
     for instance in depsgraph.object_instances:
         obj = instance.object
         if not instance.is_instance and obj.name_full in drawn_as_instance:
-            continue  # its Geometry Nodes mesh comes again as its own instance: read it there, once
+            continue  # a curve or text: its mesh comes again as its own instance, read there, once
         labelled = 0
         if instance.is_instance:  # the instancer's instances come in their order
             seen = instancers.setdefault(instance.parent.name_full, [instance_attribute(instance.parent, INSTANCE_ATTRIBUTE, "Instance"), 0])

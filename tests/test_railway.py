@@ -95,11 +95,11 @@ def test_dropper_count_per_span_follows_the_rule():
     for span, wire in contact.items():
         droppers = bpy.data.objects[f"span.t0.{span:02d}.droppers"]
         assert len(droppers.data.splines) == max(1, math.floor(wire.length / 4.5))
-    from bpy_pipeline.builders.railway.support_nodes import station_frames
+    from bpy_pipeline.builders.railway.support_nodes import support_frames
 
     masts = {}  # the instanced masts' stations: the points of the "Railway Supports" objects
     for obj in (o for o in bpy.data.objects if o.name.startswith("supports.mast.")):
-        masts |= dict(zip(obj["lidar_parts"], station_frames(obj)))
+        masts |= dict(zip(obj["lidar_parts"], support_frames(obj)))
     for support in layout.supports:  # the support assemblies stand in their frames on the alignment
         np.testing.assert_allclose(masts[f"support.{support.index:02d}.mast.right"], support.frame, atol=1e-4)  # float32 station points
         for part in ("cantilever.t0", "registration_arm.t0", "insulators.t0"):

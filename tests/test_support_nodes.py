@@ -50,7 +50,7 @@ def test_every_mast_is_the_pure_mast_at_its_station(overrides):
     expected = {f"support.{s.index:02d}.mast.{m.side}" for s in layout.supports if not s.gantry for m in s.masts}
     seen, worst, steps = set(), 0.0, 0.0
     for obj in objects:
-        frames = support_nodes.station_frames(obj)
+        frames = support_nodes.support_frames(obj)
         names = list(obj["lidar_parts"])
         for name, frame in zip(names, frames):  # the points stand at the pure frames
             support = layout.supports[int(name.split(".")[1])]

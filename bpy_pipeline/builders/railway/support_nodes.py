@@ -88,7 +88,7 @@ def supports_object(name: str, prototype: bpy.types.Object, frames: np.ndarray, 
     return obj
 
 
-def station_frames(obj: bpy.types.Object) -> np.ndarray:
+def support_frames(obj: bpy.types.Object) -> np.ndarray:
     """``(n, 4, 4)`` the level frames a supports object's points stand for (position and ``rotation`` yaw), float64."""
     mesh = obj.data
     co = np.empty(len(mesh.vertices) * 3, np.float32)
