@@ -42,7 +42,8 @@ def remake(run: Run, index: int, scene, cache: CasterCache) -> Frame:
                 continue
             start = time.perf_counter()
             stage(frame, run)
-            frame.timings[timing] = frame.timings.get(timing, 0.0) + time.perf_counter() - start
+            if timing is not None:  # None: the stage timed its own parts
+                frame.timings[timing] = frame.timings.get(timing, 0.0) + time.perf_counter() - start
     finally:
         run.casters = kept
     return frame

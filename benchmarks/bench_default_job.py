@@ -27,7 +27,7 @@ def main():
             frame = json.loads((Path(out) / "records" / "000000.json").read_text())  # the frame's committed record
             runs.append({"wall_s": wall, **frame["timings_s"], "points": frame["points"], "triangles": frame["triangles"]})
     best = min(runs, key=lambda r: r["wall_s"])
-    best["startup_s"] = best["wall_s"] - sum(best[k] for k in ("build", "export", "scan", "write"))
+    best["startup_s"] = best["wall_s"] - sum(best.get(k, 0.0) for k in ("build", "export", "scan", "effects", "write"))
     report("default_job" + ("_small" if args.small else ""), [best], args.out, {"command": "python run.py --out OUT " + " ".join(extra)})
 
 

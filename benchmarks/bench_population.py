@@ -23,7 +23,7 @@ import yaml
 from common import ROOT, arguments, report
 
 PAPER_SECONDS = 27.6  # the human-robot paper: one virtual frame
-STAGES = ("build", "export", "scan", "boxes", "write")
+STAGES = ("build", "export", "scan", "effects", "boxes", "write")
 
 
 def frames(config, rebuild: bool):

@@ -75,7 +75,7 @@ def run(config: dict) -> dict:
         manifest = read_dataset(Path(tmp) / "out")  # the manifest with its frames' records
         size = sum(p.stat().st_size for p in (Path(tmp) / "out").rglob("*") if p.is_file())
     frames = manifest["frames"]
-    totals = {k: sum(f["timings_s"][k] for f in frames) for k in ("build", "export", "scan", "write")}
+    totals = {k: sum(f["timings_s"].get(k, 0.0) for f in frames) for k in ("build", "export", "scan", "effects", "write")}
     rays = manifest["sensor"].get("rays") or manifest["sensor"].get("rays_per_frame")
     return {
         "wall_s": wall, "cpu_s": cpu, "load_before": load, **{f"{k}_s": v for k, v in totals.items()}, "startup_s": wall - sum(totals.values()),

@@ -71,7 +71,7 @@ def mobile(small: bool, tmp: Path, detail: str = "path") -> dict:
         *DETAIL[detail],
     ], tmp / f"mobile_{detail}")
     per = manifest["frames"]
-    totals = {k: sum(f["timings_s"].get(k, 0.0) for f in per) for k in ("build", "export", "scan", "write")}
+    totals = {k: sum(f["timings_s"].get(k, 0.0) for f in per) for k in ("build", "export", "scan", "effects", "write")}
     sensor_time = frames * profiles / 200.0
     triangles = [f["triangles"] for f in per]
     return {"scenario": "mobile", "detail": detail, "length_m": length, "frames": frames, "rays_per_frame": profiles * 5080,
@@ -146,7 +146,7 @@ def hits(small: bool, tmp: Path) -> tuple[list[dict], dict]:
                     rates[kind][b][0] += hit
                     rates[kind][b][1] += total
         curves[model] = rates
-        scan_s = sum(f["timings_s"]["scan"] for f in manifest["frames"])
+        scan_s = sum(f["timings_s"]["scan"] + f["timings_s"].get("effects", 0.0) for f in manifest["frames"])  # the trace and the drop models
         for kind, bins in rates.items():
             for (lo, hi), (hit, total) in zip(BINS, bins):
                 rows.append({"model": model, "class": kind, "distance_m": f"{lo}-{hi}", "hit": hit, "total": total, "rate": hit / total if total else None, "scan_s": scan_s})

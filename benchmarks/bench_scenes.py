@@ -19,7 +19,7 @@ from common import RESULTS, arguments, report
 
 PAPER_SECONDS = 27.6  # the human-robot paper: one virtual frame, Blender Geometry Nodes
 TARGET_SECONDS = 2.0
-STAGES = ("build", "export", "scan", "boxes", "write")
+STAGES = ("build", "export", "scan", "effects", "boxes", "write")
 
 
 def frames(config, rebuild: bool):
@@ -62,7 +62,7 @@ def chart(rows: list, path) -> None:
     fig, ax = plt.subplots(figsize=(8, 3.2))
     labels = [f"{r['scene']}\n{r['mode']}" for r in rows]
     left = [0.0] * len(rows)
-    for stage, colour in zip(STAGES, ("#4c72b0", "#55a868", "#c44e52", "#8172b2", "#ccb974")):
+    for stage, colour in zip(STAGES, ("#4c72b0", "#55a868", "#c44e52", "#dd8452", "#8172b2", "#ccb974")):
         widths = [r[f"{stage}_s"] for r in rows]
         ax.barh(labels, widths, left=left, color=colour, label=stage)
         left = [a + b for a, b in zip(left, widths)]

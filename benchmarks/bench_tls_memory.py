@@ -69,7 +69,7 @@ def chart(rows: list[dict], path) -> None:
     left.set(xlabel="rays per scan (millions)", ylabel="peak resident memory (MB)", title="Memory", ylim=(0, 2300))
     left.legend(fontsize=8)
     bottom = [0.0] * len(rows)
-    for key in ("import", "build", "export", "scan", "write"):
+    for key in ("import", "build", "export", "scan", "effects", "write"):
         values = [r[f"{key}_s"] for r in rows]
         right.bar([f"{r:.1f} M" for r in rays], values, bottom=bottom, label=key)
         bottom = [b + v for b, v in zip(bottom, values)]
@@ -99,7 +99,7 @@ def main():
         rows.append({
             "sampling_factor": factor, "rays": rays, "points": run["points"], "triangles": run["triangles"], "peak_mb": run["peak_mb"],
             "setup_mb": setup["peak_mb"], "bytes_per_point_above_setup": (run["peak_mb"] - setup["peak_mb"]) * 2**20 / max(run["points"], 1),
-            "import_s": run["import_s"], **{f"{k}_s": timings.get(k, 0.0) for k in ("build", "export", "scan", "write")}, "wall_s": run["wall_s"],
+            "import_s": run["import_s"], **{f"{k}_s": timings.get(k, 0.0) for k in ("build", "export", "scan", "effects", "write")}, "wall_s": run["wall_s"],
         })  # fmt: skip
     name = "tls_memory" + ("_small" if args.small else "")
     report(name, rows, args.out, {"formats": FORMATS, "preview": True, "chunk_rays": "pipeline.CHUNK_RAYS"})

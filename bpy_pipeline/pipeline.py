@@ -33,7 +33,7 @@ def _camera_if_asked(frame: Frame, run: Run) -> None:
 
 # The single-sensor stages as the (stage, timing) pairs this module listed, each asking whether it runs
 # (plan.plan(config) leaves such stages out instead, and gives a rig's and a real scan's plans).
-STAGES = ((build_stage, "build"), (pose_stage, "build"), (export_stage, "export"), (scan_stage, "scan"), (effects_stage, "scan"), (_annotate_if_asked, "boxes"), (_camera_if_asked, "camera"))
+STAGES = ((build_stage, "build"), (pose_stage, "build"), (export_stage, "export"), (scan_stage, "scan"), (effects_stage, None), (_annotate_if_asked, "boxes"), (_camera_if_asked, "camera"))
 
 
 def sensor_rays(config, frame: int = 0):

@@ -50,8 +50,9 @@ class Stage:
     """A stage of a frame plan: ``function(frame, run)`` fills in its part of the frame.
 
     name : what the stage is (for logs and the plan's listing)
-    timing : the frame timing its seconds add to (several stages may share one: the scan is lazy, so
-        tracing is timed with the effects); ``None`` for a stage that times its own parts (a rig's members)
+    timing : the frame timing its seconds add to (several stages may share one); ``None`` for a stage
+        that times its own parts (a rig's members; the effects stage, which traces the lazy scan's chunks
+        as it goes: their tracing is the ``scan`` timing, the rest ``effects``)
     """
 
     name: str
@@ -64,7 +65,7 @@ class Stage:
 
 def _single(config: Config) -> tuple[Stage, ...]:
     stages = [Stage("build", build_stage, "build"), Stage("pose", pose_stage, "build"), Stage("export", export_stage, "export"),
-              Stage("scan", scan_stage, "scan"), Stage("effects", effects_stage, "scan")]
+              Stage("scan", scan_stage, "scan"), Stage("effects", effects_stage, None)]
     if config.output.boxes.formats:
         stages.append(Stage("annotate", annotate_stage, "boxes"))
     if config.output.kitti.camera.render and "kitti" in config.output.boxes.formats:
@@ -82,7 +83,7 @@ def _rig(config: Config) -> tuple[Stage, ...]:
 
 
 def _real_scan(config: Config) -> tuple[Stage, ...]:
-    timings = {"annotate_stage": "boxes"}
+    timings = {"annotate_stage": "boxes", "effects_stage": "effects"}
     return tuple(Stage(f.__name__.removesuffix("_stage"), f, timings.get(f.__name__, "scan")) for f in MIXING_STAGES)
 
 

@@ -123,6 +123,10 @@ def test_three_camera_rig_is_the_union_of_three_single_camera_runs_byte_for_byte
     assert record["points"] == len(merged) == sum(s["points"] for s in record["rig"]["sensors"])
     per_sensor = {b["instance"] for s in record["rig"]["sensors"] for b in s.get("boxes", [])}
     assert per_sensor <= {b["instance"] for b in record["boxes"]}  # a box kept by one camera is kept merged
+    members = {stage: [s["timings_s"][stage] for s in record["rig"]["sensors"]] for stage in ("scan", "effects")}  # each camera times its trace and its effects apart
+    assert all(t > 0 for t in members["scan"] + members["effects"])
+    assert record["timings_s"]["effects"] == pytest.approx(sum(members["effects"]), abs=5e-4)  # the frame adds them up
+    assert record["timings_s"]["scan"] >= sum(members["scan"]) - 5e-4  # and merges the clouds in its scan
 
 
 def _instance_of(folder, box) -> int:

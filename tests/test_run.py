@@ -41,7 +41,7 @@ def test_python_and_blender_invocations_write_identical_files(tmp_path):
     manifest = read_dataset(a)
     frame = manifest["frames"][0]
     assert manifest["seed"] == 3 and manifest["versions"]["blender"]
-    assert set(frame["timings_s"]) == {"build", "export", "scan", "write"}
+    assert set(frame["timings_s"]) == {"build", "export", "scan", "effects", "write"}
     assert frame["points"] == len(np.fromfile(a / "sequences/00/velodyne/000000.bin", np.float32)) // 4
     assert len(frame["sensor_pose"]) == 4
 

@@ -42,13 +42,11 @@ def member_boxes_stage(frame: Frame, run: Run) -> None:
     frame.boxes = world_boxes(frame.buffers, run.config, frame.pose, frame.points, frame.scene.headings, frame.index, frame.rng, run.rays, skip_unseen=True, caster=frame.caster)
 
 
-MEMBER_TIMINGS = {"export": "export", "scan": "scan", "effects": "scan", "boxes": "boxes"}  # a member's timing -> the frame's
-
-
-def each_member(*stages: tuple[str, StageFunction]) -> StageFunction:
-    """A stage that runs ``stages`` (``(timing, stage)`` pairs) for each sensor of the rig on its own frame,
-    then the platform's buffers (everything any sensor reaches, for the record and the merged boxes).
-    Each member's timings are its own; the frame's add them up (:data:`MEMBER_TIMINGS`)."""
+def each_member(*stages: tuple[str | None, StageFunction]) -> StageFunction:
+    """A stage that runs ``stages`` (``(timing, stage)`` pairs; ``None``: a stage that times its own
+    parts) for each sensor of the rig on its own frame, then the platform's buffers (everything any
+    sensor reaches, for the record and the merged boxes). Each member's timings are its own; the
+    frame's add them up, timing by timing."""
 
     def members_stage(frame: Frame, run: Run) -> None:
         from ..export import export_scene
@@ -68,9 +66,10 @@ def each_member(*stages: tuple[str, StageFunction]) -> StageFunction:
             for timing, stage in stages:
                 start = time.perf_counter()
                 stage(sub, member)
-                took = time.perf_counter() - start
-                sub.timings[timing] = sub.timings.get(timing, 0.0) + took
-                frame.timings[MEMBER_TIMINGS[timing]] = frame.timings.get(MEMBER_TIMINGS[timing], 0.0) + took
+                if timing is not None:
+                    sub.timings[timing] = sub.timings.get(timing, 0.0) + time.perf_counter() - start
+            for timing, took in sub.timings.items():
+                frame.timings[timing] = frame.timings.get(timing, 0.0) + took
             frame.rig.frames.append(sub)
             reach = max(reach, float(np.linalg.norm(matrix[:3, 3])) + sensor.spec.max_range + (0.0 if frame.trajectory is None else frame.trajectory.reach(frame.index, frame_time(sensor.spec))))
         start = time.perf_counter()
@@ -102,7 +101,7 @@ def merged_boxes_stage(frame: Frame, run: Run) -> None:
 
 def members_stage_of(config: Config, with_boxes: bool) -> StageFunction:
     """The rig's per-member stage: export, scan, effects (and its boxes when ``with_boxes``)."""
-    stages = [("export", export_stage), ("scan", scan_stage), ("effects", effects_stage)]
+    stages = [("export", export_stage), ("scan", scan_stage), (None, effects_stage)]
     if with_boxes:
         stages.append(("boxes", member_boxes_stage))
     return each_member(*stages)

@@ -4,7 +4,8 @@ its effects (mirror-edge drop, drop, noise, intensity) on its way into the frame
 from __future__ import annotations
 
 import itertools
-from typing import Iterable
+import time
+from typing import Iterable, Iterator
 
 import numpy as np
 
@@ -52,9 +53,25 @@ def scan_stage(frame: Frame, run: Run) -> None:
         frame.chunks = scan_chunks(caster, frame.buffers, patterns, pose, spec.min_range, spec.max_range, **options)
 
 
+def timed_pulls(items: Iterable, timings: dict, key: str) -> Iterator:
+    """``items`` one at a time, the seconds spent making each (pulling it) added to ``timings[key]``."""
+    items = iter(items)
+    while True:
+        start = time.perf_counter()
+        item = next(items, None)
+        timings[key] = timings.get(key, 0.0) + time.perf_counter() - start
+        if item is None:
+            return
+        yield item
+
+
 def effects_stage(frame: Frame, run: Run) -> None:
     """Trace each chunk, give it its effects and move it to the output frame before the next is traced,
-    so memory holds the final point records and one chunk's work, no more."""
+    so memory holds the final point records and one chunk's work, no more.
+
+    Times its own two parts: tracing the chunks (the lazy scan, with its point records) adds to
+    ``frame.timings["scan"]``, the rest (effects, limits, the output frame, collecting) to ``["effects"]``."""
+    start, traced = time.perf_counter(), frame.timings.get("scan", 0.0)
     config, spec = run.config, run.config.sensor.spec
     mask = run.rays.edge_mask(frame.index)
 
@@ -72,8 +89,9 @@ def effects_stage(frame: Frame, run: Run) -> None:
                 points["x"], points["y"], points["z"] = xyz.T
             yield points
 
-    frame.points = collect_points(finished(frame.chunks), ray_count(config.sensor.spec))
+    frame.points = collect_points(finished(timed_pulls(frame.chunks, frame.timings, "scan")), ray_count(config.sensor.spec))
     frame.chunks = None
+    frame.timings["effects"] = frame.timings.get("effects", 0.0) + time.perf_counter() - start - (frame.timings["scan"] - traced)
 
 
 def collect_points(parts: Iterable[np.ndarray], expected: int) -> np.ndarray:
