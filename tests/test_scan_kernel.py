@@ -222,6 +222,35 @@ def test_a_kept_static_caster_with_a_moving_part_gives_one_casters_bytes(kernel)
         cache.caster(last, pose, np.zeros(2, bool))
 
 
+def test_the_static_digest_is_the_same_on_any_threads_and_a_far_vertex_is_refused_kept_or_built():
+    """The kept static part's digest (hashed in pieces on the cache's threads) does not depend on the threads;
+    a caster that reuses the whole kept part skips its extent check only because the kept part passed it."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from bpy_pipeline.lidar import raycast
+
+    rng = np.random.default_rng(3)
+    vertices = rng.normal(size=(200_000, 3))
+    triangles = rng.integers(0, len(vertices), (60_000, 3)).astype(np.int32)
+    big = SceneBuffers.from_meshes({"cloud": (vertices, triangles)})
+    every = np.arange(len(triangles))
+    with ThreadPoolExecutor(2) as pool:
+        assert raycast.static_digest(big, every, pool) == raycast.static_digest(big, every) != raycast.static_digest(big, every[1:])
+    assert raycast.static_digest(big, every) != raycast.static_digest(moved(big, [0], [0.0, 0.0, 1e-9]), every)
+    base = room()
+    pose = pose_matrix([0.3, 0.2, 0.4], [0, 0, 10])
+    cache = CasterCache(threads=2)
+    cache.caster(base, pose)
+    assert cache.caster(base, pose).parts[0] is cache.kept.part  # the whole static part reused
+    far = moved(base, [1], [0.0, 0.0, 2 * raycast.MAX_COORDINATE])
+    with pytest.raises(InputError, match=f"object {base.objects.names[1]!r}: has vertices more than"):
+        cache.caster(far, pose)  # its digest differs: built again, and checked
+    moving = np.zeros(len(base.objects), bool)
+    moving[1] = True
+    with pytest.raises(InputError, match=f"object {base.objects.names[1]!r}: has vertices more than"):
+        cache.caster(far, pose, moving)  # a far moving object beside the kept part
+
+
 @needs_numba
 def test_compiled_planes_have_numpys_bits():
     from bpy_pipeline.lidar.kernels import compiled

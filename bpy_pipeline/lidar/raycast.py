@@ -198,20 +198,22 @@ class RayCaster:
         self.chunk = chunk
         self.kernels = choose_kernels(kernel)
         self.buffers = buffers
-        local = self.to_local(vertices)
         triangles = np.ascontiguousarray(buffers.triangles, np.int32)
-        check_extent(local, triangles, buffers)
         self.triangle_object = np.asarray(buffers.triangle_object)
         self.objects = len(buffers.objects)
-        if static is None:
-            self.plane_normal, self.plane_offset = triangle_planes(local, triangles, self.kernels)  # (m, 3), (m,) local frame
-            parts = [embree_part(local, triangles, None, self.plane_normal)]
+        if static is not None and not np.array_equal(static.frame, self.frame):
+            raise ValueError("RayCaster: the static part was built for another frame")
+        if static is not None and len(static.triangle) == len(triangles):
+            # nothing moves: the kept planes as they are (read only); its vertices' extent was checked when it was built,
+            # in this frame, from the same triangles and vertex rows (the cache's digest or the caller's key)
+            self.plane_normal, self.plane_offset = static.normal, static.offset
+            parts = [static.part]
         else:
-            if not np.array_equal(static.frame, self.frame):
-                raise ValueError("RayCaster: the static part was built for another frame")
-            if len(static.triangle) == len(triangles):  # nothing moves: the kept planes as they are (read only)
-                self.plane_normal, self.plane_offset = static.normal, static.offset
-                parts = [static.part]
+            local = self.to_local(vertices)
+            check_extent(local, triangles, buffers)
+            if static is None:
+                self.plane_normal, self.plane_offset = triangle_planes(local, triangles, self.kernels)  # (m, 3), (m,) local frame
+                parts = [embree_part(local, triangles, None, self.plane_normal)]
             else:
                 moving = np.ones(len(triangles), bool)
                 moving[static.triangle] = False
@@ -523,7 +525,7 @@ class CasterCache:
         if moving.shape != (k,):
             raise InputError(f"CasterCache.caster: moving must give each of the {k} object rows a flag, not shape {moving.shape}")
         static = np.flatnonzero(~moving[buffers.triangle_object]) if moving.any() else np.arange(len(buffers.triangles))
-        digest = ("key", key) if key is not None else static_digest(buffers, static)
+        digest = ("key", key) if key is not None else static_digest(buffers, static, self.pool)
         kept = self.kept
         if kept is None or not (np.array_equal(kept.frame, frame) and np.array_equal(kept.triangle, static) and kept.digest == digest):
             if len(buffers.triangles):
@@ -544,20 +546,26 @@ class CasterCache:
         return RayCaster(buffers, frame, self.threads, kernel=self.kernel, static=self.kept, record_pool=self.record_pool, pool=self.pool)
 
 
-def static_digest(buffers: SceneBuffers, static: np.ndarray) -> bytes:
-    """A sha256 of triangles ``static`` ((s, 3) indices) and of the vertex rows they span ((lo..hi, 3) float64, world).
+DIGEST_PIECE = 1 << 20  # bytes hashed per piece of a static digest (pieces hashed on the cache's threads)
+
+
+def static_digest(buffers: SceneBuffers, static: np.ndarray, pool: ThreadPoolExecutor | None = None) -> bytes:
+    """A digest of triangles ``static`` ((s, 3) indices) and of the vertex rows they span ((lo..hi, 3) float64, world):
+    the sha256 of the sha256s of their bytes' :data:`DIGEST_PIECE`-byte pieces, hashed on ``pool`` when given
+    (hashlib releases the GIL; the same digest however many threads). Only ever compared within a process.
 
     Equal digests mean the same static geometry. The span also holds any moving object whose
     vertices lie between the static ones': the digest then changes with it and the static part
     is built again (correct, only slower); exporting the moving objects last avoids that.
     """
-    h = hashlib.sha256()
-    if len(static):
-        every = len(static) == len(buffers.triangles)  # static is then 0..m-1
-        index = np.ascontiguousarray(buffers.triangles if every else buffers.triangles[static])
-        h.update(index)
-        h.update(np.ascontiguousarray(buffers.vertices[index.min() : index.max() + 1], np.float64))
-    return h.digest()
+    if not len(static):
+        return hashlib.sha256().digest()
+    every = len(static) == len(buffers.triangles)  # static is then 0..m-1
+    index = np.ascontiguousarray(buffers.triangles if every else buffers.triangles[static])
+    spanned = np.ascontiguousarray(buffers.vertices[index.min() : index.max() + 1], np.float64)
+    pieces = [memoryview(a).cast("B")[k : k + DIGEST_PIECE] for a in (index, spanned) for k in range(0, a.nbytes, DIGEST_PIECE)]
+    digests = list(pool.map(lambda piece: hashlib.sha256(piece).digest(), pieces)) if pool is not None and len(pieces) > 1 else [hashlib.sha256(p).digest() for p in pieces]
+    return hashlib.sha256(b"".join(digests)).digest()
 
 
 def check_extent(local: np.ndarray, triangles: np.ndarray, buffers: SceneBuffers) -> None:

@@ -40,7 +40,8 @@ def moving_objects(frame: Frame) -> np.ndarray | None:
 
 def scan_stage(frame: Frame, run: Run) -> None:
     """The scan's ``(points, beam)`` chunks (lazy: the effects stage traces them one at a time)."""
-    frame.buffers.check()
+    if not len(frame.buffers.triangles):
+        frame.buffers.check()  # "nothing to scan"; the caster checks the rest before it uses an index
     config, spec = run.config, run.config.sensor.spec
     caster = frame.caster = run.casters.caster(frame.buffers, frame.pose, moving_objects(frame))
     ghost = run.table.id_of("reflection") if config.effects.mirrors.label == "reflection" else None
