@@ -222,6 +222,42 @@ def test_a_kept_static_caster_with_a_moving_part_gives_one_casters_bytes(kernel)
         cache.caster(last, pose, np.zeros(2, bool))
 
 
+def test_parts_finished_out_of_order_are_joined_in_firing_order():
+    """InOrder: parts filled at their own rows, finishing in any order on any threads, end up one after another."""
+    import time as clock
+    from concurrent.futures import ThreadPoolExecutor
+
+    from bpy_pipeline.lidar.points import POINT_DTYPE
+    from bpy_pipeline.lidar.scanner import InOrder
+
+    rng = np.random.default_rng(8)
+    chunk, parts = 1000, 9
+    starts = list(range(0, chunk * parts, chunk))
+    filled = rng.integers(0, chunk + 1, parts)
+    filled[3] = 0
+    filled[4] = chunk  # a part with no hits, a part all hits
+    source = np.zeros(chunk * parts, POINT_DTYPE)
+    source["range"] = rng.random(len(source), dtype=np.float32)
+    source["ring"] = np.arange(len(source)) % 7
+    expected = np.concatenate([source[s : s + f] for s, f in zip(starts, filled)])
+    for order, threads in ((range(parts), 1), (reversed(range(parts)), 3), (rng.permutation(parts), 2)):
+        points, ray = np.zeros(len(source), POINT_DTYPE), np.full(len(source), -1, np.int64)
+        joined = InOrder((points, ray), starts)
+        delay = {int(j): 0.002 * k for k, j in enumerate(order)}  # part j finishes after its delay
+
+        def fill(j):
+            s = slice(starts[j], starts[j] + filled[j])
+            points[s], ray[s] = source[s], np.arange(s.start, s.stop)
+            clock.sleep(delay[j])
+            joined.finished(j, int(filled[j]))
+
+        with ThreadPoolExecutor(threads) as pool:
+            list(pool.map(fill, range(parts)))
+        total = joined.ends[-1]
+        assert total == filled.sum() and points[:total].tobytes() == expected.tobytes()
+        assert np.array_equal(ray[:total], np.concatenate([np.arange(s, s + f) for s, f in zip(starts, filled)]))
+
+
 def test_the_static_digest_is_the_same_on_any_threads_and_a_far_vertex_is_refused_kept_or_built():
     """The kept static part's digest (hashed in pieces on the cache's threads) does not depend on the threads;
     a caster that reuses the whole kept part skips its extent check only because the kept part passed it."""

@@ -19,6 +19,7 @@ direction never changed.
 from __future__ import annotations
 
 import math
+import threading
 from dataclasses import dataclass
 from typing import Iterable, Iterator
 
@@ -359,12 +360,18 @@ def _fused_chunk(caster: RayCaster, buffers: SceneBuffers, pattern: Pattern, ori
         rows = np.array(starts + [n], np.int64)
         points, beam, ray = caster.record_pool.take(n, POINT_DTYPE), caster.record_pool.take(n, BEAM_DTYPE), caster.record_pool.take(n, np.int64)
 
+        joined = InOrder((points, beam, ray), starts)
+
         def traced(j):
             s, r = slice(starts[j], starts[j] + caster.chunk), slice(rows[j], rows[j + 1])
-            return trace_fill(caster.kernels, caster, far[s], origins if shared else origins[s], world_d[s], objects, pattern.ring[s], pattern.time[s], min_range, max_range,
-                              points[r], beam[r], ray[r], tfar[s], prim[s], starts[j])  # fmt: skip
+            out = trace_fill(caster.kernels, caster, far[s], origins if shared else origins[s], world_d[s], objects, pattern.ring[s], pattern.time[s], min_range, max_range,
+                             points[r], beam[r], ray[r], tfar[s], prim[s], starts[j])  # fmt: skip
+            joined.finished(j, out[0])
+            return out
 
         parts = caster.map(traced, range(len(starts)))
+        points, beam, ray = (a[: joined.ends[-1]] for a in (points, beam, ray))  # joined in order: one part after another
+        rows = np.concatenate([[0], np.cumsum([p[0] for p in parts])]).astype(np.int64)
     else:  # Embree's answer first, then the compiled pass: each part of the rays fills its rows, placed by the hits before it
         tfar, prim = caster._embree(origins32, directions32, far)
         rows = hit_rows(prim, starts, caster.chunk)
@@ -390,6 +397,39 @@ def _fused_chunk(caster: RayCaster, buffers: SceneBuffers, pattern: Pattern, ori
     more = _records(beams, buffers, pattern, origin, world_d, ghost_semantic, ideal)
     order = np.argsort(np.concatenate([ray, more[2]]), kind="stable")  # firing order (one record per ray at most)
     return take(join([points, more[0]]), order), take(join([beam, more[1]]), order), np.concatenate([ray, more[2]])[order]
+
+
+class InOrder:
+    """The records of a chunk's parts, each part filled on a thread at its own rows (room for all its rays),
+    moved to follow the parts before it as soon as those are in place: the records end up joined in
+    firing order, most parts moved by the thread that just filled them (still in its cache), and no
+    copy of them all afterwards. No thread waits: a part finished before the one ahead of it is moved
+    by whichever thread then finishes that one (one thread at a time moves, in order).
+
+    arrays : the record arrays the parts fill (same rows in each); starts : (p,) each part's first row.
+    ``ends[j]``: the row after part j's records once moved.
+    """
+
+    def __init__(self, arrays: tuple[np.ndarray, ...], starts: list[int]):
+        self.arrays = [a.view(np.dtype((np.void, a.dtype.itemsize))) for a in arrays]  # moved as raw bytes
+        self.starts = starts
+        self.ends = [0] * len(starts)
+        self.filled: list[int | None] = [None] * len(starts)
+        self.next = 0  # the first part not yet moved
+        self.lock = threading.Lock()
+
+    def finished(self, j: int, filled: int) -> None:
+        """Part j filled its first ``filled`` rows: move it, and any finished part after it, into place."""
+        with self.lock:
+            self.filled[j] = filled
+            while self.next < len(self.starts) and self.filled[self.next] is not None:
+                k, count = self.next, self.filled[self.next]
+                at = self.ends[k - 1] if k else 0
+                if count and at != self.starts[k]:
+                    for a in self.arrays:  # leftwards within one array: numpy copies overlapping slices correctly
+                        a[at : at + count] = a[self.starts[k] : self.starts[k] + count]
+                self.ends[k] = at + count
+                self.next += 1
 
 
 def hit_rows(prim: np.ndarray, starts: list[int], chunk: int) -> np.ndarray:
