@@ -33,10 +33,16 @@ def set_modifier_input(modifier: bpy.types.Modifier, name: str, value) -> None:
 
 def get_modifier_input(modifier: bpy.types.Modifier, name: str):
     """The value of the Geometry Nodes modifier input called ``name``."""
-    item = interface_inputs(modifier.node_group)[name]
+    return get_modifier_inputs(modifier, [name])[name]
+
+
+def get_modifier_inputs(modifier: bpy.types.Modifier, names) -> dict:
+    """``{name: value}`` of the Geometry Nodes modifier inputs called ``names`` (the group's interface read once)."""
+    items = interface_inputs(modifier.node_group)
     if VERSION >= (5, 2, 0):
-        return getattr(modifier.properties.inputs, item.identifier).value
-    return modifier[item.identifier]
+        inputs = modifier.properties.inputs
+        return {name: getattr(inputs, items[name].identifier).value for name in names}
+    return {name: modifier[items[name].identifier] for name in names}
 
 
 def set_node_option(node: bpy.types.Node, name: str, value: str) -> None:

@@ -30,7 +30,7 @@ import dataclasses
 import bpy
 import numpy as np
 
-from ...compat import get_modifier_input
+from ...compat import get_modifier_inputs
 from ...scenes import box_nodes
 from ...scenes.box_nodes import select
 from ...scenes.nodes import GroupBuilder, add_group_modifier, current_group, new_group, stamp
@@ -168,10 +168,9 @@ def edited_params(objects, params):
         for modifier in obj.modifiers:
             if modifier.type != "NODES" or modifier.node_group is None or modifier.node_group.name != GROUP:
                 continue
-            for name, field in FIELDS.items():
-                if field in changes:
-                    continue
-                value = get_modifier_input(modifier, name)
+            values = get_modifier_inputs(modifier, [name for name, field in FIELDS.items() if field not in changes])
+            for name, value in values.items():
+                field = FIELDS[name]
                 if not _same(value, getattr(params, field)):
                     changes[field] = int(value) if field in INTS else float(str(np.float32(value)))  # the shortest decimal: 2.8, not 2.7999999523
     return dataclasses.replace(params, **changes) if changes else params
