@@ -116,3 +116,43 @@ def test_a_capsule_built_at_once_is_the_same_bits_as_ring_by_ring():
         want_vertices, want_triangles = _capsule_ring_by_ring(a, b, radius, **options)
         assert vertices.dtype == want_vertices.dtype and vertices.tobytes() == want_vertices.tobytes(), (i, options)
         assert triangles.dtype == want_triangles.dtype and triangles.tobytes() == want_triangles.tobytes(), (i, options)
+
+
+def test_boxes_fitted_from_triangles_grouped_once_are_the_per_instance_isin_boxes():
+    """fit_boxes groups the wanted objects' triangles by object row once; the reference looks each instance's up
+    over every triangle (np.isin). Objects of one instance spread over the table, some classes unwanted, a heading
+    given for some: the same bits."""
+    from bpy_pipeline.buffers import SceneBuffers
+    from bpy_pipeline.geometry.boxes import BOX_DTYPE, fit_boxes, footprint_heading, wrap_angle
+
+    rng = np.random.default_rng(11)
+    meshes = {}
+    for k in range(40):
+        centre = rng.uniform(-50, 50, 3)
+        vertices = centre + rng.normal(size=(30, 3)) * rng.uniform(0.2, 2.0, 3)
+        meshes[f"part{k}"] = (vertices, rng.integers(0, 30, (25, 3)))
+    buffers = SceneBuffers.from_meshes(meshes)
+    names = np.array(["car", "person", "building", "car", "pole"])[rng.integers(0, 5, 40)]
+    buffers.objects.class_names[:] = list(names)
+    buffers.objects.instance[:] = rng.integers(1, 12, 40)  # several rows an instance, in any order
+    classes = ["car", "person"]
+    headings = {2: 0.3, 5: -1.2}
+    got = fit_boxes(buffers, classes, headings)
+
+    objects = buffers.objects
+    by_instance = {}
+    for r in range(len(objects)):
+        if objects.class_names[r] in classes:
+            by_instance.setdefault(int(objects.instance[r]), []).append(r)
+    expected = np.zeros(len(by_instance), BOX_DTYPE)
+    for k, (instance, members) in enumerate(sorted(by_instance.items())):
+        vertices = buffers.vertices[np.unique(buffers.triangles[np.isin(buffers.triangle_object, members)])]
+        yaw = headings.get(instance, None)
+        yaw = footprint_heading(vertices[:, :2]) if yaw is None else yaw
+        c, s = np.cos(yaw), np.sin(yaw)
+        rotation = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        local = vertices @ rotation
+        low, high = local.min(axis=0), local.max(axis=0)
+        expected[k]["class_name"], expected[k]["instance"] = objects.class_names[members[0]], instance
+        expected[k]["centre"], expected[k]["size"], expected[k]["heading"] = rotation @ ((low + high) / 2), high - low, wrap_angle(yaw)
+    assert len(got) >= 8 and got.tobytes() == expected.tobytes()

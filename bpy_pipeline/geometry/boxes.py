@@ -98,11 +98,16 @@ def fit_boxes(buffers: SceneBuffers, classes, headings: dict | None = None) -> n
     by_instance: dict[int, list[int]] = {}
     for r in rows:
         by_instance.setdefault(int(objects.instance[r]), []).append(r)
-    tri_rows = buffers.triangle_object
+    tri_rows = np.asarray(buffers.triangle_object)
+    wanted_row = np.zeros(len(objects), bool)
+    wanted_row[rows] = True
+    mine = np.flatnonzero(wanted_row[tri_rows])  # the wanted objects' triangles, grouped by object row once
+    mine = mine[np.argsort(tri_rows[mine], kind="stable")]
+    bounds = np.searchsorted(tri_rows[mine], np.arange(len(objects) + 1))
     out = np.zeros(len(by_instance), BOX_DTYPE)
     for k, (instance, members) in enumerate(sorted(by_instance.items())):
-        triangles = buffers.triangles[np.isin(tri_rows, members)]
-        vertices = buffers.vertices[np.unique(triangles)]
+        triangles = buffers.triangles[np.concatenate([mine[bounds[r] : bounds[r + 1]] for r in members])]
+        vertices = buffers.vertices[np.unique(triangles)]  # sorted vertex indices: the same rows in any triangle order
         yaw = headings.get(instance)
         if yaw is None:
             yaw = footprint_heading(vertices[:, :2])
