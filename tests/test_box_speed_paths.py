@@ -156,3 +156,31 @@ def test_boxes_fitted_from_triangles_grouped_once_are_the_per_instance_isin_boxe
         expected[k]["class_name"], expected[k]["instance"] = objects.class_names[members[0]], instance
         expected[k]["centre"], expected[k]["size"], expected[k]["heading"] = rotation @ ((low + high) / 2), high - low, wrap_angle(yaw)
     assert len(got) >= 8 and got.tobytes() == expected.tobytes()
+
+
+def test_the_cone_prefilter_keeps_every_pair_of_the_full_matrix_compiled_or_numpy():
+    """cone_pairs: ray-major pairs, compiled or numpy in blocks, the same pairs; every pair the full (n, k) matrix
+    test lets through is among them (the margin covers rounding), rays on a cone's edge included."""
+    from bpy_pipeline.lidar.kernels import compiled
+    from bpy_pipeline.lidar.visibility import CONE_BLOCK, cone_pairs
+
+    rng = np.random.default_rng(12)
+    directions = _unit(rng.normal(size=(2 * CONE_BLOCK + 777, 3)))  # blocks and a remainder
+    centres = rng.normal(size=(30, 3)) * 20
+    distance = np.linalg.norm(centres, axis=1)
+    axes = centres / distance[:, None]
+    radius = rng.uniform(0.5, 4.0, len(centres))
+    cos_limit = np.sqrt(1 - (radius / distance) ** 2)
+    edge = np.sqrt(1 - cos_limit[:5] ** 2)  # rays on the edges of the first five cones
+    side = _unit(np.cross(axes[:5], [0.0, 0.0, 1.0]))
+    directions[:5] = axes[:5] * cos_limit[:5, None] + side * edge[:, None]
+    full = np.nonzero(directions @ axes.T >= cos_limit[None])
+    numpy_pairs = cone_pairs(directions, axes, cos_limit)
+    assert np.all(np.diff(numpy_pairs[0]) >= 0)  # ray-major
+    pair_set = set(zip(*(a.tolist() for a in numpy_pairs)))
+    assert set(zip(*(a.tolist() for a in full))) <= pair_set and {(j, j) for j in range(5)} <= pair_set
+    assert len(pair_set) - len(full[0]) <= 5  # the margin adds rounding-close pairs, no more
+    kernels = compiled()
+    if kernels is not None:
+        compiled_pairs = cone_pairs(directions, axes, cos_limit, kernels)
+        assert all(np.array_equal(a, b) for a, b in zip(compiled_pairs, numpy_pairs))

@@ -205,3 +205,25 @@ def triangle_planes(vertices, triangles, normal, offset):
         nx, ny, nz = cx / scale, cy / scale, cz / scale
         normal[i, 0], normal[i, 1], normal[i, 2] = nx, ny, nz
         offset[i] = ((0.0 + nx * x0) + nz * z0) + ny * y0  # einsum starts from +0.0 (a -0.0 product becomes 0.0)
+
+
+@jit
+def cone_pairs(directions, axes, limit):
+    """``(ray, box)`` int64 pairs, ray-major (``np.nonzero``'s order), of ``directions`` (n, 3) whose dot product with
+    ``axes[box]`` (k, 3) is at least ``limit[box]`` (k,): a count pass, then a fill pass (no (n, k) matrix)."""
+    n, k = directions.shape[0], axes.shape[0]
+    count = 0
+    for i in range(n):
+        dx, dy, dz = directions[i, 0], directions[i, 1], directions[i, 2]
+        for j in range(k):
+            if dx * axes[j, 0] + dy * axes[j, 1] + dz * axes[j, 2] >= limit[j]:
+                count += 1
+    ray, box = np.empty(count, np.int64), np.empty(count, np.int64)
+    at = 0
+    for i in range(n):
+        dx, dy, dz = directions[i, 0], directions[i, 1], directions[i, 2]
+        for j in range(k):
+            if dx * axes[j, 0] + dy * axes[j, 1] + dz * axes[j, 2] >= limit[j]:
+                ray[at], box[at] = i, j
+                at += 1
+    return ray, box

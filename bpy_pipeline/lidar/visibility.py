@@ -27,6 +27,8 @@ from .raycast import RayCaster
 from .scanner import scan_chunk, trace_beams
 from .sensors import Pattern
 
+CONE_MARGIN = 1e-12  # cosine: the cone prefilter lets through pairs this far outside an object's cone, so its dot products' rounding never drops a pair the exact test keeps
+CONE_BLOCK = 16384  # rays per block of the numpy cone test: a (block, k) matrix, not (n, k)
 SAMPLE_SPACING = 0.1  # m between surface samples for truncation (wider on objects that would need more than about:)
 MAX_SAMPLES = 4000  # x 2 (surface_samples' area bound)
 
@@ -127,8 +129,7 @@ def visibility(
         shift = 0.0 if chunk.origins is None else float(np.linalg.norm(origins, axis=1).max())
         reach = radii + shift
         cos_limit = np.where(distance > reach, np.sqrt(np.clip(1.0 - (reach / np.maximum(distance, 1e-12)) ** 2, 0.0, 1.0)), -2.0)
-        towards = chunk.directions @ (centres / np.maximum(distance, 1e-12)[:, None]).T  # (n, k)
-        ray, k = np.nonzero(towards >= cos_limit[None])
+        ray, k = cone_pairs(chunk.directions, centres / np.maximum(distance, 1e-12)[:, None], cos_limit, getattr(caster, "kernels", None))
         if len(ray) == 0:
             continue
         d = chunk.directions[ray]
@@ -181,6 +182,24 @@ def visibility(
         mine = order[bounds[k] : bounds[k + 1]]
         whole = area[mine].sum()
         boxes["truncation"][k] = float(1.0 - area[mine][covered[mine]].sum() / whole) if whole > 0 else 1.0
+
+
+def cone_pairs(directions: np.ndarray, axes: np.ndarray, cos_limit: np.ndarray, kernels=None) -> tuple[np.ndarray, np.ndarray]:
+    """``(ray, box)`` int64 pairs, ray-major: the rays of ``directions`` (n, 3) within box k's cone (unit ``axes``
+    (k, 3), ``cos_limit`` (k,) the cosine of its half-angle), widened by :data:`CONE_MARGIN` so that the exact
+    test after it alone decides. Compiled (``kernels.cone_pairs``, :mod:`.numba_kernels`) or numpy in blocks of
+    :data:`CONE_BLOCK` rays; their dot products may round apart, never by the margin, so both give every pair
+    the exact test keeps."""
+    limit = np.asarray(cos_limit, np.float64) - CONE_MARGIN
+    directions, axes = np.ascontiguousarray(directions, np.float64), np.ascontiguousarray(axes, np.float64)
+    if kernels is not None:
+        return kernels.cone_pairs(directions, axes, limit)
+    rays, boxes = [np.zeros(0, np.int64)], [np.zeros(0, np.int64)]
+    for start in range(0, len(directions), CONE_BLOCK):
+        ray, box = np.nonzero(directions[start : start + CONE_BLOCK] @ axes.T >= limit[None])
+        rays.append(ray + start)
+        boxes.append(box)
+    return np.concatenate(rays).astype(np.int64), np.concatenate(boxes).astype(np.int64)
 
 
 def covered_by_owner(points: np.ndarray, point_owner: np.ndarray, samples: np.ndarray, sample_owner: np.ndarray, count: int, cell_deg: float, where: np.ndarray | None = None, distance: np.ndarray | None = None) -> np.ndarray:
