@@ -371,7 +371,7 @@ def _fused_chunk(caster: RayCaster, buffers: SceneBuffers, pattern: Pattern, ori
 
         parts = caster.map(traced, range(len(starts)))
         points, beam, ray = (a[: joined.ends[-1]] for a in (points, beam, ray))  # joined in order: one part after another
-        rows = np.concatenate([[0], np.cumsum([p[0] for p in parts])]).astype(np.int64)
+        rows = np.concatenate([[0], np.cumsum([p[0] for p in parts])]).astype(np.int64)  # the parts' rows now: nothing left to compact below
     else:  # Embree's answer first, then the compiled pass: each part of the rays fills its rows, placed by the hits before it
         tfar, prim = caster._embree(origins32, directions32, far)
         rows = hit_rows(prim, starts, caster.chunk)
