@@ -11,6 +11,15 @@ The public API (stable names; :mod:`bpy_pipeline.api` has a runnable example):
 The pure part (config, geometry, lidar, io) runs anywhere; ``scenes``, ``export`` and ``run`` need ``bpy``.
 """
 
+import os as _os
+
+# One BLAS thread unless the user set another count, and only if numpy is not loaded yet. numpy's OpenBLAS
+# threads spin (sched_yield) for a while after every call: a 120-frame parking run spent 15 of its 36 CPU
+# seconds there, on the core the scan's and the preview's threads need. The pipeline's matrices are small,
+# so one thread costs no frame time; every job's files and the goldens keep their bytes.
+# Workers get the same setting from parallel.SINGLE_THREAD_ENV. docs/performance.md, round seven.
+_os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
 from ._version import __version__  # noqa: E402,F401
 from . import _moved  # noqa: E402
 

@@ -78,11 +78,11 @@ def sha256_file(path: Path) -> str:
 # lines and projections are Python-heavy and held the GIL against the main thread's writes (a parking frame's
 # write stage 45 -> 51 ms, alternating runs of 40 frames at load 4-7)
 BACKGROUND_WRITERS = ("preview",)
-# a frame of fewer points writes them in the caller's thread: a thread's GIL hand-overs (the main thread waits for the
-# GIL after each of its file operations) cost more than the overlap gains there: a parking frame's 14 k points,
-# write stage 45 ms inline against 61 ms with the preview's thread; the 131 k-point box frame 111 against 95 ms
-# (alternating runs, medians, load 4-6)
-BACKGROUND_MIN_POINTS = 65536
+# a frame of fewer points writes them in the caller's thread. Every frame, since numpy's OpenBLAS runs one thread
+# (bpy_pipeline/__init__.py): its idle thread used to spin on the core the preview's thread needs, and the
+# 65,536-point floor measured then (a parking frame's write stage 45 ms inline against 61 ms threaded, load 4-6)
+# no longer holds: 80 parking frames, whole process, threaded / inline 0.97 (0.86-1.00) in 5 alternating pairs
+BACKGROUND_MIN_POINTS = 0
 
 
 def write_frame_files(frame, staging: Path, names: list[str]) -> list[Path]:

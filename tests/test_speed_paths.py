@@ -3,6 +3,7 @@ preview splat, digests taken while writing, the preview written on a thread, a s
 kept without a copy. No timings here (benchmarks/bench_speed.py measures)."""
 
 import hashlib
+import json
 import os
 from pathlib import Path
 
@@ -177,3 +178,31 @@ def test_a_single_effects_part_is_kept_and_several_are_joined():
     parts = [cloud(50, 1), cloud(70, 2)]
     assert collect_points(iter(parts), 10).tobytes() == np.concatenate(parts).tobytes()
     assert len(collect_points(iter([]), 10)) == 0
+
+
+BLAS_THREADS = (
+    "import {first}, threadpoolctl; "
+    "print([i['num_threads'] for i in threadpoolctl.threadpool_info() if i['internal_api'] == 'openblas'])"
+)
+
+
+def blas_threads(first: str, **env) -> list[int]:
+    """The OpenBLAS thread counts a fresh Python reports after importing ``first`` (then numpy), with ``env``."""
+    import subprocess
+    import sys
+
+    base = {k: v for k, v in os.environ.items() if k not in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS")}
+    done = subprocess.run([sys.executable, "-c", BLAS_THREADS.format(first=first + ", numpy")], env={**base, **env}, capture_output=True, text=True, check=True)
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+@pytest.mark.skipif(os.cpu_count() < 2, reason="OpenBLAS runs one thread on one core anyway")
+def test_the_package_runs_one_blas_thread_unless_the_user_sets_a_count():
+    """numpy's idle OpenBLAS threads spin on the core the scan needs (bpy_pipeline/__init__.py); a user's own
+    OPENBLAS_NUM_THREADS stays as it is."""
+    pytest.importorskip("threadpoolctl")
+    if not blas_threads("os"):
+        pytest.skip("this numpy is not built on OpenBLAS")
+    assert blas_threads("os") != [1]  # numpy alone: a thread a core
+    assert blas_threads("bpy_pipeline") == [1]
+    assert blas_threads("bpy_pipeline", OPENBLAS_NUM_THREADS="2") == blas_threads("os", OPENBLAS_NUM_THREADS="2") == [2]
