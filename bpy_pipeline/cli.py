@@ -89,10 +89,13 @@ def load_run_config(args):
     """The run's config from ``--config`` and the overrides, or from ``--out``'s manifest for a worker (``--join``)."""
     from .config import config_from_dict, load_config
 
-    if args.join:
+    if args.join:  # the run's config, on this worker's share of the cores (--threads shapes no byte: run_key leaves it out)
+        from dataclasses import replace
+
         from .io import read_manifest
 
-        return config_from_dict(read_manifest(args.out)["config"])
+        config = config_from_dict(read_manifest(args.out)["config"])
+        return config if args.threads is None else replace(config, threads=args.threads)
     overrides = list(args.set)
     if args.seed is not None:
         overrides.append(f"seed={args.seed}")

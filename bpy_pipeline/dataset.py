@@ -49,6 +49,7 @@ from .errors import InputError
 from .io.atomic import atomic_write, digests_while_writing
 from .io.manifest import MANIFEST_NAME, read_manifest, to_json, write_manifest
 from .io.writers import WRITERS, frame_writers
+from .lidar.raycast import default_threads
 
 DATASET_FORMAT = "bpy_pipeline dataset"
 DATASET_VERSION = 2
@@ -78,24 +79,24 @@ def sha256_file(path: Path) -> str:
 # lines and projections are Python-heavy and held the GIL against the main thread's writes (a parking frame's
 # write stage 45 -> 51 ms, alternating runs of 40 frames at load 4-7)
 BACKGROUND_WRITERS = ("preview",)
-# a frame of fewer points writes them in the caller's thread. Every frame, since numpy's OpenBLAS runs one thread
-# (bpy_pipeline/__init__.py): its idle thread used to spin on the core the preview's thread needs, and the
-# 65,536-point floor measured then (a parking frame's write stage 45 ms inline against 61 ms threaded, load 4-6)
-# no longer holds: 80 parking frames, whole process, threaded / inline 0.97 (0.86-1.00) in 5 alternating pairs
-BACKGROUND_MIN_POINTS = 0
+# only with a core to spare: one process on every core (config.threads 0 or above 1). A worker of --workers runs on
+# its share of one core, where the preview's thread only adds GIL hand-overs: 400 parking frames on 2 workers took
+# 51-54 ms a frame's write stage threaded against 25-40 ms in one process, and 2 workers reached 1.31x one process
+# (1.84x inline). In one process, 80 parking frames threaded / inline: 0.97 wall (0.86-1.00, 5 alternating pairs),
+# since numpy's OpenBLAS runs one thread (bpy_pipeline/__init__.py; its idle thread used to spin on that core)
 
 
 def write_frame_files(frame, staging: Path, names: list[str]) -> list[Path]:
     """Every writer of ``names`` writes ``frame`` under ``staging``; their files in the order of ``names``.
 
-    In a frame of at least :data:`BACKGROUND_MIN_POINTS` points, the :data:`BACKGROUND_WRITERS` (the
+    In a process with more than one thread (``config.threads``, 0: the cores available), the :data:`BACKGROUND_WRITERS` (the
     preview: numpy, a compiled pass and zlib, which let go of the GIL) each run on a thread of their own
     while the others write, in the caller's context (its :func:`~.io.atomic.digests_while_writing`), and
     are all waited for before this returns or raises, so nothing writes under ``staging`` afterwards. A failure of the others is raised first,
     then the background writers' in the order of ``names``.
     """
-    points = len(frame.points) if frame.points is not None else 0
-    later = [n for n in names if n in BACKGROUND_WRITERS] if len(names) > 1 and points >= BACKGROUND_MIN_POINTS else []
+    spare_core = (frame.config.threads or default_threads()) > 1
+    later = [n for n in names if n in BACKGROUND_WRITERS] if len(names) > 1 and spare_core else []
     results: dict[str, list[Path]] = {}
     failed: dict[str, BaseException] = {}
 

@@ -5,6 +5,7 @@ kept without a copy. No timings here (benchmarks/bench_speed.py measures)."""
 import hashlib
 import json
 import os
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -155,14 +156,15 @@ def test_frame_files_keep_the_writers_order_and_a_preview_failure_is_raised(tmp_
     from bpy_pipeline.dataset import write_frame_files
     from bpy_pipeline.io import formats
 
-    monkeypatch.setattr(dataset, "BACKGROUND_MIN_POINTS", 0 if threaded else 10**9)  # the preview on its thread, or inline
-
-    config = load_config(None, ["output.formats=[ply, semantickitti]"])
+    config = load_config(None, ["output.formats=[ply, semantickitti]", f"threads={2 if threaded else 1}"])  # the preview on its thread, or inline
+    started, real_thread = [], threading.Thread
+    monkeypatch.setattr(dataset.threading, "Thread", lambda *a, **k: started.append(k["name"]) or real_thread(*a, **k))
     frame = Frame(0, config, frame_rng(0, 0))
     frame.points = cloud(2000)
     written = write_frame_files(frame, tmp_path / "a", ["ply", "preview", "semantickitti"])
     names = [Path(p).suffix for p in written]
     assert names == [".ply", ".png", ".bin", ".label"]
+    assert started == (["frame 0 preview writer"] if threaded else [])
 
     def broken(*args, **kwargs):
         raise ValueError("preview broke")
@@ -206,3 +208,19 @@ def test_the_package_runs_one_blas_thread_unless_the_user_sets_a_count():
     assert blas_threads("os") != [1]  # numpy alone: a thread a core
     assert blas_threads("bpy_pipeline") == [1]
     assert blas_threads("bpy_pipeline", OPENBLAS_NUM_THREADS="2") == blas_threads("os", OPENBLAS_NUM_THREADS="2") == [2]
+
+
+def test_a_worker_joins_the_run_on_its_share_of_the_cores(tmp_path):
+    """``--workers N`` hands each worker ``--threads`` (its share of the cores); a joining worker reads the run's
+    config from the manifest and must keep that share, or every worker casts rays and writes previews on every core."""
+    import argparse
+
+    from bpy_pipeline.cli import load_run_config
+    from bpy_pipeline.dataset import Dataset
+
+    config = load_config(None, ["frames=4"])
+    with Dataset.open(tmp_path / "run", config, "new"):
+        pass
+    joining = argparse.Namespace(join=True, out=str(tmp_path / "run"), threads=1)
+    assert load_run_config(joining).threads == 1
+    assert load_run_config(argparse.Namespace(join=True, out=str(tmp_path / "run"), threads=None)).threads == config.threads == 0
