@@ -79,11 +79,9 @@ def sha256_file(path: Path) -> str:
 # lines and projections are Python-heavy and held the GIL against the main thread's writes (a parking frame's
 # write stage 45 -> 51 ms, alternating runs of 40 frames at load 4-7)
 BACKGROUND_WRITERS = ("preview",)
-# only with a core to spare: one process on every core (config.threads 0 or above 1). A worker of --workers runs on
-# its share of one core, where the preview's thread only adds GIL hand-overs: 400 parking frames on 2 workers took
-# 51-54 ms a frame's write stage threaded against 25-40 ms in one process, and 2 workers reached 1.31x one process
-# (1.84x inline). In one process, 80 parking frames threaded / inline: 0.97 wall (0.86-1.00, 5 alternating pairs),
-# since numpy's OpenBLAS runs one thread (bpy_pipeline/__init__.py; its idle thread used to spin on that core)
+# only with a core to spare: one process on every core (config.threads 0 or above 1), where 80 parking frames ran at
+# 0.97 of the inline wall time (0.86-1.00, 5 alternating pairs; docs/performance.md, round seven). A worker of
+# --workers runs on its share of the cores, often one, where the thread only adds GIL hand-overs
 
 
 def write_frame_files(frame, staging: Path, names: list[str]) -> list[Path]:

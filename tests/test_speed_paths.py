@@ -1,6 +1,7 @@
 """The speed round's shortcuts give the bytes of the long way: rays made once per run, the compiled
 preview splat, digests taken while writing, the preview written on a thread, a single effects part
-kept without a copy. No timings here (benchmarks/bench_speed.py measures)."""
+kept without a copy; and what keeps a run off cores it does not need: one BLAS thread, a worker's share of the
+cores. No timings here (benchmarks/bench_speed.py measures)."""
 
 import hashlib
 import json
