@@ -19,16 +19,10 @@ from typing import Callable
 from .config import Config
 from .dataset import Dataset
 from .errors import InputError
+from .lidar.raycast import default_threads
 
 SINGLE_THREAD_ENV = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "NUMBA_NUM_THREADS": "1"}
 ROOT = Path(__file__).resolve().parents[1]
-
-
-def available_cores() -> int:
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:
-        return os.cpu_count() or 1
 
 
 def split(frames: list, parts: int) -> list[list]:
@@ -80,7 +74,7 @@ def run_parallel(config: Config, out: str, frames: list[int], mode: str, workers
         if ray_address:
             return _run_on_ray(out, todo, ray_address, frames_per_scene(config), log)
         ranges = aligned_ranges(todo, workers, frames_per_scene(config))
-        threads = max(1, (config.threads or available_cores()) // len(ranges))
+        threads = max(1, (config.threads or default_threads()) // len(ranges))
         env = {**os.environ, **SINGLE_THREAD_ENV}
         procs = [subprocess.Popen(worker_command(out, r, threads), env=env, cwd=os.getcwd()) for r in ranges]
         try:

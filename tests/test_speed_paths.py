@@ -204,9 +204,10 @@ def test_the_package_runs_one_blas_thread_unless_the_user_sets_a_count():
     """numpy's idle OpenBLAS threads spin on the core the scan needs (bpy_pipeline/__init__.py); a user's own
     OPENBLAS_NUM_THREADS stays as it is."""
     pytest.importorskip("threadpoolctl")
-    if not blas_threads("os"):
+    alone = blas_threads("os")
+    if not alone:
         pytest.skip("this numpy is not built on OpenBLAS")
-    assert blas_threads("os") != [1]  # numpy alone: a thread a core
+    assert alone != [1]  # numpy alone: a thread a core
     assert blas_threads("bpy_pipeline") == [1]
     assert blas_threads("bpy_pipeline", OPENBLAS_NUM_THREADS="2") == blas_threads("os", OPENBLAS_NUM_THREADS="2") == [2]
 
