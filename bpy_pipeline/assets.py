@@ -25,6 +25,7 @@ import numpy as np
 import yaml
 
 from .errors import InputError
+from .yaml_text import load_yaml
 
 MANIFEST = Path(__file__).resolve().parents[1] / "assets_manifest" / "assets.yaml"
 FORMATS = (".glb", ".gltf", ".obj", ".fbx", ".blend")
@@ -65,7 +66,7 @@ def read_manifest(path: str | Path | None = None) -> list[AssetEntry]:
     if not path.exists():
         raise InputError(f"{path}: the assets manifest does not exist")
     try:
-        data = yaml.safe_load(path.read_text()) or {}
+        data = load_yaml(path.read_text()) or {}
     except yaml.YAMLError:
         raise InputError(f"{path}: not valid YAML") from None
     entries = data.get("assets", []) if isinstance(data, dict) else None

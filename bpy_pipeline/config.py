@@ -37,6 +37,7 @@ from .builders.population import population_from_dict, population_to_dict
 from .builders.railway.params import RailwayScene
 from .io.writers import frame_writers
 from .schema import check_positive, convert, from_dict, to_plain
+from .yaml_text import SAFE_LOADER
 
 Vec3 = tuple[float, float, float]
 DEFAULT_SENSOR = {"preset": "railway_tls", "sampling_factor": 0.25}
@@ -309,7 +310,6 @@ MAX_FRAMES = 10**9  # frame indices are 6+ digit file names and records; a billi
 MAX_CONFIG_BYTES = 16 << 20  # a config file larger than this is refused before it is parsed
 MAX_CONFIG_DEPTH = 64  # nesting of mappings and lists in a config (the deepest real one is under 10)
 MAX_CONFIG_VALUES = 100_000  # scalars in a config file or --set value (keys included); parsing 100,000 takes seconds
-SAFE_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml's parser when present (the same values, 10x faster on large configs)
 
 
 @dataclass(frozen=True)

@@ -15,6 +15,7 @@ import numpy as np
 import yaml
 
 from .errors import InputError
+from .yaml_text import load_yaml
 
 LABELS_PATH = Path(__file__).resolve().parent.parent / "assets_manifest" / "labels.yaml"
 
@@ -98,7 +99,7 @@ def parse_rules(rules: list, where: str, names: dict[int, str]) -> tuple[NameRul
 def load_class_table(path: Path = LABELS_PATH) -> ClassTable:
     """Read and check the class table; ``InputError`` naming the file when it is missing or malformed."""
     try:
-        raw = yaml.safe_load(Path(path).read_text())
+        raw = load_yaml(Path(path).read_text())
     except (OSError, yaml.YAMLError) as err:
         raise InputError(f"{path}: cannot read the class table ({err})") from None
     try:
@@ -121,7 +122,7 @@ def semantickitti_ids(path: Path = LABELS_PATH) -> dict[str, int]:
     (every class of the table listed; ``InputError`` naming the file when the section is missing, incomplete or not ids)."""
     table = load_class_table(path)
     try:
-        raw = yaml.safe_load(Path(path).read_text()).get("semantickitti")
+        raw = load_yaml(Path(path).read_text()).get("semantickitti")
         ids = {normalise(name): int(value) for name, value in raw.items()}
     except (OSError, yaml.YAMLError, AttributeError, TypeError, ValueError) as err:
         raise InputError(f"{path}: semantickitti: expected a mapping of class name to SemanticKITTI raw id ({err})") from None

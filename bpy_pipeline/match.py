@@ -38,6 +38,7 @@ import numpy as np
 import yaml
 
 from .errors import InputError
+from .yaml_text import load_yaml
 
 CLASSES = ("car", "person", "bicyclist")  # SemanticKITTI training names that KITTI boxes label too
 OBJECT_TYPE = {"car": "car", "person": "person", "bicyclist": "cyclist"}  # class -> insertable object type
@@ -216,7 +217,7 @@ def match(sources: Sequence[str | Path], config_path: str | Path, out: str | Pat
 
     path = Path(config_path)
     try:
-        base = yaml.safe_load(path.read_text()) or {}
+        base = load_yaml(path.read_text()) or {}
     except OSError as err:
         raise InputError(f"--config: cannot read {path} ({err.strerror or err})") from None
     except yaml.YAMLError:
@@ -227,7 +228,7 @@ def match(sources: Sequence[str | Path], config_path: str | Path, out: str | Pat
     config, notes = matched_config(base, stats)
     out = Path(out)
     text = f"# matched to {len(frames)} labelled real frame(s) by bpy-pipeline match\n" + yaml.safe_dump(config, sort_keys=False, width=120, default_flow_style=None)
-    load_config(yaml.safe_load(text), [])  # refuse before writing anything a run would refuse
+    load_config(load_yaml(text), [])  # refuse before writing anything a run would refuse
     try:
         out.parent.mkdir(parents=True, exist_ok=True)
         with atomic_write(out) as tmp:

@@ -16,6 +16,7 @@ Shapes are plain arrays:
 from __future__ import annotations
 
 import math
+from functools import lru_cache
 
 import numpy as np
 
@@ -162,9 +163,78 @@ def ray_box_distance(origin, directions, centre, axes, half, max_distance=np.inf
 
 
 def _cross3(p: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """``np.cross`` of two (3,) float64 vectors, component for component the same products and differences
-    (the same bits) without its general-shape set-up (a capsule is made per body segment, per frame)."""
-    return np.array([p[1] * q[2] - p[2] * q[1], p[2] * q[0] - p[0] * q[2], p[0] * q[1] - p[1] * q[0]])
+    """``np.cross`` of (..., 3) float64 vectors, component for component the same products and differences
+    (the same bits) without its general-shape set-up (capsules are made per body, per frame)."""
+    p0, p1, p2 = p[..., 0], p[..., 1], p[..., 2]
+    q0, q1, q2 = q[..., 0], q[..., 1], q[..., 2]
+    return np.stack([p1 * q2 - p2 * q1, p2 * q0 - p0 * q2, p0 * q1 - p1 * q0], -1)
+
+
+@lru_cache(maxsize=None)
+def capsule_topology(segments: int, rings: int, flat_start: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """What every capsule mesh of these counts shares: ``(cos (s,), sin (s,) around the axis, triangles (m, 3) int32)``.
+
+    Read only (cached per process: the same counts give the same arrays).
+    """
+    phi = np.linspace(0.0, 2 * np.pi, segments, endpoint=False)
+    rows = (1 if flat_start else rings + 1) + 1 + rings
+    s = segments
+    j = np.arange(s)
+    k = (j + 1) % s
+    lo = 1 + np.arange(rows - 1)[:, None] * s  # (rows - 1, 1): each band between two rings
+    hi = lo + s
+    bands = np.stack([np.stack([lo + j, lo + k, hi + k], -1), np.stack([lo + j, hi + k, hi + j], -1)], 1)  # (rows - 1, 2, s, 3)
+    last = 1 + (rows - 1) * s
+    pole = 2 + rows * s - 1
+    tris = [np.stack([np.zeros(s, int), 1 + k, 1 + j], 1),  # start fan: normals point away from b
+            bands.reshape(-1, 3), np.stack([np.full(s, pole), last + j, last + k], 1)]
+    out = (np.cos(phi), np.sin(phi), np.concatenate(tris).astype(np.int32))
+    for array in out:
+        array.flags.writeable = False
+    return out
+
+
+def capsule_meshes(a, b, radius, segments: int = 10, rings: int = 3, flat_start: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """Closed triangle meshes inscribed in the capsules ``a[i]``-``b[i]`` of ``radius[i]``, all at once.
+
+    a, b : (c, 3) axis ends, metres; radius : (c,)
+    Returns ``(vertices (c, n, 3) float64, triangles (m, 3) int32)``: every capsule's mesh has the same
+    triangles (indices into its own ``n`` vertices). Each is :func:`capsule_mesh` of that capsule, bit for bit.
+    """
+    a, b = np.asarray(a, float).reshape(-1, 3), np.asarray(b, float).reshape(-1, 3)
+    radius = np.asarray(radius, float).reshape(-1)
+    axis = b - a
+    w = np.empty_like(axis)
+    for i in range(len(axis)):  # numpy's norm per capsule: the bits of the one-capsule code
+        length = float(np.linalg.norm(axis[i]))
+        w[i] = axis[i] / length if length > 1e-12 else (0.0, 0.0, 1.0)
+    helper = np.where((np.abs(w[:, 0]) < 0.9)[:, None], np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0]))
+    u = _cross3(w, helper)
+    for i in range(len(u)):
+        u[i] /= np.linalg.norm(u[i])
+    v = _cross3(w, u)
+    cos_phi, sin_phi, triangles = capsule_topology(segments, rings, flat_start)
+    circle = cos_phi[None, :, None] * u[:, None, :] + sin_phi[None, :, None] * v[:, None, :]  # (c, s, 3)
+    # rings from the start pole to the end pole: (polar angle measured from -w at a, +w at b)
+    theta = [np.pi / 2 * k / (rings + 1) for k in range(1, rings + 1)]
+    r = radius[:, None]
+    zero, full = np.zeros_like(r), r
+    if flat_start:
+        start_offsets, start_radii = [zero], [full]
+    else:
+        start_offsets = [-r * np.cos(t) for t in theta] + [zero]
+        start_radii = [r * np.sin(t) for t in theta] + [full]
+    end_offsets = [zero] + [r * np.cos(t) for t in theta[::-1]]
+    end_radii = [full] + [r * np.sin(t) for t in theta[::-1]]
+    n_start = len(start_offsets)
+    offsets = np.concatenate(start_offsets + end_offsets, axis=1)  # (c, rows)
+    radii = np.concatenate(start_radii + end_radii, axis=1)
+    centres = np.concatenate([np.repeat(a[:, None], n_start, 1), np.repeat(b[:, None], len(end_offsets), 1)], axis=1)  # (c, rows, 3)
+    ring_vertices = (centres[:, :, None, :] + (offsets[:, :, None] * w[:, None, :])[:, :, None, :]) + radii[:, :, None, None] * circle[:, None]  # (c, rows, s, 3)
+    start_pole = a if flat_start else a - radius[:, None] * w
+    end_pole = b + radius[:, None] * w
+    vertices = np.concatenate([start_pole[:, None], ring_vertices.reshape(len(a), -1, 3), end_pole[:, None]], axis=1)
+    return vertices, triangles
 
 
 def capsule_mesh(a, b, radius: float, segments: int = 10, rings: int = 3, flat_start: bool = False):
@@ -175,44 +245,5 @@ def capsule_mesh(a, b, radius: float, segments: int = 10, rings: int = 3, flat_s
     ``rings`` per hemispherical cap. ``flat_start`` replaces the cap at ``a`` by a flat disc
     through ``a`` (a robot base standing on the floor). A zero-length axis gives a sphere.
     """
-    a, b = np.asarray(a, float), np.asarray(b, float)
-    axis = b - a
-    length = float(np.linalg.norm(axis))
-    w = axis / length if length > 1e-12 else np.array([0.0, 0.0, 1.0])
-    helper = np.array([1.0, 0.0, 0.0]) if abs(w[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    u = _cross3(w, helper)
-    u /= np.linalg.norm(u)
-    v = _cross3(w, u)
-    phi = np.linspace(0.0, 2 * np.pi, segments, endpoint=False)
-    circle = np.cos(phi)[:, None] * u + np.sin(phi)[:, None] * v  # (s, 3)
-    # rings from the start pole to the end pole: (polar angle measured from -w at a, +w at b)
-    rows = []  # each: (centre, axial offset, ring radius)
-    if flat_start:
-        rows.append((a, 0.0, radius))
-    else:
-        for k in range(1, rings + 1):
-            theta = np.pi / 2 * k / (rings + 1)
-            rows.append((a, -radius * np.cos(theta), radius * np.sin(theta)))
-        rows.append((a, 0.0, radius))
-    rows.append((b, 0.0, radius))
-    for k in range(rings, 0, -1):
-        theta = np.pi / 2 * k / (rings + 1)
-        rows.append((b, radius * np.cos(theta), radius * np.sin(theta)))
-    centres = np.array([centre for centre, _, _ in rows])
-    offsets = np.array([offset for _, offset, _ in rows])
-    radii = np.array([rho for _, _, rho in rows])
-    ring_vertices = (centres[:, None, :] + (offsets[:, None] * w)[:, None, :]) + radii[:, None, None] * circle[None]  # (rows, s, 3)
-    start_pole = a if flat_start else a - radius * w
-    end_pole = b + radius * w
-    vertices = np.concatenate([[start_pole], ring_vertices.reshape(-1, 3), [end_pole]])
-    s = segments
-    j = np.arange(s)
-    k = (j + 1) % s
-    lo = 1 + np.arange(len(rows) - 1)[:, None] * s  # (rows - 1, 1): each band between two rings
-    hi = lo + s
-    bands = np.stack([np.stack([lo + j, lo + k, hi + k], -1), np.stack([lo + j, hi + k, hi + j], -1)], 1)  # (rows - 1, 2, s, 3)
-    last = 1 + (len(rows) - 1) * s
-    pole = len(vertices) - 1
-    tris = [np.stack([np.zeros(s, int), 1 + k, 1 + j], 1),  # start fan: normals point away from b
-            bands.reshape(-1, 3), np.stack([np.full(s, pole), last + j, last + k], 1)]
-    return vertices, np.concatenate(tris).astype(np.int32)
+    vertices, triangles = capsule_meshes(a, b, [radius], segments, rings, flat_start)
+    return vertices[0], triangles.copy()

@@ -355,13 +355,9 @@ def body_mesh(a: np.ndarray, b: np.ndarray, radius: np.ndarray, segments: int = 
     One closed capsule mesh per capsule (:func:`~.collision.capsule_mesh`), inscribed in it;
     ``capsule`` gives each vertex's capsule (so :data:`CAPSULE_SEGMENT` gives its segment).
     """
-    from .collision import capsule_mesh
+    from .collision import capsule_meshes
 
-    vertices, triangles, owner, offset = [], [], [], 0
-    for k in range(len(radius)):
-        v, t = capsule_mesh(a[k], b[k], float(radius[k]), segments, rings)
-        vertices.append(v)
-        triangles.append(t + offset)
-        owner.append(np.full(len(v), k))
-        offset += len(v)
-    return np.concatenate(vertices), np.concatenate(triangles).astype(np.int32), np.concatenate(owner)
+    vertices, triangles = capsule_meshes(a, b, radius, segments, rings)  # (c, n, 3), (m, 3)
+    count, per = vertices.shape[:2]
+    shifted = triangles[None] + (np.arange(count) * per)[:, None, None]
+    return vertices.reshape(-1, 3), shifted.reshape(-1, 3).astype(np.int32), np.repeat(np.arange(count), per)

@@ -24,6 +24,7 @@ import yaml
 
 from ..errors import InputError
 from .collision import capsule_gaps
+from ..yaml_text import load_yaml
 
 ARM_PATH = Path(__file__).resolve().parents[2] / "assets_manifest" / "robot_arm.yaml"
 
@@ -147,7 +148,7 @@ def load_arm(path: str | Path = ARM_PATH) -> ArmModel:
     """The arm model of a robot_arm.yaml file (default: the TX90L in assets_manifest)."""
     path = Path(path)
     try:
-        data = yaml.safe_load(path.read_text())
+        data = load_yaml(path.read_text())
     except OSError as err:
         raise InputError(f"{path}: cannot read the arm model ({err.strerror or err})") from None
     except yaml.YAMLError:

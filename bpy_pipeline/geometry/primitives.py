@@ -6,6 +6,7 @@ Every function returns ``(vertices (n, 3) float64 metres, triangles (m, 3) int32
 from __future__ import annotations
 
 import math
+from functools import lru_cache
 
 import numpy as np
 
@@ -101,8 +102,20 @@ def box_mesh(x0, x1, y0, y1, z0, z1) -> tuple[np.ndarray, np.ndarray]:
 
 def wheel_mesh(x: float, y: float, radius: float, width: float, sides: int = 12) -> tuple[np.ndarray, np.ndarray]:
     """A wheel (a short cylinder, axis along y) touching the ground at ``(x, y)``."""
+    v, t = wheel_shape(float(radius), float(width), int(sides))
+    return v + [x, y, radius], t.copy()
+
+
+@lru_cache(maxsize=64)
+def wheel_shape(radius: float, width: float, sides: int) -> tuple[np.ndarray, np.ndarray]:
+    """A wheel's cylinder with its axis along y, centred on the origin: ``(vertices (n, 3), triangles (m, 3))``, read only.
+
+    Cached: a road user's wheels come in a few sizes, and every vehicle of a street frame has four.
+    """
     v, t = cylinder(radius, width, sides)
-    return v[:, [0, 2, 1]] + [x, y, radius], t[:, ::-1].copy()
+    v, t = v[:, [0, 2, 1]], t[:, ::-1].copy()
+    v.flags.writeable = t.flags.writeable = False
+    return v, t
 
 
 def beam_mesh(p0, p1, thickness: float) -> tuple[np.ndarray, np.ndarray]:

@@ -20,6 +20,7 @@ import yaml
 
 from ..errors import InputError
 from ..labels import LABELS_PATH, load_class_table, normalise
+from ..yaml_text import load_yaml
 
 USER_CODES = 64  # first user-definable LAS classification code (ASPRS LAS 1.4 R15, table 17)
 ASPRS_NAMES = {  # the standard classes' names (table 17), for the classification lookup VLR
@@ -67,7 +68,7 @@ def load_class_maps(path: Path = LABELS_PATH) -> ClassMaps:
     """The maps of the class table at ``path``; ``InputError`` naming the file and key when one is malformed."""
     table = load_class_table(path)
     try:
-        raw = yaml.safe_load(Path(path).read_text()) or {}
+        raw = load_yaml(Path(path).read_text()) or {}
     except (OSError, yaml.YAMLError) as err:
         raise InputError(f"{path}: cannot read the class table ({err})") from None
     size = 1 << 16
@@ -137,7 +138,7 @@ SUSTECH_TYPES = ("Car", "Pedestrian", "Van", "Bus", "Truck", "ScooterRider", "Sc
 def load_sustech_names(path: Path = LABELS_PATH) -> dict[str, str]:
     """``{class name: SUSTechPOINTS type}`` (labels.yaml ``sustech_names``); ``InputError`` for a type its class list lacks."""
     try:
-        raw = (yaml.safe_load(Path(path).read_text()) or {}).get("sustech_names", {}) or {}
+        raw = (load_yaml(Path(path).read_text()) or {}).get("sustech_names", {}) or {}
     except (OSError, yaml.YAMLError) as err:
         raise InputError(f"{path}: cannot read the class table ({err})") from None
     table = load_class_table(path)

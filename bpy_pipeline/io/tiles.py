@@ -28,6 +28,7 @@ from ..errors import InputError
 from ..geometry.tiles import SAMPLING_METHODS, sample, tiles
 from .atomic import atomic_write
 from .npy import write_npy_folder
+from ..yaml_text import load_yaml
 
 
 @dataclass(frozen=True)
@@ -65,7 +66,7 @@ def coarse_classes(path: Path | None = None) -> tuple[list[str], np.ndarray]:
 
     from ..labels import LABELS_PATH
 
-    raw = yaml.safe_load(Path(path or LABELS_PATH).read_text())
+    raw = load_yaml(Path(path or LABELS_PATH).read_text())
     names = {int(k): v for k, v in raw["labels"].items()}
     ignored = {int(k) for k, v in raw["learning_map"].items() if int(v) == 0}
     mapping = {str(k).replace("_", " ").lower(): str(v) for k, v in (raw.get("coarse") or {}).items()}

@@ -70,6 +70,7 @@ from .intensity import carla_intensity, compute_intensity, lidar_intensity, refl
 from .materials import apply_materials
 from .points import POINT_DTYPE
 from .weather import apply_weather, fog_alpha, fog_soft_table
+from ..yaml_text import load_yaml
 
 MODEL_FORMAT = "bpy_pipeline effects model"
 MODEL_VERSION = 1
@@ -270,7 +271,7 @@ def read_model_file(path: str | Path, where: str = "model_file") -> FittedModels
 def _read_model_file(path: str, mtime_ns: int, size: int, key: str) -> FittedModels:
     where = f"{key} {path}"
     try:
-        data = yaml.safe_load(Path(path).read_text())
+        data = load_yaml(Path(path).read_text())
     except OSError as err:
         raise InputError(f"{where}: cannot read it ({err.strerror or err})") from None
     except yaml.YAMLError:

@@ -27,13 +27,13 @@ from pathlib import Path
 from typing import Iterable, Iterator, Literal
 
 import numpy as np
-import yaml
 
 from ..errors import InputError
 from ..schema import from_dict, key_of
 from .patterns import PATTERNS
 from .patterns.base import derive_rows
 from .rays import Pattern, load_numeric_npy, load_rays, pattern_chunks  # noqa: F401  (re-exported: the names lived here)
+from ..yaml_text import load_yaml
 
 PRESETS_PATH = Path(__file__).with_name("sensors.yaml")
 DEFAULT_PRESET = "vlp16"
@@ -102,7 +102,7 @@ PROFILE_KEYS = ("effects", "sources", "return_modes")  # a preset's effects prof
 
 @lru_cache(maxsize=1)
 def _presets_file() -> dict[str, dict]:
-    return yaml.safe_load(PRESETS_PATH.read_text())
+    return load_yaml(PRESETS_PATH.read_text())
 
 
 def presets() -> dict[str, dict]:
