@@ -136,6 +136,21 @@ def rectangles_overlap(centre1, half1, yaw1, centre2, half2, yaw2, clearance: fl
     return True
 
 
+def rectangles_near(centre, half, clearance: float, centres: np.ndarray, radii: np.ndarray) -> np.ndarray:
+    """The rows of ``centres`` ((o, 2) rectangles' centres, ``radii`` (o,) their circumscribed radii grown by
+    ``clearance / 2``) that :func:`rectangles_overlap` of the rectangle ``centre``, ``half`` needs to test, in order.
+
+    The others' circles lie apart from the candidate's by more than 2 micrometres, where
+    :func:`rectangles_overlap`'s own circle test (a micrometre) answers no: one array test instead of a
+    call per rectangle.
+    """
+    if len(centres) == 0:
+        return np.zeros(0, np.int64)
+    grow = clearance / 2.0
+    reach = radii + np.hypot(half[0] + grow, half[1] + grow) + 2e-6
+    return np.flatnonzero(np.hypot(centres[:, 0] - centre[0], centres[:, 1] - centre[1]) <= reach)
+
+
 def rectangle_inside(centre, half, yaw, low, high, margin: float = 0.0) -> bool:
     """True when the rectangle lies within the axis-aligned region ``low (2,) .. high (2,)`` shrunk by ``margin``."""
     corners = rectangle_corners(centre, half, yaw)

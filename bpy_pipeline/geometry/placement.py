@@ -20,7 +20,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..schema import check_positive
-from .collision import box_axes, rectangle_inside, rectangles_overlap
+from .collision import box_axes, rectangle_inside, rectangles_near, rectangles_overlap
 
 
 @dataclass(frozen=True)
@@ -279,14 +279,6 @@ class FloorBoxPlacer:
             return True
         return rectangle_inside(centre_xy, half_xy, yaw, *self.region)
 
-    def _near(self, centre_xy: np.ndarray, half: np.ndarray, centres: np.ndarray, radii: np.ndarray) -> np.ndarray:
-        """The rows of ``centres`` (o, 2) whose circles of ``radii`` (o,) come within 2 micrometres of the candidate's
-        circle grown by ``clearance / 2``, in order: for the others :func:`rectangles_overlap` answers no from its own
-        circle test (a micrometre), so only these need it."""
-        grow = self.clearance / 2.0
-        reach = radii + np.hypot(half[0] + grow, half[1] + grow) + 2e-6
-        return np.flatnonzero(np.hypot(centres[:, 0] - centre_xy[0], centres[:, 1] - centre_xy[1]) <= reach)
-
     def _rays(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         offset = points - self.sensor
         distance = np.linalg.norm(offset, axis=1)
@@ -325,7 +317,7 @@ class FloorBoxPlacer:
             if self._obstacle_reach is None:  # (centres (o, 2), circumscribed radii grown by clearance / 2 (o,))
                 grow = self.clearance / 2.0
                 self._obstacle_reach = (np.array([o[0][:2] for o in self.obstacles], float), np.array([np.hypot(o[1][0] + grow, o[1][1] + grow) for o in self.obstacles], float))
-            for k in self._near(centre_xy, half, *self._obstacle_reach):
+            for k in rectangles_near(centre_xy, half, self.clearance, *self._obstacle_reach):
                 o_centre, o_half, o_yaw = self.obstacles[k]
                 if rectangles_overlap(centre_xy, half[:2], yaw, o_centre, o_half, o_yaw, self.clearance):
                     self.rejections["obstacle"] += 1

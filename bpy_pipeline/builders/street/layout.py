@@ -44,7 +44,7 @@ import numpy as np
 
 from ...geometry import primitives
 from ...geometry.primitives import beam_mesh, box_mesh, quad_mesh, transformed, wheel_mesh  # noqa: F401 - street.box_mesh etc. stay importable
-from ...geometry.collision import rectangles_overlap
+from ...geometry.collision import rectangles_near, rectangles_overlap
 from ...geometry.field_of_view import FieldOfView, box_samples, in_view_fraction  # noqa: F401 - FieldOfView etc. stay importable from here and from geometry.street (its old path)
 from ...geometry.vehicles import saddle_height, two_wheeler_parts, vehicle_parts
 
@@ -328,11 +328,17 @@ def place_users(p, layout: StreetLayout, rng: np.random.Generator, views=(), tri
     parking = [i for i, lane in enumerate(layout.lanes) if lane.kind == "parking"]
     last_in_lane: dict[int, RoadUser] = {}
 
+    grow = p.clearance / 2.0
+    reach = {"obstacles": (np.array([c[:2] for c, _, _ in obstacles], float).reshape(-1, 2), np.array([math.hypot(h[0] + grow, h[1] + grow) for _, h, _ in obstacles])),
+             "users": (np.zeros((0, 2)), np.zeros(0))}  # centres (n, 2) and circumscribed radii grown by clearance / 2 (n,)
+
     def free(centre, half, yaw) -> bool:
-        for c, h, y in obstacles:
+        for k in rectangles_near(centre, half, p.clearance, *reach["obstacles"]):
+            c, h, y = obstacles[k]
             if rectangles_overlap(centre, half, yaw, c, h, y, p.clearance):
                 return False
-        for u in out.users:
+        for k in rectangles_near(centre, half, p.clearance, *reach["users"]):
+            u = out.users[k]
             if rectangles_overlap(centre, half, yaw, u.centre, u.half, u.yaw, p.clearance):
                 return False
         return True
@@ -345,6 +351,8 @@ def place_users(p, layout: StreetLayout, rng: np.random.Generator, views=(), tri
             out.out_of_view[user.kind] = out.out_of_view.get(user.kind, 0) + 1
             return False
         out.users.append(user)
+        centres, radii = reach["users"]
+        reach["users"] = (np.vstack([centres, np.asarray(user.centre, float)[None, :2]]), np.append(radii, math.hypot(user.half[0] + grow, user.half[1] + grow)))
         return True
 
     shares = np.array([p.vehicle_mix.get(k, 0.0) for k in VEHICLES], float)
