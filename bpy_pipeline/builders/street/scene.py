@@ -26,7 +26,7 @@ from __future__ import annotations
 import bpy
 import numpy as np
 
-from ...scenes.objects import mesh_data, mesh_object, scene_collection, tag
+from ...scenes.objects import mesh_data, mesh_object, remove_objects, scene_collection, tag
 from . import layout as street
 from .facade_nodes import facade_object
 from .planting_nodes import planting_object
@@ -72,11 +72,7 @@ class Intersection:
             return False
 
     def _clear_users(self) -> None:
-        for obj in list(self.users.objects):
-            mesh = obj.data
-            bpy.data.objects.remove(obj, do_unlink=True)
-            if mesh is not None and mesh.users == 0:
-                bpy.data.meshes.remove(mesh)
+        remove_objects(list(self.users.objects))
 
     def populate(self, rng: np.random.Generator, view=None):
         from ..base import BuildResult
