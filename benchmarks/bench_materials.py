@@ -38,7 +38,8 @@ upper body and roof, glass, cabin) on the insertion with the glass model and the
 Detection (``--detection``): the parts' detection reflectivity (``scene.car_paint.parts.<part>.detection``: what the drop
 decision sees, the reading staying the part's own) over the fitted part models; a grid on 000008, the row chosen by
 :func:`detection_rank` (stated before it ran) held out on 004747 (materials.json's ``detection``).
-Run: python benchmarks/bench_materials.py [--small] [--insertion | --reading | --parts | --detection]
+Spread (``--spread``): the chosen models seed by seed on both frames, nothing chosen (materials.json's ``spread``).
+Run: python benchmarks/bench_materials.py [--small] [--insertion | --reading | --parts | --detection | --spread]
 """
 
 import argparse
@@ -611,6 +612,54 @@ def detection(small: bool, out) -> None:
     path.write_text(json.dumps(payload, indent=2) + "\n")
 
 
+SPREAD_SEEDS = 40
+
+
+def resample_overlap(real: np.ndarray, draws: int = 400) -> list[float]:
+    """What the overlap measure gives a perfect model at this many points: the real car points' histogram against
+    resamples (with replacement, as many points) of themselves; ``[median, 10th percentile]`` over ``draws``
+    (a fixed generator: the same figures every run)."""
+    rng = np.random.default_rng(0)
+    values = [intersection(real, rng.choice(real, size=len(real)), BINS) for _ in range(draws)]
+    return [round(float(np.median(values)), 3), round(float(np.percentile(values, 10)), 3)]
+
+
+def spread(small: bool, out) -> None:
+    """The chosen car models (the ``detection`` section's choice: the part models without ``detection``, the glass model,
+    plates and lamps, the fitted reading) scored seed by seed on both frames, nothing chosen: how far one draw of the
+    cars' bodies and paints moves each car's count and the overlap. Per car: the mean, the 10th-90th percentile range of
+    sim / real over the seeds, and the share of seeds within 0.7-1.4; per frame: the overlap's range. Into
+    materials.json's ``spread`` section (the others kept)."""
+    from bpy_pipeline.mixing.paint import CarPaint
+
+    path = out / "materials.json"
+    payload = json.loads(path.read_text()) if path.exists() else {"benchmark": "materials", "rows": [], "notes": {}}
+    receiver = payload.get("reading", {}).get("receiver") or receiver_of(reading_fit())
+    effects = {"intensity": receiver}
+    scene = {"car_glass": CarGlass(enabled=True, windshield=0.6, tinted=0.7), "car_fittings": True, "car_paint": CarPaint(enabled=True)}
+    seeds = list(range(3 if small else SPREAD_SEEDS))
+    frames = {}
+    for frame in insertions():
+        rows = [frame.score(effects, [seed], scene) for seed in seeds]
+        ratios = np.array([r["sim/real per car"] for r in rows])  # (seeds, cars)
+        overlap = np.array([r["overlap"] for r in rows])
+        frames[frame.name] = {
+            "real points per car": frame.real_counts,
+            "sim/real mean per car": np.round(ratios.mean(axis=0), 2).tolist(),
+            "sim/real 10-90th percentile per car": [[round(float(lo), 2), round(float(hi), 2)] for lo, hi in zip(np.percentile(ratios, 10, axis=0), np.percentile(ratios, 90, axis=0))],
+            "share of seeds within 0.7-1.4 per car": np.round(((ratios >= 0.7) & (ratios <= 1.4)).mean(axis=0), 2).tolist(),
+            "cars within 0.7-1.4 per seed (min, median, max)": [int(v) for v in np.percentile(((ratios >= 0.7) & (ratios <= 1.4)).sum(axis=1), [0, 50, 100], method="nearest")],
+            "overlap (min, median, max)": [round(float(v), 3) for v in np.percentile(overlap, [0, 50, 100], method="nearest")],
+            "real car points": int(len(frame.real_on)),
+            "overlap of the real points with a resample of themselves (median, 10th percentile)": resample_overlap(frame.real_on),
+        }
+        print(frame.name, frames[frame.name], flush=True)
+    payload = json.loads(path.read_text()) if path.exists() else payload
+    payload["spread"] = {"seeds": len(seeds), "models": "part models (parts' fitted defaults), glass 0.6 / 0.7, plates and lamps, the fitted reading; no detection", "frames": frames}
+    out.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(payload, indent=2) + "\n")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--small", action="store_true", help="a small size, for CI (checks the benchmark runs)")
@@ -618,12 +667,13 @@ def main() -> None:
     parser.add_argument("--insertion", action="store_true", help="the insertion comparison only (into materials.json's insertion section)")
     parser.add_argument("--reading", action="store_true", help="the reading model (effects.intensity.reading) fitted on 000008 and on the insertion (materials.json's reading section)")
     parser.add_argument("--detection", action="store_true", help="the car parts' detection reflectivity apart from their reading, fitted on 000008, held out on 004747 (materials.json's detection section)")
+    parser.add_argument("--spread", action="store_true", help=f"the chosen car models seed by seed ({SPREAD_SEEDS} seeds) on both frames: how much one draw moves each car (materials.json's spread section)")
     parser.add_argument("--parts", action="store_true", help="a reflectance model per car part (scene.car_paint) on the insertion, fitted on 000008, held out on 004747 (materials.json's parts section)")
     args = parser.parse_args()
     if not KITTI.exists() or not KITTI_4747.exists():
         print(f"skipped: {KITTI} or {KITTI_4747} is absent")
         return
-    for mode, run in (("detection", detection), ("parts", parts), ("reading", reading), ("insertion", insertion)):
+    for mode, run in (("detection", detection), ("parts", parts), ("reading", reading), ("insertion", insertion), ("spread", spread)):
         if getattr(args, mode):
             run(args.small, args.out)
             return
@@ -651,7 +701,7 @@ def main() -> None:
     rows += held_rows + dual_rows(fit)
     cars = {frame.name: [{"distance_m": round(float(np.linalg.norm(b["centre"][:2])), 1), "occluded": b["occluded"], "real_points": b["real_points"]} for b in frame.boxes] for frame in (fit, held)}
     path = args.out / "materials.json"
-    kept = {k: v for k, v in json.loads(path.read_text()).items() if k in ("insertion", "reading", "parts", "detection")} if path.exists() else {}  # the --insertion, --reading, --parts and --detection sections stay
+    kept = {k: v for k, v in json.loads(path.read_text()).items() if k in ("insertion", "reading", "parts", "detection", "spread")} if path.exists() else {}  # the --insertion, --reading, --parts and --detection sections stay
     report("materials", rows, args.out, {"cars": cars, "best on 000008": best["paint"], "best paint alone on 000008": paint_only["paint"]})
     if kept:
         payload = json.loads(path.read_text())
