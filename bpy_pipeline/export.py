@@ -37,18 +37,35 @@ INSTANCE_ATTRIBUTE = "lidar_instance"  # INT named attribute: the instance id of
 PART_ATTRIBUTE = "lidar_part"  # INT named attribute of faces or points: p > 0 labels them as the row named ``owner["lidar_parts"][p - 1]``
 
 
-def _triangle_values(mesh, name: str, triangles: np.ndarray) -> np.ndarray | None:
-    """``(m,)`` int32: the INT named attribute ``name`` of each loop triangle's face (or first point); None where the mesh has none."""
+def _triangle_values(mesh, name: str, triangles: np.ndarray, faces: np.ndarray) -> np.ndarray | None:
+    """``(m,)`` int32: the INT named attribute ``name`` of each loop triangle's face (``faces`` (m,)) or first point
+    (``triangles`` (m, 3)); None where the mesh has none."""
     attribute = mesh.attributes.get(name)
     if attribute is None or attribute.data_type != "INT" or attribute.domain not in ("FACE", "POINT"):
         return None
     values = np.empty(len(attribute.data), np.int32)
     attribute.data.foreach_get("value", values)
-    if attribute.domain == "FACE":
-        faces = np.empty(len(mesh.loop_triangles), np.int32)
-        mesh.loop_triangles.foreach_get("polygon_index", faces)
-        return values[faces]
-    return values[triangles[:, 0]]
+    return values[faces] if attribute.domain == "FACE" else values[triangles[:, 0]]
+
+
+def _loop_triangles(mesh) -> tuple[np.ndarray, np.ndarray]:
+    """``(triangles (m, 3) int32 vertex indices, faces (m,) int32)``: the mesh's loop triangles and the face of each.
+
+    A mesh whose faces are all triangles (as many corners as three times its faces; the builders' meshes) is
+    its own tessellation: each face's corners in order, read through the ``.corner_vert`` attribute in one
+    copy. Others are tessellated by Blender and read per triangle (slower: ``loop_triangles`` has no array path).
+    """
+    if len(mesh.loops) == 3 * len(mesh.polygons):
+        corners = np.empty(len(mesh.loops), np.int32)
+        if len(corners):
+            mesh.attributes[".corner_vert"].data.foreach_get("value", corners)
+        return corners.reshape(-1, 3), np.arange(len(mesh.polygons), dtype=np.int32)
+    mesh.calc_loop_triangles()
+    triangles = np.empty(len(mesh.loop_triangles) * 3, np.int32)
+    mesh.loop_triangles.foreach_get("vertices", triangles)
+    faces = np.empty(len(mesh.loop_triangles), np.int32)
+    mesh.loop_triangles.foreach_get("polygon_index", faces)
+    return triangles.reshape(-1, 3), faces
 
 
 def _mesh_arrays(obj) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None]:
@@ -57,14 +74,12 @@ def _mesh_arrays(obj) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.nda
     where the mesh has them."""
     mesh = obj.to_mesh()
     try:
-        mesh.calc_loop_triangles()
         vertices = np.empty(len(mesh.vertices) * 3, np.float32)
-        mesh.vertices.foreach_get("co", vertices)
-        triangles = np.empty(len(mesh.loop_triangles) * 3, np.int32)
-        mesh.loop_triangles.foreach_get("vertices", triangles)
-        triangles = triangles.reshape(-1, 3)
-        ids = _triangle_values(mesh, INSTANCE_ATTRIBUTE, triangles)
-        parts = _triangle_values(mesh, PART_ATTRIBUTE, triangles) if "lidar_parts" in obj.original else None
+        if len(vertices):  # positions in one copy (``vertices.co`` goes value by value)
+            mesh.attributes["position"].data.foreach_get("vector", vertices)
+        triangles, faces = _loop_triangles(mesh)
+        ids = _triangle_values(mesh, INSTANCE_ATTRIBUTE, triangles, faces)
+        parts = _triangle_values(mesh, PART_ATTRIBUTE, triangles, faces) if "lidar_parts" in obj.original else None
     finally:
         obj.to_mesh_clear()
     return vertices.reshape(-1, 3).astype(np.float64), triangles, ids, parts
