@@ -45,3 +45,41 @@ def test_objects_removed_at_once_take_only_their_orphaned_meshes():
     remove_objects(own + [going])
     assert sorted(o.name for o in bpy.data.objects) == ["staying"]
     assert sorted(m.name for m in bpy.data.meshes) == ["shared"]  # still used by "staying"
+
+
+@pytest.mark.parametrize("faces", ["triangles", "quads"])
+def test_export_gives_blenders_loop_triangles_and_their_faces_ids(faces):
+    """The export reads an all-triangle mesh's corners as its tessellation, and tessellates others through Blender:
+    either way the triangles (world), and a FACE attribute's ids per triangle, are Blender's loop triangles'."""
+    import bpy
+
+    from bpy_pipeline.export import INSTANCE_ATTRIBUTE, export_scene
+    from bpy_pipeline.labels import load_class_table
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    bpy.ops.mesh.primitive_uv_sphere_add(segments=12, ring_count=6, location=(1.0, 2.0, 3.0))
+    obj = bpy.context.active_object
+    if faces == "triangles":
+        modifier = obj.modifiers.new("tri", "TRIANGULATE")
+        bpy.ops.object.modifier_apply(modifier=modifier.name)
+    mesh = obj.data
+    ids = mesh.attributes.new(INSTANCE_ATTRIBUTE, "INT", "FACE")
+    ids.data.foreach_set("value", np.arange(len(mesh.polygons), dtype=np.int32) % 3 + 1)
+    obj["lidar_class"] = "wall"
+    mesh.calc_loop_triangles()
+    expected = np.empty(len(mesh.loop_triangles) * 3, np.int32)
+    mesh.loop_triangles.foreach_get("vertices", expected)
+    face = np.empty(len(mesh.loop_triangles), np.int32)
+    mesh.loop_triangles.foreach_get("polygon_index", face)
+    co = np.empty(len(mesh.vertices) * 3, np.float32)
+    mesh.vertices.foreach_get("co", co)
+    corners = (co.reshape(-1, 3).astype(np.float64) + [1.0, 2.0, 3.0])[expected.reshape(-1, 3)]  # (m, 3, 3) world
+    assert (len(mesh.loops) == 3 * len(mesh.polygons)) == (faces == "triangles")
+
+    buffers = export_scene(load_class_table())
+    got = buffers.vertices[buffers.triangles]
+    instance = buffers.objects.instance[buffers.triangle_object]
+    order = np.lexsort(corners.reshape(len(corners), -1).T)
+    got_order = np.lexsort(got.reshape(len(got), -1).T)
+    np.testing.assert_allclose(got[got_order], corners[order], atol=1e-6)
+    assert np.array_equal(instance[got_order], (face % 3 + 1)[order])
