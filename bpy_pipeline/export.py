@@ -37,19 +37,25 @@ INSTANCE_ATTRIBUTE = "lidar_instance"  # INT named attribute: the instance id of
 PART_ATTRIBUTE = "lidar_part"  # INT named attribute of faces or points: p > 0 labels them as the row named ``owner["lidar_parts"][p - 1]``
 
 
-def _triangle_values(mesh, name: str, triangles: np.ndarray, faces: np.ndarray) -> np.ndarray | None:
-    """``(m,)`` int32: the INT named attribute ``name`` of each loop triangle's face (``faces`` (m,)) or first point
-    (``triangles`` (m, 3)); None where the mesh has none."""
+def _triangle_values(mesh, name: str, triangles: np.ndarray, faces: np.ndarray | None) -> np.ndarray | None:
+    """``(m,)`` int32: the INT named attribute ``name`` of each loop triangle's face (``faces`` (m,); None: read from the
+    loop triangles) or first point (``triangles`` (m, 3)); None where the mesh has none."""
     attribute = mesh.attributes.get(name)
     if attribute is None or attribute.data_type != "INT" or attribute.domain not in ("FACE", "POINT"):
         return None
     values = np.empty(len(attribute.data), np.int32)
     attribute.data.foreach_get("value", values)
-    return values[faces] if attribute.domain == "FACE" else values[triangles[:, 0]]
+    if attribute.domain == "POINT":
+        return values[triangles[:, 0]]
+    if faces is None:
+        faces = np.empty(len(mesh.loop_triangles), np.int32)
+        mesh.loop_triangles.foreach_get("polygon_index", faces)
+    return values[faces]
 
 
-def _loop_triangles(mesh) -> tuple[np.ndarray, np.ndarray]:
-    """``(triangles (m, 3) int32 vertex indices, faces (m,) int32)``: the mesh's loop triangles and the face of each.
+def _loop_triangles(mesh) -> tuple[np.ndarray, np.ndarray | None]:
+    """``(triangles (m, 3) int32 vertex indices, faces (m,) int32 or None)``: the mesh's loop triangles and the face of
+    each (None: not read; :func:`_triangle_values` reads it where a face attribute needs it).
 
     A mesh whose faces are all triangles (as many corners as three times its faces; the builders' meshes) is
     its own tessellation: each face's corners in order, read through the ``.corner_vert`` attribute in one
@@ -63,9 +69,7 @@ def _loop_triangles(mesh) -> tuple[np.ndarray, np.ndarray]:
     mesh.calc_loop_triangles()
     triangles = np.empty(len(mesh.loop_triangles) * 3, np.int32)
     mesh.loop_triangles.foreach_get("vertices", triangles)
-    faces = np.empty(len(mesh.loop_triangles), np.int32)
-    mesh.loop_triangles.foreach_get("polygon_index", faces)
-    return triangles.reshape(-1, 3), faces
+    return triangles.reshape(-1, 3), None
 
 
 def _mesh_arrays(obj) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None]:
