@@ -5,12 +5,15 @@
 - the vertices an object set uses, without a sort, against ``np.unique``;
 - the placer's slab test against :func:`~bpy_pipeline.geometry.collision.ray_box_distance`, rays along the box's
   faces and axes included (the whole visibility against its per-object reference: tests/test_boxes.py);
-- a capsule's mesh (every body segment of every person, every frame) built at once against ring by ring.
+- a capsule's mesh (every body segment of every person, every frame) built at once against ring by ring, and a
+  body's capsules all at once against one by one;
+- the street's and the garage's free-space prefilter against testing every rectangle;
+- a wheel from its cached cylinder against the cylinder made anew.
 """
 
 import numpy as np
 
-from bpy_pipeline.geometry.collision import box_axes, capsule_mesh, ray_box_distance
+from bpy_pipeline.geometry.collision import box_axes, capsule_mesh, capsule_meshes, ray_box_distance, rectangles_near, rectangles_overlap
 from bpy_pipeline.geometry.placement import _ray_box_distance, facing_samples
 from bpy_pipeline.lidar.visibility import Coverage, _used_vertices, covered_by_owner, surface_samples
 
@@ -116,6 +119,56 @@ def test_a_capsule_built_at_once_is_the_same_bits_as_ring_by_ring():
         want_vertices, want_triangles = _capsule_ring_by_ring(a, b, radius, **options)
         assert vertices.dtype == want_vertices.dtype and vertices.tobytes() == want_vertices.tobytes(), (i, options)
         assert triangles.dtype == want_triangles.dtype and triangles.tobytes() == want_triangles.tobytes(), (i, options)
+
+
+def test_a_bodys_capsules_built_at_once_are_each_capsules_bits():
+    from bpy_pipeline.geometry import human
+
+    rng = np.random.default_rng(7)
+    for i in range(40):
+        person = human.pose_person(human.sample_pose(human.POSES[i % len(human.POSES)], rng), float(rng.uniform(1.4, 2.0)), 1.0,
+                                   "walking", rng.normal(size=2) * 20, float(rng.uniform(-3, 3)))
+        a, b, radius = person.a.copy(), person.b.copy(), person.radius
+        a[0] = b[0]  # a zero-length axis (a sphere) among them
+        vertices, triangles = capsule_meshes(a, b, radius, 8, 2)
+        for k in range(len(radius)):
+            want_vertices, want_triangles = capsule_mesh(a[k], b[k], float(radius[k]), 8, 2)
+            assert vertices[k].tobytes() == want_vertices.tobytes() and triangles.tobytes() == want_triangles.tobytes(), (i, k)
+        body_vertices, body_triangles, owner = human.body_mesh(a, b, radius, 8, 2)
+        assert body_vertices.tobytes() == vertices.reshape(-1, 3).tobytes()
+        assert np.array_equal(body_triangles, (triangles[None] + (np.arange(len(radius)) * vertices.shape[1])[:, None, None]).reshape(-1, 3))
+        assert np.array_equal(owner, np.repeat(np.arange(len(radius)), vertices.shape[1]))
+
+
+def test_the_free_space_prefilter_keeps_every_overlapping_rectangle():
+    rng = np.random.default_rng(8)
+    for clearance in (0.0, 0.3):
+        centres = rng.uniform(-20, 20, (300, 2))
+        halves = rng.uniform(0.1, 3.0, (300, 2))
+        yaws = rng.uniform(-np.pi, np.pi, 300)
+        radii = np.hypot(halves[:, 0] + clearance / 2, halves[:, 1] + clearance / 2)
+        for _ in range(300):
+            centre, half, yaw = rng.uniform(-20, 20, 2), rng.uniform(0.1, 3.0, 2), float(rng.uniform(-np.pi, np.pi))
+            near = set(rectangles_near(centre, half, clearance, centres, radii).tolist())
+            overlapping = {k for k in range(len(centres)) if rectangles_overlap(centre, half, yaw, centres[k], halves[k], yaws[k], clearance)}
+            assert overlapping <= near
+            assert len(near) < len(centres)  # it does filter
+
+
+def test_a_wheel_from_its_cached_cylinder_is_the_cylinder_made_anew():
+    from bpy_pipeline.geometry.primitives import cylinder, wheel_mesh
+
+    rng = np.random.default_rng(9)
+    for _ in range(50):
+        x, y, radius, width, sides = *rng.normal(size=2), float(rng.choice([0.31, 0.5])), float(rng.choice([0.2, 0.3])), int(rng.choice([8, 12]))
+        v, t = cylinder(radius, width, sides)
+        want = (v[:, [0, 2, 1]] + [x, y, radius], t[:, ::-1].copy())
+        got = wheel_mesh(x, y, radius, width, sides)
+        assert got[0].tobytes() == want[0].tobytes() and got[1].tobytes() == want[1].tobytes()
+        got[0][:] = 0.0  # a caller may change its wheel: the next one is unchanged
+        got[1][:] = 0
+        again = wheel_mesh(x, y, radius, width, sides)
+        assert again[0].tobytes() == want[0].tobytes() and again[1].tobytes() == want[1].tobytes()
 
 
 def test_boxes_fitted_from_triangles_grouped_once_are_the_per_instance_isin_boxes():

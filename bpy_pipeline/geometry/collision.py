@@ -185,7 +185,7 @@ def _cross3(p: np.ndarray, q: np.ndarray) -> np.ndarray:
     return np.stack([p1 * q2 - p2 * q1, p2 * q0 - p0 * q2, p0 * q1 - p1 * q0], -1)
 
 
-@lru_cache(maxsize=None)
+@lru_cache(maxsize=32)
 def capsule_topology(segments: int, rings: int, flat_start: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """What every capsule mesh of these counts shares: ``(cos (s,), sin (s,) around the axis, triangles (m, 3) int32)``.
 
@@ -232,15 +232,15 @@ def capsule_meshes(a, b, radius, segments: int = 10, rings: int = 3, flat_start:
     circle = cos_phi[None, :, None] * u[:, None, :] + sin_phi[None, :, None] * v[:, None, :]  # (c, s, 3)
     # rings from the start pole to the end pole: (polar angle measured from -w at a, +w at b)
     theta = [np.pi / 2 * k / (rings + 1) for k in range(1, rings + 1)]
-    r = radius[:, None]
-    zero, full = np.zeros_like(r), r
+    r = radius[:, None]  # (c, 1); each row below is (c, 1): its axial offset or its ring's radius
+    zero = np.zeros_like(r)
     if flat_start:
-        start_offsets, start_radii = [zero], [full]
+        start_offsets, start_radii = [zero], [r]
     else:
         start_offsets = [-r * np.cos(t) for t in theta] + [zero]
-        start_radii = [r * np.sin(t) for t in theta] + [full]
+        start_radii = [r * np.sin(t) for t in theta] + [r]
     end_offsets = [zero] + [r * np.cos(t) for t in theta[::-1]]
-    end_radii = [full] + [r * np.sin(t) for t in theta[::-1]]
+    end_radii = [r] + [r * np.sin(t) for t in theta[::-1]]
     n_start = len(start_offsets)
     offsets = np.concatenate(start_offsets + end_offsets, axis=1)  # (c, rows)
     radii = np.concatenate(start_radii + end_radii, axis=1)
