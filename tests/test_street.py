@@ -204,6 +204,37 @@ def test_same_seed_same_bytes_whatever_frame_a_run_starts_at(bpy_scene, tmp_path
     assert "car" in boxes
 
 
+@pytest.mark.bpy
+def test_road_users_kept_across_frames_are_the_frames_parts_and_the_spares_export_nothing(bpy_scene):
+    """The users' objects are kept and refilled frame after frame: after a frame with more parts than the next, the
+    next frame's objects carry exactly its parts (names, tags, vertices), and the spare ones export no triangle."""
+    from bpy_pipeline.builders.street.scene import Intersection
+    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.labels import load_class_table
+
+    street_scene = Intersection(_config().scene.params)
+
+    def parts(count: int, shift: float):
+        box = (np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], float), np.array([[0, 1, 2], [0, 1, 3], [0, 2, 3], [1, 2, 3]], np.int32))
+        return [(f"street_user_{k:03d}_car_body", "car", "diffuse", 0.3, 1000 + k, (box[0] * (k + 1) + [shift + 10 * k, 50.0, 0.0], box[1])) for k in range(count)]
+
+    street_scene._show_users(parts(5, 0.0))
+    second = parts(2, 3.0)
+    street_scene._show_users(second)
+    bpy_scene.context.view_layer.update()
+    kept = list(street_scene.users.objects)
+    assert [o.name for o in kept[:2]] == [name for name, *_ in second]
+    assert all(len(o.data.vertices) == 0 for o in kept[2:]) and len(kept) == 5
+    for obj, (name, class_name, _, reflectivity, instance, (vertices, _)) in zip(kept, second):
+        co = np.empty(len(obj.data.vertices) * 3, np.float32)
+        obj.data.vertices.foreach_get("co", co)
+        assert np.array_equal(co.reshape(-1, 3), vertices.astype(np.float32))
+        assert (obj["lidar_class"], obj["lidar_instance"], obj["lidar_reflectivity"]) == (class_name, instance, reflectivity)
+    buffers = export_scene(load_class_table())
+    users = [r for r in range(len(buffers.objects)) if buffers.objects.instance[r] >= 1000]
+    assert sorted(buffers.objects.names[r] for r in users) == [name for name, *_ in second]
+
+
 # ----------------------------------------------------------------------------- what real streets hold (street_dressing)
 def test_dressing_is_present_labelled_and_drawn_from_the_layout_seed_alone():
     from bpy_pipeline.labels import load_class_table

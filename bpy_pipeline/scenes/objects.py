@@ -43,13 +43,19 @@ def tag(obj: bpy.types.Object, class_name: str | None = None, material: str = "d
 
 
 def mesh_data(name: str, vertices: np.ndarray, triangles: np.ndarray) -> bpy.types.Mesh:
-    """A mesh datablock from ``(n, 3)`` vertices and ``(m, 3)`` triangles, filled with foreach_set.
+    """A mesh datablock from ``(n, 3)`` vertices and ``(m, 3)`` triangles (:func:`fill_mesh`)."""
+    return fill_mesh(bpy.data.meshes.new(name), vertices, triangles)
+
+
+def fill_mesh(mesh: bpy.types.Mesh, vertices: np.ndarray, triangles: np.ndarray) -> bpy.types.Mesh:
+    """``mesh`` emptied and given ``(n, 3)`` vertices and ``(m, 3)`` triangles, filled with foreach_set; returns it.
 
     The positions and corners are written through their attributes (``position``, ``.corner_vert``), whose
     arrays take the numpy buffer in one copy; ``vertices.co`` and ``loops.vertex_index`` go value by value
-    (the same mesh, 3x slower: a street frame makes about 150 meshes).
+    (the same mesh, 3x slower: a street frame makes about 150 meshes). Refilling a mesh an object already
+    uses changes its geometry only, where a new object or mesh makes Blender rebuild the scene's relations.
     """
-    mesh = bpy.data.meshes.new(name)
+    mesh.clear_geometry()
     vertices = np.ascontiguousarray(vertices, np.float32).reshape(-1)
     triangles = np.ascontiguousarray(triangles, np.int32).reshape(-1)
     if len(vertices):  # an empty mesh has no attributes to write
