@@ -31,6 +31,17 @@ def test_the_table_names_no_module_twice_and_only_existing_ones():
     assert importlib.util.find_spec("bpy_pipeline.geometry.no_such_module") is None  # the finder answers only its table
 
 
+@pytest.mark.parametrize("module", sorted(_moved.MOVED_NAMES))
+def test_a_name_that_moved_up_is_answered_by_its_old_module_which_never_names_its_new_one(module):
+    old = importlib.import_module(f"bpy_pipeline.{module}")
+    for name, home in _moved.MOVED_NAMES[module].items():
+        assert getattr(old, name) is getattr(importlib.import_module(f"bpy_pipeline.{home}"), name)
+        assert f"{name}(" in (ROOT / "bpy_pipeline" / f"{home.replace('.', '/')}.py").read_text()
+        assert f"import {name}" not in (ROOT / "bpy_pipeline" / f"{module.replace('.', '/')}.py").read_text()
+    with pytest.raises(AttributeError):
+        old.no_such_name
+
+
 @pytest.mark.parametrize("name", BUILDERS)
 def test_an_old_builder_module_is_its_package_with_the_params_names(name):
     package = importlib.import_module(f"bpy_pipeline.builders.{name}")

@@ -250,16 +250,3 @@ def path_view(trajectory, frames: int, frame_time: float, step: float, max_range
     frames of ``frame_time`` s, beams ``step`` rad apart, reaching ``max_range`` m, turning at ``rotation_hz``."""
     path = path_positions(trajectory, frames * frame_time)
     return PathView(np.asarray(path, float).reshape(-1, 3), step, float(max_range), fastest_speed(trajectory) / float(rotation_hz))
-
-
-def __getattr__(name: str):
-    """Names that moved up a layer this round, still importable from here (compat; removed next round)."""
-    if name == "view_of":
-        from ..lidar.view import view_of
-
-        return view_of
-    if name == "planned_path":
-        from ..stages.view import planned_path
-
-        return planned_path
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
