@@ -415,8 +415,10 @@ class Dataset:
         """True when frame ``index`` is committed (and, after a resume, verified)."""
         return index in self.committed
 
-    def commit(self, frame) -> dict:
-        """Write ``frame`` with every writer of the config and commit it (see the module docstring); returns its record."""
+    def commit(self, frame, say: Callable[[str], None] | None = None) -> dict:
+        """Write ``frame`` with every writer of the config and commit it (see the module docstring); returns its record.
+
+        say : where its warning (an empty frame) goes (default: the dataset's log)"""
         import time
 
         start = time.perf_counter()
@@ -459,7 +461,7 @@ class Dataset:
         frame.record = record
         self.committed[frame.index] = record
         if record["points"] == 0:
-            self._say(f"warning: frame {frame.index}: 0 points. {empty_frame_cause(frame)}")
+            (say or self._say)(f"warning: frame {frame.index}: 0 points. {empty_frame_cause(frame)}")
         return record
 
     def skip(self, frame, reason: str) -> dict:

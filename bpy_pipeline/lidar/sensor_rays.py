@@ -55,15 +55,16 @@ class SensorRays:
         edge = reflector.edge_drop
         measured = Path(edge.mask) if edge.mask not in ("none", "generated") else None
         key = (frame if PATTERNS.get(spec.pattern).per_frame else 0, measured and measured.exists() and measured.stat().st_mtime_ns)
-        if self.cached.get("key") != key:
+        cached = self.cached  # read once: a frame finishing on another thread may ask for its own frame's meanwhile
+        if cached.get("key") != key:
             traced = MirrorFrame.of(reflector, spec, key[0])
             mask = None
             if edge.mask == "generated":
                 mask = traced.edge_drop_mask(spec, edge.probability, edge.beam_diameter)
             elif measured is not None:
                 mask = load_edge_mask(measured, image_shape(spec), "sensor.reflector.edge_drop.mask")
-            self.cached = {"key": key, "rays": traced.reflected(reflector), "mask": mask}
-        return self.cached
+            cached = self.cached = {"key": key, "rays": traced.reflected(reflector), "mask": mask}
+        return cached
 
     def patterns(self, frame: int = 0) -> Iterable[Pattern]:
         """The rays of frame ``frame`` (sensor frame) in chunks; a mirror sensor's leave from its mirrors
