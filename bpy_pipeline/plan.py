@@ -2,7 +2,7 @@
 
 Three plans, each a tuple of small stages over the same :class:`~bpy_pipeline.frame.Frame`:
 
-- **single sensor**: build -> pose -> export -> scan -> effects [-> annotate] [-> flash] [-> camera];
+- **single sensor**: build -> pose -> export -> scan -> effects [-> camera] [-> annotate] [-> flash];
 - **rig** (``sensor.rig``): build -> pose -> members (export, scan, effects [, boxes] for each sensor, then the
   platform's buffers) -> merge [-> merged boxes] [-> flash];
 - **real-scan background** (a builder whose ``plan`` is ``real_scan``): background -> place -> cast ->
@@ -15,6 +15,9 @@ asks whether it should run. A run can start at any frame: a scene that serves se
 (railway stations) is built from the generator of the first frame it serves, so any frame alone
 gives the same bytes as in the full run. What a run keeps across frames is its
 :class:`~bpy_pipeline.frame.Run`, never the module.
+
+A plan's last stages that call no Blender (:attr:`Stage.finishing`: the boxes, flash images) and the frame's
+commit may run on a thread beside the next frame's first stages (:func:`run_frames`, :func:`overlaps`).
 """
 
 from __future__ import annotations
