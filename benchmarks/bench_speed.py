@@ -2,7 +2,8 @@
 
 Every figure is a ratio against a reference measured in the same run (no timed asserts):
 
-- ``scan``: two jobs, run through ``run_frames`` as a user's run goes: the os1_128 preset in a closed
+- ``scan``: two jobs, run through ``run_frames`` as a user's run goes, but each stage alone (``overlap=False``: no
+  frame finishing beside the next, whose wall times would hold the turns a stage waits for): the os1_128 preset in a closed
   40 m box (131,072 rays; ``scene.builder: primitives``; PLY + SemanticKITTI + preview) and the default
   railway (``python run.py`` with no options). The ``scan`` timing of the frame records (the trace with
   its point records; the effects are their own ``effects`` timing), median of frames 2-3, against raw
