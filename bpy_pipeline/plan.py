@@ -52,7 +52,7 @@ LONG_STAGE_S = 3.0  # a stage that takes longer gets a line of its own
 MAX_INDICES_PER_KEPT = 20  # output.frames_kept: frame indices tried per kept frame before giving up
 OVERLAP_MIN_RAYS = 1 << 16  # rays a frame (a rig's: all its sensors') from which a frame finishes beside the next one. Smaller frames
 # spend their time in the interpreter, which two threads take turns at: 80 parking frames (the vlp16, 14,480 rays) ran at 1.02-1.06
-# of the wall time with the thread; the default railway, the os1_128 box and the ego street at 0.88-0.92 (docs/performance.md, round nine)
+# of the wall time with the thread; the ego street, the default railway and the os1_128 box at 0.88-0.95 (docs/performance.md, round nine)
 
 
 @dataclass(frozen=True)
@@ -153,8 +153,8 @@ def make_frame(run: Run, index: int, stages: tuple[Stage, ...] | None = None) ->
     frame = Frame(index, run.config, frame_rng(run.config.seed, index))
     said: list[str] = []
     run_stages(frame, run, plan(run.config) if stages is None else stages, said)
-    for line in said + builder_warnings(frame):
-        if run.log is not None:
+    if run.log is not None:
+        for line in said + builder_warnings(frame):
             run.log(line)
     return frame
 
@@ -229,9 +229,8 @@ def run_frames(config: Config, out_dir: str | Path, build: bool = True, frames: 
     first, finishing = stages[:cut], stages[cut:]
 
     def say(lines: list[str]) -> None:
-        for line in lines:
-            if log is not None:
-                log(line)
+        for line in lines if log is not None else ():
+            log(line)
 
     def finish(frame: Frame, said: list[str]) -> bool:  # the finishing stages and the commit; False for a skipped frame
         run_stages(frame, run, finishing, said)

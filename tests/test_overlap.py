@@ -160,3 +160,25 @@ def test_kill_9_while_a_frame_finishes_beside_the_next_then_resume_gives_the_uni
         assert frame_bytes(out) == frame_bytes(reference)
         assert records(out) == records(reference)
     assert interrupted  # some kill landed among the frames
+
+
+def test_a_mirror_sensor_keeps_the_rays_of_the_frame_finishing_and_of_the_next(monkeypatch):
+    """A rosette's rays change every frame: the frame finishing beside the next asks for its own frame's after the next
+    frame asked for its, and gets them without tracing them through the mirrors again."""
+    import bpy_pipeline.lidar.sensor_rays as sensor_rays
+
+    traced = []
+    real = sensor_rays.MirrorFrame.of
+
+    def counted(reflector, spec, frame):
+        traced.append(frame)
+        return real(reflector, spec, frame)
+
+    monkeypatch.setattr(sensor_rays.MirrorFrame, "of", staticmethod(counted))
+    rays = sensor_rays.SensorRays(load_config(None, ["sensor.preset=livox_mid40", "sensor.reflector={enabled: true, edge_drop: {mask: none}}"]))
+    first = rays.patterns(0)[0]
+    assert rays.patterns(1)[0] is not first and rays.patterns(0)[0] is first
+    assert traced == [0, 1]
+    rays.patterns(2)
+    rays.patterns(0)
+    assert traced == [0, 1, 2, 0]  # two frames kept: the oldest goes

@@ -32,7 +32,8 @@ class SensorRays:
     """The rays of a config's ``sensor`` section (``.spec``, ``.reflector``), kept by a run across frames.
 
     config : anything with a ``sensor`` section (a :class:`~bpy_pipeline.config.Config`)
-    cached : the key, the reflected :class:`Pattern` and the edge mask of a mirror sensor
+    cached : a mirror sensor's {key: {"rays": the reflected :class:`Pattern`, "mask": the edge mask}} of the
+        last two keys asked for (a rosette's rays change every frame: its key is the frame)
     kept : a plain sensor's chunks of rays, made once (:meth:`patterns`), ``None`` until then
     """
 
@@ -55,16 +56,19 @@ class SensorRays:
         edge = reflector.edge_drop
         measured = Path(edge.mask) if edge.mask not in ("none", "generated") else None
         key = (frame if PATTERNS.get(spec.pattern).per_frame else 0, measured and measured.exists() and measured.stat().st_mtime_ns)
-        cached = self.cached  # read once: a frame finishing on another thread may ask for its own frame's meanwhile
-        if cached.get("key") != key:
+        entry = self.cached.get(key)
+        if entry is None:
             traced = MirrorFrame.of(reflector, spec, key[0])
             mask = None
             if edge.mask == "generated":
                 mask = traced.edge_drop_mask(spec, edge.probability, edge.beam_diameter)
             elif measured is not None:
                 mask = load_edge_mask(measured, image_shape(spec), "sensor.reflector.edge_drop.mask")
-            cached = self.cached = {"key": key, "rays": traced.reflected(reflector), "mask": mask}
-        return cached
+            entry = {"rays": traced.reflected(reflector), "mask": mask}
+            # a new dict holding the newest key before this one and this one: a frame finishing on another
+            # thread (plan.run_frames) asks for its own frame's rays while the next frame asks for its
+            self.cached = {**dict(list(self.cached.items())[-1:]), key: entry}
+        return entry
 
     def patterns(self, frame: int = 0) -> Iterable[Pattern]:
         """The rays of frame ``frame`` (sensor frame) in chunks; a mirror sensor's leave from its mirrors
