@@ -2,6 +2,7 @@
 while the next frame's first stages run. The same bytes and records, the same frames committed when a run
 stops or fails, log lines in frame order, and whole frames under kill -9."""
 
+import json
 import os
 import signal
 import subprocess
@@ -51,8 +52,6 @@ def frame_bytes(out: Path) -> dict[str, bytes]:
 
 
 def records(out: Path) -> list[dict]:
-    import json
-
     kept = []
     for path in sorted((out / "records").glob("*.json")):
         record = json.loads(path.read_text())
@@ -73,6 +72,7 @@ def test_the_same_bytes_and_records_beside_the_next_frame_or_alone(bpy_scene, tm
         assert made == [0, 1, 2, 3]
     assert frame_bytes(tmp_path / "True") == frame_bytes(tmp_path / "False")
     assert records(tmp_path / "True") == records(tmp_path / "False")
+    assert said[True] == said[False]
     boxes = [r["boxes"] for r in records(tmp_path / "True")]
     assert sum(len(b) for b in boxes) > 0  # the finishing stage ran: the frames have their boxes
 
