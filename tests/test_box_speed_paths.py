@@ -237,3 +237,85 @@ def test_the_cone_prefilter_keeps_every_pair_of_the_full_matrix_compiled_or_nump
     if kernels is not None:
         compiled_pairs = cone_pairs(directions, axes, cos_limit, kernels)
         assert all(np.array_equal(a, b) for a, b in zip(compiled_pairs, numpy_pairs))
+
+
+def _turn_about_numpy(pivot_xy, position_xy, yaw, angle_deg):
+    """turn_about as numpy scalars computed it before (the reference)."""
+    angle = np.radians(angle_deg)
+    c, s = np.cos(angle), np.sin(angle)
+    offset = np.asarray(position_xy, float) - np.asarray(pivot_xy, float)
+    turned = np.array([c * offset[0] - s * offset[1], s * offset[0] + c * offset[1]]) + pivot_xy
+    return turned, float(np.angle(np.exp(1j * (yaw + angle))))
+
+
+def test_a_candidate_turned_in_python_floats_is_numpys_bits():
+    """The insertion rule's turn (every candidate of every car, every frame): the centre and the wrapped yaw are the
+    bits numpy's scalars gave, over the rule's 36 steps and random poses, a turn past +-pi included."""
+    from bpy_pipeline.geometry.placement import turn_about
+
+    rng = np.random.default_rng(21)
+    for _ in range(3000):
+        pivot = rng.uniform(-40, 40, 2)
+        position = pivot + rng.uniform(-30, 30, 2)
+        yaw = float(rng.uniform(-np.pi, np.pi))
+        for angle_deg in (0, 10.0, 170.0, 180.0, 350.0, float(rng.integers(36)) * 10.0, float(rng.uniform(0, 360))):
+            got, expected = turn_about(pivot, position, yaw, angle_deg), _turn_about_numpy(pivot, position, yaw, angle_deg)
+            assert got[0].tobytes() == expected[0].tobytes() and got[1] == expected[1]
+
+
+def _overlap_by_corners(centre1, half1, yaw1, centre2, half2, yaw2, clearance=0.0):
+    """The separating-axis test on the four corners' projections (the reference: what rectangles_overlap did)."""
+    from bpy_pipeline.geometry.collision import rectangle_corners
+
+    grow = clearance / 2.0
+    c1 = rectangle_corners(centre1, np.asarray(half1, float) + grow, yaw1)
+    c2 = rectangle_corners(centre2, np.asarray(half2, float) + grow, yaw2)
+    for yaw in (yaw1, yaw2):
+        for axis in (np.array([np.cos(yaw), np.sin(yaw)]), np.array([-np.sin(yaw), np.cos(yaw)])):
+            p1, p2 = c1 @ axis, c2 @ axis
+            if p1.max() <= p2.min() or p2.max() <= p1.min():
+                return False
+    return True
+
+
+def test_rectangles_overlap_in_floats_answers_as_the_corners_projections():
+    """Random pairs near each other (about half overlap), with and without clearance; touching edges count as apart,
+    as before (axis-aligned and turned by 90 degrees, where the sums are exact)."""
+    rng = np.random.default_rng(22)
+    answers = []
+    for _ in range(20000):
+        c1, c2 = rng.uniform(-5, 5, 2), rng.uniform(-5, 5, 2)
+        h1, h2 = rng.uniform(0.2, 3.0, 2), rng.uniform(0.2, 3.0, 2)
+        y1, y2 = rng.uniform(-np.pi, np.pi, 2)
+        clearance = float(rng.choice([0.0, 0.3]))
+        got = rectangles_overlap(c1, h1, y1, c2, h2, y2, clearance)
+        assert got == _overlap_by_corners(c1, h1, y1, c2, h2, y2, clearance)
+        answers.append(got)
+    assert 0.2 < np.mean(answers) < 0.8
+    assert not rectangles_overlap((0.0, 0.0), (1.0, 0.5), 0.0, (3.0, 0.0), (2.0, 0.5), 0.0)  # touching at x = 1
+    assert rectangles_overlap((0.0, 0.0), (1.0, 0.5), 0.0, (2.75, 0.0), (2.0, 0.5), 0.0)
+    assert not rectangles_overlap((0.0, 0.0), (1.0, 0.5), 0.0, (0.0, 1.5), (1.0, 0.5), 0.0, clearance=0.5)  # grown to touch
+    assert not _overlap_by_corners((0.0, 0.0), (1.0, 0.5), 0.0, (3.0, 0.0), (2.0, 0.5), 0.0)
+
+
+def test_the_placers_region_and_keep_out_tests_answer_as_numpy():
+    """FloorBoxPlacer's region test (centre, circle, then corners) and keep-out circle, in Python floats, against the
+    numpy forms they replace, on random boxes around the region's edges and the sensor."""
+    from bpy_pipeline.geometry.collision import rectangle_inside
+    from bpy_pipeline.geometry.placement import FloorBoxPlacer
+
+    rng = np.random.default_rng(23)
+    low, high = np.array([-20.0, -8.0]), np.array([20.0, 8.0])
+    placer = FloorBoxPlacer(np.array([1.0, 0.5, 0.8]), (low, high), keep_out=1.0)
+    seen = {"inside": set(), "near": set()}
+    for _ in range(20000):
+        centre = rng.uniform(low - 3, high + 3) if rng.random() < 0.7 else placer.sensor[:2] + rng.uniform(-4, 4, 2)
+        half, yaw = rng.uniform(0.5, 2.5, 3), float(rng.uniform(-np.pi, np.pi))
+        inside = placer._inside(centre, half[:2], yaw)
+        assert inside == rectangle_inside(centre, half[:2], yaw, low, high)
+        nearest = np.abs((placer.sensor[:2] - centre) @ box_axes(yaw)[:2, :2])
+        near = placer._near_sensor(centre, half, yaw)
+        assert near == bool(np.linalg.norm(np.maximum(nearest - half[:2], 0.0)) < placer.keep_out)
+        seen["inside"].add(inside)
+        seen["near"].add(near)
+    assert seen == {"inside": {True, False}, "near": {True, False}}

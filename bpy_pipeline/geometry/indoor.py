@@ -111,8 +111,16 @@ def parking_layout(p) -> ParkingLayout:
     else:
         ceiling.append((0.0, 0.0, outer[0], outer[1]))
     layout.boxes["ceiling"] = [(np.array([cx, cy, h + slab / 2]), np.array([hx, hy, slab / 2])) for cx, cy, hx, hy in ceiling]
-    layout.driveway = (-half[0] + 1.0, (ramp_x0 if np.isfinite(ramp_x0) else half[0]) - 1.0)
+    layout.driveway = driveway(p)
     return layout
+
+
+def driveway(p) -> tuple[float, float]:
+    """``(x_start, x_end)`` metres of the driveway the sensor robot drives along (y = 0): from 1 m inside the level's
+    west wall to 1 m before the ramp (or the east wall). :func:`parking_layout`'s ``driveway``, without the layout."""
+    half = p.length / 2
+    end = half - p.ramp_length if p.ramp_length > 0 else half
+    return (-half + 1.0, end - 1.0)
 
 
 def _prism_along_y(profile_xz: np.ndarray, y0: float, y1: float):
@@ -128,7 +136,7 @@ def parking_station(p, frame: int) -> np.ndarray:
     It starts ``sensor_start`` metres along the driveway and advances ``sensor_step`` a frame,
     starting over at the driveway's beginning when it passes the end.
     """
-    x0, x1 = parking_layout(p).driveway
+    x0, x1 = driveway(p)
     along = (p.sensor_start + frame * p.sensor_step) % max(x1 - x0, 1e-9)
     return pose_matrix([x0 + along, 0.0, p.sensor_height], [0.0, 0.0, 0.0])
 

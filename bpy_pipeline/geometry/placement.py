@@ -12,6 +12,7 @@ says whether one candidate box fits.
 
 from __future__ import annotations
 
+import math
 from collections import Counter
 from dataclasses import dataclass, field
 from typing import Callable, Literal
@@ -164,12 +165,19 @@ def insert_sequentially(
 
 
 def turn_about(pivot_xy, position_xy, yaw: float, angle_deg: float) -> tuple[np.ndarray, float]:
-    """``position_xy`` and ``yaw`` (radians) turned rigidly by ``angle_deg`` about the vertical axis through ``pivot_xy``."""
-    angle = np.radians(angle_deg)
-    c, s = np.cos(angle), np.sin(angle)
-    offset = np.asarray(position_xy, float) - np.asarray(pivot_xy, float)
-    turned = np.array([c * offset[0] - s * offset[1], s * offset[0] + c * offset[1]]) + pivot_xy
-    return turned, float(np.angle(np.exp(1j * (yaw + angle))))
+    """``position_xy`` and ``yaw`` (radians) turned rigidly by ``angle_deg`` about the vertical axis through ``pivot_xy``.
+
+    In Python floats, each a candidate of the insertion rule: the products and sums of numpy's scalars, and
+    ``math``'s radians, cosine and sine, which give numpy's bits; the yaw is wrapped by numpy's ``arctan2``
+    (what ``np.angle(np.exp(1j * a))`` computes; ``math.atan2`` rounds apart). ``tests/test_placement_paths.py``.
+    """
+    angle = math.radians(angle_deg)
+    c, s = math.cos(angle), math.sin(angle)
+    px, py = float(pivot_xy[0]), float(pivot_xy[1])
+    ox, oy = float(position_xy[0]) - px, float(position_xy[1]) - py
+    turned = np.array([c * ox - s * oy + px, s * ox + c * oy + py])
+    a = yaw + angle
+    return turned, float(np.arctan2(math.sin(a), math.cos(a)))
 
 
 # ----------------------------------------------------------------------------- boxes on a floor
@@ -257,6 +265,7 @@ class FloorBoxPlacer:
     def __init__(self, sensor, region, obstacles=(), static_distance=None, clearance: float = 0.3, min_visible: float = 0.3, keep_out: float = 1.0, samples_per_side: int = 4):
         self.sensor = np.asarray(sensor, float)
         self.region = (np.asarray(region[0], float), np.asarray(region[1], float))
+        self._bounds = ((float(self.region[0][0]), float(self.region[0][1])), (float(self.region[1][0]), float(self.region[1][1])))
         self.obstacles = list(obstacles)
         self.static_distance = static_distance
         self.clearance = clearance
@@ -270,14 +279,22 @@ class FloorBoxPlacer:
     def _inside(self, centre_xy: np.ndarray, half_xy: np.ndarray, yaw: float) -> bool:
         """:func:`rectangle_inside` of the region, answered from the centre and the circumscribed circle where they
         settle it by more than a micrometre (far beyond rounding): a centre outside the region puts a corner
-        outside, a circle inside puts every corner inside."""
-        low, high = self.region
-        if (centre_xy < low[:2] - 1e-6).any() or (centre_xy > high[:2] + 1e-6).any():
+        outside, a circle inside puts every corner inside. Python floats: the answers of numpy's scalars."""
+        (x0, y0), (x1, y1) = self._bounds
+        cx, cy = float(centre_xy[0]), float(centre_xy[1])
+        if cx < x0 - 1e-6 or cy < y0 - 1e-6 or cx > x1 + 1e-6 or cy > y1 + 1e-6:
             return False
-        r = float(np.hypot(half_xy[0], half_xy[1])) + 1e-6
-        if (centre_xy - r >= low[:2]).all() and (centre_xy + r <= high[:2]).all():
+        r = math.hypot(half_xy[0], half_xy[1]) + 1e-6  # np.hypot may round a bit apart: the circle's micrometre covers it
+        if cx - r >= x0 and cy - r >= y0 and cx + r <= x1 and cy + r <= y1:
             return True
         return rectangle_inside(centre_xy, half_xy, yaw, *self.region)
+
+    def _near_sensor(self, centre_xy: np.ndarray, half_xy: np.ndarray, yaw: float) -> bool:
+        """Whether the upright rectangle reaches within ``keep_out`` of the sensor (its gap to the sensor's axis)."""
+        c, s = math.cos(yaw), math.sin(yaw)
+        dx, dy = float(self.sensor[0] - centre_xy[0]), float(self.sensor[1] - centre_xy[1])
+        along, across = abs(dx * c + dy * s), abs(dy * c - dx * s)  # the sensor in the box's axes
+        return math.hypot(max(along - half_xy[0], 0.0), max(across - half_xy[1], 0.0)) < self.keep_out
 
     def _rays(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         offset = points - self.sensor
@@ -309,8 +326,7 @@ class FloorBoxPlacer:
         if not self._inside(centre_xy, half[:2], yaw):
             self.rejections["outside"] += 1
             return None
-        nearest = np.abs((self.sensor[:2] - centre_xy) @ box_axes(yaw)[:2, :2])
-        if np.linalg.norm(np.maximum(nearest - half[:2], 0.0)) < self.keep_out:
+        if self._near_sensor(centre_xy, half, yaw):
             self.rejections["outside"] += 1
             return None
         if self.obstacles:
