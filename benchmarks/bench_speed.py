@@ -18,7 +18,10 @@ Every figure is a ratio against a reference measured in the same run (no timed a
   against ``--old CHECKOUT`` (e.g. a ``git worktree`` of an older commit) in alternating rounds.
   Code without ``scene.ego_vehicle`` runs the nearest config it accepts: the same street builder and
   sensor, standing in the right-hand lane at the start of the ego's path (said in the results).
-- ``workers``: parking frames with ``--workers 2`` against one process, this checkout, in alternating rounds (best of each).
+- ``workers``: parking frames with ``--workers 2`` against one process, this checkout, in alternating rounds (best of each);
+  and against one process on one thread (``--threads 1``, as each worker runs), the workers' own scaling. The one process
+  keeps more than a core busy (its preview's thread, Embree's), so two workers can give it at most ``speed_up_ceiling``
+  = 2 x its wall time / its CPU time.
 
 The scan and write parts run in a subprocess per checkout (``--baseline CHECKOUT`` adds the same
 measurement of another checkout, interleaved); each subprocess reports which ``bpy_pipeline`` it imported.
@@ -284,14 +287,21 @@ def main() -> None:
     results["workers"] = []
     if scaling:
         job = ["--set", "scene.builder=parking", "--frames", str(scaling)]
-        ones, twos = [], []
+        ones, singles, twos = [], [], []
         for _ in range(rounds):  # alternating, so a slow spell of the machine does not fall on one side only
             ones.append(run_py(ROOT, job))
+            singles.append(run_py(ROOT, [*job, "--threads", "1"]))  # one process as a worker runs: one thread
             twos.append(run_py(ROOT, job, workers=2))
-        one, two = max(ones, key=lambda r: r["fps"]), max(twos, key=lambda r: r["fps"])
+        one, single, two = (max(runs, key=lambda r: r["fps"]) for runs in (ones, singles, twos))
         results["workers"].append({"frames": scaling, "one": one, "two": two, "speed_up": two["fps"] / one["fps"], "one_rounds": ones, "two_rounds": twos,
-                                   "round_speed_ups": [t["fps"] / o["fps"] for o, t in zip(ones, twos)]})  # fmt: skip
-        print(f"{scaling} parking frames: one process {one['fps']:.2f} frames/s, 2 workers {two['fps']:.2f} ({two['fps'] / one['fps']:.2f}x, best of {rounds} alternating rounds each)", flush=True)
+                                   "round_speed_ups": [t["fps"] / o["fps"] for o, t in zip(ones, twos)],
+                                   "one_thread": single, "one_thread_rounds": singles, "speed_up_over_one_thread": two["fps"] / single["fps"],
+                                   "round_speed_ups_over_one_thread": [t["fps"] / o["fps"] for o, t in zip(singles, twos)],
+                                   # what two workers of one core each can give over the one process at most: its wall time is its
+                                   # CPU time over the cores it kept busy, two workers get two cores' worth
+                                   "cores_busy_one_process": one["cpu_s"] / one["wall_s"], "speed_up_ceiling": 2.0 * one["wall_s"] / one["cpu_s"]})  # fmt: skip
+        print(f"{scaling} parking frames: one process {one['fps']:.2f} frames/s ({one['cpu_s'] / one['wall_s']:.2f} cores busy), one process on one thread {single['fps']:.2f}, "
+              f"2 workers {two['fps']:.2f} ({two['fps'] / one['fps']:.2f}x and {two['fps'] / single['fps']:.2f}x, best of {rounds} alternating rounds each)", flush=True)
     for row in results["fps"]:
         if "old" in row:
             print(f"{row['job']}: {row['new']['fps']:.2f} frames/s against {row['old']['fps']:.2f} ({row['fps_new_over_old']:.2f}x)")

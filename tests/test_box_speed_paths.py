@@ -8,7 +8,9 @@
 - a capsule's mesh (every body segment of every person, every frame) built at once against ring by ring, and a
   body's capsules all at once against one by one;
 - the street's and the garage's free-space prefilter against testing every rectangle;
-- a wheel from its cached cylinder against the cylinder made anew.
+- a wheel from its cached cylinder against the cylinder made anew;
+- the insertion rule's turn of a candidate, the rectangles' separating axes and the placer's region and keep-out
+  tests in Python floats against the numpy forms they replace.
 """
 
 import numpy as np
@@ -38,9 +40,10 @@ def test_coverage_of_all_objects_at_once_is_each_objects_coverage():
             if (owner == k).any():
                 expected[mine] = Coverage(points[owner == k], cell).covers(samples[mine])
         assert expected.any() and not expected.all()
-        assert np.array_equal(covered_by_owner(points, owner, samples, sample_owner, count, cell), expected)
-        assert np.array_equal(covered_by_owner(points, owner, samples, sample_owner, count, cell, where=where), expected & where)
-        assert np.array_equal(covered_by_owner(points, owner, samples, sample_owner, count, cell, where=where, distance=np.linalg.norm(samples, axis=1)), expected & where)
+        for dense in (None, True, False):  # by size (the mask at 2 degrees, the keys at 1 and 0.7), then each way
+            assert np.array_equal(covered_by_owner(points, owner, samples, sample_owner, count, cell, dense=dense), expected)
+            assert np.array_equal(covered_by_owner(points, owner, samples, sample_owner, count, cell, where=where, dense=dense), expected & where)
+            assert np.array_equal(covered_by_owner(points, owner, samples, sample_owner, count, cell, where=where, distance=np.linalg.norm(samples, axis=1), dense=dense), expected & where)
 
 
 def test_surface_samples_with_given_areas_are_the_same_bits():

@@ -167,9 +167,10 @@ def insert_sequentially(
 def turn_about(pivot_xy, position_xy, yaw: float, angle_deg: float) -> tuple[np.ndarray, float]:
     """``position_xy`` and ``yaw`` (radians) turned rigidly by ``angle_deg`` about the vertical axis through ``pivot_xy``.
 
-    In Python floats, each a candidate of the insertion rule: the products and sums of numpy's scalars, and
-    ``math``'s radians, cosine and sine, which give numpy's bits; the yaw is wrapped by numpy's ``arctan2``
-    (what ``np.angle(np.exp(1j * a))`` computes; ``math.atan2`` rounds apart). ``tests/test_placement_paths.py``.
+    Called for every candidate of the insertion rule, so in Python floats: the products and sums numpy's scalars
+    did, and ``math``'s radians, cosine and sine, which give numpy's bits; the yaw is wrapped by numpy's
+    ``arctan2``, what ``np.angle(np.exp(1j * a))`` computed (``math.atan2`` rounds apart). The same bits:
+    ``tests/test_box_speed_paths.py``.
     """
     angle = math.radians(angle_deg)
     c, s = math.cos(angle), math.sin(angle)

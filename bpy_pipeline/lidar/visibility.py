@@ -31,6 +31,7 @@ CONE_MARGIN = 1e-12  # cosine: the cone prefilter lets through pairs this far ou
 CONE_BLOCK = 16384  # rays per block of the numpy cone test: a (block, k) matrix, not (n, k)
 SAMPLE_SPACING = 0.1  # m between surface samples for truncation (wider on objects that would need more than about:)
 MAX_SAMPLES = 4000  # x 2 (surface_samples' area bound)
+DENSE_CELLS = 1 << 22  # (object, row, column) cells up to which covered_by_owner grows one mask of them all (4 MB of bool)
 
 
 class Coverage:
@@ -202,18 +203,20 @@ def cone_pairs(directions: np.ndarray, axes: np.ndarray, cos_limit: np.ndarray, 
     return np.concatenate(rays).astype(np.int64), np.concatenate(boxes).astype(np.int64)
 
 
-def covered_by_owner(points: np.ndarray, point_owner: np.ndarray, samples: np.ndarray, sample_owner: np.ndarray, count: int, cell_deg: float, where: np.ndarray | None = None, distance: np.ndarray | None = None) -> np.ndarray:
+def covered_by_owner(points: np.ndarray, point_owner: np.ndarray, samples: np.ndarray, sample_owner: np.ndarray, count: int, cell_deg: float, where: np.ndarray | None = None, distance: np.ndarray | None = None, dense: bool | None = None) -> np.ndarray:
     """``(s,)`` bool: is each sample's direction covered by the passing points of its own object?
 
     points, point_owner : ``(p, 3)`` sensor-frame points where rays pass the objects and ``(p,)`` their object (0..count-1)
     samples, sample_owner : ``(s, 3)`` sensor-frame surface samples and ``(s,)`` their object
     The same answer as ``Coverage(points of k, cell_deg).covers(samples of k)`` per object k (the same cells, the
-    same one-cell growth: rows clamped at the poles, columns wrapping), with each direction's cell computed once:
-    the points' occupied (object, row, column) cells are one sorted array of keys, and a sample is covered when
-    one of the nine cells around its own is among them (no mask of every cell is made: at the HDL-64E's cells
-    a frame's masks were 100 MB an object group).
+    same one-cell growth: rows clamped at the poles, columns wrapping), with each direction's cell computed once.
+    Up to :data:`DENSE_CELLS` (object, row, column) cells (a garage's few cars at a coarse sensor's cells), every
+    object's mask at once, grown as :class:`Coverage` grows one; beyond (at the HDL-64E's cells a street's masks were
+    100 MB an object group), the points' occupied cells are one sorted array of keys, and a sample is covered when
+    one of the nine cells around its own is among them.
     where : ``(s,)`` bool, the samples to look at (the others come back False), or ``None`` for all
     distance : the ``(s,)`` samples' ``np.linalg.norm(samples, axis=1)`` (m) if the caller has it
+    dense : the mask (True) or the sorted keys (False) whatever the size; ``None``: by :data:`DENSE_CELLS`
     """
     covered = np.zeros(len(samples), bool)
     if where is not None:  # only these samples can count: the others' cells are never looked up
@@ -223,20 +226,31 @@ def covered_by_owner(points: np.ndarray, point_owner: np.ndarray, samples: np.nd
     rows, columns = grid.rows, grid.columns
     owned = (point_owner >= 0) & (point_owner < count)
     point_row, point_col = grid._cells(points[owned])
-    occupied = np.unique((point_owner[owned].astype(np.int64) * rows + point_row) * columns + point_col)
+    point_keys = (point_owner[owned].astype(np.int64) * rows + point_row) * columns + point_col
     found = np.zeros(len(samples), bool)
-    if len(occupied):  # each distinct (object, cell) of the samples looked up once, in order
+    if len(point_keys):
         row, col = grid._cells(samples, distance)
-        cells, inverse = np.unique((sample_owner.astype(np.int64) * rows + row) * columns + col, return_inverse=True)
-        cell_col, cell_row, base = cells % columns, (cells // columns) % rows, cells // (columns * rows) * rows
-        hit = np.zeros(len(cells), bool)
-        for dr in (-1, 0, 1):
-            near_row = (base + np.clip(cell_row + dr, 0, rows - 1)) * columns
-            for dc in (-1, 0, 1):
-                key = near_row + (cell_col + dc) % columns
-                at = np.minimum(np.searchsorted(occupied, key), len(occupied) - 1)
-                hit |= occupied[at] == key
-        found = hit[inverse.reshape(-1)]
+        sample_keys = (sample_owner.astype(np.int64) * rows + row) * columns + col
+        if dense if dense is not None else count * rows * columns <= DENSE_CELLS:
+            mask = np.zeros((count, rows, columns), bool)
+            mask.reshape(-1)[point_keys] = True
+            grown = mask.copy()  # a row sees its neighbours where they exist (clamped at the poles), then the columns wrap
+            grown[:, 1:] |= mask[:, :-1]
+            grown[:, :-1] |= mask[:, 1:]
+            grown |= np.roll(grown, 1, axis=2) | np.roll(grown, -1, axis=2)
+            found = grown.reshape(-1)[sample_keys]
+        else:  # each distinct (object, cell) of the samples looked up once, in order
+            occupied = np.unique(point_keys)
+            cells, inverse = np.unique(sample_keys, return_inverse=True)
+            cell_col, cell_row, base = cells % columns, (cells // columns) % rows, cells // (columns * rows) * rows
+            hit = np.zeros(len(cells), bool)
+            for dr in (-1, 0, 1):
+                near_row = (base + np.clip(cell_row + dr, 0, rows - 1)) * columns
+                for dc in (-1, 0, 1):
+                    key = near_row + (cell_col + dc) % columns
+                    at = np.minimum(np.searchsorted(occupied, key), len(occupied) - 1)
+                    hit |= occupied[at] == key
+            found = hit[inverse.reshape(-1)]
     if where is None:
         return found
     covered[where] = found
