@@ -291,7 +291,7 @@ class FloorBoxPlacer:
         return rectangle_inside(centre_xy, half_xy, yaw, *self.region)
 
     def _near_sensor(self, centre_xy: np.ndarray, half_xy: np.ndarray, yaw: float) -> bool:
-        """Whether the upright rectangle reaches within ``keep_out`` of the sensor (its gap to the sensor's axis)."""
+        """Whether the box's floor rectangle comes within ``keep_out`` of the sensor (their distance on the floor plan)."""
         c, s = math.cos(yaw), math.sin(yaw)
         dx, dy = float(self.sensor[0] - centre_xy[0]), float(self.sensor[1] - centre_xy[1])
         along, across = abs(dx * c + dy * s), abs(dy * c - dx * s)  # the sensor in the box's axes

@@ -231,7 +231,7 @@ def covered_by_owner(points: np.ndarray, point_owner: np.ndarray, samples: np.nd
     if len(point_keys):
         row, col = grid._cells(samples, distance)
         sample_keys = (sample_owner.astype(np.int64) * rows + row) * columns + col
-        if dense if dense is not None else count * rows * columns <= DENSE_CELLS:
+        if count * rows * columns <= DENSE_CELLS if dense is None else dense:
             mask = np.zeros((count, rows, columns), bool)
             mask.reshape(-1)[point_keys] = True
             grown = mask.copy()  # a row sees its neighbours where they exist (clamped at the poles), then the columns wrap
