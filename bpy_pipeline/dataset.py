@@ -374,8 +374,14 @@ class Dataset:
                 entry.unlink()
 
     def _clean_partial_frames(self) -> None:
-        """Remove staged frames and the moved files of frames that never got their record."""
+        """Remove staged frames, the moved files of frames that never got their record, and the temporary files of
+        writes a kill cut short beside the intents, the records and the manifest (:func:`~.io.atomic.atomic_write`'s
+        ``.<name>.<hex>.tmp``: only this run, holding the lock, writes there)."""
         shutil.rmtree(self.out / STAGING, ignore_errors=True)
+        for folder in (self.out / MOVING, self.out / RECORDS, self.out):
+            for leftover in folder.glob(".*.tmp"):
+                if leftover.is_file():
+                    leftover.unlink(missing_ok=True)
         for intent in sorted((self.out / MOVING).glob("*.json")):
             if not (self.out / RECORDS / intent.name).exists():
                 try:

@@ -161,6 +161,26 @@ def test_a_kill_during_the_move_phase_leaves_no_frame_then_resume_completes(full
     assert frame_files(out) == frame_files(full_parking)
 
 
+def test_resume_removes_the_temporary_files_of_writes_a_kill_cut_short(full_parking, tmp_path):
+    """A kill while an intent, a record or the manifest is being written leaves its temporary file (the random
+    kills of the test above hit this once in a CI run); the next start removes them, and only them."""
+    out = tmp_path / "cut"
+    shutil.copytree(full_parking, out)
+    (out / "records" / "000004.json").unlink()  # a frame left to make again, so the resume writes
+    leftovers = [out / ".moving" / ".000004.json.0a1b2c3d.tmp", out / "records" / ".000004.json.deadbeef.tmp", out / ".manifest.json.12345678.tmp"]
+    for path in leftovers:
+        path.parent.mkdir(exist_ok=True)
+        path.write_text('["ply/000004.ply"')  # cut short
+    kept = out / "ply" / ".notes.tmp.txt"  # not a temporary file of ours
+    kept.write_text("mine")
+    done = cli("--out", str(out), "--frames", "10", *PARKING, "--resume")
+    assert done.returncode == 0, done.stderr
+    assert not any(path.exists() for path in leftovers) and kept.read_text() == "mine"
+    assert not (out / ".moving").exists() and not (out / ".staging").exists()
+    kept.unlink()
+    assert consistent(out) == set(range(10)) and frame_files(out) == frame_files(full_parking)
+
+
 def test_resume_redoes_a_frame_whose_file_changed(full_parking, tmp_path):
     out = tmp_path / "tampered"
     shutil.copytree(full_parking, out)
