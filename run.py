@@ -17,8 +17,8 @@ SETUP = (
 
 if __name__ == "__main__":
     try:
-        from bpy_pipeline.cli import main
+        from bpy_pipeline.cli import exit_process, main
     except ModuleNotFoundError as err:  # outside the venv: one line on how to set up, not a traceback
         print(SETUP.format(missing=err.name, python=sys.executable), file=sys.stderr)
         sys.exit(2)
-    sys.exit(main(sys.argv))
+    exit_process(main(sys.argv))

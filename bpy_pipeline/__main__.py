@@ -312,5 +312,12 @@ def main(argv: list[str] | None = None) -> int:
     return guarded(args.func, args)
 
 
+def console() -> None:
+    """The ``bpy-pipeline`` script: :func:`main`, then :func:`~.cli.exit_process` (no teardown)."""
+    from .cli import exit_process
+
+    exit_process(main())
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    console()
