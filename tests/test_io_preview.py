@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from bpy_pipeline.errors import InputError
-from bpy_pipeline.io import render_preview, write_preview
+from bpy_pipeline.io import preview, render_preview, write_preview
 from bpy_pipeline.geometry.boxes import BOX_DTYPE
 from bpy_pipeline.io.preview import BACKGROUND, INK, SIZE
 from bpy_pipeline.labels import load_class_table
@@ -182,3 +182,30 @@ def test_the_compiled_panel_paint_gives_the_numpy_paths_pixels(monkeypatch):
     monkeypatch.setattr(preview, "_splat_kernel", lambda: None)
     numpy_path = render_preview(pts, LUT, boxes=boxes, names=load_class_table().names)
     assert (compiled == numpy_path).all() and len(colours(compiled) - FRAME) > 3
+
+
+def test_segments_drawn_at_once_paint_the_pixels_of_one_linspace_per_segment():
+    """draw_segments samples every segment in one pass; a segment at a time with np.linspace (the reference
+    below, the code it replaced) paints the same pixels: zero-length segments, long ones cut at the image's
+    bound, and segments partly or wholly outside."""
+
+    def reference(image, starts, ends, color=preview.INK):
+        length = np.minimum(np.ceil(np.abs(ends - starts).max(axis=1)).astype(np.int64) + 1, 4 * sum(image.shape[:2]))
+        t = np.concatenate([np.linspace(0.0, 1.0, n) for n in length])
+        which = np.repeat(np.arange(len(starts)), length)
+        col, row = np.rint(starts[which] + t[:, None] * (ends[which] - starts[which])).astype(np.int64).T
+        keep = (col >= 0) & (col < image.shape[1]) & (row >= 0) & (row < image.shape[0])
+        image[row[keep], col[keep]] = color
+
+    rng = np.random.default_rng(7)
+    for trial in range(30):
+        k = int(rng.integers(1, 200))
+        starts = rng.uniform(-100, 400, (k, 2))
+        ends = starts + rng.normal(0, [3, 40, 400][trial % 3], (k, 2))
+        ends[::5] = starts[::5]  # zero length: one sample
+        ends[1] = starts[1] + 1e5  # longer than the cap
+        ours, theirs = np.zeros((240, 320, 3), np.uint8), np.zeros((240, 320, 3), np.uint8)
+        preview.draw_segments(ours, starts, ends)
+        reference(theirs, starts, ends)
+        assert np.array_equal(ours, theirs)
+        assert ours.any()
