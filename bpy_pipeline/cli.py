@@ -242,6 +242,6 @@ def exit_process(code: int) -> NoReturn:
     for stream in (sys.stdout, sys.stderr):
         try:
             stream.flush()
-        except (OSError, ValueError):  # a closed pipe or stream: what a normal exit would have lost too
+        except (AttributeError, OSError, ValueError):  # no stream, a closed pipe or stream: what a normal exit would have lost too
             pass
     os._exit(code)

@@ -49,3 +49,9 @@ def test_inside_blender_blender_ends_itself(monkeypatch):
     with pytest.raises(SystemExit) as ended:
         exit_process(5)
     assert ended.value.code == 5
+
+
+def test_a_process_without_stdout_still_exits_with_its_code():
+    program = "import sys; sys.stdout = None; from bpy_pipeline.cli import exit_process; exit_process(4)"
+    done = subprocess.run([sys.executable, "-c", program], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 4 and done.stderr == ""
