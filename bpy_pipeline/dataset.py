@@ -46,7 +46,7 @@ from typing import Callable
 
 from .config import Config, config_to_dict
 from .errors import InputError
-from .io.atomic import atomic_write, digests_while_writing
+from .io.atomic import atomic_write, digests_while_writing, temporary_files
 from .io.manifest import MANIFEST_NAME, read_manifest, to_json, write_manifest
 from .io.writers import WRITERS, frame_writers
 from .lidar.raycast import default_threads
@@ -379,9 +379,8 @@ class Dataset:
         ``.<name>.<hex>.tmp``: only this run, holding the lock, writes there)."""
         shutil.rmtree(self.out / STAGING, ignore_errors=True)
         for folder in (self.out / MOVING, self.out / RECORDS, self.out):
-            for leftover in folder.glob(".*.tmp"):
-                if leftover.is_file():
-                    leftover.unlink(missing_ok=True)
+            for leftover in temporary_files(folder):
+                leftover.unlink(missing_ok=True)
         for intent in sorted((self.out / MOVING).glob("*.json")):
             if not (self.out / RECORDS / intent.name).exists():
                 try:

@@ -108,6 +108,11 @@ def temporary_sibling(path: Path, suffix: str = ".tmp") -> Path:
     return path.with_name(f".{path.name}.{secrets.token_hex(4)}{suffix}")
 
 
+def temporary_files(folder: Path) -> list[Path]:
+    """The files in ``folder`` named as :func:`temporary_sibling` names them: what writes a kill cut short left behind."""
+    return [path for path in Path(folder).glob(".*.tmp") if path.is_file()]
+
+
 def remove(path: Path) -> None:
     """Remove a file, symlink or folder tree if it exists; never raises for a missing path."""
     path = Path(path)
