@@ -1,7 +1,8 @@
 """The faster ways of the boxes stage and the parking placement give the bits of the ways they replace.
 
-- truncation's coverage of every object at once (:func:`covered_by_owner`) against one :class:`Coverage` per object;
-- :func:`surface_samples` given the triangles' areas against computing them;
+- truncation's coverage of every object at once (:func:`covered_by_owner`, each object's window of cells) against one
+  :class:`Coverage` per object;
+- :func:`surface_samples` written in place against level by level, and given the triangles' areas against computing them;
 - the vertices an object set uses, without a sort, against ``np.unique``;
 - the placer's slab test against :func:`~bpy_pipeline.geometry.collision.ray_box_distance`, rays along the box's
   faces and axes included (the whole visibility against its per-object reference: tests/test_boxes.py);
@@ -17,16 +18,26 @@ import numpy as np
 
 from bpy_pipeline.geometry.collision import box_axes, capsule_mesh, capsule_meshes, ray_box_distance, rectangles_near, rectangles_overlap
 from bpy_pipeline.geometry.placement import _ray_box_distance, facing_samples
-from bpy_pipeline.lidar.visibility import Coverage, _used_vertices, covered_by_owner, surface_samples
+from bpy_pipeline.lidar.visibility import Coverage, _centroids, _used_vertices, covered_by_owner, surface_samples
 
 
 def _unit(v):
     return v / np.linalg.norm(v, axis=1, keepdims=True)
 
 
+def _each_objects_coverage(points, owner, samples, sample_owner, count, cell):
+    expected = np.zeros(len(samples), bool)
+    for k in range(count):
+        mine = sample_owner == k
+        if (owner == k).any():
+            expected[mine] = Coverage(points[owner == k], cell).covers(samples[mine])
+    return expected
+
+
 def test_coverage_of_all_objects_at_once_is_each_objects_coverage():
     rng = np.random.default_rng(4)
-    count = 70  # more than one group of masks
+    count = 70
+    # objects spread over the whole sphere: every window is every cell
     points = _unit(rng.normal(size=(3000, 3))) * rng.uniform(1, 30, (3000, 1))
     points[:200, 2] = np.abs(points[:200, 2]) + 50  # near the pole: rows clamp there
     owner = rng.integers(0, count - 5, len(points))  # the last objects pass no ray
@@ -34,16 +45,69 @@ def test_coverage_of_all_objects_at_once_is_each_objects_coverage():
     sample_owner = rng.integers(0, count, len(samples))
     where = rng.random(len(samples)) < 0.7
     for cell in (1.0, 0.7, 2.0):
-        expected = np.zeros(len(samples), bool)
-        for k in range(count):
-            mine = sample_owner == k
-            if (owner == k).any():
-                expected[mine] = Coverage(points[owner == k], cell).covers(samples[mine])
+        expected = _each_objects_coverage(points, owner, samples, sample_owner, count, cell)
         assert expected.any() and not expected.all()
-        for dense in (None, True, False):  # by size (the mask at 2 degrees, the keys at 1 and 0.7), then each way
-            assert np.array_equal(covered_by_owner(points, owner, samples, sample_owner, count, cell, dense=dense), expected)
-            assert np.array_equal(covered_by_owner(points, owner, samples, sample_owner, count, cell, where=where, dense=dense), expected & where)
-            assert np.array_equal(covered_by_owner(points, owner, samples, sample_owner, count, cell, where=where, distance=np.linalg.norm(samples, axis=1), dense=dense), expected & where)
+        assert np.array_equal(covered_by_owner(points, owner, samples, sample_owner, count, cell), expected)
+        assert np.array_equal(covered_by_owner(points, owner, samples, sample_owner, count, cell, where=where), expected & where)
+        assert np.array_equal(covered_by_owner(points, owner, samples, sample_owner, count, cell, where=where, distance=np.linalg.norm(samples, axis=1)), expected & where)
+
+
+def test_coverage_of_small_objects_across_the_seam_and_at_a_pole():
+    """Objects as a street's are, each a few cells wide: one across azimuth 180 deg, where columns wrap, one
+    over the sensor, where rows clamp, one beside a single point, and objects no ray passes."""
+    rng = np.random.default_rng(6)
+    count = 40
+    centres = _unit(rng.normal(size=(count, 3)))
+    centres[0], centres[1] = [-1, 0, 0.01], [0.01, 0, 1]
+    spread = rng.uniform(0.01, 0.3, count)
+    spread[2] = 0.0
+    owner = rng.integers(0, count - 3, 5000)
+    owner[owner == 2] = 3
+    owner[0] = 2  # object 2: one point
+    sample_owner = rng.integers(0, count, 30000)
+    points = (centres[owner] + rng.normal(size=(5000, 3)) * spread[owner, None]) * rng.uniform(1, 40, (5000, 1))
+    samples = (centres[sample_owner] + rng.normal(size=(30000, 3)) * np.maximum(spread, 0.002)[sample_owner, None]) * rng.uniform(1, 40, (30000, 1))
+    where = rng.random(len(samples)) < 0.8
+    azimuth = np.degrees(np.arctan2(samples[sample_owner == 0, 1], samples[sample_owner == 0, 0]))
+    assert (azimuth > 170).any() and (azimuth < -170).any()  # object 0 straddles the seam
+    for cell in (0.2, 0.35, 1.0):
+        expected = _each_objects_coverage(points, owner, samples, sample_owner, count, cell)
+        assert expected[sample_owner == 0].any() and expected[sample_owner == 1].any() and expected[sample_owner == 2].any()
+        assert not expected[sample_owner >= count - 3].any()
+        assert np.array_equal(covered_by_owner(points, owner, samples, sample_owner, count, cell), expected)
+        assert np.array_equal(covered_by_owner(points, owner, samples, sample_owner, count, cell, where=where, distance=np.linalg.norm(samples, axis=1)), expected & where)
+
+
+def _surface_samples_level_by_level(triangles, spacing):
+    """The way :func:`surface_samples` sampled before it wrote in place: each level's rows found by a scan, its
+    blocks joined at the end (the reference for its bits)."""
+    first, edge1, edge2 = triangles[:, 0], triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0]
+    area = np.linalg.norm(np.cross(edge1, edge2), axis=1) / 2
+    edge = np.minimum(np.maximum(np.linalg.norm(edge1, axis=1), np.linalg.norm(edge2, axis=1)), np.sqrt(2.0 * area))
+    level = np.clip(np.ceil(edge / spacing), 1, 24).astype(int)
+    points, weights, owners = [], [], []
+    for n in np.unique(level):
+        rows = np.flatnonzero(level == n)
+        u, v = _centroids(int(n))
+        block = np.multiply(u[None, :, None], edge1[rows][:, None])
+        block += first[rows][:, None]
+        block += np.multiply(v[None, :, None], edge2[rows][:, None])
+        points.append(block.reshape(-1, 3))
+        weights.append(np.repeat(area[rows] / n**2, len(u)))
+        owners.append(np.repeat(rows, len(u)))
+    return np.concatenate(points), np.concatenate(weights), np.concatenate(owners)
+
+
+def test_surface_samples_written_in_place_are_the_bits_of_level_by_level():
+    rng = np.random.default_rng(7)
+    triangles = rng.normal(size=(3000, 3, 3)) * rng.uniform(0.005, 4, (3000, 1, 1))  # levels 1 to 24
+    spacing = rng.uniform(0.05, 0.5, 3000)
+    new = surface_samples(triangles, spacing, return_triangle=True, area_bound=True)
+    assert len(np.unique(np.bincount(new[2]))) > 20  # many levels, each n^2 samples a triangle
+    for x, y in zip(new, _surface_samples_level_by_level(triangles, spacing)):
+        assert x.dtype == y.dtype and x.tobytes() == y.tobytes()
+    empty = surface_samples(np.zeros((0, 3, 3)), 0.1, return_triangle=True)
+    assert [a.shape for a in empty] == [(0, 3), (0,), (0,)]
 
 
 def test_surface_samples_with_given_areas_are_the_same_bits():

@@ -31,7 +31,6 @@ CONE_MARGIN = 1e-12  # cosine: the cone prefilter lets through pairs this far ou
 CONE_BLOCK = 16384  # rays per block of the numpy cone test: a (block, k) matrix, not (n, k)
 SAMPLE_SPACING = 0.1  # m between surface samples for truncation (wider on objects that would need more than about:)
 MAX_SAMPLES = 4000  # x 2 (surface_samples' area bound)
-DENSE_CELLS = 1 << 22  # (object, row, column) cells up to which covered_by_owner grows one mask of them all (4 MB of bool)
 
 
 class Coverage:
@@ -203,54 +202,58 @@ def cone_pairs(directions: np.ndarray, axes: np.ndarray, cos_limit: np.ndarray, 
     return np.concatenate(rays).astype(np.int64), np.concatenate(boxes).astype(np.int64)
 
 
-def covered_by_owner(points: np.ndarray, point_owner: np.ndarray, samples: np.ndarray, sample_owner: np.ndarray, count: int, cell_deg: float, where: np.ndarray | None = None, distance: np.ndarray | None = None, dense: bool | None = None) -> np.ndarray:
+def covered_by_owner(points: np.ndarray, point_owner: np.ndarray, samples: np.ndarray, sample_owner: np.ndarray, count: int, cell_deg: float, where: np.ndarray | None = None, distance: np.ndarray | None = None) -> np.ndarray:
     """``(s,)`` bool: is each sample's direction covered by the passing points of its own object?
 
     points, point_owner : ``(p, 3)`` sensor-frame points where rays pass the objects and ``(p,)`` their object (0..count-1)
     samples, sample_owner : ``(s, 3)`` sensor-frame surface samples and ``(s,)`` their object
     The same answer as ``Coverage(points of k, cell_deg).covers(samples of k)`` per object k (the same cells, the
     same one-cell growth: rows clamped at the poles, columns wrapping), with each direction's cell computed once.
-    Up to :data:`DENSE_CELLS` (object, row, column) cells (a garage's few cars at a coarse sensor's cells), every
-    object's mask at once, grown as :class:`Coverage` grows one; beyond (at the HDL-64E's cells a street's masks were
-    100 MB an object group), the points' occupied cells are one sorted array of keys, and a sample is covered when
-    one of the nine cells around its own is among them.
+    Each object gets a window of cells: the rows and columns its points and samples fall in, and one more on every
+    side (every column, wrapping, when that would wrap), all windows in one mask. Each point marks its cell and the
+    eight around it, and a sample is covered when its cell is marked. No sort: an object's window is the few cells
+    its directions span (a whole row band only for an object around the sensor).
     where : ``(s,)`` bool, the samples to look at (the others come back False), or ``None`` for all
     distance : the ``(s,)`` samples' ``np.linalg.norm(samples, axis=1)`` (m) if the caller has it
-    dense : the mask (True) or the sorted keys (False) whatever the size; ``None``: by :data:`DENSE_CELLS`
     """
     covered = np.zeros(len(samples), bool)
     if where is not None:  # only these samples can count: the others' cells are never looked up
         samples, sample_owner = samples[where], sample_owner[where]
         distance = None if distance is None else distance[where]
     grid = Coverage(np.zeros((0, 3)), cell_deg)
-    rows, columns = grid.rows, grid.columns
+    columns = grid.columns
     owned = (point_owner >= 0) & (point_owner < count)
-    point_row, point_col = grid._cells(points[owned])
-    point_keys = (point_owner[owned].astype(np.int64) * rows + point_row) * columns + point_col
+    point_owner = point_owner[owned].astype(np.int64)
     found = np.zeros(len(samples), bool)
-    if len(point_keys):
+    if len(point_owner):
+        point_row, point_col = grid._cells(points[owned])
+        sample_owner = sample_owner.astype(np.int64)
         row, col = grid._cells(samples, distance)
-        sample_keys = (sample_owner.astype(np.int64) * rows + row) * columns + col
-        if count * rows * columns <= DENSE_CELLS if dense is None else dense:
-            mask = np.zeros((count, rows, columns), bool)
-            mask.reshape(-1)[point_keys] = True
-            grown = mask.copy()  # a row sees its neighbours where they exist (clamped at the poles), then the columns wrap
-            grown[:, 1:] |= mask[:, :-1]
-            grown[:, :-1] |= mask[:, 1:]
-            grown |= np.roll(grown, 1, axis=2) | np.roll(grown, -1, axis=2)
-            found = grown.reshape(-1)[sample_keys]
-        else:  # each distinct (object, cell) of the samples looked up once, in order
-            occupied = np.unique(point_keys)
-            cells, inverse = np.unique(sample_keys, return_inverse=True)
-            cell_col, cell_row, base = cells % columns, (cells // columns) % rows, cells // (columns * rows) * rows
-            hit = np.zeros(len(cells), bool)
-            for dr in (-1, 0, 1):
-                near_row = (base + np.clip(cell_row + dr, 0, rows - 1)) * columns
-                for dc in (-1, 0, 1):
-                    key = near_row + (cell_col + dc) % columns
-                    at = np.minimum(np.searchsorted(occupied, key), len(occupied) - 1)
-                    hit |= occupied[at] == key
-            found = hit[inverse.reshape(-1)]
+        low_row, high_row = np.full(count, grid.rows), np.zeros(count, np.int64)
+        low_col, high_col = np.full(count, columns), np.zeros(count, np.int64)
+        for owner, r, c in ((point_owner, point_row, point_col), (sample_owner, row, col)):
+            np.minimum.at(low_row, owner, r)
+            np.maximum.at(high_row, owner, r)
+            np.minimum.at(low_col, owner, c)
+            np.maximum.at(high_col, owner, c)
+        low_row, low_col = np.minimum(low_row, high_row), np.minimum(low_col, high_col)  # an object with no cell: a window of one
+        # a margin row or column is never a sample's, so a point's mark there (row -1 for row 0's neighbour) is
+        # what clamping at a pole gives; a window that would wrap is every column, and its marks wrap
+        whole = high_col - low_col + 3 > columns
+        width = np.where(whole, columns, high_col - low_col + 3)
+        size = (high_row - low_row + 3) * width
+        offset = np.cumsum(size) - size - (low_row - 1) * width - np.where(whole, 0, low_col - 1)  # cell (k, r, c): offset[k] + r width[k] + c
+        mask = np.zeros(int(size.sum()), bool)
+        step, wraps = width[point_owner], whole[point_owner]
+        base = offset[point_owner] + point_row * step
+        for dc in (-1, 0, 1):
+            c = point_col + dc
+            if wraps.any():
+                c = np.where(wraps, c % columns, c)
+            mask[base + c - step] = True
+            mask[base + c] = True
+            mask[base + c + step] = True
+        found = mask[offset[sample_owner] + row * width[sample_owner] + col]
     if where is None:
         return found
     covered[where] = found
@@ -431,23 +434,28 @@ def surface_samples(triangles: np.ndarray, spacing, return_triangle: bool = Fals
         area = np.linalg.norm(np.cross(edge1, edge2), axis=1) / 2
     if area_bound:
         edge = np.minimum(edge, np.sqrt(2.0 * area))
-    level = np.clip(np.ceil(edge / spacing), 1, 24).astype(int)
-    points, weights, owners = [], [], []
-    for n in np.unique(level):
-        rows = np.flatnonzero(level == n)
+    level = np.clip(np.ceil(edge / spacing), 1, 24).astype(np.uint8)
+    count = np.bincount(level, minlength=25)
+    order = np.argsort(level, kind="stable")  # the triangles of each level, in increasing order (a radix sort)
+    total = int((count * np.arange(25) ** 2).sum())
+    points, weights, owners = np.empty((total, 3)), np.empty(total), np.empty(total, np.int64)
+    start = at = 0
+    for n in np.flatnonzero(count):  # each level's n^2 centroids of every triangle, written in place
+        rows = order[start : start + count[n]]
+        start += count[n]
         u, v = _centroids(int(n))
-        # first + u edge1 + v edge2, added in that order, in two (r, n^2, 3) buffers
-        block = np.multiply(u[None, :, None], edge1[rows][:, None])
+        size = len(rows) * len(u)
+        # first + u edge1 + v edge2, added in that order
+        block = points[at : at + size].reshape(len(rows), len(u), 3)
+        np.multiply(u[None, :, None], edge1[rows][:, None], out=block)
         block += first[rows][:, None]
         block += np.multiply(v[None, :, None], edge2[rows][:, None])
-        points.append(block.reshape(-1, 3))
-        weights.append(np.repeat(area[rows] / n**2, len(u)))
-        owners.append(np.repeat(rows, len(u)))
-    if not points:
-        return (np.zeros((0, 3)), np.zeros(0), np.zeros(0, np.int64)) if return_triangle else (np.zeros((0, 3)), np.zeros(0))
+        weights[at : at + size] = np.repeat(area[rows] / n**2, len(u))
+        owners[at : at + size] = np.repeat(rows, len(u))
+        at += size
     if return_triangle:
-        return np.concatenate(points), np.concatenate(weights), np.concatenate(owners)
-    return np.concatenate(points), np.concatenate(weights)
+        return points, weights, owners
+    return points, weights
 
 
 _CENTROIDS: dict[int, tuple[np.ndarray, np.ndarray]] = {}
