@@ -19,6 +19,12 @@ import os as _os
 # so one thread costs no frame time; every job's files and the goldens keep their bytes.
 # Workers get the same setting from parallel.SINGLE_THREAD_ENV. docs/performance.md, round seven.
 _os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+# No transparent huge pages asked for by numpy, unless the user set NUMPY_MADVISE_HUGEPAGE, and again only
+# before numpy loads. numpy marks every array of 4 MB or more MADV_HUGEPAGE; where the kernel's THP defrag is
+# "madvise" (the common default), a fault in such memory may stop for a synchronous compaction when no huge page
+# is free (numpy issue #31590). A default railway frame's effects took 25-115 ms so, and 25-35 ms without; its
+# runs take 0.92 of the wall time. Bytes are the same either way. docs/performance.md, round twelve.
+_os.environ.setdefault("NUMPY_MADVISE_HUGEPAGE", "0")
 
 from ._version import __version__  # noqa: E402,F401
 from . import _moved  # noqa: E402

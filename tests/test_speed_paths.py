@@ -6,6 +6,7 @@ cores. No timings here (benchmarks/bench_speed.py measures)."""
 import hashlib
 import json
 import os
+import sys
 import threading
 from pathlib import Path
 
@@ -210,6 +211,33 @@ def test_the_package_runs_one_blas_thread_unless_the_user_sets_a_count():
     assert alone != [1]  # numpy alone: a thread a core
     assert blas_threads("bpy_pipeline") == [1]
     assert blas_threads("bpy_pipeline", OPENBLAS_NUM_THREADS="2") == blas_threads("os", OPENBLAS_NUM_THREADS="2") == [2]
+
+
+HUGEPAGE = (
+    "import {first}, numpy; "
+    "core = numpy._core if int(numpy.__version__.split('.')[0]) >= 2 else numpy.core; "
+    "print(int(core.multiarray._get_madvise_hugepage()))"
+)
+
+
+def madvise_hugepage(first: str, **env) -> int:
+    """Whether numpy marks large arrays MADV_HUGEPAGE in a fresh Python that imports ``first`` first, with ``env``."""
+    import subprocess
+    import sys
+
+    base = {k: v for k, v in os.environ.items() if k != "NUMPY_MADVISE_HUGEPAGE"}
+    done = subprocess.run([sys.executable, "-c", HUGEPAGE.format(first=first)], env={**base, **env}, capture_output=True, text=True, check=True)
+    return int(done.stdout.strip().splitlines()[-1])
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="numpy asks for huge pages on Linux only")
+def test_the_package_turns_numpys_huge_page_advice_off_unless_the_user_sets_it():
+    """A fault in memory numpy marked MADV_HUGEPAGE may wait for the kernel's compaction (bpy_pipeline/__init__.py);
+    a user's own NUMPY_MADVISE_HUGEPAGE stays as it is."""
+    if not madvise_hugepage("os"):
+        pytest.skip("this numpy or kernel never asks for huge pages")
+    assert madvise_hugepage("bpy_pipeline") == 0
+    assert madvise_hugepage("bpy_pipeline", NUMPY_MADVISE_HUGEPAGE="1") == 1
 
 
 def test_a_worker_joins_the_run_on_its_share_of_the_cores(tmp_path):
