@@ -67,10 +67,10 @@ def stage_part(frames: int, job: str = "box") -> dict:
     an interleaved one robust to a shared machine (after each frame from the second, one raw trace
     and one raw write of that frame's bytes; the median of the per-frame ratios).
     """
+    import bpy_pipeline  # first, as run.py imports it: its settings for numpy apply only before numpy loads
+
     import numpy as np
     from concurrent.futures import ThreadPoolExecutor
-
-    import bpy_pipeline
     from embreex import rtcore_scene
     from embreex.mesh_construction import TriangleMesh
 
