@@ -22,8 +22,8 @@ _os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 # No transparent huge pages asked for by numpy, unless the user set NUMPY_MADVISE_HUGEPAGE, and again only
 # before numpy loads. numpy marks every array of 4 MB or more MADV_HUGEPAGE; where the kernel's THP defrag is
 # "madvise" (the common default), a fault in such memory may stop for a synchronous compaction when no huge page
-# is free (numpy issue #31590). A default railway frame's effects took 25-115 ms so, and 25-35 ms without; its
-# runs take 0.92 of the wall time. Bytes are the same either way. docs/performance.md, round twelve.
+# is free (numpy issue #31590). A default railway frame's effects took 30-114 ms so, and 30-48 ms without; its
+# runs take 0.92-0.95 of the wall time. Bytes are the same either way. docs/performance.md, round twelve.
 _os.environ.setdefault("NUMPY_MADVISE_HUGEPAGE", "0")
 
 from ._version import __version__  # noqa: E402,F401
