@@ -18,6 +18,8 @@ Every figure is a ratio against a reference measured in the same run (no timed a
   against ``--old CHECKOUT`` (e.g. a ``git worktree`` of an older commit) in alternating rounds.
   Code without ``scene.ego_vehicle`` runs the nearest config it accepts: the same street builder and
   sensor, standing in the right-hand lane at the start of the ego's path (said in the results).
+  ``--old-env KEY=VALUE`` adds a variable to the older side's environment; without ``--old`` that side is this
+  checkout, so a setting is measured against its absence. ``--railway N``: the default railway as a job too.
 - ``workers``: parking frames with ``--workers 2`` against one process, this checkout, in alternating rounds (best of each);
   and against one process on one thread (``--threads 1``, as each worker runs), the workers' own scaling. The one process
   keeps more than a core busy (its preview's thread, Embree's), so two workers can give it at most ``speed_up_ceiling``
@@ -26,7 +28,7 @@ Every figure is a ratio against a reference measured in the same run (no timed a
 The scan and write parts run in a subprocess per checkout (``--baseline CHECKOUT`` adds the same
 measurement of another checkout, interleaved); each subprocess reports which ``bpy_pipeline`` it imported.
 
-    python benchmarks/bench_speed.py [--small] [--old DIR] [--baseline DIR] [--frames N] [--parking N] [--street N] [--scaling N] [--merge]
+    python benchmarks/bench_speed.py [--small] [--old DIR] [--old-env KEY=VALUE] [--baseline DIR] [--frames N] [--railway N] [--parking N] [--street N] [--scaling N] [--merge]
 
 ``--small`` (< 60 s): the scan and write parts (5 frames), 20 parking frames against one process with 2 workers,
 no older checkout unless given. Results: ``benchmarks/results/speed.json`` (``speed_small.json``).
@@ -196,14 +198,15 @@ def in_checkout(code: Path, frames: int, job: str = "box") -> dict:
     return row
 
 
-def run_py(code: Path, args: list[str], workers: int = 1) -> dict:
-    """``run.py ARGS`` of checkout ``code`` end to end: wall s, CPU s (it and its workers), records' mean stage timings."""
+def run_py(code: Path, args: list[str], workers: int = 1, env: dict | None = None) -> dict:
+    """``run.py ARGS`` of checkout ``code`` end to end, with ``env`` added to the environment: wall s, CPU s (it and its
+    workers), records' mean stage timings."""
     with tempfile.TemporaryDirectory(dir=os.environ.get("BENCH_SPEED_TMP")) as tmp:
         out = Path(tmp) / "run"
         before = resource.getrusage(resource.RUSAGE_CHILDREN)
         start = time.perf_counter()
         command = [sys.executable, str(code / "run.py"), "--out", str(out), *args] + (["--workers", str(workers)] if workers > 1 else [])
-        done = subprocess.run(command, cwd=code, capture_output=True, text=True, env={**os.environ, "OPENBLAS_NUM_THREADS": "1", "PYTHONPATH": str(code)})
+        done = subprocess.run(command, cwd=code, capture_output=True, text=True, env={**os.environ, "OPENBLAS_NUM_THREADS": "1", "PYTHONPATH": str(code), **(env or {})})
         wall = time.perf_counter() - start
         after = resource.getrusage(resource.RUSAGE_CHILDREN)
         if done.returncode != 0:
@@ -222,13 +225,14 @@ def accepts_ego(code: Path) -> bool:
     return any(f.exists() and "ego_vehicle" in f.read_text() for f in (builders / "street.py", builders / "street" / "params.py"))  # a module, or a package since the layout issue
 
 
-def compare(name: str, new_args: list[str], old_args: list[str] | None, old: Path | None, rounds: int) -> dict:
-    """Alternating rounds of this checkout and ``old`` (when given); the best round of each."""
+def compare(name: str, new_args: list[str], old_args: list[str] | None, old: Path | None, rounds: int, old_env: dict | None = None) -> dict:
+    """Alternating rounds of this checkout and ``old`` (when given) with ``old_env`` added to its environment; the best
+    round of each."""
     new_runs, old_runs = [], []
     for _ in range(rounds):
         new_runs.append(run_py(ROOT, new_args))
         if old is not None:
-            old_runs.append(run_py(old, old_args))
+            old_runs.append(run_py(old, old_args, env=old_env))
         print(name, "new", round(new_runs[-1]["fps"], 2), "old", round(old_runs[-1]["fps"], 2) if old_runs else "-", flush=True)
     best_new = max(new_runs, key=lambda r: r["fps"])
     row = {"job": name, "new": best_new, "new_args": new_args, "new_rounds": new_runs}
@@ -243,6 +247,9 @@ def main() -> None:
     p.add_argument("--small", action="store_true", help="under a minute: stages, and a short workers comparison")
     p.add_argument("--out", type=Path, default=HERE / "results")
     p.add_argument("--old", type=Path, help="an older checkout for frames per second side by side (e.g. git worktree add ../old 7513fcb)")
+    p.add_argument("--old-env", action="append", default=[], metavar="KEY=VALUE",
+                   help="an environment variable for the older side's runs; without --old, that side is this checkout with it")
+    p.add_argument("--railway", type=int, default=0, help="default railway frames (run.py --frames N) for frames per second (default 0)")
     p.add_argument("--baseline", type=Path, help="another checkout whose scan and write stages are measured beside this one's")
     p.add_argument("--parking", type=int, help="parking frames for frames per second (default 120; --small 0)")
     p.add_argument("--street", type=int, help="street frames (default 20; --small 0)")
@@ -273,14 +280,18 @@ def main() -> None:
         print(f"{row['checkout']} {row.get('job', 'box')}: scan {row['scan_s'] * 1e3:.1f} ms + effects {row.get('effects_s', 0.0) * 1e3:.1f} ms vs raw {row['raw_embreex_s'] * 1e3:.1f} ms "
               f"(ratio {row['scan_ratio']:.2f}, interleaved {row['interleaved_scan_ratio']:.2f}; with the effects {row.get('scan_with_effects_ratio', row['scan_ratio']):.2f}, CPU {row['cpu_scan_ratio']:.2f}); "
               f"write {row['write_s'] * 1e3:.1f} ms vs raw {row['raw_write_s'] * 1e3:.1f} ms ({row['write_over_raw']:.2f}x, interleaved {row['interleaved_write_over_raw']:.2f}x)", flush=True)  # fmt: skip
-    old = args.old.resolve() if args.old is not None else None
+    old_env = dict(item.split("=", 1) for item in args.old_env)
+    old = args.old.resolve() if args.old is not None else (ROOT if old_env else None)
     results["fps"] = []
+    if args.railway:
+        job = ["--frames", str(args.railway)]
+        results["fps"].append(compare(f"{args.railway} default railway frames", job, job, old, rounds, old_env))
     if parking:
         job = ["--set", "scene.builder=parking", "--frames", str(parking)]
-        results["fps"].append(compare(f"{parking} parking frames", job, job, old, rounds))
+        results["fps"].append(compare(f"{parking} parking frames", job, job, old, rounds, old_env))
     if street:
         old_street = (EGO if accepts_ego(old) else EGO_STATIC) if old is not None else None
-        row = compare(f"{street} street frames, hdl64e on a car roof", [*EGO, "--frames", str(street)], None if old is None else [*old_street, "--frames", str(street)], old, rounds)
+        row = compare(f"{street} street frames, hdl64e on a car roof", [*EGO, "--frames", str(street)], None if old is None else [*old_street, "--frames", str(street)], old, rounds, old_env)
         if old is not None and old_street is EGO_STATIC:
             row["old_note"] = "the older code has no scene.ego_vehicle: its street builder with the hdl64e standing where the ego starts (right-hand lane, static)"
         results["fps"].append(row)
@@ -305,7 +316,7 @@ def main() -> None:
     for row in results["fps"]:
         if "old" in row:
             print(f"{row['job']}: {row['new']['fps']:.2f} frames/s against {row['old']['fps']:.2f} ({row['fps_new_over_old']:.2f}x)")
-    results["notes"] = {"load_average": os.getloadavg(), "cores": os.cpu_count(), "small": args.small, "old": str(old) if old else None,
+    results["notes"] = {"load_average": os.getloadavg(), "cores": os.cpu_count(), "small": args.small, "old": str(old) if old else None, "old_env": old_env,
                         "baseline": str(args.baseline) if args.baseline else None}  # fmt: skip
     args.out.mkdir(parents=True, exist_ok=True)
     name = args.name or ("speed_small.json" if args.small else "speed.json")
