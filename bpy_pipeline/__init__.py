@@ -23,7 +23,8 @@ _os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 # before numpy loads. numpy marks every array of 4 MB or more MADV_HUGEPAGE; where the kernel's THP defrag is
 # "madvise" (the common default), a fault in such memory may stop for a synchronous compaction when no huge page
 # is free (numpy issue #31590). A default railway frame's effects took 30-114 ms so, and 30-48 ms without; its
-# runs take 0.92-0.95 of the wall time. Bytes are the same either way. docs/performance.md, round twelve.
+# runs took 0.92-0.95 of the wall time then, and the same when huge pages were at hand. Bytes are the same either
+# way. docs/performance.md, round twelve.
 _os.environ.setdefault("NUMPY_MADVISE_HUGEPAGE", "0")
 
 from ._version import __version__  # noqa: E402,F401

@@ -225,7 +225,6 @@ def madvise_hugepage(first: str, **env) -> int:
     """Whether numpy marks large arrays MADV_HUGEPAGE (1 or 0) in a fresh Python that imports ``first`` first, with
     ``env``; -1 for a numpy that cannot say (before 1.23)."""
     import subprocess
-    import sys
 
     base = {k: v for k, v in os.environ.items() if k != "NUMPY_MADVISE_HUGEPAGE"}
     done = subprocess.run([sys.executable, "-c", HUGEPAGE.format(first=first)], env={**base, **env}, capture_output=True, text=True, check=True)
