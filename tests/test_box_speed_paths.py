@@ -10,14 +10,19 @@
   body's capsules all at once against one by one;
 - the street's and the garage's free-space prefilter against testing every rectangle;
 - a wheel from its cached cylinder against the cylinder made anew;
+- rows' lengths (:func:`~bpy_pipeline.lidar.raycast.row_norms`) against ``np.linalg.norm``, and the suspect rays
+  moved four ways in one Embree query against one query a way;
 - the insertion rule's turn of a candidate, the rectangles' separating axes and the placer's region and keep-out
   tests in Python floats against the numpy forms they replace.
 """
 
 import numpy as np
 
+from bpy_pipeline.buffers import SceneBuffers
+from bpy_pipeline.geometry import primitives
 from bpy_pipeline.geometry.collision import box_axes, capsule_mesh, capsule_meshes, ray_box_distance, rectangles_near, rectangles_overlap
 from bpy_pipeline.geometry.placement import _ray_box_distance, facing_samples
+from bpy_pipeline.lidar.raycast import JITTER, RayCaster, row_norms
 from bpy_pipeline.lidar.visibility import Coverage, _centroids, _used_vertices, covered_by_owner, surface_samples
 
 
@@ -50,6 +55,8 @@ def test_coverage_of_all_objects_at_once_is_each_objects_coverage():
         assert np.array_equal(covered_by_owner(points, owner, samples, sample_owner, count, cell), expected)
         assert np.array_equal(covered_by_owner(points, owner, samples, sample_owner, count, cell, where=where), expected & where)
         assert np.array_equal(covered_by_owner(points, owner, samples, sample_owner, count, cell, where=where, distance=np.linalg.norm(samples, axis=1)), expected & where)
+        every = np.ones(len(samples), bool)  # a mask of all True takes the way of no mask
+        assert np.array_equal(covered_by_owner(points, owner, samples, sample_owner, count, cell, where=every, distance=np.linalg.norm(samples, axis=1)), expected)
 
 
 def test_coverage_of_small_objects_across_the_seam_and_at_a_pole():
@@ -76,6 +83,8 @@ def test_coverage_of_small_objects_across_the_seam_and_at_a_pole():
         assert not expected[sample_owner >= count - 3].any()
         assert np.array_equal(covered_by_owner(points, owner, samples, sample_owner, count, cell), expected)
         assert np.array_equal(covered_by_owner(points, owner, samples, sample_owner, count, cell, where=where, distance=np.linalg.norm(samples, axis=1)), expected & where)
+        every = np.ones(len(samples), bool)  # a mask of all True takes the way of no mask
+        assert np.array_equal(covered_by_owner(points, owner, samples, sample_owner, count, cell, where=every, distance=np.linalg.norm(samples, axis=1)), expected)
 
 
 def _surface_samples_level_by_level(triangles, spacing):
@@ -386,3 +395,47 @@ def test_the_placers_region_and_keep_out_tests_answer_as_numpy():
         seen["inside"].add(inside)
         seen["near"].add(near)
     assert seen == {"inside": {True, False}, "near": {True, False}}
+
+
+def test_row_norms_are_numpys_norms_bit_for_bit():
+    rng = np.random.default_rng(8)
+    rows = rng.normal(size=(50000, 3)) * 10.0 ** rng.uniform(-8, 8, (50000, 1))
+    rows[:6] = [[0, 0, 0], [-0.0, 3, 4], [np.inf, 1, 0], [np.nan, 0, 1], [1e200, 1e200, 0], [1e-200, 0, 0]]
+    with np.errstate(over="ignore", invalid="ignore"):  # 1e200 squared is inf, as numpy's own norm has it
+        expected = np.linalg.norm(rows, axis=1)
+        assert np.array_equal(row_norms(rows), expected, equal_nan=True)
+        assert (row_norms(rows) != np.sqrt(rows[:, 0] ** 2 + (rows[:, 1] ** 2 + rows[:, 2] ** 2))).any()  # the order matters: a test that can fail
+    assert row_norms(np.zeros((0, 3))).shape == (0,)
+
+
+def test_suspect_rays_moved_four_ways_in_one_query_are_one_query_a_way():
+    """:meth:`RayCaster.retrace` asks Embree once for the four moved copies of every suspect ray; the answer
+    is what four queries, one a way in order, keep (a later way wins only when strictly nearer)."""
+    vertices, triangles = primitives.uv_sphere(1.0, 24)
+    buffers = SceneBuffers.from_meshes({"ball": (vertices, triangles), "wall": (np.array([[3.0, -5, -5], [3, 5, -5], [3, 5, 5], [3, -5, 5]]), np.array([[0, 2, 1], [0, 3, 2]]))})
+    caster = RayCaster(buffers, frame=np.eye(4), threads=1)
+    rng = np.random.default_rng(3)
+    n = 400
+    origins = np.column_stack([np.full(n, -4.0), rng.uniform(-1.2, 1.2, n), rng.uniform(-1.2, 1.2, n)])
+    origins[: n // 4] = vertices[rng.integers(0, len(vertices), n // 4)] * 0.5  # inside the ball: back faces
+    directions = _unit(np.column_stack([np.ones(n), rng.normal(0, 0.05, (n, 2))]))
+    far = np.full(n, 30.0, np.float32)
+    tfar, prim = caster._embree(np.ascontiguousarray(origins, np.float32), np.ascontiguousarray(directions, np.float32), far)
+    rays = np.arange(n)
+    new_t, new_p, moved = caster.retrace(rays, origins, directions, far, tfar, prim)
+    # one query a way, as before
+    d, o = directions, origins
+    axis = np.zeros_like(d)
+    axis[np.arange(n), np.argmin(np.abs(d), axis=1)] = 1.0
+    u = _unit(np.cross(d, axis))
+    shift = JITTER * (1.0 + np.abs(o).max(axis=1))
+    best_t, best_p, expected = tfar.copy(), prim.copy(), np.zeros(n, bool)
+    for across in (u, -u, np.cross(d, u), -np.cross(d, u)):
+        turned = _unit(d + JITTER * across)
+        t2, p2 = caster._embree(np.ascontiguousarray(o + shift[:, None] * across, np.float32), np.ascontiguousarray(turned, np.float32), far)
+        better = (p2 >= 0) & ((best_p < 0) | (t2 < best_t))
+        best_t[better], best_p[better] = t2[better], p2[better]
+        expected |= better
+    assert expected.any() and not expected.all()
+    assert np.array_equal(moved, expected)
+    assert np.array_equal(new_p, best_p) and np.array_equal(new_t, best_t)

@@ -96,6 +96,18 @@ def dot3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return (a[..., 0] * b[..., 0] + a[..., 2] * b[..., 2]) + a[..., 1] * b[..., 1]
 
 
+def row_norms(a: np.ndarray) -> np.ndarray:
+    """``(h,)`` lengths of the rows of an ``(h, 3)`` float64 array: ``np.linalg.norm(a, axis=1)`` bit for bit.
+
+    numpy sums a row's squares as ``(a0^2 + a1^2) + a2^2`` (numpy 1.26 and 2.x); written out, without its
+    ``(h, 3)`` reduction, it takes a sixth of the time.
+    """
+    total = a[:, 0] * a[:, 0]
+    total += a[:, 1] * a[:, 1]
+    total += a[:, 2] * a[:, 2]
+    return np.sqrt(total, out=total)
+
+
 def closed_surface(triangles: np.ndarray) -> bool:
     """Whether ``(m, 3)`` vertex indices form closed, consistently wound surfaces.
 
@@ -410,16 +422,19 @@ class RayCaster:
         axis = np.zeros_like(d)
         axis[np.arange(len(d)), np.argmin(np.abs(d), axis=1)] = 1.0
         u = np.cross(d, axis)
-        u /= np.linalg.norm(u, axis=1, keepdims=True)
+        u /= row_norms(u)[:, None]
         shift = JITTER * (1.0 + np.abs(o).max(axis=1))
-        limits = far[rays]
+        v = np.cross(d, u)
+        ways = (u, -u, v, -v)
+        # the four ways in one Embree query (each ray's answer is its own): origins and directions way after way
+        turned = np.concatenate([d + JITTER * across for across in ways])
+        turned /= row_norms(turned)[:, None]
+        o32 = np.ascontiguousarray(np.concatenate([o + shift[:, None] * across for across in ways]), np.float32)
+        t4, p4 = self._embree(o32, np.ascontiguousarray(turned, np.float32), np.tile(far[rays], len(ways)))
         best_t, best_p = tfar[rays].copy(), prim[rays].copy()
         moved = np.zeros(len(rays), bool)
-        for across in (u, -u, np.cross(d, u), -np.cross(d, u)):
-            turned = d + JITTER * across
-            turned /= np.linalg.norm(turned, axis=1, keepdims=True)
-            o32 = np.ascontiguousarray(o + shift[:, None] * across, np.float32)
-            t2, p2 = self._embree(o32, np.ascontiguousarray(turned, np.float32), limits)
+        for way in range(len(ways)):  # in order: a later way wins only when strictly nearer
+            t2, p2 = t4[way * len(rays) : (way + 1) * len(rays)], p4[way * len(rays) : (way + 1) * len(rays)]
             better = (p2 >= 0) & ((best_p < 0) | (t2 < best_t))
             best_t[better], best_p[better] = t2[better], p2[better]
             moved |= better
@@ -599,7 +614,7 @@ def triangle_planes(vertices: np.ndarray, triangles: np.ndarray, compiled=None) 
         s = slice(start, start + PLANE_CHUNK)
         v0, v1, v2 = (vertices[triangles[s, k]] for k in range(3))
         cross = np.cross(v1 - v0, v2 - v0)
-        area2 = np.linalg.norm(cross, axis=1)
+        area2 = row_norms(cross)
         normal[s] = cross / np.where(area2 > 0, area2, 1.0)[:, None]
         offset[s] = np.einsum("ij,ij->i", normal[s], v0)
     return normal, offset

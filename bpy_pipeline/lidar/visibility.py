@@ -23,7 +23,7 @@ import numpy as np
 
 from ..buffers import SceneBuffers
 from ..geometry.boxes import instance_triangles
-from .raycast import RayCaster
+from .raycast import RayCaster, row_norms
 from .scanner import scan_chunk, trace_beams
 from .sensors import Pattern
 
@@ -51,7 +51,7 @@ class Coverage:
         """``(n,)`` row and column of ``(n, 3)`` directions; ``norm``: their ``(n,)`` lengths if the caller has them."""
         d = np.asarray(directions, float)
         azimuth = np.degrees(np.arctan2(d[:, 1], d[:, 0])) + 180.0
-        norm = np.linalg.norm(d, axis=1) if norm is None else norm
+        norm = row_norms(d) if norm is None else norm
         elevation = np.degrees(np.arcsin(np.clip(d[:, 2] / np.maximum(norm, 1e-12), -1, 1))) + 90.0
         col = np.floor(azimuth / self.cell).astype(int) % self.columns
         row = np.clip(np.floor(elevation / self.cell).astype(int), 0, self.rows - 1)
@@ -162,12 +162,12 @@ def visibility(
     # share of its area whose direction the passing rays cover, within the range limits
     owner = box_of_triangle[box_of_triangle >= 0]
     triangles = buffers.vertices[buffers.triangles[box_of_triangle >= 0]]  # (m, 3, 3)
-    tri_area = np.linalg.norm(np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0]), axis=1) / 2
+    tri_area = row_norms(np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])) / 2
     total = np.bincount(owner, tri_area, minlength=len(boxes))
     spacing = np.maximum(SAMPLE_SPACING, np.sqrt(total / MAX_SAMPLES))
     samples, area, triangle = surface_samples(triangles, spacing[owner], return_triangle=True, area_bound=True, area=tri_area)
     samples = (samples - pose[:3, 3]) @ pose[:3, :3]
-    distance = np.linalg.norm(samples, axis=1)
+    distance = row_norms(samples)
     inside = (distance >= min_range) & (distance <= max_range)
     sample_owner = owner[triangle]
     covered = np.zeros(len(samples), bool)
@@ -214,8 +214,10 @@ def covered_by_owner(points: np.ndarray, point_owner: np.ndarray, samples: np.nd
     eight around it, and a sample is covered when its cell is marked. No sort: an object's window is the few cells
     its directions span (a whole row band only for an object around the sensor).
     where : ``(s,)`` bool, the samples to look at (the others come back False), or ``None`` for all
-    distance : the ``(s,)`` samples' ``np.linalg.norm(samples, axis=1)`` (m) if the caller has it
+    distance : the ``(s,)`` samples' lengths (m, :func:`~.raycast.row_norms`) if the caller has it
     """
+    if where is not None and where.all():  # every sample counts (a copy of each array by a mask of all True costs more than the rest)
+        where = None
     covered = np.zeros(len(samples), bool)
     if where is not None:  # only these samples can count: the others' cells are never looked up
         samples, sample_owner = samples[where], sample_owner[where]
@@ -429,9 +431,9 @@ def surface_samples(triangles: np.ndarray, spacing, return_triangle: bool = Fals
     first = triangles[:, 0]
     edge1 = triangles[:, 1] - first
     edge2 = triangles[:, 2] - first
-    edge = np.maximum(np.linalg.norm(edge1, axis=1), np.linalg.norm(edge2, axis=1))
+    edge = np.maximum(row_norms(edge1), row_norms(edge2))
     if area is None:
-        area = np.linalg.norm(np.cross(edge1, edge2), axis=1) / 2
+        area = row_norms(np.cross(edge1, edge2)) / 2
     if area_bound:
         edge = np.minimum(edge, np.sqrt(2.0 * area))
     level = np.clip(np.ceil(edge / spacing), 1, 24).astype(np.uint8)
