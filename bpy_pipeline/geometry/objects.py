@@ -176,7 +176,8 @@ def car_parts(style: CarStyle, height: float = NOMINAL_HEIGHT) -> dict:
     ]
     for side in (-1, 1):
         outline = [(xw, side * ys, belt), (xr1, side * yt, roof), (xr2, side * yt, roof), (xb, side * ys, deck), (xb, side * ys, belt)]
-        windows.append((np.array(outline, float), np.array([[0, 1, 2], [0, 2, 3], [0, 3, 4]], np.int32)))
+        fan = np.array([[0, 1, 2], [0, 2, 3], [0, 3, 4]], np.int32)
+        windows.append((np.array(outline, float), fan if side < 0 else fan[:, ::-1].copy()))  # each side's glass wound outwards
     cabin = lambda c: xb + c * (xw - xb)  # noqa: E731 - fraction of the cabin from its rear
     interior = [
         _box(xw - 0.08 * L, xw, -W / 2 + 0.06, W / 2 - 0.06, zc, belt + 0.02 * H),  # dashboard

@@ -33,7 +33,7 @@ def prism(profile_yz: np.ndarray, x0: float, x1: float):
     vertices = np.concatenate([np.column_stack([np.full(k, x), profile]) for x in (x0, x1)])
     i = np.arange(k)
     j = (i + 1) % k
-    sides = np.concatenate([np.stack([i, k + j, j], 1), np.stack([i, k + i, k + j], 1)])
+    sides = np.concatenate([np.stack([i, j, k + j], 1), np.stack([i, k + j, k + i], 1)])  # wound outwards, as the caps are
     fan = np.arange(1, k - 1)
     caps = np.concatenate([np.stack([np.zeros_like(fan), fan + 1, fan], 1), np.stack([np.full_like(fan, k), k + fan, k + fan + 1], 1)])
     return vertices, np.concatenate([sides, caps]).astype(np.int32)
