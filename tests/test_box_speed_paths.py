@@ -12,6 +12,7 @@
 - a wheel from its cached cylinder against the cylinder made anew;
 - rows' lengths (:func:`~bpy_pipeline.lidar.raycast.row_norms`) against ``np.linalg.norm``, and the suspect rays
   moved four ways in one Embree query against one query a way;
+- the placer's occlusion tests of every placed box at once against one box at a time;
 - the insertion rule's turn of a candidate, the rectangles' separating axes and the placer's region and keep-out
   tests in Python floats against the numpy forms they replace.
 """
@@ -21,7 +22,7 @@ import numpy as np
 from bpy_pipeline.buffers import SceneBuffers
 from bpy_pipeline.geometry import primitives
 from bpy_pipeline.geometry.collision import box_axes, capsule_mesh, capsule_meshes, ray_box_distance, rectangles_near, rectangles_overlap
-from bpy_pipeline.geometry.placement import _ray_box_distance, facing_samples
+from bpy_pipeline.geometry.placement import FloorBoxPlacer, PlacedBox, _ray_box_distance, facing_samples
 from bpy_pipeline.lidar.raycast import JITTER, RayCaster, row_norms
 from bpy_pipeline.lidar.visibility import Coverage, _centroids, _used_vertices, covered_by_owner, surface_samples
 
@@ -155,6 +156,43 @@ def test_placer_slab_test_is_ray_box_distance():
         with np.errstate(divide="ignore", invalid="ignore"):
             fast = _ray_box_distance(sensor, directions, centre, axes, half)
         assert fast.tobytes() == ray_box_distance(sensor, directions, centre, axes, half).tobytes()
+
+
+def test_the_placers_occlusion_tests_of_every_box_at_once_are_one_box_at_a_time():
+    """A candidate's samples against every placed box, and every placed box's samples against the candidate, in one
+    slab test each: the bits of :func:`_ray_box_distance` one box at a time (boxes in front, behind, around the
+    sensor, and rays along their axes)."""
+    rng = np.random.default_rng(21)
+    for trial in range(40):
+        placer = FloorBoxPlacer(rng.uniform(-1, 1, 3), ((-30.0, -30.0), (30.0, 30.0)))
+        for _ in range(int(rng.integers(0, 7))):
+            half = rng.uniform(0.3, 2.5, 3)
+            centre = np.array([*rng.uniform(-12, 12, 2), half[2]])
+            yaw = float(rng.choice([0.0, np.pi / 2, rng.uniform(-np.pi, np.pi)]))
+            samples = facing_samples(placer.sensor, centre, half, yaw)
+            placer.boxes.append(PlacedBox(centre, half, yaw, samples, rng.random(len(samples)) < 0.8))
+        half = rng.uniform(0.3, 2.5, 3)
+        candidate = PlacedBox(np.array([*rng.uniform(-12, 12, 2), half[2]]), half, float(rng.uniform(-np.pi, np.pi)), np.zeros((0, 3)), np.zeros(0, bool))
+        directions = _unit(rng.normal(size=(48, 3)))
+        directions[:6] = box_axes(candidate.yaw).T[rng.integers(0, 3, 6)]  # along a box's axes: divisions by zero
+        distance = rng.uniform(0.5, 30, 48)
+        expected = np.zeros(48, bool)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            for box in placer.boxes:
+                expected |= _ray_box_distance(placer.sensor, directions, box.centre, box_axes(box.yaw), box.half) < distance - 1e-6
+            hidden = [_ray_box_distance(placer.sensor, _rays(placer, box)[0], candidate.centre, box_axes(candidate.yaw), candidate.half) < _rays(placer, box)[1] - 1e-6 for box in placer.boxes]
+        assert np.array_equal(placer._blocked(directions, distance, placer.boxes), expected)
+        got = placer._hidden_by(candidate)
+        assert len(got) == len(placer.boxes) and all(np.array_equal(a, b) for a, b in zip(got, hidden))
+        if trial == 39:
+            assert expected.any() and any(h.any() for h in hidden)
+
+
+def _rays(placer, box):
+    """A placed box's samples' directions and distances from the sensor, as the placer computes them."""
+    offset = box.samples - placer.sensor
+    distance = np.linalg.norm(offset, axis=1)
+    return offset / np.maximum(distance, 1e-12)[:, None], distance
 
 
 def _capsule_ring_by_ring(a, b, radius, segments=10, rings=3, flat_start=False):

@@ -216,8 +216,13 @@ def _face_grid(per_side: int) -> tuple[np.ndarray, np.ndarray]:
 def _ray_box_distance(origin: np.ndarray, directions: np.ndarray, centre: np.ndarray, axes: np.ndarray, half: np.ndarray) -> np.ndarray:
     """:func:`~bpy_pipeline.geometry.collision.ray_box_distance` with no distance limit, the same operations on
     float64 arrays without its per-call conversions (the caller ignores division warnings): ``(n,)`` metres, inf on a miss."""
-    local_o = (origin - centre) @ axes
-    local_d = directions @ axes
+    return _slab_distance((origin - centre) @ axes, directions @ axes, half)
+
+
+def _slab_distance(local_o: np.ndarray, local_d: np.ndarray, half: np.ndarray) -> np.ndarray:
+    """The slab test of :func:`_ray_box_distance` on rays already in a box's axes: ``local_o`` (..., 3) origins,
+    ``local_d`` (..., 3) directions and ``half`` (..., 3) extents, broadcast against each other (several boxes
+    at once); ``(...)`` metres, inf on a miss. Element by element the operations of one box."""
     inv = 1.0 / local_d
     t1 = (-half - local_o) * inv
     t2 = (half - local_o) * inv
@@ -302,12 +307,34 @@ class FloorBoxPlacer:
         distance = np.linalg.norm(offset, axis=1)
         return offset / np.maximum(distance, 1e-12)[:, None], distance
 
-    def _blocked_by_box(self, directions, distance, box: PlacedBox) -> np.ndarray:
+    def _blocked(self, directions: np.ndarray, distance: np.ndarray, boxes: list[PlacedBox]) -> np.ndarray:
+        """``(n,)`` bool: the rays from the sensor along unit ``directions`` (n, 3) that one of ``boxes`` blocks
+        before ``distance`` (n,) metres. Each box's rays are turned into its axes by a product of their own (the
+        bits of one box at a time); the slab test then takes every box at once."""
+        if not boxes:
+            return np.zeros(len(directions), bool)
+        for box in boxes:
+            if box.axes is None:
+                box.axes = box_axes(box.yaw)
+        local_o = np.stack([(self.sensor - box.centre) @ box.axes for box in boxes])[:, None]  # (b, 1, 3)
+        local_d = np.stack([directions @ box.axes for box in boxes])  # (b, n, 3)
+        half = np.stack([box.half for box in boxes])[:, None]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            hit = _slab_distance(local_o, local_d, half)
+        return (hit < distance - 1e-6).any(axis=0)
+
+    def _hidden_by(self, box: PlacedBox) -> list[np.ndarray]:
+        """For each placed box, ``(m,)`` bool: which of its samples ``box`` hides from the sensor (one slab test for all)."""
+        if not self.boxes:
+            return []
         if box.axes is None:
             box.axes = box_axes(box.yaw)
+        rays = [self._box_rays(other) for other in self.boxes]
+        local_d = np.concatenate([d @ box.axes for d, _ in rays])
         with np.errstate(divide="ignore", invalid="ignore"):
-            hit = _ray_box_distance(self.sensor, directions, box.centre, box.axes, box.half)
-        return hit < distance - 1e-6
+            hit = _slab_distance((self.sensor - box.centre) @ box.axes, local_d, box.half)
+        hidden = hit < np.concatenate([dist for _, dist in rays]) - 1e-6
+        return np.split(hidden, np.cumsum([len(d) for d, _ in rays])[:-1])
 
     def _box_rays(self, box: PlacedBox) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`_rays` of a box's samples, computed once per box (the sensor and the samples stay)."""
@@ -350,14 +377,12 @@ class FloorBoxPlacer:
         if self.static_distance is not None and len(samples):
             visible &= self.static_distance(directions) >= distance - 1e-3
         candidate = PlacedBox(centre, half, yaw, samples, visible, (directions, distance))
-        for box in self.boxes:
-            visible &= ~self._blocked_by_box(directions, distance, box)
+        visible &= ~self._blocked(directions, distance, self.boxes)
         if candidate.visible_fraction < self.min_visible:
             self.rejections["occluded"] += 1
             return None
-        for box in self.boxes:
-            d, dist = self._box_rays(box)
-            still = box.visible & ~self._blocked_by_box(d, dist, candidate)
+        for box, hidden in zip(self.boxes, self._hidden_by(candidate)):
+            still = box.visible & ~hidden
             if still.mean() < self.min_visible:
                 self.rejections["occludes"] += 1
                 return None
@@ -365,7 +390,6 @@ class FloorBoxPlacer:
 
     def commit(self, box: PlacedBox) -> None:
         """Keep ``box``: later boxes avoid it, and it now hides the samples of earlier boxes behind it."""
-        for other in self.boxes:
-            d, dist = self._box_rays(other)
-            other.visible &= ~self._blocked_by_box(d, dist, box)
+        for other, hidden in zip(self.boxes, self._hidden_by(box)):
+            other.visible &= ~hidden
         self.boxes.append(box)
