@@ -22,7 +22,7 @@ import numpy as np
 from bpy_pipeline.buffers import SceneBuffers
 from bpy_pipeline.geometry import primitives
 from bpy_pipeline.geometry.collision import box_axes, capsule_mesh, capsule_meshes, ray_box_distance, rectangles_near, rectangles_overlap
-from bpy_pipeline.geometry.placement import FloorBoxPlacer, PlacedBox, _ray_box_distance, facing_samples
+from bpy_pipeline.geometry.placement import FloorBoxPlacer, PlacedBox, _slab_distance, facing_samples
 from bpy_pipeline.lidar.raycast import JITTER, RayCaster, row_norms
 from bpy_pipeline.lidar.visibility import Coverage, _centroids, _used_vertices, covered_by_owner, surface_samples
 
@@ -140,6 +140,11 @@ def test_used_vertices_is_unique_with_inverse():
     used, inverse = np.unique(triangles, return_inverse=True)
     used2, inverse2 = _used_vertices(triangles, 6000)
     assert np.array_equal(used, used2) and np.array_equal(inverse.ravel(), inverse2)
+
+
+def _ray_box_distance(origin, directions, centre, axes, half):
+    """The placer's slab test of one box: its rays turned into the box's axes, then :func:`_slab_distance`."""
+    return _slab_distance((origin - centre) @ axes, directions @ axes, half)
 
 
 def test_placer_slab_test_is_ray_box_distance():

@@ -213,16 +213,11 @@ def _face_grid(per_side: int) -> tuple[np.ndarray, np.ndarray]:
     return _FACE_GRIDS[per_side]
 
 
-def _ray_box_distance(origin: np.ndarray, directions: np.ndarray, centre: np.ndarray, axes: np.ndarray, half: np.ndarray) -> np.ndarray:
-    """:func:`~bpy_pipeline.geometry.collision.ray_box_distance` with no distance limit, the same operations on
-    float64 arrays without its per-call conversions (the caller ignores division warnings): ``(n,)`` metres, inf on a miss."""
-    return _slab_distance((origin - centre) @ axes, directions @ axes, half)
-
-
 def _slab_distance(local_o: np.ndarray, local_d: np.ndarray, half: np.ndarray) -> np.ndarray:
-    """The slab test of :func:`_ray_box_distance` on rays already in a box's axes: ``local_o`` (..., 3) origins,
-    ``local_d`` (..., 3) directions and ``half`` (..., 3) extents, broadcast against each other (several boxes
-    at once); ``(...)`` metres, inf on a miss. Element by element the operations of one box."""
+    """:func:`~bpy_pipeline.geometry.collision.ray_box_distance` with no distance limit, on rays already in a box's
+    axes, the same operations on float64 arrays without its per-call conversions (the caller ignores division
+    warnings): ``local_o`` (..., 3) origins, ``local_d`` (..., 3) directions and ``half`` (..., 3) extents, broadcast
+    against each other (several boxes at once); ``(...)`` metres, inf on a miss."""
     inv = 1.0 / local_d
     t1 = (-half - local_o) * inv
     t2 = (half - local_o) * inv
@@ -247,7 +242,11 @@ class PlacedBox:
     samples: np.ndarray
     visible: np.ndarray
     rays: tuple | None = field(default=None, repr=False, compare=False)  # (directions, distances) of the samples from the placer's sensor, kept once computed
-    axes: np.ndarray | None = field(default=None, repr=False, compare=False)  # box_axes(yaw), kept once computed
+    axes: np.ndarray | None = field(default=None, repr=False, compare=False)  # box_axes(yaw), made with the box
+
+    def __post_init__(self):
+        if self.axes is None:
+            self.axes = box_axes(self.yaw)
 
     @property
     def visible_fraction(self) -> float:
@@ -313,9 +312,6 @@ class FloorBoxPlacer:
         bits of one box at a time); the slab test then takes every box at once."""
         if not boxes:
             return np.zeros(len(directions), bool)
-        for box in boxes:
-            if box.axes is None:
-                box.axes = box_axes(box.yaw)
         local_o = np.stack([(self.sensor - box.centre) @ box.axes for box in boxes])[:, None]  # (b, 1, 3)
         local_d = np.stack([directions @ box.axes for box in boxes])  # (b, n, 3)
         half = np.stack([box.half for box in boxes])[:, None]
@@ -327,8 +323,6 @@ class FloorBoxPlacer:
         """For each placed box, ``(m,)`` bool: which of its samples ``box`` hides from the sensor (one slab test for all)."""
         if not self.boxes:
             return []
-        if box.axes is None:
-            box.axes = box_axes(box.yaw)
         rays = [self._box_rays(other) for other in self.boxes]
         local_d = np.concatenate([d @ box.axes for d, _ in rays])
         with np.errstate(divide="ignore", invalid="ignore"):

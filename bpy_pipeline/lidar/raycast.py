@@ -433,8 +433,7 @@ class RayCaster:
         t4, p4 = self._embree(o32, np.ascontiguousarray(turned, np.float32), np.tile(far[rays], len(ways)))
         best_t, best_p = tfar[rays].copy(), prim[rays].copy()
         moved = np.zeros(len(rays), bool)
-        for way in range(len(ways)):  # in order: a later way wins only when strictly nearer
-            t2, p2 = t4[way * len(rays) : (way + 1) * len(rays)], p4[way * len(rays) : (way + 1) * len(rays)]
+        for t2, p2 in zip(t4.reshape(len(ways), len(rays)), p4.reshape(len(ways), len(rays))):  # in order: a later way wins only when strictly nearer
             better = (p2 >= 0) & ((best_p < 0) | (t2 < best_t))
             best_t[better], best_p[better] = t2[better], p2[better]
             moved |= better
