@@ -258,11 +258,10 @@ def test_parts_finished_out_of_order_are_joined_in_firing_order():
         assert np.array_equal(ray[:total], np.concatenate([np.arange(s, s + f) for s, f in zip(starts, filled)]))
 
 
-def test_the_static_digest_is_the_same_on_any_threads_and_a_far_vertex_is_refused_kept_or_built():
-    """The kept static part's digest (hashed in pieces on the cache's threads) does not depend on the threads;
-    a caster that reuses the whole kept part skips its extent check only because the kept part passed it."""
-    from concurrent.futures import ThreadPoolExecutor
-
+def test_the_static_part_is_kept_only_for_the_same_bytes_and_a_far_vertex_is_refused_kept_or_built():
+    """The kept static part is reused only for the same triangles and vertex bytes (a copy of them is kept, so a
+    change made in place to the caller's buffers is seen); a caster that reuses the whole kept part skips its
+    extent check only because the kept part passed it."""
     from bpy_pipeline.lidar import raycast
 
     rng = np.random.default_rng(3)
@@ -270,9 +269,24 @@ def test_the_static_digest_is_the_same_on_any_threads_and_a_far_vertex_is_refuse
     triangles = rng.integers(0, len(vertices), (60_000, 3)).astype(np.int32)
     big = SceneBuffers.from_meshes({"cloud": (vertices, triangles)})
     every = np.arange(len(triangles))
-    with ThreadPoolExecutor(2) as pool:
-        assert raycast.static_digest(big, every, pool) == raycast.static_digest(big, every) != raycast.static_digest(big, every[1:])
-    assert raycast.static_digest(big, every) != raycast.static_digest(moved(big, [0], [0.0, 0.0, 1e-9]), every)
+    same = SceneBuffers(big.vertices.copy(), big.triangles.copy(), big.triangle_object, big.objects)
+    kept = raycast.static_geometry(big, every)
+    assert raycast.same_geometry(kept, raycast.static_geometry(same, every))
+    assert not raycast.same_geometry(kept, raycast.static_geometry(big, every[1:]))
+    assert not raycast.same_geometry(kept, raycast.static_geometry(moved(big, [0], [0.0, 0.0, 1e-9]), every))
+    signed = same.vertices.copy()
+    signed[triangles.min(), 0] = 0.0  # a zero of the other sign: the same value, other bytes
+    same.vertices[triangles.min(), 0] = -0.0
+    assert not raycast.same_geometry(raycast.static_geometry(same, every), raycast.static_geometry(SceneBuffers(signed, big.triangles, big.triangle_object, big.objects), every))
+    assert raycast.same_geometry(("key", 1), ("key", 1)) and not raycast.same_geometry(("key", 1), ("key", 2)) and not raycast.same_geometry(("key", 1), kept)
+
+    changed = room()
+    pose = pose_matrix([0.3, 0.2, 0.4], [0, 0, 10])
+    cache = CasterCache(threads=2)
+    cache.caster(changed, pose)
+    changed.vertices[changed.triangles[changed.triangle_object == 1]] += 0.5  # in place, after the part was kept
+    cache.caster(changed, pose)
+    assert (cache.builds, cache.reuses) == (2, 0)
     base = room()
     pose = pose_matrix([0.3, 0.2, 0.4], [0, 0, 10])
     cache = CasterCache(threads=2)
