@@ -39,10 +39,14 @@ def get_modifier_input(modifier: bpy.types.Modifier, name: str):
 def get_modifier_inputs(modifier: bpy.types.Modifier, names) -> dict:
     """``{name: value}`` of the Geometry Nodes modifier inputs called ``names`` (the group's interface read once)."""
     items = interface_inputs(modifier.node_group)
+    return {name: _input_value(modifier, items[name]) for name in names}
+
+
+def _input_value(modifier: bpy.types.Modifier, item):
+    """The value of the Geometry Nodes modifier input of interface socket ``item``."""
     if VERSION >= (5, 2, 0):
-        inputs = modifier.properties.inputs
-        return {name: getattr(inputs, items[name].identifier).value for name in names}
-    return {name: modifier[items[name].identifier] for name in names}
+        return getattr(modifier.properties.inputs, item.identifier).value
+    return modifier[item.identifier]
 
 
 def set_node_option(node: bpy.types.Node, name: str, value: str) -> None:
@@ -74,8 +78,8 @@ def instance_attribute(instancer, attribute: str, modifier_input: str) -> Callab
     if not modifiers:
         return None  # only Geometry Nodes store attributes on instances
     if VERSION < (5, 3, 0):
-        given = [m for m in modifiers if modifier_input in interface_inputs(m.node_group)]
-        value = int(get_modifier_input(given[-1], modifier_input)) if given else 0
+        given = [(m, items[modifier_input]) for m in modifiers for items in [interface_inputs(m.node_group)] if modifier_input in items]  # each interface read once
+        value = int(_input_value(*given[-1])) if given else 0
         return (lambda index: value) if value > 0 else None
     geometry = instancer.evaluated_geometry()  # held while read
     points = geometry.instances_pointcloud()
