@@ -14,10 +14,11 @@ from bpy_pipeline.labels import load_class_table
 from bpy_pipeline.lidar.points import empty_points
 
 
-def decode_png(data: bytes) -> np.ndarray:
-    """A minimal decoder for 8-bit RGB, non-interlaced PNGs with unfiltered rows; checks every CRC."""
+def decode_png(data: bytes, kinds_seen: list | None = None) -> np.ndarray:
+    """A minimal decoder for 8-bit RGB or indexed, non-interlaced PNGs with unfiltered rows; checks every CRC.
+    ``kinds_seen`` (a list) receives the colour type."""
     assert data[:8] == b"\x89PNG\r\n\x1a\n"
-    pos, idat, header, kinds = 8, b"", None, []
+    pos, idat, header, kinds, palette = 8, b"", None, [], None
     while pos < len(data):
         (length,) = struct.unpack(">I", data[pos : pos + 4])
         kind, body = data[pos + 4 : pos + 8], data[pos + 8 : pos + 8 + length]
@@ -27,14 +28,23 @@ def decode_png(data: bytes) -> np.ndarray:
         pos += 12 + length
         if kind == b"IHDR":
             header = struct.unpack(">IIBBBBB", body)
+        elif kind == b"PLTE":
+            assert len(body) % 3 == 0 and 3 <= len(body) <= 768
+            palette = np.frombuffer(body, np.uint8).reshape(-1, 3)
         elif kind == b"IDAT":
             idat += body
     assert pos == len(data) and kinds[0] == b"IHDR" and kinds[-1] == b"IEND"
     w, h, depth, color_type, compression, filter_method, interlace = header
-    assert (depth, color_type, compression, filter_method, interlace) == (8, 2, 0, 0, 0)
-    raw = np.frombuffer(zlib.decompress(idat), np.uint8).reshape(h, 1 + 3 * w)
+    assert (depth, compression, filter_method, interlace) == (8, 0, 0, 0) and color_type in (2, 3)
+    if kinds_seen is not None:
+        kinds_seen.append(color_type)
+    channels = 3 if color_type == 2 else 1
+    raw = np.frombuffer(zlib.decompress(idat), np.uint8).reshape(h, 1 + channels * w)
     assert not raw[:, 0].any(), "row filter types other than None are not decoded here"
-    return raw[:, 1:].reshape(h, w, 3)
+    if color_type == 2:
+        return raw[:, 1:].reshape(h, w, 3)
+    assert kinds.index(b"PLTE") < kinds.index(b"IDAT") and raw[:, 1:].max() < len(palette)
+    return palette[raw[:, 1:]]
 
 
 def colours(image):
@@ -209,3 +219,36 @@ def test_segments_drawn_at_once_paint_the_pixels_of_one_linspace_per_segment():
         reference(theirs, starts, ends)
         assert np.array_equal(ours, theirs)
         assert ours.any()
+
+
+def test_the_written_preview_is_indexed_and_decodes_to_the_rendered_pixels(tmp_path):
+    """write_preview writes palette indices (a third of the bytes to compress): decoded, the pixels of render_preview,
+    boxes, legend and scale bar included; with more classes present than a palette holds, a truecolour PNG of the same pixels."""
+    rng = np.random.default_rng(4)
+    pts = empty_points(5000)
+    pts["x"], pts["y"], pts["z"] = rng.uniform(-30, 30, 5000), rng.uniform(-20, 20, 5000), rng.uniform(-2, 3, 5000)
+    pts["semantic"] = np.array([10, 40, 30, 50])[rng.integers(0, 4, 5000)]
+    boxes = np.zeros(2, BOX_DTYPE)
+    boxes["centre"] = [[5.0, 2.0, 0.5], [-8.0, -4.0, 0.8]]
+    boxes["size"] = [[4.0, 2.0, 1.5], [0.6, 0.6, 1.8]]
+    table = load_class_table()
+    kinds = []
+    decoded = decode_png(write_preview(tmp_path / "p.png", pts, LUT, boxes=boxes, names=table.names).read_bytes(), kinds)
+    rendered = render_preview(pts, LUT, boxes=boxes, names=table.names)
+    assert kinds == [3] and np.array_equal(decoded, rendered) and (rendered == INK).all(axis=2).sum() > 100
+    assert (tmp_path / "p.png").stat().st_size < len(preview.encode_png(rendered))
+
+    many = np.tile(np.arange(300, dtype=np.uint8)[:, None], 3)  # 300 classes (colours repeat: the palette need not be unique)
+    pts["semantic"] = rng.integers(0, 300, 5000)
+    kinds = []
+    decoded = decode_png(write_preview(tmp_path / "q.png", pts, many).read_bytes(), kinds)
+    assert kinds == [2] and np.array_equal(decoded, render_preview(pts, many))
+
+
+def test_an_indexed_png_needs_a_palette_of_1_to_256_colours_and_a_2d_index():
+    index = np.zeros((4, 5), np.uint8)
+    with pytest.raises(ValueError, match="palette of 1 to 256 colours"):
+        preview.encode_png_indexed(index, np.zeros((257, 3), np.uint8))
+    with pytest.raises(ValueError, match="index image"):
+        preview.encode_png_indexed(np.zeros((4, 5, 1), np.uint8), np.zeros((2, 3), np.uint8))
+    assert np.array_equal(decode_png(preview.encode_png_indexed(index + 1, [[0, 0, 0], [9, 8, 7]])), np.full((4, 5, 3), [9, 8, 7], np.uint8))

@@ -135,7 +135,7 @@ def render_image(points: np.ndarray, camera, color_lut: np.ndarray, dot: int = 3
     du, dv = (a.ravel() for a in np.meshgrid(offsets, offsets))
     col = np.clip(col[:, None] + du, 0, width - 1).ravel()
     row = np.clip(row[:, None] + dv, 0, height - 1).ravel()
-    splat(image, col, row, np.repeat(-depth[seen], len(du)), np.repeat(lut[semantic], len(du), axis=0))
+    splat(image, col, row, np.repeat(-depth[seen], len(du)), np.repeat(np.take(lut, semantic, axis=0), len(du), axis=0))
     return image
 
 
