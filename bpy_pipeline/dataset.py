@@ -75,49 +75,54 @@ def sha256_file(path: Path) -> str:
     return digest.hexdigest()
 
 
-# each written on a thread of its own while the frame's other files are written. Not the KITTI layout: its label
-# lines and projections are Python-heavy and held the GIL against the main thread's writes (a parking frame's
-# write stage 45 -> 51 ms, alternating runs of 40 frames at load 4-7)
-BACKGROUND_WRITERS = ("preview",)
-# only with a core to spare: one process on every core (config.threads 0 or above 1), where 80 parking frames ran at
-# 0.97 of the inline wall time (0.86-1.00, 5 alternating pairs; docs/performance.md, round seven). A worker of
-# --workers runs on its share of the cores, often one, where the thread only adds GIL hand-overs
+# Writers' ``beside`` parts go on threads only with a core to spare: one process on every core (config.threads 0 or
+# above 1), where 80 parking frames ran at 0.97 of the inline wall time with the preview's thread (0.86-1.00, 5
+# alternating pairs; docs/performance.md, round seven). A worker of --workers runs on its share of the cores, often
+# one, where a thread only adds GIL hand-overs. The KITTI layout's labels and projections stay on the caller's
+# thread: Python-heavy, they held the GIL against the other writes (round seven); its image goes beside.
 
 
 def write_frame_files(frame, staging: Path, names: list[str]) -> list[Path]:
-    """Every writer of ``names`` writes ``frame`` under ``staging``; their files in the order of ``names``.
+    """Every writer of ``names`` writes ``frame`` under ``staging``; their files in the order of ``names``, each
+    writer's ``write`` files, then its ``beside`` files.
 
-    In a process with more than one thread (``config.threads``, 0: the cores available), the :data:`BACKGROUND_WRITERS` (the
-    preview: numpy, a compiled pass and zlib, which let go of the GIL) each run on a thread of their own
-    while the others write, in the caller's context (its :func:`~.io.atomic.digests_while_writing`), and
-    are all waited for before this returns or raises, so nothing writes under ``staging`` afterwards. A failure of the others is raised first,
-    then the background writers' in the order of ``names``.
+    In a process with more than one thread (``config.threads``, 0: the cores available) and more than one
+    writer, each writer's ``beside`` part (the preview, the KITTI layout's image: numpy, compiled passes and
+    zlib, which let go of the interpreter) runs on a thread of its own while the ``write`` parts run here, in
+    the caller's context (its :func:`~.io.atomic.digests_while_writing`); all are waited for before this
+    returns or raises, so nothing writes under ``staging`` afterwards. Otherwise each runs here after its
+    writer's ``write``. A failure of the ``write`` parts is raised first, then the ``beside`` parts' in the
+    order of ``names``.
     """
+    writers = {name: WRITERS.get(name) for name in names}
     spare_core = (frame.config.threads or default_threads()) > 1
-    later = [n for n in names if n in BACKGROUND_WRITERS] if len(names) > 1 and spare_core else []
+    threaded = len(names) > 1 and spare_core
     results: dict[str, list[Path]] = {}
+    besides: dict[str, list[Path]] = {}
     failed: dict[str, BaseException] = {}
 
     def background(name: str):
         try:
-            results[name] = WRITERS.get(name).write(frame, staging)
+            besides[name] = writers[name].beside(frame, staging)
         except BaseException as err:  # re-raised by the caller's thread
             failed[name] = err
 
-    threads = [threading.Thread(target=contextvars.copy_context().run, args=(background, name), name=f"frame {frame.index} {name} writer") for name in later]
+    later = [name for name in names if writers[name].beside is not None]
+    threads = [threading.Thread(target=contextvars.copy_context().run, args=(background, name), name=f"frame {frame.index} {name} writer") for name in later] if threaded else []
     for thread in threads:
         thread.start()
     try:
         for name in names:
-            if name not in later:
-                results[name] = WRITERS.get(name).write(frame, staging)
+            results[name] = writers[name].write(frame, staging)
+            if not threaded and name in later:
+                besides[name] = writers[name].beside(frame, staging)
     finally:
         for thread in threads:
             thread.join()
     for name in later:
         if name in failed:
             raise failed[name]
-    return [path for name in names for path in results[name]]
+    return [path for name in names for path in results[name] + besides.get(name, [])]
 
 
 def _pid_alive(pid: int) -> bool:

@@ -153,7 +153,7 @@ def test_a_file_written_past_the_hashing_handle_gets_no_digest(tmp_path):
 
 
 @pytest.mark.parametrize("threaded", [True, False])
-def test_frame_files_keep_the_writers_order_and_a_preview_failure_is_raised(tmp_path, monkeypatch, threaded):
+def test_frame_files_keep_the_writers_order_and_a_failure_beside_is_raised(tmp_path, monkeypatch, threaded):
     from bpy_pipeline import dataset
     from bpy_pipeline.dataset import write_frame_files
     from bpy_pipeline.io import formats
@@ -163,10 +163,13 @@ def test_frame_files_keep_the_writers_order_and_a_preview_failure_is_raised(tmp_
     monkeypatch.setattr(dataset.threading, "Thread", lambda *a, **k: started.append(k["name"]) or real_thread(*a, **k))
     frame = Frame(0, config, frame_rng(0, 0))
     frame.points = cloud(2000)
-    written = write_frame_files(frame, tmp_path / "a", ["ply", "preview", "semantickitti"])
-    names = [Path(p).suffix for p in written]
-    assert names == [".ply", ".png", ".bin", ".label"]
-    assert started == (["frame 0 preview writer"] if threaded else [])
+    written = write_frame_files(frame, tmp_path / "a", ["ply", "preview", "semantickitti", "kitti"])
+    names = [str(Path(p).relative_to(tmp_path / "a")) for p in written]
+    assert names == ["ply/000000.ply", "preview/000000.png", "sequences/00/velodyne/000000.bin", "sequences/00/labels/000000.label",
+                     "kitti/training/velodyne/000000.bin", "kitti/training/label_2/000000.txt", "kitti/training/calib/000000.txt", "kitti/training/image_2/000000.png"]  # fmt: skip
+    assert started == (["frame 0 preview writer", "frame 0 kitti writer"] if threaded else [])
+    alone = write_frame_files(frame, tmp_path / "c", ["kitti"])  # one writer: its image after its text, here
+    assert [str(Path(p).relative_to(tmp_path / "c")) for p in alone] == names[4:] and len(started) == (2 if threaded else 0)
 
     def broken(*args, **kwargs):
         raise ValueError("preview broke")
@@ -174,6 +177,9 @@ def test_frame_files_keep_the_writers_order_and_a_preview_failure_is_raised(tmp_
     monkeypatch.setattr(formats, "write_frame_preview", broken)
     with pytest.raises(ValueError, match="preview broke"):
         write_frame_files(frame, tmp_path / "b", ["ply", "preview"])
+    monkeypatch.setattr(formats.kitti, "render_image", lambda *a, **k: (_ for _ in ()).throw(ValueError("image broke")))
+    with pytest.raises(ValueError, match="image broke"):
+        write_frame_files(frame, tmp_path / "d", ["ply", "kitti"])
 
 
 def test_a_single_effects_part_is_kept_and_several_are_joined():

@@ -18,7 +18,7 @@ from .layout import frame_stem, write_frame_las, write_frame_ply, write_frame_pr
 from .pcd import write_pcd
 from .range_image import write_frame_range_image
 from .splits import sequence_of, split_of
-from .writers import Writer, register_writer
+from .writers import Writer, no_files, register_writer
 
 
 def _points_writer(write_points):
@@ -63,10 +63,18 @@ def _write_semantickitti(frame, out: Path) -> list[Path]:
     return list(semantickitti.write_semantickitti(out, sequence_of(frame.index, config.output.split, config.frames), frame.index, frame.points, lut))
 
 
+def _kitti_folder(frame) -> str:
+    return "testing" if split_of(frame.index, frame.config.output.split, frame.config.frames) == "test" else "training"
+
+
 def _write_kitti(frame, out: Path) -> list[Path]:
-    image = frame.images.get("image_2")  # the camera stage's rendering (output.kitti.camera.render), else the points' projection
-    folder = "testing" if split_of(frame.index, frame.config.output.split, frame.config.frames) == "test" else "training"
-    return kitti.write_frame(out, frame_stem(frame.index), frame.points, frame.boxes, frame.config.output.kitti.camera, load_class_table().color_lut(), frame.config.output.boxes.names, image, folder)
+    """The KITTI layout's point file, labels and calibration (its image is :func:`_write_kitti_image`)."""
+    return kitti.write_frame_text(out, frame_stem(frame.index), frame.points, frame.boxes, frame.config.output.kitti.camera, frame.config.output.boxes.names, _kitti_folder(frame))
+
+
+def _write_kitti_image(frame, out: Path) -> list[Path]:
+    """``image_2``: the camera stage's rendering (output.kitti.camera.render), else the points' projection."""
+    return [kitti.write_image(out, frame_stem(frame.index), frame.points, frame.config.output.kitti.camera, load_class_table().color_lut(), frame.images.get("image_2"), _kitti_folder(frame))]
 
 
 def _write_openpcdet(frame, out: Path) -> list[Path]:
@@ -87,8 +95,8 @@ register_writer("las", _points_writer(write_frame_las))
 register_writer("npy", Writer(_write_npy, index=npy.write_index))
 register_writer("pcd", Writer(_write_pcd))
 register_writer("range_image", Writer(_write_range_image, _check_range_image))
-register_writer("preview", Writer(_write_preview))
-register_writer("kitti", Writer(_write_kitti, _check_kitti, kitti.write_index, boxes=True))
+register_writer("preview", Writer(no_files, beside=_write_preview))
+register_writer("kitti", Writer(_write_kitti, _check_kitti, kitti.write_index, boxes=True, beside=_write_kitti_image))
 register_writer("openpcdet", Writer(_write_openpcdet, index=openpcdet.write_index, boxes=True))
 register_writer("sustech", Writer(_write_sustech, boxes=True))
 

@@ -147,10 +147,14 @@ def _text(path: Path, text: str) -> Path:
 
 def write_frame(out_dir: str | os.PathLike, stem: str, points: np.ndarray, boxes: np.ndarray, camera, color_lut: np.ndarray, names: dict | None = None,
                 image: np.ndarray | None = None, folder: str = "training") -> list[Path]:
-    """One frame of the KITTI layout under ``out_dir/kitti/<folder>`` (see the module docstring); returns the paths.
+    """One frame of the KITTI layout under ``out_dir/kitti/<folder>`` (see the module docstring); returns the paths:
+    :func:`write_frame_text`'s, then :func:`write_image`'s."""
+    return write_frame_text(out_dir, stem, points, boxes, camera, names, folder) + [write_image(out_dir, stem, points, camera, color_lut, image, folder)]
 
-    image : ``(height, width, 3) uint8`` the camera's rendering of the scene (:func:`bpy_pipeline.scenes.camera.render_camera`);
-        without one, ``image_2`` is the projection of the labelled points (:func:`render_image`)
+
+def write_frame_text(out_dir: str | os.PathLike, stem: str, points: np.ndarray, boxes: np.ndarray, camera, names: dict | None = None, folder: str = "training") -> list[Path]:
+    """A frame's ``velodyne``, ``label_2`` and ``calib`` files under ``out_dir/kitti/<folder>``; returns their paths.
+
     folder : ``training``, or ``testing`` for a frame of the test split (where the loaders read test frames)
     """
     root = Path(out_dir) / "kitti" / folder
@@ -158,14 +162,23 @@ def write_frame(out_dir: str | os.PathLike, stem: str, points: np.ndarray, boxes
     velodyne = root / "velodyne" / f"{stem}.bin"
     with atomic_write(velodyne) as tmp, hashed_open(tmp) as f:  # hashed as written: the commit reads it back no more
         f.write(np.column_stack([points["x"], points["y"], points["z"], points["intensity"]]).astype("<f4"))
-    image_path = root / "image_2" / f"{stem}.png"
+    lines = label_lines(boxes if boxes is not None else np.zeros(0, _box_dtype()), points, camera, names=names)
+    return [velodyne, _text(root / "label_2" / f"{stem}.txt", "".join(line + "\n" for line in lines)), _text(root / "calib" / f"{stem}.txt", calib_text(k, tr))]
+
+
+def write_image(out_dir: str | os.PathLike, stem: str, points: np.ndarray, camera, color_lut: np.ndarray, image: np.ndarray | None = None, folder: str = "training") -> Path:
+    """A frame's ``image_2`` PNG under ``out_dir/kitti/<folder>``; returns its path.
+
+    image : ``(height, width, 3) uint8`` the camera's rendering of the scene (:func:`bpy_pipeline.scenes.camera.render_camera`);
+        without one, the projection of the labelled points (:func:`render_image`)
+    """
+    image_path = Path(out_dir) / "kitti" / folder / "image_2" / f"{stem}.png"
     if image is not None and np.shape(image) != (int(camera.resolution[1]), int(camera.resolution[0]), 3):
         raise ValueError(f"image_2: expected a {camera.resolution[1]} x {camera.resolution[0]} RGB image, got shape {np.shape(image)}")
     data = encode_png(render_image(points, camera, color_lut) if image is None else image, level=1)
     with atomic_write(image_path) as tmp, hashed_open(tmp) as f:
         f.write(data)
-    lines = label_lines(boxes if boxes is not None else np.zeros(0, _box_dtype()), points, camera, names=names)
-    return [velodyne, _text(root / "label_2" / f"{stem}.txt", "".join(line + "\n" for line in lines)), _text(root / "calib" / f"{stem}.txt", calib_text(k, tr)), image_path]
+    return image_path
 
 
 def _box_dtype():
