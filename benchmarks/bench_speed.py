@@ -20,6 +20,9 @@ Every figure is a ratio against a reference measured in the same run (no timed a
   sensor, standing in the right-hand lane at the start of the ego's path (said in the results).
   ``--old-env KEY=VALUE`` adds a variable to the older side's environment; without ``--old`` that side is this
   checkout, so a setting is measured against its absence. ``--railway N``: the default railway as a job too.
+  Each run also gives when its first ``frame k/n`` line came (start-up and the first frame), its frames
+  per second from that line to the last, and the time after the last; ``later_fps_new_over_old`` is the
+  second, best against best.
 - ``workers``: parking frames with ``--workers 2`` against one process, this checkout, in alternating rounds (best of each);
   and against one process on one thread (``--threads 1``, as each worker runs), the workers' own scaling. The one process
   keeps more than a core busy (its preview's thread, Embree's), so two workers can give it at most ``speed_up_ceiling``
@@ -200,23 +203,32 @@ def in_checkout(code: Path, frames: int, job: str = "box") -> dict:
 
 def run_py(code: Path, args: list[str], workers: int = 1, env: dict | None = None) -> dict:
     """``run.py ARGS`` of checkout ``code`` end to end, with ``env`` added to the environment: wall s, CPU s (it and its
-    workers), records' mean stage timings."""
+    workers), records' mean stage timings; and from the times its ``frame k/n`` lines came: the first one's
+    (start-up and the first frame), the frames per second from the first line to the last (the frames after
+    the first) and the time from the last line to the exit (the indexes, the manifest)."""
     with tempfile.TemporaryDirectory(dir=os.environ.get("BENCH_SPEED_TMP")) as tmp:
         out = Path(tmp) / "run"
         before = resource.getrusage(resource.RUSAGE_CHILDREN)
         start = time.perf_counter()
         command = [sys.executable, str(code / "run.py"), "--out", str(out), *args] + (["--workers", str(workers)] if workers > 1 else [])
-        done = subprocess.run(command, cwd=code, capture_output=True, text=True, env={**os.environ, "OPENBLAS_NUM_THREADS": "1", "PYTHONPATH": str(code), **(env or {})})
-        wall = time.perf_counter() - start
+        with open(Path(tmp) / "stderr", "w+") as errors:
+            process = subprocess.Popen(command, cwd=code, stdout=subprocess.PIPE, stderr=errors, text=True,
+                                       env={**os.environ, "OPENBLAS_NUM_THREADS": "1", "PYTHONPATH": str(code), "PYTHONUNBUFFERED": "1", **(env or {})})  # each line as it is printed
+            lines = [time.perf_counter() - start for line in process.stdout if line.startswith("frame ")]
+            process.wait()
+            wall = time.perf_counter() - start
+            errors.seek(0)
+            stderr = errors.read()
         after = resource.getrusage(resource.RUSAGE_CHILDREN)
-        if done.returncode != 0:
-            raise RuntimeError(f"{code}: run.py {' '.join(args)}: {done.stderr.strip()[-800:]}")
+        if process.returncode != 0:
+            raise RuntimeError(f"{code}: run.py {' '.join(args)}: {stderr.strip()[-800:]}")
         records = [json.loads(p.read_text()) for p in sorted((out / "records").glob("*.json"))]
     stages: dict[str, float] = {}
     for record in records:
         for key, value in (record.get("timings_s") or record.get("timings") or {}).items():
             stages[key] = stages.get(key, 0.0) + value / len(records)
-    return {"wall_s": wall, "cpu_s": (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime), "frames": len(records), "fps": len(records) / wall, "stage_s_per_frame": stages}
+    timeline = {"first_frame_s": lines[0], "later_fps": (len(lines) - 1) / (lines[-1] - lines[0]), "after_last_frame_s": wall - lines[-1]} if len(lines) > 1 else {}
+    return {"wall_s": wall, "cpu_s": (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime), "frames": len(records), "fps": len(records) / wall, "stage_s_per_frame": stages, **timeline}
 
 
 def accepts_ego(code: Path) -> bool:
@@ -239,6 +251,8 @@ def compare(name: str, new_args: list[str], old_args: list[str] | None, old: Pat
     if old_runs:
         best_old = max(old_runs, key=lambda r: r["fps"])
         row.update({"old": best_old, "old_args": old_args, "fps_new_over_old": best_new["fps"] / best_old["fps"], "old_rounds": old_runs})
+        if all("later_fps" in r for r in new_runs + old_runs):  # the frames after the first, best against best
+            row["later_fps_new_over_old"] = max(r["later_fps"] for r in new_runs) / max(r["later_fps"] for r in old_runs)
     return row
 
 
@@ -315,7 +329,8 @@ def main() -> None:
               f"2 workers {two['fps']:.2f} ({two['fps'] / one['fps']:.2f}x and {two['fps'] / single['fps']:.2f}x, best of {rounds} alternating rounds each)", flush=True)
     for row in results["fps"]:
         if "old" in row:
-            print(f"{row['job']}: {row['new']['fps']:.2f} frames/s against {row['old']['fps']:.2f} ({row['fps_new_over_old']:.2f}x)")
+            print(f"{row['job']}: {row['new']['fps']:.2f} frames/s against {row['old']['fps']:.2f} ({row['fps_new_over_old']:.2f}x)"
+                  + (f"; the frames after the first {row['later_fps_new_over_old']:.2f}x" if "later_fps_new_over_old" in row else ""))
     results["notes"] = {"load_average": os.getloadavg(), "cores": os.cpu_count(), "small": args.small, "old": str(old) if old else None, "old_env": old_env,
                         "baseline": str(args.baseline) if args.baseline else None}  # fmt: skip
     args.out.mkdir(parents=True, exist_ok=True)
