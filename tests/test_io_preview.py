@@ -54,8 +54,7 @@ def colours(image):
 LUT = load_class_table().color_lut()
 
 
-DIVIDER = (60, 60, 66)
-FRAME = {BACKGROUND, INK, DIVIDER}  # background, text, scale bar, boxes, the line between the views
+FRAME = set(preview.FRAME_COLOURS)  # background, text, scale bar, boxes, the line between the views
 
 
 def test_png_shows_the_present_class_colours_and_no_other(tmp_path):
