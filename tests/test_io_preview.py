@@ -251,3 +251,15 @@ def test_an_indexed_png_needs_a_palette_of_1_to_256_colours_and_a_2d_index():
     with pytest.raises(ValueError, match="index image"):
         preview.encode_png_indexed(np.zeros((4, 5, 1), np.uint8), np.zeros((2, 3), np.uint8))
     assert np.array_equal(decode_png(preview.encode_png_indexed(index + 1, [[0, 0, 0], [9, 8, 7]])), np.full((4, 5, 3), [9, 8, 7], np.uint8))
+
+
+def test_the_crop_percentiles_and_the_median_are_numpys():
+    """The preview's crop (1st and 99th percentiles) and its camera target's height (the median) come from one partition
+    each: the values ``np.percentile`` and ``np.median`` give, for odd and even counts, ties and a single value."""
+    from bpy_pipeline.io.preview import median, percentiles
+
+    rng = np.random.default_rng(5)
+    for n in [1, 2, 3, 4, 7, 100, 101, 1234, 20001]:
+        for values in (rng.normal(0, 30, n), np.round(rng.normal(0, 3, n), 1), np.full(n, 2.5)):
+            assert percentiles(values, (1, 99)) == list(np.percentile(values, [1, 99]))
+            assert median(values) == np.median(values)

@@ -139,14 +139,18 @@ def _paint_kernels():
                         flat[p, c] = colors[i, c]
 
     @numba.njit(cache=True, nogil=True)
-    def perspective(flat, best, cam, colors, focal, half_w, half_h, width, panel_width, height, left):  # pragma: no cover
-        for i in range(len(cam)):  # in front (depth > 0.1): u = half_w + focal * x / depth, v = half_h + focal * y / depth, depth -depth
-            if cam[i, 2] > 0.1:
-                col = np.rint(half_w + focal * cam[i, 0] / cam[i, 2])
-                row = np.rint(half_h + focal * cam[i, 1] / cam[i, 2])
+    def perspective(flat, best, xyz, eye, rotation, colors, focal, half_w, half_h, width, panel_width, height, left):  # pragma: no cover
+        for i in range(len(xyz)):  # the camera frame as _camera has it; in front (depth > 0.1): u = half_w + focal * x / depth, v = half_h + focal * y / depth, depth -depth
+            dx, dy, dz = xyz[i, 0] - eye[0], xyz[i, 1] - eye[1], xyz[i, 2] - eye[2]
+            cam0 = dx * rotation[0, 0] + dy * rotation[0, 1] + dz * rotation[0, 2]
+            cam1 = dx * rotation[1, 0] + dy * rotation[1, 1] + dz * rotation[1, 2]
+            cam2 = dx * rotation[2, 0] + dy * rotation[2, 1] + dz * rotation[2, 2]
+            if cam2 > 0.1:
+                col = np.rint(half_w + focal * cam0 / cam2)
+                row = np.rint(half_h + focal * cam1 / cam2)
                 if col >= 0.0 and col < panel_width and row >= 0.0 and row < height:
                     p = np.int64(row) * width + np.int64(col) + left
-                    depth = -cam[i, 2]
+                    depth = -cam2
                     if depth >= best[p]:
                         best[p] = depth
                         for c in range(flat.shape[1]):
@@ -241,6 +245,40 @@ def look_at(eye: np.ndarray, target: np.ndarray) -> np.ndarray:
     return np.stack([right, down, forward])
 
 
+def _camera(p: np.ndarray, eye: np.ndarray, rotation: np.ndarray) -> np.ndarray:
+    """``(n, 3)`` camera-frame coordinates of ``(n, 3)`` points: ``(p - eye)`` times each row of the ``(3, 3)`` ``rotation``,
+    added in axis order (a row's products summed one by one, as the compiled perspective does, instead of a matrix product
+    whose summing order BLAS chooses: the same values in both paths, and a third of the time of ``@`` on an ``(n, 3)`` array)."""
+    d = p - eye
+    cam = d[:, :1] * rotation[:, 0]
+    cam += d[:, 1:2] * rotation[:, 1]
+    cam += d[:, 2:3] * rotation[:, 2]
+    return cam
+
+
+def percentiles(values: np.ndarray, q) -> list[float]:
+    """``np.percentile(values, q)`` (its default, linear interpolation) for a ``(n,)`` float array with ``n >= 1``, from one
+    partition of a copy at the ranks it needs: the same values at about half the time."""
+    n = len(values)
+    at = [float(p) / 100 * (n - 1) for p in q]
+    below = [int(np.floor(a)) for a in at]
+    ranks = sorted({r for b in below for r in (b, min(b + 1, n - 1))})
+    part = np.partition(np.array(values, np.float64), ranks)
+    out = []
+    for a, b in zip(at, below):
+        lo, hi, t = part[b], part[min(b + 1, n - 1)], a - b
+        out.append(float(hi - (hi - lo) * (1 - t) if t >= 0.5 else lo + (hi - lo) * t))  # numpy's lerp, both halves
+    return out
+
+
+def median(values: np.ndarray) -> float:
+    """``np.median`` of a ``(n,)`` float array with ``n >= 1``, from one partition at its middle rank(s)."""
+    n = len(values)
+    middle = sorted({(n - 1) // 2, n // 2})
+    part = np.partition(np.array(values, np.float64), middle)
+    return float(part[(n - 1) // 2] + part[n // 2]) / 2 if n % 2 == 0 else float(part[n // 2])
+
+
 def render_preview(points: np.ndarray, color_lut: np.ndarray, size: tuple[int, int] = SIZE, dot: int = 1, boxes: np.ndarray | None = None, names: dict | None = None) -> np.ndarray:
     """The preview as an ``(height, width, 3) uint8`` RGB array (see the module docstring and :func:`render_indexed` for the arguments)."""
     index, palette = render_indexed(points, color_lut, size, dot, boxes, names)
@@ -318,8 +356,7 @@ def render_indexed(points: np.ndarray, color_lut: np.ndarray, size: tuple[int, i
     # when one class (a railway's ground rings) holds most of them
     focus = semantic != ids[counts.argmax()]
     bulk = xyz[:, :2][focus] if counts.max() > 0.4 * len(semantic) and focus.sum() >= 100 else xyz[:, :2]
-    columns = [np.ascontiguousarray(bulk[:, axis]) for axis in (0, 1)]  # one partition of a contiguous column each
-    low, high = (np.array(v) for v in zip(*(np.percentile(c, [1, 99]) for c in columns)))
+    low, high = (np.array(v) for v in zip(*(percentiles(bulk[:, axis], (1, 99)) for axis in (0, 1))))
     span = np.maximum(high - low, 1e-6)
     low, high = low - 0.05 * span, high + 0.05 * span
     inner_w, inner_h = panel - 2 * MARGIN, height - 2 * MARGIN
@@ -346,18 +383,18 @@ def render_indexed(points: np.ndarray, color_lut: np.ndarray, size: tuple[int, i
 
     # perspective: from behind and above the sensor, looking at the middle of the cropped region
     extent = float(np.hypot(*(high - low)))
-    target = np.array([centre[0], centre[1], float(np.median(xyz[:, 2]))])
+    target = np.array([centre[0], centre[1], float(median(xyz[:, 2]))])
     eye = np.array([min(0.0, low[0]) - 0.35 * extent, 0.0, target[2] + 0.45 * extent])
     rotation = look_at(eye, target)
     focal = 0.5 * panel / np.tan(np.radians(30.0))
 
     def perspective(p):
-        cam = (p - eye) @ rotation.T
+        cam = _camera(p, eye, rotation)
         with np.errstate(divide="ignore", invalid="ignore"):
             return (panel - 1) / 2 + focal * cam[:, 0] / cam[:, 2], (height - 1) / 2 + focal * cam[:, 1] / cam[:, 2], cam[:, 2]
 
     if kernels is not None:
-        kernels[1](image.reshape(-1, 1), best.reshape(-1), np.ascontiguousarray((xyz - eye) @ rotation.T), colors, float(focal),
+        kernels[1](image.reshape(-1, 1), best.reshape(-1), np.ascontiguousarray(xyz), eye, rotation, colors, float(focal),
                    (panel - 1) / 2, (height - 1) / 2, width, panel, height, 0)  # fmt: skip
     else:
         u, v, depth = perspective(xyz)
