@@ -482,3 +482,48 @@ def test_suspect_rays_moved_four_ways_in_one_query_are_one_query_a_way():
     assert expected.any() and not expected.all()
     assert np.array_equal(moved, expected)
     assert np.array_equal(new_p, best_p) and np.array_equal(new_t, best_t)
+
+
+def test_objects_wholly_covered_get_the_truncation_their_samples_give(monkeypatch):
+    """Truncation without the samples of objects whose every direction and distance is surely covered (:func:`wholly_covered`)
+    is the sampled truncation, bit for bit: cars around a VLP-16 cut by its lowest and highest beams, across the azimuth
+    seam behind it, at its minimum and maximum ranges, above it and around its vertical axis, level (high and low) and tilted,
+    and cut at the sides of a narrower field of view."""
+    from bpy_pipeline.geometry.boxes import fit_boxes
+    from bpy_pipeline.geometry.transforms import pose_matrix
+    from bpy_pipeline.lidar import visibility as vis
+    from bpy_pipeline.lidar.sensors import iter_pattern, resolve_sensor
+    from bpy_pipeline.buffers import ObjectTable
+
+    sensor = resolve_sensor({"preset": "vlp16", "rotation_hz": 10.0}, "sensor")
+    rng = np.random.default_rng(3)
+    placed = [(8.0, 0.0, 0.0), (-9.0, 0.0, 0.0), (-9.0, 0.4, 1.2), (4.0, 3.0, 0.7), (2.5, -1.0, 0.3), (98.0, 5.0, 0.1), (0.0, 0.0, 2.5), (1.2, 0.2, 0.0), (0.6, 0.0, 0.0), (150.0, 0.0, 0.0)]
+    placed += [(*rng.uniform(-40, 40, 2), rng.uniform(-np.pi, np.pi)) for _ in range(25)]
+    near = rng.uniform(2.5, 9.0, 40), rng.uniform(-np.pi, np.pi, 40)  # where the lowest and highest beams cut cars
+    placed += [(r * np.cos(a), r * np.sin(a), yaw) for r, a, yaw in zip(*near, rng.uniform(-np.pi, np.pi, 40))]
+    sides = rng.uniform(12.0, 30.0, 16), np.radians(np.concatenate([rng.uniform(66.0, 84.0, 8), rng.uniform(-69.0, -51.0, 8)]))  # the narrow sensor's sides
+    placed += [(r * np.cos(a), r * np.sin(a), yaw) for r, a, yaw in zip(*sides, rng.uniform(-np.pi, np.pi, 16))]
+    vertices, triangles, owner = [], [], []
+    for row, (x, y, yaw) in enumerate(placed):
+        v, t = primitives.box(4.5, 1.8, 1.5)
+        c, s = np.cos(yaw), np.sin(yaw)
+        vertices.append(v @ np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]]).T + [x, y, 0.75 + (2.0 if row == 6 else 0.0)])
+        triangles.append(t + 8 * row)
+        owner.append(np.full(len(t), row, np.int32))
+    k = len(placed)
+    objects = ObjectTable([f"car{i}" for i in range(k)], [""] * k, ["car"] * k, np.zeros(k, np.uint16), np.arange(1, k + 1, dtype=np.uint32), np.zeros(k, np.uint8), np.full(k, 0.5, np.float32))
+    buffers = SceneBuffers(np.concatenate(vertices), np.concatenate(triangles).astype(np.int32), np.concatenate(owner), objects)
+    shortcut = []
+    found = vis.wholly_covered
+    narrow = resolve_sensor({"preset": "vlp16", "rotation_hz": 10.0, "horizontal_fov_deg": [-60.0, 75.0]}, "sensor")  # cars cut at its sides too
+    level, low, tilted = (pose_matrix([0.0, 0.0, 1.6], [0.0, 0.0, 0.0]), pose_matrix([0.0, 0.0, 0.3], [0.0, 0.0, 0.0]), pose_matrix([0.3, -0.2, 1.6], [4.0, -3.0, 30.0]))
+    for sensor, pose in ((sensor, level), (sensor, low), (sensor, tilted), (narrow, level)):
+        ours, reference = fit_boxes(buffers, ["car"]), fit_boxes(buffers, ["car"])
+        monkeypatch.setattr(vis, "wholly_covered", lambda *a: shortcut.append(found(*a)) or shortcut[-1])
+        vis.visibility(buffers, ours, iter_pattern(sensor, 1 << 16), pose, sensor.min_range, sensor.max_range, cell_deg=2.0)
+        monkeypatch.setattr(vis, "wholly_covered", lambda boxes, *a: np.zeros(len(boxes), bool))
+        vis.visibility(buffers, reference, iter_pattern(sensor, 1 << 16), pose, sensor.min_range, sensor.max_range, cell_deg=2.0)
+        np.testing.assert_array_equal(ours["truncation"], reference["truncation"])
+        truncation = reference["truncation"]
+        assert ((truncation > 0) & (truncation < 1)).sum() >= 3 and (truncation == 1).any()
+        assert 5 <= shortcut[-1].sum() < (truncation == 0).sum() + 1 and (truncation[shortcut[-1]] == 0).all()

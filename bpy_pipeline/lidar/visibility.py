@@ -159,9 +159,15 @@ def visibility(
     boxes["visible"] = visible
     boxes["unoccluded"] = unoccluded
     # truncation: every object's surface sampled in one call (each at its own spacing), then per object the
-    # share of its area whose direction the passing rays cover, within the range limits
-    owner = box_of_triangle[box_of_triangle >= 0]
-    triangles = buffers.vertices[buffers.triangles[box_of_triangle >= 0]]  # (m, 3, 3)
+    # share of its area whose direction the passing rays cover, within the range limits; an object whose every
+    # direction and distance is surely covered (:func:`wholly_covered`) is 0 without its samples: what they give it
+    seen = np.concatenate(seen_points) if seen_points else np.zeros((0, 3))
+    point_owner = np.concatenate(seen_boxes) if seen_boxes else np.zeros(0, np.int64)
+    whole_view = wholly_covered(boxes, pose, seen, point_owner, min_range, max_range, cell_deg)
+    keep = box_of_triangle >= 0
+    keep[keep] = ~whole_view[box_of_triangle[keep]]
+    owner = box_of_triangle[keep]
+    triangles = buffers.vertices[buffers.triangles[keep]]  # (m, 3, 3)
     tri_area = row_norms(np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])) / 2
     total = np.bincount(owner, tri_area, minlength=len(boxes))
     spacing = np.maximum(SAMPLE_SPACING, np.sqrt(total / MAX_SAMPLES))
@@ -171,17 +177,93 @@ def visibility(
     inside = (distance >= min_range) & (distance <= max_range)
     sample_owner = owner[triangle]
     covered = np.zeros(len(samples), bool)
-    if seen_points:  # every object's coverage at once (what :class:`Coverage` gives per object, cell for cell), for the
+    if len(point_owner):  # every object's coverage at once (what :class:`Coverage` gives per object, cell for cell), for the
         # samples within the range limits of objects some ray passes (no other sample can count)
-        point_owner = np.concatenate(seen_boxes)
         passed = np.bincount(point_owner, minlength=len(boxes)) > 0
-        covered = covered_by_owner(np.concatenate(seen_points), point_owner, samples, sample_owner, len(boxes), cell_deg, where=inside & passed[sample_owner], distance=distance)
+        sampled = ~whole_view[point_owner]
+        covered = covered_by_owner(seen[sampled], point_owner[sampled], samples, sample_owner, len(boxes), cell_deg, where=inside & passed[sample_owner], distance=distance)
     order = np.argsort(sample_owner, kind="stable")
     bounds = np.searchsorted(sample_owner[order], np.arange(len(boxes) + 1))
     for k in range(len(boxes)):
+        if whole_view[k]:
+            boxes["truncation"][k] = 0.0
+            continue
         mine = order[bounds[k] : bounds[k + 1]]
         whole = area[mine].sum()
         boxes["truncation"][k] = float(1.0 - area[mine][covered[mine]].sum() / whole) if whole > 0 else 1.0
+
+
+def nearest_to_origin(a: np.ndarray, b: np.ndarray) -> float:
+    """The least distance from the origin to the ``(m, 2)`` segments from ``a`` to ``b`` (m)."""
+    ab = b - a
+    length2 = (ab * ab).sum(axis=1)
+    t = np.clip(-(a * ab).sum(axis=1) / np.where(length2 > 0, length2, 1.0), 0.0, 1.0)
+    nearest = a + t[:, None] * ab
+    return float(np.sqrt((nearest * nearest).sum(axis=1).min()))
+
+
+PAIRS = np.array([(i, j) for i in range(8) for j in range(i + 1, 8)])  # every two of a box's 8 corners: the footprint's edges among them
+
+
+ANGLE_MARGIN = 1e-6  # degrees added to the directions a box spans: far beyond the rounding of a sample's cell (about 1e-12 degrees)
+BOX_MARGIN = 0.01  # m (and as much again per 10 km of coordinates): a box grown by it holds every surface sample of its object
+
+
+def wholly_covered(boxes: np.ndarray, pose: np.ndarray, points: np.ndarray, point_owner: np.ndarray, min_range: float, max_range: float, cell_deg: float) -> np.ndarray:
+    """``(k,)`` bool: is every surface sample of box k's object surely within the range limits and covered (truncation 0)?
+
+    boxes : (k,) world-frame BOX_DTYPE, each the tightest box around its object's vertices (so around every surface
+        sample, up to rounding: grown by :data:`BOX_MARGIN`); points, point_owner : ``(p, 3)`` sensor-frame points where
+        rays pass the objects and ``(p,)`` their box, as :func:`covered_by_owner` takes them
+    A sample counts when its distance is within ``[min_range, max_range]`` and its direction's cell (:class:`Coverage`'s
+    cells) is within one cell of a passing point's. True only when the box's bounding box in the sensor frame is within
+    the limits, and every cell of the directions it spans (widened by :data:`ANGLE_MARGIN`) is so marked: then every sample
+    counts, and the sampled share of covered area would be ``x / x``, 0 exactly. Objects around the sensor's vertical
+    axis, and those beyond these bounds, are left to the samples (False).
+    """
+    out = np.zeros(len(boxes), bool)
+    if len(point_owner) == 0:
+        return out
+    grid = Coverage(np.zeros((0, 3)), cell_deg)
+    point_row, point_col = grid._cells(points)
+    signs = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], float)
+    for k, box in enumerate(boxes):
+        mine = point_owner == k
+        if not mine.any():
+            continue
+        c, s = np.cos(box["heading"]), np.sin(box["heading"])
+        margin = BOX_MARGIN * (1.0 + np.abs(box["centre"]).max() / 1e4)
+        local = signs * (np.asarray(box["size"]) / 2 + margin)
+        corners = local @ np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]]) + box["centre"]
+        corners = (corners - pose[:3, 3]) @ pose[:3, :3]
+        low, high = corners.min(axis=0), corners.max(axis=0)
+        near = np.maximum(np.maximum(low, -high), 0.0)  # per axis, the nearest the box comes to the sensor
+        far = np.maximum(np.abs(low), np.abs(high))
+        if np.sqrt(near @ near) < min_range or np.sqrt(far @ far) > max_range:
+            continue
+        if np.hypot(near[0], near[1]) <= 0.0:  # the bounding box is around the vertical axis: every azimuth
+            continue
+        xy = corners[:, :2]
+        rho_near = nearest_to_origin(xy[PAIRS[:, 0]], xy[PAIRS[:, 1]])  # of the box's footprint (the hull of its corners' edges)
+        rho_far = float(np.sqrt((xy * xy).sum(axis=1).max()))
+        top = np.degrees(np.arctan2(high[2], rho_near if high[2] >= 0 else rho_far))
+        bottom = np.degrees(np.arctan2(low[2], rho_far if low[2] >= 0 else rho_near))
+        rows = np.arange(max(int(np.floor((bottom - ANGLE_MARGIN + 90.0) / grid.cell)), 0), min(int(np.floor((top + ANGLE_MARGIN + 90.0) / grid.cell)), grid.rows - 1) + 1)
+        # the footprint's azimuths, from the box centre's (less than half a turn either way: the sensor is outside it)
+        centre_azimuth = np.degrees(np.arctan2(*(((low + high) / 2)[[1, 0]])))
+        turn = (np.degrees(np.arctan2(xy[:, 1], xy[:, 0])) - centre_azimuth + 180.0) % 360.0 - 180.0
+        first = int(np.floor((centre_azimuth + turn.min() - ANGLE_MARGIN + 180.0) / grid.cell))
+        last = int(np.floor((centre_azimuth + turn.max() + ANGLE_MARGIN + 180.0) / grid.cell))
+        width = min(last - first + 1, grid.columns)
+        need = np.zeros((len(rows), width), bool)
+        r, col = point_row[mine], point_col[mine]
+        for dr in (-1, 0, 1):
+            for dc in (-1, 0, 1):
+                at_r, at_c = r + dr - rows[0], (col + dc - first) % grid.columns
+                ok = (at_r >= 0) & (at_r < len(rows)) & (at_c < width)
+                need[at_r[ok], at_c[ok]] = True
+        out[k] = need.all()
+    return out
 
 
 def cone_pairs(directions: np.ndarray, axes: np.ndarray, cos_limit: np.ndarray, kernels=None) -> tuple[np.ndarray, np.ndarray]:
