@@ -312,3 +312,36 @@ def test_compiled_planes_have_numpys_bits():
     triangles[:50, 2] = triangles[:50, 0]  # zero-area triangles
     for a, b in zip(triangle_planes(vertices, triangles), triangle_planes(vertices, triangles, compiled())):
         assert a.tobytes() == b.tobytes()
+
+
+@needs_numba
+def test_embrees_answer_from_the_compiled_pass_is_embreexs():
+    """:meth:`RayCaster._embree` through :func:`~bpy_pipeline.lidar.numba_kernels.trace_rays` gives embreex's ``(tfar, prim)``,
+    byte for byte: one caster of the room and a kept static part with a moving one, rays from the origin (one row
+    repeated by strides) and from their own origins, float32 and float64 directions, limits that cut some hits."""
+    from types import SimpleNamespace
+
+    base = room()
+    rng = np.random.default_rng(7)
+    pose = pose_matrix([0.3, 0.2, 0.4], [0, 0, 10])
+    cache = CasterCache(threads=2, kernel="numba")
+    moving = np.array([False, True, True, False, False])
+    cache.caster(base, pose, moving)
+    two_parts = cache.caster(moved(base, [1, 2], [0.5, 0.0, 0.0]), pose, moving)
+    for caster in (RayCaster(base, frame=pose, kernel="numba"), two_parts):
+        assert caster.kernels.traces and caster.embree_handles is not None
+        embreex = SimpleNamespace(**{**vars(caster.kernels), "traces": False})
+        n = 5000
+        directions = rng.normal(size=(n, 3))
+        directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+        for origins in (np.zeros(3), rng.uniform(-3.0, 3.0, (n, 3))):
+            for d in (directions, directions.astype(np.float32)):
+                _, origins32, directions32, far = caster.launch(origins, directions, 100.0, d if d.dtype == np.float32 else None, convert=False)
+                far[::3] = rng.uniform(0.5, 12.0, len(far[::3])).astype(np.float32)
+                got = [a.copy() for a in caster._embree(origins32, directions32, far)]
+                with mock.patch.object(caster, "kernels", embreex):
+                    expected = caster._embree(origins32, directions32, far)
+                assert (expected[1] >= 0).mean() > 0.5 and (expected[1] < 0).any()
+                for a, b in zip(got, expected):
+                    assert a.dtype == b.dtype and a.tobytes() == b.tobytes()
+    assert len(two_parts.parts) == 2

@@ -167,6 +167,43 @@ def fill_diffuse(trace, handles, part_triangle, far, tfar, prim, prim_triangle, 
 
 
 @jit
+def trace_rays(handles, part_triangle, far, origins, directions, tfar, prim):
+    """Embree's nearest hit of each ray, as :meth:`.raycast.RayCaster._embree` has it from embreex, into ``tfar`` (n,)
+    float32 and ``prim`` (n,) int32: the ray by ray ``rtcIntersect1`` of :func:`fill_diffuse` without the records.
+
+    handles, part_triangle, far : as :func:`fill_diffuse` takes them; origins (n, 3) or (1, 3) shared, directions
+    (n, 3), float32 or float64 (rounded to float32 as numpy's ``astype`` does). A miss keeps ``far`` and gets -1.
+    """
+    n = directions.shape[0]
+    q = handles.shape[0]
+    shared = origins.shape[0] != n or n == 1
+    words = np.empty(RAYHIT_WORDS + 4, np.uint32)  # Embree's ray and hit, from a 16-byte boundary
+    first = ((16 - words.ctypes.data % 16) % 16) // 4
+    word = words[first : first + RAYHIT_WORDS]
+    real = word.view(np.float32)
+    address = word.ctypes.data
+    word[:] = 0  # tnear, time, flags 0 (Embree writes only tfar and the hit)
+    word[9] = NO_HIT  # mask: every geometry
+    for i in range(n):
+        j = 0 if shared else i
+        best_t = far[i]
+        best_p = -1
+        for part in range(q):
+            real[0], real[1], real[2] = np.float32(origins[j, 0]), np.float32(origins[j, 1]), np.float32(origins[j, 2])
+            real[4], real[5], real[6] = np.float32(directions[i, 0]), np.float32(directions[i, 1]), np.float32(directions[i, 2])
+            real[8] = best_t
+            word[17], word[18], word[19] = NO_HIT, NO_HIT, NO_HIT  # primID, geomID, instID[0]: no hit yet
+            rtc_intersect1(handles[part], address, 0)
+            hit = word[17]
+            if hit != NO_HIT:
+                best_t = real[8]
+                mapping = part_triangle[part]
+                best_p = np.int64(hit) if q == 1 or mapping.shape[0] == 0 else mapping[hit]
+        tfar[i] = best_t
+        prim[i] = best_p
+
+
+@jit
 def back_face_rays(prim, prim_triangle, directions, plane_normal, triangle_object, both, out):
     """Rays whose hit is a back face (d.n > 0) of an object flagged in ``both`` (k,) bool; returns how many, in ``out``."""
     identity = prim_triangle.shape[0] == 0

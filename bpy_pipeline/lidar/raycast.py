@@ -280,14 +280,19 @@ class RayCaster:
         With two parts (static and moving), the moving one is traced up to the static hit and the
         nearer hit is kept, as a buffer triangle index. Only Embree (and that merge) runs in the
         worker threads: embreex takes the GIL back after every call, so numpy work on another
-        thread would stall it.
+        thread would stall it. Where the compiled kernels call Embree themselves, they answer instead
+        (:func:`.numba_kernels.trace_rays`: the same ``rtcIntersect1`` per ray, the same answer).
         """
 
         n = len(directions32)
         tfar_out, prim_out = self.record_pool.take(n, np.float32), self.record_pool.take(n, np.int32)  # each thread fills its rows: no join
+        traces = self.kernels is not None and self.kernels.traces and self.embree_handles is not None
 
         def run(start):
             s = slice(start, start + self.chunk)
+            if traces:  # Embree called from the compiled pass: the same hits, without embreex's arrays per call (a small call's most)
+                self.kernels.trace_rays(self.embree_handles, self.part_triangle, far[s], origins32[s], directions32[s], tfar_out[s], prim_out[s])
+                return
             limit = np.array(far[s], np.float32)  # a copy: embreex writes the hits' distances into it
             d32 = directions32[s] if directions32.dtype == np.float32 else np.ascontiguousarray(directions32[s], np.float32)
             best = None
