@@ -163,14 +163,14 @@ def visibility(
     # direction and distance is surely covered (:func:`wholly_covered`) is 0 without its samples: what they give it
     seen = np.concatenate(seen_points) if seen_points else np.zeros((0, 3))
     point_owner = np.concatenate(seen_boxes) if seen_boxes else np.zeros(0, np.int64)
-    whole_view = wholly_covered(boxes, pose, seen, point_owner, min_range, max_range, cell_deg)
-    keep = box_of_triangle >= 0
-    keep[keep] = ~whole_view[box_of_triangle[keep]]
-    owner = box_of_triangle[keep]
-    triangles = buffers.vertices[buffers.triangles[keep]]  # (m, 3, 3)
+    owner = box_of_triangle[box_of_triangle >= 0]
+    triangles = buffers.vertices[buffers.triangles[box_of_triangle >= 0]]  # (m, 3, 3)
     tri_area = row_norms(np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])) / 2
     total = np.bincount(owner, tri_area, minlength=len(boxes))
+    whole_view = wholly_covered(boxes, pose, seen, point_owner, min_range, max_range, cell_deg) & (total > 0)  # no area: 1, as sampled
     spacing = np.maximum(SAMPLE_SPACING, np.sqrt(total / MAX_SAMPLES))
+    sampled = ~whole_view[owner]
+    owner, triangles, tri_area = owner[sampled], triangles[sampled], tri_area[sampled]
     samples, area, triangle = surface_samples(triangles, spacing[owner], return_triangle=True, area_bound=True, area=tri_area)
     samples = (samples - pose[:3, 3]) @ pose[:3, :3]
     distance = row_norms(samples)
@@ -180,8 +180,8 @@ def visibility(
     if len(point_owner):  # every object's coverage at once (what :class:`Coverage` gives per object, cell for cell), for the
         # samples within the range limits of objects some ray passes (no other sample can count)
         passed = np.bincount(point_owner, minlength=len(boxes)) > 0
-        sampled = ~whole_view[point_owner]
-        covered = covered_by_owner(seen[sampled], point_owner[sampled], samples, sample_owner, len(boxes), cell_deg, where=inside & passed[sample_owner], distance=distance)
+        partial = ~whole_view[point_owner]
+        covered = covered_by_owner(seen[partial], point_owner[partial], samples, sample_owner, len(boxes), cell_deg, where=inside & passed[sample_owner], distance=distance)
     order = np.argsort(sample_owner, kind="stable")
     bounds = np.searchsorted(sample_owner[order], np.arange(len(boxes) + 1))
     for k in range(len(boxes)):
