@@ -163,11 +163,12 @@ def visibility(
     # direction and distance is surely covered (:func:`wholly_covered`) is 0 without its samples: what they give it
     seen = np.concatenate(seen_points) if seen_points else np.zeros((0, 3))
     point_owner = np.concatenate(seen_boxes) if seen_boxes else np.zeros(0, np.int64)
+    point_cells = Coverage(np.zeros((0, 3)), cell_deg)._cells(seen)  # each passing point's (row, col), once for both uses
     owner = box_of_triangle[box_of_triangle >= 0]
     triangles = buffers.vertices[buffers.triangles[box_of_triangle >= 0]]  # (m, 3, 3)
     tri_area = row_norms(np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])) / 2
     total = np.bincount(owner, tri_area, minlength=len(boxes))
-    whole_view = wholly_covered(boxes, pose, seen, point_owner, min_range, max_range, cell_deg) & (total > 0)  # no area: 1, as sampled
+    whole_view = wholly_covered(boxes, pose, point_cells, point_owner, min_range, max_range, cell_deg) & (total > 0)  # no area: 1, as sampled
     spacing = np.maximum(SAMPLE_SPACING, np.sqrt(total / MAX_SAMPLES))
     sampled = ~whole_view[owner]
     owner, triangles, tri_area = owner[sampled], triangles[sampled], tri_area[sampled]
@@ -181,7 +182,8 @@ def visibility(
         # samples within the range limits of objects some ray passes (no other sample can count)
         passed = np.bincount(point_owner, minlength=len(boxes)) > 0
         partial = ~whole_view[point_owner]
-        covered = covered_by_owner(seen[partial], point_owner[partial], samples, sample_owner, len(boxes), cell_deg, where=inside & passed[sample_owner], distance=distance)
+        covered = covered_by_owner(seen[partial], point_owner[partial], samples, sample_owner, len(boxes), cell_deg, where=inside & passed[sample_owner], distance=distance,
+                                   point_cells=(point_cells[0][partial], point_cells[1][partial]))  # fmt: skip
     order = np.argsort(sample_owner, kind="stable")
     bounds = np.searchsorted(sample_owner[order], np.arange(len(boxes) + 1))
     for k in range(len(boxes)):
@@ -193,76 +195,77 @@ def visibility(
         boxes["truncation"][k] = float(1.0 - area[mine][covered[mine]].sum() / whole) if whole > 0 else 1.0
 
 
-def nearest_to_origin(a: np.ndarray, b: np.ndarray) -> float:
-    """The least distance from the origin to the ``(m, 2)`` segments from ``a`` to ``b`` (m)."""
-    ab = b - a
-    length2 = (ab * ab).sum(axis=1)
-    t = np.clip(-(a * ab).sum(axis=1) / np.where(length2 > 0, length2, 1.0), 0.0, 1.0)
-    nearest = a + t[:, None] * ab
-    return float(np.sqrt((nearest * nearest).sum(axis=1).min()))
-
-
-PAIRS = np.array([(i, j) for i in range(8) for j in range(i + 1, 8)])  # every two of a box's 8 corners: the footprint's edges among them
-
-
 ANGLE_MARGIN = 1e-6  # degrees added to the directions a box spans: far beyond the rounding of a sample's cell (about 1e-12 degrees)
 BOX_MARGIN = 0.01  # m (and as much again per 10 km of coordinates): a box grown by it holds every surface sample of its object
+CORNER_SIGNS = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], float)  # (8, 3)
+CORNER_PAIRS = np.array([(i, j) for i in range(8) for j in range(i + 1, 8)])  # (28, 2): every two corners, the footprint's edges among them
 
 
-def wholly_covered(boxes: np.ndarray, pose: np.ndarray, points: np.ndarray, point_owner: np.ndarray, min_range: float, max_range: float, cell_deg: float) -> np.ndarray:
+def wholly_covered(boxes: np.ndarray, pose: np.ndarray, point_cells: tuple[np.ndarray, np.ndarray], point_owner: np.ndarray, min_range: float, max_range: float, cell_deg: float) -> np.ndarray:
     """``(k,)`` bool: is every surface sample of box k's object surely within the range limits and covered (truncation 0)?
 
     boxes : (k,) world-frame BOX_DTYPE, each the tightest box around its object's vertices (so around every surface
-        sample, up to rounding: grown by :data:`BOX_MARGIN`); points, point_owner : ``(p, 3)`` sensor-frame points where
-        rays pass the objects and ``(p,)`` their box, as :func:`covered_by_owner` takes them
+        sample, up to rounding: grown by :data:`BOX_MARGIN`); point_cells, point_owner : the ``(p,)`` row and column
+        (:class:`Coverage`'s cells of ``cell_deg``) of the sensor-frame points where rays pass the objects, and their ``(p,)`` box
     A sample counts when its distance is within ``[min_range, max_range]`` and its direction's cell (:class:`Coverage`'s
     cells) is within one cell of a passing point's. True only when the box's bounding box in the sensor frame is within
-    the limits, and every cell of the directions it spans (widened by :data:`ANGLE_MARGIN`) is so marked: then every sample
-    counts, and the sampled share of covered area would be ``x / x``, 0 exactly. Objects around the sensor's vertical
-    axis, and those beyond these bounds, are left to the samples (False).
+    the limits, and every cell of the directions the box spans (its elevations from its heights and its footprint's
+    nearest and farthest horizontal distances, its azimuths from its footprint's corners, widened by :data:`ANGLE_MARGIN`)
+    is so marked: then every sample counts, and the sampled share of covered area would be ``x / x``, 0 exactly. Boxes
+    around the sensor's vertical axis, and those beyond these bounds, are left to the samples (False). All boxes at once,
+    but for each one's few cells.
     """
     out = np.zeros(len(boxes), bool)
-    if len(point_owner) == 0:
+    if len(point_owner) == 0 or len(boxes) == 0:
         return out
     grid = Coverage(np.zeros((0, 3)), cell_deg)
-    point_row, point_col = grid._cells(points)
-    signs = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], float)
-    for k, box in enumerate(boxes):
-        mine = point_owner == k
-        if not mine.any():
-            continue
-        c, s = np.cos(box["heading"]), np.sin(box["heading"])
-        margin = BOX_MARGIN * (1.0 + np.abs(box["centre"]).max() / 1e4)
-        local = signs * (np.asarray(box["size"]) / 2 + margin)
-        corners = local @ np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]]) + box["centre"]
-        corners = (corners - pose[:3, 3]) @ pose[:3, :3]
-        low, high = corners.min(axis=0), corners.max(axis=0)
-        near = np.maximum(np.maximum(low, -high), 0.0)  # per axis, the nearest the box comes to the sensor
-        far = np.maximum(np.abs(low), np.abs(high))
-        if np.sqrt(near @ near) < min_range or np.sqrt(far @ far) > max_range:
-            continue
-        if np.hypot(near[0], near[1]) <= 0.0:  # the bounding box is around the vertical axis: every azimuth
-            continue
-        xy = corners[:, :2]
-        rho_near = nearest_to_origin(xy[PAIRS[:, 0]], xy[PAIRS[:, 1]])  # of the box's footprint (the hull of its corners' edges)
-        rho_far = float(np.sqrt((xy * xy).sum(axis=1).max()))
-        top = np.degrees(np.arctan2(high[2], rho_near if high[2] >= 0 else rho_far))
-        bottom = np.degrees(np.arctan2(low[2], rho_far if low[2] >= 0 else rho_near))
-        rows = np.arange(max(int(np.floor((bottom - ANGLE_MARGIN + 90.0) / grid.cell)), 0), min(int(np.floor((top + ANGLE_MARGIN + 90.0) / grid.cell)), grid.rows - 1) + 1)
-        # the footprint's azimuths, from the box centre's (less than half a turn either way: the sensor is outside it)
-        centre_azimuth = np.degrees(np.arctan2(*(((low + high) / 2)[[1, 0]])))
-        turn = (np.degrees(np.arctan2(xy[:, 1], xy[:, 0])) - centre_azimuth + 180.0) % 360.0 - 180.0
-        first = int(np.floor((centre_azimuth + turn.min() - ANGLE_MARGIN + 180.0) / grid.cell))
-        last = int(np.floor((centre_azimuth + turn.max() + ANGLE_MARGIN + 180.0) / grid.cell))
-        width = min(last - first + 1, grid.columns)
-        need = np.zeros((len(rows), width), bool)
-        r, col = point_row[mine], point_col[mine]
-        for dr in (-1, 0, 1):
-            for dc in (-1, 0, 1):
-                at_r, at_c = r + dr - rows[0], (col + dc - first) % grid.columns
-                ok = (at_r >= 0) & (at_r < len(rows)) & (at_c < width)
-                need[at_r[ok], at_c[ok]] = True
-        out[k] = need.all()
+    c, s = np.cos(boxes["heading"])[:, None], np.sin(boxes["heading"])[:, None]
+    margin = BOX_MARGIN * (1.0 + np.abs(boxes["centre"]).max(axis=1) / 1e4)
+    local = CORNER_SIGNS[None] * (boxes["size"] / 2 + margin[:, None])[:, None, :]  # (k, 8, 3), the box's own axes
+    world = np.stack([local[..., 0] * c - local[..., 1] * s, local[..., 0] * s + local[..., 1] * c, local[..., 2]], axis=-1) + boxes["centre"][:, None, :]
+    corners = (world - pose[:3, 3]) @ pose[:3, :3]  # (k, 8, 3) sensor frame
+    low, high = corners.min(axis=1), corners.max(axis=1)
+    near = np.maximum(np.maximum(low, -high), 0.0)  # per axis, the nearest the bounding box comes to the sensor
+    far = np.maximum(np.abs(low), np.abs(high))
+    xy = corners[..., :2]
+    a, b = xy[:, CORNER_PAIRS[:, 0]], xy[:, CORNER_PAIRS[:, 1]]  # (k, 28, 2)
+    ab = b - a
+    length2 = (ab * ab).sum(axis=2)
+    t = np.clip(-(a * ab).sum(axis=2) / np.where(length2 > 0, length2, 1.0), 0.0, 1.0)
+    closest = a + t[..., None] * ab
+    rho_near = np.sqrt((closest * closest).sum(axis=2).min(axis=1))  # the footprint's nearest horizontal distance
+    rho_far = np.sqrt((xy * xy).sum(axis=2).max(axis=1))
+    top = np.degrees(np.arctan2(high[:, 2], np.where(high[:, 2] >= 0, rho_near, rho_far)))
+    bottom = np.degrees(np.arctan2(low[:, 2], np.where(low[:, 2] >= 0, rho_far, rho_near)))
+    row0 = np.maximum(np.floor((bottom - ANGLE_MARGIN + 90.0) / grid.cell).astype(np.int64), 0)
+    row1 = np.minimum(np.floor((top + ANGLE_MARGIN + 90.0) / grid.cell).astype(np.int64), grid.rows - 1)
+    # the footprint's azimuths, from its centre's (less than half a turn either way: the sensor is outside it)
+    mid = (low + high) / 2
+    centre_azimuth = np.degrees(np.arctan2(mid[:, 1], mid[:, 0]))
+    turn = (np.degrees(np.arctan2(xy[..., 1], xy[..., 0])) - centre_azimuth[:, None] + 180.0) % 360.0 - 180.0
+    col0 = np.floor((centre_azimuth + turn.min(axis=1) - ANGLE_MARGIN + 180.0) / grid.cell).astype(np.int64)
+    col1 = np.floor((centre_azimuth + turn.max(axis=1) + ANGLE_MARGIN + 180.0) / grid.cell).astype(np.int64)
+    # each box's marks in a window of its cells and one more on every side (no column twice: narrower than a turn)
+    height, width = row1 - row0 + 3, col1 - col0 + 3
+    passed = np.bincount(point_owner, minlength=len(boxes))[: len(boxes)] > 0
+    candidate = passed & (np.sqrt((near * near).sum(axis=1)) >= min_range) & (np.sqrt((far * far).sum(axis=1)) <= max_range) & (np.hypot(near[:, 0], near[:, 1]) > 0.0) & (width <= grid.columns)
+    if not candidate.any():
+        return out
+    size = np.where(candidate, height * width, 0)
+    offset = np.cumsum(size) - size
+    mask = np.zeros(int(size.sum()), bool)
+    mine = candidate[point_owner]
+    owner, row, col = point_owner[mine], point_cells[0][mine], point_cells[1][mine]
+    r, q = row - (row0[owner] - 1), (col - (col0[owner] - 1)) % grid.columns
+    inside = (r >= 0) & (r < height[owner]) & (q < width[owner])
+    mask[(offset[owner] + r * width[owner] + q)[inside]] = True
+    for k in np.flatnonzero(candidate):  # a cell is covered when it or one of its eight neighbours is marked
+        marks = mask[offset[k] : offset[k] + size[k]].reshape(height[k], width[k])
+        covered = np.zeros((height[k] - 2, width[k] - 2), bool)
+        for dr in range(3):
+            for dc in range(3):
+                covered |= marks[dr : dr + height[k] - 2, dc : dc + width[k] - 2]
+        out[k] = covered.all()
     return out
 
 
@@ -284,7 +287,8 @@ def cone_pairs(directions: np.ndarray, axes: np.ndarray, cos_limit: np.ndarray, 
     return np.concatenate(rays).astype(np.int64), np.concatenate(boxes).astype(np.int64)
 
 
-def covered_by_owner(points: np.ndarray, point_owner: np.ndarray, samples: np.ndarray, sample_owner: np.ndarray, count: int, cell_deg: float, where: np.ndarray | None = None, distance: np.ndarray | None = None) -> np.ndarray:
+def covered_by_owner(points: np.ndarray, point_owner: np.ndarray, samples: np.ndarray, sample_owner: np.ndarray, count: int, cell_deg: float, where: np.ndarray | None = None, distance: np.ndarray | None = None,
+                     point_cells: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:  # fmt: skip
     """``(s,)`` bool: is each sample's direction covered by the passing points of its own object?
 
     points, point_owner : ``(p, 3)`` sensor-frame points where rays pass the objects and ``(p,)`` their object (0..count-1)
@@ -297,6 +301,7 @@ def covered_by_owner(points: np.ndarray, point_owner: np.ndarray, samples: np.nd
     its directions span (a whole row band only for an object around the sensor).
     where : ``(s,)`` bool, the samples to look at (the others come back False), or ``None`` for all
     distance : the ``(s,)`` samples' lengths (m, :func:`~.raycast.row_norms`) if the caller has it
+    point_cells : the ``(p,)`` rows and columns of ``points`` (``Coverage(..., cell_deg)._cells``) if the caller has them
     """
     if where is not None and where.all():  # every sample counts: no copies by a mask of all True (a quarter of a garage frame's call)
         where = None
@@ -310,7 +315,7 @@ def covered_by_owner(points: np.ndarray, point_owner: np.ndarray, samples: np.nd
     point_owner = point_owner[owned].astype(np.int64)
     found = np.zeros(len(samples), bool)
     if len(point_owner):
-        point_row, point_col = grid._cells(points[owned])
+        point_row, point_col = grid._cells(points[owned]) if point_cells is None else (point_cells[0][owned], point_cells[1][owned])
         sample_owner = sample_owner.astype(np.int64)
         row, col = grid._cells(samples, distance)
         low_row, high_row = np.full(count, grid.rows), np.zeros(count, np.int64)
