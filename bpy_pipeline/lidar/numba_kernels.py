@@ -73,17 +73,10 @@ def fill_diffuse(trace, handles, part_triangle, far, tfar, prim, prim_triangle, 
     """
     plane_normal, plane_offset, triangle_object, material, semantic, instance, reflectivity = scene
     n = directions.shape[0]
-    q = handles.shape[0]
     shared = origins.shape[0] != n or n == 1
     identity = prim_triangle.shape[0] == 0
     any_moved = moved.shape[0] != 0
-    words = np.empty(RAYHIT_WORDS + 4, np.uint32)  # Embree's ray and hit, from a 16-byte boundary
-    first = ((16 - words.ctypes.data % 16) % 16) // 4
-    word = words[first : first + RAYHIT_WORDS]
-    real = word.view(np.float32)
-    address = word.ctypes.data
-    word[:] = 0  # tnear, time, flags 0 (Embree writes only tfar and the hit)
-    word[9] = NO_HIT  # mask: every geometry
+    word, real, address = ray_hit()
     k = 0
     m = 0
     for i in range(n):
@@ -91,21 +84,7 @@ def fill_diffuse(trace, handles, part_triangle, far, tfar, prim, prim_triangle, 
         ox, oy, oz = origins[j, 0], origins[j, 1], origins[j, 2]
         dx, dy, dz = directions[i, 0], directions[i, 1], directions[i, 2]
         if trace:
-            best_t = far[i]
-            best_p = -1
-            for part in range(q):
-                real[0], real[1], real[2] = np.float32(ox), np.float32(oy), np.float32(oz)
-                real[4], real[5], real[6] = np.float32(dx), np.float32(dy), np.float32(dz)
-                real[8] = best_t
-                word[17], word[18], word[19] = NO_HIT, NO_HIT, NO_HIT  # primID, geomID, instID[0]: no hit yet
-                rtc_intersect1(handles[part], address, 0)
-                hit = word[17]
-                if hit != NO_HIT:
-                    best_t = real[8]
-                    mapping = part_triangle[part]
-                    best_p = np.int64(hit) if q == 1 or mapping.shape[0] == 0 else mapping[hit]
-            tfar[i] = best_t
-            prim[i] = best_p
+            tfar[i], prim[i] = nearest_hit(handles, part_triangle, word, real, address, ox, oy, oz, dx, dy, dz, far[i])
         p = prim[i]
         if p < 0:
             continue
@@ -167,40 +146,54 @@ def fill_diffuse(trace, handles, part_triangle, far, tfar, prim, prim_triangle, 
 
 
 @jit
+def ray_hit():
+    """Embree's ray and hit record (``RTCRayHit``) on a 16-byte boundary, set for a query (tnear, time and flags 0, every
+    geometry in the mask): ``(word (32,) uint32, the same words as float32, its address)``."""
+    words = np.empty(RAYHIT_WORDS + 4, np.uint32)
+    first = ((16 - words.ctypes.data % 16) % 16) // 4
+    word = words[first : first + RAYHIT_WORDS]
+    word[:] = 0
+    word[9] = NO_HIT
+    return word, word.view(np.float32), word.ctypes.data
+
+
+@jit
+def nearest_hit(handles, part_triangle, word, real, address, ox, oy, oz, dx, dy, dz, limit):
+    """One ray's nearest hit up to ``limit`` (float32) on the scenes ``handles`` (``rtcIntersect1`` in the record of
+    :func:`ray_hit`, the origin and direction rounded to float32): ``(tfar, primitive)``, ``(limit, -1)`` for a miss.
+    With two parts, the moving one is asked up to the static hit, and the primitive is the nearer hit's buffer triangle
+    (``part_triangle``: each part's map, (0,) for the identity), as :meth:`.raycast.RayCaster._embree` merges them."""
+    q = handles.shape[0]
+    best_t = limit
+    best_p = -1
+    for part in range(q):
+        real[0], real[1], real[2] = np.float32(ox), np.float32(oy), np.float32(oz)
+        real[4], real[5], real[6] = np.float32(dx), np.float32(dy), np.float32(dz)
+        real[8] = best_t
+        word[17], word[18], word[19] = NO_HIT, NO_HIT, NO_HIT  # primID, geomID, instID[0]: no hit yet
+        rtc_intersect1(handles[part], address, 0)
+        hit = word[17]
+        if hit != NO_HIT:
+            best_t = real[8]
+            mapping = part_triangle[part]
+            best_p = np.int64(hit) if q == 1 or mapping.shape[0] == 0 else mapping[hit]
+    return best_t, best_p
+
+
+@jit
 def trace_rays(handles, part_triangle, far, origins, directions, tfar, prim):
     """Embree's nearest hit of each ray, as :meth:`.raycast.RayCaster._embree` has it from embreex, into ``tfar`` (n,)
-    float32 and ``prim`` (n,) int32: the ray by ray ``rtcIntersect1`` of :func:`fill_diffuse` without the records.
+    float32 and ``prim`` (n,) int32: :func:`fill_diffuse`'s trace without the records.
 
     handles, part_triangle, far : as :func:`fill_diffuse` takes them; origins (n, 3) or (1, 3) shared, directions
     (n, 3), float32 or float64 (rounded to float32 as numpy's ``astype`` does). A miss keeps ``far`` and gets -1.
     """
     n = directions.shape[0]
-    q = handles.shape[0]
     shared = origins.shape[0] != n or n == 1
-    words = np.empty(RAYHIT_WORDS + 4, np.uint32)  # Embree's ray and hit, from a 16-byte boundary
-    first = ((16 - words.ctypes.data % 16) % 16) // 4
-    word = words[first : first + RAYHIT_WORDS]
-    real = word.view(np.float32)
-    address = word.ctypes.data
-    word[:] = 0  # tnear, time, flags 0 (Embree writes only tfar and the hit)
-    word[9] = NO_HIT  # mask: every geometry
+    word, real, address = ray_hit()
     for i in range(n):
         j = 0 if shared else i
-        best_t = far[i]
-        best_p = -1
-        for part in range(q):
-            real[0], real[1], real[2] = np.float32(origins[j, 0]), np.float32(origins[j, 1]), np.float32(origins[j, 2])
-            real[4], real[5], real[6] = np.float32(directions[i, 0]), np.float32(directions[i, 1]), np.float32(directions[i, 2])
-            real[8] = best_t
-            word[17], word[18], word[19] = NO_HIT, NO_HIT, NO_HIT  # primID, geomID, instID[0]: no hit yet
-            rtc_intersect1(handles[part], address, 0)
-            hit = word[17]
-            if hit != NO_HIT:
-                best_t = real[8]
-                mapping = part_triangle[part]
-                best_p = np.int64(hit) if q == 1 or mapping.shape[0] == 0 else mapping[hit]
-        tfar[i] = best_t
-        prim[i] = best_p
+        tfar[i], prim[i] = nearest_hit(handles, part_triangle, word, real, address, origins[j, 0], origins[j, 1], origins[j, 2], directions[i, 0], directions[i, 1], directions[i, 2], far[i])
 
 
 @jit
