@@ -123,6 +123,24 @@ def fit_boxes(buffers: SceneBuffers, classes, headings: dict | None = None) -> n
     return out
 
 
+def box_corners(boxes: np.ndarray, grow=0.0) -> np.ndarray:
+    """``(k, 8, 3)`` corners of ``(k,)`` BOX_DTYPE boxes, in their frame: bottom face 0-3, top face 4-7.
+
+    grow : metres added to every half-size (one value or ``(k,)``): the corners of a box that far larger on every side
+    """
+    grow = np.broadcast_to(np.asarray(grow, float), (len(boxes),))
+    signs = np.array([[1, 1], [1, -1], [-1, -1], [-1, 1]], float)
+    out = np.zeros((len(boxes), 8, 3))
+    for k, box in enumerate(boxes):
+        c, s = np.cos(box["heading"]), np.sin(box["heading"])
+        local = signs * (np.asarray(box["size"][:2]) / 2 + grow[k])
+        xy = local @ np.array([[c, s], [-s, c]]) + np.asarray(box["centre"][:2])
+        out[k, :4, :2] = out[k, 4:, :2] = xy
+        out[k, :4, 2] = box["centre"][2] - (box["size"][2] / 2 + grow[k])
+        out[k, 4:, 2] = box["centre"][2] + (box["size"][2] / 2 + grow[k])
+    return out
+
+
 def boxes_in_frame(boxes: np.ndarray, frame: np.ndarray, where: str = "output.frame") -> np.ndarray:
     """Boxes moved from the world into the frame whose ``(4, 4)`` frame-to-world transform is ``frame``.
 

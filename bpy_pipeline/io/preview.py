@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from ..geometry.boxes import box_corners
 from ._records import as_points
 from .atomic import atomic_write, hashed_open
 
@@ -212,20 +213,6 @@ def draw_segments(image: np.ndarray, starts: np.ndarray, ends: np.ndarray, color
     col, row = np.rint(points).astype(np.int64).T
     keep = (col >= 0) & (col < image.shape[1]) & (row >= 0) & (row < image.shape[0])
     image[row[keep], col[keep]] = color
-
-
-def box_corners(boxes: np.ndarray) -> np.ndarray:
-    """``(k, 8, 3)`` corners of BOX_DTYPE boxes: bottom face 0-3, top face 4-7."""
-    signs = np.array([[1, 1], [1, -1], [-1, -1], [-1, 1]], float)
-    out = np.zeros((len(boxes), 8, 3))
-    for k, box in enumerate(boxes):
-        c, s = np.cos(box["heading"]), np.sin(box["heading"])
-        local = signs * np.asarray(box["size"][:2]) / 2
-        xy = local @ np.array([[c, s], [-s, c]]) + np.asarray(box["centre"][:2])
-        out[k, :4, :2] = out[k, 4:, :2] = xy
-        out[k, :4, 2] = box["centre"][2] - box["size"][2] / 2
-        out[k, 4:, 2] = box["centre"][2] + box["size"][2] / 2
-    return out
 
 
 def nice_length(span: float) -> float:

@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..buffers import SceneBuffers
-from ..geometry.boxes import instance_triangles
+from ..geometry.boxes import box_corners, instance_triangles
 from .raycast import RayCaster, row_norms
 from .scanner import scan_chunk, trace_beams
 from .sensors import Pattern
@@ -197,7 +197,6 @@ def visibility(
 
 ANGLE_MARGIN = 1e-6  # degrees added to the directions a box spans: far beyond the rounding of a sample's cell (about 1e-12 degrees)
 BOX_MARGIN = 0.01  # m (and as much again per 10 km of coordinates): a box grown by it holds every surface sample of its object
-CORNER_SIGNS = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], float)  # (8, 3)
 CORNER_PAIRS = np.array([(i, j) for i in range(8) for j in range(i + 1, 8)])  # (28, 2): every two corners, the footprint's edges among them
 
 
@@ -219,11 +218,8 @@ def wholly_covered(boxes: np.ndarray, pose: np.ndarray, point_cells: tuple[np.nd
     if len(point_owner) == 0 or len(boxes) == 0:
         return out
     grid = Coverage(np.zeros((0, 3)), cell_deg)
-    c, s = np.cos(boxes["heading"])[:, None], np.sin(boxes["heading"])[:, None]
     margin = BOX_MARGIN * (1.0 + np.abs(boxes["centre"]).max(axis=1) / 1e4)
-    local = CORNER_SIGNS[None] * (boxes["size"] / 2 + margin[:, None])[:, None, :]  # (k, 8, 3), the box's own axes
-    world = np.stack([local[..., 0] * c - local[..., 1] * s, local[..., 0] * s + local[..., 1] * c, local[..., 2]], axis=-1) + boxes["centre"][:, None, :]
-    corners = (world - pose[:3, 3]) @ pose[:3, :3]  # (k, 8, 3) sensor frame
+    corners = (box_corners(boxes, margin) - pose[:3, 3]) @ pose[:3, :3]  # (k, 8, 3) sensor frame
     low, high = corners.min(axis=1), corners.max(axis=1)
     near = np.maximum(np.maximum(low, -high), 0.0)  # per axis, the nearest the bounding box comes to the sensor
     far = np.maximum(np.abs(low), np.abs(high))
