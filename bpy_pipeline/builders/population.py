@@ -68,11 +68,13 @@ class RobotArmPopulation:
 @dataclass(frozen=True)
 class CarPopulation:
     """``scene.population.car``: cars, the procedural styles or an asset set, scaled to a height drawn from
-    ``height`` (the parking paper: 1.55-1.70 m, uniform)."""
+    ``height`` (the parking paper: 1.55-1.70 m, uniform); a procedural car carries its licence plates and lamps
+    (geometry/objects.py ``car_fittings``) unless ``fittings: false``."""
 
     count: int | Distribution = 1
     height: Distribution = field(default_factory=lambda: Distribution("uniform", 0.0, 0.0, 1.55, 1.70))
     assets: str = ""
+    fittings: bool = True
 
 
 @dataclass(frozen=True)
@@ -199,7 +201,7 @@ def _draw_arm(params: RobotArmPopulation, models, rng: np.random.Generator):
 
 def _draw_car(params: CarPopulation, models, rng: np.random.Generator):
     """A car of a procedural style (length and width +-3 % about the style's proportions) or an asset car, at a drawn height."""
-    from ..geometry.objects import COLOURS, STYLES, car_parts, style_size
+    from ..geometry.objects import COLOURS, STYLES, car_meshes, style_size
     from ..geometry.placement import sample
     from ..geometry.population import Shape, box_support, mesh_shape
     from ..geometry.primitives import merge
@@ -214,7 +216,7 @@ def _draw_car(params: CarPopulation, models, rng: np.random.Generator):
     shares = np.array([c[2] for c in COLOURS])
     colour = int(rng.choice(len(COLOURS), p=shares / shares.sum()))
     scale = size / style_size(STYLES[style])
-    vertices, triangles = merge(list(car_parts(STYLES[style]).values()))
+    vertices, triangles = merge(list(car_meshes(STYLES[style], params.fittings).values()))
     vertices = vertices * scale
     return Shape(vertices, triangles, box_support(vertices, 0.7), {"style": style, "size": size, "colour": colour, "scale": scale})
 

@@ -192,8 +192,10 @@ def car_parts(style: CarStyle, height: float = NOMINAL_HEIGHT) -> dict:
     return {"body": primitives.merge(body), "windows": primitives.merge(windows), "interior": primitives.merge(interior), "tyres": primitives.merge(tyres)}
 
 
-# Fittings (opt-in: not in PARTS, so the builders' cars and their scans are unchanged): licence plates and
-# lamps, each with the reflectance model (lidar/materials.py) its ``lidar_material`` names.
+# Fittings (not in PARTS: the parts every car has): licence plates and lamps, each with the reflectance model
+# (lidar/materials.py) its ``lidar_material`` names. The builders' cars carry them unless ``scene.car_fittings:
+# false`` (the population's ``car.fittings``); inserted cars with ``scene.car_fittings``. Their reflectivities
+# differ from every paint's, so an instance's parts keep their models apart (lidar/materials.py).
 FITTINGS = {"plates": ("retroreflector", 0.8), "lights": ("glossy_paint", 0.6)}  # part -> (lidar_material, reflectivity)
 PLATE_SIZE = (0.52, 0.11)  # m: an EU plate (520 x 110 mm)
 
@@ -214,6 +216,17 @@ def car_fittings(style: CarStyle, height: float = NOMINAL_HEIGHT) -> dict:
             y = side * (W / 2 - 0.15)
             lights.append(_box(x0, x1, y - 0.10, y + 0.10, 0.36 * H, 0.43 * H))
     return {"plates": primitives.merge(plates), "lights": primitives.merge(lights)}
+
+
+def car_meshes(style: CarStyle, fittings: bool, height: float = NOMINAL_HEIGHT) -> dict:
+    """Part name -> ``(vertices, triangles)``: :func:`car_parts`, then :func:`car_fittings` when ``fittings``."""
+    return {**car_parts(style, height), **(car_fittings(style, height) if fittings else {})}
+
+
+def car_surfaces(paint: float) -> dict:
+    """Part name -> ``(lidar_material, reflectivity)`` of every part of a car (:data:`PARTS`, :data:`FITTINGS`)
+    whose paint has reflectivity ``paint``: what a builder tags each part's object with."""
+    return {"body": ("diffuse", paint), "windows": ("glass", GLASS_REFLECTIVITY), "interior": ("diffuse", INTERIOR_REFLECTIVITY), "tyres": ("diffuse", TYRE_REFLECTIVITY), **FITTINGS}
 
 
 def style_size(style: CarStyle, height: float = NOMINAL_HEIGHT) -> np.ndarray:
@@ -296,7 +309,7 @@ def car_object(rng: np.random.Generator, size=None, bodies: str = "classic", bod
     shares = np.array([c[2] for c in COLOURS])
     paint = COLOURS[int(rng.choice(len(COLOURS), p=shares / shares.sum()))][3]
     mesh = car_parts(style, style.height)
-    reflect = {"body": ("diffuse", paint), "windows": ("glass", GLASS_REFLECTIVITY), "interior": ("diffuse", INTERIOR_REFLECTIVITY), "tyres": ("diffuse", TYRE_REFLECTIVITY)}
+    reflect = car_surfaces(paint)
     parts = [ObjectPart(mesh[name][0], mesh[name][1], *reflect[name]) for name in PARTS]
     fitted = fit_to_box(parts, style_size(style, style.height) if size is None else size)
     if not fittings:

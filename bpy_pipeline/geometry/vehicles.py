@@ -58,6 +58,42 @@ def vehicle_parts(kind: str, size) -> dict[str, Mesh]:
     return {"body": primitives.merge(body), "glass": primitives.merge(glass), "tyres": tyres}
 
 
+PLATE = (0.52, 0.11)  # m: an EU licence plate (geometry/objects.py PLATE_SIZE)
+LAMP = (0.2, 0.07)  # m: a lamp's width and height
+
+
+def vehicle_fittings(kind: str, size) -> dict[str, Mesh]:
+    """``{"plates", "lights"}`` meshes of a vehicle of ``kind`` and ``size``, own frame: a licence plate centred on
+    each end (5 mm proud) and a lamp in each corner of each end (1 cm proud), on the body part that ends the vehicle
+    there (:func:`vehicle_parts`: a car's lower body, a van's hood and box, a truck's cab and cargo box, a bus).
+
+    Each end's face spans heights ``z0 .. z1``: the plate's lower edge is ``min(0.2 (z1 - z0), 0.25)`` m above
+    ``z0``, the lamps' centres ``min(0.6 (z1 - z0), 0.55)`` m, 0.15 m in from the sides. These parts stand the
+    millimetres proud of the box ``[-L/2, L/2] x ...`` that holds the other parts.
+    """
+    L, W, H = (float(s) for s in size)
+    radius = {"car": 0.31, "van": 0.34, "truck": 0.5, "bus": 0.5}[kind]
+    clearance = 0.55 * radius
+    y = W / 2
+    ends = {  # (x of the end face, outward sign, half width, z0, z1): front, then rear
+        "car": ((L / 2, 1.0, y, clearance, 0.58 * H), (-L / 2, -1.0, y, clearance, 0.58 * H)),
+        "van": ((L / 2, 1.0, y, clearance, 0.5 * H), (-L / 2, -1.0, y, clearance, H)),
+        "truck": ((L / 2, 1.0, y - 0.05, clearance, 0.92 * H), (-L / 2, -1.0, y, clearance + 0.4, H)),
+        "bus": ((L / 2, 1.0, y, clearance, H), (-L / 2, -1.0, y, clearance, H)),
+    }[kind]
+    plates, lights = [], []
+    for x, out, half, z0, z1 in ends:
+        pw, ph = PLATE
+        low = z0 + min(0.2 * (z1 - z0), 0.25)
+        plates.append(box_mesh(*sorted((x, x + out * 0.005)), -pw / 2, pw / 2, low, low + ph))
+        lw, lh = LAMP
+        mid = z0 + min(0.6 * (z1 - z0), 0.55)
+        for side in (-1.0, 1.0):
+            c = side * (half - 0.15)
+            lights.append(box_mesh(*sorted((x - out * 0.06, x + out * 0.01)), c - lw / 2, c + lw / 2, mid - lh / 2, mid + lh / 2))
+    return {"plates": primitives.merge(plates), "lights": primitives.merge(lights)}
+
+
 def two_wheeler_parts(kind: str, size) -> dict[str, Mesh]:
     """``{"frame", "wheels"}`` of a bicycle or motorcycle of ``size`` (length, width, height of the whole with its rider).
 

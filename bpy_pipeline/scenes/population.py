@@ -23,7 +23,7 @@ from mathutils import Matrix
 
 from ..builders.population import KINDS, count_of
 from ..geometry import human
-from ..geometry.objects import COLOURS, GLASS_REFLECTIVITY, INTERIOR_REFLECTIVITY, PARTS, STYLES, TYRE_REFLECTIVITY, car_parts
+from ..geometry.objects import COLOURS, STYLES, car_meshes, car_surfaces
 from ..geometry.population import Placer, place_on_spots
 from ..geometry.surfaces import find_surfaces, floor_and_seats
 from .objects import mesh_data, scene_collection, tag
@@ -188,7 +188,7 @@ class CarSide(Side):
         meshes = []
         for style in STYLES:
             parts = {}
-            for part, (vertices, triangles) in car_parts(style).items():
+            for part, (vertices, triangles) in car_meshes(style, self.params.fittings).items():
                 name = f"LiDAR car {style.name} {part}"
                 parts[part] = bpy.data.meshes.get(name) or mesh_data(name, vertices, triangles)
             meshes.append(parts)
@@ -200,7 +200,7 @@ class CarSide(Side):
             from .assets import AssetSlot
 
             return AssetSlot(self.collection, f"car_{index:03d}")
-        return PartsSlot(self.collection, f"car_{index:03d}", list(PARTS))
+        return PartsSlot(self.collection, f"car_{index:03d}", list(self.meshes[0]))
 
     def show_one(self, slot, placed, instance, rng):
         d = placed.shape.detail
@@ -209,13 +209,8 @@ class CarSide(Side):
             return
         world = placed.matrix @ np.diag([*d["scale"], 1.0])
         meshes = self.meshes[d["style"]]
-        parts = {
-            "body": (meshes["body"], "diffuse", COLOURS[d["colour"]][3]),
-            "windows": (meshes["windows"], "glass", GLASS_REFLECTIVITY),
-            "interior": (meshes["interior"], "diffuse", INTERIOR_REFLECTIVITY),
-            "tyres": (meshes["tyres"], "diffuse", TYRE_REFLECTIVITY),
-        }
-        slot.show(world, parts, "car", instance)
+        surfaces = car_surfaces(COLOURS[d["colour"]][3])
+        slot.show(world, {part: (mesh, *surfaces[part]) for part, mesh in meshes.items()}, "car", instance)
 
 
 SIDES = {"person": PersonSide, "robot_arm": RobotArmSide, "car": CarSide}

@@ -32,6 +32,8 @@ class ParkingScene:
     ``car_clearance`` from pillars, ramp and other cars and show at least ``min_visible_fraction``
     of its sensor-facing side, without hiding more than that of any car placed before it.
     ``placement: bays`` snaps each candidate into the nearest free bay instead of placing it freely.
+    ``car_fittings``: each car's licence plates and lamps (geometry/objects.py ``car_fittings``), tagged
+    ``retroreflector`` and ``glossy_paint``; ``false`` leaves them out.
     """
 
     length: float = 60.0
@@ -62,6 +64,7 @@ class ParkingScene:
     max_consecutive_failures: int = 10
     min_visible_fraction: float = 0.3
     car_clearance: float = 0.3
+    car_fittings: bool = True
 
 
 

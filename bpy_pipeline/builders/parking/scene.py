@@ -12,7 +12,9 @@ each frame, never rebuilt.
 
 A car is four objects sharing one instance id, class ``car``: the body (its paint colour's
 reflectivity), the windows (``lidar_material: glass``, so the scan can see the seats through
-them as a real LiDAR does), the interior (dashboard and seats) and the tyres. Three body styles
+them as a real LiDAR does), the interior (dashboard and seats) and the tyres; and, unless
+``car_fittings: false``, two more: its licence plates (``retroreflector``) and lamps
+(``glossy_paint``), which ``effects.materials.objects: true`` gives their models. Three body styles
 (sedan, hatchback, estate), each a nominal mesh scaled to the drawn height (the paper:
 1.55-1.70 m), with length and width following the style's proportions (+-3 %).
 """
@@ -25,7 +27,7 @@ import bpy
 import numpy as np
 
 from ...buffers import MATERIAL_ID, ObjectTable, SceneBuffers
-from ...geometry.objects import COLOURS, GLASS_REFLECTIVITY, INTERIOR_REFLECTIVITY, PARTS, STYLES, TYRE_REFLECTIVITY, car_parts, style_size
+from ...geometry.objects import COLOURS, STYLES, car_meshes, car_surfaces, style_size
 from ...geometry.indoor import parking_station
 from ...geometry.placement import FloorBoxPlacer, insert_sequentially, sample, sample_count, turn_about
 from ...lidar.raycast import RayCaster
@@ -52,12 +54,12 @@ class Car:
 
 # ----------------------------------------------------------------------------- Blender objects
 class CarSlot:
-    """Four objects of one car (body the parent of windows, interior, tyres), reused frame after frame."""
+    """The objects of one car, one per part of ``meshes`` (the body the parent of the others), reused frame after frame."""
 
     def __init__(self, collection, index: int, meshes: dict, paints: list):
         self.objects = {}
         self.paints = paints
-        for part in PARTS:
+        for part in meshes:
             obj = bpy.data.objects.new(f"car_{index:03d}" + ("" if part == "body" else f"_{part}"), meshes[part])
             collection.objects.link(obj)
             if part != "body":
@@ -67,7 +69,7 @@ class CarSlot:
 
     def show(self, meshes: dict, car: Car, centre_xy, yaw: float, instance: int) -> None:
         body = self.objects["body"]
-        for part in PARTS:  # assigned only when it changes: every assignment has the depsgraph rebuild relations
+        for part in self.objects:  # assigned only when it changes: every assignment has the depsgraph rebuild relations
             if self.objects[part].data != meshes[car.style][part]:
                 self.objects[part].data = meshes[car.style][part]
         body.location = (float(centre_xy[0]), float(centre_xy[1]), 0.0)
@@ -78,10 +80,9 @@ class CarSlot:
             slot.link = "OBJECT"
         if slot.material != self.paints[car.colour]:
             slot.material = self.paints[car.colour]
-        tag(body, "car", "diffuse", COLOURS[car.colour][3], instance)
-        tag(self.objects["windows"], "car", "glass", GLASS_REFLECTIVITY, instance)
-        tag(self.objects["interior"], "car", "diffuse", INTERIOR_REFLECTIVITY, instance)
-        tag(self.objects["tyres"], "car", "diffuse", TYRE_REFLECTIVITY, instance)
+        surfaces = car_surfaces(COLOURS[car.colour][3])
+        for part, obj in self.objects.items():
+            tag(obj, "car", *surfaces[part], instance)
         self.set_hidden(False)
 
     def set_hidden(self, hidden: bool) -> None:
@@ -114,7 +115,7 @@ class ParkingGarage:
         self.meshes = []
         for style in STYLES:
             parts = {}
-            for part, (vertices, triangles) in car_parts(style).items():
+            for part, (vertices, triangles) in car_meshes(style, params.car_fittings).items():
                 mesh = bpy.data.meshes.get(f"LiDAR car {style.name} {part}") or mesh_data(f"LiDAR car {style.name} {part}", vertices, triangles)
                 if part == "body" and not mesh.materials:
                     mesh.materials.append(None)

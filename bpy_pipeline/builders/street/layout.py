@@ -46,7 +46,8 @@ from ...geometry import primitives
 from ...geometry.primitives import beam_mesh, box_mesh, quad_mesh, transformed, wheel_mesh  # noqa: F401 - street.box_mesh etc. stay importable
 from ...geometry.collision import rectangles_near, rectangles_overlap
 from ...geometry.field_of_view import FieldOfView, box_samples, in_view_fraction  # noqa: F401 - FieldOfView etc. stay importable from here and from geometry.street (its old path)
-from ...geometry.vehicles import saddle_height, two_wheeler_parts, vehicle_parts
+from ...geometry.objects import FITTINGS
+from ...geometry.vehicles import saddle_height, two_wheeler_parts, vehicle_fittings, vehicle_parts
 
 Mesh = tuple[np.ndarray, np.ndarray]  # vertices (n, 3) float64, triangles (m, 3) int32
 
@@ -443,19 +444,20 @@ def _sidewalk_point(layout: StreetLayout, rng) -> np.ndarray:
 
 
 # ----------------------------------------------------------------------------- the users' meshes
-def user_meshes(user: RoadUser, rng: np.random.Generator) -> list[tuple[str, str, str, float, Mesh]]:
+def user_meshes(user: RoadUser, rng: np.random.Generator, fittings: bool = True) -> list[tuple[str, str, str, float, Mesh]]:
     """``[(part, class, material, reflectivity, mesh (world))]`` of one placed road user.
 
-    A vehicle's paint reflectivity is drawn from ``rng`` (0.05 black .. 0.7 white); a pedestrian
-    walks or stands (:func:`~.human.sample_pose`); a rider sits on the saddle, hands towards the bar.
+    A vehicle's paint reflectivity is drawn from ``rng`` (0.05 black .. 0.7 white); with ``fittings`` its plates
+    (``retroreflector``) and lamps (``glossy_paint``) follow its parts (:func:`~.vehicles.vehicle_fittings`, no
+    draw); a pedestrian walks or stands (:func:`~.human.sample_pose`); a rider sits on the saddle, hands towards the bar.
     """
     from ...geometry import human
 
     if user.kind in VEHICLES:
         paint = float(rng.choice([0.7, 0.05, 0.3, 0.5, 0.2, 0.45]))
-        parts = vehicle_parts(user.kind, user.size)
-        return [(name, user.kind, "glass" if name == "glass" else "diffuse", {"body": paint, "glass": REFLECTIVITY["glass"], "tyres": REFLECTIVITY["tyre"]}[name], transformed(mesh, user.centre, user.yaw, user.z))
-                for name, mesh in parts.items() if len(mesh[1])]
+        parts = {**vehicle_parts(user.kind, user.size), **(vehicle_fittings(user.kind, user.size) if fittings else {})}
+        surfaces = {"body": ("diffuse", paint), "glass": ("glass", REFLECTIVITY["glass"]), "tyres": ("diffuse", REFLECTIVITY["tyre"]), **FITTINGS}
+        return [(name, user.kind, *surfaces[name], transformed(mesh, user.centre, user.yaw, user.z)) for name, mesh in parts.items() if len(mesh[1])]
     build = float(rng.choice(list(human.BUILDS.values())))
     if user.kind == "person":
         angles = human.sample_pose("walking" if rng.random() < 0.7 else "standing", rng, build)

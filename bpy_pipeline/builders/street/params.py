@@ -47,6 +47,9 @@ class StreetScene:
     ``k * ego_step`` metres further along, cycling over ``[-ego_span, ego_span]``, so consecutive
     frames see the street from different places. The ego car's footprint is kept free of road users;
     its body is not built (recorded scans leave the ego vehicle out).
+
+    ``car_fittings``: every vehicle's licence plates and lamps (geometry/vehicles.py ``vehicle_fittings``), tagged
+    ``retroreflector`` and ``glossy_paint`` (applied with ``effects.materials.objects: true``); ``false`` leaves them out.
     """
 
     arm_length: float = 100.0
@@ -96,6 +99,7 @@ class StreetScene:
     ego_height: float = 1.73
     ego_span: float = 60.0
     ego_step: float = 7.3
+    car_fittings: bool = True
 
 
 MAX_YARD_TREES = 100.0  # per 100 m^2: one tree a square metre (Distribute Points on Faces draws that many before thinning)

@@ -16,7 +16,7 @@ Each frame removes the last frame's road users and places new ones from the fram
 (lane following, platoons, parked cars, pedestrians on sidewalks and crossings, field-of-view
 aware when the run's sensors are known).
 
-A road user is one object per part (a vehicle's body, glass and tyres; a two-wheeler's frame,
+A road user is one object per part (a vehicle's body, glass, tyres, plates and lamps; a two-wheeler's frame,
 wheels and rider) sharing one instance id, so its 3D box holds all of it; the rider's points are
 labelled ``rider``, the box takes the vehicle's class (its first object, by name).
 """
@@ -106,7 +106,7 @@ class Intersection:
         headings, parts = {}, []
         for k, user in enumerate(placement.users):
             instance = USER_INSTANCE + k
-            for part, class_name, material, reflectivity, mesh in street.user_meshes(user, rng):
+            for part, class_name, material, reflectivity, mesh in street.user_meshes(user, rng, self.params.car_fittings):
                 name = f"street_user_{k:03d}_{user.kind}_{part}" if part != "rider" else f"street_user_{k:03d}_{user.kind}_~rider"
                 parts.append((name, class_name, material, reflectivity, instance, mesh))
             headings[instance] = float(user.yaw)
