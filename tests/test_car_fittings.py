@@ -16,6 +16,17 @@ def _boxes(mesh):
     return np.stack([corners.min(axis=1), corners.max(axis=1)], axis=1)
 
 
+def test_boxes_made_at_once_are_the_boxes_made_one_by_one():
+    from bpy_pipeline.geometry import primitives
+
+    rng = np.random.default_rng(0)
+    low = rng.normal(size=(5, 3))
+    high = low + rng.random((5, 3))
+    at_once = primitives.boxes_mesh(low, high)
+    one_by_one = primitives.merge([primitives.box_mesh(a[0], b[0], a[1], b[1], a[2], b[2]) for a, b in zip(low, high)])
+    assert np.array_equal(at_once[0], one_by_one[0]) and np.array_equal(at_once[1], one_by_one[1]) and at_once[1].dtype == np.int32
+
+
 @pytest.mark.parametrize("kind", sorted(SIZES))
 def test_each_vehicle_has_a_plate_at_each_end_and_a_lamp_in_each_corner(kind):
     L, W, H = SIZES[kind]

@@ -81,17 +81,16 @@ def vehicle_fittings(kind: str, size) -> dict[str, Mesh]:
         "truck": ((L / 2, 1.0, y - 0.05, clearance, 0.92 * H), (-L / 2, -1.0, y, clearance + 0.4, H)),
         "bus": ((L / 2, 1.0, y, clearance, H), (-L / 2, -1.0, y, clearance, H)),
     }[kind]
-    plates, lights = [], []
+    (pw, ph), (lw, lh) = PLATE, LAMP
+    plates, lights = [], []  # (x0, x1, y0, y1, z0, z1) of each box
     for x, out, half, z0, z1 in ends:
-        pw, ph = PLATE
         low = z0 + min(0.2 * (z1 - z0), 0.25)
-        plates.append(box_mesh(*sorted((x, x + out * 0.005)), -pw / 2, pw / 2, low, low + ph))
-        lw, lh = LAMP
+        plates.append((*sorted((x, x + out * 0.005)), -pw / 2, pw / 2, low, low + ph))
         mid = z0 + min(0.6 * (z1 - z0), 0.55)
         for side in (-1.0, 1.0):
             c = side * (half - 0.15)
-            lights.append(box_mesh(*sorted((x - out * 0.06, x + out * 0.01)), c - lw / 2, c + lw / 2, mid - lh / 2, mid + lh / 2))
-    return {"plates": primitives.merge(plates), "lights": primitives.merge(lights)}
+            lights.append((*sorted((x - out * 0.06, x + out * 0.01)), c - lw / 2, c + lw / 2, mid - lh / 2, mid + lh / 2))
+    return {name: primitives.boxes_mesh(np.array(b)[:, 0::2], np.array(b)[:, 1::2]) for name, b in (("plates", plates), ("lights", lights))}
 
 
 def two_wheeler_parts(kind: str, size) -> dict[str, Mesh]:

@@ -78,16 +78,22 @@ class Intersection:
         Each kept object is renamed and its mesh refilled in place: objects and meshes made and removed every
         frame made Blender rebuild the whole scene's relations twice a frame (about 40 ms of a street frame).
         The objects stay in the collection's order, so the export sees the parts in the order of ``parts``.
+        Only objects whose name changes are renamed (a rename costs Blender a pass over its names): first to
+        names no part takes, so that no new name is still another object's, then to their own. The spares
+        are ``street_user_kept_K`` by their place.
         """
         kept = list(self.users.objects)
-        for k, obj in enumerate(kept):  # free every name first: a part's name may be another object's now
-            obj.name = obj.data.name = f"street_user_kept_{k:03d}"
         while len(kept) < len(parts):
             name = f"street_user_kept_{len(kept):03d}"
             kept.append(bpy.data.objects.new(name, bpy.data.meshes.new(name)))
             self.users.objects.link(kept[-1])
-        for obj, (name, class_name, material, reflectivity, instance, mesh) in zip(kept, parts):
+        names = [part[0] for part in parts] + [f"street_user_kept_{k:03d}" for k in range(len(parts), len(kept))]
+        renamed = [(obj, name) for obj, name in zip(kept, names) if obj.name != name or obj.data.name != name]
+        for k, (obj, _) in enumerate(renamed):
+            obj.name = obj.data.name = f"street_user_renamed_{k:03d}"
+        for obj, name in renamed:
             obj.name = obj.data.name = name
+        for obj, (name, class_name, material, reflectivity, instance, mesh) in zip(kept, parts):
             fill_mesh(obj.data, *mesh)
             tag(obj, class_name, material, reflectivity, instance)
         for obj in kept[len(parts) :]:  # an empty mesh exports nothing
