@@ -71,6 +71,8 @@ ABLATION = {
     "40 m arms": ["scene.arm_length=40", "scene.ego_span=25"],
     "ideal scan (no noise, drop)": ["effects.ideal=true"],
     "more yard trees": ["scene.yard_trees=2"],  # the "Street Planting" group's trees added (2 per 100 m^2 of yard, 4 m apart)
+    "material models": ["effects.materials.objects=true"],  # the vehicles' plates (retroreflector) and lamps (glossy) as their models
+    "glossy vehicles": ["effects.materials.objects=true", "effects.materials.classes={car: glossy_paint, van: glossy_paint, truck: glossy_paint, bus: glossy_paint}"],
 }
 
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import primitives
+from .objects import PLATE_SIZE
 from .primitives import beam_mesh, box_mesh, quad_mesh, wheel_mesh
 
 Mesh = tuple[np.ndarray, np.ndarray]  # vertices (n, 3) float64, triangles (m, 3) int32
@@ -58,7 +59,6 @@ def vehicle_parts(kind: str, size) -> dict[str, Mesh]:
     return {"body": primitives.merge(body), "glass": primitives.merge(glass), "tyres": tyres}
 
 
-PLATE = (0.52, 0.11)  # m: an EU licence plate (geometry/objects.py PLATE_SIZE)
 LAMP = (0.2, 0.07)  # m: a lamp's width and height
 
 
@@ -81,7 +81,7 @@ def vehicle_fittings(kind: str, size) -> dict[str, Mesh]:
         "truck": ((L / 2, 1.0, y - 0.05, clearance, 0.92 * H), (-L / 2, -1.0, y, clearance + 0.4, H)),
         "bus": ((L / 2, 1.0, y, clearance, H), (-L / 2, -1.0, y, clearance, H)),
     }[kind]
-    (pw, ph), (lw, lh) = PLATE, LAMP
+    (pw, ph), (lw, lh) = PLATE_SIZE, LAMP
     plates, lights = [], []  # (x0, x1, y0, y1, z0, z1) of each box
     for x, out, half, z0, z1 in ends:
         low = z0 + min(0.2 * (z1 - z0), 0.25)
