@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import primitives
+from .vehicles import PLATE_SIZE
 
 GLASS_REFLECTIVITY = 0.08  # two faces of about 4 % each at normal incidence
 INTERIOR_REFLECTIVITY = 0.15
@@ -197,7 +198,6 @@ def car_parts(style: CarStyle, height: float = NOMINAL_HEIGHT) -> dict:
 # false`` (the population's ``car.fittings``); inserted cars with ``scene.car_fittings``. Their reflectivities
 # differ from every paint's, so an instance's parts keep their models apart (lidar/materials.py).
 FITTINGS = {"plates": ("retroreflector", 0.8), "lights": ("glossy_paint", 0.6)}  # part -> (lidar_material, reflectivity)
-PLATE_SIZE = (0.52, 0.11)  # m: an EU plate (520 x 110 mm)
 
 
 def car_fittings(style: CarStyle, height: float = NOMINAL_HEIGHT) -> dict:

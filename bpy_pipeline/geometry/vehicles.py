@@ -9,7 +9,6 @@ from __future__ import annotations
 import numpy as np
 
 from . import primitives
-from .objects import PLATE_SIZE
 from .primitives import beam_mesh, box_mesh, quad_mesh, wheel_mesh
 
 Mesh = tuple[np.ndarray, np.ndarray]  # vertices (n, 3) float64, triangles (m, 3) int32
@@ -59,6 +58,7 @@ def vehicle_parts(kind: str, size) -> dict[str, Mesh]:
     return {"body": primitives.merge(body), "glass": primitives.merge(glass), "tyres": tyres}
 
 
+PLATE_SIZE = (0.52, 0.11)  # m: an EU licence plate (520 x 110 mm); geometry/objects.py's cars use it too
 LAMP = (0.2, 0.07)  # m: a lamp's width and height
 
 
