@@ -265,8 +265,10 @@ def export_scene(table: ClassTable, extra_rules=(), depsgraph=None, keep_within=
         if not instance.is_instance and obj.name_full in drawn_as_instance:
             continue  # a curve or text: its mesh comes again as its own instance, read there, once
         labelled = 0
-        if instance.is_instance:  # the instancer's instances come in their order
-            seen = instancers.setdefault(instance.parent.name_full, [instance_attribute(instance.parent, INSTANCE_ATTRIBUTE, "Instance"), 0])
+        if instance.is_instance:  # the instancer's instances come in their order; its attribute read once, at the first
+            seen = instancers.get(instance.parent.name_full)
+            if seen is None:
+                seen = instancers[instance.parent.name_full] = [instance_attribute(instance.parent, INSTANCE_ATTRIBUTE, "Instance"), 0]
             if seen[0] is not None:
                 labelled = seen[0](seen[1])
             seen[1] += 1
