@@ -1,9 +1,13 @@
 """Licence plates and lamps on every builder's vehicles: where they sit, how they are tagged, what a scan reads from them."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
+from bpy_pipeline.builders.base import Distribution
 from bpy_pipeline.builders.street import layout as street
+from bpy_pipeline.builders.street.params import StreetScene
 from bpy_pipeline.geometry.objects import FITTINGS
 from bpy_pipeline.geometry.vehicles import vehicle_fittings, vehicle_parts
 
@@ -49,6 +53,13 @@ def test_each_vehicle_has_a_plate_at_each_end_and_a_lamp_in_each_corner(kind):
     assert sorted(np.sign((lamps[:, 0, 0] + lamps[:, 1, 0]) * (lamps[:, 0, 1] + lamps[:, 1, 1])).tolist()) == [-1, -1, 1, 1]
 
 
+def _placed(seed=0):
+    """A busy street's road users (12 driving and 8 parked vehicles wanted), placed from ``seed``."""
+    params = dataclasses.replace(StreetScene(), vehicles=Distribution("normal", 12.0, 0.0, 0.0, 40.0), parked=Distribution("normal", 8.0, 0.0, 0.0, 40.0))
+    scene_layout = street.street_layout(params, np.random.default_rng(params.layout_seed))
+    return params, scene_layout, street.place_users(params, scene_layout, np.random.default_rng(seed))
+
+
 def test_a_street_vehicle_tags_its_fittings_and_draws_nothing_for_them():
     params, layout, placement = _placed()
     vehicles = [u for u in placement.users if u.kind in street.VEHICLES]
@@ -63,17 +74,6 @@ def test_a_street_vehicle_tags_its_fittings_and_draws_nothing_for_them():
             assert parts[name][:2] == bare[name][:2] and np.array_equal(parts[name][2][0], bare[name][2][0])
         for name in ("plates", "lights"):
             assert parts[name][:2] == FITTINGS[name]
-
-
-def _placed(seed=0):
-    import dataclasses
-
-    from bpy_pipeline.builders.base import Distribution
-    from bpy_pipeline.builders.street.params import StreetScene
-
-    params = dataclasses.replace(StreetScene(), vehicles=Distribution("normal", 12.0, 0.0, 0.0, 40.0), parked=Distribution("normal", 8.0, 0.0, 0.0, 40.0))
-    scene_layout = street.street_layout(params, np.random.default_rng(params.layout_seed))
-    return params, scene_layout, street.place_users(params, scene_layout, np.random.default_rng(seed))
 
 
 BUILDERS = {  # config overrides whose scene has procedural cars, and the classes those cars take
