@@ -358,6 +358,41 @@ def test_the_cone_prefilter_keeps_every_pair_of_the_full_matrix_compiled_or_nump
         assert all(np.array_equal(a, b) for a, b in zip(compiled_pairs, numpy_pairs))
 
 
+def test_the_compiled_cone_test_skips_only_boxes_no_ray_of_a_block_can_reach():
+    """cone_blocks prunes (block of consecutive rays, box) pairs by the blocks' bounding cones: on a spinning
+    pattern most pairs go, yet every pair the full matrix keeps is in a kept block, the pairs are numpy's, rays on a
+    cone's edge included; a box around the sensor keeps every block, and rays all round the sphere keep every box."""
+    from bpy_pipeline.lidar.kernels import compiled
+    from bpy_pipeline.lidar.numba_kernels import CONE_RAYS
+    from bpy_pipeline.lidar.sensors import resolve_sensor, sensor_pattern
+    from bpy_pipeline.lidar.visibility import CONE_MARGIN, cone_pairs
+
+    kernels = compiled()
+    if kernels is None:
+        pytest.skip("numba is not installed: the numpy cone test has no blocks")
+    directions = np.ascontiguousarray(sensor_pattern(resolve_sensor({"preset": "hdl64e"})).directions, np.float64)
+    rng = np.random.default_rng(3)
+    centres = rng.normal(size=(60, 3)) * [25.0, 25.0, 1.0]
+    centres[-1] = [0.3, 0.2, 0.1]  # the sensor inside this one's sphere: every ray may pass it
+    distance = np.linalg.norm(centres, axis=1)
+    axes = centres / distance[:, None]
+    radius = rng.uniform(0.5, 3.0, len(centres))
+    cos_limit = np.where(distance > radius, np.sqrt(np.clip(1 - (radius / distance) ** 2, 0, 1)), -2.0)
+    # the first ten cones' edges through a ray each: a ray of a block right on a box's boundary
+    for j, i in enumerate(rng.choice(len(directions), 10, replace=False)):
+        cos_limit[j] = directions[i] @ axes[j]
+    limit = cos_limit - CONE_MARGIN
+    keep = kernels.cone_blocks(directions, np.ascontiguousarray(axes), limit)
+    full = np.nonzero(directions @ axes.T >= limit[None])
+    assert keep[full[0] // CONE_RAYS, full[1]].all()
+    assert keep[:, -1].all() and keep[:, :-1].mean() < 0.3
+    compiled_pairs = cone_pairs(directions, axes, cos_limit, kernels)
+    numpy_pairs = cone_pairs(directions, axes, cos_limit)
+    assert all(np.array_equal(a, b) for a, b in zip(compiled_pairs, numpy_pairs)) and len(compiled_pairs[0]) > 1000
+    everywhere = _unit(rng.normal(size=(4 * CONE_RAYS, 3)))
+    assert kernels.cone_blocks(everywhere, np.ascontiguousarray(axes), limit).all()
+
+
 def _turn_about_numpy(pivot_xy, position_xy, yaw, angle_deg):
     """turn_about as numpy scalars computed it before (the reference)."""
     angle = np.radians(angle_deg)

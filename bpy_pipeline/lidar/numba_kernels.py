@@ -237,23 +237,78 @@ def triangle_planes(vertices, triangles, normal, offset):
         offset[i] = ((0.0 + nx * x0) + nz * z0) + ny * y0  # einsum starts from +0.0 (a -0.0 product becomes 0.0)
 
 
+CONE_RAYS = 256  # rays per block of cone_pairs' prune: consecutive rays of a pattern point close together
+CONE_SLACK = 1e-6  # radians added to every angle of the prune: far beyond the error of acos near 1 (about 1.5e-8)
+
+
+@jit
+def cone_blocks(directions, axes, limit):
+    """``(b, k)`` bool: which boxes' cones any ray of each block of :data:`CONE_RAYS` consecutive ``directions`` (n, 3)
+    unit may fall in (:func:`cone_pairs`' test: dot with ``axes[box]`` (k, 3) unit at least ``limit[box]`` (k,)).
+
+    Each block is bounded by a cone about its rays' summed direction ``c``, of half-angle ``beta = acos(min d.c)`` (its
+    farthest ray); a box's cone has half-angle ``alpha = acos(limit)``. A ray within ``beta`` of ``c`` is at least
+    ``angle(c, box axis) - beta`` from the box's axis (the triangle inequality on the sphere), so a box whose axis is
+    farther than ``alpha + beta`` from ``c`` can take none of the block's rays: kept are the boxes with
+    ``a.c >= cos(alpha + beta + 3 slack)`` (expanded as ``cos alpha cos(beta + 3 slack) - sin alpha sin(...)``), and every
+    box where that angle reaches pi. The :data:`CONE_SLACK` on each of the three angles drops only pairs the test
+    itself refuses, whatever acos, cos and sin round to."""
+    n, k = directions.shape[0], axes.shape[0]
+    blocks = (n + CONE_RAYS - 1) // CONE_RAYS
+    keep = np.ones((blocks, k), np.bool_)
+    alpha, cos_alpha, sin_alpha = np.empty(k), np.empty(k), np.empty(k)
+    for j in range(k):
+        alpha[j] = np.arccos(min(max(limit[j], -1.0), 1.0))
+        cos_alpha[j], sin_alpha[j] = np.cos(alpha[j]), np.sin(alpha[j])
+    for b in range(blocks):
+        start, stop = b * CONE_RAYS, min(n, (b + 1) * CONE_RAYS)
+        cx, cy, cz = 0.0, 0.0, 0.0
+        for i in range(start, stop):
+            cx += directions[i, 0]
+            cy += directions[i, 1]
+            cz += directions[i, 2]
+        norm = np.sqrt(cx * cx + cy * cy + cz * cz)
+        if norm < 1e-3 * (stop - start):  # rays all round the sphere: no axis bounds them usefully (and none at norm 0)
+            continue
+        cx, cy, cz = cx / norm, cy / norm, cz / norm
+        nearest = 1.0
+        for i in range(start, stop):
+            nearest = min(nearest, directions[i, 0] * cx + directions[i, 1] * cy + directions[i, 2] * cz)
+        spread = np.arccos(min(max(nearest, -1.0), 1.0)) + 3.0 * CONE_SLACK
+        cos_spread, sin_spread = np.cos(spread), np.sin(spread)
+        for j in range(k):
+            if alpha[j] + spread < np.pi:
+                keep[b, j] = axes[j, 0] * cx + axes[j, 1] * cy + axes[j, 2] * cz >= cos_alpha[j] * cos_spread - sin_alpha[j] * sin_spread
+    return keep
+
+
 @jit
 def cone_pairs(directions, axes, limit):
     """``(ray, box)`` int64 pairs, ray-major (``np.nonzero``'s order), of ``directions`` (n, 3) whose dot product with
-    ``axes[box]`` (k, 3) is at least ``limit[box]`` (k,): a count pass, then a fill pass (no (n, k) matrix)."""
+    ``axes[box]`` (k, 3) is at least ``limit[box]`` (k,): a count pass, then a fill pass (no (n, k) matrix). Each ray is
+    tested against the boxes :func:`cone_blocks` keeps for its block only, in box order: the same pairs as testing every box."""
     n, k = directions.shape[0], axes.shape[0]
-    count = 0
-    for i in range(n):
-        dx, dy, dz = directions[i, 0], directions[i, 1], directions[i, 2]
-        for j in range(k):
-            if dx * axes[j, 0] + dy * axes[j, 1] + dz * axes[j, 2] >= limit[j]:
-                count += 1
-    ray, box = np.empty(count, np.int64), np.empty(count, np.int64)
-    at = 0
-    for i in range(n):
-        dx, dy, dz = directions[i, 0], directions[i, 1], directions[i, 2]
-        for j in range(k):
-            if dx * axes[j, 0] + dy * axes[j, 1] + dz * axes[j, 2] >= limit[j]:
-                ray[at], box[at] = i, j
-                at += 1
-    return ray, box
+    keep = cone_blocks(directions, axes, limit)
+    index, near, bound = np.empty(k, np.int64), np.empty((k, 3)), np.empty(k)  # the kept boxes of the block at hand
+    out = np.empty(0, np.int64), np.empty(0, np.int64)
+    for fill in (False, True):
+        at = 0
+        for b in range(keep.shape[0]):
+            m = 0
+            for j in range(k):
+                if keep[b, j]:
+                    index[m], bound[m] = j, limit[j]
+                    near[m, 0], near[m, 1], near[m, 2] = axes[j, 0], axes[j, 1], axes[j, 2]
+                    m += 1
+            if m == 0:
+                continue
+            for i in range(b * CONE_RAYS, min(n, (b + 1) * CONE_RAYS)):
+                dx, dy, dz = directions[i, 0], directions[i, 1], directions[i, 2]
+                for q in range(m):
+                    if dx * near[q, 0] + dy * near[q, 1] + dz * near[q, 2] >= bound[q]:
+                        if fill:
+                            out[0][at], out[1][at] = i, index[q]
+                        at += 1
+        if not fill:
+            out = np.empty(at, np.int64), np.empty(at, np.int64)
+    return out
