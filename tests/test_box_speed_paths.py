@@ -361,7 +361,8 @@ def test_the_cone_prefilter_keeps_every_pair_of_the_full_matrix_compiled_or_nump
 def test_the_compiled_cone_test_skips_only_boxes_no_ray_of_a_block_can_reach():
     """cone_blocks prunes (block of consecutive rays, box) pairs by the blocks' bounding cones: on a spinning
     pattern most pairs go, yet every pair the full matrix keeps is in a kept block, the pairs are numpy's, rays on a
-    cone's edge included; a box around the sensor keeps every block, and rays all round the sphere keep every box."""
+    cone's edge included; a box around the sensor keeps every block, rays all round the sphere keep every box, and so
+    does a block with a ray that is not unit."""
     from bpy_pipeline.lidar.kernels import compiled
     from bpy_pipeline.lidar.numba_kernels import CONE_RAYS
     from bpy_pipeline.lidar.sensors import resolve_sensor, sensor_pattern
@@ -391,6 +392,10 @@ def test_the_compiled_cone_test_skips_only_boxes_no_ray_of_a_block_can_reach():
     assert all(np.array_equal(a, b) for a, b in zip(compiled_pairs, numpy_pairs)) and len(compiled_pairs[0]) > 1000
     everywhere = _unit(rng.normal(size=(4 * CONE_RAYS, 3)))
     assert kernels.cone_blocks(everywhere, np.ascontiguousarray(axes), limit).all()
+    longer = directions[: 4 * CONE_RAYS].copy()
+    longer[CONE_RAYS + 7] *= 1.0 + 1e-9  # not unit: its block is never pruned, the others are
+    pruned = kernels.cone_blocks(longer, np.ascontiguousarray(axes), limit)
+    assert pruned[1].all() and not pruned[[0, 2, 3]].all()
 
 
 def _turn_about_numpy(pivot_xy, position_xy, yaw, angle_deg):

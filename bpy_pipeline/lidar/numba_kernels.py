@@ -239,6 +239,7 @@ def triangle_planes(vertices, triangles, normal, offset):
 
 CONE_RAYS = 256  # rays per block of cone_pairs' prune: consecutive rays of a pattern point close together
 CONE_SLACK = 1e-6  # radians added to every angle of the prune: far beyond the error of acos near 1 (about 1.5e-8)
+CONE_UNIT = 1e-14  # |v.v - 1| up to which a direction counts as unit for the prune (float64 unit vectors: about 4e-16)
 
 
 @jit
@@ -252,23 +253,28 @@ def cone_blocks(directions, axes, limit):
     farther than ``alpha + beta`` from ``c`` can take none of the block's rays: kept are the boxes with
     ``a.c >= cos(alpha + beta + 3 slack)`` (expanded as ``cos alpha cos(beta + 3 slack) - sin alpha sin(...)``), and every
     box where that angle reaches pi. The :data:`CONE_SLACK` on each of the three angles drops only pairs the test
-    itself refuses, whatever acos, cos and sin round to."""
+    itself refuses, whatever acos, cos and sin round to. Angles stand for dot products only between unit vectors, so a
+    block with a ray, or a box with an axis, farther than :data:`CONE_UNIT` from unit length is never pruned."""
     n, k = directions.shape[0], axes.shape[0]
     blocks = (n + CONE_RAYS - 1) // CONE_RAYS
     keep = np.ones((blocks, k), np.bool_)
     alpha, cos_alpha, sin_alpha = np.empty(k), np.empty(k), np.empty(k)
     for j in range(k):
-        alpha[j] = np.arccos(min(max(limit[j], -1.0), 1.0))
+        unit = abs(axes[j, 0] * axes[j, 0] + axes[j, 1] * axes[j, 1] + axes[j, 2] * axes[j, 2] - 1.0) <= CONE_UNIT
+        alpha[j] = np.arccos(min(max(limit[j], -1.0), 1.0)) if unit else np.pi
         cos_alpha[j], sin_alpha[j] = np.cos(alpha[j]), np.sin(alpha[j])
     for b in range(blocks):
         start, stop = b * CONE_RAYS, min(n, (b + 1) * CONE_RAYS)
         cx, cy, cz = 0.0, 0.0, 0.0
+        unit = True
         for i in range(start, stop):
-            cx += directions[i, 0]
-            cy += directions[i, 1]
-            cz += directions[i, 2]
+            dx, dy, dz = directions[i, 0], directions[i, 1], directions[i, 2]
+            cx += dx
+            cy += dy
+            cz += dz
+            unit = unit and abs(dx * dx + dy * dy + dz * dz - 1.0) <= CONE_UNIT
         norm = np.sqrt(cx * cx + cy * cy + cz * cz)
-        if norm < 1e-3 * (stop - start):  # rays all round the sphere: no axis bounds them usefully (and none at norm 0)
+        if not unit or norm < 1e-3 * (stop - start):  # rays all round the sphere: no axis bounds them usefully (none at norm 0)
             continue
         cx, cy, cz = cx / norm, cy / norm, cz / norm
         nearest = 1.0
