@@ -34,8 +34,8 @@ def test_boxes_made_at_once_are_the_boxes_made_one_by_one():
 @pytest.mark.parametrize("kind", sorted(SIZES))
 def test_each_vehicle_has_a_plate_at_each_end_and_a_lamp_in_each_corner(kind):
     L, W, H = SIZES[kind]
-    fittings = vehicle_fittings(kind, SIZES[kind])
     body = vehicle_parts(kind, SIZES[kind])["body"][0]
+    fittings = vehicle_fittings(body, L)
     plates, lamps = _boxes(fittings["plates"]), _boxes(fittings["lights"])
     assert len(plates) == 2 and len(lamps) == 4
     for low, high in plates:

@@ -62,28 +62,22 @@ PLATE_SIZE = (0.52, 0.11)  # m: an EU licence plate (520 x 110 mm); geometry/obj
 LAMP = (0.2, 0.07)  # m: a lamp's width and height
 
 
-def vehicle_fittings(kind: str, size) -> dict[str, Mesh]:
-    """``{"plates", "lights"}`` meshes of a vehicle of ``kind`` and ``size``, own frame: a licence plate centred on
-    each end (5 mm proud) and a lamp in each corner of each end (1 cm proud), on the body part that ends the vehicle
-    there (:func:`vehicle_parts`: a car's lower body, a van's hood and box, a truck's cab and cargo box, a bus).
+def vehicle_fittings(body: np.ndarray, length: float) -> dict[str, Mesh]:
+    """``{"plates", "lights"}`` meshes of a vehicle whose :func:`vehicle_parts` body has vertices ``body`` (n, 3) and whose
+    length is ``length`` (m), own frame: a licence plate centred on each end (5 mm proud) and a lamp in each corner of each
+    end (1 cm proud), on the body face that ends the vehicle there (a car's lower body, a van's hood and box, a truck's
+    cab and cargo box, a bus), read from the body's vertices on that end.
 
     Each end's face spans heights ``z0 .. z1``: the plate's lower edge is ``min(0.2 (z1 - z0), 0.25)`` m above
-    ``z0``, the lamps' centres ``min(0.6 (z1 - z0), 0.55)`` m, 0.15 m in from the sides. These parts stand the
+    ``z0``, the lamps' centres ``min(0.6 (z1 - z0), 0.55)`` m, 0.15 m in from the face's sides. These parts stand the
     millimetres proud of the box ``[-L/2, L/2] x ...`` that holds the other parts.
     """
-    L, W, H = (float(s) for s in size)
-    radius = {"car": 0.31, "van": 0.34, "truck": 0.5, "bus": 0.5}[kind]
-    clearance = 0.55 * radius
-    y = W / 2
-    ends = {  # (x of the end face, outward sign, half width, z0, z1): front, then rear
-        "car": ((L / 2, 1.0, y, clearance, 0.58 * H), (-L / 2, -1.0, y, clearance, 0.58 * H)),
-        "van": ((L / 2, 1.0, y, clearance, 0.5 * H), (-L / 2, -1.0, y, clearance, H)),
-        "truck": ((L / 2, 1.0, y - 0.05, clearance, 0.92 * H), (-L / 2, -1.0, y, clearance + 0.4, H)),
-        "bus": ((L / 2, 1.0, y, clearance, H), (-L / 2, -1.0, y, clearance, H)),
-    }[kind]
     (pw, ph), (lw, lh) = PLATE_SIZE, LAMP
     plates, lights = [], []  # (x0, x1, y0, y1, z0, z1) of each box
-    for x, out, half, z0, z1 in ends:
+    for out in (1.0, -1.0):  # front, then rear
+        x = out * length / 2
+        face = body[np.abs(body[:, 0] - x) <= 1e-9]
+        z0, z1, half = face[:, 2].min(), face[:, 2].max(), np.abs(face[:, 1]).max()
         low = z0 + min(0.2 * (z1 - z0), 0.25)
         plates.append((*sorted((x, x + out * 0.005)), -pw / 2, pw / 2, low, low + ph))
         mid = z0 + min(0.6 * (z1 - z0), 0.55)

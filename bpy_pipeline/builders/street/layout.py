@@ -455,7 +455,9 @@ def user_meshes(user: RoadUser, rng: np.random.Generator, fittings: bool = True)
 
     if user.kind in VEHICLES:
         paint = float(rng.choice([0.7, 0.05, 0.3, 0.5, 0.2, 0.45]))
-        parts = {**vehicle_parts(user.kind, user.size), **(vehicle_fittings(user.kind, user.size) if fittings else {})}
+        parts = vehicle_parts(user.kind, user.size)
+        if fittings:
+            parts |= vehicle_fittings(parts["body"][0], user.size[0])
         surfaces = {"body": ("diffuse", paint), "glass": ("glass", REFLECTIVITY["glass"]), "tyres": ("diffuse", REFLECTIVITY["tyre"]), **FITTINGS}
         return [(name, user.kind, *surfaces[name], transformed(mesh, user.centre, user.yaw, user.z)) for name, mesh in parts.items() if len(mesh[1])]
     build = float(rng.choice(list(human.BUILDS.values())))
