@@ -78,6 +78,8 @@ class Frame:
     buffers : the exported :class:`~bpy_pipeline.buffers.SceneBuffers` (a real scan's: its inserted objects)
     caster : the scan's :class:`~bpy_pipeline.lidar.raycast.RayCaster` of ``buffers`` at ``pose`` (the boxes reuse it)
     chunks : the scan's ``(points, beam)`` chunks, consumed by the effects stage
+    direct_returns : (d,) int64 the instance of each of the scan's returns that met no mirror, before the effects, when the
+        boxes take their ``visible`` counts from them (:func:`~bpy_pipeline.stages.scan.counts_direct_returns`); else ``None``
     points : (p,) POINT_DTYPE records in the output frame (sensor or world; a rig's: RIG_POINT_DTYPE)
     boxes : (b,) BOX_DTYPE box labels in the output frame, ``None`` when no box format is asked for
     images : {name: (h, w, 3) uint8} camera renderings (KITTI's ``image_2``)
@@ -99,6 +101,7 @@ class Frame:
     buffers: SceneBuffers | None = None
     caster: RayCaster | None = None
     chunks: Iterable | None = None
+    direct_returns: np.ndarray | None = None
     points: np.ndarray | None = None
     boxes: np.ndarray | None = None
     files: list[str] = field(default_factory=list)

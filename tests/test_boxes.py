@@ -273,3 +273,133 @@ def test_pipeline_writes_boxes_that_hold_the_hall_points(tmp_path):
             assert entry["points"] == entry["visible"] <= entry["unoccluded"]  # no effects: every visible ray is a point
             checked += 1
     assert checked >= 4
+
+
+def people_pillar_mirror_and_glass():
+    """:func:`people_and_pillar` with a mirror 3 m behind the sensor that sends beams back into the scene and a glass
+    pane in front of person 10, part of its instance (as a car's windows are the car's)."""
+    from bpy_pipeline.lidar.scanner import GLASS, MIRROR
+
+    buffers, people = people_and_pillar()
+    objects = buffers.objects
+    mirror = primitives.translated(primitives.box(0.05, 12.0, 4.0), (-3.0, 0.0, 1.5))
+    pane = primitives.translated(primitives.box(0.02, 1.5, 2.5), (6.0, 0.0, 1.0))
+    vertices = np.concatenate([buffers.vertices, mirror[0], pane[0]])
+    triangles = np.concatenate([buffers.triangles, mirror[1] + len(buffers.vertices), pane[1] + len(buffers.vertices) + len(mirror[0])]).astype(np.int32)
+    rows = len(objects)
+    owner = np.concatenate([buffers.triangle_object, np.full(len(mirror[1]), rows, np.int32), np.full(len(pane[1]), rows + 1, np.int32)])
+    table = ObjectTable(list(objects.names) + ["mirror", "pane"], list(objects.parents) + ["", ""], list(objects.class_names) + ["mirror", "glass"],
+                        np.zeros(rows + 2, np.uint16), np.concatenate([objects.instance, [4, 10]]).astype(np.uint32),
+                        np.concatenate([objects.material, [MIRROR, GLASS]]).astype(np.uint8), np.concatenate([objects.reflectivity, [0.9, 0.1]]).astype(np.float32))  # fmt: skip
+    return SceneBuffers(vertices, triangles, owner, table), people
+
+
+@pytest.mark.parametrize("kernel", ["numba", "numpy"])
+@pytest.mark.parametrize("glass_reflect", [0.0, 1.0])
+def test_visible_counts_from_the_scans_direct_returns_are_the_traced_ones(kernel, glass_reflect, monkeypatch):
+    """The boxes' ``visible`` counted from the scan's returns that met no mirror is what tracing the rays that pass
+    the boxes again gives, with a mirror in the scene and a box's glass passed or reflected (no draw either way)."""
+    from bpy_pipeline.lidar.scanner import MirrorGlassRules, scan_chunks
+    from bpy_pipeline.lidar.visibility import counts_per_instance, visibility
+
+    if kernel == "numba":
+        pytest.importorskip("numba")
+    monkeypatch.setenv("BPY_PIPELINE_SCAN_KERNEL", kernel)
+    buffers, people = people_pillar_mirror_and_glass()
+    surfaces = MirrorGlassRules(mirror_return_deg=0.5, glass_return_deg=5.0, glass_reflect=glass_reflect)
+    rays = list(iter_pattern(SENSOR, 1 << 14))
+    caster = RayCaster(buffers, frame=POSE)
+    points = np.concatenate([p for p, _ in scan_chunks(caster, buffers, rays, POSE, SENSOR.min_range, SENSOR.max_range, max_bounces=3, surfaces=surfaces, rng=np.random.default_rng(0))])
+    ghosts = points["bounces"] > 0
+    assert (ghosts & (points["instance"] == 4)).sum() > 1000  # the mirror's returns
+    traced = bx.fit_boxes(buffers, ["person", "pillar", "wall"], {k: p.yaw for k, p in people.items()})
+    counted = traced.copy()
+    visibility(buffers, traced, rays, POSE, SENSOR.min_range, SENSOR.max_range, cell_deg=2.5, caster=caster, surfaces=surfaces, rng=np.random.default_rng(1))
+    visibility(buffers, counted, rays, POSE, SENSOR.min_range, SENSOR.max_range, cell_deg=2.5, caster=caster, surfaces=surfaces, rng=np.random.default_rng(1),
+               direct_returns=points["instance"][points["bounces"] == 0].astype(np.int64))  # fmt: skip
+    assert (traced["visible"] > 0).all() and (traced["visible"] < traced["unoccluded"]).any()
+    np.testing.assert_array_equal(counted["visible"], traced["visible"])
+    np.testing.assert_array_equal(counted["unoccluded"], traced["unoccluded"])
+    np.testing.assert_array_equal(counted["truncation"], traced["truncation"])
+    if glass_reflect == 1.0:  # the pane's reflected returns carry its box's instance: counting them too would not be the trace's
+        assert (ghosts & (points["instance"] == 10)).sum() > 20
+        every = counts_per_instance(traced["instance"], points["instance"].astype(np.int64))
+        assert (every > traced["visible"]).any()
+
+
+def test_counts_per_instance():
+    from bpy_pipeline.lidar.visibility import counts_per_instance
+
+    values = np.array([7, 3, 3, 9, 12, 7, 7, 0, 100], np.int64)
+    np.testing.assert_array_equal(counts_per_instance(np.array([7, 100, 3, 5]), values), [3, 1, 2, 0])
+    np.testing.assert_array_equal(counts_per_instance(np.array([200]), values), [0])
+    assert counts_per_instance(np.zeros(0, np.int64), values).shape == (0,)
+    np.testing.assert_array_equal(counts_per_instance(np.array([3, 7]), np.zeros(0, np.int64)), [0, 0])
+
+
+def test_a_box_short_of_its_instance_keeps_the_trace():
+    """A rider's box fitted without the motorcycle it shares an instance with does not hold it: returns from the
+    motorcycle outside the box's sphere are not the trace's, so the boxes take the trace (``boxes_hold_their_instances``)."""
+    from bpy_pipeline.lidar.scanner import scan_chunks
+    from bpy_pipeline.lidar.visibility import visibility
+    from bpy_pipeline.stages.annotate import boxes_hold_their_instances
+
+    buffers, people = people_and_pillar()
+    cart = upright_box((1.0, 1.6, 1.0), (8.0, 1.6), 0.0)  # beside person 10, outside its box's sphere, its instance
+    objects, rows = buffers.objects, len(buffers.objects)
+    table = ObjectTable(list(objects.names) + ["cart"], list(objects.parents) + [""], list(objects.class_names) + ["motorcycle"], np.zeros(rows + 1, np.uint16),
+                        np.concatenate([objects.instance, [10]]).astype(np.uint32), np.zeros(rows + 1, np.uint8), np.full(rows + 1, 0.5, np.float32))  # fmt: skip
+    whole = SceneBuffers(np.concatenate([buffers.vertices, cart[0]]), np.concatenate([buffers.triangles, cart[1] + len(buffers.vertices)]).astype(np.int32),
+                         np.concatenate([buffers.triangle_object, np.full(len(cart[1]), rows, np.int32)]), table)  # fmt: skip
+    classes = ["person", "pillar", "wall"]
+    boxes = bx.fit_boxes(whole, classes, {k: p.yaw for k, p in people.items()})
+    assert not boxes_hold_their_instances(whole, boxes, classes)
+    assert boxes_hold_their_instances(whole, boxes, classes + ["motorcycle"]) and boxes_hold_their_instances(buffers, bx.fit_boxes(buffers, classes), classes)
+    rays = list(iter_pattern(SENSOR, 1 << 14))
+    caster = RayCaster(whole, frame=POSE)
+    points = np.concatenate([p for p, _ in scan_chunks(caster, whole, rays, POSE, SENSOR.min_range, SENSOR.max_range)])
+    traced, counted = boxes.copy(), boxes.copy()
+    visibility(whole, traced, rays, POSE, SENSOR.min_range, SENSOR.max_range, cell_deg=2.5, caster=caster)
+    visibility(whole, counted, rays, POSE, SENSOR.min_range, SENSOR.max_range, cell_deg=2.5, caster=caster, direct_returns=points["instance"][points["bounces"] == 0].astype(np.int64))
+    ten = boxes["instance"] == 10
+    assert counted["visible"][ten] > traced["visible"][ten]  # why the guard is there
+
+
+def test_the_scan_keeps_its_direct_returns_only_where_the_boxes_trace_would_cast_its_rays():
+    from bpy_pipeline.config import load_config
+    from bpy_pipeline.frame import Frame
+    from bpy_pipeline.stages.scan import counts_direct_returns
+
+    def kept(overrides, moving=False):
+        config = load_config(None, ["scene.builder=parking"] + overrides)
+        frame = Frame(0, config, np.random.default_rng(0))
+        if moving:
+            frame.trajectory = object()
+        return counts_direct_returns(config, frame)
+
+    assert kept([]) and kept(["effects.mirrors.glass.reflect_fraction=1.0"])
+    assert not kept(["output.boxes.formats=[]"])  # no boxes
+    assert not kept([], moving=True)  # the boxes trace from the frame's first pose
+    assert not kept(["effects.mirrors.glass.reflect_fraction=0.5"])  # glass draws: the trace would draw again
+    assert not kept(["sensor.divergence.rays=7", "sensor.divergence.mrad=3.0"])  # a firing's sub-rays
+
+
+@pytest.mark.bpy
+def test_a_garage_run_counts_visible_from_its_scan_with_the_traces_boxes(bpy_scene, tmp_path, monkeypatch):
+    from bpy_pipeline.config import load_config
+    from bpy_pipeline.plan import run_frames
+    from bpy_pipeline.stages import scan as scan_stages
+
+    config = load_config(None, ["scene.builder=parking", "frames=3", "seed=2"])
+    boxes, kept = {}, {}
+    for counted in (True, False):
+        if not counted:
+            monkeypatch.setattr(scan_stages, "counts_direct_returns", lambda config, frame: False)
+        bpy_scene.ops.wm.read_factory_settings(use_empty=True)
+        frames = list(run_frames(config, tmp_path / str(counted)))
+        boxes[counted] = [f.boxes for f in frames]
+        kept[counted] = [f.direct_returns is not None for f in frames]
+    assert kept == {True: [True] * 3, False: [False] * 3}
+    assert sum(len(b) for b in boxes[True]) > 5 and all((b["visible"] > 0).any() for b in boxes[True])
+    for ours, traced in zip(boxes[True], boxes[False]):
+        assert ours.tobytes() == traced.tobytes()

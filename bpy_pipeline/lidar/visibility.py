@@ -90,6 +90,7 @@ def visibility(
     caster: RayCaster | None = None,
     surfaces=None,
     rng: np.random.Generator | None = None,
+    direct_returns: np.ndarray | None = None,
 ) -> None:
     """Fill ``truncation``, ``visible`` and ``unoccluded`` of world-frame ``boxes`` in place.
 
@@ -101,10 +102,13 @@ def visibility(
     caster : a :class:`RayCaster` of ``buffers`` in the sensor's frame, if one exists already
     surfaces, rng : the scanner's rules for mirrors and glass and a generator for glass that
         reflects a fraction of beams (:func:`~bpy_pipeline.lidar.scanner.trace_beams`)
+    direct_returns : (d,) the instance of each return of the frame's scan of these rays from ``pose`` that met no
+        mirror, when the scan drew nothing the trace would draw again: ``visible`` counts them and the rays passing
+        the boxes are not traced through the scene again (the same counts; :func:`~bpy_pipeline.stages.scan.counts_direct_returns`)
     The rays that pass within an object's bounding sphere are traced the scanner's way (glass
     passed through, no mirror bounces), per chunk once through the whole scene for all objects
-    together and once against all objects alone (:class:`AloneCaster`), so a car's windows count
-    the same in both.
+    together (unless ``direct_returns`` has their answer) and once against all objects alone
+    (:class:`AloneCaster`), so a car's windows count the same in both.
     """
     if len(boxes) == 0:
         return
@@ -142,21 +146,11 @@ def visibility(
             continue
         seen_points.append(origins[ray] + along[:, None] * d)  # the ray's point closest to the object's centre
         seen_boxes.append(k)
-        # the whole scene, each passing ray once: a ray whose first hit is object k passes k's sphere
-        traced = np.unique(ray)
-        if chunk.origins is None and getattr(caster, "kernels", None) is not None:
-            # the compiled scan of those rays (Embree and the records in one pass; the same hits and draws as
-            # trace_beams: tests/test_scan_kernel.py): with no mirror bounces a record's object is its beam's last
-            visible += _direct_returns(caster, buffers, Pattern(chunk.directions[traced], chunk.ring[traced], chunk.time[traced]), box_of_row, min_range, max_range, surfaces, rng)
-        else:
-            o = origins[traced] if chunk.origins is not None else np.zeros(3)
-            beams = trace_beams(caster, buffers, o, chunk.directions[traced], min_range, max_range, max_bounces=0, surfaces=surfaces, rng=rng)
-            hit = box_of_triangle[beams.triangle]
-            direct = (hit >= 0) & (beams.bounces == 0)
-            visible += np.bincount(hit[direct], minlength=len(boxes))
+        if direct_returns is None:  # the whole scene, each passing ray once: a ray whose first hit is object k passes k's sphere
+            visible += _scene_returns(caster, buffers, chunk, np.unique(ray), len(boxes), box_of_row, box_of_triangle, min_range, max_range, surfaces, rng)
         # every object alone, each (ray, object) pair once
         unoccluded += alone.count(origins[ray], d, k, along, min_range, max_range, surfaces, rng)
-    boxes["visible"] = visible
+    boxes["visible"] = visible if direct_returns is None else counts_per_instance(boxes["instance"], direct_returns)
     boxes["unoccluded"] = unoccluded
     # truncation: every object's surface sampled in one call (each at its own spacing), then per object the
     # share of its area whose direction the passing rays cover, within the range limits; an object whose every
@@ -193,6 +187,18 @@ def visibility(
         mine = order[bounds[k] : bounds[k + 1]]
         whole = area[mine].sum()
         boxes["truncation"][k] = float(1.0 - area[mine][covered[mine]].sum() / whole) if whole > 0 else 1.0
+
+
+def counts_per_instance(box_instance: np.ndarray, instance: np.ndarray) -> np.ndarray:
+    """``(k,)`` int64: how many of the ``(d,)`` ``instance`` values are each of the ``(k,)`` distinct ``box_instance``."""
+    order = np.argsort(box_instance)
+    known = np.asarray(box_instance, np.int64)[order]
+    at = np.searchsorted(known, instance)
+    mine = at < len(known)
+    mine[mine] = known[at[mine]] == instance[mine]
+    out = np.zeros(len(known), np.int64)
+    out[order] = np.bincount(at[mine], minlength=len(known))
+    return out
 
 
 ANGLE_MARGIN = 1e-6  # degrees added to the directions a box spans: far beyond the rounding of a sample's cell (about 1e-12 degrees)
@@ -362,6 +368,19 @@ def _direct_returns(caster, buffers: SceneBuffers, pattern: Pattern, box_of_row:
 
 
 IDENTITY4 = np.eye(4)
+
+
+def _scene_returns(caster, buffers: SceneBuffers, chunk: Pattern, traced: np.ndarray, count: int, box_of_row: np.ndarray, box_of_triangle: np.ndarray, min_range: float, max_range: float, surfaces, rng) -> np.ndarray:
+    """``(count,)`` rays ``traced`` (indices into ``chunk``) whose return through the whole scene is from box k's objects, no mirror met."""
+    if chunk.origins is None and getattr(caster, "kernels", None) is not None:
+        # the compiled scan of those rays (Embree and the records in one pass; the same hits and draws as
+        # trace_beams: tests/test_scan_kernel.py): with no mirror bounces a record's object is its beam's last
+        return _direct_returns(caster, buffers, Pattern(chunk.directions[traced], chunk.ring[traced], chunk.time[traced]), box_of_row, min_range, max_range, surfaces, rng)
+    o = chunk.origins[traced] if chunk.origins is not None else np.zeros(3)
+    beams = trace_beams(caster, buffers, o, chunk.directions[traced], min_range, max_range, max_bounces=0, surfaces=surfaces, rng=rng)
+    hit = box_of_triangle[beams.triangle]
+    direct = (hit >= 0) & (beams.bounces == 0)
+    return np.bincount(hit[direct], minlength=count)
 
 
 def _used_vertices(triangles: np.ndarray, count: int) -> tuple[np.ndarray, np.ndarray]:

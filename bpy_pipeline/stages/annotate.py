@@ -20,7 +20,7 @@ from ..rig import out_of_reach
 from .view import scan_surfaces
 
 
-def world_boxes(buffers: SceneBuffers, config: Config, pose: np.ndarray, points: np.ndarray, headings: dict | None = None, frame: int = 0, rng: np.random.Generator | None = None, rays: SensorRays | None = None, skip_unseen: bool = False, caster=None) -> np.ndarray:
+def world_boxes(buffers: SceneBuffers, config: Config, pose: np.ndarray, points: np.ndarray, headings: dict | None = None, frame: int = 0, rng: np.random.Generator | None = None, rays: SensorRays | None = None, skip_unseen: bool = False, caster=None, direct_returns: np.ndarray | None = None) -> np.ndarray:
     """Every box of ``output.boxes.classes`` in the world frame with truncation, occlusion and its points, none dropped
     (:func:`sensor_boxes` keeps those with their minimum points and moves them into the points' frame).
 
@@ -29,6 +29,8 @@ def world_boxes(buffers: SceneBuffers, config: Config, pose: np.ndarray, points:
         field of view or range, :func:`~bpy_pipeline.rig.out_of_reach`): they get what the trace would give them
         (truncation 1, no visible or unoccluded ray); a rig's narrow sensors see a few of a street's boxes each
     caster : the scan's :class:`~bpy_pipeline.lidar.raycast.RayCaster` of ``buffers`` at ``pose``, reused by the cast (built when ``None``)
+    direct_returns : the scan's ``frame.direct_returns`` (:func:`~.scan.counts_direct_returns`), which give the ``visible``
+        counts when every object of a box's instance is of a box class (:func:`boxes_hold_their_instances`)
     """
     section = config.output.boxes
     boxes = fit_boxes(buffers, section.classes, headings)
@@ -42,18 +44,30 @@ def world_boxes(buffers: SceneBuffers, config: Config, pose: np.ndarray, points:
             near = ~out_of_reach(spec, pose, boxes["centre"], np.linalg.norm(boxes["size"], axis=1) / 2 + 1e-3)
             boxes["truncation"] = 1.0
         traced = boxes[near]
-        visibility(buffers, traced, patterns, pose, spec.min_range, spec.max_range, cell, caster=caster, surfaces=scan_surfaces(config), rng=rng)
+        if direct_returns is not None and not boxes_hold_their_instances(buffers, traced, section.classes):
+            direct_returns = None
+        visibility(buffers, traced, patterns, pose, spec.min_range, spec.max_range, cell, caster=caster, surfaces=scan_surfaces(config), rng=rng, direct_returns=direct_returns)
         boxes[near] = traced
         boxes["occlusion"] = occlusion_levels(boxes["visible"], boxes["unoccluded"], section.occlusion_levels)
         count_points(boxes, points)
     return boxes
 
 
-def sensor_boxes(buffers: SceneBuffers, config: Config, pose: np.ndarray, points: np.ndarray, headings: dict | None = None, frame: int = 0, rng: np.random.Generator | None = None, rays: SensorRays | None = None, caster=None) -> np.ndarray:
+def boxes_hold_their_instances(buffers: SceneBuffers, boxes: np.ndarray, classes) -> bool:
+    """Whether every object sharing an instance with one of ``boxes`` is of one of ``classes``, so each box (fitted
+    around its instance's objects of those classes, :func:`~bpy_pipeline.geometry.boxes.fit_boxes`) holds every
+    object of its instance. A return from any of them then comes from a ray that passes the box's bounding sphere, as
+    the visibility trace's rays do; a rider's box without the motorcycle it shares an instance with does not."""
+    objects = buffers.objects
+    wanted = {str(c) for c in classes}
+    return all(objects.class_names[r] in wanted for r in np.flatnonzero(np.isin(objects.instance, boxes["instance"])))
+
+
+def sensor_boxes(buffers: SceneBuffers, config: Config, pose: np.ndarray, points: np.ndarray, headings: dict | None = None, frame: int = 0, rng: np.random.Generator | None = None, rays: SensorRays | None = None, caster=None, direct_returns: np.ndarray | None = None) -> np.ndarray:
     """The frame's 3D box labels (:data:`~bpy_pipeline.geometry.boxes.BOX_DTYPE`) in the frame of the points, thin boxes dropped
     (:func:`world_boxes`, then those with their class's minimum points, in the output frame)."""
     section = config.output.boxes
-    boxes = world_boxes(buffers, config, pose, points, headings, frame, rng, rays, caster=caster)
+    boxes = world_boxes(buffers, config, pose, points, headings, frame, rng, rays, caster=caster, direct_returns=direct_returns)
     if len(boxes):
         boxes = keep_boxes(boxes, section.min_points, section.min_points_default)
     return boxes_in_frame(boxes, pose if config.output.frame == "sensor" else np.eye(4))
@@ -64,4 +78,4 @@ frame_boxes = sensor_boxes  # the name pipeline.py gave it (mixing's boxes are m
 
 def annotate_stage(frame: Frame, run: Run) -> None:
     """The frame's 3D box labels (in the plan when a box format is asked for)."""
-    frame.boxes = sensor_boxes(frame.buffers, run.config, frame.pose, frame.points, frame.scene.headings, frame.index, frame.rng, run.rays, frame.caster)
+    frame.boxes = sensor_boxes(frame.buffers, run.config, frame.pose, frame.points, frame.scene.headings, frame.index, frame.rng, run.rays, frame.caster, frame.direct_returns)

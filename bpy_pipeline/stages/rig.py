@@ -39,7 +39,7 @@ def rig_members(run: Run) -> list[Run]:
 def member_boxes_stage(frame: Frame, run: Run) -> None:
     """A member's boxes in the world, none dropped yet (:func:`merged_boxes_stage` merges them, then keeps each
     member's where it holds their minimum points, in its frame)."""
-    frame.boxes = world_boxes(frame.buffers, run.config, frame.pose, frame.points, frame.scene.headings, frame.index, frame.rng, run.rays, skip_unseen=True, caster=frame.caster)
+    frame.boxes = world_boxes(frame.buffers, run.config, frame.pose, frame.points, frame.scene.headings, frame.index, frame.rng, run.rays, skip_unseen=True, caster=frame.caster, direct_returns=frame.direct_returns)
 
 
 def each_member(*stages: tuple[str | None, StageFunction]) -> StageFunction:

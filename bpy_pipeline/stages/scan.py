@@ -54,6 +54,19 @@ def scan_stage(frame: Frame, run: Run) -> None:
         frame.chunks = scan_chunks(caster, frame.buffers, patterns, pose, spec.min_range, spec.max_range, **options)
 
 
+def counts_direct_returns(config: Config, frame: Frame) -> bool:
+    """Whether the effects stage keeps the instance of each return that met no mirror (``frame.direct_returns``), so
+    the boxes count their ``visible`` rays from the scan (:func:`~bpy_pipeline.lidar.visibility.visibility`'s
+    ``direct_returns``) instead of tracing again the rays that pass them. It does when boxes are asked for and that
+    trace would cast the scan's own rays from the scan's pose and make the same draws: a sensor that stands still
+    during the frame (the boxes' trace casts from the frame's first pose), one ray a firing (no beam divergence), rays
+    from the sensor's centre (none of its own mirrors) and glass that reflects all of the beams it meets or none (no
+    draw: the boxes' trace would draw again from the frame's generator). Every return of the scan with no mirror met
+    lies on the first object its ray meets, as the trace's do, so the counts are the same."""
+    mirrors = config.effects.mirrors
+    return bool(config.output.boxes.formats) and not frame.moving and not config.sensor.divergence.active and not config.sensor.reflector.enabled and mirrors.glass.reflect_fraction in (0.0, 1.0)
+
+
 def timed_pulls(items: Iterable, timings: dict, key: str) -> Iterator:
     """``items`` one at a time, the seconds spent making each (pulling it) added to ``timings[key]``."""
     items = iter(items)
@@ -75,9 +88,12 @@ def effects_stage(frame: Frame, run: Run) -> None:
     start, traced = time.perf_counter(), frame.timings.get("scan", 0.0)
     config, spec = run.config, run.config.sensor.spec
     mask = run.rays.edge_mask(frame.index)
+    direct = [] if counts_direct_returns(config, frame) else None
 
     def finished(chunks):
         for points, beam in chunks:
+            if direct is not None:
+                direct.append(points["instance"][points["bounces"] == 0].astype(np.int64))
             if mask is not None:  # returns lost where the beam split on an edge of the sensor's own mirrors
                 keep = drop_at_edges(points, mask, config.sensor.spec, frame.rng)
                 points, beam = points[keep], beam[keep]
@@ -92,6 +108,7 @@ def effects_stage(frame: Frame, run: Run) -> None:
 
     frame.points = collect_points(finished(timed_pulls(frame.chunks, frame.timings, "scan")), ray_count(config.sensor.spec))
     frame.chunks = None
+    frame.direct_returns = None if direct is None else np.concatenate(direct) if direct else np.zeros(0, np.int64)
     frame.timings["effects"] = frame.timings.get("effects", 0.0) + time.perf_counter() - start - (frame.timings["scan"] - traced)
 
 
