@@ -9,9 +9,10 @@
 - ``export``: ``export_scene`` of each builder's first frame, fastest of 10.
 - ``ego_street``: the ego street's stages one frame at a time (``overlap=False``), median of frames 2 on, with the
   vehicles' plates and lamps and without (``scene.car_fittings``).
-- ``garage_boxes``: the garage's boxes stage, median of frames 2 on, with the ``visible`` counts taken from the scan's
-  own returns (``stages.scan.counts_direct_returns``, the default) and with the rays that pass the boxes traced
-  again (that function made to answer False), in alternating rounds; the boxes of both, byte for byte.
+- ``boxes_from_scan``: the boxes stage of the garage and of the ego street, one frame at a time, median of frames 2 on,
+  with the ``visible`` counts taken from the scan's own returns (``stages.scan.counts_direct_returns``, the default)
+  and with the rays that pass the boxes traced again (that function made to answer False), in alternating rounds; the
+  boxes of both, byte for byte.
 
     python benchmarks/bench_stage_parts.py [--small] [--name NAME]
 
@@ -138,29 +139,34 @@ def ego_street(frames: int) -> dict:
     return out
 
 
-def garage_boxes(frames: int, rounds: int) -> dict:
+def boxes_from_scan(jobs: dict, rounds: int) -> dict:
+    """Per job ``{name: (config file or None, overrides)}``: its boxes stage, median of frames 2 on, one frame at a time,
+    with the scan's counts and traced again, in alternating rounds; whether both give the same boxes."""
     import bpy
 
     from bpy_pipeline.config import load_config
     from bpy_pipeline.plan import run_frames
     from bpy_pipeline.stages import scan
 
-    config = load_config(None, ["scene.builder=parking", f"frames={frames}"])
     counted = scan.counts_direct_returns
-    stage, boxes = {"scan_counts": [], "traced": []}, {}
+    out = {}
     try:
-        for _ in range(rounds):
-            for way in stage:
-                scan.counts_direct_returns = counted if way == "scan_counts" else (lambda config, frame: False)
-                bpy.ops.wm.read_factory_settings(use_empty=True)
-                with tempfile.TemporaryDirectory() as tmp:
-                    made = list(run_frames(config, Path(tmp) / "run", overlap=False))
-                stage[way].append(statistics.median(f.timings["boxes"] for f in made[1:]))
-                boxes[way] = b"".join(f.boxes.tobytes() for f in made)
+        for name, (path, overrides) in jobs.items():
+            config = load_config(path, overrides)
+            stage, boxes = {"scan_counts": [], "traced": []}, {}
+            for _ in range(rounds):
+                for way in stage:
+                    scan.counts_direct_returns = counted if way == "scan_counts" else (lambda config, frame: False)
+                    bpy.ops.wm.read_factory_settings(use_empty=True)
+                    with tempfile.TemporaryDirectory() as tmp:
+                        made = list(run_frames(config, Path(tmp) / "run", overlap=False))
+                    stage[way].append(statistics.median(f.timings["boxes"] for f in made[1:]))
+                    boxes[way] = b"".join(f.boxes.tobytes() for f in made)
+            out[name] = {"frames": config.frames, "boxes_stage_s": {way: [round(v, 5) for v in values] for way, values in stage.items()},
+                         "best_ratio_traced_over_scan_counts": round(min(stage["traced"]) / min(stage["scan_counts"]), 3), "same_boxes": boxes["scan_counts"] == boxes["traced"]}  # fmt: skip
     finally:
         scan.counts_direct_returns = counted
-    return {"frames": frames, "boxes_stage_s": {way: [round(v, 5) for v in values] for way, values in stage.items()},
-            "best_ratio_traced_over_scan_counts": round(min(stage["traced"]) / min(stage["scan_counts"]), 3), "same_boxes": boxes["scan_counts"] == boxes["traced"]}  # fmt: skip
+    return out
 
 
 def main() -> None:
@@ -171,7 +177,8 @@ def main() -> None:
     args = parser.parse_args()
     repeats, frames = (1, 3) if args.small else (3, 7)
     result = {"cone": cone(repeats), "export": export(1 if args.small else 10), "ego_street": ego_street(frames), "railway": railway(2 if args.small else 6, repeats),
-              "garage_boxes": garage_boxes(6 if args.small else 30, 1 if args.small else 3)}  # fmt: skip
+              "boxes_from_scan": boxes_from_scan({"garage": (None, ["scene.builder=parking", f"frames={6 if args.small else 30}"]),
+                                                  "ego_street": (str(ROOT / "examples/street/ego_hdl64e.yaml"), [f"frames={frames}"])}, 1 if args.small else 3)}  # fmt: skip
     for row in result["cone"]:
         print(f"cone {row['preset']}: numpy {row['numpy_s'] * 1e3:.1f} ms, compiled {row.get('compiled_s', float('nan')) * 1e3:.1f} ms, kept {row.get('kept_share', 1.0):.3f}, same pairs {row.get('same_pairs')}", flush=True)
     for row in result["export"]:
@@ -181,9 +188,9 @@ def main() -> None:
     r = result["railway"]
     print(f"railway: raw embreex {r['raw_embreex_s'] * 1e3:.1f} ms, compiled Embree calls {r.get('compiled_embree_calls_s', float('nan')) * 1e3:.1f} ms, "
           f"scan alone {r['scan_alone_s'] * 1e3:.1f} ms ({r['scan_alone_ratio']:.2f} of raw), in the run {[round(s * 1e3, 1) for s in r['scan_in_run_s']]} ms")  # fmt: skip
-    g = result["garage_boxes"]
-    print(f"garage boxes stage: with the scan's counts {[round(v * 1e3, 2) for v in g['boxes_stage_s']['scan_counts']]} ms, traced again {[round(v * 1e3, 2) for v in g['boxes_stage_s']['traced']]} ms "
-          f"({g['best_ratio_traced_over_scan_counts']:.2f}x best against best), the same boxes: {g['same_boxes']}")  # fmt: skip
+    for name, g in result["boxes_from_scan"].items():
+        print(f"{name} boxes stage: with the scan's counts {[round(v * 1e3, 2) for v in g['boxes_stage_s']['scan_counts']]} ms, traced again {[round(v * 1e3, 2) for v in g['boxes_stage_s']['traced']]} ms "
+              f"({g['best_ratio_traced_over_scan_counts']:.2f}x best against best), the same boxes: {g['same_boxes']}")  # fmt: skip
     args.out.mkdir(parents=True, exist_ok=True)
     path = args.out / (args.name or ("stage_parts_small.json" if args.small else "stage_parts.json"))
     path.write_text(json.dumps(result, indent=1))
