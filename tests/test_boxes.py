@@ -363,6 +363,14 @@ def test_a_box_short_of_its_instance_keeps_the_trace():
     visibility(whole, counted, rays, POSE, SENSOR.min_range, SENSOR.max_range, cell_deg=2.5, caster=caster, direct_returns=points["instance"][points["bounces"] == 0].astype(np.int64))
     ten = boxes["instance"] == 10
     assert counted["visible"][ten] > traced["visible"][ten]  # why the guard is there
+    # the annotate stage's boxes with the scan's returns given are the trace's: it keeps the trace for this scene
+    from bpy_pipeline.config import load_config
+    from bpy_pipeline.stages.annotate import world_boxes
+
+    config = load_config(None, ["sensor.preset=vlp16", "output.boxes.formats=[kitti]", "output.boxes.classes=[person]"])
+    given = world_boxes(whole, config, POSE, points, {k: p.yaw for k, p in people.items()}, caster=caster, direct_returns=points["instance"][points["bounces"] == 0].astype(np.int64))
+    plain = world_boxes(whole, config, POSE, points, {k: p.yaw for k, p in people.items()}, caster=caster)
+    assert len(given) == 3 and given.tobytes() == plain.tobytes()
 
 
 def test_the_scan_keeps_its_direct_returns_only_where_the_boxes_trace_would_cast_its_rays():
