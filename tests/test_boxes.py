@@ -21,15 +21,17 @@ POSE = pose_matrix([0.0, 0.0, 1.2], [0.0, 0.0, 0.0])
 
 
 def scene(parts):
-    """Buffers of ``[(name, class, instance, (vertices, triangles)), ...]``."""
+    """Buffers of ``[(name, class, instance, (vertices, triangles)[, material, reflectivity]), ...]`` (diffuse at 0.5 unless given)."""
     vertices, triangles, owner, offset = [], [], [], 0
-    for row, (_, _, _, (v, t)) in enumerate(parts):
+    for row, (_, _, _, (v, t), *_) in enumerate(parts):
         vertices.append(v)
         triangles.append(t + offset)
         owner.append(np.full(len(t), row, np.int32))
         offset += len(v)
     k = len(parts)
-    objects = ObjectTable([p[0] for p in parts], [""] * k, [p[1] for p in parts], np.zeros(k, np.uint16), np.array([p[2] for p in parts], np.uint32), np.zeros(k, np.uint8), np.full(k, 0.5, np.float32))
+    material = np.array([p[4] if len(p) > 4 else 0 for p in parts], np.uint8)
+    reflectivity = np.array([p[5] if len(p) > 5 else 0.5 for p in parts], np.float32)
+    objects = ObjectTable([p[0] for p in parts], [""] * k, [p[1] for p in parts], np.zeros(k, np.uint16), np.array([p[2] for p in parts], np.uint32), material, reflectivity)
     return SceneBuffers(np.concatenate(vertices), np.concatenate(triangles).astype(np.int32), np.concatenate(owner), objects)
 
 
@@ -44,8 +46,9 @@ def upright_box(size, centre_xy, yaw, bottom=0.0):
     return v @ np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]]).T + [centre_xy[0], centre_xy[1], bottom + size[2] / 2], t
 
 
-def people_and_pillar():
-    """Three people 8 m away facing the sensor: in the open, half behind a pillar, behind a wall up to the eyes."""
+def people_and_pillar(extra=()):
+    """Three people 8 m away facing the sensor: in the open, half behind a pillar, behind a wall up to the eyes
+    (and ``extra`` parts, as :func:`scene` takes them)."""
     floor = primitives.translated(primitives.box(60, 60, 0.2), (0, 0, -0.1))
     parts = [("floor", "floor", 1, floor)]
     people = {}
@@ -62,7 +65,7 @@ def people_and_pillar():
     eyes = 0.93 * 1.75
     top = 1.2 + (eyes - 1.2) * 5.0 / np.hypot(8.0, 4.0)
     parts.append(("wall", "wall", 3, upright_box((0.2, 3.0, top + 0.2), 5.0 * np.array([np.cos(az), np.sin(az)]), az, -0.2)))
-    return scene(parts), people
+    return scene(parts + list(extra)), people
 
 
 def test_occlusion_levels_of_constructed_cases():
@@ -280,18 +283,9 @@ def people_pillar_mirror_and_glass():
     pane in front of person 10, part of its instance (as a car's windows are the car's)."""
     from bpy_pipeline.lidar.scanner import GLASS, MIRROR
 
-    buffers, people = people_and_pillar()
-    objects = buffers.objects
-    mirror = primitives.translated(primitives.box(0.05, 12.0, 4.0), (-3.0, 0.0, 1.5))
-    pane = primitives.translated(primitives.box(0.02, 1.5, 2.5), (6.0, 0.0, 1.0))
-    vertices = np.concatenate([buffers.vertices, mirror[0], pane[0]])
-    triangles = np.concatenate([buffers.triangles, mirror[1] + len(buffers.vertices), pane[1] + len(buffers.vertices) + len(mirror[0])]).astype(np.int32)
-    rows = len(objects)
-    owner = np.concatenate([buffers.triangle_object, np.full(len(mirror[1]), rows, np.int32), np.full(len(pane[1]), rows + 1, np.int32)])
-    table = ObjectTable(list(objects.names) + ["mirror", "pane"], list(objects.parents) + ["", ""], list(objects.class_names) + ["mirror", "glass"],
-                        np.zeros(rows + 2, np.uint16), np.concatenate([objects.instance, [4, 10]]).astype(np.uint32),
-                        np.concatenate([objects.material, [MIRROR, GLASS]]).astype(np.uint8), np.concatenate([objects.reflectivity, [0.9, 0.1]]).astype(np.float32))  # fmt: skip
-    return SceneBuffers(vertices, triangles, owner, table), people
+    mirror = ("mirror", "mirror", 4, primitives.translated(primitives.box(0.05, 12.0, 4.0), (-3.0, 0.0, 1.5)), MIRROR, 0.9)
+    pane = ("pane", "glass", 10, primitives.translated(primitives.box(0.02, 1.5, 2.5), (6.0, 0.0, 1.0)), GLASS, 0.1)
+    return people_and_pillar([mirror, pane])
 
 
 @pytest.mark.parametrize("kernel", ["numba", "numpy"])
@@ -345,12 +339,7 @@ def test_a_box_short_of_its_instance_keeps_the_trace():
     from bpy_pipeline.stages.annotate import boxes_hold_their_instances
 
     buffers, people = people_and_pillar()
-    cart = upright_box((1.0, 1.6, 1.0), (8.0, 1.6), 0.0)  # beside person 10, outside its box's sphere, its instance
-    objects, rows = buffers.objects, len(buffers.objects)
-    table = ObjectTable(list(objects.names) + ["cart"], list(objects.parents) + [""], list(objects.class_names) + ["motorcycle"], np.zeros(rows + 1, np.uint16),
-                        np.concatenate([objects.instance, [10]]).astype(np.uint32), np.zeros(rows + 1, np.uint8), np.full(rows + 1, 0.5, np.float32))  # fmt: skip
-    whole = SceneBuffers(np.concatenate([buffers.vertices, cart[0]]), np.concatenate([buffers.triangles, cart[1] + len(buffers.vertices)]).astype(np.int32),
-                         np.concatenate([buffers.triangle_object, np.full(len(cart[1]), rows, np.int32)]), table)  # fmt: skip
+    whole, _ = people_and_pillar([("cart", "motorcycle", 10, upright_box((1.0, 1.6, 1.0), (8.0, 1.6), 0.0))])  # beside person 10, outside its box's sphere, its instance
     classes = ["person", "pillar", "wall"]
     boxes = bx.fit_boxes(whole, classes, {k: p.yaw for k, p in people.items()})
     assert not boxes_hold_their_instances(whole, boxes, classes)

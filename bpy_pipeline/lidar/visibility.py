@@ -147,7 +147,7 @@ def visibility(
         seen_points.append(origins[ray] + along[:, None] * d)  # the ray's point closest to the object's centre
         seen_boxes.append(k)
         if direct_returns is None:  # the whole scene, each passing ray once: a ray whose first hit is object k passes k's sphere
-            visible += _scene_returns(caster, buffers, chunk, np.unique(ray), len(boxes), box_of_row, box_of_triangle, min_range, max_range, surfaces, rng)
+            visible += _scene_returns(caster, buffers, chunk, np.unique(ray), boxes["instance"], box_of_triangle, min_range, max_range, surfaces, rng)
         # every object alone, each (ray, object) pair once
         unoccluded += alone.count(origins[ray], d, k, along, min_range, max_range, surfaces, rng)
     boxes["visible"] = visible if direct_returns is None else counts_per_instance(boxes["instance"], direct_returns)
@@ -351,36 +351,22 @@ def covered_by_owner(points: np.ndarray, point_owner: np.ndarray, samples: np.nd
     return covered
 
 
-def _direct_returns(caster, buffers: SceneBuffers, pattern: Pattern, box_of_row: np.ndarray, min_range: float, max_range: float, surfaces, rng) -> np.ndarray:
-    """``(k,)`` rays of ``pattern`` (sensor frame = the caster's) whose return is from box k's objects, no mirror met.
-
-    :func:`~bpy_pipeline.lidar.scanner.scan_chunk` with no bounces: a record's instance is that of the object its
-    beam ended on, so with ``box_of_row`` ((rows,) box of each object row, -1 for none) this counts what
-    ``trace_beams`` and the boxes of its beams' triangles count."""
-    points, _, _ = scan_chunk(caster, buffers, pattern, IDENTITY4, min_range, max_range, max_bounces=0, surfaces=surfaces, rng=rng)
-    k = int(box_of_row.max()) + 1
-    owned = box_of_row >= 0
-    known, first = np.unique(buffers.objects.instance[owned].astype(np.int64), return_index=True)  # every row of an instance has one box
-    instance = points["instance"][points["bounces"] == 0].astype(np.int64)
-    at = np.minimum(np.searchsorted(known, instance), len(known) - 1)
-    mine = known[at] == instance
-    return np.bincount(box_of_row[owned][first][at[mine]], minlength=k)[:k]
-
-
 IDENTITY4 = np.eye(4)
 
 
-def _scene_returns(caster, buffers: SceneBuffers, chunk: Pattern, traced: np.ndarray, count: int, box_of_row: np.ndarray, box_of_triangle: np.ndarray, min_range: float, max_range: float, surfaces, rng) -> np.ndarray:
-    """``(count,)`` rays ``traced`` (indices into ``chunk``) whose return through the whole scene is from box k's objects, no mirror met."""
+def _scene_returns(caster, buffers: SceneBuffers, chunk: Pattern, traced: np.ndarray, box_instance: np.ndarray, box_of_triangle: np.ndarray, min_range: float, max_range: float, surfaces, rng) -> np.ndarray:
+    """``(k,)`` rays ``traced`` (indices into ``chunk``) whose return through the whole scene is from box k's objects
+    (``box_instance`` (k,), ``box_of_triangle`` (m,) -1 for none), no mirror met."""
     if chunk.origins is None and getattr(caster, "kernels", None) is not None:
         # the compiled scan of those rays (Embree and the records in one pass; the same hits and draws as
-        # trace_beams: tests/test_scan_kernel.py): with no mirror bounces a record's object is its beam's last
-        return _direct_returns(caster, buffers, Pattern(chunk.directions[traced], chunk.ring[traced], chunk.time[traced]), box_of_row, min_range, max_range, surfaces, rng)
+        # trace_beams: tests/test_scan_kernel.py): with no mirror bounces a record's instance is that of its beam's last object
+        points, _, _ = scan_chunk(caster, buffers, Pattern(chunk.directions[traced], chunk.ring[traced], chunk.time[traced]), IDENTITY4, min_range, max_range, max_bounces=0, surfaces=surfaces, rng=rng)
+        return counts_per_instance(box_instance, points["instance"][points["bounces"] == 0].astype(np.int64))
     o = chunk.origins[traced] if chunk.origins is not None else np.zeros(3)
     beams = trace_beams(caster, buffers, o, chunk.directions[traced], min_range, max_range, max_bounces=0, surfaces=surfaces, rng=rng)
     hit = box_of_triangle[beams.triangle]
     direct = (hit >= 0) & (beams.bounces == 0)
-    return np.bincount(hit[direct], minlength=count)
+    return np.bincount(hit[direct], minlength=len(box_instance))
 
 
 def _used_vertices(triangles: np.ndarray, count: int) -> tuple[np.ndarray, np.ndarray]:
