@@ -14,8 +14,12 @@ the origin of every firing of that column; ranges and directions are measured fr
 
 A scan of returns only (KITTI) has no ring field: rings are rebuilt from the scan order (a new
 ring starts where the azimuth wraps around), columns from the azimuth on a lattice of the
-sensor's step, and the cells of a ring's lattice without a return inside the scan's azimuth
-span become empty firings. All of that is approximate and :attr:`Firings.approximate` says so.
+sensor's step. Where each ring's returns are listed in firing order (the scan order, or a ring
+field read in file order), the empty firings are counted between consecutive returns of a ring
+(a step of about k lattice steps hides k - 1 firings), where the gap stays inside the scan's
+azimuth span. Otherwise (returns in no firing order) every lattice cell inside that span without
+a return is an empty firing. All of that is
+approximate and :attr:`Firings.approximate` says so.
 A sensor preset (``hdl64e``) fills what the file lacks: the azimuth step, the frame time and,
 where the scan order gives no rings, the ring of each return by its nearest elevation.
 """
@@ -212,9 +216,73 @@ def _scan_order_rings(azimuth: np.ndarray) -> np.ndarray | None:
     return np.cumsum(ring)
 
 
+FIRING_ORDER_SHARE = 0.9  # a ring's returns are in firing order when this share of its steps goes forward, by under 10 lattice steps
+
+
+SPAN_HOLE_COLUMNS = 6  # lattice columns no ring returned in, between columns some ring did, that are still the scan's span
+
+
+def _azimuth_span(column: np.ndarray, columns: int) -> np.ndarray:
+    """(columns,) bool: the scan's azimuth span, the columns some return lies in (a front-camera crop keeps part of the
+    circle) with holes of up to :data:`SPAN_HOLE_COLUMNS` closed (a lattice finer than the sensor's step leaves columns
+    no ring's return falls in; a morphological closing on the circle)."""
+    seen = np.zeros(columns, bool)
+    seen[column] = True
+    k = SPAN_HOLE_COLUMNS // 2
+    grown = np.any([np.roll(seen, j) for j in range(-k, k + 1)], axis=0)
+    return np.all([np.roll(grown, j) for j in range(-k, k + 1)], axis=0)
+
+
+def _firing_order(azimuth: np.ndarray, ring: np.ndarray, step: float) -> float | None:
+    """The sense (+1 or -1) in which each ring's returns advance in azimuth, when the scan lists them in firing order
+    (:data:`FIRING_ORDER_SHARE` of the steps between a ring's consecutive returns go forward by less than 10 lattice
+    steps); ``None`` when it does not (returns sorted or shuffled otherwise)."""
+    same = np.diff(ring) == 0
+    d = _wrap(np.diff(azimuth))[same]
+    if len(d) < 2:
+        return None
+    sense = 1.0 if np.median(d) >= 0 else -1.0
+    forward = (sense * d > -0.5 * step) & (sense * d < 10.0 * step)
+    return sense if forward.mean() >= FIRING_ORDER_SHARE else None
+
+
+def _gaps_in_firing_order(azimuth: np.ndarray, ring: np.ndarray, rings: int, step: float, sense: float, phase: float, span: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The empty firings of a scan whose rings list their returns in firing order: ``(ring (g,), azimuth (g,) deg)``.
+
+    Between two consecutive returns of a ring that lie ``d`` apart (in the sense ``sense``; a step back counts as
+    none; the last return is followed by the first) lie ``round(d / step) - 1`` empty firings, spaced evenly: the
+    real firings' own spacing, which a fixed lattice does not follow (KITTI's HDL-64E steps about 0.18 deg six times,
+    then 0.09, where the 0.17 deg lattice put two returns in one cell and made up an empty cell beside them every few
+    firings). A gap that leaves the scan's azimuth span (``span``, (columns,) bool of the lattice of phase ``phase``
+    and step ``step``: :func:`_azimuth_span`) is where a crop cut the ring (a front-camera crop keeps part of the
+    circle, and its lower corners part of the lowest rings): no firings there.
+    """
+    columns = len(span)
+    rings_out, azimuths = [], []
+    for r in range(rings):
+        a = sense * azimuth[ring == r]
+        if len(a) < 2:
+            continue
+        d = np.diff(np.append(a, a[0])) % 360.0
+        d[d > 360.0 - 10.0 * step] = 0.0  # a step back (the returns' jitter): no firing between
+        missing = np.maximum(np.round(d / step) - 1, 0).astype(np.int64)
+        after = np.repeat(np.arange(len(d)), missing)  # the return each empty firing follows
+        k = np.arange(len(after)) - np.repeat(np.cumsum(missing) - missing, missing) + 1  # 1 .. its gap's count
+        between = _wrap(sense * (a[after] + d[after] * k / (missing[after] + 1)))
+        cut = np.zeros(len(d), bool)
+        cut[after[~span[np.round((between - phase) / step).astype(np.int64) % columns]]] = True
+        between = between[~cut[after]]
+        rings_out.append(np.full(len(between), r))
+        azimuths.append(between)
+    if not rings_out:
+        return np.zeros(0, np.int64), np.zeros(0)
+    return np.concatenate(rings_out).astype(np.int64), np.concatenate(azimuths)
+
+
 def unorganised_firings(scan: RealScan, preset: str | None = None, step_deg: float | None = None) -> Firings:
     """The firings of a scan of returns only: rings from the ring field, the scan order or the preset's elevations;
-    columns on an azimuth lattice; empty firings from the lattice's gaps within the scan's azimuth span."""
+    columns on an azimuth lattice; empty firings counted between a ring's returns where they are in firing order
+    (:func:`_gaps_in_firing_order`), else the lattice's gaps within the scan's azimuth span."""
     spec = _spec(preset)
     points = scan.points
     distance = np.linalg.norm(points, axis=1)
@@ -248,25 +316,24 @@ def unorganised_firings(scan: RealScan, preset: str | None = None, step_deg: flo
         step = float(np.median(gaps[gaps > 1e-4])) if (gaps > 1e-4).any() else 0.2
         period = 0.1
     step = step_deg or step
-    approximate.append(f"columns on an azimuth lattice of {step:.4f} deg; empty firings from the lattice's gaps")
+    approximate.append(f"columns on an azimuth lattice of {step:.4f} deg")
     columns = int(round(360.0 / step))
     phase = math.degrees(math.atan2(np.sin(np.radians(az / step * 360.0)).mean(), np.cos(np.radians(az / step * 360.0)).mean())) / 360.0 * step
     column = np.round((az - phase) / step).astype(np.int64) % columns
     elevation = _ring_elevations(el, ring, rings, None if spec is None or len(spec.elevations_deg) != rings else np.asarray(spec.elevations_deg, float))
-    # the scan's azimuth span (a front-camera crop keeps only part of the circle): columns some ring returned in
-    seen = np.zeros(columns, bool)
-    seen[column] = True
-    have = np.zeros((rings, columns), bool)
-    have[ring, column] = True
-    # an empty firing: a seen column of a ring with no return there, between the ring's returns
-    ring_span = np.zeros((rings, columns), bool)
-    for r in range(rings):
-        cols = np.unique(column[ring == r])
-        if len(cols):
-            ring_span[r] = seen
-    gap_ring, gap_column = np.nonzero(ring_span & ~have)
     line = _wrap(phase + step * np.arange(columns))
-    gap_direction = spherical(line[gap_column], elevation[gap_ring])
+    sense = _firing_order(az, ring, step)
+    if sense is not None:
+        gap_ring, gap_azimuth = _gaps_in_firing_order(az, ring, rings, step, sense, phase, _azimuth_span(column, columns))
+        gap_column = np.round((gap_azimuth - phase) / step).astype(np.int64) % columns
+        approximate.append("empty firings counted between each ring's consecutive returns (its firing order)")
+    else:  # every cell of a ring's lattice in the scan's span (the columns some ring returned in) without a return
+        seen, have = np.zeros(columns, bool), np.zeros((rings, columns), bool)
+        seen[column], have[ring, column] = True, True
+        gap_ring, gap_column = np.nonzero((np.bincount(ring, minlength=rings) > 0)[:, None] & seen[None, :] & ~have)
+        gap_azimuth = line[gap_column]
+        approximate.append("empty firings from the lattice's gaps")
+    gap_direction = spherical(gap_azimuth, elevation[gap_ring])
     n, g = len(points), len(gap_ring)
     model = spherical(line[column], elevation[ring])
     residual = math.degrees(float(np.median(angle_between(model, direction))))
