@@ -186,3 +186,19 @@ def test_an_impossible_edit_is_one_line_naming_the_input():
     with pytest.raises(InputError, match=r"ramp_length: must leave at least 8 m") as error:
         build_frame_scene(config, 1, keep=keep)
     assert "\n" not in str(error.value)
+
+
+def test_the_group_is_laid_out_in_columns_by_depth():
+    """``GroupBuilder.finish`` lays the nodes out (set all at once): the group input in the first column, the output
+    in the last, every linked node right of each node it reads, no two nodes at one place."""
+    import bpy
+
+    from bpy_pipeline.builders.parking.level_nodes import level_group
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    group = level_group()
+    x = {node.name: node.location[0] for node in group.nodes}
+    places = {(node.location[0], node.location[1]) for node in group.nodes}
+    inputs, outputs = (next(n for n in group.nodes if n.bl_idname == kind) for kind in ("NodeGroupInput", "NodeGroupOutput"))
+    assert x[inputs.name] == 0.0 and x[outputs.name] == max(x.values()) and len(places) == len(group.nodes)
+    assert all(x[link.to_node.name] > x[link.from_node.name] for link in group.links)

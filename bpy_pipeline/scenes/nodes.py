@@ -113,11 +113,14 @@ class GroupBuilder:
                 column_of(node.name)
         last = max(depth.values(), default=0) + 1
         columns: dict[int, int] = {}
+        locations = []
         for node in self.nodes:
             column = last if node == self.outputs else depth[node.name]
             row = columns.get(column, 0)
             columns[column] = row + 1
-            node.location = (220 * column, -160 * row)
+            locations += (220.0 * column, -160.0 * row)
+        # all at once: setting each node's location updates the whole tree (0.24 ms a node in a 170-node group)
+        self.nodes.foreach_set("location", locations)
         return self.group
 
 
