@@ -1,12 +1,21 @@
 """Shared fixtures: where the real scans are, and the bpy marker skip."""
 
+import atexit
 import importlib.util
 import os
+import shutil
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 import pytest
+
+# Node groups kept between runs (bpy_pipeline/scenes/group_cache.py) go to a folder of this test process (and the runs
+# it starts), never the user's cache; removed at exit
+if "BPY_PIPELINE_CACHE" not in os.environ:
+    os.environ["BPY_PIPELINE_CACHE"] = tempfile.mkdtemp(prefix="bpy_pipeline_cache_")
+    atexit.register(shutil.rmtree, os.environ["BPY_PIPELINE_CACHE"], True)
 
 REAL_SCANS = Path(os.environ.get("BPY_PIPELINE_REAL_SCANS", Path(__file__).resolve().parents[2] / "shared" / "real_scans"))
 HAS_BPY = importlib.util.find_spec("bpy") is not None

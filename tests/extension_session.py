@@ -374,6 +374,8 @@ for builder in settings.bl_rna.properties["builder"].enum_items.keys():
             continue
         builders[builder] = [panel.settings_config(settings).scene == cfg.config_from_dict({"scene": {"builder": builder}}).scene, len(drawn), built]
 report["every_builder"] = builders
+kept = Path(bpy.utils.extension_path_user(MODULE, path="node_groups"))  # the built groups, kept in the extension's own folder
+report["kept_groups"] = sorted(path.name.split(".v")[0] for path in kept.rglob("*.blend")) if kept.is_dir() else []
 
 (WORK / "report.json").write_text(json.dumps(report, indent=1, default=str))
 print("session done")

@@ -5,6 +5,7 @@ from __future__ import annotations
 import bpy
 
 from ..compat import set_modifier_input, set_node_option
+from . import group_cache
 
 
 def _socket(group, name, in_out, socket_type, default=None):
@@ -128,19 +129,26 @@ VERSION_KEY = "bpy_pipeline_version"  # custom property of a group: the version 
 
 
 def current_group(name: str, version: int) -> bpy.types.NodeTree | None:
-    """The node group ``name`` if ``version`` of its builder made it, else None; an older one is renamed
-    ``name.old`` (what still uses it keeps it), so that a file holding it gets a new one."""
+    """The node group ``name`` if ``version`` of its builder made it (in this session, or kept on disk by the same
+    code: :mod:`.group_cache`), else None; an older one is renamed ``name.old`` (what still uses it keeps it), so
+    that a file holding it gets a new one."""
     group = bpy.data.node_groups.get(name)
     if group is not None and group.get(VERSION_KEY) == version:
         return group
     if group is not None:
         group.name = name + ".old"
-    return None
+    group = group_cache.load(name, version)
+    if group is not None and group.get(VERSION_KEY) != version:  # not what its file name says: made anew
+        bpy.data.node_groups.remove(group)
+        return None
+    return group
 
 
 def stamp(group: bpy.types.NodeTree, version: int) -> bpy.types.NodeTree:
-    """``group``, marked as made by ``version`` of its builder (:func:`current_group`)."""
+    """``group``, made and laid out, marked as made by ``version`` of its builder (:func:`current_group`) and kept
+    on disk for the next run (:mod:`.group_cache`)."""
     group[VERSION_KEY] = version
+    group_cache.keep(group, version)
     return group
 
 

@@ -98,8 +98,7 @@ def hall_group() -> bpy.types.NodeTree:
                             xyz(select(b, upright, length, 0.06), select(b, upright, depth, 0.06), select(b, upright, 0.03, top)), box)
 
     box_nodes.finish(b, box_nodes.pick(b, g("Part"), [floor, ceiling, walls, desk, shelf]), g("Realize"), g("Instance"))
-    stamp(group, VERSION)
-    return b.finish()
+    return stamp(b.finish(), VERSION)
 
 
 def hall_object(name: str, part: str, params, collection, prototypes: dict, instance: int = 0, **inputs) -> bpy.types.Object:

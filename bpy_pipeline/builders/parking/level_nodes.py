@@ -129,8 +129,7 @@ def level_group() -> bpy.types.NodeTree:
                                     xyz(g("Ramp Length"), m("SUBTRACT", half_y, front), m("ADD", h, slab)), g("Wedge"))
 
     box_nodes.finish(b, box_nodes.pick(b, g("Part"), [floor, ceiling, walls, pillars, ramp_geometry]), g("Realize"), g("Instance"))
-    stamp(group, VERSION)
-    return b.finish()
+    return stamp(b.finish(), VERSION)
 
 
 FIELDS = {"Length": "length", "Driveway Width": "driveway_width", "Bay Width": "bay_width", "Bay Depth": "bay_depth",

@@ -97,8 +97,7 @@ def wire_group() -> bpy.types.NodeTree:
     t = b.math("DIVIDE", index, b.math("SUBTRACT", g("Samples"), 1.0))
     hung = b.node("GeometryNodeSetPosition", {"Geometry": b.out(resampled), "Position": _hang(b, start, end, g("Sag"), t)})
     b.links.new(_sweep(b, b.out(hung), g("Radius"), g("Sides"), g("Sweep")), b.socket(b.outputs.inputs, "Geometry"))
-    stamp(group, VERSION)
-    return b.finish()
+    return stamp(b.finish(), VERSION)
 
 
 def droppers_group() -> bpy.types.NodeTree:
@@ -145,8 +144,7 @@ def droppers_group() -> bpy.types.NodeTree:
 
     placed = b.switch("GEOMETRY", b.compare("GREATER_THAN", g("Spacing"), 0.0), built, even)
     b.links.new(_sweep(b, placed, g("Radius"), g("Sides"), g("Sweep")), b.socket(b.outputs.inputs, "Geometry"))
-    stamp(group, VERSION)
-    return b.finish()
+    return stamp(b.finish(), VERSION)
 
 
 def curve_object(name: str, polylines, collection) -> bpy.types.Object:

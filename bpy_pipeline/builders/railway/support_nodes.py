@@ -54,8 +54,7 @@ def supports_group() -> bpy.types.NodeTree:
     instances = b.node("GeometryNodeInstanceOnPoints", {"Points": b.get("Geometry"), "Instance": b.out(prototype, "Geometry"), "Rotation": rotation})
     real = b.node("GeometryNodeRealizeInstances", {"Geometry": b.out(instances)})
     b.links.new(b.out(real), b.socket(b.outputs.inputs, "Geometry"))
-    stamp(group, VERSION)
-    return b.finish()
+    return stamp(b.finish(), VERSION)
 
 
 def prototype_object(name: str, mesh: bpy.types.Mesh, parent: bpy.types.Collection) -> bpy.types.Object:

@@ -49,8 +49,7 @@ def facade_group() -> bpy.types.NodeTree:
     labelled = b.node("GeometryNodeStoreNamedAttribute", {"Geometry": swept, "Name": "lidar_instance", "Value": g("Instance")},
                       options={"data_type": "INT", "domain": "FACE"})
     b.links.new(b.out(labelled), b.socket(b.outputs.inputs, "Geometry"))
-    stamp(group, VERSION)
-    return b.finish()
+    return stamp(b.finish(), VERSION)
 
 
 def facade_object(name: str, front, collection: bpy.types.Collection, instance: int = 0) -> bpy.types.Object:

@@ -97,8 +97,7 @@ def planting_group() -> bpy.types.NodeTree:
     b.links.new(b.out(trunk_instances), b.socket(joined.inputs, "Geometry"))
     b.links.new(b.out(crown_instances), b.socket(joined.inputs, "Geometry"))
     b.links.new(b.out(joined), b.socket(b.outputs.inputs, "Geometry"))
-    stamp(group, VERSION)
-    return b.finish()
+    return stamp(b.finish(), VERSION)
 
 
 def planting_object(yards, params, collection: bpy.types.Collection, prototypes: bpy.types.Collection, instance: int,

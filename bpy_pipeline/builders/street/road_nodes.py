@@ -107,8 +107,7 @@ def road_group() -> bpy.types.NodeTree:
     labelled = b.node("GeometryNodeStoreNamedAttribute", {"Geometry": b.out(chosen), "Name": "lidar_instance", "Value": g("Instance")},
                       options={"data_type": "INT", "domain": "FACE"})
     b.links.new(b.out(labelled), b.socket(b.outputs.inputs, "Geometry"))
-    stamp(group, VERSION)
-    return b.finish()
+    return stamp(b.finish(), VERSION)
 
 
 def centre_lines(arm_length: float) -> list[np.ndarray]:

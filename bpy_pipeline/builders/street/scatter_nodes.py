@@ -68,8 +68,7 @@ def scatter_group() -> bpy.types.NodeTree:
                             options={"data_type": "INT", "domain": "INSTANCE"}))
     real = b.node("GeometryNodeRealizeInstances", {"Geometry": labelled})
     b.links.new(b.switch("GEOMETRY", g("Realize"), labelled, b.out(real)), b.socket(b.outputs.inputs, "Geometry"))
-    stamp(group, VERSION)
-    return b.finish()
+    return stamp(b.finish(), VERSION)
 
 
 def prototypes_collection(parent: bpy.types.Collection, name: str = PROTOTYPES) -> bpy.types.Collection:
