@@ -69,9 +69,10 @@ def test_switched_off_nothing_is_kept(monkeypatch, tmp_path):
     from bpy_pipeline.scenes import group_cache
 
     monkeypatch.setenv("BPY_PIPELINE_CACHE", "")
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))  # where it would go without the variable
     fresh()
     level_group()
-    assert group_cache.folder() is None and group_cache.path_of("Parking Level", 3) is None
+    assert group_cache.folder() is None and not list(tmp_path.rglob("*.blend"))
 
 
 def test_a_damaged_file_is_made_again_and_kept_anew(cache):

@@ -18,8 +18,7 @@ sensor's step. Where each ring's returns are listed in firing order (the scan or
 field read in file order), the empty firings are counted between consecutive returns of a ring
 (a step of about k lattice steps hides k - 1 firings), where the gap stays inside the scan's
 azimuth span. Otherwise (returns in no firing order) every lattice cell inside that span without
-a return is an empty firing. All of that is
-approximate and :attr:`Firings.approximate` says so.
+a return is an empty firing. All of that is approximate and :attr:`Firings.approximate` says so.
 A sensor preset (``hdl64e``) fills what the file lacks: the azimuth step, the frame time and,
 where the scan order gives no rings, the ring of each return by its nearest elevation.
 """
