@@ -7,8 +7,9 @@ of its 0.13-0.2 s, the railway's seven groups about 0.15 s; appending a kept one
 A group is kept in ``<folder>/<Blender version>/<name>.v<version>.<code digest>.blend`` with the groups it uses.
 The digest covers every Python file of the package, so changed code never meets a group the old code made.
 ``<folder>`` is ``$BPY_PIPELINE_CACHE/node_groups``, or ``$XDG_CACHE_HOME/bpy_pipeline/node_groups``
-(``~/.cache/...``; in Blender's extension, its user folder); ``BPY_PIPELINE_CACHE=""`` keeps nothing. A cache that cannot be read or written is passed
-over: the group is made as before (a file that fails to load is removed, to be written again).
+(``~/.cache/...``; in Blender's extension, its user folder); ``BPY_PIPELINE_CACHE=""`` keeps nothing. A cache
+that cannot be read or written is passed over: the group is made as before (a file that fails to load is
+removed, to be written again).
 """
 
 from __future__ import annotations
