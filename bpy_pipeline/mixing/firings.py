@@ -218,6 +218,11 @@ def _scan_order_rings(azimuth: np.ndarray) -> np.ndarray | None:
 FIRING_ORDER_SHARE = 0.9  # a ring's returns are in firing order when this share of its steps goes forward, by under 10 lattice steps
 
 
+def _lattice_column(azimuth: np.ndarray, phase: float, step: float, columns: int) -> np.ndarray:
+    """``(n,)`` int64 column of the azimuth lattice (``phase + step k`` deg, ``columns`` a turn) nearest each azimuth (deg)."""
+    return np.round((np.asarray(azimuth) - phase) / step).astype(np.int64) % columns
+
+
 SPAN_HOLE_COLUMNS = 6  # lattice columns no ring returned in, between columns some ring did, that are still the scan's span
 
 
@@ -269,7 +274,7 @@ def _gaps_in_firing_order(azimuth: np.ndarray, ring: np.ndarray, rings: int, ste
         k = np.arange(len(after)) - np.repeat(np.cumsum(missing) - missing, missing) + 1  # 1 .. its gap's count
         between = _wrap(sense * (a[after] + d[after] * k / (missing[after] + 1)))
         cut = np.zeros(len(d), bool)
-        cut[after[~span[np.round((between - phase) / step).astype(np.int64) % columns]]] = True
+        cut[after[~span[_lattice_column(between, phase, step, columns)]]] = True
         between = between[~cut[after]]
         rings_out.append(np.full(len(between), r))
         azimuths.append(between)
@@ -318,13 +323,13 @@ def unorganised_firings(scan: RealScan, preset: str | None = None, step_deg: flo
     approximate.append(f"columns on an azimuth lattice of {step:.4f} deg")
     columns = int(round(360.0 / step))
     phase = math.degrees(math.atan2(np.sin(np.radians(az / step * 360.0)).mean(), np.cos(np.radians(az / step * 360.0)).mean())) / 360.0 * step
-    column = np.round((az - phase) / step).astype(np.int64) % columns
+    column = _lattice_column(az, phase, step, columns)
     elevation = _ring_elevations(el, ring, rings, None if spec is None or len(spec.elevations_deg) != rings else np.asarray(spec.elevations_deg, float))
     line = _wrap(phase + step * np.arange(columns))
     sense = _firing_order(az, ring, step)
     if sense is not None:
         gap_ring, gap_azimuth = _gaps_in_firing_order(az, ring, rings, step, sense, phase, _azimuth_span(column, columns))
-        gap_column = np.round((gap_azimuth - phase) / step).astype(np.int64) % columns
+        gap_column = _lattice_column(gap_azimuth, phase, step, columns)
         approximate.append("empty firings counted between each ring's consecutive returns (its firing order)")
     else:  # every cell of a ring's lattice in the scan's span (the columns some ring returned in) without a return
         seen, have = np.zeros(columns, bool), np.zeros((rings, columns), bool)
