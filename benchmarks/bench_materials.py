@@ -191,6 +191,13 @@ class Insertion:
         s = self.image_slopes(xyz)
         return np.isfinite(s).all(axis=1) & ((s >= self.window[0]) & (s <= self.window[1])).all(axis=1)
 
+    def real_zero_shares(self) -> list[float]:
+        """Per car: the share of its real points (in its box, in the frustum) whose reflectance reads 0."""
+        real = np.fromfile(self.section.path, np.float32).reshape(-1, 4)
+        keep = self.in_window(real[:, :3].astype(np.float64))
+        xyz, reading = real[keep, :3].astype(np.float64), real[keep, 3]
+        return [round(float(np.mean(reading[in_box(xyz, b)] == 0)), 2) for b in self.boxes]
+
     def on_cars(self, xyz: np.ndarray) -> np.ndarray:
         on = np.zeros(len(xyz), bool)
         for b in self.boxes:
@@ -613,6 +620,7 @@ def detection(small: bool, out) -> None:
 
 
 SPREAD_SEEDS = 40
+PAINT_SEEDS = 6  # seeds per paint in the spread's paint-by-paint rows
 
 
 def resample_overlap(real: np.ndarray, draws: int = 400) -> list[float]:
@@ -628,9 +636,11 @@ def spread(small: bool, out) -> None:
     """The chosen car models (the ``detection`` section's choice: the part models without ``detection``, the glass model,
     plates and lamps, the fitted reading) scored seed by seed on both frames, nothing chosen: how far one draw of the
     cars' bodies and paints moves each car's count and the overlap. Per car: the mean, the 10th-90th percentile range of
-    sim / real over the seeds, and the share of seeds within 0.7-1.4; per frame: the overlap's range. Into
-    materials.json's ``spread`` section (the others kept)."""
-    from bpy_pipeline.mixing.paint import CarPaint
+    sim / real over the seeds, and the share of seeds within 0.7-1.4; per frame: the overlap's range. Beside them, what a
+    count can know of a real car's paint: the share of its real points that read 0 (dark paint reads 0), and sim / real
+    with every car given one paint of ``PAINTS`` (PAINT_SEEDS seeds each). Into materials.json's ``spread`` section
+    (the others kept)."""
+    from bpy_pipeline.mixing.paint import PAINTS, CarPaint
 
     path = out / "materials.json"
     payload = json.loads(path.read_text()) if path.exists() else {"benchmark": "materials", "rows": [], "notes": {}}
@@ -642,12 +652,16 @@ def spread(small: bool, out) -> None:
     for frame in insertions():
         rows = [frame.score(effects, [seed], scene) for seed in seeds]
         ratios = np.array([r["sim/real per car"] for r in rows])  # (seeds, cars)
+        by_paint = {name: frame.score(effects, seeds[:PAINT_SEEDS], {**scene, "car_paint": CarPaint(enabled=True, paints={name: [1.0, reflectance]})})["sim/real per car"]
+                    for name, (_, reflectance) in PAINTS.items()}
         overlap = np.array([r["overlap"] for r in rows])
         frames[frame.name] = {
             "real points per car": frame.real_counts,
             "sim/real mean per car": np.round(ratios.mean(axis=0), 2).tolist(),
             "sim/real 10-90th percentile per car": [[round(float(lo), 2), round(float(hi), 2)] for lo, hi in zip(np.percentile(ratios, 10, axis=0), np.percentile(ratios, 90, axis=0))],
             "share of seeds within 0.7-1.4 per car": np.round(((ratios >= 0.7) & (ratios <= 1.4)).mean(axis=0), 2).tolist(),
+            "real zero-reading share per car": frame.real_zero_shares(),
+            f"sim/real per car, every car one paint ({min(PAINT_SEEDS, len(seeds))} seeds)": by_paint,
             "cars within 0.7-1.4 per seed (min, median, max)": [int(v) for v in np.percentile(((ratios >= 0.7) & (ratios <= 1.4)).sum(axis=1), [0, 50, 100], method="nearest")],
             "overlap (min, median, max)": [round(float(v), 3) for v in np.percentile(overlap, [0, 50, 100], method="nearest")],
             "real car points": int(len(frame.real_on)),
