@@ -184,19 +184,13 @@ class Insertion:
         keep = self.in_window(real[:, :3].astype(np.float64))
         xyz, self.real_i = real[keep, :3].astype(np.float64), real[keep, 3]
         self.real_counts = [int(in_box(xyz, b).sum()) for b in boxes]
+        self.real_zero_shares = [round(float(np.mean(self.real_i[in_box(xyz, b)] == 0)), 2) for b in boxes]  # dark paint reads 0
         self.real_on = self.real_i[self.on_cars(xyz)]
         self.scan = self.firings = None
 
     def in_window(self, xyz: np.ndarray) -> np.ndarray:
         s = self.image_slopes(xyz)
         return np.isfinite(s).all(axis=1) & ((s >= self.window[0]) & (s <= self.window[1])).all(axis=1)
-
-    def real_zero_shares(self) -> list[float]:
-        """Per car: the share of its real points (in its box, in the frustum) whose reflectance reads 0."""
-        real = np.fromfile(self.section.path, np.float32).reshape(-1, 4)
-        keep = self.in_window(real[:, :3].astype(np.float64))
-        xyz, reading = real[keep, :3].astype(np.float64), real[keep, 3]
-        return [round(float(np.mean(reading[in_box(xyz, b)] == 0)), 2) for b in self.boxes]
 
     def on_cars(self, xyz: np.ndarray) -> np.ndarray:
         on = np.zeros(len(xyz), bool)
@@ -660,7 +654,7 @@ def spread(small: bool, out) -> None:
             "sim/real mean per car": np.round(ratios.mean(axis=0), 2).tolist(),
             "sim/real 10-90th percentile per car": [[round(float(lo), 2), round(float(hi), 2)] for lo, hi in zip(np.percentile(ratios, 10, axis=0), np.percentile(ratios, 90, axis=0))],
             "share of seeds within 0.7-1.4 per car": np.round(((ratios >= 0.7) & (ratios <= 1.4)).mean(axis=0), 2).tolist(),
-            "real zero-reading share per car": frame.real_zero_shares(),
+            "real zero-reading share per car": frame.real_zero_shares,
             f"sim/real per car, every car one paint ({min(PAINT_SEEDS, len(seeds))} seeds)": by_paint,
             "cars within 0.7-1.4 per seed (min, median, max)": [int(v) for v in np.percentile(((ratios >= 0.7) & (ratios <= 1.4)).sum(axis=1), [0, 50, 100], method="nearest")],
             "overlap (min, median, max)": [round(float(v), 3) for v in np.percentile(overlap, [0, 50, 100], method="nearest")],
