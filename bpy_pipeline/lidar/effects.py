@@ -69,6 +69,7 @@ from .drop.threshold import ThresholdModel, threshold_model  # noqa: F401
 from .intensity import carla_intensity, compute_intensity, lidar_intensity, reflectance  # noqa: F401
 from .materials import apply_materials
 from .points import POINT_DTYPE
+from .sharing import share
 from .weather import apply_weather, fog_alpha, fog_soft_table
 from ..yaml_text import load_yaml
 
@@ -463,9 +464,9 @@ def apply_effects(points: np.ndarray, beam: np.ndarray, effects, rng: np.random.
     1. intensity of the true geometry; 2. ray drop (it sees the true range, as the receiver
     does); 3. weather (``effects.weather``, :mod:`.weather`: attenuation, scatterer returns, the noise
     floor); 4. range noise, ring bias and angular jitter on the points that remain.
-    The points go through in chunks of :data:`CHUNK_POINTS` on ``pool`` (an executor the caller keeps,
-    e.g. the run's: no threads started per call) or else on ``threads`` threads started for the call
-    (default: every core; 1: in this thread); chunk k draws from its own generator, seeded by the k-th
+    The points go through in chunks of :data:`CHUNK_POINTS` on ``threads`` threads (default: every core;
+    1: in this thread), this one and others of ``pool`` (an executor the caller keeps, e.g. the run's: no
+    threads started per call) or else started for the call (:func:`.sharing.share`); chunk k draws from its own generator, seeded by the k-th
     of one draw of seeds from ``rng``, so the same generator state gives the same bytes however the threads run.
     ``objects``: the scene's ObjectTable, for ``effects.materials.objects`` (per-object reflectance models).
     ``detection``: (p,) float32 reflectivities the drop decision sees instead of the beam's (None: the beam's), the
@@ -489,12 +490,11 @@ def apply_effects(points: np.ndarray, beam: np.ndarray, effects, rng: np.random.
 
     if len(starts) == 1:
         return chunk(0)
-    if pool is not None:
-        parts = list(pool.map(chunk, range(len(starts))))
-    elif threads == 1:
-        parts = [chunk(k) for k in range(len(starts))]
+    threads = threads or os.cpu_count() or 1
+    if pool is not None or threads == 1:
+        parts = share(pool, chunk, range(len(starts)), threads)
     else:
-        with ThreadPoolExecutor(threads or os.cpu_count() or 1) as own:
-            parts = list(own.map(chunk, range(len(starts))))
+        with ThreadPoolExecutor(threads - 1) as own:
+            parts = share(own, chunk, range(len(starts)), threads)
     raw = np.dtype((np.void, points.dtype.itemsize))
     return np.concatenate([p.view(raw) for p in parts]).view(points.dtype)

@@ -51,6 +51,7 @@ from ..buffers import MATERIAL_ID, SceneBuffers
 from ..errors import InputError
 from . import kernels
 from .embree import attach_triangles, scene_handle
+from .sharing import share
 
 FAR = 1e30  # stands for "no limit" in Embree's float32 tfar
 JITTER = 2.0**-18  # radians (and metres per metre of origin coordinate) a re-traced ray is moved by: 64 float32 ulps
@@ -189,8 +190,8 @@ class RayCaster:
         :data:`KERNEL_VARIABLE`, else ``"auto"``. Both give the same bytes.
     static : the static objects' part kept by a :class:`CasterCache` (use :meth:`CasterCache.caster`)
     record_pool : the :class:`RecordPool` its scans' records come from (default: its own; a cache shares one across frames)
-    pool : the thread pool its work runs on (default: its own, made on first use; a cache shares one
-        across frames, so a frame's caster starts no threads)
+    pool : the thread pool its work runs on beside the calling thread, ``threads - 1`` workers (default: its own,
+        made on first use; a cache shares one across frames, so a frame's caster starts no threads)
     ``InputError`` (naming the object) for non-finite vertices, bad triangle indices, or vertices
     farther than :data:`MAX_COORDINATE` from the local origin.
     """
@@ -316,14 +317,13 @@ class RayCaster:
         return tfar_out, prim_out
 
     def map(self, fn, items) -> list:
-        """``[fn(item) for item in items]`` on the caster's threads (Embree, and compiled kernels: both release the GIL)."""
+        """``[fn(item) for item in items]`` on the caster's threads, the calling one among them (:func:`.sharing.share`;
+        Embree and the compiled kernels release the GIL)."""
         items = list(items)
-        if self.threads > 1 and len(items) > 1:
-            if self._pool is None:
-                self._pool = ThreadPoolExecutor(self.threads)
-                weakref.finalize(self, self._pool.shutdown)
-            return list(self._pool.map(fn, items))
-        return [fn(item) for item in items]
+        if self.threads > 1 and len(items) > 1 and self._pool is None:
+            self._pool = ThreadPoolExecutor(self.threads - 1)
+            weakref.finalize(self, self._pool.shutdown)
+        return share(self._pool, fn, items, self.threads)
 
     def launch(self, origins, directions, max_distance=FAR, directions32=None, convert: bool = True):
         """The float32 query of :meth:`intersect`: ``(local (3,) or (n, 3) float64, origins32, directions32, far32)``.
@@ -522,10 +522,11 @@ class CasterCache:
 
     @property
     def pool(self) -> ThreadPoolExecutor | None:
-        """The thread pool every caster of this cache runs on (``None`` with one thread); made on first use."""
+        """The thread pool every caster of this cache runs on beside the calling thread (``threads - 1`` workers:
+        :func:`.sharing.share`; ``None`` with one thread); made on first use."""
         threads = int(self.threads) if self.threads else default_threads()
         if threads > 1 and self._pool is None:
-            self._pool = ThreadPoolExecutor(threads)
+            self._pool = ThreadPoolExecutor(threads - 1)
             weakref.finalize(self, self._pool.shutdown)
         return self._pool
 
