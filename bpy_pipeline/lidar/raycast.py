@@ -43,6 +43,7 @@ import threading
 import weakref
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from embreex import rtcore_scene
@@ -176,6 +177,23 @@ class StaticPart:
     part: EmbreePart | None
     normal: np.ndarray
     offset: np.ndarray
+
+    @cached_property
+    def corners(self) -> np.ndarray | None:
+        """``(s, 3, 3)`` float64 world corners of its triangles, from the geometry's copies; ``None`` for a caller's key."""
+        if isinstance(self.geometry[0], str):
+            return None
+        index, span = self.geometry
+        return span[index - index.min()] if len(index) else np.zeros((0, 3, 3))
+
+    def at(self, triangle: np.ndarray) -> "StaticPart":
+        """The same part with its triangles at the buffer positions ``triangle`` (s,) sorted (:func:`moved_in_buffers`):
+        Embree's scene, the planes and the geometry kept, the primitives mapped to the new positions."""
+        part = self.part
+        if part is not None:
+            within = np.arange(len(self.triangle)) if part.triangle is None else np.searchsorted(self.triangle, part.triangle)
+            part = EmbreePart(part.scene, triangle[within].astype(np.int64), part.keep, part.handle)
+        return StaticPart(self.frame, np.asarray(triangle), self.geometry, part, self.normal, self.offset)
 
 
 class RayCaster:
@@ -506,7 +524,9 @@ class CasterCache:
     The triangles of the object rows not flagged in ``moving`` form the static part: when they
     (their buffer positions and their vertices, compared byte for byte with the copy kept of
     :func:`static_geometry`, or the caller's ``key``) and ``frame`` are exactly those of the previous
-    call, its Embree scene and planes are reused; otherwise they are built and kept. The moving rows get a small Embree scene of their own each call;
+    call, its Embree scene and planes are reused; so are they when the same triangles, corner for corner, come at other
+    buffer positions (:func:`moved_in_buffers`: moving objects exported among the static ones); otherwise they are
+    built and kept. The moving rows get a small Embree scene of their own each call;
     the caster traces both and keeps the nearer hit (the same triangle, hence the same bytes,
     as one caster of all the buffers, but for exact ties).
 
@@ -545,6 +565,9 @@ class CasterCache:
         static = np.flatnonzero(~moving[buffers.triangle_object]) if moving.any() else np.arange(len(buffers.triangles))
         geometry = ("key", key) if key is not None else static_geometry(buffers, static)
         kept = self.kept
+        if kept is not None and np.array_equal(kept.frame, frame) and not np.array_equal(kept.triangle, static) and key is None and moved_in_buffers(kept, buffers, static):
+            self.reuses += 1  # the same static triangles at other buffer positions (the moving objects exported among them)
+            return RayCaster(buffers, frame, self.threads, kernel=self.kernel, static=kept.at(static), record_pool=self.record_pool, pool=self.pool)
         if kept is None or not (np.array_equal(kept.frame, frame) and np.array_equal(kept.triangle, static) and same_geometry(kept.geometry, geometry)):
             if key is None:  # a copy of its own: the caller's buffers may change in place later
                 geometry = tuple(np.array(a) for a in geometry)
@@ -566,13 +589,23 @@ class CasterCache:
         return RayCaster(buffers, frame, self.threads, kernel=self.kernel, static=self.kept, record_pool=self.record_pool, pool=self.pool)
 
 
+def moved_in_buffers(kept: StaticPart, buffers: SceneBuffers, static: np.ndarray) -> bool:
+    """Whether the triangles ``static`` (s,) of ``buffers`` are the kept part's, corner for corner and in its order, at
+    other buffer positions: a builder that exports its moving objects among the static ones (the street's road users)
+    shifts the static triangles' indices every frame though none of them changed. Corners are compared as the bits of
+    their float64 coordinates (:func:`same_geometry`'s rule)."""
+    if len(static) != len(kept.triangle) or not len(static) or kept.corners is None:
+        return False
+    now = np.ascontiguousarray(np.asarray(buffers.vertices, np.float64)[buffers.triangles[static]])
+    return np.array_equal(kept.corners.view(np.int64), now.view(np.int64))
+
+
 def static_geometry(buffers: SceneBuffers, static: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """What a kept static part stands for: triangles ``static`` ((s, 3) int32 indices, contiguous) and the vertex
     rows they span ((hi - lo + 1, 3) float64, world, contiguous); views of ``buffers`` where they can be.
 
     The span also holds any moving object whose vertices lie between the static ones': it then changes
-    with it and the static part is built again (correct, only slower); exporting the moving objects
-    last avoids that.
+    with it, and the kept part is found again by its corners (:func:`moved_in_buffers`).
     """
     every = len(static) == len(buffers.triangles)  # static is then 0..m-1
     index = np.ascontiguousarray(buffers.triangles if every else buffers.triangles[static])
