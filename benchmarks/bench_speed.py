@@ -19,7 +19,8 @@ Every figure is a ratio against a reference measured in the same run (no timed a
   Code without ``scene.ego_vehicle`` runs the nearest config it accepts: the same street builder and
   sensor, standing in the right-hand lane at the start of the ego's path (said in the results).
   ``--old-env KEY=VALUE`` adds a variable to the older side's environment; without ``--old`` that side is this
-  checkout, so a setting is measured against its absence. ``--railway N``: the default railway as a job too.
+  checkout, so a setting is measured against its absence. ``--railway N``: the default railway as a job too;
+  ``--street-standing N``: that nearest config (the street, the ``hdl64e`` standing in the lane) on both sides.
   Each run also gives when its first ``frame k/n`` line came (start-up and the first frame), its frames
   per second from that line to the last, and the time after the last; ``later_fps_new_over_old`` is the
   second, best against best.
@@ -32,7 +33,7 @@ Every run's environment is this one's without ``PYTHONDONTWRITEBYTECODE`` (:func
 from its bytecode caches, as an installed package does. The scan and write parts run in a subprocess per checkout (``--baseline CHECKOUT`` adds the same
 measurement of another checkout, interleaved); each subprocess reports which ``bpy_pipeline`` it imported.
 
-    python benchmarks/bench_speed.py [--small] [--old DIR] [--old-env KEY=VALUE] [--baseline DIR] [--frames N] [--railway N] [--parking N] [--street N] [--scaling N] [--merge]
+    python benchmarks/bench_speed.py [--small] [--old DIR] [--old-env KEY=VALUE] [--baseline DIR] [--frames N] [--railway N] [--parking N] [--street N] [--street-standing N] [--scaling N] [--merge]
 
 ``--small`` (< 60 s): the scan and write parts (5 frames), 20 parking frames against one process with 2 workers,
 no older checkout unless given. Results: ``benchmarks/results/speed.json`` (``speed_small.json``).
@@ -276,6 +277,7 @@ def main() -> None:
     p.add_argument("--baseline", type=Path, help="another checkout whose scan and write stages are measured beside this one's")
     p.add_argument("--parking", type=int, help="parking frames for frames per second (default 120; --small 0)")
     p.add_argument("--street", type=int, help="street frames (default 20; --small 0)")
+    p.add_argument("--street-standing", type=int, default=0, help="street frames with the hdl64e standing in the right-hand lane, on both sides (default 0)")
     p.add_argument("--scaling", type=int, help="parking frames for 2 workers against 1 (default 1000; --small 30)")
     p.add_argument("--rounds", type=int, default=2, help="alternating rounds per comparison (best kept)")
     p.add_argument("--part", help=argparse.SUPPRESS)
@@ -318,6 +320,9 @@ def main() -> None:
         if old is not None and old_street is EGO_STATIC:
             row["old_note"] = "the older code has no scene.ego_vehicle: its street builder with the hdl64e standing where the ego starts (right-hand lane, static)"
         results["fps"].append(row)
+    if args.street_standing:
+        job = [*EGO_STATIC, "--frames", str(args.street_standing)]
+        results["fps"].append(compare(f"{args.street_standing} street frames, hdl64e standing in the lane", job, job, old, rounds, old_env))
     results["workers"] = []
     if scaling:
         job = ["--set", "scene.builder=parking", "--frames", str(scaling)]
