@@ -465,9 +465,10 @@ def apply_effects(points: np.ndarray, beam: np.ndarray, effects, rng: np.random.
     does); 3. weather (``effects.weather``, :mod:`.weather`: attenuation, scatterer returns, the noise
     floor); 4. range noise, ring bias and angular jitter on the points that remain.
     The points go through in chunks of :data:`CHUNK_POINTS` on ``threads`` threads (default: every core;
-    1: in this thread), this one and others of ``pool`` (an executor the caller keeps, e.g. the run's: no
-    threads started per call) or else started for the call (:func:`.sharing.share`); chunk k draws from its own generator, seeded by the k-th
-    of one draw of seeds from ``rng``, so the same generator state gives the same bytes however the threads run.
+    1: in this thread): this one and others of ``pool`` (an executor the caller keeps, e.g. the run's: no
+    threads started per call) or else started for the call (:func:`.sharing.share`). Chunk k draws from its
+    own generator, seeded by the k-th of one draw of seeds from ``rng``, so the same generator state gives
+    the same bytes however the threads run.
     ``objects``: the scene's ObjectTable, for ``effects.materials.objects`` (per-object reflectance models).
     ``detection``: (p,) float32 reflectivities the drop decision sees instead of the beam's (None: the beam's), the
     reading still the beam's (``scene.car_paint`` parts' ``detection``, mixing/paint.py).
