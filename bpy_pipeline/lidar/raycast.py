@@ -565,28 +565,30 @@ class CasterCache:
         static = np.flatnonzero(~moving[buffers.triangle_object]) if moving.any() else np.arange(len(buffers.triangles))
         geometry = ("key", key) if key is not None else static_geometry(buffers, static)
         kept = self.kept
-        if kept is not None and np.array_equal(kept.frame, frame) and not np.array_equal(kept.triangle, static) and key is None and moved_in_buffers(kept, buffers, static):
+        same_frame = kept is not None and np.array_equal(kept.frame, frame)
+        same_place = same_frame and np.array_equal(kept.triangle, static)
+        if same_place and same_geometry(kept.geometry, geometry):
+            self.reuses += 1
+            part = kept
+        elif same_frame and not same_place and key is None and moved_in_buffers(kept, buffers, static):
             self.reuses += 1  # the same static triangles at other buffer positions (the moving objects exported among them)
-            return RayCaster(buffers, frame, self.threads, kernel=self.kernel, static=kept.at(static), record_pool=self.record_pool, pool=self.pool)
-        if kept is None or not (np.array_equal(kept.frame, frame) and np.array_equal(kept.triangle, static) and same_geometry(kept.geometry, geometry)):
+            part = kept.at(static)
+        else:
             if key is None:  # a copy of its own: the caller's buffers may change in place later
                 geometry = tuple(np.array(a) for a in geometry)
             if len(buffers.triangles):
                 buffers.check()  # before any index is used to build (the reused path is checked by RayCaster)
-            caster = RayCaster(buffers, frame, self.threads, kernel=self.kernel, record_pool=self.record_pool, pool=self.pool) if not moving.any() else None
-            if caster is not None:  # nothing moves: the whole scene is the static part
+            self.builds += 1
+            if not moving.any():  # nothing moves: the whole scene is the static part
+                caster = RayCaster(buffers, frame, self.threads, kernel=self.kernel, record_pool=self.record_pool, pool=self.pool)
                 self.kept = StaticPart(frame, static, geometry, caster.parts[0] if caster.parts else None, caster.plane_normal, caster.plane_offset)
-                self.builds += 1
                 return caster
             local = (np.asarray(buffers.vertices, np.float64) - frame[:3, 3]) @ frame[:3, :3]
             triangles = np.ascontiguousarray(buffers.triangles, np.int32)
             check_extent(local, triangles, buffers)
             normal, offset = triangle_planes(local, triangles[static], choose_kernels(self.kernel))
-            self.kept = StaticPart(frame, static, geometry, embree_part(local, triangles, static, normal), normal, offset)
-            self.builds += 1
-        else:
-            self.reuses += 1
-        return RayCaster(buffers, frame, self.threads, kernel=self.kernel, static=self.kept, record_pool=self.record_pool, pool=self.pool)
+            part = self.kept = StaticPart(frame, static, geometry, embree_part(local, triangles, static, normal), normal, offset)
+        return RayCaster(buffers, frame, self.threads, kernel=self.kernel, static=part, record_pool=self.record_pool, pool=self.pool)
 
 
 def moved_in_buffers(kept: StaticPart, buffers: SceneBuffers, static: np.ndarray) -> bool:
@@ -596,7 +598,7 @@ def moved_in_buffers(kept: StaticPart, buffers: SceneBuffers, static: np.ndarray
     their float64 coordinates (:func:`same_geometry`'s rule)."""
     if len(static) != len(kept.triangle) or not len(static) or kept.corners is None:
         return False
-    now = np.ascontiguousarray(np.asarray(buffers.vertices, np.float64)[buffers.triangles[static]])
+    now = np.asarray(buffers.vertices, np.float64)[buffers.triangles[static]]  # a new (s, 3, 3) array
     return np.array_equal(kept.corners.view(np.int64), now.view(np.int64))
 
 
