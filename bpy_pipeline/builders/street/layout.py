@@ -70,14 +70,14 @@ MARKING_THICKNESS = 0.005  # m: road markings stand this proud of the road; user
 # Reflectivity at 905 nm. Road, sidewalk, building and pole fitted (a prior at the assumed values, log sd 0.3) with the
 # hdl64e reading to SemanticKITTI's remission per class (docs/realism.md, "The HDL-64E's reading, fitted per class");
 # the rest assumed. "building" is the median of each building's own draw (BUILDING).
-REFLECTIVITY = {"road": 0.13, "marking": 0.6, "sidewalk": 0.25, "kerb": 0.35, "building": 0.55, "glass": 0.08,
+REFLECTIVITY = {"road": 0.15, "marking": 0.6, "sidewalk": 0.25, "kerb": 0.35, "building": 0.55, "glass": 0.08,
                 "tyre": 0.05, "pole": 0.2, "traffic light": 0.15, "traffic sign": 0.8, "frame": 0.3}
 # Per-object reflectivity, lognormal: (median, sd of its log, lowest, highest). Buildings draw from the layout's
 # generator, road users from the frame's. PAINT is a body's diffuse return beside its clear coat's mirror lobe
 # (dark and metallic paints return 1-5 %, white up to 0.5), CLOTHING a pedestrian's or rider's; both fitted to
 # KITTI and SemanticKITTI car and person remission through the hdl64e reading (docs/realism.md).
 BUILDING = (0.55, 0.4, 0.15, 0.95)
-PAINT = (0.04, 1.0, 0.003, 0.8)
+PAINT = (0.04, 1.2, 0.002, 0.8)
 CLOTHING = (0.5, 0.6, 0.05, 0.95)
 
 
