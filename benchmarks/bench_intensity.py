@@ -16,12 +16,19 @@ their intensity with the real remission of ../shared/real_scans (or ``BPY_PIPELI
     python benchmarks/bench_intensity.py --before   # measure the checkout as "before": results/intensity_before.json
     python benchmarks/bench_intensity.py            # measure it as "after", beside the stored before: results/intensity_round21.json
     python benchmarks/bench_intensity.py --small    # 1 layout x 1 frame: that it runs
+    python benchmarks/bench_intensity.py --fit      # refit the hdl64e reading on the fit frames: results/intensity_fit.json
+
+The fit (``--fit``, :func:`fit_law`) simulates each real point of the fit frames' static classes from its range and
+its class's reflectivity through the reading ``clip(s (a f(R))^gamma exp(sd z) - o, 0, 1)`` in 0.01 steps and matches
+each class's 10/25/50/75/90 % quantiles in five range bins by Nelder-Mead; the classes' reflectivities are free about
+the street's values before the fit (``PRIOR``) under a log-normal prior (sd 0.3).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import subprocess
 import sys
@@ -174,15 +181,78 @@ def print_table(title: str, rows: list[dict]) -> None:
               f"{r.get('ours_median', ''):>8} {r.get('real_median', ''):>8} {r['wasserstein'] if r['wasserstein'] is not None else '':>7}")
 
 
+PRIOR = {"road": 0.12, "sidewalk": 0.25, "building": 0.4, "vegetation": 0.5, "terrain": 0.4, "pole": 0.3}  # the street's values before the fit
+FIT_BINS = (0.0, 10.0, 20.0, 30.0, 40.0, 60.0)
+QUANTILES = np.array([0.1, 0.25, 0.5, 0.75, 0.9])
+
+
+def fit_law(seed: int = 0) -> dict:
+    """The hdl64e reading's ``scale, response, offset, compensated_range, exponent`` and total log sd, and the static
+    classes' reflectivities, fitted on the SemanticKITTI fit frames (module notes)."""
+    from scipy.optimize import minimize
+
+    groups = []
+    for name in FIT_FRAMES:
+        if not name.startswith("semantickitti"):
+            continue
+        scan = labelled.load_scans([REAL / name], NAMED)[0]
+        value, distance = remission(REAL / name), np.linalg.norm(scan.points, axis=1)
+        for k, cls in enumerate(NAMED):
+            if cls in PRIOR:
+                groups.append((cls, value[scan.labels == k], distance[scan.labels == k]))
+    binned, draw = [], np.random.default_rng(seed)
+    for cls in PRIOR:
+        value = np.concatenate([g[1] for g in groups if g[0] == cls])
+        distance = np.concatenate([g[2] for g in groups if g[0] == cls])
+        for lo, hi in zip(FIT_BINS[:-1], FIT_BINS[1:]):
+            mine = np.flatnonzero((distance >= lo) & (distance < hi))
+            if len(mine) >= 80:
+                mine = draw.permutation(mine)[:4000]
+                binned.append((cls, np.quantile(value[mine], QUANTILES), distance[mine], draw.standard_normal(len(mine))))
+    names = list(PRIOR)
+
+    def unpack(x):
+        return x[:6], dict(zip(names, np.exp(x[6:])))
+
+    def loss(x):
+        (s, gamma, o, rc, e, sd), rho = unpack(x)
+        if s <= 0 or not 0.02 < gamma <= 2 or not 5 <= rc <= 80 or not 0 <= e <= 20 or not 0 <= sd <= 1 or o < -0.5:
+            return 1e3
+        total = 0.0
+        for cls, real, distance, z in binned:
+            f = np.minimum(1.0, (rc / np.maximum(distance, 1e-3)) ** e)
+            sim = np.clip(np.round(s * (rho[cls] * f) ** gamma * np.exp(sd * z) - o, 2), 0.0, 0.99)
+            total += float(np.sum((np.quantile(sim, QUANTILES) - real) ** 2))
+        return total + 0.01 * sum((math.log(rho[n] / PRIOR[n]) / 0.3) ** 2 for n in names)
+
+    best = None
+    for start in ([0.87, 0.23, 0.34, 21.5, 2.6, 0.16], [0.67, 0.3, 0.13, 25.0, 3.9, 0.25]):
+        x0 = np.array(start + [math.log(PRIOR[n]) for n in names])
+        res = minimize(loss, x0, method="Nelder-Mead", options={"maxiter": 6000, "maxfev": 6000, "xatol": 1e-4, "fatol": 1e-7, "adaptive": True})
+        if best is None or res.fun < best.fun:
+            best = res
+    (s, gamma, o, rc, e, sd), rho = unpack(best.x)
+    return {"frames": [f for f in FIT_FRAMES if f.startswith("semantickitti")], "loss": round(float(best.fun), 4),
+            "law": {"scale": round(s, 3), "response": round(gamma, 3), "offset": round(o, 3), "compensated_range": round(rc, 1), "exponent": round(e, 2), "log_sd": round(sd, 3)},
+            "reflectivity": {n: round(v, 3) for n, v in rho.items()}, "prior": PRIOR}
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--before", action="store_true", help="store this checkout's figures as the before (intensity_before.json)")
     p.add_argument("--small", action="store_true", help="1 layout x 1 frame: that it runs")
     p.add_argument("--keep", type=Path, help="write the generated frames here (kept) instead of a temporary folder")
     p.add_argument("--out", type=Path, default=RESULTS, help="folder for the JSON results")
+    p.add_argument("--fit", action="store_true", help="refit the hdl64e reading and the static classes' reflectivities (intensity_fit.json)")
     args = p.parse_args()
     if not all((REAL / f).is_file() for f in FIT_FRAMES + CHECK_FRAMES):
         print(f"SKIP: the real scans are not at {REAL} (set BPY_PIPELINE_REAL_SCANS)")
+        return
+    if args.fit:
+        fitted = fit_law()
+        print(json.dumps(fitted, indent=2))
+        args.out.mkdir(parents=True, exist_ok=True)
+        (args.out / "intensity_fit.json").write_text(json.dumps({"benchmark": "intensity_fit", **fitted}, indent=2) + "\n")
         return
     layouts, frames = (1, 1) if args.small else (3, 2)
     result = {"frames": {"ours": f"{layouts} layouts x {frames} frames of {CONFIG.relative_to(ROOT)} (scene.layout_seed 100..)", "fit": list(FIT_FRAMES), "check": list(CHECK_FRAMES)},

@@ -19,7 +19,7 @@ asphalt 0.25 and foliage 0.36 where a calibrated reflectivity says 0.12 and 0.45
 laser ``k`` (a multi-beam sensor calibrates each laser apart, as the HDL-64E's per-laser table does;
 ``z_k, w_k`` standard normals drawn once per sensor unit from ``unit_seed``, so every frame and chunk
 of a run sees the same lasers), and ``n = exp(noise_sd e)`` a per-return factor (``e`` standard normal
-from the frame's generator). A weak return is detected yet reads 0 where ``g_k a f(R) < o_k``: a far
+from the frame's generator). A weak return is detected yet reads 0 where ``g_k (a f(R))^gamma < o_k``: a far
 car, or a car's glass and cabin, as KITTI's reflectance shows. Defaults fitted on KITTI frame 000008
 (docs/realism.md, "The reading apart from detection"); the ``hdl64e`` profile's values (its response included)
 on SemanticKITTI and KITTI frames (docs/realism.md, "The HDL-64E's reading, fitted per class").

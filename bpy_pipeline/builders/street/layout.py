@@ -67,8 +67,8 @@ NOMINAL_SIZE = {
 SPREAD = {"car": 0.08, "van": 0.06, "truck": 0.1, "bus": 0.05, "bicycle": 0.03, "motorcycle": 0.05, "person": 0.08}
 EGO_HALF = (2.3, 0.95)  # m: half the ego car's footprint (a 4.6 x 1.9 m estate car), kept free under a roof sensor
 MARKING_THICKNESS = 0.005  # m: road markings stand this proud of the road; users on the road stand on it
-# Reflectivity at 905 nm. Road, sidewalk, building and pole fitted (a prior at the assumed values, log sd 0.3) with the
-# hdl64e reading to SemanticKITTI's remission per class (docs/realism.md, "The HDL-64E's reading, fitted per class");
+# Reflectivity at 905 nm. Road, sidewalk, building and pole fitted with the hdl64e reading to SemanticKITTI's remission
+# per class, then checked on whole generated streets (docs/realism.md, "The HDL-64E's reading, fitted per class");
 # the rest assumed. "building" is the median of each building's own draw (BUILDING).
 REFLECTIVITY = {"road": 0.15, "marking": 0.6, "sidewalk": 0.25, "kerb": 0.35, "building": 0.55, "glass": 0.08,
                 "tyre": 0.05, "pole": 0.2, "traffic light": 0.15, "traffic sign": 0.8, "frame": 0.3}
