@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from bpy_pipeline import cli
-from bpy_pipeline.config import effects_from_dict
+from bpy_pipeline.config import effects_from_dict, load_config
 from bpy_pipeline.errors import InputError
 from bpy_pipeline.lidar.effects import apply_effects
 from bpy_pipeline.lidar.intensity import MAX_RINGS, ReadingModel, laser_calibration, range_factor, read_out
@@ -136,3 +136,68 @@ def test_a_bad_value_on_the_command_line_exits_2_in_one_line(tmp_path, capsys):
     assert code == 2
     assert len(err) == 1 and "effects.intensity.reading.gain_sd" in err[0], err
     assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
+
+
+# ----------------------------------------------------------------------------- the receiver's response and the hdl64e profile
+def test_a_compressing_response_reads_the_closed_form():
+    points, beam = wall(10.0, 0.3, rings=64)
+    out = apply_effects(points, beam, effects(noise_sd=0.0, response=0.225), np.random.default_rng(1), threads=1)
+    z = np.random.default_rng(0).standard_normal((2, MAX_RINGS))
+    want = np.clip(4.5 * np.exp(0.16 * z[0][:64]) * 0.3**0.225 - 0.15, 0.0, 1.0)[out["ring"]]
+    assert np.allclose(out["intensity"], want, atol=2e-6)
+    # beyond the compensated range the power falls first, then the response compresses it: (a (R_c / R)^e)^gamma
+    far = read_out(np.array([0.3]), np.array([56.0]), np.zeros(1, int), ReadingModel(enabled=True, gain_sd=0.0, noise_sd=0.0, response=0.5), 1.0, 0.0, None)
+    assert float(far[0]) == pytest.approx((0.3 * 0.25) ** 0.5, rel=1e-5)
+
+
+@pytest.mark.parametrize("response", [0.0, -0.5, 4.5, float("nan")])
+def test_a_response_out_of_range_is_refused_naming_its_key(response):
+    with pytest.raises(InputError, match=r"effects\.intensity\.reading\.response"):
+        effects(response=response)
+
+
+def hdl64e_reading(reflectivity, range_m=10.0, n=20000):
+    """The hdl64e profile's readings of a head-on diffuse wall on all 64 lasers."""
+    points, beam = wall(range_m, reflectivity, n=n)
+    profile = load_config({"sensor": {"preset": "hdl64e"}, "effects": {"drop": {"model": "none"}}}).effects
+    return apply_effects(points, beam, profile, np.random.default_rng(0), threads=1)["intensity"]
+
+
+def test_the_hdl64e_profile_reads_every_diffuse_surface_below_saturation_in_many_steps():
+    """The profile before it (3 x reflectivity, clipped) read every surface brighter than 0.33 as 1.0, one value per
+    material; the fitted reading keeps a white wall below the top and spreads each surface over many steps."""
+    for rho in (0.05, 0.13, 0.4, 0.9):
+        got = hdl64e_reading(rho)
+        assert (got >= 0.99).mean() < 0.02, rho
+        assert len(np.unique(got)) >= 20, rho
+    assert np.median(hdl64e_reading(0.9)) > np.median(hdl64e_reading(0.4)) > np.median(hdl64e_reading(0.13))
+    assert np.median(hdl64e_reading(0.4, 60.0)) < 0.5 * np.median(hdl64e_reading(0.4, 10.0))  # the reading falls beyond the compensated range
+
+
+def test_the_hdl64e_reading_of_the_street_materials_meets_semantickitti_per_class(real_scan):
+    """The street's fitted materials read through the profile at 5-20 m against SemanticKITTI seq08 000720's remission
+    there, per class: medians within 0.08 (the fit's frame; bench_intensity.py measures the whole distribution)."""
+    from bpy_pipeline.builders.street import dressing, layout
+    from bpy_pipeline.evaluate import labelled
+
+    path = real_scan("semantickitti_seq08_000720.bin")
+    classes = ("road", "sidewalk", "building", "vegetation", "terrain")
+    scan = labelled.load_scans([path], classes)[0]
+    remission = np.fromfile(path, np.float32).reshape(-1, 4)[:, 3]
+    near = (np.linalg.norm(scan.points, axis=1) >= 5) & (np.linalg.norm(scan.points, axis=1) < 20)
+    ours = {"road": layout.REFLECTIVITY["road"], "sidewalk": layout.REFLECTIVITY["sidewalk"], "building": layout.BUILDING[0],
+            "vegetation": dressing.REFLECTIVITY["vegetation"], "terrain": dressing.REFLECTIVITY["terrain"]}
+    for k, name in enumerate(classes):
+        real = float(np.median(remission[near & (scan.labels == k)]))
+        assert abs(float(np.median(hdl64e_reading(ours[name], 12.0))) - real) <= 0.08, (name, real)
+
+
+def test_street_road_users_draw_their_reflectivity_from_the_frame_generator():
+    from bpy_pipeline.builders.street.layout import CLOTHING, PAINT, draw_reflectivity
+
+    for law in (PAINT, CLOTHING):
+        draws = [draw_reflectivity(np.random.default_rng(seed), law) for seed in range(200)]
+        assert law[2] <= min(draws) and max(draws) <= law[3]
+        assert np.median(draws) == pytest.approx(law[0], rel=0.25)
+        assert len(set(draws)) > 150  # one object's value, not one per class
+    assert draw_reflectivity(np.random.default_rng(7), PAINT) == draw_reflectivity(np.random.default_rng(7), PAINT)

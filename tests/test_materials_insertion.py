@@ -59,7 +59,9 @@ def test_counts_against_the_real_car_and_glossy_paint_against_diffuse(car_3, ben
     assert 0.7 <= diffuse["on real-returned firings only"][0] <= 1.4, diffuse
     assert diffuse["sim/real per car"][0] >= diffuse["on real-returned firings only"][0]
     assert glossy["sim/real per car"][0] < diffuse["sim/real per car"][0]  # 15 m, oblique sides: the coat sends some beams away
-    assert glossy["overlap"] > diffuse["overlap"]  # dark paint reads nearer KITTI's mostly-dark car returns
+    # the hdl64e reading (compressing, fitted per class on SemanticKITTI) puts either paint within KITTI's car readings;
+    # under the linear 3 x reflectivity before it, the diffuse car saturated and only the dark coat came near
+    assert min(glossy["overlap"], diffuse["overlap"]) >= 0.6, (glossy["overlap"], diffuse["overlap"])
     # and reads darker on the car (its zero share, 0.3-0.5 % of about 600 points either way, is too few points to order)
     (xyz_d, read_d, _), (xyz_g, read_g, _) = car_3.mixed({}, 0), car_3.mixed(bench.glossy(0.03, 0.6, 8.0), 0)
     assert read_g[bench.in_box(xyz_g, car_3.boxes[0])].mean() < read_d[bench.in_box(xyz_d, car_3.boxes[0])].mean()

@@ -149,7 +149,8 @@ def far_dark_returns(n: int = 2000):
     points["x"], points["range"], points["ring"] = 30.0, 30.0, np.arange(n) % 64
     beam = np.zeros(n, BEAM_DTYPE)
     beam["cos_incidence"], beam["reflectivity"], beam["gain"], beam["direction"] = 0.9, 0.01, 1.0, [1.0, 0.0, 0.0]
-    effects = bpy_pipeline.load_config({"sensor": {"preset": "hdl64e"}, "effects": {"intensity": {"scale": 4.5, "offset": 0.15, "reading": {"enabled": True}}}}).effects
+    reading = {"enabled": True, "response": 1.0, "compensated_range": 28.0, "exponent": 2.0, "gain_sd": 0.16, "noise_sd": 0.075}  # KITTI 000008's linear reading
+    effects = bpy_pipeline.load_config({"sensor": {"preset": "hdl64e"}, "effects": {"intensity": {"scale": 4.5, "offset": 0.15, "reading": reading}}}).effects
     return points, beam, effects
 
 
@@ -189,7 +190,8 @@ def test_detection_unset_leaves_the_frame_byte_identical(real_scan):
     scan = real_scan("kitti_hdl64e_000008_frontfov.bin")
     section = RealScanScene(path=str(scan), format="kitti", preset="hdl64e", objects=[ObjectBox("car", (8.0, 0.5, -0.95), (4.5, 1.8, 1.5), 20.0)],
                             car_glass=CarGlass(enabled=True), car_paint=CarPaint(enabled=True))
-    effects = bpy_pipeline.load_config({"sensor": {"preset": "hdl64e"}, "effects": {"intensity": {"scale": 4.5, "offset": 0.15, "reading": {"enabled": True}}}}).effects
+    reading = {"enabled": True, "response": 1.0, "compensated_range": 28.0, "exponent": 2.0, "gain_sd": 0.16, "noise_sd": 0.075}  # KITTI 000008's linear reading
+    effects = bpy_pipeline.load_config({"sensor": {"preset": "hdl64e"}, "effects": {"intensity": {"scale": 4.5, "offset": 0.15, "reading": reading}}}).effects
 
     def run(paint):
         state = MixState(replace(section, car_paint=paint), np.random.default_rng(0), effects, 1)

@@ -11,15 +11,18 @@ The reading apart from detection (``effects.intensity.reading``, :class:`Reading
 models decide detection from the received power (the apparent reflectance ``a`` and the range, as
 before); what a detected return *reads* is the receiver's calibrated value
 
-    ``I = clip(g_k a f(R) n - o_k, 0, 1)``,  ``f(R) = 1`` up to ``compensated_range`` ``R_c``, ``(R_c / R)^exponent`` beyond,
+    ``I = clip(g_k (a f(R))^gamma n - o_k, 0, 1)``,  ``f(R) = 1`` up to ``compensated_range`` ``R_c``, ``(R_c / R)^exponent`` beyond,
 
-with ``g_k = scale exp(gain_sd z_k)`` and ``o_k = max(offset + offset_sd w_k, 0)`` the gain and offset of
+with ``gamma`` the receiver's ``response`` (1: linear; below 1 a compressing receiver, as the HDL-64E's: KITTI reads
+asphalt 0.25 and foliage 0.36 where a calibrated reflectivity says 0.12 and 0.45),
+``g_k = scale exp(gain_sd z_k)`` and ``o_k = max(offset + offset_sd w_k, 0)`` the gain and offset of
 laser ``k`` (a multi-beam sensor calibrates each laser apart, as the HDL-64E's per-laser table does;
 ``z_k, w_k`` standard normals drawn once per sensor unit from ``unit_seed``, so every frame and chunk
 of a run sees the same lasers), and ``n = exp(noise_sd e)`` a per-return factor (``e`` standard normal
-from the frame's generator). A weak return is detected yet reads 0 where ``g_k a f(R) < o_k``: a far
+from the frame's generator). A weak return is detected yet reads 0 where ``g_k (a f(R))^gamma < o_k``: a far
 car, or a car's glass and cabin, as KITTI's reflectance shows. Defaults fitted on KITTI frame 000008
-(docs/realism.md, "The reading apart from detection").
+(docs/realism.md, "The reading apart from detection"); the ``hdl64e`` profile's values (its response included)
+on SemanticKITTI and KITTI frames (docs/realism.md, "The HDL-64E's reading, fitted per class").
 """
 
 from __future__ import annotations
@@ -49,18 +52,22 @@ class ReadingModel:
     offset_sd: float = 0.0  # sd of the offset across lasers (not identifiable on one frame: 0)
     noise_sd: float = 0.075  # sd of ln of a per-return factor (KITTI 000008's road: robust within-ring log spread, 8-20 m)
     unit_seed: int = 0  # the sensor unit: its lasers' gains and offsets are drawn from this seed
+    response: float = 1.0  # gamma: the reading grows as (a f(R))^gamma (1: linear; below 1: a compressing receiver)
 
 
 def check_reading(reading: ReadingModel, offset: float, model: str = "reflectance") -> None:
     """One-line :class:`InputError` for a reading model's value out of range (``offset``, ``model``: ``effects.intensity``'s)."""
     key = "effects.intensity.reading"
-    for name, value in (("compensated_range", reading.compensated_range), ("exponent", reading.exponent), ("gain_sd", reading.gain_sd), ("offset_sd", reading.offset_sd), ("noise_sd", reading.noise_sd)):
+    for name, value in (("compensated_range", reading.compensated_range), ("exponent", reading.exponent), ("gain_sd", reading.gain_sd), ("offset_sd", reading.offset_sd), ("noise_sd", reading.noise_sd),
+                        ("response", reading.response)):
         if not (isinstance(value, (int, float)) and math.isfinite(value)):
             raise InputError(f"{key}.{name}: must be a finite number, got {value!r}")
     if not 0 < reading.compensated_range <= 10000:
         raise InputError(f"{key}.compensated_range: must lie in (0, 10000] metres, got {reading.compensated_range}")
     if not 0 <= reading.exponent <= 10:
         raise InputError(f"{key}.exponent: must lie in 0..10, got {reading.exponent}")
+    if not 0 < reading.response <= 4:
+        raise InputError(f"{key}.response: must lie in (0, 4], got {reading.response}")
     for name in ("gain_sd", "offset_sd", "noise_sd"):
         if not 0 <= getattr(reading, name) <= 2:
             raise InputError(f"{key}.{name}: must lie in 0..2, got {getattr(reading, name)}")
@@ -90,12 +97,16 @@ def range_factor(range_m: np.ndarray, compensated_range: float, exponent: float)
 
 
 def read_out(value: np.ndarray, range_m: np.ndarray, ring: np.ndarray, reading: ReadingModel, scale: float, offset: float, rng: np.random.Generator | None) -> np.ndarray:
-    """The reading ``clip(g_k a f(R) n - o_k, 0, 1)`` (module notes) of apparent reflectances ``value`` (p,);
+    """The reading ``clip(g_k (a f(R))^gamma n - o_k, 0, 1)`` (module notes) of apparent reflectances ``value`` (p,);
     range_m (p,) m; ring (p,) laser ids; ``rng`` draws the per-return factor (needed when ``noise_sd`` > 0).
     Returns (p,) float32."""
     gain, off = laser_calibration(int(reading.unit_seed), float(scale), float(offset), float(reading.gain_sd), float(reading.offset_sd))
     k = np.asarray(ring, np.int64) % MAX_RINGS
-    power = np.asarray(value, np.float32) * gain[k] * range_factor(range_m, reading.compensated_range, reading.exponent)
+    f = range_factor(range_m, reading.compensated_range, reading.exponent)
+    if reading.response == 1.0:
+        power = np.asarray(value, np.float32) * gain[k] * f
+    else:
+        power = (np.maximum(np.asarray(value, np.float32), np.float32(0.0)) * f) ** np.float32(reading.response) * gain[k]
     if reading.noise_sd > 0:
         if rng is None:
             raise ValueError("read_out: noise_sd > 0 needs a generator")

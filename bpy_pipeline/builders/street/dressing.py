@@ -47,9 +47,10 @@ from . import vegetation
 
 Mesh = tuple[np.ndarray, np.ndarray]
 
-# reflectivity at 905 nm (assumed, of the order measured for each material: leaves 0.4-0.6 in the
-# near infrared, bark 0.3, grass 0.4, grey paint and concrete 0.3-0.4, dark plastic 0.1-0.2)
-REFLECTIVITY = {"vegetation": 0.5, "trunk": 0.3, "terrain": 0.4, "pole": 0.3, "fence": 0.3, "wall": 0.35,
+# reflectivity at 905 nm (of the order measured for each material: leaves 0.4-0.6 in the near infrared, bark 0.3,
+# grass 0.4, grey paint and concrete 0.3-0.4, dark plastic 0.1-0.2); vegetation, terrain and pole fitted with the
+# hdl64e reading to SemanticKITTI's remission (docs/realism.md, "The HDL-64E's reading, fitted per class")
+REFLECTIVITY = {"vegetation": 0.35, "trunk": 0.3, "terrain": 0.4, "pole": 0.2, "fence": 0.3, "wall": 0.35,
                 "barrier": 0.5, "traffic cone": 0.55, "bin": 0.15, "bicycle stand": 0.4}
 BOUNDARIES = ("fence", "hedge", "wall", "none")
 

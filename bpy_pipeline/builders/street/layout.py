@@ -65,11 +65,26 @@ NOMINAL_SIZE = {
     "person": (0.6, 0.6, 1.75),
 }
 SPREAD = {"car": 0.08, "van": 0.06, "truck": 0.1, "bus": 0.05, "bicycle": 0.03, "motorcycle": 0.05, "person": 0.08}
-# reflectivity at 905 nm (assumed; the parking builder's paint table for cars)
 EGO_HALF = (2.3, 0.95)  # m: half the ego car's footprint (a 4.6 x 1.9 m estate car), kept free under a roof sensor
 MARKING_THICKNESS = 0.005  # m: road markings stand this proud of the road; users on the road stand on it
-REFLECTIVITY = {"road": 0.12, "marking": 0.6, "sidewalk": 0.25, "kerb": 0.35, "building": 0.4, "glass": 0.08,
-                "tyre": 0.05, "pole": 0.3, "traffic light": 0.15, "traffic sign": 0.8, "frame": 0.3, "person": 0.35}
+# Reflectivity at 905 nm. Road, sidewalk, building and pole fitted with the hdl64e reading to SemanticKITTI's remission
+# per class, then checked on whole generated streets (docs/realism.md, "The HDL-64E's reading, fitted per class");
+# the rest assumed. "building" is the median of each building's own draw (BUILDING).
+REFLECTIVITY = {"road": 0.15, "marking": 0.6, "sidewalk": 0.25, "kerb": 0.35, "building": 0.55, "glass": 0.08,
+                "tyre": 0.05, "pole": 0.2, "traffic light": 0.15, "traffic sign": 0.8, "frame": 0.3}
+# Per-object reflectivity, lognormal: (median, sd of its log, lowest, highest). Buildings draw from the layout's
+# generator, road users from the frame's. PAINT is a body's diffuse return beside its clear coat's mirror lobe
+# (dark and metallic paints return 1-5 %, white up to 0.5), CLOTHING a pedestrian's or rider's; both fitted to
+# KITTI and SemanticKITTI car and person remission through the hdl64e reading (docs/realism.md).
+BUILDING = (0.55, 0.4, 0.15, 0.95)
+PAINT = (0.04, 1.2, 0.002, 0.8)
+CLOTHING = (0.5, 0.6, 0.05, 0.95)
+
+
+def draw_reflectivity(rng: np.random.Generator, law: tuple[float, float, float, float]) -> float:
+    """One object's reflectivity: ``median exp(log_sd z)``, ``z`` standard normal from ``rng``, clipped to ``[lowest, highest]``."""
+    median, log_sd, lowest, highest = law
+    return float(np.clip(median * math.exp(log_sd * float(rng.standard_normal())), lowest, highest))
 
 
 # ----------------------------------------------------------------------------- the layout
@@ -267,7 +282,7 @@ def street_layout(p, rng: np.random.Generator) -> StreetLayout:
 
     dressing = dress(p, R, inner, outer, kh, c1, rng)
     for mesh, front in zip(dressing.buildings, dressing.fronts, strict=True):
-        add(f"street_building_{len(parts):03d}", "building", REFLECTIVITY["building"], mesh)
+        add(f"street_building_{len(parts):03d}", "building", draw_reflectivity(rng, BUILDING), mesh)
         parts[-1] = dataclasses.replace(parts[-1], front=front)
     for name, class_name, reflectivity, mesh, scatter in dressing.parts:
         add(name, class_name, reflectivity, mesh, scatter=scatter)
@@ -447,14 +462,15 @@ def _sidewalk_point(layout: StreetLayout, rng) -> np.ndarray:
 def user_meshes(user: RoadUser, rng: np.random.Generator, fittings: bool = True) -> list[tuple[str, str, str, float, Mesh]]:
     """``[(part, class, material, reflectivity, mesh (world))]`` of one placed road user.
 
-    A vehicle's paint reflectivity is drawn from ``rng`` (0.05 black .. 0.7 white); with ``fittings`` its plates
+    A vehicle's paint reflectivity is drawn from ``rng`` (:data:`PAINT`), a person's or rider's clothing too
+    (:data:`CLOTHING`); with ``fittings`` its plates
     (``retroreflector``) and lamps (``glossy_paint``) follow its parts (:func:`~.vehicles.vehicle_fittings`, no
     draw); a pedestrian walks or stands (:func:`~.human.sample_pose`); a rider sits on the saddle, hands towards the bar.
     """
     from ...geometry import human
 
     if user.kind in VEHICLES:
-        paint = float(rng.choice([0.7, 0.05, 0.3, 0.5, 0.2, 0.45]))
+        paint = draw_reflectivity(rng, PAINT)
         parts = vehicle_parts(user.kind, user.size)
         if fittings:
             parts |= vehicle_fittings(parts["body"][0], user.size[0])
@@ -465,7 +481,7 @@ def user_meshes(user: RoadUser, rng: np.random.Generator, fittings: bool = True)
         angles = human.sample_pose("walking" if rng.random() < 0.7 else "standing", rng, build)
         person = human.pose_person(angles, float(user.size[2]), build, "walking", user.centre, user.yaw, user.z)
         v, t, _ = human.body_mesh(person.a, person.b, person.radius, 8, 2)
-        return [("body", "person", "diffuse", REFLECTIVITY["person"], (v, t))]
+        return [("body", "person", "diffuse", draw_reflectivity(rng, CLOTHING), (v, t))]
     parts = two_wheeler_parts(user.kind, user.size)
     out = [(name, user.kind, "diffuse", REFLECTIVITY["frame"] if name == "frame" else REFLECTIVITY["tyre"], transformed(mesh, user.centre, user.yaw, user.z)) for name, mesh in parts.items()]
     angles = human.sample_pose("sitting", rng, build)
@@ -474,7 +490,7 @@ def user_meshes(user: RoadUser, rng: np.random.Generator, fittings: bool = True)
     hip = user.centre + np.array([c, s]) * (-0.1 * user.size[0] - 0.05)
     rider = human.pose_person(angles, 0.95 * float(user.size[2]), build, "sitting", hip, user.yaw, user.z + seat + 0.005)
     v, t, _ = human.body_mesh(rider.a, rider.b, rider.radius, 8, 2)
-    out.append(("rider", "rider", "diffuse", REFLECTIVITY["person"], (v, t)))
+    out.append(("rider", "rider", "diffuse", draw_reflectivity(rng, CLOTHING), (v, t)))
     return out
 
 
