@@ -122,8 +122,11 @@ def test_kitti_frame_emptied_of_every_box(real_scan):
 
 
 def test_bad_backgrounds_get_one_line(real_scan, tmp_path):
-    offset = real_scan("semantickitti_000700_points.npy")  # this sample's returns sit about 100 m from its origin
-    with pytest.raises(InputError, match="000700_points.npy: not in its sensor's frame"):
+    real = real_scan("semantickitti_000700_points.npy")  # in its sensor's frame; moved 100 m off, it is not
+    offset = tmp_path / "moved_points.npy"
+    np.save(offset, np.load(real) + np.float32([0, -100, 0]))
+    np.save(tmp_path / "moved_labels.npy", np.load(str(real).replace("_points", "_labels")))
+    with pytest.raises(InputError, match="moved_points.npy: not in its sensor's frame"):
         sm.empty_background(offset)
     lone = tmp_path / "x_points.npy"
     np.save(lone, np.zeros((10, 3), np.float32))
