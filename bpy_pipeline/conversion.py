@@ -152,8 +152,10 @@ def convert(scan_path, to: str, labels=None, method: str = "hybrid", lift: float
     return Converted(out, source, carried, info)
 
 
-def write_converted(converted: Converted, out: str | Path, to: str, formats=("semantickitti",), overwrite: bool = False, scan_path: str = "") -> dict:
-    """Write a converted scan as a one-frame dataset under ``out`` (the run's manifest, record and writers); returns its record."""
+def write_converted(converted: Converted, out: str | Path, to: str, formats=("semantickitti",), overwrite: bool = False, scan_path: str = "", inputs=()) -> dict:
+    """Write a converted scan as a one-frame dataset under ``out`` (the run's manifest, record and writers); returns its record.
+
+    inputs : other files the conversion read (its labels); ``overwrite`` refuses when one lies inside ``out``, as the scan"""
     from .buffers import SceneBuffers
     from .builders.base import BuildResult
     from .config import load_config
@@ -167,7 +169,7 @@ def write_converted(converted: Converted, out: str | Path, to: str, formats=("se
                  f"output.formats=[{', '.join(formats)}]", "output.boxes.formats=[]", "output.preview=false"]
     config = load_config(None, overrides)
     frame = Frame(index=0, config=config, rng=frame_rng(config.seed, 0), buffers=SceneBuffers.from_meshes({}), points=converted.points, scene=BuildResult(info=converted.info))
-    with Dataset.open(out, config, "overwrite" if overwrite else "new") as dataset:
+    with Dataset.open(out, config, "overwrite" if overwrite else "new", inputs=[p for p in inputs if p]) as dataset:
         return dataset.commit(frame)
 
 
@@ -197,8 +199,12 @@ def convert_main(args) -> int:
     bad = [f for f in formats if f not in POINT_FORMATS]
     if bad or not formats:
         raise InputError(f"--formats: {bad[0] if bad else '(none)'!r} is not one of {', '.join(POINT_FORMATS)}")
+    if args.overwrite:  # before any work: --overwrite never removes an input
+        from .dataset import refuse_inputs_inside
+
+        refuse_inputs_inside(args.out, [args.scan, args.labels])
     converted = convert(args.scan, args.to, args.labels, args.method, args.lift, args.source, args.format, args.label_space, args.threads)
-    record = write_converted(converted, args.out, args.to, formats, args.overwrite, str(Path(args.scan).resolve()))
+    record = write_converted(converted, args.out, args.to, formats, args.overwrite, str(Path(args.scan).resolve()), [args.labels])
     c = converted.info["conversion"]
     print(f"{c['source_returns']:,} returns of {c['scan']} -> {c['converted']:,} points of {args.to} ({args.method}, {c['convert_ms']:.0f} ms, labels: {c['labels']}); {len(record['files'])} files in {args.out}")
     return 0

@@ -1,0 +1,180 @@
+"""A user's files are never lost and never reached outside the output folder (issue 51, parts 1 and 2).
+
+The dataset is written by ``bpy-pipeline convert`` (a street scan made here, no Blender), so every case runs
+the real command, its real writers and the real dataset code. docs/reliability.md lists what is guaranteed.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import subprocess
+from pathlib import Path
+
+import pytest
+
+from bpy_pipeline import cli
+from bpy_pipeline.__main__ import main
+from bpy_pipeline.config import config_from_dict
+from bpy_pipeline.dataset import Dataset
+from bpy_pipeline.io import read_manifest
+from test_convert import street
+
+
+def snapshot(folder: Path) -> dict[str, str]:
+    """{relative path: sha256} of every file under ``folder``."""
+    return {str(p.relative_to(folder)): hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def convert(capsys, scan: Path, out: Path, *extra: str) -> tuple[int, str]:
+    code = main(["convert", str(scan), "--to", "vlp16", "--out", str(out), "--formats", "semantickitti,ply", *extra])
+    return code, capsys.readouterr().err
+
+
+def one_line(stderr: str, fragment: str) -> None:
+    lines = [line for line in stderr.splitlines() if line.strip()]
+    assert "Traceback" not in stderr and len(lines) == 1 and fragment in lines[0], stderr
+
+
+@pytest.fixture
+def dataset(tmp_path, capsys):
+    """(scan, labels, out): a converted one-frame dataset in ``out``, its inputs outside it."""
+    scan, labels = street(tmp_path)
+    out = tmp_path / "out"
+    code, err = convert(capsys, scan, out)
+    assert code == 0, err
+    return scan, labels, out
+
+
+def test_overwrite_removes_only_what_the_run_wrote(dataset, capsys):
+    scan, _, out = dataset
+    (out / "notes.txt").write_text("mine")
+    (out / "ply" / "keep.txt").write_text("mine too")
+    (out / "sequences" / "00" / "velodyne" / "extra.bin").write_bytes(b"mine")
+    code, err = convert(capsys, scan, out, "--overwrite")
+    assert code == 0, err
+    assert (out / "notes.txt").read_text() == "mine" and (out / "ply" / "keep.txt").read_text() == "mine too"
+    assert (out / "sequences" / "00" / "velodyne" / "extra.bin").read_bytes() == b"mine"
+    assert (out / "ply" / "000000.ply").is_file() and len(list((out / "records").iterdir())) == 1
+
+
+def test_overwrite_leaves_no_file_of_the_old_run_behind(dataset, capsys):
+    scan, _, out = dataset
+    code, err = main(["convert", str(scan), "--to", "vlp16", "--out", str(out), "--formats", "npy", "--overwrite"]), capsys.readouterr().err
+    assert code == 0, err
+    assert not (out / "ply").exists() and not (out / "sequences").exists() and not (out / "semantic-kitti.yaml").exists()
+    assert (out / "npy" / "000000").is_dir()
+
+
+@pytest.mark.parametrize("inside", ["scan", "labels"])
+def test_convert_overwrite_refuses_inputs_inside_out(dataset, capsys, inside):
+    """issue 51, 1: ``convert d2/X_points.npy --labels d2/X_labels.npy --out d2 --overwrite`` deleted both inputs."""
+    scan, labels, out = dataset
+    moved = {"scan": scan, "labels": labels}
+    target = out / moved[inside].name
+    target.write_bytes(moved[inside].read_bytes())
+    moved[inside] = target
+    before = snapshot(out)
+    code = main(["convert", str(moved["scan"]), "--labels", str(moved["labels"]), "--label-space", "raw", "--to", "hdl32e", "--out", str(out), "--overwrite"])
+    assert code == 2
+    one_line(capsys.readouterr().err, f"the input {target} lies inside {out}")
+    assert snapshot(out) == before
+
+
+def test_run_overwrite_refuses_a_config_and_scan_inside_out(dataset, capsys):
+    """issue 51, 1: ``run.py --config d/cfg.yaml --out d --overwrite`` emptied d/, scan and config included."""
+    scan, _, out = dataset
+    (out / "scan.npy").write_bytes(scan.read_bytes())
+    config = out / "cfg.yaml"
+    config.write_text(f"scene: {{builder: real_scan, path: {out / 'scan.npy'}}}\n")
+    before = snapshot(out)
+    code = cli.main(["run.py", "--config", str(config), "--out", str(out), "--overwrite"])
+    assert code == 2
+    one_line(capsys.readouterr().err, f"the input {config} lies inside {out}")
+    assert snapshot(out) == before
+
+
+def test_a_scene_input_inside_out_is_refused_by_the_dataset(dataset):
+    """The same refusal for the API and workers, from the config alone (``scene.path``)."""
+    _, _, out = dataset
+    (out / "scan.npy").write_bytes(b"x")
+    config = config_from_dict({**read_manifest(out)["config"], "scene": {"builder": "real_scan", "path": str(out / "scan.npy")}})
+    before = snapshot(out)
+    with pytest.raises(Exception, match="lies inside"):
+        Dataset.open(out, config, "overwrite")
+    assert snapshot(out) == before
+
+
+def test_a_folder_whose_manifest_is_not_ours_is_refused_not_emptied(tmp_path, capsys):
+    """issue 51, 1: an unrelated ``manifest.json`` lost its folder's ``src/`` and README to ``--overwrite``."""
+    scan, _ = street(tmp_path)
+    web = tmp_path / "webapp"
+    (web / "src").mkdir(parents=True)
+    (web / "src" / "app.js").write_text("x")
+    (web / "README").write_text("x")
+    (web / "manifest.json").write_text('{"manifest_version": 3, "name": "x"}')
+    before = snapshot(web)
+    code, err = convert(capsys, scan, web, "--overwrite")
+    assert code == 2
+    one_line(err, "is not a bpy_pipeline run's manifest")
+    assert snapshot(web) == before
+
+
+def chattr(flag: str, path: Path) -> None:
+    done = subprocess.run(["chattr", flag, str(path)], capture_output=True)
+    if done.returncode:
+        pytest.skip(f"chattr {flag} is not available here ({done.stderr.decode().strip()})")
+
+
+def test_an_undeletable_file_refuses_before_the_first_deletion(dataset, capsys):
+    """issue 51, 1: with one file immutable, ``--overwrite`` died with a traceback after deleting 150 files."""
+    scan, _, out = dataset
+    locked = out / "sequences" / "00" / "velodyne" / "000000.bin"
+    chattr("+i", locked)
+    try:
+        before = snapshot(out)
+        code, err = convert(capsys, scan, out, "--overwrite")
+        assert code == 2
+        one_line(err, f"cannot remove {locked}")
+        assert snapshot(out) == before
+    finally:
+        chattr("-i", locked)
+
+
+def test_a_crafted_intent_never_removes_a_file_outside_out(dataset, capsys):
+    """issue 51, 2: ``OUT/.moving/000001.json`` naming ``../../victim/keep.txt`` and an absolute path made the
+    next run delete both; the next resume or overwrite now leaves them, with one warning each."""
+    scan, _, out = dataset
+    victim = out.parent / "victim"
+    victim.mkdir()
+    (victim / "keep.txt").write_text("keep")
+    (victim / "keep2.txt").write_text("keep")
+    (out / "ply" / "link").symlink_to(victim)  # a folder link inside OUT pointing out of it
+    names = ["../victim/keep.txt", str(victim / "keep2.txt"), "ply/link/keep.txt", "ply", "\x00"]
+    (out / ".moving").mkdir(exist_ok=True)
+    (out / ".moving" / "000001.json").write_text(json.dumps(names))
+    warnings = []
+    config = config_from_dict(read_manifest(out)["config"])
+    with Dataset.open(out, config, "resume", log=warnings.append):
+        pass
+    assert (victim / "keep.txt").read_text() == "keep" and (victim / "keep2.txt").read_text() == "keep"
+    assert (out / "ply" / "000000.ply").is_file() and not (out / ".moving" / "000001.json").exists()
+    assert sum("left alone" in w for w in warnings) == len(names), warnings
+    (out / ".moving").mkdir(exist_ok=True)
+    (out / ".moving" / "000001.json").write_text(json.dumps(names))
+    code, err = convert(capsys, scan, out, "--overwrite")
+    assert code == 0, err
+    assert (victim / "keep.txt").read_text() == "keep" and (victim / "keep2.txt").read_text() == "keep"
+
+
+def test_a_record_naming_a_file_outside_out_is_not_read(dataset):
+    """A record whose ``sha256`` names ``../x`` or ``/dev/zero`` is not read: its frame is made again."""
+    _, _, out = dataset
+    record = json.loads((out / "records" / "000000.json").read_text())
+    for name in ("../../../../../../dev/zero", "/dev/zero", "ply/../../outside.bin"):
+        (out.parent / "outside.bin").write_bytes(b"x")
+        (out / "records" / "000000.json").write_text(json.dumps({**record, "sha256": {name: "0" * 64}}))
+        warnings = []
+        with Dataset.open(out, config_from_dict(read_manifest(out)["config"]), "resume", log=warnings.append) as opened:
+            assert not opened.has(0)
+        assert any("does not match its record" in w for w in warnings)
