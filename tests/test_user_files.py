@@ -178,3 +178,100 @@ def test_a_record_naming_a_file_outside_out_is_not_read(dataset):
         with Dataset.open(out, config_from_dict(read_manifest(out)["config"]), "resume", log=warnings.append) as opened:
             assert not opened.has(0)
         assert any("does not match its record" in w for w in warnings)
+
+
+# ----------------------------------------------------------------------------- paths read from an asset or a dataset
+def gltf_with_buffer(folder: Path, uri: str) -> Path:
+    """A .gltf box whose one buffer is the file ``uri`` (written beside it as ``box.bin`` for a good one)."""
+    from test_insertion_objects import box_in_gltf, write_gltf
+
+    folder.mkdir(parents=True, exist_ok=True)
+    path = write_gltf(folder / "box.gltf", [(*box_in_gltf(1.0, 1.0, 1.0), "paint")])
+    doc = json.loads(path.read_text())
+    import base64
+
+    (folder / "box.bin").write_bytes(base64.b64decode(doc["buffers"][0]["uri"].split(",", 1)[1]))
+    doc["buffers"][0]["uri"] = uri
+    path.write_text(json.dumps(doc))
+    return path
+
+
+@pytest.mark.parametrize("uri, fragment", [
+    ("../outside.bin", "not a relative path inside its folder"),
+    ("/dev/zero", "not a relative path inside its folder"),
+    ("zero", "a link pointing outside its folder"),  # a link to /dev/zero beside it
+    ("fifo", "not a regular file"),
+    ("out.bin", "a link pointing outside its folder"),
+])
+def test_a_gltf_buffer_uri_outside_its_folder_or_not_a_file_is_refused(tmp_path, uri, fragment):
+    """issue 51, 2: ``buffers[].uri`` of ``../../outside.bin`` was read from outside the asset's folder; ``/dev/zero``
+    read until MemoryError; a FIFO hung for ever."""
+    import os
+
+    from bpy_pipeline.errors import InputError
+    from bpy_pipeline.mixing.objects import file_parts
+
+    assets = tmp_path / "assets"
+    path = gltf_with_buffer(assets, uri)
+    (tmp_path / "outside.bin").write_bytes((assets / "box.bin").read_bytes())
+    (assets / "zero").symlink_to("/dev/zero")
+    os.mkfifo(assets / "fifo")
+    (assets / "out.bin").symlink_to(tmp_path / "outside.bin")
+    with pytest.raises(InputError) as info:
+        file_parts(str(path))
+    assert fragment in str(info.value) and "buffers[0].uri" in str(info.value) and "\n" not in str(info.value)
+
+
+def test_a_gltf_buffer_beside_it_is_read(tmp_path):
+    from bpy_pipeline.mixing.objects import file_parts
+
+    parts = file_parts(str(gltf_with_buffer(tmp_path / "assets", "box.bin")))
+    assert len(parts) == 1 and len(parts[0].triangles) == 12
+
+
+def test_a_gltf_whose_nodes_list_the_next_twice_is_refused_at_once(tmp_path):
+    """issue 51, 3: 41 nodes each listing the next one twice were walked 2**40 times."""
+    import time
+
+    from bpy_pipeline.errors import InputError
+    from bpy_pipeline.mixing.objects import file_parts
+
+    path = gltf_with_buffer(tmp_path / "assets", "box.bin")
+    doc = json.loads(path.read_text())
+    doc["nodes"] = [{"children": [k + 1, k + 1]} for k in range(40)] + [{"mesh": 0}]
+    path.write_text(json.dumps(doc))
+    start = time.perf_counter()
+    with pytest.raises(InputError, match="is reached twice; a node has at most one parent"):
+        file_parts(str(path))
+    assert time.perf_counter() - start < 10  # exponential, it ran for hours; a generous bound, not a benchmark
+
+
+def test_evaluate_never_follows_a_record_out_of_train(dataset, tmp_path):
+    """issue 51, 2: a record's ``files`` entry ``ply/../../../elsewhere/000000.ply`` was read from outside ``--train``."""
+    from bpy_pipeline.errors import InputError
+    from bpy_pipeline.evaluate.labelled import read_generated
+
+    _, _, out = dataset
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    (elsewhere / "000000.ply").write_bytes((out / "ply" / "000000.ply").read_bytes())
+    record = json.loads((out / "records" / "000000.json").read_text())
+    assert len(read_generated(out, ["car"])) == 1
+    for name in ("ply/../../elsewhere/000000.ply", "ply/link.ply"):
+        (out / "ply" / "link.ply").unlink(missing_ok=True)
+        (out / "ply" / "link.ply").symlink_to(elsewhere / "000000.ply")
+        (out / "records" / "000000.json").write_text(json.dumps({**record, "files": [name]}))
+        with pytest.raises(InputError, match="a record's files lie in its dataset folder"):
+            read_generated(out, ["car"])
+
+
+def test_evaluate_refuses_a_class_table_that_is_a_list(dataset):
+    """issue 51, 4: a manifest whose ``class_table`` is a list raised a traceback."""
+    from bpy_pipeline.errors import InputError
+    from bpy_pipeline.evaluate.labelled import read_generated
+
+    _, _, out = dataset
+    manifest = read_manifest(out)
+    (out / "manifest.json").write_text(json.dumps({**manifest, "class_table": ["unlabeled", "car"]}))
+    with pytest.raises(InputError, match="class_table must map class ids"):
+        read_generated(out, ["car"])
