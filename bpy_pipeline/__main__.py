@@ -132,8 +132,13 @@ def fit_effects(args) -> int:
     options = fitting.FitOptions()
     changes = {k: getattr(args, k) for k in fitting.FitOptions.__dataclass_fields__ if getattr(args, k, None) is not None}
     options = replace(options, **changes)
-    if options.min_range <= 0 or options.max_range <= options.min_range:
-        raise InputError(f"fit: need 0 < --min-range < --max-range, got {options.min_range} and {options.max_range}")
+    if not (np.isfinite(options.min_range) and np.isfinite(options.max_range) and 0 < options.min_range < options.max_range):
+        raise InputError(f"fit: need 0 < --min-range < --max-range, finite metres, got {options.min_range} and {options.max_range}")
+    if not (np.isfinite(options.intensity_scale) and options.intensity_scale > 0):
+        raise InputError(f"--intensity-scale: must be a finite number > 0 (the intensity of an apparent reflectance of 1), got {options.intensity_scale}")
+    for key, most in (("folds", fitting.MAX_FOLDS), ("mlp_steps", fitting.MAX_MLP_STEPS), ("max_gap", fitting.MAX_GAP)):
+        if not 0 <= getattr(options, key) <= most:
+            raise InputError(f"--{key.replace('_', '-')}: must lie in {int(key == 'mlp_steps')}..{most:,}, got {getattr(options, key):,}")
     if min(options.range_bins, options.incidence_bins, options.noise_range_bins, options.noise_incidence_bins, options.min_samples,
            options.mlp_range_bins, options.mlp_incidence_bins, options.mlp_steps) < 1 or options.seed < 0:
         raise InputError("fit: bin counts, --min-samples and --mlp-steps must be >= 1, --seed >= 0")

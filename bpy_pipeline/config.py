@@ -304,6 +304,7 @@ class LimitsConfig:
     objects: float = 1e4  # objects of a frame's scene (placed people, cars, shapes, ...)
     seconds: float = 7 * 86400.0  # estimated seconds of the selected frames in one process
     bytes: float = 1e12  # estimated bytes written by the selected frames
+    particles: float = 1e9  # rain drops and snow flakes drawn a frame, at most (lidar/weather.py; 235 ns each: 4 min a frame)
 
 
 MAX_FRAMES = 10**9  # frame indices are 6+ digit file names and records; a billion frames is centuries of scanning
@@ -692,8 +693,7 @@ def apply_override(data: dict, assignment: str) -> None:
     if not sep or not key.strip():
         raise InputError(f"--set {assignment!r}: expected key.path=value")
     try:
-        check_yaml_depth(text, f"--set {key}")
-        value = yaml.load(text, Loader=SAFE_LOADER)
+        value = read_yaml_text(text, f"--set {key}")
     except yaml.YAMLError:
         raise InputError(f"--set {key}: the value {text!r} is not valid YAML") from None
     parts = key.strip().split(".")
@@ -730,8 +730,7 @@ def read_config_file(path: str | Path) -> dict:
     except UnicodeDecodeError as err:
         raise InputError(f"{path}: not UTF-8 text (byte {err.start}); save the config as UTF-8 YAML") from None
     try:
-        check_yaml_depth(text, str(path))
-        data = yaml.load(text, Loader=SAFE_LOADER)
+        data = read_yaml_text(text, str(path))
     except yaml.YAMLError as err:
         mark = getattr(err, "problem_mark", None)
         where = f" at line {mark.line + 1}" if mark else ""
@@ -743,20 +742,42 @@ def read_config_file(path: str | Path) -> dict:
 
 def check_yaml_depth(text: str, where: str) -> None:
     """``InputError`` when the YAML ``text`` nests mappings and lists deeper than :data:`MAX_CONFIG_DEPTH` or
-    holds more than :data:`MAX_CONFIG_VALUES` scalars (read as events, without building the tree: PyYAML's
-    tree builder recurses, and builds a large tree slowly)."""
+    holds more than :data:`MAX_CONFIG_VALUES` scalars once its aliases are expanded (read as events, without
+    building the tree: PyYAML's tree builder recurses, and builds a large tree slowly; an alias counts the
+    values of its anchor, so nine levels of ten aliases each count 10**9, not 90)."""
     depth = values = 0
+    anchors: dict[str, int] = {}  # anchor -> the values it expands to
+    opened: list[tuple[str | None, int]] = []  # the open collections: (anchor, values before it)
+
+    def count(n: int) -> None:
+        nonlocal values
+        values += n
+        if values > MAX_CONFIG_VALUES:
+            raise InputError(f"{where}: holds more than {MAX_CONFIG_VALUES:,} values (aliases expanded), not a config (a scene of more objects belongs in a .blend or mesh file)")
+
     for event in yaml.parse(text, Loader=SAFE_LOADER):
         if isinstance(event, yaml.ScalarEvent):
-            values += 1
-            if values > MAX_CONFIG_VALUES:
-                raise InputError(f"{where}: holds more than {MAX_CONFIG_VALUES:,} values, not a config (a scene of more objects belongs in a .blend or mesh file)")
+            count(1)
+            if event.anchor:
+                anchors[event.anchor] = 1
+        elif isinstance(event, yaml.AliasEvent):
+            count(anchors.get(event.anchor, 1))
         elif isinstance(event, (yaml.MappingStartEvent, yaml.SequenceStartEvent)):
             depth += 1
             if depth > MAX_CONFIG_DEPTH:
                 raise InputError(f"{where}: nested deeper than {MAX_CONFIG_DEPTH} levels, not a config")
+            opened.append((event.anchor, values))
         elif isinstance(event, (yaml.MappingEndEvent, yaml.SequenceEndEvent)):
             depth -= 1
+            anchor, before = opened.pop()
+            if anchor:
+                anchors[anchor] = max(values - before, 1)
+
+
+def read_yaml_text(text: str, where: str):
+    """The value of a config's YAML ``text`` through the one guard (:func:`check_yaml_depth`); ``yaml.YAMLError`` as PyYAML raises it."""
+    check_yaml_depth(text, where)
+    return yaml.load(text, Loader=SAFE_LOADER)
 
 
 def check_tree_depth(data, where: str = "config") -> None:

@@ -68,10 +68,12 @@ def read_labels(path: str | Path, n: int, space: str = "auto") -> np.ndarray:
             array = np.load(path)
         except (ValueError, OSError, EOFError) as err:
             raise InputError(f"--labels: {path}: not a numpy array file ({err})") from None
-        if not isinstance(array, np.ndarray) or array.dtype.kind not in "iu" or array.size != len(array.reshape(len(array), -1)):
+        if not isinstance(array, np.ndarray) or array.dtype.kind not in "iu" or array.ndim not in (1, 2) or (array.ndim == 2 and array.shape[1] != 1):
             raise InputError(f"--labels: {path}: expected one integer a point, (n,) or (n, 1), got {getattr(array, 'dtype', type(array))} {getattr(array, 'shape', '')}")
         if array.size and array.min() < 0:
             raise InputError(f"--labels: {path}: negative labels (first at point {int(np.flatnonzero(array.reshape(-1) < 0)[0])})")
+        if array.size and int(array.max()) > np.iinfo(np.uint32).max:
+            raise InputError(f"--labels: {path}: labels up to {int(array.max())} do not fit SemanticKITTI's uint32 (semantic | instance << 16); first at point {int(np.argmax(array.reshape(-1) > np.iinfo(np.uint32).max))}")
         labels = array.reshape(-1).astype(np.uint32)
         space = "train" if space == "auto" else space
     if len(labels) != n:

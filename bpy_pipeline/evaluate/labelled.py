@@ -31,7 +31,7 @@ from typing import Callable, Iterable, Sequence
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, require
 from ..io.confined import readable_inside
 from ..io.manifest import read_frame_records, read_manifest
 from ..io.ply import read_ply
@@ -95,6 +95,7 @@ class LabelledScan:
 # ----------------------------------------------------------------------------- objects
 def components(points: np.ndarray, radius: float = LINK_M) -> np.ndarray:
     """``(n,)`` int64 connected-component index of ``(n, 3)`` points linked within ``radius`` metres."""
+    require("scipy.sparse.csgraph", "evaluate", "objects of labelled scans without instance ids (match, evaluate)")
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
     from scipy.spatial import cKDTree

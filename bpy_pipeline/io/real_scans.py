@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, require
 
 FORMATS = ("nuscenes", "kitti", "semantickitti", "npy", "ply", "las", "pcd")
 NUSCENES_TO_SENSOR = np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])  # x' = y, y' = -x
@@ -168,7 +168,7 @@ def _from_fields(fields: dict, path: Path, fmt: str, intensity_scale: float | No
 
 
 def read_ply(path: Path) -> RealScan:
-    from plyfile import PlyData
+    PlyData = require("plyfile", "mixing", f"{path}: reading a PLY scan").PlyData
 
     try:
         vertex = PlyData.read(str(path))["vertex"]

@@ -26,7 +26,7 @@ from urllib.parse import unquote
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, require
 from ..io.confined import readable_inside
 from ..geometry.checks import check_mesh
 from ..geometry.objects import GLASS_REFLECTIVITY, OBJECT_TYPES, ObjectPart, fit_to_box
@@ -42,7 +42,7 @@ Group = tuple[np.ndarray, list, str]  # vertices (n, 3) float64, faces (lists of
 # ----------------------------------------------------------------------------- readers: path -> [(vertices, faces, material)]
 def read_ply_groups(p: Path) -> list[Group]:
     """A PLY mesh (``vertex`` x y z and ``face`` vertex indices) as one diffuse group."""
-    from plyfile import PlyData
+    PlyData = require("plyfile", "mixing", f"{p}: reading a PLY mesh").PlyData
 
     try:
         ply = PlyData.read(str(p))
