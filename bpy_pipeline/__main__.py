@@ -76,6 +76,8 @@ def show_sensor(args) -> int:
     shown = {"fields": sensors.spec_fields(spec), "summary": sensors.spec_summary(spec), "effects": sensors.preset_effects(args.name), "sources": sensors.preset_sources(args.name)}
     print(yaml.safe_dump(shown, sort_keys=False, width=100, default_flow_style=None), end="")
     if args.rays:
+        if Path(args.rays).is_dir() or not Path(args.rays).parent.is_dir():
+            raise InputError(f"--rays: {args.rays} must be a file path in an existing folder (FILE.npy)")
         n = save_rays(spec, args.rays)
         print(f"rays: {n:,} directions (float32, sensor frame) written to {args.rays}")
     return 0
@@ -98,6 +100,9 @@ def save_rays(spec: sensors.SensorSpec, path: str | Path, chunk_rays: int = 1 <<
         out.flush()
         del out
         os.replace(tmp, path)
+    except OSError as err:
+        tmp.unlink(missing_ok=True)
+        raise InputError(f"--rays: cannot write {path} ({err.strerror or err})") from None
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
@@ -244,6 +249,8 @@ def run_evaluate(args) -> int:
         raise InputError(f"--out: {out} must be a file path in a folder")
     if args.every < 1 or (args.max_frames is not None and args.max_frames < 1) or args.jobs < 1:
         raise InputError("evaluate: --every, --max-frames and --jobs must be >= 1")
+    if args.max_points_per_scan < 1 or args.seed < 0:
+        raise InputError(f"evaluate: --max-points-per-scan must be >= 1 and --seed >= 0, got {args.max_points_per_scan} and {args.seed}")
     report = evaluate(args.train, args.test, args.classes, args.reference, args.model, args.seed, args.every, args.max_frames,
                       args.max_points_per_scan, args.jobs, log=lambda m: print(m, file=sys.stderr))
     try:

@@ -11,6 +11,7 @@ gives an equal config.
 from __future__ import annotations
 
 import dataclasses
+import os
 import typing
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -796,6 +797,10 @@ def load_config(path_or_dict: str | Path | dict | None = None, overrides: list[s
     with ``key.path=value`` overrides applied (values parsed as YAML)."""
     import copy
 
+    if path_or_dict is not None and not isinstance(path_or_dict, (str, os.PathLike, dict)):
+        raise InputError(f"config: expected a YAML file path or a mapping, got {type(path_or_dict).__name__}")
+    if isinstance(overrides, (str, bytes)) or not all(isinstance(o, str) for o in overrides):
+        raise InputError(f"overrides: expected a list of 'key.path=value' strings, got {overrides!r}")
     if isinstance(path_or_dict, dict):
         check_tree_depth(path_or_dict)
         data = copy.deepcopy(path_or_dict)

@@ -124,7 +124,11 @@ def convert(scan_path, to: str, labels=None, method: str = "hybrid", lift: float
         raise InputError(f"SCAN: {path} is not a file")
     start = time.perf_counter()
     scan = read_real_scan(path, format)
-    raw = read_labels(labels, len(scan), label_space) if labels is not None else scan.labels
+    if labels is None:
+        raw = scan.labels
+    else:  # one label a row of the file, the rows left out (non-finite points) too
+        raw = read_labels(labels, len(scan) if scan.kept is None else len(scan.kept), label_space)
+        raw = raw if scan.kept is None else raw[scan.kept]
     try:
         firings = recover_firings(scan, source_preset)
     except InputError as err:

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, path_argument
 from .atomic import atomic_write
 
 MANIFEST_NAME = "manifest.json"
@@ -69,4 +69,4 @@ def read_frame_records(out_dir: str | os.PathLike) -> list[dict]:
 
 def read_dataset(out_dir: str | os.PathLike) -> dict:
     """The run manifest with its committed frames' records under ``frames``."""
-    return {**read_manifest(out_dir), "frames": read_frame_records(out_dir)}
+    return {**read_manifest(path_argument(out_dir, "out_dir")), "frames": read_frame_records(out_dir)}
