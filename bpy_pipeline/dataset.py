@@ -408,7 +408,7 @@ class Dataset:
         for frame in manifest.get("frames") or []:  # an earlier version's manifest listed its frames
             listed += [name for name in (frame.get("files") or []) if isinstance(name, str)] if isinstance(frame, dict) else []
         for name in own[1:]:
-            listed += _listed_files(self.out / name)
+            listed += [rel for rel in _listed_files(self.out / name) if self._of_frame(self.out / name, rel)]
         files = []
         for name in own + listed:
             path = inside(self.out, name)
@@ -429,6 +429,8 @@ class Dataset:
         for intent in sorted((self.out / MOVING).glob("*.json")):
             if not (self.out / RECORDS / intent.name).exists():
                 for rel in _listed_files(intent):
+                    if not self._of_frame(intent, rel):
+                        continue
                     path = inside(self.out, rel)
                     if path is None or (path.is_dir() and not path.is_symlink()):
                         self._say(f"warning: {intent}: {rel!r} is not a file inside {self.out}; left alone")
@@ -436,6 +438,14 @@ class Dataset:
                     path.unlink(missing_ok=True)
                 self._say(f"warning: {self.out}: removed the files of frame {intent.stem}, which a killed run left without its record")
             intent.unlink()
+
+    def _of_frame(self, listing: Path, name: str) -> bool:
+        """True when ``name``, listed by the intent or record ``listing`` (``NNNNNN.json``), can be a file of that
+        frame: every writer names a frame's files by its stem. Otherwise one warning, and the name is left alone."""
+        if listing.stem in name:
+            return True
+        self._say(f"warning: {listing}: {name!r} is not a file of frame {listing.stem}; left alone")
+        return False
 
     def _read_records(self) -> dict[int, dict]:
         records = {}

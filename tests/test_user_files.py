@@ -150,7 +150,10 @@ def test_a_crafted_intent_never_removes_a_file_outside_out(dataset, capsys):
     (victim / "keep.txt").write_text("keep")
     (victim / "keep2.txt").write_text("keep")
     (out / "ply" / "link").symlink_to(victim)  # a folder link inside OUT pointing out of it
-    names = ["../victim/keep.txt", str(victim / "keep2.txt"), "ply/link/keep.txt", "ply", "\x00"]
+    (out / "notes.txt").write_text("mine")  # a file of the user's inside OUT
+    names = ["../victim/keep.txt", str(victim / "keep2.txt"), "ply/link/keep.txt", "ply", "\x00", "notes.txt",
+             "ply/000001/../../../victim/keep.txt", "ply/link/000001.ply"]
+    (victim / "000001.ply").write_text("keep")
     (out / ".moving").mkdir(exist_ok=True)
     (out / ".moving" / "000001.json").write_text(json.dumps(names))
     warnings = []
@@ -158,6 +161,7 @@ def test_a_crafted_intent_never_removes_a_file_outside_out(dataset, capsys):
     with Dataset.open(out, config, "resume", log=warnings.append):
         pass
     assert (victim / "keep.txt").read_text() == "keep" and (victim / "keep2.txt").read_text() == "keep"
+    assert (victim / "000001.ply").read_text() == "keep" and (out / "notes.txt").read_text() == "mine"
     assert (out / "ply" / "000000.ply").is_file() and not (out / ".moving" / "000001.json").exists()
     assert sum("left alone" in w for w in warnings) == len(names), warnings
     (out / ".moving").mkdir(exist_ok=True)
@@ -165,6 +169,7 @@ def test_a_crafted_intent_never_removes_a_file_outside_out(dataset, capsys):
     code, err = convert(capsys, scan, out, "--overwrite")
     assert code == 0, err
     assert (victim / "keep.txt").read_text() == "keep" and (victim / "keep2.txt").read_text() == "keep"
+    assert (victim / "000001.ply").read_text() == "keep" and (out / "notes.txt").read_text() == "mine"
 
 
 def test_a_record_naming_a_file_outside_out_is_not_read(dataset):
