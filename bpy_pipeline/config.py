@@ -38,7 +38,7 @@ from .builders.population import population_from_dict, population_to_dict
 from .builders.railway.params import RailwayScene
 from .io.writers import frame_writers
 from .schema import check_positive, convert, from_dict, to_plain
-from .yaml_text import SAFE_LOADER
+from .yaml_text import MAX_DEPTH, read_yaml_file, read_yaml_text
 
 Vec3 = tuple[float, float, float]
 DEFAULT_SENSOR = {"preset": "railway_tls", "sampling_factor": 0.25}
@@ -309,9 +309,6 @@ class LimitsConfig:
 
 
 MAX_FRAMES = 10**9  # frame indices are 6+ digit file names and records; a billion frames is centuries of scanning
-MAX_CONFIG_BYTES = 16 << 20  # a config file larger than this is refused before it is parsed
-MAX_CONFIG_DEPTH = 64  # nesting of mappings and lists in a config (the deepest real one is under 10)
-MAX_CONFIG_VALUES = 100_000  # scalars in a config file or --set value (keys included); parsing 100,000 takes seconds
 
 
 @dataclass(frozen=True)
@@ -716,79 +713,22 @@ def apply_override(data: dict, assignment: str) -> None:
 
 
 def read_config_file(path: str | Path) -> dict:
-    """Raw mapping from a YAML file; ``InputError`` naming the file when missing or malformed."""
-    path = Path(path)
-    try:
-        if path.is_dir():
-            raise InputError(f"{path}: is a folder, not a config file")
-        with open(path, "rb") as handle:  # bounded: /dev/zero or a huge file is refused, not read for ever
-            raw = handle.read(MAX_CONFIG_BYTES + 1)
-        if len(raw) > MAX_CONFIG_BYTES:
-            raise InputError(f"{path}: larger than {MAX_CONFIG_BYTES >> 20} MB, not a config file")
-        text = raw.decode("utf-8")
-    except OSError as err:
-        raise InputError(f"{path}: cannot read the config file ({err.strerror or err})") from None
-    except UnicodeDecodeError as err:
-        raise InputError(f"{path}: not UTF-8 text (byte {err.start}); save the config as UTF-8 YAML") from None
-    try:
-        data = read_yaml_text(text, str(path))
-    except yaml.YAMLError as err:
-        mark = getattr(err, "problem_mark", None)
-        where = f" at line {mark.line + 1}" if mark else ""
-        raise InputError(f"{path}: not valid YAML{where}") from None
+    """Raw mapping from a YAML file, read through the one guard (:func:`~.yaml_text.read_yaml_file`: size, nesting,
+    values with aliases expanded); ``InputError`` naming the file when missing or malformed."""
+    data = read_yaml_file(path, "config file")
     if data is not None and not isinstance(data, dict):
         raise InputError(f"{path}: expected a mapping of config keys at the top level")
     return data or {}
 
 
-def check_yaml_depth(text: str, where: str) -> None:
-    """``InputError`` when the YAML ``text`` nests mappings and lists deeper than :data:`MAX_CONFIG_DEPTH` or
-    holds more than :data:`MAX_CONFIG_VALUES` scalars once its aliases are expanded (read as events, without
-    building the tree: PyYAML's tree builder recurses, and builds a large tree slowly; an alias counts the
-    values of its anchor, so nine levels of ten aliases each count 10**9, not 90)."""
-    depth = values = 0
-    anchors: dict[str, int] = {}  # anchor -> the values it expands to
-    opened: list[tuple[str | None, int]] = []  # the open collections: (anchor, values before it)
-
-    def count(n: int) -> None:
-        nonlocal values
-        values += n
-        if values > MAX_CONFIG_VALUES:
-            raise InputError(f"{where}: holds more than {MAX_CONFIG_VALUES:,} values (aliases expanded), not a config (a scene of more objects belongs in a .blend or mesh file)")
-
-    for event in yaml.parse(text, Loader=SAFE_LOADER):
-        if isinstance(event, yaml.ScalarEvent):
-            count(1)
-            if event.anchor:
-                anchors[event.anchor] = 1
-        elif isinstance(event, yaml.AliasEvent):
-            count(anchors.get(event.anchor, 1))
-        elif isinstance(event, (yaml.MappingStartEvent, yaml.SequenceStartEvent)):
-            depth += 1
-            if depth > MAX_CONFIG_DEPTH:
-                raise InputError(f"{where}: nested deeper than {MAX_CONFIG_DEPTH} levels, not a config")
-            opened.append((event.anchor, values))
-        elif isinstance(event, (yaml.MappingEndEvent, yaml.SequenceEndEvent)):
-            depth -= 1
-            anchor, before = opened.pop()
-            if anchor:
-                anchors[anchor] = max(values - before, 1)
-
-
-def read_yaml_text(text: str, where: str):
-    """The value of a config's YAML ``text`` through the one guard (:func:`check_yaml_depth`); ``yaml.YAMLError`` as PyYAML raises it."""
-    check_yaml_depth(text, where)
-    return yaml.load(text, Loader=SAFE_LOADER)
-
-
 def check_tree_depth(data, where: str = "config") -> None:
-    """``InputError`` when a config mapping nests deeper than :data:`MAX_CONFIG_DEPTH` (iterative; a cycle counts as deep)."""
+    """``InputError`` when a config mapping nests deeper than :data:`MAX_DEPTH` (iterative; a cycle counts as deep)."""
     stack = [(data, 1)]
     while stack:
         node, depth = stack.pop()
         if isinstance(node, (dict, list, tuple)):
-            if depth > MAX_CONFIG_DEPTH:
-                raise InputError(f"{where}: nested deeper than {MAX_CONFIG_DEPTH} levels, not a config")
+            if depth > MAX_DEPTH:
+                raise InputError(f"{where}: nested deeper than {MAX_DEPTH} levels, not a config")
             stack.extend((child, depth + 1) for child in (node.values() if isinstance(node, dict) else node))
 
 

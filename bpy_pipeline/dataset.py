@@ -451,11 +451,14 @@ class Dataset:
         records = {}
         for path in sorted((self.out / RECORDS).glob("*.json")):
             try:
+                if readable_inside(path.parent, path.name, MAX_RECORD_BYTES)[0] is None:
+                    raise ValueError("not a regular file of a record's size")
                 record = json.loads(path.read_text())
                 records[int(record["index"])] = record
             except (OSError, ValueError, KeyError, TypeError):
                 self._say(f"warning: {path}: unreadable frame record, the frame is made again")
-                path.unlink(missing_ok=True)
+                if not path.is_dir():
+                    path.unlink(missing_ok=True)
         return records
 
     def _verified(self, records: dict[int, dict]) -> dict[int, dict]:

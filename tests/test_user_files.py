@@ -185,6 +185,25 @@ def test_a_record_naming_a_file_outside_out_is_not_read(dataset):
         assert any("does not match its record" in w for w in warnings)
 
 
+def test_a_fifo_for_a_record_or_the_manifest_never_hangs(dataset, tmp_path):
+    """A FIFO read as a record or a manifest would block for ever: it is refused or its frame made again."""
+    import os
+
+    from bpy_pipeline.errors import InputError
+
+    _, _, out = dataset
+    config = config_from_dict(read_manifest(out)["config"])
+    os.mkfifo(out / "records" / "000001.json")
+    warnings = []
+    with Dataset.open(out, config, "resume", log=warnings.append) as opened:
+        assert opened.has(0) and not opened.has(1)
+    assert any("000001.json: unreadable frame record" in w for w in warnings)
+    (out / "manifest.json").unlink()
+    os.mkfifo(out / "manifest.json")
+    with pytest.raises(InputError, match="not a regular file, not a run manifest"):
+        Dataset.open(out, config, "resume")
+
+
 # ----------------------------------------------------------------------------- paths read from an asset or a dataset
 def gltf_with_buffer(folder: Path, uri: str) -> Path:
     """A .gltf box whose one buffer is the file ``uri`` (written beside it as ``box.bin`` for a good one)."""

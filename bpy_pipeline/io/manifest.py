@@ -17,6 +17,7 @@ from ..errors import InputError, path_argument
 from .atomic import atomic_write
 
 MANIFEST_NAME = "manifest.json"
+MAX_JSON_BYTES = 256 << 20  # a manifest or frame record larger than this is not one (nor is a device or a FIFO)
 
 
 def to_json(value):
@@ -45,6 +46,10 @@ def write_manifest(out_dir: str | os.PathLike, manifest: dict) -> Path:
 def read_manifest(out_dir: str | os.PathLike) -> dict:
     """Read ``out_dir/manifest.json``; ``InputError`` naming the file when it is missing or not a JSON object."""
     path = Path(out_dir) / MANIFEST_NAME
+    if path.exists() and not path.is_file():
+        raise InputError(f"{path}: not a regular file, not a run manifest")
+    if path.is_file() and path.stat().st_size > MAX_JSON_BYTES:
+        raise InputError(f"{path}: larger than {MAX_JSON_BYTES >> 20} MB, not a run manifest")
     try:
         manifest = json.loads(path.read_text(encoding="utf-8"))
     except OSError as err:
@@ -60,6 +65,8 @@ def read_frame_records(out_dir: str | os.PathLike) -> list[dict]:
     """The records of the committed frames of the dataset in ``out_dir`` (``records/NNNNNN.json``), by frame index."""
     records = []
     for path in sorted((Path(out_dir) / "records").glob("*.json")):
+        if not path.is_file() or path.stat().st_size > MAX_JSON_BYTES:
+            raise InputError(f"{path}: not a frame record (a regular file of at most {MAX_JSON_BYTES >> 20} MB)")
         try:
             records.append(json.loads(path.read_text(encoding="utf-8")))
         except ValueError as err:
