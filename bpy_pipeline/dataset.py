@@ -330,6 +330,8 @@ class Dataset:
         """Refuse, resume or overwrite an existing run; clean up what a killed run left; write the manifest."""
         manifest_path = self.out / MANIFEST_NAME
         old = read_manifest(self.out) if manifest_path.exists() else None
+        if old is not None and self.mode in ("new", "resume") and not is_our_manifest(old):
+            raise InputError(f"--out: {manifest_path} is not a bpy_pipeline run's manifest; give another --out (nothing there is touched)")
         if old is not None and self.mode == "new":
             what = f"seed {old.get('seed')}, {len(list((self.out / RECORDS).glob('*.json')))} frames" if old.get("format") == DATASET_FORMAT else "an earlier version's output"
             raise InputError(f"--out: {self.out} holds another run ({what}); give --resume to continue it (same config and seed) or --overwrite to replace it")

@@ -22,8 +22,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from .collision import capsule_gaps
 from ..yaml_text import read_yaml_file
+from .collision import capsule_gaps
 
 ARM_PATH = Path(__file__).resolve().parents[2] / "assets_manifest" / "robot_arm.yaml"
 
