@@ -464,11 +464,12 @@ class Dataset:
         return records
 
     def _verified(self, records: dict[int, dict]) -> dict[int, dict]:
-        """The records whose files all exist with their sha256; the others are removed (and redone)."""
+        """The records whose files all exist inside ``OUT`` with their sha256; the others are removed (and redone)."""
         kept = {}
         for index, record in records.items():
-            digests = record.get("sha256")
-            good = isinstance(digests, dict) and all(_matches(self.out, rel, digest) for rel, digest in digests.items())
+            digests, files = record.get("sha256"), record.get("files")
+            good = isinstance(digests, dict) and isinstance(files, list) and set(map(str, files)) <= set(digests)  # every file listed is checked
+            good = good and all(_matches(self.out, rel, digest) for rel, digest in digests.items())
             if good:
                 kept[index] = record
             else:

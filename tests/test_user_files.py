@@ -177,9 +177,11 @@ def test_a_record_naming_a_file_outside_out_is_not_read(dataset):
     """A record whose ``sha256`` names ``../x`` or ``/dev/zero`` is not read: its frame is made again."""
     _, _, out = dataset
     record = json.loads((out / "records" / "000000.json").read_text())
-    for name in ("../../../../../../dev/zero", "/dev/zero", "ply/../../outside.bin"):
+    crafted = [{"sha256": {name: "0" * 64}} for name in ("../../../../../../dev/zero", "/dev/zero", "ply/../../outside.bin")]
+    crafted.append({"files": [*record["files"], "sequences/00/labels/../../../../outside.label"]})  # a file listed, never checked
+    for change in crafted:
         (out.parent / "outside.bin").write_bytes(b"x")
-        (out / "records" / "000000.json").write_text(json.dumps({**record, "sha256": {name: "0" * 64}}))
+        (out / "records" / "000000.json").write_text(json.dumps({**record, **change}))
         warnings = []
         with Dataset.open(out, config_from_dict(read_manifest(out)["config"]), "resume", log=warnings.append) as opened:
             assert not opened.has(0)
