@@ -141,9 +141,9 @@ def fit_effects(args) -> int:
         raise InputError(f"fit: need 0 < --min-range < --max-range, finite metres, got {options.min_range} and {options.max_range}")
     if not (np.isfinite(options.intensity_scale) and options.intensity_scale > 0):
         raise InputError(f"--intensity-scale: must be a finite number > 0 (the intensity of an apparent reflectance of 1), got {options.intensity_scale}")
-    for key, most in (("folds", fitting.MAX_FOLDS), ("mlp_steps", fitting.MAX_MLP_STEPS), ("max_gap", fitting.MAX_GAP)):
-        if not 0 <= getattr(options, key) <= most:
-            raise InputError(f"--{key.replace('_', '-')}: must lie in {int(key == 'mlp_steps')}..{most:,}, got {getattr(options, key):,}")
+    for key, least, most in (("folds", 0, fitting.MAX_FOLDS), ("mlp_steps", 1, fitting.MAX_MLP_STEPS), ("max_gap", 0, fitting.MAX_GAP)):  # they multiply the work
+        if not least <= getattr(options, key) <= most:
+            raise InputError(f"--{key.replace('_', '-')}: must lie in {least}..{most:,}, got {getattr(options, key):,}")
     if min(options.range_bins, options.incidence_bins, options.noise_range_bins, options.noise_incidence_bins, options.min_samples,
            options.mlp_range_bins, options.mlp_incidence_bins, options.mlp_steps) < 1 or options.seed < 0:
         raise InputError("fit: bin counts, --min-samples and --mlp-steps must be >= 1, --seed >= 0")
@@ -249,8 +249,6 @@ def run_evaluate(args) -> int:
         raise InputError(f"--out: {out} must be a file path in a folder")
     if args.every < 1 or (args.max_frames is not None and args.max_frames < 1) or args.jobs < 1:
         raise InputError("evaluate: --every, --max-frames and --jobs must be >= 1")
-    if args.max_points_per_scan < 1 or args.seed < 0:
-        raise InputError(f"evaluate: --max-points-per-scan must be >= 1 and --seed >= 0, got {args.max_points_per_scan} and {args.seed}")
     report = evaluate(args.train, args.test, args.classes, args.reference, args.model, args.seed, args.every, args.max_frames,
                       args.max_points_per_scan, args.jobs, log=lambda m: print(m, file=sys.stderr))
     try:
