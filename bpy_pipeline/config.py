@@ -38,7 +38,7 @@ from .builders.population import population_from_dict, population_to_dict
 from .builders.railway.params import RailwayScene
 from .io.writers import frame_writers
 from .schema import check_positive, convert, from_dict, to_plain
-from .yaml_text import MAX_DEPTH, read_yaml_file, read_yaml_text
+from .yaml_text import MAX_DEPTH, MAX_VALUES, read_yaml_file, read_yaml_text
 
 Vec3 = tuple[float, float, float]
 DEFAULT_SENSOR = {"preset": "railway_tls", "sampling_factor": 0.25}
@@ -722,10 +722,14 @@ def read_config_file(path: str | Path) -> dict:
 
 
 def check_tree_depth(data, where: str = "config") -> None:
-    """``InputError`` when a config mapping nests deeper than :data:`MAX_DEPTH` (iterative; a cycle counts as deep)."""
-    stack = [(data, 1)]
+    """``InputError`` when a config mapping nests deeper than :data:`MAX_DEPTH` (iterative; a cycle counts as deep)
+    or holds more than :data:`~.yaml_text.MAX_VALUES` values, a shared one counted wherever it is (as a YAML file's aliases)."""
+    stack, values = [(data, 1)], 0
     while stack:
         node, depth = stack.pop()
+        values += 1 + (len(node) if isinstance(node, dict) else 0)  # keys count, as in a file
+        if values > MAX_VALUES:
+            raise InputError(f"{where}: holds more than {MAX_VALUES:,} values (shared ones counted each time), not a config")
         if isinstance(node, (dict, list, tuple)):
             if depth > MAX_DEPTH:
                 raise InputError(f"{where}: nested deeper than {MAX_DEPTH} levels, not a config")

@@ -79,6 +79,15 @@ def test_a_yaml_alias_bomb_is_refused_by_every_command(tmp_path, capsys):
     one_line(capsys.readouterr().err, "--set labels: holds more than 100,000 values (aliases expanded)")
 
 
+def test_an_alias_bomb_loaded_by_the_caller_is_refused_by_the_api():
+    """``bp.load_config(yaml.safe_load(bomb))``: the mapping shares its lists; walked path by path it is 1e9 values."""
+    import yaml
+
+    import bpy_pipeline as bp
+
+    refused("holds more than 100,000 values", bp.load_config, yaml.safe_load(ALIAS_BOMB))
+
+
 def test_a_config_with_a_few_aliases_still_reads(tmp_path):
     from bpy_pipeline.config import load_config
 
