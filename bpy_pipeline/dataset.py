@@ -158,7 +158,7 @@ def _holder(path: Path) -> dict | None:
     """The lock file's JSON (``None`` when empty, unreadable or not a mapping)."""
     try:
         holder = json.loads(path.read_text())
-    except (OSError, ValueError):
+    except (OSError, ValueError, RecursionError):
         return None
     return holder if isinstance(holder, dict) else None
 
@@ -328,6 +328,9 @@ class Dataset:
 
     def _prepare(self) -> None:
         """Refuse, resume or overwrite an existing run; clean up what a killed run left; write the manifest."""
+        for name in (RECORDS, MOVING, STAGING):  # the run's own folders: removed from and written into, never through a link
+            if (self.out / name).is_symlink() or ((self.out / name).exists() and not (self.out / name).is_dir()):
+                raise InputError(f"--out: {self.out / name} is a link or a file, not the run's own folder; remove it or give another --out (nothing was removed)")
         manifest_path = self.out / MANIFEST_NAME
         old = read_manifest(self.out) if manifest_path.exists() else None
         if old is not None and self.mode in ("new", "resume") and not is_our_manifest(old):
@@ -457,7 +460,7 @@ class Dataset:
                     raise ValueError("not a regular file of a record's size")
                 record = json.loads(path.read_text())
                 records[int(record["index"])] = record
-            except (OSError, ValueError, KeyError, TypeError):
+            except (OSError, ValueError, KeyError, TypeError, RecursionError):
                 self._say(f"warning: {path}: unreadable frame record, the frame is made again")
                 if not path.is_dir():
                     path.unlink(missing_ok=True)
@@ -610,7 +613,7 @@ def _listed_files(path: Path) -> list[str]:
     found, _ = readable_inside(path.parent, path.name, MAX_RECORD_BYTES)
     try:
         data = json.loads(found.read_text()) if found is not None else None
-    except (OSError, ValueError):
+    except (OSError, ValueError, RecursionError):
         return []
     files = data.get("files") if isinstance(data, dict) else data
     return [name for name in files if isinstance(name, str)] if isinstance(files, list) else []

@@ -173,6 +173,48 @@ def test_a_crafted_intent_never_removes_a_file_outside_out(dataset, capsys):
     assert (victim / "000001.ply").read_text() == "keep" and (out / "notes.txt").read_text() == "mine"
 
 
+@pytest.mark.parametrize("text", ["[" * 100_000 + "]" * 100_000, "[1, 2]", '{"index": "x"}', "{"])
+def test_a_deep_or_strange_intent_record_or_manifest_is_one_line(dataset, text):
+    """JSON nested 100,000 deep (a RecursionError in the parser), a list, a string index, a truncated object."""
+    from bpy_pipeline.errors import InputError
+    from bpy_pipeline.evaluate.labelled import read_generated
+
+    _, _, out = dataset
+    config = config_from_dict(read_manifest(out)["config"])
+    (out / ".moving").mkdir(exist_ok=True)
+    (out / ".moving" / "000002.json").write_text(text)
+    (out / "records" / "000001.json").write_text(text)
+    warnings = []
+    with Dataset.open(out, config, "resume", log=warnings.append) as opened:
+        assert opened.has(0) and not opened.has(1)
+    assert any("000001.json: unreadable frame record" in w for w in warnings)
+    (out / "records" / "000001.json").write_text(text)
+    with pytest.raises(InputError, match="000001.json: not"):
+        read_generated(out, ["car"])
+    (out / "records" / "000001.json").unlink()
+    (out / "manifest.json").write_text(text)
+    with pytest.raises(InputError, match="manifest.json"):
+        Dataset.open(out, config, "resume")
+
+
+@pytest.mark.parametrize("folder", ["records", ".moving", ".staging"])
+def test_a_run_folder_that_is_a_link_out_of_out_is_refused(dataset, tmp_path, folder):
+    """``OUT/records`` linked to another folder would have its files removed (unreadable records) or written there."""
+    _, _, out = dataset
+    victim = tmp_path / "victim"
+    victim.mkdir()
+    (victim / "000000.json").write_text("not a record")
+    if (out / folder).exists():
+        import shutil
+
+        shutil.rmtree(out / folder)
+    (out / folder).symlink_to(victim)
+    for mode in ("resume", "overwrite"):
+        with pytest.raises(Exception, match="is a link or a file, not the run's own folder"):
+            Dataset.open(out, config_from_dict(read_manifest(out)["config"]), mode)
+    assert (victim / "000000.json").read_text() == "not a record"
+
+
 def test_a_record_naming_a_file_outside_out_is_not_read(dataset):
     """A record whose ``sha256`` names ``../x`` or ``/dev/zero`` is not read: its frame is made again."""
     _, _, out = dataset

@@ -54,8 +54,8 @@ def read_manifest(out_dir: str | os.PathLike) -> dict:
         manifest = json.loads(path.read_text(encoding="utf-8"))
     except OSError as err:
         raise InputError(f"{path}: cannot read the run manifest ({err.strerror})") from None
-    except ValueError as err:
-        raise InputError(f"{path}: not valid JSON ({err})") from None
+    except (ValueError, RecursionError) as err:
+        raise InputError(f"{path}: not valid JSON ({str(err) or type(err).__name__})") from None
     if not isinstance(manifest, dict):
         raise InputError(f"{path}: expected a JSON object at the top level, got {type(manifest).__name__}")
     return manifest
@@ -68,9 +68,12 @@ def read_frame_records(out_dir: str | os.PathLike) -> list[dict]:
         if not path.is_file() or path.stat().st_size > MAX_JSON_BYTES:
             raise InputError(f"{path}: not a frame record (a regular file of at most {MAX_JSON_BYTES >> 20} MB)")
         try:
-            records.append(json.loads(path.read_text(encoding="utf-8")))
-        except ValueError as err:
-            raise InputError(f"{path}: not valid JSON ({err})") from None
+            record = json.loads(path.read_text(encoding="utf-8"))
+        except (ValueError, RecursionError) as err:
+            raise InputError(f"{path}: not valid JSON ({str(err) or type(err).__name__})") from None
+        if not isinstance(record, dict) or isinstance(record.get("index"), bool) or not isinstance(record.get("index"), int):
+            raise InputError(f"{path}: not a frame record (a JSON object with an integer index)")
+        records.append(record)
     return sorted(records, key=lambda r: r["index"])
 
 
