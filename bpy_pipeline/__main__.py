@@ -147,7 +147,10 @@ def fit_effects(args) -> int:
     if min(options.range_bins, options.incidence_bins, options.noise_range_bins, options.noise_incidence_bins, options.min_samples,
            options.mlp_range_bins, options.mlp_incidence_bins, options.mlp_steps) < 1 or options.seed < 0:
         raise InputError("fit: bin counts, --min-samples and --mlp-steps must be >= 1, --seed >= 0")
+    from .io.confined import refuse_output_over_input
+
     out = Path(args.out)
+    refuse_output_over_input(out, args.scans)
     if not out.parent.is_dir() and (out.parent.exists() or any(p.exists() and not p.is_dir() for p in out.parents)):
         raise InputError(f"--out: {out.parent} is not a folder (a file stands in the path); give a path in a folder")
     if args.fields < 4 or not 0 <= args.intensity_field < args.fields or args.ring_field >= args.fields or args.rings < 1:
@@ -247,6 +250,9 @@ def run_evaluate(args) -> int:
     out = Path(args.out)
     if out.is_dir() or (out.parent.exists() and not out.parent.is_dir()):
         raise InputError(f"--out: {out} must be a file path in a folder")
+    from .io.confined import refuse_output_over_input
+
+    refuse_output_over_input(out, [*args.train, *args.test, *(args.reference or [])])
     if args.every < 1 or (args.max_frames is not None and args.max_frames < 1) or args.jobs < 1:
         raise InputError("evaluate: --every, --max-frames and --jobs must be >= 1")
     report = evaluate(args.train, args.test, args.classes, args.reference, args.model, args.seed, args.every, args.max_frames,

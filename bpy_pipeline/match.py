@@ -252,11 +252,15 @@ def match_main(args) -> int:
 
     from .evaluate.label_maps import parse_classes
     from .io.atomic import atomic_write
+    from .io.confined import refuse_output_over_input
 
     if args.min_points < 1:
         raise InputError(f"--min-points: must be >= 1, got {args.min_points}")
     if args.report and os.path.realpath(args.report) == os.path.realpath(args.out):
         raise InputError(f"--report: {args.report} is the --out file too; give the statistics a file of their own")
+    refuse_output_over_input(args.out, [*args.real, args.config])
+    if args.report:
+        refuse_output_over_input(args.report, [*args.real, args.config], "--report")
     classes = parse_classes(args.classes)
     result = match(args.real, args.config, args.out, classes, args.min_points)
     for line in result["notes"]:

@@ -232,6 +232,24 @@ def test_match_refuses_a_report_on_the_config_it_writes(tmp_path, capsys):
     assert "is the --out file too" in err and not (tmp_path / "o.yaml").exists()
 
 
+@pytest.mark.parametrize("argv", [
+    ["match", "REAL", "--config", "BASE", "--out", "REAL"],
+    ["match", "REAL", "--config", "BASE", "--out", "BASE"],
+    ["match", "REAL", "--config", "BASE", "--out", "o.yaml", "--report", "REAL"],
+    ["evaluate", "--train", "REAL", "--test", "REAL", "--out", "REAL"],
+    ["fit", "REAL", "--out", "REAL"],
+])
+def test_a_command_never_writes_over_its_own_input(argv, tmp_path, capsys):
+    scan, _ = npy_frame(tmp_path / "real")
+    base = tmp_path / "base.yaml"
+    base.write_text("scene: {builder: real_scan, path: x.bin}\n")
+    before = {p: p.read_bytes() for p in (scan, base)}
+    code, err = command(capsys, *[{"REAL": str(scan), "BASE": str(base), "o.yaml": str(tmp_path / "o.yaml")}.get(a, a) for a in argv])
+    assert code == 2
+    one_line(err, " is the input ")
+    assert {p: p.read_bytes() for p in (scan, base)} == before and not (tmp_path / "o.yaml").exists()
+
+
 def test_evaluate_reports_a_class_absent_from_training_as_not_measured(tmp_path):
     """``person 0.000 [0.000, 0.000]`` was reported as if measured when the training set held no person."""
     pytest.importorskip("lightgbm")

@@ -45,3 +45,14 @@ def readable_inside(folder: str | os.PathLike, name, max_bytes: int) -> tuple[Pa
     if info.st_size > max_bytes:
         return None, f"{info.st_size:,} bytes, more than the {max_bytes:,} allowed"
     return path, ""
+
+
+def refuse_output_over_input(out, inputs, option: str = "--out") -> None:
+    """:class:`~bpy_pipeline.errors.InputError` when the file ``out`` is one of ``inputs`` (the same path once
+    links are resolved): a command never writes its result over what it reads."""
+    from ..errors import InputError
+
+    target = os.path.realpath(out)
+    for given in inputs:
+        if given and os.path.realpath(given) == target:
+            raise InputError(f"{option}: {out} is the input {given}; write to a file of its own (nothing was written)")
