@@ -38,6 +38,8 @@ from .evaluate import evaluate  # noqa: F401  (train on generated scans, IoU on 
 def load_config(path_or_dict: str | Path | Mapping | None = None, overrides: Iterable[str] = ()) -> Config:
     """The validated :class:`~.config.Config` of a YAML file or of a mapping (``None``: the defaults),
     with ``key.path=value`` overrides (``["sensor.preset=vlp16", "frames=10"]``)."""
+    if isinstance(overrides, (str, bytes)) or not isinstance(overrides, Iterable):
+        raise InputError(f"overrides: expected a list of 'key.path=value' strings, got {overrides!r}")
     return _load_config(dict(path_or_dict) if isinstance(path_or_dict, Mapping) else path_or_dict, list(overrides))
 
 
@@ -55,6 +57,10 @@ def run(config: Config, out: str | Path, frames: Iterable[int] | None = None, mo
         raise InputError(f"config: expected a Config (bpy_pipeline.load_config(...) of a file or a mapping), got {type(config).__name__}")
     path_argument(out, "out")
     frames = checked_frames(frames, config.frames)
+    if mode not in ("new", "resume", "overwrite"):
+        raise InputError(f"mode: {mode!r} is not one of new, resume, overwrite")
+    if not callable(log):
+        raise InputError(f"log: expected a function of one str (print, or lambda text: None to print nothing), got {type(log).__name__}")
 
     check_limits(estimate_run(config, config.frames if frames is None else len(frames) if hasattr(frames, "__len__") else None), config)  # before any work
     try:

@@ -165,7 +165,8 @@ def test_convert_labels_of_a_0d_array(tmp_path, capsys):
     one_line(err, "expected one integer a point, (n,) or (n, 1)")
 
 
-@pytest.mark.parametrize("what", ["load_config(5)", "run(dict)", "run(out=None)", "read_ply(None)", "run(frames='0')", "run(frames=[5, -1])"])
+@pytest.mark.parametrize("what", ["load_config(5)", "run(dict)", "run(out=None)", "read_ply(None)", "run(frames='0')", "run(frames=[5, -1])",
+                                  "load_config(overrides=None)", "run(mode='x')", "run(log=5)", "read_las(None)", "read_dataset(None)"])
 def test_api_calls_with_wrong_types_raise_input_error_and_commit_nothing(what, tmp_path):
     """``bp.run(cfg, out, frames=[5, -1])`` committed ``records/000005.json`` before it raised."""
     import bpy_pipeline as bp
@@ -179,6 +180,11 @@ def test_api_calls_with_wrong_types_raise_input_error_and_commit_nothing(what, t
         "read_ply(None)": (lambda: bp.read_ply(None), "path: expected a file or folder path"),
         "run(frames='0')": (lambda: bp.run(config, out, frames="0"), "frames: expected frame indices"),
         "run(frames=[5, -1])": (lambda: bp.run(config, out, frames=[5, -1]), "frames: -1 is not a frame index of this run"),
+        "load_config(overrides=None)": (lambda: bp.load_config({}, None), "overrides: expected a list"),
+        "run(mode='x')": (lambda: bp.run(config, out, mode="x"), "mode: 'x' is not one of new, resume, overwrite"),
+        "run(log=5)": (lambda: bp.run(config, out, log=5), "log: expected a function of one str"),
+        "read_las(None)": (lambda: bp.read_las(None), "path: expected a file or folder path"),
+        "read_dataset(None)": (lambda: bp.read_dataset(None), "out_dir: expected a file or folder path"),
     }
     call, fragment = calls[what]
     refused(fragment, call)
