@@ -139,6 +139,8 @@ def fit_effects(args) -> int:
     options = replace(options, **changes)
     if not (np.isfinite(options.min_range) and np.isfinite(options.max_range) and 0 < options.min_range < options.max_range):
         raise InputError(f"fit: need 0 < --min-range < --max-range, finite metres, got {options.min_range} and {options.max_range}")
+    if not (np.isfinite(args.empty_radius) and args.empty_radius >= 0):
+        raise InputError(f"--empty-radius: must be a finite number of metres >= 0, got {args.empty_radius}")
     if not (np.isfinite(options.intensity_scale) and options.intensity_scale > 0):
         raise InputError(f"--intensity-scale: must be a finite number > 0 (the intensity of an apparent reflectance of 1), got {options.intensity_scale}")
     for key, least, most in (("folds", 0, fitting.MAX_FOLDS), ("mlp_steps", 1, fitting.MAX_MLP_STEPS), ("max_gap", 0, fitting.MAX_GAP)):  # they multiply the work

@@ -144,6 +144,7 @@ def test_fit_knobs_that_multiply_work_are_bounded(option, fragment, tmp_path, ca
     (["fit", "S", "--out", "m.yaml", "--max-range", "inf"], "fit: need 0 < --min-range < --max-range, finite metres"),
     (["fit", "S", "--out", "m.yaml", "--min-range", "nan"], "fit: need 0 < --min-range < --max-range, finite metres"),
     (["fit", "S", "--out", "m.yaml", "--intensity-scale", "0"], "--intensity-scale: must be a finite number > 0"),
+    (["fit", "S", "--out", "m.yaml", "--empty-radius", "nan"], "--empty-radius: must be a finite number of metres >= 0"),
     (["evaluate", "--train", "T", "--test", "T", "--out", "r.json", "--max-points-per-scan", "-5"], "--max-points-per-scan: expected an integer >= 1, got -5"),
     (["evaluate", "--train", "T", "--test", "T", "--out", "r.json", "--seed", "-1"], "--seed: expected an integer >= 0, got -1"),
     (["sensors", "show", "vlp16", "--rays", "."], "--rays: . must be a file path in an existing folder"),
