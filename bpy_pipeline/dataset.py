@@ -400,9 +400,8 @@ class Dataset:
         shutil.rmtree(self.out / STAGING, ignore_errors=True)
         for folder in sorted(folders, key=lambda p: len(p.parts), reverse=True):  # deepest first: the folders left empty go
             if folder.is_dir() and not folder.is_symlink():
-                for empty in sorted((d for d in folder.rglob("*") if d.is_dir() and not d.is_symlink()), key=lambda p: len(p.parts), reverse=True):
-                    _rmdir_if_empty(empty)
-                _rmdir_if_empty(folder)
+                for below, _, _ in os.walk(folder, topdown=False):  # links are not followed
+                    _rmdir_if_empty(Path(below))
 
     def _files_of_run(self, manifest: dict) -> list[Path]:
         """Every existing file the run in ``OUT`` wrote, by its manifest, records and intents (names confined to ``OUT``)."""

@@ -51,8 +51,11 @@ def test_overwrite_removes_only_what_the_run_wrote(dataset, capsys):
     (out / "notes.txt").write_text("mine")
     (out / "ply" / "keep.txt").write_text("mine too")
     (out / "sequences" / "00" / "velodyne" / "extra.bin").write_bytes(b"mine")
+    (out.parent / "elsewhere" / "empty").mkdir(parents=True)
+    (out / "sequences" / "01" / "elsewhere").symlink_to(out.parent / "elsewhere")  # empty folders behind a link are not ours
     code, err = convert(capsys, scan, out, "--overwrite")
     assert code == 0, err
+    assert (out.parent / "elsewhere" / "empty").is_dir() and (out / "sequences" / "01" / "elsewhere").is_symlink()
     assert (out / "notes.txt").read_text() == "mine" and (out / "ply" / "keep.txt").read_text() == "mine too"
     assert (out / "sequences" / "00" / "velodyne" / "extra.bin").read_bytes() == b"mine"
     assert (out / "ply" / "000000.ply").is_file() and len(list((out / "records").iterdir())) == 1
