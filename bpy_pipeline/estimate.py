@@ -29,9 +29,9 @@ HIT_FRACTION = 614_941 / 1_441_800  # points / rays of the default job: 0.43
 WRITE_S_PER_POINT_FORMAT = 0.1072 / 614_941 / 2  # write 0.1072 s for ply + semantickitti (+ preview): 87 ns a point and format
 # benchmarks/results/scan.json, "default railway (railway_tls)": caster_ns_per_triangle 143.4 (Embree's scene built once a frame)
 CASTER_S_PER_TRIANGLE = 143.4e-9
-# the particles of rain and snow drawn along the beams (lidar/weather.py): 2.46e7 visible drops of rain at 50 mm/h for 30,000
-# VLP-16 returns at 1..100 m drawn and offered in 5.79 s (235 ns each), measured once on the 2-core machine
-WEATHER_S_PER_PARTICLE = 235e-9
+# benchmarks/results/weather_particles.json, "rain 50 mm/h, 3 mrad": 2.45e7 visible drops for 30,000 VLP-16 returns at
+# 1..100 m drawn and offered in 3.555 s, 145 ns each
+WEATHER_S_PER_PARTICLE = 145e-9
 # benchmarks/results/population.json, "parking + car assets", populated in place: build 0.4029 s for 9 placed objects
 OBJECT_S = 0.4029 / 9
 

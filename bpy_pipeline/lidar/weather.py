@@ -123,7 +123,7 @@ class WeatherConfig:
 
 
 DEFAULT_DIVERGENCE_MRAD = 3.0  # the snowfall paper's HDL-64 beam
-PARTICLES_PER_PASS = 4e6  # visible particles drawn at once (about 60 B each while drawn: 240 MB); more are drawn in passes
+PARTICLES_PER_PASS = 4e6  # visible particles drawn at once (a pass peaks at 421 MB: benchmarks/results/weather_particles.json); more are drawn in passes
 
 
 def check_weather(weather: WeatherConfig, where: str = "effects.weather") -> None:
