@@ -673,6 +673,7 @@ def input_paths(config: Config) -> list[str]:
         elif isinstance(node, (list, tuple)):
             stack.extend((key, value) for value in node)
         elif isinstance(node, str) and node and "\x00" not in node:
+            node = os.path.expanduser(node)  # the blend builder's path may start with ~
             fixed = node[: min((node.find(c) for c in "*?[" if c in node), default=len(node))]
             if key == "path" and fixed != node:
                 fixed = os.path.dirname(fixed) or "."
