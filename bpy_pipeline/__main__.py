@@ -76,6 +76,8 @@ def show_sensor(args) -> int:
     shown = {"fields": sensors.spec_fields(spec), "summary": sensors.spec_summary(spec), "effects": sensors.preset_effects(args.name), "sources": sensors.preset_sources(args.name)}
     print(yaml.safe_dump(shown, sort_keys=False, width=100, default_flow_style=None), end="")
     if args.rays:
+        if Path(args.rays).is_dir() or not Path(args.rays).parent.is_dir():
+            raise InputError(f"--rays: {args.rays} must be a file path in an existing folder (FILE.npy)")
         n = save_rays(spec, args.rays)
         print(f"rays: {n:,} directions (float32, sensor frame) written to {args.rays}")
     return 0
@@ -98,6 +100,9 @@ def save_rays(spec: sensors.SensorSpec, path: str | Path, chunk_rays: int = 1 <<
         out.flush()
         del out
         os.replace(tmp, path)
+    except OSError as err:
+        tmp.unlink(missing_ok=True)
+        raise InputError(f"--rays: cannot write {path} ({err.strerror or err})") from None
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
@@ -132,12 +137,22 @@ def fit_effects(args) -> int:
     options = fitting.FitOptions()
     changes = {k: getattr(args, k) for k in fitting.FitOptions.__dataclass_fields__ if getattr(args, k, None) is not None}
     options = replace(options, **changes)
-    if options.min_range <= 0 or options.max_range <= options.min_range:
-        raise InputError(f"fit: need 0 < --min-range < --max-range, got {options.min_range} and {options.max_range}")
+    if not (np.isfinite(options.min_range) and np.isfinite(options.max_range) and 0 < options.min_range < options.max_range):
+        raise InputError(f"fit: need 0 < --min-range < --max-range, finite metres, got {options.min_range} and {options.max_range}")
+    if not (np.isfinite(args.empty_radius) and args.empty_radius >= 0):
+        raise InputError(f"--empty-radius: must be a finite number of metres >= 0, got {args.empty_radius}")
+    if not (np.isfinite(options.intensity_scale) and options.intensity_scale > 0):
+        raise InputError(f"--intensity-scale: must be a finite number > 0 (the intensity of an apparent reflectance of 1), got {options.intensity_scale}")
+    for key, least, most in (("folds", 0, fitting.MAX_FOLDS), ("mlp_steps", 1, fitting.MAX_MLP_STEPS), ("max_gap", 0, fitting.MAX_GAP)):  # they multiply the work
+        if not least <= getattr(options, key) <= most:
+            raise InputError(f"--{key.replace('_', '-')}: must lie in {least}..{most:,}, got {getattr(options, key):,}")
     if min(options.range_bins, options.incidence_bins, options.noise_range_bins, options.noise_incidence_bins, options.min_samples,
            options.mlp_range_bins, options.mlp_incidence_bins, options.mlp_steps) < 1 or options.seed < 0:
         raise InputError("fit: bin counts, --min-samples and --mlp-steps must be >= 1, --seed >= 0")
+    from .io.confined import refuse_output_over_input
+
     out = Path(args.out)
+    refuse_output_over_input(out, args.scans)
     if not out.parent.is_dir() and (out.parent.exists() or any(p.exists() and not p.is_dir() for p in out.parents)):
         raise InputError(f"--out: {out.parent} is not a folder (a file stands in the path); give a path in a folder")
     if args.fields < 4 or not 0 <= args.intensity_field < args.fields or args.ring_field >= args.fields or args.rings < 1:
@@ -237,6 +252,9 @@ def run_evaluate(args) -> int:
     out = Path(args.out)
     if out.is_dir() or (out.parent.exists() and not out.parent.is_dir()):
         raise InputError(f"--out: {out} must be a file path in a folder")
+    from .io.confined import refuse_output_over_input
+
+    refuse_output_over_input(out, [*args.train, *args.test, *(args.reference or [])])
     if args.every < 1 or (args.max_frames is not None and args.max_frames < 1) or args.jobs < 1:
         raise InputError("evaluate: --every, --max-frames and --jobs must be >= 1")
     report = evaluate(args.train, args.test, args.classes, args.reference, args.model, args.seed, args.every, args.max_frames,

@@ -38,6 +38,8 @@ from .evaluate import evaluate  # noqa: F401  (train on generated scans, IoU on 
 def load_config(path_or_dict: str | Path | Mapping | None = None, overrides: Iterable[str] = ()) -> Config:
     """The validated :class:`~.config.Config` of a YAML file or of a mapping (``None``: the defaults),
     with ``key.path=value`` overrides (``["sensor.preset=vlp16", "frames=10"]``)."""
+    if isinstance(overrides, (str, bytes)) or not isinstance(overrides, Iterable):
+        raise InputError(f"overrides: expected a list of 'key.path=value' strings, got {overrides!r}")
     return _load_config(dict(path_or_dict) if isinstance(path_or_dict, Mapping) else path_or_dict, list(overrides))
 
 
@@ -46,8 +48,19 @@ def run(config: Config, out: str | Path, frames: Iterable[int] | None = None, mo
     manifest with the frames' records. Blender's scene is reset to an empty one first (needs ``bpy``).
 
     mode : ``new`` (refuse a folder holding another run), ``resume`` or ``overwrite`` (see :mod:`.dataset`)
+    Every argument is checked before anything is written: a bad one raises :class:`InputError` and commits no frame.
     """
+    from .errors import path_argument
     from .estimate import check_limits, estimate_run
+
+    if not isinstance(config, Config):
+        raise InputError(f"config: expected a Config (bpy_pipeline.load_config(...) of a file or a mapping), got {type(config).__name__}")
+    path_argument(out, "out")
+    frames = checked_frames(frames, config.frames)
+    if mode not in ("new", "resume", "overwrite"):
+        raise InputError(f"mode: {mode!r} is not one of new, resume, overwrite")
+    if not callable(log):
+        raise InputError(f"log: expected a function of one str (print, or lambda text: None to print nothing), got {type(log).__name__}")
 
     check_limits(estimate_run(config, config.frames if frames is None else len(frames) if hasattr(frames, "__len__") else None), config)  # before any work
     try:
@@ -58,6 +71,23 @@ def run(config: Config, out: str | Path, frames: Iterable[int] | None = None, mo
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     return run_pipeline(config, out, log=log, frames=frames, mode=mode)
+
+
+def checked_frames(frames, count: int):
+    """``frames`` (frame indices, default all) when each is an int in ``0 .. count - 1``; else :class:`InputError`."""
+    if frames is None:
+        return None
+    if isinstance(frames, range):
+        if len(frames) and not (0 <= min(frames[0], frames[-1]) and max(frames[0], frames[-1]) < count):
+            raise InputError(f"frames: {frames} reaches past the run's frames 0..{count - 1}")
+        return frames
+    if isinstance(frames, (str, bytes, Mapping)) or not isinstance(frames, Iterable):
+        raise InputError(f"frames: expected frame indices (a list or range of ints), got {type(frames).__name__}")
+    frames = list(frames)
+    bad = [f for f in frames if isinstance(f, bool) or not isinstance(f, (int, np.integer)) or not 0 <= f < count]
+    if bad:
+        raise InputError(f"frames: {bad[0]!r} is not a frame index of this run (ints 0..{count - 1}); nothing was made")
+    return frames
 
 
 def scene_buffers(meshes: SceneBuffers | Mapping) -> SceneBuffers:

@@ -146,6 +146,10 @@ def run_main(args) -> int:
         raise InputError("--out: empty; give a folder (default: ./out)")
     if not 1 <= args.workers <= MAX_WORKERS:
         raise InputError(f"--workers: must be 1 .. {MAX_WORKERS}, got {args.workers}")
+    if args.overwrite and args.config:  # before any work: --overwrite never removes an input
+        from .dataset import refuse_inputs_inside
+
+        refuse_inputs_inside(args.out, [args.config])
     config = load_run_config(args)
     frames = frame_selection(args, config.frames)
     mode = "join" if args.join else "resume" if args.resume else "overwrite" if args.overwrite else "new"

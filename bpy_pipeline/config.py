@@ -11,6 +11,7 @@ gives an equal config.
 from __future__ import annotations
 
 import dataclasses
+import os
 import typing
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -37,7 +38,7 @@ from .builders.population import population_from_dict, population_to_dict
 from .builders.railway.params import RailwayScene
 from .io.writers import frame_writers
 from .schema import check_positive, convert, from_dict, to_plain
-from .yaml_text import SAFE_LOADER
+from .yaml_text import MAX_DEPTH, MAX_VALUES, read_yaml_file, read_yaml_text
 
 Vec3 = tuple[float, float, float]
 DEFAULT_SENSOR = {"preset": "railway_tls", "sampling_factor": 0.25}
@@ -304,12 +305,10 @@ class LimitsConfig:
     objects: float = 1e4  # objects of a frame's scene (placed people, cars, shapes, ...)
     seconds: float = 7 * 86400.0  # estimated seconds of the selected frames in one process
     bytes: float = 1e12  # estimated bytes written by the selected frames
+    particles: float = 1e9  # rain drops and snow flakes drawn a frame, at most (lidar/weather.py; 145 ns each: 2.4 min a frame)
 
 
 MAX_FRAMES = 10**9  # frame indices are 6+ digit file names and records; a billion frames is centuries of scanning
-MAX_CONFIG_BYTES = 16 << 20  # a config file larger than this is refused before it is parsed
-MAX_CONFIG_DEPTH = 64  # nesting of mappings and lists in a config (the deepest real one is under 10)
-MAX_CONFIG_VALUES = 100_000  # scalars in a config file or --set value (keys included); parsing 100,000 takes seconds
 
 
 @dataclass(frozen=True)
@@ -692,8 +691,7 @@ def apply_override(data: dict, assignment: str) -> None:
     if not sep or not key.strip():
         raise InputError(f"--set {assignment!r}: expected key.path=value")
     try:
-        check_yaml_depth(text, f"--set {key}")
-        value = yaml.load(text, Loader=SAFE_LOADER)
+        value = read_yaml_text(text, f"--set {key}")
     except yaml.YAMLError:
         raise InputError(f"--set {key}: the value {text!r} is not valid YAML") from None
     parts = key.strip().split(".")
@@ -715,58 +713,26 @@ def apply_override(data: dict, assignment: str) -> None:
 
 
 def read_config_file(path: str | Path) -> dict:
-    """Raw mapping from a YAML file; ``InputError`` naming the file when missing or malformed."""
-    path = Path(path)
-    try:
-        if path.is_dir():
-            raise InputError(f"{path}: is a folder, not a config file")
-        with open(path, "rb") as handle:  # bounded: /dev/zero or a huge file is refused, not read for ever
-            raw = handle.read(MAX_CONFIG_BYTES + 1)
-        if len(raw) > MAX_CONFIG_BYTES:
-            raise InputError(f"{path}: larger than {MAX_CONFIG_BYTES >> 20} MB, not a config file")
-        text = raw.decode("utf-8")
-    except OSError as err:
-        raise InputError(f"{path}: cannot read the config file ({err.strerror or err})") from None
-    except UnicodeDecodeError as err:
-        raise InputError(f"{path}: not UTF-8 text (byte {err.start}); save the config as UTF-8 YAML") from None
-    try:
-        check_yaml_depth(text, str(path))
-        data = yaml.load(text, Loader=SAFE_LOADER)
-    except yaml.YAMLError as err:
-        mark = getattr(err, "problem_mark", None)
-        where = f" at line {mark.line + 1}" if mark else ""
-        raise InputError(f"{path}: not valid YAML{where}") from None
+    """Raw mapping from a YAML file, read through the one guard (:func:`~.yaml_text.read_yaml_file`: size, nesting,
+    values with aliases expanded); ``InputError`` naming the file when missing or malformed."""
+    data = read_yaml_file(path, "config file")
     if data is not None and not isinstance(data, dict):
         raise InputError(f"{path}: expected a mapping of config keys at the top level")
     return data or {}
 
 
-def check_yaml_depth(text: str, where: str) -> None:
-    """``InputError`` when the YAML ``text`` nests mappings and lists deeper than :data:`MAX_CONFIG_DEPTH` or
-    holds more than :data:`MAX_CONFIG_VALUES` scalars (read as events, without building the tree: PyYAML's
-    tree builder recurses, and builds a large tree slowly)."""
-    depth = values = 0
-    for event in yaml.parse(text, Loader=SAFE_LOADER):
-        if isinstance(event, yaml.ScalarEvent):
-            values += 1
-            if values > MAX_CONFIG_VALUES:
-                raise InputError(f"{where}: holds more than {MAX_CONFIG_VALUES:,} values, not a config (a scene of more objects belongs in a .blend or mesh file)")
-        elif isinstance(event, (yaml.MappingStartEvent, yaml.SequenceStartEvent)):
-            depth += 1
-            if depth > MAX_CONFIG_DEPTH:
-                raise InputError(f"{where}: nested deeper than {MAX_CONFIG_DEPTH} levels, not a config")
-        elif isinstance(event, (yaml.MappingEndEvent, yaml.SequenceEndEvent)):
-            depth -= 1
-
-
 def check_tree_depth(data, where: str = "config") -> None:
-    """``InputError`` when a config mapping nests deeper than :data:`MAX_CONFIG_DEPTH` (iterative; a cycle counts as deep)."""
-    stack = [(data, 1)]
+    """``InputError`` when a config mapping nests deeper than :data:`MAX_DEPTH` (iterative; a cycle counts as deep)
+    or holds more than :data:`~.yaml_text.MAX_VALUES` values, a shared one counted wherever it is (as a YAML file's aliases)."""
+    stack, values = [(data, 1)], 0
     while stack:
         node, depth = stack.pop()
+        values += 1 + (len(node) if isinstance(node, dict) else 0)  # keys count, as in a file
+        if values > MAX_VALUES:
+            raise InputError(f"{where}: holds more than {MAX_VALUES:,} values (shared ones counted each time), not a config")
         if isinstance(node, (dict, list, tuple)):
-            if depth > MAX_CONFIG_DEPTH:
-                raise InputError(f"{where}: nested deeper than {MAX_CONFIG_DEPTH} levels, not a config")
+            if depth > MAX_DEPTH:
+                raise InputError(f"{where}: nested deeper than {MAX_DEPTH} levels, not a config")
             stack.extend((child, depth + 1) for child in (node.values() if isinstance(node, dict) else node))
 
 
@@ -775,6 +741,10 @@ def load_config(path_or_dict: str | Path | dict | None = None, overrides: list[s
     with ``key.path=value`` overrides applied (values parsed as YAML)."""
     import copy
 
+    if path_or_dict is not None and not isinstance(path_or_dict, (str, os.PathLike, dict)):
+        raise InputError(f"config: expected a YAML file path or a mapping, got {type(path_or_dict).__name__}")
+    if isinstance(overrides, (str, bytes)) or not all(isinstance(o, str) for o in overrides):
+        raise InputError(f"overrides: expected a list of 'key.path=value' strings, got {overrides!r}")
     if isinstance(path_or_dict, dict):
         check_tree_depth(path_or_dict)
         data = copy.deepcopy(path_or_dict)

@@ -68,10 +68,12 @@ def read_labels(path: str | Path, n: int, space: str = "auto") -> np.ndarray:
             array = np.load(path)
         except (ValueError, OSError, EOFError) as err:
             raise InputError(f"--labels: {path}: not a numpy array file ({err})") from None
-        if not isinstance(array, np.ndarray) or array.dtype.kind not in "iu" or array.size != len(array.reshape(len(array), -1)):
+        if not isinstance(array, np.ndarray) or array.dtype.kind not in "iu" or array.ndim not in (1, 2) or (array.ndim == 2 and array.shape[1] != 1):
             raise InputError(f"--labels: {path}: expected one integer a point, (n,) or (n, 1), got {getattr(array, 'dtype', type(array))} {getattr(array, 'shape', '')}")
         if array.size and array.min() < 0:
             raise InputError(f"--labels: {path}: negative labels (first at point {int(np.flatnonzero(array.reshape(-1) < 0)[0])})")
+        if array.size and int(array.max()) > np.iinfo(np.uint32).max:
+            raise InputError(f"--labels: {path}: labels up to {int(array.max())} do not fit SemanticKITTI's uint32 (semantic | instance << 16); first at point {int(np.argmax(array.reshape(-1) > np.iinfo(np.uint32).max))}")
         labels = array.reshape(-1).astype(np.uint32)
         space = "train" if space == "auto" else space
     if len(labels) != n:
@@ -122,7 +124,11 @@ def convert(scan_path, to: str, labels=None, method: str = "hybrid", lift: float
         raise InputError(f"SCAN: {path} is not a file")
     start = time.perf_counter()
     scan = read_real_scan(path, format)
-    raw = read_labels(labels, len(scan), label_space) if labels is not None else scan.labels
+    if labels is None:
+        raw = scan.labels
+    else:  # one label a row of the file, the rows left out (non-finite points) too
+        raw = read_labels(labels, len(scan) if scan.kept is None else len(scan.kept), label_space)
+        raw = raw if scan.kept is None else raw[scan.kept]
     try:
         firings = recover_firings(scan, source_preset)
     except InputError as err:
@@ -152,8 +158,10 @@ def convert(scan_path, to: str, labels=None, method: str = "hybrid", lift: float
     return Converted(out, source, carried, info)
 
 
-def write_converted(converted: Converted, out: str | Path, to: str, formats=("semantickitti",), overwrite: bool = False, scan_path: str = "") -> dict:
-    """Write a converted scan as a one-frame dataset under ``out`` (the run's manifest, record and writers); returns its record."""
+def write_converted(converted: Converted, out: str | Path, to: str, formats=("semantickitti",), overwrite: bool = False, scan_path: str = "", inputs=()) -> dict:
+    """Write a converted scan as a one-frame dataset under ``out`` (the run's manifest, record and writers); returns its record.
+
+    inputs : other files the conversion read (its labels); ``overwrite`` refuses when one lies inside ``out``, as the scan"""
     from .buffers import SceneBuffers
     from .builders.base import BuildResult
     from .config import load_config
@@ -167,7 +175,7 @@ def write_converted(converted: Converted, out: str | Path, to: str, formats=("se
                  f"output.formats=[{', '.join(formats)}]", "output.boxes.formats=[]", "output.preview=false"]
     config = load_config(None, overrides)
     frame = Frame(index=0, config=config, rng=frame_rng(config.seed, 0), buffers=SceneBuffers.from_meshes({}), points=converted.points, scene=BuildResult(info=converted.info))
-    with Dataset.open(out, config, "overwrite" if overwrite else "new") as dataset:
+    with Dataset.open(out, config, "overwrite" if overwrite else "new", inputs=[p for p in inputs if p]) as dataset:
         return dataset.commit(frame)
 
 
@@ -197,8 +205,12 @@ def convert_main(args) -> int:
     bad = [f for f in formats if f not in POINT_FORMATS]
     if bad or not formats:
         raise InputError(f"--formats: {bad[0] if bad else '(none)'!r} is not one of {', '.join(POINT_FORMATS)}")
+    if args.overwrite:  # before any work: --overwrite never removes an input
+        from .dataset import refuse_inputs_inside
+
+        refuse_inputs_inside(args.out, [args.scan, args.labels])
     converted = convert(args.scan, args.to, args.labels, args.method, args.lift, args.source, args.format, args.label_space, args.threads)
-    record = write_converted(converted, args.out, args.to, formats, args.overwrite, str(Path(args.scan).resolve()))
+    record = write_converted(converted, args.out, args.to, formats, args.overwrite, str(Path(args.scan).resolve()), [args.labels])
     c = converted.info["conversion"]
     print(f"{c['source_returns']:,} returns of {c['scan']} -> {c['converted']:,} points of {args.to} ({args.method}, {c['convert_ms']:.0f} ms, labels: {c['labels']}); {len(record['files'])} files in {args.out}")
     return 0

@@ -47,6 +47,7 @@ from typing import Callable
 from .config import Config, config_to_dict
 from .errors import InputError
 from .io.atomic import atomic_write, digests_while_writing, temporary_files
+from .io.confined import inside, readable_inside
 from .io.manifest import MANIFEST_NAME, read_manifest, to_json, write_manifest
 from .io.writers import WRITERS, frame_writers
 from .lidar.raycast import default_threads
@@ -55,6 +56,8 @@ DATASET_FORMAT = "bpy_pipeline dataset"
 DATASET_VERSION = 2
 RECORDS, STAGING, MOVING, LOCK = "records", ".staging", ".moving", ".lock"
 MODES = ("new", "resume", "overwrite", "join")
+MAX_RECORD_BYTES = 64 << 20  # an intent or a frame record larger than this is not one
+MAX_FRAME_FILE_BYTES = 1 << 40  # a frame's file larger than this is not one (nor is a device or a FIFO)
 BYTES_PER_POINT = 64  # on disk per point and format, a generous estimate (PLY: 35, LAS: 46, SemanticKITTI: 20)
 
 
@@ -155,7 +158,7 @@ def _holder(path: Path) -> dict | None:
     """The lock file's JSON (``None`` when empty, unreadable or not a mapping)."""
     try:
         holder = json.loads(path.read_text())
-    except (OSError, ValueError):
+    except (OSError, ValueError, RecursionError):
         return None
     return holder if isinstance(holder, dict) else None
 
@@ -277,13 +280,15 @@ class Dataset:
 
     # ------------------------------------------------------------------ opening
     @classmethod
-    def open(cls, out: str | os.PathLike, config: Config, mode: str = "new", log: Callable[[str], None] | None = None) -> "Dataset":
+    def open(cls, out: str | os.PathLike, config: Config, mode: str = "new", log: Callable[[str], None] | None = None, inputs=()) -> "Dataset":
         """Open ``out`` for ``config``.
 
         mode : ``new`` refuses a folder that holds a run; ``resume`` continues a run of the same config
             and seed (committed frames whose files still match their sha256 are kept, the rest redone);
             ``overwrite`` removes the old dataset first; ``join`` adds frames to a run another process
             holds the lock of (workers: same config and seed, no lock, no clean-up)
+        inputs : paths the run reads beyond its config's (the config file, label files); ``overwrite`` refuses
+            when one of them, or a file the config names, lies inside ``out``
         Raises :class:`InputError` (exit 2) for a folder it cannot or must not write.
         """
         if mode not in MODES:
@@ -291,6 +296,8 @@ class Dataset:
         out = Path(out)
         if out.exists() and not out.is_dir():
             raise InputError(f"--out: {out} exists and is not a folder")
+        if mode == "overwrite":
+            refuse_inputs_inside(out, [*inputs, *input_paths(config)])
         dataset = cls(out, config, mode, log, created=not out.exists())
         if mode == "join":
             dataset._check_same_run(read_manifest(out))
@@ -321,8 +328,13 @@ class Dataset:
 
     def _prepare(self) -> None:
         """Refuse, resume or overwrite an existing run; clean up what a killed run left; write the manifest."""
+        for name in (RECORDS, MOVING, STAGING):  # the run's own folders: removed from and written into, never through a link
+            if (self.out / name).is_symlink() or ((self.out / name).exists() and not (self.out / name).is_dir()):
+                raise InputError(f"--out: {self.out / name} is a link or a file, not the run's own folder; remove it or give another --out (nothing was removed)")
         manifest_path = self.out / MANIFEST_NAME
         old = read_manifest(self.out) if manifest_path.exists() else None
+        if old is not None and self.mode in ("new", "resume") and not is_our_manifest(old):
+            raise InputError(f"--out: {manifest_path} is not a bpy_pipeline run's manifest; give another --out (nothing there is touched)")
         if old is not None and self.mode == "new":
             what = f"seed {old.get('seed')}, {len(list((self.out / RECORDS).glob('*.json')))} frames" if old.get("format") == DATASET_FORMAT else "an earlier version's output"
             raise InputError(f"--out: {self.out} holds another run ({what}); give --resume to continue it (same config and seed) or --overwrite to replace it")
@@ -367,16 +379,48 @@ class Dataset:
             raise InputError(f"--resume: {self.out} holds a run with another config or seed (differs in: {', '.join(keys) or 'versions'}); give --overwrite to replace it")
 
     def _remove_old(self, manifest: dict) -> None:
-        """Remove the old dataset: its frames' files, records, manifest and indexes (the whole folder's content)."""
-        if manifest.get("format") not in (DATASET_FORMAT, None) and "config" not in manifest:
-            raise InputError(f"--overwrite: {self.out}/manifest.json is not a bpy_pipeline manifest; refusing to remove the folder's content")
-        for entry in self.out.iterdir():
-            if entry.name == LOCK:
-                continue
-            if entry.is_dir() and not entry.is_symlink():
-                shutil.rmtree(entry)
-            else:
-                entry.unlink()
+        """Remove the old run: the files its records, intents and manifest name (confined to ``OUT``), its records,
+        intents, staging folder and manifest, and the folders that leaves empty. Nothing else is touched: a file
+        the run did not write stays. Every file is checked deletable first; one that is not refuses the overwrite
+        with the old run whole."""
+        if not is_our_manifest(manifest):
+            raise InputError(f"--overwrite: {self.out / MANIFEST_NAME} is not a bpy_pipeline run's manifest; refusing to remove anything from {self.out}: give another --out")
+        files = self._files_of_run(manifest)
+        for path in files:
+            why = undeletable(path)
+            if why:
+                raise InputError(f"--overwrite: cannot remove {path} ({why}); nothing was removed, the old run in {self.out} is whole")
+        folders = set()
+        for path in files:
+            try:
+                path.unlink(missing_ok=True)
+            except OSError as err:
+                raise _error(path, "remove", err) from None
+            folders.update(p for p in path.parents if self.out in p.parents)
+        shutil.rmtree(self.out / STAGING, ignore_errors=True)
+        for folder in sorted(folders, key=lambda p: len(p.parts), reverse=True):  # deepest first: the folders left empty go
+            if folder.is_dir() and not folder.is_symlink():
+                for below, _, _ in os.walk(folder, topdown=False):  # links are not followed
+                    _rmdir_if_empty(Path(below))
+
+    def _files_of_run(self, manifest: dict) -> list[Path]:
+        """Every existing file the run in ``OUT`` wrote, by its manifest, records and intents (names confined to ``OUT``)."""
+        own = [MANIFEST_NAME, *[f"{RECORDS}/{p.name}" for p in (self.out / RECORDS).glob("[0-9]*.json")],
+               *[f"{MOVING}/{p.name}" for p in (self.out / MOVING).glob("[0-9]*.json")]]
+        own += [str(p.relative_to(self.out)) for folder in (self.out / MOVING, self.out / RECORDS, self.out) for p in temporary_files(folder)]
+        listed = [name for name in manifest.get("indexes") or [] if isinstance(name, str)]
+        for frame in manifest.get("frames") or []:  # an earlier version's manifest listed its frames
+            listed += [name for name in (frame.get("files") or []) if isinstance(name, str)] if isinstance(frame, dict) else []
+        for name in own[1:]:
+            listed += [rel for rel in _listed_files(self.out / name) if self._of_frame(self.out / name, rel)]
+        files = []
+        for name in own + listed:
+            path = inside(self.out, name)
+            if path is None:
+                self._say(f"warning: {self.out}: the old run names {name!r}, which is not inside the folder; left alone")
+            elif path.is_symlink() or path.is_file():
+                files.append(path)
+        return sorted(set(files))
 
     def _clean_partial_frames(self) -> None:
         """Remove staged frames, the moved files of frames that never got their record, and the temporary files of
@@ -388,31 +432,46 @@ class Dataset:
                 leftover.unlink(missing_ok=True)
         for intent in sorted((self.out / MOVING).glob("*.json")):
             if not (self.out / RECORDS / intent.name).exists():
-                try:
-                    files = json.loads(intent.read_text())
-                except (OSError, ValueError):
-                    files = []
-                for rel in files:
-                    (self.out / rel).unlink(missing_ok=True)
+                for rel in _listed_files(intent):
+                    if not self._of_frame(intent, rel):
+                        continue
+                    path = inside(self.out, rel)
+                    if path is None or (path.is_dir() and not path.is_symlink()):
+                        self._say(f"warning: {intent}: {rel!r} is not a file inside {self.out}; left alone")
+                        continue
+                    path.unlink(missing_ok=True)
                 self._say(f"warning: {self.out}: removed the files of frame {intent.stem}, which a killed run left without its record")
             intent.unlink()
+
+    def _of_frame(self, listing: Path, name: str) -> bool:
+        """True when ``name``, listed by the intent or record ``listing`` (``NNNNNN.json``), can be a file of that
+        frame: every writer names a frame's files by its stem. Otherwise one warning, and the name is left alone."""
+        if listing.stem in name:
+            return True
+        self._say(f"warning: {listing}: {name!r} is not a file of frame {listing.stem}; left alone")
+        return False
 
     def _read_records(self) -> dict[int, dict]:
         records = {}
         for path in sorted((self.out / RECORDS).glob("*.json")):
             try:
+                if readable_inside(path.parent, path.name, MAX_RECORD_BYTES)[0] is None:
+                    raise ValueError("not a regular file of a record's size")
                 record = json.loads(path.read_text())
                 records[int(record["index"])] = record
-            except (OSError, ValueError, KeyError, TypeError):
+            except (OSError, ValueError, KeyError, TypeError, RecursionError):
                 self._say(f"warning: {path}: unreadable frame record, the frame is made again")
-                path.unlink(missing_ok=True)
+                if not path.is_dir():
+                    path.unlink(missing_ok=True)
         return records
 
     def _verified(self, records: dict[int, dict]) -> dict[int, dict]:
-        """The records whose files all exist with their sha256; the others are removed (and redone)."""
+        """The records whose files all exist inside ``OUT`` with their sha256; the others are removed (and redone)."""
         kept = {}
         for index, record in records.items():
-            good = all((self.out / rel).is_file() and sha256_file(self.out / rel) == digest for rel, digest in record.get("sha256", {}).items())
+            digests, files = record.get("sha256"), record.get("files")
+            good = isinstance(digests, dict) and isinstance(files, list) and set(map(str, files)) <= set(digests)  # every file listed is checked
+            good = good and all(_matches(self.out, rel, digest) for rel, digest in digests.items())
             if good:
                 kept[index] = record
             else:
@@ -500,14 +559,16 @@ class Dataset:
             return
         try:
             records = [r for _, r in sorted(self._read_records().items()) if not r.get("skipped")]  # workers commit frames too
+            indexes = []
             for name in frame_writers(self.config):
                 writer = WRITERS.get(name)
                 if writer.index is not None:
-                    writer.index(self.out, records, self.config)
+                    indexes += [os.path.relpath(p, self.out) for p in writer.index(self.out, records, self.config) or ()]
             for name in (STAGING, MOVING):  # empty once every frame is committed
                 if (self.out / name).is_dir() and not any((self.out / name).iterdir()):
                     (self.out / name).rmdir()
             manifest = read_manifest(self.out)
+            manifest["indexes"] = sorted(set(manifest.get("indexes") or []) | set(indexes))  # what --overwrite removes beside the frames
             manifest["summary"] = {"frames": len(records), "points": int(sum(r["points"] for r in records)), "frame_indices": _ranges([r["index"] for r in records])}
             skipped = [i for i, r in self._read_records().items() if r.get("skipped")]
             if skipped:
@@ -539,6 +600,97 @@ class Dataset:
     def _say(self, text: str) -> None:
         if self.log is not None:
             self.log(text)
+
+
+def is_our_manifest(manifest: dict) -> bool:
+    """True for the manifest of a bpy_pipeline run (this version's, or an earlier one's: a config and a seed)."""
+    return manifest.get("format") == DATASET_FORMAT or ("format" not in manifest and isinstance(manifest.get("config"), dict) and "seed" in manifest)
+
+
+def _listed_files(path: Path) -> list[str]:
+    """The file names an intent (a JSON list) or a record (its ``files``) lists; ``[]`` when unreadable."""
+    found, _ = readable_inside(path.parent, path.name, MAX_RECORD_BYTES)
+    try:
+        data = json.loads(found.read_text()) if found is not None else None
+    except (OSError, ValueError, RecursionError):
+        return []
+    files = data.get("files") if isinstance(data, dict) else data
+    return [name for name in files if isinstance(name, str)] if isinstance(files, list) else []
+
+
+def _matches(out: Path, rel, digest) -> bool:
+    """True when the record's file ``rel`` is a regular file inside ``out`` whose sha256 is ``digest``."""
+    path, _ = readable_inside(out, rel, MAX_FRAME_FILE_BYTES)
+    return path is not None and sha256_file(path) == digest
+
+
+FS_IOC_GETFLAGS, FS_IMMUTABLE_FL, FS_APPEND_FL = 0x80086601, 0x10, 0x20  # linux/fs.h: the inode flags chattr sets
+
+
+def _flags(path: Path) -> int:
+    """The inode flags of ``path`` (``lsattr``), 0 where unknown."""
+    import array
+
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_NOFOLLOW)
+    except OSError:
+        return 0
+    try:
+        flags = array.array("l", [0])
+        fcntl.ioctl(fd, FS_IOC_GETFLAGS, flags, True)
+        return flags[0]
+    except OSError:
+        return 0
+    finally:
+        os.close(fd)
+
+
+def undeletable(path: Path) -> str:
+    """Why ``path`` cannot be removed (its folder not writable, it or its folder immutable or append-only), or ``""``."""
+    folder = path.parent
+    if not os.access(folder, os.W_OK | os.X_OK) or _flags(folder) & (FS_IMMUTABLE_FL | FS_APPEND_FL):
+        return f"its folder {folder} is not writable"
+    if not path.is_symlink() and _flags(path) & (FS_IMMUTABLE_FL | FS_APPEND_FL):
+        return "it is immutable or append-only (chattr)"
+    return ""
+
+
+def _rmdir_if_empty(folder: Path) -> None:
+    try:
+        folder.rmdir()
+    except OSError:
+        pass
+
+
+def input_paths(config: Config) -> list[str]:
+    """What a run reads, as given in the config: every string naming an existing file, and every ``path`` (a file,
+    a folder, or a glob pattern: its folder)."""
+    found, stack = [], [("", config_to_dict(config))]
+    while stack:
+        key, node = stack.pop()
+        if isinstance(node, dict):
+            stack.extend(node.items())
+        elif isinstance(node, (list, tuple)):
+            stack.extend((key, value) for value in node)
+        elif isinstance(node, str) and node and "\x00" not in node:
+            node = os.path.expanduser(node)  # the blend builder's path may start with ~
+            fixed = node[: min((node.find(c) for c in "*?[" if c in node), default=len(node))]
+            if key == "path" and fixed != node:
+                fixed = os.path.dirname(fixed) or "."
+            if os.path.isfile(fixed) or (key == "path" and os.path.exists(fixed)):
+                found.append(fixed)
+    return found
+
+
+def refuse_inputs_inside(out: str | os.PathLike, inputs, what: str = "--overwrite") -> None:
+    """``InputError`` when an input path lies inside ``out`` (or is it), before anything is removed from ``out``."""
+    root = os.path.realpath(out)
+    for given in inputs:
+        if given is None or not str(given):
+            continue
+        real = os.path.realpath(given)
+        if real == root or real.startswith(root + os.sep):
+            raise InputError(f"{what}: the input {given} lies inside {out}; nothing was removed: keep the inputs outside --out, or give another --out")
 
 
 def _ranges(indices: list[int]) -> list[list[int]]:

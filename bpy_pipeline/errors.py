@@ -10,3 +10,24 @@ class InputError(Exception):
     """Bad user input: a one-line message naming the key, object or file and what is allowed."""
 
     exit_code = 2
+
+
+def require(module: str, extra: str, what: str, package: str | None = None):
+    """The imported ``module``, or :class:`InputError` naming the extra that installs it:
+    ``{what} needs scipy, which is not installed: pip install 'bpy-pipeline[evaluate]'``."""
+    import importlib
+
+    try:
+        return importlib.import_module(module)
+    except ImportError:
+        name = package or module.split(".")[0]
+        raise InputError(f"{what} needs {name}, which is not installed: pip install 'bpy-pipeline[{extra}]' (or pip install {name})") from None
+
+
+def path_argument(value, name: str = "path"):
+    """``value`` when it is a path (``str`` or ``os.PathLike``); else :class:`InputError` naming the argument ``name``."""
+    import os
+
+    if isinstance(value, (str, os.PathLike)) and str(value):
+        return value
+    raise InputError(f"{name}: expected a file or folder path (str or pathlib.Path), got {value!r}")

@@ -29,6 +29,9 @@ HIT_FRACTION = 614_941 / 1_441_800  # points / rays of the default job: 0.43
 WRITE_S_PER_POINT_FORMAT = 0.1072 / 614_941 / 2  # write 0.1072 s for ply + semantickitti (+ preview): 87 ns a point and format
 # benchmarks/results/scan.json, "default railway (railway_tls)": caster_ns_per_triangle 143.4 (Embree's scene built once a frame)
 CASTER_S_PER_TRIANGLE = 143.4e-9
+# benchmarks/results/weather_particles.json, "rain 50 mm/h, 3 mrad": 2.45e7 visible drops for 30,000 VLP-16 returns at
+# 1..100 m drawn and offered in 3.555 s, 145 ns each
+WEATHER_S_PER_PARTICLE = 145e-9
 # benchmarks/results/population.json, "parking + car assets", populated in place: build 0.4029 s for 9 placed objects
 OBJECT_S = 0.4029 / 9
 
@@ -68,6 +71,7 @@ class Estimate:
     seconds_per_frame: float
     seconds: float
     parts: dict = field(default_factory=dict)  # seconds a frame by stage, for the note
+    particles: float = 0.0  # visible rain drops and snow flakes drawn a frame (at most)
 
     def line(self) -> str:
         return (f"estimate: {self.frames:,} x ({self.rays_per_frame:,} rays, {self.triangles:,} triangles, {self.objects:,} objects); "
@@ -151,6 +155,22 @@ def _rays(config: Config) -> int:
     return int(sum(ray_count(spec) for spec in specs)) * sub_rays
 
 
+def _particles(config: Config) -> float:
+    """The most rain drops and snow flakes a frame draws: each return's cone up to the sensor's max_range
+    (:func:`~.lidar.weather.expected_particles`), for the returns of every sensor of the frame."""
+    from .lidar.drop.threshold import threshold_model
+    from .lidar.effects import fitted_models
+    from .lidar.sensors import ray_count
+    from .lidar.weather import expected_particles
+
+    weather = config.effects.weather
+    if config.effects.ideal or not (weather.rain.rate > 0 or weather.snow.rate > 0):
+        return 0.0
+    detect = threshold_model(config.effects, fitted_models(config.effects.drop, "effects.drop.model_file")).detection_probability
+    specs = [member.spec for member in config.sensor.rig] if config.sensor.rig else [config.sensor.spec]
+    return sum(ray_count(spec) * HIT_FRACTION * expected_particles(config.effects, spec.max_range, detect) for spec in specs)
+
+
 def _write_bytes_per_point(config: Config) -> float:
     from .io.writers import frame_writers
 
@@ -182,9 +202,12 @@ def estimate_run(config: Config, frames: int | None = None) -> Estimate:
         "scan": rays * SCAN_S_PER_RAY,
         "write": points * WRITE_S_PER_POINT_FORMAT * max(len(writers), 1),
     }
+    particles = _particles(config)
+    if particles:
+        parts["weather"] = particles * WEATHER_S_PER_PARTICLE
     per_frame = sum(parts.values())
     frame_bytes = points * _write_bytes_per_point(config) + (PREVIEW_BYTES if "preview" in frame_writers(config) else 0)
-    return Estimate(frames, rays, int(triangles), int(objects), points, frame_bytes * frames, per_frame, STARTUP_S + per_frame * frames, parts)
+    return Estimate(frames, rays, int(triangles), int(objects), points, frame_bytes * frames, per_frame, STARTUP_S + per_frame * frames, parts, particles)
 
 
 # limit key -> (the estimate's figure, what it is)
@@ -194,6 +217,7 @@ CHECKS: dict[str, tuple[Callable[[Estimate], float], str]] = {
     "objects": (lambda e: e.objects, "objects a frame"),
     "seconds": (lambda e: e.seconds, "seconds in one process"),
     "bytes": (lambda e: e.bytes, "bytes to write"),
+    "particles": (lambda e: e.particles, "rain and snow particles a frame"),
 }
 
 

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import copy
 import math
+import os
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Sequence
@@ -212,18 +213,13 @@ def stats_report(stats: dict[str, ClassStats], frames: list[str]) -> dict:
 def match(sources: Sequence[str | Path], config_path: str | Path, out: str | Path, classes: Sequence[str] = CLASSES, min_points: int = 10) -> dict:
     """``bpy-pipeline match``: fit ``sources``, write the matched config to ``out`` (atomically, checked by
     :func:`~.config.load_config` first) and return ``{"notes", "report"}``."""
-    from .config import load_config
+    from .config import load_config, read_config_file
     from .io.atomic import atomic_write
 
-    path = Path(config_path)
-    try:
-        base = load_yaml(path.read_text()) or {}
-    except OSError as err:
-        raise InputError(f"--config: cannot read {path} ({err.strerror or err})") from None
-    except yaml.YAMLError:
-        raise InputError(f"--config: {path} is not valid YAML") from None
-    if not isinstance(base, dict):
-        raise InputError(f"--config: {path} must hold a mapping (a config), got {type(base).__name__}")
+    try:  # the guard every command reads a config through: size, depth, values with aliases expanded
+        base = read_config_file(config_path)
+    except InputError as err:
+        raise InputError(f"--config: {err}") from None
     stats, frames = fit_real(sources, classes, min_points)
     config, notes = matched_config(base, stats)
     out = Path(out)
@@ -256,9 +252,15 @@ def match_main(args) -> int:
 
     from .evaluate.label_maps import parse_classes
     from .io.atomic import atomic_write
+    from .io.confined import refuse_output_over_input
 
     if args.min_points < 1:
         raise InputError(f"--min-points: must be >= 1, got {args.min_points}")
+    if args.report and os.path.realpath(args.report) == os.path.realpath(args.out):
+        raise InputError(f"--report: {args.report} is the --out file too; give the statistics a file of their own")
+    refuse_output_over_input(args.out, [*args.real, args.config])
+    if args.report:
+        refuse_output_over_input(args.report, [*args.real, args.config], "--report")
     classes = parse_classes(args.classes)
     result = match(args.real, args.config, args.out, classes, args.min_points)
     for line in result["notes"]:

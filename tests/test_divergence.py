@@ -197,7 +197,8 @@ def test_divergence_from_config_through_the_pipeline_with_a_moving_sensor():
 @pytest.mark.parametrize(
     "section, message",
     [
-        ({"mrad": -1}, "^sensor.divergence.mrad: must be >= 0"),
+        ({"mrad": -1}, "^sensor.divergence.mrad: must lie in 0..100"),
+        ({"mrad": 1e9}, "^sensor.divergence.mrad: must lie in 0..100"),
         ({"mrad": 3, "rays": 0}, "^sensor.divergence.rays: must lie in 1..1024"),
         ({"mrad": 3, "rays": 5000}, "^sensor.divergence.rays: must lie in 1..1024"),
         ({"rays": 7}, "^sensor.divergence.rays: 7 sub-rays of a zero-width beam"),

@@ -39,6 +39,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..errors import require
+
 SHAPE_VOXEL_M = 0.3  # local shape: the 3 x 3 x 3 block of 0.3 m voxels around a point's voxel (0.9 m across)
 GROUND_CELL_M = 2.0
 GROUND_QUANTILE = 0.1
@@ -63,6 +65,7 @@ def ground_height(points: np.ndarray, cell: float = GROUND_CELL_M, quantile: flo
     neighbourhood (a car or a wall filling a cell does not lift the ground); cells without points take the
     nearest cell's value; a 3 x 3 mean smooths it; each point reads the grid bilinearly.
     """
+    require("scipy.ndimage", "evaluate", "the reference model's ground height")
     from scipy import ndimage
 
     n = len(points)
@@ -140,6 +143,7 @@ def eigen_features(points: np.ndarray, voxel: float = SHAPE_VOXEL_M) -> np.ndarr
 def clusters(points: np.ndarray, voxel: float = VOXEL_M, link: float = LINK_M, link_per_m: float = LINK_PER_M, link_max: float = LINK_MAX_M) -> np.ndarray:
     """``(n,)`` int64 cluster index of ``(n, 3)`` points: connected components linked within
     ``min(max(link, link_per_m * range), link_max)`` metres, on a ``voxel`` grid (points of one voxel are one node, at their mean)."""
+    require("scipy.sparse.csgraph", "evaluate", "the reference model's clusters")
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
     from scipy.spatial import cKDTree

@@ -31,7 +31,8 @@ from typing import Callable, Iterable, Sequence
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, require
+from ..io.confined import readable_inside
 from ..io.manifest import read_frame_records, read_manifest
 from ..io.ply import read_ply
 from ..io.real_scans import label_path as semantickitti_label_path
@@ -40,6 +41,7 @@ from . import label_maps
 
 LINK_M = 0.5  # connected-component linking distance for objects of sources without instance ids, metres
 IMAGE_SIZE = (1242, 375)  # KITTI's image_2 width, height in pixels
+MAX_PLY_BYTES = 1 << 34  # a generated frame's PLY larger than this (16 GB) is not one
 
 
 @dataclass
@@ -93,6 +95,7 @@ class LabelledScan:
 # ----------------------------------------------------------------------------- objects
 def components(points: np.ndarray, radius: float = LINK_M) -> np.ndarray:
     """``(n,)`` int64 connected-component index of ``(n, 3)`` points linked within ``radius`` metres."""
+    require("scipy.sparse.csgraph", "evaluate", "objects of labelled scans without instance ids (match, evaluate)")
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
     from scipy.spatial import cKDTree
@@ -352,12 +355,18 @@ def read_generated(folder: Path, classes: Sequence[str], every: int = 1, max_fra
         raise InputError(f"{folder}: every and max_frames must be >= 1, got {every} and {max_frames}")
     manifest = read_manifest(folder) if (folder / "manifest.json").is_file() else {}
     class_names = manifest.get("class_table")
+    if class_names is not None and not (isinstance(class_names, dict) and class_names and all(str(k).isdigit() and int(k) < 1 << 16 and isinstance(v, str) for k, v in class_names.items())):
+        raise InputError(f"{folder / 'manifest.json'}: class_table must map class ids (0..65535) to names, got {type(class_names).__name__}")
     world = ((manifest.get("config") or {}).get("output") or {}).get("frame") == "world"
     records = read_frame_records(folder) if (folder / "records").is_dir() else []
     files = []
     for record in records:
-        ply = [f for f in record.get("files", []) if f.startswith("ply/") and f.endswith(".ply")]
-        files += [(folder / f, np.asarray(record.get("sensor_pose", np.eye(4)), np.float64)) for f in ply]
+        ply = [f for f in record.get("files", []) if isinstance(f, str) and f.startswith("ply/") and f.endswith(".ply")]
+        for name in ply:
+            path, why = readable_inside(folder, name, MAX_PLY_BYTES)
+            if path is None:
+                raise InputError(f"{folder}/records: frame {record.get('index')} names {name!r}, {why}; a record's files lie in its dataset folder")
+            files.append((path, np.asarray(record.get("sensor_pose", np.eye(4)), np.float64)))
     if not records:
         files = [(p, np.eye(4)) for p in sorted((folder / "ply").glob("*.ply"))]
     files = files[::every][:max_frames]

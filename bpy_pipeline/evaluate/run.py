@@ -67,6 +67,10 @@ def evaluate(train: Iterable[Source], test: Iterable[Source], classes: str | Seq
     image_size : KITTI image width, height (px) bounding the labelled field of view
     log : ``print``-like progress callback, or ``None``
     """
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise InputError(f"--seed: expected an integer >= 0, got {seed!r}")
+    if isinstance(max_points_per_scan, bool) or not isinstance(max_points_per_scan, (int, np.integer)) or max_points_per_scan < 1:
+        raise InputError(f"--max-points-per-scan: expected an integer >= 1, got {max_points_per_scan!r}")
     classes = parse_classes(classes)
     say = log or (lambda *_: None)
     train_scans = load_scans(list(train), classes, every, max_frames, image_size)
@@ -83,6 +87,10 @@ def evaluate(train: Iterable[Source], test: Iterable[Source], classes: str | Seq
     say(f"{model}: trained on {sum(trained.training_points)} points in {fit_seconds:.1f} s")
     synthetic = score(test_scans, [trained.predict(s) for s in test_scans], classes, seed, draws)
     synthetic["training_points"] = dict(zip([*classes, "other"], trained.training_points))
+    for c, points in zip(classes, trained.training_points):
+        if not points:  # the model never saw the class: its IoU of 0 would measure the training set, not the model
+            synthetic["classes"][c].update(iou=float("nan"), interval=[float("nan"), float("nan")], measured=False)
+            say(f"warning: {c}: no {c} point in --train; its IoU is not measured")
     synthetic["seconds"] = round(fit_seconds, 2)
     report = {
         "classes": list(classes), "model": model, "seed": seed, "features": list(FEATURE_NAMES),
@@ -109,6 +117,8 @@ def table(report: dict) -> str:
         if block is None:
             return "-"
         r = block["classes"][c]
+        if r.get("measured") is False:
+            return f"not measured (no {c} point in training)"
         lo, hi = r["interval"]
         return f"{_fmt(r['iou'])} [{_fmt(lo)}, {_fmt(hi)}]  {r['objects_found']}/{r['objects']} objects"
 

@@ -20,11 +20,10 @@ from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from ..errors import InputError
+from ..yaml_text import read_yaml_file
 from .collision import capsule_gaps
-from ..yaml_text import load_yaml
 
 ARM_PATH = Path(__file__).resolve().parents[2] / "assets_manifest" / "robot_arm.yaml"
 
@@ -147,12 +146,7 @@ def parse_arm(data: dict, where: str) -> ArmModel:
 def load_arm(path: str | Path = ARM_PATH) -> ArmModel:
     """The arm model of a robot_arm.yaml file (default: the TX90L in assets_manifest)."""
     path = Path(path)
-    try:
-        data = load_yaml(path.read_text())
-    except OSError as err:
-        raise InputError(f"{path}: cannot read the arm model ({err.strerror or err})") from None
-    except yaml.YAMLError:
-        raise InputError(f"{path}: not valid YAML") from None
+    data = read_yaml_file(path, "arm model")
     return parse_arm(data, str(path))
 
 

@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, path_argument
 from ..lidar.points import POINT_DTYPE
 from ._records import as_points, chunks
 from .atomic import atomic_write
@@ -300,7 +300,7 @@ def read_las(path: str | os.PathLike) -> np.ndarray:
     and absent ones are zero. Other point formats, compressed
     (LAZ) files and older versions raise ``InputError``; use ``laspy`` for those.
     """
-    path = Path(path)
+    path = Path(path_argument(path))
     try:
         raw = path.read_bytes()
     except OSError as err:

@@ -13,10 +13,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, path_argument
 from .atomic import atomic_write
 
 MANIFEST_NAME = "manifest.json"
+MAX_JSON_BYTES = 256 << 20  # a manifest or frame record larger than this is not one (nor is a device or a FIFO)
 
 
 def to_json(value):
@@ -45,12 +46,16 @@ def write_manifest(out_dir: str | os.PathLike, manifest: dict) -> Path:
 def read_manifest(out_dir: str | os.PathLike) -> dict:
     """Read ``out_dir/manifest.json``; ``InputError`` naming the file when it is missing or not a JSON object."""
     path = Path(out_dir) / MANIFEST_NAME
+    if path.exists() and not path.is_file():
+        raise InputError(f"{path}: not a regular file, not a run manifest")
+    if path.is_file() and path.stat().st_size > MAX_JSON_BYTES:
+        raise InputError(f"{path}: larger than {MAX_JSON_BYTES >> 20} MB, not a run manifest")
     try:
         manifest = json.loads(path.read_text(encoding="utf-8"))
     except OSError as err:
         raise InputError(f"{path}: cannot read the run manifest ({err.strerror})") from None
-    except ValueError as err:
-        raise InputError(f"{path}: not valid JSON ({err})") from None
+    except (ValueError, RecursionError) as err:
+        raise InputError(f"{path}: not valid JSON ({str(err) or type(err).__name__})") from None
     if not isinstance(manifest, dict):
         raise InputError(f"{path}: expected a JSON object at the top level, got {type(manifest).__name__}")
     return manifest
@@ -60,13 +65,18 @@ def read_frame_records(out_dir: str | os.PathLike) -> list[dict]:
     """The records of the committed frames of the dataset in ``out_dir`` (``records/NNNNNN.json``), by frame index."""
     records = []
     for path in sorted((Path(out_dir) / "records").glob("*.json")):
+        if not path.is_file() or path.stat().st_size > MAX_JSON_BYTES:
+            raise InputError(f"{path}: not a frame record (a regular file of at most {MAX_JSON_BYTES >> 20} MB)")
         try:
-            records.append(json.loads(path.read_text(encoding="utf-8")))
-        except ValueError as err:
-            raise InputError(f"{path}: not valid JSON ({err})") from None
+            record = json.loads(path.read_text(encoding="utf-8"))
+        except (ValueError, RecursionError) as err:
+            raise InputError(f"{path}: not valid JSON ({str(err) or type(err).__name__})") from None
+        if not isinstance(record, dict) or isinstance(record.get("index"), bool) or not isinstance(record.get("index"), int):
+            raise InputError(f"{path}: not a frame record (a JSON object with an integer index)")
+        records.append(record)
     return sorted(records, key=lambda r: r["index"])
 
 
 def read_dataset(out_dir: str | os.PathLike) -> dict:
     """The run manifest with its committed frames' records under ``frames``."""
-    return {**read_manifest(out_dir), "frames": read_frame_records(out_dir)}
+    return {**read_manifest(path_argument(out_dir, "out_dir")), "frames": read_frame_records(out_dir)}

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, path_argument
 from ..lidar.points import POINT_DTYPE
 from ._records import as_points, chunks
 from .atomic import atomic_dir
@@ -78,7 +78,7 @@ def read_npy_folder(folder: str | os.PathLike, maps: ClassMaps | None = None) ->
     training id; ignored points are unlabeled). ring, time, range and bounces are zero.
     ``InputError`` naming the file for a missing coord file or mismatched shapes.
     """
-    folder = Path(folder)
+    folder = Path(path_argument(folder, "folder"))
     coord_path = folder / "coord.npy"
     if not coord_path.is_file():
         raise InputError(f"{coord_path}: missing; a Pointcept frame folder needs coord.npy")

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, path_argument
 from ..lidar.points import POINT_DTYPE
 from ._records import as_points, chunks
 from .atomic import atomic_write, hashed_open
@@ -184,7 +184,7 @@ def read_ply(path: str | os.PathLike) -> np.ndarray:
     scalar properties (binary) or are read line by line (ASCII). ``InputError`` naming the
     file for anything it cannot read (not a PLY, list properties on the vertex, truncated data).
     """
-    path = Path(path)
+    path = Path(path_argument(path))
     try:
         f = open(path, "rb")
     except OSError as err:

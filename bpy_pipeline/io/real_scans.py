@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, require
 
 FORMATS = ("nuscenes", "kitti", "semantickitti", "npy", "ply", "las", "pcd")
 NUSCENES_TO_SENSOR = np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])  # x' = y, y' = -x
@@ -43,6 +43,8 @@ class RealScan:
     rings : rings of an organised file (``None`` otherwise)
     format, path : what was read
     notes : how the file was interpreted (axes, units) and what is approximate, for the manifest
+    kept : (file rows,) bool the file's points kept (non-finite ones left out), or ``None`` when every one is:
+        labels given beside the file have one a file row
     """
 
     points: np.ndarray
@@ -54,6 +56,7 @@ class RealScan:
     format: str = ""
     path: str = ""
     notes: list[str] = field(default_factory=list)
+    kept: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.points)
@@ -168,7 +171,7 @@ def _from_fields(fields: dict, path: Path, fmt: str, intensity_scale: float | No
 
 
 def read_ply(path: Path) -> RealScan:
-    from plyfile import PlyData
+    PlyData = require("plyfile", "mixing", f"{path}: reading a PLY scan").PlyData
 
     try:
         vertex = PlyData.read(str(path))["vertex"]
@@ -265,6 +268,7 @@ def read_real_scan(path, format: str | None = None) -> RealScan:
             scan.points, scan.intensity = scan.points[keep], scan.intensity[keep]
             scan.ring = None if scan.ring is None else scan.ring[keep]
             scan.labels = None if scan.labels is None else scan.labels[keep]
+            scan.kept = keep
         scan.notes.append(f"{int((~finite).sum())} non-finite points {'taken as empty firings' if scan.organised else 'left out'}")
     if len(scan) == 0:
         raise InputError(f"{path}: the scan holds no points")

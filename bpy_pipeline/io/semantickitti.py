@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, path_argument
 from ..lidar.points import POINT_DTYPE
 from ._records import as_points, chunks
 from .atomic import atomic_write, hashed_open
@@ -143,7 +143,7 @@ def read_semantickitti(bin_path: str | os.PathLike, label_path: str | os.PathLik
     (zero without a label file); ``ring``, ``time``, ``range`` and ``bounces`` are zero.
     ``InputError`` when the two files hold different point counts.
     """
-    scan = read_bin(bin_path)
+    scan = read_bin(path_argument(bin_path, "bin_path"))
     out = np.zeros(len(scan), POINT_DTYPE)
     for i, name in enumerate(("x", "y", "z", "intensity")):
         out[name] = scan[:, i]

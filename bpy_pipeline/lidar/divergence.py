@@ -56,6 +56,7 @@ from .sensors import Pattern, pattern_chunks
 
 GOLDEN_ANGLE = math.pi * (3.0 - math.sqrt(5.0))  # radians
 MAX_SUB_RAYS = 1024
+MAX_MRAD = 100.0  # full-angle divergence: a beam wider than 0.1 rad (5.7 degrees) is no lidar's (effects.weather.divergence_mrad's bound too)
 
 
 @dataclass(frozen=True)
@@ -84,8 +85,8 @@ class Divergence:
 
 def check_divergence(divergence: Divergence, where: str = "sensor.divergence") -> None:
     """``InputError`` naming the key when the footprint model cannot describe a beam."""
-    if divergence.mrad < 0:
-        raise InputError(f"{where}.mrad: must be >= 0 (full-angle divergence in milliradians), got {divergence.mrad}")
+    if not 0 <= divergence.mrad <= MAX_MRAD:
+        raise InputError(f"{where}.mrad: must lie in 0..{MAX_MRAD:g} (full-angle divergence in milliradians; lidars have 0.1..10), got {divergence.mrad}")
     if not 1 <= divergence.rays <= MAX_SUB_RAYS:
         raise InputError(f"{where}.rays: must lie in 1..{MAX_SUB_RAYS} sub-rays a beam, got {divergence.rays}")
     if divergence.separation < 0:

@@ -71,7 +71,7 @@ from .materials import apply_materials
 from .points import POINT_DTYPE
 from .sharing import share
 from .weather import apply_weather, fog_alpha, fog_soft_table
-from ..yaml_text import load_yaml
+from ..yaml_text import read_yaml_file
 
 MODEL_FORMAT = "bpy_pipeline effects model"
 MODEL_VERSION = 1
@@ -272,11 +272,9 @@ def read_model_file(path: str | Path, where: str = "model_file") -> FittedModels
 def _read_model_file(path: str, mtime_ns: int, size: int, key: str) -> FittedModels:
     where = f"{key} {path}"
     try:
-        data = load_yaml(Path(path).read_text())
-    except OSError as err:
-        raise InputError(f"{where}: cannot read it ({err.strerror or err})") from None
-    except yaml.YAMLError:
-        raise InputError(f"{where}: not valid YAML") from None
+        data = read_yaml_file(path, "model file")
+    except InputError as err:
+        raise InputError(f"{key}: {err}") from None
     if not isinstance(data, dict) or data.get("format") != MODEL_FORMAT:
         raise InputError(f"{where}: not a model file of `python -m bpy_pipeline fit` (format: {MODEL_FORMAT!r})")
     if data.get("version") != MODEL_VERSION:

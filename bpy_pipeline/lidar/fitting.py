@@ -643,6 +643,11 @@ def simulate_drops(samples: Samples, effects, rng: np.random.Generator) -> np.nd
 
 
 # ----------------------------------------------------------------------------- everything at once
+MAX_FOLDS = 64  # held-out column blocks (each refits every model; the default 8)
+MAX_MLP_STEPS = 100_000  # Adam steps of one mlp fit (33 x the default; each fold refits it)
+MAX_GAP = 1024  # columns of empty firings filled from ring neighbours
+
+
 @dataclass(frozen=True)
 class FitOptions:
     """What ``python -m bpy_pipeline fit`` asks of the fits (defaults: the choice the held-out

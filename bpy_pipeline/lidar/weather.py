@@ -123,6 +123,7 @@ class WeatherConfig:
 
 
 DEFAULT_DIVERGENCE_MRAD = 3.0  # the snowfall paper's HDL-64 beam
+PARTICLES_PER_PASS = 4e6  # visible particles drawn at once (a pass peaks at 421 MB: benchmarks/results/weather_particles.json); more are drawn in passes
 
 
 def check_weather(weather: WeatherConfig, where: str = "effects.weather") -> None:
@@ -320,18 +321,16 @@ class _Particles:
         return np.minimum(low - self.mean * np.log1p(-rng.random(len(low)) * span), self.cap)
 
 
-def _visible_particles(limit: np.ndarray, medium: _Particles, divergence: float, detect, extinction: float, rng: np.random.Generator):
-    """The particles of each beam's cone up to ``limit`` (p,) metres that can clear the noise floor:
-    ``(beam row, range m, diameter m)``, by beam, nearest first.
+def _rain_particles(rain: RainConfig) -> _Particles:
+    """Marshall-Palmer drops above ``rain.min_diameter_mm``."""
+    lam = marshall_palmer_lambda(rain.rate)
+    return _Particles(8000.0 * math.exp(-lam * rain.min_diameter_mm) / lam, rain.min_diameter_mm * 1e-3, 1e-3 / lam, 6e-3, rain.droplet_reflectivity)
 
-    A particle at ``x`` of diameter ``D`` reads the apparent reflectance ``rho min(1, (D / (phi x))^2) xi(x) exp(-k x)``
-    (``k``: the medium's own ``extinction`` in front of it); below the smallest diameter ``D_min(x)`` that the floor
-    sees with probability 2 % it cannot be a return, so only the rest are drawn: a Poisson count per beam of mean
-    ``int_0^limit per_m3 pi (phi / 2)^2 x^2 P(D >= D_min(x)) dx``, ranges by that intensity's inverse (the uniforms
-    of a beam drawn in order: normalised sums of exponential spacings, no sort), then each diameter above ``D_min(x)``.
-    """
-    limit = np.asarray(limit, np.float64)
-    grid = np.concatenate([np.linspace(0.0, 2.0, 201)[:-1], np.geomspace(2.0, max(float(limit.max(initial=2.0)), 2.0) + 1e-9, 400)])
+
+def _visible_mass(limit: float, medium: _Particles, divergence: float, detect, extinction: float):
+    """``(grid (k,) m, cumulative (k,), d_min (k,) m)``: the mean count of visible particles in a beam's cone up to
+    each grid range, and the smallest visible diameter there (inf: none) (:func:`_visible_particles`)."""
+    grid = np.concatenate([np.linspace(0.0, 2.0, 201)[:-1], np.geomspace(2.0, max(limit, 2.0) + 1e-9, 400)])
     # the smallest apparent reflectance the floor sees at each grid range (bisection on the detection probability)
     lo, hi = np.full(len(grid), 1e-12), np.full(len(grid), 10.0)
     at = np.maximum(grid, MIN_RANGE).astype(np.float32)
@@ -344,6 +343,19 @@ def _visible_particles(limit: np.ndarray, medium: _Particles, divergence: float,
         d_min = np.where(full >= hi, divergence * grid * np.sqrt(hi / np.maximum(full, 1e-300)), np.inf)
     density = medium.per_m3 * np.pi * (divergence / 2.0) ** 2 * grid**2 * np.where(np.isfinite(d_min), medium.tail(np.where(np.isfinite(d_min), d_min, 0.0)), 0.0)
     cumulative = np.concatenate([[0.0], np.cumsum((density[1:] + density[:-1]) / 2 * np.diff(grid))])
+    return grid, cumulative, d_min
+
+
+def _visible_particles(limit: np.ndarray, medium: _Particles, grid: np.ndarray, cumulative: np.ndarray, d_min: np.ndarray, rng: np.random.Generator):
+    """The particles of each beam's cone up to ``limit`` (p,) metres that can clear the noise floor:
+    ``(beam row, range m, diameter m)``, by beam, nearest first; ``grid, cumulative, d_min``: :func:`_visible_mass`.
+
+    A particle at ``x`` of diameter ``D`` reads the apparent reflectance ``rho min(1, (D / (phi x))^2) xi(x) exp(-k x)``
+    (``k``: the medium's own ``extinction`` in front of it); below the smallest diameter ``D_min(x)`` that the floor
+    sees with probability 2 % it cannot be a return, so only the rest are drawn: a Poisson count per beam of mean
+    ``int_0^limit per_m3 pi (phi / 2)^2 x^2 P(D >= D_min(x)) dx``, ranges by that intensity's inverse (the uniforms
+    of a beam drawn in order: normalised sums of exponential spacings, no sort), then each diameter above ``D_min(x)``.
+    """
     mass = np.interp(limit, grid, cumulative)
     count = rng.poisson(mass)
     rows = np.repeat(np.arange(len(limit)), count)
@@ -359,6 +371,22 @@ def _visible_particles(limit: np.ndarray, medium: _Particles, divergence: float,
     x = np.interp(u * mass[rows], cumulative[rising], grid[rising])
     d = medium.draw_above(np.interp(x, grid, np.where(np.isfinite(d_min), d_min, medium.cap)), rng)
     return rows, x, d
+
+
+def expected_particles(effects, max_range: float, detect) -> float:
+    """The most visible rain drops and snow flakes one beam can meet (its cone up to ``max_range`` m): the
+    Poisson mean :func:`_visible_particles` draws, for the estimate of a run's work (:mod:`~bpy_pipeline.estimate`)."""
+    weather = effects.weather
+    if effects.ideal or not (weather.rain.rate > 0 or weather.snow.rate > 0):
+        return 0.0
+    divergence = (weather.divergence_mrad or DEFAULT_DIVERGENCE_MRAD) * 1e-3
+    media = []
+    if weather.rain.rate > 0:
+        media.append((_rain_particles(weather.rain), 0.0))
+    if weather.snow.rate > 0:
+        per_m3, mean = snow_density(weather.snow)
+        media.append((_Particles(per_m3, 0.0, mean, SNOW_MAX_DIAMETER, weather.snow.flake_reflectivity), snow_extinction(weather.snow)))
+    return float(sum(_visible_mass(max_range, medium, divergence, detect, extinction)[1][-1] for medium, extinction in media))
 
 
 # ----------------------------------------------------------------------------- applying it
@@ -398,12 +426,17 @@ def _strongest(rows: np.ndarray, power: np.ndarray) -> np.ndarray:
 
 
 def _offer_particles(medium: _Medium, r: np.ndarray, particles: _Particles, divergence: float, detect, extinction: float, kind: int, rng) -> None:
-    """The strongest visible particle of each beam, offered as its scatterer."""
-    rows, x, d = _visible_particles(r, particles, divergence, detect, extinction, rng)
-    if len(rows):
-        apparent = particles.reflectivity * np.minimum(1.0, (d / (divergence * x)) ** 2) * overlap(x) * np.exp(-extinction * x)
-        best = _strongest(rows, apparent / (x * x))
-        medium.offer(rows[best], x[best], apparent[best], kind)
+    """The strongest visible particle of each beam, offered as its scatterer. Beams are drawn in passes of at most
+    about :data:`PARTICLES_PER_PASS` particles, so that the memory stays bounded whatever the rate and divergence."""
+    grid, cumulative, d_min = _visible_mass(float(r.max(initial=2.0)), particles, divergence, detect, extinction)
+    passes = (np.cumsum(np.interp(r, grid, cumulative)) // PARTICLES_PER_PASS).astype(np.int64)
+    bounds = np.flatnonzero(np.diff(passes)) + 1
+    for start, stop in zip(np.concatenate([[0], bounds]), np.concatenate([bounds, [len(r)]])):
+        rows, x, d = _visible_particles(r[start:stop], particles, grid, cumulative, d_min, rng)
+        if len(rows):
+            apparent = particles.reflectivity * np.minimum(1.0, (d / (divergence * x)) ** 2) * overlap(x) * np.exp(-extinction * x)
+            best = _strongest(rows, apparent / (x * x))
+            medium.offer(rows[best] + start, x[best], apparent[best], kind)
 
 
 def apply_weather(points: np.ndarray, beam: np.ndarray, effects, rng: np.random.Generator, detect) -> tuple[np.ndarray, np.ndarray | None]:
@@ -451,9 +484,7 @@ def apply_weather(points: np.ndarray, beam: np.ndarray, effects, rng: np.random.
         # the soft return's power is factor x the clear return's (a / r^2); at its range that is apparent reflectance x at^2 / r^2
         medium.offer(rows, at, (a * factor)[rows] * at * at / (r[rows] * r[rows]), 0, factor[rows])
     if rain.rate > 0:
-        lam = marshall_palmer_lambda(rain.rate)
-        drops = _Particles(8000.0 * math.exp(-lam * rain.min_diameter_mm) / lam, rain.min_diameter_mm * 1e-3, 1e-3 / lam, 6e-3, rain.droplet_reflectivity)
-        _offer_particles(medium, r, drops, divergence, detect, 0.0, 1, rng)
+        _offer_particles(medium, r, _rain_particles(rain), divergence, detect, 0.0, 1, rng)
     if snow.rate > 0:
         flakes = _Particles(per_m3, 0.0, mean, SNOW_MAX_DIAMETER, snow.flake_reflectivity)
         _offer_particles(medium, r, flakes, divergence, detect, extinction, 2, rng)

@@ -114,6 +114,44 @@ def _spec(preset: str | None):
     return resolve_sensor({"preset": preset}, "scene.preset")
 
 
+def preset_elevations(spec) -> np.ndarray:
+    """``(rings,)`` float64 degrees of a preset's rings: its table, or its pattern's evenly spaced rows."""
+    from ..lidar.sensors import elevations
+
+    return np.asarray(spec.elevations_deg, float) if spec.elevations_deg else np.asarray(elevations(spec), float)
+
+
+ELEVATION_SLACK_DEG = 1.0  # a scan's returns may reach this far past its preset's elevations (calibration, a tilted mount)
+OUTSIDE_SHARE = 0.05  # returns past the slack: a preset that leaves more out of its span is another sensor
+# rings taken from the nearest of a preset's elevations: each ring's interquartile elevation spread over the preset's
+# ring spacing is 0.22-0.41 on the real scans of the preset that made them (nuScenes HDL-32E, KITTI HDL-64E), 0.49-0.51
+# on those of a sensor with other rings (uniform within a ring: 0.5)
+RING_SPREAD = 0.46
+
+
+def check_preset_fits(scan: RealScan, spec, elevation_deg: np.ndarray, ring: np.ndarray, rings: int, nearest: bool = False) -> None:
+    """``InputError`` when the scan's rings cannot be the preset's (an HDL-64E scan given as an HDL-32E): more rings than
+    it has channels, more than :data:`OUTSIDE_SHARE` of the returns outside its elevations, or, where the rings are the
+    nearest of its elevations (``nearest``), rings as wide as its spacing (:data:`RING_SPREAD`)."""
+    table = preset_elevations(spec)
+    if not len(table):
+        return
+    why = ""
+    if rings > len(table):
+        why = f"has {rings} rings; preset {spec.name} has {len(table)} channels"
+    outside = float(np.mean((elevation_deg < table.min() - ELEVATION_SLACK_DEG) | (elevation_deg > table.max() + ELEVATION_SLACK_DEG)))
+    if not why and outside > OUTSIDE_SHARE:
+        why = f"has {outside:.0%} of its returns outside preset {spec.name}'s elevations {table.min():.2f}..{table.max():.2f} deg"
+    if not why and nearest and len(table) > 1 and len(ring) >= 1000:  # a few returns do not show their rings
+        count = np.bincount(ring, minlength=rings)
+        spread = [np.subtract(*np.percentile(elevation_deg[ring == k], [75, 25])) for k in range(rings) if count[k] >= 20]
+        ratio = float(np.median(spread)) / float(np.median(np.diff(np.sort(table)))) if spread else 0.0
+        if ratio > RING_SPREAD:
+            why = f"has rings finer than preset {spec.name}'s (each of its rings spreads over {ratio:.2f} of the preset's ring spacing; the preset's own scans: under {RING_SPREAD})"
+    if why:
+        raise InputError(f"scene.preset: {scan.path} {why}: give the scan's own sensor")
+
+
 def _azimuth_line(azimuth: np.ndarray, column: np.ndarray, ring: np.ndarray, rings: int, columns: int) -> tuple[np.ndarray, np.ndarray]:
     """A straight line in the column index through the returns' azimuths (unwrapped, trimmed), plus each ring's median offset.
 
@@ -174,6 +212,8 @@ def organised_firings(scan: RealScan, preset: str | None = None) -> Firings:
     direction = np.zeros_like(rel)
     direction[valid] = rel[valid] / rng_[valid, None]
     az, el = angles_deg(direction[valid])
+    if spec is not None:
+        check_preset_fits(scan, spec, el, ring[valid], rings)
     fallback = None if spec is None or not spec.elevations_deg else np.asarray(spec.elevations_deg, float)
     elevation = _ring_elevations(el, ring[valid], rings, fallback)
     line, offset = _azimuth_line(az, column[valid], ring[valid], rings, columns)
@@ -302,14 +342,15 @@ def unorganised_firings(scan: RealScan, preset: str | None = None, step_deg: flo
         ring = _scan_order_rings(az)
         if ring is not None:
             approximate.append("rings rebuilt from the scan order (a new ring where the azimuth wraps)")
-        elif spec is not None and spec.elevations_deg:
-            table = np.asarray(spec.elevations_deg, float)
+        elif spec is not None and len(preset_elevations(spec)):
+            table = preset_elevations(spec)
             ring = np.abs(el[:, None] - table[None]).argmin(axis=1)
             approximate.append(f"rings from the nearest elevation of preset {spec.name}")
         else:
             raise InputError(f"{scan.path}: no ring field and the scan order shows no rings; give scene.preset (a sensor preset such as hdl64e)")
     rings = int(ring.max()) + 1
     if spec is not None:
+        check_preset_fits(scan, spec, el, ring, rings, nearest=scan.ring is None and any("nearest elevation" in note for note in approximate))
         from ..lidar.sensors import azimuth_step
 
         step = azimuth_step(spec)

@@ -22,10 +22,12 @@ import json
 import re
 import struct
 from pathlib import Path
+from urllib.parse import unquote
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, require
+from ..io.confined import readable_inside
 from ..geometry.checks import check_mesh
 from ..geometry.objects import GLASS_REFLECTIVITY, OBJECT_TYPES, ObjectPart, fit_to_box
 
@@ -33,13 +35,14 @@ GLASS_NAME = re.compile("glass|window", re.IGNORECASE)
 # glTF (x right-of-viewer / the asset's left, y up, z the asset's front) -> insertion frame (x front, y left, z up)
 GLTF_TO_SENSOR = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
 
+MAX_BUFFER_BYTES = 1 << 30  # a glTF buffer file larger than this is refused (no mesh to insert into a scan needs a GB)
 Group = tuple[np.ndarray, list, str]  # vertices (n, 3) float64, faces (lists of vertex indices), material name ("glass" if glass)
 
 
 # ----------------------------------------------------------------------------- readers: path -> [(vertices, faces, material)]
 def read_ply_groups(p: Path) -> list[Group]:
     """A PLY mesh (``vertex`` x y z and ``face`` vertex indices) as one diffuse group."""
-    from plyfile import PlyData
+    PlyData = require("plyfile", "mixing", f"{p}: reading a PLY mesh").PlyData
 
     try:
         ply = PlyData.read(str(p))
@@ -120,7 +123,10 @@ def _gltf_document(p: Path) -> tuple[dict, list[bytes]]:
         elif uri.startswith("data:"):
             buffers.append(base64.b64decode(uri.split(",", 1)[1]))
         else:
-            buffers.append((p.parent / uri).read_bytes())
+            found, why = readable_inside(p.parent, unquote(str(uri)), MAX_BUFFER_BYTES)
+            if found is None:
+                raise InputError(f"{p}: buffers[{k}].uri {uri!r} is {why}; a glTF's buffers are data URIs or files in its folder")
+            buffers.append(found.read_bytes())
     return doc, buffers
 
 
@@ -188,11 +194,14 @@ def read_gltf_groups(p: Path) -> list[Group]:
             children = {c for n in nodes for c in n.get("children", [])}
             roots = [k for k in range(len(nodes)) if k not in children]
         groups: dict[bool, tuple[list, list, int]] = {}
-        stack = [(k, np.eye(4), 0) for k in roots]
+        stack, seen = [(k, np.eye(4), 0) for k in roots], set()
         while stack:
             k, parent, depth = stack.pop()
             if depth > 64:
                 raise ValueError("node hierarchy deeper than 64 (a cycle?)")
+            if k in seen:  # glTF's nodes are trees: a node reached twice would be walked once per path to it
+                raise ValueError(f"node {k} is reached twice; a node has at most one parent")
+            seen.add(k)
             node = nodes[k]
             world = parent @ _node_matrix(node)
             stack.extend((c, world, depth + 1) for c in node.get("children", []))
