@@ -412,14 +412,17 @@ def dress(p, road_half: float, walk_inner: float, walk_outer: float, kerb_height
                         if (end - start)[0] * away[1] - (end - start)[1] * away[0] < 0:  # keep the building on the line's left
                             start, end = end, start
                         out.fronts.append((start, end, float(p.building_depth), 0.3 + height))
-                    # the yard (or open plot): plants drawn by area, kept 1 m off the boundary and the building
-                    area = max(width - 2.0, 0.0) * max(depth - 2.0, 0.0)
+                    # the yard (or open plot): plants drawn by area, kept 1 m off the boundary (at ``front``) and the building;
+                    # one rectangle (along0..along1, across0..across1) sets both its area and where its plants stand
+                    along0, along1 = s + 1.0, s + width - 1.0
+                    across0, across1 = front + 1.0, walk_outer + depth - 1.0
+                    area = max(along1 - along0, 0.0) * max(across1 - across0, 0.0)
                     if area > 0.0:
-                        (ax, ay), (bx, by) = in_block(s + 1.0, front + 1.0, sx, sy, axis), in_block(s + width - 1.0, walk_outer + depth - 1.0, sx, sy, axis)
+                        (ax, ay), (bx, by) = in_block(along0, across0, sx, sy, axis), in_block(along1, across1, sx, sy, axis)
                         out.yards.rects.append((min(ax, bx), max(ax, bx), min(ay, by), max(ay, by)))
                     for _ in range(int(rng.poisson(p.yard_plants * area / 100.0))):
-                        along = float(rng.uniform(s + 1.0, s + width - 1.0))
-                        across = float(rng.uniform(front + 1.0, walk_outer + depth - 1.0))
+                        along = float(rng.uniform(along0, along1))
+                        across = float(rng.uniform(across0, across1))
                         x, y = in_block(along, across, sx, sy, axis)
                         plant(x, y, float(z_at(x, y)), big=rng.random() < (0.5 if is_open else 0.3))
                     kind = BOUNDARIES[int(rng.choice(len(BOUNDARIES), p=shares))]
