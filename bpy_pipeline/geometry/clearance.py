@@ -70,6 +70,20 @@ class SensorPoses:
         up = np.maximum(np.maximum(z0 - z, z - z1), 0.0)
         return float(np.hypot(flat, up).min())
 
+    def capsule_distance(self, a, b, radius) -> float:
+        """m: the smallest distance from a pose to the capsules from ``a`` to ``b`` ((k, 3) each) of ``radius`` (k,) (a body's limbs)."""
+        a, b = np.asarray(a, float).reshape(-1, 3), np.asarray(b, float).reshape(-1, 3)
+        if not len(self.points) or not len(a):
+            return math.inf
+        ab = b - a
+        t = np.clip(((self.points[:, None] - a[None]) * ab[None]).sum(-1) / np.maximum((ab**2).sum(-1), 1e-300)[None], 0.0, 1.0)
+        gap = np.linalg.norm(self.points[:, None] - (a[None] + t[..., None] * ab[None]), axis=-1) - np.asarray(radius, float).reshape(-1)[None]
+        return float(max(gap.min(), 0.0))
+
+    def clear_of_capsules(self, a, b, radius) -> bool:
+        """Whether the capsules of :meth:`capsule_distance` keep :attr:`reach` from every pose."""
+        return self.capsule_distance(a, b, radius) >= self.reach
+
     def clear_of_box(self, centre, half, yaw: float = 0.0, z0: float = -math.inf, z1: float = math.inf) -> bool:
         """Whether the box of :meth:`box_distance` keeps :attr:`reach` from every pose."""
         return self.box_distance(centre, half, yaw, z0, z1) >= self.reach

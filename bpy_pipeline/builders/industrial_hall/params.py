@@ -83,7 +83,7 @@ def build(params: IndustrialHallScene, context: BuildContext) -> BuildResult:
     """The static hall once per run, then robots and people drawn and posed for this frame."""
     from .scene import IndustrialHall
 
-    return context.kept("industrial_hall", params, lambda: IndustrialHall(params)).randomize(context.rng, context.view)
+    return context.kept("industrial_hall", params, lambda: IndustrialHall(params)).randomize(context.rng, context.view, context.sensor_poses)
 
 
 # the human-robot paper's sensor: an OS1-128 at 2048 columns through its own ring of 8 mirrors

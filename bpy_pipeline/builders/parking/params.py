@@ -100,7 +100,7 @@ def build(params: ParkingScene, context: BuildContext) -> BuildResult:
     """The static level once per run, then cars drawn and placed for this frame."""
     from .scene import ParkingGarage
 
-    return context.kept("parking", params, lambda: ParkingGarage(params, check)).randomize(context.rng, context.view)
+    return context.kept("parking", params, lambda: ParkingGarage(params, check)).randomize(context.rng, context.view, context.sensor_poses)
 
 
 # the paper's VLP-16 at 20 Hz: 0.4 deg, 16 channels, +-15 deg (its table 1)
