@@ -45,7 +45,7 @@ import numpy as np
 
 from ...geometry import primitives
 from ...geometry.clearance import NO_POSES, SensorPoses
-from ...geometry.primitives import beam_mesh, box_mesh, transformed
+from ...geometry.primitives import beam_mesh, beams_mesh, box_mesh, transformed
 from . import vegetation
 
 Mesh = tuple[np.ndarray, np.ndarray]
@@ -238,12 +238,16 @@ def fence_mesh(start, end, height: float, kind: str, z_at) -> Mesh:
     start, end = np.asarray(start, float), np.asarray(end, float)
     length = float(np.linalg.norm(end - start))
     along = (end - start) / length
-    parts = []
     posts = np.linspace(0.0, length, max(2, int(math.ceil(length / 2.5)) + 1))
     ground = lambda s: float(z_at(*(start + s * along)))  # noqa: E731 - the ground below a point at s
-    for s in posts:
-        p = start + s * along
-        parts.append(beam_mesh([*p, ground(s) - 0.2], [*p, ground(s) + height], 0.08))
+
+    def on_ground(s, low: float, high: float) -> tuple[np.ndarray, np.ndarray]:
+        """``(bottoms, tops)`` (k, 3) of uprights at ``s`` (k,) along the fence, from ``low`` to ``high`` above the ground."""
+        p = start + np.asarray(s, float)[:, None] * along
+        z = np.asarray(z_at(p[:, 0], p[:, 1]), float)
+        return np.column_stack([p, z + low]), np.column_stack([p, z + high])
+
+    parts = [beams_mesh(*on_ground(posts, -0.2, height), 0.08)]
     if kind == "boards":
         for s0, s1 in zip(posts[:-1], posts[1:]):
             a, b = start + s0 * along, start + s1 * along
@@ -256,14 +260,19 @@ def fence_mesh(start, end, height: float, kind: str, z_at) -> Mesh:
             triangles = np.array([[0, 1, 2], [0, 2, 3], [4, 6, 5], [4, 7, 6]], np.int32)
             parts.append((vertices, triangles))
         return primitives.merge(parts)
+    starts, ends, thickness = [], [], []  # per panel: its two rails, then its bars
     for s0, s1 in zip(posts[:-1], posts[1:]):
         a, b = start + s0 * along, start + s1 * along
         za, zb = ground(s0), ground(s1)
         for level in (0.15, height - 0.1):
-            parts.append(beam_mesh([*a, za + level], [*b, zb + level], 0.04))
-        for s in np.arange(s0 + 0.12, s1 - 0.06, 0.12):
-            p = start + s * along
-            parts.append(beam_mesh([*p, ground(s) + 0.1], [*p, ground(s) + height - 0.05], 0.02))
+            starts.append([[*a, za + level]])
+            ends.append([[*b, zb + level]])
+            thickness.append([0.04])
+        bottoms, tops = on_ground(np.arange(s0 + 0.12, s1 - 0.06, 0.12), 0.1, height - 0.05)
+        starts.append(bottoms)
+        ends.append(tops)
+        thickness.append(np.full(len(bottoms), 0.02))
+    parts.append(beams_mesh(np.concatenate(starts), np.concatenate(ends), np.concatenate(thickness)))
     return primitives.merge(parts)
 
 
