@@ -476,9 +476,9 @@ def dress(p, road_half: float, walk_inner: float, walk_outer: float, kerb_height
                     elif kind == "hedge":
                         height = float(rng.uniform(0.8, 2.0))
                         inward = np.array([0.0, 0.5 * sy] if axis == 0 else [0.5 * sx, 0.0])  # the hedge's axis 0.5 m into the plot
-                        width = float(rng.uniform(0.6, 1.0))
-                        hedge = vegetation.hedge([*(a + inward), ground - 0.05], [*(b + inward), ground - 0.05], width, height, rng)
-                        if segment_clear(a + inward, b + inward, width + 2 * LEAF_CARD, ground - 0.05, ground + height + LEAF_CARD):
+                        thickness = float(rng.uniform(0.6, 1.0))
+                        hedge = vegetation.hedge([*(a + inward), ground - 0.05], [*(b + inward), ground - 0.05], thickness, height, rng)
+                        if segment_clear(a + inward, b + inward, thickness + 2 * LEAF_CARD, ground - 0.05, ground + height + LEAF_CARD):
                             hedges.append(hedge)
                             out.count("hedges")
                     elif kind == "wall":
