@@ -3,13 +3,16 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass, field
 from typing import Literal
 
 import numpy as np
 
 from ...errors import InputError
+from ...geometry.clearance import CLEARANCE
 from ..base import Builder, BuildContext, BuildResult, register_builder
+from .parts import H_SECTION, LATTICE
 
 Vec3 = tuple[float, float, float]
 
@@ -240,8 +243,8 @@ def check(params: RailwayScene, where: str) -> None:
     check_assets(params.assets, f"{where}.assets", load_class_table().names.values())
 
 
-MAST_REACH = 0.3  # m: a mast's half width, rounded up (a 0.40 m lattice's half diagonal is 0.28 m)
-STATION_CLEARANCE = 0.5  # m: a station's sensor keeps this from every mast and fence (geometry/clearance.py's CLEARANCE)
+STATION_CLEARANCE = CLEARANCE  # m: a station's sensor keeps this from every mast and fence
+MAST_REACH = max(H_SECTION[0], LATTICE[0]) / math.sqrt(2.0)  # m: how far a mast reaches from its axis (a 0.40 m lattice's half diagonal)
 
 
 def check_station_clearance(params: RailwayScene, where: str) -> None:
@@ -251,9 +254,9 @@ def check_station_clearance(params: RailwayScene, where: str) -> None:
     if not params.place_sensor:
         return
     mast_sides = {"single": {sup.side}, "both_sides": {"right", "left"}, "gantry": {"right", "left"}}.get(sup.layout, {sup.side} if params.track.tracks == 1 else {"right", "left"})
-    if st.side in mast_sides and abs(st.offset - sup.mast_offset) < MAST_REACH + STATION_CLEARANCE:
+    if st.side in mast_sides and abs(st.offset - sup.mast_offset) < MAST_REACH + STATION_CLEARANCE - 1e-9:
         raise InputError(f"{where}.stations.offset: stations {st.offset} m beyond the outer track stand in the masts' line ({where}.supports.mast_offset: {sup.mast_offset} m) "
-                         f"on the {st.side}; keep them at least {MAST_REACH + STATION_CLEARANCE:g} m apart")
+                         f"on the {st.side}; keep them at least {MAST_REACH + STATION_CLEARANCE:.2f} m apart")
     side = params.trackside
     if side.fences and abs(st.offset - side.fence_offset) < STATION_CLEARANCE + 0.05:
         raise InputError(f"{where}.stations.offset: stations {st.offset} m beyond the outer track stand in the fence's line ({where}.trackside.fence_offset: {side.fence_offset} m); "
