@@ -45,7 +45,8 @@ def build_stage(frame: Frame, run: Run) -> None:
     first = frame.index - frame.index % per_scene
     if run.build and run.scene_frame != first:
         rng = frame.rng if first == frame.index else frame_rng(config.seed, first)
-        run.result = build_populated(config.scene, BuildContext(rng, scene_view(config, first, per_scene), run.keep, sensor_poses(config)))
+        run.sensor_poses = sensor_poses(config) if run.sensor_poses is None else run.sensor_poses
+        run.result = build_populated(config.scene, BuildContext(rng, scene_view(config, first, per_scene), run.keep, run.sensor_poses))
         run.scene_frame = first
         run.trajectory = None
         frame.built = True
