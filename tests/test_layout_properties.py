@@ -149,6 +149,8 @@ def test_a_scan_from_inside_one_object_is_enclosed_and_an_open_scan_is_not():
     assert floor is None
     mixed = enclosing_instance(rng.uniform(0.5, 2.0, rays), rng.integers(1, 4, rays), rays)  # a small room of three objects
     assert mixed is None
+    fog = enclosing_instance(rng.uniform(0.5, 2.0, rays), np.zeros(rays, np.uint32), rays)  # dense fog: returns of no object
+    assert fog is None
 
 
 @pytest.mark.slow

@@ -116,14 +116,15 @@ ENCLOSED_RANGE = 3.0  # m: the median range of that object's returns
 def enclosing_instance(ranges, instances, rays: int, share: float = ENCLOSED_SHARE, near: float = ENCLOSED_RANGE) -> tuple[int, float] | None:
     """``(instance, its share of the rays)`` when the sensor stands enclosed by one object, else ``None``.
 
-    ranges : (p,) m of a frame's returns; instances : (p,) their instance ids; rays : how many rays the frame fired.
-    Enclosed: one instance returns at least ``share`` of the rays and the median of its ranges is under ``near``
-    (a sensor inside a bus, a box or a wall; a garage or hall scanned from inside has its returns metres away).
+    ranges : (p,) m of a frame's returns; instances : (p,) their instance ids (0: no object, as weather's returns);
+    rays : how many rays the frame fired. Enclosed: one instance returns at least ``share`` of the rays and the median
+    of its ranges is under ``near`` (a sensor inside a bus, a box or a wall; a garage or hall scanned from inside has its
+    returns metres away).
     """
     ranges, instances = np.asarray(ranges, float).reshape(-1), np.asarray(instances).reshape(-1)
-    if rays <= 0 or len(instances) < share * rays:
+    if rays <= 0 or np.count_nonzero(instances) < share * rays:
         return None
-    ids, counts = np.unique(instances, return_counts=True)
+    ids, counts = np.unique(instances[instances != 0], return_counts=True)
     top = int(np.argmax(counts))
     if counts[top] < share * rays or float(np.median(ranges[instances == ids[top]])) >= near:
         return None
