@@ -369,7 +369,7 @@ def dress(p, road_half: float, walk_inner: float, walk_outer: float, kerb_height
     fences: list[Mesh] = []
     walls: list[Mesh] = []
 
-    def clear_of(kind: str, centre, size, z0: float, z1: float, yaw: float = 0.0) -> bool:
+    def clear_of(centre, size, z0: float, z1: float, yaw: float = 0.0) -> bool:
         """Whether an item's upright box (``size`` (2,): half extents) or cylinder (``size``: radius) keeps clear of the
         sensor poses; counts it left out when not."""
         ok = clear.clear_of_circle(centre, size, z0, z1) if np.isscalar(size) else clear.clear_of_box(centre, size, yaw, z0, z1)
@@ -381,7 +381,7 @@ def dress(p, road_half: float, walk_inner: float, walk_outer: float, kerb_height
         """:func:`clear_of` for a fence, hedge or wall ``width`` thick from ``a`` to ``b`` ((2,) m)."""
         a, b = np.asarray(a, float)[:2], np.asarray(b, float)[:2]
         half = (float(np.linalg.norm(b - a)) / 2.0, width / 2.0)
-        return clear_of("boundary", (a + b) / 2.0, half, z0, z1, math.atan2(b[1] - a[1], b[0] - a[0]))
+        return clear_of((a + b) / 2.0, half, z0, z1, math.atan2(b[1] - a[1], b[0] - a[0]))
 
     def plant(x: float, y: float, ground: float, big: bool, street: bool = False) -> bool:
         """A tree (``big``) or a bush at ``(x, y, ground)``; a street tree's crown clears 4.5 m (buses and lamps' arms).
@@ -397,7 +397,7 @@ def dress(p, road_half: float, walk_inner: float, walk_outer: float, kerb_height
             top = height - crown_height / 2.0  # the crown's centre above the ground
             yaw = float(rng.uniform(0.0, 2 * math.pi))
             r = vegetation.default_trunk_radius(height)  # from 0.2 m under the ground into the crown's middle
-            if not (clear_of("trunk", (x, y), r, ground - 0.2, ground + top) and clear_of("crown", (x, y), radius + LEAF_CARD, ground + height - crown_height - LEAF_CARD, ground + height + LEAF_CARD)):
+            if not (clear_of((x, y), r, ground - 0.2, ground + top) and clear_of((x, y), radius + LEAF_CARD, ground + height - crown_height - LEAF_CARD, ground + height + LEAF_CARD)):
                 return False
             plants.add(k, (x, y, ground + top), yaw, (radius / r0, radius / r0, crown_height / h0))
             trunks.add(0, (x, y, ground - 0.2), 0.0, (r, r, top + 0.2))
@@ -407,7 +407,7 @@ def dress(p, road_half: float, walk_inner: float, walk_outer: float, kerb_height
         k = kinds.bush(int(rng.integers(CROWN_VARIANTS)))
         r0, h0 = kinds.plant_size[k]
         yaw = float(rng.uniform(0.0, 2 * math.pi))
-        if not clear_of("bush", (x, y), radius + LEAF_CARD, ground - 0.1, ground + height + LEAF_CARD):
+        if not clear_of((x, y), radius + LEAF_CARD, ground - 0.1, ground + height + LEAF_CARD):
             return False
         plants.add(k, (x, y, ground - 0.1), yaw, (radius / r0, radius / r0, height / h0))
         out.count("bushes")
@@ -443,7 +443,7 @@ def dress(p, road_half: float, walk_inner: float, walk_outer: float, kerb_height
                         cx1, cy1 = in_block(s + width, a1, sx, sy, axis)
                         low = float(np.min(z_at(np.array([cx0, cx1, cx0, cx1]), np.array([cy0, cy0, cy1, cy1])))) - 0.3
                         box_centre, box_half = ((cx0 + cx1) / 2, (cy0 + cy1) / 2), (abs(cx1 - cx0) / 2, abs(cy1 - cy0) / 2)
-                        is_open = not clear_of("building", box_centre, box_half, low, low + 0.3 + height)  # left out: its front yard stays
+                        is_open = not clear_of(box_centre, box_half, low, low + 0.3 + height)  # left out: its front yard stays
                     if not is_open:
                         out.buildings.append(box_mesh(*sorted((cx0, cx1)), *sorted((cy0, cy1)), low, low + 0.3 + height))
                         start, end = (np.array([*in_block(t, a0, sx, sy, axis), low]) for t in (s, s + width))
@@ -467,10 +467,12 @@ def dress(p, road_half: float, walk_inner: float, walk_outer: float, kerb_height
                     kind = BOUNDARIES[int(rng.choice(len(BOUNDARIES), p=shares))]
                     a = np.array(in_block(s + 0.1, front, sx, sy, axis))
                     b = np.array(in_block(s + width - 0.1, front, sx, sy, axis))
+                    line = a + np.linspace(0.0, 1.0, 9)[:, None] * (b - a)
                     ground = min(float(z_at(*a)), float(z_at(*b)))
+                    ridge = float(np.max(z_at(line[:, 0], line[:, 1])))  # the ground's highest along the boundary: a fence's or wall's top follows it
                     if kind == "fence":
                         height, style = float(rng.uniform(0.9, 1.8)), "bars" if rng.random() < 0.6 else "boards"
-                        if segment_clear(a, b, 0.1, ground - 0.2, max(float(z_at(*a)), float(z_at(*b))) + height):
+                        if segment_clear(a, b, 0.1, ground - 0.2, ridge + height):
                             fences.append(fence_mesh(a, b, height, style, z_at))
                             out.count("fences")
                     elif kind == "hedge":
@@ -483,7 +485,7 @@ def dress(p, road_half: float, walk_inner: float, walk_outer: float, kerb_height
                             out.count("hedges")
                     elif kind == "wall":
                         height = float(rng.uniform(0.4, 1.6))
-                        if segment_clear(a, b, 0.25, ground - 0.3, max(float(z_at(*a)), float(z_at(*b))) + height):
+                        if segment_clear(a, b, 0.25, ground - 0.3, ridge + height):
                             walls.append(wall_mesh(a, b, height, 0.25, z_at))
                             out.count("walls")
                     s += width
@@ -510,7 +512,7 @@ def dress(p, road_half: float, walk_inner: float, walk_outer: float, kerb_height
                             facing = math.atan2(-y, 0.0) if axis == 0 else math.atan2(0.0, -x)
                             height = float(rng.uniform(6.0, 9.0))
                             top = kerb_height + height
-                            if clear_of("lamp", (x, y), 0.08, kerb_height - 0.3, top) and clear_of("lamp head", (x, y), 1.9, top - 0.3, top + 0.4):
+                            if clear_of((x, y), 0.08, kerb_height - 0.3, top) and clear_of((x, y), 1.9, top - 0.3, top + 0.4):
                                 poles.add(0, (x, y, kerb_height - 0.3), 0.0, (0.08, 0.08, height + 0.3))  # 0.3 m into the ground
                                 poles.add(1, (x, y, top), facing)
                                 out.circles.append((x, y, 0.3))
@@ -525,7 +527,7 @@ def dress(p, road_half: float, walk_inner: float, walk_outer: float, kerb_height
                     x, y = in_block(t, band, sx, sy, axis)
                     what = rng.random()
                     if what < 0.4:
-                        if clear_of("bin", (x, y), 0.3, kerb_height, kerb_height + 1.0):
+                        if clear_of((x, y), 0.3, kerb_height, kerb_height + 1.0):
                             bins.add(0, (x, y, kerb_height))
                             out.circles.append((x, y, 0.4))
                             out.count("bins")
@@ -535,14 +537,14 @@ def dress(p, road_half: float, walk_inner: float, walk_outer: float, kerb_height
                         mx, my = in_block(0.4 * (hoops - 1), 0.0, sx, sy, axis)
                         half = (0.4 * (hoops - 1) + 0.3, 0.5)
                         block = (np.array([x + mx, y + my]), np.array(half if axis == 0 else half[::-1]), 0.0)
-                        if clear_of("bicycle stands", block[0], block[1], kerb_height - 0.1, kerb_height + 0.85):
+                        if clear_of(block[0], block[1], kerb_height - 0.1, kerb_height + 0.85):
                             for k in range(hoops):
                                 dx, dy = in_block(0.8 * k, 0.0, sx, sy, axis)
                                 stands.add(0, (x + dx, y + dy, kerb_height), yaw)
                             out.blocks.append(block)
                             taken += [t + 0.8 * k for k in range(hoops)]
                             out.count("bicycle stands")
-                    elif clear_of("bollard", (x, y), 0.1, kerb_height, kerb_height + 0.9):
+                    elif clear_of((x, y), 0.1, kerb_height, kerb_height + 0.9):
                         poles.add(0, (x, y, kerb_height), 0.0, (0.1, 0.1, 0.9))
                         out.circles.append((x, y, 0.25))
                         out.count("bollards")
@@ -553,7 +555,7 @@ def dress(p, road_half: float, walk_inner: float, walk_outer: float, kerb_height
                     length = float(rng.uniform(6.0, 12.0))
                     cx, cy = in_block(t0 + length / 2 + 0.5, lane_mid, sx, sy, axis)
                     half = np.array([length / 2 + 1.5, p.parking_width / 2]) if axis == 0 else np.array([p.parking_width / 2, length / 2 + 1.5])
-                    if not clear_of("road works", (cx, cy), half, 0.0, 1.2):
+                    if not clear_of((cx, cy), half, 0.0, 1.2):
                         continue
                     for t in np.arange(t0, t0 + length, 1.5):
                         x, y = in_block(t, lane_mid - 0.4, sx, sy, axis)
