@@ -13,6 +13,7 @@ Coordinates: metres, world frame, z up; yaw in radians about +z.
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 
@@ -102,8 +103,8 @@ def sample_path(points, step: float = PATH_STEP) -> np.ndarray:
     if len(points) < 2:
         return points
     out = [points[:1]]
-    for a, b in zip(points[:-1], points[1:]):
-        n = max(1, int(math.ceil(float(np.linalg.norm(b - a)) / step)))
+    for a, b in itertools.pairwise(points):
+        n = max(1, math.ceil(float(np.linalg.norm(b - a)) / step))
         out.append(a + (b - a) * (np.arange(1, n + 1) / n)[:, None])
     return np.concatenate(out)
 
