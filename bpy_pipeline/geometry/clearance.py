@@ -123,8 +123,8 @@ def enclosing_instance(ranges, instances, rays: int, share: float = ENCLOSED_SHA
     returns metres away).
     """
     ranges, instances = np.asarray(ranges, float).reshape(-1), np.asarray(instances).reshape(-1)
-    if rays <= 0 or np.count_nonzero(instances) < share * rays:
-        return None
+    if rays <= 0 or np.count_nonzero(instances) < share * rays or np.count_nonzero(ranges < near) < share * rays / 2:
+        return None  # cheap necessary conditions first: half of the object's returns lie nearer than ``near``
     ids, counts = np.unique(instances[instances != 0], return_counts=True)
     top = int(np.argmax(counts))
     if counts[top] < share * rays or float(np.median(ranges[instances == ids[top]])) >= near:
