@@ -451,10 +451,10 @@ def dress(p, road_half: float, walk_inner: float, walk_outer: float, kerb_height
                         if (end - start)[0] * away[1] - (end - start)[1] * away[0] < 0:  # keep the building on the line's left
                             start, end = end, start
                         out.fronts.append((start, end, float(p.building_depth), 0.3 + height))
-                    # the yard (or open plot): plants drawn by area, kept 1 m off the boundary (at ``front``) and the building;
-                    # one rectangle (along0..along1, across0..across1) sets both its area and where its plants stand
+                    # the yard (or open plot): plants drawn by area, 1 m inside the plot's bounds (:class:`Yards`), so off the
+                    # building; one rectangle (along0..along1, across0..across1) sets both its area and where its plants stand
                     along0, along1 = s + 1.0, s + width - 1.0
-                    across0, across1 = front + 1.0, walk_outer + depth - 1.0
+                    across0, across1 = walk_outer + 1.0, walk_outer + depth - 1.0
                     area = max(along1 - along0, 0.0) * max(across1 - across0, 0.0)
                     if area > 0.0:
                         (ax, ay), (bx, by) = in_block(along0, across0, sx, sy, axis), in_block(along1, across1, sx, sy, axis)
