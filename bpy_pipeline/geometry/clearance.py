@@ -3,10 +3,14 @@
 A :class:`SensorPoses` holds the optical centres of every sensor pose of a run (every frame's
 station or position, every rig member, a moving sensor's path sampled at most ``step`` apart) and
 the ``radius`` no placed solid may reach into. A solid is an upright box (a footprint rectangle and a
-height range) or a vertical cylinder (a circle and a height range); :meth:`SensorPoses.clear_of_box`
-and :meth:`SensorPoses.clear_of_circle` answer whether it keeps the radius from every pose. Between two
-path samples the sensor lies within ``step / 2`` of one of them, so the answers ask for
-``radius + step / 2``: a solid they accept keeps ``radius`` from the whole path.
+height range), a vertical cylinder (a circle and a height range) or capsules (a body's limbs);
+:meth:`SensorPoses.clear_of_box`, :meth:`~SensorPoses.clear_of_circle` and :meth:`~SensorPoses.clear_of_capsules`
+answer whether it keeps the radius from every pose. Between two path samples the sensor lies within
+``step / 2`` of one of them, so the answers ask for ``radius + step / 2``: a solid they accept keeps
+``radius`` from the whole path.
+
+:func:`enclosing_instance` tells, after a scan, whether the sensor stood enclosed by one object anyway
+(a pose or a shape the user placed): the scan stage warns about such a frame.
 
 Coordinates: metres, world frame, z up; yaw in radians about +z.
 """
