@@ -43,6 +43,7 @@ BENCHMARKS = [
     "bench_speed.py",
     "bench_stage_parts.py",
     "bench_weather_particles.py",
+    "bench_layout_seeds.py",
 ]
 
 if __name__ == "__main__":

@@ -17,6 +17,7 @@ import numpy as np
 from . import _version
 from .builders.base import BuildResult
 from .labels import ClassTable, load_class_table, parse_rules
+from .geometry.clearance import SensorPoses
 from .lidar.platform import Trajectory
 from .lidar.raycast import CasterCache
 from .lidar.sensor_rays import SensorRays
@@ -162,6 +163,8 @@ class Run:
     log : where warnings and the lines of long stages go (``None``: nowhere)
     members : a rig's sensors, one single-sensor :class:`Run` each (made by the rig stage on its first frame, :mod:`bpy_pipeline.stages.rig`)
     casters : the static objects' caster kept from frame to frame (:class:`~bpy_pipeline.lidar.raycast.CasterCache`)
+    sensor_poses : every sensor pose of the run (:class:`~bpy_pipeline.geometry.clearance.SensorPoses`), made by the
+        build stage before its first build: what the builders keep their solids clear of
     """
 
     config: Config
@@ -177,6 +180,7 @@ class Run:
     log: Callable[[str], None] | None = None
     members: list["Run"] = field(default_factory=list)
     casters: CasterCache | None = None
+    sensor_poses: SensorPoses | None = None
 
     def __post_init__(self):
         self.rules = parse_rules(self.config.labels.name_rules, "labels.name_rules", self.table.names)

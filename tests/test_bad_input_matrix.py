@@ -85,6 +85,13 @@ CLI_ROWS = [
     ("--ray without a port", ["--ray", "somewhere"], "--ray: expected auto or HOST:PORT"),
     ("limits zero", ["--set", "limits.seconds=0"], "limits.seconds: must be > 0"),
     ("frames 0", ["--frames", "0"], "frames: must be 1"),
+    # a sensor the builder cannot keep 0.5 m clear of its solids (docs/builders.md, what every builder guarantees)
+    ("railway stations in the masts' line", ["--set", "scene={builder: railway, supports: {layout: single, side: left}, stations: {side: left, offset: 3.5}}"], "scene.stations.offset: stations 3.5 m beyond the outer track stand in the masts' line"),
+    ("railway stations in the fence's line", ["--set", "scene={builder: railway, trackside: {fences: true, fence_offset: 4.2}}"], "scene.stations.offset: stations 4.0 m beyond the outer track stand in the fence's line"),
+    ("parking sensor 0.2 m under the ceiling", ["--set", "scene={builder: parking, sensor_height: 2.4}"], "scene.sensor_height: must be below the ceiling (2.6 m) by at least 0.5 m"),
+    ("parking driveway narrower than the robot's clearance", ["--set", "scene={builder: parking, driveway_width: 0.8}"], "scene.driveway_width: at least 1 m"),
+    ("hall desks past its walls", ["--set", "scene={builder: industrial_hall, desks_per_row: 9}"], "scene.desks_per_row: 2 row(s) of 9 desk(s) and 3 shelf rack(s) do not fit"),
+    ("hall sensor on a shelf", ["--set", "scene={builder: industrial_hall, width: 5, sensor_height: 2.5}"], "scene.sensor_height: the sensor 2.5 m above the hall's centre comes within 0.5 m of shelf_0"),
 ]
 
 

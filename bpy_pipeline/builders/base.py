@@ -15,6 +15,7 @@ from typing import Any, Callable
 import numpy as np
 
 from ..errors import InputError
+from ..geometry.clearance import NO_POSES, SensorPoses
 from ..geometry.placement import Distribution, check_distribution  # noqa: F401  (re-exported: builders' parameters use them)
 from ..registry import Registry
 from ..schema import check_positive
@@ -31,11 +32,14 @@ class BuildContext:
         when the builder ``follows_path``, else ``None`` (fixed detail)
     keep : state the run owns across frames; a builder that re-randomises in place keeps its static
         scene here (and must give the same result as when built from nothing)
+    sensor_poses : :class:`~bpy_pipeline.geometry.clearance.SensorPoses`, every optical centre of the run (all frames,
+        rig members, a path); every solid the builder places keeps their ``radius`` from them
     """
 
     rng: np.random.Generator
     view: Any = None
     keep: dict = field(default_factory=dict)
+    sensor_poses: SensorPoses = field(default_factory=lambda: NO_POSES)
 
     def kept(self, key: str, params, make: Callable[[], Any]):
         """The object kept under ``key`` for ``params`` while it is alive, else a new one from ``make()``."""

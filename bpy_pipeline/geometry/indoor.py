@@ -198,8 +198,12 @@ def shelf(name: str, centre_xy, size, levels: int) -> Furniture:
     return Furniture(name, "shelf", parts)
 
 
+WALL_GAP = 0.1  # m: a shelf row stands at least this far from the hall's east wall
+
+
 def hall_layout(p) -> HallLayout:
-    """Desks in ``desk_rows`` rows west of the centre, 1.8 m aisles between rows; shelves in a row 2.5 m from the +y wall."""
+    """Desks in ``desk_rows`` rows west of the centre, 1.8 m aisles between rows; shelves in a row 2.5 m from the +y wall,
+    centred a quarter of the length east of the centre, or further west where that leaves less than ``WALL_GAP`` to the east wall."""
     half = np.array([p.length / 2, p.width / 2])
     t, h, slab = p.wall_thickness, p.height, 0.3
     layout = HallLayout(-half + t, half - t)
@@ -210,8 +214,10 @@ def hall_layout(p) -> HallLayout:
             x = -p.length / 4 + (k - (p.desks_per_row - 1) / 2) * (length + 0.8)
             layout.furniture.append(desk(f"desk_{r}_{k}", (x, y), p.desk_size, p.desk_height))
     s_len = p.shelf_size[0]
+    row_half = (p.shelves * s_len + max(p.shelves - 1, 0) * 0.8) / 2
+    middle = min(p.length / 4, half[0] - t - WALL_GAP - row_half)  # east of the centre, WALL_GAP clear of the east wall
     for k in range(p.shelves):
-        x = p.length / 4 + (k - (p.shelves - 1) / 2) * (s_len + 0.8)
+        x = middle + (k - (p.shelves - 1) / 2) * (s_len + 0.8)
         layout.furniture.append(shelf(f"shelf_{k}", (x, p.width / 2 - 2.5), p.shelf_size, p.shelf_levels))
     layout.walls = [
         (np.array([0.0, s * (half[1] - t / 2), h / 2]), np.array([half[0], t / 2, h / 2])) for s in (-1, 1)

@@ -21,6 +21,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..schema import check_positive
+from .clearance import NO_POSES, SensorPoses
 from .collision import box_axes, rectangle_inside, rectangles_near, rectangles_overlap
 
 
@@ -265,9 +266,11 @@ class FloorBoxPlacer:
     min_visible : the smallest fraction of a box's sensor-facing surface samples that must be in
         line of sight, for the new box and for every box already placed
     keep_out : radius (metres) around the sensor no box may reach into (the robot carrying it)
+    clear : :class:`~.clearance.SensorPoses` of the whole run: no box comes within their radius (``near_sensor``)
     """
 
-    def __init__(self, sensor, region, obstacles=(), static_distance=None, clearance: float = 0.3, min_visible: float = 0.3, keep_out: float = 1.0, samples_per_side: int = 4):
+    def __init__(self, sensor, region, obstacles=(), static_distance=None, clearance: float = 0.3, min_visible: float = 0.3, keep_out: float = 1.0, samples_per_side: int = 4,
+                 clear: SensorPoses = NO_POSES):
         self.sensor = np.asarray(sensor, float)
         self.region = (np.asarray(region[0], float), np.asarray(region[1], float))
         self._bounds = ((float(self.region[0][0]), float(self.region[0][1])), (float(self.region[1][0]), float(self.region[1][1])))
@@ -277,6 +280,7 @@ class FloorBoxPlacer:
         self.min_visible = min_visible
         self.keep_out = keep_out
         self.per_side = samples_per_side
+        self.clear = clear
         self.boxes: list[PlacedBox] = []
         self.rejections: Counter = Counter()
         self._obstacle_reach = None  # kept from the first try (the obstacles stay)
@@ -350,6 +354,9 @@ class FloorBoxPlacer:
             return None
         if self._near_sensor(centre_xy, half, yaw):
             self.rejections["outside"] += 1
+            return None
+        if not self.clear.clear_of_box(centre_xy, half[:2], yaw, 0.0, 2.0 * half[2]):
+            self.rejections["near_sensor"] += 1
             return None
         if self.obstacles:
             if self._obstacle_reach is None:  # (centres (o, 2), circumscribed radii grown by clearance / 2 (o,))

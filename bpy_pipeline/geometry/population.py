@@ -22,6 +22,7 @@ from typing import Callable
 
 import numpy as np
 
+from .clearance import NO_POSES, SensorPoses
 from .collision import rectangles_overlap
 from .surfaces import Surface, on_surface
 
@@ -176,9 +177,11 @@ class Placer:
     sensor, min_visible : with a sensor position (3,) and ``min_visible`` > 0, the parking paper's rule: a shape
         is refused when less than ``min_visible`` of its sampled vertices are in the sensor's line of sight
         (past the static scene and the shapes placed before), or when it would leave one placed before below that
+    clear : :class:`~.clearance.SensorPoses` of the whole run: a shape whose footprint box comes within their radius is refused
     """
 
-    def __init__(self, vertices: np.ndarray, triangles: np.ndarray, keep_out: float = 0.3, sensor: np.ndarray | None = None, min_visible: float = 0.0):
+    def __init__(self, vertices: np.ndarray, triangles: np.ndarray, keep_out: float = 0.3, sensor: np.ndarray | None = None, min_visible: float = 0.0,
+                 clear: SensorPoses = NO_POSES):
         self.vertices = np.asarray(vertices, float)
         self.triangles = np.asarray(triangles, np.int64).reshape(-1, 3)
         self.tri = self.vertices[self.triangles]
@@ -188,6 +191,7 @@ class Placer:
         self.rejections: Counter = Counter()
         self.sensor = None if sensor is None else np.asarray(sensor, float)
         self.min_visible = min_visible
+        self.clear = clear
 
     def sight_lines(self, vertices: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(starts, ends, blocked)``: segments from the sensor to ``vertices``' samples (stopping 2 cm short),
@@ -217,6 +221,9 @@ class Placer:
                 self.rejections["off_surface"] += 1
                 return None
         box = footprint(shape, matrix)
+        if not self.clear.clear_of_box(*box):
+            self.rejections["near_sensor"] += 1
+            return None
         for other in self.placed:
             c, h, y, z0, z1 = other.footprint
             if box[3] < z1 + self.keep_out and z0 < box[4] + self.keep_out and rectangles_overlap(box[0], box[1], box[2], c, h, y, self.keep_out):

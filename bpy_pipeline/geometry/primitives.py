@@ -138,6 +138,23 @@ def beam_mesh(p0, p1, thickness: float) -> tuple[np.ndarray, np.ndarray]:
     return v @ np.column_stack([u, np.cross(w, u), w]).T + (p0 + p1) / 2, t
 
 
+def beams_mesh(p0, p1, thickness) -> tuple[np.ndarray, np.ndarray]:
+    """Square beams from ``p0`` to ``p1`` ((n, 3) m each), ``thickness`` (m, a number or (n,)), one mesh: ``merge`` of each
+    one's :func:`beam_mesh` (the same vertices up to rounding), made at once."""
+    p0, p1 = np.asarray(p0, float).reshape(-1, 3), np.asarray(p1, float).reshape(-1, 3)
+    n = len(p0)
+    thickness = np.broadcast_to(np.asarray(thickness, float), (n,))
+    axis = p1 - p0
+    length = np.linalg.norm(axis, axis=1)
+    w = axis / length[:, None]
+    u = np.cross(w, np.where((np.abs(w[:, 1]) < 0.9)[:, None], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]))
+    u /= np.linalg.norm(u, axis=1)[:, None]
+    corners, triangles = box(1.0, 1.0, 1.0)
+    local = corners[None] * np.column_stack([thickness, thickness, length])[:, None]  # (n, 8, 3) in each beam's axes
+    vertices = local[..., :1] * u[:, None] + local[..., 1:2] * np.cross(w, u)[:, None] + local[..., 2:] * w[:, None] + ((p0 + p1) / 2)[:, None]
+    return vertices.reshape(-1, 3), (triangles + 8 * np.arange(n, dtype=np.int32)[:, None, None]).reshape(-1, 3).astype(np.int32)
+
+
 def quad_mesh(a, b, c, d) -> tuple[np.ndarray, np.ndarray]:
     return np.array([a, b, c, d], float), np.array([[0, 1, 2], [0, 2, 3]], np.int32)
 

@@ -23,6 +23,7 @@ from mathutils import Matrix
 
 from ..builders.population import KINDS, count_of
 from ..geometry import human
+from ..geometry.clearance import NO_POSES
 from ..geometry.objects import COLOURS, STYLES, car_meshes, car_surfaces
 from ..geometry.population import Placer, place_on_spots
 from ..geometry.surfaces import find_surfaces, floor_and_seats
@@ -293,17 +294,18 @@ class PopulationScene:
             self.cached = (digest, find_places(buffers, self.population.placement))
         return buffers, self.cached[1]
 
-    def randomize(self, rng: np.random.Generator, view=None):
+    def randomize(self, rng: np.random.Generator, view=None, sensor_poses=NO_POSES):
         """Draw, place and show this frame's objects: ``(headings {instance: yaw}, info, warnings)``.
 
         view : the frames' :class:`~bpy_pipeline.geometry.lod.SensorView` (its first position is the sensor the
             visibility rule looks from), or ``None``
+        sensor_poses : every sensor pose of the run (:class:`~bpy_pipeline.geometry.clearance.SensorPoses`), kept clear
         """
         rules = self.population.placement
         buffers, places = self.static_scene()
         positions = getattr(view, "positions", None)
         sensor = np.asarray(positions[0], float) if positions is not None and len(positions) else None
-        placer = Placer(buffers.vertices, buffers.triangles, rules.keep_out, sensor, rules.min_visible)
+        placer = Placer(buffers.vertices, buffers.triangles, rules.keep_out, sensor, rules.min_visible, sensor_poses)
         floor_spots = [(s, s.spots, None) for s in places.floors]
         seat_spots = [(s, s.edges, s.outward) for s in places.seats]
 
@@ -343,7 +345,7 @@ def populate(population, context, result):
     held = context.keep.get(KEY)
     if held is None or held[0] != population or not held[1].alive():
         held = context.keep[KEY] = (population, PopulationScene(population))
-    headings, info, warnings = held[1].randomize(context.rng, context.view)
+    headings, info, warnings = held[1].randomize(context.rng, context.view, context.sensor_poses)
     return dataclasses.replace(
         result,
         headings={**result.headings, **headings},

@@ -12,6 +12,7 @@ import numpy as np
 from ..buffers import SceneBuffers
 from ..config import Config, sensor_trajectory
 from ..frame import Frame, Run
+from ..geometry.clearance import enclosing_instance
 from ..geometry.transforms import transform_points
 from ..lidar.divergence import scan_footprint_chunks
 from ..lidar.effects import apply_effects
@@ -108,8 +109,24 @@ def effects_stage(frame: Frame, run: Run) -> None:
 
     frame.points = collect_points(finished(timed_pulls(frame.chunks, frame.timings, "scan")), ray_count(config.sensor.spec))
     frame.chunks = None
+    warn_enclosed(frame, run)
     frame.direct_returns = None if direct is None else np.concatenate(direct) if direct else np.zeros(0, np.int64)
     frame.timings["effects"] = frame.timings.get("effects", 0.0) + time.perf_counter() - start - (frame.timings["scan"] - traced)
+
+
+def warn_enclosed(frame: Frame, run: Run) -> None:
+    """Warn, naming the frame, when its sensor stands enclosed by one object (:func:`~bpy_pipeline.geometry.clearance.enclosing_instance`):
+    inside a solid its scan shows that solid's inside, not the scene. A warning, not a refusal: a user's scene may be
+    meant to be scanned from a small room or a box; the builders' own scenes keep every solid clear of the sensor."""
+    points = frame.points
+    found = enclosing_instance(points["range"], points["instance"], ray_count(run.config.sensor.spec))
+    if found is None or run.log is None:
+        return
+    instance, share = found
+    names = [name for name, i in zip(frame.buffers.objects.names, frame.buffers.objects.instance) if int(i) == instance]
+    where = [round(float(v), 2) for v in frame.pose[:3, 3]]
+    run.log(f"warning: frame {frame.index}: the sensor at {where} stands enclosed by {names[0] if names else f'instance {instance}'}: "
+            f"{share:.0%} of its rays return from it, most within a few metres; move the sensor or the object")
 
 
 def collect_points(parts: Iterable[np.ndarray], expected: int) -> np.ndarray:

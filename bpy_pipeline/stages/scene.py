@@ -8,7 +8,7 @@ from ..config import Config
 from ..errors import InputError
 from ..frame import Frame, Run, frame_rng
 from ..lidar.sensors import frame_time
-from .view import frames_per_scene, scene_trajectory, scene_view, sensor_pose
+from .view import frames_per_scene, scene_trajectory, scene_view, sensor_pose, sensor_poses
 
 
 def build_populated(scene, context: BuildContext) -> BuildResult:
@@ -30,7 +30,7 @@ def build_frame_scene(config: Config, index: int = 0, rng=None, keep: dict | Non
     """
     per_scene = frames_per_scene(config)
     rng = frame_rng(config.seed, index) if rng is None else rng
-    return build_populated(config.scene, BuildContext(rng, scene_view(config, index, per_scene), {} if keep is None else keep))
+    return build_populated(config.scene, BuildContext(rng, scene_view(config, index, per_scene), {} if keep is None else keep, sensor_poses(config)))
 
 
 def build_stage(frame: Frame, run: Run) -> None:
@@ -45,7 +45,8 @@ def build_stage(frame: Frame, run: Run) -> None:
     first = frame.index - frame.index % per_scene
     if run.build and run.scene_frame != first:
         rng = frame.rng if first == frame.index else frame_rng(config.seed, first)
-        run.result = build_populated(config.scene, BuildContext(rng, scene_view(config, first, per_scene), run.keep))
+        run.sensor_poses = sensor_poses(config) if run.sensor_poses is None else run.sensor_poses
+        run.result = build_populated(config.scene, BuildContext(rng, scene_view(config, first, per_scene), run.keep, run.sensor_poses))
         run.scene_frame = first
         run.trajectory = None
         frame.built = True

@@ -7,6 +7,7 @@ import numpy as np
 
 from ..builders.base import BUILDERS
 from ..config import Config, sensor_trajectory
+from ..geometry.clearance import NO_POSES, PATH_STEP, SensorPoses
 from ..geometry.lod import PathView, PlannedPath, path_view
 from ..geometry.transforms import pose_matrix
 from ..lidar.platform import Trajectory
@@ -70,6 +71,31 @@ def scene_view(config: Config, first: int, count: int):
         view = min(views, key=lambda v: v.step)
         view = RigView(view.positions, view.step, max(v.max_range for v in views))
     return RigView(view.positions, view.step, view.max_range, fields)
+
+
+def sensor_poses(config: Config) -> SensorPoses:
+    """Every optical centre the run's sensors take (:class:`~bpy_pipeline.geometry.clearance.SensorPoses`): each frame's
+    pose (a scene's stations, once each) times each rig member, or a moving sensor's path over the whole run sampled
+    :data:`~bpy_pipeline.geometry.clearance.PATH_STEP` apart. A path along a curve of the scene is not known before the
+    scene is built: none (the scan's enclosure check still warns)."""
+    members = [s.matrix() for s in config.sensor.rig] or [np.eye(4)]
+    section = config.sensor.trajectory
+    if section is not None:
+        if section.curve:
+            return NO_POSES
+        trajectory = sensor_trajectory(config.sensor)
+        duration = min(config.frames * frame_time(config.sensor.spec), trajectory.duration)
+        s0, s1 = trajectory.distance([0.0, duration])
+        arc = np.unique(np.concatenate([np.linspace(s0, s1, int(np.ceil((s1 - s0) / PATH_STEP)) + 1), trajectory.arc[(trajectory.arc > s0) & (trajectory.arc < s1)]]))
+        poses = trajectory.poses(np.interp(arc, trajectory.clock_arc, trajectory.clock_times) - trajectory.start_time)
+        step = PATH_STEP
+    else:
+        stations = BUILDERS.get(config.scene.builder).stations(config.scene.params)
+        frames = range(min(config.frames, stations) if stations else config.frames)
+        poses = np.array([sensor_pose(config, f) for f in frames])
+        step = 0.0
+    points = np.concatenate([(poses @ m)[:, :3, 3] for m in members])
+    return SensorPoses(np.unique(np.round(points, 6), axis=0), step=step)
 
 
 def scene_trajectory(config: Config) -> Trajectory | None:

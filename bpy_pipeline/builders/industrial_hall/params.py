@@ -70,6 +70,33 @@ def check(params: IndustrialHallScene, where: str) -> None:
         raise InputError(f"{where}.poses: weights must be numbers >= 0, not all zero, got {params.poses!r}")
     if params.sensor_height >= params.height:
         raise InputError(f"{where}.sensor_height: must be below the ceiling ({params.height} m), got {params.sensor_height}")
+    check_furniture(params, where)
+
+
+def check_furniture(params: IndustrialHallScene, where: str) -> None:
+    """``InputError`` when the desks and shelves overlap or reach past the walls, or when the hanging sensor
+    (``place_sensor``) comes within :data:`~bpy_pipeline.geometry.clearance.CLEARANCE` of the ceiling or a piece of furniture."""
+    from ...geometry.clearance import CLEARANCE, SensorPoses
+    from ...geometry.indoor import hall_layout, hall_station
+
+    layout = hall_layout(params)
+    rows = f"{params.desk_rows} row(s) of {params.desks_per_row} desk(s) and {params.shelves} shelf rack(s)"
+    boxes = [item.footprint for item in layout.furniture]
+    for k, (low, high) in enumerate(boxes):
+        if (low < layout.low - 1e-9).any() or (high > layout.high + 1e-9).any() or any((np.minimum(high, h) - np.maximum(low, l) > 1e-9).all() for l, h in boxes[:k]):
+            raise InputError(f"{where}.desks_per_row: {rows} do not fit the hall's {params.length:g} x {params.width:g} m floor without overlapping or "
+                             f"reaching past its walls; use fewer desks (desk_rows, desks_per_row) or shelves, smaller desk_size or shelf_size, or a larger hall")
+    if not params.place_sensor:
+        return
+    if params.sensor_height > params.height - CLEARANCE:
+        raise InputError(f"{where}.sensor_height: must stay {CLEARANCE} m below the ceiling ({params.height} m), got {params.sensor_height}")
+    sensor = SensorPoses(hall_station(params)[:3, 3])
+    for item in layout.furniture:
+        low, high = item.footprint
+        top = max(c[2] + h[2] for c, h in item.parts)
+        if not sensor.clear_of_box((low + high) / 2, (high - low) / 2, 0.0, 0.0, top):
+            raise InputError(f"{where}.sensor_height: the sensor {params.sensor_height} m above the hall's centre comes within {CLEARANCE} m of {item.name} ({top:.2f} m high); "
+                             f"hang it higher or move the furniture (desk_rows, desks_per_row, shelves)")
 
 
 def station(params: IndustrialHallScene, frame: int) -> np.ndarray | None:
@@ -83,7 +110,7 @@ def build(params: IndustrialHallScene, context: BuildContext) -> BuildResult:
     """The static hall once per run, then robots and people drawn and posed for this frame."""
     from .scene import IndustrialHall
 
-    return context.kept("industrial_hall", params, lambda: IndustrialHall(params)).randomize(context.rng, context.view)
+    return context.kept("industrial_hall", params, lambda: IndustrialHall(params)).randomize(context.rng, context.view, context.sensor_poses)
 
 
 # the human-robot paper's sensor: an OS1-128 at 2048 columns through its own ring of 8 mirrors

@@ -17,6 +17,7 @@ import bpy
 import numpy as np
 
 from ...geometry import human, kinematics
+from ...geometry.clearance import NO_POSES
 from ...geometry.collision import box_axes, capsule_box_gaps, capsule_gaps
 from ...geometry.indoor import hall_layout
 from ...geometry.placement import sample, sample_count
@@ -38,6 +39,7 @@ class IndustrialHall:
 
     def __init__(self, params):
         self.params = params
+        self.sensor_poses = NO_POSES  # the run's, set by randomize: robots and people keep clear of them
         self.collection = scene_collection()
         self.layout = hall_layout(params)
         prototypes = box_nodes.prototypes(self.collection)  # every piece through the "Industrial Hall" group
@@ -101,7 +103,7 @@ class IndustrialHall:
             q = kinematics.random_configuration(self.arm, rng, base, floor_z=0.0)
             frames = kinematics.forward(self.arm, q, base)
             a, b, r = kinematics.capsules_world(self.arm, frames)
-            if self._hits_static(a, b, r, 0.1):
+            if self._hits_static(a, b, r, 0.1) or not self.sensor_poses.clear_of_capsules(a, b, r):
                 continue
             if any((capsule_gaps(a, b, r, *other[2]) < 0.2).any() for other in placed):
                 continue
@@ -150,7 +152,7 @@ class IndustrialHall:
                 else:
                     origin, yaw, support = self._area_point(rng), float(rng.uniform(-np.pi, np.pi)), 0.0
                 person = human.pose_person(angles, height, build, kind, origin, yaw, support)
-            if self._hits_static(person.a, person.b, person.radius, STATIC_CLEARANCE):
+            if self._hits_static(person.a, person.b, person.radius, STATIC_CLEARANCE) or not self.sensor_poses.clear_of_capsules(person.a, person.b, person.radius):
                 continue
             if kind != "sitting" and not self._walkable(person.support[:2]):
                 continue
@@ -168,9 +170,11 @@ class IndustrialHall:
         return not any(((low <= xy) & (xy <= high)).all() for low, high in (f.footprint for f in self.layout.furniture))
 
     # ------------------------------------------------------------------ a frame
-    def randomize(self, rng: np.random.Generator, view=None):
+    def randomize(self, rng: np.random.Generator, view=None, sensor_poses=NO_POSES):
+        """This frame's robots and people; none comes within ``sensor_poses.radius`` of a sensor pose of the run."""
         from ..base import BuildResult
 
+        self.sensor_poses = sensor_poses
         p = self.params
         robots = []
         for r in range(p.robots):

@@ -8,6 +8,7 @@ from typing import Literal
 import numpy as np
 
 from ...errors import InputError
+from ...geometry.clearance import CLEARANCE
 from ..base import Builder, BuildContext, BuildResult, Distribution, check_distribution, check_sizes, refuse_sensor_placement, register_builder
 
 
@@ -85,8 +86,10 @@ def check(params: ParkingScene, where: str) -> None:
         raise InputError(f"{where}.opening_height: must be below the ceiling ({params.ceiling_height} m), got {params.opening_height}")
     if params.wall_openings and params.opening_width >= params.length / (params.wall_openings + 1):
         raise InputError(f"{where}.opening_width: {params.wall_openings} doorways a wall leave no wall between them unless under {params.length / (params.wall_openings + 1):.3f} m (length / (wall_openings + 1)), got {params.opening_width}")
-    if params.sensor_height >= params.ceiling_height:
-        raise InputError(f"{where}.sensor_height: must be below the ceiling ({params.ceiling_height} m), got {params.sensor_height}")
+    if params.place_sensor and params.sensor_height > params.ceiling_height - CLEARANCE:
+        raise InputError(f"{where}.sensor_height: must be below the ceiling ({params.ceiling_height} m) by at least {CLEARANCE} m (the sensor keeps clear of every solid), got {params.sensor_height}")
+    if params.place_sensor and params.driveway_width < 2 * CLEARANCE:
+        raise InputError(f"{where}.driveway_width: at least {2 * CLEARANCE:g} m (the sensor robot drives along its middle, {CLEARANCE} m clear of the pillars), got {params.driveway_width}")
 
 
 def station(params: ParkingScene, frame: int) -> np.ndarray | None:
@@ -100,7 +103,7 @@ def build(params: ParkingScene, context: BuildContext) -> BuildResult:
     """The static level once per run, then cars drawn and placed for this frame."""
     from .scene import ParkingGarage
 
-    return context.kept("parking", params, lambda: ParkingGarage(params, check)).randomize(context.rng, context.view)
+    return context.kept("parking", params, lambda: ParkingGarage(params, check)).randomize(context.rng, context.view, context.sensor_poses)
 
 
 # the paper's VLP-16 at 20 Hz: 0.4 deg, 16 channels, +-15 deg (its table 1)

@@ -27,6 +27,7 @@ import bpy
 import numpy as np
 
 from ...buffers import MATERIAL_ID, ObjectTable, SceneBuffers
+from ...geometry.clearance import NO_POSES
 from ...geometry.objects import COLOURS, STYLES, car_meshes, car_surfaces, style_size
 from ...geometry.indoor import parking_station
 from ...geometry.placement import FloorBoxPlacer, insert_sequentially, sample, sample_count, turn_about
@@ -176,7 +177,8 @@ class ParkingGarage:
         bay_yaw = bays[k, 2] if np.cos(yaw - bays[k, 2]) >= 0 else bays[k, 2] + np.pi
         return bays[k, :2].copy(), float(np.angle(np.exp(1j * bay_yaw)))
 
-    def randomize(self, rng: np.random.Generator, view=None):
+    def randomize(self, rng: np.random.Generator, view=None, sensor_poses=NO_POSES):
+        """This frame's cars; none comes within ``sensor_poses.radius`` of a sensor pose of the run."""
         from ..base import BuildResult
 
         self.follow_edits()
@@ -185,7 +187,7 @@ class ParkingGarage:
         sensor = np.asarray(view.positions[0], float) if view is not None and len(view.positions) else parking_station(p, 0)[:3, 3]
         placer = FloorBoxPlacer(
             sensor, (self.layout.low, self.layout.high), self.layout.obstacles, self.static_distance(sensor),
-            clearance=p.car_clearance, min_visible=p.min_visible_fraction, keep_out=1.0,
+            clearance=p.car_clearance, min_visible=p.min_visible_fraction, keep_out=1.0, clear=sensor_poses,
         )
 
         def try_at(car: Car, angle_deg: float):

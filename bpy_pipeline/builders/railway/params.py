@@ -3,13 +3,16 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass, field
 from typing import Literal
 
 import numpy as np
 
 from ...errors import InputError
+from ...geometry.clearance import CLEARANCE
 from ..base import Builder, BuildContext, BuildResult, register_builder
+from .parts import H_SECTION, LATTICE
 
 Vec3 = tuple[float, float, float]
 
@@ -230,6 +233,7 @@ def check(params: RailwayScene, where: str) -> None:
         raise InputError(f"{where}.catenary.overlap_rise: must lie in (0, 1] m, got {cat.overlap_rise}")
     if cat.steady_arms and not 0.2 <= cat.steady_arm_length <= cat.registration_arm_length - 0.2:
         raise InputError(f"{where}.catenary.steady_arm_length: must lie in [0.2, registration_arm_length - 0.2 = {cat.registration_arm_length - 0.2:g}] m, got {cat.steady_arm_length}")
+    check_station_clearance(params, where)
     if params.reroll_every < 0:
         raise InputError(f"{where}.reroll_every: must be >= 0 (0: one railway per run; k: a new railway every k frames), got {params.reroll_every}")
     check_railway(params, where)
@@ -237,6 +241,26 @@ def check(params: RailwayScene, where: str) -> None:
     from ...labels import load_class_table
 
     check_assets(params.assets, f"{where}.assets", load_class_table().names.values())
+
+
+STATION_CLEARANCE = CLEARANCE  # m: a station's sensor keeps this from every mast and fence
+MAST_REACH = max(H_SECTION[0], LATTICE[0]) / math.sqrt(2.0)  # m: how far a mast reaches from its axis (a 0.40 m lattice's half diagonal)
+
+
+def check_station_clearance(params: RailwayScene, where: str) -> None:
+    """``InputError`` when the stations stand in the line of the masts or the fence on their side: their sensor would
+    stand in (or within 0.5 m of) a mast wherever a support falls at a station's chainage."""
+    st, sup = params.stations, params.supports
+    if not params.place_sensor:
+        return
+    mast_sides = {"single": {sup.side}, "both_sides": {"right", "left"}, "gantry": {"right", "left"}}.get(sup.layout, {sup.side} if params.track.tracks == 1 else {"right", "left"})
+    if st.side in mast_sides and abs(st.offset - sup.mast_offset) < MAST_REACH + STATION_CLEARANCE - 1e-9:
+        raise InputError(f"{where}.stations.offset: stations {st.offset} m beyond the outer track stand in the masts' line ({where}.supports.mast_offset: {sup.mast_offset} m) "
+                         f"on the {st.side}; keep them at least {MAST_REACH + STATION_CLEARANCE:.2f} m apart")
+    side = params.trackside
+    if side.fences and abs(st.offset - side.fence_offset) < STATION_CLEARANCE + 0.05:
+        raise InputError(f"{where}.stations.offset: stations {st.offset} m beyond the outer track stand in the fence's line ({where}.trackside.fence_offset: {side.fence_offset} m); "
+                         f"keep them at least {STATION_CLEARANCE + 0.05:g} m apart")
 
 
 def station(params: RailwayScene, frame: int) -> np.ndarray | None:

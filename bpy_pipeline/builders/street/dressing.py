@@ -22,7 +22,9 @@ generator) and laid out per corner block of the intersection of :mod:`.street`:
   and construction barriers.
 
 Every item that stands where road users go is an obstacle for their placement: circles
-``(x, y, radius)`` and rectangles ``(centre (2,), half (2,), yaw)``.
+``(x, y, radius)`` and rectangles ``(centre (2,), half (2,), yaw)``. An item that would come within
+``clear.radius`` of a sensor pose of the run (:class:`~bpy_pipeline.geometry.clearance.SensorPoses`) is left
+out after its draws, so the rest of the street stays the one its seed gives (``counts["near sensor"]``).
 
 Scattered items (trunks, crowns and bushes, lamps and bollards, bins, bicycle stands, cones,
 barriers) are *instances*: a :class:`Scatter` holds a few prototype meshes per kind (crowns: a few
@@ -42,7 +44,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ...geometry import primitives
-from ...geometry.primitives import beam_mesh, box_mesh, transformed
+from ...geometry.clearance import NO_POSES, SensorPoses
+from ...geometry.primitives import beam_mesh, beams_mesh, box_mesh, transformed
 from . import vegetation
 
 Mesh = tuple[np.ndarray, np.ndarray]
@@ -53,6 +56,7 @@ Mesh = tuple[np.ndarray, np.ndarray]
 REFLECTIVITY = {"vegetation": 0.35, "trunk": 0.3, "terrain": 0.4, "pole": 0.2, "fence": 0.3, "wall": 0.35,
                 "barrier": 0.5, "traffic cone": 0.55, "bin": 0.15, "bicycle stand": 0.4}
 BOUNDARIES = ("fence", "hedge", "wall", "none")
+LEAF_CARD = 0.25  # m: how far a crown's or hedge's leaf cards may reach beyond its nominal size (half a 0.4-0.5 m card)
 
 
 def place(mesh: Mesh, position, yaw: float = 0.0, scale=(1.0, 1.0, 1.0)) -> Mesh:
@@ -235,12 +239,16 @@ def fence_mesh(start, end, height: float, kind: str, z_at) -> Mesh:
     start, end = np.asarray(start, float), np.asarray(end, float)
     length = float(np.linalg.norm(end - start))
     along = (end - start) / length
-    parts = []
     posts = np.linspace(0.0, length, max(2, int(math.ceil(length / 2.5)) + 1))
     ground = lambda s: float(z_at(*(start + s * along)))  # noqa: E731 - the ground below a point at s
-    for s in posts:
-        p = start + s * along
-        parts.append(beam_mesh([*p, ground(s) - 0.2], [*p, ground(s) + height], 0.08))
+
+    def on_ground(s, low: float, high: float) -> tuple[np.ndarray, np.ndarray]:
+        """``(bottoms, tops)`` (k, 3) of uprights at ``s`` (k,) along the fence, from ``low`` to ``high`` above the ground."""
+        p = start + np.asarray(s, float)[:, None] * along
+        z = np.asarray(z_at(p[:, 0], p[:, 1]), float)
+        return np.column_stack([p, z + low]), np.column_stack([p, z + high])
+
+    parts = [beams_mesh(*on_ground(posts, -0.2, height), 0.08)]
     if kind == "boards":
         for s0, s1 in zip(posts[:-1], posts[1:]):
             a, b = start + s0 * along, start + s1 * along
@@ -253,14 +261,19 @@ def fence_mesh(start, end, height: float, kind: str, z_at) -> Mesh:
             triangles = np.array([[0, 1, 2], [0, 2, 3], [4, 6, 5], [4, 7, 6]], np.int32)
             parts.append((vertices, triangles))
         return primitives.merge(parts)
+    starts, ends, thickness = [], [], []  # per panel: its two rails, then its bars
     for s0, s1 in zip(posts[:-1], posts[1:]):
         a, b = start + s0 * along, start + s1 * along
         za, zb = ground(s0), ground(s1)
         for level in (0.15, height - 0.1):
-            parts.append(beam_mesh([*a, za + level], [*b, zb + level], 0.04))
-        for s in np.arange(s0 + 0.12, s1 - 0.06, 0.12):
-            p = start + s * along
-            parts.append(beam_mesh([*p, ground(s) + 0.1], [*p, ground(s) + height - 0.05], 0.02))
+            starts.append([[*a, za + level]])
+            ends.append([[*b, zb + level]])
+            thickness.append([0.04])
+        bottoms, tops = on_ground(np.arange(s0 + 0.12, s1 - 0.06, 0.12), 0.1, height - 0.05)
+        starts.append(bottoms)
+        ends.append(tops)
+        thickness.append(np.full(len(bottoms), 0.02))
+    parts.append(beams_mesh(np.concatenate(starts), np.concatenate(ends), np.concatenate(thickness)))
     return primitives.merge(parts)
 
 
@@ -329,7 +342,7 @@ def prototypes(rng: np.random.Generator) -> Prototypes:
 
 # ----------------------------------------------------------------------------- the dressing
 def dress(p, road_half: float, walk_inner: float, walk_outer: float, kerb_height: float, crossing_end: float,
-          rng: np.random.Generator) -> Dressing:
+          rng: np.random.Generator, clear: SensorPoses = NO_POSES) -> Dressing:
     """The dressing of :class:`~bpy_pipeline.builders.street.StreetScene` ``p`` around an intersection.
 
     road_half : R (m), the carriageway's half width to the kerb; walk_inner / walk_outer : the
@@ -340,6 +353,7 @@ def dress(p, road_half: float, walk_inner: float, walk_outer: float, kerb_height
     building is the box standing ``height`` above the line (which lies at the box's bottom, under the
     ground) and reaching ``depth`` to the left of start -> end (away from the road): the reference of the
     "Street Facade" Geometry Nodes group (builders/street/facade_nodes.py).
+    clear : the run's sensor poses; an item reaching within their radius is left out (its draws made all the same)
     """
     A = p.arm_length
     out = Dressing()
@@ -356,8 +370,23 @@ def dress(p, road_half: float, walk_inner: float, walk_outer: float, kerb_height
     fences: list[Mesh] = []
     walls: list[Mesh] = []
 
-    def plant(x: float, y: float, ground: float, big: bool, street: bool = False) -> None:
+    def clear_of(centre, size, z0: float, z1: float, yaw: float = 0.0) -> bool:
+        """Whether an item's upright box (``size`` (2,): half extents) or cylinder (``size``: radius) keeps clear of the
+        sensor poses; counts it left out when not."""
+        ok = clear.clear_of_circle(centre, size, z0, z1) if np.isscalar(size) else clear.clear_of_box(centre, size, yaw, z0, z1)
+        if not ok:
+            out.count("near sensor")
+        return ok
+
+    def segment_clear(a, b, width: float, z0: float, z1: float) -> bool:
+        """:func:`clear_of` for a fence, hedge or wall ``width`` thick from ``a`` to ``b`` ((2,) m)."""
+        a, b = np.asarray(a, float)[:2], np.asarray(b, float)[:2]
+        half = (float(np.linalg.norm(b - a)) / 2.0, width / 2.0)
+        return clear_of((a + b) / 2.0, half, z0, z1, math.atan2(b[1] - a[1], b[0] - a[0]))
+
+    def plant(x: float, y: float, ground: float, big: bool, street: bool = False) -> bool:
         """A tree (``big``) or a bush at ``(x, y, ground)``; a street tree's crown clears 4.5 m (buses and lamps' arms).
+        False when it would stand within reach of a sensor pose (left out).
 
         Its foliage is a prototype crown (or bush) of its shape, turned at random and scaled to its size."""
         if big:
@@ -367,16 +396,23 @@ def dress(p, road_half: float, walk_inner: float, walk_outer: float, kerb_height
             k = kinds.crown(shape, int(rng.integers(CROWN_VARIANTS)))
             r0, h0 = kinds.plant_size[k]
             top = height - crown_height / 2.0  # the crown's centre above the ground
-            plants.add(k, (x, y, ground + top), float(rng.uniform(0.0, 2 * math.pi)), (radius / r0, radius / r0, crown_height / h0))
+            yaw = float(rng.uniform(0.0, 2 * math.pi))
             r = vegetation.default_trunk_radius(height)  # from 0.2 m under the ground into the crown's middle
+            if not (clear_of((x, y), r, ground - 0.2, ground + top) and clear_of((x, y), radius + LEAF_CARD, ground + height - crown_height - LEAF_CARD, ground + height + LEAF_CARD)):
+                return False
+            plants.add(k, (x, y, ground + top), yaw, (radius / r0, radius / r0, crown_height / h0))
             trunks.add(0, (x, y, ground - 0.2), 0.0, (r, r, top + 0.2))
             out.count("trees")
-        else:
-            radius, height = float(rng.uniform(0.4, 1.4)), float(rng.uniform(0.6, 2.0))
-            k = kinds.bush(int(rng.integers(CROWN_VARIANTS)))
-            r0, h0 = kinds.plant_size[k]
-            plants.add(k, (x, y, ground - 0.1), float(rng.uniform(0.0, 2 * math.pi)), (radius / r0, radius / r0, height / h0))
-            out.count("bushes")
+            return True
+        radius, height = float(rng.uniform(0.4, 1.4)), float(rng.uniform(0.6, 2.0))
+        k = kinds.bush(int(rng.integers(CROWN_VARIANTS)))
+        r0, h0 = kinds.plant_size[k]
+        yaw = float(rng.uniform(0.0, 2 * math.pi))
+        if not clear_of((x, y), radius + LEAF_CARD, ground - 0.1, ground + height + LEAF_CARD):
+            return False
+        plants.add(k, (x, y, ground - 0.1), yaw, (radius / r0, radius / r0, height / h0))
+        out.count("bushes")
+        return True
 
     def in_block(local_along: float, local_across: float, sx: int, sy: int, axis: int) -> tuple[float, float]:
         """World (x, y) of a point ``local_along`` the frontage and ``local_across`` from the road's centre line."""
@@ -407,37 +443,52 @@ def dress(p, road_half: float, walk_inner: float, walk_outer: float, kerb_height
                         cx0, cy0 = in_block(s, a0, sx, sy, axis)
                         cx1, cy1 = in_block(s + width, a1, sx, sy, axis)
                         low = float(np.min(z_at(np.array([cx0, cx1, cx0, cx1]), np.array([cy0, cy0, cy1, cy1])))) - 0.3
+                        box_centre, box_half = ((cx0 + cx1) / 2, (cy0 + cy1) / 2), (abs(cx1 - cx0) / 2, abs(cy1 - cy0) / 2)
+                        is_open = not clear_of(box_centre, box_half, low, low + 0.3 + height)  # left out: its front yard stays
+                    if not is_open:
                         out.buildings.append(box_mesh(*sorted((cx0, cx1)), *sorted((cy0, cy1)), low, low + 0.3 + height))
                         start, end = (np.array([*in_block(t, a0, sx, sy, axis), low]) for t in (s, s + width))
                         away = np.array(in_block(0.0, 1.0, sx, sy, axis)) - np.array(in_block(0.0, 0.0, sx, sy, axis))
                         if (end - start)[0] * away[1] - (end - start)[1] * away[0] < 0:  # keep the building on the line's left
                             start, end = end, start
                         out.fronts.append((start, end, float(p.building_depth), 0.3 + height))
-                    # the yard (or open plot): plants drawn by area, kept 1 m off the boundary and the building
-                    area = max(width - 2.0, 0.0) * max(depth - 2.0, 0.0)
+                    # the yard (or open plot): plants drawn by area, 1 m inside the plot's bounds (:class:`Yards`), so off the
+                    # building; one rectangle (along0..along1, across0..across1) sets both its area and where its plants stand
+                    along0, along1 = s + 1.0, s + width - 1.0
+                    across0, across1 = walk_outer + 1.0, walk_outer + depth - 1.0
+                    area = max(along1 - along0, 0.0) * max(across1 - across0, 0.0)
                     if area > 0.0:
-                        (ax, ay), (bx, by) = in_block(s + 1.0, front + 1.0, sx, sy, axis), in_block(s + width - 1.0, walk_outer + depth - 1.0, sx, sy, axis)
+                        (ax, ay), (bx, by) = in_block(along0, across0, sx, sy, axis), in_block(along1, across1, sx, sy, axis)
                         out.yards.rects.append((min(ax, bx), max(ax, bx), min(ay, by), max(ay, by)))
                     for _ in range(int(rng.poisson(p.yard_plants * area / 100.0))):
-                        along = float(rng.uniform(s + 1.0, s + width - 1.0))
-                        across = float(rng.uniform(front + 1.0, walk_outer + depth - 1.0))
+                        along = float(rng.uniform(along0, along1))
+                        across = float(rng.uniform(across0, across1))
                         x, y = in_block(along, across, sx, sy, axis)
                         plant(x, y, float(z_at(x, y)), big=rng.random() < (0.5 if is_open else 0.3))
                     kind = BOUNDARIES[int(rng.choice(len(BOUNDARIES), p=shares))]
                     a = np.array(in_block(s + 0.1, front, sx, sy, axis))
                     b = np.array(in_block(s + width - 0.1, front, sx, sy, axis))
+                    line = a + np.linspace(0.0, 1.0, 9)[:, None] * (b - a)
+                    ground = min(float(z_at(*a)), float(z_at(*b)))
+                    ridge = float(np.max(z_at(line[:, 0], line[:, 1])))  # the ground's highest along the boundary: a fence's or wall's top follows it
                     if kind == "fence":
-                        fences.append(fence_mesh(a, b, float(rng.uniform(0.9, 1.8)), "bars" if rng.random() < 0.6 else "boards", z_at))
-                        out.count("fences")
+                        height, style = float(rng.uniform(0.9, 1.8)), "bars" if rng.random() < 0.6 else "boards"
+                        if segment_clear(a, b, 0.1, ground - 0.2, ridge + height):
+                            fences.append(fence_mesh(a, b, height, style, z_at))
+                            out.count("fences")
                     elif kind == "hedge":
                         height = float(rng.uniform(0.8, 2.0))
                         inward = np.array([0.0, 0.5 * sy] if axis == 0 else [0.5 * sx, 0.0])  # the hedge's axis 0.5 m into the plot
-                        ground = min(float(z_at(*a)), float(z_at(*b))) - 0.05
-                        hedges.append(vegetation.hedge([*(a + inward), ground], [*(b + inward), ground], float(rng.uniform(0.6, 1.0)), height, rng))
-                        out.count("hedges")
+                        thickness = float(rng.uniform(0.6, 1.0))
+                        hedge = vegetation.hedge([*(a + inward), ground - 0.05], [*(b + inward), ground - 0.05], thickness, height, rng)
+                        if segment_clear(a + inward, b + inward, thickness + 2 * LEAF_CARD, ground - 0.05, ground + height + LEAF_CARD):
+                            hedges.append(hedge)
+                            out.count("hedges")
                     elif kind == "wall":
-                        walls.append(wall_mesh(a, b, float(rng.uniform(0.4, 1.6)), 0.25, z_at))
-                        out.count("walls")
+                        height = float(rng.uniform(0.4, 1.6))
+                        if segment_clear(a, b, 0.25, ground - 0.3, ridge + height):
+                            walls.append(wall_mesh(a, b, height, 0.25, z_at))
+                            out.count("walls")
                     s += width
             # the kerb-side band of the sidewalks of this block's two arm sides
             for axis in (0, 1):
@@ -451,8 +502,8 @@ def dress(p, road_half: float, walk_inner: float, walk_outer: float, kerb_height
                         t += float(rng.uniform(*p.tree_spacing))
                 for t in trees_at:
                     x, y = in_block(t, band, sx, sy, axis)
-                    plant(x, y, kerb_height, big=True, street=True)
-                    out.circles.append((x, y, 0.45))
+                    if plant(x, y, kerb_height, big=True, street=True):
+                        out.circles.append((x, y, 0.45))
                 taken = list(trees_at)
                 if p.lamp_spacing > 0:
                     t = crossing_end + 2.0 + float(rng.uniform(0.0, p.lamp_spacing))
@@ -461,11 +512,13 @@ def dress(p, road_half: float, walk_inner: float, walk_outer: float, kerb_height
                             x, y = in_block(t, walk_inner + 0.4, sx, sy, axis)
                             facing = math.atan2(-y, 0.0) if axis == 0 else math.atan2(0.0, -x)
                             height = float(rng.uniform(6.0, 9.0))
-                            poles.add(0, (x, y, kerb_height - 0.3), 0.0, (0.08, 0.08, height + 0.3))  # 0.3 m into the ground
-                            poles.add(1, (x, y, kerb_height + height), facing)
-                            out.circles.append((x, y, 0.3))
-                            taken.append(t)
-                            out.count("lamps")
+                            top = kerb_height + height
+                            if clear_of((x, y), 0.08, kerb_height - 0.3, top) and clear_of((x, y), 1.9, top - 0.3, top + 0.4):
+                                poles.add(0, (x, y, kerb_height - 0.3), 0.0, (0.08, 0.08, height + 0.3))  # 0.3 m into the ground
+                                poles.add(1, (x, y, top), facing)
+                                out.circles.append((x, y, 0.3))
+                                taken.append(t)
+                                out.count("lamps")
                         t += p.lamp_spacing
                 for _ in range(int(rng.poisson(p.furniture_per_100m * (A - crossing_end) / 100.0))):
                     t = float(rng.uniform(crossing_end + 2.0, A - 2.0))
@@ -475,37 +528,42 @@ def dress(p, road_half: float, walk_inner: float, walk_outer: float, kerb_height
                     x, y = in_block(t, band, sx, sy, axis)
                     what = rng.random()
                     if what < 0.4:
-                        bins.add(0, (x, y, kerb_height))
-                        out.circles.append((x, y, 0.4))
-                        out.count("bins")
+                        if clear_of((x, y), 0.3, kerb_height, kerb_height + 1.0):
+                            bins.add(0, (x, y, kerb_height))
+                            out.circles.append((x, y, 0.4))
+                            out.count("bins")
                     elif what < 0.7:
                         yaw = 0.0 if axis == 0 else math.pi / 2
                         hoops = int(rng.integers(2, 5))
-                        for k in range(hoops):
-                            dx, dy = in_block(0.8 * k, 0.0, sx, sy, axis)
-                            stands.add(0, (x + dx, y + dy, kerb_height), yaw)
                         mx, my = in_block(0.4 * (hoops - 1), 0.0, sx, sy, axis)
                         half = (0.4 * (hoops - 1) + 0.3, 0.5)
-                        out.blocks.append((np.array([x + mx, y + my]), np.array(half if axis == 0 else half[::-1]), 0.0))
-                        taken += [t + 0.8 * k for k in range(hoops)]
-                        out.count("bicycle stands")
-                    else:
+                        block = (np.array([x + mx, y + my]), np.array(half if axis == 0 else half[::-1]), 0.0)
+                        if clear_of(block[0], block[1], kerb_height - 0.1, kerb_height + 0.85):
+                            for k in range(hoops):
+                                dx, dy = in_block(0.8 * k, 0.0, sx, sy, axis)
+                                stands.add(0, (x + dx, y + dy, kerb_height), yaw)
+                            out.blocks.append(block)
+                            taken += [t + 0.8 * k for k in range(hoops)]
+                            out.count("bicycle stands")
+                    elif clear_of((x, y), 0.1, kerb_height, kerb_height + 0.9):
                         poles.add(0, (x, y, kerb_height), 0.0, (0.1, 0.1, 0.9))
                         out.circles.append((x, y, 0.25))
                         out.count("bollards")
-                # road works in the parking strip
-                if rng.random() < p.roadworks:
+                # road works in the parking strip (an arm too short for a 12 m run beyond the crossing has none)
+                if rng.random() < p.roadworks and A - 15.0 > crossing_end + 3.0:
                     lane_mid = road_half - p.parking_width / 2
                     t0 = float(rng.uniform(crossing_end + 3.0, A - 15.0))
                     length = float(rng.uniform(6.0, 12.0))
+                    cx, cy = in_block(t0 + length / 2 + 0.5, lane_mid, sx, sy, axis)
+                    half = np.array([length / 2 + 1.5, p.parking_width / 2]) if axis == 0 else np.array([p.parking_width / 2, length / 2 + 1.5])
+                    if not clear_of((cx, cy), half, 0.0, 1.2):
+                        continue
                     for t in np.arange(t0, t0 + length, 1.5):
                         x, y = in_block(t, lane_mid - 0.4, sx, sy, axis)
                         cones.add(0, (x, y, 0.0))
                     for t in np.arange(t0 + 0.5, t0 + length, 2.5):
                         x, y = in_block(t + 1.0, lane_mid + 0.4, sx, sy, axis)
                         barriers.add(0, (x, y, 0.0), 0.0 if axis == 0 else math.pi / 2)
-                    cx, cy = in_block(t0 + length / 2 + 0.5, lane_mid, sx, sy, axis)
-                    half = np.array([length / 2 + 1.5, p.parking_width / 2]) if axis == 0 else np.array([p.parking_width / 2, length / 2 + 1.5])
                     out.blocks.append((np.array([cx, cy]), half, 0.0))
                     out.count("road works")
     for name, class_name, what in (("trunks", "trunk", trunks), ("plants", "vegetation", plants), ("hedges", "vegetation", hedges),

@@ -29,6 +29,8 @@ Placement rules (:func:`place_users`):
   or in the intersection;
 - *pedestrians*: on a sidewalk (heading along it) or on a crossing (heading across the road);
 - *no overlap*: every footprint keeps ``clearance`` from every other and from poles;
+- *clear of the sensor*: no user's box comes within ``clear.radius`` of a sensor pose of the run
+  (:class:`~bpy_pipeline.geometry.clearance.SensorPoses`: every frame, rig member and path sample);
 - *field-of-view aware*: when the sensors' :class:`FieldOfView` s are given, a candidate is kept
   only if at least ``min_in_view`` of the sample points of its box lie inside one sensor's field
   of view and range, so a narrow sensor sees what is placed.
@@ -44,6 +46,7 @@ import numpy as np
 
 from ...geometry import primitives
 from ...geometry.primitives import beam_mesh, box_mesh, quad_mesh, transformed, wheel_mesh  # noqa: F401 - street.box_mesh etc. stay importable
+from ...geometry.clearance import NO_POSES, SensorPoses
 from ...geometry.collision import rectangles_near, rectangles_overlap
 from ...geometry.field_of_view import FieldOfView, box_samples, in_view_fraction  # noqa: F401 - FieldOfView etc. stay importable from here and from geometry.street (its old path)
 from ...geometry.objects import FITTINGS
@@ -205,8 +208,9 @@ def road_meshes(p) -> tuple[Mesh, Mesh, Mesh, list[tuple[float, float, float, fl
     return primitives.merge(road), primitives.merge(kerbs), primitives.merge(walks), walk_rects
 
 
-def street_layout(p, rng: np.random.Generator) -> StreetLayout:
-    """The static intersection of :class:`~bpy_pipeline.builders.street.StreetScene` ``p``, its buildings drawn from ``rng``."""
+def street_layout(p, rng: np.random.Generator, clear: SensorPoses = NO_POSES) -> StreetLayout:
+    """The static intersection of :class:`~bpy_pipeline.builders.street.StreetScene` ``p``, its buildings drawn from ``rng``;
+    traffic lights, signs and the dressing that would come within ``clear.radius`` of a sensor pose of ``clear`` are left out."""
     lw, n, pw = p.lane_width, p.lanes_per_direction, p.parking_width
     R = n * lw + pw
     A = p.arm_length
@@ -259,6 +263,8 @@ def street_layout(p, rng: np.random.Generator) -> StreetLayout:
     for sx in (-1, 1):
         for sy in (-1, 1):
             x, y = sx * (inner + 0.5), sy * (inner + 0.5)
+            if not clear.clear_of_box((x, y), (0.15, 0.15), 0.0, 0.0, kh + 3.9):
+                continue
             pole = primitives.translated(primitives.cylinder(0.07, 3.0, 8), (x, y, kh + 1.5))
             head = box_mesh(x - 0.15, x + 0.15, y - 0.15, y + 0.15, kh + 3.0, kh + 3.9)
             light_meshes.append(primitives.merge([pole, head]))
@@ -269,6 +275,8 @@ def street_layout(p, rng: np.random.Generator) -> StreetLayout:
         axis, sx, sy = int(rng.integers(2)), int(rng.choice([-1, 1])), int(rng.choice([-1, 1]))
         s = float(rng.uniform(c1 + 2.0, A - 2.0))
         x, y = (sx * s, sy * (inner + 0.4)) if axis == 0 else (sx * (inner + 0.4), sy * s)
+        if not clear.clear_of_circle((x, y), 0.31, 0.0, kh + 2.8):  # the pole and its turning plate
+            continue
         pole = primitives.translated(primitives.cylinder(0.04, 2.2, 8), (x, y, kh + 1.1))
         facing = 0.0 if axis == 1 else math.pi / 2
         plate = transformed(box_mesh(-0.02, 0.02, -0.3, 0.3, 0.0, 0.6), (x, y), facing, kh + 2.2)
@@ -280,7 +288,7 @@ def street_layout(p, rng: np.random.Generator) -> StreetLayout:
     # walls, street trees, lamps, furniture and road works (builders/street/dressing.py)
     from .dressing import dress
 
-    dressing = dress(p, R, inner, outer, kh, c1, rng)
+    dressing = dress(p, R, inner, outer, kh, c1, rng, clear)
     for mesh, front in zip(dressing.buildings, dressing.fronts, strict=True):
         add(f"street_building_{len(parts):03d}", "building", draw_reflectivity(rng, BUILDING), mesh)
         parts[-1] = dataclasses.replace(parts[-1], front=front)
@@ -320,6 +328,7 @@ class Placement:
     wanted: dict = field(default_factory=dict)
     out_of_view: dict = field(default_factory=dict)
     collisions: int = 0
+    near_sensor: int = 0
     platoons: int = 0
 
 
@@ -328,12 +337,13 @@ def _draw_size(kind: str, rng) -> np.ndarray:
     return np.array(NOMINAL_SIZE[kind]) * (1.0 + rng.uniform(-spread, spread, 3))
 
 
-def place_users(p, layout: StreetLayout, rng: np.random.Generator, views=(), tries: int = 40, reserved=()) -> Placement:
+def place_users(p, layout: StreetLayout, rng: np.random.Generator, views=(), tries: int = 40, reserved=(), clear: SensorPoses = NO_POSES) -> Placement:
     """Road users of one frame for :class:`~bpy_pipeline.builders.street.StreetScene` ``p`` on ``layout``.
 
     views : the sensors' :class:`FieldOfView` s, used when ``p.fov_aware`` (otherwise ignored)
     Each user gets up to ``tries`` candidate positions; the first that is free (and in view) is kept.
     reserved : rectangles ``(centre (2,), half (2,), yaw)`` kept free besides the layout's obstacles (the ego car)
+    clear : the run's sensor poses: a user whose box comes within their radius is refused (``near_sensor``)
     """
     from ...geometry.placement import sample, sample_count
 
@@ -362,6 +372,9 @@ def place_users(p, layout: StreetLayout, rng: np.random.Generator, views=(), tri
     def accept(user: RoadUser) -> bool:
         if not free(user.centre, user.half, user.yaw):
             out.collisions += 1
+            return False
+        if not clear.clear_of_box(user.centre, user.half, user.yaw, user.z, user.z + user.size[2]):
+            out.near_sensor += 1
             return False
         if in_view_fraction(views, user.centre, user.half, user.yaw, user.size[2], user.z) < p.min_in_view:
             out.out_of_view[user.kind] = out.out_of_view.get(user.kind, 0) + 1
@@ -406,7 +419,8 @@ def place_users(p, layout: StreetLayout, rng: np.random.Generator, views=(), tri
         for _ in range(tries):
             lane = layout.lanes[i := parking[int(rng.integers(len(parking)))]]
             s = float(rng.uniform(size[0] / 2, lane.length - size[0] / 2))
-            if accept(RoadUser(kind, lane.at(s, lateral=float(rng.uniform(-0.1, 0.1))), lane.heading, size, MARKING_THICKNESS, f"parking:{i}")):
+            play = min(0.1, max(lane.width - size[1], 0.0) / 2)  # off the strip's middle, the footprint inside the strip
+            if accept(RoadUser(kind, lane.at(s, lateral=float(rng.uniform(-play, play))), lane.heading, size, MARKING_THICKNESS, f"parking:{i}")):
                 break
     # cyclists and motorcyclists at the right edge of the rightmost drive lanes
     rightmost = [i for i in drive if abs(abs(_lane_offset(layout.lanes[i])) - (p.lanes_per_direction - 0.5) * p.lane_width) < 1e-6]

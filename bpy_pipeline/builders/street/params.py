@@ -167,7 +167,7 @@ def build(params: StreetScene, context: BuildContext) -> BuildResult:
     """The static intersection once per run, then this frame's road users."""
     from .scene import Intersection
 
-    return context.kept("street", params, lambda: Intersection(params)).populate(context.rng, context.view)
+    return context.kept("street", (params, context.sensor_poses), lambda: Intersection(params, context.sensor_poses)).populate(context.rng, context.view)
 
 
 # The sparse-camera thesis: three flash cameras on a 2 m post at a corner of the intersection,

@@ -41,9 +41,10 @@ SWEPT = {"street_road": "road", "street_kerbs": "kerbs", "street_sidewalks": "si
 class Intersection:
     """The built intersection; :meth:`populate` places one frame's road users."""
 
-    def __init__(self, params):
+    def __init__(self, params, sensor_poses=street.NO_POSES):
         self.params = params
-        self.layout = street.street_layout(params, np.random.default_rng(params.layout_seed))
+        self.sensor_poses = sensor_poses  # every sensor pose of the run: the layout and the road users keep clear of them
+        self.layout = street.street_layout(params, np.random.default_rng(params.layout_seed), sensor_poses)
         self.collection = scene_collection()
         prototypes = prototypes_collection(self.collection)
         self.static = [tag(self._static_object(part, prototypes), part.class_name, part.material, part.reflectivity, part.instance) for part in self.layout.parts]
@@ -108,7 +109,7 @@ class Intersection:
             for v in views:
                 yaw = float(np.arctan2(v.pose[1, 0], v.pose[0, 0]))
                 reserved.append((v.pose[:2, 3].copy(), np.array(street.EGO_HALF), yaw))
-        placement = street.place_users(self.params, self.layout, rng, views, reserved=reserved)
+        placement = street.place_users(self.params, self.layout, rng, views, reserved=reserved, clear=self.sensor_poses)
         headings, parts = {}, []
         for k, user in enumerate(placement.users):
             instance = USER_INSTANCE + k
@@ -126,6 +127,7 @@ class Intersection:
             "wanted": placement.wanted,
             "out_of_view": placement.out_of_view,
             "collisions_refused": placement.collisions,
+            "near_sensor_refused": placement.near_sensor,
             "platooning": placement.platoons,
             "fov_aware": bool(views) and bool(self.params.fov_aware),
             "placed": [
