@@ -27,7 +27,9 @@ import bpy  # noqa: E402
 from bpy_pipeline.config import load_config  # noqa: E402
 from bpy_pipeline.frame import Frame  # noqa: E402
 from bpy_pipeline.lidar.raycast import CasterCache  # noqa: E402
-from bpy_pipeline.pipeline import STAGES, Run, build_stage, frame_rng  # noqa: E402
+from bpy_pipeline.frame import Run, frame_rng  # noqa: E402
+from bpy_pipeline.plan import plan  # noqa: E402
+from bpy_pipeline.stages.scene import build_stage  # noqa: E402
 
 TIMED = ("scan", "boxes")
 
@@ -37,13 +39,13 @@ def remake(run: Run, index: int, scene, cache: CasterCache) -> Frame:
     kept, run.casters = run.casters, cache
     try:
         frame = Frame(index, run.config, frame_rng(run.config.seed, index), scene=scene)
-        for stage, timing in STAGES:
-            if stage is build_stage:
+        for stage in plan(run.config):
+            if stage.name == "build":
                 continue
             start = time.perf_counter()
             stage(frame, run)
-            if timing is not None:  # None: the stage timed its own parts
-                frame.timings[timing] = frame.timings.get(timing, 0.0) + time.perf_counter() - start
+            if stage.timing is not None:  # None: the stage timed its own parts
+                frame.timings[stage.timing] = frame.timings.get(stage.timing, 0.0) + time.perf_counter() - start
     finally:
         run.casters = kept
     return frame

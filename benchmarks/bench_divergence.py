@@ -49,7 +49,7 @@ from bpy_pipeline.lidar.divergence import Divergence, scan_footprint  # noqa: E4
 from bpy_pipeline.lidar.raycast import RayCaster  # noqa: E402
 from bpy_pipeline.lidar.scanner import scan  # noqa: E402
 from bpy_pipeline.lidar.sensors import Pattern, azimuth_step, azimuths, elevation_step, elevations, resolve_sensor, sensor_pattern  # noqa: E402
-from bpy_pipeline.pipeline import frame_rng  # noqa: E402
+from bpy_pipeline.frame import frame_rng  # noqa: E402
 from bpy_pipeline.scenes import build_scene  # noqa: E402
 
 DIAMETER = 0.012  # m, a contact wire

@@ -461,7 +461,7 @@ def reading_fit() -> dict:
 def reading(small: bool, out) -> None:
     """The reading model (``effects.intensity.reading``) on the insertion: its parameters from :func:`reading_fit` (000008),
     a grid of paints and cabins scored on 000008 with the glass model, plates and lamps; the best (cars within 0.7-1.4x,
-    then overlap) and the best of last round's receivers held out on 004747 unchanged. Into materials.json's ``reading``."""
+    then overlap) and the best earlier receivers held out on 004747 unchanged. Into materials.json's ``reading``."""
     fitted = reading_fit()
     print(fitted, flush=True)
     fit, held = insertions()
@@ -469,8 +469,8 @@ def reading(small: bool, out) -> None:
     receiver = receiver_of(fitted)
     glass = lambda cabin: {"car_glass": CarGlass(enabled=True, windshield=0.6, tinted=0.7, interior=cabin), "car_fittings": True}  # noqa: E731
     grid = {"diffuse, clear glass, plates and lamps (default)": ({}, {"car_glass": CarGlass(enabled=False), "car_fittings": True}),
-            "glass model, glossy 0.1 / 0.6 / 6 deg, 6 a - 0.3 (last round's best counts)": (glossy(0.1, 0.6, 6.0, 6.0, 0.3), glass(0.15)),
-            "glass model, glossy 0.06 / 0.3 / 10 deg, 4 a - 0.15 (last round's best overlap)": (glossy(0.06, 0.3, 10.0, 4.0, 0.15), glass(0.15))}
+            "glass model, glossy 0.1 / 0.6 / 6 deg, 6 a - 0.3 (the earlier best counts)": (glossy(0.1, 0.6, 6.0, 6.0, 0.3), glass(0.15)),
+            "glass model, glossy 0.06 / 0.3 / 10 deg, 4 a - 0.15 (the earlier best overlap)": (glossy(0.06, 0.3, 10.0, 4.0, 0.15), glass(0.15))}
     paints = {"diffuse": {}, "dark 0.05": {"materials": {"classes": {"car": "dark_paint"}, "dark_paint": {"reflectivity": 0.05}}},
               "dark 0.1": {"materials": {"classes": {"car": "dark_paint"}, "dark_paint": {"reflectivity": 0.1}}}}
     for d, s_, lobe in [(0.06, 0.3, 10.0)] if small else [(0.03, 0.3, 10.0), (0.06, 0.3, 10.0), (0.1, 0.3, 10.0), (0.06, 0.6, 6.0), (0.1, 0.6, 6.0)]:

@@ -37,7 +37,8 @@ from bpy_pipeline.config import load_config  # noqa: E402
 from bpy_pipeline.export import export_scene  # noqa: E402
 from bpy_pipeline.labels import load_class_table  # noqa: E402
 from bpy_pipeline.lidar.mirror_sensor import MirrorFrame  # noqa: E402
-from bpy_pipeline.pipeline import frame_rng, scan_buffers  # noqa: E402
+from bpy_pipeline.frame import frame_rng  # noqa: E402
+from bpy_pipeline.stages.scan import scan_buffers  # noqa: E402
 from bpy_pipeline.scenes import build_scene  # noqa: E402
 
 HEIGHT = 6.0  # m, sensor above the floor

@@ -48,7 +48,7 @@ def run(overrides: list[str], out: Path) -> tuple[dict, float]:
     import bpy
 
     from bpy_pipeline.config import load_config
-    from bpy_pipeline.pipeline import run as run_pipeline
+    from bpy_pipeline.plan import run as run_pipeline
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     config = load_config(None, ["output.preview=false", "output.frame=world", *overrides])

@@ -44,7 +44,8 @@ from bpy_pipeline.lidar.points import BEAM_DTYPE, POINT_DTYPE  # noqa: E402
 from bpy_pipeline.lidar.raycast import CasterCache, RayCaster, default_threads  # noqa: E402
 from bpy_pipeline.lidar.scanner import scan  # noqa: E402
 from bpy_pipeline.lidar.sensors import resolve_sensor, sensor_pattern  # noqa: E402
-from bpy_pipeline.pipeline import frame_rng, sensor_pose  # noqa: E402
+from bpy_pipeline.frame import frame_rng  # noqa: E402
+from bpy_pipeline.stages.view import sensor_pose  # noqa: E402
 from bpy_pipeline.scenes import build_scene  # noqa: E402
 
 REPEAT = 7

@@ -114,7 +114,8 @@ def export(repeats: int) -> list:
     from bpy_pipeline.config import load_config
     from bpy_pipeline.export import export_scene
     from bpy_pipeline.labels import load_class_table
-    from bpy_pipeline.pipeline import build_frame_scene, frame_rng
+    from bpy_pipeline.frame import frame_rng
+    from bpy_pipeline.stages.scene import build_frame_scene
 
     rows, table = [], load_class_table()
     for builder in ("parking", "street", "railway", "industrial_hall"):

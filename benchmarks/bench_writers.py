@@ -123,7 +123,7 @@ def bench_preview(n: int) -> list[dict]:
     def rgb(size, level):
         return encode_png(render_preview(pts, lut, size, names=table.names), level)
 
-    def indexed(size, level):  # what write_preview writes (round fourteen): palette indices, an indexed PNG
+    def indexed(size, level):  # what write_preview writes: palette indices, an indexed PNG
         index, palette = render_indexed(pts, lut, size, names=table.names)
         return encode_png_indexed(index[..., 0], palette, level)
 

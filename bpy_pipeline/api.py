@@ -54,7 +54,7 @@ def run(config: Config, out: str | Path, frames: Iterable[int] | None = None, mo
         import bpy
     except ImportError:
         raise InputError("bpy: bpy_pipeline.run needs Blender's Python module (pip install 'bpy==4.5.*'); bpy_pipeline.scan needs none") from None
-    from .pipeline import run as run_pipeline
+    from .plan import run as run_pipeline
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     return run_pipeline(config, out, log=log, frames=frames, mode=mode)
@@ -110,7 +110,8 @@ def scan(meshes: SceneBuffers | Mapping, sensor: str | Mapping = "vlp16", pose: 
     """
     from .frame import Frame
     from .geometry.checks import check_pose
-    from .pipeline import Run, effects_stage, frame_rng, scan_stage
+    from .frame import Run, frame_rng
+    from .stages.scan import effects_stage, scan_stage
 
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise InputError(f"seed: expected an integer >= 0, got {seed!r}")
@@ -124,7 +125,7 @@ def scan(meshes: SceneBuffers | Mapping, sensor: str | Mapping = "vlp16", pose: 
     section = {"preset": sensor} if isinstance(sensor, str) else dict(sensor)
     config = config_from_dict({"seed": seed, "sensor": section, **({} if effects is None else {"effects": dict(effects)}), "output": {"formats": ["ply"]}})
     out = Frame(frame, config, frame_rng(seed, frame), buffers=scene_buffers(meshes))
-    out.pose = out.pose_at = pose
+    out.place(pose)
     run = Run(config, build=False)
     scan_stage(out, run)
     effects_stage(out, run)

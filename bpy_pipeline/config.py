@@ -46,7 +46,6 @@ DEFAULT_SENSOR = {"preset": "railway_tls", "sampling_factor": 0.25}
 # ----------------------------------------------------------------------------- scene
 # builder name -> its parameters dataclass (the panel's list); the registry itself is builders.BUILDERS
 BUILDER_PARAMS = {name: entry.params for name, entry in BUILDER_REGISTRY.items()}
-BUILDERS = BUILDER_PARAMS  # the old name (it collided with the registry, builders.BUILDERS); kept importable for this round
 
 
 @dataclass(frozen=True)

@@ -77,9 +77,9 @@ def sha256_file(path: Path) -> str:
 
 # Writers' ``beside`` parts go on threads only with a core to spare: one process on every core (config.threads 0 or
 # above 1), where 80 parking frames ran at 0.97 of the inline wall time with the preview's thread (0.86-1.00, 5
-# alternating pairs; docs/performance.md, round seven). A worker of --workers runs on its share of the cores, often
+# alternating pairs; docs/performance.md). A worker of --workers runs on its share of the cores, often
 # one, where a thread only adds GIL hand-overs. The KITTI layout's labels and projections stay on the caller's
-# thread: Python-heavy, they held the GIL against the other writes (round seven); its image goes beside.
+# thread: Python-heavy, they held the GIL against the other writes; its image goes beside.
 
 
 def write_frame_files(frame, staging: Path, names: list[str]) -> list[Path]:

@@ -119,11 +119,6 @@ class Frame:
         if self.pose_at is None:
             self.pose_at = StaticPose(self.pose)
 
-    def __setattr__(self, name, value):
-        if name == "pose_at" and value is not None and not callable(value):  # a (4, 4) matrix, as callers before the plan set it
-            value = StaticPose(np.asarray(value, np.float64).reshape(4, 4))
-        super().__setattr__(name, value)
-
     def place(self, pose: np.ndarray, pose_at: Callable[[np.ndarray], np.ndarray] | None = None, trajectory: Trajectory | None = None) -> None:
         """Set the sensor's pose at the frame's start (4, 4), and ``pose_at`` (a moving sensor's; a static one's otherwise)."""
         self.pose = np.asarray(pose, np.float64).reshape(4, 4)

@@ -65,7 +65,7 @@ def worker_command(out: str, frames: list[int], threads: int) -> list[str]:
 def run_parallel(config: Config, out: str, frames: list[int], mode: str, workers: int = 1, ray_address: str | None = None, log: Callable[[str], None] = print) -> int:
     """Make ``frames`` of ``config`` into ``out`` with ``workers`` local processes or on the Ray cluster at
     ``ray_address``; returns the exit code (0 when every frame is committed)."""
-    from .pipeline import frames_per_scene
+    from .stages.view import frames_per_scene
 
     with Dataset.open(out, config, mode, log=log) as dataset:
         todo = [f for f in frames if not dataset.has(f)]
@@ -99,7 +99,7 @@ def _frames_task(out: str, frames: list[int], threads: int) -> int:
 
     from .config import config_from_dict
     from .io import read_manifest
-    from .pipeline import run_frames
+    from .plan import run_frames
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     config = config_from_dict(read_manifest(out)["config"])

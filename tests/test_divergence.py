@@ -13,7 +13,8 @@ from bpy_pipeline.lidar.divergence import Divergence, expand, footprint_offsets,
 from bpy_pipeline.lidar.raycast import RayCaster
 from bpy_pipeline.lidar.scanner import scan
 from bpy_pipeline.lidar.sensors import Pattern, spherical_directions
-from bpy_pipeline.pipeline import frame_rng, scan_buffers
+from bpy_pipeline.frame import frame_rng
+from bpy_pipeline.stages.scan import scan_buffers
 
 
 def fan(azimuth_deg, elevation_deg) -> Pattern:

@@ -95,7 +95,8 @@ def test_a_cars_plate_is_seen_far_beyond_its_glossy_body():
     from bpy_pipeline.buffers import SceneBuffers
     from bpy_pipeline.config import config_from_dict
     from bpy_pipeline.geometry.objects import FITTINGS, STYLES, car_fittings, car_parts
-    from bpy_pipeline.pipeline import frame_rng, scan_buffers
+    from bpy_pipeline.frame import frame_rng
+    from bpy_pipeline.stages.scan import scan_buffers
 
     parts = {**{k: car_parts(STYLES[0])[k] for k in ("body",)}, **car_fittings(STYLES[0])}
     models = {"body": ("glossy_paint", 0.5), **FITTINGS}

@@ -113,7 +113,7 @@ def clashes(overrides: list[str]) -> list[tuple[str, str]]:
 
     from bpy_pipeline.export import export_scene
     from bpy_pipeline.labels import load_class_table
-    from bpy_pipeline.pipeline import frame_rng
+    from bpy_pipeline.frame import frame_rng
     from bpy_pipeline.scenes import build_scene
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
@@ -177,7 +177,7 @@ def test_overlaps_and_steady_arms_stay_clear(layout, tracks):
 def test_registration_arms_are_about_a_metre_long():
     import bpy
 
-    from bpy_pipeline.pipeline import frame_rng
+    from bpy_pipeline.frame import frame_rng
     from bpy_pipeline.scenes import build_scene
 
     for layout, tracks in (("single", 2), ("both_sides", 4), ("gantry", 3)):

@@ -31,7 +31,7 @@ def test_a_short_mobile_run_keeps_every_mast_in_place_across_frames(tmp_path):
     import bpy
 
     from bpy_pipeline.io import read_ply
-    from bpy_pipeline.pipeline import run
+    from bpy_pipeline.plan import run
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     # the worked config, 5 frames (0.5 s, 10 m), with its noise, drop and divergence; 512 columns keep it quick
@@ -51,7 +51,7 @@ def test_a_short_mobile_run_keeps_every_mast_in_place_across_frames(tmp_path):
                 seen.setdefault(row["name"], []).append(xyz)
     # the rolling shutter: each point lies at its range from where the optical centre was at its own time
     from bpy_pipeline.lidar.sensors import frame_time
-    from bpy_pipeline.pipeline import scene_trajectory
+    from bpy_pipeline.stages.view import scene_trajectory
 
     trajectory = scene_trajectory(config)
     for frame in manifest["frames"]:

@@ -326,7 +326,8 @@ def test_a_blender_object_with_a_nan_vertex_is_an_input_error_naming_it(tmp_path
     from bpy_pipeline.config import config_from_dict
     from bpy_pipeline.export import export_scene
     from bpy_pipeline.labels import load_class_table
-    from bpy_pipeline.pipeline import frame_rng, scan_buffers
+    from bpy_pipeline.frame import frame_rng
+    from bpy_pipeline.stages.scan import scan_buffers
     from bpy_pipeline.scenes.objects import mesh_object, scene_collection
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
@@ -362,7 +363,8 @@ def test_a_blender_scene_10_km_from_the_origin_keeps_a_tenth_of_a_millimetre():
     from bpy_pipeline.config import config_from_dict
     from bpy_pipeline.export import export_scene
     from bpy_pipeline.labels import load_class_table
-    from bpy_pipeline.pipeline import frame_rng, scan_buffers
+    from bpy_pipeline.frame import frame_rng
+    from bpy_pipeline.stages.scan import scan_buffers
     from bpy_pipeline.scenes import build_scene
 
     offset = np.array([6000.0, -8000.0, 0.0])

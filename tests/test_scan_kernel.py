@@ -148,7 +148,7 @@ def test_grazing_rays_and_a_sensor_in_the_surface():
 @pytest.mark.parametrize("ideal", [False, True])
 def test_glass_and_mirrors_continue_in_the_numpy_path_with_the_same_bytes(ideal):
     """The crate is glass (some beams reflect, drawn from the generator), the wall a mirror: those rays go on in trace_beams."""
-    from bpy_pipeline.lidar.scanner import Surfaces
+    from bpy_pipeline.lidar.scanner import MirrorGlassRules
 
     buffers = room()
     buffers.objects.material[2] = MATERIAL_ID["glass"]
@@ -156,7 +156,7 @@ def test_glass_and_mirrors_continue_in_the_numpy_path_with_the_same_bytes(ideal)
     pose = pose_matrix([0.3, 0.2, 0.4], [3.0, -2.0, 20.0])
     pattern = vertex_pattern(buffers, pose[:3, 3])
     pattern = Pattern(pattern.directions @ pose[:3, :3], pattern.ring, pattern.time)
-    surfaces = Surfaces(mirror_return_deg=2.0, glass_return_deg=5.0, glass_reflect=0.3, glass_passes=4)
+    surfaces = MirrorGlassRules(mirror_return_deg=2.0, glass_return_deg=5.0, glass_reflect=0.3, glass_passes=4)
 
     def run(kernel):
         caster = RayCaster(buffers, frame=pose, threads=2, chunk=700, kernel=kernel)

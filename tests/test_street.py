@@ -154,7 +154,7 @@ BUSY_RAW = {k: {"kind": d.kind, "mean": d.mean, "std": d.std, "min": d.min, "max
 def test_exported_street_has_no_intersections_and_users_stand_on_their_ground(bpy_scene):
     from bpy_pipeline.export import export_scene
     from bpy_pipeline.labels import load_class_table
-    from bpy_pipeline.pipeline import build_frame_scene
+    from bpy_pipeline.stages.scene import build_frame_scene
 
     config = _config(seed=2)
     result = build_frame_scene(config, 0)
@@ -188,7 +188,7 @@ def test_exported_street_has_no_intersections_and_users_stand_on_their_ground(bp
 
 @pytest.mark.bpy
 def test_same_seed_same_bytes_whatever_frame_a_run_starts_at(bpy_scene, tmp_path):
-    from bpy_pipeline.pipeline import run
+    from bpy_pipeline.plan import run
 
     config = _config(frames=2, seed=7)
     run(config, tmp_path / "a", log=lambda s: None)

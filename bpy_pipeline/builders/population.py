@@ -292,13 +292,4 @@ def count_of(params, rng: np.random.Generator) -> int:
     return params.count if isinstance(params.count, int) else sample_count(params.count, rng)
 
 
-def __getattr__(name: str):
-    """``build_populated`` is the build stage's now (:mod:`bpy_pipeline.stages.scene`); the old name stays importable this round."""
-    if name == "build_populated":
-        from ..stages.scene import build_populated
-
-        return build_populated
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
 __all__ = ["KINDS", "Population", "PopulationKind", "population_from_dict", "population_to_dict"]

@@ -25,7 +25,7 @@ import numpy as np
 from ..errors import InputError
 from ..lidar.sensors import FLASH_PATTERNS, check_flash
 from .atomic import atomic_write
-from .boxes import openpcdet_lines
+from .openpcdet import label_lines as openpcdet_lines
 from .layout import frame_stem
 from .ply import ply_header, write_ply
 from .preview import BACKGROUND, encode_png

@@ -63,9 +63,6 @@ class MirrorGlassRules:
     glass_transmission: object = None
 
 
-Surfaces = MirrorGlassRules  # the old name (it collided with scenes.population.Surfaces); kept importable for this round
-
-
 @dataclass
 class Beams:
     """The beams that returned (k of n), in firing order.
@@ -96,7 +93,6 @@ class Beams:
     def select(self, keep: np.ndarray) -> "Beams":
         """The beams ``keep`` (a boolean mask or indices) selects."""
         return Beams(*(getattr(self, f)[keep] for f in ARRAY_FIELDS), single=self.single)
-
 
 
 ARRAY_FIELDS = tuple(f for f in Beams.__dataclass_fields__ if f != "single")

@@ -5,7 +5,7 @@ only waits, the system wakes the pool's threads and may place them both on one c
 milliseconds a part takes (Linux tends to put a woken thread near the thread that woke it, and the caller
 sleeps right after): the parts then run one after the other on one core while the other core idles.
 On this project's two-core machine that happened in about half the frames of a run (the os1_128 box's
-scan stage read 15 ms in those against 8 ms in the others; docs/performance.md, round twenty). Here the
+scan stage read 15 ms in those against 8 ms in the others; docs/performance.md). Here the
 caller works too: it takes parts in turn with ``threads - 1`` of the pool's threads, so it keeps its
 core and the one woken thread takes the other.
 

@@ -138,9 +138,6 @@ class InsertedHits:
     bounces: np.ndarray
 
 
-Hits = InsertedHits  # the old name (it collided with the ray caster's lidar.raycast.Hits); kept importable for this round
-
-
 def bounding_spheres(buffers: SceneBuffers) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(instance (k,), centre (k, 3), radius (k,))``: a sphere around each instance's triangles (slightly grown)."""
     instances = np.unique(buffers.objects.instance[np.unique(buffers.triangle_object)]) if len(buffers.triangles) else np.zeros(0, np.uint32)

@@ -11,7 +11,7 @@ boxes). The real-scan frame plan runs them as its stages (:mod:`bpy_pipeline.sta
 Labels: real returns get ``background_class`` or, from a SemanticKITTI file with
 ``keep_labels``, their class mapped by name to the project's table (:data:`SEMANTICKITTI_NAMES`;
 unknown ones the background) and their instance; inserted returns their object's class and an
-instance above every real one. Boxes (:data:`~bpy_pipeline.io.boxes.BOX_DTYPE`): each inserted
+instance above every real one. Boxes (:data:`~bpy_pipeline.geometry.boxes.BOX_DTYPE`): each inserted
 object with truncation (the share of its surface outside the firings' azimuth span) and
 occlusion (visible / unoccluded firings: those whose return is the object, against those that
 hit it when it is alone); each of ``real_boxes`` with its occlusion updated from the share of its

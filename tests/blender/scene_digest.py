@@ -21,7 +21,7 @@ import numpy as np  # noqa: E402
 from bpy_pipeline import config as cfg  # noqa: E402
 from bpy_pipeline.export import export_scene  # noqa: E402
 from bpy_pipeline.labels import load_class_table  # noqa: E402
-from bpy_pipeline.pipeline import build_frame_scene  # noqa: E402
+from bpy_pipeline.stages.scene import build_frame_scene  # noqa: E402
 
 args = sys.argv[sys.argv.index("--") + 1 :]
 out, sets = Path(args[0]), [a for a in args[1:] if a != "--set"]

@@ -4,4 +4,3 @@ The package's names are its ``params``' (``bpy_pipeline.builders.real_scan`` was
 """
 
 from .params import *  # noqa: F401,F403
-from .params import __getattr__  # noqa: F401  (kept_scan, real_scan_stage: names that moved to stages.mixing, importable here this round)
