@@ -41,7 +41,7 @@ import bpy
 import numpy as np
 
 from .bpy_pipeline.errors import InputError
-from .bpy_pipeline.schema import key_of, to_plain
+from .bpy_pipeline.schema import key_of
 
 UNITS = {"hz": "Hz", "s": "s"}  # label suffixes; degrees and metres are shown by Blender's own units
 # The last word of a field name that makes it a length in metres (``contact_wire_height``, ``max_range``,

@@ -22,14 +22,14 @@ import time
 import numpy as np
 from common import arguments, report
 
-import bpy  # noqa: E402
+import bpy
 
-from bpy_pipeline.config import load_config  # noqa: E402
-from bpy_pipeline.frame import Frame  # noqa: E402
-from bpy_pipeline.lidar.raycast import CasterCache  # noqa: E402
-from bpy_pipeline.frame import Run, frame_rng  # noqa: E402
-from bpy_pipeline.plan import plan  # noqa: E402
-from bpy_pipeline.stages.scene import build_stage  # noqa: E402
+from bpy_pipeline.config import load_config
+from bpy_pipeline.frame import Frame
+from bpy_pipeline.lidar.raycast import CasterCache
+from bpy_pipeline.frame import Run, frame_rng
+from bpy_pipeline.plan import plan
+from bpy_pipeline.stages.scene import build_stage
 
 TIMED = ("scan", "boxes")
 

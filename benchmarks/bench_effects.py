@@ -22,17 +22,17 @@ from pathlib import Path
 import numpy as np
 from common import ROOT, arguments, report
 
-import bpy  # noqa: E402,F401
+import bpy  # noqa: F401
 
-from bpy_pipeline.frame import frame_rng  # noqa: E402
-from bpy_pipeline.stages.scene import build_frame_scene  # noqa: E402
-from bpy_pipeline.stages.view import sensor_pose  # noqa: E402
-from bpy_pipeline.stages import scan as scan_stages  # noqa: E402  (the effects stage's own apply_effects is the one patched)
-from bpy_pipeline.config import effects_from_dict, load_config  # noqa: E402
-from bpy_pipeline.export import export_scene  # noqa: E402
-from bpy_pipeline.labels import load_class_table  # noqa: E402
-from bpy_pipeline.lidar import fitting  # noqa: E402
-from bpy_pipeline.lidar.effects import write_model_file  # noqa: E402
+from bpy_pipeline.frame import frame_rng
+from bpy_pipeline.stages.scene import build_frame_scene
+from bpy_pipeline.stages.view import sensor_pose
+from bpy_pipeline.stages import scan as scan_stages
+from bpy_pipeline.config import effects_from_dict, load_config
+from bpy_pipeline.export import export_scene
+from bpy_pipeline.labels import load_class_table
+from bpy_pipeline.lidar import fitting
+from bpy_pipeline.lidar.effects import write_model_file
 
 SCAN = ROOT.parent / "shared" / "real_scans" / "nuscenes_hdl32e_sweep.bin"
 

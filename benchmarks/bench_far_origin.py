@@ -23,11 +23,11 @@ Run: python benchmarks/bench_far_origin.py [--small]
 import numpy as np
 from common import arguments, report
 
-from bpy_pipeline.buffers import SceneBuffers  # noqa: E402
-from bpy_pipeline.geometry import primitives  # noqa: E402
-from bpy_pipeline.geometry.transforms import pose_matrix  # noqa: E402
-from bpy_pipeline.lidar.raycast import FAR, RayCaster  # noqa: E402
-from bpy_pipeline.lidar.sensors import resolve_sensor, sensor_pattern  # noqa: E402
+from bpy_pipeline.buffers import SceneBuffers
+from bpy_pipeline.geometry import primitives
+from bpy_pipeline.geometry.transforms import pose_matrix
+from bpy_pipeline.lidar.raycast import FAR, RayCaster
+from bpy_pipeline.lidar.sensors import resolve_sensor, sensor_pattern
 
 # The scene in its own frame: name -> (low corner, high corner), metres; a zero extent is a plane.
 BOXES = {

@@ -32,9 +32,9 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from common import arguments, report  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+from common import arguments, report
 
 BINS = [(0, 15), (15, 30), (30, 60), (60, 120)]
 MODELS = {

@@ -41,7 +41,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-from common import RESULTS, ROOT, arguments, best_of, report
+from common import ROOT, arguments, best_of, report
 
 import bpy_pipeline
 from bpy_pipeline.config import effects_from_dict

@@ -28,25 +28,25 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 from common import arguments, best_of, report
 
-import bpy  # noqa: E402
-from embreex import rtcore_scene  # noqa: E402
-from embreex.mesh_construction import TriangleMesh  # noqa: E402
+import bpy
+from embreex import rtcore_scene
+from embreex.mesh_construction import TriangleMesh
 
-from bpy_pipeline.buffers import SceneBuffers  # noqa: E402
-from bpy_pipeline.config import load_config  # noqa: E402
-from bpy_pipeline.export import export_scene  # noqa: E402
-from bpy_pipeline.geometry import primitives  # noqa: E402
-from bpy_pipeline.geometry.transforms import pose_matrix  # noqa: E402
-from bpy_pipeline.labels import load_class_table  # noqa: E402
-from bpy_pipeline.lidar import kernels  # noqa: E402
-from bpy_pipeline.lidar.embree import attach_triangles  # noqa: E402
-from bpy_pipeline.lidar.points import BEAM_DTYPE, POINT_DTYPE  # noqa: E402
-from bpy_pipeline.lidar.raycast import CasterCache, RayCaster, default_threads  # noqa: E402
-from bpy_pipeline.lidar.scanner import scan  # noqa: E402
-from bpy_pipeline.lidar.sensors import resolve_sensor, sensor_pattern  # noqa: E402
-from bpy_pipeline.frame import frame_rng  # noqa: E402
-from bpy_pipeline.stages.view import sensor_pose  # noqa: E402
-from bpy_pipeline.scenes import build_scene  # noqa: E402
+from bpy_pipeline.buffers import SceneBuffers
+from bpy_pipeline.config import load_config
+from bpy_pipeline.export import export_scene
+from bpy_pipeline.geometry import primitives
+from bpy_pipeline.geometry.transforms import pose_matrix
+from bpy_pipeline.labels import load_class_table
+from bpy_pipeline.lidar import kernels
+from bpy_pipeline.lidar.embree import attach_triangles
+from bpy_pipeline.lidar.points import BEAM_DTYPE, POINT_DTYPE
+from bpy_pipeline.lidar.raycast import CasterCache, RayCaster, default_threads
+from bpy_pipeline.lidar.scanner import scan
+from bpy_pipeline.lidar.sensors import resolve_sensor, sensor_pattern
+from bpy_pipeline.frame import frame_rng
+from bpy_pipeline.stages.view import sensor_pose
+from bpy_pipeline.scenes import build_scene
 
 REPEAT = 7
 

@@ -30,10 +30,10 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from common import RESULTS, ROOT, best_of  # noqa: E402  (puts the checkout on the path)
+from common import RESULTS, ROOT, best_of
 
-import bpy_pipeline  # noqa: E402, F401  (before numpy: its numpy settings apply only before numpy loads)
-import numpy as np  # noqa: E402
+import bpy_pipeline  # noqa: F401  (before numpy: its numpy settings apply only before numpy loads)
+import numpy as np
 
 
 def best(fn, repeats: int) -> float:

@@ -27,7 +27,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from common import RESULTS, arguments, report
+from common import arguments, report
 
 THESIS = {"frames": 4599, "kept": 2816, "objects_per_frame": 1.9}
 BOX_CLASSES = ["car", "van", "truck", "bus", "person", "bicycle", "motorcycle", "rider"]

@@ -21,8 +21,8 @@ import tempfile
 
 from common import ROOT, arguments, report
 
-from bpy_pipeline.config import load_config  # noqa: E402
-from bpy_pipeline.lidar.sensors import ray_count  # noqa: E402
+from bpy_pipeline.config import load_config
+from bpy_pipeline.lidar.sensors import ray_count
 
 FORMATS = "[ply,semantickitti,las,npy]"
 CHILD = r"""

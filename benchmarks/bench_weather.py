@@ -14,8 +14,8 @@ import time
 import numpy as np
 from common import arguments, report
 
-from bpy_pipeline.api import scan  # noqa: E402
-from bpy_pipeline.labels import load_class_table  # noqa: E402
+from bpy_pipeline.api import scan
+from bpy_pipeline.labels import load_class_table
 
 TABLE = load_class_table()
 

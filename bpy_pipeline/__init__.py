@@ -27,8 +27,8 @@ _os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 # way (docs/performance.md).
 _os.environ.setdefault("NUMPY_MADVISE_HUGEPAGE", "0")
 
-from ._version import __version__  # noqa: E402,F401
-from .api import load_config, run, scan  # noqa: E402
-from .io import read_dataset, read_las, read_npy_folder, read_ply, read_semantickitti  # noqa: E402
+from ._version import __version__
+from .api import load_config, run, scan
+from .io import read_dataset, read_las, read_npy_folder, read_ply, read_semantickitti
 
 __all__ = ["load_config", "run", "scan", "read_dataset", "read_las", "read_npy_folder", "read_ply", "read_semantickitti", "__version__"]

@@ -237,8 +237,8 @@ def exit_process(code: int) -> NoReturn:
         sys.exit(code)
     # the first two steps of the interpreter's own exit (Py_FinalizeEx), in its order: thread pools told to
     # stop and every other thread waited for, then the atexit handlers
-    threading._shutdown()  # noqa: SLF001
-    atexit._run_exitfuncs()  # noqa: SLF001
+    threading._shutdown()
+    atexit._run_exitfuncs()
     for stream in (sys.stdout, sys.stderr):
         try:
             stream.flush()

@@ -31,7 +31,7 @@ from .lidar.sensors import SensorSpec, frame_time, mount_offset, resolve_sensor
 from .lidar.sensors import rings as sensor_rings
 from .lidar.materials import MaterialsConfig, check_materials
 from .lidar.weather import WeatherConfig, check_weather
-from .buffers import MATERIALS  # noqa: F401  (the panel's list)
+
 from .builders import BUILDERS as BUILDER_REGISTRY
 from .builders.population import population_from_dict, population_to_dict
 from .builders.railway.params import RailwayScene

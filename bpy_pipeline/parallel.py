@@ -129,7 +129,7 @@ def _run_on_ray(out: str, frames: list[int], address: str, per_scene: int, log: 
             try:
                 ray.get(done[0])
                 log(f"frames {r[0]}..{r[-1]} done on the cluster")
-            except Exception as err:  # noqa: BLE001 - a task that failed after its retries
+            except Exception as err:
                 failed.append(f"{r[0]}:{r[-1] + 1} ({type(err).__name__})")
     finally:
         ray.shutdown()

@@ -282,7 +282,7 @@ def finished_now(function: Callable, *args) -> Future:
     future: Future = Future()
     try:
         future.set_result(function(*args))
-    except BaseException as err:  # noqa: BLE001 - re-raised by future.result()
+    except BaseException as err:
         future.set_exception(err)
     return future
 

@@ -193,7 +193,7 @@ def test_a_wrongly_oriented_asset_is_named_in_one_line_and_its_declared_up_axis_
     cfg.write_text(yaml.safe_dump({"scene": {"builder": "blend", "path": str(hall), "population": population}, "sensor": {"preset": "vlp16", "position": [0, 0, 2.5]}}))
     run = subprocess.run([sys.executable, str(ROOT / "run.py"), "--config", str(cfg), "--out", str(out)], cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert run.returncode == 2
-    lines = [l for l in run.stderr.strip().splitlines() if l.strip()]
+    lines = [line for line in run.stderr.strip().splitlines() if line.strip()]
     assert len(lines) == 1 and "does not stand upright" in lines[0], run.stderr
     assert not list(out.glob("ply/*.ply"))
 

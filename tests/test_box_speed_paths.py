@@ -18,6 +18,7 @@
 """
 
 import numpy as np
+import pytest
 
 from bpy_pipeline.buffers import SceneBuffers
 from bpy_pipeline.geometry import primitives

@@ -1,6 +1,8 @@
 """3D box labels: fitting, occlusion levels of constructed cases, truncation, point thresholds, KITTI and OpenPCDet files."""
 
-import json
+
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -17,6 +19,8 @@ from bpy_pipeline.lidar.points import empty_points
 from bpy_pipeline.lidar.raycast import RayCaster
 from bpy_pipeline.lidar.scanner import scan
 from bpy_pipeline.lidar.sensors import iter_pattern, resolve_sensor
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))  # visibility_reference: the per-object cast
 
 SENSOR = resolve_sensor({"preset": "vlp16", "rotation_hz": 5.0}, "sensor")  # 0.1 deg columns
 POSE = pose_matrix([0.0, 0.0, 1.2], [0.0, 0.0, 0.0])
@@ -99,7 +103,8 @@ def test_occlusion_levels_of_constructed_cases():
 
 @pytest.mark.parametrize("kernel", ["numba", "numpy"])  # numba: the scene cast goes through the compiled scan
 def test_one_cast_for_all_objects_equals_a_caster_per_object(kernel, monkeypatch):
-    from bpy_pipeline.lidar.visibility import visibility, visibility_per_object
+    from bpy_pipeline.lidar.visibility import visibility
+    from visibility_reference import visibility_per_object
 
     if kernel == "numba":
         pytest.importorskip("numba")

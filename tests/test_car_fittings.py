@@ -5,7 +5,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from bpy_pipeline.builders.base import Distribution
+from bpy_pipeline.geometry.placement import Distribution
 from bpy_pipeline.builders.street import layout as street
 from bpy_pipeline.builders.street.params import StreetScene
 from bpy_pipeline.geometry.objects import FITTINGS

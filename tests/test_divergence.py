@@ -12,7 +12,8 @@ from bpy_pipeline.geometry import primitives
 from bpy_pipeline.lidar.divergence import Divergence, expand, footprint_offsets, reduce_returns, scan_footprint
 from bpy_pipeline.lidar.raycast import RayCaster
 from bpy_pipeline.lidar.scanner import scan
-from bpy_pipeline.lidar.sensors import Pattern, spherical_directions
+from bpy_pipeline.lidar.sensors import spherical_directions
+from bpy_pipeline.lidar.rays import Pattern
 from bpy_pipeline.frame import frame_rng
 from bpy_pipeline.stages.scan import scan_buffers
 

@@ -10,10 +10,9 @@ import pytest
 
 from bpy_pipeline.buffers import MATERIAL_ID, ObjectTable, SceneBuffers
 from bpy_pipeline.geometry import primitives
-from bpy_pipeline.geometry.transforms import euler_xyz_matrix
 from bpy_pipeline.lidar.raycast import RayCaster
 from bpy_pipeline.lidar.scanner import MirrorGlassRules, scan, trace_beams
-from bpy_pipeline.lidar.sensors import Pattern
+from bpy_pipeline.lidar.rays import Pattern
 
 WALL, MIRROR_CLASS, REFLECTION = 17, 20, 25
 

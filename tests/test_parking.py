@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bpy_pipeline.builders.base import Distribution
+from bpy_pipeline.geometry.placement import Distribution
 from bpy_pipeline.builders.parking.params import ParkingScene
 from bpy_pipeline.geometry.collision import rectangles_overlap
 from bpy_pipeline.geometry.indoor import parking_layout, parking_station

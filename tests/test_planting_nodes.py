@@ -88,7 +88,7 @@ def test_the_trees_keep_the_density_clearance_yards_and_sizes_they_are_given():
 
 
 def test_the_trees_are_labelled_trunk_and_vegetation_and_scanned():
-    import bpy
+    import bpy  # noqa: F401  (the test needs Blender's module loaded)
 
     from bpy_pipeline.export import export_scene
     from bpy_pipeline.io import read_ply

@@ -164,7 +164,7 @@ def test_overlaps_and_steady_arms_stay_clear(layout, tracks):
 
     found = clashes(overrides)
     names = {o.name for o in bpy.data.objects}
-    assert {f"span.t0.02.contact_wire", f"span.t0s1.02.contact_wire", "span.t0s1.03.contact_wire"} <= names
+    assert {"span.t0.02.contact_wire", "span.t0s1.02.contact_wire", "span.t0s1.03.contact_wire"} <= names
     assert any(".steady_arm." in n for n in names)
     if layout != "gantry":  # the ending run's raised end is roped to its anchor at support 3 (a gantry carries no anchors)
         end = np.array(bpy.data.objects["span.t0.02.contact_wire"].data.splines[0].points[-1].co[:3])

@@ -90,7 +90,7 @@ def test_toy_builder_and_writer_run(toys, bpy_scene, tmp_path):
 # ----------------------------------------------------------------------------- a toy ray pattern
 def halo_rays(spec):
     """``columns`` rays in a horizontal ring, ring 0, all at t = 0."""
-    from bpy_pipeline.lidar.sensors import Pattern
+    from bpy_pipeline.lidar.rays import Pattern
 
     def chunk(start, stop, frame):
         azimuth = 2 * np.pi * np.arange(start, stop) / spec.columns

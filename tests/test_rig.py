@@ -141,13 +141,10 @@ def _instance_of(folder, box) -> int:
 
 @pytest.mark.bpy
 def test_rig_sensors_draw_from_their_own_generators(bpy_scene):
-    from bpy_pipeline.export import export_scene
-    from bpy_pipeline.labels import load_class_table
     from bpy_pipeline.frame import Run
     from bpy_pipeline.plan import make_frame
     from bpy_pipeline.stages.rig import member_config
     from bpy_pipeline.stages.scan import scan_buffers
-    from bpy_pipeline.stages.scene import build_frame_scene
     from bpy_pipeline.rig import member_rng
 
     noisy = {"noise": {"sigma": 0.02}, "drop": {"model": "uniform", "probability": 0.2}}

@@ -1,4 +1,4 @@
-"""Where ray casting fails, and how it fails well (DESIGN.md, "Find where methods fail").
+"""Where ray casting fails, and how it fails well (degenerate input gets a correct fallback or a clear error).
 
 Rays aimed exactly at the shared edges and vertices of closed meshes, grazing rays, a sensor
 inside a closed mesh, zero rays, degenerate triangles, non-finite and huge coordinates, and a
@@ -18,7 +18,8 @@ from bpy_pipeline.geometry.transforms import pose_matrix
 from bpy_pipeline.lidar.points import BEAM_DTYPE, POINT_DTYPE
 from bpy_pipeline.lidar.raycast import RayCaster, closed_surface
 from bpy_pipeline.lidar.scanner import scan
-from bpy_pipeline.lidar.sensors import Pattern, resolve_sensor, sensor_pattern
+from bpy_pipeline.lidar.sensors import resolve_sensor, sensor_pattern
+from bpy_pipeline.lidar.rays import Pattern
 
 
 # ----------------------------------------------------------------------------- numpy scenes

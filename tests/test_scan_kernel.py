@@ -21,7 +21,8 @@ from bpy_pipeline.lidar import raycast, scanner
 from bpy_pipeline.lidar.kernels import numba_available
 from bpy_pipeline.lidar.raycast import CasterCache, RayCaster
 from bpy_pipeline.lidar.scanner import scan, scan_chunk
-from bpy_pipeline.lidar.sensors import Pattern, resolve_sensor, sensor_pattern
+from bpy_pipeline.lidar.sensors import resolve_sensor, sensor_pattern
+from bpy_pipeline.lidar.rays import Pattern
 
 needs_numba = pytest.mark.skipif(not numba_available(), reason="numba is not installed (the 'fast' extra): only the numpy path exists here")
 

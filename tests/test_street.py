@@ -7,12 +7,13 @@ import math
 import numpy as np
 import pytest
 
-from bpy_pipeline.builders.base import Distribution
+from bpy_pipeline.geometry.placement import Distribution
 from bpy_pipeline.builders.street.params import StreetScene
 from bpy_pipeline.errors import InputError
 from bpy_pipeline.geometry import primitives
 from bpy_pipeline.builders.street import layout as street
 from bpy_pipeline.geometry.collision import rectangles_overlap
+from bpy_pipeline.geometry.field_of_view import in_view_fraction
 from bpy_pipeline.geometry.transforms import pose_matrix
 from bpy_pipeline.lidar.sensors import resolve_sensor
 from bpy_pipeline.rig import field_of_view
@@ -101,9 +102,9 @@ def test_field_of_view_aware_placement_puts_users_where_the_camera_sees_them():
     params, layout, placement = _placed(seed=5, views=views)
     assert placement.users and sum(placement.out_of_view.values()) > 0
     for u in placement.users:
-        assert street.in_view_fraction(views, u.centre, u.half, u.yaw, u.size[2], u.z) >= params.min_in_view
+        assert in_view_fraction(views, u.centre, u.half, u.yaw, u.size[2], u.z) >= params.min_in_view
     _, _, blind = _placed(seed=5, views=views, fov_aware=False)
-    seen = [street.in_view_fraction(views, u.centre, u.half, u.yaw, u.size[2], u.z) >= params.min_in_view for u in blind.users]
+    seen = [in_view_fraction(views, u.centre, u.half, u.yaw, u.size[2], u.z) >= params.min_in_view for u in blind.users]
     assert not all(seen)  # without the rule, some users stand where no camera looks
 
 
@@ -114,10 +115,10 @@ def test_field_of_view_counts_azimuth_elevation_and_range():
 
 
 def test_meshes_that_cross_are_found_and_touching_ones_are_not():
-    a = street.box_mesh(0, 1, 0, 1, 0, 1)
-    assert street.meshes_intersect(a, street.box_mesh(0.5, 1.5, 0.2, 0.8, 0.2, 0.8))
-    assert not street.meshes_intersect(a, street.box_mesh(1, 2, 0, 1, 0, 1))  # sharing a face
-    assert not street.meshes_intersect(a, street.box_mesh(1.01, 2, 0, 1, 0, 1))
+    a = primitives.box_mesh(0, 1, 0, 1, 0, 1)
+    assert street.meshes_intersect(a, primitives.box_mesh(0.5, 1.5, 0.2, 0.8, 0.2, 0.8))
+    assert not street.meshes_intersect(a, primitives.box_mesh(1, 2, 0, 1, 0, 1))  # sharing a face
+    assert not street.meshes_intersect(a, primitives.box_mesh(1.01, 2, 0, 1, 0, 1))
     pole = primitives.translated(primitives.cylinder(0.1, 3.0, 8), (0.5, 0.5, 1.5))
     assert street.meshes_intersect(a, pole)
 

@@ -15,7 +15,6 @@ from typing import Any, Callable
 import numpy as np
 
 from ..errors import InputError
-from ..geometry.placement import Distribution, check_distribution  # noqa: F401  (re-exported: builders' parameters use them)
 from ..registry import Registry
 from ..schema import check_positive
 

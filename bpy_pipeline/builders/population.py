@@ -30,7 +30,7 @@ from ..errors import InputError
 from ..geometry.placement import sample_count
 from ..registry import Registry
 from ..schema import check_positive, from_dict, to_plain
-from .base import Distribution, check_distribution
+from ..geometry.placement import Distribution, check_distribution
 
 
 @dataclass(frozen=True)

@@ -23,7 +23,6 @@ import numpy as np
 import yaml
 
 from ..errors import InputError
-from .collision import capsule_gaps
 from ..yaml_text import load_yaml
 
 ARM_PATH = Path(__file__).resolve().parents[2] / "assets_manifest" / "robot_arm.yaml"

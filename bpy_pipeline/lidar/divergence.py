@@ -3,7 +3,7 @@
 A real beam is a cone, not a line: its footprint is ``aperture + mrad * 1e-3 * range`` metres
 wide, so a 12 mm catenary wire that slips between two zero-width rays still returns light
 from a beam whose footprint touches it. :func:`expand` replaces every beam of a
-:class:`~.sensors.Pattern` by ``rays`` sub-rays (sharing its ring and firing time) spread
+:class:`~.rays.Pattern` by ``rays`` sub-rays (sharing its ring and firing time) spread
 over the cone; the scanner traces them like any rays, and :func:`reduce_returns` turns the
 sub-ray hits of each beam back into one point:
 
@@ -25,7 +25,7 @@ sub-ray hits of each beam back into one point:
    ``mirrors.ideal`` the point is that sub-ray's true hit instead. ``separation: 0`` makes
    every distinct sub-ray range its own return.
 
-Dual returns in the point record: the record (DESIGN.md) has no return-index field and writers keep
+Dual returns in the point record: the record (:mod:`.points`) has no return-index field and writers keep
 every field their format holds, so the second return is an extra point: a beam's points are
 consecutive, its strongest first, and the second carries the same ``ring`` and ``time``. A reader
 tells them apart by that (:func:`return_index`); effects such as drop act on each return alone.
@@ -52,7 +52,7 @@ import numpy as np
 from ..errors import InputError
 from ..geometry.transforms import rotate
 from .scanner import collect, scan_chunk
-from .sensors import Pattern, pattern_chunks
+from .rays import Pattern, pattern_chunks
 
 GOLDEN_ANGLE = math.pi * (3.0 - math.sqrt(5.0))  # radians
 MAX_SUB_RAYS = 1024

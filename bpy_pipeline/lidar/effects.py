@@ -65,7 +65,7 @@ from . import effects_kernels
 from .drop import DROP_MODELS
 from .drop.carla import carla_keep_probability  # noqa: F401  (stable names)
 from .drop.mlp import MLP
-from .drop.threshold import ThresholdModel, threshold_model  # noqa: F401
+from .drop.threshold import ThresholdModel, threshold_model
 from .intensity import carla_intensity, compute_intensity, lidar_intensity, reflectance  # noqa: F401
 from .materials import apply_materials
 from .points import POINT_DTYPE

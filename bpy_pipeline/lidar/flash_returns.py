@@ -30,7 +30,7 @@ import numpy as np
 
 from .raycast import RayCaster
 from .scanner import trace_beams
-from .sensors import FLASH_PATTERNS, SensorSpec, azimuths, check_flash, elevations  # noqa: F401  (FLASH_PATTERNS, check_flash: re-exported)
+from .sensors import SensorSpec, azimuths, check_flash, elevations
 
 
 @dataclass(frozen=True)

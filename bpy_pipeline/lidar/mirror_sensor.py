@@ -47,7 +47,8 @@ import numpy as np
 
 from ..errors import InputError
 from . import grid
-from .sensors import Pattern, SensorSpec, load_numeric_npy, sensor_pattern
+from .sensors import SensorSpec, sensor_pattern
+from .rays import Pattern, load_numeric_npy
 
 # A ``reflector`` below is any object with the attributes of ``config.ReflectorConfig``: segments (int),
 # inclination_deg, azimuth_deg (degrees), distance, bottom, top, width (metres).

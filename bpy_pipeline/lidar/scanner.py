@@ -30,7 +30,7 @@ from ..geometry.transforms import rotate
 from .points import BEAM_DTYPE, POINT_DTYPE
 from .kernels import back_face_rays, fill_diffuse, trace_fill
 from .raycast import Hits, RayCaster, dot3
-from .sensors import Pattern, pattern_chunks
+from .rays import Pattern, pattern_chunks
 
 DIFFUSE, MIRROR, GLASS, ABSORBER = (MATERIAL_ID[name] for name in ("diffuse", "mirror", "glass", "absorber"))
 # Re-launch offset off a mirror or glass surface, per metre of the largest local coordinate of

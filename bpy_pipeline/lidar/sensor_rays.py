@@ -20,7 +20,8 @@ import numpy as np
 from .grid import image_shape
 from .mirror_sensor import MirrorFrame, load_edge_mask, reflect_patterns
 from .patterns import PATTERNS
-from .sensors import Pattern, iter_pattern, ray_count
+from .sensors import iter_pattern, ray_count
+from .rays import Pattern
 
 CHUNK_RAYS = 1 << 18  # rays generated and traced at a time: bounds memory for 23-million-ray scans
 MAX_KEPT_MIRROR_RAYS = 1 << 22  # a mirror sensor's rays up to this many are traced through its mirrors once and kept

@@ -24,7 +24,7 @@ import math
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
-from typing import Iterable, Iterator, Literal
+from typing import Iterator, Literal
 
 import numpy as np
 
@@ -32,7 +32,7 @@ from ..errors import InputError
 from ..schema import from_dict, key_of
 from .patterns import PATTERNS
 from .patterns.base import derive_rows
-from .rays import Pattern, load_numeric_npy, load_rays, pattern_chunks  # noqa: F401  (re-exported: the names lived here)
+from .rays import Pattern
 from ..yaml_text import load_yaml
 
 PRESETS_PATH = Path(__file__).with_name("sensors.yaml")

@@ -25,7 +25,7 @@ from ..lidar.materials import CarGlass, glass_transmission, pane_internal, part_
 from ..lidar.raycast import RayCaster
 from ..lidar.scanner import MirrorGlassRules, trace_beams
 from .firings import Firings
-from .objects import mesh_file_parts  # noqa: F401 - re-exported: mixing.cast.mesh_file_parts stays importable
+from .objects import mesh_file_parts
 from .paint import CarPaint, paint_car
 from .placement import Placement
 

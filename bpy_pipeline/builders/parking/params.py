@@ -8,7 +8,8 @@ from typing import Literal
 import numpy as np
 
 from ...errors import InputError
-from ..base import Builder, BuildContext, BuildResult, Distribution, check_distribution, check_sizes, refuse_sensor_placement, register_builder
+from ..base import Builder, BuildContext, BuildResult, check_sizes, refuse_sensor_placement, register_builder
+from ...geometry.placement import Distribution, check_distribution
 
 
 @dataclass(frozen=True)

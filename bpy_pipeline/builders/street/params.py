@@ -7,7 +7,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ...errors import InputError
-from ..base import Builder, BuildContext, BuildResult, Distribution, check_distribution, check_sizes, register_builder
+from ..base import Builder, BuildContext, BuildResult, check_sizes, register_builder
+from ...geometry.placement import Distribution, check_distribution
 
 
 @dataclass(frozen=True)

@@ -5,6 +5,6 @@ plus its name in the import line below.
 """
 
 from .base import PATTERNS, RayPattern, register_pattern
-from . import scanning, camera, rosette, file, profile  # noqa: F401,E402  (registration)
+from . import scanning, camera, rosette, file, profile  # noqa: F401  (registration)
 
 __all__ = ["PATTERNS", "RayPattern", "register_pattern"]

@@ -1,4 +1,4 @@
-"""The two papers' insertion methods, implemented here as references for :func:`~.frame.mix_frame` (benchmarks/bench_mixing.py).
+"""The two papers' insertion methods, the references :func:`bpy_pipeline.mixing.frame.mix_frame` is measured against (bench_mixing.py).
 
 - :func:`parking_paper_insert` (the parking paper, sections 3.1-3.2): each object is scanned
   alone by a simulated sensor (a preset's nominal pattern from the scan's origin), its points
@@ -21,12 +21,12 @@ import math
 
 import numpy as np
 
-from ..buffers import SceneBuffers
-from ..lidar.visibility import subset_buffers, surface_samples
-from ..lidar.raycast import RayCaster
-from ..lidar.sensors import azimuth_step, resolve_sensor, sensor_pattern
-from .firings import Firings, angle_between, angles_deg
-from .placement import Placement, ray_box_entry
+from bpy_pipeline.buffers import SceneBuffers
+from bpy_pipeline.lidar.visibility import subset_buffers, surface_samples
+from bpy_pipeline.lidar.raycast import RayCaster
+from bpy_pipeline.lidar.sensors import azimuth_step, resolve_sensor, sensor_pattern
+from bpy_pipeline.mixing.firings import Firings, angle_between, angles_deg
+from bpy_pipeline.mixing.placement import Placement, ray_box_entry
 
 
 def _returns(firings: Firings, valid: np.ndarray) -> np.ndarray:
