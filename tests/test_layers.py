@@ -188,15 +188,15 @@ def test_no_circles_between_modules():
 
 def test_the_graph_sees_imports_inside_functions(tmp_path):
     """The parser counts a function-level import and resolves relative ones (else the checks above could not fail)."""
-    source = "from ..lidar import sensors\n\ndef f():\n    from ..config import Config\n    import bpy_pipeline.pipeline\n"
+    source = "from ..lidar import points\n\ndef f():\n    from ..config import Config\n    import bpy_pipeline.pipeline\n"
     path = PACKAGE / "geometry" / "lod.py"
-    known = {"bpy_pipeline.lidar.sensors", "bpy_pipeline.config", "bpy_pipeline.pipeline", "bpy_pipeline.geometry.lod"}
+    known = {"bpy_pipeline.lidar.points", "bpy_pipeline.config", "bpy_pipeline.pipeline", "bpy_pipeline.geometry.lod"}
     probe = tmp_path / "lod.py"
     probe.write_text(source)
     found = imports(probe, "bpy_pipeline.geometry.lod", known)
-    assert found == [("bpy_pipeline.lidar.sensors", 1, False), ("bpy_pipeline.config", 4, True), ("bpy_pipeline.pipeline", 5, True)]
+    assert found == [("bpy_pipeline.lidar.points", 1, False), ("bpy_pipeline.config", 4, True), ("bpy_pipeline.pipeline", 5, True)]
     rows = [("bpy_pipeline.geometry.lod", *row) for row in found]
-    assert [t for _, t, _ in wrong_way(rows)] == ["lidar.sensors", "config", "pipeline"]
+    assert [t for _, t, _ in wrong_way(rows)] == ["lidar.points", "config", "pipeline"]
     probe.write_text("def __getattr__(name):\n    from ..config import Config\n    return Config\n")
     assert imports(probe, "bpy_pipeline.geometry.lod", known) == [("bpy_pipeline.config", 2, True)]  # a module __getattr__'s import counts
     assert compat_hooks(probe) == ["__getattr__ at line 1"]
@@ -206,7 +206,7 @@ def test_the_graph_sees_imports_inside_functions(tmp_path):
     # a builder's geometry keeps geometry's rule, its own package's geometry aside; shared scenes import no builder's package
     rows = [("bpy_pipeline.builders.railway.layout", "bpy_pipeline.builders.railway.catenary", 1, False),
             ("bpy_pipeline.builders.railway.layout", "bpy_pipeline.geometry.lod", 2, False),
-            ("bpy_pipeline.builders.railway.layout", "bpy_pipeline.lidar.sensors", 3, True),
+            ("bpy_pipeline.builders.railway.layout", "bpy_pipeline.lidar.points", 3, True),
             ("bpy_pipeline.builders.railway.layout", "bpy_pipeline.builders.railway.scene", 4, True),
             ("bpy_pipeline.builders.railway.layout", "bpy_pipeline.builders.street.layout", 5, False),
             ("bpy_pipeline.builders.railway.params", "bpy_pipeline.builders.railway.scene", 6, True),
