@@ -36,7 +36,7 @@ from .bpy_pipeline.buffers import MATERIALS
 from .bpy_pipeline.errors import InputError
 from .bpy_pipeline.schema import to_plain
 from .bpy_pipeline.labels import load_class_table
-from .bpy_pipeline.lidar import sensors
+from .bpy_pipeline.lidar.sensor import sensors
 
 MY_SCENE = "my_scene"
 SENSOR_FIELDS = ("min_range", "max_range", "sampling_factor")  # shown; any other override passes through
@@ -251,7 +251,7 @@ def _sensor_dict(settings, base: dict) -> dict:
     return section | pose
 
 
-PROFILE_SECTIONS = ("noise", "drop", "intensity")  # what a preset's effects profile sets (lidar/sensors.yaml)
+PROFILE_SECTIONS = ("noise", "drop", "intensity")  # what a preset's effects profile sets (lidar/sensor/sensors.yaml)
 
 
 def _effects_dict(settings, base: dict) -> dict:

@@ -2,7 +2,7 @@
 
 Each frame's scene is built once; then the frame is made twice through the pipeline's stages after
 the build (pose, export, scan, effects, boxes), once with the run's kept
-:class:`~bpy_pipeline.lidar.raycast.CasterCache` and once with a fresh one, in alternating order
+:class:`~bpy_pipeline.lidar.cast.raycast.CasterCache` and once with a fresh one, in alternating order
 (so a busy moment or a warm cache favours neither), and the two frames must give the same bytes.
 Reported per job: seconds per frame of the scan stage (caster set-up, trace, records, effects) and
 of the boxes stage (its visibility cast reuses the frame's caster in both), and ``speedup`` = fresh
@@ -26,7 +26,7 @@ import bpy
 
 from bpy_pipeline.config import load_config
 from bpy_pipeline.frame import Frame
-from bpy_pipeline.lidar.raycast import CasterCache
+from bpy_pipeline.lidar.cast.raycast import CasterCache
 from bpy_pipeline.frame import Run, frame_rng
 from bpy_pipeline.plan import plan
 from bpy_pipeline.stages.scene import build_stage

@@ -31,8 +31,8 @@ from bpy_pipeline.stages import scan as scan_stages
 from bpy_pipeline.config import effects_from_dict, load_config
 from bpy_pipeline.export import export_scene
 from bpy_pipeline.labels import load_class_table
-from bpy_pipeline.lidar import fitting
-from bpy_pipeline.lidar.effects import write_model_file
+from bpy_pipeline.lidar.fit import fitting
+from bpy_pipeline.lidar.effects.apply import write_model_file
 
 SCAN = ROOT.parent / "shared" / "real_scans" / "nuscenes_hdl32e_sweep.bin"
 

@@ -1,4 +1,4 @@
-"""Material reflectance models (lidar/materials.py) and dual returns against real KITTI cars, and their cost.
+"""Material reflectance models (lidar/effects/materials.py) and dual returns against real KITTI cars, and their cost.
 
 The cars of benchmarks/bench_realism.py (the sedan of geometry/objects.py at each label's pose, silver
 paint 0.5, glass windows, on a road of 0.10, the ``hdl64e`` preset with its profile, cropped to the
@@ -56,8 +56,8 @@ from common import RESULTS, report
 
 import bpy_pipeline
 from bpy_pipeline.labels import load_class_table
-from bpy_pipeline.lidar.materials import CarGlass
-from bpy_pipeline.lidar.divergence import return_index
+from bpy_pipeline.lidar.effects.materials import CarGlass
+from bpy_pipeline.lidar.effects.divergence import return_index
 from bpy_pipeline.mixing import ObjectBox, RealScanScene, mix_frame
 from bpy_pipeline.mixing.section import RemoveBox
 
@@ -238,7 +238,7 @@ class Insertion:
         (the windows of before, every seed's car), in the frustum, by what the real scan did on them: no return, a
         return in the car's box (its glass, cabin or a part our shape lacks), a return beyond the car (passed through)."""
         from bpy_pipeline.buffers import MATERIAL_ID
-        from bpy_pipeline.lidar.raycast import RayCaster
+        from bpy_pipeline.lidar.cast.raycast import RayCaster
         from bpy_pipeline.mixing.cast import near_objects
 
         tally = {}

@@ -36,7 +36,7 @@ import bpy
 from bpy_pipeline.config import load_config
 from bpy_pipeline.export import export_scene
 from bpy_pipeline.labels import load_class_table
-from bpy_pipeline.lidar.mirror_sensor import MirrorFrame
+from bpy_pipeline.lidar.sensor.mirror_sensor import MirrorFrame
 from bpy_pipeline.frame import frame_rng
 from bpy_pipeline.stages.scan import scan_buffers
 from bpy_pipeline.scenes import build_scene

@@ -30,8 +30,8 @@ from bpy_pipeline.buffers import SceneBuffers
 from bpy_pipeline.geometry import primitives
 from bpy_pipeline.geometry.objects import car_object
 from bpy_pipeline.io.real_scans import read_real_scan
-from bpy_pipeline.lidar.raycast import RayCaster
-from bpy_pipeline.lidar.sensors import resolve_sensor
+from bpy_pipeline.lidar.cast.raycast import RayCaster
+from bpy_pipeline.lidar.sensor.sensors import resolve_sensor
 from bpy_pipeline.mixing import ObjectBox, RealScanScene, mix_frame
 from bpy_pipeline.mixing.convert import convert_scan, project_to_cones, raycast_convert, target_rays
 from bpy_pipeline.mixing.firings import recover_firings

@@ -47,10 +47,10 @@ from embreex.mesh_construction import TriangleMesh
 from bpy_pipeline.buffers import SceneBuffers
 from bpy_pipeline.geometry import primitives
 from bpy_pipeline.geometry.transforms import pose_matrix
-from bpy_pipeline.lidar import kernels
-from bpy_pipeline.lidar.raycast import RayCaster, default_threads
-from bpy_pipeline.lidar.scanner import scan, scan_chunk
-from bpy_pipeline.lidar.sensors import resolve_sensor, sensor_pattern
+from bpy_pipeline.lidar.cast import kernels
+from bpy_pipeline.lidar.cast.raycast import RayCaster, default_threads
+from bpy_pipeline.lidar.cast.scanner import scan, scan_chunk
+from bpy_pipeline.lidar.sensor.sensors import resolve_sensor, sensor_pattern
 
 
 REPEAT = 5  # interleaved timing rounds; the best of each method counts

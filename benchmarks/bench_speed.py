@@ -82,7 +82,7 @@ def stage_part(frames: int, job: str = "box") -> dict:
     from embreex.mesh_construction import TriangleMesh
 
     from bpy_pipeline.config import load_config
-    from bpy_pipeline.lidar.sensors import sensor_pattern
+    from bpy_pipeline.lidar.sensor.sensors import sensor_pattern
 
     try:
         from bpy_pipeline.plan import run_frames

@@ -49,9 +49,9 @@ def railway(frames: int, repeats: int) -> dict:
     from embreex.mesh_construction import TriangleMesh
 
     from bpy_pipeline.config import load_config
-    from bpy_pipeline.lidar import scanner
-    from bpy_pipeline.lidar.sensor_rays import CHUNK_RAYS
-    from bpy_pipeline.lidar.sensors import sensor_pattern
+    from bpy_pipeline.lidar.cast import scanner
+    from bpy_pipeline.lidar.sensor.sensor_rays import CHUNK_RAYS
+    from bpy_pipeline.lidar.sensor.sensors import sensor_pattern
     from bpy_pipeline.plan import run_frames
 
     config = load_config(None, [f"frames={frames}"])
@@ -87,9 +87,9 @@ def railway(frames: int, repeats: int) -> dict:
 
 
 def cone(repeats: int) -> list:
-    from bpy_pipeline.lidar.kernels import compiled
-    from bpy_pipeline.lidar.sensors import resolve_sensor, sensor_pattern
-    from bpy_pipeline.lidar.visibility import CONE_MARGIN, cone_pairs
+    from bpy_pipeline.lidar.cast.kernels import compiled
+    from bpy_pipeline.lidar.sensor.sensors import resolve_sensor, sensor_pattern
+    from bpy_pipeline.lidar.cast.visibility import CONE_MARGIN, cone_pairs
 
     kernels, rows = compiled(), []
     for preset in ("hdl64e", "os1_128", "vlp16"):

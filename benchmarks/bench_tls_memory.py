@@ -7,7 +7,7 @@ with the preview. Each run is a fresh Python process running :func:`bpy_pipeline
 its peak resident memory is its own ``ru_maxrss``. A second process builds and exports the same
 scene and sets up the caster without scanning: the memory every run needs before its first ray.
 
-Rays go through in chunks of ``lidar.sensor_rays.CHUNK_RAYS``: traced, given their effects and moved into
+Rays go through in chunks of ``lidar.sensor.sensor_rays.CHUNK_RAYS``: traced, given their effects and moved into
 one array of point records (37 bytes a point) chunk by chunk; the writers convert a million
 points at a time. So memory is the set-up plus the records, and the target is under 2 GB.
 Run: python benchmarks/bench_tls_memory.py [--small]
@@ -22,7 +22,7 @@ import tempfile
 from common import ROOT, arguments, report
 
 from bpy_pipeline.config import load_config
-from bpy_pipeline.lidar.sensors import ray_count
+from bpy_pipeline.lidar.sensor.sensors import ray_count
 
 FORMATS = "[ply,semantickitti,las,npy]"
 CHILD = r"""
@@ -38,7 +38,7 @@ imported = time.perf_counter() - start
 if sys.argv[2] == "setup":  # build, export and the caster, no scan
     from bpy_pipeline.export import export_scene
     from bpy_pipeline.labels import load_class_table
-    from bpy_pipeline.lidar.raycast import RayCaster
+    from bpy_pipeline.lidar.cast.raycast import RayCaster
     build_frame_scene(config, 0)
     buffers = export_scene(load_class_table(), keep_within=(sensor_pose(config)[:3, 3], config.sensor.spec.max_range))
     RayCaster(buffers, frame=sensor_pose(config))
@@ -104,7 +104,7 @@ def main():
             "import_s": run["import_s"], **{f"{k}_s": timings.get(k, 0.0) for k in ("build", "export", "scan", "effects", "write")}, "wall_s": run["wall_s"],
         })  # fmt: skip
     name = "tls_memory" + ("_small" if args.small else "")
-    report(name, rows, args.out, {"formats": FORMATS, "preview": True, "chunk_rays": "lidar.sensor_rays.CHUNK_RAYS"})
+    report(name, rows, args.out, {"formats": FORMATS, "preview": True, "chunk_rays": "lidar.sensor.sensor_rays.CHUNK_RAYS"})
     chart(rows, args.out / f"{name}.png")
 
 

@@ -7,7 +7,7 @@
 - Preview: render + PNG encode at the old settings (1600 x 800 px, zlib level 6) against the new
   (1280 x 560 px, level 1), on the same cloud; PNG sizes beside.
 - Boxes: :func:`visibility_reference.visibility_per_object` (a caster per object and a
-  Python loop over the objects, the way before) against :func:`~bpy_pipeline.lidar.visibility.visibility`
+  Python loop over the objects, the way before) against :func:`~bpy_pipeline.lidar.cast.visibility.visibility`
   (one cast through the scene, one against all objects alone) on a parking-like scene: sedans and
   people around a VLP-16 at 10 Hz (0.2 deg columns), the scene's caster given to both (as the scan
   has one), so the ratio is that of the per-object work.
@@ -33,9 +33,9 @@ from bpy_pipeline.io.ply import PLY_DTYPE, ply_records, write_ply
 from bpy_pipeline.io.preview import encode_png, encode_png_indexed, render_indexed, render_preview
 from bpy_pipeline.labels import load_class_table
 from bpy_pipeline.lidar.points import empty_points
-from bpy_pipeline.lidar.raycast import RayCaster
-from bpy_pipeline.lidar.sensors import iter_pattern, resolve_sensor
-from bpy_pipeline.lidar.visibility import visibility
+from bpy_pipeline.lidar.cast.raycast import RayCaster
+from bpy_pipeline.lidar.sensor.sensors import iter_pattern, resolve_sensor
+from bpy_pipeline.lidar.cast.visibility import visibility
 from visibility_reference import visibility_per_object
 
 

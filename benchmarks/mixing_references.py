@@ -22,9 +22,9 @@ import math
 import numpy as np
 
 from bpy_pipeline.buffers import SceneBuffers
-from bpy_pipeline.lidar.visibility import subset_buffers, surface_samples
-from bpy_pipeline.lidar.raycast import RayCaster
-from bpy_pipeline.lidar.sensors import azimuth_step, resolve_sensor, sensor_pattern
+from bpy_pipeline.lidar.cast.visibility import subset_buffers, surface_samples
+from bpy_pipeline.lidar.cast.raycast import RayCaster
+from bpy_pipeline.lidar.sensor.sensors import azimuth_step, resolve_sensor, sensor_pattern
 from bpy_pipeline.mixing.firings import Firings, angle_between, angles_deg
 from bpy_pipeline.mixing.placement import Placement, ray_box_entry
 

@@ -1,6 +1,6 @@
 """The reference the boxes' visibility cast is measured against: a caster per object, each tracing its own rays.
 
-Used by ``benchmarks/bench_writers.py`` (its speed against :func:`bpy_pipeline.lidar.visibility.visibility`)
+Used by ``benchmarks/bench_writers.py`` (its speed against :func:`bpy_pipeline.lidar.cast.visibility.visibility`)
 and ``tests/test_boxes.py`` (both give the same counts).
 """
 
@@ -10,10 +10,10 @@ import numpy as np
 
 from bpy_pipeline.buffers import SceneBuffers
 from bpy_pipeline.geometry.boxes import instance_triangles
-from bpy_pipeline.lidar.raycast import RayCaster
-from bpy_pipeline.lidar.rays import Pattern
-from bpy_pipeline.lidar.scanner import trace_beams
-from bpy_pipeline.lidar.visibility import MAX_SAMPLES, SAMPLE_SPACING, Coverage, subset_buffers, surface_samples
+from bpy_pipeline.lidar.cast.raycast import RayCaster
+from bpy_pipeline.lidar.sensor.rays import Pattern
+from bpy_pipeline.lidar.cast.scanner import trace_beams
+from bpy_pipeline.lidar.cast.visibility import MAX_SAMPLES, SAMPLE_SPACING, Coverage, subset_buffers, surface_samples
 
 
 def visibility_per_object(
@@ -28,7 +28,7 @@ def visibility_per_object(
     surfaces=None,
     rng: np.random.Generator | None = None,
 ) -> None:
-    """:func:`~bpy_pipeline.lidar.visibility.visibility` the earlier way, kept as its reference (tests/test_boxes.py, bench_writers.py):
+    """:func:`~bpy_pipeline.lidar.cast.visibility.visibility` the earlier way, kept as its reference (tests/test_boxes.py, bench_writers.py):
     a caster per object and a loop over the objects, each tracing its own rays. Same arguments and results
     (up to the draws of glass that reflects a fraction of beams).
 
@@ -41,7 +41,7 @@ def visibility_per_object(
         to where they pass it (so rays leaving from the sensor's own mirrors count right)
     caster : a :class:`RayCaster` of ``buffers`` in the sensor's frame, if one exists already
     surfaces, rng : the scanner's rules for mirrors and glass and a generator for glass that
-        reflects a fraction of beams (:func:`~bpy_pipeline.lidar.scanner.trace_beams`)
+        reflects a fraction of beams (:func:`~bpy_pipeline.lidar.cast.scanner.trace_beams`)
     Only the rays that pass within an object's bounding sphere are traced, once through the
     whole scene and once against the object alone, both the scanner's way (glass passed
     through, no mirror bounces), so a car's windows count the same in both.

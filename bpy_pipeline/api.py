@@ -64,7 +64,7 @@ def scene_buffers(meshes: SceneBuffers | Mapping) -> SceneBuffers:
     """Scene buffers of ``meshes``: buffers as they are, or ``{name: (vertices (n, 3) m, triangles (m, 3))}``
     with an optional class name, material and reflectivity after the triangles
     (``(v, t, "car", "diffuse", 0.3)``); objects are ``unlabeled``, ``diffuse``, 0.5 by default. The material is a tracing
-    one (diffuse, mirror, glass, absorber) or a reflectance model of lidar/materials.py (``glossy_paint``,
+    one (diffuse, mirror, glass, absorber) or a reflectance model of lidar/effects/materials.py (``glossy_paint``,
     ``retroreflector``, ``dark_paint``, ``wet``: traced as diffuse, applied with ``effects.materials.objects: true``)."""
     from .geometry.checks import check_fraction, check_mesh
 
@@ -76,7 +76,7 @@ def scene_buffers(meshes: SceneBuffers | Mapping) -> SceneBuffers:
     if not isinstance(meshes, Mapping):
         raise InputError(f"meshes: expected scene buffers or a mapping {{name: (vertices (n, 3), triangles (m, 3)[, class, material, reflectivity])}}, got {type(meshes).__name__}")
     from .labels import load_class_table
-    from .lidar.materials import part_material
+    from .lidar.effects.materials import part_material
 
     table = load_class_table()
     checked = {}

@@ -19,18 +19,18 @@ from typing import Literal
 import yaml
 
 from .errors import InputError
-from .lidar.divergence import Divergence, check_divergence, check_return_mode
-from .lidar.drop import DROP_MODELS
-from .lidar.drop.carla import CarlaDrop
-from .lidar.drop.threshold import ThresholdDrop
-from .lidar.intensity import ReadingModel, check_reading
-from .lidar.grid import check_grid, image_shape
-from .lidar.mirror_sensor import check_reflector, load_edge_mask
-from .lidar.platform import Trajectory
-from .lidar.sensors import SensorSpec, frame_time, mount_offset, resolve_sensor
-from .lidar.sensors import rings as sensor_rings
-from .lidar.materials import MaterialsConfig, check_materials
-from .lidar.weather import WeatherConfig, check_weather
+from .lidar.effects.divergence import Divergence, check_divergence, check_return_mode
+from .lidar.effects.drop import DROP_MODELS
+from .lidar.effects.drop.carla import CarlaDrop
+from .lidar.effects.drop.threshold import ThresholdDrop
+from .lidar.effects.intensity import ReadingModel, check_reading
+from .lidar.sensor.grid import check_grid, image_shape
+from .lidar.sensor.mirror_sensor import check_reflector, load_edge_mask
+from .lidar.sensor.platform import Trajectory
+from .lidar.sensor.sensors import SensorSpec, frame_time, mount_offset, resolve_sensor
+from .lidar.sensor.sensors import rings as sensor_rings
+from .lidar.effects.materials import MaterialsConfig, check_materials
+from .lidar.effects.weather import WeatherConfig, check_weather
 
 from .builders import BUILDERS as BUILDER_REGISTRY
 from .builders.population import population_from_dict, population_to_dict
@@ -60,7 +60,7 @@ class SceneConfig:
 # ----------------------------------------------------------------------------- sensor, effects, output
 @dataclass(frozen=True)
 class TrajectoryConfig:
-    """``sensor.trajectory``: a moving sensor (``lidar/platform.py``); replaces ``sensor.position``.
+    """``sensor.trajectory``: a moving sensor (``lidar/sensor/platform.py``); replaces ``sensor.position``.
 
     The path is ``waypoints`` or the scene's curve object named ``curve`` (its evaluated,
     world-space polyline); its clock a constant ``speed`` or one of ``times`` per waypoint.
@@ -79,7 +79,7 @@ class TrajectoryConfig:
 
 @dataclass(frozen=True)
 class EdgeDropConfig:
-    """``sensor.reflector.edge_drop``: returns lost where a beam splits on a mirror edge (lidar/mirror_sensor.py)."""
+    """``sensor.reflector.edge_drop``: returns lost where a beam splits on a mirror edge (lidar/sensor/mirror_sensor.py)."""
 
     mask: str = "generated"  # generated | none | path of a measured (rows, columns) .npy of drop probabilities
     probability: float = 0.95  # generated: drop probability where the footprint straddles an edge (the paper: > 90 %)
@@ -88,7 +88,7 @@ class EdgeDropConfig:
 
 @dataclass(frozen=True)
 class ReflectorConfig:
-    """``sensor.reflector``: the super-resolution LiDAR's own ring of mirrors (lidar/mirror_sensor.py has the geometry).
+    """``sensor.reflector``: the super-resolution LiDAR's own ring of mirrors (lidar/sensor/mirror_sensor.py has the geometry).
 
     Defaults: the human-robot paper's eight segments at 34 deg, around an Ouster OS1-128.
     """
@@ -119,7 +119,7 @@ class SensorConfig:
 
 @dataclass(frozen=True)
 class IntensityConfig:
-    """``effects.intensity`` (lidar/effects.py): what a point's intensity (0..1) says."""
+    """``effects.intensity`` (lidar/effects/apply.py): what a point's intensity (0..1) says."""
 
     model: Literal["reflectance", "lidar", "carla"] = "reflectance"  # rho cos g | lidar equation | CARLA exp(-a R)
     alpha: float = 0.0  # 1/m atmospheric extinction, two-way exp(-2 alpha R): `lidar` intensity and `threshold` drop
@@ -130,7 +130,7 @@ class IntensityConfig:
     scale: float = 1.0  # the model's value times this, clipped to 0..1 (Velodyne's 0..100 % diffuse in 0..255: 100 / 255)
     steps: int = 0  # quantise to k / steps as the sensor's integer intensity does (255: nuScenes 0..255; 100: KITTI 0.01); 0 = continuous
     offset: float = 0.0  # subtracted after scale, clipped at 0: a receiver that reads weak returns as 0 (KITTI's car paint); 0 = none
-    reading: ReadingModel = field(default_factory=ReadingModel)  # per-laser gain/offset reading apart from detection (lidar/intensity.py); opt-in
+    reading: ReadingModel = field(default_factory=ReadingModel)  # per-laser gain/offset reading apart from detection (lidar/effects/intensity.py); opt-in
 
 
 @dataclass(frozen=True)
@@ -147,9 +147,9 @@ class NoiseConfig:
 
 @dataclass(frozen=True)
 class DropConfig:
-    """``effects.drop``: the model (lidar/drop, a registry) and its parameters."""
+    """``effects.drop``: the model (lidar/effects/drop, a registry) and its parameters."""
 
-    model: str = "none"  # a name of lidar/drop (DROP_MODELS)
+    model: str = "none"  # a name of lidar/effects/drop (DROP_MODELS)
     probability: float = 0.0  # for `uniform`
     carla: CarlaDrop = field(default_factory=CarlaDrop)
     threshold: ThresholdDrop = field(default_factory=ThresholdDrop)
@@ -159,7 +159,7 @@ class DropConfig:
 
 @dataclass(frozen=True)
 class GlassConfig:
-    """``effects.mirrors.glass``: how beams meet ``glass`` objects (car windows), lidar/scanner.py."""
+    """``effects.mirrors.glass``: how beams meet ``glass`` objects (car windows), lidar/cast/scanner.py."""
 
     normal_return_deg: float = 5.0  # met this close to normal incidence, the glass itself returns the beam
     reflect_fraction: float = 0.0  # share of the other beams that reflect like a mirror instead of passing through
@@ -168,7 +168,7 @@ class GlassConfig:
 
 @dataclass(frozen=True)
 class MirrorConfig:
-    """``effects.mirrors``: specular surfaces of the scene (``mirror`` and ``glass`` objects), lidar/scanner.py."""
+    """``effects.mirrors``: specular surfaces of the scene (``mirror`` and ``glass`` objects), lidar/cast/scanner.py."""
 
     max_bounces: int = 3  # reflections before a beam is given up (0..255)
     label: Literal["target", "reflection"] = "target"  # class of points seen through a mirror
@@ -180,7 +180,7 @@ class MirrorConfig:
 @dataclass(frozen=True)
 class EffectsConfig:
     """``effects``: what the sensor adds to the exact trace. Unless ``ideal``, the sensor preset's profile
-    (``effects`` in lidar/sensors.yaml) fills the sections and keys the config does not give
+    (``effects`` in lidar/sensor/sensors.yaml) fills the sections and keys the config does not give
     (:func:`realistic_effects`); ``ideal: true`` leaves the profile out, so only the keys given apply
     (none given: the exact, noise-free scan)."""
 
@@ -189,8 +189,8 @@ class EffectsConfig:
     drop: DropConfig = field(default_factory=DropConfig)
     mirrors: MirrorConfig = field(default_factory=MirrorConfig)
     intensity: IntensityConfig = field(default_factory=IntensityConfig)
-    weather: WeatherConfig = field(default_factory=WeatherConfig)  # fog, rain, snow (lidar/weather.py); off under ideal
-    materials: MaterialsConfig = field(default_factory=MaterialsConfig)  # reflectance model per class (lidar/materials.py); opt-in
+    weather: WeatherConfig = field(default_factory=WeatherConfig)  # fog, rain, snow (lidar/effects/weather.py); off under ideal
+    materials: MaterialsConfig = field(default_factory=MaterialsConfig)  # reflectance model per class (lidar/effects/materials.py); opt-in
 
 
 @dataclass(frozen=True)
@@ -355,7 +355,7 @@ def _scene_from_dict(data) -> SceneConfig:
 
 
 def sensor_trajectory(sensor: SensorConfig, path=None) -> Trajectory | None:
-    """The configured :class:`~.lidar.platform.Trajectory`, ``None`` for a static sensor.
+    """The configured :class:`~.lidar.sensor.platform.Trajectory`, ``None`` for a static sensor.
 
     path : (k, 3) float64 world polyline of ``trajectory.curve`` (``scenes.curves.curve_polyline``);
         needed only when the trajectory follows a curve of the scene
@@ -419,7 +419,7 @@ def effects_from_dict(data, spec: SensorSpec | None = None) -> EffectsConfig:
 
 
 def realistic_effects(data, spec: SensorSpec | None) -> dict | object:
-    """The config's raw ``effects`` mapping over the profile of its sensor's preset (lidar/sensors.yaml).
+    """The config's raw ``effects`` mapping over the profile of its sensor's preset (lidar/sensor/sensors.yaml).
 
     Unless ``ideal: true``: each section the profile has (noise, drop, intensity) is the profile's,
     with the config's keys of that section replacing the profile's one by one; a config section
@@ -427,7 +427,7 @@ def realistic_effects(data, spec: SensorSpec | None) -> dict | object:
     Merging a resolved config again changes nothing (``config_to_dict`` round trips).
     Anything but a mapping is returned as given, for validation to name.
     """
-    from .lidar.sensors import preset_effects
+    from .lidar.sensor.sensors import preset_effects
 
     if data is not None and not isinstance(data, dict):
         return data
@@ -453,7 +453,7 @@ def _merged(base: dict, over: dict) -> dict:
 
 def _check_effects(effects: EffectsConfig, spec: SensorSpec | None) -> None:
     """Ranges of the effects' parameters, and that a model file holds the models asked of it."""
-    from .lidar.effects import read_model_file
+    from .lidar.effects.apply import read_model_file
 
     noise, drop, intensity = effects.noise, effects.drop, effects.intensity
     check_weather(effects.weather)

@@ -49,7 +49,7 @@ from .errors import InputError
 from .io.atomic import atomic_write, digests_while_writing, temporary_files
 from .io.manifest import MANIFEST_NAME, read_manifest, to_json, write_manifest
 from .io.writers import WRITERS, frame_writers
-from .lidar.raycast import default_threads
+from .lidar.cast.raycast import default_threads
 
 DATASET_FORMAT = "bpy_pipeline dataset"
 DATASET_VERSION = 2
@@ -343,7 +343,7 @@ class Dataset:
         write_manifest(self.out, manifest)
 
     def _new_manifest(self) -> dict:
-        from .lidar.sensors import spec_summary
+        from .lidar.sensor.sensors import spec_summary
         from .frame import versions
 
         return {
@@ -569,7 +569,7 @@ def frame_record(frame, digests: dict[str, str]) -> dict:
     if stations:
         record["station"] = frame.index % stations
     if frame.trajectory is not None:
-        from .lidar.sensors import frame_time
+        from .lidar.sensor.sensors import frame_time
 
         record["trajectory"] = frame.trajectory.frame_info(frame.index, frame_time(config.sensor.spec))
     record["timings_s"] = {k: round(v, 4) for k, v in frame.timings.items()}
@@ -607,7 +607,7 @@ def check_writable(out: Path, config: Config) -> None:
     """Refuse, before any work, a folder that cannot take a frame: not writable, or too little free space
     for one frame's estimated size; and a sensor whose rays per frame cannot fit in memory."""
     from .lidar.points import POINT_DTYPE
-    from .lidar.sensors import ray_count
+    from .lidar.sensor.sensors import ray_count
 
     probe = out / f".write_test_{os.getpid()}"
     try:

@@ -144,7 +144,7 @@ def _population(config: Config) -> tuple[float, float]:
 
 def _rays(config: Config) -> int:
     """Rays of a frame: every sensor of the rig (or the one sensor), times the sub-rays of a divergent beam."""
-    from .lidar.sensors import ray_count
+    from .lidar.sensor.sensors import ray_count
 
     specs = [member.spec for member in config.sensor.rig] if config.sensor.rig else [config.sensor.spec]
     sub_rays = max(int(getattr(config.sensor.divergence, "rays", 1) or 1), 1)

@@ -19,7 +19,7 @@ from typing import Callable
 from .config import Config
 from .dataset import Dataset
 from .errors import InputError
-from .lidar.raycast import default_threads
+from .lidar.cast.raycast import default_threads
 
 SINGLE_THREAD_ENV = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "NUMBA_NUM_THREADS": "1"}
 ROOT = Path(__file__).resolve().parents[1]

@@ -37,8 +37,8 @@ from .dataset import Dataset
 from .frame import Frame, Run, StageFunction, frame_rng
 from .io import read_dataset
 from .io.writers import WRITERS, frame_writers
-from .lidar.raycast import default_threads
-from .lidar.sensors import ray_count
+from .lidar.cast.raycast import default_threads
+from .lidar.sensor.sensors import ray_count
 from .registry import Registry
 from .stages.annotate import annotate_stage
 from .stages.camera import camera_stage

@@ -255,7 +255,7 @@ report["draw_with_untagged_active"] = [line for line in draw_all_panels() if lin
 from mathutils import Euler, Matrix  # noqa: E402
 
 geometry = sys.modules[f"{MODULE}.bpy_pipeline.geometry.transforms"]
-sensors = sys.modules[f"{MODULE}.bpy_pipeline.lidar.sensors"]
+sensors = sys.modules[f"{MODULE}.bpy_pipeline.lidar.sensor.sensors"]
 poses = {}
 for kind in ("EMPTY", "CAMERA"):
     data = None if kind == "EMPTY" else bpy.data.cameras.new("cam")

@@ -14,11 +14,11 @@ from bpy_pipeline.geometry import human, primitives
 from bpy_pipeline.geometry.transforms import pose_matrix
 from bpy_pipeline.geometry import boxes as gb
 from bpy_pipeline.io import boxes as bx
-from bpy_pipeline.lidar import visibility as vis
+from bpy_pipeline.lidar.cast import visibility as vis
 from bpy_pipeline.lidar.points import empty_points
-from bpy_pipeline.lidar.raycast import RayCaster
-from bpy_pipeline.lidar.scanner import scan
-from bpy_pipeline.lidar.sensors import iter_pattern, resolve_sensor
+from bpy_pipeline.lidar.cast.raycast import RayCaster
+from bpy_pipeline.lidar.cast.scanner import scan
+from bpy_pipeline.lidar.sensor.sensors import iter_pattern, resolve_sensor
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))  # visibility_reference: the per-object cast
 
@@ -103,7 +103,7 @@ def test_occlusion_levels_of_constructed_cases():
 
 @pytest.mark.parametrize("kernel", ["numba", "numpy"])  # numba: the scene cast goes through the compiled scan
 def test_one_cast_for_all_objects_equals_a_caster_per_object(kernel, monkeypatch):
-    from bpy_pipeline.lidar.visibility import visibility
+    from bpy_pipeline.lidar.cast.visibility import visibility
     from visibility_reference import visibility_per_object
 
     if kernel == "numba":
@@ -288,7 +288,7 @@ def test_pipeline_writes_boxes_that_hold_the_hall_points(tmp_path):
 def people_pillar_mirror_and_glass():
     """:func:`people_and_pillar` with a mirror 3 m behind the sensor that sends beams back into the scene and a glass
     pane in front of person 10, part of its instance (as a car's windows are the car's)."""
-    from bpy_pipeline.lidar.scanner import GLASS, MIRROR
+    from bpy_pipeline.lidar.cast.scanner import GLASS, MIRROR
 
     mirror = ("mirror", "mirror", 4, primitives.translated(primitives.box(0.05, 12.0, 4.0), (-3.0, 0.0, 1.5)), MIRROR, 0.9)
     pane = ("pane", "glass", 10, primitives.translated(primitives.box(0.02, 1.5, 2.5), (6.0, 0.0, 1.0)), GLASS, 0.1)
@@ -300,8 +300,8 @@ def people_pillar_mirror_and_glass():
 def test_visible_counts_from_the_scans_direct_returns_are_the_traced_ones(kernel, glass_reflect, monkeypatch):
     """The boxes' ``visible`` counted from the scan's returns that met no mirror is what tracing the rays that pass
     the boxes again gives, with a mirror in the scene and a box's glass passed or reflected (no draw either way)."""
-    from bpy_pipeline.lidar.scanner import MirrorGlassRules, scan_chunks
-    from bpy_pipeline.lidar.visibility import counts_per_instance, visibility
+    from bpy_pipeline.lidar.cast.scanner import MirrorGlassRules, scan_chunks
+    from bpy_pipeline.lidar.cast.visibility import counts_per_instance, visibility
 
     if kernel == "numba":
         pytest.importorskip("numba")
@@ -329,7 +329,7 @@ def test_visible_counts_from_the_scans_direct_returns_are_the_traced_ones(kernel
 
 
 def test_counts_per_instance():
-    from bpy_pipeline.lidar.visibility import counts_per_instance
+    from bpy_pipeline.lidar.cast.visibility import counts_per_instance
 
     values = np.array([7, 3, 3, 9, 12, 7, 7, 0, 100], np.int64)
     np.testing.assert_array_equal(counts_per_instance(np.array([7, 100, 3, 5]), values), [3, 1, 2, 0])
@@ -341,8 +341,8 @@ def test_counts_per_instance():
 def test_a_box_short_of_its_instance_keeps_the_trace():
     """A rider's box fitted without the motorcycle it shares an instance with does not hold it: returns from the
     motorcycle outside the box's sphere are not the trace's, so the boxes take the trace (``boxes_hold_their_instances``)."""
-    from bpy_pipeline.lidar.scanner import scan_chunks
-    from bpy_pipeline.lidar.visibility import visibility
+    from bpy_pipeline.lidar.cast.scanner import scan_chunks
+    from bpy_pipeline.lidar.cast.visibility import visibility
     from bpy_pipeline.stages.annotate import boxes_hold_their_instances
 
     buffers, people = people_and_pillar()

@@ -93,7 +93,7 @@ def test_every_part_is_wound_outwards(body):
 
 def test_a_prism_is_wound_outwards():
     from bpy_pipeline.geometry import primitives
-    from bpy_pipeline.lidar.raycast import closed_surface
+    from bpy_pipeline.lidar.cast.raycast import closed_surface
 
     v, t = primitives.prism(np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 1.0], [0.5, 1.5]]), -1.0, 3.0)
     p = v[t]

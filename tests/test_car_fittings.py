@@ -92,7 +92,7 @@ def test_every_builders_cars_carry_plates_and_lamps_inside_their_boxes(bpy_scene
     from bpy_pipeline.export import export_scene
     from bpy_pipeline.geometry.boxes import fit_boxes
     from bpy_pipeline.labels import load_class_table
-    from bpy_pipeline.lidar.materials import model_id
+    from bpy_pipeline.lidar.effects.materials import model_id
     from bpy_pipeline.frame import frame_rng
     from bpy_pipeline.stages.scene import build_frame_scene
 
@@ -137,7 +137,7 @@ def test_a_parking_cars_plates_read_the_retroreflectors_value_with_material_mode
     from bpy_pipeline.config import load_config
     from bpy_pipeline.export import export_scene
     from bpy_pipeline.labels import load_class_table
-    from bpy_pipeline.lidar.materials import model_id
+    from bpy_pipeline.lidar.effects.materials import model_id
     from bpy_pipeline.frame import frame_rng
     from bpy_pipeline.stages.scan import scan_buffers
     from bpy_pipeline.stages.scene import build_frame_scene

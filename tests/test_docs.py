@@ -105,8 +105,8 @@ def test_every_file_a_docstring_or_a_doc_names_exists():
 
 def test_the_checks_can_fail(tmp_path):
     """The patterns find a project path, a bare DESIGN.md and a package-relative path, and skip placeholders."""
-    text = "see bpy_pipeline/lidar/none.py, DESIGN.md, lidar/sensors.yaml, OUT/manifest.json, io/<format>.py and docs/*.md"
-    assert PATH.findall(text) == ["bpy_pipeline/lidar/none.py", "lidar/sensors.yaml"] and DOC.findall(text) == ["DESIGN.md"]
+    text = "see bpy_pipeline/lidar/none.py, DESIGN.md, lidar/sensor/sensors.yaml, OUT/manifest.json, io/<format>.py and docs/*.md"
+    assert PATH.findall(text) == ["bpy_pipeline/lidar/none.py", "lidar/sensor/sensors.yaml"] and DOC.findall(text) == ["DESIGN.md"]
     assert not exists("bpy_pipeline/lidar/none.py", tmp_path / "x.py") and exists("buffers.py", PACKAGE / "x.py")
 
 

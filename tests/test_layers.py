@@ -33,7 +33,7 @@ FORBIDDEN = {
 BUILDER_PACKAGES = tuple(sorted(p.parent.name for p in (PACKAGE / "builders").glob("*/__init__.py")))
 FORBIDDEN["scenes"] = tuple(f"builders.{b}" for b in BUILDER_PACKAGES)
 # what io may use of lidar: the point record and the sensor's layout (its spec, rings, columns, frame time)
-ALLOWED = {"io": ("lidar.points", "lidar.grid", "lidar.sensors")}
+ALLOWED = {"io": ("lidar.points", "lidar.sensor.grid", "lidar.sensor.sensors")}
 
 
 def builder_geometry(rel: str) -> bool:

@@ -9,8 +9,8 @@ from bpy_pipeline.buffers import ObjectTable
 from bpy_pipeline.config import effects_from_dict
 from bpy_pipeline.errors import InputError
 from bpy_pipeline.labels import load_class_table
-from bpy_pipeline.lidar.effects import apply_effects
-from bpy_pipeline.lidar.materials import GLOSSY_ROUGHNESS, model_from_material, model_id, object_models
+from bpy_pipeline.lidar.effects.apply import apply_effects
+from bpy_pipeline.lidar.effects.materials import GLOSSY_ROUGHNESS, model_from_material, model_id, object_models
 from test_materials import returns
 
 TABLE = load_class_table()

@@ -10,9 +10,9 @@ import pytest
 
 from bpy_pipeline.buffers import MATERIAL_ID, ObjectTable, SceneBuffers
 from bpy_pipeline.geometry import primitives
-from bpy_pipeline.lidar.raycast import RayCaster
-from bpy_pipeline.lidar.scanner import MirrorGlassRules, scan, trace_beams
-from bpy_pipeline.lidar.rays import Pattern
+from bpy_pipeline.lidar.cast.raycast import RayCaster
+from bpy_pipeline.lidar.cast.scanner import MirrorGlassRules, scan, trace_beams
+from bpy_pipeline.lidar.sensor.rays import Pattern
 
 WALL, MIRROR_CLASS, REFLECTION = 17, 20, 25
 
@@ -120,7 +120,7 @@ def test_range_noise_moves_points_along_their_own_beam():
     """Behind the mirror (reported) a ghost moves along the emitted ray; at its true position
     (ideal) along the reflected segment, so it stays on the wall instead of drifting off it."""
     from bpy_pipeline.config import effects_from_dict
-    from bpy_pipeline.lidar.effects import apply_effects
+    from bpy_pipeline.lidar.effects.apply import apply_effects
 
     buffers = scene(MIRROR_45, SIDE_WALL)
     noise = effects_from_dict({"noise": {"sigma": 0.05}})

@@ -7,7 +7,7 @@ import pytest
 
 from bpy_pipeline.buffers import SceneBuffers
 from bpy_pipeline.geometry import human, kinematics
-from bpy_pipeline.lidar.raycast import RayCaster
+from bpy_pipeline.lidar.cast.raycast import RayCaster
 
 
 # ----------------------------------------------------------------------------- the body model

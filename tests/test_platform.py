@@ -13,8 +13,8 @@ import pytest
 from bpy_pipeline.buffers import ObjectTable, SceneBuffers
 from bpy_pipeline.config import config_from_dict, config_to_dict, sensor_trajectory
 from bpy_pipeline.errors import InputError
-from bpy_pipeline.lidar.platform import Trajectory
-from bpy_pipeline.lidar.sensors import azimuth_step, azimuths, elevations, spherical_directions
+from bpy_pipeline.lidar.sensor.platform import Trajectory
+from bpy_pipeline.lidar.sensor.sensors import azimuth_step, azimuths, elevations, spherical_directions
 from bpy_pipeline.frame import frame_rng
 
 

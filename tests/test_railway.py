@@ -177,7 +177,7 @@ def test_every_class_of_the_scene_appears_in_the_output(tmp_path):
 
 def test_same_seed_same_scene():
     from bpy_pipeline.export import export_scene
-    from bpy_pipeline.lidar.view import view_of
+    from bpy_pipeline.lidar.sensor.view import view_of
     from bpy_pipeline.labels import load_class_table
 
     overrides = ("scene.track.tracks=2", "scene.supports.mast_type=mixed", "scene.catenary.double_contact_probability=0.5")

@@ -224,7 +224,7 @@ def config_sem(name: str) -> int:
 
 
 def test_out_of_reach_is_conservative():
-    from bpy_pipeline.lidar.sensors import resolve_sensor
+    from bpy_pipeline.lidar.sensor.sensors import resolve_sensor
     from bpy_pipeline.rig import out_of_reach
 
     spec = resolve_sensor({"preset": "flash96x16_carla"})  # +-40 deg, +-6.67 deg, 35 m

@@ -16,10 +16,10 @@ from bpy_pipeline.errors import InputError
 from bpy_pipeline.geometry import primitives
 from bpy_pipeline.geometry.transforms import pose_matrix
 from bpy_pipeline.lidar.points import BEAM_DTYPE, POINT_DTYPE
-from bpy_pipeline.lidar.raycast import RayCaster, closed_surface
-from bpy_pipeline.lidar.scanner import scan
-from bpy_pipeline.lidar.sensors import resolve_sensor, sensor_pattern
-from bpy_pipeline.lidar.rays import Pattern
+from bpy_pipeline.lidar.cast.raycast import RayCaster, closed_surface
+from bpy_pipeline.lidar.cast.scanner import scan
+from bpy_pipeline.lidar.sensor.sensors import resolve_sensor, sensor_pattern
+from bpy_pipeline.lidar.sensor.rays import Pattern
 
 
 # ----------------------------------------------------------------------------- numpy scenes

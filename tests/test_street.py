@@ -15,7 +15,7 @@ from bpy_pipeline.builders.street import layout as street
 from bpy_pipeline.geometry.collision import rectangles_overlap
 from bpy_pipeline.geometry.field_of_view import in_view_fraction
 from bpy_pipeline.geometry.transforms import pose_matrix
-from bpy_pipeline.lidar.sensors import resolve_sensor
+from bpy_pipeline.lidar.sensor.sensors import resolve_sensor
 from bpy_pipeline.rig import field_of_view
 
 BOX_CLASSES = ["car", "van", "truck", "bus", "person", "bicycle", "motorcycle", "rider"]

@@ -134,7 +134,7 @@ def test_the_export_labels_instances_by_their_scatter_object_and_scans_as_the_pu
     from bpy_pipeline.buffers import SceneBuffers
     from bpy_pipeline.export import export_scene
     from bpy_pipeline.labels import load_class_table
-    from bpy_pipeline.lidar.raycast import RayCaster
+    from bpy_pipeline.lidar.cast.raycast import RayCaster
 
     layout, _ = street_frame
     buffers = export_scene(load_class_table())

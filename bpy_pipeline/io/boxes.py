@@ -2,7 +2,7 @@
 
 The boxes themselves are :mod:`bpy_pipeline.geometry.boxes` (fitting, frames, counts); their
 truncation and occlusion are cast by the annotate stage (:mod:`bpy_pipeline.stages.annotate`, with
-:mod:`bpy_pipeline.lidar.visibility`) before any writer runs; the layouts are :mod:`.kitti`
+:mod:`bpy_pipeline.lidar.cast.visibility`) before any writer runs; the layouts are :mod:`.kitti`
 (KITTI object layout), :mod:`.openpcdet` (OpenPCDet custom) and :mod:`.sustech` (SUSTechPOINTS).
 """
 

@@ -32,10 +32,10 @@ from ..errors import InputError
 from ..geometry.boxes import BOX_DTYPE, footprint_heading
 from ..io.real_scans import RealScan, read_real_scan
 from ..labels import ClassTable, load_class_table
-from ..lidar.effects import apply_effects
+from ..lidar.effects.apply import apply_effects
 from ..lidar.points import BEAM_DTYPE, POINT_DTYPE
-from ..lidar.sensors import resolve_sensor
-from ..lidar.visibility import occlusion_levels, subset_buffers, surface_samples
+from ..lidar.sensor.sensors import resolve_sensor
+from ..lidar.cast.visibility import occlusion_levels, subset_buffers, surface_samples
 from . import noise as injections
 from .cast import InsertedHits, cast_firings, glass_rules, merge_returns, near_objects, object_buffers, object_parts
 from .firings import Firings, angles_deg, recover_firings

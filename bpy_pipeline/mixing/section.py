@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 from ..geometry.placement import Distribution
-from ..lidar.materials import CarGlass
+from ..lidar.effects.materials import CarGlass
 from .paint import CarPaint
 
 
@@ -216,7 +216,7 @@ class RealScanScene:
         the frames made before the body set, byte for byte). Explicit ``objects`` keep their box either way.
     population : people and robot arms on the floors and desks found in the scan's points (:class:`RealPopulation`,
         :mod:`.supports`; off with no people and no arms)
-    car_glass : what an inserted car's windows and cabin do to the beam (lidar/materials.py :class:`CarGlass`: Fresnel
+    car_glass : what an inserted car's windows and cabin do to the beam (lidar/effects/materials.py :class:`CarGlass`: Fresnel
         and tint by incidence, a dark cabin; opt-in, ``enabled: true``; off: the windows of before)
     car_fittings : licence plates (retroreflector) and lamps (glossy) on every inserted car, their models applied
         to the inserted returns (geometry/objects.py ``car_fittings``)
