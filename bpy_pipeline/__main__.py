@@ -213,7 +213,9 @@ def _add_fit(sub) -> None:
 def _add_config(sub) -> None:
     p = sub.add_parser("config", help="print the resolved config with the source of each value",
                        description="Print the resolved config: each value with where it comes from (default < preset < builder < profile < config < --set; bpy_pipeline/resolved.py).")
-    p.add_argument("--resolved", action="store_true", required=True, help="the resolved tree (the only view so far)")
+    view = p.add_mutually_exclusive_group(required=True)
+    view.add_argument("--resolved", action="store_true", help="the resolved tree")
+    view.add_argument("--reference", action="store_true", help="every config key with its type, default, unit, range and meaning (docs/config.md)")
     p.add_argument("--config", help="YAML config file (default: the embedded railway scene)")
     p.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE", help="override one config key (repeatable)")
     p.set_defaults(func=print_resolved)
@@ -221,6 +223,12 @@ def _add_config(sub) -> None:
 
 def print_resolved(args) -> int:
     from .resolved import render, resolved
+
+    if args.reference:
+        from .config import config_reference
+
+        print(config_reference())
+        return 0
 
     print(render(*resolved(args.config, args.set)), end="")
     return 0
