@@ -27,7 +27,7 @@ import bpy  # noqa: F401
 from bpy_pipeline.frame import frame_rng
 from bpy_pipeline.stages.scene import build_frame_scene
 from bpy_pipeline.stages.view import sensor_pose
-from bpy_pipeline.stages import scan as scan_stages
+from bpy_pipeline.stages import scan as scan_stages  # the effects stage's own apply_effects is the one patched
 from bpy_pipeline.config import effects_from_dict, load_config
 from bpy_pipeline.export import export_scene
 from bpy_pipeline.labels import load_class_table

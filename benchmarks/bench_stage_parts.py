@@ -30,7 +30,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from common import RESULTS, ROOT, best_of
+from common import RESULTS, ROOT, best_of  # puts the checkout on the path
 
 import bpy_pipeline  # noqa: F401  (before numpy: its numpy settings apply only before numpy loads)
 import numpy as np

@@ -108,9 +108,8 @@ def scan(meshes: SceneBuffers | Mapping, sensor: str | Mapping = "vlp16", pose: 
     effects : a mapping as the config's ``effects`` section (``None``: the config's defaults, as run.py uses)
     seed, frame : the frame's generator is the one frame ``frame`` of a run seeded ``seed`` gets
     """
-    from .frame import Frame
+    from .frame import Frame, Run, frame_rng
     from .geometry.checks import check_pose
-    from .frame import Run, frame_rng
     from .stages.scan import effects_stage, scan_stage
 
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:

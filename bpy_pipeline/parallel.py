@@ -129,7 +129,7 @@ def _run_on_ray(out: str, frames: list[int], address: str, per_scene: int, log: 
             try:
                 ray.get(done[0])
                 log(f"frames {r[0]}..{r[-1]} done on the cluster")
-            except Exception as err:
+            except Exception as err:  # a task that failed after its retries
                 failed.append(f"{r[0]}:{r[-1] + 1} ({type(err).__name__})")
     finally:
         ray.shutdown()

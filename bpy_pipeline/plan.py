@@ -282,7 +282,7 @@ def finished_now(function: Callable, *args) -> Future:
     future: Future = Future()
     try:
         future.set_result(function(*args))
-    except BaseException as err:
+    except BaseException as err:  # re-raised by future.result()
         future.set_exception(err)
     return future
 

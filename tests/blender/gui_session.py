@@ -71,7 +71,7 @@ def serve() -> float:
         try:
             exec(compile(path.read_text(), str(path), "exec"), scope)
             out = {"ok": True, **scope["reply"]}
-        except Exception:
+        except Exception:  # handed to the driver, which fails the test with it
             out = {"ok": False, "error": traceback.format_exc()}
         target = WORK / path.name.replace("cmd-", "reply-").replace(".py", ".json")
         tmp = target.with_suffix(".tmp")
