@@ -20,9 +20,9 @@ Units come from the field's metadata (:func:`bpy_pipeline.schema.meta`, :func:`u
 are angles (subtype ``ANGLE``, ``EULER`` for a rotation vector: Blender shows degrees and stores radians;
 :func:`read` and :func:`write` convert), ``m`` fields lengths (subtype ``DISTANCE``, ``TRANSLATION`` for a
 3-vector) shown in the scene's length unit, and other 3-vectors carry X/Y/Z labels (``XYZ``). The
-metadata's range sets the slider's soft limits and its help the tooltip. A field without metadata (builder
-parameters not yet annotated) falls back to its name: ``*_deg`` is an angle, a last word of
-:data:`LENGTH_WORDS` a length.
+metadata's range sets the slider's soft limits and its help the tooltip. A field without metadata (the
+lidar sections' own dataclasses: weather, materials, drop models, divergence) falls back to its name:
+``*_deg`` is an angle, a last word of :data:`LENGTH_WORDS` a length.
 
 Anything else (lists of shapes, unions) is not shown and passes through untouched from the
 config the panel was loaded from. Blender stores floats in 32 bits; :func:`read` hands back the

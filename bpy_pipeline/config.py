@@ -335,19 +335,21 @@ REFERENCE_SECTIONS = (("", None), ("sensor", SensorConfig), ("effects", EffectsC
 
 
 def config_reference() -> str:
-    """docs/config.md: every key of the config's sensor, effects, output and limits sections (and the top-level
-    scalars) with its type, default, unit, allowed range and meaning, read from the dataclasses' fields and their
+    """docs/config.md: every key of the config's sensor, effects, output and limits sections, the top-level
+    scalars and each builder's ``scene`` keys, with its type, default, unit, allowed range and meaning, read from the dataclasses' fields and their
     metadata (:func:`bpy_pipeline.schema.meta`). ``python -m bpy_pipeline config --reference`` prints it."""
     lines = ["# Config reference", "",
              "Generated from the config's dataclasses (`python -m bpy_pipeline config --reference > docs/config.md`;",
              "`tests/test_docs.py` fails when this file and the code differ). Unit, range and meaning come from each",
              "field's metadata (`bpy_pipeline/schema.py`, `meta`); a value outside the range is refused with the key's",
              "name. The sensor preset's own fields (`sensor.preset` and what it sets) are listed by",
-             "`python -m bpy_pipeline sensors show NAME`; a builder's `scene` keys in docs/builders.md.", ""]
-    for section, cls in REFERENCE_SECTIONS:
+             "`python -m bpy_pipeline sensors show NAME`; what each builder builds is docs/builders.md.", ""]
+    sections = [(f"`{section}`" if section else "Top level", cls, section) for section, cls in REFERENCE_SECTIONS]
+    sections += [(f"`scene` (builder: {name})", BUILDER_REGISTRY.get(name).params, "scene") for name in sorted(BUILDER_REGISTRY.names())]
+    for title, cls, section in sections:
         rows = [r for r in reference(Config) if "." not in r[0]] if cls is None else reference(cls, section)
         rows = [r for r in rows if not r[0].startswith("sensor.spec")]
-        lines += [f"## {f'`{section}`' if section else 'Top level'}", "", "| key | type | default | unit | range | meaning |", "| --- | --- | --- | --- | --- | --- |"]
+        lines += [f"## {title}", "", "| key | type | default | unit | range | meaning |", "| --- | --- | --- | --- | --- | --- |"]
         lines += ["| " + " | ".join(str(cell).replace("|", "\\|") for cell in (f"`{key}`", *rest)) + " |" for key, *rest in rows]
         lines.append("")
     return "\n".join(lines)

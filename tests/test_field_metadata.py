@@ -39,6 +39,34 @@ def test_every_number_of_config_py_carries_its_unit():
     assert len(config_classes()) >= 15
 
 
+def nested_classes(cls, seen=None) -> list[type]:
+    """``cls`` and every dataclass its fields hold (directly, optionally or in a list)."""
+    seen = [] if seen is None else seen
+    if cls in seen:
+        return seen
+    seen.append(cls)
+    for hint in typing.get_type_hints(cls).values():
+        for arg in [hint, *typing.get_args(hint)]:
+            if isinstance(arg, type) and dataclasses.is_dataclass(arg):
+                nested_classes(arg, seen)
+    return seen
+
+
+def test_every_number_of_a_builders_parameters_carries_its_unit():
+    """The panel shows them: each one's unit comes from its metadata, never from its name."""
+    from bpy_pipeline.builders import BUILDERS
+    from bpy_pipeline.builders.population import Population
+
+    classes = [c for name, entry in BUILDERS.items() for c in nested_classes(entry.params)] + nested_classes(Population)
+    classes = [c for c in dict.fromkeys(classes) if c.__module__.startswith("bpy_pipeline.builders")]
+    missing = []
+    for cls in classes:
+        hints = typing.get_type_hints(cls)
+        missing += [f"{cls.__module__}.{cls.__name__}.{f.name}" for f in dataclasses.fields(cls) if numeric(hints[f.name]) and f.metadata.get("unit") not in UNITS]
+    assert not missing, f"numeric builder fields without meta(unit=...): {missing}"
+    assert len(classes) >= 15
+
+
 def test_a_value_outside_the_range_is_refused_naming_the_key_range_and_unit():
     with pytest.raises(InputError, match=r"^effects\.noise\.sigma: must be >= 0 m, got -0\.1$"):
         load_config(None, ["effects.noise.sigma=-0.1"])
