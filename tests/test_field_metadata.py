@@ -58,7 +58,8 @@ def test_every_number_of_a_builders_parameters_carries_its_unit():
     from bpy_pipeline.builders.population import Population
 
     classes = [c for name, entry in BUILDERS.items() for c in nested_classes(entry.params)] + nested_classes(Population)
-    classes = [c for c in dict.fromkeys(classes) if c.__module__.startswith("bpy_pipeline.builders")]
+    # a Distribution's numbers take the unit of the field that holds it (a count, metres, degrees): not listed
+    classes = [c for c in dict.fromkeys(classes) if c.__module__.startswith(("bpy_pipeline.builders", "bpy_pipeline.mixing.section"))]
     missing = []
     for cls in classes:
         hints = typing.get_type_hints(cls)

@@ -49,6 +49,7 @@ from typing import Iterable, Iterator, Literal
 
 import numpy as np
 
+from ...schema import meta
 from ...errors import InputError
 from ...geometry.transforms import rotate
 from ..cast.scanner import collect, scan_chunk
@@ -70,11 +71,11 @@ class Divergence:
     aperture : beam diameter at the sensor's exit window, metres
     """
 
-    mrad: float = 0.0
-    rays: int = 1
+    mrad: float = field(default=0.0, metadata=meta("", help="full divergence angle, mrad"))
+    rays: int = field(default=1, metadata=meta("", help="sub-rays per beam (1: off)"))
     pick: Literal["first", "strongest", "last", "dual"] = field(default="first", metadata={"key": "return"})
-    separation: float = 0.5
-    aperture: float = 0.0
+    separation: float = field(default=0.5, metadata=meta("m"))
+    aperture: float = field(default=0.0, metadata=meta("m"))
 
     @property
     def active(self) -> bool:

@@ -7,10 +7,11 @@ point above ``intensity_limit`` is kept and one below it is kept with probabilit
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
+from ....schema import meta
 from ..intensity import carla_intensity
 from .base import DropModel, register_drop_model
 
@@ -19,10 +20,10 @@ from .base import DropModel, register_drop_model
 class CarlaDrop:
     """``effects.drop.carla``: CARLA's RayCastLidar drop-off, with CARLA's defaults."""
 
-    general_rate: float = 0.45  # dropoff_general_rate: rays lost whatever they hit
-    intensity_limit: float = 0.8  # dropoff_intensity_limit: above it, never lost
-    zero_intensity: float = 0.4  # dropoff_zero_intensity: probability of losing a zero-intensity point
-    attenuation_rate: float = 0.004  # atmosphere_attenuation_rate: intensity exp(-a R), 1/m
+    general_rate: float = field(default=0.45, metadata=meta("", help="dropoff_general_rate: rays lost whatever they hit"))
+    intensity_limit: float = field(default=0.8, metadata=meta("", help="dropoff_intensity_limit: above it, never lost"))
+    zero_intensity: float = field(default=0.4, metadata=meta("", help="dropoff_zero_intensity: probability of losing a zero-intensity point"))
+    attenuation_rate: float = field(default=0.004, metadata=meta("", help="atmosphere_attenuation_rate: intensity exp(-a R), 1/m"))
 
 
 def carla_keep_probability(intensity: np.ndarray, intensity_limit: float, zero_intensity: float) -> np.ndarray:

@@ -8,10 +8,11 @@ vanish nearer than bright ones.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
+from ....schema import meta
 from ..intensity import MIN_RANGE, reflectance
 from .base import DropModel, register_drop_model
 
@@ -20,10 +21,10 @@ from .base import DropModel, register_drop_model
 class ThresholdDrop:
     """``effects.drop.threshold``: a detection threshold from a datasheet's ranges (normal incidence, 50 % detection)."""
 
-    range_at_10: float = 40.0  # m for a 10 % reflectivity target (Ouster OS1: 40; sparse 3D camera: 10)
-    range_at_80: float = 120.0  # m for an 80 % target (0: unknown, the lidar equation's R^2 decides)
-    softness: float = 0.1  # width of the transition in ln(received power); 0 for a hard cut
-    floor: float = 0.0  # share of returns lost whatever the target (a fitted scan's near-range drop); 0 for none
+    range_at_10: float = field(default=40.0, metadata=meta("m", help="for a 10 % reflectivity target (Ouster OS1: 40; sparse 3D camera: 10)"))
+    range_at_80: float = field(default=120.0, metadata=meta("m", help="for an 80 % target (0: unknown, the lidar equation's R^2 decides)"))
+    softness: float = field(default=0.1, metadata=meta("", help="width of the transition in ln(received power); 0 for a hard cut"))
+    floor: float = field(default=0.0, metadata=meta("", help="share of returns lost whatever the target (a fitted scan's near-range drop); 0 for none"))
 
 
 @dataclass(frozen=True)
@@ -36,9 +37,9 @@ class ThresholdModel:
     """
 
     sensitivity: float
-    exponent: float = 2.0
-    softness: float = 0.0
-    alpha: float = 0.0
+    exponent: float = field(default=2.0, metadata=meta(""))
+    softness: float = field(default=0.0, metadata=meta(""))
+    alpha: float = field(default=0.0, metadata=meta(""))
 
     @classmethod
     def from_datasheet(cls, range_at_10: float, range_at_80: float = 0.0, softness: float = 0.0, alpha: float = 0.0) -> "ThresholdModel":
