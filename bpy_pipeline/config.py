@@ -340,11 +340,12 @@ def config_reference() -> str:
     metadata (:func:`bpy_pipeline.schema.meta`). ``python -m bpy_pipeline config --reference`` prints it."""
     lines = ["# Config reference", "",
              "Generated from the config's dataclasses (`python -m bpy_pipeline config --reference > docs/config.md`;",
-             "`tests/test_docs.py` fails when this file and the code differ). Unit, range and meaning come from each",
+             "`tests/test_field_metadata.py` fails when this file and the code differ). Unit, range and meaning come from each",
              "field's metadata (`bpy_pipeline/schema.py`, `meta`); a value outside the range is refused with the key's",
-             "name. The sensor preset's own fields (`sensor.preset` and what it sets) are listed by",
-             "`python -m bpy_pipeline sensors show NAME`; what each builder builds is docs/builders.md.", ""]
+             "name. A preset's values are listed by `python -m bpy_pipeline sensors show NAME`; what each builder builds",
+             "is docs/builders.md.", ""]
     sections = [(f"`{section}`" if section else "Top level", cls, section) for section, cls in REFERENCE_SECTIONS]
+    sections.insert(2, ("`sensor`: the preset's fields, each overridable (defaults: `custom`, no preset)", SensorSpec, "sensor"))
     sections += [(f"`scene` (builder: {name})", BUILDER_REGISTRY.get(name).params, "scene") for name in sorted(BUILDER_REGISTRY.names())]
     for title, cls, section in sections:
         rows = [r for r in reference(Config) if "." not in r[0]] if cls is None else reference(cls, section)

@@ -29,7 +29,7 @@ from typing import Iterator, Literal
 import numpy as np
 
 from ...errors import InputError
-from ...schema import from_dict, key_of
+from ...schema import from_dict, key_of, meta
 from .patterns import PATTERNS
 from .patterns.base import derive_rows
 from .rays import Pattern
@@ -75,24 +75,24 @@ class SensorSpec:
     name: str = field(default="custom", metadata={"key": "preset"})
     description: str = ""
     pattern: str = "spinning"  # a name of lidar/sensor/patterns (PATTERNS)
-    channels: int = 16
-    vertical_fov_deg: tuple[float, float] = (-15.0, 15.0)
-    elevations_deg: list[float] = field(default_factory=list)
-    horizontal_fov_deg: tuple[float, float] = (-180.0, 180.0)
-    horizontal_resolution_deg: float = 0.2
-    rotation_hz: float = 10.0
-    min_range: float = 0.5
-    max_range: float = 100.0
-    vertical_resolution_deg: float = 0.0
-    columns: int = 0
-    firing_rate_hz: float = 0.0
-    sampling_factor: float = 1.0
+    channels: int = field(default=16, metadata=meta(""))
+    vertical_fov_deg: tuple[float, float] = field(default=(-15.0, 15.0), metadata=meta("deg"))
+    elevations_deg: list[float] = field(default_factory=list, metadata=meta("deg"))
+    horizontal_fov_deg: tuple[float, float] = field(default=(-180.0, 180.0), metadata=meta("deg"))
+    horizontal_resolution_deg: float = field(default=0.2, metadata=meta("deg"))
+    rotation_hz: float = field(default=10.0, metadata=meta("Hz"))
+    min_range: float = field(default=0.5, metadata=meta("m"))
+    max_range: float = field(default=100.0, metadata=meta("m"))
+    vertical_resolution_deg: float = field(default=0.0, metadata=meta("deg"))
+    columns: int = field(default=0, metadata=meta(""))
+    firing_rate_hz: float = field(default=0.0, metadata=meta("Hz"))
+    sampling_factor: float = field(default=1.0, metadata=meta(""))
     spin: Literal["ccw", "cw"] = "ccw"
-    mount_height: float = 0.0
-    rotor_hz: tuple[float, float] = (121.57, -77.73)
-    deflection_deg: tuple[float, float] = (9.6, 9.6)
-    point_rate_hz: float = 100000.0
-    frame_time_s: float = 0.0
+    mount_height: float = field(default=0.0, metadata=meta("m"))
+    rotor_hz: tuple[float, float] = field(default=(121.57, -77.73), metadata=meta("Hz"))
+    deflection_deg: tuple[float, float] = field(default=(9.6, 9.6), metadata=meta("deg"))
+    point_rate_hz: float = field(default=100000.0, metadata=meta("Hz"))
+    frame_time_s: float = field(default=0.0, metadata=meta("s"))
     rays_file: str = ""
 
 
