@@ -16,11 +16,13 @@ config type hint            Blender property
 a nested dataclass          ``PointerProperty`` to its own group
 ==========================  ====================================
 
-Units follow the field's name (:func:`unit_of`): ``*_deg`` fields are angles (subtype ``ANGLE``,
-``EULER`` for a rotation vector: Blender shows degrees and stores radians; :func:`read` and
-:func:`write` convert), lengths in metres (``width``, ``height``, ``position``, ``max_range``, ...:
-subtype ``DISTANCE``, ``TRANSLATION`` for a 3-vector) show the scene's length unit, and other
-3-vectors carry X/Y/Z labels (``XYZ``).
+Units come from the field's metadata (:func:`bpy_pipeline.schema.meta`, :func:`unit_of`): ``deg`` fields
+are angles (subtype ``ANGLE``, ``EULER`` for a rotation vector: Blender shows degrees and stores radians;
+:func:`read` and :func:`write` convert), ``m`` fields lengths (subtype ``DISTANCE``, ``TRANSLATION`` for a
+3-vector) shown in the scene's length unit, and other 3-vectors carry X/Y/Z labels (``XYZ``). The
+metadata's range sets the slider's soft limits and its help the tooltip. A field without metadata (the
+lidar sections' own dataclasses: weather, materials, drop models, divergence) falls back to its name:
+``*_deg`` is an angle, a last word of :data:`LENGTH_WORDS` a length.
 
 Anything else (lists of shapes, unions) is not shown and passes through untouched from the
 config the panel was loaded from. Blender stores floats in 32 bits; :func:`read` hands back the
@@ -41,20 +43,25 @@ import bpy
 import numpy as np
 
 from .bpy_pipeline.errors import InputError
-from .bpy_pipeline.schema import key_of, to_plain
+from .bpy_pipeline import schema
+from .bpy_pipeline.schema import key_of
 
 UNITS = {"hz": "Hz", "s": "s"}  # label suffixes; degrees and metres are shown by Blender's own units
-# The last word of a field name that makes it a length in metres (``contact_wire_height``, ``max_range``,
-# ``track.start``); ratios, counts and distributions (``mean``, ``std``) are plain numbers.
+# For fields without unit metadata only: the last word of a field name that makes it a length in metres
+# (``contact_wire_height``, ``max_range``, ``track.start``); ratios, counts and distributions are plain numbers.
 LENGTH_WORDS = frozenset(
     "width height length size spacing offset sag diameter thickness depth radius range distance clearance "
     "shoulder berm gauge stagger span sigma position start mid end bottom top separation aperture step jitter".split()
 )
 
 
-def unit_of(attr: str) -> str:
-    """``"angle"`` (``*_deg``: degrees in the config), ``"length"`` (metres) or ``""`` for a field name."""
-    words = attr.split("_")
+def unit_of(f: dataclasses.Field) -> str:
+    """``"angle"`` (degrees in the config), ``"length"`` (metres) or ``""`` for a config field: its metadata's
+    unit where it has one, else guessed from its name."""
+    unit = schema.unit_of(f)
+    if unit is not None:
+        return {"deg": "angle", "m": "length"}.get(unit, "")
+    words = f.name.split("_")
     if len(words) > 1 and words[-1] == "deg":
         return "angle"
     return "length" if words[-1] in LENGTH_WORDS else ""
@@ -71,6 +78,8 @@ class FieldView:
     size: int = 0  # vector length
     group: GroupView | None = None
     unit: str = ""  # "angle" (the property holds radians, the config degrees) | "length" | ""
+    help: str = ""  # the tooltip (the field's metadata)
+    soft: tuple = ()  # (low, high) of the slider in config units, from the metadata's soft limits or range; () none
 
 
 @dataclass
@@ -141,9 +150,26 @@ def _fits(view: FieldView, default) -> bool:
     }[view.kind]
 
 
+def limits(f: dataclasses.Field) -> tuple:
+    """``(low, high)`` the panel's slider offers for a field (its metadata's ``soft``, else its range), ``()`` when
+    it gives neither end; an open end is the other's sign (0 or a huge value)."""
+    m = f.metadata
+    if m.get("soft"):
+        return tuple(m["soft"])
+    low, high = m.get("low"), m.get("high")
+    if low is None and high is None:
+        return ()
+    return (-1e9 if low is None else low, 1e9 if high is None else high)
+
+
 def _property(view: FieldView, default, update=None):
     name = label(view.attr)
     extra = {"update": update} if update is not None else {}
+    if view.help:
+        extra["description"] = view.help
+    if view.soft and view.kind in ("int", "float", "vector", "ivector"):
+        low, high = (to_panel(FieldView("", "", "float", unit=view.unit), float(v)) for v in view.soft)
+        extra.update(soft_min=int(low) if view.kind in ("int", "ivector") else low, soft_max=int(high) if view.kind in ("int", "ivector") else high)
     if view.kind == "bool":
         return bpy.props.BoolProperty(name=name, default=bool(default), **extra)
     if view.kind == "int":
@@ -189,7 +215,8 @@ def group_view(cls, name: str, defaults: dict, only=None, skip=(), extra: dict |
             continue
         fv = FieldView(f.name, key_of(f), *kind)
         if fv.kind in ("float", "vector"):
-            fv.unit = unit_of(f.name)
+            fv.unit = unit_of(f)
+        fv.help, fv.soft = f.metadata.get("help", ""), limits(f)
         if not _fits(fv, defaults[fv.key]):
             continue  # e.g. an optional vector that is None by default: passes through, not shown
         if fv.kind == "group":

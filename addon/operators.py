@@ -72,7 +72,7 @@ class FrameJob:
 
     def __init__(self, config: cfg.Config, out_dir: Path, build: bool, last=None):
         """``last``: where each finished frame is remembered (``WindowManager.lidar_last``), or ``None``."""
-        from .bpy_pipeline.pipeline import run_frames
+        from .bpy_pipeline.plan import run_frames
 
         self.total, self.done, self.out_dir = config.frames, 0, out_dir
         self.output_frame = config.output.frame
@@ -147,7 +147,7 @@ class LIDAR_OT_build_scene(bpy.types.Operator):
     bl_options = {"REGISTER", "UNDO"}
 
     def execute(self, context):
-        from .bpy_pipeline.pipeline import build_frame_scene
+        from .bpy_pipeline.stages.scene import build_frame_scene
 
         settings = context.scene.lidar
         if settings.builder == panel.MY_SCENE:

@@ -32,9 +32,11 @@ from mathutils import Matrix, Vector
 
 from . import fields
 from .bpy_pipeline import config as cfg
+from .bpy_pipeline.buffers import MATERIALS
 from .bpy_pipeline.errors import InputError
+from .bpy_pipeline.schema import to_plain
 from .bpy_pipeline.labels import load_class_table
-from .bpy_pipeline.lidar import sensors
+from .bpy_pipeline.lidar.sensor import sensors
 
 MY_SCENE = "my_scene"
 SENSOR_FIELDS = ("min_range", "max_range", "sampling_factor")  # shown; any other override passes through
@@ -120,7 +122,7 @@ def make_views() -> Views:
         if name == "blend":
             continue  # "My scene" instead: the open file
         try:
-            builder_defaults = fields.to_plain(params())
+            builder_defaults = to_plain(params())
         except TypeError:  # a builder without defaults for every field: nothing to show
             builder_defaults = {}
         builders[name] = fields.group_view(params, f"LIDAR_PG_scene_{name}", builder_defaults)
@@ -133,7 +135,7 @@ def make_views() -> Views:
     trajectory = None
     if has_trajectory():
         trajectory_cls = cfg.TrajectoryConfig
-        trajectory = fields.group_view(trajectory_cls, "LIDAR_PG_trajectory", fields.to_plain(trajectory_cls()), skip=("waypoints", "times", "curve"))
+        trajectory = fields.group_view(trajectory_cls, "LIDAR_PG_trajectory", to_plain(trajectory_cls()), skip=("waypoints", "times", "curve"))
     effects = fields.group_view(cfg.EffectsConfig, "LIDAR_PG_effects", defaults["effects"])
     output = fields.group_view(cfg.OutputConfig, "LIDAR_PG_output", defaults["output"])
     views = Views(builders, sensor, pose, trajectory, effects, output, defaults)
@@ -160,7 +162,7 @@ def make_views() -> Views:
         "output": bpy.props.PointerProperty(type=output.property_group),
         "out_dir": bpy.props.StringProperty(name="Folder", subtype="DIR_PATH", description="Output folder (empty: the extension's user folder)"),
         "label_class": bpy.props.EnumProperty(name="Class", items=[(n.replace(" ", "_"), n.capitalize(), f"class id {i}") for i, n in sorted(table.names.items())], default="ground"),
-        "label_material": bpy.props.EnumProperty(name="Material", items=_enum_items(cfg.MATERIALS), default="diffuse"),
+        "label_material": bpy.props.EnumProperty(name="Material", items=_enum_items(MATERIALS), default="diffuse"),
         "label_reflectivity": bpy.props.FloatProperty(name="Reflectivity", min=0.0, max=1.0, default=0.5),
         "loaded": bpy.props.StringProperty(options={"HIDDEN"}, description="The last loaded config (JSON)"),
         "status": bpy.props.StringProperty(name="Status", options={"SKIP_SAVE"}),
@@ -249,7 +251,7 @@ def _sensor_dict(settings, base: dict) -> dict:
     return section | pose
 
 
-PROFILE_SECTIONS = ("noise", "drop", "intensity")  # what a preset's effects profile sets (lidar/sensors.yaml)
+PROFILE_SECTIONS = ("noise", "drop", "intensity")  # what a preset's effects profile sets (lidar/sensor/sensors.yaml)
 
 
 def _effects_dict(settings, base: dict) -> dict:

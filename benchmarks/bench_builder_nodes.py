@@ -157,7 +157,7 @@ def counts(builder: str) -> dict:
     import bpy
 
     from bpy_pipeline.config import load_config
-    from bpy_pipeline.pipeline import build_frame_scene
+    from bpy_pipeline.stages.scene import build_frame_scene
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     build_frame_scene(load_config({"seed": 0, "frames": 1, "scene": {"builder": builder}, "output": {"formats": ["ply"], "preview": False}}), 0)

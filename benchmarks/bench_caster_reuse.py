@@ -2,7 +2,7 @@
 
 Each frame's scene is built once; then the frame is made twice through the pipeline's stages after
 the build (pose, export, scan, effects, boxes), once with the run's kept
-:class:`~bpy_pipeline.lidar.raycast.CasterCache` and once with a fresh one, in alternating order
+:class:`~bpy_pipeline.lidar.cast.raycast.CasterCache` and once with a fresh one, in alternating order
 (so a busy moment or a warm cache favours neither), and the two frames must give the same bytes.
 Reported per job: seconds per frame of the scan stage (caster set-up, trace, records, effects) and
 of the boxes stage (its visibility cast reuses the frame's caster in both), and ``speedup`` = fresh
@@ -22,12 +22,14 @@ import time
 import numpy as np
 from common import arguments, report
 
-import bpy  # noqa: E402
+import bpy
 
-from bpy_pipeline.config import load_config  # noqa: E402
-from bpy_pipeline.frame import Frame  # noqa: E402
-from bpy_pipeline.lidar.raycast import CasterCache  # noqa: E402
-from bpy_pipeline.pipeline import STAGES, Run, build_stage, frame_rng  # noqa: E402
+from bpy_pipeline.config import load_config
+from bpy_pipeline.frame import Frame
+from bpy_pipeline.lidar.cast.raycast import CasterCache
+from bpy_pipeline.frame import Run, frame_rng
+from bpy_pipeline.plan import plan
+from bpy_pipeline.stages.scene import build_stage
 
 TIMED = ("scan", "boxes")
 
@@ -37,13 +39,13 @@ def remake(run: Run, index: int, scene, cache: CasterCache) -> Frame:
     kept, run.casters = run.casters, cache
     try:
         frame = Frame(index, run.config, frame_rng(run.config.seed, index), scene=scene)
-        for stage, timing in STAGES:
-            if stage is build_stage:
+        for stage in plan(run.config):
+            if stage.name == "build":
                 continue
             start = time.perf_counter()
             stage(frame, run)
-            if timing is not None:  # None: the stage timed its own parts
-                frame.timings[timing] = frame.timings.get(timing, 0.0) + time.perf_counter() - start
+            if stage.timing is not None:  # None: the stage timed its own parts
+                frame.timings[stage.timing] = frame.timings.get(stage.timing, 0.0) + time.perf_counter() - start
     finally:
         run.casters = kept
     return frame

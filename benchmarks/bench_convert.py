@@ -23,7 +23,7 @@ from common import ROOT, arguments, best_of, report
 
 from bpy_pipeline.conversion import convert
 from bpy_pipeline.io.real_scans import read_real_scan
-from bpy_pipeline.lidar.sensors import resolve_sensor
+from bpy_pipeline.lidar.sensor.sensors import resolve_sensor
 from bpy_pipeline.mixing.convert import METHODS
 from bpy_pipeline.mixing.firings import recover_firings
 
@@ -37,7 +37,7 @@ NAMES = {"cones": "parking paper: cones", "mesh": "meshed ray cast", "hybrid": "
 
 def street_truth(tmp, seed: int = 7):
     """The street scanned by both sensors: ``(scan.npy, labels.npy, truth xyz (32, columns, 3), truth valid, truth object)``."""
-    from bpy_pipeline.lidar.raycast import RayCaster
+    from bpy_pipeline.lidar.cast.raycast import RayCaster
     from bpy_pipeline.mixing.convert import target_rays
 
     buffers = street_scene(np.random.default_rng(seed))
@@ -74,7 +74,7 @@ def accuracy(repeat: int, tmp) -> list[dict]:
         pts = out.points
         ring, column = pts["ring"].astype(np.int64), np.zeros(len(pts), np.int64)
         spec = resolve_sensor({"preset": "hdl32e"}, "t")
-        from bpy_pipeline.lidar.sensors import azimuths
+        from bpy_pipeline.lidar.sensor.sensors import azimuths
 
         az = np.degrees(np.arctan2(pts["y"], pts["x"]))
         line = np.asarray(azimuths(spec), float)

@@ -36,7 +36,7 @@ def frame_times(frames: int) -> list[float]:
     import bpy
 
     from bpy_pipeline.config import load_config
-    from bpy_pipeline.pipeline import run_frames
+    from bpy_pipeline.plan import run_frames
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     config = load_config(None, ["scene.builder=parking", "output.formats=[ply,semantickitti]", f"frames={frames}"])

@@ -35,22 +35,23 @@ import time
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from common import arguments, best_of, report  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+from common import arguments, best_of, report
 
-import bpy  # noqa: E402
+import bpy
 
-from bpy_pipeline.builders.primitives.params import PrimitivesScene, Shape  # noqa: E402
-from bpy_pipeline.config import SceneConfig  # noqa: E402
-from bpy_pipeline.export import export_scene  # noqa: E402
-from bpy_pipeline.labels import load_class_table  # noqa: E402
-from bpy_pipeline.lidar.divergence import Divergence, scan_footprint  # noqa: E402
-from bpy_pipeline.lidar.raycast import RayCaster  # noqa: E402
-from bpy_pipeline.lidar.scanner import scan  # noqa: E402
-from bpy_pipeline.lidar.sensors import Pattern, azimuth_step, azimuths, elevation_step, elevations, resolve_sensor, sensor_pattern  # noqa: E402
-from bpy_pipeline.pipeline import frame_rng  # noqa: E402
-from bpy_pipeline.scenes import build_scene  # noqa: E402
+from bpy_pipeline.builders.primitives.params import PrimitivesScene, Shape
+from bpy_pipeline.config import SceneConfig
+from bpy_pipeline.export import export_scene
+from bpy_pipeline.labels import load_class_table
+from bpy_pipeline.lidar.effects.divergence import Divergence, scan_footprint
+from bpy_pipeline.lidar.cast.raycast import RayCaster
+from bpy_pipeline.lidar.cast.scanner import scan
+from bpy_pipeline.lidar.sensor.sensors import azimuth_step, azimuths, elevation_step, elevations, resolve_sensor, sensor_pattern
+from bpy_pipeline.lidar.sensor.rays import Pattern
+from bpy_pipeline.frame import frame_rng
+from bpy_pipeline.scenes import build_scene
 
 DIAMETER = 0.012  # m, a contact wire
 SLOPE = 0.05  # the TLS wire's slope, and the VLP-16 wires' tilt: phases vary from crossing to crossing

@@ -1,7 +1,7 @@
 """Cost of the sensor effects beside the scan of the default job, measured in the same run.
 
 Builds and exports the default job's scene (python run.py without --config) as run_frames does, times
-``pipeline.scan_buffers`` with ``apply_effects`` taken out (the scan alone: trace, records,
+``stages.scan.scan_buffers`` with ``apply_effects`` taken out (the scan alone: trace, records,
 labels), keeps the points and beam facts it would have handed to ``effects.apply_effects`` (one
 call per chunk of rays, as the pipeline makes them), and times those calls with each effect,
 and with all of them together: the
@@ -22,15 +22,17 @@ from pathlib import Path
 import numpy as np
 from common import ROOT, arguments, report
 
-import bpy  # noqa: E402,F401
+import bpy  # noqa: F401
 
-from bpy_pipeline import pipeline  # noqa: E402
-from bpy_pipeline.stages import scan as scan_stages  # noqa: E402  (the effects stage's own apply_effects is the one patched)
-from bpy_pipeline.config import effects_from_dict, load_config  # noqa: E402
-from bpy_pipeline.export import export_scene  # noqa: E402
-from bpy_pipeline.labels import load_class_table  # noqa: E402
-from bpy_pipeline.lidar import fitting  # noqa: E402
-from bpy_pipeline.lidar.effects import write_model_file  # noqa: E402
+from bpy_pipeline.frame import frame_rng
+from bpy_pipeline.stages.scene import build_frame_scene
+from bpy_pipeline.stages.view import sensor_pose
+from bpy_pipeline.stages import scan as scan_stages  # the effects stage's own apply_effects is the one patched
+from bpy_pipeline.config import effects_from_dict, load_config
+from bpy_pipeline.export import export_scene
+from bpy_pipeline.labels import load_class_table
+from bpy_pipeline.lidar.fit import fitting
+from bpy_pipeline.lidar.effects.apply import write_model_file
 
 SCAN = ROOT.parent / "shared" / "real_scans" / "nuscenes_hdl32e_sweep.bin"
 
@@ -85,8 +87,8 @@ def main():
     args = arguments(__doc__)
     overrides = ["sensor.sampling_factor=0.1"] if args.small else []
     config = load_config(None, overrides)
-    pipeline.build_frame_scene(config, 0)
-    buffers = export_scene(load_class_table(), (), keep_within=(pipeline.sensor_pose(config)[:3, 3], config.sensor.spec.max_range))
+    build_frame_scene(config, 0)
+    buffers = export_scene(load_class_table(), (), keep_within=(sensor_pose(config)[:3, 3], config.sensor.spec.max_range))
 
     captured = []
     original = scan_stages.apply_effects
@@ -99,7 +101,7 @@ def main():
         captured.clear()
         scan_stages.apply_effects = capture
         try:
-            return pipeline.scan_buffers(buffers, config, pipeline.frame_rng(0, 0))
+            return scan_stages.scan_buffers(buffers, config, frame_rng(0, 0))
         finally:
             scan_stages.apply_effects = original
 
@@ -117,7 +119,7 @@ def main():
         effects = {name: effects_from_dict(section, config.sensor.spec) for name, section in sections.items()}
         kept = {name: effects_on_every_chunk(e) for name, e in effects.items()}  # warms: model files read, rasters built
         on = dataclasses.replace(config, effects=effects["all"])
-        timed = {"scan alone": scan_alone, "scan + all effects": lambda: pipeline.scan_buffers(buffers, on, pipeline.frame_rng(0, 0))}
+        timed = {"scan alone": scan_alone, "scan + all effects": lambda: scan_stages.scan_buffers(buffers, on, frame_rng(0, 0))}
         timed |= {name: (lambda e=e: effects_on_every_chunk(e)) for name, e in effects.items()}
         best = interleaved(timed, rounds)
     t_scan = best["scan alone"]

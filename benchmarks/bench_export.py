@@ -8,11 +8,11 @@ Run: python benchmarks/bench_export.py [--small]
 
 from common import arguments, best_of, report
 
-import bpy  # noqa: E402
+import bpy
 
-from bpy_pipeline.export import export_scene  # noqa: E402
-from bpy_pipeline.labels import load_class_table  # noqa: E402
-from bpy_pipeline.scenes.objects import mesh_object, scene_collection, tag  # noqa: E402
+from bpy_pipeline.export import export_scene
+from bpy_pipeline.labels import load_class_table
+from bpy_pipeline.scenes.objects import mesh_object, scene_collection, tag
 
 
 def gn_object(name: str, build) -> bpy.types.Object:

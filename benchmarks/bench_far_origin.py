@@ -6,7 +6,7 @@ from the world origin, and scanned by a 64-channel spinning sensor 1.8 m above i
 Four ways of tracing the same rays:
 
 - ``shift + float64``: the pipeline (Embree in the sensor's frame, distance re-solved in float64
-  against the hit triangle's plane: :class:`~bpy_pipeline.lidar.raycast.RayCaster`)
+  against the hit triangle's plane: :class:`~bpy_pipeline.lidar.cast.raycast.RayCaster`)
 - ``world + float64``: the same caster with Embree's scene in world coordinates (float32)
 - ``shift, Embree t``: Embree in the sensor's frame, its own float32 distance
 - ``world, Embree t``: Embree in world coordinates, its own distance: what a plain Embree,
@@ -23,11 +23,11 @@ Run: python benchmarks/bench_far_origin.py [--small]
 import numpy as np
 from common import arguments, report
 
-from bpy_pipeline.buffers import SceneBuffers  # noqa: E402
-from bpy_pipeline.geometry import primitives  # noqa: E402
-from bpy_pipeline.geometry.transforms import pose_matrix  # noqa: E402
-from bpy_pipeline.lidar.raycast import FAR, RayCaster  # noqa: E402
-from bpy_pipeline.lidar.sensors import resolve_sensor, sensor_pattern  # noqa: E402
+from bpy_pipeline.buffers import SceneBuffers
+from bpy_pipeline.geometry import primitives
+from bpy_pipeline.geometry.transforms import pose_matrix
+from bpy_pipeline.lidar.cast.raycast import FAR, RayCaster
+from bpy_pipeline.lidar.sensor.sensors import resolve_sensor, sensor_pattern
 
 # The scene in its own frame: name -> (low corner, high corner), metres; a zero extent is a plane.
 BOXES = {

@@ -2,7 +2,7 @@
 
 The nuScenes sweep (../shared/real_scans/nuscenes_hdl32e_sweep.bin, 32 x 1084 firings) is read
 as an organised scan (ego motion undone, gaps of up to 4 columns filled from ring neighbours,
-incidence from local normals; lidar/fitting.py). Each model is fitted on 7 of 8 blocks of 135
+incidence from local normals; lidar/fit/fitting.py). Each model is fitted on 7 of 8 blocks of 135
 columns (45 degrees of azimuth) and scored on the eighth: mean negative log-likelihood per
 firing (nats), paired fold by fold against the best model. "Within noise" = the mean paired
 difference is at most one standard error. Cost: the model's drop decision (probability and
@@ -26,8 +26,8 @@ import numpy as np
 from common import ROOT, arguments, best_of, report
 
 from bpy_pipeline.config import effects_from_dict
-from bpy_pipeline.lidar import fitting
-from bpy_pipeline.lidar.effects import FittedModels, drop_mask, fitted_models, write_model_file
+from bpy_pipeline.lidar.fit import fitting
+from bpy_pipeline.lidar.effects.apply import FittedModels, drop_mask, fitted_models, write_model_file
 
 SCAN = ROOT.parent / "shared" / "real_scans" / "nuscenes_hdl32e_sweep.bin"
 FOLDS = 8

@@ -1,4 +1,4 @@
-"""Material reflectance models (lidar/materials.py) and dual returns against real KITTI cars, and their cost.
+"""Material reflectance models (lidar/effects/materials.py) and dual returns against real KITTI cars, and their cost.
 
 The cars of benchmarks/bench_realism.py (the sedan of geometry/objects.py at each label's pose, silver
 paint 0.5, glass windows, on a road of 0.10, the ``hdl64e`` preset with its profile, cropped to the
@@ -56,8 +56,8 @@ from common import RESULTS, report
 
 import bpy_pipeline
 from bpy_pipeline.labels import load_class_table
-from bpy_pipeline.lidar.materials import CarGlass
-from bpy_pipeline.lidar.divergence import return_index
+from bpy_pipeline.lidar.effects.materials import CarGlass
+from bpy_pipeline.lidar.effects.divergence import return_index
 from bpy_pipeline.mixing import ObjectBox, RealScanScene, mix_frame
 from bpy_pipeline.mixing.section import RemoveBox
 
@@ -238,7 +238,7 @@ class Insertion:
         (the windows of before, every seed's car), in the frustum, by what the real scan did on them: no return, a
         return in the car's box (its glass, cabin or a part our shape lacks), a return beyond the car (passed through)."""
         from bpy_pipeline.buffers import MATERIAL_ID
-        from bpy_pipeline.lidar.raycast import RayCaster
+        from bpy_pipeline.lidar.cast.raycast import RayCaster
         from bpy_pipeline.mixing.cast import near_objects
 
         tally = {}
@@ -461,7 +461,7 @@ def reading_fit() -> dict:
 def reading(small: bool, out) -> None:
     """The reading model (``effects.intensity.reading``) on the insertion: its parameters from :func:`reading_fit` (000008),
     a grid of paints and cabins scored on 000008 with the glass model, plates and lamps; the best (cars within 0.7-1.4x,
-    then overlap) and the best of last round's receivers held out on 004747 unchanged. Into materials.json's ``reading``."""
+    then overlap) and the best earlier receivers held out on 004747 unchanged. Into materials.json's ``reading``."""
     fitted = reading_fit()
     print(fitted, flush=True)
     fit, held = insertions()
@@ -469,8 +469,8 @@ def reading(small: bool, out) -> None:
     receiver = receiver_of(fitted)
     glass = lambda cabin: {"car_glass": CarGlass(enabled=True, windshield=0.6, tinted=0.7, interior=cabin), "car_fittings": True}  # noqa: E731
     grid = {"diffuse, clear glass, plates and lamps (default)": ({}, {"car_glass": CarGlass(enabled=False), "car_fittings": True}),
-            "glass model, glossy 0.1 / 0.6 / 6 deg, 6 a - 0.3 (last round's best counts)": (glossy(0.1, 0.6, 6.0, 6.0, 0.3), glass(0.15)),
-            "glass model, glossy 0.06 / 0.3 / 10 deg, 4 a - 0.15 (last round's best overlap)": (glossy(0.06, 0.3, 10.0, 4.0, 0.15), glass(0.15))}
+            "glass model, glossy 0.1 / 0.6 / 6 deg, 6 a - 0.3 (the earlier best counts)": (glossy(0.1, 0.6, 6.0, 6.0, 0.3), glass(0.15)),
+            "glass model, glossy 0.06 / 0.3 / 10 deg, 4 a - 0.15 (the earlier best overlap)": (glossy(0.06, 0.3, 10.0, 4.0, 0.15), glass(0.15))}
     paints = {"diffuse": {}, "dark 0.05": {"materials": {"classes": {"car": "dark_paint"}, "dark_paint": {"reflectivity": 0.05}}},
               "dark 0.1": {"materials": {"classes": {"car": "dark_paint"}, "dark_paint": {"reflectivity": 0.1}}}}
     for d, s_, lobe in [(0.06, 0.3, 10.0)] if small else [(0.03, 0.3, 10.0), (0.06, 0.3, 10.0), (0.1, 0.3, 10.0), (0.06, 0.6, 6.0), (0.1, 0.6, 6.0)]:

@@ -27,18 +27,19 @@ import time
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from common import arguments, best_of, report  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+from common import arguments, best_of, report
 
-import bpy  # noqa: E402
+import bpy
 
-from bpy_pipeline.config import load_config  # noqa: E402
-from bpy_pipeline.export import export_scene  # noqa: E402
-from bpy_pipeline.labels import load_class_table  # noqa: E402
-from bpy_pipeline.lidar.mirror_sensor import MirrorFrame  # noqa: E402
-from bpy_pipeline.pipeline import frame_rng, scan_buffers  # noqa: E402
-from bpy_pipeline.scenes import build_scene  # noqa: E402
+from bpy_pipeline.config import load_config
+from bpy_pipeline.export import export_scene
+from bpy_pipeline.labels import load_class_table
+from bpy_pipeline.lidar.sensor.mirror_sensor import MirrorFrame
+from bpy_pipeline.frame import frame_rng
+from bpy_pipeline.stages.scan import scan_buffers
+from bpy_pipeline.scenes import build_scene
 
 HEIGHT = 6.0  # m, sensor above the floor
 

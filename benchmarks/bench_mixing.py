@@ -3,7 +3,7 @@
 1. Mixing: the nuScenes sweep (../shared/real_scans/nuscenes_hdl32e_sweep.bin, 32 x 1084 firings), five
    cars at fixed boxes. Milliseconds per mixed frame (best of N, Embree warmed up), ours split by stage
    (read, firings, placement, meshes, cast, effects, records, boxes), beside the two papers' methods on
-   the same frame and the same car meshes (bpy_pipeline/mixing/references.py): the parking paper's
+   the same frame and the same car meshes (benchmarks/mixing_references.py): the parking paper's
    (each car scanned alone by the hdl32e preset's nominal pattern, its points copied in, the
    background it occludes removed by the cone test) and the KITTI paper's (spherical point tracing of
    a dense point model, with the point wall). For all three: the angle from each inserted point to
@@ -30,12 +30,12 @@ from bpy_pipeline.buffers import SceneBuffers
 from bpy_pipeline.geometry import primitives
 from bpy_pipeline.geometry.objects import car_object
 from bpy_pipeline.io.real_scans import read_real_scan
-from bpy_pipeline.lidar.raycast import RayCaster
-from bpy_pipeline.lidar.sensors import resolve_sensor
+from bpy_pipeline.lidar.cast.raycast import RayCaster
+from bpy_pipeline.lidar.sensor.sensors import resolve_sensor
 from bpy_pipeline.mixing import ObjectBox, RealScanScene, mix_frame
 from bpy_pipeline.mixing.convert import convert_scan, project_to_cones, raycast_convert, target_rays
 from bpy_pipeline.mixing.firings import recover_firings
-from bpy_pipeline.mixing.references import angular_error, kitti_paper_insert, parking_paper_insert
+from mixing_references import angular_error, kitti_paper_insert, parking_paper_insert
 
 SCAN = ROOT.parent / "shared" / "real_scans" / "nuscenes_hdl32e_sweep.bin"
 KITTI = ROOT.parent / "shared" / "real_scans" / "kitti_hdl64e_000008_frontfov.bin"

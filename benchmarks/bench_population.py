@@ -31,7 +31,8 @@ def frames(config, rebuild: bool):
     import bpy
 
     from bpy_pipeline.dataset import Dataset
-    from bpy_pipeline.pipeline import Run, make_frame
+    from bpy_pipeline.frame import Run
+    from bpy_pipeline.plan import make_frame
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     out = []

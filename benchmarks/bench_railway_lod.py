@@ -17,13 +17,15 @@ import time
 import numpy as np
 from common import arguments, report
 
-import bpy  # noqa: E402
+import bpy
 
-from bpy_pipeline.config import load_config  # noqa: E402
-from bpy_pipeline.export import export_scene  # noqa: E402
-from bpy_pipeline.labels import load_class_table  # noqa: E402
-from bpy_pipeline.pipeline import frame_rng, scan_buffers, scene_view, sensor_pose  # noqa: E402
-from bpy_pipeline.scenes import build_scene  # noqa: E402
+from bpy_pipeline.config import load_config
+from bpy_pipeline.export import export_scene
+from bpy_pipeline.labels import load_class_table
+from bpy_pipeline.frame import frame_rng
+from bpy_pipeline.stages.scan import scan_buffers
+from bpy_pipeline.stages.view import scene_view, sensor_pose
+from bpy_pipeline.scenes import build_scene
 
 WIRES = ("contact_wire", "messenger_wire", "feeder", "earth_wire")
 

@@ -32,9 +32,9 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from common import arguments, report  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+from common import arguments, report
 
 BINS = [(0, 15), (15, 30), (30, 60), (60, 120)]
 MODELS = {
@@ -48,7 +48,7 @@ def run(overrides: list[str], out: Path) -> tuple[dict, float]:
     import bpy
 
     from bpy_pipeline.config import load_config
-    from bpy_pipeline.pipeline import run as run_pipeline
+    from bpy_pipeline.plan import run as run_pipeline
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     config = load_config(None, ["output.preview=false", "output.frame=world", *overrides])

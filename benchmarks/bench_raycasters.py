@@ -39,18 +39,18 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 from common import arguments, report
 
-import bpy  # noqa: E402
-from bench_far_origin import BOXES, SENSOR, TURN_DEG, analytic_scene, exact_hits, placed  # noqa: E402
-from embreex import rtcore_scene  # noqa: E402
-from embreex.mesh_construction import TriangleMesh  # noqa: E402
+import bpy
+from bench_far_origin import BOXES, SENSOR, TURN_DEG, analytic_scene, exact_hits, placed
+from embreex import rtcore_scene
+from embreex.mesh_construction import TriangleMesh
 
-from bpy_pipeline.buffers import SceneBuffers  # noqa: E402
-from bpy_pipeline.geometry import primitives  # noqa: E402
-from bpy_pipeline.geometry.transforms import pose_matrix  # noqa: E402
-from bpy_pipeline.lidar import kernels  # noqa: E402
-from bpy_pipeline.lidar.raycast import RayCaster, default_threads  # noqa: E402
-from bpy_pipeline.lidar.scanner import scan, scan_chunk  # noqa: E402
-from bpy_pipeline.lidar.sensors import resolve_sensor, sensor_pattern  # noqa: E402
+from bpy_pipeline.buffers import SceneBuffers
+from bpy_pipeline.geometry import primitives
+from bpy_pipeline.geometry.transforms import pose_matrix
+from bpy_pipeline.lidar.cast import kernels
+from bpy_pipeline.lidar.cast.raycast import RayCaster, default_threads
+from bpy_pipeline.lidar.cast.scanner import scan, scan_chunk
+from bpy_pipeline.lidar.sensor.sensors import resolve_sensor, sensor_pattern
 
 
 REPEAT = 5  # interleaved timing rounds; the best of each method counts

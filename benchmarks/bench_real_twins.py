@@ -27,8 +27,8 @@ from bpy_pipeline.buffers import SceneBuffers
 from bpy_pipeline.geometry import primitives
 from bpy_pipeline.geometry.indoor import boxes_mesh, hall_layout
 from bpy_pipeline.geometry.objects import person_mesh
-from bpy_pipeline.lidar.raycast import RayCaster
-from bpy_pipeline.lidar.sensors import resolve_sensor
+from bpy_pipeline.lidar.cast.raycast import RayCaster
+from bpy_pipeline.lidar.sensor.sensors import resolve_sensor
 from bpy_pipeline.mixing.convert import target_rays
 from bpy_pipeline.mixing.section import SupportParams
 from bpy_pipeline.mixing.supports import find_supports

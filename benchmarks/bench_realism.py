@@ -3,7 +3,7 @@
 Two real scans (../shared/real_scans, read only):
 
 * **HDL-32E, nuScenes sweep**, replayed: the sweep's own returns (ego motion undone, gaps of up to
-  4 columns filled from ring neighbours; lidar/fitting.py) are meshed as a range image (two
+  4 columns filled from ring neighbours; lidar/fit/fitting.py) are meshed as a range image (two
   triangles per 2 x 2 cell of firings whose ranges agree within 10 %), each triangle carrying the
   reflectivity its real returns imply (apparent reflectance intensity / 100 over cos incidence,
   in steps of 0.01; firings no cell covers become small squares facing the sensor; returns nearer
@@ -41,13 +41,13 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-from common import RESULTS, ROOT, arguments, best_of, report
+from common import ROOT, arguments, best_of, report
 
 import bpy_pipeline
 from bpy_pipeline.config import effects_from_dict
 from bpy_pipeline.geometry.objects import STYLES, car_parts, fit_to_box, person_object, ObjectPart, PARTS, GLASS_REFLECTIVITY, INTERIOR_REFLECTIVITY, TYRE_REFLECTIVITY
-from bpy_pipeline.lidar import fitting
-from bpy_pipeline.lidar.sensors import elevations, preset_effects, resolve_sensor
+from bpy_pipeline.lidar.fit import fitting
+from bpy_pipeline.lidar.sensor.sensors import elevations, preset_effects, resolve_sensor
 
 REAL = Path(os.environ.get("BPY_PIPELINE_REAL_SCANS", ROOT.parent / "shared" / "real_scans"))
 NUSCENES, KITTI, BOXES = REAL / "nuscenes_hdl32e_sweep.bin", REAL / "kitti_hdl64e_000008_frontfov.bin", REAL / "kitti_000008_boxes.json"

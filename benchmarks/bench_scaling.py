@@ -23,11 +23,11 @@ from common import arguments, best_of, report
 from embreex import rtcore_scene
 from embreex.mesh_construction import TriangleMesh
 
-from bpy_pipeline.buffers import SceneBuffers  # noqa: E402
-from bpy_pipeline.geometry.transforms import pose_matrix  # noqa: E402
-from bpy_pipeline.lidar.raycast import RayCaster  # noqa: E402
-from bpy_pipeline.lidar.scanner import scan  # noqa: E402
-from bpy_pipeline.lidar.sensors import resolve_sensor, sensor_pattern  # noqa: E402
+from bpy_pipeline.buffers import SceneBuffers
+from bpy_pipeline.geometry.transforms import pose_matrix
+from bpy_pipeline.lidar.cast.raycast import RayCaster
+from bpy_pipeline.lidar.cast.scanner import scan
+from bpy_pipeline.lidar.sensor.sensors import resolve_sensor, sensor_pattern
 
 SIDE = 400.0  # m, terrain edge
 

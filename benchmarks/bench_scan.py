@@ -10,7 +10,7 @@ All in one process and one run, every core for Embree:
 - ``raw embreex``: embreex's own ``EmbreeScene.run(..., output=1)`` on the caster's float32 rays
   (the same zero origin repeated by strides) in the same chunks over a thread pool of the same
   size, nothing else done (the reference);
-- ``scan``: :func:`bpy_pipeline.lidar.scanner.scan` with the compiled kernel (numba, when
+- ``scan``: :func:`bpy_pipeline.lidar.cast.scanner.scan` with the compiled kernel (numba, when
   installed: Embree called from inside the pass) and with ``kernel="numpy"``; ``ratio`` = raw
   time / scan time (target >= 0.8), best of interleaved rounds (about a second of raw tracing, at least 7);
 - ``post_ns_per_hit``: (scan time - raw time) / hits, wall time of the work after Embree (one core);
@@ -18,7 +18,7 @@ All in one process and one run, every core for Embree:
 - set-up per triangle: ``RayCaster(...)`` (target <= 150 ns); Embree's own build of the same
   buffers read in place (the floor: the caster's set-up less its checks, planes and float32 copy);
   embreex's ``TriangleMesh`` plus commit (the copy it makes); and a
-  :class:`~bpy_pipeline.lidar.raycast.CasterCache` handing back the kept caster for the next frame.
+  :class:`~bpy_pipeline.lidar.cast.raycast.CasterCache` handing back the kept caster for the next frame.
 Run: python benchmarks/bench_scan.py [--small]
 """
 
@@ -28,24 +28,25 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 from common import arguments, best_of, report
 
-import bpy  # noqa: E402
-from embreex import rtcore_scene  # noqa: E402
-from embreex.mesh_construction import TriangleMesh  # noqa: E402
+import bpy
+from embreex import rtcore_scene
+from embreex.mesh_construction import TriangleMesh
 
-from bpy_pipeline.buffers import SceneBuffers  # noqa: E402
-from bpy_pipeline.config import load_config  # noqa: E402
-from bpy_pipeline.export import export_scene  # noqa: E402
-from bpy_pipeline.geometry import primitives  # noqa: E402
-from bpy_pipeline.geometry.transforms import pose_matrix  # noqa: E402
-from bpy_pipeline.labels import load_class_table  # noqa: E402
-from bpy_pipeline.lidar import kernels  # noqa: E402
-from bpy_pipeline.lidar.embree import attach_triangles  # noqa: E402
-from bpy_pipeline.lidar.points import BEAM_DTYPE, POINT_DTYPE  # noqa: E402
-from bpy_pipeline.lidar.raycast import CasterCache, RayCaster, default_threads  # noqa: E402
-from bpy_pipeline.lidar.scanner import scan  # noqa: E402
-from bpy_pipeline.lidar.sensors import resolve_sensor, sensor_pattern  # noqa: E402
-from bpy_pipeline.pipeline import frame_rng, sensor_pose  # noqa: E402
-from bpy_pipeline.scenes import build_scene  # noqa: E402
+from bpy_pipeline.buffers import SceneBuffers
+from bpy_pipeline.config import load_config
+from bpy_pipeline.export import export_scene
+from bpy_pipeline.geometry import primitives
+from bpy_pipeline.geometry.transforms import pose_matrix
+from bpy_pipeline.labels import load_class_table
+from bpy_pipeline.lidar.cast import kernels
+from bpy_pipeline.lidar.cast.embree import attach_triangles
+from bpy_pipeline.lidar.points import BEAM_DTYPE, POINT_DTYPE
+from bpy_pipeline.lidar.cast.raycast import CasterCache, RayCaster, default_threads
+from bpy_pipeline.lidar.cast.scanner import scan
+from bpy_pipeline.lidar.sensor.sensors import resolve_sensor, sensor_pattern
+from bpy_pipeline.frame import frame_rng
+from bpy_pipeline.stages.view import sensor_pose
+from bpy_pipeline.scenes import build_scene
 
 REPEAT = 7
 

@@ -26,7 +26,8 @@ def frames(config, rebuild: bool):
     """``[(wall_s, timings, points, boxes), ...]`` of one run of ``config``."""
     import bpy
 
-    from bpy_pipeline.pipeline import Run, make_frame
+    from bpy_pipeline.frame import Run
+    from bpy_pipeline.plan import make_frame
     from bpy_pipeline.dataset import Dataset
 
     bpy.ops.wm.read_factory_settings(use_empty=True)

@@ -57,7 +57,7 @@ CONFIG = ROOT / "examples" / "street" / "ego_hdl64e.yaml"
 OFFSET_000700 = np.array([0.1, -97.5, 0.0], np.float32)
 
 # The ablation: each level of scene detail as --set overrides of the default street. "bare" is the street
-# before this round (no terrain, vegetation, fences or furniture, 40 m arms, its old road-user counts).
+# without its dressing (no terrain, vegetation, fences or furniture, 40 m arms, its old road-user counts).
 NO_DRESSING = ["scene.terrain=false", "scene.open_share=0", "scene.street_trees=0", "scene.yard_plants=0", "scene.boundary_mix={none: 1}",
                "scene.lamp_spacing=0", "scene.furniture_per_100m=0", "scene.roadworks=0"]
 OLD_USERS = ["scene.vehicles={mean: 8, std: 3, min: 0, max: 40}", "scene.parked={mean: 6, std: 3, min: 0, max: 40}",

@@ -82,12 +82,12 @@ def stage_part(frames: int, job: str = "box") -> dict:
     from embreex.mesh_construction import TriangleMesh
 
     from bpy_pipeline.config import load_config
-    from bpy_pipeline.lidar.sensors import sensor_pattern
+    from bpy_pipeline.lidar.sensor.sensors import sensor_pattern
 
     try:
         from bpy_pipeline.plan import run_frames
     except ImportError:  # code before the frame plan
-        from bpy_pipeline.pipeline import run_frames
+        from bpy_pipeline.plan import run_frames
     config = load_config(None, [*JOBS[job], f"frames={frames}"])
     d32 = np.ascontiguousarray(sensor_pattern(config.sensor.spec).directions, np.float32)
     o32 = np.lib.stride_tricks.as_strided(np.zeros(3, np.float32), d32.shape, (0, 4))
@@ -117,7 +117,7 @@ def stage_part(frames: int, job: str = "box") -> dict:
     with tempfile.TemporaryDirectory(dir=os.environ.get("BENCH_SPEED_TMP")) as tmp:
         out = Path(tmp) / "run"
         made = []
-        alone = {"overlap": False} if "overlap" in inspect.signature(run_frames).parameters else {}  # each stage's cost alone (code before round nine: always)
+        alone = {"overlap": False} if "overlap" in inspect.signature(run_frames).parameters else {}  # each stage's cost alone (older code: always)
         for frame in run_frames(config, out, **alone):
             made.append(frame)
             if scene is None:  # the frame's triangles in its sensor frame, as the caster has them
@@ -232,7 +232,7 @@ def run_py(code: Path, args: list[str], workers: int = 1, env: dict | None = Non
         if process.returncode != 0:
             raise RuntimeError(f"{code}: run.py {' '.join(args)}: {stderr.strip()[-800:]}")
         records = [json.loads(p.read_text()) for p in sorted((out / "records").glob("*.json"))]
-    os.sync()  # the removed run's blocks and inodes committed: the next run's new files need not wait for them (docs/performance.md, round fifteen)
+    os.sync()  # the removed run's blocks and inodes committed: the next run's new files need not wait for them (docs/performance.md)
     stages: dict[str, float] = {}
     for record in records:
         for key, value in (record.get("timings_s") or record.get("timings") or {}).items():

@@ -30,10 +30,10 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from common import RESULTS, ROOT, best_of  # noqa: E402  (puts the checkout on the path)
+from common import RESULTS, ROOT, best_of  # puts the checkout on the path
 
-import bpy_pipeline  # noqa: E402, F401  (before numpy: its numpy settings apply only before numpy loads)
-import numpy as np  # noqa: E402
+import bpy_pipeline  # noqa: F401  (before numpy: its numpy settings apply only before numpy loads)
+import numpy as np
 
 
 def best(fn, repeats: int) -> float:
@@ -49,9 +49,9 @@ def railway(frames: int, repeats: int) -> dict:
     from embreex.mesh_construction import TriangleMesh
 
     from bpy_pipeline.config import load_config
-    from bpy_pipeline.lidar import scanner
-    from bpy_pipeline.lidar.sensor_rays import CHUNK_RAYS
-    from bpy_pipeline.lidar.sensors import sensor_pattern
+    from bpy_pipeline.lidar.cast import scanner
+    from bpy_pipeline.lidar.sensor.sensor_rays import CHUNK_RAYS
+    from bpy_pipeline.lidar.sensor.sensors import sensor_pattern
     from bpy_pipeline.plan import run_frames
 
     config = load_config(None, [f"frames={frames}"])
@@ -87,9 +87,9 @@ def railway(frames: int, repeats: int) -> dict:
 
 
 def cone(repeats: int) -> list:
-    from bpy_pipeline.lidar.kernels import compiled
-    from bpy_pipeline.lidar.sensors import resolve_sensor, sensor_pattern
-    from bpy_pipeline.lidar.visibility import CONE_MARGIN, cone_pairs
+    from bpy_pipeline.lidar.cast.kernels import compiled
+    from bpy_pipeline.lidar.sensor.sensors import resolve_sensor, sensor_pattern
+    from bpy_pipeline.lidar.cast.visibility import CONE_MARGIN, cone_pairs
 
     kernels, rows = compiled(), []
     for preset in ("hdl64e", "os1_128", "vlp16"):
@@ -114,7 +114,8 @@ def export(repeats: int) -> list:
     from bpy_pipeline.config import load_config
     from bpy_pipeline.export import export_scene
     from bpy_pipeline.labels import load_class_table
-    from bpy_pipeline.pipeline import build_frame_scene, frame_rng
+    from bpy_pipeline.frame import frame_rng
+    from bpy_pipeline.stages.scene import build_frame_scene
 
     rows, table = [], load_class_table()
     for builder in ("parking", "street", "railway", "industrial_hall"):

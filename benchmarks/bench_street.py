@@ -27,7 +27,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from common import RESULTS, arguments, report
+from common import arguments, report
 
 THESIS = {"frames": 4599, "kept": 2816, "objects_per_frame": 1.9}
 BOX_CLASSES = ["car", "van", "truck", "bus", "person", "bicycle", "motorcycle", "rider"]
@@ -52,7 +52,7 @@ def measure(cfg) -> dict:
     """One run of ``cfg``: wall seconds per frame (median after the first), kept share, boxes per kept frame."""
     import bpy
 
-    from bpy_pipeline.pipeline import run
+    from bpy_pipeline.plan import run
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     with tempfile.TemporaryDirectory() as folder:
@@ -90,7 +90,8 @@ def interleaved(configs: list, frames: int) -> list[dict]:
     import bpy
 
     from bpy_pipeline.dataset import Dataset
-    from bpy_pipeline.pipeline import Run, make_frame
+    from bpy_pipeline.frame import Run
+    from bpy_pipeline.plan import make_frame
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     walls = [[] for _ in configs]

@@ -3,11 +3,11 @@
 The default job's one-track railway scene (``scene.builder: railway``) scanned by the
 ``railway_tls`` preset (0..360 x -70..+90 deg at 0.05 deg: 23 million rays at
 ``sampling_factor`` 1; the thesis itself ran 1.5, 52 million) and written in all four formats
-with the preview. Each run is a fresh Python process running :func:`bpy_pipeline.pipeline.run`;
+with the preview. Each run is a fresh Python process running :func:`bpy_pipeline.plan.run`;
 its peak resident memory is its own ``ru_maxrss``. A second process builds and exports the same
 scene and sets up the caster without scanning: the memory every run needs before its first ray.
 
-Rays go through in chunks of ``pipeline.CHUNK_RAYS``: traced, given their effects and moved into
+Rays go through in chunks of ``lidar.sensor.sensor_rays.CHUNK_RAYS``: traced, given their effects and moved into
 one array of point records (37 bytes a point) chunk by chunk; the writers convert a million
 points at a time. So memory is the set-up plus the records, and the target is under 2 GB.
 Run: python benchmarks/bench_tls_memory.py [--small]
@@ -21,8 +21,8 @@ import tempfile
 
 from common import ROOT, arguments, report
 
-from bpy_pipeline.config import load_config  # noqa: E402
-from bpy_pipeline.lidar.sensors import ray_count  # noqa: E402
+from bpy_pipeline.config import load_config
+from bpy_pipeline.lidar.sensor.sensors import ray_count
 
 FORMATS = "[ply,semantickitti,las,npy]"
 CHILD = r"""
@@ -30,19 +30,21 @@ import json, resource, sys, time
 sys.path.insert(0, sys.argv[1])
 start = time.perf_counter()
 from bpy_pipeline.config import load_config
-from bpy_pipeline import pipeline
+from bpy_pipeline.plan import run
+from bpy_pipeline.stages.scene import build_frame_scene
+from bpy_pipeline.stages.view import sensor_pose
 config = load_config(None, json.loads(sys.argv[3]))
 imported = time.perf_counter() - start
 if sys.argv[2] == "setup":  # build, export and the caster, no scan
     from bpy_pipeline.export import export_scene
     from bpy_pipeline.labels import load_class_table
-    from bpy_pipeline.lidar.raycast import RayCaster
-    pipeline.build_frame_scene(config, 0)
-    buffers = export_scene(load_class_table(), keep_within=(pipeline.sensor_pose(config)[:3, 3], config.sensor.spec.max_range))
-    RayCaster(buffers, frame=pipeline.sensor_pose(config))
+    from bpy_pipeline.lidar.cast.raycast import RayCaster
+    build_frame_scene(config, 0)
+    buffers = export_scene(load_class_table(), keep_within=(sensor_pose(config)[:3, 3], config.sensor.spec.max_range))
+    RayCaster(buffers, frame=sensor_pose(config))
     result = {"triangles": int(len(buffers.triangles))}
 else:
-    frame = pipeline.run(config, sys.argv[2], log=lambda *a: None)["frames"][0]
+    frame = run(config, sys.argv[2], log=lambda *a: None)["frames"][0]
     result = {"points": frame["points"], "triangles": frame["triangles"], "timings_s": frame["timings_s"]}
 result.update(import_s=imported, wall_s=time.perf_counter() - start, peak_mb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024)
 print(json.dumps(result))
@@ -102,7 +104,7 @@ def main():
             "import_s": run["import_s"], **{f"{k}_s": timings.get(k, 0.0) for k in ("build", "export", "scan", "effects", "write")}, "wall_s": run["wall_s"],
         })  # fmt: skip
     name = "tls_memory" + ("_small" if args.small else "")
-    report(name, rows, args.out, {"formats": FORMATS, "preview": True, "chunk_rays": "pipeline.CHUNK_RAYS"})
+    report(name, rows, args.out, {"formats": FORMATS, "preview": True, "chunk_rays": "lidar.sensor.sensor_rays.CHUNK_RAYS"})
     chart(rows, args.out / f"{name}.png")
 
 

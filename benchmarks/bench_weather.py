@@ -1,4 +1,4 @@
-"""Cost and effect of the weather (lidar/weather.py) beside the clear scan, measured in the same run.
+"""Cost and effect of the weather (lidar/effects/weather.py) beside the clear scan, measured in the same run.
 
 An HDL-64E (full 0.17 deg columns, its realistic profile) in a street of walls at 8-110 m over a road;
 ``bpy_pipeline.api.scan`` (trace, effects, records) timed clear and with each weather, rounds taken
@@ -14,8 +14,8 @@ import time
 import numpy as np
 from common import arguments, report
 
-from bpy_pipeline.api import scan  # noqa: E402
-from bpy_pipeline.labels import load_class_table  # noqa: E402
+from bpy_pipeline.api import scan
+from bpy_pipeline.labels import load_class_table
 
 TABLE = load_class_table()
 

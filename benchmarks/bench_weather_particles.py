@@ -1,4 +1,4 @@
-"""What a rain drop or snow flake costs to draw (lidar/weather.py), and the memory of drawing them in passes.
+"""What a rain drop or snow flake costs to draw (lidar/effects/weather.py), and the memory of drawing them in passes.
 
 VLP-16 returns at ranges uniform in 1..100 m, its realistic profile's noise floor; the visible particles of
 each return's cone are drawn and the strongest offered (``_offer_particles``), timed best of the rounds. The
@@ -15,9 +15,9 @@ import numpy as np
 from common import arguments, report
 
 from bpy_pipeline.config import load_config
-from bpy_pipeline.lidar import weather
-from bpy_pipeline.lidar.drop.threshold import threshold_model
-from bpy_pipeline.lidar.effects import fitted_models
+from bpy_pipeline.lidar.effects import weather
+from bpy_pipeline.lidar.effects.drop.threshold import threshold_model
+from bpy_pipeline.lidar.effects.apply import fitted_models
 
 
 def draw(config, r: np.ndarray, seed: int = 0):

@@ -6,8 +6,8 @@
   git, against today's), as nanoseconds a point and as time per byte relative to PLY's.
 - Preview: render + PNG encode at the old settings (1600 x 800 px, zlib level 6) against the new
   (1280 x 560 px, level 1), on the same cloud; PNG sizes beside.
-- Boxes: :func:`~bpy_pipeline.lidar.visibility.visibility_per_object` (a caster per object and a
-  Python loop over the objects, the way before) against :func:`~bpy_pipeline.lidar.visibility.visibility`
+- Boxes: :func:`visibility_reference.visibility_per_object` (a caster per object and a
+  Python loop over the objects, the way before) against :func:`~bpy_pipeline.lidar.cast.visibility.visibility`
   (one cast through the scene, one against all objects alone) on a parking-like scene: sedans and
   people around a VLP-16 at 10 Hz (0.2 deg columns), the scene's caster given to both (as the scan
   has one), so the ratio is that of the per-object work.
@@ -23,19 +23,20 @@ import numpy as np
 
 from common import ROOT, arguments, best_of, report
 
-from bpy_pipeline.buffers import ObjectTable, SceneBuffers  # noqa: E402
-from bpy_pipeline.geometry import human, objects, primitives  # noqa: E402
-from bpy_pipeline.geometry.boxes import fit_boxes  # noqa: E402
-from bpy_pipeline.geometry.transforms import pose_matrix  # noqa: E402
-from bpy_pipeline.io import las as las_module  # noqa: E402
-from bpy_pipeline.io.las import RECORD_DTYPE, write_las  # noqa: E402
-from bpy_pipeline.io.ply import PLY_DTYPE, ply_records, write_ply  # noqa: E402
-from bpy_pipeline.io.preview import encode_png, encode_png_indexed, render_indexed, render_preview  # noqa: E402
-from bpy_pipeline.labels import load_class_table  # noqa: E402
-from bpy_pipeline.lidar.points import empty_points  # noqa: E402
-from bpy_pipeline.lidar.raycast import RayCaster  # noqa: E402
-from bpy_pipeline.lidar.sensors import iter_pattern, resolve_sensor  # noqa: E402
-from bpy_pipeline.lidar.visibility import visibility, visibility_per_object  # noqa: E402
+from bpy_pipeline.buffers import ObjectTable, SceneBuffers
+from bpy_pipeline.geometry import human, objects, primitives
+from bpy_pipeline.geometry.boxes import fit_boxes
+from bpy_pipeline.geometry.transforms import pose_matrix
+from bpy_pipeline.io import las as las_module
+from bpy_pipeline.io.las import RECORD_DTYPE, write_las
+from bpy_pipeline.io.ply import PLY_DTYPE, ply_records, write_ply
+from bpy_pipeline.io.preview import encode_png, encode_png_indexed, render_indexed, render_preview
+from bpy_pipeline.labels import load_class_table
+from bpy_pipeline.lidar.points import empty_points
+from bpy_pipeline.lidar.cast.raycast import RayCaster
+from bpy_pipeline.lidar.sensor.sensors import iter_pattern, resolve_sensor
+from bpy_pipeline.lidar.cast.visibility import visibility
+from visibility_reference import visibility_per_object
 
 
 LAS_BEFORE = "bde0316"  # the last commit with the LAS writer before this change
@@ -123,7 +124,7 @@ def bench_preview(n: int) -> list[dict]:
     def rgb(size, level):
         return encode_png(render_preview(pts, lut, size, names=table.names), level)
 
-    def indexed(size, level):  # what write_preview writes (round fourteen): palette indices, an indexed PNG
+    def indexed(size, level):  # what write_preview writes: palette indices, an indexed PNG
         index, palette = render_indexed(pts, lut, size, names=table.names)
         return encode_png_indexed(index[..., 0], palette, level)
 

@@ -12,7 +12,7 @@ Commands:
     One preset's resolved fields and summary; ``--rays`` saves the ray directions of a full
     frame as ``(n, 3)`` float32 in the sensor frame (x forward, y left, z up).
 ``fit SCAN [SCAN ...] --out MODEL.yaml [--rings 32 ...]``
-    Ray drop and range noise models fitted to real organised scans (``lidar/fitting.py``),
+    Ray drop and range noise models fitted to real organised scans (``lidar/fit/fitting.py``),
     written for ``effects.drop.model_file`` / ``effects.noise.model_file``; prints each drop
     model's held-out error.
 ``evaluate --train DATASET --test REAL [--reference REAL ...] --classes car,person --out report.json``
@@ -44,7 +44,7 @@ import numpy as np
 import yaml
 
 from .errors import InputError
-from .lidar import sensors
+from .lidar.sensor import sensors
 
 
 _LINE = "{:<16} {:<11} {:>8}  {:>17}  {:>7}  {:>11}  {:>8}  {:>9}"
@@ -131,8 +131,8 @@ def fit_effects(args) -> int:
     """Fit drop and noise models to real organised scans and write a model file for the effects."""
     from dataclasses import replace
 
-    from .lidar import fitting
-    from .lidar.effects import write_model_file
+    from .lidar.fit import fitting
+    from .lidar.effects.apply import write_model_file
 
     options = fitting.FitOptions()
     changes = {k: getattr(args, k) for k in fitting.FitOptions.__dataclass_fields__ if getattr(args, k, None) is not None}
@@ -220,7 +220,7 @@ def _add_fit(sub) -> None:
         ("mlp_steps", int, "mlp models: Adam steps"),
         ("seed", int, "mlp models: seed of the weights' start (same seed, same file)"),
     ):
-        default = getattr(__import__("bpy_pipeline.lidar.fitting", fromlist=["FitOptions"]).FitOptions, name)
+        default = getattr(__import__("bpy_pipeline.lidar.fit.fitting", fromlist=["FitOptions"]).FitOptions, name)
         p.add_argument("--" + name.replace("_", "-"), dest=name, type=kind, default=None, help=f"{what} (default {default})")
     p.set_defaults(func=fit_effects)
 
@@ -228,7 +228,9 @@ def _add_fit(sub) -> None:
 def _add_config(sub) -> None:
     p = sub.add_parser("config", help="print the resolved config with the source of each value",
                        description="Print the resolved config: each value with where it comes from (default < preset < builder < profile < config < --set; bpy_pipeline/resolved.py).")
-    p.add_argument("--resolved", action="store_true", required=True, help="the resolved tree (the only view so far)")
+    view = p.add_mutually_exclusive_group(required=True)
+    view.add_argument("--resolved", action="store_true", help="the resolved tree")
+    view.add_argument("--reference", action="store_true", help="every config key with its type, default, unit, range and meaning (docs/config.md)")
     p.add_argument("--config", help="YAML config file (default: the embedded railway scene)")
     p.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE", help="override one config key (repeatable)")
     p.set_defaults(func=print_resolved)
@@ -236,6 +238,12 @@ def _add_config(sub) -> None:
 
 def print_resolved(args) -> int:
     from .resolved import render, resolved
+
+    if args.reference:
+        from .config import config_reference
+
+        print(config_reference())
+        return 0
 
     print(render(*resolved(args.config, args.set)), end="")
     return 0

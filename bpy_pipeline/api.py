@@ -67,7 +67,7 @@ def run(config: Config, out: str | Path, frames: Iterable[int] | None = None, mo
         import bpy
     except ImportError:
         raise InputError("bpy: bpy_pipeline.run needs Blender's Python module (pip install 'bpy==4.5.*'); bpy_pipeline.scan needs none") from None
-    from .pipeline import run as run_pipeline
+    from .plan import run as run_pipeline
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     return run_pipeline(config, out, log=log, frames=frames, mode=mode)
@@ -94,7 +94,7 @@ def scene_buffers(meshes: SceneBuffers | Mapping) -> SceneBuffers:
     """Scene buffers of ``meshes``: buffers as they are, or ``{name: (vertices (n, 3) m, triangles (m, 3))}``
     with an optional class name, material and reflectivity after the triangles
     (``(v, t, "car", "diffuse", 0.3)``); objects are ``unlabeled``, ``diffuse``, 0.5 by default. The material is a tracing
-    one (diffuse, mirror, glass, absorber) or a reflectance model of lidar/materials.py (``glossy_paint``,
+    one (diffuse, mirror, glass, absorber) or a reflectance model of lidar/effects/materials.py (``glossy_paint``,
     ``retroreflector``, ``dark_paint``, ``wet``: traced as diffuse, applied with ``effects.materials.objects: true``)."""
     from .geometry.checks import check_fraction, check_mesh
 
@@ -106,7 +106,7 @@ def scene_buffers(meshes: SceneBuffers | Mapping) -> SceneBuffers:
     if not isinstance(meshes, Mapping):
         raise InputError(f"meshes: expected scene buffers or a mapping {{name: (vertices (n, 3), triangles (m, 3)[, class, material, reflectivity])}}, got {type(meshes).__name__}")
     from .labels import load_class_table
-    from .lidar.materials import part_material
+    from .lidar.effects.materials import part_material
 
     table = load_class_table()
     checked = {}
@@ -138,9 +138,9 @@ def scan(meshes: SceneBuffers | Mapping, sensor: str | Mapping = "vlp16", pose: 
     effects : a mapping as the config's ``effects`` section (``None``: the config's defaults, as run.py uses)
     seed, frame : the frame's generator is the one frame ``frame`` of a run seeded ``seed`` gets
     """
-    from .frame import Frame
+    from .frame import Frame, Run, frame_rng
     from .geometry.checks import check_pose
-    from .pipeline import Run, effects_stage, frame_rng, scan_stage
+    from .stages.scan import effects_stage, scan_stage
 
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise InputError(f"seed: expected an integer >= 0, got {seed!r}")
@@ -154,7 +154,7 @@ def scan(meshes: SceneBuffers | Mapping, sensor: str | Mapping = "vlp16", pose: 
     section = {"preset": sensor} if isinstance(sensor, str) else dict(sensor)
     config = config_from_dict({"seed": seed, "sensor": section, **({} if effects is None else {"effects": dict(effects)}), "output": {"formats": ["ply"]}})
     out = Frame(frame, config, frame_rng(seed, frame), buffers=scene_buffers(meshes))
-    out.pose = out.pose_at = pose
+    out.place(pose)
     run = Run(config, build=False)
     scan_stage(out, run)
     effects_stage(out, run)

@@ -1,4 +1,4 @@
-"""Scene buffers: the one type that crosses the bpy boundary (DESIGN.md, "The way a frame flows").
+"""Scene buffers: the one type that crosses the bpy boundary (docs/layout.md, "A frame's path through the stages").
 
 ``export.py`` fills them from Blender's evaluated depsgraph; everything after that (scanner,
 effects, writers) reads only these numpy arrays and never imports bpy.
@@ -25,7 +25,7 @@ class ObjectTable:
     instance : (k,) uint32 instance id (>= 1)
     material : (k,) uint8 index into :data:`MATERIALS`
     reflectivity : (k,) float32 in 0..1
-    surface : (k,) uint8 reflectance model of each object (lidar/materials.py ``model_id``: 0 none), or None
+    surface : (k,) uint8 reflectance model of each object (lidar/effects/materials.py ``model_id``: 0 none), or None
     """
 
     names: list[str]

@@ -167,7 +167,7 @@ def run_main(args) -> int:
     except ImportError:
         raise InputError("bpy: Blender's Python module is not installed; pip install 'bpy==4.5.*' (Python 3.11), or run blender --background --python-exit-code 1 --python run.py -- ...") from None
     bpy.ops.wm.read_factory_settings(use_empty=True)
-    from .pipeline import run
+    from .plan import run
 
     run(config, args.out, log=progress(len(frames), estimate), frames=frames, mode=mode)
     return 0
@@ -231,7 +231,7 @@ def exit_process(code: int) -> NoReturn:
     """End the process with exit ``code``, skipping the interpreter's and Blender's teardown.
 
     After a run, that teardown frees every object, module and Blender's data one by one: 0.3-0.5 s
-    (docs/performance.md, round eleven), and nothing of it reaches the disk. What a normal exit does
+    (docs/performance.md), and nothing of it reaches the disk. What a normal exit does
     that matters is done first: other threads are waited for, the ``atexit`` handlers run (a progress
     bar's last line, temporary folders), and both output streams are flushed. Inside Blender's own
     executable (``blender --python run.py``) Blender ends itself: a plain ``sys.exit``.
@@ -241,8 +241,8 @@ def exit_process(code: int) -> NoReturn:
         sys.exit(code)
     # the first two steps of the interpreter's own exit (Py_FinalizeEx), in its order: thread pools told to
     # stop and every other thread waited for, then the atexit handlers
-    threading._shutdown()  # noqa: SLF001
-    atexit._run_exitfuncs()  # noqa: SLF001
+    threading._shutdown()
+    atexit._run_exitfuncs()
     for stream in (sys.stdout, sys.stderr):
         try:
             stream.flush()

@@ -1,4 +1,8 @@
-"""YAML -> typed, validated configuration. Every default of the pipeline lives in this file.
+"""YAML -> typed, validated configuration: the tree of sections, their precedence and checks.
+
+The sections' dataclasses live here and beside the code they configure (the sensor's spec in lidar/sensor,
+the weather and materials in lidar/effects, each builder's parameters in its package). A field's unit, range
+and meaning are its metadata (:func:`bpy_pipeline.schema.meta`); docs/config.md is generated from them.
 
 A config is a tree of frozen dataclasses. :func:`load_config` reads YAML, applies ``--set``
 overrides, and checks every key against the dataclass fields: an unknown key, a wrong type or
@@ -20,24 +24,24 @@ from typing import Literal
 import yaml
 
 from .errors import InputError
-from .lidar.divergence import Divergence, check_divergence, check_return_mode
-from .lidar.drop import DROP_MODELS
-from .lidar.drop.carla import CarlaDrop
-from .lidar.drop.threshold import ThresholdDrop
-from .lidar.intensity import ReadingModel, check_reading
-from .lidar.grid import check_grid, image_shape
-from .lidar.mirror_sensor import check_reflector, load_edge_mask
-from .lidar.platform import Trajectory
-from .lidar.sensors import SensorSpec, frame_time, mount_offset, resolve_sensor
-from .lidar.sensors import rings as sensor_rings
-from .lidar.materials import MaterialsConfig, check_materials
-from .lidar.weather import WeatherConfig, check_weather
-from .buffers import MATERIALS  # noqa: F401  (the panel's list)
+from .lidar.effects.divergence import Divergence, check_divergence, check_return_mode
+from .lidar.effects.drop import DROP_MODELS
+from .lidar.effects.drop.carla import CarlaDrop
+from .lidar.effects.drop.threshold import ThresholdDrop
+from .lidar.effects.intensity import ReadingModel, check_reading
+from .lidar.sensor.grid import check_grid, image_shape
+from .lidar.sensor.mirror_sensor import check_reflector, load_edge_mask
+from .lidar.sensor.platform import Trajectory
+from .lidar.sensor.sensors import SensorSpec, frame_time, mount_offset, resolve_sensor
+from .lidar.sensor.sensors import rings as sensor_rings
+from .lidar.effects.materials import MaterialsConfig, check_materials
+from .lidar.effects.weather import WeatherConfig, check_weather
+
 from .builders import BUILDERS as BUILDER_REGISTRY
 from .builders.population import population_from_dict, population_to_dict
 from .builders.railway.params import RailwayScene
 from .io.writers import frame_writers
-from .schema import check_positive, convert, from_dict, to_plain
+from .schema import check_positive, convert, from_dict, meta, reference, to_plain
 from .yaml_text import MAX_DEPTH, MAX_VALUES, read_yaml_file, read_yaml_text
 
 Vec3 = tuple[float, float, float]
@@ -47,7 +51,6 @@ DEFAULT_SENSOR = {"preset": "railway_tls", "sampling_factor": 0.25}
 # ----------------------------------------------------------------------------- scene
 # builder name -> its parameters dataclass (the panel's list); the registry itself is builders.BUILDERS
 BUILDER_PARAMS = {name: entry.params for name, entry in BUILDER_REGISTRY.items()}
-BUILDERS = BUILDER_PARAMS  # the old name (it collided with the registry, builders.BUILDERS); kept importable for this round
 
 
 @dataclass(frozen=True)
@@ -62,47 +65,47 @@ class SceneConfig:
 # ----------------------------------------------------------------------------- sensor, effects, output
 @dataclass(frozen=True)
 class TrajectoryConfig:
-    """``sensor.trajectory``: a moving sensor (``lidar/platform.py``); replaces ``sensor.position``.
+    """``sensor.trajectory``: a moving sensor (``lidar/sensor/platform.py``); replaces ``sensor.position``.
 
     The path is ``waypoints`` or the scene's curve object named ``curve`` (its evaluated,
     world-space polyline); its clock a constant ``speed`` or one of ``times`` per waypoint.
     The optical centre rides ``height`` (plus the preset's mount_height) above the path.
     """
 
-    waypoints: list[Vec3] = field(default_factory=list)  # m, world
-    curve: str = ""  # name of a curve object of the scene, instead of waypoints
-    speed: float = 0.0  # m/s along the path (0: give times)
-    times: list[float] = field(default_factory=list)  # s at each waypoint, instead of speed
-    height: float = 0.0  # m above the path
-    heading: bool = True  # the sensor's x axis follows the path's yaw; rotation_deg turns it from there
-    start_distance: float = 0.0  # m along the path where frame 0 starts (with speed)
-    start_time: float = 0.0  # s after the path's start where frame 0 starts
+    waypoints: list[Vec3] = field(default_factory=list, metadata=meta("m", help="world"))
+    curve: str = field(default="", metadata=meta(help="name of a curve object of the scene, instead of waypoints"))
+    speed: float = field(default=0.0, metadata=meta("m/s", help="along the path (0: give times)"))
+    times: list[float] = field(default_factory=list, metadata=meta("s", help="at each waypoint, instead of speed"))
+    height: float = field(default=0.0, metadata=meta("m", help="above the path"))
+    heading: bool = field(default=True, metadata=meta(help="the sensor's x axis follows the path's yaw; rotation_deg turns it from there"))
+    start_distance: float = field(default=0.0, metadata=meta("m", low=0, help="along the path where frame 0 starts (with speed)"))
+    start_time: float = field(default=0.0, metadata=meta("s", low=0, help="after the path's start where frame 0 starts"))
 
 
 @dataclass(frozen=True)
 class EdgeDropConfig:
-    """``sensor.reflector.edge_drop``: returns lost where a beam splits on a mirror edge (lidar/mirror_sensor.py)."""
+    """``sensor.reflector.edge_drop``: returns lost where a beam splits on a mirror edge (lidar/sensor/mirror_sensor.py)."""
 
-    mask: str = "generated"  # generated | none | path of a measured (rows, columns) .npy of drop probabilities
-    probability: float = 0.95  # generated: drop probability where the footprint straddles an edge (the paper: > 90 %)
-    beam_diameter: float = 0.01  # m, generated: the beam's width where it meets the mirror (assumed; measure it)
+    mask: str = field(default="generated", metadata=meta(help="generated | none | path of a measured (rows, columns) .npy of drop probabilities"))
+    probability: float = field(default=0.95, metadata=meta("", 0, 1, help="generated: drop probability where the footprint straddles an edge (the paper: > 90 %)"))
+    beam_diameter: float = field(default=0.01, metadata=meta("m", low=0, help="generated: the beam's width where it meets the mirror (assumed; measure it)"))
 
 
 @dataclass(frozen=True)
 class ReflectorConfig:
-    """``sensor.reflector``: the super-resolution LiDAR's own ring of mirrors (lidar/mirror_sensor.py has the geometry).
+    """``sensor.reflector``: the super-resolution LiDAR's own ring of mirrors (lidar/sensor/mirror_sensor.py has the geometry).
 
     Defaults: the human-robot paper's eight segments at 34 deg, around an Ouster OS1-128.
     """
 
     enabled: bool = False
-    segments: int = 8
-    inclination_deg: float = 34.0  # between each mirror and the spin axis: horizontal beams leave 2x this below the horizon
-    azimuth_deg: float = 0.0  # azimuth of segment 0's centre
-    distance: float = 0.1  # m, optical centre to each mirror along its central horizontal beam
-    bottom: float = 0.09  # m along the slope from that central point down to the segment's lower edge
-    top: float = 0.05  # m along the slope up to its upper edge
-    width: float = 0.0  # m, each segment's width; 0 = full facets meeting edge to edge
+    segments: int = field(default=8, metadata=meta(help="mirror segments around the spin axis"))
+    inclination_deg: float = field(default=34.0, metadata=meta("deg", help="between each mirror and the spin axis: horizontal beams leave 2x this below the horizon"))
+    azimuth_deg: float = field(default=0.0, metadata=meta("deg", help="azimuth of segment 0's centre"))
+    distance: float = field(default=0.1, metadata=meta("m", help="optical centre to each mirror along its central horizontal beam"))
+    bottom: float = field(default=0.09, metadata=meta("m", help="along the slope from that central point down to the segment's lower edge"))
+    top: float = field(default=0.05, metadata=meta("m", help="along the slope up to its upper edge"))
+    width: float = field(default=0.0, metadata=meta("m", help="each segment's width; 0 = full facets meeting edge to edge"))
     edge_drop: EdgeDropConfig = field(default_factory=EdgeDropConfig)
 
 
@@ -111,28 +114,28 @@ class SensorConfig:
     """The sensor: a preset resolved with field-by-field overrides, its pose or trajectory, its beam footprint."""
 
     spec: SensorSpec
-    position: Vec3 = (0.0, -4.0, 0.0)  # m, world (the station point; the preset's mount_height is added)
-    rotation_deg: Vec3 = (0.0, 0.0, 0.0)  # roll, pitch, yaw
+    position: Vec3 = field(default=(0.0, -4.0, 0.0), metadata=meta("m", help="world (the station point; the preset's mount_height is added)"))
+    rotation_deg: Vec3 = field(default=(0.0, 0.0, 0.0), metadata=meta("deg", help="roll, pitch, yaw"))
     trajectory: TrajectoryConfig | None = None  # a moving sensor instead of the static position
     divergence: Divergence = field(default_factory=Divergence)  # off unless rays > 1
     reflector: ReflectorConfig = field(default_factory=ReflectorConfig)  # the sensor's own mirrors; off by default
-    rig: tuple = ()  # sensor rig (bpy_pipeline/rig.py): RigSensor s on the platform placed by position/rotation_deg; spec is the first's
+    rig: tuple = field(default=(), metadata=meta(help="sensor rig (bpy_pipeline/rig.py): RigSensor s on the platform placed by position/rotation_deg; spec is the first's"))
 
 
 @dataclass(frozen=True)
 class IntensityConfig:
-    """``effects.intensity`` (lidar/effects.py): what a point's intensity (0..1) says."""
+    """``effects.intensity`` (lidar/effects/apply.py): what a point's intensity (0..1) says."""
 
-    model: Literal["reflectance", "lidar", "carla"] = "reflectance"  # rho cos g | lidar equation | CARLA exp(-a R)
-    alpha: float = 0.0  # 1/m atmospheric extinction, two-way exp(-2 alpha R): `lidar` intensity and `threshold` drop
-    reference_range: float = 10.0  # m: `lidar`, a target of reference_reflectivity at normal incidence here reads 1
-    reference_reflectivity: float = 1.0
-    attenuation_rate: float = 0.004  # 1/m: `carla`, CARLA's atmosphere_attenuation_rate
-    incidence_exponent: float = 1.0  # `reflectance` and `lidar`: rho cos(theta)^k; 1 Lambertian, 0 as real road returns read (KITTI, nuScenes)
-    scale: float = 1.0  # the model's value times this, clipped to 0..1 (Velodyne's 0..100 % diffuse in 0..255: 100 / 255)
-    steps: int = 0  # quantise to k / steps as the sensor's integer intensity does (255: nuScenes 0..255; 100: KITTI 0.01); 0 = continuous
-    offset: float = 0.0  # subtracted after scale, clipped at 0: a receiver that reads weak returns as 0 (KITTI's car paint); 0 = none
-    reading: ReadingModel = field(default_factory=ReadingModel)  # per-laser gain/offset reading apart from detection (lidar/intensity.py); opt-in
+    model: Literal["reflectance", "lidar", "carla"] = field(default="reflectance", metadata=meta(help="rho cos g | lidar equation | CARLA exp(-a R)"))
+    alpha: float = field(default=0.0, metadata=meta("1/m", low=0, help="atmospheric extinction, two-way exp(-2 alpha R): `lidar` intensity and `threshold` drop"))
+    reference_range: float = field(default=10.0, metadata=meta("m", low=0, low_open=True, help="`lidar`: a target of reference_reflectivity at normal incidence here reads 1"))
+    reference_reflectivity: float = field(default=1.0, metadata=meta("", 0, 1, low_open=True, help="`lidar`: the reflectivity that reads 1 at reference_range"))
+    attenuation_rate: float = field(default=0.004, metadata=meta("1/m", low=0, help="`carla`: CARLA's atmosphere_attenuation_rate"))
+    incidence_exponent: float = field(default=1.0, metadata=meta("", low=0, help="`reflectance` and `lidar`: rho cos(theta)^k; 1 Lambertian, 0 as real road returns read (KITTI, nuScenes)"))
+    scale: float = field(default=1.0, metadata=meta("", low=0, low_open=True, help="the model's value times this, clipped to 0..1 (Velodyne's 0..100 % diffuse in 0..255: 100 / 255)"))
+    steps: int = field(default=0, metadata=meta("", 0, 65535, help="quantise to k / steps as the sensor's integer intensity does (255: nuScenes 0..255; 100: KITTI 0.01); 0 = continuous"))
+    offset: float = field(default=0.0, metadata=meta("", 0, 1, high_open=True, help="subtracted after scale, clipped at 0: a receiver that reads weak returns as 0 (KITTI's car paint); 0 = none"))
+    reading: ReadingModel = field(default_factory=ReadingModel)  # per-laser gain/offset reading apart from detection (lidar/effects/intensity.py); opt-in
 
 
 @dataclass(frozen=True)
@@ -140,49 +143,49 @@ class NoiseConfig:
     """``effects.noise``: Gaussian range noise along the beam, per-ring bias, angular jitter."""
 
     model: Literal["constant", "range", "table", "mlp"] = "constant"
-    sigma: float = 0.0  # m, Gaussian along the beam (`range`: at zero range)
-    sigma_per_metre: float = 0.0  # m of sigma per m of range (`range`)
-    model_file: str = ""  # a file of `python -m bpy_pipeline fit`: `range` and `table` take their parameters from it
-    ring_bias: list[float] = field(default_factory=list)  # m added to every range of ring k (one per ring, or none)
-    angular_jitter_deg: float = 0.0  # one sigma, in azimuth and in elevation
+    sigma: float = field(default=0.0, metadata=meta("m", low=0, help="Gaussian along the beam (`range`: at zero range)"))
+    sigma_per_metre: float = field(default=0.0, metadata=meta("", low=0, help="m of sigma per m of range (`range`)"))
+    model_file: str = field(default="", metadata=meta(help="a file of `python -m bpy_pipeline fit`: `range` and `table` take their parameters from it"))
+    ring_bias: list[float] = field(default_factory=list, metadata=meta("m", help="added to every range of ring k (one per ring, or none)"))
+    angular_jitter_deg: float = field(default=0.0, metadata=meta("deg", low=0, help="one sigma, in azimuth and in elevation"))
 
 
 @dataclass(frozen=True)
 class DropConfig:
-    """``effects.drop``: the model (lidar/drop, a registry) and its parameters."""
+    """``effects.drop``: the model (lidar/effects/drop, a registry) and its parameters."""
 
-    model: str = "none"  # a name of lidar/drop (DROP_MODELS)
-    probability: float = 0.0  # for `uniform`
+    model: str = field(default="none", metadata=meta(help="a name of lidar/effects/drop (DROP_MODELS)"))
+    probability: float = field(default=0.0, metadata=meta("", 0, 1, help="for `uniform`: the share of returns dropped"))
     carla: CarlaDrop = field(default_factory=CarlaDrop)
     threshold: ThresholdDrop = field(default_factory=ThresholdDrop)
-    params: dict = field(default_factory=dict)  # for a model that takes its parameters here (its own dataclass checks them)
-    model_file: str = ""  # a file of `python -m bpy_pipeline fit`: `uniform`, `threshold` and `table` take their parameters from it
+    params: dict = field(default_factory=dict, metadata=meta(help="for a model that takes its parameters here (its own dataclass checks them)"))
+    model_file: str = field(default="", metadata=meta(help="a file of `python -m bpy_pipeline fit`: `uniform`, `threshold` and `table` take their parameters from it"))
 
 
 @dataclass(frozen=True)
 class GlassConfig:
-    """``effects.mirrors.glass``: how beams meet ``glass`` objects (car windows), lidar/scanner.py."""
+    """``effects.mirrors.glass``: how beams meet ``glass`` objects (car windows), lidar/cast/scanner.py."""
 
-    normal_return_deg: float = 5.0  # met this close to normal incidence, the glass itself returns the beam
-    reflect_fraction: float = 0.0  # share of the other beams that reflect like a mirror instead of passing through
-    max_passes: int = 8  # glass surfaces a beam may pass through; one more loses it
+    normal_return_deg: float = field(default=5.0, metadata=meta("deg", 0, 90, high_open=True, help="met this close to normal incidence, the glass itself returns the beam (0: never)"))
+    reflect_fraction: float = field(default=0.0, metadata=meta("", 0, 1, help="share of the other beams that reflect like a mirror instead of passing through"))
+    max_passes: int = field(default=8, metadata=meta("", 0, 65535, help="glass surfaces a beam may pass through; one more loses it"))
 
 
 @dataclass(frozen=True)
 class MirrorConfig:
-    """``effects.mirrors``: specular surfaces of the scene (``mirror`` and ``glass`` objects), lidar/scanner.py."""
+    """``effects.mirrors``: specular surfaces of the scene (``mirror`` and ``glass`` objects), lidar/cast/scanner.py."""
 
-    max_bounces: int = 3  # reflections before a beam is given up (0..255)
-    label: Literal["target", "reflection"] = "target"  # class of points seen through a mirror
-    ideal: bool = False  # report mirrored points at the true hit instead of behind the mirror
-    normal_return_deg: float = 0.5  # a mirror met this close to normal incidence returns the beam itself
+    max_bounces: int = field(default=3, metadata=meta("", 0, 255, help="reflections before a beam is given up (a point's bounces is uint8)"))
+    label: Literal["target", "reflection"] = field(default="target", metadata=meta(help="class of points seen through a mirror"))
+    ideal: bool = field(default=False, metadata=meta(help="report mirrored points at the true hit instead of behind the mirror"))
+    normal_return_deg: float = field(default=0.5, metadata=meta("deg", 0, 90, high_open=True, help="a mirror met this close to normal incidence returns the beam itself (0: never)"))
     glass: GlassConfig = field(default_factory=GlassConfig)
 
 
 @dataclass(frozen=True)
 class EffectsConfig:
     """``effects``: what the sensor adds to the exact trace. Unless ``ideal``, the sensor preset's profile
-    (``effects`` in lidar/sensors.yaml) fills the sections and keys the config does not give
+    (``effects`` in lidar/sensor/sensors.yaml) fills the sections and keys the config does not give
     (:func:`realistic_effects`); ``ideal: true`` leaves the profile out, so only the keys given apply
     (none given: the exact, noise-free scan)."""
 
@@ -191,8 +194,8 @@ class EffectsConfig:
     drop: DropConfig = field(default_factory=DropConfig)
     mirrors: MirrorConfig = field(default_factory=MirrorConfig)
     intensity: IntensityConfig = field(default_factory=IntensityConfig)
-    weather: WeatherConfig = field(default_factory=WeatherConfig)  # fog, rain, snow (lidar/weather.py); off under ideal
-    materials: MaterialsConfig = field(default_factory=MaterialsConfig)  # reflectance model per class (lidar/materials.py); opt-in
+    weather: WeatherConfig = field(default_factory=WeatherConfig)  # fog, rain, snow (lidar/effects/weather.py); off under ideal
+    materials: MaterialsConfig = field(default_factory=MaterialsConfig)  # reflectance model per class (lidar/effects/materials.py); opt-in
 
 
 @dataclass(frozen=True)
@@ -207,12 +210,12 @@ class BoxesConfig:
     class to its label-file type (default: its words capitalised and joined, robot arm -> RobotArm).
     """
 
-    formats: list[str] | Literal["auto"] = "auto"  # box writers (io/writers.py)
-    classes: list[str] = field(default_factory=lambda: ["car", "person", "robot arm", "rider"])  # rider: an inserted cyclist (KITTI Cyclist)
+    formats: list[str] | Literal["auto"] = field(default="auto", metadata=meta(help="box writers (io/writers.py)"))
+    classes: list[str] = field(default_factory=lambda: ["car", "person", "robot arm", "rider"], metadata=meta(help="rider: an inserted cyclist (KITTI Cyclist)"))
     names: dict = field(default_factory=dict)
     min_points: dict = field(default_factory=lambda: {"car": 12})
-    min_points_default: int = 6
-    occlusion_levels: tuple[float, float, float] = (0.8, 0.4, 0.1)
+    min_points_default: int = field(default=6, metadata=meta("", low=0, help="labelled points a box needs when min_points does not name its class"))
+    occlusion_levels: tuple[float, float, float] = field(default=(0.8, 0.4, 0.1), metadata=meta("", 0, 1, help="visible / unoccluded point fractions from which a box is occlusion level 0, 1, 2 (below t2: 3)"))
 
 
 @dataclass(frozen=True)
@@ -227,10 +230,10 @@ class CameraConfig:
     labelled points projected into the image (milliseconds; what a LiDAR-only loader needs).
     """
 
-    resolution: tuple[int, int] = (1242, 375)
-    fov_deg: float = 81.4
-    position: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    rotation_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    resolution: tuple[int, int] = field(default=(1242, 375), metadata=meta("px", low=1, help="[width, height]"))
+    fov_deg: float = field(default=81.4, metadata=meta("deg", 0, 180, low_open=True, high_open=True, help="horizontal field of view (KITTI's own P2: 81.4 deg on 1242 px)"))
+    position: tuple[float, float, float] = field(default=(0.0, 0.0, 0.0), metadata=meta("m", help="in the sensor frame"))
+    rotation_deg: tuple[float, float, float] = field(default=(0.0, 0.0, 0.0), metadata=meta("deg", help="Blender XYZ Euler angles in the sensor frame"))
     render: bool = False
 
 
@@ -241,7 +244,7 @@ class KittiConfig:
     ``val_fraction`` (older configs): the val share of ``output.split``, train the rest, no test.
     """
 
-    val_fraction: float | None = None
+    val_fraction: float | None = field(default=None, metadata=meta("", 0, 1, help="older configs: the val share of output.split, train the rest, no test"))
     camera: CameraConfig = field(default_factory=CameraConfig)
 
 
@@ -254,13 +257,13 @@ class SplitConfig:
     split's sequence starts (null: its start). Every format and index follows it."""
 
     by: Literal["auto", "scene", "block", "frame", "fold"] = "auto"
-    train: float = 0.7
-    val: float = 0.15
-    test: float = 0.15
-    block: int = 0
-    folds: int = 5
-    fold: int = -1
-    seed: int | None = None
+    train: float = field(default=0.7, metadata=meta("", 0, 1, help="share of scenes, blocks or frames in train"))
+    val: float = field(default=0.15, metadata=meta("", 0, 1, help="share in val"))
+    test: float = field(default=0.15, metadata=meta("", 0, 1, help="share in test"))
+    block: int = field(default=0, metadata=meta("", low=0, help="frames per block (0: 10)"))
+    folds: int = field(default=5, metadata=meta(help="contiguous folds (by: fold)"))
+    fold: int = field(default=-1, metadata=meta(help="the fold that is val (-1: the last)"))
+    seed: int | None = field(default=None, metadata=meta(help="draws where the split's sequence starts (null: its start)"))
 
 
 @dataclass(frozen=True)
@@ -273,17 +276,17 @@ class SemanticKittiOutput:
 
 @dataclass(frozen=True)
 class OutputConfig:
-    formats: list[str] = field(default_factory=lambda: ["ply", "semantickitti"])  # writers of io/writers.py
+    formats: list[str] = field(default_factory=lambda: ["ply", "semantickitti"], metadata=meta(help="writers of io/writers.py"))
     frame: Literal["sensor", "world"] = "sensor"
     preview: bool = True
-    sequence: int = 0  # older configs only: SemanticKITTI sequences follow output.split (0 is accepted)
+    sequence: int = field(default=0, metadata=meta(help="older configs only: SemanticKITTI sequences follow output.split (0 is accepted)"))
     boxes: BoxesConfig = field(default_factory=BoxesConfig)
-    skip_empty: bool = False  # a frame with fewer than min_objects labelled objects is recorded as skipped, no files
-    min_objects: int = 1  # objects of output.boxes.classes with their minimum points (skip_empty)
-    frames_kept: bool = False  # skip_empty: `frames` counts kept frames; indices go on past it (full runs only)
+    skip_empty: bool = field(default=False, metadata=meta(help="a frame with fewer than min_objects labelled objects is recorded as skipped, no files"))
+    min_objects: int = field(default=1, metadata=meta(help="objects of output.boxes.classes with their minimum points (skip_empty)"))
+    frames_kept: bool = field(default=False, metadata=meta(help="skip_empty: `frames` counts kept frames; indices go on past it (full runs only)"))
     kitti: KittiConfig = field(default_factory=KittiConfig)  # KITTI layout camera
     split: SplitConfig = field(default_factory=SplitConfig)  # train/val/test of every format and index
-    class_map: dict = field(default_factory=dict)  # {task class: [classes] | rest, ignore: [classes]}: training ids for a task
+    class_map: dict = field(default_factory=dict, metadata=meta(help="{task class: [classes] | rest, ignore: [classes]}: training ids for a task"))
     semantickitti: SemanticKittiOutput = field(default_factory=SemanticKittiOutput)
 
 
@@ -300,12 +303,12 @@ class LimitsConfig:
     anything, with the estimate's figures and the key to raise (bpy_pipeline/estimate.py). Never
     changes a frame's bytes (not part of the run key)."""
 
-    rays_per_frame: float = 5e7  # every ray of every sensor of a frame (the thesis scanner at full resolution: 2.3e7)
-    triangles: float = 5e7  # triangles of a frame's scene, estimated from the config
-    objects: float = 1e4  # objects of a frame's scene (placed people, cars, shapes, ...)
-    seconds: float = 7 * 86400.0  # estimated seconds of the selected frames in one process
-    bytes: float = 1e12  # estimated bytes written by the selected frames
-    particles: float = 1e9  # rain drops and snow flakes drawn a frame, at most (lidar/weather.py; 145 ns each: 2.4 min a frame)
+    rays_per_frame: float = field(default=5e7, metadata=meta("", low=0, help="every ray of every sensor of a frame (the thesis scanner at full resolution: 2.3e7)"))
+    triangles: float = field(default=5e7, metadata=meta("", low=0, help="triangles of a frame's scene, estimated from the config"))
+    objects: float = field(default=1e4, metadata=meta("", low=0, help="objects of a frame's scene (placed people, cars, shapes, ...)"))
+    seconds: float = field(default=7 * 86400.0, metadata=meta("s", low=0, help="estimated seconds of the selected frames in one process"))
+    bytes: float = field(default=1e12, metadata=meta("", low=0, help="estimated bytes written by the selected frames"))
+    particles: float = field(default=1e9, metadata=meta("", low=0, help="rain drops and snow flakes drawn a frame, at most (145 ns each: 2.4 min a frame)"))
 
 
 MAX_FRAMES = 10**9  # frame indices are 6+ digit file names and records; a billion frames is centuries of scanning
@@ -313,9 +316,9 @@ MAX_FRAMES = 10**9  # frame indices are 6+ digit file names and records; a billi
 
 @dataclass(frozen=True)
 class Config:
-    seed: int = 0
-    frames: int = 1
-    threads: int = 0  # ray-casting threads per process (0: the cores available); never changes the output
+    seed: int = field(default=0, metadata=meta(help="the run's seed: every frame's generator derives from (seed, frame index)"))
+    frames: int = field(default=1, metadata=meta(help="frames to make"))
+    threads: int = field(default=0, metadata=meta(help="ray-casting threads per process (0: the cores available); never changes the output"))
     scene: SceneConfig = field(default_factory=SceneConfig)
     # The default job: the railway thesis's terrestrial scanner (table 4.3) 2 m above a station
     # point 4 m beside the track, at 0.2 x 0.2 degrees (1.4 M rays) so it runs in seconds.
@@ -324,6 +327,32 @@ class Config:
     output: OutputConfig = field(default_factory=OutputConfig)
     labels: LabelsConfig = field(default_factory=LabelsConfig)
     limits: LimitsConfig = field(default_factory=LimitsConfig)
+
+
+# ----------------------------------------------------------------------------- reference
+REFERENCE_SECTIONS = (("", None), ("sensor", SensorConfig), ("effects", EffectsConfig), ("output", OutputConfig), ("limits", LimitsConfig))
+
+
+def config_reference() -> str:
+    """docs/config.md: every key of the config's sensor, effects, output and limits sections, the top-level
+    scalars and each builder's ``scene`` keys, with its type, default, unit, allowed range and meaning, read from the dataclasses' fields and their
+    metadata (:func:`bpy_pipeline.schema.meta`). ``python -m bpy_pipeline config --reference`` prints it."""
+    lines = ["# Config reference", "",
+             "Generated from the config's dataclasses (`python -m bpy_pipeline config --reference > docs/config.md`;",
+             "`tests/test_field_metadata.py` fails when this file and the code differ). Unit, range and meaning come from each",
+             "field's metadata (`bpy_pipeline/schema.py`, `meta`); a value outside the range is refused with the key's",
+             "name. A preset's values are listed by `python -m bpy_pipeline sensors show NAME`; what each builder builds",
+             "is docs/builders.md.", ""]
+    sections = [(f"`{section}`" if section else "Top level", cls, section) for section, cls in REFERENCE_SECTIONS]
+    sections.insert(2, ("`sensor`: the preset's fields, each overridable (defaults: `custom`, no preset)", SensorSpec, "sensor"))
+    sections += [(f"`scene` (builder: {name})", BUILDER_REGISTRY.get(name).params, "scene") for name in sorted(BUILDER_REGISTRY.names())]
+    for title, cls, section in sections:
+        rows = [r for r in reference(Config) if "." not in r[0]] if cls is None else reference(cls, section)
+        rows = [r for r in rows if not r[0].startswith("sensor.spec")]
+        lines += [f"## {title}", "", "| key | type | default | unit | range | meaning |", "| --- | --- | --- | --- | --- | --- |"]
+        lines += ["| " + " | ".join(str(cell).replace("|", "\\|") for cell in (f"`{key}`", *rest)) + " |" for key, *rest in rows]
+        lines.append("")
+    return "\n".join(lines)
 
 
 # ----------------------------------------------------------------------------- validation
@@ -355,7 +384,7 @@ def _scene_from_dict(data) -> SceneConfig:
 
 
 def sensor_trajectory(sensor: SensorConfig, path=None) -> Trajectory | None:
-    """The configured :class:`~.lidar.platform.Trajectory`, ``None`` for a static sensor.
+    """The configured :class:`~.lidar.sensor.platform.Trajectory`, ``None`` for a static sensor.
 
     path : (k, 3) float64 world polyline of ``trajectory.curve`` (``scenes.curves.curve_polyline``);
         needed only when the trajectory follows a curve of the scene
@@ -419,7 +448,7 @@ def effects_from_dict(data, spec: SensorSpec | None = None) -> EffectsConfig:
 
 
 def realistic_effects(data, spec: SensorSpec | None) -> dict | object:
-    """The config's raw ``effects`` mapping over the profile of its sensor's preset (lidar/sensors.yaml).
+    """The config's raw ``effects`` mapping over the profile of its sensor's preset (lidar/sensor/sensors.yaml).
 
     Unless ``ideal: true``: each section the profile has (noise, drop, intensity) is the profile's,
     with the config's keys of that section replacing the profile's one by one; a config section
@@ -427,7 +456,7 @@ def realistic_effects(data, spec: SensorSpec | None) -> dict | object:
     Merging a resolved config again changes nothing (``config_to_dict`` round trips).
     Anything but a mapping is returned as given, for validation to name.
     """
-    from .lidar.sensors import preset_effects
+    from .lidar.sensor.sensors import preset_effects
 
     if data is not None and not isinstance(data, dict):
         return data
@@ -453,17 +482,15 @@ def _merged(base: dict, over: dict) -> dict:
 
 def _check_effects(effects: EffectsConfig, spec: SensorSpec | None) -> None:
     """Ranges of the effects' parameters, and that a model file holds the models asked of it."""
-    from .lidar.effects import read_model_file
+    from .lidar.effects.apply import read_model_file
 
     noise, drop, intensity = effects.noise, effects.drop, effects.intensity
     check_weather(effects.weather)
     check_materials(effects.materials)
-    for key in ("sigma", "sigma_per_metre", "angular_jitter_deg"):
-        check_positive(getattr(noise, key), f"effects.noise.{key}", allow_zero=True)
     rings = None if spec is None else sensor_rings(spec)
     if noise.ring_bias and rings is not None and len(noise.ring_bias) != rings:
         raise InputError(f"effects.noise.ring_bias: one value per ring ({rings} for this sensor), got {len(noise.ring_bias)}")
-    probabilities = {"effects.drop.probability": drop.probability, "effects.drop.carla.general_rate": drop.carla.general_rate, "effects.drop.carla.zero_intensity": drop.carla.zero_intensity}
+    probabilities = {"effects.drop.carla.general_rate": drop.carla.general_rate, "effects.drop.carla.zero_intensity": drop.carla.zero_intensity}
     for key, value in probabilities.items():
         if not 0 <= value <= 1:
             raise InputError(f"{key}: must lie in 0..1, got {value}")
@@ -474,20 +501,9 @@ def _check_effects(effects: EffectsConfig, spec: SensorSpec | None) -> None:
     check_positive(drop.threshold.softness, "effects.drop.threshold.softness", allow_zero=True)
     if drop.threshold.range_at_80 and drop.threshold.range_at_80 <= drop.threshold.range_at_10:
         raise InputError(f"effects.drop.threshold.range_at_80: must exceed range_at_10 ({drop.threshold.range_at_10} m), or be 0, got {drop.threshold.range_at_80}")
-    for key in ("alpha", "attenuation_rate"):
-        check_positive(getattr(intensity, key), f"effects.intensity.{key}", allow_zero=True)
-    check_positive(intensity.reference_range, "effects.intensity.reference_range")
-    check_positive(intensity.scale, "effects.intensity.scale")
-    if not 0 <= intensity.offset < 1:
-        raise InputError(f"effects.intensity.offset: must lie in 0..1, got {intensity.offset}")
-    check_positive(intensity.incidence_exponent, "effects.intensity.incidence_exponent", allow_zero=True)
     check_reading(intensity.reading, intensity.offset, intensity.model)
-    if not 0 <= intensity.steps <= 65535:
-        raise InputError(f"effects.intensity.steps: must lie in 0..65535 (0 = continuous), got {intensity.steps}")
     if not 0 <= drop.threshold.floor < 1:
         raise InputError(f"effects.drop.threshold.floor: must lie in 0..1 (a share of returns lost at any range), got {drop.threshold.floor}")
-    if not 0 < intensity.reference_reflectivity <= 1:
-        raise InputError(f"effects.intensity.reference_reflectivity: must lie in (0, 1], got {intensity.reference_reflectivity}")
     model = DROP_MODELS.get(drop.model)
     if model.params is not None:
         from_dict(model.params, drop.params, "effects.drop.params")
@@ -513,28 +529,12 @@ def _check_effects(effects: EffectsConfig, spec: SensorSpec | None) -> None:
             raise InputError(f"{where}: {section.model_file} holds no {section.model} {name} model")
 
 
-def _check_mirrors(mirrors: MirrorConfig) -> None:
-    if not 0 <= mirrors.max_bounces <= 255:
-        raise InputError(f"effects.mirrors.max_bounces: must lie in 0..255 (a point's bounces is uint8), got {mirrors.max_bounces}")
-    for key, angle in (("normal_return_deg", mirrors.normal_return_deg), ("glass.normal_return_deg", mirrors.glass.normal_return_deg)):
-        if not 0 <= angle < 90:
-            raise InputError(f"effects.mirrors.{key}: must lie in 0..90 degrees (0 = never), got {angle}")
-    if not 0 <= mirrors.glass.reflect_fraction <= 1:
-        raise InputError(f"effects.mirrors.glass.reflect_fraction: must lie in 0..1, got {mirrors.glass.reflect_fraction}")
-    if not 0 <= mirrors.glass.max_passes <= 65535:
-        raise InputError(f"effects.mirrors.glass.max_passes: must lie in 0..65535, got {mirrors.glass.max_passes}")
-
-
 def _check_reflector(reflector: ReflectorConfig, spec: SensorSpec) -> None:
     if not reflector.enabled:
         return
     where = "sensor.reflector"
     check_reflector(reflector, where)
     edge = reflector.edge_drop
-    if not 0 <= edge.probability <= 1:
-        raise InputError(f"{where}.edge_drop.probability: must lie in 0..1, got {edge.probability}")
-    if edge.beam_diameter < 0:
-        raise InputError(f"{where}.edge_drop.beam_diameter: must be >= 0 m, got {edge.beam_diameter}")
     if edge.mask != "none":
         check_grid(spec, f"{where}.edge_drop.mask")
         if edge.mask != "generated":
@@ -591,7 +591,6 @@ def config_from_dict(data) -> Config:
     if trajectory is not None and trajectory.waypoints:  # a curve's path is checked once the scene is built
         sensor_trajectory(sensor).check_frames(config.frames, frame_time(sensor.spec))
     _check_effects(config.effects, config.sensor.spec)
-    _check_mirrors(config.effects.mirrors)
     weather = config.effects.weather
     if weather.divergence_mrad == 0 and config.sensor.divergence.mrad > 0:  # the weather's particles see the sensor's beam
         weather = dataclasses.replace(weather, divergence_mrad=config.sensor.divergence.mrad)
@@ -655,7 +654,6 @@ def _check_boxes(config: Config) -> Config:
     for name, value in boxes.names.items():
         if not isinstance(value, str) or not value or any(c.isspace() for c in value):
             raise InputError(f"output.boxes.names.{name}: expected one word (label files split on spaces), got {value!r}")
-    check_positive(boxes.min_points_default, "output.boxes.min_points_default", allow_zero=True)
     t0, t1, t2 = boxes.occlusion_levels
     if not 1 >= t0 >= t1 >= t2 >= 0:
         raise InputError(f"output.boxes.occlusion_levels: expected three fractions 1 >= t0 >= t1 >= t2 >= 0, got {list(boxes.occlusion_levels)}")

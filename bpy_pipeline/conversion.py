@@ -103,7 +103,7 @@ def convert(scan_path, to: str, labels=None, method: str = "hybrid", lift: float
     """The scan at ``scan_path`` converted to preset ``to`` (module notes); ``lift`` metres: the target's centre above the source's."""
     from .io.real_scans import read_real_scan
     from .lidar.points import POINT_DTYPE
-    from .lidar.sensors import presets, resolve_sensor
+    from .lidar.sensor.sensors import presets, resolve_sensor
     from .mixing.convert import METHODS, convert_firings
     from .mixing.firings import recover_firings
 

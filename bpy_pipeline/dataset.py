@@ -50,7 +50,7 @@ from .io.atomic import atomic_write, digests_while_writing, temporary_files
 from .io.confined import inside, readable_inside
 from .io.manifest import MANIFEST_NAME, read_manifest, to_json, write_manifest
 from .io.writers import WRITERS, frame_writers
-from .lidar.raycast import default_threads
+from .lidar.cast.raycast import default_threads
 
 DATASET_FORMAT = "bpy_pipeline dataset"
 DATASET_VERSION = 2
@@ -80,9 +80,9 @@ def sha256_file(path: Path) -> str:
 
 # Writers' ``beside`` parts go on threads only with a core to spare: one process on every core (config.threads 0 or
 # above 1), where 80 parking frames ran at 0.97 of the inline wall time with the preview's thread (0.86-1.00, 5
-# alternating pairs; docs/performance.md, round seven). A worker of --workers runs on its share of the cores, often
+# alternating pairs; docs/performance.md). A worker of --workers runs on its share of the cores, often
 # one, where a thread only adds GIL hand-overs. The KITTI layout's labels and projections stay on the caller's
-# thread: Python-heavy, they held the GIL against the other writes (round seven); its image goes beside.
+# thread: Python-heavy, they held the GIL against the other writes; its image goes beside.
 
 
 def write_frame_files(frame, staging: Path, names: list[str]) -> list[Path]:
@@ -355,7 +355,7 @@ class Dataset:
         write_manifest(self.out, manifest)
 
     def _new_manifest(self) -> dict:
-        from .lidar.sensors import spec_summary
+        from .lidar.sensor.sensors import spec_summary
         from .frame import versions
 
         return {
@@ -721,7 +721,7 @@ def frame_record(frame, digests: dict[str, str]) -> dict:
     if stations:
         record["station"] = frame.index % stations
     if frame.trajectory is not None:
-        from .lidar.sensors import frame_time
+        from .lidar.sensor.sensors import frame_time
 
         record["trajectory"] = frame.trajectory.frame_info(frame.index, frame_time(config.sensor.spec))
     record["timings_s"] = {k: round(v, 4) for k, v in frame.timings.items()}
@@ -759,7 +759,7 @@ def check_writable(out: Path, config: Config) -> None:
     """Refuse, before any work, a folder that cannot take a frame: not writable, or too little free space
     for one frame's estimated size; and a sensor whose rays per frame cannot fit in memory."""
     from .lidar.points import POINT_DTYPE
-    from .lidar.sensors import ray_count
+    from .lidar.sensor.sensors import ray_count
 
     probe = out / f".write_test_{os.getpid()}"
     try:

@@ -148,7 +148,7 @@ def _population(config: Config) -> tuple[float, float]:
 
 def _rays(config: Config) -> int:
     """Rays of a frame: every sensor of the rig (or the one sensor), times the sub-rays of a divergent beam."""
-    from .lidar.sensors import ray_count
+    from .lidar.sensor.sensors import ray_count
 
     specs = [member.spec for member in config.sensor.rig] if config.sensor.rig else [config.sensor.spec]
     sub_rays = max(int(getattr(config.sensor.divergence, "rays", 1) or 1), 1)
@@ -157,11 +157,11 @@ def _rays(config: Config) -> int:
 
 def _particles(config: Config) -> float:
     """The most rain drops and snow flakes a frame draws: each return's cone up to the sensor's max_range
-    (:func:`~.lidar.weather.expected_particles`), for the returns of every sensor of the frame."""
-    from .lidar.drop.threshold import threshold_model
-    from .lidar.effects import fitted_models
-    from .lidar.sensors import ray_count
-    from .lidar.weather import expected_particles
+    (:func:`~.lidar.effects.weather.expected_particles`), for the returns of every sensor of the frame."""
+    from .lidar.effects.drop.threshold import threshold_model
+    from .lidar.effects.apply import fitted_models
+    from .lidar.sensor.sensors import ray_count
+    from .lidar.effects.weather import expected_particles
 
     weather = config.effects.weather
     if config.effects.ideal or not (weather.rain.rate > 0 or weather.snow.rate > 0):

@@ -29,7 +29,7 @@ from .buffers import MATERIAL_ID, MATERIALS, ObjectTable, SceneBuffers
 from .compat import instance_attribute
 from .errors import InputError
 from .labels import ClassTable
-from .lidar.materials import MATERIAL_MODELS, model_from_material, model_id
+from .lidar.effects.materials import MATERIAL_MODELS, model_from_material, model_id
 
 GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "META", "FONT"}
 VIRTUAL_DEFORM = ("ARMATURE", "LATTICE", "CURVE")  # parent types that deform a child's mesh without a modifier
@@ -135,9 +135,9 @@ def _reflectivity(owner, where: str) -> float:
 
 
 def _surface(owner, where: str) -> str:
-    """The reflectance model (lidar/materials.py, ``""`` for none) the object's ``lidar_material``, else its first
+    """The reflectance model (lidar/effects/materials.py, ``""`` for none) the object's ``lidar_material``, else its first
     material's ``lidar_material`` custom property, else that material's Principled BSDF roughness and metallic
-    (when not linked to a texture) select (:func:`~.lidar.materials.model_from_material`)."""
+    (when not linked to a texture) select (:func:`~.lidar.effects.materials.model_from_material`)."""
     if "lidar_material" in owner:
         return model_from_material(owner["lidar_material"], None, None, where)
     material = next((slot.material for slot in getattr(owner, "material_slots", ()) if slot.material is not None), None)
@@ -206,7 +206,7 @@ class _Labeller:
             semantic = self.table.id_of(class_name, where)
         material = str(owner.get("lidar_material", "diffuse"))
         surface = _surface(owner, where)
-        if material in MATERIAL_MODELS:  # a reflectance model on a diffuse surface (lidar/materials.py)
+        if material in MATERIAL_MODELS:  # a reflectance model on a diffuse surface (lidar/effects/materials.py)
             material = "diffuse"
         if material not in MATERIAL_ID:
             raise InputError(f"{where}: lidar_material {material!r} is not one of {', '.join(MATERIALS + tuple(MATERIAL_MODELS))}")

@@ -18,14 +18,14 @@ from . import _version
 from .builders.base import BuildResult
 from .labels import ClassTable, load_class_table, parse_rules
 from .geometry.clearance import SensorPoses
-from .lidar.platform import Trajectory
-from .lidar.raycast import CasterCache
-from .lidar.sensor_rays import SensorRays
+from .lidar.sensor.platform import Trajectory
+from .lidar.cast.raycast import CasterCache
+from .lidar.sensor.sensor_rays import SensorRays
 
 if TYPE_CHECKING:
     from .buffers import SceneBuffers
     from .config import Config
-    from .lidar.raycast import RayCaster
+    from .lidar.cast.raycast import RayCaster
     from .rig import RigFrame
 
 
@@ -75,9 +75,9 @@ class Frame:
     built : True when this frame built ``scene`` (its warnings are this frame's)
     pose : (4, 4) float64 sensor-to-world transform at the frame's start (mount height included)
     pose_at : ``pose_at(t (n,) s) -> (n, 4, 4)`` sensor-to-world poses at firing times (a static sensor's: ``pose``)
-    trajectory : the moving sensor's :class:`~bpy_pipeline.lidar.platform.Trajectory`, ``None`` when static
+    trajectory : the moving sensor's :class:`~bpy_pipeline.lidar.sensor.platform.Trajectory`, ``None`` when static
     buffers : the exported :class:`~bpy_pipeline.buffers.SceneBuffers` (a real scan's: its inserted objects)
-    caster : the scan's :class:`~bpy_pipeline.lidar.raycast.RayCaster` of ``buffers`` at ``pose`` (the boxes reuse it)
+    caster : the scan's :class:`~bpy_pipeline.lidar.cast.raycast.RayCaster` of ``buffers`` at ``pose`` (the boxes reuse it)
     chunks : the scan's ``(points, beam)`` chunks, consumed by the effects stage
     direct_returns : (d,) int64 the instance of each of the scan's returns that met no mirror, before the effects, when the
         boxes take their ``visible`` counts from them (:func:`~bpy_pipeline.stages.scan.counts_direct_returns`); else ``None``
@@ -120,11 +120,6 @@ class Frame:
         if self.pose_at is None:
             self.pose_at = StaticPose(self.pose)
 
-    def __setattr__(self, name, value):
-        if name == "pose_at" and value is not None and not callable(value):  # a (4, 4) matrix, as callers before the plan set it
-            value = StaticPose(np.asarray(value, np.float64).reshape(4, 4))
-        super().__setattr__(name, value)
-
     def place(self, pose: np.ndarray, pose_at: Callable[[np.ndarray], np.ndarray] | None = None, trajectory: Trajectory | None = None) -> None:
         """Set the sensor's pose at the frame's start (4, 4), and ``pose_at`` (a moving sensor's; a static one's otherwise)."""
         self.pose = np.asarray(pose, np.float64).reshape(4, 4)
@@ -155,14 +150,14 @@ class Run:
     config : the run's config; build : build ``config.scene`` (``False``: scan the open scene as it is)
     table, rules : the class table and the name rules objects are labelled by
     keep : the builder's state across frames (:class:`~bpy_pipeline.builders.base.BuildContext`)
-    rays : the sensor's rays (:class:`~bpy_pipeline.lidar.sensor_rays.SensorRays`)
+    rays : the sensor's rays (:class:`~bpy_pipeline.lidar.sensor.sensor_rays.SensorRays`)
     result : the :class:`~bpy_pipeline.builders.base.BuildResult` of the scene built now (every frame's ``scene``)
     scene_frame : the frame whose scene is built now (``None``: none yet)
     trajectory : the moving sensor's path in the built scene (``None`` for a static sensor)
     threads : ray-casting threads (``None``: the cores available)
     log : where warnings and the lines of long stages go (``None``: nowhere)
     members : a rig's sensors, one single-sensor :class:`Run` each (made by the rig stage on its first frame, :mod:`bpy_pipeline.stages.rig`)
-    casters : the static objects' caster kept from frame to frame (:class:`~bpy_pipeline.lidar.raycast.CasterCache`)
+    casters : the static objects' caster kept from frame to frame (:class:`~bpy_pipeline.lidar.cast.raycast.CasterCache`)
     sensor_poses : every sensor pose of the run (:class:`~bpy_pipeline.geometry.clearance.SensorPoses`), made by the
         build stage before its first build: what the builders keep their solids clear of
     """

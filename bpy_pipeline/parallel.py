@@ -19,7 +19,7 @@ from typing import Callable
 from .config import Config
 from .dataset import Dataset
 from .errors import InputError
-from .lidar.raycast import default_threads
+from .lidar.cast.raycast import default_threads
 
 SINGLE_THREAD_ENV = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "NUMBA_NUM_THREADS": "1"}
 ROOT = Path(__file__).resolve().parents[1]
@@ -65,7 +65,7 @@ def worker_command(out: str, frames: list[int], threads: int) -> list[str]:
 def run_parallel(config: Config, out: str, frames: list[int], mode: str, workers: int = 1, ray_address: str | None = None, log: Callable[[str], None] = print) -> int:
     """Make ``frames`` of ``config`` into ``out`` with ``workers`` local processes or on the Ray cluster at
     ``ray_address``; returns the exit code (0 when every frame is committed)."""
-    from .pipeline import frames_per_scene
+    from .stages.view import frames_per_scene
 
     with Dataset.open(out, config, mode, log=log) as dataset:
         todo = [f for f in frames if not dataset.has(f)]
@@ -99,7 +99,7 @@ def _frames_task(out: str, frames: list[int], threads: int) -> int:
 
     from .config import config_from_dict
     from .io import read_manifest
-    from .pipeline import run_frames
+    from .plan import run_frames
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     config = config_from_dict(read_manifest(out)["config"])
@@ -129,7 +129,7 @@ def _run_on_ray(out: str, frames: list[int], address: str, per_scene: int, log: 
             try:
                 ray.get(done[0])
                 log(f"frames {r[0]}..{r[-1]} done on the cluster")
-            except Exception as err:  # noqa: BLE001 - a task that failed after its retries
+            except Exception as err:  # a task that failed after its retries
                 failed.append(f"{r[0]}:{r[-1] + 1} ({type(err).__name__})")
     finally:
         ray.shutdown()

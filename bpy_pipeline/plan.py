@@ -37,8 +37,8 @@ from .dataset import Dataset
 from .frame import Frame, Run, StageFunction, frame_rng
 from .io import read_dataset
 from .io.writers import WRITERS, frame_writers
-from .lidar.raycast import default_threads
-from .lidar.sensors import ray_count
+from .lidar.cast.raycast import default_threads
+from .lidar.sensor.sensors import ray_count
 from .registry import Registry
 from .stages.annotate import annotate_stage
 from .stages.camera import camera_stage
@@ -52,7 +52,7 @@ LONG_STAGE_S = 3.0  # a stage that takes longer gets a line of its own
 MAX_INDICES_PER_KEPT = 20  # output.frames_kept: frame indices tried per kept frame before giving up
 OVERLAP_MIN_RAYS = 1 << 16  # rays a frame (a rig's: all its sensors') from which a frame finishes beside the next one. Smaller frames
 # spend their time in the interpreter, which two threads take turns at: 80 parking frames (the vlp16, 14,480 rays) ran at 1.02-1.06
-# of the wall time with the thread; the ego street, the default railway and the os1_128 box at 0.88-0.95 (docs/performance.md, round nine)
+# of the wall time with the thread; the ego street, the default railway and the os1_128 box at 0.88-0.95 (docs/performance.md)
 
 
 @dataclass(frozen=True)
@@ -118,10 +118,7 @@ PRODUCTS.register("flash", (Stage("flash", flash_stage, "flash", finishing=True)
 def plan(config: Config) -> tuple[Stage, ...]:
     """The stages every frame of a run of ``config`` goes through, in order (see the module docstring)."""
     builder = BUILDERS.get(config.scene.builder)
-    if builder.stages:  # a builder that still gives its own stages: ((stage(frame, run), timing), ...)
-        stages = tuple(Stage(getattr(f, "__name__", "stage").removesuffix("_stage"), f, timing) for f, timing in builder.stages)
-    else:
-        stages = PLANS.get(builder.plan)(config)
+    stages = PLANS.get(builder.plan)(config)
     products = []
     for name in frame_writers(config):
         for need in WRITERS.get(name).needs:
@@ -285,7 +282,7 @@ def finished_now(function: Callable, *args) -> Future:
     future: Future = Future()
     try:
         future.set_result(function(*args))
-    except BaseException as err:  # noqa: BLE001 - re-raised by future.result()
+    except BaseException as err:  # re-raised by future.result()
         future.set_exception(err)
     return future
 

@@ -4,7 +4,7 @@ Where a value comes from, lowest first (a later source replaces an earlier one, 
 
 1. ``default``: the config's dataclasses (:mod:`bpy_pipeline.config`), and ``DEFAULT_SENSOR`` when
    neither the config nor the builder names a sensor preset;
-2. ``preset NAME``: the sensor preset's fields (``lidar/sensors.yaml``);
+2. ``preset NAME``: the sensor preset's fields (``lidar/sensor/sensors.yaml``);
 3. ``builder NAME``: the builder's own sensor (``Builder.sensor``: it names the preset, and its fields
    refine it), used only when the config names no preset;
 4. ``profile NAME``: the preset's effects profile (noise, drop, intensity), unless ``effects.ideal``;
@@ -25,7 +25,7 @@ import yaml
 
 from .builders.base import BUILDERS
 from .config import DEFAULT_SENSOR, apply_override, config_from_dict, config_to_dict, read_config_file
-from .lidar.sensors import SensorSpec, preset_effects, presets
+from .lidar.sensor.sensors import SensorSpec, preset_effects, presets
 from .schema import to_plain
 
 PRECEDENCE = ("default", "preset", "builder", "profile", "config", "--set")

@@ -30,7 +30,7 @@ from .geometry.lod import SensorView
 from .geometry.field_of_view import FieldOfView
 from .geometry.transforms import pose_matrix, transform_points
 from .lidar.points import POINT_DTYPE
-from .lidar.sensors import SensorSpec, angular_resolution, elevations, mount_offset, resolve_sensor
+from .lidar.sensor.sensors import SensorSpec, angular_resolution, elevations, mount_offset, resolve_sensor
 
 RIG_POINT_DTYPE = np.dtype(POINT_DTYPE.descr + [("sensor", "u1")])
 MAX_SENSORS = 255

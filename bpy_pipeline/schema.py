@@ -4,6 +4,12 @@
 converts values by the field type hints (float, int, bool, str, Literal, unions, lists,
 fixed-length tuples, nested dataclasses). A field may carry ``metadata={"key": "class"}`` to
 be spelled differently in YAML than in Python.
+
+A field's unit, allowed range and help live in its metadata, written with :func:`meta`
+(``sigma: float = field(default=0.0, metadata=meta("m", low=0, help="along the beam"))``), and nowhere else:
+:func:`from_dict` refuses a value outside the range (naming the key, the range and the unit), the Blender
+panel takes the unit and soft limits (addon/fields.py), and :func:`reference` lists every field for the
+generated docs/config.md.
 """
 
 from __future__ import annotations
@@ -19,6 +25,62 @@ from .errors import InputError
 
 def key_of(f: dataclasses.Field) -> str:
     return f.metadata.get("key", f.name)
+
+
+# units a field's metadata may name; "" is a plain number (a ratio, a count, a probability)
+UNITS = ("", "m", "deg", "s", "Hz", "m/s", "1/m", "px", "m^2", "mm/h", "ns")
+
+
+def meta(unit: str = "", low: float | None = None, high: float | None = None, *, low_open: bool = False, high_open: bool = False,
+         soft: tuple[float, float] | None = None, help: str = "", key: str | None = None) -> dict:
+    """A field's metadata: ``unit`` (one of :data:`UNITS`), the allowed range ``low``..``high`` (either end
+    ``None``: open-ended; ``low_open`` / ``high_open``: that end itself not allowed), ``soft`` the range the
+    panel's slider offers, ``help`` one line for the panel's tooltip and the config reference, ``key`` the
+    YAML spelling when it differs from the field's name. A tuple or list field's range holds for each item."""
+    if unit not in UNITS:
+        raise ValueError(f"unit {unit!r}: expected one of {UNITS}")
+    out = {"unit": unit, "low": low, "high": high, "low_open": low_open, "high_open": high_open, "soft": soft, "help": help}
+    if key is not None:
+        out["key"] = key
+    return out
+
+
+def unit_of(f: dataclasses.Field) -> str | None:
+    """The unit a field's metadata gives (``""``: a plain number), ``None`` when it carries no :func:`meta`."""
+    return f.metadata.get("unit")
+
+
+def range_text(m) -> str:
+    """The allowed range of metadata ``m`` in words (``0..1``, ``>= 0 m``, ``0..90 deg (90 excluded)``)."""
+    low, high, unit = m.get("low"), m.get("high"), m.get("unit", "")
+    suffix = f" {unit}" if unit else ""
+    if low is not None and high is not None:
+        excluded = [str(v) for v, is_open in ((low, m.get("low_open")), (high, m.get("high_open"))) if is_open]
+        return f"{low}..{high}{suffix}" + (f" ({' and '.join(excluded)} excluded)" if excluded else "")
+    if low is not None:
+        return f"{'>' if m.get('low_open') else '>='} {low}{suffix}"
+    if high is not None:
+        return f"{'<' if m.get('high_open') else '<='} {high}{suffix}"
+    return ""
+
+
+def check_range(value, m, path: str) -> None:
+    """``InputError`` naming ``path`` when ``value`` (a number, or each number of a list or tuple) lies outside the
+    range of metadata ``m``."""
+    if value is None or isinstance(value, bool) or (m.get("low") is None and m.get("high") is None):
+        return
+    if isinstance(value, (list, tuple)):
+        for k, v in enumerate(value):
+            check_range(v, m, f"{path}[{k}]")
+        return
+    if not isinstance(value, (int, float)):
+        return
+    low, high = m.get("low"), m.get("high")
+    below = low is not None and (value < low or (m.get("low_open") and value == low))
+    above = high is not None and (value > high or (m.get("high_open") and value == high))
+    if below or above:
+        verb = "lie in" if low is not None and high is not None else "be"
+        raise InputError(f"{path}: must {verb} {range_text(m)}, got {value}")
 
 
 def _type_name(hint) -> str:
@@ -103,7 +165,11 @@ def from_dict(cls, data, path: str = ""):
     unknown = sorted(set(map(str, data)) - set(fields))
     if unknown:
         raise InputError(f"{_join(path, unknown[0])}: unknown key; allowed: {', '.join(fields)}")
-    kwargs = {f.name: convert(data[k], hints[f.name], _join(path, k)) for k, f in fields.items() if k in data}
+    kwargs = {}
+    for k, f in fields.items():
+        if k in data:
+            kwargs[f.name] = convert(data[k], hints[f.name], _join(path, k))
+            check_range(kwargs[f.name], f.metadata, _join(path, k))
     try:
         return cls(**kwargs)
     except TypeError as err:  # a required field is missing
@@ -127,3 +193,27 @@ def check_positive(value: float, path: str, allow_zero: bool = False) -> None:
     """``InputError`` naming ``path`` unless ``value`` > 0 (>= 0 with ``allow_zero``)."""
     if value < 0 or (value == 0 and not allow_zero):
         raise InputError(f"{path}: must be {'>= 0' if allow_zero else '> 0'}, got {value}")
+
+
+def reference(cls, path: str = "") -> list[tuple[str, str, str, str, str, str]]:
+    """``[(key path, type, default, unit, range, help)]`` of every field of dataclass ``cls`` and the
+    dataclasses nested in it, as docs/config.md lists them (a field without :func:`meta` has empty unit,
+    range and help)."""
+    hints = _hints(cls)
+    rows = []
+    for f in dataclasses.fields(cls):
+        key = _join(path, key_of(f))
+        hint = hints[f.name]
+        options = [a for a in typing.get_args(hint) if a is not type(None)] if typing.get_origin(hint) in (typing.Union, types.UnionType) else [hint]
+        if len(options) == 1 and dataclasses.is_dataclass(options[0]):  # a section (or an optional one)
+            rows += reference(options[0], key)
+            continue
+        if f.default is not dataclasses.MISSING:
+            default = to_plain(f.default)
+        elif f.default_factory is not dataclasses.MISSING:
+            default = to_plain(f.default_factory())
+        else:
+            default = "(required)"
+        rows.append((key, _type_name(hint), repr(default) if isinstance(default, str) else str(default), f.metadata.get("unit", ""),
+                     range_text(f.metadata), f.metadata.get("help", "")))
+    return rows

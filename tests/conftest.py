@@ -30,7 +30,7 @@ def real_scans_folder() -> Path:
 @pytest.fixture(scope="module")
 def real_samples(real_scans_folder):
     """The real nuScenes HDL-32E sweep (``fitting.read_scan``) and its drop samples; skips with a reason where it is absent."""
-    from bpy_pipeline.lidar import fitting
+    from bpy_pipeline.lidar.fit import fitting
 
     path = real_scans_folder / "nuscenes_hdl32e_sweep.bin"
     if not path.exists():

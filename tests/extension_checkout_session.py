@@ -14,7 +14,7 @@ import sys
 from pathlib import Path
 
 import bpy
-import addon_utils  # noqa: E402  (importable once bpy put Blender's scripts/modules on sys.path)
+import addon_utils  # importable once bpy put Blender's scripts/modules on sys.path
 
 ROOT = Path(__file__).resolve().parents[1]
 MODULE = "bl_ext.user_default.lidar_pipeline"

@@ -133,7 +133,8 @@ def street_case(seed: int) -> list[str]:
     from bpy_pipeline.geometry.placement import Distribution
 
     rng = np.random.default_rng(seed)
-    u = lambda lo, hi: float(rng.uniform(lo, hi))
+    def u(lo, hi):
+        return float(rng.uniform(lo, hi))
     lanes, lane_width, parking = int(rng.integers(1, 3)), u(2.8, 4.0), (0.0 if rng.random() < 0.2 else u(1.8, 2.8))
     kerb_width, sidewalk, crossing_width, crossing_offset = u(0.1, 0.3), u(1.5, 5.0), u(2.0, 5.0), u(0.0, 3.0)
     reach = lanes * lane_width + parking + kerb_width + crossing_offset + crossing_width + 10.0
@@ -192,7 +193,8 @@ def parking_case(seed: int) -> list[str]:
     from bpy_pipeline.geometry.placement import FloorBoxPlacer
 
     rng = np.random.default_rng(seed)
-    u = lambda lo, hi: float(rng.uniform(lo, hi))
+    def u(lo, hi):
+        return float(rng.uniform(lo, hi))
     length, ceiling = u(30.0, 90.0), u(2.2, 3.5)
     openings = int(rng.integers(0, 4))
     params = parking_params.ParkingScene(
@@ -233,7 +235,8 @@ def hall_case(seed: int) -> list[str]:
     from bpy_pipeline.geometry.indoor import boxes_mesh, hall_layout, hall_station
 
     rng = np.random.default_rng(seed)
-    u = lambda lo, hi: float(rng.uniform(lo, hi))
+    def u(lo, hi):
+        return float(rng.uniform(lo, hi))
     height = u(3.0, 8.0)
     params = hall_params.IndustrialHallScene(
         length=u(8.0, 40.0), width=u(8.0, 30.0), height=height, wall_thickness=u(0.2, 0.4), desk_rows=int(rng.integers(0, 4)),
@@ -270,7 +273,8 @@ def railway_case(seed: int) -> list[str]:
     from bpy_pipeline.builders.railway.parts import mast
 
     rng = np.random.default_rng(seed)
-    u = lambda lo, hi: float(rng.uniform(lo, hi))
+    def u(lo, hi):
+        return float(rng.uniform(lo, hi))
     base = railway_params.RailwayScene()
     track = dataclasses.replace(base.track, tracks=int(rng.integers(1, 4)))
     supports = dataclasses.replace(base.supports, layout=str(rng.choice(["auto", "single", "both_sides", "gantry"])) if track.tracks > 1 else "single",

@@ -97,7 +97,7 @@ def test_transition_curves_keep_the_ends_and_follow_the_clothoid():
     kappa = curve.curvature([0.0, 10.0, 40.0, curve.length / 2, curve.length - 10.0, curve.length])
     np.testing.assert_allclose(kappa, np.array([0, 0.25, 1, 1, 0.25, 0]) / curve.radius, atol=1e-12)
     # the entry clothoid against its series (A^2 = R L), in the frame of the start tangent
-    A2, L = curve.radius * 40.0, 40.0
+    A2 = curve.radius * 40.0
     s = np.array([10.0, 25.0, 40.0])
     t0 = arc.tangent([0.0])[0][:2]
     n0 = np.array([-t0[1], t0[0]])

@@ -102,7 +102,7 @@ def test_asset_sets_stand_upright_at_drawn_heights_with_glass_windows_and_animat
     from bpy_pipeline.export import export_scene
     from bpy_pipeline.geometry.population import meshes_cross
     from bpy_pipeline.labels import load_class_table
-    from bpy_pipeline.pipeline import build_frame_scene
+    from bpy_pipeline.stages.scene import build_frame_scene
 
     population = {  # the car first: it needs the most room
         "car": {"count": 1, "assets": "project_cars"},
@@ -164,7 +164,7 @@ def _lying_person(tmp_path) -> Path:
 @pytest.mark.bpy
 def test_a_wrongly_oriented_asset_is_named_in_one_line_and_its_declared_up_axis_fixes_it(bpy_scene, tmp_path):
     from bpy_pipeline.config import load_config
-    from bpy_pipeline.pipeline import build_frame_scene
+    from bpy_pipeline.stages.scene import build_frame_scene
 
     file = _lying_person(tmp_path)
     hall = _hall(tmp_path)
@@ -193,7 +193,7 @@ def test_a_wrongly_oriented_asset_is_named_in_one_line_and_its_declared_up_axis_
     cfg.write_text(yaml.safe_dump({"scene": {"builder": "blend", "path": str(hall), "population": population}, "sensor": {"preset": "vlp16", "position": [0, 0, 2.5]}}))
     run = subprocess.run([sys.executable, str(ROOT / "run.py"), "--config", str(cfg), "--out", str(out)], cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert run.returncode == 2
-    lines = [l for l in run.stderr.strip().splitlines() if l.strip()]
+    lines = [line for line in run.stderr.strip().splitlines() if line.strip()]
     assert len(lines) == 1 and "does not stand upright" in lines[0], run.stderr
     assert not list(out.glob("ply/*.ply"))
 
@@ -261,7 +261,7 @@ def test_fbx_and_blend_car_files_import_upright_with_their_glass(bpy_scene, tmp_
 @pytest.mark.bpy
 def test_asset_frames_are_the_same_whatever_came_before(bpy_scene, tmp_path):
     from bpy_pipeline.config import load_config
-    from bpy_pipeline.pipeline import run_frames
+    from bpy_pipeline.plan import run_frames
 
     population = {"car": {"count": 1, "assets": "project_cars"}, "person": {"count": {"min": 1, "max": 4}, "assets": "project_people"}}
     data = {"seed": 9, "frames": 4, "scene": {"builder": "blend", "path": str(_hall(tmp_path)), "population": population}, "sensor": {"preset": "vlp16", "position": [0, 0, 2.5]}, "output": {"formats": ["ply"], "preview": False}}

@@ -108,9 +108,9 @@ def test_rain_at_300_mm_h_through_a_100_mrad_beam_is_estimated_and_drawn_in_boun
     are drawn in passes, so the memory stays bounded (it allocated 113 M floats)."""
     from bpy_pipeline.config import load_config
     from bpy_pipeline.estimate import check_limits, estimate_run
-    from bpy_pipeline.lidar import weather
-    from bpy_pipeline.lidar.drop.threshold import threshold_model
-    from bpy_pipeline.lidar.effects import fitted_models
+    from bpy_pipeline.lidar.effects import weather
+    from bpy_pipeline.lidar.effects.drop.threshold import threshold_model
+    from bpy_pipeline.lidar.effects.apply import fitted_models
 
     config = load_config({"sensor": {"preset": "vlp16"}, "effects": {"weather": {"rain": {"rate": 300}, "divergence_mrad": 100}}})
     estimate = estimate_run(config)

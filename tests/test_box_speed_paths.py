@@ -10,7 +10,7 @@
   body's capsules all at once against one by one;
 - the street's and the garage's free-space prefilter against testing every rectangle;
 - a wheel from its cached cylinder against the cylinder made anew;
-- rows' lengths (:func:`~bpy_pipeline.lidar.raycast.row_norms`) against ``np.linalg.norm``, and the suspect rays
+- rows' lengths (:func:`~bpy_pipeline.lidar.cast.raycast.row_norms`) against ``np.linalg.norm``, and the suspect rays
   moved four ways in one Embree query against one query a way;
 - the placer's occlusion tests of every placed box at once against one box at a time;
 - the insertion rule's turn of a candidate, the rectangles' separating axes and the placer's region and keep-out
@@ -18,13 +18,14 @@
 """
 
 import numpy as np
+import pytest
 
 from bpy_pipeline.buffers import SceneBuffers
 from bpy_pipeline.geometry import primitives
 from bpy_pipeline.geometry.collision import box_axes, capsule_mesh, capsule_meshes, ray_box_distance, rectangles_near, rectangles_overlap
 from bpy_pipeline.geometry.placement import FloorBoxPlacer, PlacedBox, _slab_distance, facing_samples
-from bpy_pipeline.lidar.raycast import JITTER, RayCaster, row_norms
-from bpy_pipeline.lidar.visibility import Coverage, _centroids, _used_vertices, covered_by_owner, surface_samples
+from bpy_pipeline.lidar.cast.raycast import JITTER, RayCaster, row_norms
+from bpy_pipeline.lidar.cast.visibility import Coverage, _centroids, _used_vertices, covered_by_owner, surface_samples
 
 
 def _unit(v):
@@ -333,8 +334,8 @@ def test_boxes_fitted_from_triangles_grouped_once_are_the_per_instance_isin_boxe
 def test_the_cone_prefilter_keeps_every_pair_of_the_full_matrix_compiled_or_numpy():
     """cone_pairs: ray-major pairs, compiled or numpy in blocks, the same pairs; every pair the full (n, k) matrix
     test lets through is among them (the margin covers rounding), rays on a cone's edge included."""
-    from bpy_pipeline.lidar.kernels import compiled
-    from bpy_pipeline.lidar.visibility import CONE_BLOCK, cone_pairs
+    from bpy_pipeline.lidar.cast.kernels import compiled
+    from bpy_pipeline.lidar.cast.visibility import CONE_BLOCK, cone_pairs
 
     rng = np.random.default_rng(12)
     directions = _unit(rng.normal(size=(2 * CONE_BLOCK + 777, 3)))  # blocks and a remainder
@@ -363,10 +364,10 @@ def test_the_compiled_cone_test_skips_only_boxes_no_ray_of_a_block_can_reach():
     pattern most pairs go, yet every pair the full matrix keeps is in a kept block, the pairs are numpy's, rays on a
     cone's edge included; a box around the sensor keeps every block, rays all round the sphere keep every box, and so
     does a block with a ray that is not unit."""
-    from bpy_pipeline.lidar.kernels import compiled
-    from bpy_pipeline.lidar.numba_kernels import CONE_RAYS
-    from bpy_pipeline.lidar.sensors import resolve_sensor, sensor_pattern
-    from bpy_pipeline.lidar.visibility import CONE_MARGIN, cone_pairs
+    from bpy_pipeline.lidar.cast.kernels import compiled
+    from bpy_pipeline.lidar.cast.numba_kernels import CONE_RAYS
+    from bpy_pipeline.lidar.sensor.sensors import resolve_sensor, sensor_pattern
+    from bpy_pipeline.lidar.cast.visibility import CONE_MARGIN, cone_pairs
 
     kernels = compiled()
     if kernels is None:
@@ -531,8 +532,8 @@ def test_objects_wholly_covered_get_the_truncation_their_samples_give(monkeypatc
     and cut at the sides of a narrower field of view."""
     from bpy_pipeline.geometry.boxes import fit_boxes
     from bpy_pipeline.geometry.transforms import pose_matrix
-    from bpy_pipeline.lidar import visibility as vis
-    from bpy_pipeline.lidar.sensors import iter_pattern, resolve_sensor
+    from bpy_pipeline.lidar.cast import visibility as vis
+    from bpy_pipeline.lidar.sensor.sensors import iter_pattern, resolve_sensor
     from bpy_pipeline.buffers import ObjectTable
 
     sensor = resolve_sensor({"preset": "vlp16", "rotation_hz": 10.0}, "sensor")

@@ -1,6 +1,8 @@
 """3D box labels: fitting, occlusion levels of constructed cases, truncation, point thresholds, KITTI and OpenPCDet files."""
 
-import json
+
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -10,11 +12,15 @@ from bpy_pipeline.io import read_dataset
 from bpy_pipeline.buffers import ObjectTable, SceneBuffers
 from bpy_pipeline.geometry import human, primitives
 from bpy_pipeline.geometry.transforms import pose_matrix
+from bpy_pipeline.geometry import boxes as gb
 from bpy_pipeline.io import boxes as bx
+from bpy_pipeline.lidar.cast import visibility as vis
 from bpy_pipeline.lidar.points import empty_points
-from bpy_pipeline.lidar.raycast import RayCaster
-from bpy_pipeline.lidar.scanner import scan
-from bpy_pipeline.lidar.sensors import iter_pattern, resolve_sensor
+from bpy_pipeline.lidar.cast.raycast import RayCaster
+from bpy_pipeline.lidar.cast.scanner import scan
+from bpy_pipeline.lidar.sensor.sensors import iter_pattern, resolve_sensor
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))  # visibility_reference: the per-object cast
 
 SENSOR = resolve_sensor({"preset": "vlp16", "rotation_hz": 5.0}, "sensor")  # 0.1 deg columns
 POSE = pose_matrix([0.0, 0.0, 1.2], [0.0, 0.0, 0.0])
@@ -70,10 +76,10 @@ def people_and_pillar(extra=()):
 
 def test_occlusion_levels_of_constructed_cases():
     buffers, people = people_and_pillar()
-    boxes = bx.fit_boxes(buffers, ["person"], {k: p.yaw for k, p in people.items()})
-    bx.visibility(buffers, boxes, iter_pattern(SENSOR, 1 << 18), POSE, SENSOR.min_range, SENSOR.max_range, cell_deg=2.5)
+    boxes = gb.fit_boxes(buffers, ["person"], {k: p.yaw for k, p in people.items()})
+    vis.visibility(buffers, boxes, iter_pattern(SENSOR, 1 << 18), POSE, SENSOR.min_range, SENSOR.max_range, cell_deg=2.5)
     fraction = boxes["visible"] / boxes["unoccluded"]
-    levels = bx.occlusion_levels(boxes["visible"], boxes["unoccluded"], (0.8, 0.4, 0.1))
+    levels = vis.occlusion_levels(boxes["visible"], boxes["unoccluded"], (0.8, 0.4, 0.1))
     by_instance = dict(zip(boxes["instance"].tolist(), zip(fraction, levels)))
     assert by_instance[10][0] == 1.0 and by_instance[10][1] == 0  # in the open
     assert 0.4 < by_instance[11][0] < 0.6 and by_instance[11][1] == 1  # half behind the pillar
@@ -97,7 +103,8 @@ def test_occlusion_levels_of_constructed_cases():
 
 @pytest.mark.parametrize("kernel", ["numba", "numpy"])  # numba: the scene cast goes through the compiled scan
 def test_one_cast_for_all_objects_equals_a_caster_per_object(kernel, monkeypatch):
-    from bpy_pipeline.lidar.visibility import visibility, visibility_per_object
+    from bpy_pipeline.lidar.cast.visibility import visibility
+    from visibility_reference import visibility_per_object
 
     if kernel == "numba":
         pytest.importorskip("numba")
@@ -105,7 +112,7 @@ def test_one_cast_for_all_objects_equals_a_caster_per_object(kernel, monkeypatch
 
     buffers, people = people_and_pillar()
     headings = {k: p.yaw for k, p in people.items()}
-    ours = bx.fit_boxes(buffers, ["person", "pillar", "wall"], headings)
+    ours = gb.fit_boxes(buffers, ["person", "pillar", "wall"], headings)
     reference = ours.copy()
     visibility(buffers, ours, iter_pattern(SENSOR, 1 << 16), POSE, SENSOR.min_range, SENSOR.max_range, cell_deg=2.5)
     visibility_per_object(buffers, reference, iter_pattern(SENSOR, 1 << 16), POSE, SENSOR.min_range, SENSOR.max_range, cell_deg=2.5)
@@ -117,13 +124,13 @@ def test_one_cast_for_all_objects_equals_a_caster_per_object(kernel, monkeypatch
 
 def test_every_box_contains_its_instances_points():
     buffers, people = people_and_pillar()
-    boxes = bx.fit_boxes(buffers, ["person", "pillar", "wall"], {k: p.yaw for k, p in people.items()})
+    boxes = gb.fit_boxes(buffers, ["person", "pillar", "wall"], {k: p.yaw for k, p in people.items()})
     points, _ = scan(RayCaster(buffers, frame=POSE), buffers, iter_pattern(SENSOR, 1 << 18), POSE, SENSOR.min_range, SENSOR.max_range)
-    in_sensor = bx.boxes_in_frame(boxes, POSE)
+    in_sensor = gb.boxes_in_frame(boxes, POSE)
     xyz = np.column_stack([points["x"], points["y"], points["z"]]).astype(np.float64)
     for box in in_sensor:
         mine = points["instance"] == box["instance"]
-        assert mine.sum() >= 10 and bx.points_in_box(xyz[mine], box, 1e-4).all()
+        assert mine.sum() >= 10 and gb.points_in_box(xyz[mine], box, 1e-4).all()
         # and it is tight: the object's vertices touch all six faces
         rows = [r for r in range(len(buffers.objects)) if buffers.objects.instance[r] == box["instance"]]
         vertices = buffers.vertices[np.unique(buffers.triangles[np.isin(buffers.triangle_object, rows)])]
@@ -145,31 +152,31 @@ def test_truncation_is_the_share_outside_the_field_of_view():
     panel = upright_box((0.1, 1.0, 2.0), (3.0, 0.0), 0.0)
     far_panel = upright_box((0.1, 1.0, 2.0), (150.0, 0.0), 0.0)  # beyond the 100 m range
     buffers = scene([("panel", "car", 5, panel), ("far", "car", 6, far_panel)])
-    boxes = bx.fit_boxes(buffers, ["car"], {5: 0.0, 6: 0.0})
-    bx.visibility(buffers, boxes, iter_pattern(SENSOR, 1 << 18), POSE, SENSOR.min_range, SENSOR.max_range, cell_deg=2.0)
+    boxes = gb.fit_boxes(buffers, ["car"], {5: 0.0, 6: 0.0})
+    vis.visibility(buffers, boxes, iter_pattern(SENSOR, 1 << 18), POSE, SENSOR.min_range, SENSOR.max_range, cell_deg=2.0)
     near, far = boxes[boxes["instance"] == 5][0], boxes[boxes["instance"] == 6][0]
     hidden_below = (1.2 - 3.0 * np.tan(np.radians(15.0))) / 2.0  # of the panel's height (its faces: mostly front and back)
     assert abs(near["truncation"] - hidden_below) < 0.08, near["truncation"]
     assert far["truncation"] == 1.0 and far["unoccluded"] == 0
-    assert bx.occlusion_levels(far["visible"], far["unoccluded"])[()] == 3
+    assert vis.occlusion_levels(far["visible"], far["unoccluded"])[()] == 3
 
 
 def test_thin_boxes_are_dropped_by_their_class_minimum():
-    boxes = np.zeros(4, bx.BOX_DTYPE)
+    boxes = np.zeros(4, gb.BOX_DTYPE)
     boxes["class_name"] = ["car", "car", "person", "robot arm"]
     boxes["points"] = [12, 11, 6, 5]
-    kept = bx.keep_boxes(boxes, {"car": 12}, default=6)
+    kept = gb.keep_boxes(boxes, {"car": 12}, default=6)
     assert kept["class_name"].tolist() == ["car", "person"] and kept["points"].tolist() == [12, 6]
     points = np.zeros(7, [("instance", "<u4")])
     points["instance"] = [3, 3, 3, 9, 9, 0, 0]
-    boxes = np.zeros(3, bx.BOX_DTYPE)
+    boxes = np.zeros(3, gb.BOX_DTYPE)
     boxes["instance"] = [3, 9, 4]
-    bx.count_points(boxes, points)
+    gb.count_points(boxes, points)
     assert boxes["points"].tolist() == [3, 2, 0]
 
 
 def sample_boxes(rng, n=5, ahead=True):
-    boxes = np.zeros(n, bx.BOX_DTYPE)
+    boxes = np.zeros(n, gb.BOX_DTYPE)
     boxes["class_name"] = ["car", "person", "robot arm", "car", "person"][:n]
     boxes["instance"] = np.arange(1, n + 1)
     boxes["centre"] = rng.uniform(-20, 20, (n, 3))
@@ -245,9 +252,9 @@ def test_kitti_camera_pose_and_frames_without_objects(tmp_path):
 def test_a_tilted_frame_cannot_hold_upright_boxes():
     from bpy_pipeline.errors import InputError
 
-    boxes = np.zeros(1, bx.BOX_DTYPE)
+    boxes = np.zeros(1, gb.BOX_DTYPE)
     with pytest.raises(InputError, match="output.frame"):
-        bx.boxes_in_frame(boxes, pose_matrix([0, 0, 3], [0, 90, 0]))
+        gb.boxes_in_frame(boxes, pose_matrix([0, 0, 3], [0, 90, 0]))
 
 
 @pytest.mark.bpy
@@ -256,7 +263,7 @@ def test_pipeline_writes_boxes_that_hold_the_hall_points(tmp_path):
 
     from bpy_pipeline.config import load_config
     from bpy_pipeline.io import read_ply
-    from bpy_pipeline.pipeline import run
+    from bpy_pipeline.plan import run
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     config = load_config(None, ["scene.builder=industrial_hall", "frames=2", "sensor.columns=1024", "output.formats=[ply]", "output.preview=false", "sensor.reflector.edge_drop.mask=none", "effects.ideal=true"])
@@ -272,7 +279,7 @@ def test_pipeline_writes_boxes_that_hold_the_hall_points(tmp_path):
         for box, entry in zip(labels, frame["boxes"]):
             mine = points["instance"] == entry["instance"]
             assert mine.sum() == entry["points"] >= 6
-            assert bx.points_in_box(xyz[mine], box, 1e-3).all()
+            assert gb.points_in_box(xyz[mine], box, 1e-3).all()
             assert entry["points"] == entry["visible"] <= entry["unoccluded"]  # no effects: every visible ray is a point
             checked += 1
     assert checked >= 4
@@ -281,7 +288,7 @@ def test_pipeline_writes_boxes_that_hold_the_hall_points(tmp_path):
 def people_pillar_mirror_and_glass():
     """:func:`people_and_pillar` with a mirror 3 m behind the sensor that sends beams back into the scene and a glass
     pane in front of person 10, part of its instance (as a car's windows are the car's)."""
-    from bpy_pipeline.lidar.scanner import GLASS, MIRROR
+    from bpy_pipeline.lidar.cast.scanner import GLASS, MIRROR
 
     mirror = ("mirror", "mirror", 4, primitives.translated(primitives.box(0.05, 12.0, 4.0), (-3.0, 0.0, 1.5)), MIRROR, 0.9)
     pane = ("pane", "glass", 10, primitives.translated(primitives.box(0.02, 1.5, 2.5), (6.0, 0.0, 1.0)), GLASS, 0.1)
@@ -293,8 +300,8 @@ def people_pillar_mirror_and_glass():
 def test_visible_counts_from_the_scans_direct_returns_are_the_traced_ones(kernel, glass_reflect, monkeypatch):
     """The boxes' ``visible`` counted from the scan's returns that met no mirror is what tracing the rays that pass
     the boxes again gives, with a mirror in the scene and a box's glass passed or reflected (no draw either way)."""
-    from bpy_pipeline.lidar.scanner import MirrorGlassRules, scan_chunks
-    from bpy_pipeline.lidar.visibility import counts_per_instance, visibility
+    from bpy_pipeline.lidar.cast.scanner import MirrorGlassRules, scan_chunks
+    from bpy_pipeline.lidar.cast.visibility import counts_per_instance, visibility
 
     if kernel == "numba":
         pytest.importorskip("numba")
@@ -306,7 +313,7 @@ def test_visible_counts_from_the_scans_direct_returns_are_the_traced_ones(kernel
     points = np.concatenate([p for p, _ in scan_chunks(caster, buffers, rays, POSE, SENSOR.min_range, SENSOR.max_range, max_bounces=3, surfaces=surfaces, rng=np.random.default_rng(0))])
     ghosts = points["bounces"] > 0
     assert (ghosts & (points["instance"] == 4)).sum() > 1000  # the mirror's returns
-    traced = bx.fit_boxes(buffers, ["person", "pillar", "wall"], {k: p.yaw for k, p in people.items()})
+    traced = gb.fit_boxes(buffers, ["person", "pillar", "wall"], {k: p.yaw for k, p in people.items()})
     counted = traced.copy()
     visibility(buffers, traced, rays, POSE, SENSOR.min_range, SENSOR.max_range, cell_deg=2.5, caster=caster, surfaces=surfaces, rng=np.random.default_rng(1))
     visibility(buffers, counted, rays, POSE, SENSOR.min_range, SENSOR.max_range, cell_deg=2.5, caster=caster, surfaces=surfaces, rng=np.random.default_rng(1),
@@ -322,7 +329,7 @@ def test_visible_counts_from_the_scans_direct_returns_are_the_traced_ones(kernel
 
 
 def test_counts_per_instance():
-    from bpy_pipeline.lidar.visibility import counts_per_instance
+    from bpy_pipeline.lidar.cast.visibility import counts_per_instance
 
     values = np.array([7, 3, 3, 9, 12, 7, 7, 0, 100], np.int64)
     np.testing.assert_array_equal(counts_per_instance(np.array([7, 100, 3, 5]), values), [3, 1, 2, 0])
@@ -334,16 +341,16 @@ def test_counts_per_instance():
 def test_a_box_short_of_its_instance_keeps_the_trace():
     """A rider's box fitted without the motorcycle it shares an instance with does not hold it: returns from the
     motorcycle outside the box's sphere are not the trace's, so the boxes take the trace (``boxes_hold_their_instances``)."""
-    from bpy_pipeline.lidar.scanner import scan_chunks
-    from bpy_pipeline.lidar.visibility import visibility
+    from bpy_pipeline.lidar.cast.scanner import scan_chunks
+    from bpy_pipeline.lidar.cast.visibility import visibility
     from bpy_pipeline.stages.annotate import boxes_hold_their_instances
 
     buffers, people = people_and_pillar()
     whole, _ = people_and_pillar([("cart", "motorcycle", 10, upright_box((1.0, 1.6, 1.0), (8.0, 1.6), 0.0))])  # beside person 10, outside its box's sphere, its instance
     classes = ["person", "pillar", "wall"]
-    boxes = bx.fit_boxes(whole, classes, {k: p.yaw for k, p in people.items()})
+    boxes = gb.fit_boxes(whole, classes, {k: p.yaw for k, p in people.items()})
     assert not boxes_hold_their_instances(whole, boxes, classes)
-    assert boxes_hold_their_instances(whole, boxes, classes + ["motorcycle"]) and boxes_hold_their_instances(buffers, bx.fit_boxes(buffers, classes), classes)
+    assert boxes_hold_their_instances(whole, boxes, classes + ["motorcycle"]) and boxes_hold_their_instances(buffers, gb.fit_boxes(buffers, classes), classes)
     rays = list(iter_pattern(SENSOR, 1 << 14))
     caster = RayCaster(whole, frame=POSE)
     points = np.concatenate([p for p, _ in scan_chunks(caster, whole, rays, POSE, SENSOR.min_range, SENSOR.max_range)])

@@ -16,8 +16,8 @@ from bpy_pipeline.geometry.objects import BODIES, CAR_BODY_SETS, STYLES, body_si
 
 # sha256 of the classic styles' meshes (vertices then triangles of body, windows, interior, tyres): the parking
 # builder's cars and its golden frames depend on them (recorded with OpenBLAS's Haswell kernels: see the test below).
-# The vertices are those made before the body set existed (commit 39f308d); the triangles are wound outwards since
-# round thirteen (hood, trunk and the +y side glass were inside out: test_every_part_is_wound_outwards).
+# The vertices are those made before the body set existed (commit 39f308d); the triangles are wound outwards
+# (hood, trunk and the +y side glass were inside out: test_every_part_is_wound_outwards).
 CLASSIC = {
     "sedan": "2f4bf26fbd82ed494aa44c3c9c4519c62a48dbbcf2d082e8efd845280de12e1a",
     "hatchback": "3d466ac7e502eb510013df835c318275bde19e15fea86c83990c99f2cd493071",
@@ -93,7 +93,7 @@ def test_every_part_is_wound_outwards(body):
 
 def test_a_prism_is_wound_outwards():
     from bpy_pipeline.geometry import primitives
-    from bpy_pipeline.lidar.raycast import closed_surface
+    from bpy_pipeline.lidar.cast.raycast import closed_surface
 
     v, t = primitives.prism(np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 1.0], [0.5, 1.5]]), -1.0, 3.0)
     p = v[t]

@@ -5,7 +5,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from bpy_pipeline.builders.base import Distribution
+from bpy_pipeline.geometry.placement import Distribution
 from bpy_pipeline.builders.street import layout as street
 from bpy_pipeline.builders.street.params import StreetScene
 from bpy_pipeline.geometry.objects import FITTINGS
@@ -92,8 +92,9 @@ def test_every_builders_cars_carry_plates_and_lamps_inside_their_boxes(bpy_scene
     from bpy_pipeline.export import export_scene
     from bpy_pipeline.geometry.boxes import fit_boxes
     from bpy_pipeline.labels import load_class_table
-    from bpy_pipeline.lidar.materials import model_id
-    from bpy_pipeline.pipeline import build_frame_scene, frame_rng
+    from bpy_pipeline.lidar.effects.materials import model_id
+    from bpy_pipeline.frame import frame_rng
+    from bpy_pipeline.stages.scene import build_frame_scene
 
     overrides, classes = BUILDERS[builder]
     counts = {}
@@ -136,8 +137,10 @@ def test_a_parking_cars_plates_read_the_retroreflectors_value_with_material_mode
     from bpy_pipeline.config import load_config
     from bpy_pipeline.export import export_scene
     from bpy_pipeline.labels import load_class_table
-    from bpy_pipeline.lidar.materials import model_id
-    from bpy_pipeline.pipeline import build_frame_scene, frame_rng, scan_buffers
+    from bpy_pipeline.lidar.effects.materials import model_id
+    from bpy_pipeline.frame import frame_rng
+    from bpy_pipeline.stages.scan import scan_buffers
+    from bpy_pipeline.stages.scene import build_frame_scene
 
     table = load_class_table()
     base = ["scene.builder=parking", "scene.cars={kind: normal, mean: 6, std: 0, min: 0, max: 40}", "sensor.preset=os1_128"]

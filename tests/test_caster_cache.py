@@ -1,10 +1,10 @@
-"""The kept static part of a :class:`~bpy_pipeline.lidar.raycast.CasterCache` found again at other buffer positions
+"""The kept static part of a :class:`~bpy_pipeline.lidar.cast.raycast.CasterCache` found again at other buffer positions
 (``moved_in_buffers``): no Blender."""
 
 import numpy as np
 
 from bpy_pipeline.buffers import SceneBuffers
-from bpy_pipeline.lidar.raycast import CasterCache, RayCaster
+from bpy_pipeline.lidar.cast.raycast import CasterCache, RayCaster
 
 
 def box_mesh(centre, half, splits=1):

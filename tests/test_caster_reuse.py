@@ -10,7 +10,8 @@ pytestmark = pytest.mark.bpy
 
 def frames(config, indices):
     """``{index: frame}`` made in turn by one run, and the run."""
-    from bpy_pipeline.pipeline import Run, make_frame
+    from bpy_pipeline.frame import Run
+    from bpy_pipeline.plan import make_frame
 
     run = Run(config)
     return {k: make_frame(run, k) for k in indices}, run
@@ -26,7 +27,7 @@ def same_frame(a, b):
 def test_hall_frames_keep_the_static_caster_and_their_bytes(bpy_scene):
     """People and robots move; the hall is kept (the sensor hangs still): frame 2 after 0 and 1 is frame 2 alone."""
     from bpy_pipeline.config import load_config
-    from bpy_pipeline.pipeline import moving_objects
+    from bpy_pipeline.stages.scan import moving_objects
 
     config = load_config(overrides=["scene.builder=industrial_hall", "frames=3", "seed=5", "sensor.columns=512", "output.boxes.formats=[kitti]"])
     together, run = frames(config, [0, 1, 2])

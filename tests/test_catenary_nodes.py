@@ -59,7 +59,7 @@ def railway():
     import bpy
 
     from bpy_pipeline.config import load_config
-    from bpy_pipeline.pipeline import frame_rng
+    from bpy_pipeline.frame import frame_rng
     from bpy_pipeline.scenes import build_scene
 
     bpy.ops.wm.read_factory_settings(use_empty=True)

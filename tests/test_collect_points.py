@@ -3,7 +3,7 @@
 import numpy as np
 
 from bpy_pipeline.lidar.points import POINT_DTYPE
-from bpy_pipeline.pipeline import collect_points
+from bpy_pipeline.stages.scan import collect_points
 
 
 def records(k: int, rng) -> np.ndarray:

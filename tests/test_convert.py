@@ -11,8 +11,8 @@ from bpy_pipeline.conversion import TRAINING_TO_RAW, convert, project_classes
 from bpy_pipeline.geometry import primitives
 from bpy_pipeline.io.class_maps import semantic_kitti_lut
 from bpy_pipeline.io.semantickitti import read_bin, read_label
-from bpy_pipeline.lidar.raycast import RayCaster
-from bpy_pipeline.lidar.sensors import resolve_sensor
+from bpy_pipeline.lidar.cast.raycast import RayCaster
+from bpy_pipeline.lidar.sensor.sensors import resolve_sensor
 from bpy_pipeline.mixing.convert import METHODS, target_rays
 
 SEQ01 = "semantickitti_seq01_000000"

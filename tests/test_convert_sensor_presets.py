@@ -3,7 +3,7 @@
 import numpy as np
 
 from bpy_pipeline.config import load_config
-from bpy_pipeline.lidar.effects import apply_effects
+from bpy_pipeline.lidar.effects.apply import apply_effects
 from bpy_pipeline.lidar.points import BEAM_DTYPE, POINT_DTYPE
 
 

@@ -134,7 +134,7 @@ def test_kill_9_at_random_points_then_resume_gives_the_uninterrupted_bytes(full_
 def test_a_kill_during_the_move_phase_leaves_no_frame_then_resume_completes(full_parking, tmp_path, monkeypatch):
     """Forced: the process dies after the first of a frame's files is moved into place."""
     from bpy_pipeline.config import load_config
-    from bpy_pipeline.pipeline import run_frames
+    from bpy_pipeline.plan import run_frames
 
     config = load_config(None, ["scene.builder=parking", "output.formats=[ply,semantickitti]", "seed=11", "frames=10"])
     out = tmp_path / "moved"

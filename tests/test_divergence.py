@@ -9,11 +9,13 @@ from bpy_pipeline.buffers import ObjectTable, SceneBuffers
 from bpy_pipeline.config import config_from_dict, config_to_dict
 from bpy_pipeline.errors import InputError
 from bpy_pipeline.geometry import primitives
-from bpy_pipeline.lidar.divergence import Divergence, expand, footprint_offsets, reduce_returns, scan_footprint
-from bpy_pipeline.lidar.raycast import RayCaster
-from bpy_pipeline.lidar.scanner import scan
-from bpy_pipeline.lidar.sensors import Pattern, spherical_directions
-from bpy_pipeline.pipeline import frame_rng, scan_buffers
+from bpy_pipeline.lidar.effects.divergence import Divergence, expand, footprint_offsets, reduce_returns, scan_footprint
+from bpy_pipeline.lidar.cast.raycast import RayCaster
+from bpy_pipeline.lidar.cast.scanner import scan
+from bpy_pipeline.lidar.sensor.sensors import spherical_directions
+from bpy_pipeline.lidar.sensor.rays import Pattern
+from bpy_pipeline.frame import frame_rng
+from bpy_pipeline.stages.scan import scan_buffers
 
 
 def fan(azimuth_deg, elevation_deg) -> Pattern:

@@ -1,4 +1,4 @@
-"""The ``mlp`` drop and noise models (lidar/drop/mlp.py, the Raphael paper's perceptron over
+"""The ``mlp`` drop and noise models (lidar/effects/drop/mlp.py, the Raphael paper's perceptron over
 (range, incidence) bins): it learns a known surface, the same seed gives the same bytes, the
 model file round-trips exactly, the config and the scan path use it, and on the real nuScenes
 HDL-32E sweep it beats or equals the table model on held-out azimuth columns. Pure: no bpy."""
@@ -11,9 +11,9 @@ import pytest
 from bpy_pipeline.__main__ import main
 from bpy_pipeline.config import effects_from_dict
 from bpy_pipeline.errors import InputError
-from bpy_pipeline.lidar import fitting
-from bpy_pipeline.lidar.drop.mlp import MLP, fit_mlp
-from bpy_pipeline.lidar.effects import FittedModels, drop_probability, noise_sigma, read_model_file, write_model_file
+from bpy_pipeline.lidar.fit import fitting
+from bpy_pipeline.lidar.effects.drop.mlp import MLP, fit_mlp
+from bpy_pipeline.lidar.effects.apply import FittedModels, drop_probability, noise_sigma, read_model_file, write_model_file
 
 
 def synthetic_samples(rng, n=60_000):

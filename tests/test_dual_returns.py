@@ -7,8 +7,8 @@ import pytest
 
 from bpy_pipeline.config import config_from_dict
 from bpy_pipeline.errors import InputError
-from bpy_pipeline.lidar.divergence import Divergence, expand, reduce_returns, return_index, scan_footprint
-from bpy_pipeline.lidar.raycast import RayCaster
+from bpy_pipeline.lidar.effects.divergence import Divergence, expand, reduce_returns, return_index, scan_footprint
+from bpy_pipeline.lidar.cast.raycast import RayCaster
 from test_divergence import buffers_of, fan, wall_x, xyz
 
 

@@ -8,7 +8,7 @@ import pytest
 
 from bpy_pipeline.config import effects_from_dict
 from bpy_pipeline.errors import InputError
-from bpy_pipeline.lidar.effects import (
+from bpy_pipeline.lidar.effects.apply import (
     CHUNK_POINTS,
     BinnedTable,
     FittedModels,
@@ -21,7 +21,7 @@ from bpy_pipeline.lidar.effects import (
     write_model_file,
 )
 from bpy_pipeline.lidar.points import BEAM_DTYPE, empty_points
-from bpy_pipeline.lidar.sensors import resolve_sensor
+from bpy_pipeline.lidar.sensor.sensors import resolve_sensor
 
 Z = 4.0  # binomial intervals at 4 sigma: a correct model fails one check in ~16,000
 

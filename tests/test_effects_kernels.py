@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from bpy_pipeline.config import NoiseConfig, load_config
-from bpy_pipeline.lidar import effects_kernels
-from bpy_pipeline.lidar.effects import apply_effects, perturb
+from bpy_pipeline.lidar.effects import effects_kernels
+from bpy_pipeline.lidar.effects.apply import apply_effects, perturb
 from bpy_pipeline.lidar.points import BEAM_DTYPE, POINT_DTYPE
 
 

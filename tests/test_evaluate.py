@@ -12,13 +12,13 @@ import pytest
 pytest.importorskip("scipy", reason="evaluate needs the evaluate extra (pip install '.[evaluate]')")
 pytest.importorskip("lightgbm", reason="evaluate's reference model needs LightGBM (pip install '.[evaluate]')")
 
-from bpy_pipeline.__main__ import main  # noqa: E402
-from bpy_pipeline.evaluate import label_maps, labelled, metrics  # noqa: E402
-from bpy_pipeline.evaluate.features import FEATURE_NAMES, point_features  # noqa: E402
-from bpy_pipeline.evaluate.labelled import LabelledScan, load_scans  # noqa: E402
-from bpy_pipeline.evaluate.models import fit  # noqa: E402
-from bpy_pipeline.evaluate.run import evaluate  # noqa: E402
-from bpy_pipeline.labels import load_class_table  # noqa: E402
+from bpy_pipeline.__main__ import main
+from bpy_pipeline.evaluate import label_maps, labelled, metrics
+from bpy_pipeline.evaluate.features import FEATURE_NAMES, point_features
+from bpy_pipeline.evaluate.labelled import LabelledScan, load_scans
+from bpy_pipeline.evaluate.models import fit
+from bpy_pipeline.evaluate.run import evaluate
+from bpy_pipeline.labels import load_class_table
 
 ROOT = Path(__file__).resolve().parents[1]
 

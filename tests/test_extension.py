@@ -125,10 +125,10 @@ def test_installs_from_the_zip_with_its_own_wheels(session):
     sections = {"LIDAR_PT_run", "LIDAR_PT_scene", "LIDAR_PT_sensor", "LIDAR_PT_effects", "LIDAR_PT_output", "LIDAR_PT_legend", "LIDAR_PT_labels"}
     advanced = {"LIDAR_PT_scene_advanced", "LIDAR_PT_sensor_advanced", "LIDAR_PT_effects_advanced", "LIDAR_PT_output_advanced"}
     assert {c for c in report["classes"] if c.startswith("LIDAR_PT_")} == sections | advanced
-    assert set(report["builders"]) == (set(cfg.BUILDERS) - {"blend"}) | {"my_scene"}
+    assert set(report["builders"]) == (set(cfg.BUILDER_PARAMS) - {"blend"}) | {"my_scene"}
     assert report["panels_drawn"] > 20  # every panel drew, naming only properties and operators that exist
     # every builder: the panel's defaults are the config's, and its parameters are drawn
-    assert set(report["every_builder"]) == set(cfg.BUILDERS) - {"blend"}
+    assert set(report["every_builder"]) == set(cfg.BUILDER_PARAMS) - {"blend"}
     needs_input = {name: built for name, (_, _, built) in report["every_builder"].items() if isinstance(built, str)}
     assert all(message.startswith("Error: scene.path:") for message in needs_input.values()), needs_input  # real_scan: a scan file
     assert all(same and (drawn > 10 or name in needs_input) and built for name, (same, drawn, built) in report["every_builder"].items()), report["every_builder"]

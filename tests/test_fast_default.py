@@ -14,7 +14,7 @@ def test_numba_is_a_default_dependency():
 
 
 def test_the_installed_environment_compiles_the_scan_kernel():
-    from bpy_pipeline.lidar import kernels
+    from bpy_pipeline.lidar.cast import kernels
 
     try:  # numba ships wheels for every Python this project supports; where none installs, the numpy path runs
         import numba  # noqa: F401

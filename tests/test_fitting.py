@@ -10,9 +10,9 @@ import pytest
 from bpy_pipeline.__main__ import main
 from bpy_pipeline.config import effects_from_dict
 from bpy_pipeline.errors import InputError
-from bpy_pipeline.lidar import fitting
-from bpy_pipeline.lidar.effects import drop_probability, read_model_file, write_model_file
-from bpy_pipeline.lidar.sensors import resolve_sensor
+from bpy_pipeline.lidar.fit import fitting
+from bpy_pipeline.lidar.effects.apply import drop_probability, read_model_file, write_model_file
+from bpy_pipeline.lidar.sensor.sensors import resolve_sensor
 
 HEIGHT, WALL, WALL_TOP = 1.8, 40.0, 6.0  # m: sensor above flat ground, a round wall around it
 EDGES = [2.0, 10.0, 25.0, 100.0]

@@ -14,7 +14,7 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent / "golden"))
 
-import jobs  # noqa: E402
+import jobs
 
 GOLDEN = jobs.read_golden()["by_blender"]
 

@@ -177,7 +177,7 @@ def test_a_gltf_car_inserts_with_glass_that_rays_pass(sweep, tmp_path):
     on_block = lambda xyz: np.abs(xyz[:, 0] - 9.5) < 0.05  # noqa: E731
     pane, block = on_pane(runs["paint"]).sum(), on_block(runs["paint"]).sum()  # opaque: the pane hides the block (but rays over its top)
     assert pane > 100 and block < 0.2 * pane
-    # glass lets the rays through; as the scanner's glass (cast_firings: Surfaces(glass_return_deg=5)) the pane itself
+    # glass lets the rays through; as the scanner's glass (cast_firings: MirrorGlassRules(glass_return_deg=5)) the pane itself
     # returns only beams within 5 degrees of its normal (here the sensor's x axis)
     glass = runs["glass"]
     seen = glass[on_pane(glass)]

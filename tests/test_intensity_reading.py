@@ -1,4 +1,4 @@
-"""The reading model (``effects.intensity.reading``, lidar/intensity.py): per-laser gain and offset, range
+"""The reading model (``effects.intensity.reading``, lidar/effects/intensity.py): per-laser gain and offset, range
 compensation, detection left to the drop models."""
 
 import math
@@ -9,8 +9,8 @@ import pytest
 from bpy_pipeline import cli
 from bpy_pipeline.config import effects_from_dict, load_config
 from bpy_pipeline.errors import InputError
-from bpy_pipeline.lidar.effects import apply_effects
-from bpy_pipeline.lidar.intensity import MAX_RINGS, ReadingModel, laser_calibration, range_factor, read_out
+from bpy_pipeline.lidar.effects.apply import apply_effects
+from bpy_pipeline.lidar.effects.intensity import MAX_RINGS, ReadingModel, laser_calibration, range_factor, read_out
 from bpy_pipeline.lidar.points import BEAM_DTYPE, empty_points
 
 

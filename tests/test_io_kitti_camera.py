@@ -47,7 +47,7 @@ def test_a_run_renders_image_2_when_asked(blender_renders, bpy_scene, tmp_path):
 
     from bpy_pipeline.config import load_config
     from bpy_pipeline.labels import load_class_table
-    from bpy_pipeline.pipeline import run
+    from bpy_pipeline.plan import run
 
     images, timings = {}, {}
     for render in (True, False):

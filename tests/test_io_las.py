@@ -152,7 +152,7 @@ def test_classification_lookup_vlr_names_every_code(tmp_path):
 def test_pdal_reads_the_file(tmp_path):
     pdal = shutil.which("pdal")
     try:
-        import pdal as pdal_module  # noqa: F401
+        import pdal as pdal_module
     except ImportError:
         pdal_module = None
     if pdal is None and pdal_module is None:

@@ -9,7 +9,7 @@ import pytest
 from bpy_pipeline.errors import InputError
 from bpy_pipeline.io import read_ply, write_ply
 from bpy_pipeline.io.ply import PLY_DTYPE, point_field
-from bpy_pipeline.lidar.points import POINT_DTYPE, empty_points
+from bpy_pipeline.lidar.points import POINT_DTYPE
 from samples import random_points
 
 INSTANCES = 2**31  # PLY instance ids are int (Open3D reads no uint)

@@ -6,9 +6,9 @@ the Blender side ``scene*.py`` / ``*_nodes.py``) keeps geometry's rule, its own 
 Blender helpers (``scenes``) serve every builder and import no builder's package.
 An import is an edge from the importing module to the module it names (``from pkg import name`` names
 ``pkg.name`` when that is a module), wherever the statement sits: module level, inside a function, or
-under ``if TYPE_CHECKING`` (an annotation-only import still ties the layers together for a reader).
-One exception, listed by the report: a module-level ``__getattr__`` that keeps a name importable from
-where it lived before it moved up a layer (this round's compat; the next round removes them).
+under ``if TYPE_CHECKING`` (an annotation-only import still ties the layers together for a reader), with no
+exception. No compatibility layer either: no module-level ``__getattr__`` and no import finder on ``sys.meta_path``;
+when a module moves, its callers move with it.
 
 ``python tests/test_layers.py`` prints the figures: the largest circle, the wrong-way imports and the
 imports inside functions.
@@ -33,7 +33,7 @@ FORBIDDEN = {
 BUILDER_PACKAGES = tuple(sorted(p.parent.name for p in (PACKAGE / "builders").glob("*/__init__.py")))
 FORBIDDEN["scenes"] = tuple(f"builders.{b}" for b in BUILDER_PACKAGES)
 # what io may use of lidar: the point record and the sensor's layout (its spec, rings, columns, frame time)
-ALLOWED = {"io": ("lidar.points", "lidar.grid", "lidar.sensors")}
+ALLOWED = {"io": ("lidar.points", "lidar.sensor.grid", "lidar.sensor.sensors")}
 
 
 def builder_geometry(rel: str) -> bool:
@@ -67,20 +67,19 @@ def modules() -> dict[str, Path]:
     return {module_name(p): p for p in sorted(PACKAGE.rglob("*.py"))}
 
 
-def imports(path: Path, name: str, known: set[str]) -> list[tuple[str, int, bool, bool]]:
-    """``[(imported module, line, inside a function, in a module-level __getattr__)]`` of the package's own modules that ``path`` imports."""
+def imports(path: Path, name: str, known: set[str]) -> list[tuple[str, int, bool]]:
+    """``[(imported module, line, inside a function)]`` of the package's own modules that ``path`` imports."""
     tree = ast.parse(path.read_text(), str(path))
     package = name if path.name == "__init__.py" else name.rpartition(".")[0]
     out = []
 
-    def visit(node, in_function: bool, compat: bool):
+    def visit(node, in_function: bool):
         for child in ast.iter_child_nodes(node):
             inner = in_function or isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda))
-            shim = compat or (node is tree and isinstance(child, ast.FunctionDef) and child.name == "__getattr__")
             if isinstance(child, ast.Import):
                 for alias in child.names:
                     if alias.name.split(".")[0] == "bpy_pipeline":
-                        out.append((alias.name, child.lineno, in_function, compat))
+                        out.append((alias.name, child.lineno, in_function))
             elif isinstance(child, ast.ImportFrom):
                 if child.level:
                     base = package.split(".")
@@ -92,25 +91,23 @@ def imports(path: Path, name: str, known: set[str]) -> list[tuple[str, int, bool
                     continue
                 for alias in child.names:
                     sub = f"{target}.{alias.name}"
-                    out.append((sub if sub in known else target, child.lineno, in_function, compat))
-            visit(child, inner, shim)
+                    out.append((sub if sub in known else target, child.lineno, in_function))
+            visit(child, inner)
 
-    visit(tree, False, False)
+    visit(tree, False)
     return [row for row in out if row[0] in known and row[0] != name]
 
 
-def graph() -> tuple[dict[str, set[str]], list[tuple[str, str, int, bool, bool]]]:
-    """``({module: modules it imports}, [(module, imported, line, inside a function, compat __getattr__)])``;
-    the edges leave out the compat ``__getattr__`` imports."""
+def graph() -> tuple[dict[str, set[str]], list[tuple[str, str, int, bool]]]:
+    """``({module: modules it imports}, [(module, imported, line, inside a function)])``, every import counted."""
     found = modules()
     known = set(found)
     edges: dict[str, set[str]] = {m: set() for m in found}
     rows = []
     for name, path in found.items():
-        for target, line, in_function, compat in imports(path, name, known):
-            if not compat:
-                edges[name].add(target)
-            rows.append((name, target, line, in_function, compat))
+        for target, line, in_function in imports(path, name, known):
+            edges[name].add(target)
+            rows.append((name, target, line, in_function))
     return edges, rows
 
 
@@ -155,14 +152,26 @@ def short(name: str) -> str:
 def wrong_way(rows) -> list[tuple[str, str, int]]:
     """``[(module, imported, line)]``: imports against the layers."""
     out = []
-    for name, target, line, _, compat in rows:
-        if compat:
-            continue
+    for name, target, line, _ in rows:
         rel = short(target)
         forbidden, allowed = rules(short(name))
         if any(rel == f or rel.startswith(f + ".") for f in forbidden) and not any(rel == a or rel.startswith(a + ".") for a in allowed):
             out.append((short(name), rel, line))
     return out
+
+
+def compat_hooks(path: Path) -> list[str]:
+    """What keeps old import paths alive in ``path``: a module-level ``__getattr__`` or a use of ``sys.meta_path``."""
+    tree = ast.parse(path.read_text(), str(path))
+    found = [f"__getattr__ at line {node.lineno}" for node in tree.body if isinstance(node, ast.FunctionDef) and node.name == "__getattr__"]
+    found += [f"sys.meta_path at line {node.lineno}" for node in ast.walk(tree)
+              if isinstance(node, ast.Attribute) and node.attr == "meta_path" and isinstance(node.value, ast.Name) and node.value.id == "sys"]
+    return found
+
+
+def test_no_compatibility_layer():
+    found = {short(name): hooks for name, path in modules().items() if (hooks := compat_hooks(path))}
+    assert not found, f"old import paths kept alive (move the callers instead): {found}"
 
 
 def test_layers_import_one_way():
@@ -179,29 +188,31 @@ def test_no_circles_between_modules():
 
 def test_the_graph_sees_imports_inside_functions(tmp_path):
     """The parser counts a function-level import and resolves relative ones (else the checks above could not fail)."""
-    source = "from ..lidar import sensors\n\ndef f():\n    from ..config import Config\n    import bpy_pipeline.pipeline\n"
+    source = "from ..lidar import points\n\ndef f():\n    from ..config import Config\n    import bpy_pipeline.pipeline\n"
     path = PACKAGE / "geometry" / "lod.py"
-    known = {"bpy_pipeline.lidar.sensors", "bpy_pipeline.config", "bpy_pipeline.pipeline", "bpy_pipeline.geometry.lod"}
+    known = {"bpy_pipeline.lidar.points", "bpy_pipeline.config", "bpy_pipeline.pipeline", "bpy_pipeline.geometry.lod"}
     probe = tmp_path / "lod.py"
     probe.write_text(source)
     found = imports(probe, "bpy_pipeline.geometry.lod", known)
-    assert found == [("bpy_pipeline.lidar.sensors", 1, False, False), ("bpy_pipeline.config", 4, True, False), ("bpy_pipeline.pipeline", 5, True, False)]
+    assert found == [("bpy_pipeline.lidar.points", 1, False), ("bpy_pipeline.config", 4, True), ("bpy_pipeline.pipeline", 5, True)]
     rows = [("bpy_pipeline.geometry.lod", *row) for row in found]
-    assert [t for _, t, _ in wrong_way(rows)] == ["lidar.sensors", "config", "pipeline"]
-    probe.write_text("def __getattr__(name):\n    from ..config import Config\n    return Config\n\ndef g():\n    def __getattr__(name):\n        from ..config import Config\n")
-    found = imports(probe, "bpy_pipeline.geometry.lod", known)
-    assert found == [("bpy_pipeline.config", 2, True, True), ("bpy_pipeline.config", 7, True, False)]  # only the module's own __getattr__ is compat
+    assert [t for _, t, _ in wrong_way(rows)] == ["lidar.points", "config", "pipeline"]
+    probe.write_text("def __getattr__(name):\n    from ..config import Config\n    return Config\n")
+    assert imports(probe, "bpy_pipeline.geometry.lod", known) == [("bpy_pipeline.config", 2, True)]  # a module __getattr__'s import counts
+    assert compat_hooks(probe) == ["__getattr__ at line 1"]
+    probe.write_text("import sys\n\nsys.meta_path.insert(0, object())\n\ndef g():\n    def __getattr__(name):\n        return name\n")
+    assert compat_hooks(probe) == ["sys.meta_path at line 3"]  # a function's own __getattr__ is no module hook
     assert path.exists()
     # a builder's geometry keeps geometry's rule, its own package's geometry aside; shared scenes import no builder's package
-    rows = [("bpy_pipeline.builders.railway.layout", "bpy_pipeline.builders.railway.catenary", 1, False, False),
-            ("bpy_pipeline.builders.railway.layout", "bpy_pipeline.geometry.lod", 2, False, False),
-            ("bpy_pipeline.builders.railway.layout", "bpy_pipeline.lidar.sensors", 3, True, False),
-            ("bpy_pipeline.builders.railway.layout", "bpy_pipeline.builders.railway.scene", 4, True, False),
-            ("bpy_pipeline.builders.railway.layout", "bpy_pipeline.builders.street.layout", 5, False, False),
-            ("bpy_pipeline.builders.railway.params", "bpy_pipeline.builders.railway.scene", 6, True, False),
-            ("bpy_pipeline.builders.railway.scene", "bpy_pipeline.scenes.objects", 7, False, False),
-            ("bpy_pipeline.scenes.box_nodes", "bpy_pipeline.builders.street.scatter_nodes", 8, False, False),
-            ("bpy_pipeline.scenes.population", "bpy_pipeline.builders.population", 9, False, False)]
+    rows = [("bpy_pipeline.builders.railway.layout", "bpy_pipeline.builders.railway.catenary", 1, False),
+            ("bpy_pipeline.builders.railway.layout", "bpy_pipeline.geometry.lod", 2, False),
+            ("bpy_pipeline.builders.railway.layout", "bpy_pipeline.lidar.points", 3, True),
+            ("bpy_pipeline.builders.railway.layout", "bpy_pipeline.builders.railway.scene", 4, True),
+            ("bpy_pipeline.builders.railway.layout", "bpy_pipeline.builders.street.layout", 5, False),
+            ("bpy_pipeline.builders.railway.params", "bpy_pipeline.builders.railway.scene", 6, True),
+            ("bpy_pipeline.builders.railway.scene", "bpy_pipeline.scenes.objects", 7, False),
+            ("bpy_pipeline.scenes.box_nodes", "bpy_pipeline.builders.street.scatter_nodes", 8, False),
+            ("bpy_pipeline.scenes.population", "bpy_pipeline.builders.population", 9, False)]
     assert [line for _, _, line in wrong_way(rows)] == [3, 4, 5, 8]
     assert circles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
 
@@ -209,8 +220,7 @@ def test_the_graph_sees_imports_inside_functions(tmp_path):
 def report() -> None:
     edges, rows = graph()
     found = circles(edges)
-    inside = sorted({(r[0], r[2]) for r in rows if r[3] and not r[4]})  # statements: (module, line)
-    compat = sorted({(short(r[0]), short(r[1]), r[2]) for r in rows if r[4]})
+    inside = sorted({(r[0], r[2]) for r in rows if r[3]})  # statements: (module, line)
     bad = sorted(set(wrong_way(rows)))
     print(f"modules: {len(edges)}; import statements of the package's own modules: {len({(r[0], r[2]) for r in rows})}; inside functions: {len(inside)}")
     print(f"circles: {len(found)} holding {sum(map(len, found))} modules; largest: {len(found[0]) if found else 0}")
@@ -218,9 +228,6 @@ def report() -> None:
         print(f"  {len(part)}: " + ", ".join(short(m) for m in part))
     print(f"wrong-way imports: {len(bad)} statements, {len({(m, t) for m, t, _ in bad})} module pairs")
     for m, t, line in bad:
-        print(f"  {m}:{line} -> {t}")
-    print(f"compat __getattr__ imports (names that moved, importable from their old module this round): {len(compat)}")
-    for m, t, line in compat:
         print(f"  {m}:{line} -> {t}")
     print("inside functions, by module: " + ", ".join(f"{short(m)} {n}" for m, n in Counter(r[0] for r in inside).most_common(12)))
 

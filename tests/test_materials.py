@@ -1,4 +1,4 @@
-"""Material reflectance models (lidar/materials.py): glossy paint against incidence, retro-reflectors, dark paint,
+"""Material reflectance models (lidar/effects/materials.py): glossy paint against incidence, retro-reflectors, dark paint,
 wet surfaces; opt-in; bad names. Pure: no bpy."""
 
 import math
@@ -9,8 +9,8 @@ import pytest
 from bpy_pipeline.config import effects_from_dict
 from bpy_pipeline.errors import InputError
 from bpy_pipeline.labels import load_class_table
-from bpy_pipeline.lidar.effects import apply_effects
-from bpy_pipeline.lidar.materials import GlossyPaint, MaterialsConfig, apply_materials, glossy_paint
+from bpy_pipeline.lidar.effects.apply import apply_effects
+from bpy_pipeline.lidar.effects.materials import GlossyPaint, MaterialsConfig, apply_materials, glossy_paint
 from bpy_pipeline.lidar.points import BEAM_DTYPE, empty_points
 
 TABLE = load_class_table()

@@ -1,4 +1,4 @@
-"""Car glass and cabins at 905 nm (lidar/materials.py CarGlass, scene.car_glass of the real_scan builder): Fresnel and
+"""Car glass and cabins at 905 nm (lidar/effects/materials.py CarGlass, scene.car_glass of the real_scan builder): Fresnel and
 tint against their closed forms, a pane in the trace passing beams with its round-trip transmission, an inserted car's
 windows letting fewer beams through at oblique incidence, the default, and bad values."""
 
@@ -11,9 +11,9 @@ from bpy_pipeline import cli
 from bpy_pipeline.buffers import ObjectTable, SceneBuffers
 from bpy_pipeline.errors import InputError
 from bpy_pipeline.geometry.objects import PARTS, ObjectPart, car_object
-from bpy_pipeline.lidar.materials import CarGlass, fresnel_reflectance, glass_round_trip, glass_transmission, pane_internal, pane_transmission
-from bpy_pipeline.lidar.raycast import RayCaster
-from bpy_pipeline.lidar.scanner import MirrorGlassRules, trace_beams
+from bpy_pipeline.lidar.effects.materials import CarGlass, fresnel_reflectance, glass_round_trip, glass_transmission, pane_internal, pane_transmission
+from bpy_pipeline.lidar.cast.raycast import RayCaster
+from bpy_pipeline.lidar.cast.scanner import MirrorGlassRules, trace_beams
 from bpy_pipeline.mixing.cast import glass_rules, object_buffers, object_parts
 from bpy_pipeline.mixing.placement import Placement
 from bpy_pipeline.mixing.section import RealScanScene

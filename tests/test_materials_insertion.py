@@ -68,12 +68,12 @@ def test_counts_against_the_real_car_and_glossy_paint_against_diffuse(car_3, ben
 
 
 def test_parts_may_name_a_reflectance_model_where_tracing_materials_were_the_only_choice():
-    """api.scan's meshes and the inserted objects' parts (mixing/cast.py) accept lidar/materials.py's model names."""
+    """api.scan's meshes and the inserted objects' parts (mixing/cast.py) accept lidar/effects/materials.py's model names."""
     import bpy_pipeline
     from bpy_pipeline.buffers import MATERIAL_ID
     from bpy_pipeline.errors import InputError
     from bpy_pipeline.geometry.objects import ObjectPart
-    from bpy_pipeline.lidar.materials import model_id
+    from bpy_pipeline.lidar.effects.materials import model_id
     from bpy_pipeline.mixing.cast import object_buffers
     from bpy_pipeline.mixing.placement import Placement
 

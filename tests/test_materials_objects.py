@@ -9,8 +9,8 @@ from bpy_pipeline.buffers import ObjectTable
 from bpy_pipeline.config import effects_from_dict
 from bpy_pipeline.errors import InputError
 from bpy_pipeline.labels import load_class_table
-from bpy_pipeline.lidar.effects import apply_effects
-from bpy_pipeline.lidar.materials import GLOSSY_ROUGHNESS, model_from_material, model_id, object_models
+from bpy_pipeline.lidar.effects.apply import apply_effects
+from bpy_pipeline.lidar.effects.materials import GLOSSY_ROUGHNESS, model_from_material, model_id, object_models
 from test_materials import returns
 
 TABLE = load_class_table()
@@ -95,7 +95,8 @@ def test_a_cars_plate_is_seen_far_beyond_its_glossy_body():
     from bpy_pipeline.buffers import SceneBuffers
     from bpy_pipeline.config import config_from_dict
     from bpy_pipeline.geometry.objects import FITTINGS, STYLES, car_fittings, car_parts
-    from bpy_pipeline.pipeline import frame_rng, scan_buffers
+    from bpy_pipeline.frame import frame_rng
+    from bpy_pipeline.stages.scan import scan_buffers
 
     parts = {**{k: car_parts(STYLES[0])[k] for k in ("body",)}, **car_fittings(STYLES[0])}
     models = {"body": ("glossy_paint", 0.5), **FITTINGS}

@@ -11,7 +11,7 @@ import bpy_pipeline
 from bpy_pipeline import cli
 from bpy_pipeline.errors import InputError
 from bpy_pipeline.geometry.objects import PARTS
-from bpy_pipeline.lidar.materials import CarGlass
+from bpy_pipeline.lidar.effects.materials import CarGlass
 from bpy_pipeline.mixing import ObjectBox, RealScanScene
 from bpy_pipeline.mixing.cast import car_part_names, object_parts
 from bpy_pipeline.mixing.frame import MIX_STEPS, MixState

@@ -15,11 +15,11 @@ from bpy_pipeline.config import EdgeDropConfig, ReflectorConfig, config_from_dic
 from bpy_pipeline.errors import InputError
 from bpy_pipeline.geometry import primitives
 from bpy_pipeline.io.range_image import image_points, organise, read_range_image, write_range_image
-from bpy_pipeline.lidar import grid
-from bpy_pipeline.lidar.mirror_sensor import drop_at_edges, edge_drop_mask, load_edge_mask, reflect_pattern, trace_mirrors
-from bpy_pipeline.lidar.raycast import RayCaster
-from bpy_pipeline.lidar.scanner import scan
-from bpy_pipeline.lidar.sensors import resolve_sensor, sensor_pattern
+from bpy_pipeline.lidar.sensor import grid
+from bpy_pipeline.lidar.sensor.mirror_sensor import drop_at_edges, edge_drop_mask, load_edge_mask, reflect_pattern, trace_mirrors
+from bpy_pipeline.lidar.cast.raycast import RayCaster
+from bpy_pipeline.lidar.cast.scanner import scan
+from bpy_pipeline.lidar.sensor.sensors import resolve_sensor, sensor_pattern
 
 PAPER = ReflectorConfig(enabled=True)  # eight segments at 34 degrees, 0.1 m from the optical centre
 OS1 = resolve_sensor({"preset": "os1_128", "columns": 2048})
@@ -302,7 +302,8 @@ def test_pipeline_frame_of_the_mirror_sensor(tmp_path):
 
     from bpy_pipeline.config import load_config
     from bpy_pipeline.io import read_ply
-    from bpy_pipeline.pipeline import edge_mask, run
+    from bpy_pipeline.lidar.sensor.sensor_rays import SensorRays
+    from bpy_pipeline.plan import run
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     config = load_config(None, [
@@ -318,7 +319,7 @@ def test_pipeline_frame_of_the_mirror_sensor(tmp_path):
     assert image.shape == (128, 2048) and (image["range"] > 0).sum() == len(points)
     floor = points["semantic"] == 15
     assert np.allclose(points["z"][floor], -4.0, atol=1e-4) and (points["semantic"] == 21).sum() > 500  # true positions, sensor frame
-    mask = edge_mask(config)
+    mask = SensorRays(config).edge_mask(0)
     hit = image["range"] > 0
     assert not hit[mask == 1].any()  # rays that miss the mirrors never return
     kept_at_edges = hit[mask == np.float32(0.95)].mean()

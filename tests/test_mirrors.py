@@ -10,10 +10,9 @@ import pytest
 
 from bpy_pipeline.buffers import MATERIAL_ID, ObjectTable, SceneBuffers
 from bpy_pipeline.geometry import primitives
-from bpy_pipeline.geometry.transforms import euler_xyz_matrix
-from bpy_pipeline.lidar.raycast import RayCaster
-from bpy_pipeline.lidar.scanner import Surfaces, scan, trace_beams
-from bpy_pipeline.lidar.sensors import Pattern
+from bpy_pipeline.lidar.cast.raycast import RayCaster
+from bpy_pipeline.lidar.cast.scanner import MirrorGlassRules, scan, trace_beams
+from bpy_pipeline.lidar.sensor.rays import Pattern
 
 WALL, MIRROR_CLASS, REFLECTION = 17, 20, 25
 
@@ -121,7 +120,7 @@ def test_range_noise_moves_points_along_their_own_beam():
     """Behind the mirror (reported) a ghost moves along the emitted ray; at its true position
     (ideal) along the reflected segment, so it stays on the wall instead of drifting off it."""
     from bpy_pipeline.config import effects_from_dict
-    from bpy_pipeline.lidar.effects import apply_effects
+    from bpy_pipeline.lidar.effects.apply import apply_effects
 
     buffers = scene(MIRROR_45, SIDE_WALL)
     noise = effects_from_dict({"noise": {"sigma": 0.05}})
@@ -161,7 +160,7 @@ def test_two_facing_mirrors_stop_at_max_bounces():
     points, _ = run(buffers, normal, max_bounces=255, max_range=1e6)
     assert len(points) == 0
     # ... with one, the first mirror returns it from its own surface.
-    points, _ = run(buffers, normal, max_bounces=255, surfaces=Surfaces(mirror_return_deg=0.5))
+    points, _ = run(buffers, normal, max_bounces=255, surfaces=MirrorGlassRules(mirror_return_deg=0.5))
     assert len(points) == 1 and points["bounces"][0] == 0 and points["range"][0] == pytest.approx(2.0, abs=1e-6)
 
 
@@ -203,7 +202,7 @@ def test_a_mirror_of_zero_reflectivity_and_an_absorber_lose_the_beam():
     back = ("back", plane_at(60.0, [30.0, 0.0, 0.0], [-1.0, 0.0, 0.0]), "diffuse", 0.5, WALL)
     for material, reflectivity in (("mirror", 0.0), ("absorber", 0.5)):
         blocker = ("blocker", plane_at(4.0, [5.0, 0.0, 0.0], [-1.0, 0.2, 0.0]), material, reflectivity, MIRROR_CLASS)
-        points, _ = run(scene(blocker, SIDE_WALL, back), beams, surfaces=Surfaces(mirror_return_deg=20.0))
+        points, _ = run(scene(blocker, SIDE_WALL, back), beams, surfaces=MirrorGlassRules(mirror_return_deg=20.0))
         assert len(points) == 0, material
     alone, _ = run(scene(SIDE_WALL, back), beams)
     assert len(alone) == len(beams)  # without the blocker every beam returns
@@ -231,7 +230,7 @@ def test_glass_passes_beams_returns_near_normal_incidence_and_scales_intensity()
     directions = fan(np.linspace(-14.75, 14.75, 60), [0.0])
     angle = np.abs(np.linspace(-14.75, 14.75, 60))  # incidence on the window at x = 5 (normal -x); none exactly at 5
     buffers = scene(WINDOW, INTERIOR)
-    points, beam = run(buffers, directions, surfaces=Surfaces(glass_return_deg=5.0))
+    points, beam = run(buffers, directions, surfaces=MirrorGlassRules(glass_return_deg=5.0))
     assert len(points) == len(directions) and (points["bounces"] == 0).all()
     on_glass = np.isclose(points["x"], 5.0, atol=1e-5)
     assert np.array_equal(on_glass, angle < 5.0) and 0 < on_glass.sum() < len(angle)  # the glass itself returns near normal incidence
@@ -240,7 +239,7 @@ def test_glass_passes_beams_returns_near_normal_incidence_and_scales_intensity()
     assert np.allclose(points["range"][behind], 7.0 / directions[behind, 0], atol=1e-5)
     assert np.allclose(beam["gain"][behind], 0.8)  # 1 - the glass's reflectivity
     assert np.allclose(points["intensity"][behind], 0.5 * np.cos(np.radians(angle[behind])) * 0.8, atol=1e-6)
-    none, _ = run(buffers, directions)  # default Surfaces: glass never returns
+    none, _ = run(buffers, directions)  # default MirrorGlassRules: glass never returns
     assert np.allclose(none["x"], 7.0, atol=1e-5)
 
 
@@ -251,7 +250,7 @@ def test_glass_pane_of_two_faces_counts_passes():
     points, beam = run(buffers, directions)
     assert len(points) == len(directions) and np.allclose(points["x"], 7.0, atol=1e-5)
     assert np.allclose(beam["gain"], 0.81)  # through two faces
-    assert len(run(buffers, directions, surfaces=Surfaces(glass_passes=1))[0]) == 0  # the second face is one pass too many
+    assert len(run(buffers, directions, surfaces=MirrorGlassRules(glass_passes=1))[0]) == 0  # the second face is one pass too many
 
 
 def test_a_glass_reflection_fraction_is_a_mirror_share_drawn_from_the_generator():
@@ -260,17 +259,17 @@ def test_a_glass_reflection_fraction_is_a_mirror_share_drawn_from_the_generator(
     back = ("back", plane_at(80.0, [30.0, 0.0, 0.0], [-1.0, 0.0, 0.0]), "diffuse", 0.5, WALL)
     buffers = scene(window, side, back)
     directions = fan(np.linspace(-3, 3, 101), np.linspace(-3, 3, 101))
-    all_reflect, _ = run(buffers, directions, surfaces=Surfaces(glass_reflect=1.0))
-    true_hit, _ = run(buffers, directions, surfaces=Surfaces(glass_reflect=1.0), ideal=True)
+    all_reflect, _ = run(buffers, directions, surfaces=MirrorGlassRules(glass_reflect=1.0))
+    true_hit, _ = run(buffers, directions, surfaces=MirrorGlassRules(glass_reflect=1.0), ideal=True)
     assert len(all_reflect) == len(directions) and (all_reflect["bounces"] == 1).all() and np.allclose(true_hit["y"], -10.0)
     ghost = np.column_stack([all_reflect["x"], all_reflect["y"], all_reflect["z"]]).astype(np.float64)
     real = np.column_stack([true_hit["x"], true_hit["y"], true_hit["z"]]).astype(np.float64)
     assert np.abs(ghost - reflect(real, [5.0, 0.0, 0.0], [-1.0, -1.0, 0.0])).max() < 1e-4  # the side wall, seen in the glass
     with pytest.raises(ValueError, match="Generator"):
-        run(buffers, directions, surfaces=Surfaces(glass_reflect=0.3))
-    a, _ = run(buffers, directions, surfaces=Surfaces(glass_reflect=0.3), rng=np.random.default_rng(7))
-    b, _ = run(buffers, directions, surfaces=Surfaces(glass_reflect=0.3), rng=np.random.default_rng(7))
-    c, _ = run(buffers, directions, surfaces=Surfaces(glass_reflect=0.3), rng=np.random.default_rng(8))
+        run(buffers, directions, surfaces=MirrorGlassRules(glass_reflect=0.3))
+    a, _ = run(buffers, directions, surfaces=MirrorGlassRules(glass_reflect=0.3), rng=np.random.default_rng(7))
+    b, _ = run(buffers, directions, surfaces=MirrorGlassRules(glass_reflect=0.3), rng=np.random.default_rng(7))
+    c, _ = run(buffers, directions, surfaces=MirrorGlassRules(glass_reflect=0.3), rng=np.random.default_rng(8))
     assert a.tobytes() == b.tobytes() and a.tobytes() != c.tobytes()
     share = (a["bounces"] == 1).mean()
     n = len(a)
@@ -297,7 +296,8 @@ def test_pipeline_scene_mirror_through_blender(tmp_path):
     from bpy_pipeline.config import config_from_dict
     from bpy_pipeline.export import export_scene
     from bpy_pipeline.labels import load_class_table
-    from bpy_pipeline.pipeline import frame_rng, scan_buffers
+    from bpy_pipeline.frame import frame_rng
+    from bpy_pipeline.stages.scan import scan_buffers
     from bpy_pipeline.scenes import build_scene
 
     bpy.ops.wm.read_factory_settings(use_empty=True)

@@ -135,7 +135,7 @@ def test_remove_and_reinsert_gives_back_the_returns(sweep, tmp_path):
     ours = np.isin(k, vertex_firing)
     assert np.linalg.norm(xyz[ours] - original[k[ours]], axis=1).max() < 0.02
     # firings through inner vertices of the mesh come back (a ray aimed exactly at a vertex of an open mesh
-    # can slip between its triangles in float32: lidar/raycast.py); one through its rim may pass the edge
+    # can slip between its triangles in float32: lidar/cast/raycast.py); one through its rim may pass the edge
     edges = np.sort(np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]]), axis=1)
     unique, count = np.unique(edges, axis=0, return_counts=True)
     rim = np.zeros(len(used), bool)
@@ -162,8 +162,8 @@ def test_same_seed_same_bytes_with_rules_effects_and_injections(sweep):
 
 def test_drop_of_inserted_points_follows_the_fitted_model_on_held_out_columns(sweep, tmp_path):
     from bpy_pipeline.config import DropConfig, EffectsConfig
-    from bpy_pipeline.lidar.effects import FittedModels, write_model_file
-    from bpy_pipeline.lidar.fitting import FitOptions, OrganisedScan, fit_models, read_scan
+    from bpy_pipeline.lidar.effects.apply import FittedModels, write_model_file
+    from bpy_pipeline.lidar.fit.fitting import FitOptions, OrganisedScan, fit_models, read_scan
 
     path, scan, f = sweep
     organised = read_scan(path, 32)
@@ -312,10 +312,10 @@ def test_bad_input_names_the_key(tmp_path, real_scan):
 
 
 def test_sensor_conversion_on_a_flat_ground_is_exact_for_the_meshed_cast():
-    from bpy_pipeline.lidar.raycast import RayCaster
+    from bpy_pipeline.lidar.cast.raycast import RayCaster
     from bpy_pipeline.buffers import SceneBuffers
     from bpy_pipeline.geometry import primitives
-    from bpy_pipeline.lidar.sensors import resolve_sensor
+    from bpy_pipeline.lidar.sensor.sensors import resolve_sensor
     from bpy_pipeline.mixing.convert import project_to_cones, raycast_convert, target_rays
 
     ground = SceneBuffers.from_meshes({"ground": primitives.plane(400.0, 400.0)})
@@ -400,7 +400,7 @@ def test_semantickitti_labels_are_kept_and_labelled_vehicles_get_boxes(tmp_path)
 
 
 def test_convert_a_real_kitti_scan_to_a_vlp16(real_scan):
-    from bpy_pipeline.lidar.sensors import resolve_sensor
+    from bpy_pipeline.lidar.sensor.sensors import resolve_sensor
     from bpy_pipeline.mixing.convert import convert_scan
 
     f = recover_firings(read_real_scan(real_scan(KITTI)), "hdl64e")

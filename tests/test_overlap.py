@@ -165,7 +165,7 @@ def test_kill_9_while_a_frame_finishes_beside_the_next_then_resume_gives_the_uni
 def test_a_mirror_sensor_keeps_the_rays_of_the_frame_finishing_and_of_the_next(monkeypatch):
     """A rosette's rays change every frame: the frame finishing beside the next asks for its own frame's after the next
     frame asked for its, and gets them without tracing them through the mirrors again."""
-    import bpy_pipeline.lidar.sensor_rays as sensor_rays
+    import bpy_pipeline.lidar.sensor.sensor_rays as sensor_rays
 
     traced = []
     real = sensor_rays.MirrorFrame.of

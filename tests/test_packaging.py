@@ -26,7 +26,7 @@ def wheel(tmp_path_factory) -> Path:
 
 def test_wheel_holds_every_data_file_the_package_reads(wheel):
     names = set(zipfile.ZipFile(wheel).namelist())
-    for data in ("assets_manifest/labels.yaml", "assets_manifest/robot_arm.yaml", "assets_manifest/assets.yaml", "bpy_pipeline/lidar/sensors.yaml"):
+    for data in ("assets_manifest/labels.yaml", "assets_manifest/robot_arm.yaml", "assets_manifest/assets.yaml", "bpy_pipeline/lidar/sensor/sensors.yaml"):
         assert data in names, f"{data} missing from {wheel.name}"
     source = {p.relative_to(ROOT).as_posix() for p in (ROOT / "bpy_pipeline").rglob("*.py")}
     assert source <= names, f"modules missing from the wheel: {sorted(source - names)[:5]}"

@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bpy_pipeline.builders.base import Distribution
+from bpy_pipeline.geometry.placement import Distribution
 from bpy_pipeline.builders.parking.params import ParkingScene
 from bpy_pipeline.geometry.collision import rectangles_overlap
 from bpy_pipeline.geometry.indoor import parking_layout, parking_station
@@ -107,7 +107,8 @@ def _frame(config, index, keep=None):
     """Build frame ``index`` (on the scene ``keep`` holds from earlier frames, when given) and export it."""
     from bpy_pipeline.export import export_scene
     from bpy_pipeline.labels import load_class_table
-    from bpy_pipeline.pipeline import build_frame_scene, frame_rng
+    from bpy_pipeline.frame import frame_rng
+    from bpy_pipeline.stages.scene import build_frame_scene
 
     state = build_frame_scene(config, index, frame_rng(config.seed, index), keep)
     return state, export_scene(load_class_table())
@@ -159,7 +160,8 @@ def test_same_seed_same_frame_whatever_came_before(bpy_scene, tmp_path):
     import bpy
 
     from bpy_pipeline.config import load_config
-    from bpy_pipeline.pipeline import run, scan_buffers
+    from bpy_pipeline.plan import run
+    from bpy_pipeline.stages.scan import scan_buffers
 
     config = load_config(None, ["scene.builder=parking", "frames=2", "output.formats=[ply]", "output.preview=false"])
     # frame 1 built on top of frame 0's scene, and frame 1 built from nothing, scan the same

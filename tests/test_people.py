@@ -7,7 +7,7 @@ import pytest
 
 from bpy_pipeline.buffers import SceneBuffers
 from bpy_pipeline.geometry import human, kinematics
-from bpy_pipeline.lidar.raycast import RayCaster
+from bpy_pipeline.lidar.cast.raycast import RayCaster
 
 
 # ----------------------------------------------------------------------------- the body model
@@ -79,7 +79,8 @@ def _hall(seed: int, **params):
     from bpy_pipeline.config import load_config
     from bpy_pipeline.export import export_scene
     from bpy_pipeline.labels import load_class_table
-    from bpy_pipeline.pipeline import build_frame_scene, frame_rng
+    from bpy_pipeline.frame import frame_rng
+    from bpy_pipeline.stages.scene import build_frame_scene
 
     sets = ["scene.builder=industrial_hall"] + [f"scene.{k}={v}" for k, v in params.items()]
     config = load_config(None, sets)
@@ -148,7 +149,8 @@ def test_a_new_frame_reposes_without_rebuilding(bpy_scene):
     import bpy
 
     from bpy_pipeline.config import load_config
-    from bpy_pipeline.pipeline import build_frame_scene, frame_rng
+    from bpy_pipeline.frame import frame_rng
+    from bpy_pipeline.stages.scene import build_frame_scene
 
     config = load_config(None, ["scene.builder=industrial_hall"])
     keep = {}

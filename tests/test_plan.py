@@ -1,4 +1,4 @@
-"""The frame plan: one tuple of stages chosen per run, typed frames, writers that only write, old names still importable."""
+"""The frame plan: one tuple of stages chosen per run, typed frames, writers that only write."""
 
 import numpy as np
 import pytest
@@ -39,8 +39,6 @@ def test_a_frame_is_typed_pose_4x4_and_pose_at_a_function_of_time():
     frame.place(pose)
     poses = frame.pose_at(np.array([0.0, 0.05, 0.1]))
     assert isinstance(frame.pose_at, StaticPose) and poses.shape == (3, 4, 4) and np.array_equal(poses[2], pose)
-    frame.pose_at = pose  # a matrix, as callers before the plan set it: still a function of time
-    assert callable(frame.pose_at) and np.array_equal(frame.pose_at([0.0])[0], pose)
     with pytest.raises(ValueError, match="4, 4"):
         Frame(0, config, frame_rng(0, 0), pose=np.eye(3))
     run = Run(config, build=False)
@@ -54,17 +52,3 @@ def test_the_railway_layout_writer_reads_the_built_layout_and_draws_nothing(tmp_
     frame = Frame(0, config, frame_rng(0, 0))  # a frame of a scene it did not build: no layout to write
     with pytest.raises(InputError, match="railway_layout"):
         WRITERS.get("railway_layout").write(frame, tmp_path)
-
-
-def test_the_old_names_stay_importable():
-    from bpy_pipeline.builders.population import build_populated
-    from bpy_pipeline.builders.real_scan import kept_scan, real_scan_stage
-    from bpy_pipeline.geometry.lod import planned_path, view_of
-    from bpy_pipeline.io.boxes import _subset, occlusion_levels, visibility
-    from bpy_pipeline.lidar import visibility as module
-    from bpy_pipeline.mixing.frame import frame_boxes, mixed_boxes
-    from bpy_pipeline.pipeline import STAGES, Run as OldRun, frame_boxes as sensor_boxes, make_frame, scan_buffers, sensor_pose  # noqa: F401
-
-    assert visibility is module.visibility and occlusion_levels is module.occlusion_levels and _subset is module.subset_buffers
-    assert frame_boxes is mixed_boxes and OldRun is Run and callable(build_populated) and callable(view_of) and callable(planned_path)
-    assert callable(kept_scan) and callable(real_scan_stage) and len(STAGES) == 7

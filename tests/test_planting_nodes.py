@@ -20,7 +20,7 @@ def _street(**scene):
 
     from bpy_pipeline.builders.street import layout as street
     from bpy_pipeline.config import load_config
-    from bpy_pipeline.pipeline import build_frame_scene
+    from bpy_pipeline.stages.scene import build_frame_scene
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     config = load_config({"seed": 0, "frames": 1, "scene": {"builder": "street", **scene}, "effects": {"ideal": True},
@@ -88,12 +88,12 @@ def test_the_trees_keep_the_density_clearance_yards_and_sizes_they_are_given():
 
 
 def test_the_trees_are_labelled_trunk_and_vegetation_and_scanned():
-    import bpy
+    import bpy  # noqa: F401  (the test needs Blender's module loaded)
 
     from bpy_pipeline.export import export_scene
     from bpy_pipeline.io import read_ply
     from bpy_pipeline.labels import load_class_table
-    from bpy_pipeline.pipeline import run_frames
+    from bpy_pipeline.plan import run_frames
 
     layout, config = _street(yard_trees=4.0)
     table = load_class_table()

@@ -13,9 +13,13 @@ import pytest
 from bpy_pipeline.buffers import ObjectTable, SceneBuffers
 from bpy_pipeline.config import config_from_dict, config_to_dict, sensor_trajectory
 from bpy_pipeline.errors import InputError
-from bpy_pipeline.lidar.platform import Trajectory
-from bpy_pipeline.lidar.sensors import azimuth_step, azimuths, elevations, spherical_directions
-from bpy_pipeline.pipeline import frame_rng, scan_buffers
+from bpy_pipeline.lidar.sensor.platform import Trajectory
+from bpy_pipeline.lidar.sensor.sensors import azimuth_step, azimuths, elevations, spherical_directions
+from bpy_pipeline.frame import frame_rng
+
+
+# ----------------------------------------------------------------------------- trajectories alone
+from bpy_pipeline.stages.scan import scan_buffers
 
 
 # ----------------------------------------------------------------------------- trajectories alone
@@ -271,7 +275,7 @@ def test_curve_polyline_reads_the_evaluated_world_space_centreline():
 def test_pipeline_follows_a_curve_of_the_scene(tmp_path):
     import bpy
 
-    from bpy_pipeline.pipeline import run_frames
+    from bpy_pipeline.plan import run_frames
     from bpy_pipeline.scenes.objects import mesh_data, tag
 
     bpy.ops.wm.read_factory_settings(use_empty=True)

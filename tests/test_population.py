@@ -138,7 +138,7 @@ def test_placed_objects_never_cross_each_other_or_the_hall_and_stand_on_allowed_
     from bpy_pipeline.export import export_scene
     from bpy_pipeline.geometry import kinematics
     from bpy_pipeline.labels import load_class_table
-    from bpy_pipeline.pipeline import build_frame_scene
+    from bpy_pipeline.stages.scene import build_frame_scene
 
     config = _config(_hall(tmp_path))
     keep, seated, counts = {}, 0, []
@@ -183,7 +183,7 @@ def test_placed_objects_never_cross_each_other_or_the_hall_and_stand_on_allowed_
 
 @pytest.mark.bpy
 def test_frame_k_after_k_minus_1_is_frame_k_alone(bpy_scene, tmp_path):
-    from bpy_pipeline.pipeline import run_frames
+    from bpy_pipeline.plan import run_frames
 
     config = _config(_hall(tmp_path))
     for _ in run_frames(config, tmp_path / "all"):
@@ -203,7 +203,7 @@ def test_population_works_on_a_procedural_builder(bpy_scene):
     from bpy_pipeline.config import load_config
     from bpy_pipeline.export import export_scene
     from bpy_pipeline.labels import load_class_table
-    from bpy_pipeline.pipeline import build_frame_scene
+    from bpy_pipeline.stages.scene import build_frame_scene
 
     config = load_config(None, ["scene.builder=parking", "scene.cars={kind: normal, mean: 3, std: 0, min: 0, max: 9}", "scene.population={person: {count: 4, poses: {standing: 1}}}"])
     keep = {}

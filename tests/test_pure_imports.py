@@ -29,7 +29,7 @@ PURE_PACKAGES = ("geometry", "lidar", "io", "mixing", "evaluate")  # never impor
 BLENDER_MODULES = ("bpy", "bmesh", "mathutils")
 
 
-OPTIONAL = {"bpy_pipeline.lidar.numba_kernels": "numba"}  # modules that need an optional package (the 'fast' extra)
+OPTIONAL = {"bpy_pipeline.lidar.cast.numba_kernels": "numba"}  # modules that need an optional package (the 'fast' extra)
 
 
 def blender_file(name: str) -> bool:
@@ -142,7 +142,7 @@ def test_the_check_finds_a_blender_import(source):
 
 def test_pure_modules_import_and_run_with_bpy_blocked():
     modules = pure_modules()
-    assert {"bpy_pipeline.lidar.scanner", "bpy_pipeline.io.ply", "bpy_pipeline.config", "bpy_pipeline.geometry.primitives"} <= set(modules)
+    assert {"bpy_pipeline.lidar.cast.scanner", "bpy_pipeline.io.ply", "bpy_pipeline.config", "bpy_pipeline.geometry.primitives"} <= set(modules)
     code = f"""
 import sys
 class Block:
@@ -158,9 +158,9 @@ import numpy as np
 from bpy_pipeline.config import load_config
 from bpy_pipeline.buffers import SceneBuffers, ObjectTable
 from bpy_pipeline.geometry import primitives
-from bpy_pipeline.lidar.raycast import RayCaster
-from bpy_pipeline.lidar.scanner import scan
-from bpy_pipeline.lidar.sensors import sensor_pattern
+from bpy_pipeline.lidar.cast.raycast import RayCaster
+from bpy_pipeline.lidar.cast.scanner import scan
+from bpy_pipeline.lidar.sensor.sensors import sensor_pattern
 from bpy_pipeline.geometry.transforms import pose_matrix
 from bpy_pipeline.io import write_ply, read_ply
 cfg = load_config()

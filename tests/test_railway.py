@@ -18,7 +18,7 @@ def scan_world(tmp_path, *overrides):
     import bpy
 
     from bpy_pipeline.io import read_ply
-    from bpy_pipeline.pipeline import run
+    from bpy_pipeline.plan import run
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     config = load_config(None, ["output.formats=[ply]", "output.preview=false", "output.frame=world", *overrides])
@@ -68,7 +68,7 @@ def manifest_spans(manifest):
     """``(span index, start (3,), end (3,))`` of each contact wire, rebuilt from the resolved config."""
     from bpy_pipeline.config import config_from_dict
     from bpy_pipeline.builders.railway.layout import plan
-    from bpy_pipeline.pipeline import frame_rng
+    from bpy_pipeline.frame import frame_rng
 
     config = config_from_dict(manifest["config"])
     layout = plan(config.scene.params, frame_rng(manifest["seed"], 0))
@@ -78,7 +78,7 @@ def manifest_spans(manifest):
 def build(*overrides, seed=0, view=None):
     import bpy
 
-    from bpy_pipeline.pipeline import frame_rng
+    from bpy_pipeline.frame import frame_rng
     from bpy_pipeline.scenes import build_scene
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
@@ -177,7 +177,7 @@ def test_every_class_of_the_scene_appears_in_the_output(tmp_path):
 
 def test_same_seed_same_scene():
     from bpy_pipeline.export import export_scene
-    from bpy_pipeline.geometry.lod import view_of
+    from bpy_pipeline.lidar.sensor.view import view_of
     from bpy_pipeline.labels import load_class_table
 
     overrides = ("scene.track.tracks=2", "scene.supports.mast_type=mixed", "scene.catenary.double_contact_probability=0.5")

@@ -256,7 +256,7 @@ def test_the_scan_of_a_gltf_mast_lies_on_the_asset(tmp_path):
 
     from bpy_pipeline.io import read_ply
     from bpy_pipeline.labels import load_class_table
-    from bpy_pipeline.pipeline import run
+    from bpy_pipeline.plan import run
 
     glb = write_glb(tmp_path / "mast.glb", MAST)
     bpy.ops.wm.read_factory_settings(use_empty=True)

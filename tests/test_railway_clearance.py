@@ -113,7 +113,7 @@ def clashes(overrides: list[str]) -> list[tuple[str, str]]:
 
     from bpy_pipeline.export import export_scene
     from bpy_pipeline.labels import load_class_table
-    from bpy_pipeline.pipeline import frame_rng
+    from bpy_pipeline.frame import frame_rng
     from bpy_pipeline.scenes import build_scene
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
@@ -164,7 +164,7 @@ def test_overlaps_and_steady_arms_stay_clear(layout, tracks):
 
     found = clashes(overrides)
     names = {o.name for o in bpy.data.objects}
-    assert {f"span.t0.02.contact_wire", f"span.t0s1.02.contact_wire", "span.t0s1.03.contact_wire"} <= names
+    assert {"span.t0.02.contact_wire", "span.t0s1.02.contact_wire", "span.t0s1.03.contact_wire"} <= names
     assert any(".steady_arm." in n for n in names)
     if layout != "gantry":  # the ending run's raised end is roped to its anchor at support 3 (a gantry carries no anchors)
         end = np.array(bpy.data.objects["span.t0.02.contact_wire"].data.splines[0].points[-1].co[:3])
@@ -177,7 +177,7 @@ def test_overlaps_and_steady_arms_stay_clear(layout, tracks):
 def test_registration_arms_are_about_a_metre_long():
     import bpy
 
-    from bpy_pipeline.pipeline import frame_rng
+    from bpy_pipeline.frame import frame_rng
     from bpy_pipeline.scenes import build_scene
 
     for layout, tracks in (("single", 2), ("both_sides", 4), ("gantry", 3)):

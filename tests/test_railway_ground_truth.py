@@ -22,7 +22,7 @@ def test_every_frame_gets_the_layout_its_points_show(tmp_path):
     import bpy
 
     from bpy_pipeline.io import read_ply
-    from bpy_pipeline.pipeline import run
+    from bpy_pipeline.plan import run
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     config = load_config(None, ["output.formats=[ply,railway_layout]", "output.preview=false", "output.frame=world", "frames=2",
@@ -72,7 +72,7 @@ def test_overlap_runs_and_steady_arms_are_where_the_layout_says(tmp_path):
     import bpy
 
     from bpy_pipeline.io import read_ply
-    from bpy_pipeline.pipeline import run
+    from bpy_pipeline.plan import run
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     # 200 m, 40 m spans, tension sections of 80 m: one overlap over span 2, scanned from beside it

@@ -8,7 +8,8 @@ import pytest
 from bpy_pipeline.config import load_config
 from bpy_pipeline.errors import InputError
 from bpy_pipeline.builders.railway import catenary
-from bpy_pipeline.geometry.lod import SensorView, section_error, view_of
+from bpy_pipeline.geometry.lod import SensorView, section_error
+from bpy_pipeline.lidar.sensor.view import view_of
 from bpy_pipeline.builders.railway.layout import level_of_detail, plan, station_frames
 
 

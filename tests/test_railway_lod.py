@@ -9,7 +9,7 @@ from bpy_pipeline.config import load_config
 from bpy_pipeline.builders.railway import catenary
 from bpy_pipeline.geometry.lod import PathView, PlannedPath, section_error
 from bpy_pipeline.builders.railway.layout import STONE_STRETCH, level_of_detail, plan
-from bpy_pipeline.pipeline import scene_view
+from bpy_pipeline.stages.view import scene_view
 
 LINE = ["scene.track.start=[0, 0, 0]", "scene.track.mid=[300, 0, 0]", "scene.track.end=[600, 0, 0]", "scene.track.tracks=2"]
 
@@ -112,7 +112,7 @@ def test_a_mobile_run_builds_stones_and_fine_wires_along_its_path_only(tmp_path)
     import bpy
 
     from bpy_pipeline.io import read_ply
-    from bpy_pipeline.pipeline import run
+    from bpy_pipeline.plan import run
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     # a trolley at 0.5 m/s from 100 m along the line, its profiler coarsened to 0.5 deg so stones stay few

@@ -9,7 +9,7 @@ import pytest
 
 from bpy_pipeline.config import load_config
 from bpy_pipeline.builders.railway.parts import H_SECTION
-from bpy_pipeline.lidar.sensors import preset_sources, presets
+from bpy_pipeline.lidar.sensor.sensors import preset_sources, presets
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "railway" / "mobile.yaml"
 
@@ -31,7 +31,7 @@ def test_a_short_mobile_run_keeps_every_mast_in_place_across_frames(tmp_path):
     import bpy
 
     from bpy_pipeline.io import read_ply
-    from bpy_pipeline.pipeline import run
+    from bpy_pipeline.plan import run
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     # the worked config, 5 frames (0.5 s, 10 m), with its noise, drop and divergence; 512 columns keep it quick
@@ -50,8 +50,8 @@ def test_a_short_mobile_run_keeps_every_mast_in_place_across_frames(tmp_path):
                 xyz = np.column_stack([hit["x"], hit["y"], hit["z"]]).astype(float)
                 seen.setdefault(row["name"], []).append(xyz)
     # the rolling shutter: each point lies at its range from where the optical centre was at its own time
-    from bpy_pipeline.lidar.sensors import frame_time
-    from bpy_pipeline.pipeline import scene_trajectory
+    from bpy_pipeline.lidar.sensor.sensors import frame_time
+    from bpy_pipeline.stages.view import scene_trajectory
 
     trajectory = scene_trajectory(config)
     for frame in manifest["frames"]:

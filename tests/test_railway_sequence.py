@@ -15,7 +15,7 @@ def run_world(tmp_path, *overrides, frames=5, frames_range=None):
     import bpy
 
     from bpy_pipeline.io import read_ply
-    from bpy_pipeline.pipeline import run
+    from bpy_pipeline.plan import run
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     config = load_config(None, ["output.formats=[ply]", "output.preview=false", "output.frame=world", f"frames={frames}", *overrides])

@@ -1,4 +1,4 @@
-"""Embree reading the caster's buffers in place (lidar/embree.py) gives embreex's own hits.
+"""Embree reading the caster's buffers in place (lidar/cast/embree.py) gives embreex's own hits.
 
 The shared-buffer scene and embreex's ``TriangleMesh`` (the fallback) are built from the same
 vertices and triangles and traced with the same rays: same triangle, same float32 distance for
@@ -14,8 +14,8 @@ from embreex import rtcore_scene
 from embreex.mesh_construction import TriangleMesh
 
 from bpy_pipeline.buffers import SceneBuffers
-from bpy_pipeline.lidar import embree
-from bpy_pipeline.lidar.raycast import RayCaster, default_threads
+from bpy_pipeline.lidar.cast import embree
+from bpy_pipeline.lidar.cast.raycast import RayCaster, default_threads
 
 
 def terrain(n: int = 120, seed: int = 0):

@@ -9,7 +9,7 @@ not by the distances Embree wrote into the first trace's array.
 import numpy as np
 
 from bpy_pipeline.buffers import SceneBuffers
-from bpy_pipeline.lidar.raycast import RayCaster
+from bpy_pipeline.lidar.cast.raycast import RayCaster
 
 
 def test_retraced_rays_keep_the_querys_range_and_the_callers_arrays_stay_untouched():

@@ -1,4 +1,4 @@
-"""Realistic by default: each sensor preset's effects profile (lidar/sensors.yaml), ``effects.ideal``,
+"""Realistic by default: each sensor preset's effects profile (lidar/sensor/sensors.yaml), ``effects.ideal``,
 intensities in the real sensor's units, and reflectivity read from Blender materials."""
 
 import numpy as np
@@ -7,7 +7,7 @@ import pytest
 import bpy_pipeline
 from bpy_pipeline.config import config_from_dict, config_to_dict, load_config
 from bpy_pipeline.errors import InputError
-from bpy_pipeline.lidar.sensors import preset_effects, preset_sources, presets
+from bpy_pipeline.lidar.sensor.sensors import preset_effects, preset_sources, presets
 
 # a 12 m box room, 6 m high, around the sensor: every preset's rays meet a wall within the flash cameras' 10 m
 V = np.array([[x, y, z] for x in (-6, 6) for y in (-6, 6) for z in (-1.5, 4.5)], float)
@@ -131,7 +131,7 @@ def test_incidence_exponent_sets_how_intensity_and_drop_follow_incidence():
     assert len(lambert) == len(flat) and np.allclose(flat["intensity"], 0.3)
     cos = lambert["intensity"] / np.float32(0.3)
     assert cos.min() < 0.5 and np.all(cos <= 1 + 1e-6)  # grazing returns read less under Lambert's law
-    from bpy_pipeline.lidar.drop.threshold import probability
+    from bpy_pipeline.lidar.effects.drop.threshold import probability
 
     effects = load_config({"scene": {"builder": "primitives"}, "sensor": {"preset": "vlp16"}, "effects": {"ideal": True, "drop": {"model": "threshold"}}}).effects
     from bpy_pipeline.lidar.points import BEAM_DTYPE, empty_points

@@ -6,10 +6,10 @@ import pytest
 from bpy_pipeline.buffers import SceneBuffers
 from bpy_pipeline.geometry import primitives
 from bpy_pipeline.geometry.transforms import pose_matrix
-from bpy_pipeline.lidar import kernels
-from bpy_pipeline.lidar.raycast import RayCaster, RecordPool
-from bpy_pipeline.lidar.scanner import scan
-from bpy_pipeline.lidar.sensors import resolve_sensor, sensor_pattern
+from bpy_pipeline.lidar.cast import kernels
+from bpy_pipeline.lidar.cast.raycast import RayCaster, RecordPool
+from bpy_pipeline.lidar.cast.scanner import scan
+from bpy_pipeline.lidar.sensor.sensors import resolve_sensor, sensor_pattern
 
 
 def test_busy_while_a_view_lives():

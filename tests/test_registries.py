@@ -76,7 +76,7 @@ def test_toy_builder_and_writer_validate_from_a_config(toys):
 
 @pytest.mark.bpy
 def test_toy_builder_and_writer_run(toys, bpy_scene, tmp_path):
-    from bpy_pipeline.pipeline import run
+    from bpy_pipeline.plan import run
 
     config = load_config({"scene": {"builder": "pillar", "x": 5.0}, "sensor": {"preset": "vlp16", "position": [0, 0, 1]}, "effects": {"ideal": True}, "output": {"formats": ["xyz", "ply"], "preview": False}})
     manifest = run(config, tmp_path, log=lambda *_: None)
@@ -90,7 +90,7 @@ def test_toy_builder_and_writer_run(toys, bpy_scene, tmp_path):
 # ----------------------------------------------------------------------------- a toy ray pattern
 def halo_rays(spec):
     """``columns`` rays in a horizontal ring, ring 0, all at t = 0."""
-    from bpy_pipeline.lidar.sensors import Pattern
+    from bpy_pipeline.lidar.sensor.rays import Pattern
 
     def chunk(start, stop, frame):
         azimuth = 2 * np.pi * np.arange(start, stop) / spec.columns
@@ -106,7 +106,7 @@ def check_halo(spec, where):
 
 @pytest.fixture
 def halo():
-    from bpy_pipeline.lidar.patterns import PATTERNS, RayPattern, register_pattern
+    from bpy_pipeline.lidar.sensor.patterns import PATTERNS, RayPattern, register_pattern
 
     register_pattern("halo", RayPattern(halo_rays, lambda spec: spec.columns, lambda spec: (360.0 / spec.columns, None), check_halo, lambda spec: "columns"))
     yield
@@ -145,7 +145,7 @@ def ring_drop(points, beam, effects, models):
 
 @pytest.fixture
 def ring_model():
-    from bpy_pipeline.lidar.drop import DROP_MODELS, DropModel, register_drop_model
+    from bpy_pipeline.lidar.effects.drop import DROP_MODELS, DropModel, register_drop_model
 
     register_drop_model("upper_rings", DropModel(ring_drop, params=RingDrop))
     yield

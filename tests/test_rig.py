@@ -64,7 +64,7 @@ def test_merged_cloud_keeps_each_cloud_and_its_index():
 
 
 def test_merged_boxes_sum_the_sensors_points_and_keep_a_box_split_by_a_boundary():
-    from bpy_pipeline.io.boxes import BOX_DTYPE
+    from bpy_pipeline.geometry.boxes import BOX_DTYPE
 
     a, b = np.zeros(2, BOX_DTYPE), np.zeros(1, BOX_DTYPE)
     a["class_name"], a["instance"], a["points"], a["truncation"] = ["car", "person"], [1, 2], [8, 3], [0.5, 0.0]
@@ -93,7 +93,7 @@ THREE_CAMERAS = {"position": list(PLATFORM), "rotation_deg": [0.0, 0.0, 0.0], "r
 def test_three_camera_rig_is_the_union_of_three_single_camera_runs_byte_for_byte(bpy_scene, tmp_path):
     from bpy_pipeline.io.boxes import read_openpcdet_labels
     from bpy_pipeline.io.ply import read_ply
-    from bpy_pipeline.pipeline import run
+    from bpy_pipeline.plan import run
 
     rig_config = _street(THREE_CAMERAS, ["ply", "rig"], effects=EXACT)
     run(rig_config, tmp_path / "rig", log=lambda s: None)
@@ -141,9 +141,10 @@ def _instance_of(folder, box) -> int:
 
 @pytest.mark.bpy
 def test_rig_sensors_draw_from_their_own_generators(bpy_scene):
-    from bpy_pipeline.export import export_scene
-    from bpy_pipeline.labels import load_class_table
-    from bpy_pipeline.pipeline import Run, build_frame_scene, make_frame, member_config, scan_buffers
+    from bpy_pipeline.frame import Run
+    from bpy_pipeline.plan import make_frame
+    from bpy_pipeline.stages.rig import member_config
+    from bpy_pipeline.stages.scan import scan_buffers
     from bpy_pipeline.rig import member_rng
 
     noisy = {"noise": {"sigma": 0.02}, "drop": {"model": "uniform", "probability": 0.2}}
@@ -162,7 +163,7 @@ def test_rig_sensors_draw_from_their_own_generators(bpy_scene):
 
 @pytest.mark.bpy
 def test_skip_empty_records_skipped_frames_and_can_fill_the_requested_kept_frames(bpy_scene, tmp_path):
-    from bpy_pipeline.pipeline import run
+    from bpy_pipeline.plan import run
 
     sparse = {"builder": "street", "vehicles": {"mean": 0.0, "std": 1.0, "max": 3.0}, "parked": {"mean": 0.0, "std": 0.0, "max": 0.0},
               "pedestrians": {"mean": 0.0, "std": 1.0, "max": 3.0}, "bicycles": {"mean": 0.0, "std": 0.0, "max": 0.0}, "motorcycles": {"mean": 0.0, "std": 0.0, "max": 0.0}}
@@ -195,7 +196,7 @@ def test_skip_empty_records_skipped_frames_and_can_fill_the_requested_kept_frame
 @pytest.mark.bpy
 def test_flash_image_has_two_returns_where_a_pixel_spans_a_pole_and_the_wall_behind(bpy_scene, tmp_path):
     from bpy_pipeline.io.rig_outputs import read_flash_image
-    from bpy_pipeline.pipeline import run
+    from bpy_pipeline.plan import run
 
     shapes = [{"type": "box", "size": [0.2, 10.0, 4.0], "position": [12.0, 0.0, 0.0], "class": "wall"},
               {"type": "cylinder", "size": [0.05, 3.0], "position": [6.0, 0.0, 0.0], "class": "mast"}]
@@ -223,7 +224,7 @@ def config_sem(name: str) -> int:
 
 
 def test_out_of_reach_is_conservative():
-    from bpy_pipeline.lidar.sensors import resolve_sensor
+    from bpy_pipeline.lidar.sensor.sensors import resolve_sensor
     from bpy_pipeline.rig import out_of_reach
 
     spec = resolve_sensor({"preset": "flash96x16_carla"})  # +-40 deg, +-6.67 deg, 35 m

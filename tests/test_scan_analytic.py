@@ -24,7 +24,8 @@ def scanned():
     from bpy_pipeline.config import config_from_dict
     from bpy_pipeline.export import export_scene
     from bpy_pipeline.labels import load_class_table
-    from bpy_pipeline.pipeline import frame_rng, scan_buffers
+    from bpy_pipeline.frame import frame_rng
+    from bpy_pipeline.stages.scan import scan_buffers
     from bpy_pipeline.scenes import build_scene
 
     bpy.ops.wm.read_factory_settings(use_empty=True)

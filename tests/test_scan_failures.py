@@ -1,4 +1,4 @@
-"""Where ray casting fails, and how it fails well (DESIGN.md, "Find where methods fail").
+"""Where ray casting fails, and how it fails well (degenerate input gets a correct fallback or a clear error).
 
 Rays aimed exactly at the shared edges and vertices of closed meshes, grazing rays, a sensor
 inside a closed mesh, zero rays, degenerate triangles, non-finite and huge coordinates, and a
@@ -16,9 +16,10 @@ from bpy_pipeline.errors import InputError
 from bpy_pipeline.geometry import primitives
 from bpy_pipeline.geometry.transforms import pose_matrix
 from bpy_pipeline.lidar.points import BEAM_DTYPE, POINT_DTYPE
-from bpy_pipeline.lidar.raycast import RayCaster, closed_surface
-from bpy_pipeline.lidar.scanner import scan
-from bpy_pipeline.lidar.sensors import Pattern, resolve_sensor, sensor_pattern
+from bpy_pipeline.lidar.cast.raycast import RayCaster, closed_surface
+from bpy_pipeline.lidar.cast.scanner import scan
+from bpy_pipeline.lidar.sensor.sensors import resolve_sensor, sensor_pattern
+from bpy_pipeline.lidar.sensor.rays import Pattern
 
 
 # ----------------------------------------------------------------------------- numpy scenes
@@ -326,7 +327,8 @@ def test_a_blender_object_with_a_nan_vertex_is_an_input_error_naming_it(tmp_path
     from bpy_pipeline.config import config_from_dict
     from bpy_pipeline.export import export_scene
     from bpy_pipeline.labels import load_class_table
-    from bpy_pipeline.pipeline import frame_rng, scan_buffers
+    from bpy_pipeline.frame import frame_rng
+    from bpy_pipeline.stages.scan import scan_buffers
     from bpy_pipeline.scenes.objects import mesh_object, scene_collection
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
@@ -362,7 +364,8 @@ def test_a_blender_scene_10_km_from_the_origin_keeps_a_tenth_of_a_millimetre():
     from bpy_pipeline.config import config_from_dict
     from bpy_pipeline.export import export_scene
     from bpy_pipeline.labels import load_class_table
-    from bpy_pipeline.pipeline import frame_rng, scan_buffers
+    from bpy_pipeline.frame import frame_rng
+    from bpy_pipeline.stages.scan import scan_buffers
     from bpy_pipeline.scenes import build_scene
 
     offset = np.array([6000.0, -8000.0, 0.0])

@@ -1,4 +1,4 @@
-"""The compiled diffuse path (lidar/kernels.py) and the numpy path give the same bytes.
+"""The compiled diffuse path (lidar/cast/kernels.py) and the numpy path give the same bytes.
 
 Every scene is scanned twice, once with ``kernel="numpy"`` and once with ``kernel="numba"``
 (skipped, with the reason, where numba is not installed): shared and per-ray origins, a caster
@@ -17,11 +17,12 @@ from bpy_pipeline.buffers import MATERIAL_ID, SceneBuffers
 from bpy_pipeline.errors import InputError
 from bpy_pipeline.geometry import primitives
 from bpy_pipeline.geometry.transforms import pose_matrix
-from bpy_pipeline.lidar import raycast, scanner
-from bpy_pipeline.lidar.kernels import numba_available
-from bpy_pipeline.lidar.raycast import CasterCache, RayCaster
-from bpy_pipeline.lidar.scanner import scan, scan_chunk
-from bpy_pipeline.lidar.sensors import Pattern, resolve_sensor, sensor_pattern
+from bpy_pipeline.lidar.cast import raycast, scanner
+from bpy_pipeline.lidar.cast.kernels import numba_available
+from bpy_pipeline.lidar.cast.raycast import CasterCache, RayCaster
+from bpy_pipeline.lidar.cast.scanner import scan, scan_chunk
+from bpy_pipeline.lidar.sensor.sensors import resolve_sensor, sensor_pattern
+from bpy_pipeline.lidar.sensor.rays import Pattern
 
 needs_numba = pytest.mark.skipif(not numba_available(), reason="numba is not installed (the 'fast' extra): only the numpy path exists here")
 
@@ -67,7 +68,7 @@ def both(run):
 
 @needs_numba
 def test_the_compiled_pass_calls_embree_itself_where_it_can():
-    from bpy_pipeline.lidar import embree, kernels
+    from bpy_pipeline.lidar.cast import embree, kernels
 
     if not embree.shared_buffers_supported():
         pytest.skip("this embreex's objects do not have the checked layout: Embree's answer comes from embreex")
@@ -148,7 +149,7 @@ def test_grazing_rays_and_a_sensor_in_the_surface():
 @pytest.mark.parametrize("ideal", [False, True])
 def test_glass_and_mirrors_continue_in_the_numpy_path_with_the_same_bytes(ideal):
     """The crate is glass (some beams reflect, drawn from the generator), the wall a mirror: those rays go on in trace_beams."""
-    from bpy_pipeline.lidar.scanner import Surfaces
+    from bpy_pipeline.lidar.cast.scanner import MirrorGlassRules
 
     buffers = room()
     buffers.objects.material[2] = MATERIAL_ID["glass"]
@@ -156,7 +157,7 @@ def test_glass_and_mirrors_continue_in_the_numpy_path_with_the_same_bytes(ideal)
     pose = pose_matrix([0.3, 0.2, 0.4], [3.0, -2.0, 20.0])
     pattern = vertex_pattern(buffers, pose[:3, 3])
     pattern = Pattern(pattern.directions @ pose[:3, :3], pattern.ring, pattern.time)
-    surfaces = Surfaces(mirror_return_deg=2.0, glass_return_deg=5.0, glass_reflect=0.3, glass_passes=4)
+    surfaces = MirrorGlassRules(mirror_return_deg=2.0, glass_return_deg=5.0, glass_reflect=0.3, glass_passes=4)
 
     def run(kernel):
         caster = RayCaster(buffers, frame=pose, threads=2, chunk=700, kernel=kernel)
@@ -228,7 +229,7 @@ def test_parts_finished_out_of_order_are_joined_in_firing_order():
     from concurrent.futures import ThreadPoolExecutor
 
     from bpy_pipeline.lidar.points import POINT_DTYPE
-    from bpy_pipeline.lidar.scanner import InOrder
+    from bpy_pipeline.lidar.cast.scanner import InOrder
 
     rng = np.random.default_rng(8)
     chunk, parts = 1000, 9
@@ -262,7 +263,7 @@ def test_the_static_part_is_kept_only_for_the_same_bytes_and_a_far_vertex_is_ref
     """The kept static part is reused only for the same triangles and vertex bytes (a copy of them is kept, so a
     change made in place to the caller's buffers is seen); a caster that reuses the whole kept part skips its
     extent check only because the kept part passed it."""
-    from bpy_pipeline.lidar import raycast
+    from bpy_pipeline.lidar.cast import raycast
 
     rng = np.random.default_rng(3)
     vertices = rng.normal(size=(200_000, 3))
@@ -303,8 +304,8 @@ def test_the_static_part_is_kept_only_for_the_same_bytes_and_a_far_vertex_is_ref
 
 @needs_numba
 def test_compiled_planes_have_numpys_bits():
-    from bpy_pipeline.lidar.kernels import compiled
-    from bpy_pipeline.lidar.raycast import triangle_planes
+    from bpy_pipeline.lidar.cast.kernels import compiled
+    from bpy_pipeline.lidar.cast.raycast import triangle_planes
 
     rng = np.random.default_rng(5)
     vertices = rng.normal(size=(20000, 3)) * rng.choice([1e-3, 1.0, 1e4], (20000, 1))
@@ -316,7 +317,7 @@ def test_compiled_planes_have_numpys_bits():
 
 @needs_numba
 def test_embrees_answer_from_the_compiled_pass_is_embreexs():
-    """:meth:`RayCaster._embree` through :func:`~bpy_pipeline.lidar.numba_kernels.trace_rays` gives embreex's ``(tfar, prim)``,
+    """:meth:`RayCaster._embree` through :func:`~bpy_pipeline.lidar.cast.numba_kernels.trace_rays` gives embreex's ``(tfar, prim)``,
     byte for byte: one caster of the room and a kept static part with a moving one, rays from the origin (one row
     repeated by strides) and from their own origins, float32 and float64 directions, limits that cut some hits."""
     from types import SimpleNamespace

@@ -10,8 +10,7 @@ import yaml
 from bpy_pipeline.__main__ import main
 from bpy_pipeline.config import config_from_dict, config_to_dict, load_config
 from bpy_pipeline.errors import InputError
-from bpy_pipeline.lidar.sensors import (
-    DEFAULT_PRESET,
+from bpy_pipeline.lidar.sensor.sensors import (
     angular_resolution,
     azimuths,
     elevations,

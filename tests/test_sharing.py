@@ -1,4 +1,4 @@
-"""The calling thread takes its share of a pool's work (bpy_pipeline/lidar/sharing.py)."""
+"""The calling thread takes its share of a pool's work (bpy_pipeline/lidar/cast/sharing.py)."""
 
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 import pytest
 
-from bpy_pipeline.lidar.raycast import RayCaster
-from bpy_pipeline.lidar.sharing import share
+from bpy_pipeline.lidar.cast.raycast import RayCaster
+from bpy_pipeline.lidar.cast.sharing import share
 from bpy_pipeline.buffers import SceneBuffers
 
 

@@ -13,7 +13,7 @@ from bpy_pipeline.labels import load_class_table
 from bpy_pipeline.mixing.firings import recover_firings
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-import sim2real_mixed as sm  # noqa: E402
+import sim2real_mixed as sm
 
 SEQ01 = "semantickitti_seq01_000000_points.npy"
 

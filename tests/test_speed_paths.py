@@ -22,8 +22,8 @@ from bpy_pipeline.io.atomic import atomic_write, digests_while_writing, hashed_o
 from bpy_pipeline.io.ply import write_ply
 from bpy_pipeline.io.semantickitti import write_semantickitti
 from bpy_pipeline.lidar.points import POINT_DTYPE
-from bpy_pipeline.lidar.sensor_rays import CHUNK_RAYS, SensorRays
-from bpy_pipeline.lidar.sensors import iter_pattern
+from bpy_pipeline.lidar.sensor.sensor_rays import CHUNK_RAYS, SensorRays
+from bpy_pipeline.lidar.sensor.sensors import iter_pattern
 from bpy_pipeline.stages.scan import collect_points, effects_stage, scan_stage
 from bpy_pipeline.stages.scene import pose_stage
 

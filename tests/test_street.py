@@ -7,14 +7,15 @@ import math
 import numpy as np
 import pytest
 
-from bpy_pipeline.builders.base import Distribution
+from bpy_pipeline.geometry.placement import Distribution
 from bpy_pipeline.builders.street.params import StreetScene
 from bpy_pipeline.errors import InputError
 from bpy_pipeline.geometry import primitives
 from bpy_pipeline.builders.street import layout as street
 from bpy_pipeline.geometry.collision import rectangles_overlap
+from bpy_pipeline.geometry.field_of_view import in_view_fraction
 from bpy_pipeline.geometry.transforms import pose_matrix
-from bpy_pipeline.lidar.sensors import resolve_sensor
+from bpy_pipeline.lidar.sensor.sensors import resolve_sensor
 from bpy_pipeline.rig import field_of_view
 
 BOX_CLASSES = ["car", "van", "truck", "bus", "person", "bicycle", "motorcycle", "rider"]
@@ -101,9 +102,9 @@ def test_field_of_view_aware_placement_puts_users_where_the_camera_sees_them():
     params, layout, placement = _placed(seed=5, views=views)
     assert placement.users and sum(placement.out_of_view.values()) > 0
     for u in placement.users:
-        assert street.in_view_fraction(views, u.centre, u.half, u.yaw, u.size[2], u.z) >= params.min_in_view
+        assert in_view_fraction(views, u.centre, u.half, u.yaw, u.size[2], u.z) >= params.min_in_view
     _, _, blind = _placed(seed=5, views=views, fov_aware=False)
-    seen = [street.in_view_fraction(views, u.centre, u.half, u.yaw, u.size[2], u.z) >= params.min_in_view for u in blind.users]
+    seen = [in_view_fraction(views, u.centre, u.half, u.yaw, u.size[2], u.z) >= params.min_in_view for u in blind.users]
     assert not all(seen)  # without the rule, some users stand where no camera looks
 
 
@@ -114,10 +115,10 @@ def test_field_of_view_counts_azimuth_elevation_and_range():
 
 
 def test_meshes_that_cross_are_found_and_touching_ones_are_not():
-    a = street.box_mesh(0, 1, 0, 1, 0, 1)
-    assert street.meshes_intersect(a, street.box_mesh(0.5, 1.5, 0.2, 0.8, 0.2, 0.8))
-    assert not street.meshes_intersect(a, street.box_mesh(1, 2, 0, 1, 0, 1))  # sharing a face
-    assert not street.meshes_intersect(a, street.box_mesh(1.01, 2, 0, 1, 0, 1))
+    a = primitives.box_mesh(0, 1, 0, 1, 0, 1)
+    assert street.meshes_intersect(a, primitives.box_mesh(0.5, 1.5, 0.2, 0.8, 0.2, 0.8))
+    assert not street.meshes_intersect(a, primitives.box_mesh(1, 2, 0, 1, 0, 1))  # sharing a face
+    assert not street.meshes_intersect(a, primitives.box_mesh(1.01, 2, 0, 1, 0, 1))
     pole = primitives.translated(primitives.cylinder(0.1, 3.0, 8), (0.5, 0.5, 1.5))
     assert street.meshes_intersect(a, pole)
 
@@ -154,7 +155,7 @@ BUSY_RAW = {k: {"kind": d.kind, "mean": d.mean, "std": d.std, "min": d.min, "max
 def test_exported_street_has_no_intersections_and_users_stand_on_their_ground(bpy_scene):
     from bpy_pipeline.export import export_scene
     from bpy_pipeline.labels import load_class_table
-    from bpy_pipeline.pipeline import build_frame_scene
+    from bpy_pipeline.stages.scene import build_frame_scene
 
     config = _config(seed=2)
     result = build_frame_scene(config, 0)
@@ -188,7 +189,7 @@ def test_exported_street_has_no_intersections_and_users_stand_on_their_ground(bp
 
 @pytest.mark.bpy
 def test_same_seed_same_bytes_whatever_frame_a_run_starts_at(bpy_scene, tmp_path):
-    from bpy_pipeline.pipeline import run
+    from bpy_pipeline.plan import run
 
     config = _config(frames=2, seed=7)
     run(config, tmp_path / "a", log=lambda s: None)

@@ -70,7 +70,7 @@ def street_frame():
     import bpy
 
     from bpy_pipeline.config import load_config
-    from bpy_pipeline.pipeline import build_frame_scene
+    from bpy_pipeline.stages.scene import build_frame_scene
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     config = load_config({"seed": 0, "frames": 1, "scene": {"builder": "street"}, "output": {"formats": ["ply"], "preview": False}})
@@ -134,7 +134,7 @@ def test_the_export_labels_instances_by_their_scatter_object_and_scans_as_the_pu
     from bpy_pipeline.buffers import SceneBuffers
     from bpy_pipeline.export import export_scene
     from bpy_pipeline.labels import load_class_table
-    from bpy_pipeline.lidar.raycast import RayCaster
+    from bpy_pipeline.lidar.cast.raycast import RayCaster
 
     layout, _ = street_frame
     buffers = export_scene(load_class_table())

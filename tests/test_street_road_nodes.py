@@ -111,7 +111,7 @@ def street_frame():
     import bpy
 
     from bpy_pipeline.config import load_config
-    from bpy_pipeline.pipeline import build_frame_scene
+    from bpy_pipeline.stages.scene import build_frame_scene
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     config = load_config({"seed": 0, "frames": 1, "scene": {"builder": "street"}, "output": {"formats": ["ply"], "preview": False}})

@@ -95,7 +95,7 @@ def test_a_urdf_arm_is_placed_with_its_own_meshes_posed_within_its_limits(bpy_sc
     from bpy_pipeline.export import export_scene
     from bpy_pipeline.geometry.population import meshes_cross
     from bpy_pipeline.labels import load_class_table
-    from bpy_pipeline.pipeline import build_frame_scene
+    from bpy_pipeline.stages.scene import build_frame_scene
 
     sys.path.insert(0, str(ROOT / "examples" / "hall_twin"))
     try:

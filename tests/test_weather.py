@@ -1,4 +1,4 @@
-"""Weather (lidar/weather.py) against each paper's closed form on flat walls; the hdl64e's share of returns kept
+"""Weather (lidar/effects/weather.py) against each paper's closed form on flat walls; the hdl64e's share of returns kept
 in fog; rain's maximum range and range noise against Goodin et al.'s curves; snow along beams; labelled clutter;
 determinism; ``ideal``; bad values. Pure: no bpy (the command-line case runs run.py in a subprocess)."""
 
@@ -15,8 +15,8 @@ from bpy_pipeline.config import effects_from_dict, load_config
 from bpy_pipeline.errors import InputError
 from bpy_pipeline.geometry.boxes import count_points
 from bpy_pipeline.labels import load_class_table
-from bpy_pipeline.lidar.drop.threshold import ThresholdModel
-from bpy_pipeline.lidar.effects import apply_effects
+from bpy_pipeline.lidar.effects.drop.threshold import ThresholdModel
+from bpy_pipeline.lidar.effects.apply import apply_effects
 from bpy_pipeline.lidar.points import BEAM_DTYPE, empty_points
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -213,7 +213,7 @@ def test_snow_points_lie_along_beams_and_grow_with_the_rate():
         assert (flakes["instance"] == 0).all()
     assert counts[0] > 0 and all(b > a for a, b in zip(counts, counts[1:])), counts
     # what the flakes occlude per metre grows with the rate at every rate
-    from bpy_pipeline.lidar.weather import SnowConfig, snow_extinction
+    from bpy_pipeline.lidar.effects.weather import SnowConfig, snow_extinction
 
     shares = [snow_extinction(SnowConfig(rate=rate)) for rate in (0.1, 0.25, 0.5, 1.0, 2.5, 5.0, 10.0)]
     assert all(b > a for a, b in zip(shares, shares[1:])), shares

@@ -8,7 +8,7 @@ re-exports its ``params`` (``bpy_pipeline.builders.<name>`` was that module befo
 is one new package plus its name in the import line below.
 """
 
-from .base import BUILDERS, Builder, BuildContext, BuildResult, Distribution, build_scene, register_builder
+from .base import BUILDERS, Builder, BuildContext, BuildResult, build_scene, register_builder
 from . import railway, primitives, blend, parking, industrial_hall, street, real_scan  # noqa: F401  (registration)
 
-__all__ = ["BUILDERS", "Builder", "BuildContext", "BuildResult", "Distribution", "build_scene", "register_builder"]
+__all__ = ["BUILDERS", "Builder", "BuildContext", "BuildResult", "build_scene", "register_builder"]

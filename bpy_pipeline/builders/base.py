@@ -16,7 +16,6 @@ import numpy as np
 
 from ..errors import InputError
 from ..geometry.clearance import NO_POSES, SensorPoses
-from ..geometry.placement import Distribution, check_distribution  # noqa: F401  (re-exported: builders' parameters use them)
 from ..registry import Registry
 from ..schema import check_positive
 
@@ -105,8 +104,6 @@ class Builder:
         (``InputError`` where both do)
     plan : how its frames are made (:data:`bpy_pipeline.plan.PLANS`): ``scene`` (a Blender scene scanned by one
         sensor or a rig) or ``real_scan`` (a real scan as the background, objects cast in by its firings)
-    stages : ``((stage(frame, run), timing name), ...)`` in place of the plan's stages (kept for builders
-        written before the frame plan); ``None``: the plan's
     follows_path : a moving sensor's scene is graded along its path: ``build`` gets a
         :class:`~bpy_pipeline.geometry.lod.PlannedPath` as ``context.view`` (else ``None``)
     """
@@ -120,14 +117,13 @@ class Builder:
     sensor: dict = field(default_factory=dict)
     boxes: bool = False
     release_sensor: Callable[[Any, dict, dict], Any] | None = None
-    stages: tuple | None = None
     follows_path: bool = False
     plan: str = "scene"
 
     @property
     def blender_scene(self) -> bool:
         """True when its frames scan a Blender scene (so a population can be placed in it)."""
-        return self.stages is None and self.plan == "scene"
+        return self.plan == "scene"
 
 
 BUILDERS: Registry[Builder] = Registry("scene builder", "scene.builder")

@@ -29,8 +29,8 @@ import numpy as np
 from ..errors import InputError
 from ..geometry.placement import sample_count
 from ..registry import Registry
-from ..schema import check_positive, from_dict, to_plain
-from .base import Distribution, check_distribution
+from ..schema import check_positive, from_dict, to_plain, meta
+from ..geometry.placement import Distribution, check_distribution
 
 
 @dataclass(frozen=True)
@@ -47,7 +47,7 @@ class PersonPopulation:
     height: Distribution = field(default_factory=lambda: Distribution("normal", 1.72, 0.09, 1.50, 1.98))
     poses: dict = field(default_factory=lambda: {"standing": 0.4, "walking": 0.4, "sitting": 0.1, "crouching": 0.1})
     assets: str = ""
-    reflectivity: tuple[float, float] = (0.15, 0.6)
+    reflectivity: tuple[float, float] = field(default=(0.15, 0.6), metadata=meta(""))
 
 
 @dataclass(frozen=True)
@@ -61,7 +61,7 @@ class RobotArmPopulation:
     count: int | Distribution = 1
     model: str = ""
     positions: list[tuple[float, float, float]] = field(default_factory=list)
-    reflectivity: float = 0.55
+    reflectivity: float = field(default=0.55, metadata=meta(""))
     assets: str = ""
 
 
@@ -93,15 +93,15 @@ class PlacementRules:
         objects of these classes are the floors (seats); none of them in the scene: surfaces are detected
     """
 
-    keep_out: float = 0.3
-    tries: int = 60
-    cell: float = 0.1
-    seat_height: tuple[float, float] = (0.35, 0.8)
-    floor_band: float = 0.3
-    min_area: float = 0.25
-    instance_base: int = 10000
+    keep_out: float = field(default=0.3, metadata=meta("m"))
+    tries: int = field(default=60, metadata=meta(""))
+    cell: float = field(default=0.1, metadata=meta("m"))
+    seat_height: tuple[float, float] = field(default=(0.35, 0.8), metadata=meta("m"))
+    floor_band: float = field(default=0.3, metadata=meta("m"))
+    min_area: float = field(default=0.25, metadata=meta("m^2"))
+    instance_base: int = field(default=10000, metadata=meta(""))
     manifest: str = ""
-    min_visible: float = 0.0
+    min_visible: float = field(default=0.0, metadata=meta(""))
     walkable_classes: list[str] = field(default_factory=lambda: ["floor", "ground", "road", "sidewalk", "platform"])
     seat_classes: list[str] = field(default_factory=list)
 
@@ -290,15 +290,6 @@ def population_to_dict(population: Population | None) -> dict | None:
 def count_of(params, rng: np.random.Generator) -> int:
     """How many of a kind a frame wants: the fixed count, or a draw of its distribution."""
     return params.count if isinstance(params.count, int) else sample_count(params.count, rng)
-
-
-def __getattr__(name: str):
-    """``build_populated`` is the build stage's now (:mod:`bpy_pipeline.stages.scene`); the old name stays importable this round."""
-    if name == "build_populated":
-        from ..stages.scene import build_populated
-
-        return build_populated
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 __all__ = ["KINDS", "Population", "PopulationKind", "population_from_dict", "population_to_dict"]

@@ -5,7 +5,7 @@ A box is fitted to the exported triangles of one instance (so it holds every poi
 on that instance) around a heading the scene builder knows (a car's body, a person's facing, the
 arm's vertical plane), or, without one, the heading of the smallest rectangle around its footprint.
 What the sensor sees of each box (truncation, visible and unoccluded rays) is
-:mod:`bpy_pipeline.lidar.visibility`; the label files are written by the box writers of :mod:`bpy_pipeline.io`.
+:mod:`bpy_pipeline.lidar.cast.visibility`; the label files are written by the box writers of :mod:`bpy_pipeline.io`.
 """
 
 from __future__ import annotations

@@ -23,7 +23,6 @@ import numpy as np
 
 from ..errors import InputError
 from ..yaml_text import read_yaml_file
-from .collision import capsule_gaps
 
 ARM_PATH = Path(__file__).resolve().parents[2] / "assets_manifest" / "robot_arm.yaml"
 

@@ -81,7 +81,7 @@ def view_from_steps(azimuth_deg: float | None, elevation_deg: float | None, max_
     """The :class:`SensorView` of a sensor whose neighbouring beams are ``azimuth_deg`` and ``elevation_deg``
     apart (degrees; ``None`` or not finite: no such spacing) reaching ``max_range`` (m), at ``positions`` ((k, 3), m).
     The coarser of the two steps counts; a sensor with neither is assumed fine (:data:`FINEST_STEP_DEG`).
-    :func:`bpy_pipeline.lidar.view.view_of` gives it for a sensor spec."""
+    :func:`bpy_pipeline.lidar.sensor.view.view_of` gives it for a sensor spec."""
     steps = [s for s in (azimuth_deg, elevation_deg) if s is not None and math.isfinite(s) and s > 0]
     step = math.radians(max(steps) if steps else FINEST_STEP_DEG)
     positions = np.asarray(positions, float).reshape(-1, 3)
@@ -201,7 +201,7 @@ class PathView(SensorView):
 
 
 def path_positions(trajectory, duration: float) -> np.ndarray:
-    """``(k, 3)`` polyline of the optical centre of ``trajectory`` (a :class:`~bpy_pipeline.lidar.platform.Trajectory`)
+    """``(k, 3)`` polyline of the optical centre of ``trajectory`` (a :class:`~bpy_pipeline.lidar.sensor.platform.Trajectory`)
     over frame-clock seconds 0 .. ``duration``: its position at both ends and every vertex between (exact: the
     platform moves straight between vertices and its offset is fixed in the world)."""
     s0, s1 = trajectory.distance([0.0, duration])
@@ -246,7 +246,7 @@ class PlannedPath:
 
 
 def path_view(trajectory, frames: int, frame_time: float, step: float, max_range: float, rotation_hz: float) -> PathView:
-    """The :class:`PathView` of ``trajectory`` (a :class:`~bpy_pipeline.lidar.platform.Trajectory`) over ``frames``
+    """The :class:`PathView` of ``trajectory`` (a :class:`~bpy_pipeline.lidar.sensor.platform.Trajectory`) over ``frames``
     frames of ``frame_time`` s, beams ``step`` rad apart, reaching ``max_range`` m, turning at ``rotation_hz``."""
     path = path_positions(trajectory, frames * frame_time)
     return PathView(np.asarray(path, float).reshape(-1, 3), step, float(max_range), fastest_speed(trajectory) / float(rotation_hz))

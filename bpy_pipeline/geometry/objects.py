@@ -194,9 +194,9 @@ def car_parts(style: CarStyle, height: float = NOMINAL_HEIGHT) -> dict:
 
 
 # Fittings (not in PARTS: the parts every car has): licence plates and lamps, each with the reflectance model
-# (lidar/materials.py) its ``lidar_material`` names. The builders' cars carry them unless ``scene.car_fittings:
+# (lidar/effects/materials.py) its ``lidar_material`` names. The builders' cars carry them unless ``scene.car_fittings:
 # false`` (the population's ``car.fittings``); inserted cars with ``scene.car_fittings``. Their reflectivities
-# differ from every paint's, so an instance's parts keep their models apart (lidar/materials.py).
+# differ from every paint's, so an instance's parts keep their models apart (lidar/effects/materials.py).
 FITTINGS = {"plates": ("retroreflector", 0.8), "lights": ("glossy_paint", 0.6)}  # part -> (lidar_material, reflectivity)
 
 

@@ -159,7 +159,7 @@ def quad_mesh(a, b, c, d) -> tuple[np.ndarray, np.ndarray]:
     return np.array([a, b, c, d], float), np.array([[0, 1, 2], [0, 2, 3]], np.int32)
 
 
-def transformed(mesh: Mesh, centre_xy, yaw: float, z: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+def transformed(mesh: tuple[np.ndarray, np.ndarray], centre_xy, yaw: float, z: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """``mesh`` turned by ``yaw`` about z and moved to ``(centre_xy, z)``."""
     c, s = math.cos(yaw), math.sin(yaw)
     v = mesh[0] @ np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]]) + [centre_xy[0], centre_xy[1], z]

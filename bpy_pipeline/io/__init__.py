@@ -1,6 +1,6 @@
 """Writers and readers for point clouds and run outputs; pure numpy, never imports bpy.
 
-Formats (DESIGN.md, "Output folder"): PLY (binary, all fields), SemanticKITTI (``.bin`` +
+Formats (docs/formats.md, docs/datasets.md): PLY (binary, all fields), SemanticKITTI (``.bin`` +
 ``.label``), LAS 1.4 (point format 6 + extra bytes), Pointcept NPY folders, a preview PNG and
 the run manifest. Every writer takes an ``(n,)`` :data:`~bpy_pipeline.lidar.points.POINT_DTYPE`
 array and writes under a temporary name, then renames (:mod:`.atomic`), so no half-written file
@@ -16,7 +16,7 @@ from .ply import read_ply, write_ply
 from .preview import encode_png, render_preview, write_preview
 from .semantickitti import read_bin, read_label, read_semantickitti, write_semantickitti
 from .writers import WRITERS, Writer, register_writer
-from . import formats  # noqa: F401,E402  (registers the built-in writers)
+from . import formats  # noqa: F401  (registers the built-in writers)
 
 __all__ = [
     "WRITERS",

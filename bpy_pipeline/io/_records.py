@@ -1,4 +1,4 @@
-"""Check and normalise the points every writer receives (DESIGN.md, "Per-point record"), and the
+"""Check and normalise the points every writer receives (:mod:`bpy_pipeline.lidar.points`), and the
 steps writers take through them.
 
 Writers convert and write :data:`WRITE_CHUNK` points at a time (:func:`chunks`), so what they

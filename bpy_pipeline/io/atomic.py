@@ -1,6 +1,6 @@
 """Write files and folders under a temporary name, then rename: nothing half-written under a final name.
 
-DESIGN.md, "Bad input": a frame that fails leaves no half-written file behind. Every writer in
+docs/datasets.md, "How a frame is committed": a frame that fails leaves no half-written file behind. Every writer in
 :mod:`bpy_pipeline.io` writes to a temporary sibling of its destination and renames it into place
 only when the write succeeded. The temporary name lives in the destination folder (so the rename
 stays on one file system and is atomic), starts with ``.`` and ends with ``.tmp``, so globs such

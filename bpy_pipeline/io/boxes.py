@@ -1,12 +1,9 @@
-"""Box label files shared by the box writers, and the box names older imports use.
+"""Box label files read back (tests, tools): KITTI ``label_2`` and OpenPCDet custom labels, as :data:`BOX_DTYPE` arrays.
 
 The boxes themselves are :mod:`bpy_pipeline.geometry.boxes` (fitting, frames, counts); their
 truncation and occlusion are cast by the annotate stage (:mod:`bpy_pipeline.stages.annotate`, with
-:mod:`bpy_pipeline.lidar.visibility`) before any writer runs; the layouts are :mod:`.kitti`
+:mod:`bpy_pipeline.lidar.cast.visibility`) before any writer runs; the layouts are :mod:`.kitti`
 (KITTI object layout), :mod:`.openpcdet` (OpenPCDet custom) and :mod:`.sustech` (SUSTechPOINTS).
-This module reads the label files back (tests, tools) and re-exports the names that lived here
-before the split, so ``from bpy_pipeline.io.boxes import BOX_DTYPE`` keeps working (the visibility
-names through a compat ``__getattr__`` this round: import them from :mod:`bpy_pipeline.lidar.visibility`).
 """
 
 from __future__ import annotations
@@ -16,31 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..geometry.boxes import (  # noqa: F401  (re-exported)
-    BOX_DTYPE,
-    boxes_in_frame,
-    count_points,
-    fit_boxes,
-    footprint_heading,
-    instance_triangles,
-    keep_boxes,
-    points_in_box,
-    wrap_angle,
-)
+from ..geometry.boxes import BOX_DTYPE, wrap_angle
 from .kitti import KITTI_AXES
-from .openpcdet import label_lines as openpcdet_lines  # noqa: F401  (re-exported)
-from .sustech import label_type as label_name  # noqa: F401  (re-exported)
-
-_VISIBILITY_NAMES = {"Coverage", "occlusion_levels", "subset_buffers", "surface_samples", "visibility", "_subset"}
-
-
-def __getattr__(name: str):
-    """The visibility names that lived here, still importable this round (compat; they are lidar's, above io)."""
-    if name in _VISIBILITY_NAMES:
-        from ..lidar import visibility as module
-
-        return module.subset_buffers if name == "_subset" else getattr(module, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def read_kitti_labels(path: str | os.PathLike, tr: np.ndarray | None = None) -> np.ndarray:

@@ -31,7 +31,7 @@ def _write_range_image(frame, out: Path) -> list[Path]:
 
 
 def _check_range_image(config) -> None:
-    from ..lidar.grid import check_grid
+    from ..lidar.sensor.grid import check_grid
 
     check_grid(config.sensor.spec, "output.formats: range_image")
 

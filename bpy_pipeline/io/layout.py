@@ -1,6 +1,6 @@
 """Where each format puts a frame inside the output folder, and one writer per format name.
 
-Output folder layout (DESIGN.md, "Output folder")::
+Output folder layout (docs/datasets.md, "What is in the folder")::
 
     OUT/ply/NNNNNN.ply
     OUT/sequences/SS/velodyne/NNNNNN.bin, OUT/sequences/SS/labels/NNNNNN.label

@@ -1,4 +1,4 @@
-"""The run manifest, ``OUT/manifest.json`` (DESIGN.md, "Output folder").
+"""The run manifest, ``OUT/manifest.json`` (docs/datasets.md, "What is in the folder").
 
 The manifest is a plain JSON object (indent 2, keys in insertion order, UTF-8, trailing
 newline). numpy scalars and arrays become JSON numbers and lists, paths become strings.

@@ -1,6 +1,6 @@
 """Range images: a frame of a rows x columns sensor as an organised image, with its labels, and a PNG to look at.
 
-Layout (:mod:`bpy_pipeline.lidar.grid`): row 0 is the highest beam, column ``c`` the ``c``-th
+Layout (:mod:`bpy_pipeline.lidar.sensor.grid`): row 0 is the highest beam, column ``c`` the ``c``-th
 column fired; each point goes to the pixel of its ``ring`` and firing ``time``. Files::
 
     OUT/range_image/NNNNNN.npy   (rows, columns) POINT_DTYPE: the organised cloud, every field
@@ -20,9 +20,9 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from ..lidar import grid
+from ..lidar.sensor import grid
 from ..lidar.points import POINT_DTYPE
-from ..lidar.sensors import SensorSpec
+from ..lidar.sensor.sensors import SensorSpec
 from ._records import as_points
 from .atomic import atomic_write
 from .layout import frame_stem

@@ -215,7 +215,7 @@ def read_las(path: Path) -> RealScan:
         las = laspy.read(str(path))
     except InputError:
         raise
-    except Exception as err:  # noqa: BLE001 - laspy raises many types on bad files
+    except Exception as err:  # laspy raises many types on bad files
         raise InputError(f"{path}: not a readable LAS file ({type(err).__name__}: {str(err).splitlines()[0] if str(err) else ''})") from None
     if len(las.points) != claimed:
         raise InputError(f"{path}: LAS header point count claims {claimed} records; {len(las.points)} were read")

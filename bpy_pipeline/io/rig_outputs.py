@@ -10,7 +10,7 @@
 ``flash_image`` (a flash camera, or a rig's flash cameras): ``flash_image/NNNNNN.npy`` (one camera)
 or ``flash_image/NNNNNN_sK.npy`` (sensor K of a rig), a ``(returns, rows, columns)`` structured
 array (``depth`` float32 m, ``intensity`` float32, ``semantic`` uint16, ``instance`` uint32; see
-:mod:`~bpy_pipeline.lidar.flash_returns`), and a PNG beside it: depth (grey, near bright) above
+:mod:`~bpy_pipeline.lidar.cast.flash_returns`), and a PNG beside it: depth (grey, near bright) above
 intensity, first return. The images are traced from the frame's exported scene by the flash stage
 (:mod:`bpy_pipeline.stages.flash`: a few sub-rays per pixel of a 96 x 16 camera, milliseconds); the
 writer only writes them.
@@ -23,9 +23,9 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from ..lidar.sensors import FLASH_PATTERNS, check_flash
+from ..lidar.sensor.sensors import FLASH_PATTERNS, check_flash
 from .atomic import atomic_write
-from .boxes import openpcdet_lines
+from .openpcdet import label_lines as openpcdet_lines
 from .layout import frame_stem
 from .ply import ply_header, write_ply
 from .preview import BACKGROUND, encode_png
@@ -73,7 +73,7 @@ def _check_rig(config) -> None:
 
 # ----------------------------------------------------------------------------- flash images
 def flash_image_array(images) -> np.ndarray:
-    """``(returns, rows, columns)`` :data:`FLASH_IMAGE_DTYPE` of :class:`~bpy_pipeline.lidar.flash_returns.FlashImages`
+    """``(returns, rows, columns)`` :data:`FLASH_IMAGE_DTYPE` of :class:`~bpy_pipeline.lidar.cast.flash_returns.FlashImages`
     (anything with ``depth``, ``intensity``, ``semantic`` and ``instance`` arrays of one shape)."""
     out = np.zeros(images.depth.shape, FLASH_IMAGE_DTYPE)
     for name in FLASH_IMAGE_DTYPE.names:

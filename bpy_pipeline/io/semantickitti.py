@@ -229,7 +229,7 @@ def write_index(out_dir: str | os.PathLike, records: list[dict], config) -> list
 
     import yaml
 
-    from ..lidar.sensors import frame_time
+    from ..lidar.sensor.sensors import frame_time
     from .class_maps import semantic_kitti_space_yaml, semantic_kitti_yaml
     from .kitti import calib_text, camera_matrices
     from .splits import SEQUENCES, split_of_sequence

@@ -62,7 +62,6 @@ def coarse_classes(path: Path | None = None) -> tuple[list[str], np.ndarray]:
     """The coarse level of the class table: its class names (index = coarse segment id) and a ``(raw ids,)``
     int32 lookup from raw ``semantic`` to coarse segment (-1 for unlabeled and ignored classes).
     A class the ``coarse`` section does not list is its own coarse class."""
-    import yaml
 
     from ..labels import LABELS_PATH
 

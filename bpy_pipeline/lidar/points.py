@@ -1,4 +1,4 @@
-"""The per-point record every scan returns and every writer reads (DESIGN.md, "Per-point record")."""
+"""The per-point record every scan returns and every writer reads."""
 
 import numpy as np
 

@@ -6,10 +6,10 @@ Each firing keeps at most one return (:func:`merge_returns`):
 - a new hit on an empty firing fills it (what the KITTI paper's point wall approximates);
 - a new hit behind a real return is discarded.
 
-The meshes go to Embree in the scan's sensor frame (:class:`~bpy_pipeline.lidar.raycast.RayCaster`
+The meshes go to Embree in the scan's sensor frame (:class:`~bpy_pipeline.lidar.cast.raycast.RayCaster`
 with the identity as its local frame); each firing leaves from its own origin (the sensor's
 position at firing time) along its own direction, so an inserted point lies exactly on a real
-firing's ray. Glass (car windows) is traced as the scanner traces it (:func:`~bpy_pipeline.lidar.scanner.trace_beams`).
+firing's ray. Glass (car windows) is traced as the scanner traces it (:func:`~bpy_pipeline.lidar.cast.scanner.trace_beams`).
 """
 
 from __future__ import annotations
@@ -21,18 +21,18 @@ import numpy as np
 
 from ..buffers import ObjectTable, SceneBuffers
 from ..geometry.objects import FITTINGS, OBJECT_TYPES, PARTS, ObjectPart, car_object
-from ..lidar.materials import CarGlass, glass_transmission, pane_internal, part_material
-from ..lidar.raycast import RayCaster
-from ..lidar.scanner import MirrorGlassRules, trace_beams
+from ..lidar.effects.materials import CarGlass, glass_transmission, pane_internal, part_material
+from ..lidar.cast.raycast import RayCaster
+from ..lidar.cast.scanner import MirrorGlassRules, trace_beams
 from .firings import Firings
-from .objects import mesh_file_parts  # noqa: F401 - re-exported: mixing.cast.mesh_file_parts stays importable
+from .objects import mesh_file_parts
 from .paint import CarPaint, paint_car
 from .placement import Placement
 
 
 def car_glass_parts(parts: list[ObjectPart], glass: CarGlass) -> list[ObjectPart]:
     """A car of :func:`~bpy_pipeline.geometry.objects.car_object` (its own frame, nose +x) with its windows split
-    into panes and its cabin darkened (``scene.car_glass``, :class:`~bpy_pipeline.lidar.materials.CarGlass`).
+    into panes and its cabin darkened (``scene.car_glass``, :class:`~bpy_pipeline.lidar.effects.materials.CarGlass`).
 
     The windows part becomes ``tinted_glass`` (side and rear panes; it keeps its place, so part j is still
     ``PARTS[j]``) and a ``windshield_glass`` part appended after the others: the triangles whose normal points
@@ -86,8 +86,8 @@ def object_buffers(placements: list[Placement], parts: list[list[ObjectPart]], i
     """Scene buffers of the inserted objects: one object row per part, the placement's class and instance.
 
     A part's material is a tracing material (diffuse, mirror, glass, absorber) or a reflectance model of
-    lidar/materials.py (``glossy_paint``, ``retroreflector``, ...: traced as diffuse, the model in the table's
-    ``surface`` column, :func:`~bpy_pipeline.lidar.materials.part_material`)."""
+    lidar/effects/materials.py (``glossy_paint``, ``retroreflector``, ...: traced as diffuse, the model in the table's
+    ``surface`` column, :func:`~bpy_pipeline.lidar.effects.materials.part_material`)."""
     vertices, triangles, rows, names, classes, sem, inst, material, reflect, surface = [], [], [], [], [], [], [], [], [], []
     offset = 0
     for k, (p, object_parts_) in enumerate(zip(placements, parts)):
@@ -136,9 +136,6 @@ class InsertedHits:
     cos_incidence: np.ndarray
     gain: np.ndarray
     bounces: np.ndarray
-
-
-Hits = InsertedHits  # the old name (it collided with the ray caster's lidar.raycast.Hits); kept importable for this round
 
 
 def bounding_spheres(buffers: SceneBuffers) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -1,7 +1,7 @@
 """A dense real scan resampled into a sparser sensor's pattern and mounting height (the parking paper, section 4.2).
 
 Two methods, both from the dense scan's returns (``(n, 3)`` points in its sensor frame) to the
-target sensor's firings (a :class:`~bpy_pipeline.lidar.sensors.SensorSpec`, mounted ``height``
+target sensor's firings (a :class:`~bpy_pipeline.lidar.sensor.sensors.SensorSpec`, mounted ``height``
 metres above or below the source: ``target_offset`` is the target's optical centre in the
 source frame):
 
@@ -28,8 +28,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..buffers import SceneBuffers
-from ..lidar.raycast import RayCaster
-from ..lidar.sensors import azimuths, elevations, spherical_directions
+from ..lidar.cast.raycast import RayCaster
+from ..lidar.sensor.sensors import azimuths, elevations, spherical_directions
 
 
 def mesh_range_image(points: np.ndarray, valid: np.ndarray, max_jump: float = 0.1, min_jump: float = 0.3, wrap: bool = True) -> tuple[np.ndarray, np.ndarray]:

@@ -9,7 +9,7 @@ median offset from it), which reproduces the returned firings to about 0.03 deg.
 
 nuScenes sweeps are motion compensated: a return was moved to the sensor pose at the sweep's
 end, and an empty firing (zero range) lands on the sensor's position at firing time. Those
-positions lie on a straight line in the column index (:func:`~bpy_pipeline.lidar.fitting.sensor_track`),
+positions lie on a straight line in the column index (:func:`~bpy_pipeline.lidar.fit.fitting.sensor_track`),
 the origin of every firing of that column; ranges and directions are measured from it.
 
 A scan of returns only (KITTI) has no ring field: rings are rebuilt from the scan order (a new
@@ -32,7 +32,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..io.real_scans import RealScan
-from ..lidar.fitting import sensor_track
+from ..lidar.fit.fitting import sensor_track
 
 EMPTY_RADIUS = 0.5  # m: returns of an organised file nearer than this are candidates for empty firings
 
@@ -109,14 +109,14 @@ def _wrap(deg: np.ndarray) -> np.ndarray:
 def _spec(preset: str | None):
     if not preset:
         return None
-    from ..lidar.sensors import resolve_sensor
+    from ..lidar.sensor.sensors import resolve_sensor
 
     return resolve_sensor({"preset": preset}, "scene.preset")
 
 
 def preset_elevations(spec) -> np.ndarray:
     """``(rings,)`` float64 degrees of a preset's rings: its table, or its pattern's evenly spaced rows."""
-    from ..lidar.sensors import elevations
+    from ..lidar.sensor.sensors import elevations
 
     return np.asarray(spec.elevations_deg, float) if spec.elevations_deg else np.asarray(elevations(spec), float)
 
@@ -351,7 +351,7 @@ def unorganised_firings(scan: RealScan, preset: str | None = None, step_deg: flo
     rings = int(ring.max()) + 1
     if spec is not None:
         check_preset_fits(scan, spec, el, ring, rings, nearest=scan.ring is None and any("nearest elevation" in note for note in approximate))
-        from ..lidar.sensors import azimuth_step
+        from ..lidar.sensor.sensors import azimuth_step
 
         step = azimuth_step(spec)
         period = 1.0 / spec.rotation_hz

@@ -11,7 +11,7 @@ boxes). The real-scan frame plan runs them as its stages (:mod:`bpy_pipeline.sta
 Labels: real returns get ``background_class`` or, from a SemanticKITTI file with
 ``keep_labels``, their class mapped by name to the project's table (:data:`SEMANTICKITTI_NAMES`;
 unknown ones the background) and their instance; inserted returns their object's class and an
-instance above every real one. Boxes (:data:`~bpy_pipeline.io.boxes.BOX_DTYPE`): each inserted
+instance above every real one. Boxes (:data:`~bpy_pipeline.geometry.boxes.BOX_DTYPE`): each inserted
 object with truncation (the share of its surface outside the firings' azimuth span) and
 occlusion (visible / unoccluded firings: those whose return is the object, against those that
 hit it when it is alone); each of ``real_boxes`` with its occlusion updated from the share of its
@@ -32,10 +32,10 @@ from ..errors import InputError
 from ..geometry.boxes import BOX_DTYPE, footprint_heading
 from ..io.real_scans import RealScan, read_real_scan
 from ..labels import ClassTable, load_class_table
-from ..lidar.effects import apply_effects
+from ..lidar.effects.apply import apply_effects
 from ..lidar.points import BEAM_DTYPE, POINT_DTYPE
-from ..lidar.sensors import resolve_sensor
-from ..lidar.visibility import occlusion_levels, subset_buffers, surface_samples
+from ..lidar.sensor.sensors import resolve_sensor
+from ..lidar.cast.visibility import occlusion_levels, subset_buffers, surface_samples
 from . import noise as injections
 from .cast import InsertedHits, cast_firings, glass_rules, merge_returns, near_objects, object_buffers, object_parts
 from .firings import Firings, angles_deg, recover_firings

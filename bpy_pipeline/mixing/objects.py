@@ -49,7 +49,7 @@ def read_ply_groups(p: Path) -> list[Group]:
         vertex, face = ply["vertex"], ply["face"]
         v = np.column_stack([vertex[k] for k in "xyz"]).astype(np.float64)
         faces = [np.asarray(f, np.int64) for f in face.data[face.data.dtype.names[0]]]
-    except Exception as err:  # noqa: BLE001 - plyfile raises many types on a lying header or short data
+    except Exception as err:  # plyfile raises many types on a lying header or short data
         raise InputError(f"{p}: not a readable PLY mesh with vertex x y z and faces ({type(err).__name__}: {str(err).splitlines()[0] if str(err) else ''})") from None
     return [(v, faces, "")]
 
@@ -225,7 +225,7 @@ def read_gltf_groups(p: Path) -> list[Group]:
         raise
     except OSError as err:
         raise InputError(f"{p}: cannot read ({err.strerror or err})") from None
-    except Exception as err:  # noqa: BLE001 - JSON, keys, indices, struct: a lying file, one line
+    except Exception as err:  # JSON, keys, indices, struct: a lying file, one line
         raise InputError(f"{p}: not a readable glTF 2.0 mesh ({type(err).__name__}: {str(err).splitlines()[0] if str(err) else ''})") from None
     return [(np.concatenate(v), list(np.concatenate(f)), "glass" if g else "") for g, (v, f, _) in sorted(groups.items())]
 

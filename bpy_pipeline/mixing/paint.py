@@ -12,7 +12,7 @@ parts it takes, :func:`~bpy_pipeline.mixing.cast.car_part_names`, and which of t
 ``cabin``   dashboard and seats, seen through the glass
 ``tyres``, ``plates``, ``lights``
 
-Each part is ``{model: NAME, ...its parameters}`` with ``NAME`` one of ``lidar/materials.py`` ``MATERIAL_MODELS``
+Each part is ``{model: NAME, ...its parameters}`` with ``NAME`` one of ``lidar/effects/materials.py`` ``MATERIAL_MODELS``
 (``glossy_paint``: a clear coat's lobe over a diffuse pigment; ``dark_paint``: a fixed diffuse reflectivity;
 ``retroreflector``; ``wet``), or ``{}``: the part keeps its material of before (the scene's diffuse reflectivity, a
 plate's retroreflector). The body's pigment (``glossy_paint``'s ``diffuse``, ``dark_paint``'s ``reflectivity``, else the
@@ -34,7 +34,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..geometry.objects import ObjectPart
-from ..lidar.materials import MATERIAL_MODELS, MaterialsConfig, apply_materials, check_materials
+from ..lidar.effects.materials import MATERIAL_MODELS, MaterialsConfig, apply_materials, check_materials
 from ..registry import Registry
 
 
@@ -116,7 +116,7 @@ def part_model(spec, where: str, pigment: float | None = None) -> PartModel | No
     if pigment is not None and PIGMENT.get(name) and PIGMENT[name] not in rest:
         rest[PIGMENT[name]] = float(pigment)
     params = params_type(**{k: float(v) for k, v in rest.items()})
-    try:  # the models' own ranges (lidar/materials.py check_materials), named as this part's keys
+    try:  # the models' own ranges (lidar/effects/materials.py check_materials), named as this part's keys
         check_materials(replace(MaterialsConfig(), **{name: params}), "@")
     except InputError as err:
         raise InputError(str(err).replace(f"@.{name}.", f"{where}.", 1)) from None
@@ -197,7 +197,7 @@ def paint_car(parts: list[ObjectPart], names: list[str], paint: CarPaint, rng: n
 def paint_beam(points: np.ndarray, beam: np.ndarray, rows: np.ndarray, paints: list, materials, incidence_exponent: float, objects=None) -> np.ndarray:
     """``beam`` with every return's reflectivity set so that the intensity model's ``rho cos^k`` is its model's apparent
     reflectance: the returns on a part with its own model (``paints[rows]``, :class:`PartModel`) by that model, the
-    others by ``effects.materials`` as before (:func:`~bpy_pipeline.lidar.materials.apply_materials`); a copy.
+    others by ``effects.materials`` as before (:func:`~bpy_pipeline.lidar.effects.materials.apply_materials`); a copy.
 
     points : (p,) POINT_DTYPE; beam : (p,) BEAM_DTYPE; rows : (p,) object row of each return; paints : per object row
     (PartModel or None); materials : ``effects.materials``; incidence_exponent : ``effects.intensity``'s ``k``."""

@@ -9,8 +9,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Literal
 
+from ..schema import meta
 from ..geometry.placement import Distribution
-from ..lidar.materials import CarGlass
+from ..lidar.effects.materials import CarGlass
 from .paint import CarPaint
 
 
@@ -21,9 +22,9 @@ class ObjectBox:
     a file's own)."""
 
     type: str = "car"
-    center: tuple[float, float, float] = (10.0, 0.0, 0.0)
-    size: tuple[float, float, float] = (0.0, 0.0, 0.0)  # 0: the type's nominal size
-    yaw_deg: float = 0.0
+    center: tuple[float, float, float] = field(default=(10.0, 0.0, 0.0), metadata=meta("m", help="box centre, sensor frame"))
+    size: tuple[float, float, float] = field(default=(0.0, 0.0, 0.0), metadata=meta("m", help="0: the type's nominal size"))
+    yaw_deg: float = field(default=0.0, metadata=meta("deg"))
     class_name: str = field(default="", metadata={"key": "class"})  # "" : the type's class (car, person, rider, robot arm; a file's by its name)
 
 
@@ -31,9 +32,9 @@ class ObjectBox:
 class RemoveBox:
     """A box whose real returns are cut out before insertion (to swap a real object for a synthetic one)."""
 
-    center: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    size: tuple[float, float, float] = (1.0, 1.0, 1.0)
-    yaw_deg: float = 0.0
+    center: tuple[float, float, float] = field(default=(0.0, 0.0, 0.0), metadata=meta("m", help="box centre, sensor frame"))
+    size: tuple[float, float, float] = field(default=(1.0, 1.0, 1.0), metadata=meta("m"))
+    yaw_deg: float = field(default=0.0, metadata=meta("deg"))
 
 
 @dataclass(frozen=True)
@@ -57,15 +58,15 @@ class ParkingRule:
     distance: Distribution = field(default_factory=lambda: Distribution("normal", 10.0, 20.0, 2.5, 20.0))
     height: Distribution = field(default_factory=lambda: Distribution("uniform", 1.625, 0.0, 1.55, 1.70))
     heading: Distribution = field(default_factory=lambda: Distribution("uniform", 0.0, 0.0, -180.0, 180.0))
-    rotation_step_deg: float = 10.0
-    rotations: int = 36
-    max_consecutive_failures: int = 10
-    max_real_points: int = 5
-    box_margin: float = 0.1
-    min_ground_points: int = 3
-    max_hidden_fraction: float = 0.5
-    near_rejection_distance: float = 5.0
-    near_rejection_probability: float = 0.1
+    rotation_step_deg: float = field(default=10.0, metadata=meta("deg"))
+    rotations: int = field(default=36, metadata=meta(""))
+    max_consecutive_failures: int = field(default=10, metadata=meta(""))
+    max_real_points: int = field(default=5, metadata=meta(""))
+    box_margin: float = field(default=0.1, metadata=meta("", help="the box grown by this share when real returns in it are counted (0.1: 10 %)"))
+    min_ground_points: int = field(default=3, metadata=meta(""))
+    max_hidden_fraction: float = field(default=0.5, metadata=meta(""))
+    near_rejection_distance: float = field(default=5.0, metadata=meta("m"))
+    near_rejection_probability: float = field(default=0.1, metadata=meta(""))
 
 
 @dataclass(frozen=True)
@@ -79,12 +80,12 @@ class KittiRule:
 
     enabled: bool = False
     type: str = "car"
-    count: int = 5
-    candidates: int = 200
-    collision_distance: float = 5.0
-    snap_distance: float = 0.0
-    max_range: float = 50.0
-    min_range: float = 0.0
+    count: int = field(default=5, metadata=meta(""))
+    candidates: int = field(default=200, metadata=meta(""))
+    collision_distance: float = field(default=5.0, metadata=meta("m"))
+    snap_distance: float = field(default=0.0, metadata=meta("m"))
+    max_range: float = field(default=50.0, metadata=meta("m"))
+    min_range: float = field(default=0.0, metadata=meta("m"))
 
 
 @dataclass(frozen=True)
@@ -102,12 +103,12 @@ class NoiseInjections:
     ``scene.noise`` may also name a profile of :data:`NOISE_PROFILES` (``scene.noise: parking_paper_best``).
     """
 
-    dropout_max: float = 0.0
-    range_sigma: tuple[float, float] = (0.0, 0.0)
-    interior_points: int = 0
-    cutoff_probability: float = 0.0
-    cutoff_fraction: tuple[float, float] = (0.2, 0.8)
-    class_flip: float = 0.0
+    dropout_max: float = field(default=0.0, metadata=meta(""))
+    range_sigma: tuple[float, float] = field(default=(0.0, 0.0), metadata=meta("m"))
+    interior_points: int = field(default=0, metadata=meta(""))
+    cutoff_probability: float = field(default=0.0, metadata=meta(""))
+    cutoff_fraction: tuple[float, float] = field(default=(0.2, 0.8), metadata=meta(""))
+    class_flip: float = field(default=0.0, metadata=meta(""))
 
     @classmethod
     def named(cls, name: str, path: str = "scene.noise") -> "NoiseInjections":
@@ -147,22 +148,22 @@ class SupportParams:
         scan do not depend on the frame's draws)
     """
 
-    threshold: float = 0.05
-    iterations: int = 300
-    max_tilt_deg: float = 10.0
-    max_planes: int = 10
-    min_inliers: int = 30
-    voxel: float = 0.1
-    eps: float = 0.4
-    min_samples: int = 4
-    min_area: float = 0.25
-    min_width: float = 0.3
-    desk_height: tuple[float, float] = (0.4, 1.2)
-    floor_band: float = 0.2
-    headroom: float = 0.8
-    max_covered: float = 0.25
-    sample: int = 20000
-    seed: int = 0
+    threshold: float = field(default=0.05, metadata=meta("m", help="a plane's inlier distance"))
+    iterations: int = field(default=300, metadata=meta(""))
+    max_tilt_deg: float = field(default=10.0, metadata=meta("deg"))
+    max_planes: int = field(default=10, metadata=meta(""))
+    min_inliers: int = field(default=30, metadata=meta(""))
+    voxel: float = field(default=0.1, metadata=meta("m", help="the cells a plane's inliers are thinned to"))
+    eps: float = field(default=0.4, metadata=meta("m", help="DBSCAN: cells within eps"))
+    min_samples: int = field(default=4, metadata=meta(""))
+    min_area: float = field(default=0.25, metadata=meta("m^2"))
+    min_width: float = field(default=0.3, metadata=meta("m"))
+    desk_height: tuple[float, float] = field(default=(0.4, 1.2), metadata=meta("m"))
+    floor_band: float = field(default=0.2, metadata=meta("m", help="surfaces this near the floor's plane are floor"))
+    headroom: float = field(default=0.8, metadata=meta("m"))
+    max_covered: float = field(default=0.25, metadata=meta(""))
+    sample: int = field(default=20000, metadata=meta(""))
+    seed: int = field(default=0, metadata=meta(""))
 
 
 @dataclass(frozen=True)
@@ -179,21 +180,21 @@ class RealPopulation:
     min_range, max_range : m from the sensor in the plane (0: no limit)
     """
 
-    people: int = 0
-    arms: int = 0
+    people: int = field(default=0, metadata=meta(""))
+    arms: int = field(default=0, metadata=meta(""))
     people_on: list[str] = field(default_factory=lambda: ["floor"])
     arms_on: list[str] = field(default_factory=lambda: ["desk"])
     person_height: Distribution = field(default_factory=lambda: Distribution("normal", 1.72, 0.09, 1.50, 1.98))
-    tries: int = 60
-    keep_out: float = 0.3
-    clearance: float = 0.1
-    max_points: int = 0
-    margin: float = 0.03
-    reach: float = 0.3
-    arm_reach: float = 0.2
-    step: float = 0.05
-    min_range: float = 1.0
-    max_range: float = 0.0
+    tries: int = field(default=60, metadata=meta(""))
+    keep_out: float = field(default=0.3, metadata=meta("m", help="between objects' boxes"))
+    clearance: float = field(default=0.1, metadata=meta("m"))
+    max_points: int = field(default=0, metadata=meta(""))
+    margin: float = field(default=0.03, metadata=meta("m", help="an arm's capsules keep this far from real returns"))
+    reach: float = field(default=0.3, metadata=meta("m"))
+    arm_reach: float = field(default=0.2, metadata=meta("m"))
+    step: float = field(default=0.05, metadata=meta("m"))
+    min_range: float = field(default=1.0, metadata=meta("m"))
+    max_range: float = field(default=0.0, metadata=meta("m"))
     supports: SupportParams = field(default_factory=SupportParams)
 
 
@@ -216,7 +217,7 @@ class RealScanScene:
         the frames made before the body set, byte for byte). Explicit ``objects`` keep their box either way.
     population : people and robot arms on the floors and desks found in the scan's points (:class:`RealPopulation`,
         :mod:`.supports`; off with no people and no arms)
-    car_glass : what an inserted car's windows and cabin do to the beam (lidar/materials.py :class:`CarGlass`: Fresnel
+    car_glass : what an inserted car's windows and cabin do to the beam (lidar/effects/materials.py :class:`CarGlass`: Fresnel
         and tint by incidence, a dark cabin; opt-in, ``enabled: true``; off: the windows of before)
     car_fittings : licence plates (retroreflector) and lamps (glossy) on every inserted car, their models applied
         to the inserted returns (geometry/objects.py ``car_fittings``)
@@ -237,7 +238,7 @@ class RealScanScene:
     keep_labels: bool = True
     real_boxes: list[ObjectBox] = field(default_factory=list)
     ground: Literal["auto", "ransac", "patchwork"] = "auto"
-    max_range: float = 0.0
+    max_range: float = field(default=0.0, metadata=meta("m"))
     car_bodies: Literal["all", "classic"] = "all"
     population: RealPopulation = field(default_factory=RealPopulation)
     car_glass: CarGlass = field(default_factory=CarGlass)

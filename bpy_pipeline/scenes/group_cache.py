@@ -66,7 +66,7 @@ def load(name: str, version: int) -> bpy.types.NodeTree | None:
             names = list(source.node_groups)
             clash = name not in names or any(n in bpy.data.node_groups for n in names)
             target.node_groups = [] if clash else names
-    except Exception:  # noqa: BLE001 - a damaged or foreign file: made again, and kept anew
+    except Exception:  # a damaged or foreign file: made again, and kept anew
         path.unlink(missing_ok=True)
         return None
     finally:

@@ -32,7 +32,7 @@ def remove_objects(objects: list) -> None:
 
 
 def tag(obj: bpy.types.Object, class_name: str | None = None, material: str = "diffuse", reflectivity: float = 0.5, instance: int | None = None):
-    """Set the ``lidar_*`` custom properties export reads (DESIGN.md, "One class table")."""
+    """Set the ``lidar_*`` custom properties export reads (docs/builders.md; the classes are assets_manifest/labels.yaml)."""
     if class_name is not None:
         obj["lidar_class"] = class_name
     obj["lidar_material"] = material

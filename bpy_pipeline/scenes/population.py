@@ -233,9 +233,6 @@ class StandingPlaces:
     source: str  # "lidar_walkable", "detected"
 
 
-Surfaces = StandingPlaces  # the old name (it collided with the scanner's rules, lidar.scanner.Surfaces)
-
-
 def _class_rows(buffers, names) -> np.ndarray:
     """``(m,)`` bool: triangles of objects whose class is one of ``names``."""
     wanted = {n.lower() for n in names}

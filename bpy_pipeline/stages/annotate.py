@@ -2,7 +2,7 @@
 
 The boxes are fitted around each labelled object's triangles (:mod:`bpy_pipeline.geometry.boxes`);
 their truncation and occlusion come from one visibility cast of the sensor's own rays
-(:mod:`bpy_pipeline.lidar.visibility`), here, before any writer runs: writers only write.
+(:mod:`bpy_pipeline.lidar.cast.visibility`), here, before any writer runs: writers only write.
 """
 
 from __future__ import annotations
@@ -13,9 +13,9 @@ from ..buffers import SceneBuffers
 from ..config import Config
 from ..frame import Frame, Run
 from ..geometry.boxes import boxes_in_frame, count_points, fit_boxes, keep_boxes
-from ..lidar.sensor_rays import SensorRays
-from ..lidar.sensors import angular_resolution
-from ..lidar.visibility import occlusion_levels, visibility
+from ..lidar.sensor.sensor_rays import SensorRays
+from ..lidar.sensor.sensors import angular_resolution
+from ..lidar.cast.visibility import occlusion_levels, visibility
 from ..rig import out_of_reach
 from .view import scan_surfaces
 
@@ -28,7 +28,7 @@ def world_boxes(buffers: SceneBuffers, config: Config, pose: np.ndarray, points:
     skip_unseen : leave out of the visibility trace the boxes no ray of the sensor can pass near (outside its
         field of view or range, :func:`~bpy_pipeline.rig.out_of_reach`): they get what the trace would give them
         (truncation 1, no visible or unoccluded ray); a rig's narrow sensors see a few of a street's boxes each
-    caster : the scan's :class:`~bpy_pipeline.lidar.raycast.RayCaster` of ``buffers`` at ``pose``, reused by the cast (built when ``None``)
+    caster : the scan's :class:`~bpy_pipeline.lidar.cast.raycast.RayCaster` of ``buffers`` at ``pose``, reused by the cast (built when ``None``)
     direct_returns : the scan's ``frame.direct_returns`` (:func:`~.scan.counts_direct_returns`), which give the ``visible``
         counts when every object of a box's instance is of a box class (:func:`boxes_hold_their_instances`)
     """

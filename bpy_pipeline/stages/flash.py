@@ -5,8 +5,8 @@ from __future__ import annotations
 
 from ..frame import Frame, Run
 from ..io.rig_outputs import FLASH_RETURNS, FLASH_SEPARATION, FLASH_SUB_RAYS, flash_image_array
-from ..lidar.flash_returns import flash_images
-from ..lidar.sensors import FLASH_PATTERNS
+from ..lidar.cast.flash_returns import flash_images
+from ..lidar.sensor.sensors import FLASH_PATTERNS
 from .view import scan_surfaces
 
 

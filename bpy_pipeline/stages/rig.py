@@ -16,8 +16,8 @@ import numpy as np
 from ..config import Config, SensorConfig
 from ..frame import Frame, Run, StageFunction
 from ..geometry.boxes import boxes_in_frame, keep_boxes
-from ..lidar.sensors import frame_time
-from ..lidar.visibility import occlusion_levels
+from ..lidar.sensor.sensors import frame_time
+from ..lidar.cast.visibility import occlusion_levels
 from ..rig import RigFrame, member_rng, merge_clouds, merged_boxes
 from .annotate import world_boxes
 from .scan import effects_stage, scan_stage

@@ -14,14 +14,14 @@ from ..config import Config, sensor_trajectory
 from ..frame import Frame, Run
 from ..geometry.clearance import enclosing_instance
 from ..geometry.transforms import transform_points
-from ..lidar.divergence import scan_footprint_chunks
-from ..lidar.effects import apply_effects
-from ..lidar.mirror_sensor import drop_at_edges
-from ..lidar.platform import Trajectory
+from ..lidar.effects.divergence import scan_footprint_chunks
+from ..lidar.effects.apply import apply_effects
+from ..lidar.sensor.mirror_sensor import drop_at_edges
+from ..lidar.sensor.platform import Trajectory
 from ..lidar.points import POINT_DTYPE
-from ..lidar.scanner import scan_chunks
-from ..lidar.sensor_rays import CHUNK_RAYS
-from ..lidar.sensors import ray_count
+from ..lidar.cast.scanner import scan_chunks
+from ..lidar.sensor.sensor_rays import CHUNK_RAYS
+from ..lidar.sensor.sensors import ray_count
 from .scene import pose_stage
 from .view import scan_surfaces
 
@@ -31,7 +31,7 @@ MAX_RESERVED_POINTS = 1 << 25  # point records reserved up front (address space 
 def moving_objects(frame: Frame) -> np.ndarray | None:
     """``(k,)`` bool per row of ``frame.buffers.objects``: the objects the builder placed for this frame
     (those it gives 3D boxes: cars, robots, people, road users), traced by a small caster of their own
-    while the rest of the scene's is kept (:class:`~bpy_pipeline.lidar.raycast.CasterCache`). ``None`` when
+    while the rest of the scene's is kept (:class:`~bpy_pipeline.lidar.cast.raycast.CasterCache`). ``None`` when
     the scene placed none. A function of the frame alone, so frame k gives the same bytes after
     frame k - 1 as alone."""
     if not frame.scene.headings:
@@ -57,7 +57,7 @@ def scan_stage(frame: Frame, run: Run) -> None:
 
 def counts_direct_returns(config: Config, frame: Frame) -> bool:
     """Whether the effects stage keeps the instance of each return that met no mirror (``frame.direct_returns``), so
-    the boxes count their ``visible`` rays from the scan (:func:`~bpy_pipeline.lidar.visibility.visibility`'s
+    the boxes count their ``visible`` rays from the scan (:func:`~bpy_pipeline.lidar.cast.visibility.visibility`'s
     ``direct_returns``) instead of tracing again the rays that pass them. It does when boxes are asked for and that
     trace would cast the scan's own rays from the scan's pose and make the same draws: a sensor that stands still
     during the frame (the boxes' trace casts from the frame's first pose), one ray a firing (no beam divergence), rays

@@ -7,7 +7,7 @@ from ..builders.base import BUILDERS, BuildContext, BuildResult
 from ..config import Config
 from ..errors import InputError
 from ..frame import Frame, Run, frame_rng
-from ..lidar.sensors import frame_time
+from ..lidar.sensor.sensors import frame_time
 from .view import frames_per_scene, scene_trajectory, scene_view, sensor_pose, sensor_poses
 
 

@@ -10,10 +10,10 @@ from ..config import Config, sensor_trajectory
 from ..geometry.clearance import NO_POSES, PATH_STEP, SensorPoses
 from ..geometry.lod import PathView, PlannedPath, path_view
 from ..geometry.transforms import pose_matrix
-from ..lidar.platform import Trajectory
-from ..lidar.scanner import MirrorGlassRules
-from ..lidar.sensors import frame_time, mount_offset
-from ..lidar.view import view_of
+from ..lidar.sensor.platform import Trajectory
+from ..lidar.cast.scanner import MirrorGlassRules
+from ..lidar.sensor.sensors import frame_time, mount_offset
+from ..lidar.sensor.view import view_of
 from ..rig import RigSensor, RigView, field_of_view
 
 

@@ -93,7 +93,7 @@ class Chroot:
         return subprocess.run(command, capture_output=True, text=True, timeout=timeout)
 
     def popen(self, args: list, env: dict | None = None, log: Path | None = None) -> subprocess.Popen:
-        out = open(log, "w") if log else subprocess.DEVNULL  # noqa: SIM115 - closed with the process
+        out = open(log, "w") if log else subprocess.DEVNULL  # closed with the process
         return subprocess.Popen(self.command(args, env), stdout=out, stderr=subprocess.STDOUT)
 
     def blender(self, args: list, home: Path, timeout: float = 600, cwd: Path | None = None) -> subprocess.CompletedProcess:

@@ -15,13 +15,13 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-import bpy  # noqa: E402
-import numpy as np  # noqa: E402
+import bpy
+import numpy as np
 
-from bpy_pipeline import config as cfg  # noqa: E402
-from bpy_pipeline.export import export_scene  # noqa: E402
-from bpy_pipeline.labels import load_class_table  # noqa: E402
-from bpy_pipeline.pipeline import build_frame_scene  # noqa: E402
+from bpy_pipeline import config as cfg
+from bpy_pipeline.export import export_scene
+from bpy_pipeline.labels import load_class_table
+from bpy_pipeline.stages.scene import build_frame_scene
 
 args = sys.argv[sys.argv.index("--") + 1 :]
 out, sets = Path(args[0]), [a for a in args[1:] if a != "--set"]

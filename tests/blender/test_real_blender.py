@@ -290,7 +290,8 @@ def full_default(work):
 import bpy
 bpy.ops.wm.read_factory_settings(use_empty=True)
 from bpy_pipeline import config as cfg
-from bpy_pipeline.pipeline import build_frame_scene, run_frames
+from bpy_pipeline.plan import run_frames
+from bpy_pipeline.stages.scene import build_frame_scene
 config = cfg.config_from_dict({{}})
 build_frame_scene(config, 0)
 for _ in run_frames(config, {str(out)!r}, build=False, mode="overwrite"):

@@ -3,4 +3,4 @@
 The package's names are its ``params``' (``bpy_pipeline.builders.blend`` was that module before the builders became packages).
 """
 
-from .params import *  # noqa: F401,F403
+from .params import *  # noqa: F403

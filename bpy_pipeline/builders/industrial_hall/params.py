@@ -6,8 +6,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ...schema import meta
 from ...errors import InputError
-from ..base import Builder, BuildContext, BuildResult, Distribution, check_distribution, check_sizes, refuse_sensor_placement, register_builder
+from ..base import Builder, BuildContext, BuildResult, check_sizes, refuse_sensor_placement, register_builder
+from ...geometry.placement import Distribution, check_distribution
 
 
 @dataclass(frozen=True)
@@ -28,28 +30,28 @@ class IndustrialHallScene:
     meshes (empty: assets_manifest/assets.yaml); the procedural people are used when it lists none.
     """
 
-    length: float = 16.0
-    width: float = 12.0
-    height: float = 5.0
-    wall_thickness: float = 0.3
-    desk_rows: int = 2
-    desks_per_row: int = 3
-    desk_size: tuple[float, float] = (1.6, 0.8)
-    desk_height: float = 0.72
-    shelves: int = 3
-    shelf_size: tuple[float, float, float] = (2.0, 0.6, 2.2)
-    shelf_levels: int = 4
+    length: float = field(default=16.0, metadata=meta("m"))
+    width: float = field(default=12.0, metadata=meta("m"))
+    height: float = field(default=5.0, metadata=meta("m"))
+    wall_thickness: float = field(default=0.3, metadata=meta("m"))
+    desk_rows: int = field(default=2, metadata=meta(""))
+    desks_per_row: int = field(default=3, metadata=meta(""))
+    desk_size: tuple[float, float] = field(default=(1.6, 0.8), metadata=meta("m"))
+    desk_height: float = field(default=0.72, metadata=meta("m"))
+    shelves: int = field(default=3, metadata=meta(""))
+    shelf_size: tuple[float, float, float] = field(default=(2.0, 0.6, 2.2), metadata=meta("m"))
+    shelf_levels: int = field(default=4, metadata=meta(""))
     place_sensor: bool = True
-    sensor_height: float = 4.5
-    area_radius: float = 4.5  # people and robots stand within this of the point below the sensor (0: anywhere)
-    robots: int = 1
+    sensor_height: float = field(default=4.5, metadata=meta("m"))
+    area_radius: float = field(default=4.5, metadata=meta("m", help="people and robots stand within this of the point below the sensor (0: anywhere)"))
+    robots: int = field(default=1, metadata=meta(""))
     robot_model: str = ""
     people: Distribution = field(default_factory=lambda: Distribution("normal", 4.4, 2.0, 0.0, 12.0))
     person_height: Distribution = field(default_factory=lambda: Distribution("normal", 1.72, 0.09, 1.50, 1.98))
     poses: dict = field(default_factory=lambda: {"standing": 0.35, "walking": 0.35, "sitting": 0.15, "crouching": 0.15})
-    person_clearance: float = 0.05
-    placement_tries: int = 60
-    max_consecutive_failures: int = 10  # people in a row that fit nowhere end the frame's placement (with a warning)
+    person_clearance: float = field(default=0.05, metadata=meta("m"))
+    placement_tries: int = field(default=60, metadata=meta(""))
+    max_consecutive_failures: int = field(default=10, metadata=meta("", help="people in a row that fit nowhere end the frame's placement (with a warning)"))
     assets: str = ""
 
 

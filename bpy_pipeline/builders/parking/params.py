@@ -7,9 +7,11 @@ from typing import Literal
 
 import numpy as np
 
+from ...schema import meta
 from ...errors import InputError
 from ...geometry.clearance import CLEARANCE
-from ..base import Builder, BuildContext, BuildResult, Distribution, check_distribution, check_sizes, refuse_sensor_placement, register_builder
+from ..base import Builder, BuildContext, BuildResult, check_sizes, refuse_sensor_placement, register_builder
+from ...geometry.placement import Distribution, check_distribution
 
 
 @dataclass(frozen=True)
@@ -37,34 +39,34 @@ class ParkingScene:
     ``retroreflector`` and ``glossy_paint``; ``false`` leaves them out.
     """
 
-    length: float = 60.0
-    driveway_width: float = 6.5
-    bay_width: float = 2.5
-    bay_depth: float = 5.0
-    ceiling_height: float = 2.6
-    slab_thickness: float = 0.3
-    wall_thickness: float = 0.3
-    pillar_size: float = 0.6
-    pillar_every: int = 3
-    ramp_length: float = 16.0
-    wall_openings: int = 0
-    opening_width: float = 1.2
-    opening_height: float = 2.1
+    length: float = field(default=60.0, metadata=meta("m"))
+    driveway_width: float = field(default=6.5, metadata=meta("m"))
+    bay_width: float = field(default=2.5, metadata=meta("m"))
+    bay_depth: float = field(default=5.0, metadata=meta("m"))
+    ceiling_height: float = field(default=2.6, metadata=meta("m"))
+    slab_thickness: float = field(default=0.3, metadata=meta("m"))
+    wall_thickness: float = field(default=0.3, metadata=meta("m"))
+    pillar_size: float = field(default=0.6, metadata=meta("m"))
+    pillar_every: int = field(default=3, metadata=meta(""))
+    ramp_length: float = field(default=16.0, metadata=meta("m"))
+    wall_openings: int = field(default=0, metadata=meta(""))
+    opening_width: float = field(default=1.2, metadata=meta("m"))
+    opening_height: float = field(default=2.1, metadata=meta("m"))
     place_sensor: bool = True
-    sensor_height: float = 1.51
-    sensor_start: float = 4.0
-    sensor_step: float = 2.0
+    sensor_height: float = field(default=1.51, metadata=meta("m"))
+    sensor_start: float = field(default=4.0, metadata=meta("m"))
+    sensor_step: float = field(default=2.0, metadata=meta("m"))
     cars: Distribution = field(default_factory=lambda: Distribution("normal", 5.0, 4.0, 0.0, 40.0))
     car_distance: Distribution = field(default_factory=lambda: Distribution("normal", 10.0, 20.0, 2.5, 20.0))
     car_height: Distribution = field(default_factory=lambda: Distribution("uniform", 1.625, 0.0, 1.55, 1.70))
-    near_rejection_distance: float = 5.0
-    near_rejection_probability: float = 0.1
+    near_rejection_distance: float = field(default=5.0, metadata=meta("m"))
+    near_rejection_probability: float = field(default=0.1, metadata=meta(""))
     placement: Literal["free", "bays"] = "free"
-    rotation_step_deg: float = 10.0
-    rotations: int = 36
-    max_consecutive_failures: int = 10
-    min_visible_fraction: float = 0.3
-    car_clearance: float = 0.3
+    rotation_step_deg: float = field(default=10.0, metadata=meta("deg"))
+    rotations: int = field(default=36, metadata=meta(""))
+    max_consecutive_failures: int = field(default=10, metadata=meta(""))
+    min_visible_fraction: float = field(default=0.3, metadata=meta(""))
+    car_clearance: float = field(default=0.3, metadata=meta("m"))
     car_fittings: bool = True
 
 

@@ -31,7 +31,7 @@ from ...geometry.clearance import NO_POSES
 from ...geometry.objects import COLOURS, STYLES, car_meshes, car_surfaces, style_size
 from ...geometry.indoor import parking_station
 from ...geometry.placement import FloorBoxPlacer, insert_sequentially, sample, sample_count, turn_about
-from ...lidar.raycast import RayCaster
+from ...lidar.cast.raycast import RayCaster
 from ...scenes import box_nodes
 from ...scenes.objects import mesh_data, scene_collection, tag
 from . import level_nodes as parking_nodes

@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Literal
 
+from ...schema import meta
 from ...buffers import MATERIALS
 from ...errors import InputError
 from ..base import Builder, BuildContext, BuildResult, register_builder
@@ -22,13 +23,13 @@ class Shape:
     """
 
     type: Literal["plane", "box", "sphere", "cylinder"]
-    size: float | list[float] = 1.0
-    position: Vec3 = (0.0, 0.0, 0.0)
-    rotation_deg: Vec3 = (0.0, 0.0, 0.0)
+    size: float | list[float] = field(default=1.0, metadata=meta("m", help="plane, box: edge length (a number or [x, y] / [x, y, z]); sphere: radius; cylinder: [radius, height]"))
+    position: Vec3 = field(default=(0.0, 0.0, 0.0), metadata=meta("m"))
+    rotation_deg: Vec3 = field(default=(0.0, 0.0, 0.0), metadata=meta("deg"))
     class_name: str = field(default="unlabeled", metadata={"key": "class"})
     material: str = "diffuse"  # one of buffers.MATERIALS
-    reflectivity: float = 0.5
-    segments: int = 64
+    reflectivity: float = field(default=0.5, metadata=meta(""))
+    segments: int = field(default=64, metadata=meta(""))
     name: str = ""
 
 

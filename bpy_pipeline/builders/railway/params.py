@@ -9,6 +9,7 @@ from typing import Literal
 
 import numpy as np
 
+from ...schema import meta
 from ...errors import InputError
 from ...geometry.clearance import CLEARANCE
 from ..base import Builder, BuildContext, BuildResult, register_builder
@@ -22,12 +23,12 @@ class RailProfile:
     """A simplified flat-bottom rail: three stacked rectangles (m). The default weighs about 60 kg/m
     (7.63e-3 m^2 of steel; UIC 60: 172 mm high, 150 mm foot, 72 mm head, 16.5 mm web)."""
 
-    foot_width: float = 0.150
-    foot_height: float = 0.018
-    web_width: float = 0.0165
-    web_height: float = 0.111
-    head_width: float = 0.072
-    head_height: float = 0.043
+    foot_width: float = field(default=0.150, metadata=meta("m"))
+    foot_height: float = field(default=0.018, metadata=meta("m"))
+    web_width: float = field(default=0.0165, metadata=meta("m"))
+    web_height: float = field(default=0.111, metadata=meta("m"))
+    head_width: float = field(default=0.072, metadata=meta("m"))
+    head_height: float = field(default=0.043, metadata=meta("m"))
 
 
 @dataclass(frozen=True)
@@ -37,34 +38,34 @@ class RailwayTrack:
     they are collinear), at formation level (the underside of the ballast); tracks are spread evenly
     across it, track 0 the rightmost in the direction of travel."""
 
-    start: Vec3 = (-75.0, 0.0, 0.0)
-    mid: Vec3 = (0.0, 0.0, 0.0)
-    end: Vec3 = (75.0, 0.0, 0.0)
-    gauge: float = 1.435  # between the inner faces of the rail heads
+    start: Vec3 = field(default=(-75.0, 0.0, 0.0), metadata=meta("m"))
+    mid: Vec3 = field(default=(0.0, 0.0, 0.0), metadata=meta("m"))
+    end: Vec3 = field(default=(75.0, 0.0, 0.0), metadata=meta("m"))
+    gauge: float = field(default=1.435, metadata=meta("m", help="between the inner faces of the rail heads"))
     rail: RailProfile = field(default_factory=RailProfile)
-    sleeper_spacing: float = 0.6
-    sleeper_length: float = 2.6  # concrete monoblock sleeper (B70-like): across the track
-    sleeper_width: float = 0.26  # along the track
-    sleeper_height: float = 0.22
-    ballast_height: float = 0.35  # under the sleepers
-    crib_height: float = 0.17  # ballast between the sleepers, above their underside (0 to sleeper_height; 0: bare sleepers on the bed)
-    ballast_shoulder: float = 0.5  # beyond the sleeper ends
-    ballast_slope: float = 1.5  # horizontal per vertical
-    tracks: int = 1  # 1..5
-    track_spacing: float = 4.0  # between neighbouring track centrelines
-    embankment_height: float = 0.0  # formation above the surrounding ground
-    embankment_slope: float = 1.5  # horizontal per vertical
-    embankment_berm: float = 1.0  # flat formation beyond the ballast toe
-    ground_width: float = 80.0  # flat ground strip along the alignment
-    cut_depth: float = 0.0  # m: the track in a cutting this deep (the ground beyond its slopes; 0: none)
-    cut_slope: float = 1.5  # horizontal per vertical
-    ground_roughness: float = 0.0  # m: amplitude of the ground's undulation beyond the slopes (0: flat)
-    ground_wavelength: float = 20.0  # m: the undulation's longest wavelength
-    transition_length: float = 0.0  # m of clothoid at each end of a curve (0: none); the cant ramps along it
+    sleeper_spacing: float = field(default=0.6, metadata=meta("m"))
+    sleeper_length: float = field(default=2.6, metadata=meta("m", help="concrete monoblock sleeper (B70-like): across the track"))
+    sleeper_width: float = field(default=0.26, metadata=meta("m", help="along the track"))
+    sleeper_height: float = field(default=0.22, metadata=meta("m"))
+    ballast_height: float = field(default=0.35, metadata=meta("m", help="under the sleepers"))
+    crib_height: float = field(default=0.17, metadata=meta("m", help="ballast between the sleepers, above their underside (0 to sleeper_height; 0: bare sleepers on the bed)"))
+    ballast_shoulder: float = field(default=0.5, metadata=meta("m", help="beyond the sleeper ends"))
+    ballast_slope: float = field(default=1.5, metadata=meta("", help="horizontal per vertical"))
+    tracks: int = field(default=1, metadata=meta("", help="1..5"))
+    track_spacing: float = field(default=4.0, metadata=meta("m", help="between neighbouring track centrelines"))
+    embankment_height: float = field(default=0.0, metadata=meta("m", help="formation above the surrounding ground"))
+    embankment_slope: float = field(default=1.5, metadata=meta("", help="horizontal per vertical"))
+    embankment_berm: float = field(default=1.0, metadata=meta("m", help="flat formation beyond the ballast toe"))
+    ground_width: float = field(default=80.0, metadata=meta("m", help="flat ground strip along the alignment"))
+    cut_depth: float = field(default=0.0, metadata=meta("m", help="the track in a cutting this deep (the ground beyond its slopes; 0: none)"))
+    cut_slope: float = field(default=1.5, metadata=meta("", help="horizontal per vertical"))
+    ground_roughness: float = field(default=0.0, metadata=meta("m", help="amplitude of the ground's undulation beyond the slopes (0: flat)"))
+    ground_wavelength: float = field(default=20.0, metadata=meta("m", help="the undulation's longest wavelength"))
+    transition_length: float = field(default=0.0, metadata=meta("m", help="of clothoid at each end of a curve (0: none); the cant ramps along it"))
     cant_from: Literal["speed", "value"] = "speed"  # the cant on curves: of design_speed, or the cant value
-    design_speed: float = 100.0  # km/h: on a curve the outer rail is raised by the equilibrium cant 11.8 v^2 / R mm
-    cant: float = 0.0  # m, with cant_from: value
-    max_cant: float = 0.16  # m: the cant never exceeds this (EN 13803: 160 mm on ballasted track)
+    design_speed: float = field(default=100.0, metadata=meta("", help="km/h: on a curve the outer rail is raised by the equilibrium cant 11.8 v^2 / R mm"))
+    cant: float = field(default=0.0, metadata=meta("m", help="with cant_from: value"))
+    max_cant: float = field(default=0.16, metadata=meta("m", help="the cant never exceeds this (EN 13803: 160 mm on ballasted track)"))
 
 
 @dataclass(frozen=True)
@@ -79,11 +80,11 @@ class RailwaySupports:
 
     layout: Literal["auto", "single", "both_sides", "gantry"] = "auto"
     side: Literal["right", "left"] = "right"
-    span: float = 50.0
-    span_jitter: float = 5.0
+    span: float = field(default=50.0, metadata=meta("m"))
+    span_jitter: float = field(default=5.0, metadata=meta("m"))
     mast_type: Literal["h_section", "lattice", "mixed"] = "h_section"
-    mast_offset: float = 3.2  # from the centreline of the nearest track
-    mast_height: float = 8.5  # above the ground it stands on
+    mast_offset: float = field(default=3.2, metadata=meta("m", help="from the centreline of the nearest track"))
+    mast_height: float = field(default=8.5, metadata=meta("m", help="above the ground it stands on"))
 
 
 @dataclass(frozen=True)
@@ -96,37 +97,37 @@ class RailwayCatenary:
     enabled: bool = True  # ENABLE_CATENARY: contact and messenger wires, droppers
     feeders: bool = True  # ENABLE_FEEDERS
     earth_wire: bool = True  # ENABLE_CdPA
-    contact_wire_height: float = 5.5  # above the rail heads
-    system_height: float = 1.4  # messenger above the contact wire at the supports (1.1-1.8)
-    stagger: float = 0.2  # contact wire zig-zag at the supports, +- (0.2-0.3)
-    registration_arm_length: float = 1.2  # m, horizontal reach of the registration arm (1-1.5 m on real lines)
-    double_contact_probability: float = 0.0  # FC_DOUBLE_PROBABILITY, per track
-    double_contact_spacing: float = 0.04  # FC_DOUBLE_SPACING: between the two contact wires
-    sag_reference_length: float = 50.0  # SAG_REFERENCE_LENGTH
-    sag_exponent: float = 2.0  # SAG_EXPONENT_ALPHA (2: sag grows with L^2 at a fixed tension)
-    contact_wire_sag: float = 0.05  # SAG_* at the reference length (contact wire: pre-sag, 1/1000 of the span)
-    messenger_wire_sag: float = 0.5
-    feeder_sag: float = 1.0
-    earth_wire_sag: float = 0.8
-    contact_wire_diameter: float = 0.012  # DIAM_*: 107 mm^2 grooved copper
-    messenger_wire_diameter: float = 0.011
-    feeder_diameter: float = 0.024
-    earth_wire_diameter: float = 0.012
-    dropper_diameter: float = 0.005
-    dropper_spacing: float = 5.0  # PENDULUM_SPACING
-    dropper_jitter: float = 0.2  # PENDULUM_JITTER, +- along the span
-    points_per_10m: int = 20  # CURVE_RESOLUTION_POINTS_PER_10M, for scene.detail.mode fixed
+    contact_wire_height: float = field(default=5.5, metadata=meta("m", help="above the rail heads"))
+    system_height: float = field(default=1.4, metadata=meta("m", help="messenger above the contact wire at the supports (1.1-1.8)"))
+    stagger: float = field(default=0.2, metadata=meta("m", help="contact wire zig-zag at the supports, +- (0.2-0.3)"))
+    registration_arm_length: float = field(default=1.2, metadata=meta("m", help="horizontal reach of the registration arm (1-1.5 m on real lines)"))
+    double_contact_probability: float = field(default=0.0, metadata=meta("", help="FC_DOUBLE_PROBABILITY, per track"))
+    double_contact_spacing: float = field(default=0.04, metadata=meta("m", help="FC_DOUBLE_SPACING: between the two contact wires"))
+    sag_reference_length: float = field(default=50.0, metadata=meta("m", help="SAG_REFERENCE_LENGTH"))
+    sag_exponent: float = field(default=2.0, metadata=meta("", help="SAG_EXPONENT_ALPHA (2: sag grows with L^2 at a fixed tension)"))
+    contact_wire_sag: float = field(default=0.05, metadata=meta("m", help="SAG_* at the reference length (contact wire: pre-sag, 1/1000 of the span)"))
+    messenger_wire_sag: float = field(default=0.5, metadata=meta("m"))
+    feeder_sag: float = field(default=1.0, metadata=meta("m"))
+    earth_wire_sag: float = field(default=0.8, metadata=meta("m"))
+    contact_wire_diameter: float = field(default=0.012, metadata=meta("m", help="DIAM_*: 107 mm^2 grooved copper"))
+    messenger_wire_diameter: float = field(default=0.011, metadata=meta("m"))
+    feeder_diameter: float = field(default=0.024, metadata=meta("m"))
+    earth_wire_diameter: float = field(default=0.012, metadata=meta("m"))
+    dropper_diameter: float = field(default=0.005, metadata=meta("m"))
+    dropper_spacing: float = field(default=5.0, metadata=meta("m", help="PENDULUM_SPACING"))
+    dropper_jitter: float = field(default=0.2, metadata=meta("m", help="PENDULUM_JITTER, +- along the span"))
+    points_per_10m: int = field(default=20, metadata=meta("", help="CURVE_RESOLUTION_POINTS_PER_10M, for scene.detail.mode fixed"))
     anchors: bool = False  # the end masts anchor the wires: a pulley bracket and a tensioning weight stack behind each
-    section_insulator_every: int = 0  # a section insulator on the contact wires at the middle of every k-th span (0: none)
+    section_insulator_every: int = field(default=0, metadata=meta("", help="a section insulator on the contact wires at the middle of every k-th span (0: none)"))
     auxiliary_messenger: bool = False  # PA: a wire between messenger and contact wire, the droppers in two tiers
-    auxiliary_messenger_height: float = 0.3  # m above the contact wire at the supports (assumed)
-    auxiliary_messenger_sag: float = 0.1  # at the reference length (assumed: between the contact wire's and the messenger's)
-    auxiliary_messenger_diameter: float = 0.0105  # m (assumed: a 65 mm^2 bronze wire)
+    auxiliary_messenger_height: float = field(default=0.3, metadata=meta("m", help="above the contact wire at the supports (assumed)"))
+    auxiliary_messenger_sag: float = field(default=0.1, metadata=meta("m", help="at the reference length (assumed: between the contact wire's and the messenger's)"))
+    auxiliary_messenger_diameter: float = field(default=0.0105, metadata=meta("m", help="(assumed: a 65 mm^2 bronze wire)"))
     steady_arms: bool = False  # the registration arm ends in a steady arm, a part apart (class steady arm), hinged steady_arm_length from the wire
-    steady_arm_length: float = 0.5  # m, horizontal reach of the steady arm (part of registration_arm_length)
-    tension_length: float = 0.0  # m: tension sections about this long, overlapping over one span at each end (0: one section for the line)
-    overlap_spacing: float = 0.2  # m between the two wire runs side by side over an overlap span
-    overlap_rise: float = 0.5  # m the run out of service rises over the overlap span towards its anchor
+    steady_arm_length: float = field(default=0.5, metadata=meta("m", help="horizontal reach of the steady arm (part of registration_arm_length)"))
+    tension_length: float = field(default=0.0, metadata=meta("m", help="tension sections about this long, overlapping over one span at each end (0: one section for the line)"))
+    overlap_spacing: float = field(default=0.2, metadata=meta("m", help="between the two wire runs side by side over an overlap span"))
+    overlap_rise: float = field(default=0.5, metadata=meta("m", help="the run out of service rises over the overlap span towards its anchor"))
 
 
 @dataclass(frozen=True)
@@ -138,10 +139,10 @@ class RailwayStations:
     start point) place them; else ``count`` stations sit at the middles of equal parts of the line.
     ``count: 0`` uses sensor.position instead."""
 
-    count: int = 1
-    chainages: list[float] = field(default_factory=list)
+    count: int = field(default=1, metadata=meta(""))
+    chainages: list[float] = field(default_factory=list, metadata=meta("m"))
     side: Literal["right", "left"] = "left"  # the masts stand on the right: the scanner sees them across the track
-    offset: float = 4.0
+    offset: float = field(default=4.0, metadata=meta("m"))
 
 
 @dataclass(frozen=True)
@@ -153,7 +154,7 @@ class RailwayDetail:
 
     mode: Literal["sensor", "fixed"] = "sensor"
     stones: bool = True
-    stone_size: float = 0.045  # m, ballast grading 31.5/63 mm
+    stone_size: float = field(default=0.045, metadata=meta("m", help="ballast grading 31.5/63 mm"))
 
 
 @dataclass(frozen=True)
@@ -161,19 +162,19 @@ class RailwayTrackside:
     """``scene.trackside``: fences, signals and a platform (each off by default), see builders/railway/trackside.py."""
 
     fences: bool = False
-    fence_offset: float = 6.0  # m from the outermost track centres, both sides
-    fence_height: float = 1.8
-    fence_post_spacing: float = 2.5
-    signal_spacing: float = 0.0  # m between signals (+- a quarter); 0: none
+    fence_offset: float = field(default=6.0, metadata=meta("m", help="from the outermost track centres, both sides"))
+    fence_height: float = field(default=1.8, metadata=meta("m"))
+    fence_post_spacing: float = field(default=2.5, metadata=meta("m"))
+    signal_spacing: float = field(default=0.0, metadata=meta("m", help="between signals (+- a quarter); 0: none"))
     signal_side: Literal["right", "left"] = "right"
-    signal_height: float = 4.5
-    platform_length: float = 0.0  # m; 0: none
-    platform_chainage: float = -1.0  # m, the platform's middle; < 0: the line's middle
+    signal_height: float = field(default=4.5, metadata=meta("m"))
+    platform_length: float = field(default=0.0, metadata=meta("m", help="0: none"))
+    platform_chainage: float = field(default=-1.0, metadata=meta("m", help="the platform's middle; < 0: the line's middle"))
     platform_side: Literal["right", "left"] = "left"
-    platform_edge: float = 1.65  # m from the centre of the nearest track
-    platform_width: float = 4.0
-    platform_height: float = 0.76  # m above the rail heads
-    vegetation_per_100m: float = 0.0  # trees and bushes per side and 100 m, beyond the fences (or 2 m beyond the masts); 0: none
+    platform_edge: float = field(default=1.65, metadata=meta("m", help="from the centre of the nearest track"))
+    platform_width: float = field(default=4.0, metadata=meta("m"))
+    platform_height: float = field(default=0.76, metadata=meta("m", help="above the rail heads"))
+    vegetation_per_100m: float = field(default=0.0, metadata=meta("", help="trees and bushes per side and 100 m, beyond the fences (or 2 m beyond the masts); 0: none"))
 
 
 @dataclass(frozen=True)
@@ -186,7 +187,7 @@ class RailwayAssets:
     mast: str = ""  # replaces each mast of a single or both_sides layout (with its brackets)
     cantilever: str = ""  # replaces each mast-face cantilever assembly (cantilever, registration arm, insulators, steady arm)
     gantry: str = ""  # replaces each portal of a gantry layout
-    unit_scale: float = 1.0  # metres per file unit (OBJ and PLY drawn in mm: 0.001)
+    unit_scale: float = field(default=1.0, metadata=meta("", help="metres per file unit (OBJ and PLY drawn in mm: 0.001)"))
     classes: dict = field(default_factory=dict)
 
 
@@ -201,7 +202,7 @@ class RailwayScene:
     detail: RailwayDetail = field(default_factory=RailwayDetail)
     trackside: RailwayTrackside = field(default_factory=RailwayTrackside)
     assets: RailwayAssets = field(default_factory=RailwayAssets)
-    reroll_every: int = 0  # 0: one railway per run, drawn from frame 0's generator; k: a new one every k frames
+    reroll_every: int = field(default=0, metadata=meta("", help="0: one railway per run, drawn from frame 0's generator; k: a new one every k frames"))
 
     @property
     def place_sensor(self) -> bool:

@@ -3,5 +3,4 @@
 The package's names are its ``params``' (``bpy_pipeline.builders.real_scan`` was that module before the builders became packages).
 """
 
-from .params import *  # noqa: F401,F403
-from .params import __getattr__  # noqa: F401  (kept_scan, real_scan_stage: names that moved to stages.mixing, importable here this round)
+from .params import *  # noqa: F403

@@ -85,14 +85,5 @@ def build(params: RealScanScene, context: BuildContext) -> BuildResult:
     return BuildResult()
 
 
-def __getattr__(name: str):
-    """The frame's stages moved to the real-scan frame plan (:mod:`bpy_pipeline.stages.mixing`); their old names stay importable this round."""
-    if name in ("kept_scan", "real_scan_stage"):
-        from ...stages import mixing
-
-        return getattr(mixing, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
 # the nuScenes sweep's sensor by default (give sensor.preset: hdl64e for KITTI scans)
 register_builder("real_scan", Builder(RealScanScene, build, check, sensor={"preset": "hdl32e"}, boxes=True, plan="real_scan"))

@@ -45,10 +45,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ...geometry import primitives
-from ...geometry.primitives import beam_mesh, box_mesh, quad_mesh, transformed, wheel_mesh  # noqa: F401 - street.box_mesh etc. stay importable
+from ...geometry.primitives import box_mesh, transformed
 from ...geometry.clearance import NO_POSES, SensorPoses
 from ...geometry.collision import rectangles_near, rectangles_overlap
-from ...geometry.field_of_view import FieldOfView, box_samples, in_view_fraction  # noqa: F401 - FieldOfView etc. stay importable from here and from geometry.street (its old path)
+from ...geometry.field_of_view import in_view_fraction
 from ...geometry.objects import FITTINGS
 from ...geometry.vehicles import saddle_height, two_wheeler_parts, vehicle_fittings, vehicle_parts
 

@@ -6,8 +6,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ...schema import meta
 from ...errors import InputError
-from ..base import Builder, BuildContext, BuildResult, Distribution, check_distribution, check_sizes, register_builder
+from ..base import Builder, BuildContext, BuildResult, check_sizes, register_builder
+from ...geometry.placement import Distribution, check_distribution
 
 
 @dataclass(frozen=True)
@@ -52,53 +54,53 @@ class StreetScene:
     ``retroreflector`` and ``glossy_paint`` (applied with ``effects.materials.objects: true``); ``false`` leaves them out.
     """
 
-    arm_length: float = 100.0
-    lanes_per_direction: int = 1
-    lane_width: float = 3.5
-    parking_width: float = 2.2
-    kerb_width: float = 0.15
-    kerb_height: float = 0.15
-    sidewalk_width: float = 3.5
-    crossing_width: float = 4.0
-    crossing_offset: float = 1.0
-    signs: int = 4
-    building_depth: float = 10.0
-    building_width: tuple[float, float] = (8.0, 16.0)
-    building_height: tuple[float, float] = (6.0, 20.0)
-    setback: tuple[float, float] = (0.0, 8.0)
-    open_share: float = 0.3
-    plot_depth: float = 20.0
+    arm_length: float = field(default=100.0, metadata=meta("m"))
+    lanes_per_direction: int = field(default=1, metadata=meta(""))
+    lane_width: float = field(default=3.5, metadata=meta("m"))
+    parking_width: float = field(default=2.2, metadata=meta("m"))
+    kerb_width: float = field(default=0.15, metadata=meta("m"))
+    kerb_height: float = field(default=0.15, metadata=meta("m"))
+    sidewalk_width: float = field(default=3.5, metadata=meta("m"))
+    crossing_width: float = field(default=4.0, metadata=meta("m"))
+    crossing_offset: float = field(default=1.0, metadata=meta("m"))
+    signs: int = field(default=4, metadata=meta(""))
+    building_depth: float = field(default=10.0, metadata=meta("m"))
+    building_width: tuple[float, float] = field(default=(8.0, 16.0), metadata=meta("m"))
+    building_height: tuple[float, float] = field(default=(6.0, 20.0), metadata=meta("m"))
+    setback: tuple[float, float] = field(default=(0.0, 8.0), metadata=meta("m"))
+    open_share: float = field(default=0.3, metadata=meta(""))
+    plot_depth: float = field(default=20.0, metadata=meta("m"))
     boundary_mix: dict = field(default_factory=lambda: {"fence": 0.35, "hedge": 0.3, "wall": 0.15, "none": 0.2})
-    street_trees: float = 0.6
-    tree_spacing: tuple[float, float] = (8.0, 16.0)
-    yard_plants: float = 1.5
-    yard_trees: float = 0.0
-    yard_tree_clearance: float = 4.0
-    yard_tree_height: tuple[float, float] = (4.0, 14.0)
-    lamp_spacing: float = 28.0
-    furniture_per_100m: float = 3.0
-    roadworks: float = 0.25
+    street_trees: float = field(default=0.6, metadata=meta(""))
+    tree_spacing: tuple[float, float] = field(default=(8.0, 16.0), metadata=meta("m"))
+    yard_plants: float = field(default=1.5, metadata=meta(""))
+    yard_trees: float = field(default=0.0, metadata=meta(""))
+    yard_tree_clearance: float = field(default=4.0, metadata=meta("m"))
+    yard_tree_height: tuple[float, float] = field(default=(4.0, 14.0), metadata=meta("m"))
+    lamp_spacing: float = field(default=28.0, metadata=meta("m"))
+    furniture_per_100m: float = field(default=3.0, metadata=meta(""))
+    roadworks: float = field(default=0.25, metadata=meta(""))
     terrain: bool = True
-    terrain_step: float = 1.0
-    terrain_relief: float = 0.5
-    terrain_slope: float = 0.04
-    layout_seed: int = 0
+    terrain_step: float = field(default=1.0, metadata=meta("m"))
+    terrain_relief: float = field(default=0.5, metadata=meta("m"))
+    terrain_slope: float = field(default=0.04, metadata=meta(""))
+    layout_seed: int = field(default=0, metadata=meta(""))
     vehicles: Distribution = field(default_factory=lambda: Distribution("normal", 16.0, 5.0, 0.0, 60.0))
     vehicle_mix: dict = field(default_factory=lambda: {"car": 0.7, "van": 0.15, "truck": 0.08, "bus": 0.07})
-    platoon_probability: float = 0.5
+    platoon_probability: float = field(default=0.5, metadata=meta(""))
     platoon_gap: Distribution = field(default_factory=lambda: Distribution("uniform", 7.0, 0.0, 3.0, 12.0))
     parked: Distribution = field(default_factory=lambda: Distribution("normal", 20.0, 6.0, 0.0, 80.0))
     bicycles: Distribution = field(default_factory=lambda: Distribution("normal", 3.0, 2.0, 0.0, 20.0))
     motorcycles: Distribution = field(default_factory=lambda: Distribution("normal", 1.0, 1.0, 0.0, 20.0))
     pedestrians: Distribution = field(default_factory=lambda: Distribution("normal", 16.0, 6.0, 0.0, 80.0))
-    crossing_share: float = 0.3
-    clearance: float = 0.5
+    crossing_share: float = field(default=0.3, metadata=meta(""))
+    clearance: float = field(default=0.5, metadata=meta("m"))
     fov_aware: bool = True
-    min_in_view: float = 0.3
+    min_in_view: float = field(default=0.3, metadata=meta(""))
     ego_vehicle: bool = False
-    ego_height: float = 1.73
-    ego_span: float = 60.0
-    ego_step: float = 7.3
+    ego_height: float = field(default=1.73, metadata=meta("m"))
+    ego_span: float = field(default=60.0, metadata=meta("m"))
+    ego_step: float = field(default=7.3, metadata=meta("m"))
     car_fittings: bool = True
 
 

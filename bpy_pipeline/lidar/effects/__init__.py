@@ -1,0 +1,1 @@
+"""Effects: what the returns become (drop, noise, intensity, materials, beam divergence, weather)."""

@@ -1,0 +1,178 @@
+"""Intensity models: what a point's intensity (0..1) says (``effects.intensity.model``).
+
+``reflectance``: ``rho cos(theta) g``, the object's ``lidar_reflectivity`` times the cosine of
+incidence times the mirror gain ``g`` (product of the reflectivities of the mirrors met), which is
+what range-compensated sensors report ("calibrated reflectivity"). ``lidar``: the lidar equation for
+an extended Lambertian target, ``P ~ rho cos(theta) g exp(-2 alpha R) / R^2``, normalised so that a
+target of ``reference_reflectivity`` at normal incidence at ``reference_range`` reads 1 (nearer or
+brighter returns saturate at 1, as a receiver does). ``carla``: CARLA's ``exp(-a R)``.
+
+The reading apart from detection (``effects.intensity.reading``, :class:`ReadingModel`, opt-in): the drop
+models decide detection from the received power (the apparent reflectance ``a`` and the range, as
+before); what a detected return *reads* is the receiver's calibrated value
+
+    ``I = clip(g_k (a f(R))^gamma n - o_k, 0, 1)``,  ``f(R) = 1`` up to ``compensated_range`` ``R_c``, ``(R_c / R)^exponent`` beyond,
+
+with ``gamma`` the receiver's ``response`` (1: linear; below 1 a compressing receiver, as the HDL-64E's: KITTI reads
+asphalt 0.25 and foliage 0.36 where a calibrated reflectivity says 0.12 and 0.45),
+``g_k = scale exp(gain_sd z_k)`` and ``o_k = max(offset + offset_sd w_k, 0)`` the gain and offset of
+laser ``k`` (a multi-beam sensor calibrates each laser apart, as the HDL-64E's per-laser table does;
+``z_k, w_k`` standard normals drawn once per sensor unit from ``unit_seed``, so every frame and chunk
+of a run sees the same lasers), and ``n = exp(noise_sd e)`` a per-return factor (``e`` standard normal
+from the frame's generator). A weak return is detected yet reads 0 where ``g_k (a f(R))^gamma < o_k``: a far
+car, or a car's glass and cabin, as KITTI's reflectance shows. Defaults fitted on KITTI frame 000008
+(docs/realism.md, "The reading apart from detection"); the ``hdl64e`` profile's values (its response included)
+on SemanticKITTI and KITTI frames (docs/realism.md, "The HDL-64E's reading, fitted per class").
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+
+from ...errors import InputError
+
+MIN_RANGE = 1e-3  # m: ranges are clamped here before dividing by them
+MAX_RINGS = 1024  # lasers a unit's gains and offsets are drawn for (ring ids at or above wrap round)
+
+
+@dataclass(frozen=True)
+class ReadingModel:
+    """``effects.intensity.reading``: the receiver's reading apart from its detection (module notes).
+
+    The mean gain and offset are ``effects.intensity.scale`` and ``effects.intensity.offset``."""
+
+    enabled: bool = False
+    compensated_range: float = 28.0  # m: the reading is range-compensated up to here (KITTI 000008: 28)
+    exponent: float = 2.0  # beyond it the reading falls as (R_c / R)^exponent (the lidar equation's 2; fitted: 2)
+    gain_sd: float = 0.16  # sd of ln(gain) across lasers (KITTI 000008's road: robust sd of its per-ring log medians)
+    offset_sd: float = 0.0  # sd of the offset across lasers (not identifiable on one frame: 0)
+    noise_sd: float = 0.075  # sd of ln of a per-return factor (KITTI 000008's road: robust within-ring log spread, 8-20 m)
+    unit_seed: int = 0  # the sensor unit: its lasers' gains and offsets are drawn from this seed
+    response: float = 1.0  # gamma: the reading grows as (a f(R))^gamma (1: linear; below 1: a compressing receiver)
+
+
+def check_reading(reading: ReadingModel, offset: float, model: str = "reflectance") -> None:
+    """One-line :class:`InputError` for a reading model's value out of range (``offset``, ``model``: ``effects.intensity``'s)."""
+    key = "effects.intensity.reading"
+    for name, value in (("compensated_range", reading.compensated_range), ("exponent", reading.exponent), ("gain_sd", reading.gain_sd), ("offset_sd", reading.offset_sd), ("noise_sd", reading.noise_sd),
+                        ("response", reading.response)):
+        if not (isinstance(value, (int, float)) and math.isfinite(value)):
+            raise InputError(f"{key}.{name}: must be a finite number, got {value!r}")
+    if not 0 < reading.compensated_range <= 10000:
+        raise InputError(f"{key}.compensated_range: must lie in (0, 10000] metres, got {reading.compensated_range}")
+    if not 0 <= reading.exponent <= 10:
+        raise InputError(f"{key}.exponent: must lie in 0..10, got {reading.exponent}")
+    if not 0 < reading.response <= 4:
+        raise InputError(f"{key}.response: must lie in (0, 4], got {reading.response}")
+    for name in ("gain_sd", "offset_sd", "noise_sd"):
+        if not 0 <= getattr(reading, name) <= 2:
+            raise InputError(f"{key}.{name}: must lie in 0..2, got {getattr(reading, name)}")
+    if not isinstance(reading.unit_seed, int) or isinstance(reading.unit_seed, bool) or reading.unit_seed < 0:
+        raise InputError(f"{key}.unit_seed: must be a whole number >= 0, got {reading.unit_seed!r}")
+    if reading.enabled and model != "reflectance":
+        raise InputError(f"{key}.enabled: the reading model reads the reflectance model's value; effects.intensity.model is {model!r}")
+    if reading.enabled and offset >= 1:
+        raise InputError(f"effects.intensity.offset: must lie in 0..1 with the reading model, got {offset}")
+
+
+@lru_cache(maxsize=64)
+def laser_calibration(unit_seed: int, scale: float, offset: float, gain_sd: float, offset_sd: float) -> tuple[np.ndarray, np.ndarray]:
+    """The gains and offsets of one sensor unit's lasers: ``((MAX_RINGS,) float32 g_k, (MAX_RINGS,) float32 o_k)``,
+    ``g_k = scale exp(gain_sd z_k)``, ``o_k = max(offset + offset_sd w_k, 0)``; ``z, w`` from ``default_rng(unit_seed)``."""
+    draw = np.random.default_rng(unit_seed).standard_normal((2, MAX_RINGS))
+    gain = (scale * np.exp(gain_sd * draw[0])).astype(np.float32)
+    off = np.maximum(offset + offset_sd * draw[1], 0.0).astype(np.float32)
+    gain.flags.writeable = off.flags.writeable = False
+    return gain, off
+
+
+def range_factor(range_m: np.ndarray, compensated_range: float, exponent: float) -> np.ndarray:
+    """``f(R)``: 1 up to ``compensated_range``, ``(R_c / R)^exponent`` beyond; (p,) float32."""
+    r = np.maximum(np.asarray(range_m, np.float32), np.float32(MIN_RANGE))
+    return np.minimum(np.float32(1.0), (np.float32(compensated_range) / r) ** np.float32(exponent))
+
+
+def read_out(value: np.ndarray, range_m: np.ndarray, ring: np.ndarray, reading: ReadingModel, scale: float, offset: float, rng: np.random.Generator | None) -> np.ndarray:
+    """The reading ``clip(g_k (a f(R))^gamma n - o_k, 0, 1)`` (module notes) of apparent reflectances ``value`` (p,);
+    range_m (p,) m; ring (p,) laser ids; ``rng`` draws the per-return factor (needed when ``noise_sd`` > 0).
+    Returns (p,) float32."""
+    gain, off = laser_calibration(int(reading.unit_seed), float(scale), float(offset), float(reading.gain_sd), float(reading.offset_sd))
+    k = np.asarray(ring, np.int64) % MAX_RINGS
+    f = range_factor(range_m, reading.compensated_range, reading.exponent)
+    if reading.response == 1.0:
+        power = np.asarray(value, np.float32) * gain[k] * f
+    else:
+        power = (np.maximum(np.asarray(value, np.float32), np.float32(0.0)) * f) ** np.float32(reading.response) * gain[k]
+    if reading.noise_sd > 0:
+        if rng is None:
+            raise ValueError("read_out: noise_sd > 0 needs a generator")
+        power *= np.exp(np.float32(reading.noise_sd) * rng.standard_normal(len(power), dtype=np.float32))
+    return np.clip(power - off[k], np.float32(0.0), np.float32(1.0))
+
+
+def reflectance(beam: np.ndarray, incidence_exponent: float = 1.0) -> np.ndarray:
+    """``rho cos(theta)^k g`` of each point (``k``: ``incidence_exponent``, 1 for a Lambertian target);
+    beam : (p,) BEAM_DTYPE; returns (p,) float32."""
+    if incidence_exponent == 1.0:
+        return beam["reflectivity"] * beam["cos_incidence"] * beam["gain"]
+    cos = np.maximum(beam["cos_incidence"], np.float32(0.0)) ** np.float32(incidence_exponent)
+    return beam["reflectivity"] * cos * beam["gain"]
+
+
+def lidar_intensity(range_m: np.ndarray, beam: np.ndarray, alpha: float, reference_range: float, reference_reflectivity: float = 1.0, incidence_exponent: float = 1.0) -> np.ndarray:
+    """The lidar equation ``rho cos g exp(-2 alpha R) / R^2`` over its value for the reference target.
+
+    range_m : (p,) metres; alpha : 1/m atmospheric extinction; the reference is a Lambertian
+    target of ``reference_reflectivity`` at normal incidence at ``reference_range`` metres.
+    Returns (p,) float32 in 0..1 (clipped: nearer or brighter returns saturate).
+    """
+    r = np.maximum(np.asarray(range_m, np.float32), np.float32(MIN_RANGE))
+    scale = np.float32(reference_range**2 / reference_reflectivity)
+    power = reflectance(beam, incidence_exponent) * scale / (r * r)
+    if alpha > 0:
+        power *= np.exp(np.float32(-2.0 * alpha) * (r - np.float32(reference_range)))
+    return np.minimum(power, np.float32(1.0))
+
+
+def carla_intensity(range_m: np.ndarray, attenuation_rate: float) -> np.ndarray:
+    """CARLA's intensity ``exp(-a R)``, (p,) float32 (RayCastLidar ComputeIntensity)."""
+    return np.exp(np.float32(-attenuation_rate) * np.asarray(range_m, np.float32))
+
+
+def compute_intensity(range_m: np.ndarray, beam: np.ndarray, intensity, ring: np.ndarray | None = None, rng: np.random.Generator | None = None) -> np.ndarray:
+    """The configured intensity model (``config.IntensityConfig``) of each point, (p,) float32 in 0..1.
+
+    Then, as the sensor reports it: times ``scale`` (clipped to 1) and, with ``steps`` > 0, rounded
+    to a multiple of ``1 / steps`` (an 8-bit intensity: 255, so ``round(255 I)`` is the sensor's integer).
+    With ``intensity.reading.enabled`` (:class:`ReadingModel`) the ``reflectance`` value is read by the
+    lasers' gains and offsets instead (``ring`` (p,) laser ids and ``rng`` the frame's generator needed).
+    """
+    reading = getattr(intensity, "reading", None)
+    if reading is not None and reading.enabled and intensity.model == "reflectance":
+        if ring is None:
+            raise ValueError("compute_intensity: the reading model needs each point's ring")
+        value = read_out(reflectance(beam, intensity.incidence_exponent), range_m, ring, reading, intensity.scale, intensity.offset, rng)
+        return sensor_units(value, 1.0, intensity.steps, 0.0)
+    if intensity.model == "lidar":
+        value = lidar_intensity(range_m, beam, intensity.alpha, intensity.reference_range, intensity.reference_reflectivity, intensity.incidence_exponent)
+    elif intensity.model == "carla":
+        value = carla_intensity(range_m, intensity.attenuation_rate)
+    else:
+        value = np.clip(reflectance(beam, intensity.incidence_exponent), 0.0, 1.0)
+    return sensor_units(value, intensity.scale, intensity.steps, getattr(intensity, "offset", 0.0))
+
+
+def sensor_units(value: np.ndarray, scale: float = 1.0, steps: int = 0, offset: float = 0.0) -> np.ndarray:
+    """(p,) float32 intensities 0..1 times ``scale`` less ``offset`` (a receiver that reads weak returns as 0),
+    clipped to 0..1, rounded to ``k / steps`` when ``steps`` > 0."""
+    if scale != 1.0:
+        value = np.minimum(np.asarray(value, np.float32) * np.float32(scale), np.float32(1.0))
+    if offset:
+        value = np.maximum(np.asarray(value, np.float32) - np.float32(offset), np.float32(0.0))
+    if steps > 0:
+        value = np.rint(np.asarray(value, np.float32) * np.float32(steps)) / np.float32(steps)
+    return value

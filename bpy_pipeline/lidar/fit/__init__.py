@@ -1,0 +1,1 @@
+"""Fitting effect models to real scans."""
