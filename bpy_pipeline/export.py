@@ -245,15 +245,19 @@ class _Labeller:
         )
 
 
-def export_scene(table: ClassTable, extra_rules=(), depsgraph=None, keep_within=None) -> SceneBuffers:
+def export_scene(table: ClassTable, extra_rules=(), depsgraph=None, keep_within=None, only: str | None = None, skip: str | None = None) -> SceneBuffers:
     """Triangles of every visible, renderable object of the evaluated scene, in world coordinates.
 
     table : the class table (``labels.load_class_table()``)
     extra_rules : name rules tried before the table's own
     keep_within : optional ``(centre (3,), radius)`` in metres; objects whose bounds lie wholly
         farther than ``radius`` from ``centre`` are not exported (beyond the sensor's range)
+    only, skip : the name of a collection: export only the geometry whose owner (the object that labels it) is in it
+        (or in a collection inside it), or all but that geometry; a builder's objects placed anew every frame
+        (:attr:`~bpy_pipeline.builders.base.BuildResult.dynamic`) and the rest, exported once
     """
     depsgraph = depsgraph or bpy.context.evaluated_depsgraph_get()
+    chosen = {name: {obj.name_full for obj in bpy.data.collections[name].all_objects} for name in (only, skip) if name is not None}
     labeller = _Labeller(table, extra_rules)
     meshes: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
     placements: dict[tuple, list[np.ndarray]] = defaultdict(list)  # (mesh key, row) -> world matrices
@@ -275,7 +279,7 @@ def export_scene(table: ClassTable, extra_rules=(), depsgraph=None, keep_within=
         if obj.type not in GEOMETRY_TYPES or (not instance.is_instance and not instance.show_self):
             continue
         owner, names = _owner(instance)
-        if owner.hide_render:
+        if owner.hide_render or (only is not None and owner.name_full not in chosen[only]) or (skip is not None and owner.name_full in chosen[skip]):
             continue
         matrix = np.array(instance.matrix_world, np.float64)
         key = _mesh_key(obj, instance.is_instance)

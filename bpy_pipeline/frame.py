@@ -162,6 +162,8 @@ class Run:
     log : where warnings and the lines of long stages go (``None``: nowhere)
     members : a rig's sensors, one single-sensor :class:`Run` each (made by the rig stage on its first frame, :mod:`bpy_pipeline.stages.rig`)
     casters : the static objects' caster kept from frame to frame (:class:`~bpy_pipeline.lidar.raycast.CasterCache`)
+    static_world : ``(token, buffers)``: the builder's static world exported once (``BuildResult.static_world``, ``.dynamic``;
+        :func:`~bpy_pipeline.stages.scene.export_stage`), ``None`` before
     """
 
     config: Config
@@ -177,6 +179,7 @@ class Run:
     log: Callable[[str], None] | None = None
     members: list["Run"] = field(default_factory=list)
     casters: CasterCache | None = None
+    static_world: tuple | None = None
 
     def __post_init__(self):
         self.rules = parse_rules(self.config.labels.name_rules, "labels.name_rules", self.table.names)

@@ -3,6 +3,10 @@
 
 from __future__ import annotations
 
+import dataclasses
+
+import numpy as np
+
 from ..builders.base import BUILDERS, BuildContext, BuildResult
 from ..config import Config
 from ..errors import InputError
@@ -19,7 +23,7 @@ def build_populated(scene, context: BuildContext) -> BuildResult:
         return result
     from ..scenes.population import populate
 
-    return populate(population, context, result)
+    return dataclasses.replace(populate(population, context, result), dynamic=None)  # the population stands outside the builder's dynamic collection
 
 
 def build_frame_scene(config: Config, index: int = 0, rng=None, keep: dict | None = None) -> BuildResult:
@@ -75,11 +79,37 @@ def reach(frame: Frame, config: Config) -> float:
 
 
 def export_stage(frame: Frame, run: Run) -> None:
-    """The evaluated scene as buffers: every object the sensor can reach during the frame."""
+    """The evaluated scene as buffers: every object the sensor can reach during the frame.
+
+    A builder whose result names its ``dynamic`` collection (:class:`~bpy_pipeline.builders.base.BuildResult`) has its
+    static world exported once, whole, while its ``static_world`` token stays the same (kept in ``run.static_world``),
+    and only that collection's objects every frame, those within reach: the frame's buffers are the static world's, then
+    those. The rays, limited to the sensor's range, do the culling the export would do.
+    """
     from ..export import export_scene
 
     max_range = reach(frame, run.config)
-    frame.buffers = export_scene(run.table, run.rules, keep_within=(frame.pose[:3, 3], max_range))
-    if not len(frame.buffers.triangles) and len(export_scene(run.table, run.rules).triangles):
-        where = [round(float(v), 2) for v in frame.pose[:3, 3]]
-        raise InputError(f"sensor: no object of the scene lies within max_range ({max_range} m) of the sensor at {where} in frame {frame.index}; move the sensor or raise sensor.max_range")
+    centre = frame.pose[:3, 3]
+    scene = frame.scene
+    if scene.dynamic is not None:
+        if run.static_world is None or run.static_world[0] is not scene.static_world:
+            run.static_world = (scene.static_world, export_scene(run.table, run.rules, skip=scene.dynamic))
+        static = run.static_world[1]
+        frame.buffers = static.joined(export_scene(run.table, run.rules, keep_within=(centre, max_range), only=scene.dynamic))
+        near = len(frame.buffers.triangles) > len(static.triangles) or bounds_distance(static.vertices, centre) <= max_range
+        if near or not len(frame.buffers.triangles):
+            return
+    else:
+        frame.buffers = export_scene(run.table, run.rules, keep_within=(centre, max_range))
+        if len(frame.buffers.triangles) or not len(export_scene(run.table, run.rules).triangles):
+            return
+    where = [round(float(v), 2) for v in centre]
+    raise InputError(f"sensor: no object of the scene lies within max_range ({max_range} m) of the sensor at {where} in frame {frame.index}; move the sensor or raise sensor.max_range")
+
+
+def bounds_distance(vertices: np.ndarray, centre: np.ndarray) -> float:
+    """m from ``centre`` (3,) to the axis-aligned bounds of ``vertices`` (n, 3) (0 inside them; infinite for none)."""
+    if not len(vertices):
+        return float("inf")
+    nearest = np.clip(centre, vertices.min(axis=0), vertices.max(axis=0))
+    return float(np.linalg.norm(nearest - centre))

@@ -133,4 +133,4 @@ class Intersection:
                 for k, u in enumerate(placement.users)
             ],
         }
-        return BuildResult(headings=headings, info=info)
+        return BuildResult(headings=headings, info=info, dynamic=self.users.name, static_world=self)
