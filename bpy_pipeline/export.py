@@ -313,6 +313,44 @@ def export_scene(table: ClassTable, extra_rules=(), depsgraph=None, keep_within=
         elif len(tris):
             placements[(key, labeller.row(owner, names, labelled))].append(matrix)
 
+    return _assembled(meshes, placements, labeller)
+
+
+class _Tags(dict):
+    """The ``lidar_*`` properties of an object that is not in Blender (:func:`parts_buffers`), read as an object's are."""
+
+    def __init__(self, name: str, properties: dict):
+        super().__init__(properties)
+        self.name = self.name_full = name
+
+
+def parts_buffers(table: ClassTable, parts, extra_rules=(), keep_within=None) -> SceneBuffers:
+    """What :func:`export_scene` gives for plain mesh objects with no parent, modifier or transform, tagged by
+    :func:`~.scenes.objects.tag` and filled by :func:`~.scenes.objects.fill_mesh`, from their arrays: the same rows
+    and bytes without reading them back from Blender (a builder's objects placed every frame, ``tests/test_street_users.py``).
+
+    parts : ``[(name, lidar properties {"lidar_class": ..., ...}, vertices (n, 3) world, triangles (m, 3))]`` in the
+        objects' order; vertices are rounded to float32 as a mesh stores them
+    keep_within : as :func:`export_scene`
+    """
+    labeller = _Labeller(table, extra_rules)
+    meshes: dict[tuple, tuple] = {}
+    placements: dict[tuple, list[np.ndarray]] = {}
+    identity = np.eye(4)
+    for name, properties, vertices, triangles in parts:
+        local = np.asarray(vertices, np.float32).reshape(-1, 3).astype(np.float64)
+        if not len(triangles):
+            continue
+        if keep_within is not None and not _near_bounds(local.min(axis=0), local.max(axis=0), *keep_within):
+            continue
+        owner = _Tags(name, properties)
+        meshes[(name, "")] = (local, np.asarray(triangles, np.int32).reshape(-1, 3), None, None)
+        placements[((name, ""), labeller.row(owner, [name]))] = [identity]
+    return _assembled(meshes, placements, labeller)
+
+
+def _assembled(meshes: dict, placements: dict, labeller: _Labeller) -> SceneBuffers:
+    """The buffers of ``placements`` ({(mesh key, row): [world matrices (4, 4)]}) of ``meshes`` ({key: (local vertices, triangles, ...)})."""
     vertices, triangles, triangle_object, offset = [], [], [], 0
     for (key, row), matrices in placements.items():
         local, tris = meshes[key][:2]
@@ -368,6 +406,10 @@ def _near(obj, matrix: np.ndarray, centre, radius: float) -> bool:
 def _near_corners(local: np.ndarray, matrix: np.ndarray, centre, radius: float) -> bool:
     """:func:`_near` of an object's bound box corners ``local`` (8, 3) in its own frame."""
     corners = local @ matrix[:3, :3].T + matrix[:3, 3]
-    low, high = corners.min(axis=0), corners.max(axis=0)
+    return _near_bounds(corners.min(axis=0), corners.max(axis=0), centre, radius)
+
+
+def _near_bounds(low: np.ndarray, high: np.ndarray, centre, radius: float) -> bool:
+    """Whether the world bounds ``low``, ``high`` (3,) come within ``radius`` m of ``centre`` (3,)."""
     nearest = np.clip(np.asarray(centre, float), low, high)
     return float(np.linalg.norm(nearest - centre)) <= radius

@@ -60,6 +60,9 @@ class BuildResult:
         stage then exports the static world once, whole, and this collection every frame (``None``: the whole scene
         every frame)
     static_world : a token the builder keeps while its static world is unchanged (a new one for a world built anew)
+    dynamic_parts : the ``dynamic`` collection's objects as arrays, in its order, when they are plain tagged meshes
+        (:func:`~bpy_pipeline.export.parts_buffers`): the export stage then takes them as they are instead of reading
+        them back from Blender (the same buffers); ``None``: read from Blender
     """
 
     headings: dict = field(default_factory=dict)
@@ -68,6 +71,7 @@ class BuildResult:
     warnings: tuple[str, ...] = ()
     dynamic: str | None = None
     static_world: Any = None
+    dynamic_parts: tuple | None = None
 
 
 def no_check(params, where: str) -> None:

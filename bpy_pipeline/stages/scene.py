@@ -83,10 +83,11 @@ def export_stage(frame: Frame, run: Run) -> None:
 
     A builder whose result names its ``dynamic`` collection (:class:`~bpy_pipeline.builders.base.BuildResult`) has its
     static world exported once, whole, while its ``static_world`` token stays the same (kept in ``run.static_world``),
-    and only that collection's objects every frame, those within reach: the frame's buffers are the static world's, then
-    those. The rays, limited to the sensor's range, do the culling the export would do.
+    and only that collection's objects every frame, those within reach (from the builder's arrays when it gives them,
+    ``dynamic_parts``): the frame's buffers are the static world's, then those. The rays, limited to the sensor's
+    range, do the culling the export would do.
     """
-    from ..export import export_scene
+    from ..export import export_scene, parts_buffers
 
     max_range = reach(frame, run.config)
     centre = frame.pose[:3, 3]
@@ -95,7 +96,11 @@ def export_stage(frame: Frame, run: Run) -> None:
         if run.static_world is None or run.static_world[0] is not scene.static_world:
             run.static_world = (scene.static_world, export_scene(run.table, run.rules, skip=scene.dynamic))
         static = run.static_world[1]
-        frame.buffers = static.joined(export_scene(run.table, run.rules, keep_within=(centre, max_range), only=scene.dynamic))
+        if scene.dynamic_parts is not None:
+            dynamic = parts_buffers(run.table, scene.dynamic_parts, run.rules, keep_within=(centre, max_range))
+        else:
+            dynamic = export_scene(run.table, run.rules, keep_within=(centre, max_range), only=scene.dynamic)
+        frame.buffers = static.joined(dynamic)
         near = len(frame.buffers.triangles) > len(static.triangles) or bounds_distance(static.vertices, centre) <= max_range
         if near or not len(frame.buffers.triangles):
             return
