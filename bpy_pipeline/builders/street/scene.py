@@ -119,8 +119,7 @@ class Intersection:
                 name = f"street_user_{k:03d}_{user.kind}_{part}" if part != "rider" else f"street_user_{k:03d}_{user.kind}_~rider"
                 parts.append((name, class_name, material, reflectivity, instance, mesh))
             headings[instance] = float(user.yaw)
-        shown = self._show_users(parts)
-        bpy.context.view_layer.update()
+        shown = self._show_users(parts)  # Blender evaluates them when something reads the scene (an export, a render, the viewport)
         kinds = {}
         for user in placement.users:
             kinds[user.kind] = kinds.get(user.kind, 0) + 1
