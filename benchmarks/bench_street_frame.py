@@ -1,0 +1,108 @@
+"""The ego street's frame, stage by stage, against an older checkout: where a frame's time goes, and the same bytes.
+
+Each checkout runs ``examples/street/ego_hdl64e.yaml`` for ``--frames`` frames one frame at a time (``run_frames(...,
+overlap=False)``: no frame finishing beside the next, so each stage's time is its own) in a subprocess importing that
+checkout's ``bpy_pipeline``; the two alternate for ``--rounds`` rounds. Per checkout: each stage's median over frames 2 on
+(the first builds the street) of its best round, the frame's sum, the process's CPU seconds and peak resident memory;
+and the sha256 of every file of every frame but the records and the manifest (they hold timings), compared between
+the checkouts (``same_files``).
+
+    python benchmarks/bench_street_frame.py --old ../base [--frames 12] [--rounds 2] [--name NAME]
+
+Results: ``benchmarks/results/street_frame.json`` (or ``--name``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import os
+import resource
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+SKIPPED = ("records", "manifest.json")  # files holding timings
+
+
+def part(frames: int) -> dict:
+    """In the checkout on ``PYTHONPATH`` (the working directory): the job's frames one at a time; stage timings, digests."""
+    import bpy_pipeline  # first: its numpy settings apply only before numpy loads
+
+    from bpy_pipeline.config import load_config
+    from bpy_pipeline.plan import run_frames
+
+    config = load_config("examples/street/ego_hdl64e.yaml", [f"frames={frames}"])
+    with tempfile.TemporaryDirectory(dir=os.environ.get("BENCH_SPEED_TMP")) as tmp:
+        out = Path(tmp) / "run"
+        start = time.perf_counter()
+        timings = [dict(f.timings) for f in run_frames(config, out, overlap=False)]
+        wall = time.perf_counter() - start
+        digests = {str(p.relative_to(out)): hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(out.rglob("*")) if p.is_file() and not str(p.relative_to(out)).startswith(SKIPPED)}
+    usage = resource.getrusage(resource.RUSAGE_SELF)
+    return {"code": str(Path(bpy_pipeline.__file__).parent), "timings": timings, "wall_s": wall, "cpu_s": usage.ru_utime + usage.ru_stime, "peak_rss_mb": usage.ru_maxrss / 1024, "digests": digests}
+
+
+def in_checkout(code: Path, frames: int) -> dict:
+    """:func:`part` in a subprocess importing ``code``'s package (cwd and PYTHONPATH there)."""
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"} | {"PYTHONPATH": str(code), "OPENBLAS_NUM_THREADS": "1"}
+    done = subprocess.run([sys.executable, str(HERE / "bench_street_frame.py"), "--part", "--frames", str(frames)], cwd=code, env=env, capture_output=True, text=True)
+    if done.returncode != 0:
+        raise RuntimeError(f"{code}: {done.stderr.strip()[-800:]}")
+    row = json.loads(done.stdout.strip().splitlines()[-1])
+    if not row["code"].startswith(str(code)):
+        raise RuntimeError(f"{code}: imported bpy_pipeline from {row['code']}")
+    return row
+
+
+def summary(row: dict) -> dict:
+    """Median of each stage over frames 2 on, their sum, and the run's figures."""
+    later = row["timings"][1:]
+    stages = {k: round(statistics.median(t.get(k, 0.0) for t in later), 4) for k in later[0]}
+    return {"stages_s": stages, "frame_s": round(sum(stages.values()), 4), "wall_s": round(row["wall_s"], 3), "cpu_s": round(row["cpu_s"], 3), "peak_rss_mb": round(row["peak_rss_mb"], 1)}
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--old", type=Path, required=False, help="the older checkout (e.g. git worktree add ../base 582eb53)")
+    p.add_argument("--frames", type=int, default=12)
+    p.add_argument("--rounds", type=int, default=2)
+    p.add_argument("--out", type=Path, default=HERE / "results")
+    p.add_argument("--name", default="street_frame.json")
+    p.add_argument("--part", action="store_true", help=argparse.SUPPRESS)
+    args = p.parse_args()
+    if args.part:
+        print(json.dumps(part(args.frames)))
+        return
+    sides = {"new": ROOT} | ({"old": args.old.resolve()} if args.old else {})
+    runs: dict[str, list[dict]] = {name: [] for name in sides}
+    digests = {}
+    for _ in range(args.rounds):
+        for name, code in sides.items():
+            row = in_checkout(code, args.frames)
+            digests[name] = row.pop("digests")
+            runs[name].append(summary(row))
+            print(name, runs[name][-1], flush=True)
+    result = {"frames": args.frames, "rounds": args.rounds, "checkouts": {k: str(v) for k, v in sides.items()}, "runs": runs,
+              "best": {name: min(rows, key=lambda r: r["frame_s"]) for name, rows in runs.items()}}  # fmt: skip
+    if "old" in runs:
+        new, old = result["best"]["new"], result["best"]["old"]
+        result["frame_old_over_new"] = round(old["frame_s"] / new["frame_s"], 3)
+        result["files"] = len(digests["new"])
+        result["same_files"] = digests["new"] == digests["old"]
+        result["files_differing"] = sorted(k for k in set(digests["new"]) | set(digests["old"]) if digests["new"].get(k) != digests["old"].get(k))
+        print(f"a frame's stages: {new['frame_s'] * 1e3:.0f} ms against {old['frame_s'] * 1e3:.0f} ms ({result['frame_old_over_new']:.2f}x); {result['files']} files, the same bytes: {result['same_files']}")
+    args.out.mkdir(parents=True, exist_ok=True)
+    path = args.out / args.name
+    path.write_text(json.dumps(result, indent=1) + "\n")
+    print(f"wrote {path}")
+
+
+if __name__ == "__main__":
+    main()
