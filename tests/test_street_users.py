@@ -39,3 +39,24 @@ def test_users_from_arrays_are_the_users_read_back_from_blender():
         assert not np.isin(frame.buffers.objects.instance[~users], list(scene.headings)).any()  # no road user in the static world
         assert set(frame.buffers.objects.instance[users].tolist()) <= set(scene.headings)
     assert statics[0] is statics[1] is statics[2]  # exported once
+
+
+def test_a_sensor_out_of_reach_of_the_static_world_is_an_error():
+    """The static world exported whole still answers a sensor that no object is within range of, as the export within
+    its reach did: one line naming sensor.max_range."""
+    import bpy
+
+    from bpy_pipeline.config import load_config
+    from bpy_pipeline.errors import InputError
+    from bpy_pipeline.frame import Frame, Run, frame_rng
+    from bpy_pipeline.stages.scene import build_stage, export_stage, pose_stage
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    config = load_config(None, ["scene.builder=street", "sensor.preset=hdl64e", "sensor.position=[5000, 0, 0]", "frames=1"])
+    run = Run(config)
+    frame = Frame(0, config, frame_rng(config.seed, 0))
+    build_stage(frame, run)
+    pose_stage(frame, run)
+    assert frame.scene.dynamic is not None
+    with pytest.raises(InputError, match="sensor.max_range"):
+        export_stage(frame, run)

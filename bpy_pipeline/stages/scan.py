@@ -44,7 +44,7 @@ def scan_stage(frame: Frame, run: Run) -> None:
         frame.buffers.check()  # "nothing to scan"; the caster checks the rest before it uses an index
     config, spec = run.config, run.config.sensor.spec
     if frame.scene.dynamic is not None and run.static_world is not None:  # the static world exported once, first in the buffers
-        token, static = run.static_world
+        token, static, _ = run.static_world
         moving = np.arange(len(frame.buffers.objects)) >= len(static.objects)
         caster = run.casters.caster(frame.buffers, frame.pose, moving, key=token, follow=True)  # its Embree scene built once
     else:

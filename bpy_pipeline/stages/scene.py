@@ -94,14 +94,16 @@ def export_stage(frame: Frame, run: Run) -> None:
     scene = frame.scene
     if scene.dynamic is not None:
         if run.static_world is None or run.static_world[0] is not scene.static_world:
-            run.static_world = (scene.static_world, export_scene(run.table, run.rules, skip=scene.dynamic))
-        static = run.static_world[1]
+            static = export_scene(run.table, run.rules, skip=scene.dynamic)
+            bounds = (static.vertices.min(axis=0), static.vertices.max(axis=0)) if len(static.vertices) else None
+            run.static_world = (scene.static_world, static, bounds)
+        _, static, bounds = run.static_world
         if scene.dynamic_parts is not None:
             dynamic = parts_buffers(run.table, scene.dynamic_parts, run.rules, keep_within=(centre, max_range))
         else:
             dynamic = export_scene(run.table, run.rules, keep_within=(centre, max_range), only=scene.dynamic)
         frame.buffers = static.joined(dynamic)
-        near = len(frame.buffers.triangles) > len(static.triangles) or bounds_distance(static.vertices, centre) <= max_range
+        near = len(frame.buffers.triangles) > len(static.triangles) or (bounds is not None and float(np.linalg.norm(np.clip(centre, *bounds) - centre)) <= max_range)
         if near or not len(frame.buffers.triangles):
             return
     else:
@@ -111,10 +113,3 @@ def export_stage(frame: Frame, run: Run) -> None:
     where = [round(float(v), 2) for v in centre]
     raise InputError(f"sensor: no object of the scene lies within max_range ({max_range} m) of the sensor at {where} in frame {frame.index}; move the sensor or raise sensor.max_range")
 
-
-def bounds_distance(vertices: np.ndarray, centre: np.ndarray) -> float:
-    """m from ``centre`` (3,) to the axis-aligned bounds of ``vertices`` (n, 3) (0 inside them; infinite for none)."""
-    if not len(vertices):
-        return float("inf")
-    nearest = np.clip(centre, vertices.min(axis=0), vertices.max(axis=0))
-    return float(np.linalg.norm(nearest - centre))
