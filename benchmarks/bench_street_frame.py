@@ -1,6 +1,7 @@
 """The ego street's frame, stage by stage, against an older checkout: where a frame's time goes, and the same bytes.
 
-Each checkout runs ``examples/street/ego_hdl64e.yaml`` for ``--frames`` frames one frame at a time (``run_frames(...,
+Each checkout runs ``examples/street/ego_hdl64e.yaml`` for ``--frames`` frames, in an empty Blender scene as ``run.py``
+does, one frame at a time (``run_frames(...,
 overlap=False)``: no frame finishing beside the next, so each stage's time is its own) in a subprocess importing that
 checkout's ``bpy_pipeline``; the two alternate for ``--rounds`` rounds. Per checkout: each stage's median over frames 2 on
 (the first builds the street) of its best round, the frame's sum, the process's CPU seconds and peak resident memory;
@@ -35,9 +36,12 @@ def part(frames: int) -> dict:
     """In the checkout on ``PYTHONPATH`` (the working directory): the job's frames one at a time; stage timings, digests."""
     import bpy_pipeline  # first: its numpy settings apply only before numpy loads
 
+    import bpy
+
     from bpy_pipeline.config import load_config
     from bpy_pipeline.plan import run_frames
 
+    bpy.ops.wm.read_factory_settings(use_empty=True)  # as run.py and bpy_pipeline.run start: no startup cube in the street
     config = load_config("examples/street/ego_hdl64e.yaml", [f"frames={frames}"])
     with tempfile.TemporaryDirectory(dir=os.environ.get("BENCH_SPEED_TMP")) as tmp:
         out = Path(tmp) / "run"
