@@ -34,10 +34,11 @@ many frames of one scene keeps the caster of the static objects in a :class:`Cas
 builds a small one per frame for the objects that move; a :class:`RayCaster` traces both and
 keeps the nearer hit. A sensor that drives through a static world without turning (the street's
 ego car) keeps one Embree scene of it for the run (``CasterCache.caster(..., follow=True)``): its
-local origin is the pose it was built at, one fixed origin per layout, and each later pose moves
-the rays into it, not the scene. A street layout lies within about 100 m of that origin and a pose
-may stand at most :data:`MAX_SHIFT` from it, so Embree's float32 copy keeps better than 0.1 mm; the
-distances are solved in float64 in each pose's own frame, as before.
+local origin is the pose's position snapped to a grid of :data:`FOLLOW_GRID` m (the street's: the
+world origin, the layout's centre; one fixed origin per layout), and each pose moves the rays into
+it, not the scene. A street layout lies within about 100 m of that origin and a pose within 900 m,
+so Embree's float32 copy keeps better than 0.1 mm; the distances are solved in float64 in each
+pose's own frame, as before.
 """
 
 from __future__ import annotations
@@ -61,6 +62,7 @@ from .sharing import share
 
 FAR = 1e30  # stands for "no limit" in Embree's float32 tfar
 JITTER = 2.0**-18  # radians (and metres per metre of origin coordinate) a re-traced ray is moved by: 64 float32 ulps
+FOLLOW_GRID = 1024.0  # metres between the origins a static part following a sensor may be built at (anchored)
 MAX_SHIFT = 1000.0  # metres a pose may stand from the frame a kept static part was built in (float32 keeps 0.1 mm there)
 MAX_COORDINATE = 1e9  # metres from the local origin; far beyond any scene (Embree overflows and loses triangles from ~5e18 m)
 PLANE_CHUNK = 1 << 20  # triangles per step when computing the planes (bounds the float64 temporaries)
@@ -490,6 +492,15 @@ def shifted_origins(origins32: np.ndarray, shift: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(origins32.astype(np.float64) + shift, np.float32)
 
 
+def anchored(frame: np.ndarray) -> np.ndarray:
+    """``frame`` (4, 4) with its origin moved to the nearest point of a grid of :data:`FOLLOW_GRID` metres: the frame a
+    static part that follows a sensor is built in (:meth:`CasterCache.caster`); a street layout, about the world's
+    origin, gets one frame for every pose of its ego car."""
+    home = np.array(frame, np.float64)
+    home[:3, 3] = np.round(home[:3, 3] / FOLLOW_GRID) * FOLLOW_GRID
+    return home
+
+
 def translated(kept: np.ndarray, frame: np.ndarray) -> bool:
     """Whether the (4, 4) frame ``frame`` is ``kept`` moved by a translation of at most :data:`MAX_SHIFT` metres (the same
     rotation, bit for bit), so a static part built in ``kept`` can serve it with its rays' origins shifted."""
@@ -586,12 +597,14 @@ class CasterCache:
         moving : (k,) bool per row of ``buffers.objects``: the objects rebuilt every call (None: none)
         key : optional; when given, the caller's word that equal keys mean equal static geometry
             (e.g. the builder's parameters and seed): the static part's bytes are not compared
-        follow : a ``frame`` that is the kept part's moved by a translation (:func:`translated`: the same rotation, at
-            most :data:`MAX_SHIFT` m away) reuses it too: its Embree scene stays in the frame it was built in and the
+        follow : build the static part in :func:`anchored` ``frame`` (its rotation, its origin on a grid of
+            :data:`FOLLOW_GRID` metres) instead of ``frame``, so every pose of a sensor driving through a static world
+            without turning, within one grid cell, reuses it: its Embree scene stays in the anchored frame and the
             rays' origins are shifted into it for Embree (:attr:`RayCaster.part_shift`), while the planes are solved
-            in ``frame`` (a sensor driving along a static world). Embree then rounds the static triangles to float32
-            in the kept frame instead of ``frame``: a ray passing within float32's rounding of an edge may meet the
-            neighbouring triangle; every distance is still solved in float64 in ``frame``
+            in ``frame``. Embree then rounds the static triangles to float32 in the anchored frame instead of
+            ``frame``: a ray passing within float32's rounding of an edge may meet the neighbouring triangle; every
+            distance is still solved in float64 in ``frame``. The anchored frame depends on ``frame`` alone, so a
+            frame gives the same bytes whichever frame built the part
         """
         frame = np.asarray(frame, np.float64)
         k = len(buffers.objects)
@@ -600,8 +613,9 @@ class CasterCache:
             raise InputError(f"CasterCache.caster: moving must give each of the {k} object rows a flag, not shape {moving.shape}")
         static = np.flatnonzero(~moving[buffers.triangle_object]) if moving.any() else np.arange(len(buffers.triangles))
         geometry = ("key", key) if key is not None else static_geometry(buffers, static)
+        home = anchored(frame) if follow else frame  # the frame the static part lies in
         kept = self.kept
-        same_frame = kept is not None and (np.array_equal(kept.frame, frame) or (follow and translated(kept.frame, frame)))
+        same_frame = kept is not None and np.array_equal(kept.frame, home)
         same_place = same_frame and np.array_equal(kept.triangle, static)
         if same_place and same_geometry(kept.geometry, geometry):
             self.reuses += 1
@@ -615,15 +629,15 @@ class CasterCache:
             if len(buffers.triangles):
                 buffers.check()  # before any index is used to build (the reused path is checked by RayCaster)
             self.builds += 1
-            if not moving.any():  # nothing moves: the whole scene is the static part
+            if not moving.any() and not follow:  # nothing moves: the whole scene is the static part
                 caster = RayCaster(buffers, frame, self.threads, kernel=self.kernel, record_pool=self.record_pool, pool=self.pool)
                 self.kept = StaticPart(frame, static, geometry, caster.parts[0] if caster.parts else None, caster.plane_normal, caster.plane_offset)
                 return caster
-            local = (np.asarray(buffers.vertices, np.float64) - frame[:3, 3]) @ frame[:3, :3]
+            local = (np.asarray(buffers.vertices, np.float64) - home[:3, 3]) @ home[:3, :3]
             triangles = np.ascontiguousarray(buffers.triangles, np.int32)
             check_extent(local, triangles, buffers)
             normal, offset = triangle_planes(local, triangles[static], choose_kernels(self.kernel))
-            part = self.kept = StaticPart(frame, static, geometry, embree_part(local, triangles, static, normal), normal, offset)
+            part = self.kept = StaticPart(home, static, geometry, embree_part(local, triangles, static, normal), normal, offset)
         return RayCaster(buffers, frame, self.threads, kernel=self.kernel, static=part, record_pool=self.record_pool, pool=self.pool)
 
 
