@@ -6,7 +6,8 @@ overlap=False)``: no frame finishing beside the next, so each stage's time is it
 checkout's ``bpy_pipeline``; the two alternate for ``--rounds`` rounds. Per checkout: each stage's median over frames 2 on
 (the first builds the street) of its best round, the frame's sum, the process's CPU seconds and peak resident memory;
 and the sha256 of every file of every frame but the records and the manifest (they hold timings), compared between
-the checkouts (``same_files``).
+the checkouts (``same_files``), and their point records compared field by field (``points``: how many differ, the
+points whose labels differ, the largest position difference of the others).
 
     python benchmarks/bench_street_frame.py --old ../base [--frames 12] [--rounds 2] [--name NAME]
 
@@ -20,6 +21,7 @@ import hashlib
 import json
 import os
 import resource
+import shutil
 import statistics
 import subprocess
 import sys
@@ -32,8 +34,9 @@ ROOT = HERE.parent
 SKIPPED = ("records", "manifest.json")  # files holding timings
 
 
-def part(frames: int) -> dict:
-    """In the checkout on ``PYTHONPATH`` (the working directory): the job's frames one at a time; stage timings, digests."""
+def part(frames: int, keep: Path | None = None) -> dict:
+    """In the checkout on ``PYTHONPATH`` (the working directory): the job's frames one at a time; stage timings, digests;
+    each frame's PLY records copied to ``keep`` (when given) as ``.npy``."""
     import bpy_pipeline  # first: its numpy settings apply only before numpy loads
 
     import bpy
@@ -49,20 +52,55 @@ def part(frames: int) -> dict:
         timings = [dict(f.timings) for f in run_frames(config, out, overlap=False)]
         wall = time.perf_counter() - start
         digests = {str(p.relative_to(out)): hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(out.rglob("*")) if p.is_file() and not str(p.relative_to(out)).startswith(SKIPPED)}
+        if keep is not None:
+            import numpy as np
+
+            from bpy_pipeline.io import read_ply
+
+            keep.mkdir(parents=True, exist_ok=True)
+            for ply in sorted((out / "ply").glob("*.ply")):
+                np.save(keep / f"{ply.stem}.npy", read_ply(ply))
     usage = resource.getrusage(resource.RUSAGE_SELF)
     return {"code": str(Path(bpy_pipeline.__file__).parent), "timings": timings, "wall_s": wall, "cpu_s": usage.ru_utime + usage.ru_stime, "peak_rss_mb": usage.ru_maxrss / 1024, "digests": digests}
 
 
-def in_checkout(code: Path, frames: int) -> dict:
+def in_checkout(code: Path, frames: int, keep: Path) -> dict:
     """:func:`part` in a subprocess importing ``code``'s package (cwd and PYTHONPATH there)."""
     env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"} | {"PYTHONPATH": str(code), "OPENBLAS_NUM_THREADS": "1"}
-    done = subprocess.run([sys.executable, str(HERE / "bench_street_frame.py"), "--part", "--frames", str(frames)], cwd=code, env=env, capture_output=True, text=True)
+    done = subprocess.run([sys.executable, str(HERE / "bench_street_frame.py"), "--part", "--frames", str(frames), "--keep", str(keep)], cwd=code, env=env, capture_output=True, text=True)
     if done.returncode != 0:
         raise RuntimeError(f"{code}: {done.stderr.strip()[-800:]}")
     row = json.loads(done.stdout.strip().splitlines()[-1])
     if not row["code"].startswith(str(code)):
         raise RuntimeError(f"{code}: imported bpy_pipeline from {row['code']}")
     return row
+
+
+def compare_points(new: Path, old: Path) -> dict:
+    """Frame by frame, the two checkouts' point records: how many points, how many differ in any field, the labels
+    (semantic, instance) of those, and the largest position difference of the points whose labels agree."""
+    import numpy as np
+
+    frames, points, differing, relabelled, moved = 0, 0, 0, [], 0.0
+    for path in sorted(new.glob("*.npy")):
+        a, b = np.load(path), np.load(old / path.name)
+        frames += 1
+        points += len(a)
+        if len(a) != len(b):
+            relabelled.append({"frame": path.stem, "points": [len(a), len(b)]})
+            continue
+        differ = np.zeros(len(a), bool)
+        for name in a.dtype.names:
+            differ |= a[name].view(f"u{a[name].itemsize}") != b[name].view(f"u{b[name].itemsize}")
+        differing += int(differ.sum())
+        labels = (a["semantic"] != b["semantic"]) | (a["instance"] != b["instance"])
+        relabelled += [{"frame": path.stem, "point": int(i), "new": [int(a["semantic"][i]), int(a["instance"][i]), float(a["range"][i])], "old": [int(b["semantic"][i]), int(b["instance"][i]), float(b["range"][i])]}
+                       for i in np.flatnonzero(labels)]  # fmt: skip
+        same = ~labels
+        if same.any():
+            xyz = lambda r: np.column_stack([r["x"], r["y"], r["z"]])[same].astype(np.float64)  # noqa: E731
+            moved = max(moved, float(np.abs(xyz(a) - xyz(b)).max()))
+    return {"frames": frames, "points": points, "points_differing": differing, "relabelled": relabelled, "max_position_difference_same_labels_m": moved}
 
 
 def summary(row: dict) -> dict:
@@ -80,16 +118,18 @@ def main() -> None:
     p.add_argument("--out", type=Path, default=HERE / "results")
     p.add_argument("--name", default="street_frame.json")
     p.add_argument("--part", action="store_true", help=argparse.SUPPRESS)
+    p.add_argument("--keep", type=Path, help=argparse.SUPPRESS)
     args = p.parse_args()
     if args.part:
-        print(json.dumps(part(args.frames)))
+        print(json.dumps(part(args.frames, args.keep)))
         return
     sides = {"new": ROOT} | ({"old": args.old.resolve()} if args.old else {})
     runs: dict[str, list[dict]] = {name: [] for name in sides}
     digests = {}
+    kept = Path(tempfile.mkdtemp(dir=os.environ.get("BENCH_SPEED_TMP")))
     for _ in range(args.rounds):
         for name, code in sides.items():
-            row = in_checkout(code, args.frames)
+            row = in_checkout(code, args.frames, kept / name)
             digests[name] = row.pop("digests")
             runs[name].append(summary(row))
             print(name, runs[name][-1], flush=True)
@@ -101,7 +141,10 @@ def main() -> None:
         result["files"] = len(digests["new"])
         result["same_files"] = digests["new"] == digests["old"]
         result["files_differing"] = sorted(k for k in set(digests["new"]) | set(digests["old"]) if digests["new"].get(k) != digests["old"].get(k))
-        print(f"a frame's stages: {new['frame_s'] * 1e3:.0f} ms against {old['frame_s'] * 1e3:.0f} ms ({result['frame_old_over_new']:.2f}x); {result['files']} files, the same bytes: {result['same_files']}")
+        result["points"] = compare_points(kept / "new", kept / "old")
+        print(f"a frame's stages: {new['frame_s'] * 1e3:.0f} ms against {old['frame_s'] * 1e3:.0f} ms ({result['frame_old_over_new']:.2f}x); {result['files']} files, the same bytes: {result['same_files']}; "
+              f"points: {result['points']['points_differing']} of {result['points']['points']} differ, relabelled {result['points']['relabelled']}")  # fmt: skip
+    shutil.rmtree(kept, ignore_errors=True)
     args.out.mkdir(parents=True, exist_ok=True)
     path = args.out / args.name
     path.write_text(json.dumps(result, indent=1) + "\n")
