@@ -1,10 +1,12 @@
 """The ego street's frame, stage by stage, against an older checkout: where a frame's time goes, and the same bytes.
 
 Each checkout runs ``examples/street/ego_hdl64e.yaml`` for ``--frames`` frames, in an empty Blender scene as ``run.py``
-does, one frame at a time (``run_frames(...,
-overlap=False)``: no frame finishing beside the next, so each stage's time is its own) in a subprocess importing that
-checkout's ``bpy_pipeline``; the two alternate for ``--rounds`` rounds. Per checkout: each stage's median over frames 2 on
-(the first builds the street) of its best round, the frame's sum, the process's CPU seconds and peak resident memory;
+does, one frame at a time (``run_frames(..., overlap=False)``: no frame finishing beside the next, so each stage's time
+is its own) in a subprocess importing that checkout's ``bpy_pipeline``; the two alternate for ``--rounds`` rounds. Each
+stage is timed in wall seconds and in the process's CPU seconds (every thread; on a machine other jobs share, the
+steadier reading: ``scan`` is the caster's set-up, ``effects`` the lazy trace with the effects, ``write`` the commit).
+Per checkout: each stage's median over frames 2 on (the first builds the street) of its best round (by wall, and by
+CPU), the frame's sum, the process's CPU seconds and peak resident memory;
 and the sha256 of every file of every frame but the records and the manifest (they hold timings), compared between
 the checkouts (``same_files``), and their point records compared field by field (``points``: how many differ, the
 points whose labels differ, the largest position difference of the others).
@@ -41,15 +43,33 @@ def part(frames: int, keep: Path | None = None) -> dict:
 
     import bpy
 
+    from bpy_pipeline import plan
     from bpy_pipeline.config import load_config
-    from bpy_pipeline.plan import run_frames
+    from bpy_pipeline.dataset import Dataset
 
     bpy.ops.wm.read_factory_settings(use_empty=True)  # as run.py and bpy_pipeline.run start: no startup cube in the street
     config = load_config("examples/street/ego_hdl64e.yaml", [f"frames={frames}"])
+    cpu: dict[int, dict[str, float]] = {}  # frame -> stage name (and "write": the commit) -> CPU s of the process
+    run_stages, commit = plan.run_stages, Dataset.commit
+
+    def timed_stages(frame, run, stages, said):
+        for stage in stages:
+            start = time.process_time()
+            run_stages(frame, run, (stage,), said)
+            cpu.setdefault(frame.index, {})[stage.name] = time.process_time() - start
+
+    def timed_commit(self, frame, *args, **kwargs):
+        start = time.process_time()
+        try:
+            return commit(self, frame, *args, **kwargs)
+        finally:
+            cpu.setdefault(frame.index, {})["write"] = time.process_time() - start
+
+    plan.run_stages, Dataset.commit = timed_stages, timed_commit
     with tempfile.TemporaryDirectory(dir=os.environ.get("BENCH_SPEED_TMP")) as tmp:
         out = Path(tmp) / "run"
         start = time.perf_counter()
-        timings = [dict(f.timings) for f in run_frames(config, out, overlap=False)]
+        timings = [dict(f.timings) | {f"cpu_{k}": v for k, v in cpu[f.index].items()} for f in plan.run_frames(config, out, overlap=False)]
         wall = time.perf_counter() - start
         digests = {str(p.relative_to(out)): hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(out.rglob("*")) if p.is_file() and not str(p.relative_to(out)).startswith(SKIPPED)}
         if keep is not None:
@@ -106,8 +126,9 @@ def compare_points(new: Path, old: Path) -> dict:
 def summary(row: dict) -> dict:
     """Median of each stage over frames 2 on, their sum, and the run's figures."""
     later = row["timings"][1:]
-    stages = {k: round(statistics.median(t.get(k, 0.0) for t in later), 4) for k in later[0]}
-    return {"stages_s": stages, "frame_s": round(sum(stages.values()), 4), "wall_s": round(row["wall_s"], 3), "cpu_s": round(row["cpu_s"], 3), "peak_rss_mb": round(row["peak_rss_mb"], 1)}
+    stages = {k: round(statistics.median(t.get(k, 0.0) for t in later), 4) for k in later[0] if not k.startswith("cpu_")}
+    cpu = {k.removeprefix("cpu_"): round(statistics.median(t.get(k, 0.0) for t in later), 4) for k in later[0] if k.startswith("cpu_") and k != "cpu_pose"}
+    return {"stages_s": stages, "frame_s": round(sum(stages.values()), 4), "stages_cpu_s": cpu, "frame_cpu_s": round(sum(cpu.values()), 4), "wall_s": round(row["wall_s"], 3), "cpu_s": round(row["cpu_s"], 3), "peak_rss_mb": round(row["peak_rss_mb"], 1)}
 
 
 def main() -> None:
@@ -134,7 +155,8 @@ def main() -> None:
             runs[name].append(summary(row))
             print(name, runs[name][-1], flush=True)
     result = {"frames": args.frames, "rounds": args.rounds, "checkouts": {k: str(v) for k, v in sides.items()}, "runs": runs,
-              "best": {name: min(rows, key=lambda r: r["frame_s"]) for name, rows in runs.items()}}  # fmt: skip
+              "best": {name: min(rows, key=lambda r: r["frame_s"]) for name, rows in runs.items()},
+              "best_cpu": {name: min(rows, key=lambda r: r["frame_cpu_s"]) for name, rows in runs.items()}}  # fmt: skip
     if "old" in runs:
         new, old = result["best"]["new"], result["best"]["old"]
         result["frame_old_over_new"] = round(old["frame_s"] / new["frame_s"], 3)
@@ -142,7 +164,8 @@ def main() -> None:
         result["same_files"] = digests["new"] == digests["old"]
         result["files_differing"] = sorted(k for k in set(digests["new"]) | set(digests["old"]) if digests["new"].get(k) != digests["old"].get(k))
         result["points"] = compare_points(kept / "new", kept / "old")
-        print(f"a frame's stages: {new['frame_s'] * 1e3:.0f} ms against {old['frame_s'] * 1e3:.0f} ms ({result['frame_old_over_new']:.2f}x); {result['files']} files, the same bytes: {result['same_files']}; "
+        result["frame_cpu_old_over_new"] = round(result["best_cpu"]["old"]["frame_cpu_s"] / result["best_cpu"]["new"]["frame_cpu_s"], 3)
+        print(f"a frame's stages: {new['frame_s'] * 1e3:.0f} ms against {old['frame_s'] * 1e3:.0f} ms ({result['frame_old_over_new']:.2f}x), CPU {result['frame_cpu_old_over_new']:.2f}x; {result['files']} files, the same bytes: {result['same_files']}; "
               f"points: {result['points']['points_differing']} of {result['points']['points']} differ, relabelled {result['points']['relabelled']}")  # fmt: skip
     shutil.rmtree(kept, ignore_errors=True)
     args.out.mkdir(parents=True, exist_ok=True)
