@@ -162,8 +162,9 @@ class Run:
     log : where warnings and the lines of long stages go (``None``: nowhere)
     members : a rig's sensors, one single-sensor :class:`Run` each (made by the rig stage on its first frame, :mod:`bpy_pipeline.stages.rig`)
     casters : the static objects' caster kept from frame to frame (:class:`~bpy_pipeline.lidar.raycast.CasterCache`)
-    static_world : ``(token, buffers, bounds)``: the builder's static world exported once, its vertices' ``(low, high)`` (or ``None``) (``BuildResult.static_world``, ``.dynamic``;
-        :func:`~bpy_pipeline.stages.scene.export_stage`), ``None`` before
+    static_world : ``(token, buffers, bounds)``: the builder's static world exported once (``BuildResult.static_world``,
+        ``.dynamic``; :func:`~bpy_pipeline.stages.scene.export_stage`) and its vertices' ``(low, high)`` (``None``: no vertex);
+        ``None`` before the first export
     """
 
     config: Config

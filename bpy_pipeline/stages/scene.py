@@ -23,7 +23,7 @@ def build_populated(scene, context: BuildContext) -> BuildResult:
         return result
     from ..scenes.population import populate
 
-    return dataclasses.replace(populate(population, context, result), dynamic=None)  # the population stands outside the builder's dynamic collection
+    return dataclasses.replace(populate(population, context, result), dynamic=None, dynamic_parts=None)  # the population stands outside the builder's dynamic collection
 
 
 def build_frame_scene(config: Config, index: int = 0, rng=None, keep: dict | None = None) -> BuildResult:
