@@ -212,7 +212,7 @@ def run_environment() -> dict:
 
 def run_py(code: Path, args: list[str], workers: int = 1, env: dict | None = None) -> dict:
     """``run.py ARGS`` of checkout ``code`` end to end, with ``env`` added to the environment: wall s, CPU s (it and its
-    workers), records' mean stage timings; and from the times its ``frame k/n`` lines came: the first one's
+    workers), the run's peak resident memory (MiB, without its workers'), records' mean stage timings; and from the times its ``frame k/n`` lines came: the first one's
     (start-up and the first frame), the frames per second from the first line to the last (the frames after
     the first) and the time from the last line to the exit (the indexes, the manifest)."""
     with tempfile.TemporaryDirectory(dir=os.environ.get("BENCH_SPEED_TMP")) as tmp:
@@ -224,7 +224,8 @@ def run_py(code: Path, args: list[str], workers: int = 1, env: dict | None = Non
             process = subprocess.Popen(command, cwd=code, stdout=subprocess.PIPE, stderr=errors, text=True,
                                        env={**run_environment(), "OPENBLAS_NUM_THREADS": "1", "PYTHONPATH": str(code), "PYTHONUNBUFFERED": "1", **(env or {})})  # each line as it is printed
             lines = [time.perf_counter() - start for line in process.stdout if line.startswith("frame ")]
-            process.wait()
+            _, status, usage = os.wait4(process.pid, 0)  # the run's own peak resident memory (its workers' are not in it)
+            process.returncode = os.waitstatus_to_exitcode(status)
             wall = time.perf_counter() - start
             errors.seek(0)
             stderr = errors.read()
@@ -238,7 +239,8 @@ def run_py(code: Path, args: list[str], workers: int = 1, env: dict | None = Non
         for key, value in (record.get("timings_s") or record.get("timings") or {}).items():
             stages[key] = stages.get(key, 0.0) + value / len(records)
     timeline = {"first_frame_s": lines[0], "later_fps": (len(lines) - 1) / (lines[-1] - lines[0]), "after_last_frame_s": wall - lines[-1]} if len(lines) > 1 else {}
-    return {"wall_s": wall, "cpu_s": (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime), "frames": len(records), "fps": len(records) / wall, "stage_s_per_frame": stages, **timeline}
+    return {"wall_s": wall, "cpu_s": (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime), "frames": len(records), "fps": len(records) / wall,
+            "peak_rss_mb": usage.ru_maxrss / 1024, "stage_s_per_frame": stages, **timeline}  # fmt: skip
 
 
 def accepts_ego(code: Path) -> bool:

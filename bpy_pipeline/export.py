@@ -245,15 +245,19 @@ class _Labeller:
         )
 
 
-def export_scene(table: ClassTable, extra_rules=(), depsgraph=None, keep_within=None) -> SceneBuffers:
+def export_scene(table: ClassTable, extra_rules=(), depsgraph=None, keep_within=None, only: str | None = None, skip: str | None = None) -> SceneBuffers:
     """Triangles of every visible, renderable object of the evaluated scene, in world coordinates.
 
     table : the class table (``labels.load_class_table()``)
     extra_rules : name rules tried before the table's own
     keep_within : optional ``(centre (3,), radius)`` in metres; objects whose bounds lie wholly
         farther than ``radius`` from ``centre`` are not exported (beyond the sensor's range)
+    only, skip : the name of a collection: export only the geometry whose owner (the object that labels it) is in it
+        (or in a collection inside it), or all but that geometry; a builder's objects placed anew every frame
+        (:attr:`~bpy_pipeline.builders.base.BuildResult.dynamic`) and the rest, exported once
     """
     depsgraph = depsgraph or bpy.context.evaluated_depsgraph_get()
+    chosen = {name: {obj.name_full for obj in bpy.data.collections[name].all_objects} for name in (only, skip) if name is not None}
     labeller = _Labeller(table, extra_rules)
     meshes: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
     placements: dict[tuple, list[np.ndarray]] = defaultdict(list)  # (mesh key, row) -> world matrices
@@ -275,7 +279,7 @@ def export_scene(table: ClassTable, extra_rules=(), depsgraph=None, keep_within=
         if obj.type not in GEOMETRY_TYPES or (not instance.is_instance and not instance.show_self):
             continue
         owner, names = _owner(instance)
-        if owner.hide_render:
+        if owner.hide_render or (only is not None and owner.name_full not in chosen[only]) or (skip is not None and owner.name_full in chosen[skip]):
             continue
         matrix = np.array(instance.matrix_world, np.float64)
         key = _mesh_key(obj, instance.is_instance)
@@ -309,6 +313,44 @@ def export_scene(table: ClassTable, extra_rules=(), depsgraph=None, keep_within=
         elif len(tris):
             placements[(key, labeller.row(owner, names, labelled))].append(matrix)
 
+    return _assembled(meshes, placements, labeller)
+
+
+class _Tags(dict):
+    """The ``lidar_*`` properties of an object that is not in Blender (:func:`parts_buffers`), read as an object's are."""
+
+    def __init__(self, name: str, properties: dict):
+        super().__init__(properties)
+        self.name = self.name_full = name
+
+
+def parts_buffers(table: ClassTable, parts, extra_rules=(), keep_within=None) -> SceneBuffers:
+    """What :func:`export_scene` gives for plain mesh objects with no parent, modifier or transform, tagged by
+    :func:`~.scenes.objects.tag` and filled by :func:`~.scenes.objects.fill_mesh`, from their arrays: the same rows
+    and bytes without reading them back from Blender (a builder's objects placed every frame, ``tests/test_street_users.py``).
+
+    parts : ``[(name, lidar properties {"lidar_class": ..., ...}, vertices (n, 3) world, triangles (m, 3))]`` in the
+        objects' order; vertices are rounded to float32 as a mesh stores them
+    keep_within : as :func:`export_scene`
+    """
+    labeller = _Labeller(table, extra_rules)
+    meshes: dict[tuple, tuple] = {}
+    placements: dict[tuple, list[np.ndarray]] = {}
+    identity = np.eye(4)
+    for name, properties, vertices, triangles in parts:
+        local = np.asarray(vertices, np.float32).reshape(-1, 3).astype(np.float64)
+        if not len(triangles):
+            continue
+        if keep_within is not None and not _near_bounds(local.min(axis=0), local.max(axis=0), *keep_within):
+            continue
+        owner = _Tags(name, properties)
+        meshes[(name, "")] = (local, np.asarray(triangles, np.int32).reshape(-1, 3), None, None)
+        placements[((name, ""), labeller.row(owner, [name]))] = [identity]
+    return _assembled(meshes, placements, labeller)
+
+
+def _assembled(meshes: dict, placements: dict, labeller: _Labeller) -> SceneBuffers:
+    """The buffers of ``placements`` ({(mesh key, row): [world matrices (4, 4)]}) of ``meshes`` ({key: (local vertices, triangles, ...)})."""
     vertices, triangles, triangle_object, offset = [], [], [], 0
     for (key, row), matrices in placements.items():
         local, tris = meshes[key][:2]
@@ -364,6 +406,10 @@ def _near(obj, matrix: np.ndarray, centre, radius: float) -> bool:
 def _near_corners(local: np.ndarray, matrix: np.ndarray, centre, radius: float) -> bool:
     """:func:`_near` of an object's bound box corners ``local`` (8, 3) in its own frame."""
     corners = local @ matrix[:3, :3].T + matrix[:3, 3]
-    low, high = corners.min(axis=0), corners.max(axis=0)
+    return _near_bounds(corners.min(axis=0), corners.max(axis=0), centre, radius)
+
+
+def _near_bounds(low: np.ndarray, high: np.ndarray, centre, radius: float) -> bool:
+    """Whether the world bounds ``low``, ``high`` (3,) come within ``radius`` m of ``centre`` (3,)."""
     nearest = np.clip(np.asarray(centre, float), low, high)
     return float(np.linalg.norm(nearest - centre)) <= radius

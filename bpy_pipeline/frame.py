@@ -160,6 +160,9 @@ class Run:
     casters : the static objects' caster kept from frame to frame (:class:`~bpy_pipeline.lidar.cast.raycast.CasterCache`)
     sensor_poses : every sensor pose of the run (:class:`~bpy_pipeline.geometry.clearance.SensorPoses`), made by the
         build stage before its first build: what the builders keep their solids clear of
+    static_world : ``(token, buffers, bounds)``: the builder's static world exported once (``BuildResult.static_world``,
+        ``.dynamic``; :func:`~bpy_pipeline.stages.scene.export_stage`) and its vertices' ``(low, high)`` (``None``: no vertex);
+        ``None`` before the first export
     """
 
     config: Config
@@ -176,6 +179,7 @@ class Run:
     members: list["Run"] = field(default_factory=list)
     casters: CasterCache | None = None
     sensor_poses: SensorPoses | None = None
+    static_world: tuple | None = None
 
     def __post_init__(self):
         self.rules = parse_rules(self.config.labels.name_rules, "labels.name_rules", self.table.names)

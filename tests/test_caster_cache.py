@@ -55,3 +55,57 @@ def test_static_part_found_again_when_moving_objects_come_first_in_the_buffers()
     moved[0][0] += 1e-9
     cache.caster(SceneBuffers.from_meshes({"cart": box_mesh([3.0, 1.0, 1.0], np.array([1.0, 0.6, 0.8])), "room": moved}), pose, np.array([True, False]))
     assert cache.builds == 2
+
+
+def test_static_part_follows_a_sensor_that_moves_without_turning():
+    """``follow``: the room's Embree scene is built once, in the poses' anchored frame (their origin snapped to the
+    grid), and serves poses moved along a street (the same rotation): the rays' origins are shifted into it for Embree
+    and every distance is solved in the new pose, so hits are a fresh caster's (same triangles here, distances within
+    1e-9 m, the records' bytes equal), both through the compiled pass and the numpy path, and a pose gives the same
+    records whichever pose came first. A turned pose or one in another grid cell builds again; without ``follow``
+    every pose builds."""
+    from bpy_pipeline.lidar.cast.raycast import FOLLOW_GRID
+    from bpy_pipeline.lidar.sensor.rays import Pattern
+    from bpy_pipeline.lidar.cast.scanner import scan
+
+    room = box_mesh([20.0, 0, 2], np.array([60.0, 9.0, 4.0]), splits=6)
+    rng = np.random.default_rng(5)
+    d = rng.normal(size=(30_000, 3))
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    pattern = Pattern(d, np.zeros(len(d), np.uint16), np.zeros(len(d)))
+    poses = []
+    for k in range(4):
+        pose = np.eye(4)
+        pose[:3, 3] = [-30.0 + 7.3 * k, -1.75, 1.73]
+        poses.append(pose)
+
+    def frame_buffers(pose):
+        return SceneBuffers.from_meshes({"cart": box_mesh([pose[0, 3] + 6.0, 1.0, 1.0], np.array([2.0, 0.9, 0.8]), 2), "room": room})
+
+    moving = np.array([True, False])
+    for kernel in ("auto", "numpy"):
+        cache, backwards, plain = (CasterCache(threads=2, kernel=kernel) for _ in range(3))
+        records = {}
+        for k, pose in enumerate(poses):
+            buffers = frame_buffers(pose)
+            caster = cache.caster(buffers, pose, moving, follow=True)
+            plain.caster(buffers, pose, moving)
+            fresh = RayCaster(buffers, pose, threads=2, kernel=kernel)
+            a, b = caster.intersect(np.zeros(3), d), fresh.intersect(np.zeros(3), d)
+            assert np.array_equal(a.ray, b.ray) and np.array_equal(a.triangle, b.triangle)
+            assert np.abs(a.distance - b.distance).max() <= 1e-9
+            assert (buffers.triangle_object[a.triangle] == 0).any()
+            records[k] = scan(caster, buffers, pattern, pose, 0.1, 200.0)[0].tobytes()
+            assert records[k] == scan(fresh, buffers, pattern, pose, 0.1, 200.0)[0].tobytes()
+        assert (cache.builds, cache.reuses) == (1, 3) and (plain.builds, plain.reuses) == (4, 0)
+        for k in reversed(range(4)):
+            buffers = frame_buffers(poses[k])
+            assert scan(backwards.caster(buffers, poses[k], moving, follow=True), buffers, pattern, poses[k], 0.1, 200.0)[0].tobytes() == records[k]
+        assert backwards.builds == 1
+    turned, far = np.eye(4), np.eye(4)
+    turned[:3, :3] = [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]
+    turned[:3, 3] = pose[:3, 3]
+    far[:3, 3] = pose[:3, 3] + [FOLLOW_GRID, 0.0, 0.0]
+    for other in (turned, far):
+        cache.caster(buffers, other, moving, follow=True)
+    assert cache.builds == 3

@@ -58,12 +58,23 @@ class BuildResult:
     scene : the builder's own description of what it built (the railway's layout), for callers
         that want it; never written
     warnings : lines for the user (a placement loop that gave up, say), printed by the run
+    dynamic : the name of the Blender collection holding every object the builder placed for this frame, when all
+        the rest of the scene (its static world) stays as it is while ``static_world`` is the same object: the export
+        stage then exports the static world once, whole, and this collection every frame (``None``: the whole scene
+        every frame)
+    static_world : a token the builder keeps while its static world is unchanged (a new one for a world built anew)
+    dynamic_parts : the ``dynamic`` collection's objects as arrays, in its order, when they are plain tagged meshes
+        (:func:`~bpy_pipeline.export.parts_buffers`): the export stage then takes them as they are instead of reading
+        them back from Blender (the same buffers); ``None``: read from Blender
     """
 
     headings: dict = field(default_factory=dict)
     info: dict | None = None
     scene: Any = None
     warnings: tuple[str, ...] = ()
+    dynamic: str | None = None
+    static_world: Any = None
+    dynamic_parts: tuple | None = None
 
 
 def no_check(params, where: str) -> None:

@@ -44,7 +44,13 @@ def scan_stage(frame: Frame, run: Run) -> None:
     if not len(frame.buffers.triangles):
         frame.buffers.check()  # "nothing to scan"; the caster checks the rest before it uses an index
     config, spec = run.config, run.config.sensor.spec
-    caster = frame.caster = run.casters.caster(frame.buffers, frame.pose, moving_objects(frame))
+    if frame.scene.dynamic is not None and run.static_world is not None:  # the static world exported once, first in the buffers
+        token, static, _ = run.static_world
+        moving = np.arange(len(frame.buffers.objects)) >= len(static.objects)
+        caster = run.casters.caster(frame.buffers, frame.pose, moving, key=token, follow=True)  # its Embree scene built once
+    else:
+        caster = run.casters.caster(frame.buffers, frame.pose, moving_objects(frame))
+    frame.caster = caster
     ghost = run.table.id_of("reflection") if config.effects.mirrors.label == "reflection" else None
     options = {"max_bounces": config.effects.mirrors.max_bounces, "ghost_semantic": ghost, "ideal": config.effects.mirrors.ideal, "chunk_rays": CHUNK_RAYS, "surfaces": scan_surfaces(config), "rng": frame.rng}
     patterns = run.rays.patterns(frame.index)  # a mirror sensor's leave through its own mirrors

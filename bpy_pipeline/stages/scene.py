@@ -3,6 +3,10 @@
 
 from __future__ import annotations
 
+import dataclasses
+
+import numpy as np
+
 from ..builders.base import BUILDERS, BuildContext, BuildResult
 from ..config import Config
 from ..errors import InputError
@@ -19,7 +23,7 @@ def build_populated(scene, context: BuildContext) -> BuildResult:
         return result
     from ..scenes.population import populate
 
-    return populate(population, context, result)
+    return dataclasses.replace(populate(population, context, result), dynamic=None, dynamic_parts=None)  # the population stands outside the builder's dynamic collection
 
 
 def build_frame_scene(config: Config, index: int = 0, rng=None, keep: dict | None = None) -> BuildResult:
@@ -76,11 +80,37 @@ def reach(frame: Frame, config: Config) -> float:
 
 
 def export_stage(frame: Frame, run: Run) -> None:
-    """The evaluated scene as buffers: every object the sensor can reach during the frame."""
-    from ..export import export_scene
+    """The evaluated scene as buffers: every object the sensor can reach during the frame.
+
+    A builder whose result names its ``dynamic`` collection (:class:`~bpy_pipeline.builders.base.BuildResult`) has its
+    static world exported once, whole, while its ``static_world`` token stays the same (kept in ``run.static_world``),
+    and only that collection's objects every frame, those within reach (from the builder's arrays when it gives them,
+    ``dynamic_parts``): the frame's buffers are the static world's, then those. The rays, limited to the sensor's
+    range, do the culling the export would do.
+    """
+    from ..export import export_scene, parts_buffers
 
     max_range = reach(frame, run.config)
-    frame.buffers = export_scene(run.table, run.rules, keep_within=(frame.pose[:3, 3], max_range))
-    if not len(frame.buffers.triangles) and len(export_scene(run.table, run.rules).triangles):
-        where = [round(float(v), 2) for v in frame.pose[:3, 3]]
-        raise InputError(f"sensor: no object of the scene lies within max_range ({max_range} m) of the sensor at {where} in frame {frame.index}; move the sensor or raise sensor.max_range")
+    centre = frame.pose[:3, 3]
+    scene = frame.scene
+    if scene.dynamic is not None:
+        if run.static_world is None or run.static_world[0] is not scene.static_world:
+            static = export_scene(run.table, run.rules, skip=scene.dynamic)
+            bounds = (static.vertices.min(axis=0), static.vertices.max(axis=0)) if len(static.vertices) else None
+            run.static_world = (scene.static_world, static, bounds)
+        _, static, bounds = run.static_world
+        if scene.dynamic_parts is not None:
+            dynamic = parts_buffers(run.table, scene.dynamic_parts, run.rules, keep_within=(centre, max_range))
+        else:
+            dynamic = export_scene(run.table, run.rules, keep_within=(centre, max_range), only=scene.dynamic)
+        frame.buffers = static.joined(dynamic)
+        near = len(frame.buffers.triangles) > len(static.triangles) or (bounds is not None and float(np.linalg.norm(np.clip(centre, *bounds) - centre)) <= max_range)
+        if near or not len(frame.buffers.triangles):
+            return
+    else:
+        frame.buffers = export_scene(run.table, run.rules, keep_within=(centre, max_range))
+        if len(frame.buffers.triangles) or not len(export_scene(run.table, run.rules).triangles):
+            return
+    where = [round(float(v), 2) for v in centre]
+    raise InputError(f"sensor: no object of the scene lies within max_range ({max_range} m) of the sensor at {where} in frame {frame.index}; move the sensor or raise sensor.max_range")
+

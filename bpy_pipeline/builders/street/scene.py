@@ -81,7 +81,8 @@ class Intersection:
         The objects stay in the collection's order, so the export sees the parts in the order of ``parts``.
         Only objects whose name changes are renamed (a rename costs Blender a pass over its names): first to
         names no part takes, so that no new name is still another object's, then to their own. The spares
-        are ``street_user_kept_K`` by their place.
+        are ``street_user_kept_K`` by their place. Returns the parts as :func:`~bpy_pipeline.export.parts_buffers`
+        takes them: ``(object name, its lidar properties, vertices, triangles)``.
         """
         kept = list(self.users.objects)
         while len(kept) < len(parts):
@@ -99,6 +100,8 @@ class Intersection:
             tag(obj, class_name, material, reflectivity, instance)
         for obj in kept[len(parts) :]:  # an empty mesh exports nothing
             fill_mesh(obj.data, np.zeros((0, 3)), np.zeros((0, 3), np.int32))
+        return [(obj.name, {"lidar_class": class_name, "lidar_material": material, "lidar_reflectivity": float(reflectivity), "lidar_instance": int(instance)}, *mesh)
+                for obj, (_, class_name, material, reflectivity, instance, mesh) in zip(kept, parts)]  # fmt: skip
 
     def populate(self, rng: np.random.Generator, view=None):
         from ..base import BuildResult
@@ -117,8 +120,7 @@ class Intersection:
                 name = f"street_user_{k:03d}_{user.kind}_{part}" if part != "rider" else f"street_user_{k:03d}_{user.kind}_~rider"
                 parts.append((name, class_name, material, reflectivity, instance, mesh))
             headings[instance] = float(user.yaw)
-        self._show_users(parts)
-        bpy.context.view_layer.update()
+        shown = self._show_users(parts)  # Blender evaluates them when something reads the scene (an export, a render, the viewport)
         kinds = {}
         for user in placement.users:
             kinds[user.kind] = kinds.get(user.kind, 0) + 1
@@ -135,4 +137,4 @@ class Intersection:
                 for k, u in enumerate(placement.users)
             ],
         }
-        return BuildResult(headings=headings, info=info)
+        return BuildResult(headings=headings, info=info, dynamic=self.users.name, static_world=self, dynamic_parts=tuple(shown))

@@ -52,13 +52,14 @@ jit = numba.njit(nogil=True, cache=True, error_model="numpy", fastmath=False)
 
 
 @jit
-def fill_diffuse(trace, handles, part_triangle, far, tfar, prim, prim_triangle, moved, origins, directions, scene, ring, time, min_range, max_distance, ray_base, points, beam, ray, front, back, specular_out):
+def fill_diffuse(trace, handles, part_triangle, part_shift, far, tfar, prim, prim_triangle, moved, origins, directions, scene, ring, time, min_range, max_distance, ray_base, points, beam, ray, front, back, specular_out):
     """Records of the rays whose hit returns from a diffuse surface; returns ``(records, specular rays)``.
 
     trace : False: ``tfar`` (n,) float32 and ``prim`` (n,) int32 hold Embree's answer (-1: a miss);
         True: Embree is called here, ray by ray, on the scenes ``handles`` ((q,) uint64, q <= 2:
         the static part, then the moving one; ``part_triangle``: two (p,) int64 maps of their
-        primitives to buffer triangles, (0,) for the identity) up to ``far`` (n,) float32, and its
+        primitives to buffer triangles, (0,) for the identity; ``part_shift``: (q, 3) float64 added to a ray's
+        origin for that part, :attr:`.raycast.RayCaster.part_shift`) up to ``far`` (n,) float32, and its
         answer written into ``tfar`` and ``prim`` as :meth:`.raycast.RayCaster._embree` gives it
         (with two parts, the nearer hit's buffer triangle)
     prim_triangle : (p,) int64 buffer triangle of each primitive of ``prim``, or (0,) for the identity
@@ -84,7 +85,7 @@ def fill_diffuse(trace, handles, part_triangle, far, tfar, prim, prim_triangle, 
         ox, oy, oz = origins[j, 0], origins[j, 1], origins[j, 2]
         dx, dy, dz = directions[i, 0], directions[i, 1], directions[i, 2]
         if trace:
-            tfar[i], prim[i] = nearest_hit(handles, part_triangle, word, real, address, ox, oy, oz, dx, dy, dz, far[i])
+            tfar[i], prim[i] = nearest_hit(handles, part_triangle, part_shift, word, real, address, ox, oy, oz, dx, dy, dz, far[i])
         p = prim[i]
         if p < 0:
             continue
@@ -158,16 +159,24 @@ def ray_hit():
 
 
 @jit
-def nearest_hit(handles, part_triangle, word, real, address, ox, oy, oz, dx, dy, dz, limit):
+def nearest_hit(handles, part_triangle, part_shift, word, real, address, ox, oy, oz, dx, dy, dz, limit):
     """One ray's nearest hit up to ``limit`` (float32) on the scenes ``handles`` (``rtcIntersect1`` in the record of
     :func:`ray_hit`, the origin and direction rounded to float32): ``(tfar, primitive)``, ``(limit, -1)`` for a miss.
     With two parts, the moving one is asked up to the static hit, and the primitive is the nearer hit's buffer triangle
-    (``part_triangle``: each part's map, (0,) for the identity), as :meth:`.raycast.RayCaster._embree` merges them."""
+    (``part_triangle``: each part's map, (0,) for the identity), as :meth:`.raycast.RayCaster._embree` merges them.
+    A part with a shift ((3,) float64 of ``part_shift``, not all zero) gets the origin rounded to float32, plus the
+    shift in float64, rounded again (:meth:`.raycast.RayCaster.part_origins`' arithmetic)."""
     q = handles.shape[0]
     best_t = limit
     best_p = -1
     for part in range(q):
-        real[0], real[1], real[2] = np.float32(ox), np.float32(oy), np.float32(oz)
+        sx, sy, sz = part_shift[part, 0], part_shift[part, 1], part_shift[part, 2]
+        if sx == 0.0 and sy == 0.0 and sz == 0.0:
+            real[0], real[1], real[2] = np.float32(ox), np.float32(oy), np.float32(oz)
+        else:
+            real[0] = np.float32(np.float64(np.float32(ox)) + sx)
+            real[1] = np.float32(np.float64(np.float32(oy)) + sy)
+            real[2] = np.float32(np.float64(np.float32(oz)) + sz)
         real[4], real[5], real[6] = np.float32(dx), np.float32(dy), np.float32(dz)
         real[8] = best_t
         word[17], word[18], word[19] = NO_HIT, NO_HIT, NO_HIT  # primID, geomID, instID[0]: no hit yet
@@ -181,11 +190,11 @@ def nearest_hit(handles, part_triangle, word, real, address, ox, oy, oz, dx, dy,
 
 
 @jit
-def trace_rays(handles, part_triangle, far, origins, directions, tfar, prim):
+def trace_rays(handles, part_triangle, part_shift, far, origins, directions, tfar, prim):
     """Embree's nearest hit of each ray, as :meth:`.raycast.RayCaster._embree` has it from embreex, into ``tfar`` (n,)
     float32 and ``prim`` (n,) int32: :func:`fill_diffuse`'s trace without the records.
 
-    handles, part_triangle, far : as :func:`fill_diffuse` takes them; origins (n, 3) or (1, 3) shared, directions
+    handles, part_triangle, part_shift, far : as :func:`fill_diffuse` takes them; origins (n, 3) or (1, 3) shared, directions
     (n, 3), float32 or float64 (rounded to float32 as numpy's ``astype`` does). A miss keeps ``far`` and gets -1.
     """
     n = directions.shape[0]
@@ -193,7 +202,7 @@ def trace_rays(handles, part_triangle, far, origins, directions, tfar, prim):
     word, real, address = ray_hit()
     for i in range(n):
         j = 0 if shared else i
-        tfar[i], prim[i] = nearest_hit(handles, part_triangle, word, real, address, origins[j, 0], origins[j, 1], origins[j, 2], directions[i, 0], directions[i, 1], directions[i, 2], far[i])
+        tfar[i], prim[i] = nearest_hit(handles, part_triangle, part_shift, word, real, address, origins[j, 0], origins[j, 1], origins[j, 2], directions[i, 0], directions[i, 1], directions[i, 2], far[i])
 
 
 @jit

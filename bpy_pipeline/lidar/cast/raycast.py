@@ -32,7 +32,13 @@ Set-up and reuse: Embree reads the float32 vertices and the indices where they l
 (:mod:`.embree`), so a caster costs Embree's own build plus a few numpy passes. A run that scans
 many frames of one scene keeps the caster of the static objects in a :class:`CasterCache` and
 builds a small one per frame for the objects that move; a :class:`RayCaster` traces both and
-keeps the nearer hit.
+keeps the nearer hit. A sensor that drives through a static world without turning (the street's
+ego car) keeps one Embree scene of it for the run (``CasterCache.caster(..., follow=True)``): its
+local origin is the pose's position snapped to a grid of :data:`FOLLOW_GRID` m (the street's: the
+world origin, the layout's centre; one fixed origin per layout), and each pose moves the rays into
+it, not the scene. A street layout lies within about 100 m of that origin and a pose within 900 m,
+so Embree's float32 copy keeps better than 0.1 mm; the distances are solved in float64 in each
+pose's own frame, as before.
 """
 
 from __future__ import annotations
@@ -56,6 +62,8 @@ from .sharing import share
 
 FAR = 1e30  # stands for "no limit" in Embree's float32 tfar
 JITTER = 2.0**-18  # radians (and metres per metre of origin coordinate) a re-traced ray is moved by: 64 float32 ulps
+FOLLOW_GRID = 1024.0  # metres between the origins a static part following a sensor may be built at (anchored)
+MAX_SHIFT = 1000.0  # metres a pose may stand from the frame a kept static part was built in (float32 keeps 0.1 mm there)
 MAX_COORDINATE = 1e9  # metres from the local origin; far beyond any scene (Embree overflows and loses triangles from ~5e18 m)
 PLANE_CHUNK = 1 << 20  # triangles per step when computing the planes (bounds the float64 temporaries)
 KERNEL_VARIABLE = "BPY_PIPELINE_SCAN_KERNEL"  # "numpy" forces the numpy path where no kernel is given (tests, comparisons)
@@ -231,9 +239,12 @@ class RayCaster:
         triangles = np.ascontiguousarray(buffers.triangles, np.int32)
         self.triangle_object = np.asarray(buffers.triangle_object)
         self.objects = len(buffers.objects)
+        shift = np.zeros(3)
         if static is not None and not np.array_equal(static.frame, self.frame):
-            raise ValueError("RayCaster: the static part was built for another frame")
-        if static is not None and len(static.triangle) == len(triangles):
+            if not translated(static.frame, self.frame):
+                raise ValueError("RayCaster: the static part was built for a frame turned against this one")
+            shift = (self.origin - static.frame[:3, 3]) @ self.frame[:3, :3]  # this frame's origin in the part's frame
+        if static is not None and len(static.triangle) == len(triangles) and not shift.any():
             # nothing moves: the kept planes as they are (read only); its vertices' extent was checked when it was built,
             # in this frame, from the same triangles and vertex rows (compared byte for byte by the cache, or the caller's key)
             self.plane_normal, self.plane_offset = static.normal, static.offset
@@ -249,10 +260,16 @@ class RayCaster:
                 moving[static.triangle] = False
                 moving = np.flatnonzero(moving)
                 self.plane_normal, self.plane_offset = np.empty((len(triangles), 3)), np.empty(len(triangles))
-                self.plane_normal[static.triangle], self.plane_offset[static.triangle] = static.normal, static.offset
+                if shift.any():  # the static planes solved again in this frame: the bits a caster built here has
+                    self.plane_normal[static.triangle], self.plane_offset[static.triangle] = triangle_planes(local, triangles[static.triangle], self.kernels)
+                else:
+                    self.plane_normal[static.triangle], self.plane_offset[static.triangle] = static.normal, static.offset
                 normal, offset = triangle_planes(local, triangles[moving], self.kernels)
                 self.plane_normal[moving], self.plane_offset[moving] = normal, offset
                 parts = [static.part, embree_part(local, triangles, moving, normal)]
+        # (q, 3) float64 added to the rays' local origins for each part: the kept static part's Embree scene lies in the
+        # frame it was built in, a translation of this one (CasterCache); Embree only chooses the triangle, solved here
+        self.part_shift = np.array([shift if p is parts[0] and static is not None else np.zeros(3) for p in parts if p is not None]).reshape(-1, 3)
         self.parts = [p for p in parts if p is not None]
         # Embree's primID indexes the solid triangles; with one part, map them here, with two, in _embree
         self.embree_triangle = self.parts[0].triangle if len(self.parts) == 1 else None
@@ -310,13 +327,13 @@ class RayCaster:
         def run(start):
             s = slice(start, start + self.chunk)
             if traces:  # Embree called from the compiled pass: the same hits, without embreex's arrays per call (about half of a small call's time)
-                self.kernels.trace_rays(self.embree_handles, self.part_triangle, far[s], origins32[s], directions32[s], tfar_out[s], prim_out[s])
+                self.kernels.trace_rays(self.embree_handles, self.part_triangle, self.part_shift, far[s], origins32[s], directions32[s], tfar_out[s], prim_out[s])
                 return
             limit = np.array(far[s], np.float32)  # a copy: embreex writes the hits' distances into it
             d32 = directions32[s] if directions32.dtype == np.float32 else np.ascontiguousarray(directions32[s], np.float32)
             best = None
-            for part in self.parts:
-                out = part.scene.run(origins32[s], d32, dists=limit if best is None else best[0].copy(), output=1)
+            for part, shift in zip(self.parts, self.part_shift):
+                out = part.scene.run(shifted_origins(origins32[s], shift), d32, dists=limit if best is None else best[0].copy(), output=1)
                 prim = out["primID"]
                 if len(self.parts) == 1:
                     best = (out["tfar"], prim)
@@ -467,6 +484,30 @@ class RayCaster:
         return tfar, prim, flags
 
 
+def shifted_origins(origins32: np.ndarray, shift: np.ndarray) -> np.ndarray:
+    """``(n, 3)`` float32 ray origins for an Embree part whose frame is this caster's moved by ``-shift`` (3,) float64: the
+    float32 origins plus ``shift`` in float64, rounded again (the compiled trace's arithmetic); as given for no shift."""
+    if not shift.any():
+        return origins32
+    return np.ascontiguousarray(origins32.astype(np.float64) + shift, np.float32)
+
+
+def anchored(frame: np.ndarray) -> np.ndarray:
+    """``frame`` (4, 4) with its origin moved to the nearest point of a grid of :data:`FOLLOW_GRID` metres: the frame a
+    static part that follows a sensor is built in (:meth:`CasterCache.caster`); a street layout, about the world's
+    origin, gets one frame for every pose of its ego car."""
+    home = np.array(frame, np.float64)
+    home[:3, 3] = np.round(home[:3, 3] / FOLLOW_GRID) * FOLLOW_GRID
+    return home
+
+
+def translated(kept: np.ndarray, frame: np.ndarray) -> bool:
+    """Whether the (4, 4) frame ``frame`` is ``kept`` moved by a translation of at most :data:`MAX_SHIFT` metres (the same
+    rotation, bit for bit), so a static part built in ``kept`` can serve it with its rays' origins shifted."""
+    return (np.array_equal(kept[:3, :3], frame[:3, :3]) and np.array_equal(kept[3], frame[3])
+            and float(np.abs(frame[:3, 3] - kept[:3, 3]).max()) <= MAX_SHIFT)  # fmt: skip
+
+
 class RecordPool:
     """Memory for a caster's record arrays, used again once no array made from it is alive.
 
@@ -550,12 +591,20 @@ class CasterCache:
             weakref.finalize(self, self._pool.shutdown)
         return self._pool
 
-    def caster(self, buffers: SceneBuffers, frame, moving: np.ndarray | None = None, key=None) -> RayCaster:
+    def caster(self, buffers: SceneBuffers, frame, moving: np.ndarray | None = None, key=None, follow: bool = False) -> RayCaster:
         """A caster of ``buffers`` in ``frame`` ((4, 4) float64 local-to-world, e.g. a fixed pose for the run).
 
         moving : (k,) bool per row of ``buffers.objects``: the objects rebuilt every call (None: none)
         key : optional; when given, the caller's word that equal keys mean equal static geometry
             (e.g. the builder's parameters and seed): the static part's bytes are not compared
+        follow : build the static part in :func:`anchored` ``frame`` (its rotation, its origin on a grid of
+            :data:`FOLLOW_GRID` metres) instead of ``frame``, so every pose of a sensor driving through a static world
+            without turning, within one grid cell, reuses it: its Embree scene stays in the anchored frame and the
+            rays' origins are shifted into it for Embree (:attr:`RayCaster.part_shift`), while the planes are solved
+            in ``frame``. Embree then rounds the static triangles to float32 in the anchored frame instead of
+            ``frame``: a ray passing within float32's rounding of an edge may meet the neighbouring triangle; every
+            distance is still solved in float64 in ``frame``. The anchored frame depends on ``frame`` alone, so a
+            frame gives the same bytes whichever frame built the part
         """
         frame = np.asarray(frame, np.float64)
         k = len(buffers.objects)
@@ -564,8 +613,9 @@ class CasterCache:
             raise InputError(f"CasterCache.caster: moving must give each of the {k} object rows a flag, not shape {moving.shape}")
         static = np.flatnonzero(~moving[buffers.triangle_object]) if moving.any() else np.arange(len(buffers.triangles))
         geometry = ("key", key) if key is not None else static_geometry(buffers, static)
+        home = anchored(frame) if follow else frame  # the frame the static part lies in
         kept = self.kept
-        same_frame = kept is not None and np.array_equal(kept.frame, frame)
+        same_frame = kept is not None and np.array_equal(kept.frame, home)
         same_place = same_frame and np.array_equal(kept.triangle, static)
         if same_place and same_geometry(kept.geometry, geometry):
             self.reuses += 1
@@ -579,15 +629,15 @@ class CasterCache:
             if len(buffers.triangles):
                 buffers.check()  # before any index is used to build (the reused path is checked by RayCaster)
             self.builds += 1
-            if not moving.any():  # nothing moves: the whole scene is the static part
+            if not moving.any() and not follow:  # nothing moves: the whole scene is the static part
                 caster = RayCaster(buffers, frame, self.threads, kernel=self.kernel, record_pool=self.record_pool, pool=self.pool)
                 self.kept = StaticPart(frame, static, geometry, caster.parts[0] if caster.parts else None, caster.plane_normal, caster.plane_offset)
                 return caster
-            local = (np.asarray(buffers.vertices, np.float64) - frame[:3, 3]) @ frame[:3, :3]
+            local = (np.asarray(buffers.vertices, np.float64) - home[:3, 3]) @ home[:3, :3]
             triangles = np.ascontiguousarray(buffers.triangles, np.int32)
             check_extent(local, triangles, buffers)
             normal, offset = triangle_planes(local, triangles[static], choose_kernels(self.kernel))
-            part = self.kept = StaticPart(frame, static, geometry, embree_part(local, triangles, static, normal), normal, offset)
+            part = self.kept = StaticPart(home, static, geometry, embree_part(local, triangles, static, normal), normal, offset)
         return RayCaster(buffers, frame, self.threads, kernel=self.kernel, static=part, record_pool=self.record_pool, pool=self.pool)
 
 

@@ -31,6 +31,7 @@ CONE_MARGIN = 1e-12  # cosine: the cone prefilter lets through pairs this far ou
 CONE_BLOCK = 16384  # rays per block of the numpy cone test: a (block, k) matrix, not (n, k)
 SAMPLE_SPACING = 0.1  # m between surface samples for truncation (wider on objects that would need more than about:)
 MAX_SAMPLES = 4000  # x 2 (surface_samples' area bound)
+COUNTED_IDS = 1 << 22  # instance ids below this are counted through a table of every id (counts_per_instance)
 
 
 class Coverage:
@@ -190,7 +191,16 @@ def visibility(
 
 
 def counts_per_instance(box_instance: np.ndarray, instance: np.ndarray) -> np.ndarray:
-    """``(k,)`` int64: how many of the ``(d,)`` ``instance`` values are each of the ``(k,)`` distinct ``box_instance``."""
+    """``(k,)`` int64: how many of the ``(d,)`` ``instance`` values are each of the ``(k,)`` distinct ``box_instance``.
+
+    Instance ids up to :data:`COUNTED_IDS` are counted in one pass (a table of every id's count, read at the boxes'
+    ids); larger ones by a search among the boxes' ids (the same counts)."""
+    instance = np.asarray(instance, np.int64)
+    box_instance = np.asarray(box_instance, np.int64)
+    if not len(instance) or (instance.min() >= 0 and instance.max() < COUNTED_IDS):
+        table = np.bincount(instance, minlength=1) if len(instance) else np.zeros(1, np.int64)
+        inside = (box_instance >= 0) & (box_instance < len(table))
+        return np.where(inside, table[np.where(inside, box_instance, 0)], 0).astype(np.int64)
     order = np.argsort(box_instance)
     known = np.asarray(box_instance, np.int64)[order]
     at = np.searchsorted(known, instance)

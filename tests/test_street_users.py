@@ -1,0 +1,62 @@
+"""The street's road users as the export stage takes them: from the builder's arrays (``BuildResult.dynamic_parts``,
+``export.parts_buffers``), the same buffers, byte for byte, as reading the users' collection back from Blender; and
+its static world exported once, the same for every frame."""
+
+import numpy as np
+import pytest
+
+pytestmark = pytest.mark.bpy
+
+
+def test_users_from_arrays_are_the_users_read_back_from_blender():
+    import bpy
+
+    from bpy_pipeline.config import load_config
+    from bpy_pipeline.export import export_scene, parts_buffers
+    from bpy_pipeline.frame import Frame, Run, frame_rng
+    from bpy_pipeline.stages.scene import build_stage, export_stage, pose_stage
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    config = load_config("examples/street/ego_hdl64e.yaml", ["frames=4"])
+    run = Run(config)
+    statics = []
+    for index in range(3):
+        frame = Frame(index, config, frame_rng(config.seed, index))
+        for stage in (build_stage, pose_stage, export_stage):
+            stage(frame, run)
+        scene = frame.scene
+        assert scene.dynamic is not None and scene.dynamic_parts
+        within = (frame.pose[:3, 3], config.sensor.spec.max_range)
+        read = export_scene(run.table, run.rules, keep_within=within, only=scene.dynamic)
+        made = parts_buffers(run.table, scene.dynamic_parts, run.rules, keep_within=within)
+        assert 0 < len(made.objects) < len(scene.dynamic_parts) + 1 and len(made.triangles) > 10_000
+        for name in ("vertices", "triangles", "triangle_object"):
+            a, b = getattr(read, name), getattr(made, name)
+            assert a.dtype == b.dtype and a.tobytes() == b.tobytes(), name
+        assert read.objects.rows() == made.objects.rows() and np.array_equal(read.objects.surface, made.objects.surface)
+        statics.append(run.static_world[1])
+        users = np.arange(len(frame.buffers.objects)) >= len(statics[-1].objects)
+        assert not np.isin(frame.buffers.objects.instance[~users], list(scene.headings)).any()  # no road user in the static world
+        assert set(frame.buffers.objects.instance[users].tolist()) <= set(scene.headings)
+    assert statics[0] is statics[1] is statics[2]  # exported once
+
+
+def test_a_sensor_out_of_reach_of_the_static_world_is_an_error():
+    """The static world exported whole still answers a sensor that no object is within range of, as the export within
+    its reach did: one line naming sensor.max_range."""
+    import bpy
+
+    from bpy_pipeline.config import load_config
+    from bpy_pipeline.errors import InputError
+    from bpy_pipeline.frame import Frame, Run, frame_rng
+    from bpy_pipeline.stages.scene import build_stage, export_stage, pose_stage
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    config = load_config(None, ["scene.builder=street", "sensor.preset=hdl64e", "sensor.position=[5000, 0, 0]", "frames=1"])
+    run = Run(config)
+    frame = Frame(0, config, frame_rng(config.seed, 0))
+    build_stage(frame, run)
+    pose_stage(frame, run)
+    assert frame.scene.dynamic is not None
+    with pytest.raises(InputError, match="sensor.max_range"):
+        export_stage(frame, run)
