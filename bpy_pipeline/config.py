@@ -194,6 +194,10 @@ class EffectsConfig:
     materials: MaterialsConfig = field(default_factory=MaterialsConfig)  # reflectance model per class (lidar/materials.py); opt-in
 
 
+BOX_CLASSES = ("car", "van", "truck", "bus", "bicycle", "motorcycle", "person", "rider", "motorcyclist", "robot arm")
+# every vehicle class and every road user (a two-wheeler's box takes its rider's class, geometry/boxes.RIDER_CLASSES)
+
+
 @dataclass(frozen=True)
 class BoxesConfig:
     """``output.boxes``: 3D box labels per frame (io/boxes.py), in the frame of the points.
@@ -201,15 +205,17 @@ class BoxesConfig:
     ``formats``: ``kitti`` and/or ``openpcdet``; ``auto`` is both for the parking and
     industrial_hall builders and none otherwise. Boxes of ``classes`` with fewer labeled points
     than ``min_points[class]`` (else ``min_points_default``) are dropped (the sparse-camera
-    thesis: 12 for cars, 6 for the rest). ``occlusion_levels`` (t0, t1, t2): visible / unoccluded
+    thesis: 12 for cars, here also vans, trucks and buses; 6 for the rest). ``occlusion_levels`` (t0, t1, t2): visible / unoccluded
     point fraction from which a box is occlusion level 0, 1, 2 (below t2: 3). ``names`` maps a
-    class to its label-file type (default: its words capitalised and joined, robot arm -> RobotArm).
+    class to its label-file type (default: its words capitalised and joined, robot arm -> RobotArm; KITTI's
+    types from labels.yaml ``kitti_names``; ``DontCare`` marks a class's boxes as KITTI's DontCare regions).
+    The default ``classes`` (:data:`BOX_CLASSES`) box every vehicle class, as KITTI does (Van, Truck, Misc).
     """
 
     formats: list[str] | Literal["auto"] = "auto"  # box writers (io/writers.py)
-    classes: list[str] = field(default_factory=lambda: ["car", "person", "robot arm", "rider"])  # rider: an inserted cyclist (KITTI Cyclist)
+    classes: list[str] = field(default_factory=lambda: list(BOX_CLASSES))
     names: dict = field(default_factory=dict)
-    min_points: dict = field(default_factory=lambda: {"car": 12})
+    min_points: dict = field(default_factory=lambda: {"car": 12, "van": 12, "truck": 12, "bus": 12})
     min_points_default: int = 6
     occlusion_levels: tuple[float, float, float] = (0.8, 0.4, 0.1)
 
