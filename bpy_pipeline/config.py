@@ -279,7 +279,7 @@ class SemanticKittiOutput:
 @dataclass(frozen=True)
 class OutputConfig:
     formats: list[str] = field(default_factory=lambda: ["ply", "semantickitti"])  # writers of io/writers.py
-    frame: Literal["sensor", "world"] = "sensor"
+    frame: Literal["sensor", "world", "kitti"] = "sensor"  # kitti: level, ground at z = -1.73 m (geometry/transforms.output_pose)
     preview: bool = True
     sequence: int = 0  # older configs only: SemanticKITTI sequences follow output.split (0 is accepted)
     boxes: BoxesConfig = field(default_factory=BoxesConfig)
@@ -608,6 +608,8 @@ def config_from_dict(data) -> Config:
     _check_writers(config)
     if config.output.min_objects < 0:
         raise InputError(f"output.min_objects: must be >= 0, got {config.output.min_objects}")
+    if config.output.frame == "kitti" and (config.sensor.rig or BUILDER_REGISTRY.get(config.scene.builder).plan != "scene"):
+        raise InputError("output.frame: kitti stands on a builder's ground under one sensor; a sensor rig or a real scan writes sensor or world")
     if config.output.frames_kept and not config.output.skip_empty:
         raise InputError("output.frames_kept: counts kept frames, so it needs output.skip_empty: true")
     return config

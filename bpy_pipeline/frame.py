@@ -80,7 +80,7 @@ class Frame:
     chunks : the scan's ``(points, beam)`` chunks, consumed by the effects stage
     direct_returns : (d,) int64 the instance of each of the scan's returns that met no mirror, before the effects, when the
         boxes take their ``visible`` counts from them (:func:`~bpy_pipeline.stages.scan.counts_direct_returns`); else ``None``
-    points : (p,) POINT_DTYPE records in the output frame (sensor or world; a rig's: RIG_POINT_DTYPE)
+    points : (p,) POINT_DTYPE records in the output frame (sensor, world or kitti; a rig's: RIG_POINT_DTYPE)
     boxes : (b,) BOX_DTYPE box labels in the output frame, ``None`` when no box format is asked for
     images : {name: (h, w, 3) uint8} camera renderings (KITTI's ``image_2``)
     flash : {file suffix: (returns, rows, columns) FLASH_IMAGE_DTYPE} flash cameras' images (``flash_image``)

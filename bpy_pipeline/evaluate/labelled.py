@@ -32,6 +32,7 @@ from typing import Callable, Iterable, Sequence
 import numpy as np
 
 from ..errors import InputError
+from ..geometry.transforms import sensor_to_output
 from ..io.manifest import read_frame_records, read_manifest
 from ..io.ply import read_ply
 from ..io.real_scans import label_path as semantickitti_label_path
@@ -345,14 +346,14 @@ def read_kitti_object(path: Path, classes: Sequence[str], image_size: tuple[int,
 def read_generated(folder: Path, classes: Sequence[str], every: int = 1, max_frames: int | None = None) -> list[LabelledScan]:
     """The frames of a dataset folder made by the pipeline (``ply/*.ply``), every ``every``-th, at most ``max_frames``.
 
-    Points written in the world frame (``output.frame: world``) are moved back into the sensor frame by the
+    Points written in another frame (``output.frame: world`` or ``kitti``) are moved back into the sensor frame by the
     frame record's sensor pose. Object ids are the PLY ``instance`` field.
     """
     if every < 1 or (max_frames is not None and max_frames < 1):
         raise InputError(f"{folder}: every and max_frames must be >= 1, got {every} and {max_frames}")
     manifest = read_manifest(folder) if (folder / "manifest.json").is_file() else {}
     class_names = manifest.get("class_table")
-    world = ((manifest.get("config") or {}).get("output") or {}).get("frame") == "world"
+    points_frame = ((manifest.get("config") or {}).get("output") or {}).get("frame", "sensor")
     records = read_frame_records(folder) if (folder / "records").is_dir() else []
     files = []
     for record in records:
@@ -368,8 +369,9 @@ def read_generated(folder: Path, classes: Sequence[str], every: int = 1, max_fra
     for path, pose in files:
         cloud = read_ply(path)
         xyz = np.column_stack([cloud["x"], cloud["y"], cloud["z"]]).astype(np.float64)
-        if world:
-            xyz = (xyz - pose[:3, 3]) @ pose[:3, :3]
+        to_output = sensor_to_output(points_frame, pose)
+        if to_output is not None:
+            xyz = (xyz - to_output[:3, 3]) @ to_output[:3, :3]
         xyz = xyz.astype(np.float32)
         semantic = cloud["semantic"].astype(np.int64)
         truth = np.where(semantic < len(truth_lut), truth_lut[np.minimum(semantic, len(truth_lut) - 1)], 0)  # unknown ids: ignored

@@ -10,7 +10,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+
 from ..errors import InputError
+from ..geometry.transforms import sensor_to_output
 from ..labels import load_class_table
 from . import kitti, npy, openpcdet, semantickitti, sustech
 from .class_maps import maps_for, semantic_kitti_lut
@@ -67,14 +70,26 @@ def _kitti_folder(frame) -> str:
     return "testing" if split_of(frame.index, frame.config.output.split, frame.config.frames) == "test" else "training"
 
 
+def _sensor_ground(frame) -> np.ndarray:
+    """``(4,)`` the ground under the frame's sensor, ``n . p + d = 0`` in its frame: a real scan's ground where the
+    mixing found it (its record's ``rules.ground``), else the builders' ground, world z = 0 (:func:`.kitti.ground_plane`)."""
+    found = (getattr(getattr(frame, "mixed", None), "rule_log", None) or {}).get("ground")
+    if found:
+        return np.append(found["normal"], -float(found["offset"]))
+    return kitti.ground_plane(frame.pose)
+
+
 def _write_kitti(frame, out: Path) -> list[Path]:
-    """The KITTI layout's point file, labels and calibration (its image is :func:`_write_kitti_image`)."""
-    return kitti.write_frame_text(out, frame_stem(frame.index), frame.points, frame.boxes, frame.config.output.kitti.camera, frame.config.output.boxes.names, _kitti_folder(frame))
+    """The KITTI layout's point file, labels, calibration and road plane (its image is :func:`_write_kitti_image`)."""
+    to_points = sensor_to_output(frame.config.output.frame, frame.pose)
+    ground = kitti.plane_in_frame(_sensor_ground(frame), to_points)
+    return kitti.write_frame_text(out, frame_stem(frame.index), frame.points, frame.boxes, frame.config.output.kitti.camera, frame.config.output.boxes.names, _kitti_folder(frame), to_points, ground)
 
 
 def _write_kitti_image(frame, out: Path) -> list[Path]:
     """``image_2``: the camera stage's rendering (output.kitti.camera.render), else the points' projection."""
-    return [kitti.write_image(out, frame_stem(frame.index), frame.points, frame.config.output.kitti.camera, load_class_table().color_lut(), frame.images.get("image_2"), _kitti_folder(frame))]
+    return [kitti.write_image(out, frame_stem(frame.index), frame.points, frame.config.output.kitti.camera, load_class_table().color_lut(), frame.images.get("image_2"), _kitti_folder(frame),
+                              sensor_to_output(frame.config.output.frame, frame.pose))]
 
 
 def _write_openpcdet(frame, out: Path) -> list[Path]:

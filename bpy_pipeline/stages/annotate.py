@@ -13,6 +13,7 @@ from ..buffers import SceneBuffers
 from ..config import Config
 from ..frame import Frame, Run
 from ..geometry.boxes import boxes_in_frame, count_points, fit_boxes, keep_boxes
+from ..geometry.transforms import output_pose
 from ..lidar.sensor_rays import SensorRays
 from ..lidar.sensors import angular_resolution
 from ..lidar.visibility import occlusion_levels, visibility
@@ -70,7 +71,7 @@ def sensor_boxes(buffers: SceneBuffers, config: Config, pose: np.ndarray, points
     boxes = world_boxes(buffers, config, pose, points, headings, frame, rng, rays, caster=caster, direct_returns=direct_returns)
     if len(boxes):
         boxes = keep_boxes(boxes, section.min_points, section.min_points_default)
-    return boxes_in_frame(boxes, pose if config.output.frame == "sensor" else np.eye(4))
+    return boxes_in_frame(boxes, output_pose(config.output.frame, pose))
 
 
 frame_boxes = sensor_boxes  # the name pipeline.py gave it (mixing's boxes are mixing.frame.mixed_boxes)
