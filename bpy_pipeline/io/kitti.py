@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..geometry.transforms import KITTI_SENSOR_HEIGHT, euler_xyz_matrix
+from ..geometry.transforms import KITTI_SENSOR_HEIGHT, euler_xyz_matrix, sensor_to_output
 from .atomic import atomic_write, hashed_open, write_text_hashed
 from .class_maps import ClassMaps, load_class_maps
 from .preview import encode_png, splat
@@ -68,6 +68,14 @@ def ground_plane(sensor_pose: np.ndarray) -> np.ndarray:
     sensor at ``sensor_pose`` (4, 4): ``n`` is the world's up in that frame, ``d`` the sensor's height above the ground."""
     sensor_pose = np.asarray(sensor_pose, float)
     return np.append(sensor_pose[2, :3], sensor_pose[2, 3])
+
+
+def points_ground(sensor_pose: np.ndarray, output_frame: str, found: dict | None = None) -> np.ndarray:
+    """``(4,)`` the ground under a sensor at ``sensor_pose`` (4, 4) as ``n . p + d = 0`` in the points' frame
+    (``output.frame``): a real scan's ground where the mixing found it (``found``: ``{normal, offset}``, ``n . p =
+    offset`` in the sensor frame, its record's ``rules.ground``), else the builders' ground (:func:`ground_plane`)."""
+    sensor = np.append(found["normal"], -float(found["offset"])) if found else ground_plane(sensor_pose)
+    return plane_in_frame(sensor, sensor_to_output(output_frame, np.asarray(sensor_pose, float)))
 
 
 def plane_in_frame(plane: np.ndarray, transform: np.ndarray | None) -> np.ndarray:
