@@ -569,6 +569,8 @@ def config_from_dict(data) -> Config:
         sensor_data = {**defaults, **sensor_data, **({"reflector": {**defaults["reflector"], **(sensor_data.get("reflector") or {})}} if "reflector" in defaults else {})}
         if "trajectory" in given and "position" not in given:  # a trajectory given replaces the builder's position
             sensor_data.pop("position", None)
+    if builder.output is not None:  # the builder's output defaults, under the config's
+        data["output"] = _merged(builder.output(scene.params), _mapping(data.get("output"), "output", "formats, boxes, kitti, ..."))
     hints = typing.get_type_hints(SensorConfig)
     trajectory = _trajectory_from_dict(sensor_data.pop("trajectory", None), sensor_data)
     divergence = from_dict(Divergence, sensor_data.pop("divergence", None) or {}, "sensor.divergence")

@@ -353,7 +353,9 @@ def read_generated(folder: Path, classes: Sequence[str], every: int = 1, max_fra
         raise InputError(f"{folder}: every and max_frames must be >= 1, got {every} and {max_frames}")
     manifest = read_manifest(folder) if (folder / "manifest.json").is_file() else {}
     class_names = manifest.get("class_table")
-    points_frame = ((manifest.get("config") or {}).get("output") or {}).get("frame", "sensor")
+    output = (manifest.get("config") or {}).get("output") or {}
+    points_frame = output.get("frame", "sensor")
+    kitti_origin = ((output.get("kitti") or {}).get("camera") or {}).get("position", (0.0, 0.0, 0.0))
     records = read_frame_records(folder) if (folder / "records").is_dir() else []
     files = []
     for record in records:
@@ -369,7 +371,7 @@ def read_generated(folder: Path, classes: Sequence[str], every: int = 1, max_fra
     for path, pose in files:
         cloud = read_ply(path)
         xyz = np.column_stack([cloud["x"], cloud["y"], cloud["z"]]).astype(np.float64)
-        to_output = sensor_to_output(points_frame, pose)
+        to_output = sensor_to_output(points_frame, pose, kitti_origin)
         if to_output is not None:
             xyz = (xyz - to_output[:3, 3]) @ to_output[:3, :3]
         xyz = xyz.astype(np.float32)

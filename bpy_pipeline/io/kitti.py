@@ -70,12 +70,13 @@ def ground_plane(sensor_pose: np.ndarray) -> np.ndarray:
     return np.append(sensor_pose[2, :3], sensor_pose[2, 3])
 
 
-def points_ground(sensor_pose: np.ndarray, output_frame: str, found: dict | None = None) -> np.ndarray:
+def points_ground(sensor_pose: np.ndarray, output_frame: str, found: dict | None = None, origin=(0.0, 0.0, 0.0)) -> np.ndarray:
     """``(4,)`` the ground under a sensor at ``sensor_pose`` (4, 4) as ``n . p + d = 0`` in the points' frame
-    (``output.frame``): a real scan's ground where the mixing found it (``found``: ``{normal, offset}``, ``n . p =
-    offset`` in the sensor frame, its record's ``rules.ground``), else the builders' ground (:func:`ground_plane`)."""
+    (``output.frame``, ``origin`` as :func:`~bpy_pipeline.geometry.transforms.output_pose`): a real scan's ground where the
+    mixing found it (``found``: ``{normal, offset}``, ``n . p = offset`` in the sensor frame, its record's
+    ``rules.ground``), else the builders' ground (:func:`ground_plane`)."""
     sensor = np.append(found["normal"], -float(found["offset"])) if found else ground_plane(sensor_pose)
-    return plane_in_frame(sensor, sensor_to_output(output_frame, np.asarray(sensor_pose, float)))
+    return plane_in_frame(sensor, sensor_to_output(output_frame, np.asarray(sensor_pose, float), origin))
 
 
 def plane_in_frame(plane: np.ndarray, transform: np.ndarray | None) -> np.ndarray:

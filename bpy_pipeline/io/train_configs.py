@@ -30,6 +30,7 @@ import numpy as np
 
 from .atomic import atomic_write, write_text_hashed
 from .class_maps import load_class_maps
+from ..geometry.transforms import sensor_to_output
 from .kitti import points_ground
 from .splits import split_indices
 from .sustech import label_type
@@ -75,7 +76,7 @@ def sampled_kitti_types(root: Path, stems: list[int]) -> dict[str, int]:
     return counts
 
 
-def ground_height(records: list[dict], output_frame: str) -> float:
+def ground_height(records: list[dict], config) -> float:
     """m, the median over ``records`` of the ground's height at the points' origin (about -1.73 for a KITTI-like
     sensor; the builders' ground, or a real scan's found ground), rounded to 1 cm."""
     heights = []
@@ -83,14 +84,29 @@ def ground_height(records: list[dict], output_frame: str) -> float:
         if "sensor_pose" not in record:
             continue
         found = ((record.get("scene") or {}).get("rules") or {}).get("ground")
-        normal_d = points_ground(np.asarray(record["sensor_pose"], float), output_frame, found)
+        normal_d = points_ground(np.asarray(record["sensor_pose"], float), config.output.frame, found, config.output.kitti.camera.position)
         heights.append(-normal_d[3] / normal_d[2] if abs(normal_d[2]) > 1e-6 else 0.0)
     return round(float(np.median(heights)), 2) if heights else STOCK_KITTI_GROUND
 
 
-def moved_range(stock: tuple, shift: float) -> list[float]:
-    """``stock`` point-cloud range with its z window moved by ``shift`` m (x, y and the window's height kept)."""
-    return [float(stock[0]), float(stock[1]), round(stock[2] + shift, 2), float(stock[3]), float(stock[4]), round(stock[5] + shift, 2)]
+def camera_xy(records: list[dict], config) -> tuple[float, float]:
+    """m, the KITTI camera's x and y in the points' frame (the median over ``records``): where the forward-only KITTI
+    range starts. ``(0, 0)`` in the sensor frame with the camera at the sensor and in ``output.frame: kitti``."""
+    camera = np.append(np.asarray(config.output.kitti.camera.position, float), 1.0)
+    spots = []
+    for record in records:
+        if "sensor_pose" in record:
+            to_points = sensor_to_output(config.output.frame, np.asarray(record["sensor_pose"], float), config.output.kitti.camera.position)
+            spots.append(camera[:3] if to_points is None else (to_points @ camera)[:3])
+    x, y = np.median(spots, axis=0)[:2] if spots else (0.0, 0.0)
+    return round(float(x), 2), round(float(y), 2)
+
+
+def moved_range(stock: tuple, shift: float, xy=(0.0, 0.0)) -> list[float]:
+    """``stock`` point-cloud range with its z window moved by ``shift`` m and its x, y windows by ``xy`` m (the
+    windows' sizes kept, so the voxel grids keep theirs)."""
+    (x, y), r = xy, stock
+    return [round(r[0] + x, 2), round(r[1] + y, 2), round(r[2] + shift, 2), round(r[3] + x, 2), round(r[4] + y, 2), round(r[5] + shift, 2)]
 
 
 def min_points_of(config, kind_of_class) -> dict[str, int]:
@@ -222,16 +238,18 @@ def write_kitti_configs(out_dir: str | os.PathLike, records: list[dict], config)
         return []
     maps, names = load_class_maps(), config.output.boxes.names
     min_points = min_points_of(config, lambda name: maps.kitti_name(name, names))
-    shift = ground_height(records, config.output.frame) - STOCK_KITTI_GROUND
-    point_range = moved_range(KITTI_RANGE, shift)
+    ground = ground_height(records, config)
+    shift, xy = ground - STOCK_KITTI_GROUND, camera_xy(records, config)
+    point_range = moved_range(KITTI_RANGE, shift, xy)
     header = HEADER.format(frames=len(records), train=len(sets.get("train", [])))
     comment = (f"# Classes of the train frames' sampled objects: {', '.join(f'{c} {present[c]}' for c in sorted(present))}.\n"
-               f"# The ground lies {ground_height(records, config.output.frame):.2f} m below the points' origin (KITTI: -1.73): z range and anchors moved by {shift:+.2f} m.\n")
+               f"# The ground lies at z = {ground:.2f} m in the points' frame (KITTI: -1.73): z range and anchors moved by {shift:+.2f} m; "
+               f"the camera stands at x, y = {xy[0]:.2f}, {xy[1]:.2f} m, where the forward range starts.\n")
     dataset = openpcdet_dataset_yaml("KittiDataset", "../data/kitti", "kitti", classes, min_points, {"Car": 20, "Pedestrian": 15, "Cyclist": 15},
                                      point_range, True, "", header + comment + "# Pair: openpcdet_pv_rcnn.yaml beside it (tools/cfgs/kitti_models/pv_rcnn.yaml), or second.yaml with CLASS_NAMES and anchors as there.\n")
     anchors = {c: (ANCHORS[c][0], round(ANCHORS[c][1] + shift, 2), ANCHORS[c][2], ANCHORS[c][3]) for c in classes}
     model = openpcdet_model_yaml("cfgs/kitti_models/pv_rcnn.yaml", "../data/kitti/openpcdet_kitti_dataset.yaml", "../data/kitti/openpcdet_pv_rcnn.yaml", classes, anchors, header + comment)
-    mmdet3d = mmdet3d_config(classes, min_points, moved_range(PILLAR_RANGE, shift), shift, header + comment)
+    mmdet3d = mmdet3d_config(classes, min_points, moved_range(PILLAR_RANGE, shift, xy), shift, header + comment)
     return [_write(path, text) for path, text in zip(files, (dataset, model, mmdet3d))]
 
 
@@ -258,11 +276,11 @@ def write_custom_configs(out_dir: str | os.PathLike, records: list[dict], config
         _remove(files)
         return []
     min_points = min_points_of(config, lambda name: label_type(name, names))
-    ground = ground_height(records, config.output.frame)
+    ground = ground_height(records, config)
     shift = ground - STOCK_CUSTOM_GROUND
     header = HEADER.format(frames=len(records), train=len(train))
     comment = (f"# Classes with boxes in the train frames (and a KITTI type the evaluation knows): {', '.join(f'{c} {len(sizes[c])}' for c in classes)}.\n"
-               f"# The ground lies {ground:.2f} m below the points' origin (custom models: 0): z range and anchors moved by {shift:+.2f} m.\n")
+               f"# The ground lies at z = {ground:.2f} m in the points' frame (custom models: 0): z range and anchors moved by {shift:+.2f} m.\n")
     mapping = "MAP_CLASS_TO_KITTI: {\n" + "".join(f"    '{c}': '{kitti_of.get(c, 'Misc')}',\n" for c in sorted(kitti_of)) + "}\n"
     dataset = openpcdet_dataset_yaml("CustomDataset", "../data/custom", "custom", classes, min_points, {}, moved_range(CUSTOM_RANGE, shift), False, mapping,
                                      header + comment + "# Pair: pv_rcnn.yaml beside it (tools/cfgs/custom_models/pv_rcnn.yaml).\n")

@@ -71,7 +71,7 @@ def sensor_boxes(buffers: SceneBuffers, config: Config, pose: np.ndarray, points
     boxes = world_boxes(buffers, config, pose, points, headings, frame, rng, rays, caster=caster, direct_returns=direct_returns)
     if len(boxes):
         boxes = keep_boxes(boxes, section.min_points, section.min_points_default)
-    return boxes_in_frame(boxes, output_pose(config.output.frame, pose))
+    return boxes_in_frame(boxes, output_pose(config.output.frame, pose, config.output.kitti.camera.position))
 
 
 frame_boxes = sensor_boxes  # the name pipeline.py gave it (mixing's boxes are mixing.frame.mixed_boxes)

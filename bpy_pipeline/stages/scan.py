@@ -89,7 +89,7 @@ def effects_stage(frame: Frame, run: Run) -> None:
     config, spec = run.config, run.config.sensor.spec
     mask = run.rays.edge_mask(frame.index)
     direct = [] if counts_direct_returns(config, frame) else None
-    to_output = sensor_to_output(config.output.frame, frame.pose)
+    to_output = sensor_to_output(config.output.frame, frame.pose, config.output.kitti.camera.position)
 
     def finished(chunks):
         for points, beam in chunks:
