@@ -327,8 +327,11 @@ class LIDAR_OT_show_cloud(bpy.types.Operator):
         ply = next((f for f in frame["files"] if f.endswith(".ply")), None)
         if ply is None:
             raise InputError(f"show cloud: the last frame in {out} has no PLY file; press Scan or add ply to the formats")
-        world = manifest["config"]["output"]["frame"] == "world"
-        return read_ply(out / ply), np.eye(4) if world else np.asarray(frame["sensor_pose"], np.float64)
+        from .bpy_pipeline.geometry.transforms import output_pose
+
+        output = manifest["config"]["output"]
+        camera = ((output.get("kitti") or {}).get("camera") or {}).get("position", (0.0, 0.0, 0.0))
+        return read_ply(out / ply), output_pose(output["frame"], np.asarray(frame["sensor_pose"], np.float64), camera)  # the points' frame in the world
 
 
 def fill_legend(settings, points: np.ndarray, table) -> None:
