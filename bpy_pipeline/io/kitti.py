@@ -5,15 +5,17 @@ Files (frame ``NNNNNN``)::
     kitti/training/velodyne/NNNNNN.bin   float32 (n, 4): x y z (m, sensor frame), intensity (0..1)
     kitti/training/label_2/NNNNNN.txt    type truncated occluded alpha bbox(4) h w l x y z rotation_y
     kitti/training/calib/NNNNNN.txt      P0..P3 (the camera's 3 x 4 projection), R0_rect, Tr_velo_to_cam, Tr_imu_to_velo
+    kitti/training/planes/NNNNNN.txt     the road plane a b c d in the rectified camera frame, as KITTI's (OpenPCDet's
+                                         USE_ROAD_PLANE, mmdetection3d's --with-plane): the builders' ground, world z = 0
     kitti/training/image_2/NNNNNN.png    the camera's view: Blender's rendering where the pipeline gives one
                                          (:mod:`bpy_pipeline.scenes.camera`), else the labelled points it sees
     kitti/testing/...                    the same files for the frames of the test split (``output.split``)
     kitti/ImageSets/{train,val,test}.txt frame stems of each split that holds a frame (none for an empty split)
 
 The camera (``output.kitti.camera``) is a pinhole fixed to the LiDAR; ``Tr_velo_to_cam`` is its
-pose composed with KITTI's axis change (x_cam = -y, y_cam = -z, z_cam = x). Types come from
-``kitti_names`` in ``assets_manifest/labels.yaml`` (Car, Van, Truck, Pedestrian, Person_sitting,
-Cyclist, Tram, Misc), overridden by ``output.boxes.names``. As in KITTI, ``label_2`` lists the
+pose composed with KITTI's axis change (x_cam = -y, y_cam = -z, z_cam = x), from the points' frame
+(``output.frame``). Types come from ``kitti_names`` in ``assets_manifest/labels.yaml`` (Car, Van, Truck,
+Pedestrian, Person_sitting, Cyclist, Tram, Misc), overridden by ``output.boxes.names`` (``DontCare``: a region). As in KITTI, ``label_2`` lists the
 objects seen in the image: a box whose points all fall outside it is left out (the OpenPCDet
 custom layout keeps every box around the sensor); its 2D box is the extent of its points in the
 image, and its truncation is the larger of the LiDAR truncation and the share of its points
