@@ -2,10 +2,9 @@
 
 import subprocess
 import sys
-import pytest
-
 from pathlib import Path
 
+import pytest
 import yaml
 
 from bpy_pipeline.config import config_to_dict, load_config
