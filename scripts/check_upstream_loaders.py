@@ -38,7 +38,6 @@ import pickle
 import runpy
 import shutil
 import sys
-import traceback
 import types
 from pathlib import Path
 
