@@ -872,6 +872,8 @@ def test_street_every_vehicle_in_view_is_boxed_the_same_way_in_every_layout(stre
     from bpy_pipeline.io.sustech import label_type, sustech_type
     from bpy_pipeline.labels import load_class_table
 
+    from bpy_pipeline.config import BOX_CLASSES
+
     maps, table = load_class_maps(), load_class_table()
     kinds: dict[str, int] = {}
     for path in sorted((street / "records").glob("*.json")):
@@ -893,6 +895,9 @@ def test_street_every_vehicle_in_view_is_boxed_the_same_way_in_every_layout(stre
         lines = [line.split()[0] for line in (root / "label_2" / f"{stem}.txt").read_text().splitlines()]
         assert sorted(t for t in lines if t != "DontCare") == expected
         assert lines[: len(expected)] == [t for t in lines if t != "DontCare"]  # DontCare lines last: the loaders take the boxes before them
+        users = {o["instance"] for o in record["objects"] if o["class"] in BOX_CLASSES}
+        thin = {i for i in users - set(boxes) if seen[points["instance"] == i].any()}  # seen, fewer points than their class's minimum
+        assert lines.count("DontCare") == (len(thin) if expected or thin else 1)  # KITTI's regions of objects too far to label
         for c in boxes.values():
             kinds[c] = kinds.get(c, 0) + 1
         semantic = np.fromfile(street / [f for f in record["files"] if f.endswith(".label")][0], np.uint32) & 0xFFFF

@@ -74,7 +74,8 @@ def _write_kitti(frame, out: Path) -> list[Path]:
     to_points = sensor_to_output(output.frame, frame.pose, output.kitti.camera.position)
     found = (getattr(getattr(frame, "mixed", None), "rule_log", None) or {}).get("ground")  # a real scan's, where the mixing looked
     ground = kitti.points_ground(frame.pose, output.frame, found, output.kitti.camera.position)
-    return kitti.write_frame_text(out, frame_stem(frame.index), frame.points, frame.boxes, frame.config.output.kitti.camera, frame.config.output.boxes.names, _kitti_folder(frame), to_points, ground)
+    return kitti.write_frame_text(out, frame_stem(frame.index), frame.points, frame.boxes, output.kitti.camera, output.boxes.names, _kitti_folder(frame), to_points, ground,
+                                  frame.thin_boxes)
 
 
 def _write_kitti_image(frame, out: Path) -> list[Path]:

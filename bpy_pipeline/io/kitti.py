@@ -21,7 +21,8 @@ custom layout keeps every box around the sensor); its 2D box is the extent of it
 image, and its truncation is the larger of the LiDAR truncation and the share of its points
 outside the image. A frame without such an object gets one ``DontCare`` line (KITTI's own
 placeholder), because OpenPCDet's ``get_infos`` and mmdetection3d's converter concatenate the
-objects of a label file and fail on an empty one; the frame stays in the ImageSets.
+objects of a label file and fail on an empty one; the frame stays in the ImageSets. Objects seen with
+fewer points than their class's minimum are DontCare regions, after the boxed objects, as in KITTI's files.
 """
 
 from __future__ import annotations
@@ -128,19 +129,23 @@ def calib_text(k: np.ndarray, tr: np.ndarray) -> str:
     return "\n".join(rows) + "\n"
 
 
-def label_lines(boxes: np.ndarray, points: np.ndarray, camera, maps: ClassMaps | None = None, names: dict | None = None, to_points: np.ndarray | None = None) -> list[str]:
+def label_lines(boxes: np.ndarray, points: np.ndarray, camera, maps: ClassMaps | None = None, names: dict | None = None, to_points: np.ndarray | None = None,
+                regions: np.ndarray | None = None) -> list[str]:
     """KITTI label lines of ``boxes`` (BOX_DTYPE, the level points' frame) seen by ``camera`` in ``points`` (POINT_DTYPE).
 
-    A box whose type is ``DontCare`` becomes a DontCare region (its 2D box, no 3D box) after every boxed object, as in
-    KITTI's files: the loaders take the objects before the DontCare lines as the 3D boxes. A frame without a seen object
-    gives ``[DONT_CARE]``. to_points : as :func:`camera_matrices`
+    A box whose type is ``DontCare``, and each of ``regions`` (BOX_DTYPE: objects seen but too thin to label), becomes a
+    DontCare region (its 2D box, no 3D box) after every boxed object, as in KITTI's files ("regions in which objects have
+    not been labeled, for example because they have been too far away from the laser scanner"): the loaders take the
+    objects before the DontCare lines as the 3D boxes. A frame without a seen object gives ``[DONT_CARE]``.
+    to_points : as :func:`camera_matrices`
     """
     maps = load_class_maps() if maps is None else maps
     k, tr = camera_matrices(camera, to_points)
     resolution = tuple(int(v) for v in camera.resolution)
     xyz = np.stack([points["x"], points["y"], points["z"]], axis=1)
     lines, dont_care = [], []
-    for box in boxes:
+    regions = boxes[:0] if regions is None else regions
+    for box, region in [(b, False) for b in boxes] + [(b, True) for b in regions]:
         mine = xyz[points["instance"] == box["instance"]]
         uv, depth = project(mine, k, tr)
         seen = in_image(uv, depth, resolution)
@@ -155,7 +160,7 @@ def label_lines(boxes: np.ndarray, points: np.ndarray, camera, maps: ClassMaps |
         heading = tr[:, :3] @ [np.cos(box["heading"]), np.sin(box["heading"]), 0.0]  # the box's length axis in the camera frame
         rotation_y = float(wrap_angle(np.arctan2(-heading[2], heading[0])))
         alpha = float(wrap_angle(rotation_y - np.arctan2(x, z)))
-        kind = maps.kitti_name(str(box["class_name"]), names)
+        kind = "DontCare" if region else maps.kitti_name(str(box["class_name"]), names)
         if kind == "DontCare":
             dont_care.append(f"DontCare -1 -1 -10 {left:.2f} {top:.2f} {right:.2f} {bottom_px:.2f} -1 -1 -1 -1000 -1000 -1000 -10")
             continue
@@ -205,20 +210,21 @@ def write_frame(out_dir: str | os.PathLike, stem: str, points: np.ndarray, boxes
 
 
 def write_frame_text(out_dir: str | os.PathLike, stem: str, points: np.ndarray, boxes: np.ndarray, camera, names: dict | None = None, folder: str = "training",
-                     to_points: np.ndarray | None = None, ground: np.ndarray | None = None) -> list[Path]:
+                     to_points: np.ndarray | None = None, ground: np.ndarray | None = None, regions: np.ndarray | None = None) -> list[Path]:
     """A frame's ``velodyne``, ``label_2``, ``calib`` and ``planes`` files under ``out_dir/kitti/<folder>``; returns their paths.
 
     folder : ``training``, or ``testing`` for a frame of the test split (where the loaders read test frames)
     to_points : ``(4, 4)`` sensor frame -> the points' frame (:func:`camera_matrices`); ``None``: the sensor frame
     ground : ``(4,)`` the ground plane ``n . p + d = 0`` in the points' frame (:func:`ground_plane`, :func:`plane_in_frame`);
         ``None``: level, KITTI's 1.73 m below the origin
+    regions : BOX_DTYPE boxes too thin to label, written as DontCare regions where the camera sees them (:func:`label_lines`)
     """
     root = Path(out_dir) / "kitti" / folder
     k, tr = camera_matrices(camera, to_points)
     velodyne = root / "velodyne" / f"{stem}.bin"
     with atomic_write(velodyne) as tmp, hashed_open(tmp) as f:  # hashed as written: the commit reads it back no more
         f.write(np.column_stack([points["x"], points["y"], points["z"], points["intensity"]]).astype("<f4"))
-    lines = label_lines(boxes if boxes is not None else np.zeros(0, _box_dtype()), points, camera, names=names, to_points=to_points)
+    lines = label_lines(boxes if boxes is not None else np.zeros(0, _box_dtype()), points, camera, names=names, to_points=to_points, regions=regions)
     plane = road_plane(tr, np.array([0.0, 0.0, 1.0, KITTI_SENSOR_HEIGHT]) if ground is None else ground)
     return [velodyne, _text(root / "label_2" / f"{stem}.txt", "".join(line + "\n" for line in lines)), _text(root / "calib" / f"{stem}.txt", calib_text(k, tr)),
             _text(root / "planes" / f"{stem}.txt", plane_text(plane))]
