@@ -250,6 +250,7 @@ def check_openpcdet(checkout: Path, out: Path, work: Path) -> None:
         from pcdet.datasets.kitti.kitti_dataset import KittiDataset
 
         for cfg_file, training in (("../data/kitti/openpcdet_pv_rcnn.yaml", True), ("../data/kitti/openpcdet_pv_rcnn.yaml", False),
+                                   ("../data/kitti/openpcdet_pointpillar.yaml", True), ("../data/kitti/openpcdet_pointpillar.yaml", False),
                                    ("cfgs/kitti_models/pv_rcnn.yaml", True), ("cfgs/kitti_models/pv_rcnn.yaml", False)):
             name = f"{tag}: OpenPCDet KittiDataset {cfg_file} {'train' if training else 'val'}"
             try:

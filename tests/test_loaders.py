@@ -531,8 +531,10 @@ MAX_RETRIES = 200  # __getitem__ calls itself for another random item: a dataset
 
 
 def written_openpcdet(dataset_yaml: Path, model_yaml: Path) -> dict:
-    """The dataset and model yamls the run wrote, as the replica's config (CLASS_NAMES from the model yaml)."""
+    """The dataset and model yamls the run wrote, as the replica's config (CLASS_NAMES from the model yaml; its
+    DATA_CONFIG keys over the dataset yaml's, as pcdet/config.py's merge_new_config puts them)."""
     data, model = yaml.safe_load(dataset_yaml.read_text()), yaml.safe_load(model_yaml.read_text())
+    data = {**data, **{k: v for k, v in model["DATA_CONFIG"].items() if k != "_BASE_CONFIG_"}}
     sampler = data["DATA_AUGMENTOR"]["AUG_CONFIG_LIST"][0]
     assert sampler["NAME"] == "gt_sampling" and model["DATA_CONFIG"]["_BASE_CONFIG_"].endswith(dataset_yaml.name)
     voxel = [p for p in data["DATA_PROCESSOR"] if p["NAME"] == "transform_points_to_voxels"][0]["VOXEL_SIZE"]
@@ -736,6 +738,11 @@ def test_openpcdet_stock_3class_sampler_needs_every_class_the_written_config_nam
         assert len(item["gt_boxes"]) > 0 and item["voxels"] > 0
     infos, getitem = openpcdet_kitti_dataset(root, cfg, training=False)
     assert all(item["voxels"] > 0 for item in every_item(infos, getitem))
+    pillars = written_openpcdet(root / "openpcdet_kitti_dataset.yaml", root / "openpcdet_pointpillar.yaml")  # pointpillar.yaml's range and pillars
+    assert pillars["range"] == [0.0, -39.68, -2.78, 69.12, 39.68, 1.22] and pillars["voxel"] == [0.16, 0.16, 4] and pillars["anchors"] == cfg["anchors"]
+    for training in (True, False):
+        infos, getitem = openpcdet_kitti_dataset(root, pillars, training)
+        assert all(item["voxels"] > 0 and (len(item["gt_boxes"]) > 0 or not training) for item in every_item(infos, getitem))
 
 
 def test_openpcdet_custom_written_config_fits_the_parking_run(dataset):

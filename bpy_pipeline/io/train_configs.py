@@ -8,6 +8,7 @@ frames (OpenPCDet 8caccce, mmdetection3d fe25f7a)::
 
     kitti/openpcdet_kitti_dataset.yaml    OpenPCDet's kitti_dataset.yaml for this run (DATA_PATH ../data/kitti)
     kitti/openpcdet_pv_rcnn.yaml          tools/cfgs/kitti_models/pv_rcnn.yaml with this run's classes, range and anchors
+    kitti/openpcdet_pointpillar.yaml      tools/cfgs/kitti_models/pointpillar.yaml likewise (its pillars and range restated)
     kitti/mmdet3d_pointpillars_kitti.py   configs/pointpillars/pointpillars_hv_secfpn_8xb6-160e_kitti-3d-3class.py likewise
     openpcdet/custom_dataset.yaml         OpenPCDet's custom_dataset.yaml for this run (DATA_PATH ../data/custom)
     openpcdet/pv_rcnn.yaml                tools/cfgs/custom_models/pv_rcnn.yaml likewise
@@ -130,9 +131,9 @@ def _write(path: Path, text: str) -> Path:
     return path
 
 
-def _anchor_yaml(kind: str, size, bottom: float, matched: float, unmatched: float) -> str:
+def _anchor_yaml(kind: str, size, bottom: float, matched: float, unmatched: float, stride: int = 8) -> str:
     return (f"      - {{class_name: {kind}, anchor_sizes: [{_yaml_list([round(float(v), 3) for v in size])}], anchor_rotations: [0, 1.57],\n"
-            f"         anchor_bottom_heights: [{bottom:.2f}], align_center: false, feature_map_stride: 8,\n"
+            f"         anchor_bottom_heights: [{bottom:.2f}], align_center: false, feature_map_stride: {stride},\n"
             f"         matched_threshold: {matched}, unmatched_threshold: {unmatched}}}\n")
 
 
@@ -168,16 +169,27 @@ def openpcdet_dataset_yaml(dataset: str, data_path: str, info_prefix: str, class
     )
 
 
-def openpcdet_model_yaml(stock: str, dataset_yaml: str, model_yaml: str, classes: list[str], anchors: dict, header: str) -> str:
+def openpcdet_model_yaml(stock: str, dataset_yaml: str, model_yaml: str, classes: list[str], anchors: dict, header: str, stride: int = 8, data: str = "") -> str:
     """An OpenPCDet model yaml (at ``model_yaml``, its path from ``tools/``): the stock model ``stock`` with this run's
-    classes, dataset yaml and anchors (``{type: (size, bottom, matched, unmatched)}``, in ``classes`` order)."""
+    classes, dataset yaml and anchors (``{type: (size, bottom, matched, unmatched)}``, in ``classes`` order, on a feature
+    map of ``stride``); ``data``: the lines of DATA_CONFIG the stock model sets itself (after the dataset yaml's)."""
     return (
         header
         + f"# Train from OpenPCDet/tools with the output linked in under OpenPCDet/data (docs/formats.md): python train.py --cfg_file {model_yaml}\n"
-        + f"_BASE_CONFIG_: {stock}\n\nCLASS_NAMES: {_yaml_list(classes)}\n\nDATA_CONFIG:\n    _BASE_CONFIG_: {dataset_yaml}\n\n"
+        + f"_BASE_CONFIG_: {stock}\n\nCLASS_NAMES: {_yaml_list(classes)}\n\nDATA_CONFIG:\n    _BASE_CONFIG_: {dataset_yaml}\n{data}\n"
         + "MODEL:\n  DENSE_HEAD:\n    ANCHOR_GENERATOR_CONFIG:\n"
-        + "".join(_anchor_yaml(c, *anchors[c]) for c in classes)
+        + "".join(_anchor_yaml(c, *anchors[c], stride) for c in classes)
     )
+
+
+def pillar_data_config(point_range: list[float]) -> str:
+    """The DATA_CONFIG lines tools/cfgs/kitti_models/pointpillar.yaml sets over kitti_dataset.yaml: its range (a multiple
+    of its 0.16 m pillars, here moved as the dataset's) and its pillars."""
+    return (f"    POINT_CLOUD_RANGE: {_yaml_list(point_range)}\n    DATA_PROCESSOR:\n"
+            "        - NAME: mask_points_and_boxes_outside_range\n          REMOVE_OUTSIDE_BOXES: True\n"
+            "        - NAME: shuffle_points\n          SHUFFLE_ENABLED: {'train': True, 'test': False}\n"
+            "        - NAME: transform_points_to_voxels\n          VOXEL_SIZE: [0.16, 0.16, 4]\n          MAX_POINTS_PER_VOXEL: 32\n"
+            "          MAX_NUMBER_OF_VOXELS: {'train': 16000, 'test': 40000}\n")
 
 
 def mmdet3d_config(classes: list[str], min_points: dict, point_range: list[float], shift: float, header: str) -> str:
@@ -229,7 +241,7 @@ def write_kitti_configs(out_dir: str | os.PathLike, records: list[dict], config)
     """The KITTI layout's OpenPCDet dataset and model yamls and mmdetection3d config (module docstring); none (and none
     left from before) when the train frames hold no sampled object of the stock three classes."""
     root = Path(out_dir) / "kitti"
-    files = [root / "openpcdet_kitti_dataset.yaml", root / "openpcdet_pv_rcnn.yaml", root / "mmdet3d_pointpillars_kitti.py"]
+    files = [root / "openpcdet_kitti_dataset.yaml", root / "openpcdet_pv_rcnn.yaml", root / "openpcdet_pointpillar.yaml", root / "mmdet3d_pointpillars_kitti.py"]
     sets = split_indices([r["index"] for r in records], config.output.split, config.frames)
     present = sampled_kitti_types(root / "training", sets.get("train", []))
     classes = [c for c in ("Car", "Pedestrian", "Cyclist") if present.get(c)]
@@ -246,11 +258,15 @@ def write_kitti_configs(out_dir: str | os.PathLike, records: list[dict], config)
                f"# The ground lies at z = {ground:.2f} m in the points' frame (KITTI: -1.73): z range and anchors moved by {shift:+.2f} m; "
                f"the camera stands at x, y = {xy[0]:.2f}, {xy[1]:.2f} m, where the forward range starts.\n")
     dataset = openpcdet_dataset_yaml("KittiDataset", "../data/kitti", "kitti", classes, min_points, {"Car": 20, "Pedestrian": 15, "Cyclist": 15},
-                                     point_range, True, "", header + comment + "# Pair: openpcdet_pv_rcnn.yaml beside it (tools/cfgs/kitti_models/pv_rcnn.yaml), or second.yaml with CLASS_NAMES and anchors as there.\n")
+                                     point_range, True, "", header + comment + "# Pair: openpcdet_pv_rcnn.yaml or openpcdet_pointpillar.yaml beside it (tools/cfgs/kitti_models/pv_rcnn.yaml, pointpillar.yaml).\n")
     anchors = {c: (ANCHORS[c][0], round(ANCHORS[c][1] + shift, 2), ANCHORS[c][2], ANCHORS[c][3]) for c in classes}
-    model = openpcdet_model_yaml("cfgs/kitti_models/pv_rcnn.yaml", "../data/kitti/openpcdet_kitti_dataset.yaml", "../data/kitti/openpcdet_pv_rcnn.yaml", classes, anchors, header + comment)
-    mmdet3d = mmdet3d_config(classes, min_points, moved_range(PILLAR_RANGE, shift, xy), shift, header + comment)
-    return [_write(path, text) for path, text in zip(files, (dataset, model, mmdet3d))]
+    dataset_yaml = "../data/kitti/openpcdet_kitti_dataset.yaml"
+    model = openpcdet_model_yaml("cfgs/kitti_models/pv_rcnn.yaml", dataset_yaml, "../data/kitti/openpcdet_pv_rcnn.yaml", classes, anchors, header + comment)
+    pillar_range = moved_range(PILLAR_RANGE, shift, xy)
+    pillars = openpcdet_model_yaml("cfgs/kitti_models/pointpillar.yaml", dataset_yaml, "../data/kitti/openpcdet_pointpillar.yaml", classes, anchors, header + comment,
+                                   stride=2, data=pillar_data_config(pillar_range))
+    mmdet3d = mmdet3d_config(classes, min_points, pillar_range, shift, header + comment)
+    return [_write(path, text) for path, text in zip(files, (dataset, model, pillars, mmdet3d))]
 
 
 def write_custom_configs(out_dir: str | os.PathLike, records: list[dict], config, with_boxes: list[int]) -> list[Path]:
