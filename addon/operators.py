@@ -25,7 +25,8 @@ LIDAR_KEYS = ("lidar_class", "lidar_material", "lidar_reflectivity", "lidar_inst
 
 
 def remember_frame(last, points: np.ndarray, pose: np.ndarray, output_frame: str, out_dir: Path) -> None:
-    """Keep a frame on ``last`` (``WindowManager.lidar_last``): ``points`` the ``(n,)`` records, ``pose`` 4x4 (metres).
+    """Keep a frame on ``last`` (``WindowManager.lidar_last``): ``points`` the ``(n,)`` records, ``pose`` 4x4 (metres): the
+    points' frame in the world (:func:`~bpy_pipeline.geometry.transforms.output_pose`).
 
     The records go to ``last.points_file``, a ``.npy`` file in the system's temporary folder made for
     this session on its first frame and replaced whole (write, then rename) by every later one.
@@ -43,12 +44,10 @@ def remember_frame(last, points: np.ndarray, pose: np.ndarray, output_frame: str
 
 
 def recall_frame(last) -> tuple[np.ndarray, np.ndarray] | None:
-    """The frame kept on ``last``: ``(points, pose)``, the pose the identity for world-frame points; ``None`` when none is."""
+    """The frame kept on ``last``: ``(points, pose)``, the pose the points' frame in the world; ``None`` when none is."""
     if not last.points_file or not Path(last.points_file).is_file():
         return None
-    points = np.load(last.points_file, allow_pickle=False)
-    pose = np.asarray(last.pose, np.float64).reshape(4, 4) if last.output_frame == "sensor" else np.eye(4)
-    return points, pose
+    return np.load(last.points_file, allow_pickle=False), np.asarray(last.pose, np.float64).reshape(4, 4)
 
 
 def forget_frame(last) -> None:
@@ -75,7 +74,7 @@ class FrameJob:
         from .bpy_pipeline.plan import run_frames
 
         self.total, self.done, self.out_dir = config.frames, 0, out_dir
-        self.output_frame = config.output.frame
+        self.output_frame, self.kitti_origin = config.output.frame, config.output.kitti.camera.position
         self.points = 0
         self.last = last
         # the panel's output folder holds its latest scan or frames: each Scan and Generate replaces it
@@ -90,7 +89,9 @@ class FrameJob:
         self.done += 1
         self.points = len(frame.points)
         if self.last is not None:
-            remember_frame(self.last, frame.points, frame.pose, self.output_frame, self.out_dir)
+            from .bpy_pipeline.geometry.transforms import output_pose
+
+            remember_frame(self.last, frame.points, output_pose(self.output_frame, frame.pose, self.kitti_origin), self.output_frame, self.out_dir)
         return True
 
     def cancel(self) -> None:
@@ -327,8 +328,11 @@ class LIDAR_OT_show_cloud(bpy.types.Operator):
         ply = next((f for f in frame["files"] if f.endswith(".ply")), None)
         if ply is None:
             raise InputError(f"show cloud: the last frame in {out} has no PLY file; press Scan or add ply to the formats")
-        world = manifest["config"]["output"]["frame"] == "world"
-        return read_ply(out / ply), np.eye(4) if world else np.asarray(frame["sensor_pose"], np.float64)
+        from .bpy_pipeline.geometry.transforms import output_pose
+
+        output = manifest["config"]["output"]
+        camera = ((output.get("kitti") or {}).get("camera") or {}).get("position", (0.0, 0.0, 0.0))
+        return read_ply(out / ply), output_pose(output["frame"], np.asarray(frame["sensor_pose"], np.float64), camera)  # the points' frame in the world
 
 
 def fill_legend(settings, points: np.ndarray, table) -> None:

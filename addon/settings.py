@@ -110,8 +110,8 @@ class LIDAR_PG_last_frame(bpy.types.PropertyGroup):
 
     points_file: bpy.props.StringProperty(name="Points file", subtype="FILE_PATH", description="The frame's point records (.npy, in the temporary folder)")
     out_dir: bpy.props.StringProperty(name="Output folder", description="Where the frame was written")
-    output_frame: bpy.props.StringProperty(name="Output frame", description="sensor or world: the frame the points are in")
-    pose: bpy.props.FloatVectorProperty(name="Sensor pose", size=16, description="4x4 sensor-to-world matrix, row-major (metres)")
+    output_frame: bpy.props.StringProperty(name="Output frame", description="sensor, world or kitti: the frame the points are in")
+    pose: bpy.props.FloatVectorProperty(name="Points' frame", size=16, description="4x4 points-frame-to-world matrix, row-major (metres)")
 
 
 def make_views() -> Views:

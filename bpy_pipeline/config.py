@@ -198,6 +198,10 @@ class EffectsConfig:
     materials: MaterialsConfig = field(default_factory=MaterialsConfig)  # reflectance model per class (lidar/effects/materials.py); opt-in
 
 
+BOX_CLASSES = ("car", "van", "truck", "bus", "bicycle", "motorcycle", "person", "rider", "motorcyclist", "robot arm")
+# every vehicle class and every road user (a two-wheeler's box takes its rider's class, geometry/boxes.RIDER_CLASSES)
+
+
 @dataclass(frozen=True)
 class BoxesConfig:
     """``output.boxes``: 3D box labels per frame (io/boxes.py), in the frame of the points.
@@ -205,15 +209,17 @@ class BoxesConfig:
     ``formats``: ``kitti`` and/or ``openpcdet``; ``auto`` is both for the parking and
     industrial_hall builders and none otherwise. Boxes of ``classes`` with fewer labeled points
     than ``min_points[class]`` (else ``min_points_default``) are dropped (the sparse-camera
-    thesis: 12 for cars, 6 for the rest). ``occlusion_levels`` (t0, t1, t2): visible / unoccluded
+    thesis: 12 for cars, here also vans, trucks and buses; 6 for the rest). ``occlusion_levels`` (t0, t1, t2): visible / unoccluded
     point fraction from which a box is occlusion level 0, 1, 2 (below t2: 3). ``names`` maps a
-    class to its label-file type (default: its words capitalised and joined, robot arm -> RobotArm).
+    class to its label-file type (default: its words capitalised and joined, robot arm -> RobotArm; KITTI's
+    types from labels.yaml ``kitti_names``; ``DontCare`` marks a class's boxes as KITTI's DontCare regions).
+    The default ``classes`` (:data:`BOX_CLASSES`) box every vehicle class, as KITTI does (Van, Truck, Misc).
     """
 
     formats: list[str] | Literal["auto"] = field(default="auto", metadata=meta(help="box writers (io/writers.py)"))
-    classes: list[str] = field(default_factory=lambda: ["car", "person", "robot arm", "rider"], metadata=meta(help="rider: an inserted cyclist (KITTI Cyclist)"))
+    classes: list[str] = field(default_factory=lambda: list(BOX_CLASSES), metadata=meta(help="classes that get a box: every vehicle class, person, rider (a cyclist), motorcyclist and robot arm"))
     names: dict = field(default_factory=dict)
-    min_points: dict = field(default_factory=lambda: {"car": 12})
+    min_points: dict = field(default_factory=lambda: {"car": 12, "van": 12, "truck": 12, "bus": 12})
     min_points_default: int = field(default=6, metadata=meta("", low=0, help="labelled points a box needs when min_points does not name its class"))
     occlusion_levels: tuple[float, float, float] = field(default=(0.8, 0.4, 0.1), metadata=meta("", 0, 1, help="visible / unoccluded point fractions from which a box is occlusion level 0, 1, 2 (below t2: 3)"))
 
@@ -277,7 +283,7 @@ class SemanticKittiOutput:
 @dataclass(frozen=True)
 class OutputConfig:
     formats: list[str] = field(default_factory=lambda: ["ply", "semantickitti"], metadata=meta(help="writers of io/writers.py"))
-    frame: Literal["sensor", "world"] = "sensor"
+    frame: Literal["sensor", "world", "kitti"] = field(default="sensor", metadata=meta(help="the points' frame; kitti: level, ground at z = -1.73 m (geometry/transforms.output_pose)"))
     preview: bool = True
     sequence: int = field(default=0, metadata=meta(help="older configs only: SemanticKITTI sequences follow output.split (0 is accepted)"))
     boxes: BoxesConfig = field(default_factory=BoxesConfig)
@@ -562,6 +568,8 @@ def config_from_dict(data) -> Config:
         sensor_data = {**defaults, **sensor_data, **({"reflector": {**defaults["reflector"], **(sensor_data.get("reflector") or {})}} if "reflector" in defaults else {})}
         if "trajectory" in given and "position" not in given:  # a trajectory given replaces the builder's position
             sensor_data.pop("position", None)
+    if builder.output is not None:  # the builder's output defaults, under the config's
+        data["output"] = _merged(builder.output(scene.params), _mapping(data.get("output"), "output", "formats, boxes, kitti, ..."))
     hints = typing.get_type_hints(SensorConfig)
     trajectory = _trajectory_from_dict(sensor_data.pop("trajectory", None), sensor_data)
     divergence = from_dict(Divergence, sensor_data.pop("divergence", None) or {}, "sensor.divergence")
@@ -600,6 +608,8 @@ def config_from_dict(data) -> Config:
     _check_writers(config)
     if config.output.min_objects < 0:
         raise InputError(f"output.min_objects: must be >= 0, got {config.output.min_objects}")
+    if config.output.frame == "kitti" and (config.sensor.rig or BUILDER_REGISTRY.get(config.scene.builder).plan != "scene"):
+        raise InputError("output.frame: kitti stands on a builder's ground under one sensor; a sensor rig or a real scan writes sensor or world")
     if config.output.frames_kept and not config.output.skip_empty:
         raise InputError("output.frames_kept: counts kept frames, so it needs output.skip_empty: true")
     return config

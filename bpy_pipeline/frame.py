@@ -81,8 +81,10 @@ class Frame:
     chunks : the scan's ``(points, beam)`` chunks, consumed by the effects stage
     direct_returns : (d,) int64 the instance of each of the scan's returns that met no mirror, before the effects, when the
         boxes take their ``visible`` counts from them (:func:`~bpy_pipeline.stages.scan.counts_direct_returns`); else ``None``
-    points : (p,) POINT_DTYPE records in the output frame (sensor or world; a rig's: RIG_POINT_DTYPE)
+    points : (p,) POINT_DTYPE records in the output frame (sensor, world or kitti; a rig's: RIG_POINT_DTYPE)
     boxes : (b,) BOX_DTYPE box labels in the output frame, ``None`` when no box format is asked for
+    thin_boxes : (t,) BOX_DTYPE boxes of the box classes with some points but fewer than their minimum (KITTI's DontCare
+        regions), ``None`` where the frame's boxes do not say (a rig's, a real scan's)
     images : {name: (h, w, 3) uint8} camera renderings (KITTI's ``image_2``)
     flash : {file suffix: (returns, rows, columns) FLASH_IMAGE_DTYPE} flash cameras' images (``flash_image``)
     rig : a sensor rig's per-sensor frames (:class:`~bpy_pipeline.rig.RigFrame`), ``None`` for one sensor
@@ -105,6 +107,7 @@ class Frame:
     direct_returns: np.ndarray | None = None
     points: np.ndarray | None = None
     boxes: np.ndarray | None = None
+    thin_boxes: np.ndarray | None = None
     files: list[str] = field(default_factory=list)
     timings: dict[str, float] = field(default_factory=dict)
     record: dict = field(default_factory=dict)

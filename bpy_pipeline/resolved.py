@@ -60,6 +60,8 @@ def resolved(path: str | Path | None = None, overrides: list[str] = ()) -> tuple
     tree = config_to_dict(config)
     builder_name = config.scene.builder
     builder_sensor = BUILDERS.get(builder_name).sensor
+    builder_output = BUILDERS.get(builder_name).output
+    output_from_builder = builder_output(config.scene.params) if builder_output is not None else {}
     named = _has(given, ("sensor", "preset")) or _has(on_line, ("sensor", "preset"))
     from_builder = builder_sensor if not named else {}
     preset = config.sensor.spec.name
@@ -76,6 +78,8 @@ def resolved(path: str | Path | None = None, overrides: list[str] = ()) -> tuple
             source = "config"
         elif key[0] == "effects" and _has(profile, rest):
             source = f"profile {preset}"
+        elif key[0] == "output" and _has(output_from_builder, rest):
+            source = f"builder {builder_name}"
         elif key[0] == "sensor" and _has(from_builder, rest):
             source = f"builder {builder_name}"
         elif key[0] == "sensor" and _has(default_sensor, rest):

@@ -65,7 +65,7 @@ SLOW = frozenset({
     "test_extension.py",  # builds the zip, installs it in a Blender session
     "test_extension_checkout.py",
     "test_io_kitti_camera.py",  # Workbench renders
-    "test_loaders.py",  # its module fixture generates a dataset with run.py (25 s)
+    "test_loaders.py",  # its module fixtures generate datasets with run.py: parking, the hall twice, the street (about 60 s)
     "test_packaging.py",  # builds the wheel, installs it in a fresh venv
     "test_run.py",  # every test runs run.py
     "test_bad_input_matrix.py::test_sigterm_is_one_line_exit_143_lock_released_frames_kept",

@@ -209,7 +209,7 @@ def test_kitti_and_openpcdet_files_round_trip(tmp_path):
     points = box_points(boxes)
     lut = np.zeros((64, 3), np.uint8)
     written = kitti.write_frame(tmp_path, "000007", points, boxes, CameraConfig(), lut, {"person": "Pedestrian"}) + openpcdet.write_frame(tmp_path, "000007", points, boxes, {"person": "Pedestrian"})
-    assert {p.relative_to(tmp_path).as_posix() for p in written} == {"kitti/training/label_2/000007.txt", "kitti/training/calib/000007.txt", "kitti/training/velodyne/000007.bin", "kitti/training/image_2/000007.png", "openpcdet/labels/000007.txt", "openpcdet/points/000007.npy"}
+    assert {p.relative_to(tmp_path).as_posix() for p in written} == {"kitti/training/label_2/000007.txt", "kitti/training/calib/000007.txt", "kitti/training/velodyne/000007.bin", "kitti/training/planes/000007.txt", "kitti/training/image_2/000007.png", "openpcdet/labels/000007.txt", "openpcdet/points/000007.npy"}
     tr = np.array((tmp_path / "kitti/training/calib/000007.txt").read_text().splitlines()[5].split()[1:], float).reshape(3, 4)
     read_kitti = bx.read_kitti_labels(tmp_path / "kitti/training/label_2/000007.txt", tr)
     pcdet = bx.read_openpcdet_labels(tmp_path / "openpcdet/labels/000007.txt")
@@ -407,3 +407,70 @@ def test_a_garage_run_counts_visible_from_its_scan_with_the_traces_boxes(bpy_sce
     assert sum(len(b) for b in boxes[True]) > 5 and all((b["visible"] > 0).any() for b in boxes[True])
     for ours, traced in zip(boxes[True], boxes[False]):
         assert ours.tobytes() == traced.tobytes()
+
+
+def test_road_plane_is_kittis_and_holds_the_ground_for_any_sensor_pose_and_points_frame():
+    """planes/NNNNNN.txt as KITTI's: ``a b c d`` in the rectified camera frame, normal up (b < 0), d the camera's height
+    above the road; every world ground point (z = 0) lies on it, whatever the sensor's tilt, the points' frame
+    (sensor, world, kitti) or the camera's offset from the LiDAR."""
+    from bpy_pipeline.config import CameraConfig
+    from bpy_pipeline.geometry.transforms import output_pose, pose_matrix, sensor_to_output
+    from bpy_pipeline.io import kitti
+
+    rng = np.random.default_rng(4)
+    ground = np.c_[rng.uniform(-30, 30, (50, 2)), np.zeros(50), np.ones(50)]  # world
+    for pose in (pose_matrix([0, 0, 1.73], [0, 0, 0]), pose_matrix([5, -3, 4.5], [2, 8, 130])):
+        for camera in (CameraConfig(), CameraConfig(position=(-7.0, 0.5, -2.8), rotation_deg=(0.0, 0.0, 20.0))):
+            for frame in ("sensor", "world", "kitti"):
+                to_points = sensor_to_output(frame, pose, camera.position)
+                k, tr = kitti.camera_matrices(camera, to_points)
+                plane = kitti.road_plane(tr, kitti.points_ground(pose, frame, None, camera.position))
+                text = kitti.plane_text(plane).splitlines()
+                assert text[:3] == ["# Matrix", "WIDTH 4", "HEIGHT 1"]
+                read = np.array(text[3].split(), float)
+                assert np.linalg.norm(read[:3]) == pytest.approx(1.0) and read[1] < 0
+                camera_world = pose @ np.append(camera.position, 1.0)
+                assert read[3] == pytest.approx(camera_world[2], abs=1e-5)  # the camera's height above the road
+                points = (np.linalg.inv(output_pose(frame, pose, camera.position)) @ ground.T).T  # the ground in the points' frame
+                cam = points[:, :3] @ tr[:, :3].T + tr[:, 3]
+                np.testing.assert_allclose(cam @ read[:3] + read[3], 0.0, atol=1e-5)
+
+
+def test_kitti_frame_is_level_with_the_ground_173_m_below_under_the_camera():
+    from bpy_pipeline.geometry.transforms import output_pose, pose_matrix, sensor_to_output
+
+    pose = pose_matrix([5, -3, 4.5], [3, 10, 130])  # a tilted sensor 4.5 m up
+    frame = output_pose("kitti", pose, (-7.0, 0.0, -2.77))
+    np.testing.assert_allclose(frame[:3, 2], [0, 0, 1], atol=1e-12)  # level: boxes stay upright
+    camera_world = pose @ np.array([-7.0, 0.0, -2.77, 1.0])
+    np.testing.assert_allclose(frame[:3, 3], [camera_world[0], camera_world[1], 1.73])
+    np.testing.assert_allclose(np.degrees(np.arctan2(frame[1, 0], frame[0, 0])), 130.0, atol=2.0)  # the sensor's heading (its tilted x projected)
+    np.testing.assert_allclose(sensor_to_output("kitti", pose, (-7.0, 0.0, -2.77)), np.linalg.inv(frame) @ pose, atol=1e-12)
+    assert sensor_to_output("sensor", pose) is None and np.array_equal(sensor_to_output("world", pose), pose)
+    tilted = gb.boxes_in_frame(sample_boxes(np.random.default_rng(1), 2), frame)  # no InputError: the kitti frame is level
+    assert len(tilted) == 2
+
+
+def test_dont_care_boxes_are_kitti_regions_after_the_boxes():
+    from bpy_pipeline.config import CameraConfig
+    from bpy_pipeline.io import kitti
+
+    boxes = sample_boxes(np.random.default_rng(2))
+    boxes["centre"][:, 0] = np.abs(boxes["centre"][:, 0]) + 5  # ahead of the camera
+    boxes["centre"][:, 1] = 0.0
+    lines = kitti.label_lines(boxes, box_points(boxes), CameraConfig(), names={"car": "DontCare"})
+    kinds = [line.split()[0] for line in lines]
+    assert kinds == ["Pedestrian", "Misc", "Pedestrian", "DontCare", "DontCare"]  # the boxed objects first, as the loaders need
+    fields = lines[-1].split()
+    assert fields[1:4] == ["-1", "-1", "-10"] and fields[8:] == ["-1", "-1", "-1", "-1000", "-1000", "-1000", "-10"] and float(fields[6]) >= float(fields[4]) >= 0
+
+
+def test_kitti_difficulty_is_what_both_samplers_keep():
+    from bpy_pipeline.io.train_configs import kitti_difficulty
+
+    def line(trunc, occ, top, bottom):
+        return f"Car {trunc} {occ} 0 10 {top} 50 {bottom} 1.5 1.6 3.9 0 1.7 10 0".split()
+
+    assert [kitti_difficulty(line(0, 0, 0, 41)), kitti_difficulty(line(0.2, 1, 0, 30)), kitti_difficulty(line(0.45, 2, 0, 30))] == [0, 1, 2]
+    assert kitti_difficulty(line(0, 0, 0, 25)) == -1  # 25 px: mmdetection3d's hard needs more (OpenPCDet's would keep it)
+    assert kitti_difficulty(line(0.6, 0, 0, 100)) == -1 and kitti_difficulty(line(0, 3, 0, 100)) == -1

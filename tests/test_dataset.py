@@ -28,7 +28,8 @@ def cli(*args, env=None, **kwargs):
 def frame_files(out: Path) -> dict[str, bytes]:
     """Every file of the frames (not the manifest, records or indexes, which hold timings or the run's extent)."""
     skip = {"manifest.json", "train.txt", "val.txt", "test.txt", "semantic-kitti.yaml", "calib.txt", "poses.txt", "times.txt", "npy_train.json", "npy_val.json", "npy_test.json",
-            "semantickitti_infos_train.pkl", "semantickitti_infos_val.pkl", "semantickitti_infos_test.pkl"}  # the writers' index files
+            "semantickitti_infos_train.pkl", "semantickitti_infos_val.pkl", "semantickitti_infos_test.pkl",
+            "openpcdet_kitti_dataset.yaml", "openpcdet_pv_rcnn.yaml", "openpcdet_pointpillar.yaml", "mmdet3d_pointpillars_kitti.py", "custom_dataset.yaml", "pv_rcnn.yaml"}  # the writers' index files
     files = (p for p in sorted(out.rglob("*")) if p.is_file() and p.name not in skip)
     return {str(p.relative_to(out)): p.read_bytes() for p in files if p.parent.name != "records" and not any(part.startswith(".") for part in p.relative_to(out).parts)}
 

@@ -508,3 +508,412 @@ def test_sustech_labels_and_pcd_clouds(dataset):
     points = read_ply(dataset / "ply" / "000000.ply")
     for name in ("intensity", "semantic", "instance", "ring", "time", "range", "bounces"):
         np.testing.assert_array_equal(cloud.point[name].numpy().ravel(), points[name], err_msg=name)
+
+
+# ----------------------------------------------------------------------------- training: the samplers, the ranges, __getitem__
+# Followed (OpenPCDet 8caccce): kitti_dataset.py (get_road_plane, __getitem__, create_groundtruth_database), dataset.py
+# (prepare_data: the sampler, keep_arrays_by_name, the data processor, the retry on a training item without a box),
+# augmentor/database_sampler.py (__init__, filter_by_difficulty, filter_by_min_points, __call__: np.stack of the sampled,
+# put_boxes_on_road_planes), processor/data_processor.py (mask_points_and_boxes_outside_range, transform_points_to_voxels),
+# utils/common_utils.py (mask_points_by_range: x and y only), utils/box_utils.py (mask_boxes_outside_range_numpy: box
+# centres, USE_CENTER_TO_FILTER); custom/custom_dataset.py (__getitem__, create_groundtruth_database).
+# mmdetection3d (fe25f7a): datasets/transforms/dbsampler.py (filter_by_min_points indexes db_infos[name]),
+# transforms_3d.py (PointsRangeFilter: x, y and z; ObjectRangeFilter: bird's eye view), datasets/kitti_dataset.py (plane).
+# Left out: the samplers' collision test between sampled boxes (boxes_bev_iou_cpu) and the flips, rotations and scalings,
+# which move no item's boxes out of a range they fitted before. The stock values below are the configs' own.
+STOCK_KITTI = {"classes": ["Car", "Pedestrian", "Cyclist"], "range": [0, -40, -3, 70.4, 40, 1], "voxel": [0.05, 0.05, 0.1], "fov": True,
+               "sampler": {"USE_ROAD_PLANE": True, "PREPARE": {"filter_by_min_points": ["Car:5", "Pedestrian:5", "Cyclist:5"], "filter_by_difficulty": [-1]},
+                           "SAMPLE_GROUPS": ["Car:20", "Pedestrian:15", "Cyclist:15"], "LIMIT_WHOLE_SCENE": True}}  # tools/cfgs/dataset_configs/kitti_dataset.yaml
+STOCK_CUSTOM = {"classes": ["Vehicle", "Pedestrian", "Cyclist"], "range": [-75.2, -75.2, -2, 75.2, 75.2, 4], "voxel": [0.1, 0.1, 0.15], "fov": False,
+                "sampler": {"USE_ROAD_PLANE": False, "PREPARE": {"filter_by_min_points": ["Vehicle:5", "Pedestrian:5", "Cyclist:5"]},
+                            "SAMPLE_GROUPS": ["Vehicle:20", "Pedestrian:15", "Cyclist:15"], "LIMIT_WHOLE_SCENE": True}}  # custom_dataset.yaml
+MAX_RETRIES = 200  # __getitem__ calls itself for another random item: a dataset of empty items ends in RecursionError
+
+
+def written_openpcdet(dataset_yaml: Path, model_yaml: Path) -> dict:
+    """The dataset and model yamls the run wrote, as the replica's config (CLASS_NAMES from the model yaml; its
+    DATA_CONFIG keys over the dataset yaml's, as pcdet/config.py's merge_new_config puts them)."""
+    data, model = yaml.safe_load(dataset_yaml.read_text()), yaml.safe_load(model_yaml.read_text())
+    data = {**data, **{k: v for k, v in model["DATA_CONFIG"].items() if k != "_BASE_CONFIG_"}}
+    sampler = data["DATA_AUGMENTOR"]["AUG_CONFIG_LIST"][0]
+    assert sampler["NAME"] == "gt_sampling" and model["DATA_CONFIG"]["_BASE_CONFIG_"].endswith(dataset_yaml.name)
+    voxel = [p for p in data["DATA_PROCESSOR"] if p["NAME"] == "transform_points_to_voxels"][0]["VOXEL_SIZE"]
+    anchors = model["MODEL"]["DENSE_HEAD"]["ANCHOR_GENERATOR_CONFIG"]
+    assert [a["class_name"] for a in anchors] == model["CLASS_NAMES"]  # AxisAlignedTargetAssigner: one anchor set per class
+    return {"classes": model["CLASS_NAMES"], "range": data["POINT_CLOUD_RANGE"], "voxel": voxel, "fov": data.get("FOV_POINTS_ONLY", False), "sampler": sampler,
+            "anchors": {a["class_name"]: a["anchor_bottom_heights"][0] for a in anchors}}
+
+
+def road_plane(root_split: Path, sample_idx: str):
+    """KittiDataset.get_road_plane: the fourth line, normal turned up (b < 0 in the camera frame), unit length; None without a file."""
+    plane_file = root_split / "planes" / ("%s.txt" % sample_idx)
+    if not plane_file.exists():
+        return None
+    lines = [float(i) for i in open(plane_file).readlines()[3].split()]
+    plane = np.asarray(lines)
+    if plane[1] > 0:
+        plane = -plane
+    return plane / np.linalg.norm(plane[0:3])
+
+
+def put_boxes_on_road_planes(gt_boxes: np.ndarray, road_planes: np.ndarray, calib: Calibration) -> tuple[np.ndarray, np.ndarray]:
+    """DataBaseSampler.put_boxes_on_road_planes: each box's bottom moved onto the plane below its centre."""
+    a, b, c, d = road_planes
+    center_cam = calib.lidar_to_rect(gt_boxes[:, 0:3])
+    center_cam[:, 1] = (-d - a * center_cam[:, 0] - c * center_cam[:, 2]) / b
+    cur_lidar_height = calib.rect_to_lidar(center_cam)[:, 2]
+    mv_height = gt_boxes[:, 2] - gt_boxes[:, 5] / 2 - cur_lidar_height
+    gt_boxes = gt_boxes.copy()
+    gt_boxes[:, 2] -= mv_height
+    return gt_boxes, mv_height
+
+
+def gt_database(items: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]) -> dict[str, list[dict]]:
+    """create_groundtruth_database (used_classes None): ``items`` of (points, names, boxes, difficulty); every box's
+    points among all of the frame's points (not the camera's view only)."""
+    db: dict[str, list[dict]] = {}
+    for points, names, boxes, difficulty in items:
+        for i in range(boxes.shape[0]):
+            db.setdefault(str(names[i]), []).append({"name": str(names[i]), "box3d_lidar": boxes[i], "num_points_in_gt": int(in_box(points, boxes[i]).sum()),
+                                                     "difficulty": int(difficulty[i])})
+    return db
+
+
+class DataBaseSampler:
+    """OpenPCDet's DataBaseSampler: ``__init__`` (KeyError for a class the database lacks), its filters and sample groups,
+    and ``__call__`` (np.stack of each group's sampled boxes: ValueError for a group left empty by the filters)."""
+
+    def __init__(self, db: dict, sampler_cfg: dict, class_names: list[str]):
+        self.cfg = sampler_cfg
+        self.db_infos = {name: [] for name in class_names}
+        [self.db_infos[cur_class].extend(db[cur_class]) for cur_class in class_names]
+        for func_name, val in sampler_cfg["PREPARE"].items():
+            if func_name == "filter_by_difficulty":
+                self.db_infos = {k: [i for i in v if i["difficulty"] not in val] for k, v in self.db_infos.items()}
+            elif func_name == "filter_by_min_points":
+                for name_num in val:
+                    name, min_num = name_num.split(":")
+                    if int(min_num) > 0 and name in self.db_infos:
+                        self.db_infos[name] = [i for i in self.db_infos[name] if i["num_points_in_gt"] >= int(min_num)]
+        self.sample_groups = {}
+        for x in sampler_cfg["SAMPLE_GROUPS"]:
+            class_name, sample_num = x.split(":")
+            if class_name in class_names:
+                self.sample_groups[class_name] = int(sample_num)
+
+    def __call__(self, data: dict, calib: Calibration | None) -> dict:
+        boxes, names = data["gt_boxes"], data["gt_names"]
+        for class_name, sample_num in self.sample_groups.items():
+            if self.cfg.get("LIMIT_WHOLE_SCENE", False):
+                sample_num -= int(np.sum(class_name == names))
+            if sample_num > 0:
+                pool = self.db_infos[class_name]
+                sampled = [pool[k % len(pool)] for k in range(sample_num)] if pool else []
+                sampled_boxes = np.stack([x["box3d_lidar"] for x in sampled], axis=0).astype(np.float32)
+                if self.cfg["USE_ROAD_PLANE"]:
+                    sampled_boxes, _ = put_boxes_on_road_planes(sampled_boxes, data["road_plane"], calib)
+                boxes = np.concatenate([boxes, sampled_boxes], axis=0)
+                names = np.concatenate([names, [class_name] * len(sampled_boxes)])
+        return {**data, "gt_boxes": boxes, "gt_names": names}
+
+
+def voxel_count(points: np.ndarray, point_range, voxel_size) -> int:
+    """transform_points_to_voxels: the voxels the points inside the range fill (points outside any axis are dropped)."""
+    low, high = np.asarray(point_range[:3], float), np.asarray(point_range[3:], float)
+    inside = ((points[:, :3] >= low) & (points[:, :3] < high)).all(axis=1)
+    return len(np.unique(np.floor((points[inside, :3] - low) / np.asarray(voxel_size, float)).astype(np.int64), axis=0))
+
+
+def prepare_data(data: dict, cfg: dict, training: bool, sampler: DataBaseSampler | None, calib=None) -> dict:
+    """DatasetTemplate.prepare_data up to the retry: the sampler (training), the classes kept, the range masks, the voxels."""
+    if training:
+        data = sampler(data, calib)
+    keep = np.array([n in cfg["classes"] for n in data["gt_names"]], bool)
+    boxes = data["gt_boxes"][keep]
+    points = data["points"]
+    point_range = np.asarray(cfg["range"], float)
+    points = points[(points[:, 0] >= point_range[0]) & (points[:, 0] <= point_range[3]) & (points[:, 1] >= point_range[1]) & (points[:, 1] <= point_range[4])]
+    if training:  # REMOVE_OUTSIDE_BOXES with USE_CENTER_TO_FILTER
+        boxes = boxes[((boxes[:, :3] >= point_range[:3]) & (boxes[:, :3] <= point_range[3:])).all(axis=-1)]
+    return {**data, "gt_boxes": boxes, "points": points, "voxels": voxel_count(points, point_range, cfg["voxel"])}
+
+
+def openpcdet_kitti_dataset(root: Path, cfg: dict, training: bool):
+    """KittiDataset(training).__getitem__ over the train (training) or val infos, with the sampler made from the train
+    split's ground-truth database; returns ``getitem(index, depth)``."""
+    infos = openpcdet_kitti_infos(root, "train" if training else "val")
+    train_infos = infos if training else openpcdet_kitti_infos(root, "train")
+    split_root = root / "training"
+
+    def items():
+        for info in train_infos:
+            annos = info["annos"]
+            n = annos["gt_boxes_lidar"].shape[0]
+            points = np.fromfile(split_root / "velodyne" / f"{info['point_cloud']['lidar_idx']}.bin", np.float32).reshape(-1, 4)
+            yield points, annos["name"][:n], annos["gt_boxes_lidar"], annos["difficulty"][:n]
+
+    sampler = DataBaseSampler(gt_database(items()), cfg["sampler"], cfg["classes"]) if training else None
+    rng = np.random.default_rng(0)
+
+    def getitem(index: int, depth: int = 0) -> dict:
+        info = infos[index]
+        sample_idx = info["point_cloud"]["lidar_idx"]
+        calib = Calibration(split_root / "calib" / f"{sample_idx}.txt")
+        annos = info["annos"]
+        real = annos["name"] != "DontCare"  # common_utils.drop_info_with_name
+        data = {"gt_names": annos["name"][real], "gt_boxes": annos["gt_boxes_lidar"]}
+        plane = road_plane(split_root, sample_idx)
+        if plane is not None:
+            data["road_plane"] = plane
+        points = np.fromfile(split_root / "velodyne" / f"{sample_idx}.bin", np.float32).reshape(-1, 4)
+        if cfg["fov"]:
+            pts_img, depth_rect = calib.rect_to_img(calib.lidar_to_rect(points[:, :3]))
+            shape = info["image"]["image_shape"]
+            points = points[(pts_img[:, 0] >= 0) & (pts_img[:, 0] < shape[1]) & (pts_img[:, 1] >= 0) & (pts_img[:, 1] < shape[0]) & (depth_rect >= 0)]
+        data = prepare_data({**data, "points": points}, cfg, training, sampler, calib)
+        if training and len(data["gt_boxes"]) == 0:
+            if depth >= MAX_RETRIES:
+                raise RecursionError("maximum recursion depth exceeded: no training item holds a box")
+            return getitem(int(rng.integers(len(infos))), depth + 1)
+        return data
+
+    return infos, getitem
+
+
+def openpcdet_custom_dataset(root: Path, cfg: dict, training: bool):
+    """CustomDataset(training).__getitem__ (no road plane, every point), as :func:`openpcdet_kitti_dataset`."""
+    infos = openpcdet_custom_infos(root, "train" if training else "val")
+    train_infos = infos if training else openpcdet_custom_infos(root, "train")
+    db = gt_database((i["points"], i["annos"]["name"], i["annos"]["gt_boxes_lidar"], np.zeros(len(i["annos"]["name"]), int)) for i in train_infos)
+    sampler = DataBaseSampler(db, cfg["sampler"], cfg["classes"]) if training else None
+    rng = np.random.default_rng(0)
+
+    def getitem(index: int, depth: int = 0) -> dict:
+        info = infos[index]
+        data = prepare_data({"gt_names": info["annos"]["name"], "gt_boxes": info["annos"]["gt_boxes_lidar"], "points": info["points"]}, cfg, training, sampler)
+        if training and len(data["gt_boxes"]) == 0:
+            if depth >= MAX_RETRIES:
+                raise RecursionError("maximum recursion depth exceeded: no training item holds a box")
+            return getitem(int(rng.integers(len(infos))), depth + 1)
+        return data
+
+    return infos, getitem
+
+
+def every_item(infos, getitem) -> list[dict]:
+    return [getitem(k) for k in range(len(infos))]
+
+
+def test_openpcdet_kitti_road_planes_put_boxes_on_the_ground(dataset):
+    """Each frame's planes file (KITTI's layout) is what get_road_plane reads, and puts every labelled car back where
+    it stands: the sampler moves a sampled box onto it by that much (put_boxes_on_road_planes)."""
+    root = dataset / "kitti"
+    moved = []
+    for split in ("train", "val"):
+        for info in openpcdet_kitti_infos(root, split):
+            sample_idx = info["point_cloud"]["lidar_idx"]
+            lines = (root / "training" / "planes" / f"{sample_idx}.txt").read_text().splitlines()
+            assert lines[:3] == ["# Matrix", "WIDTH 4", "HEIGHT 1"] and len(lines[3].split()) == 4
+            plane = road_plane(root / "training", sample_idx)
+            assert plane[1] < -0.99 and plane[3] == pytest.approx(1.51, abs=0.01)  # level, the parking robot's sensor height
+            boxes = info["annos"]["gt_boxes_lidar"]
+            if len(boxes):
+                moved.append(put_boxes_on_road_planes(boxes, plane, Calibration(root / "training" / "calib" / f"{sample_idx}.txt"))[1])
+    moved = np.concatenate(moved)
+    assert len(moved) >= 2 and np.abs(moved).max() < 0.02, moved  # the cars stand on the floor the plane says
+
+
+def test_openpcdet_stock_3class_sampler_needs_every_class_the_written_config_names_those_present(dataset):
+    """A parking run holds only cars: the stock kitti_dataset.yaml's sampler stops at Pedestrian, as OpenPCDet did
+    (``database_sampler.py: KeyError: 'Pedestrian'``); the written config names Car alone, with its range and anchors,
+    and every train item comes out with boxes and voxels, every val item with voxels."""
+    root = dataset / "kitti"
+    with pytest.raises(KeyError, match="Pedestrian"):
+        openpcdet_kitti_dataset(root, STOCK_KITTI, training=True)
+    cfg = written_openpcdet(root / "openpcdet_kitti_dataset.yaml", root / "openpcdet_pv_rcnn.yaml")
+    assert cfg["classes"] == ["Car"] and cfg["sampler"]["SAMPLE_GROUPS"] == ["Car:20"] and cfg["sampler"]["PREPARE"]["filter_by_min_points"] == ["Car:5"]
+    assert cfg["range"] == [0.0, -40.0, -2.78, 70.4, 40.0, 1.22] and cfg["anchors"] == {"Car": pytest.approx(-1.56)}  # the ground at -1.51 m, not -1.73
+    infos, getitem = openpcdet_kitti_dataset(root, cfg, training=True)
+    for item in every_item(infos, getitem):
+        assert len(item["gt_boxes"]) > 0 and item["voxels"] > 0
+    infos, getitem = openpcdet_kitti_dataset(root, cfg, training=False)
+    assert all(item["voxels"] > 0 for item in every_item(infos, getitem))
+    pillars = written_openpcdet(root / "openpcdet_kitti_dataset.yaml", root / "openpcdet_pointpillar.yaml")  # pointpillar.yaml's range and pillars
+    assert pillars["range"] == [0.0, -39.68, -2.78, 69.12, 39.68, 1.22] and pillars["voxel"] == [0.16, 0.16, 4] and pillars["anchors"] == cfg["anchors"]
+    for training in (True, False):
+        infos, getitem = openpcdet_kitti_dataset(root, pillars, training)
+        assert all(item["voxels"] > 0 and (len(item["gt_boxes"]) > 0 or not training) for item in every_item(infos, getitem))
+
+
+def test_openpcdet_custom_written_config_fits_the_parking_run(dataset):
+    """The custom layout: the stock custom_dataset.yaml's classes (Vehicle, Pedestrian, Cyclist) are none of the
+    written categories (KeyError at Vehicle); the written one names Car and moves the range onto the data."""
+    root = dataset / "openpcdet"
+    with pytest.raises(KeyError, match="Vehicle"):
+        openpcdet_custom_dataset(root, STOCK_CUSTOM, training=True)
+    cfg = written_openpcdet(root / "custom_dataset.yaml", root / "pv_rcnn.yaml")
+    assert cfg["classes"] == ["Car"] and cfg["range"][2] == pytest.approx(-1.51 - 2)
+    for training in (True, False):
+        infos, getitem = openpcdet_custom_dataset(root, cfg, training)
+        for item in every_item(infos, getitem):
+            assert item["voxels"] > 0 and (len(item["gt_boxes"]) > 0 or not training)
+
+
+def _run(out: Path, *settings: str) -> Path:
+    command = [sys.executable, str(ROOT / "run.py"), "--out", str(out), "--frames", "8", "--seed", "0", "--set", "output.formats=[ply]",
+               "--set", "output.boxes.formats=[kitti,openpcdet]", "--set", "output.preview=false", *(a for s in settings for a in ("--set", s))]
+    done = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-3000:]
+    return out
+
+
+@pytest.fixture(scope="module")
+def hall(tmp_path_factory) -> dict[str, Path]:
+    """The industrial hall (sensor 4.5 m up, the KITTI camera 1 m from the -x wall at 1.73 m) in the sensor frame and in
+    ``output.frame: kitti``, eight frames each."""
+    pytest.importorskip("bpy", reason="the hall is a real run")
+    base = tmp_path_factory.mktemp("hall")
+    return {frame: _run(base / frame, "scene.builder=industrial_hall", f"output.frame={frame}") for frame in ("sensor", "kitti")}
+
+
+def test_hall_in_the_sensor_frame_is_outside_every_stock_range_the_written_configs_fit(hall):
+    """4.5 m up, the hall's points and boxes lie below the stock ranges' z: KITTI's training items lose every box
+    (mask_boxes_outside_range) and __getitem__ retries until RecursionError; the custom layout's points fill no voxel.
+    The written configs move the ranges (and anchors) onto the floor and every item comes out."""
+    root = hall["sensor"] / "kitti"
+    cfg = written_openpcdet(root / "openpcdet_kitti_dataset.yaml", root / "openpcdet_pv_rcnn.yaml")
+    assert cfg["classes"] == ["Pedestrian"]  # the hall holds people and robot arms (KITTI's Misc)
+    assert cfg["range"] == [-7.0, -40.0, -5.77, 63.4, 40.0, -1.77]  # floor at -4.5 m, the camera at x = -7 m
+    with pytest.raises(RecursionError):
+        infos, getitem = openpcdet_kitti_dataset(root, {**cfg, "range": STOCK_KITTI["range"]}, training=True)
+        getitem(0)
+    for training in (True, False):
+        infos, getitem = openpcdet_kitti_dataset(root, cfg, training)
+        for item in every_item(infos, getitem):
+            assert item["voxels"] > 0 and (len(item["gt_boxes"]) > 0 or not training)
+    custom = hall["sensor"] / "openpcdet"
+    infos, getitem = openpcdet_custom_dataset(custom, {**STOCK_CUSTOM, "classes": ["Person"], "sampler": {**STOCK_CUSTOM["sampler"], "SAMPLE_GROUPS": ["Person:15"]}}, False)
+    assert all(item["voxels"] == 0 for item in every_item(infos, getitem))  # 0.0 % of the points inside z [-2, 4]
+    cfg = written_openpcdet(custom / "custom_dataset.yaml", custom / "pv_rcnn.yaml")
+    assert cfg["classes"] == ["Person"] and cfg["anchors"] == {"Person": -4.5}
+    for training in (True, False):
+        infos, getitem = openpcdet_custom_dataset(custom, cfg, training)
+        assert all(item["voxels"] > 0 and (len(item["gt_boxes"]) > 0 or not training) for item in every_item(infos, getitem))
+
+
+def test_hall_in_the_kitti_frame_fits_the_stock_ranges(hall):
+    """``output.frame: kitti`` puts the ground at -1.73 m under an origin above the KITTI camera: the stock ranges hold
+    every item (the classes still those present), the road planes say 1.73 m, and the written configs move nothing."""
+    root = hall["kitti"] / "kitti"
+    cfg = written_openpcdet(root / "openpcdet_kitti_dataset.yaml", root / "openpcdet_pv_rcnn.yaml")
+    assert cfg["range"] == STOCK_KITTI["range"] and cfg["anchors"] == {"Pedestrian": -0.6}
+    stock = {**STOCK_KITTI, "classes": cfg["classes"], "sampler": cfg["sampler"]}
+    for training in (True, False):
+        infos, getitem = openpcdet_kitti_dataset(root, stock, training)
+        for item in every_item(infos, getitem):
+            assert item["voxels"] > 0 and (len(item["gt_boxes"]) > 0 or not training)
+            np.testing.assert_allclose(item["road_plane"], [0, -1, 0, 1.73], atol=1e-6)
+    custom = hall["kitti"] / "openpcdet"
+    points = np.concatenate([np.load(p) for p in sorted((custom / "points").glob("*.npy"))])
+    floor = np.percentile(points[:, 2], 1)
+    assert -1.8 < floor < -1.6 and ((points[:, 2] >= -2) & (points[:, 2] <= 4)).mean() > 0.99  # custom_dataset.yaml's z [-2, 4]
+
+
+def mmdet3d_written(path: Path) -> dict:
+    """The written mmdetection3d config, executed as mmengine does for its own variables (``_base_`` merged elsewhere)."""
+    names: dict = {}
+    exec(compile(path.read_text(), str(path), "exec"), {}, names)
+    return names
+
+
+def test_mmdet3d_written_config_samples_only_classes_present_and_keeps_the_points(dataset, hall):
+    """mmdetection3d's DataBaseSampler indexes ``db_infos[name]`` for every filter_by_min_points key (KeyError:
+    'Pedestrian' with the stock 3-class config on the parking run); PointsRangeFilter keeps x, y and z: the hall's points
+    in the sensor frame all fall below the stock z and none is left. The written configs name the classes present, move
+    the range, and give the model as many classes and anchor sets."""
+    for root, classes, point_range in ((dataset / "kitti", ["Car"], [0.0, -39.68, -2.78, 69.12, 39.68, 1.22]),
+                                       (hall["sensor"] / "kitti", ["Pedestrian"], [-7.0, -39.68, -5.77, 62.12, 39.68, -1.77])):
+        infos = openpcdet_kitti_infos(root, "train")
+        db = gt_database((np.fromfile(root / "training" / "velodyne" / f"{i['point_cloud']['lidar_idx']}.bin", np.float32).reshape(-1, 4), i["annos"]["name"],
+                          i["annos"]["gt_boxes_lidar"], i["annos"]["difficulty"]) for i in infos)
+        with pytest.raises(KeyError):
+            [db[name] for name in ("Car", "Pedestrian", "Cyclist")]  # the stock filter_by_min_points=dict(Car=5, Pedestrian=5, Cyclist=5)
+        config = mmdet3d_written(root / "mmdet3d_pointpillars_kitti.py")
+        assert config["class_names"] == classes and config["point_cloud_range"] == point_range
+        sampler = config["db_sampler"]
+        assert list(sampler["prepare"]["filter_by_min_points"]) == classes == list(sampler["sample_groups"])
+        for name, minimum in sampler["prepare"]["filter_by_min_points"].items():
+            assert [i for i in db[name] if i["num_points_in_gt"] >= minimum and i["difficulty"] != -1]  # a group the sampler can draw from
+        head = config["model"]["bbox_head"]
+        assert head["num_classes"] == len(classes) == len(head["anchor_generator"]["ranges"]) == len(config["model"]["train_cfg"]["assigner"])
+        low, high = np.array(point_range[:3]), np.array(point_range[3:])
+        for info in infos:
+            points = np.fromfile(root / "training" / "velodyne" / f"{info['point_cloud']['lidar_idx']}.bin", np.float32).reshape(-1, 4)
+            assert ((points[:, :3] > low) & (points[:, :3] < high)).all(axis=1).any()  # PointsRangeFilter leaves points
+    stock = np.array([0, -39.68, -3, 69.12, 39.68, 1])
+    for path in sorted((hall["sensor"] / "kitti" / "training" / "velodyne").glob("*.bin")):
+        points = np.fromfile(path, np.float32).reshape(-1, 4)
+        inside = ((points[:, :3] > stock[:3]) & (points[:, :3] < stock[3:])).all(axis=1)
+        assert inside.mean() < 0.05  # the stock range keeps a few wall and shelf points at most, no floor
+
+
+@pytest.fixture(scope="module")
+def street(tmp_path_factory) -> Path:
+    """examples/street/config.yaml (the HDL-64E 1.73 m up at the intersection), eight frames, every box layout."""
+    pytest.importorskip("bpy", reason="the street is a real run")
+    out = tmp_path_factory.mktemp("street") / "out"
+    command = [sys.executable, str(ROOT / "run.py"), "--config", str(ROOT / "examples" / "street" / "config.yaml"), "--out", str(out), "--frames", "8",
+               "--set", "output.boxes.formats=[kitti,openpcdet,sustech]", "--set", "output.preview=false"]
+    done = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-3000:]
+    return out
+
+
+def test_street_every_vehicle_in_view_is_boxed_the_same_way_in_every_layout(street):
+    """Vans, trucks and buses are boxed as KITTI does (Van, Truck, Misc), cars, people and riders as before, in
+    label_2 wherever the camera sees their points and in the custom and SUSTechPOINTS layouts around the sensor; a van's
+    points are SemanticKITTI's car (10), as KITTI's vans are in SemanticKITTI; a rider on a motorcycle is a motorcyclist
+    (32) in a box of its own class, a rider on a bicycle a bicyclist (31) in KITTI's Cyclist box."""
+    from bpy_pipeline.io import read_ply
+    from bpy_pipeline.io.class_maps import load_class_maps
+    from bpy_pipeline.io.sustech import label_type, sustech_type
+    from bpy_pipeline.labels import load_class_table
+
+    from bpy_pipeline.config import BOX_CLASSES
+
+    maps, table = load_class_maps(), load_class_table()
+    kinds: dict[str, int] = {}
+    for path in sorted((street / "records").glob("*.json")):
+        record = json.loads(path.read_text())
+        stem = path.stem
+        folder = "testing" if f"kitti/testing/label_2/{stem}.txt" in record["files"] else "training"
+        root = street / "kitti" / folder
+        boxes = {b["instance"]: b["class"] for b in record["boxes"]}
+        sustech = {int(o["obj_id"]): o["obj_type"] for o in json.loads((street / "sustech" / "label" / f"{stem}.json").read_text())}
+        assert set(sustech) == set(boxes) and all(sustech[i] == sustech_type(c) for i, c in boxes.items())
+        custom = sorted(line.split()[7] for line in (street / "openpcdet" / "labels" / f"{stem}.txt").read_text().splitlines())
+        assert custom == sorted(label_type(c) for c in boxes.values())
+        points = read_ply(street / "ply" / f"{stem}.ply")
+        calib = Calibration(root / "calib" / f"{stem}.txt")
+        shape = image_shape(root / "image_2" / f"{stem}.png")
+        pts_img, depth = calib.rect_to_img(calib.lidar_to_rect(np.stack([points["x"], points["y"], points["z"]], axis=1)))
+        seen = (pts_img[:, 0] >= 0) & (pts_img[:, 0] < shape[1]) & (pts_img[:, 1] >= 0) & (pts_img[:, 1] < shape[0]) & (depth > 0.1)
+        expected = sorted(maps.kitti_name(c) for i, c in boxes.items() if seen[points["instance"] == i].any())
+        lines = [line.split()[0] for line in (root / "label_2" / f"{stem}.txt").read_text().splitlines()]
+        assert sorted(t for t in lines if t != "DontCare") == expected
+        assert lines[: len(expected)] == [t for t in lines if t != "DontCare"]  # DontCare lines last: the loaders take the boxes before them
+        users = {o["instance"] for o in record["objects"] if o["class"] in BOX_CLASSES}
+        thin = {i for i in users - set(boxes) if seen[points["instance"] == i].any()}  # seen, fewer points than their class's minimum
+        assert lines.count("DontCare") == (len(thin) if expected or thin else 1)  # KITTI's regions of objects too far to label
+        for c in boxes.values():
+            kinds[c] = kinds.get(c, 0) + 1
+        semantic = np.fromfile(street / [f for f in record["files"] if f.endswith(".label")][0], np.uint32) & 0xFFFF
+        project = points["semantic"]
+        for name, sk in (("van", 10), ("motorcyclist", 32), ("rider", 31), ("truck", 18), ("bus", 13)):
+            assert (semantic[project == table.id_of(name)] == sk).all(), name
+        for instance, c in boxes.items():  # a two-wheeler's box is its rider's: the motorcycle and its rider share the instance
+            classes = {o["class"] for o in record["objects"] if o["instance"] == instance}
+            if classes & {"bicycle", "motorcycle"}:
+                assert c == ({"bicycle": "rider", "motorcycle": "motorcyclist"}[next(iter(classes & {"bicycle", "motorcycle"}))])
+    assert all(kinds.get(c) for c in ("car", "van", "truck", "bus", "person", "rider", "motorcyclist")), kinds
+

@@ -4,6 +4,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
 import yaml
 
 from bpy_pipeline.config import config_to_dict, load_config
@@ -56,3 +57,22 @@ def _leaves(tree, path=()):
             yield from _leaves(value, path + (key,))
     else:
         yield path, tree
+
+
+def test_a_builders_output_defaults_sit_under_the_config():
+    """The industrial hall's KITTI camera (1 m from the -x wall, 1.73 m above the floor) is the builder's; a config's key wins."""
+    tree, sources = resolved(None, ["scene.builder=industrial_hall"])
+    assert tree["output"]["kitti"]["camera"]["position"] == [-7.0, 0.0, -2.77] and tree["output"]["kitti"]["camera"]["resolution"] == [1242, 750]
+    assert sources[("output", "kitti", "camera", "position")] == "builder industrial_hall"
+    tree, sources = resolved(None, ["scene.builder=industrial_hall", "scene.sensor_height=4.0", "output.kitti.camera.resolution=[640,480]"])
+    assert tree["output"]["kitti"]["camera"]["position"] == [-7.0, 0.0, -2.27] and tree["output"]["kitti"]["camera"]["resolution"] == [640, 480]
+    assert sources[("output", "kitti", "camera", "resolution")] == "--set"
+
+
+def test_the_kitti_frame_needs_one_sensor_on_a_builders_ground():
+    from bpy_pipeline.config import config_from_dict
+    from bpy_pipeline.errors import InputError
+
+    assert config_from_dict({"output": {"frame": "kitti"}}).output.frame == "kitti"
+    with pytest.raises(InputError, match="output.frame: kitti"):
+        config_from_dict({"scene": {"builder": "street"}, "output": {"frame": "kitti"}})  # the street's default sensor is a rig

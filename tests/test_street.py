@@ -183,8 +183,9 @@ def test_exported_street_has_no_intersections_and_users_stand_on_their_ground(bp
         ground = kerb if placed["where"] == "sidewalk" else street.MARKING_THICKNESS
         assert low == pytest.approx(ground, abs=2e-3), placed
         assert objects.class_names[rows[0]] == ("person" if placed["kind"] == "person" else placed["kind"])
-    riders = [r for r in users if objects.class_names[r] == "rider"]
-    assert riders and all(objects.class_names[min(x for x in users if objects.instance[x] == objects.instance[r])] in ("bicycle", "motorcycle") for r in riders)
+    riders = [r for r in users if objects.class_names[r] in ("rider", "motorcyclist")]
+    rides = {"rider": "bicycle", "motorcyclist": "motorcycle"}  # a rider is labelled by what it rides
+    assert riders and all(objects.class_names[min(x for x in users if objects.instance[x] == objects.instance[r])] == rides[objects.class_names[r]] for r in riders)
 
 
 @pytest.mark.bpy

@@ -113,6 +113,8 @@ class Builder:
     release_sensor : ``release_sensor(params, raw_scene, sensor_data) -> params``: when the config places
         the sensor itself (sensor.position or trajectory), the parameters that stop the scene placing it
         (``InputError`` where both do)
+    output : ``output(params) -> {key: value}``: the builder's defaults for the ``output`` section, under the config's
+        (the industrial hall's KITTI camera at KITTI's height above the floor); ``None``: none
     plan : how its frames are made (:data:`bpy_pipeline.plan.PLANS`): ``scene`` (a Blender scene scanned by one
         sensor or a rig) or ``real_scan`` (a real scan as the background, objects cast in by its firings)
     follows_path : a moving sensor's scene is graded along its path: ``build`` gets a
@@ -130,6 +132,7 @@ class Builder:
     release_sensor: Callable[[Any, dict, dict], Any] | None = None
     follows_path: bool = False
     plan: str = "scene"
+    output: Callable[[Any], dict] | None = None
 
     @property
     def blender_scene(self) -> bool:

@@ -32,6 +32,7 @@ from typing import Callable, Iterable, Sequence
 import numpy as np
 
 from ..errors import InputError, require
+from ..geometry.transforms import sensor_to_output
 from ..io.confined import readable_inside
 from ..io.manifest import read_frame_records, read_manifest
 from ..io.ply import read_ply
@@ -348,7 +349,7 @@ def read_kitti_object(path: Path, classes: Sequence[str], image_size: tuple[int,
 def read_generated(folder: Path, classes: Sequence[str], every: int = 1, max_frames: int | None = None) -> list[LabelledScan]:
     """The frames of a dataset folder made by the pipeline (``ply/*.ply``), every ``every``-th, at most ``max_frames``.
 
-    Points written in the world frame (``output.frame: world``) are moved back into the sensor frame by the
+    Points written in another frame (``output.frame: world`` or ``kitti``) are moved back into the sensor frame by the
     frame record's sensor pose. Object ids are the PLY ``instance`` field.
     """
     if every < 1 or (max_frames is not None and max_frames < 1):
@@ -357,7 +358,9 @@ def read_generated(folder: Path, classes: Sequence[str], every: int = 1, max_fra
     class_names = manifest.get("class_table")
     if class_names is not None and not (isinstance(class_names, dict) and class_names and all(str(k).isdigit() and int(k) < 1 << 16 and isinstance(v, str) for k, v in class_names.items())):
         raise InputError(f"{folder / 'manifest.json'}: class_table must map class ids (0..65535) to names, got {type(class_names).__name__}")
-    world = ((manifest.get("config") or {}).get("output") or {}).get("frame") == "world"
+    output = (manifest.get("config") or {}).get("output") or {}
+    points_frame = output.get("frame", "sensor")
+    kitti_origin = ((output.get("kitti") or {}).get("camera") or {}).get("position", (0.0, 0.0, 0.0))
     records = read_frame_records(folder) if (folder / "records").is_dir() else []
     files = []
     for record in records:
@@ -377,8 +380,9 @@ def read_generated(folder: Path, classes: Sequence[str], every: int = 1, max_fra
     for path, pose in files:
         cloud = read_ply(path)
         xyz = np.column_stack([cloud["x"], cloud["y"], cloud["z"]]).astype(np.float64)
-        if world:
-            xyz = (xyz - pose[:3, 3]) @ pose[:3, :3]
+        to_output = sensor_to_output(points_frame, pose, kitti_origin)
+        if to_output is not None:
+            xyz = (xyz - to_output[:3, 3]) @ to_output[:3, :3]
         xyz = xyz.astype(np.float32)
         semantic = cloud["semantic"].astype(np.int64)
         truth = np.where(semantic < len(truth_lut), truth_lut[np.minimum(semantic, len(truth_lut) - 1)], 0)  # unknown ids: ignored

@@ -83,8 +83,14 @@ def instance_triangles(buffers: SceneBuffers) -> np.ndarray:
     return buffers.objects.instance[buffers.triangle_object]
 
 
+RIDER_CLASSES = ("rider", "motorcyclist")  # a two-wheeler's box takes its rider's class: KITTI's Cyclist is rider and bicycle in one box
+
+
 def fit_boxes(buffers: SceneBuffers, classes, headings: dict | None = None) -> np.ndarray:
     """World-frame boxes (:data:`BOX_DTYPE`) of every instance whose class is in ``classes``.
+
+    A box's class is its instance's rider class (:data:`RIDER_CLASSES`) when one of its objects has one, else
+    its first object's.
 
     headings : ``{instance: yaw radians}`` from the scene builder; instances without one get the
         heading of their footprint's smallest rectangle
@@ -115,7 +121,8 @@ def fit_boxes(buffers: SceneBuffers, classes, headings: dict | None = None) -> n
         rotation = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
         local = vertices @ rotation
         low, high = local.min(axis=0), local.max(axis=0)
-        out[k]["class_name"] = objects.class_names[members[0]]
+        classes = [objects.class_names[r] for r in members]
+        out[k]["class_name"] = next((c for c in classes if c in RIDER_CLASSES), classes[0])
         out[k]["instance"] = instance
         out[k]["centre"] = rotation @ ((low + high) / 2)
         out[k]["size"] = high - low
@@ -150,7 +157,7 @@ def boxes_in_frame(boxes: np.ndarray, frame: np.ndarray, where: str = "output.fr
     frame = np.asarray(frame, float)
     if frame[2, 2] < np.cos(np.radians(0.5)):
         tilt = np.degrees(np.arccos(np.clip(frame[2, 2], -1, 1)))
-        raise InputError(f"{where}: 3D box labels need a level point frame, but the sensor is tilted {tilt:.1f} deg from vertical; write the points in the world frame (output.frame: world)")
+        raise InputError(f"{where}: 3D box labels need a level point frame, but the sensor is tilted {tilt:.1f} deg from vertical; write the points in a level frame (output.frame: world or kitti)")
     out = boxes.copy()
     out["centre"] = (boxes["centre"] - frame[:3, 3]) @ frame[:3, :3]
     yaw = np.arctan2(frame[1, 0], frame[0, 0])

@@ -39,3 +39,34 @@ def transform_points(points: np.ndarray, matrix: np.ndarray) -> np.ndarray:
 def rotate(vectors: np.ndarray, rotation: np.ndarray) -> np.ndarray:
     """``(n, 3)`` vectors turned by one ``(3, 3)`` rotation, or by ``(n, 3, 3)`` rotations, one per vector."""
     return vectors @ rotation.T if rotation.ndim == 2 else np.einsum("nij,nj->ni", rotation, vectors)
+
+
+KITTI_SENSOR_HEIGHT = 1.73  # m: KITTI's Velodyne above the road, where the stock detection configs' ranges and anchors expect the ground
+
+
+def output_pose(frame: str, pose: np.ndarray, origin=(0.0, 0.0, 0.0)) -> np.ndarray:
+    """``(4, 4)`` world pose of the points' frame ``output.frame`` for a sensor at ``pose`` (4, 4).
+
+    ``sensor``: the sensor's pose; ``world``: identity; ``kitti``: level, x along the sensor's heading (its x axis
+    projected on the ground), origin :data:`KITTI_SENSOR_HEIGHT` above the ground (the builders' world z = 0) under
+    ``origin`` (m, the sensor frame: the KITTI camera's position, ``output.kitti.camera.position``, where KITTI's
+    camera and LiDAR stand together), so the ground lies at z = -1.73 m as in KITTI, whatever the sensor's height or tilt.
+    """
+    pose = np.asarray(pose, float)
+    if frame == "sensor":
+        return pose
+    if frame == "world":
+        return np.eye(4)
+    if frame == "kitti":
+        yaw = np.arctan2(pose[1, 0], pose[0, 0])
+        x, y, _ = pose[:3, :3] @ np.asarray(origin, float) + pose[:3, 3]
+        return pose_matrix([x, y, KITTI_SENSOR_HEIGHT], [0.0, 0.0, np.degrees(yaw)])
+    raise ValueError(f"output.frame: {frame!r} is not one of sensor, world, kitti")
+
+
+def sensor_to_output(frame: str, pose: np.ndarray, origin=(0.0, 0.0, 0.0)) -> np.ndarray | None:
+    """``(4, 4)`` sensor-frame -> ``output.frame`` transform of a sensor at ``pose`` (``origin``: as :func:`output_pose`);
+    ``None`` for ``sensor`` (no move)."""
+    if frame == "sensor":
+        return None
+    return np.asarray(pose, float) if frame == "world" else np.linalg.solve(output_pose(frame, pose, origin), np.asarray(pose, float))

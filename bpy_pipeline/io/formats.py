@@ -11,8 +11,9 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..errors import InputError
+from ..geometry.transforms import sensor_to_output
 from ..labels import load_class_table
-from . import kitti, npy, openpcdet, semantickitti, sustech
+from . import kitti, npy, openpcdet, semantickitti, sustech, train_configs
 from .class_maps import maps_for, semantic_kitti_lut
 from .layout import frame_stem, write_frame_las, write_frame_ply, write_frame_preview
 from .pcd import write_pcd
@@ -68,13 +69,19 @@ def _kitti_folder(frame) -> str:
 
 
 def _write_kitti(frame, out: Path) -> list[Path]:
-    """The KITTI layout's point file, labels and calibration (its image is :func:`_write_kitti_image`)."""
-    return kitti.write_frame_text(out, frame_stem(frame.index), frame.points, frame.boxes, frame.config.output.kitti.camera, frame.config.output.boxes.names, _kitti_folder(frame))
+    """The KITTI layout's point file, labels, calibration and road plane (its image is :func:`_write_kitti_image`)."""
+    output = frame.config.output
+    to_points = sensor_to_output(output.frame, frame.pose, output.kitti.camera.position)
+    found = (getattr(getattr(frame, "mixed", None), "rule_log", None) or {}).get("ground")  # a real scan's, where the mixing looked
+    ground = kitti.points_ground(frame.pose, output.frame, found, output.kitti.camera.position)
+    return kitti.write_frame_text(out, frame_stem(frame.index), frame.points, frame.boxes, output.kitti.camera, output.boxes.names, _kitti_folder(frame), to_points, ground,
+                                  frame.thin_boxes)
 
 
 def _write_kitti_image(frame, out: Path) -> list[Path]:
     """``image_2``: the camera stage's rendering (output.kitti.camera.render), else the points' projection."""
-    return [kitti.write_image(out, frame_stem(frame.index), frame.points, frame.config.output.kitti.camera, load_class_table().color_lut(), frame.images.get("image_2"), _kitti_folder(frame))]
+    return [kitti.write_image(out, frame_stem(frame.index), frame.points, frame.config.output.kitti.camera, load_class_table().color_lut(), frame.images.get("image_2"), _kitti_folder(frame),
+                              sensor_to_output(frame.config.output.frame, frame.pose, frame.config.output.kitti.camera.position))]
 
 
 def _write_openpcdet(frame, out: Path) -> list[Path]:
@@ -96,8 +103,19 @@ register_writer("npy", Writer(_write_npy, index=npy.write_index))
 register_writer("pcd", Writer(_write_pcd))
 register_writer("range_image", Writer(_write_range_image, _check_range_image))
 register_writer("preview", Writer(no_files, beside=_write_preview))
-register_writer("kitti", Writer(_write_kitti, _check_kitti, kitti.write_index, boxes=True, beside=_write_kitti_image))
-register_writer("openpcdet", Writer(_write_openpcdet, index=openpcdet.write_index, boxes=True))
+def _index_kitti(out: Path, records: list[dict], config) -> list[Path]:
+    """The KITTI layout's ImageSets, then the training configs of this run (:mod:`.train_configs`)."""
+    return kitti.write_index(out, records, config) + train_configs.write_kitti_configs(out, records, config)
+
+
+def _index_openpcdet(out: Path, records: list[dict], config) -> list[Path]:
+    """The custom layout's ImageSets (frames with a box), then the training configs of this run (:mod:`.train_configs`)."""
+    with_boxes = [r["index"] for r in records if r.get("boxes")]
+    return openpcdet.write_index(out, records, config) + train_configs.write_custom_configs(out, records, config, with_boxes)
+
+
+register_writer("kitti", Writer(_write_kitti, _check_kitti, _index_kitti, boxes=True, beside=_write_kitti_image))
+register_writer("openpcdet", Writer(_write_openpcdet, index=_index_openpcdet, boxes=True))
 register_writer("sustech", Writer(_write_sustech, boxes=True))
 
 from . import rig_outputs  # noqa: F401,E402  (registers rig and flash_image)

@@ -46,9 +46,9 @@ from .section import RealScanScene
 
 # SemanticKITTI raw ids -> the project's class names (assets_manifest/labels.yaml); others: the background class
 SEMANTICKITTI_NAMES = {
-    10: "car", 11: "bicycle", 13: "bus", 15: "motorcycle", 18: "truck", 20: "van", 30: "person", 31: "rider", 32: "rider",
+    10: "car", 11: "bicycle", 13: "bus", 15: "motorcycle", 18: "truck", 20: "van", 30: "person", 31: "rider", 32: "motorcyclist",
     40: "road", 44: "road", 48: "sidewalk", 49: "ground", 50: "building", 51: "fence", 52: "building", 60: "road", 70: "vegetation",
-    71: "trunk", 72: "terrain", 80: "pole", 81: "traffic sign", 99: "unlabeled", 252: "car", 253: "rider", 254: "person", 255: "rider", 256: "unlabeled",
+    71: "trunk", 72: "terrain", 80: "pole", 81: "traffic sign", 99: "unlabeled", 252: "car", 253: "rider", 254: "person", 255: "motorcyclist", 256: "unlabeled",
     257: "bus", 258: "truck", 259: "van",
 }
 OCCLUSION_LEVELS = (0.8, 0.4, 0.1)

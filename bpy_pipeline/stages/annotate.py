@@ -13,6 +13,7 @@ from ..buffers import SceneBuffers
 from ..config import Config
 from ..frame import Frame, Run
 from ..geometry.boxes import boxes_in_frame, count_points, fit_boxes, keep_boxes
+from ..geometry.transforms import output_pose
 from ..lidar.sensor.sensor_rays import SensorRays
 from ..lidar.sensor.sensors import angular_resolution
 from ..lidar.cast.visibility import occlusion_levels, visibility
@@ -63,19 +64,26 @@ def boxes_hold_their_instances(buffers: SceneBuffers, boxes: np.ndarray, classes
     return all(objects.class_names[r] in wanted for r in np.flatnonzero(np.isin(objects.instance, boxes["instance"])))
 
 
-def sensor_boxes(buffers: SceneBuffers, config: Config, pose: np.ndarray, points: np.ndarray, headings: dict | None = None, frame: int = 0, rng: np.random.Generator | None = None, rays: SensorRays | None = None, caster=None, direct_returns: np.ndarray | None = None) -> np.ndarray:
-    """The frame's 3D box labels (:data:`~bpy_pipeline.geometry.boxes.BOX_DTYPE`) in the frame of the points, thin boxes dropped
-    (:func:`world_boxes`, then those with their class's minimum points, in the output frame)."""
+def labelled_boxes(buffers: SceneBuffers, config: Config, pose: np.ndarray, points: np.ndarray, headings: dict | None = None, frame: int = 0, rng: np.random.Generator | None = None, rays: SensorRays | None = None, caster=None, direct_returns: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """``(boxes, thin)``: the frame's 3D box labels (:data:`~bpy_pipeline.geometry.boxes.BOX_DTYPE`) with their class's
+    minimum points, and the boxes with fewer but some (KITTI's DontCare regions: objects seen, too thin to label), both
+    in the frame of the points (:func:`world_boxes`, then the points' frame)."""
     section = config.output.boxes
     boxes = world_boxes(buffers, config, pose, points, headings, frame, rng, rays, caster=caster, direct_returns=direct_returns)
-    if len(boxes):
-        boxes = keep_boxes(boxes, section.min_points, section.min_points_default)
-    return boxes_in_frame(boxes, pose if config.output.frame == "sensor" else np.eye(4))
+    kept = keep_boxes(boxes, section.min_points, section.min_points_default) if len(boxes) else boxes
+    thin = boxes[(boxes["points"] > 0) & ~np.isin(boxes["instance"], kept["instance"])]
+    points_pose = output_pose(config.output.frame, pose, config.output.kitti.camera.position)
+    return boxes_in_frame(kept, points_pose), boxes_in_frame(thin, points_pose)
+
+
+def sensor_boxes(*args, **kwargs) -> np.ndarray:
+    """The frame's 3D box labels in the frame of the points, thin boxes dropped (:func:`labelled_boxes`' first)."""
+    return labelled_boxes(*args, **kwargs)[0]
 
 
 frame_boxes = sensor_boxes  # the name pipeline.py gave it (mixing's boxes are mixing.frame.mixed_boxes)
 
 
 def annotate_stage(frame: Frame, run: Run) -> None:
-    """The frame's 3D box labels (in the plan when a box format is asked for)."""
-    frame.boxes = sensor_boxes(frame.buffers, run.config, frame.pose, frame.points, frame.scene.headings, frame.index, frame.rng, run.rays, frame.caster, frame.direct_returns)
+    """The frame's 3D box labels and its thin boxes (in the plan when a box format is asked for)."""
+    frame.boxes, frame.thin_boxes = labelled_boxes(frame.buffers, run.config, frame.pose, frame.points, frame.scene.headings, frame.index, frame.rng, run.rays, frame.caster, frame.direct_returns)

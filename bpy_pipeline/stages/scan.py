@@ -13,7 +13,7 @@ from ..buffers import SceneBuffers
 from ..config import Config, sensor_trajectory
 from ..frame import Frame, Run
 from ..geometry.clearance import enclosing_instance
-from ..geometry.transforms import transform_points
+from ..geometry.transforms import sensor_to_output, transform_points
 from ..lidar.effects.divergence import scan_footprint_chunks
 from ..lidar.effects.apply import apply_effects
 from ..lidar.sensor.mirror_sensor import drop_at_edges
@@ -96,6 +96,7 @@ def effects_stage(frame: Frame, run: Run) -> None:
     config, spec = run.config, run.config.sensor.spec
     mask = run.rays.edge_mask(frame.index)
     direct = [] if counts_direct_returns(config, frame) else None
+    to_output = sensor_to_output(config.output.frame, frame.pose, config.output.kitti.camera.position)
 
     def finished(chunks):
         for points, beam in chunks:
@@ -108,8 +109,8 @@ def effects_stage(frame: Frame, run: Run) -> None:
             inside = (points["range"] >= spec.min_range) & (points["range"] <= spec.max_range)
             if not inside.all():  # noise never pushes a return past the sensor's limits: such returns are dropped
                 points = points[inside]
-            if config.output.frame == "world":
-                xyz = transform_points(np.column_stack([points["x"], points["y"], points["z"]]).astype(np.float64), frame.pose)
+            if to_output is not None:
+                xyz = transform_points(np.column_stack([points["x"], points["y"], points["z"]]).astype(np.float64), to_output)
                 points["x"], points["y"], points["z"] = xyz.T
             yield points
 

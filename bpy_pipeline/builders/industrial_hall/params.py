@@ -8,6 +8,7 @@ import numpy as np
 
 from ...schema import meta
 from ...errors import InputError
+from ...geometry.transforms import KITTI_SENSOR_HEIGHT
 from ..base import Builder, BuildContext, BuildResult, check_sizes, refuse_sensor_placement, register_builder
 from ...geometry.placement import Distribution, check_distribution
 
@@ -117,4 +118,16 @@ def build(params: IndustrialHallScene, context: BuildContext) -> BuildResult:
 
 # the human-robot paper's sensor: an OS1-128 at 2048 columns through its own ring of 8 mirrors
 SENSOR = {"preset": "os1_128", "columns": 2048, "reflector": {"enabled": True}}
-register_builder("industrial_hall", Builder(IndustrialHallScene, build, check, station, sensor=SENSOR, boxes=True, release_sensor=refuse_sensor_placement("industrial_hall")))
+
+
+def output_defaults(params: IndustrialHallScene) -> dict:
+    """The KITTI layout's camera: level (KITTI's boxes turn about the camera's y axis), 1 m from the -x wall at KITTI's
+    LiDAR height above the floor, looking along +x over the whole hall, 1242 x 750 px (KITTI's width, twice its height).
+    At the sensor, hung ``sensor_height`` up, it would look over the people's heads. ``output.frame: kitti`` puts the
+    points' origin above it."""
+    x = -(float(params.length) / 2 - 1.0)
+    return {"kitti": {"camera": {"position": [round(x, 4), 0.0, round(KITTI_SENSOR_HEIGHT - float(params.sensor_height), 4)], "resolution": [1242, 750]}}}
+
+
+register_builder("industrial_hall", Builder(IndustrialHallScene, build, check, station, sensor=SENSOR, boxes=True, release_sensor=refuse_sensor_placement("industrial_hall"),
+                                            output=output_defaults))

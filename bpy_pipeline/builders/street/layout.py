@@ -57,6 +57,7 @@ Mesh = tuple[np.ndarray, np.ndarray]  # vertices (n, 3) float64, triangles (m, 3
 # road user kinds -> class of their main part (assets_manifest/labels.yaml)
 VEHICLES = ("car", "van", "truck", "bus")
 TWO_WHEELERS = ("bicycle", "motorcycle")
+RIDER_CLASS = {"bicycle": "rider", "motorcycle": "motorcyclist"}  # a rider is labelled by what it rides (SemanticKITTI bicyclist 31, motorcyclist 32)
 # nominal sizes (length, width, height, m) and the share of each drawn size's spread (+-)
 NOMINAL_SIZE = {
     "car": (4.4, 1.8, 1.5),
@@ -479,7 +480,8 @@ def user_meshes(user: RoadUser, rng: np.random.Generator, fittings: bool = True)
     A vehicle's paint reflectivity is drawn from ``rng`` (:data:`PAINT`), a person's or rider's clothing too
     (:data:`CLOTHING`); with ``fittings`` its plates
     (``retroreflector``) and lamps (``glossy_paint``) follow its parts (:func:`~.vehicles.vehicle_fittings`, no
-    draw); a pedestrian walks or stands (:func:`~.human.sample_pose`); a rider sits on the saddle, hands towards the bar.
+    draw); a pedestrian walks or stands (:func:`~.human.sample_pose`); a rider sits on the saddle, hands towards the bar, labelled by
+    its vehicle (:data:`RIDER_CLASS`: ``rider`` on a bicycle, ``motorcyclist`` on a motorcycle).
     """
     from ...geometry import human
 
@@ -504,7 +506,7 @@ def user_meshes(user: RoadUser, rng: np.random.Generator, fittings: bool = True)
     hip = user.centre + np.array([c, s]) * (-0.1 * user.size[0] - 0.05)
     rider = human.pose_person(angles, 0.95 * float(user.size[2]), build, "sitting", hip, user.yaw, user.z + seat + 0.005)
     v, t, _ = human.body_mesh(rider.a, rider.b, rider.radius, 8, 2)
-    out.append(("rider", "rider", "diffuse", draw_reflectivity(rng, CLOTHING), (v, t)))
+    out.append(("rider", RIDER_CLASS[user.kind], "diffuse", draw_reflectivity(rng, CLOTHING), (v, t)))
     return out
 
 

@@ -18,7 +18,8 @@ aware when the run's sensors are known).
 
 A road user is one object per part (a vehicle's body, glass, tyres, plates and lamps; a two-wheeler's frame,
 wheels and rider) sharing one instance id, so its 3D box holds all of it; the rider's points are
-labelled ``rider``, the box takes the vehicle's class (its first object, by name).
+labelled by what it rides (``rider`` on a bicycle, ``motorcyclist`` on a motorcycle), and the box takes the
+rider's class (:data:`~bpy_pipeline.geometry.boxes.RIDER_CLASSES`: KITTI's Cyclist is rider and bicycle in one box).
 """
 
 from __future__ import annotations
