@@ -132,8 +132,9 @@ def test_kill_9_at_random_points_then_resume_gives_the_uninterrupted_bytes(full_
         assert not (out / ".lock").exists() and not (out / ".staging").exists() and not any((out / ".moving").glob("*"))
 
 
-def test_a_kill_during_the_move_phase_leaves_no_frame_then_resume_completes(full_parking, tmp_path, monkeypatch):
+def test_a_kill_during_the_move_phase_leaves_no_frame_then_resume_completes(full_parking, tmp_path, monkeypatch, bpy_scene):
     """Forced: the process dies after the first of a frame's files is moved into place."""
+    # bpy_scene: an empty Blender scene, as run.py starts from (the startup cube would be scanned as an unlabelled object)
     from bpy_pipeline.config import load_config
     from bpy_pipeline.plan import run_frames
 
