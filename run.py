@@ -17,7 +17,7 @@ SETUP = (
 
 if __name__ == "__main__":
     try:
-        from bpy_pipeline.cli.run import exit_process, main
+        from bpy_pipeline.cli import exit_process, main
     except ModuleNotFoundError as err:  # outside the venv: one line on how to set up, not a traceback
         print(SETUP.format(missing=err.name, python=sys.executable), file=sys.stderr)
         sys.exit(2)

@@ -110,7 +110,7 @@ def save_rays(spec: sensors.SensorSpec, path: str | Path, chunk_rays: int = 1 <<
 
 
 def _add_run(sub) -> None:
-    from .cli.run import add_run_arguments, run_main
+    from .cli import add_run_arguments, run_main
 
     p = sub.add_parser("run", help="generate labeled frames (as run.py)", description="Generate labeled LiDAR frames from a config.")
     add_run_arguments(p).set_defaults(func=run_main)
@@ -321,7 +321,7 @@ COMMANDS = [_add_run, _add_sensors, _add_fit, _add_config, _add_evaluate, _add_c
 
 
 def parser() -> argparse.ArgumentParser:
-    from .cli.run import OneLineParser  # errors in one line, exit code 2
+    from .cli import OneLineParser  # errors in one line, exit code 2
 
     p = OneLineParser(prog="bpy-pipeline", description="Synthetic labeled LiDAR point clouds: generate frames and the tools around them.")
     sub = p.add_subparsers(dest="command", metavar="COMMAND", required=True)
@@ -332,7 +332,7 @@ def parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     """Run one command; returns the exit code (2 on bad input)."""
-    from .cli.run import guarded  # InputError, Ctrl-C and SIGTERM: one line, exit 2, 130, 143
+    from .cli import guarded  # InputError, Ctrl-C and SIGTERM: one line, exit 2, 130, 143
 
     args = parser().parse_args(sys.argv[1:] if argv is None else argv)
     return guarded(args.func, args)
@@ -340,7 +340,7 @@ def main(argv: list[str] | None = None) -> int:
 
 def console() -> None:
     """The ``bpy-pipeline`` script: :func:`main`, then :func:`~.cli.exit_process` (no teardown)."""
-    from .cli.run import exit_process
+    from .cli import exit_process
 
     exit_process(main())
 

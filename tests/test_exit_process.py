@@ -7,14 +7,14 @@ from pathlib import Path
 
 import pytest
 
-from bpy_pipeline.cli.run import exit_process
+from bpy_pipeline.cli import exit_process
 
 ROOT = Path(__file__).resolve().parents[1]
 
 PROGRAM = """
 import atexit, sys, threading, time
 from pathlib import Path
-from bpy_pipeline.cli.run import exit_process
+from bpy_pipeline.cli import exit_process
 
 class Torn:
     def __del__(self):
@@ -52,6 +52,6 @@ def test_inside_blender_blender_ends_itself(monkeypatch):
 
 
 def test_a_process_without_stdout_still_exits_with_its_code():
-    program = "import sys; sys.stdout = None; from bpy_pipeline.cli.run import exit_process; exit_process(4)"
+    program = "import sys; sys.stdout = None; from bpy_pipeline.cli import exit_process; exit_process(4)"
     done = subprocess.run([sys.executable, "-c", program], cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert done.returncode == 4 and done.stderr == ""

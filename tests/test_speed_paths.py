@@ -255,7 +255,7 @@ def test_a_worker_joins_the_run_on_its_share_of_the_cores(tmp_path):
     config from the manifest and must keep that share, or every worker casts rays and writes previews on every core."""
     import argparse
 
-    from bpy_pipeline.cli.run import load_run_config
+    from bpy_pipeline.cli import load_run_config
     from bpy_pipeline.dataset import Dataset
 
     config = load_config(None, ["frames=4"])

@@ -85,7 +85,6 @@ __all__ = [
 ]
 
 
-
 def _weather_config() -> type:
     """``effects.weather``: one section per registered kind (each off unless given), and the particles' beam divergence."""
     fields = [(name, kind.config, field(default_factory=kind.config)) for name, kind in WEATHER_KINDS.items()]
