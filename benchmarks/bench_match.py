@@ -23,7 +23,7 @@ import numpy as np
 from common import ROOT, arguments, report
 
 from bpy_pipeline.geometry.placement import sample, sample_count
-from bpy_pipeline.match import DISTANCE_EDGES, HEADING_EDGES, fit_real, histogram, matched_config, stats_report
+from bpy_pipeline.cli.match import DISTANCE_EDGES, HEADING_EDGES, fit_real, histogram, matched_config, stats_report
 
 REAL = ROOT.parent / "shared" / "real_scans"
 FRAMES = ["semantickitti_000700_points.npy", "semantickitti_seq01_000000_points.npy", "semantickitti_seq01_000001_points.npy",

@@ -1,4 +1,4 @@
-"""Cost and effect of the weather (lidar/effects/weather.py) beside the clear scan, measured in the same run.
+"""Cost and effect of the weather (lidar/effects/weather/) beside the clear scan, measured in the same run.
 
 An HDL-64E (full 0.17 deg columns, its realistic profile) in a street of walls at 8-110 m over a road;
 ``bpy_pipeline.api.scan`` (trace, effects, records) timed clear and with each weather, rounds taken

@@ -1,4 +1,4 @@
-"""What a rain drop or snow flake costs to draw (lidar/effects/weather.py), and the memory of drawing them in passes.
+"""What a rain drop or snow flake costs to draw (lidar/effects/weather/), and the memory of drawing them in passes.
 
 VLP-16 returns at ranges uniform in 1..100 m, its realistic profile's noise floor; the visible particles of
 each return's cone are drawn and the strongest offered (``_offer_particles``), timed best of the rounds. The

@@ -301,7 +301,7 @@ def _add_evaluate(sub) -> None:
 
 
 def _add_convert(sub) -> None:
-    from .conversion import add_convert_arguments, convert_main
+    from .cli.convert import add_convert_arguments, convert_main
 
     p = sub.add_parser("convert", help="a dense real scan, labels carried, in a sparser sensor's pattern",
                        description="Resample a dense real scan (and its labels) into a sparser sensor preset's firings and write it as a dataset (docs/mixing.md).")
@@ -309,7 +309,7 @@ def _add_convert(sub) -> None:
 
 
 def _add_match(sub) -> None:
-    from .match import add_match_arguments, match_main
+    from .cli.match import add_match_arguments, match_main
 
     p = sub.add_parser("match", help="fit object counts, distances and headings to labelled real scans; write them into a config",
                        description="Fit per-class object counts, distance and heading histograms (and the points-per-object curve) to "

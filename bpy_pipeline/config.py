@@ -25,23 +25,22 @@ import yaml
 
 from .errors import InputError
 from .lidar.effects.divergence import Divergence, check_divergence, check_return_mode
-from .lidar.effects.drop import DROP_MODELS
-from .lidar.effects.drop.carla import CarlaDrop
-from .lidar.effects.drop.threshold import ThresholdDrop
-from .lidar.effects.intensity import ReadingModel, check_reading
+from .lidar.effects.apply import ordered_effects
+from .lidar.effects.intensity import IntensityConfig
+from .lidar.effects.noise import NoiseConfig
+from .lidar.effects.ray_drop import DropConfig
 from .lidar.sensor.grid import check_grid, image_shape
 from .lidar.sensor.mirror_sensor import check_reflector, load_edge_mask
 from .lidar.sensor.platform import Trajectory
 from .lidar.sensor.sensors import SensorSpec, frame_time, mount_offset, resolve_sensor
-from .lidar.sensor.sensors import rings as sensor_rings
-from .lidar.effects.materials import MaterialsConfig, check_materials
-from .lidar.effects.weather import WeatherConfig, check_weather
+from .lidar.effects.materials import MaterialsConfig
+from .lidar.effects.weather import WeatherConfig
 
 from .builders import BUILDERS as BUILDER_REGISTRY
 from .builders.population import population_from_dict, population_to_dict
 from .builders.railway.params import RailwayScene
 from .io.writers import frame_writers
-from .schema import check_positive, convert, from_dict, meta, reference, to_plain
+from .schema import convert, from_dict, meta, reference, to_plain
 from .yaml_text import MAX_DEPTH, MAX_VALUES, read_yaml_file, read_yaml_text
 
 Vec3 = tuple[float, float, float]
@@ -123,46 +122,6 @@ class SensorConfig:
 
 
 @dataclass(frozen=True)
-class IntensityConfig:
-    """``effects.intensity`` (lidar/effects/apply.py): what a point's intensity (0..1) says."""
-
-    model: Literal["reflectance", "lidar", "carla"] = field(default="reflectance", metadata=meta(help="rho cos g | lidar equation | CARLA exp(-a R)"))
-    alpha: float = field(default=0.0, metadata=meta("1/m", low=0, help="atmospheric extinction, two-way exp(-2 alpha R): `lidar` intensity and `threshold` drop"))
-    reference_range: float = field(default=10.0, metadata=meta("m", low=0, low_open=True, help="`lidar`: a target of reference_reflectivity at normal incidence here reads 1"))
-    reference_reflectivity: float = field(default=1.0, metadata=meta("", 0, 1, low_open=True, help="`lidar`: the reflectivity that reads 1 at reference_range"))
-    attenuation_rate: float = field(default=0.004, metadata=meta("1/m", low=0, help="`carla`: CARLA's atmosphere_attenuation_rate"))
-    incidence_exponent: float = field(default=1.0, metadata=meta("", low=0, help="`reflectance` and `lidar`: rho cos(theta)^k; 1 Lambertian, 0 as real road returns read (KITTI, nuScenes)"))
-    scale: float = field(default=1.0, metadata=meta("", low=0, low_open=True, help="the model's value times this, clipped to 0..1 (Velodyne's 0..100 % diffuse in 0..255: 100 / 255)"))
-    steps: int = field(default=0, metadata=meta("", 0, 65535, help="quantise to k / steps as the sensor's integer intensity does (255: nuScenes 0..255; 100: KITTI 0.01); 0 = continuous"))
-    offset: float = field(default=0.0, metadata=meta("", 0, 1, high_open=True, help="subtracted after scale, clipped at 0: a receiver that reads weak returns as 0 (KITTI's car paint); 0 = none"))
-    reading: ReadingModel = field(default_factory=ReadingModel)  # per-laser gain/offset reading apart from detection (lidar/effects/intensity.py); opt-in
-
-
-@dataclass(frozen=True)
-class NoiseConfig:
-    """``effects.noise``: Gaussian range noise along the beam, per-ring bias, angular jitter."""
-
-    model: Literal["constant", "range", "table", "mlp"] = "constant"
-    sigma: float = field(default=0.0, metadata=meta("m", low=0, help="Gaussian along the beam (`range`: at zero range)"))
-    sigma_per_metre: float = field(default=0.0, metadata=meta("", low=0, help="m of sigma per m of range (`range`)"))
-    model_file: str = field(default="", metadata=meta(help="a file of `python -m bpy_pipeline fit`: `range` and `table` take their parameters from it"))
-    ring_bias: list[float] = field(default_factory=list, metadata=meta("m", help="added to every range of ring k (one per ring, or none)"))
-    angular_jitter_deg: float = field(default=0.0, metadata=meta("deg", low=0, help="one sigma, in azimuth and in elevation"))
-
-
-@dataclass(frozen=True)
-class DropConfig:
-    """``effects.drop``: the model (lidar/effects/drop, a registry) and its parameters."""
-
-    model: str = field(default="none", metadata=meta(help="a name of lidar/effects/drop (DROP_MODELS)"))
-    probability: float = field(default=0.0, metadata=meta("", 0, 1, help="for `uniform`: the share of returns dropped"))
-    carla: CarlaDrop = field(default_factory=CarlaDrop)
-    threshold: ThresholdDrop = field(default_factory=ThresholdDrop)
-    params: dict = field(default_factory=dict, metadata=meta(help="for a model that takes its parameters here (its own dataclass checks them)"))
-    model_file: str = field(default="", metadata=meta(help="a file of `python -m bpy_pipeline fit`: `uniform`, `threshold` and `table` take their parameters from it"))
-
-
-@dataclass(frozen=True)
 class GlassConfig:
     """``effects.mirrors.glass``: how beams meet ``glass`` objects (car windows), lidar/cast/scanner.py."""
 
@@ -194,7 +153,7 @@ class EffectsConfig:
     drop: DropConfig = field(default_factory=DropConfig)
     mirrors: MirrorConfig = field(default_factory=MirrorConfig)
     intensity: IntensityConfig = field(default_factory=IntensityConfig)
-    weather: WeatherConfig = field(default_factory=WeatherConfig)  # fog, rain, snow (lidar/effects/weather.py); off under ideal
+    weather: WeatherConfig = field(default_factory=WeatherConfig)  # fog, rain, snow (lidar/effects/weather/); off under ideal
     materials: MaterialsConfig = field(default_factory=MaterialsConfig)  # reflectance model per class (lidar/effects/materials.py); opt-in
 
 
@@ -487,52 +446,9 @@ def _merged(base: dict, over: dict) -> dict:
 
 
 def _check_effects(effects: EffectsConfig, spec: SensorSpec | None) -> None:
-    """Ranges of the effects' parameters, and that a model file holds the models asked of it."""
-    from .lidar.effects.apply import read_model_file
-
-    noise, drop, intensity = effects.noise, effects.drop, effects.intensity
-    check_weather(effects.weather)
-    check_materials(effects.materials)
-    rings = None if spec is None else sensor_rings(spec)
-    if noise.ring_bias and rings is not None and len(noise.ring_bias) != rings:
-        raise InputError(f"effects.noise.ring_bias: one value per ring ({rings} for this sensor), got {len(noise.ring_bias)}")
-    probabilities = {"effects.drop.carla.general_rate": drop.carla.general_rate, "effects.drop.carla.zero_intensity": drop.carla.zero_intensity}
-    for key, value in probabilities.items():
-        if not 0 <= value <= 1:
-            raise InputError(f"{key}: must lie in 0..1, got {value}")
-    if not 0 < drop.carla.intensity_limit <= 1:
-        raise InputError(f"effects.drop.carla.intensity_limit: must lie in (0, 1], got {drop.carla.intensity_limit}")
-    check_positive(drop.carla.attenuation_rate, "effects.drop.carla.attenuation_rate", allow_zero=True)
-    check_positive(drop.threshold.range_at_10, "effects.drop.threshold.range_at_10")
-    check_positive(drop.threshold.softness, "effects.drop.threshold.softness", allow_zero=True)
-    if drop.threshold.range_at_80 and drop.threshold.range_at_80 <= drop.threshold.range_at_10:
-        raise InputError(f"effects.drop.threshold.range_at_80: must exceed range_at_10 ({drop.threshold.range_at_10} m), or be 0, got {drop.threshold.range_at_80}")
-    check_reading(intensity.reading, intensity.offset, intensity.model)
-    if not 0 <= drop.threshold.floor < 1:
-        raise InputError(f"effects.drop.threshold.floor: must lie in 0..1 (a share of returns lost at any range), got {drop.threshold.floor}")
-    model = DROP_MODELS.get(drop.model)
-    if model.params is not None:
-        from_dict(model.params, drop.params, "effects.drop.params")
-    elif drop.params:
-        raise InputError(f"effects.drop.params: the {drop.model} drop model takes no params")
-    # fitted models: the file must hold the model asked of it, and replaces its inline parameters
-    fitted = {
-        "drop": (drop, {drop.model: (model.fitted, model.inline(drop), model.inline_keys)} if model.fitted else {}),
-        "noise": (noise, {"range": ("noise_range", (noise.sigma, noise.sigma_per_metre) != (0.0, 0.0), "sigma / sigma_per_metre"),
-                          "table": ("noise_table", False, ""), "mlp": ("noise_mlp", False, "")}),
-    }
-    for name, (section, uses) in fitted.items():
-        where = f"effects.{name}.model_file"
-        if section.model in ("table", "mlp") and not section.model_file:
-            raise InputError(f"{where}: the {section.model} {name} model needs a model file (python -m bpy_pipeline fit ... --out FILE.yaml)")
-        if not section.model_file or section.model not in uses:
-            continue
-        attr, inline, keys = uses[section.model]
-        if inline:
-            raise InputError(f"effects.{name}.{keys.split()[0]}: give either inline parameters ({keys}) or a model_file for the {section.model} model, not both")
-        models = read_model_file(section.model_file, where)
-        if getattr(models, attr) is None:
-            raise InputError(f"{where}: {section.model_file} holds no {section.model} {name} model")
+    """Each registered effect's check of its section (lidar/effects/base.py), in the order the effects run."""
+    for effect in ordered_effects():
+        effect.check(effects, spec)
 
 
 def _check_reflector(reflector: ReflectorConfig, spec: SensorSpec) -> None:

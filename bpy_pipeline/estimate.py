@@ -156,7 +156,7 @@ def _rays(config: Config) -> int:
 
 
 def _particles(config: Config) -> float:
-    """The most rain drops and snow flakes a frame draws: each return's cone up to the sensor's max_range
+    """The most weather particles (rain drops, snow flakes) a frame draws: each return's cone up to the sensor's max_range
     (:func:`~.lidar.effects.weather.expected_particles`), for the returns of every sensor of the frame."""
     from .lidar.effects.drop.threshold import threshold_model
     from .lidar.effects.apply import fitted_models
@@ -164,7 +164,7 @@ def _particles(config: Config) -> float:
     from .lidar.effects.weather import expected_particles
 
     weather = config.effects.weather
-    if config.effects.ideal or not (weather.rain.rate > 0 or weather.snow.rate > 0):
+    if config.effects.ideal or not weather.active:
         return 0.0
     detect = threshold_model(config.effects, fitted_models(config.effects.drop, "effects.drop.model_file")).detection_probability
     specs = [member.spec for member in config.sensor.rig] if config.sensor.rig else [config.sensor.spec]

@@ -7,7 +7,7 @@ import pytest
 
 from bpy_pipeline.__main__ import main
 from bpy_pipeline.buffers import SceneBuffers
-from bpy_pipeline.conversion import TRAINING_TO_RAW, convert, project_classes
+from bpy_pipeline.cli.convert import TRAINING_TO_RAW, convert, project_classes
 from bpy_pipeline.geometry import primitives
 from bpy_pipeline.io.class_maps import semantic_kitti_lut
 from bpy_pipeline.io.semantickitti import read_bin, read_label

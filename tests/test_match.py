@@ -1,5 +1,5 @@
 """``bpy-pipeline match``: object statistics of labelled real frames written as the builder's placement
-distributions (bpy_pipeline/match.py), and the ``histogram`` Distribution they use.
+distributions (bpy_pipeline/cli/match.py), and the ``histogram`` Distribution they use.
 
 The contract "the matched run's histograms sit within 10 % of the real ones" is checked on the
 placement distributions the matched config gives, sampled directly as the real_scan builder's
@@ -15,7 +15,7 @@ from bpy_pipeline.__main__ import main
 from bpy_pipeline.config import load_config
 from bpy_pipeline.errors import InputError
 from bpy_pipeline.geometry.placement import Distribution, check_distribution, sample, sample_count
-from bpy_pipeline.match import DISTANCE_EDGES, HEADING_EDGES, heading_of, histogram
+from bpy_pipeline.cli.match import DISTANCE_EDGES, HEADING_EDGES, heading_of, histogram
 
 REAL = ["semantickitti_000700_points.npy", "semantickitti_seq01_000000_points.npy", "semantickitti_seq01_000001_points.npy",
         "semantickitti_seq01_000002_points.npy", "kitti_hdl64e_004747.bin"]

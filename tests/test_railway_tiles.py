@@ -7,7 +7,8 @@ import pytest
 
 from bpy_pipeline.errors import InputError
 from bpy_pipeline.geometry.tiles import class_quotas, farthest_point, sample, tiles
-from bpy_pipeline.io.tiles import TileSettings, export_tiles, main
+from bpy_pipeline.cli.tiles import main
+from bpy_pipeline.io.tiles import TileSettings, export_tiles
 from samples import random_points
 
 

@@ -1,4 +1,4 @@
-"""Weather (lidar/effects/weather.py) against each paper's closed form on flat walls; the hdl64e's share of returns kept
+"""Weather (lidar/effects/weather/) against each paper's closed form on flat walls; the hdl64e's share of returns kept
 in fog; rain's maximum range and range noise against Goodin et al.'s curves; snow along beams; labelled clutter;
 determinism; ``ideal``; bad values. Pure: no bpy (the command-line case runs run.py in a subprocess)."""
 

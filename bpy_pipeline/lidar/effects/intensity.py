@@ -28,12 +28,15 @@ on SemanticKITTI and KITTI frames (docs/realism.md, "The HDL-64E's reading, fitt
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import lru_cache
+from typing import Literal
 
 import numpy as np
 
 from ...errors import InputError
+from ...schema import meta
+from .base import Chunk, Effect, register_effect
 
 MIN_RANGE = 1e-3  # m: ranges are clamped here before dividing by them
 MAX_RINGS = 1024  # lasers a unit's gains and offsets are drawn for (ring ids at or above wrap round)
@@ -176,3 +179,35 @@ def sensor_units(value: np.ndarray, scale: float = 1.0, steps: int = 0, offset: 
     if steps > 0:
         value = np.rint(np.asarray(value, np.float32) * np.float32(steps)) / np.float32(steps)
     return value
+
+
+@dataclass(frozen=True)
+class IntensityConfig:
+    """``effects.intensity``: what a point's intensity (0..1) says."""
+
+    model: Literal["reflectance", "lidar", "carla"] = field(default="reflectance", metadata=meta(help="rho cos g | lidar equation | CARLA exp(-a R)"))
+    alpha: float = field(default=0.0, metadata=meta("1/m", low=0, help="atmospheric extinction, two-way exp(-2 alpha R): `lidar` intensity and `threshold` drop"))
+    reference_range: float = field(default=10.0, metadata=meta("m", low=0, low_open=True, help="`lidar`: a target of reference_reflectivity at normal incidence here reads 1"))
+    reference_reflectivity: float = field(default=1.0, metadata=meta("", 0, 1, low_open=True, help="`lidar`: the reflectivity that reads 1 at reference_range"))
+    attenuation_rate: float = field(default=0.004, metadata=meta("1/m", low=0, help="`carla`: CARLA's atmosphere_attenuation_rate"))
+    incidence_exponent: float = field(default=1.0, metadata=meta("", low=0, help="`reflectance` and `lidar`: rho cos(theta)^k; 1 Lambertian, 0 as real road returns read (KITTI, nuScenes)"))
+    scale: float = field(default=1.0, metadata=meta("", low=0, low_open=True, help="the model's value times this, clipped to 0..1 (Velodyne's 0..100 % diffuse in 0..255: 100 / 255)"))
+    steps: int = field(default=0, metadata=meta("", 0, 65535, help="quantise to k / steps as the sensor's integer intensity does (255: nuScenes 0..255; 100: KITTI 0.01); 0 = continuous"))
+    offset: float = field(default=0.0, metadata=meta("", 0, 1, high_open=True, help="subtracted after scale, clipped at 0: a receiver that reads weak returns as 0 (KITTI's car paint); 0 = none"))
+    reading: ReadingModel = field(default_factory=ReadingModel)  # per-laser gain/offset reading apart from detection (module notes); opt-in
+
+
+class Intensity(Effect):
+    """Each point's intensity from the true geometry (:func:`compute_intensity`), written into the records after the drop."""
+
+    name, section, config, order = "intensity", "intensity", IntensityConfig, 20
+
+    def check(self, effects, spec=None) -> None:
+        intensity = effects.intensity
+        check_reading(intensity.reading, intensity.offset, intensity.model)
+
+    def apply(self, chunk: Chunk, rng: np.random.Generator) -> None:
+        chunk.intensity = compute_intensity(chunk.points["range"], chunk.beam, chunk.effects.intensity, chunk.points["ring"], rng)
+
+
+register_effect(Intensity())

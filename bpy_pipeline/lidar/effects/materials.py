@@ -48,6 +48,7 @@ import numpy as np
 
 from ...errors import InputError
 from ...registry import Registry
+from .base import Chunk, Effect, register_effect
 from .weather import wet_ground_factor
 
 
@@ -247,6 +248,23 @@ def apply_materials(points: np.ndarray, beam: np.ndarray, materials: MaterialsCo
         a = model.apparent(beam["reflectivity"][mine], cos, params)
         out["reflectivity"][mine] = a / np.maximum(cos, 1e-3) ** incidence_exponent
     return out
+
+
+class Materials(Effect):
+    """The reflectance model of each class or object named (:func:`apply_materials`), before the intensity reads it."""
+
+    name, section, config, order = "materials", "materials", MaterialsConfig, 10
+
+    def check(self, effects, spec=None) -> None:
+        check_materials(effects.materials)
+
+    def apply(self, chunk: Chunk, rng: np.random.Generator) -> None:
+        materials = getattr(chunk.effects, "materials", None)
+        if materials is not None:
+            chunk.beam = apply_materials(chunk.points, chunk.beam, materials, chunk.effects.intensity.incidence_exponent, chunk.objects)
+
+
+register_effect(Materials())
 
 
 # ----------------------------------------------------------------------------- car glass and cabins (insertion)

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError
+from ..errors import InputError
 
 POINT_FORMATS = ("semantickitti", "ply", "npy", "las", "pcd", "range_image")
 # SemanticKITTI training id -> raw id (semantic-kitti.yaml, learning_map_inv)
@@ -87,8 +87,8 @@ def read_labels(path: str | Path, n: int, space: str = "auto") -> np.ndarray:
 
 def project_classes(raw: np.ndarray, table=None) -> tuple[np.ndarray, np.ndarray]:
     """``(semantic (n,) uint16 project ids, instance (n,) uint32)`` of raw SemanticKITTI labels (unknown ids: unlabeled)."""
-    from .labels import load_class_table
-    from .mixing.frame import SEMANTICKITTI_NAMES
+    from ..labels import load_class_table
+    from ..mixing.frame import SEMANTICKITTI_NAMES
 
     table = table or load_class_table()
     background = table.id_of("unlabeled")
@@ -101,11 +101,11 @@ def project_classes(raw: np.ndarray, table=None) -> tuple[np.ndarray, np.ndarray
 def convert(scan_path, to: str, labels=None, method: str = "hybrid", lift: float = 0.0, source_preset: str | None = None, format: str | None = None,
             label_space: str = "auto", threads: int | None = None) -> Converted:
     """The scan at ``scan_path`` converted to preset ``to`` (module notes); ``lift`` metres: the target's centre above the source's."""
-    from .io.real_scans import read_real_scan
-    from .lidar.points import POINT_DTYPE
-    from .lidar.sensor.sensors import presets, resolve_sensor
-    from .mixing.convert import METHODS, convert_firings
-    from .mixing.firings import recover_firings
+    from ..io.real_scans import read_real_scan
+    from ..lidar.points import POINT_DTYPE
+    from ..lidar.sensor.sensors import presets, resolve_sensor
+    from ..mixing.convert import METHODS, convert_firings
+    from ..mixing.firings import recover_firings
 
     names = list(presets())
     if to not in names:
@@ -162,11 +162,11 @@ def write_converted(converted: Converted, out: str | Path, to: str, formats=("se
     """Write a converted scan as a one-frame dataset under ``out`` (the run's manifest, record and writers); returns its record.
 
     inputs : other files the conversion read (its labels); ``overwrite`` refuses when one lies inside ``out``, as the scan"""
-    from .buffers import SceneBuffers
-    from .builders.base import BuildResult
-    from .config import load_config
-    from .dataset import Dataset
-    from .frame import Frame, frame_rng
+    from ..buffers import SceneBuffers
+    from ..builders.base import BuildResult
+    from ..config import load_config
+    from ..dataset import Dataset
+    from ..frame import Frame, frame_rng
 
     bad = [f for f in formats if f not in POINT_FORMATS]
     if bad or not formats:
@@ -180,7 +180,7 @@ def write_converted(converted: Converted, out: str | Path, to: str, formats=("se
 
 
 def add_convert_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
-    from .mixing.convert import METHODS
+    from ..mixing.convert import METHODS
 
     p.add_argument("scan", metavar="SCAN", help="the dense real scan (nuscenes, kitti, semantickitti .bin; npy, ply, las, pcd)")
     p.add_argument("--labels", metavar="FILE", help="its labels: a SemanticKITTI .label, or a .npy of SemanticKITTI training ids (one a point)")
@@ -206,7 +206,7 @@ def convert_main(args) -> int:
     if bad or not formats:
         raise InputError(f"--formats: {bad[0] if bad else '(none)'!r} is not one of {', '.join(POINT_FORMATS)}")
     if args.overwrite:  # before any work: --overwrite never removes an input
-        from .dataset import refuse_inputs_inside
+        from ..dataset import refuse_inputs_inside
 
         refuse_inputs_inside(args.out, [args.scan, args.labels])
     converted = convert(args.scan, args.to, args.labels, args.method, args.lift, args.source, args.format, args.label_space, args.threads)

@@ -1,6 +1,8 @@
-"""The command line of run.py and ``bpy-pipeline run``.
+"""The command line: ``run`` here (run.py and ``bpy-pipeline run``) with what every subcommand shares (one-line
+errors, exit codes), and one module per other subcommand: :mod:`.convert`, :mod:`.match`, :mod:`.tiles`;
+``bpy_pipeline/__main__.py`` dispatches ``bpy-pipeline <subcommand>``.
 
-``[--config FILE] [--out DIR] [--seed N] [--frames N] [--set key.path=value ...]`` plus the dataset
+``run``: ``[--config FILE] [--out DIR] [--seed N] [--frames N] [--set key.path=value ...]`` plus the dataset
 options: ``--frames-range A:B``, ``--shard i/n``, ``--resume``, ``--overwrite``, ``--workers N``,
 ``--ray auto|ADDRESS``, ``--threads N``. Works the same under ``python run.py ...`` and
 ``blender --background --python-exit-code 1 --python run.py -- ...`` (Blender's own arguments
@@ -18,7 +20,7 @@ import sys
 import threading
 from typing import NoReturn
 
-from .errors import InputError
+from ..errors import InputError
 
 
 def script_arguments(argv: list[str]) -> list[str]:
@@ -91,12 +93,12 @@ def shard_of(frames: range, i: int, parts: int) -> range:
 
 def load_run_config(args):
     """The run's config from ``--config`` and the overrides, or from ``--out``'s manifest for a worker (``--join``)."""
-    from .config import config_from_dict, load_config
+    from ..config import config_from_dict, load_config
 
     if args.join:  # the run's config, on this worker's share of the cores (--threads shapes no byte: run_key leaves it out)
         from dataclasses import replace
 
-        from .io import read_manifest
+        from ..io import read_manifest
 
         config = config_from_dict(read_manifest(args.out)["config"])
         return config if args.threads is None else replace(config, threads=args.threads)
@@ -147,19 +149,19 @@ def run_main(args) -> int:
     if not 1 <= args.workers <= MAX_WORKERS:
         raise InputError(f"--workers: must be 1 .. {MAX_WORKERS}, got {args.workers}")
     if args.overwrite and args.config:  # before any work: --overwrite never removes an input
-        from .dataset import refuse_inputs_inside
+        from ..dataset import refuse_inputs_inside
 
         refuse_inputs_inside(args.out, [args.config])
     config = load_run_config(args)
     frames = frame_selection(args, config.frames)
     mode = "join" if args.join else "resume" if args.resume else "overwrite" if args.overwrite else "new"
-    from .estimate import check_limits, estimate_run
+    from ..estimate import check_limits, estimate_run
 
     estimate = None if args.join else check_limits(estimate_run(config, len(frames)), config)  # before any work
     if args.ray:
         check_ray_address(args.ray)
     if args.workers > 1 or args.ray:
-        from .parallel import run_parallel
+        from ..parallel import run_parallel
 
         return run_parallel(config, args.out, frames, mode, workers=args.workers, ray_address=args.ray, log=progress(len(frames), estimate))
     try:
@@ -167,7 +169,7 @@ def run_main(args) -> int:
     except ImportError:
         raise InputError("bpy: Blender's Python module is not installed; pip install 'bpy==4.5.*' (Python 3.11), or run blender --background --python-exit-code 1 --python run.py -- ...") from None
     bpy.ops.wm.read_factory_settings(use_empty=True)
-    from .plan import run
+    from ..plan import run
 
     run(config, args.out, log=progress(len(frames), estimate), frames=frames, mode=mode)
     return 0

@@ -38,8 +38,8 @@ from typing import Sequence
 import numpy as np
 import yaml
 
-from .errors import InputError
-from .yaml_text import load_yaml
+from ..errors import InputError
+from ..yaml_text import load_yaml
 
 CLASSES = ("car", "person", "bicyclist")  # SemanticKITTI training names that KITTI boxes label too
 OBJECT_TYPE = {"car": "car", "person": "person", "bicyclist": "cyclist"}  # class -> insertable object type
@@ -152,8 +152,8 @@ def distance_edges(distances: np.ndarray, step: float = 5.0) -> list[float]:
 def matched_config(base: dict, stats: dict[str, ClassStats]) -> tuple[dict, list[str]]:
     """``base`` (a config mapping) with its builder's placement distributions fitted to ``stats``; and notes
     (one line each: what was written, what was left out)."""
-    from .geometry.objects import OBJECT_TYPES
-    from .mixing.section import ParkingRule
+    from ..geometry.objects import OBJECT_TYPES
+    from ..mixing.section import ParkingRule
 
     out = copy.deepcopy(base)
     scene = out.setdefault("scene", {})
@@ -193,7 +193,7 @@ def matched_config(base: dict, stats: dict[str, ClassStats]) -> tuple[dict, list
 
 def fit_real(sources: Sequence[str | Path], classes: Sequence[str] = CLASSES, min_points: int = 10) -> tuple[dict[str, ClassStats], list[str]]:
     """Read labelled real frames and return ``(per-class statistics, frame names)``."""
-    from .evaluate.labelled import load_scans
+    from ..evaluate.labelled import load_scans
 
     scans = load_scans(sources, tuple(classes))
     if not scans:
@@ -213,8 +213,8 @@ def stats_report(stats: dict[str, ClassStats], frames: list[str]) -> dict:
 def match(sources: Sequence[str | Path], config_path: str | Path, out: str | Path, classes: Sequence[str] = CLASSES, min_points: int = 10) -> dict:
     """``bpy-pipeline match``: fit ``sources``, write the matched config to ``out`` (atomically, checked by
     :func:`~.config.load_config` first) and return ``{"notes", "report"}``."""
-    from .config import load_config, read_config_file
-    from .io.atomic import atomic_write
+    from ..config import load_config, read_config_file
+    from ..io.atomic import atomic_write
 
     try:  # the guard every command reads a config through: size, depth, values with aliases expanded
         base = read_config_file(config_path)
@@ -250,9 +250,9 @@ def match_main(args) -> int:
     """``bpy-pipeline match``: fit, write, print what was written."""
     import json
 
-    from .evaluate.label_maps import parse_classes
-    from .io.atomic import atomic_write
-    from .io.confined import refuse_output_over_input
+    from ..evaluate.label_maps import parse_classes
+    from ..io.atomic import atomic_write
+    from ..io.confined import refuse_output_over_input
 
     if args.min_points < 1:
         raise InputError(f"--min-points: must be >= 1, got {args.min_points}")
