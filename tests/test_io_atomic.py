@@ -87,8 +87,8 @@ def test_text_written_hashed_has_the_bytes_and_digest_of_write_text(tmp_path):
 
 
 def test_a_large_buffer_is_written_in_slices_with_its_bytes_and_digest(tmp_path):
-    """HashedFile hands the kernel at most WRITE_SLICE bytes a call (one call of a few MB costs ten times the kernel
-    time here), and the file holds the buffer's bytes, its digest their sha256, recorded at the rename."""
+    """HashedFile hands the kernel at most WRITE_SLICE bytes a call (one call of a few MB can cost ten times the kernel
+    time), and the file holds the buffer's bytes, its digest their sha256, recorded at the rename."""
     import hashlib
     import os
 
@@ -97,7 +97,7 @@ def test_a_large_buffer_is_written_in_slices_with_its_bytes_and_digest(tmp_path)
     from bpy_pipeline.io import atomic
     from bpy_pipeline.io.atomic import atomic_write, digests_while_writing, hashed_open
 
-    data = np.random.default_rng(5).random(3 * atomic.WRITE_SLICE // 8 + 77)  # not a whole number of slices
+    data = np.random.default_rng(5).random(3 * atomic.WRITE_SLICE // 8 + 77)  # 3 slices and a part
     calls = []
     with digests_while_writing() as digests:
         with atomic_write(tmp_path / "big.bin") as tmp, hashed_open(tmp) as handle:
