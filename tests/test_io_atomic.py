@@ -84,3 +84,28 @@ def test_text_written_hashed_has_the_bytes_and_digest_of_write_text(tmp_path):
     data = (tmp_path / "hashed.txt").read_bytes()
     assert data == (tmp_path / "plain.txt").read_bytes()
     assert digests[os.path.abspath(tmp_path / "hashed.txt")] == hashlib.sha256(data).hexdigest()
+
+
+def test_a_large_buffer_is_written_in_slices_with_its_bytes_and_digest(tmp_path):
+    """HashedFile hands the kernel at most WRITE_SLICE bytes a call (one call of a few MB can cost ten times the kernel
+    time), and the file holds the buffer's bytes, its digest their sha256, recorded at the rename."""
+    import hashlib
+    import os
+
+    import numpy as np
+
+    from bpy_pipeline.io import atomic
+    from bpy_pipeline.io.atomic import atomic_write, digests_while_writing, hashed_open
+
+    data = np.random.default_rng(5).random(3 * atomic.WRITE_SLICE // 8 + 77)  # 3 slices and a part
+    calls = []
+    with digests_while_writing() as digests:
+        with atomic_write(tmp_path / "big.bin") as tmp, hashed_open(tmp) as handle:
+            real = handle.raw.write
+            handle.raw.write = lambda part: calls.append(len(part)) or real(part)
+            handle.write(b"head")
+            handle.write(data)
+    written = (tmp_path / "big.bin").read_bytes()
+    assert written == b"head" + data.tobytes()
+    assert digests[os.path.abspath(tmp_path / "big.bin")] == hashlib.sha256(written).hexdigest()
+    assert max(calls) <= atomic.WRITE_SLICE and sum(calls) == len(written) and len(calls) == 1 + 4

@@ -46,10 +46,17 @@ def digests_while_writing() -> Iterator[dict[str, str]]:
         _DIGESTS.reset(token)
 
 
+WRITE_SLICE = 1 << 20  # bytes handed to the kernel per write call (see HashedFile)
+
+
 class HashedFile:
     """A binary file opened for writing whose bytes also go through sha256 (:func:`hashed_open`).
 
-    ``write(data)`` takes bytes or any contiguous buffer (a numpy array's ``memoryview``).
+    ``write(data)`` takes bytes or any contiguous buffer (a numpy array's ``memoryview``). It is hashed in one call and
+    handed to the kernel in calls of :data:`WRITE_SLICE` bytes: at times, one write call of 2 MB or more cost this
+    project's machine (Linux 6.18, ext4) about ten times the kernel time of the same bytes in calls of 1 MB or less
+    (``benchmarks/bench_write_calls.py``, docs/performance.md); slices were never slower. Each call lets other
+    threads take the interpreter, so the slices are as large as that allows. The file's bytes and digest are the same.
     """
 
     def __init__(self, path):
@@ -65,8 +72,10 @@ class HashedFile:
             data = np.ascontiguousarray(data).reshape(-1).view(np.uint8)
         view = memoryview(data).cast("B")
         self.digest.update(view)
+        for start in range(0, len(view), WRITE_SLICE):
+            self.raw.write(view[start : start + WRITE_SLICE])
         self.size += len(view)
-        return self.raw.write(view)
+        return len(view)
 
     def close(self) -> None:
         if self.raw.closed:
