@@ -1,7 +1,9 @@
 """Reference segmentation models over :mod:`.features`: a small registry, one entry per model.
 
 - ``lgbm`` (default): LightGBM multiclass gradient-boosted trees (the ``evaluate`` extra: ``pip install 'bpy_pipeline[evaluate]'``);
-- ``forest``: scikit-learn's random forest.
+- ``forest``: scikit-learn's random forest;
+- ``rangenet``, ``rangenet-geometry``: the range-image network of :mod:`.rangenet` (the ``network`` extra, torch),
+  reading remission or not.
 
 :func:`fit` trains one on labelled scans: every point of a requested class is kept, the background ("other")
 is subsampled per scan, ignored points (-1) are left out, and each class is weighted by the inverse of its
@@ -44,7 +46,7 @@ def _forest(seed: int, n_jobs: int):
     return RandomForestClassifier(n_estimators=150, min_samples_leaf=5, max_features="sqrt", random_state=seed, n_jobs=n_jobs)
 
 
-MODELS: dict[str, Callable[[int, int], object]] = {"lgbm": _lgbm, "forest": _forest}
+ESTIMATORS: dict[str, Callable[[int, int], object]] = {"lgbm": _lgbm, "forest": _forest}
 
 
 @dataclass
@@ -55,7 +57,10 @@ class Model:
     classes : the requested classes (labels 0..C-1; C is "other")
     estimator : the fitted classifier (scikit-learn interface)
     training_points : (C + 1,) points of each label in its training sample
+    reads_remission : whether predictions read the scans' remission (the trees do not)
     """
+    reads_remission = False
+
 
     name: str
     classes: tuple[str, ...]
@@ -73,12 +78,13 @@ class Model:
 def training_sample(scans: Sequence[LabelledScan], classes: Sequence[str], rng: np.random.Generator,
                     max_points_per_scan: int = MAX_POINTS_PER_SCAN) -> tuple[np.ndarray, np.ndarray]:
     """``(features (m, F) float32, labels (m,) int64)``: every object point of each scan and at most
-    ``max_points_per_scan`` of its background points, drawn with ``rng``."""
+    ``max_points_per_scan`` of its background points, drawn with ``rng``. A scan that labels only some of the
+    classes (``known``, a KITTI frame's boxes) gives its object points only: its "other" may be of another class."""
     other = other_index(classes)
     xs, ys = [], []
     for scan in scans:
         objects = np.flatnonzero((scan.labels >= 0) & (scan.labels < other))
-        background = np.flatnonzero(scan.labels == other)
+        background = np.flatnonzero(scan.labels == other) if scan.known is None or len(scan.known) == len(classes) else np.zeros(0, np.int64)
         if len(background) > max_points_per_scan:
             background = np.sort(rng.choice(background, max_points_per_scan, replace=False))
         keep = np.concatenate([objects, background])
@@ -91,11 +97,17 @@ def training_sample(scans: Sequence[LabelledScan], classes: Sequence[str], rng: 
 
 
 def fit(scans: Sequence[LabelledScan], classes: Sequence[str], seed: int = 0, max_points_per_scan: int = MAX_POINTS_PER_SCAN,
-        model: str = "lgbm", n_jobs: int = 1) -> Model:
-    """Train model ``model`` (:data:`MODELS`) on ``scans``; ``InputError`` when the training set is empty or holds
-    no point of any requested class."""
+        model: str = "lgbm", n_jobs: int = 1, log=None):
+    """Train model ``model`` (:data:`MODELS`) on ``scans``: a :class:`Model`, or a
+    :class:`~.rangenet.RangeNetModel`; ``InputError`` when the training set is empty or holds no point of any
+    requested class."""
     if model not in MODELS:
         raise InputError(f"--model: unknown model {model!r}; allowed: {', '.join(MODELS)}")
+    return MODELS[model](scans, tuple(classes), seed, max_points_per_scan, model, n_jobs, log)
+
+
+def fit_trees(scans: Sequence[LabelledScan], classes: Sequence[str], seed: int, max_points_per_scan: int, model: str, n_jobs: int, log=None) -> Model:
+    """An :data:`ESTIMATORS` model on the geometric features of a sample of the points (module notes)."""
     classes = tuple(classes)
     if not scans:
         raise InputError("--train: the training set is empty")
@@ -108,6 +120,21 @@ def fit(scans: Sequence[LabelledScan], classes: Sequence[str], seed: int = 0, ma
     present = counts > 0
     weight_of = np.zeros(len(counts))
     weight_of[present] = len(y) / (present.sum() * counts[present])  # class-balanced
-    estimator = MODELS[model](seed, n_jobs)
+    estimator = ESTIMATORS[model](seed, n_jobs)
     estimator.fit(x, y, sample_weight=weight_of[y])
     return Model(model, classes, estimator, [int(c) for c in counts])
+
+
+def _network(remission: bool):
+    def train(scans, classes, seed, max_points_per_scan, model, n_jobs, log=None):
+        from .rangenet import fit_rangenet
+
+        return fit_rangenet(scans, classes, seed, n_jobs, remission=remission, name=model, log=log)
+
+    return train
+
+
+# name -> trainer(scans, classes, seed, max_points_per_scan, name, n_jobs, log) -> a model with predict(scan)
+MODELS: dict[str, Callable[..., object]] = {"lgbm": fit_trees, "forest": fit_trees, "rangenet": _network(True), "rangenet-geometry": _network(False)}
+READS_REMISSION = frozenset({"rangenet"})  # models whose input holds the scans' remission
+NEEDS_TORCH = frozenset({"rangenet", "rangenet-geometry"})
