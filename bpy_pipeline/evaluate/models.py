@@ -23,7 +23,7 @@ from .features import FEATURE_NAMES
 from .label_maps import other_index
 from .labelled import LabelledScan
 
-MAX_POINTS_PER_SCAN = 20000  # background points sampled from each training scan
+MAX_POINTS_PER_SCAN = 20000  # points of each label sampled from each training scan
 
 
 def _lgbm(seed: int, n_jobs: int):
@@ -77,17 +77,20 @@ class Model:
 
 def training_sample(scans: Sequence[LabelledScan], classes: Sequence[str], rng: np.random.Generator,
                     max_points_per_scan: int = MAX_POINTS_PER_SCAN) -> tuple[np.ndarray, np.ndarray]:
-    """``(features (m, F) float32, labels (m,) int64)``: every object point of each scan and at most
-    ``max_points_per_scan`` of its background points, drawn with ``rng``. A scan that labels only some of the
-    classes (``known``, a KITTI frame's boxes) gives its object points only: its "other" may be of another class."""
+    """``(features (m, F) float32, labels (m,) int64)``: of each scan, at most ``max_points_per_scan`` points of each
+    label (all of a smaller one: objects are usually kept whole), drawn with ``rng``. A scan that labels only some of
+    the classes (``known``, a KITTI frame's boxes) gives its object points only: its "other" may be of another class."""
     other = other_index(classes)
     xs, ys = [], []
     for scan in scans:
-        objects = np.flatnonzero((scan.labels >= 0) & (scan.labels < other))
-        background = np.flatnonzero(scan.labels == other) if scan.known is None or len(scan.known) == len(classes) else np.zeros(0, np.int64)
-        if len(background) > max_points_per_scan:
-            background = np.sort(rng.choice(background, max_points_per_scan, replace=False))
-        keep = np.concatenate([objects, background])
+        labels = range(other + 1) if scan.known is None or len(scan.known) == len(classes) else range(other)
+        keep = []
+        for label in labels:
+            points = np.flatnonzero(scan.labels == label)
+            if len(points) > max_points_per_scan:
+                points = np.sort(rng.choice(points, max_points_per_scan, replace=False))
+            keep.append(points)
+        keep = np.sort(np.concatenate(keep))
         if len(keep):
             xs.append(scan.features()[keep])
             ys.append(scan.labels[keep])

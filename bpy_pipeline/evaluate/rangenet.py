@@ -33,8 +33,8 @@ from .label_maps import other_index
 from .labelled import LabelledScan
 from .projection import CHANNELS, WIDTH, RangeImage, project
 
-EPOCHS = 12
-MIN_STEPS = 150
+EPOCHS = 6
+MIN_STEPS = 60
 BATCH = 4
 LEARNING_RATE = 2e-3
 WIDTHS = (16, 32, 64, 96)

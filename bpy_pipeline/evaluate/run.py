@@ -46,7 +46,7 @@ def fold_groups(groups: Sequence[str], max_folds: int | None = None) -> list[lis
 def leave_one_group_out(reference: Sequence[LabelledScan], test: Sequence[LabelledScan], classes: Sequence[str], seed: int, model: str,
                         max_points_per_scan: int, n_jobs: int, log=None, max_folds: int | None = None) -> tuple[list[np.ndarray], list[dict]]:
     """Predictions for every test scan by a model trained on the reference scans of the other groups (of the other
-    folds' groups with ``max_folds``); and the folds (``{test_groups, train: [names], seconds}``). When no test scan
+    folds' groups with ``max_folds``); and the folds (``{test_group, train: [names], seconds}``; ``test_group`` names a fold's groups, comma-separated). When no test scan
     is a reference scan (by name), one model trained on all the reference scans predicts every test scan.
     ``InputError`` when a group leaves nothing to train on."""
     predictions: list[np.ndarray | None] = [None] * len(test)
@@ -61,7 +61,7 @@ def leave_one_group_out(reference: Sequence[LabelledScan], test: Sequence[Labell
         for i, scan in enumerate(test):
             if disjoint or scan.group in groups:
                 predictions[i] = trained.predict(scan)
-        folds.append({"test_groups": groups or "all (no test scan is a reference scan)", "train": _names(train), "seconds": round(time.perf_counter() - start, 2)})
+        folds.append({"test_group": ", ".join(groups) or "all (no test scan is a reference scan)", "train": _names(train), "seconds": round(time.perf_counter() - start, 2)})
         if log:
             log(f"reference fold {', '.join(groups) or 'all'}: trained on {len(train)} scans in {folds[-1]['seconds']} s")
     return predictions, folds
