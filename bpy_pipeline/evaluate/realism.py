@@ -8,7 +8,10 @@ What it measures (every figure: generated against real; a class only on the real
 - **points per object against range** per object class: each object's point count and median range; per range
   band (:data:`RANGE_BANDS`) the median and the 90th percentile count of either side; the ratio is that of the
   90th percentiles (the best-seen objects of the band, so that how many objects stand half hidden weighs less),
-  over all bands the geometric mean of the bands' ratios, weighted by the real objects in each;
+  over all bands the geometric mean of the bands' ratios, weighted by the real objects in each. Objects of fewer
+  than :data:`MIN_OBJECT_POINTS` points are left out on both sides (real sources without instance ids are split
+  into objects by linking points within 0.5 m, which leaves far objects in one-point pieces), and a band
+  needs :data:`MIN_OBJECTS` real objects for a ratio;
 - **returns per row** (the drop pattern): the share of each row's pixels of the 64-row range image
   (:mod:`.projection`) that hold a return, within +-45 degrees of straight ahead (the field every real scan
   covers), averaged over the scans;
@@ -41,6 +44,8 @@ from .projection import ROWS, pixels
 SATURATED = 0.99  # remission at or above this is saturated (1.0 is the top of both scales)
 RANGE_BANDS = (0.0, 10.0, 20.0, 30.0, 50.0, 80.0)  # metres
 OBJECT_CLASSES = ("car", "truck", "other-vehicle", "person", "bicyclist")
+MIN_OBJECT_POINTS = 5
+MIN_OBJECTS = 3  # real objects in a range band for its ratio
 FRONT_DEG = 45.0  # returns per row: azimuths within this of straight ahead
 BEV_FIELD_M = 160.0
 BEV_BINS = 100
@@ -65,7 +70,8 @@ def intensity_figures(generated: np.ndarray, real: np.ndarray) -> dict:
 
 
 def object_sizes(scans: Sequence[LabelledScan], c: int) -> np.ndarray:
-    """``(k, 2)`` float64 rows of (points, median range m) of every object of class index ``c``."""
+    """``(k, 2)`` float64 rows of (points, median range m) of every object of class index ``c`` with at least
+    :data:`MIN_OBJECT_POINTS` points."""
     rows = []
     for scan in scans:
         mask = scan.labels == c
@@ -75,7 +81,8 @@ def object_sizes(scans: Sequence[LabelledScan], c: int) -> np.ndarray:
         ranges = np.linalg.norm(scan.points[mask], axis=1)
         for k in range(len(ids)):
             rows.append((float(np.sum(inverse == k)), float(np.median(ranges[inverse == k]))))
-    return np.array(rows, np.float64).reshape(-1, 2)
+    out = np.array(rows, np.float64).reshape(-1, 2)
+    return out[out[:, 0] >= MIN_OBJECT_POINTS]
 
 
 def points_per_object(generated: np.ndarray, real: np.ndarray) -> dict:
@@ -88,7 +95,7 @@ def points_per_object(generated: np.ndarray, real: np.ndarray) -> dict:
         row = {"band_m": [lo, hi], "generated_objects": int(len(g)), "real_objects": int(len(r)),
                "generated_median": float(np.median(g)) if len(g) else math.nan, "real_median": float(np.median(r)) if len(r) else math.nan,
                "generated_p90": float(np.percentile(g, 90)) if len(g) else math.nan, "real_p90": float(np.percentile(r, 90)) if len(r) else math.nan}
-        row["ratio"] = row["generated_p90"] / row["real_p90"] if len(g) and len(r) else math.nan
+        row["ratio"] = row["generated_p90"] / row["real_p90"] if len(g) and len(r) >= MIN_OBJECTS else math.nan
         if math.isfinite(row["ratio"]) and row["ratio"] > 0:
             logs.append(math.log(row["ratio"]))
             weights.append(len(r))
