@@ -9,7 +9,7 @@ IoU of class c = TP / (TP + FP + FN), counted over the points of all test scans 
 
 A class is scored only on the test scans that label it (``LabelledScan.known``: a KITTI frame's boxes label car,
 person and bicyclist, not road). ``miou`` is the mean IoU over the requested classes that some test scan holds
-or some prediction names (NaN IoUs left out).
+(a class no test scan holds is left out, even when predicted: its IoU would be 0 whatever the model).
 
 Units are drawn with replacement (``draws`` times, one explicit Generator) and the 2.5 and 97.5 percentiles
 of the resampled IoU are the 95 % interval. With a handful of objects the interval is wide, as it should be.
@@ -143,6 +143,7 @@ def score(scans: Sequence[LabelledScan], predictions: Sequence[np.ndarray], clas
 
 
 def mean_iou(per_class: dict) -> float:
-    """The mean of the finite ``iou`` values of ``{class: {iou: ...}}`` (NaN when there is none)."""
-    values = [r["iou"] for r in per_class.values() if np.isfinite(r["iou"])]
+    """The mean ``iou`` of the classes of ``{class: {iou, tp, fn}}`` that the test scans hold (``tp + fn > 0``);
+    NaN when there is none."""
+    values = [r["iou"] for r in per_class.values() if r["tp"] + r["fn"] > 0 and np.isfinite(r["iou"])]
     return float(np.mean(values)) if values else float("nan")
