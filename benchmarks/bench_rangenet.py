@@ -71,6 +71,12 @@ TREE_FOLDS = 5
 TARGETS = {"car": 0.6, "person": 0.6, "miou": 0.5}  # synthetic-only / real-trained, issue 50
 
 
+def rangenet_settings() -> dict:
+    from bpy_pipeline.evaluate import rangenet
+
+    return {"epochs": rangenet.EPOCHS, "min_steps": rangenet.MIN_STEPS}
+
+
 def summary(block: dict) -> dict:
     """Per class IoU, interval, objects found; and the mIoU of a score block."""
     out = {c: {"iou": r["iou"], "interval": r["interval"], "objects": r["objects"], "objects_found": r["objects_found"], "scans": r["scans"]}
@@ -141,7 +147,9 @@ def main() -> None:
     path = args.out / (f"{args.name}_small.json" if args.small else f"{args.name}.json")
     result = json.loads(path.read_text()) if path.is_file() else {}
     result.update({"classes": list(CLASSES), "layouts": layouts, "frames_per_layout": frames, "generation": cost, "real": [f.name for f in real_files],
-                   "targets": TARGETS, "config": "examples/street/ego_hdl64e.yaml", "load_average_at_start": os.getloadavg()[0]})
+                   "targets": TARGETS, "config": "examples/street/ego_hdl64e.yaml", "load_average_at_start": os.getloadavg()[0],
+                   "settings": {"tree_points_per_class": TREE_POINTS_PER_CLASS, "tree_folds": TREE_FOLDS, "network_folds": NETWORK_FOLDS,
+                                "network_epochs": rangenet_settings()["epochs"], "network_min_steps": rangenet_settings()["min_steps"], "threads": args.threads}})
     if "training" in parts:
         if args.small:
             import bpy_pipeline.evaluate.rangenet as rangenet

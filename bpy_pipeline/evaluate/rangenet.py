@@ -9,7 +9,7 @@ IoU and the intervals are those of :mod:`.metrics`, as for the LightGBM model. A
 Training: Adam (lr 2e-3, cosine decay), :data:`EPOCHS` passes over the training frames (at least
 :data:`MIN_STEPS` steps, for a handful of real frames) in batches of :data:`BATCH`, each frame turned by a random
 angle about z and mirrored left-right with probability 0.5; class-weighted cross-entropy (weight
-1 / sqrt(share of pixels), as SalsaNext). A scan that labels only some classes (``known``: KITTI boxes) adds a
+1 / (share of pixels + 0.001), as RangeNet++). A scan that labels only some classes (``known``: KITTI boxes) adds a
 partial-label term for its "other" pixels: -log of the probability of all the classes it does not know
 (they are not car, person or bicyclist, but may be road or building).
 
@@ -33,10 +33,11 @@ from .label_maps import other_index
 from .labelled import LabelledScan
 from .projection import CHANNELS, WIDTH, RangeImage, project
 
-EPOCHS = 6
-MIN_STEPS = 60
+EPOCHS = 12
+MIN_STEPS = 120
 BATCH = 4
 LEARNING_RATE = 2e-3
+WEIGHT_EPSILON = 0.001  # class weight 1 / (pixel share + this), as RangeNet++
 WIDTHS = (16, 32, 64, 96)
 # fixed input scaling (x, y, z, range, remission, mask): value / scale, so all channels are about unit size
 SCALE = np.array([20.0, 20.0, 2.0, 20.0, 0.5, 1.0], np.float32)
@@ -168,7 +169,7 @@ def fit_rangenet(scans: Sequence[LabelledScan], classes: Sequence[str], seed: in
     if not counts[: len(classes)].any():
         raise InputError(f"--train: the training scans ({', '.join(s.name for s in scans[:3])}{', ...' if len(scans) > 3 else ''}) hold no point of {', '.join(classes)}")
     share = counts / max(counts.sum(), 1)
-    weights = np.where(counts > 0, 1.0 / np.sqrt(np.maximum(share, 1e-6)), 0.0)
+    weights = np.where(counts > 0, 1.0 / (share + WEIGHT_EPSILON), 0.0)
     weights = weights / weights[counts > 0].mean()
     network = _network(torch, len(CHANNELS), n_labels)
     steps = max(MIN_STEPS, math.ceil(epochs * len(scans) / BATCH))
