@@ -85,7 +85,7 @@ def test_rangenet_trains_on_two_tiny_frames_scores_like_lgbm_and_repeats_itself(
     car = report["synthetic"]["classes"]["car"]
     assert car["tp"] + car["fn"] == 1500  # back-projected: every point of the car is scored
     assert report["synthetic"]["classes"]["road"]["iou"] > 0.8 and car["iou"] > 0.3, report["synthetic"]["classes"]
-    assert [f["test_group"] for f in report["real_reference"]["folds"]] == ["all (no test scan is a reference scan)"]  # one training
+    assert [f["test_group"] for f in report["real_reference"]["folds"]] == ["all (no test group among the reference groups)"]  # one training
     assert again["synthetic"]["classes"] == report["synthetic"]["classes"] and again["real_reference"]["miou"] == report["real_reference"]["miou"]
 
 

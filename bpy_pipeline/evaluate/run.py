@@ -2,8 +2,8 @@
 
 The reference (``reference=``) is leave-one-group-out: for each group of test scans (a sequence, a KITTI
 frame) the model is trained on the reference scans of every *other* group, so consecutive frames of one
-sequence never sit on both sides. When no test scan is among the reference scans, the reference trains once, on
-all of them. The report gives both IoUs per class with their intervals, the mean IoU, and the ratios
+sequence never sit on both sides. When no test scan shares a group with a reference scan, the reference trains
+once, on all of them. The report gives both IoUs per class with their intervals, the mean IoU, and the ratios
 synthetic / real.
 
 A model that reads remission (``rangenet``) is trained and tested on the scans that carry it only; the others
@@ -24,8 +24,8 @@ from .features import FEATURE_NAMES
 from .label_maps import parse_classes
 from .labelled import IMAGE_SIZE, LabelledScan, load_scans
 from .metrics import DRAWS, score
+from .models import MAX_POINTS_PER_SCAN, MODELS, NEEDS_TORCH, READS_REMISSION, fit
 from .projection import CHANNELS
-from .models import MAX_POINTS_PER_SCAN, NEEDS_TORCH, READS_REMISSION, fit
 
 Source = str | Path | LabelledScan
 
@@ -46,12 +46,13 @@ def fold_groups(groups: Sequence[str], max_folds: int | None = None) -> list[lis
 def leave_one_group_out(reference: Sequence[LabelledScan], test: Sequence[LabelledScan], classes: Sequence[str], seed: int, model: str,
                         max_points_per_scan: int, n_jobs: int, log=None, max_folds: int | None = None) -> tuple[list[np.ndarray], list[dict]]:
     """Predictions for every test scan by a model trained on the reference scans of the other groups (of the other
-    folds' groups with ``max_folds``); and the folds (``{test_group, train: [names], seconds}``; ``test_group`` names a fold's groups, comma-separated). When no test scan
-    is a reference scan (by name), one model trained on all the reference scans predicts every test scan.
+    folds' groups with ``max_folds``); and the folds (``{test_group, train: [names], seconds}``; ``test_group``
+    names a fold's groups, comma-separated). When no test scan shares a group with a reference scan, one model
+    trained on all the reference scans predicts every test scan.
     ``InputError`` when a group leaves nothing to train on."""
     predictions: list[np.ndarray | None] = [None] * len(test)
     folds = []
-    disjoint = not {s.name for s in test} & {s.name for s in reference}
+    disjoint = not {s.group for s in test} & {s.group for s in reference}
     for groups in [[]] if disjoint else fold_groups([s.group for s in test], max_folds):
         train = [s for s in reference if s.group not in groups]
         if not train:
@@ -61,7 +62,7 @@ def leave_one_group_out(reference: Sequence[LabelledScan], test: Sequence[Labell
         for i, scan in enumerate(test):
             if disjoint or scan.group in groups:
                 predictions[i] = trained.predict(scan)
-        folds.append({"test_group": ", ".join(groups) or "all (no test scan is a reference scan)", "train": _names(train), "seconds": round(time.perf_counter() - start, 2)})
+        folds.append({"test_group": ", ".join(groups) or "all (no test group among the reference groups)", "train": _names(train), "seconds": round(time.perf_counter() - start, 2)})
         if log:
             log(f"reference fold {', '.join(groups) or 'all'}: trained on {len(train)} scans in {folds[-1]['seconds']} s")
     return predictions, folds
@@ -85,15 +86,13 @@ def evaluate(train: Iterable[Source], test: Iterable[Source], classes: str | Seq
     model : a :data:`~.models.MODELS` name (``lgbm``, ``forest``, ``rangenet``, ``rangenet-geometry``)
     seed : the model's seed, the background sampling's and the bootstrap's
     every, max_frames : subsample the frames of generated datasets
-    max_points_per_scan : background points sampled from each training scan
+    max_points_per_scan : points of each label sampled from each training scan (the trees)
     n_jobs : threads of the model
     draws : bootstrap resamplings of the intervals
     image_size : KITTI image width, height (px) bounding the labelled field of view
     log : ``print``-like progress callback, or ``None``
     max_folds : at most this many leave-group-out folds for the reference (groups dealt round-robin), ``None``: one per group
     """
-    from .models import MODELS
-
     classes = parse_classes(classes)
     if model not in MODELS:
         raise InputError(f"--model: unknown model {model!r}; allowed: {', '.join(MODELS)}")
