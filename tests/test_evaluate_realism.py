@@ -91,3 +91,10 @@ def test_real_scans_read_with_remission_where_they_carry_it():
                        realism.DEFAULT_CLASSES)
     assert [s.remission is not None for s in scans] == [True, False, True]
     assert scans[2].known == ("car", "person", "bicyclist") and scans[0].known is None
+
+
+def test_a_missing_input_is_one_line_and_exit_2(tmp_path, capsys):
+    code = main(["realism", "--generated", str(tmp_path / "nothing"), "--real", str(tmp_path / "nothing"), "--out", str(tmp_path / "r.json")])
+    err = capsys.readouterr().err
+    assert code == 2 and "nothing: no such file or folder" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "r.json").exists() and not (tmp_path / "r.png").exists()
