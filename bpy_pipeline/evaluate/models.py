@@ -57,10 +57,7 @@ class Model:
     classes : the requested classes (labels 0..C-1; C is "other")
     estimator : the fitted classifier (scikit-learn interface)
     training_points : (C + 1,) points of each label in its training sample
-    reads_remission : whether predictions read the scans' remission (the trees do not)
     """
-    reads_remission = False
-
 
     name: str
     classes: tuple[str, ...]

@@ -118,6 +118,7 @@ class RangeNetModel:
     remission : whether the remission channel is read
     training_points : (C + 1,) labelled pixels of each label in the training images
     seconds : training time
+    threads : torch threads for predictions
     """
 
     name: str
