@@ -15,7 +15,8 @@ test frames:
   consecutive frames are one group, so they never sit on both sides).
 
 It charts real IoU against generation cost: CPU seconds of generation per configuration, and the
-curve of IoU against the number of synthetic frames. Results: benchmarks/results/sim2real.json and
+curve of IoU against the number of synthetic frames. Every class, and the range-image network beside
+LightGBM: benchmarks/bench_rangenet.py. Results: benchmarks/results/sim2real.json and
 sim2real.png; docs/sim2real.md reads them.
 
     python benchmarks/bench_sim2real.py            # the full run (about an hour on 2 cores)
@@ -36,8 +37,6 @@ import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
-
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
@@ -52,9 +51,6 @@ REAL = Path(os.environ.get("BPY_PIPELINE_REAL_SCANS", ROOT.parent / "shared" / "
 TEST_FRAMES = ("semantickitti_000700_points.npy", "semantickitti_seq01_000000_points.npy", "semantickitti_seq01_000001_points.npy",
                "semantickitti_seq01_000002_points.npy", "kitti_hdl64e_004747.bin")
 CONFIG = ROOT / "examples" / "street" / "ego_hdl64e.yaml"
-# SemanticKITTI 000700 as shared is not in its sensor's frame: its ring pattern is centred at this point of the
-# file's frame (m), so its ranges read about 100 m too far. The benchmark moves it back; the file stays as it is.
-OFFSET_000700 = np.array([0.1, -97.5, 0.0], np.float32)
 
 # The ablation: each level of scene detail as --set overrides of the default street. "bare" is the street
 # without its dressing (no terrain, vegetation, fences or furniture, 40 m arms, its old road-user counts).
@@ -170,10 +166,7 @@ def main() -> None:
     ablation = {k: ABLATION[k] for k in wanted}
     work = args.work or Path(tempfile.mkdtemp(prefix="sim2real_"))
     seed = 0
-    test = labelled.load_scans([REAL / f for f in TEST_FRAMES], CLASSES)
-    for scan in test:
-        if "000700" in scan.name:
-            scan.points = scan.points - OFFSET_000700
+    test = labelled.load_scans([REAL / f for f in TEST_FRAMES], CLASSES)  # 000700 as shared now is in its sensor's frame
     result = {"classes": list(CLASSES), "test": [s.name for s in test], "load_average_at_start": os.getloadavg()[0], "layouts": layouts, "frames_per_layout": frames}
 
     # real only: leave one group out over the real frames themselves
@@ -209,7 +202,7 @@ def main() -> None:
     # mixed domain: real backgrounds from the other groups, synthetic objects cast in
     from sim2real_mixed import make_mixed_dataset
 
-    backgrounds = [REAL / f for f in TEST_FRAMES if "000700" not in f]  # 000700 is not in its sensor's frame (sim2real_mixed refuses it)
+    backgrounds = [REAL / f for f in TEST_FRAMES]
     mixed_predictions = [None] * len(test)
     mixed_folds = []
     for group in sorted({s.group for s in test}):

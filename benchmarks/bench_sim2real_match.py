@@ -22,7 +22,7 @@ import shutil
 import tempfile
 from pathlib import Path
 
-from bench_sim2real import CLASSES, OFFSET_000700, REAL, ROOT, TEST_FRAMES, summary
+from bench_sim2real import CLASSES, REAL, ROOT, TEST_FRAMES, summary
 from sim2real_mixed import CAR_RULE, PERSON_RULE, make_mixed_dataset
 
 from bpy_pipeline.evaluate import labelled
@@ -58,17 +58,14 @@ def main() -> None:
         return
     per_background = 1 if args.small else args.frames
     seed = 0
-    test = labelled.load_scans([REAL / f for f in TEST_FRAMES], CLASSES)
-    for scan in test:
-        if "000700" in scan.name:
-            scan.points = scan.points - OFFSET_000700
+    test = labelled.load_scans([REAL / f for f in TEST_FRAMES], CLASSES)  # 000700 as shared now is in its sensor's frame
     paths = [REAL / f for f in TEST_FRAMES]
     work = Path(tempfile.mkdtemp(prefix="sim2real_match_"))
     predictions = {"papers": [None] * len(test), "matched": [None] * len(test)}
     folds = []
     try:
         for group in sorted({s.group for s in test}):
-            usable = [b for b, s in zip(paths, test) if s.group != group and "000700" not in b.name]  # 000700 is not in its sensor's frame
+            usable = [b for b, s in zip(paths, test) if s.group != group]
             if not any(b.suffix == ".npy" for b in usable):
                 folds.append({"test_group": group, "skipped": "no background with per-point labels outside the test group"})
                 continue

@@ -44,6 +44,7 @@ BENCHMARKS = [
     "bench_stage_parts.py",
     "bench_weather_particles.py",
     "bench_layout_seeds.py",
+    "bench_rangenet.py",
 ]
 
 if __name__ == "__main__":

@@ -40,8 +40,8 @@ calib) and nothing else; the caller keeps them apart from its test frames.
 
 Each background is checked to be in its sensor's frame (the cast fires from the origin): a scan with
 fewer than :data:`SENSOR_FRAME_SHARE` of its returns within :data:`SENSOR_FRAME_RADIUS_M` of the origin is
-refused (the shared SemanticKITTI sample 000700 is such a scan: its nearest return lies 29.5 m from the
-origin, its returns centre about 100 m away).
+refused (the first shared copy of SemanticKITTI 000700 was such a scan: moved by 100 m, its nearest return
+lay 29.5 m from the origin).
 
 Run as a benchmark: ``python benchmarks/sim2real_mixed.py [--small]`` times the emptying and the mixing
 (CPU seconds per mixed frame) on the real scans in ../shared/real_scans and writes

@@ -317,7 +317,17 @@ def _add_match(sub) -> None:
     add_match_arguments(p).set_defaults(func=match_main)
 
 
-COMMANDS = [_add_run, _add_sensors, _add_fit, _add_config, _add_evaluate, _add_convert, _add_match]
+def _add_realism(sub) -> None:
+    from .evaluate.realism import add_realism_arguments, realism_main
+
+    p = sub.add_parser("realism", help="compare a generated dataset with real labelled scans of the same sensor, per class",
+                       description="Per class: intensity (Wasserstein distance, share saturated), points per object against range, returns per "
+                       "row, range distribution; BEV occupancy JSD and MMD as the generative-LiDAR papers compute them. Prints what differs "
+                       "most and writes a JSON report and a PNG (docs/evaluate.md).")
+    add_realism_arguments(p).set_defaults(func=realism_main)
+
+
+COMMANDS = [_add_run, _add_sensors, _add_fit, _add_config, _add_evaluate, _add_realism, _add_convert, _add_match]
 
 
 def parser() -> argparse.ArgumentParser:

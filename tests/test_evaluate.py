@@ -175,7 +175,7 @@ def test_leave_one_group_out_never_trains_on_the_test_group():
     report = evaluate(scans, scans, ("car", "person"), reference=scans, max_points_per_scan=2000, draws=100)
     folds = {f["test_group"]: f["train"] for f in report["real_reference"]["folds"]}
     assert folds == {"a": ["b0"], "b": ["a0", "a1"]}
-    assert set(report["ratio"]) == {"car", "person"}
+    assert set(report["ratio"]) == {"car", "person", "miou"}
 
 
 # ----------------------------------------------------------------------------- real scans

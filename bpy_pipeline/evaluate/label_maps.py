@@ -86,6 +86,10 @@ KITTI_TYPES = {
     "Van": None, "Truck": None, "Tram": None, "Misc": None, "DontCare": None,
 }  # fmt: skip
 KITTI_CLASSES = ("car", "person", "bicyclist")  # what KITTI's boxes can label; other classes cannot be tested on KITTI frames
+# SqueezeSeg's samples (KITTI raw drives, labels from KITTI's tracklets): label id -> training name; 0 is labelled
+# background (none of car, person, bicyclist). Files whose name starts with SQUEEZESEG_PREFIX use it.
+SQUEEZESEG_NAMES = ("background", "car", "person", "bicyclist")
+SQUEEZESEG_PREFIX = "squeezeseg_"
 
 
 def parse_classes(classes: str | Iterable[str], where: str = "--classes") -> tuple[str, ...]:
@@ -179,8 +183,14 @@ def kitti_type_to_eval(kitti_type: str, classes: Sequence[str]) -> int:
     return classes.index(name) if name in classes else -1
 
 
+def squeezeseg_to_eval(labels: np.ndarray, classes: Sequence[str]) -> np.ndarray:
+    """``(n,)`` int64 evaluation labels of SqueezeSeg label ids (0 background -> other; a class not requested -> ignored)."""
+    lut = np.array([other_index(classes)] + [classes.index(n) if n in classes else -1 for n in SQUEEZESEG_NAMES[1:]], np.int64)
+    return lut[np.asarray(labels, np.int64).reshape(-1)]
+
+
 def check_kitti_classes(classes: Sequence[str], where: str) -> None:
-    """``InputError`` when ``classes`` asks for something KITTI boxes cannot label (road, building, ...)."""
-    unknown = [c for c in classes if c not in KITTI_CLASSES]
-    if unknown:
-        raise InputError(f"{where}: a KITTI object frame labels only {', '.join(KITTI_CLASSES)}; it cannot test {', '.join(unknown)} (drop it from --classes or from --test)")
+    """``InputError`` when ``classes`` holds none of what KITTI boxes can label (car, person, bicyclist). With some of
+    them, such a frame is scored on those only (``LabelledScan.known``)."""
+    if not any(c in KITTI_CLASSES for c in classes):
+        raise InputError(f"{where}: a KITTI object frame labels only {', '.join(KITTI_CLASSES)}; it cannot test {', '.join(classes)} (add one of those to --classes or drop it from --test)")

@@ -7,8 +7,10 @@ and an object id per point. Each reader reads its source's own label space and m
 
 - ``semantickitti``: a ``.bin`` scan (float32 x y z reflectance) with its ``.label`` (uint32: semantic raw id in
   the low 16 bits, instance in the high 16) beside it (same stem) or in ``../labels/``;
-- ``npy``: ``X_points.npy`` ((n, 3) or (n, 4) float) with ``X_labels.npy`` ((n,) or (n, 1) int, SemanticKITTI
-  training ids 0..19), as the project's real test scans are stored;
+- ``npy``: ``X_points.npy`` ((n, 3) or (n, 4) float, the fourth column remission 0..1) with ``X_labels.npy``
+  ((n,) or (n, 1) int, SemanticKITTI training ids 0..19), as the project's real test scans are stored; a name
+  starting ``squeezeseg_`` holds SqueezeSeg's KITTI-tracklet labels instead (0 background, 1 car, 2 pedestrian,
+  3 cyclist: :data:`~.label_maps.SQUEEZESEG_NAMES`), which label only car, person and bicyclist;
 - ``kitti_object``: a KITTI object frame, velodyne ``.bin`` with its ``label_2`` and ``calib`` text files, in
   the standard layout (``velodyne/NNNNNN.bin``, ``label_2/NNNNNN.txt``, ``calib/NNNNNN.txt``) or as files beside
   the scan whose names end with ``NNNNNN_label_2.txt`` / ``NNNNNN_calib.txt`` for the frame number in its name.
@@ -17,6 +19,11 @@ and an object id per point. Each reader reads its source's own label space and m
   ignored unless inside a box of a requested class;
 - ``generated``: a dataset folder made by the pipeline (``ply/*.ply``, project class ids in ``semantic``), optionally
   every ``every``-th frame and at most ``max_frames``.
+
+Remission (``LabelledScan.remission``, 0..1) is read where the source has it (SemanticKITTI and KITTI ``.bin``,
+``(n, 4)`` ``.npy``, the ``intensity`` of generated PLY frames) and is ``None`` otherwise. Sources that label only
+some classes (KITTI boxes, SqueezeSeg) say which in ``LabelledScan.known``; the metrics score a class only on
+the scans that know it.
 
 Groups (for leave-one-group-out): a SemanticKITTI sequence (the folder above ``velodyne/``, or the file name
 without its trailing ``_NNNNNN`` frame number), a KITTI object frame alone, a generated dataset folder.
@@ -58,6 +65,9 @@ class LabelledScan:
     truth : (n,) int64 SemanticKITTI training id per point (0..19; -2 labelled but of no training class, as raw 52
         other-structure) when the source has per-point classes, ``None`` otherwise (KITTI boxes)
     source : where it was read from
+    remission : (n,) float32 remission 0..1 when the source has it, else ``None``
+    known : the requested classes this scan labels (``None``: all of them); its "other" points are of none of
+        these, of any other class maybe (a KITTI frame's points outside every box)
     """
 
     name: str
@@ -68,6 +78,8 @@ class LabelledScan:
     classes: tuple[str, ...] = ("car", "person")
     truth: np.ndarray | None = None
     source: str = ""
+    remission: np.ndarray | None = None
+    known: tuple[str, ...] | None = None
     _features: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     def __post_init__(self):
@@ -76,6 +88,12 @@ class LabelledScan:
         self.instances = np.asarray(self.instances, np.int64).reshape(-1)
         self.classes = tuple(self.classes)
         n = len(self.points)
+        if self.remission is not None:
+            self.remission = np.asarray(self.remission, np.float32).reshape(-1)
+            if len(self.remission) != n:
+                raise InputError(f"{self.name}: {n} points but {len(self.remission)} remission values")
+        if self.known is not None:
+            self.known = tuple(c for c in self.classes if c in self.known)
         if len(self.labels) != n or len(self.instances) != n or (self.truth is not None and len(self.truth) != n):
             raise InputError(f"{self.name}: {n} points but {len(self.labels)} labels and {len(self.instances)} instances")
         if n and (self.labels.min() < -1 or self.labels.max() > len(self.classes)):
@@ -83,6 +101,10 @@ class LabelledScan:
 
     def __len__(self) -> int:
         return len(self.points)
+
+    def knows(self, name: str) -> bool:
+        """Whether this scan labels class ``name`` (its points of that class are all marked)."""
+        return self.known is None or name in self.known
 
     def features(self) -> np.ndarray:
         """``(n, F)`` float32 :func:`~.features.point_features` of the points, computed once."""
@@ -160,7 +182,8 @@ def read_semantickitti_scan(path: Path, classes: Sequence[str]) -> LabelledScan:
         name, group = path.stem, strip_frame_number(path.stem)
     instance = (scan.labels >> 16).astype(np.int64)
     instance = np.where(instance > 0, (truth << 16) | instance, 0)
-    return LabelledScan(name, group, points, labels, object_ids(points, labels, classes, instance), classes, truth, str(path))
+    return LabelledScan(name, group, points, labels, object_ids(points, labels, classes, instance), classes, truth, str(path),
+                        remission=scan.intensity)
 
 
 def npy_pair(path: Path) -> tuple[Path, Path]:
@@ -196,17 +219,27 @@ def read_npy_scan(path: Path, classes: Sequence[str]) -> LabelledScan:
         raise InputError(f"{labels_path}: expected (n,) or (n, 1) integer labels, got shape {labels.shape} {labels.dtype}")
     if len(labels) != len(points):
         raise InputError(f"{labels_path}: {len(labels)} labels for {len(points)} points in {points_path}")
-    if len(labels) and (labels.min() < 0 or labels.max() >= len(label_maps.TRAINING_NAMES)):
-        raise InputError(f"{labels_path}: labels must be SemanticKITTI training ids 0..19, found {labels.min()}..{labels.max()}")
     xyz = points[:, :3].astype(np.float32)
     finite = np.isfinite(xyz).all(axis=1)
-    truth = labels.astype(np.int64)
-    truth[~finite] = 0
+    remission = np.clip(np.nan_to_num(points[:, 3].astype(np.float32)), 0.0, 1.0) if points.shape[1] > 3 else None
     xyz[~finite] = 0.0
-    eval_labels = label_maps.training_to_eval(truth, classes)
     stem = points_path.name[: -len("_points.npy")]
-    return LabelledScan(stem, strip_frame_number(stem), xyz, eval_labels,
-                        object_ids(xyz, eval_labels, classes), classes, truth, str(points_path))
+    known = None
+    if stem.startswith(label_maps.SQUEEZESEG_PREFIX):
+        if len(labels) and (labels.min() < 0 or labels.max() >= len(label_maps.SQUEEZESEG_NAMES)):
+            raise InputError(f"{labels_path}: SqueezeSeg labels must be 0..{len(label_maps.SQUEEZESEG_NAMES) - 1} ({', '.join(label_maps.SQUEEZESEG_NAMES)})")
+        label_maps.check_kitti_classes(classes, str(points_path))
+        eval_labels = label_maps.squeezeseg_to_eval(labels, classes)
+        eval_labels[~finite] = -1
+        truth, known = None, label_maps.KITTI_CLASSES
+    else:
+        if len(labels) and (labels.min() < 0 or labels.max() >= len(label_maps.TRAINING_NAMES)):
+            raise InputError(f"{labels_path}: labels must be SemanticKITTI training ids 0..19, found {labels.min()}..{labels.max()}")
+        truth = labels.astype(np.int64)
+        truth[~finite] = 0
+        eval_labels = label_maps.training_to_eval(truth, classes)
+    return LabelledScan(stem, strip_frame_number(stem), xyz, eval_labels, object_ids(xyz, eval_labels, classes), classes, truth,
+                        str(points_path), remission=remission, known=known)
 
 
 # KITTI object frames
@@ -313,7 +346,8 @@ def read_kitti_object(path: Path, classes: Sequence[str], image_size: tuple[int,
     label_file, calib_file = label_2_calib
     label_maps.check_kitti_classes(classes, str(path))
     boxes, calib = read_kitti_labels(label_file), read_kitti_calib(calib_file)
-    points = read_kitti(path).points
+    kitti = read_kitti(path)
+    points = kitti.points
     camera = velodyne_to_camera(points, calib)
     uvw = np.column_stack([camera, np.ones(len(camera))]) @ calib["P2"].T
     front = camera[:, 2] > 0
@@ -342,7 +376,8 @@ def read_kitti_object(path: Path, classes: Sequence[str], image_size: tuple[int,
             instance[inside] = k
             inside_class |= inside
     pts = points.astype(np.float32)
-    return LabelledScan(path.stem, path.stem, pts, labels, object_ids(pts, labels, classes, instance), classes, None, str(path))
+    return LabelledScan(path.stem, path.stem, pts, labels, object_ids(pts, labels, classes, instance), classes, None, str(path),
+                        remission=kitti.intensity, known=label_maps.KITTI_CLASSES)
 
 
 # generated datasets
@@ -388,8 +423,15 @@ def read_generated(folder: Path, classes: Sequence[str], every: int = 1, max_fra
         truth = np.where(semantic < len(truth_lut), truth_lut[np.minimum(semantic, len(truth_lut) - 1)], 0)  # unknown ids: ignored
         labels = label_maps.training_to_eval(truth, classes)
         instance = cloud["instance"].astype(np.int64) + 1  # instance 0 is an object too; 0 is "none" for object_ids
-        scans.append(LabelledScan(f"{folder.name}/{path.stem}", folder.name, xyz, labels, object_ids(xyz, labels, classes, instance), classes, truth, str(path)))
+        remission = np.asarray(cloud["intensity"], np.float32) if "intensity" in _names_of(cloud) else None
+        scans.append(LabelledScan(f"{folder.name}/{path.stem}", folder.name, xyz, labels, object_ids(xyz, labels, classes, instance), classes, truth,
+                                  str(path), remission=remission))
     return scans
+
+
+def _names_of(cloud) -> tuple[str, ...]:
+    names = getattr(getattr(cloud, "dtype", None), "names", None)
+    return tuple(names) if names else tuple(cloud.keys())
 
 
 # ----------------------------------------------------------------------------- the registry

@@ -7,6 +7,10 @@ IoU of class c = TP / (TP + FP + FN), counted over the points of all test scans 
 - each connected region (points linked within 0.5 m) of points predicted c outside class c's ground truth is a
   unit holding its FP points.
 
+A class is scored only on the test scans that label it (``LabelledScan.known``: a KITTI frame's boxes label car,
+person and bicyclist, not road). ``miou`` is the mean IoU over the requested classes that some test scan holds
+(a class no test scan holds is left out, even when predicted: its IoU would be 0 whatever the model).
+
 Units are drawn with replacement (``draws`` times, one explicit Generator) and the 2.5 and 97.5 percentiles
 of the resampled IoU are the 95 % interval. With a handful of objects the interval is wide, as it should be.
 """
@@ -116,19 +120,30 @@ def score(scans: Sequence[LabelledScan], predictions: Sequence[np.ndarray], clas
     rng = np.random.default_rng(seed)
     out = {"classes": {}, "per_scan": {}, "confusion": matrix.tolist(), "confusion_labels": [*classes, "other"]}
     for c, name in enumerate(classes):
-        tp = int(matrix[c, c])
-        fp = int(matrix[:, c].sum() - tp)
-        fn = int(matrix[c, :].sum() - tp)
-        all_units = np.concatenate([units(s, p, c) for s, p in zip(scans, predictions)])
-        objects = object_recalls(scans, predictions, c)
+        pairs = [(s, p) for s, p in zip(scans, predictions) if s.knows(name)]
+        m = confusion([s for s, _ in pairs], [p for _, p in pairs], n_labels)
+        tp = int(m[c, c])
+        fp = int(m[:, c].sum() - tp)
+        fn = int(m[c, :].sum() - tp)
+        all_units = np.concatenate([units(s, p, c) for s, p in pairs] or [np.zeros((0, 3), np.int64)])
+        objects = object_recalls([s for s, _ in pairs], [p for _, p in pairs], c)
         found = sum(o["recall"] >= FOUND_RECALL for o in objects)
         lo, hi = bootstrap_interval(all_units, rng, draws)
         out["classes"][name] = {
-            "iou": iou(tp, fp, fn), "interval": [lo, hi], "tp": tp, "fp": fp, "fn": fn,
+            "iou": iou(tp, fp, fn), "interval": [lo, hi], "tp": tp, "fp": fp, "fn": fn, "scans": len(pairs),
             "objects": len(objects), "objects_found": int(found), "false_positive_regions": int((all_units[:, 1] > 0).sum()),
-            "false_positives": false_positive_truth(scans, predictions, c), "object_recall": objects,
+            "false_positives": false_positive_truth([s for s, _ in pairs], [p for _, p in pairs], c), "object_recall": objects,
         }
+    out["miou"] = mean_iou(out["classes"])
     for scan, pred in zip(scans, predictions):
         m = confusion([scan], [pred], n_labels)
-        out["per_scan"][scan.name] = {name: iou(m[c, c], m[:, c].sum() - m[c, c], m[c, :].sum() - m[c, c]) for c, name in enumerate(classes)}
+        out["per_scan"][scan.name] = {name: iou(m[c, c], m[:, c].sum() - m[c, c], m[c, :].sum() - m[c, c]) if scan.knows(name) else float("nan")
+                                      for c, name in enumerate(classes)}
     return out
+
+
+def mean_iou(per_class: dict) -> float:
+    """The mean ``iou`` of the classes of ``{class: {iou, tp, fn}}`` that the test scans hold (``tp + fn > 0``);
+    NaN when there is none."""
+    values = [r["iou"] for r in per_class.values() if r["tp"] + r["fn"] > 0 and np.isfinite(r["iou"])]
+    return float(np.mean(values)) if values else float("nan")

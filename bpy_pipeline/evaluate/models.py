@@ -1,7 +1,9 @@
 """Reference segmentation models over :mod:`.features`: a small registry, one entry per model.
 
 - ``lgbm`` (default): LightGBM multiclass gradient-boosted trees (the ``evaluate`` extra: ``pip install 'bpy_pipeline[evaluate]'``);
-- ``forest``: scikit-learn's random forest.
+- ``forest``: scikit-learn's random forest;
+- ``rangenet``, ``rangenet-geometry``: the range-image network of :mod:`.rangenet` (the ``network`` extra, torch),
+  reading remission or not.
 
 :func:`fit` trains one on labelled scans: every point of a requested class is kept, the background ("other")
 is subsampled per scan, ignored points (-1) are left out, and each class is weighted by the inverse of its
@@ -21,7 +23,7 @@ from .features import FEATURE_NAMES
 from .label_maps import other_index
 from .labelled import LabelledScan
 
-MAX_POINTS_PER_SCAN = 20000  # background points sampled from each training scan
+MAX_POINTS_PER_SCAN = 20000  # points of each label sampled from each training scan
 
 
 def _lgbm(seed: int, n_jobs: int):
@@ -44,7 +46,7 @@ def _forest(seed: int, n_jobs: int):
     return RandomForestClassifier(n_estimators=150, min_samples_leaf=5, max_features="sqrt", random_state=seed, n_jobs=n_jobs)
 
 
-MODELS: dict[str, Callable[[int, int], object]] = {"lgbm": _lgbm, "forest": _forest}
+ESTIMATORS: dict[str, Callable[[int, int], object]] = {"lgbm": _lgbm, "forest": _forest}
 
 
 @dataclass
@@ -72,16 +74,20 @@ class Model:
 
 def training_sample(scans: Sequence[LabelledScan], classes: Sequence[str], rng: np.random.Generator,
                     max_points_per_scan: int = MAX_POINTS_PER_SCAN) -> tuple[np.ndarray, np.ndarray]:
-    """``(features (m, F) float32, labels (m,) int64)``: every object point of each scan and at most
-    ``max_points_per_scan`` of its background points, drawn with ``rng``."""
+    """``(features (m, F) float32, labels (m,) int64)``: of each scan, at most ``max_points_per_scan`` points of each
+    label (all of a smaller one: objects are usually kept whole), drawn with ``rng``. A scan that labels only some of
+    the classes (``known``, a KITTI frame's boxes) gives its object points only: its "other" may be of another class."""
     other = other_index(classes)
     xs, ys = [], []
     for scan in scans:
-        objects = np.flatnonzero((scan.labels >= 0) & (scan.labels < other))
-        background = np.flatnonzero(scan.labels == other)
-        if len(background) > max_points_per_scan:
-            background = np.sort(rng.choice(background, max_points_per_scan, replace=False))
-        keep = np.concatenate([objects, background])
+        labels = range(other + 1) if scan.known is None or len(scan.known) == len(classes) else range(other)
+        keep = []
+        for label in labels:
+            points = np.flatnonzero(scan.labels == label)
+            if len(points) > max_points_per_scan:
+                points = np.sort(rng.choice(points, max_points_per_scan, replace=False))
+            keep.append(points)
+        keep = np.sort(np.concatenate(keep))
         if len(keep):
             xs.append(scan.features()[keep])
             ys.append(scan.labels[keep])
@@ -91,11 +97,17 @@ def training_sample(scans: Sequence[LabelledScan], classes: Sequence[str], rng: 
 
 
 def fit(scans: Sequence[LabelledScan], classes: Sequence[str], seed: int = 0, max_points_per_scan: int = MAX_POINTS_PER_SCAN,
-        model: str = "lgbm", n_jobs: int = 1) -> Model:
-    """Train model ``model`` (:data:`MODELS`) on ``scans``; ``InputError`` when the training set is empty or holds
-    no point of any requested class."""
+        model: str = "lgbm", n_jobs: int = 1, log=None):
+    """Train model ``model`` (:data:`MODELS`) on ``scans``: a :class:`Model`, or a
+    :class:`~.rangenet.RangeNetModel`; ``InputError`` when the training set is empty or holds no point of any
+    requested class."""
     if model not in MODELS:
         raise InputError(f"--model: unknown model {model!r}; allowed: {', '.join(MODELS)}")
+    return MODELS[model](scans, tuple(classes), seed, max_points_per_scan, model, n_jobs, log)
+
+
+def fit_trees(scans: Sequence[LabelledScan], classes: Sequence[str], seed: int, max_points_per_scan: int, model: str, n_jobs: int, log=None) -> Model:
+    """An :data:`ESTIMATORS` model on the geometric features of a sample of the points (module notes)."""
     classes = tuple(classes)
     if not scans:
         raise InputError("--train: the training set is empty")
@@ -108,6 +120,21 @@ def fit(scans: Sequence[LabelledScan], classes: Sequence[str], seed: int = 0, ma
     present = counts > 0
     weight_of = np.zeros(len(counts))
     weight_of[present] = len(y) / (present.sum() * counts[present])  # class-balanced
-    estimator = MODELS[model](seed, n_jobs)
+    estimator = ESTIMATORS[model](seed, n_jobs)
     estimator.fit(x, y, sample_weight=weight_of[y])
     return Model(model, classes, estimator, [int(c) for c in counts])
+
+
+def _network(remission: bool):
+    def train(scans, classes, seed, max_points_per_scan, model, n_jobs, log=None):
+        from .rangenet import fit_rangenet
+
+        return fit_rangenet(scans, classes, seed, n_jobs, remission=remission, name=model, log=log)
+
+    return train
+
+
+# name -> trainer(scans, classes, seed, max_points_per_scan, name, n_jobs, log) -> a model with predict(scan)
+MODELS: dict[str, Callable[..., object]] = {"lgbm": fit_trees, "forest": fit_trees, "rangenet": _network(True), "rangenet-geometry": _network(False)}
+READS_REMISSION = frozenset({"rangenet"})  # models whose input holds the scans' remission
+NEEDS_TORCH = frozenset({"rangenet", "rangenet-geometry"})
