@@ -251,11 +251,8 @@ def print_resolved(args) -> int:
 
 def run_evaluate(args) -> int:
     """Train on ``--train``, test on ``--test`` (and the real reference), print the table, write the JSON report."""
-    import json
-
     from .evaluate import evaluate, table
-    from .evaluate.run import json_safe
-    from .io.atomic import atomic_write
+    from .evaluate.run import write_report
 
     out = Path(args.out)
     if out.is_dir() or (out.parent.exists() and not out.parent.is_dir()):
@@ -267,12 +264,7 @@ def run_evaluate(args) -> int:
         raise InputError("evaluate: --every, --max-frames and --jobs must be >= 1")
     report = evaluate(args.train, args.test, args.classes, args.reference, args.model, args.seed, args.every, args.max_frames,
                       args.max_points_per_scan, args.jobs, log=lambda m: print(m, file=sys.stderr))
-    try:
-        out.parent.mkdir(parents=True, exist_ok=True)
-        with atomic_write(out) as tmp:
-            tmp.write_text(json.dumps(json_safe(report), indent=1) + "\n")
-    except OSError as err:
-        raise InputError(f"--out: cannot write {out} ({err.strerror or err})") from None
+    write_report(out, report)
     print(table(report))
     print(f"written: {out}")
     return 0

@@ -317,22 +317,14 @@ def add_realism_arguments(p):
 
 def realism_main(args) -> int:
     """Run the comparison, print the findings, write the report and the plot."""
-    import json
-
-    from ..io.atomic import atomic_write
-    from .run import json_safe
+    from .run import write_report
 
     out = Path(args.out)
     if out.is_dir():
         raise InputError(f"--out: {out} is a folder; give a file path")
     plot = Path(args.plot) if args.plot else out.with_suffix(".png")
     report = realism_report(args.generated, args.real, args.classes, plot)
-    try:
-        out.parent.mkdir(parents=True, exist_ok=True)
-        with atomic_write(out) as tmp:
-            tmp.write_text(json.dumps(json_safe(report), indent=1) + "\n")
-    except OSError as err:
-        raise InputError(f"--out: cannot write {out} ({err.strerror or err})") from None
+    write_report(out, report)
     print("What differs most, generated against real:")
     for line in summary_lines(report):
         print(line)

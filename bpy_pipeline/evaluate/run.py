@@ -183,6 +183,20 @@ def _fmt(x: float) -> str:
     return "n/a" if x is None or not math.isfinite(x) else f"{x:.3f}"
 
 
+def write_report(out: Path, report: dict) -> None:
+    """``report`` as strict JSON at ``out`` (written whole or not at all); ``InputError`` naming ``--out`` when it cannot be written."""
+    import json
+
+    from ..io.atomic import atomic_write
+
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        with atomic_write(out) as tmp:
+            tmp.write_text(json.dumps(json_safe(report), indent=1) + "\n")
+    except OSError as err:
+        raise InputError(f"--out: cannot write {out} ({err.strerror or err})") from None
+
+
 def json_safe(value):
     """The report with NaN as ``None`` (strict JSON)."""
     if isinstance(value, float):
