@@ -20,9 +20,8 @@ Units come from the field's metadata (:func:`bpy_pipeline.schema.meta`, :func:`u
 are angles (subtype ``ANGLE``, ``EULER`` for a rotation vector: Blender shows degrees and stores radians;
 :func:`read` and :func:`write` convert), ``m`` fields lengths (subtype ``DISTANCE``, ``TRANSLATION`` for a
 3-vector) shown in the scene's length unit, and other 3-vectors carry X/Y/Z labels (``XYZ``). The
-metadata's range sets the slider's soft limits and its help the tooltip. A field without metadata (the
-lidar sections' own dataclasses: weather, materials, drop models, divergence) falls back to its name:
-``*_deg`` is an angle, a last word of :data:`LENGTH_WORDS` a length.
+metadata's range sets the slider's soft limits and its help the tooltip; a field without metadata is a
+plain number.
 
 Anything else (lists of shapes, unions) is not shown and passes through untouched from the
 config the panel was loaded from. Blender stores floats in 32 bits; :func:`read` hands back the
@@ -47,24 +46,11 @@ from .bpy_pipeline import schema
 from .bpy_pipeline.schema import key_of
 
 UNITS = {"hz": "Hz", "s": "s"}  # label suffixes; degrees and metres are shown by Blender's own units
-# For fields without unit metadata only: the last word of a field name that makes it a length in metres
-# (``contact_wire_height``, ``max_range``, ``track.start``); ratios, counts and distributions are plain numbers.
-LENGTH_WORDS = frozenset(
-    "width height length size spacing offset sag diameter thickness depth radius range distance clearance "
-    "shoulder berm gauge stagger span sigma position start mid end bottom top separation aperture step jitter".split()
-)
 
 
 def unit_of(f: dataclasses.Field) -> str:
-    """``"angle"`` (degrees in the config), ``"length"`` (metres) or ``""`` for a config field: its metadata's
-    unit where it has one, else guessed from its name."""
-    unit = schema.unit_of(f)
-    if unit is not None:
-        return {"deg": "angle", "m": "length"}.get(unit, "")
-    words = f.name.split("_")
-    if len(words) > 1 and words[-1] == "deg":
-        return "angle"
-    return "length" if words[-1] in LENGTH_WORDS else ""
+    """``"angle"`` (degrees in the config), ``"length"`` (metres) or ``""`` for a config field, from its metadata's unit."""
+    return {"deg": "angle", "m": "length"}.get(schema.unit_of(f), "")
 
 
 @dataclass

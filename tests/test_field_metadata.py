@@ -68,6 +68,31 @@ def test_every_number_of_a_builders_parameters_carries_its_unit():
     assert len(classes) >= 15
 
 
+def test_every_number_the_panel_shows_of_the_lidar_sections_carries_its_unit():
+    """Weather, materials, the reading model, car glass and paint, distributions and the drop MLP: the panel
+    (addon/fields.py) has no name guessing left, so a number without metadata would be shown as a plain number."""
+    from bpy_pipeline.lidar.effects.drop.mlp import MLP
+    from bpy_pipeline.lidar.sensor.sensors import SensorSpec
+
+    roots = [cfg.EffectsConfig, cfg.OutputConfig, cfg.SensorConfig, cfg.TrajectoryConfig, SensorSpec, MLP, *cfg.BUILDER_PARAMS.values()]
+    classes = list(dict.fromkeys(c for root in roots for c in nested_classes(root)))
+    missing = []
+    for cls in classes:
+        hints = typing.get_type_hints(cls)
+        missing += [f"{cls.__module__}.{cls.__name__}.{f.name}" for f in dataclasses.fields(cls) if numeric(hints[f.name]) and f.metadata.get("unit") not in UNITS]
+    assert not missing, f"numeric fields without meta(unit=...): {missing}"
+    assert len(classes) >= 40
+
+
+def test_weather_and_materials_ranges_come_from_the_metadata():
+    with pytest.raises(InputError, match=r"^effects\.weather\.fog\.backscatter: must lie in 0\.\.1 \(0 excluded\), got 0\.0$"):
+        load_config(None, ["effects.weather.fog.backscatter=0"])
+    with pytest.raises(InputError, match=r"^effects\.weather\.snow\.terminal_velocity: must lie in 0\.05\.\.10 m/s, got 20\.0$"):
+        load_config(None, ["effects.weather.snow.terminal_velocity=20"])
+    with pytest.raises(InputError, match=r"^effects\.materials\.retroreflector\.max_angle_deg: must lie in 1\.\.90 deg, got 0\.5$"):
+        load_config(None, ["effects.materials.retroreflector.max_angle_deg=0.5"])
+
+
 def test_a_value_outside_the_range_is_refused_naming_the_key_range_and_unit():
     with pytest.raises(InputError, match=r"^effects\.noise\.sigma: must be >= 0 m, got -0\.1$"):
         load_config(None, ["effects.noise.sigma=-0.1"])
@@ -130,6 +155,15 @@ def test_the_panel_takes_units_from_the_metadata(panel_fields):
     # "offset" is a length word for the name guess, but the intensity offset is a fraction: the metadata wins
     assert panel_fields.unit_of(field_of(cfg.IntensityConfig, "offset")) == ""
     assert panel_fields.unit_of(field_of(cfg.TrajectoryConfig, "start_time")) == ""
+    from bpy_pipeline.lidar.effects.intensity import ReadingModel
+    from bpy_pipeline.lidar.effects.materials import GlossyPaint
+    from bpy_pipeline.lidar.effects.weather.fog import FogConfig
+
+    assert panel_fields.unit_of(field_of(FogConfig, "visibility")) == "length"  # no length word in its name
+    assert panel_fields.unit_of(field_of(FogConfig, "backscatter")) == ""
+    assert panel_fields.unit_of(field_of(ReadingModel, "compensated_range")) == "length"
+    assert panel_fields.unit_of(field_of(GlossyPaint, "lobe_deg")) == "angle"
+    assert not hasattr(panel_fields, "LENGTH_WORDS")
     assert panel_fields.limits(field_of(cfg.MirrorConfig, "max_bounces")) == (0, 255)
     view = panel_fields.group_view(cfg.MirrorConfig, "PANEL_PROBE_mirrors", {"max_bounces": 3, "normal_return_deg": 0.5, "label": "target"})
     shown = {fv.attr: fv for fv in view.fields}

@@ -20,7 +20,7 @@ from typing import Callable, Literal
 import numpy as np
 
 from ..errors import InputError
-from ..schema import check_positive
+from ..schema import check_positive, meta
 from .clearance import NO_POSES, SensorPoses
 from .collision import box_axes, rectangle_inside, rectangles_near, rectangles_overlap
 
@@ -33,12 +33,12 @@ class Distribution:
     draw's integer part, so ``edges`` k .. k + 1 hold the count k, as ``bpy-pipeline match`` writes them)."""
 
     kind: Literal["normal", "uniform", "histogram"] = "normal"
-    mean: float = 0.0
-    std: float = 1.0
-    min: float = 0.0
-    max: float = 1.0
-    edges: list[float] = field(default_factory=list)  # histogram: (b + 1,) increasing
-    weights: list[float] = field(default_factory=list)  # histogram: (b,) >= 0, not all 0
+    mean: float = field(default=0.0, metadata=meta(help="normal: the mean, in the quantity's unit"))
+    std: float = field(default=1.0, metadata=meta(help="normal: the standard deviation"))
+    min: float = field(default=0.0, metadata=meta(help="the lowest value drawn"))
+    max: float = field(default=1.0, metadata=meta(help="the highest value drawn"))
+    edges: list[float] = field(default_factory=list, metadata=meta(help="histogram: (b + 1,) increasing bin edges"))
+    weights: list[float] = field(default_factory=list, metadata=meta(help="histogram: (b,) bin weights >= 0, not all 0"))
 
 
 def check_distribution(d: Distribution, where: str, low: float | None = None, high: float | None = None) -> None:

@@ -33,6 +33,7 @@ from typing import Callable
 import numpy as np
 
 from ..errors import InputError
+from ..schema import meta
 from ..geometry.objects import ObjectPart
 from ..lidar.effects.materials import MATERIAL_MODELS, MaterialsConfig, apply_materials, check_materials
 from ..registry import Registry
@@ -129,10 +130,10 @@ class CarPaint:
     ``paints`` the body's pigments drawn per car, ``upper_from`` the height (a fraction of the car's) from which the body
     is ``upper``."""
 
-    enabled: bool = False
-    paints: dict = field(default_factory=lambda: {k: list(v) for k, v in PAINTS.items()})
-    upper_from: float = 0.58  # the bodies' beltlines lie at 0.50-0.62 of their height (geometry/objects.py); 0.5 / 0.58 tried: fitted
-    parts: dict = field(default_factory=dict)
+    enabled: bool = field(default=False, metadata=meta(help="paint the inserted cars' parts by their material models"))
+    paints: dict = field(default_factory=lambda: {k: list(v) for k, v in PAINTS.items()}, metadata=meta(help="the body's pigments drawn per car"))
+    upper_from: float = field(default=0.58, metadata=meta("", soft=(0, 1), help="fraction of the car's height from which the body is upper (0..1; beltlines lie at 0.50-0.62; fitted)"))
+    parts: dict = field(default_factory=dict, metadata=meta(help="part name -> its material model, over the default parts"))
 
     def __post_init__(self):
         if not isinstance(self.enabled, bool):

@@ -48,14 +48,14 @@ class ReadingModel:
 
     The mean gain and offset are ``effects.intensity.scale`` and ``effects.intensity.offset``."""
 
-    enabled: bool = False
-    compensated_range: float = 28.0  # m: the reading is range-compensated up to here (KITTI 000008: 28)
-    exponent: float = 2.0  # beyond it the reading falls as (R_c / R)^exponent (the lidar equation's 2; fitted: 2)
-    gain_sd: float = 0.16  # sd of ln(gain) across lasers (KITTI 000008's road: robust sd of its per-ring log medians)
-    offset_sd: float = 0.0  # sd of the offset across lasers (not identifiable on one frame: 0)
-    noise_sd: float = 0.075  # sd of ln of a per-return factor (KITTI 000008's road: robust within-ring log spread, 8-20 m)
-    unit_seed: int = 0  # the sensor unit: its lasers' gains and offsets are drawn from this seed
-    response: float = 1.0  # gamma: the reading grows as (a f(R))^gamma (1: linear; below 1: a compressing receiver)
+    enabled: bool = field(default=False, metadata=meta(help="read the reflectance through the unit's lasers (reflectance model only)"))
+    compensated_range: float = field(default=28.0, metadata=meta("m", soft=(0, 10000), help="the reading is range-compensated up to here (KITTI 000008: 28); > 0"))
+    exponent: float = field(default=2.0, metadata=meta("", 0, 10, help="beyond it the reading falls as (R_c / R)^exponent (the lidar equation's 2; fitted: 2)"))
+    gain_sd: float = field(default=0.16, metadata=meta("", 0, 2, help="sd of ln(gain) across lasers (KITTI 000008's road: robust sd of its per-ring log medians)"))
+    offset_sd: float = field(default=0.0, metadata=meta("", 0, 2, help="sd of the offset across lasers (not identifiable on one frame: 0)"))
+    noise_sd: float = field(default=0.075, metadata=meta("", 0, 2, help="sd of ln of a per-return factor (KITTI 000008's road: robust within-ring log spread, 8-20 m)"))
+    unit_seed: int = field(default=0, metadata=meta(help="the sensor unit: its lasers' gains and offsets are drawn from this seed (>= 0)"))
+    response: float = field(default=1.0, metadata=meta("", soft=(0, 4), help="gamma: the reading grows as (a f(R))^gamma (1: linear; below 1: a compressing receiver); > 0"))
 
 
 def check_reading(reading: ReadingModel, offset: float, model: str = "reflectance") -> None:

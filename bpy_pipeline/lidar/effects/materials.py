@@ -47,6 +47,7 @@ from typing import Callable
 import numpy as np
 
 from ...errors import InputError
+from ...schema import meta
 from ...registry import Registry
 from .base import Chunk, Effect, register_effect
 from .weather import wet_ground_factor
@@ -56,24 +57,24 @@ from .weather import wet_ground_factor
 class GlossyPaint:
     """``effects.materials.glossy_paint``."""
 
-    diffuse: float = 0.03  # the pigment's diffuse reflectance under the coat at 905 nm (dark: KITTI cars read about 0-0.1)
-    specular: float = 0.6  # the coat's return at normal incidence
-    lobe_deg: float = 8.0  # one sigma of the specular lobe, degrees of incidence
+    diffuse: float = field(default=0.03, metadata=meta("", 0, 1, help="the pigment's diffuse reflectance under the coat at 905 nm (dark: KITTI cars read about 0-0.1)"))
+    specular: float = field(default=0.6, metadata=meta("", 0, 10, help="the coat's return at normal incidence"))
+    lobe_deg: float = field(default=8.0, metadata=meta("deg", 0.1, 90, help="one sigma of the specular lobe, in incidence"))
 
 
 @dataclass(frozen=True)
 class Retroreflector:
     """``effects.materials.retroreflector``."""
 
-    reflectivity: float = 10.0  # apparent reflectance at normal entrance, in units of a white diffuse target (saturates)
-    max_angle_deg: float = 60.0  # entrance angle beyond which the sheeting no longer returns
+    reflectivity: float = field(default=10.0, metadata=meta("", 0, 1000, help="apparent reflectance at normal entrance, in units of a white diffuse target (saturates)"))
+    max_angle_deg: float = field(default=60.0, metadata=meta("deg", 1, 90, help="entrance angle beyond which the sheeting no longer returns"))
 
 
 @dataclass(frozen=True)
 class DarkPaint:
     """``effects.materials.dark_paint``."""
 
-    reflectivity: float = 0.05
+    reflectivity: float = field(default=0.05, metadata=meta("", 0, 1, help="diffuse reflectance at 905 nm"))
 
 
 @dataclass(frozen=True)
@@ -169,8 +170,8 @@ def model_name(identifier: int) -> str:
 class MaterialsConfig:
     """``effects.materials``: a reflectance model per class or per object, and each model's parameters."""
 
-    classes: dict = field(default_factory=dict)  # class name -> a name of MATERIAL_MODELS
-    objects: bool = False  # each object's model from its Blender material (the object table's surface column)
+    classes: dict = field(default_factory=dict, metadata=meta(help="class name -> a material model's name"))
+    objects: bool = field(default=False, metadata=meta(help="each object's model from its Blender material (the object table's surface column)"))
     glossy_paint: GlossyPaint = field(default_factory=GlossyPaint)
     retroreflector: Retroreflector = field(default_factory=Retroreflector)
     dark_paint: DarkPaint = field(default_factory=DarkPaint)
@@ -317,11 +318,11 @@ class CarGlass:
     docs/realism.md's materials table gives the sources and which figures are fitted.
     """
 
-    enabled: bool = False  # opt-in: on KITTI 004747 (held out) it puts no more cars within 0.7-1.4x (docs/realism.md)
-    index: float = GLASS_INDEX
-    windshield: float = 0.6  # fitted on KITTI 000008 (benchmarks/bench_materials.py --insertion)
-    tinted: float = 0.7  # fitted on KITTI 000008
-    interior: float = 0.15  # fitted on KITTI 000008 (0.05 and 0.15 tried; geometry/objects.py's cabin)
+    enabled: bool = field(default=False, metadata=meta(help="opt-in: on KITTI 004747 (held out) it puts no more cars within 0.7-1.4x (docs/realism.md)"))
+    index: float = field(default=GLASS_INDEX, metadata=meta("", soft=(1, 3), help="the glass's refractive index near 905 nm (1..3)"))
+    windshield: float = field(default=0.6, metadata=meta("", soft=(0, 1), help="the front pane's internal transmittance (0..1; fitted on KITTI 000008, benchmarks/bench_materials.py --insertion)"))
+    tinted: float = field(default=0.7, metadata=meta("", soft=(0, 1), help="the side and rear panes' internal transmittance (0..1; fitted on KITTI 000008)"))
+    interior: float = field(default=0.15, metadata=meta("", soft=(0, 1), help="the cabin's reflectivity (0..1; fitted on KITTI 000008: 0.05 and 0.15 tried)"))
 
     def __post_init__(self):
         for key, lo, hi in (("index", 1.0, 3.0), ("windshield", 0.0, 1.0), ("tinted", 0.0, 1.0), ("interior", 0.0, 1.0)):

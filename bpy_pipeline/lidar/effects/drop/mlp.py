@@ -16,11 +16,12 @@ seed gives the same bytes) and the ``mlp`` drop model's registration. The noise 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from ....errors import InputError
+from ....schema import meta
 from .base import DropModel, register_drop_model
 
 OUTPUTS = ("probability", "positive")  # sigmoid, exp
@@ -38,10 +39,10 @@ class MLP:
     both in -1..1; hidden layers use tanh.
     """
 
-    weights: tuple
-    biases: tuple
-    range_span: tuple[float, float]
-    output: str = "probability"
+    weights: tuple = field(metadata=meta(help="(fan_in, fan_out) weight matrices, the first layer's fan_in 2"))
+    biases: tuple = field(metadata=meta(help="(fan_out,) bias vectors; the last layer has one output"))
+    range_span: tuple[float, float] = field(metadata=meta("m", 0, low_open=True, help="(lo, hi) the network was fitted over; queries are clamped into it"))
+    output: str = field(default="probability", metadata=meta(help="probability (sigmoid of the last layer) or positive (its exponential)"))
 
     def __post_init__(self):
         object.__setattr__(self, "weights", tuple(np.asarray(w, np.float64) for w in self.weights))

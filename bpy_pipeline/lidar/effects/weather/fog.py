@@ -4,12 +4,13 @@ Detection in Adverse Weather" (ICCV 2021): the formulas are in :mod:`bpy_pipelin
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import lru_cache
 
 import numpy as np
 
 from ....errors import InputError
+from ....schema import meta
 from .kind import Returns, WeatherKind, register_weather_kind
 from .particles import overlap
 
@@ -21,11 +22,11 @@ MAX_VISIBILITY = 100_000.0  # m: beyond this fog is clear air
 class FogConfig:
     """``effects.weather.fog``: Hahner et al.'s fog (ICCV 2021)."""
 
-    visibility: float = 0.0  # m, meteorological optical range (0: no fog)
-    backscatter: float = 0.046  # beta x MOR (1/sr); their 0.046 (0.023..0.092)
-    gamma: float = 1e-6  # their hard-target reflectivity calibration Gamma (beta0 = Gamma / pi)
-    pulse_ns: float = 20.0  # tau_H, half-power pulse width (their lookup tables: 20 ns)
-    noise: float = 10.0  # m: a fog return lies noise x Beta(2, 20) behind the soft peak (their variant v4)
+    visibility: float = field(default=0.0, metadata=meta("m", soft=(0, MAX_VISIBILITY), help="meteorological optical range: 0 (no fog) or 1..100000"))
+    backscatter: float = field(default=0.046, metadata=meta("", 0, 1, low_open=True, help="beta x MOR (1/sr); their 0.046 (0.023..0.092)"))
+    gamma: float = field(default=1e-6, metadata=meta("", 0, 1, low_open=True, help="hard-target reflectivity calibration Gamma (beta0 = Gamma / pi)"))
+    pulse_ns: float = field(default=20.0, metadata=meta("ns", 0, 1000, low_open=True, help="tau_H, half-power pulse width (their lookup tables: 20 ns)"))
+    noise: float = field(default=10.0, metadata=meta("m", 0, 100, help="a fog return lies noise x Beta(2, 20) behind the soft peak (their variant v4)"))
 
 
 def fog_alpha(visibility: float) -> float:

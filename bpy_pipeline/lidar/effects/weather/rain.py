@@ -5,24 +5,25 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from ....errors import InputError
+from ....schema import meta
 from .kind import Returns, WeatherKind, register_weather_kind
 from .particles import _Particles
 
-MAX_RAIN = 300.0  # mm/h: above the heaviest measured hourly rain rates
+MAX_RAIN = 300  # mm/h: above the heaviest measured hourly rain rates
 
 
 @dataclass(frozen=True)
 class RainConfig:
     """``effects.weather.rain``: Goodin et al.'s rain (Electronics 2019) with droplet returns."""
 
-    rate: float = 0.0  # mm/h (0: no rain)
-    droplet_reflectivity: float = 0.02  # a drop returns like this diffuse target over its share of the footprint (assumed)
-    min_diameter_mm: float = 0.5  # smaller drops are left to the extinction alone
+    rate: float = field(default=0.0, metadata=meta("mm/h", 0, MAX_RAIN, help="rain rate (0: no rain)"))
+    droplet_reflectivity: float = field(default=0.02, metadata=meta("", 0, 1, help="a drop returns like this diffuse target over its share of the footprint (assumed)"))
+    min_diameter_mm: float = field(default=0.5, metadata=meta("", 0, 6, low_open=True, help="drop diameter in mm; smaller drops are left to the extinction alone"))
 
 
 def rain_alpha(rate: float) -> float:

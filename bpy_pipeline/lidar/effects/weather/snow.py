@@ -10,11 +10,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ....errors import InputError
+from ....schema import meta
 from .kind import Returns, WeatherKind, register_weather_kind
 from .particles import _Particles
 
 WATER_INDEX = 1.33  # refractive index of water in the near infrared
-MAX_SNOW = 20.0  # mm/h water equivalent: far above the heaviest snowfall (their heavy snow: > 2.5)
+MAX_SNOW = 20  # mm/h water equivalent: far above the heaviest snowfall (their heavy snow: > 2.5)
 WET_CLASSES = ("road", "ground", "terrain", "sidewalk", "kerb", "ballast", "platform", "floor", "ramp")
 
 
@@ -22,12 +23,12 @@ WET_CLASSES = ("road", "ground", "terrain", "sidewalk", "kerb", "ballast", "plat
 class SnowConfig:
     """``effects.weather.snow``: Hahner et al.'s snowfall (CVPR 2022)."""
 
-    rate: float = 0.0  # mm/h of water equivalent (0: no snow); their light < 1, moderate 1..2.5, heavy above
-    terminal_velocity: float = 1.0  # m/s (their 0.2..2)
-    density: float = 0.1  # g/cm^3 of the flakes (their 0.01..0.2)
-    flake_reflectivity: float = 0.9  # their 90 % target
-    wet_ground: bool = False  # the ground's returns through a water film
-    wet_classes: list[str] = field(default_factory=lambda: list(WET_CLASSES))
+    rate: float = field(default=0.0, metadata=meta("mm/h", 0, MAX_SNOW, help="water equivalent (0: no snow); their light < 1, moderate 1..2.5, heavy above"))
+    terminal_velocity: float = field(default=1.0, metadata=meta("m/s", 0.05, 10, help="the flakes' fall speed (their 0.2..2)"))
+    density: float = field(default=0.1, metadata=meta("", 0.005, 0.9, help="g/cm^3 of the flakes (their 0.01..0.2)"))
+    flake_reflectivity: float = field(default=0.9, metadata=meta("", 0, 1, help="a flake returns like this diffuse target (their 90 % target)"))
+    wet_ground: bool = field(default=False, metadata=meta(help="the ground's returns through a water film"))
+    wet_classes: list[str] = field(default_factory=lambda: list(WET_CLASSES), metadata=meta(help="the classes the wet ground applies to"))
 
 
 def snow_occupancy(rate: float, terminal_velocity: float = 1.0, density: float = 0.1) -> float:
