@@ -3,7 +3,7 @@
 1. Accuracy against a truth: a procedural street (bench_mixing's: ground, walls, boxes, eight cars) scanned by
    an HDL-64E at 1.73 m (the dense source, written as an organised scan with one instance id per object) and by
    the HDL-32E at 1.84 m (the truth). The source converted to the HDL-32E by each method through the command's
-   own path (bpy_pipeline.conversion.convert, lift 0.11 m). Per method: milliseconds (best of N: reading the scan,
+   own path (bpy_pipeline.cli.convert.convert, lift 0.11 m). Per method: milliseconds (best of N: reading the scan,
    recovering its firings and converting; the real scans' rows likewise), the share of
    the truth's returns reproduced (same ring and column), returns where the truth has none, the position error
    in the cells both have, and the share of those cells whose carried label (the object) is the truth's.
@@ -21,7 +21,7 @@ import numpy as np
 from bench_mixing import street_scene
 from common import ROOT, arguments, best_of, report
 
-from bpy_pipeline.conversion import convert
+from bpy_pipeline.cli.convert import convert
 from bpy_pipeline.io.real_scans import read_real_scan
 from bpy_pipeline.lidar.sensor.sensors import resolve_sensor
 from bpy_pipeline.mixing.convert import METHODS

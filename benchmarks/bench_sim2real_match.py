@@ -28,7 +28,7 @@ from sim2real_mixed import CAR_RULE, PERSON_RULE, make_mixed_dataset
 from bpy_pipeline.evaluate import labelled
 from bpy_pipeline.evaluate.metrics import score
 from bpy_pipeline.evaluate.models import fit
-from bpy_pipeline.match import fit_real, matched_config
+from bpy_pipeline.cli.match import fit_real, matched_config
 
 
 def matched_rules(backgrounds: list[Path]) -> tuple[dict, list[str]]:
