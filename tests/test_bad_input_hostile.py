@@ -245,6 +245,8 @@ def test_match_refuses_a_report_on_the_config_it_writes(tmp_path, capsys):
     ["match", "REAL", "--config", "BASE", "--out", "o.yaml", "--report", "REAL"],
     ["evaluate", "--train", "REAL", "--test", "REAL", "--out", "REAL"],
     ["fit", "REAL", "--out", "REAL"],
+    ["realism", "--generated", "REAL", "--real", "REAL", "--out", "REAL"],
+    ["realism", "--generated", "REAL", "--real", "REAL", "--out", "o.yaml", "--plot", "REAL"],
 ])
 def test_a_command_never_writes_over_its_own_input(argv, tmp_path, capsys):
     scan, _ = npy_frame(tmp_path / "real")

@@ -317,12 +317,16 @@ def add_realism_arguments(p):
 
 def realism_main(args) -> int:
     """Run the comparison, print the findings, write the report and the plot."""
+    from ..io.confined import refuse_output_over_input
     from .run import write_report
 
     out = Path(args.out)
     if out.is_dir():
         raise InputError(f"--out: {out} is a folder; give a file path")
     plot = Path(args.plot) if args.plot else out.with_suffix(".png")
+    inputs = [*args.generated, *args.real]
+    refuse_output_over_input(out, inputs)
+    refuse_output_over_input(plot, [*inputs, out], "--plot")
     report = realism_report(args.generated, args.real, args.classes, plot)
     write_report(out, report)
     print("What differs most, generated against real:")
