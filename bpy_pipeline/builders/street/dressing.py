@@ -563,7 +563,8 @@ def dress(p, road_half: float, walk_inner: float, walk_outer: float, kerb_height
                     t0 = float(rng.uniform(crossing_end + 3.0, A - 15.0))
                     length = float(rng.uniform(6.0, 12.0))
                     cx, cy = in_block(t0 + length / 2 + 0.5, lane_mid, sx, sy, axis)
-                    half = np.array([length / 2 + 1.5, p.parking_width / 2]) if axis == 0 else np.array([p.parking_width / 2, length / 2 + 1.5])
+                    across = max(p.parking_width / 2, 0.75)  # the strip, or the cones' and barriers' feet 0.4 m either side of its middle
+                    half = np.array([length / 2 + 1.5, across]) if axis == 0 else np.array([across, length / 2 + 1.5])
                     if not clear_of((cx, cy), half, 0.0, 1.2):
                         continue
                     for t in np.arange(t0, t0 + length, 1.5):
