@@ -153,7 +153,7 @@ class Terrain:
 
     def z(self, x, y) -> np.ndarray:
         x, y = np.asarray(x, float), np.asarray(y, float)
-        across_y_road = np.abs(x) if self.arms == (-1, 1) else np.where(np.isin(np.where(y < 0, -1, 1), self.arms), np.abs(x), np.inf)
+        across_y_road = np.where(np.isin(np.where(y < 0, -1, 1), self.arms), np.abs(x), np.inf)  # no arm on y's side: only the road along x is near
         d = np.maximum(np.minimum(across_y_road, np.abs(y)) - self.walk_outer, 0.0)
         rolling = np.zeros(np.broadcast(x, y).shape)
         for share, kx, ky, phase in self.waves:

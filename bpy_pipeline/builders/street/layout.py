@@ -580,9 +580,10 @@ def _sidewalk_point(layout: StreetLayout, rng) -> tuple[np.ndarray, int]:
         along = float(rng.uniform(lo, A)) * float(rng.choice([-1, 1]))
         centre = np.array([along, band]) if rng.random() < 0.5 else np.array([band, along])
         return centre, 0 if abs(centre[1]) < abs(centre[0]) else 1
-    rects = np.array(layout.walks, float) + [0.4, -0.4, 0.4, -0.4]
-    area = (rects[:, 1] - rects[:, 0]) * (rects[:, 3] - rects[:, 2])
-    x0, x1, y0, y1 = rects[int(rng.choice(len(rects), p=area / area.sum()))]
+    rects = np.array(layout.walks, float)
+    size = np.column_stack([rects[:, 1] - rects[:, 0], rects[:, 3] - rects[:, 2]])
+    margin = np.minimum(0.4, size / 2)  # a sidewalk narrower than 0.8 m: its middle
+    x0, x1, y0, y1 = (rects + np.column_stack([margin[:, 0], -margin[:, 0], margin[:, 1], -margin[:, 1]]))[int(rng.choice(len(rects), p=size.prod(1) / size.prod(1).sum()))]
     return np.array([rng.uniform(x0, x1), rng.uniform(y0, y1)]), 0 if x1 - x0 > y1 - y0 else 1
 
 
