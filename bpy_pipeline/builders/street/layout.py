@@ -1,4 +1,4 @@
-"""An urban intersection and its road users: layout, meshes and placement rules. Pure numpy.
+"""An urban street (a four-arm intersection, a T-junction or a straight street) and its road users: layout, meshes and placement rules. Pure numpy.
 
 World frame: the junction's centre at the origin, z up, the road surface at z = 0. The road along
 x runs whole, ``arm_length`` metres either side of the centre; the road along y has the arms of
