@@ -25,7 +25,7 @@ class StreetScene:
     sidewalks the junction has, so there are as many per metre); ``lanes_per_direction``
     drive lanes of ``lane_width`` each way, a ``parking_width`` strip by each kerb (0: none), kerbs
     ``kerb_width`` x ``kerb_height``, sidewalks ``sidewalk_width`` wide, zebra crossings
-    ``crossing_width`` wide ``crossing_offset`` from the intersection, four traffic lights, ``signs``
+    ``crossing_width`` wide ``crossing_offset`` from the junction, a traffic light at each corner it has, ``signs``
     traffic signs; each road reaches ``arm_length`` from the centre (100 m: a car-roof sensor's
     range). Beyond the sidewalks (builders/street/dressing.py): terrain rolling by
     ``terrain_relief`` (m) and rising by ``terrain_slope`` away from the road, on a ``terrain_step``
