@@ -149,11 +149,10 @@ def centre_lines(arm_length: float, j: Junction = FOUR_ARMS) -> list[np.ndarray]
     """The roads' centre lines ((2, 3) m each) of junction ``j``: the road along x (through), then the road along y
     (crossing) with four arms, its arm from the centre out at a T-junction, nothing more on a straight street."""
     a = float(arm_length)
-    lines = [np.array([[-a, 0.0, 0.0], [a, 0.0, 0.0]])]
+    through = np.array([[-a, 0.0, 0.0], [a, 0.0, 0.0]])
     if len(j.arms) == 2:
-        lines.append(np.array([[0.0, -a, 0.0], [0.0, a, 0.0]]))
-    lines += [np.array([[0.0, 0.0, 0.0], [0.0, sign * a, 0.0]]) for sign in j.arms if len(j.arms) == 1]
-    return lines
+        return [through, np.array([[0.0, -a, 0.0], [0.0, a, 0.0]])]
+    return [through] + [np.array([[0.0, 0.0, 0.0], [0.0, sign * a, 0.0]]) for sign in j.arms]
 
 
 def road_inputs(params) -> dict:
