@@ -97,7 +97,7 @@ def draw_reflectivity(rng: np.random.Generator, law: tuple[float, float, float, 
 
 
 # ----------------------------------------------------------------------------- the junction
-JUNCTION_STREAM = 50  # the junction's generator: default_rng([layout_seed, JUNCTION_STREAM]), apart from the layout's own
+JUNCTION_STREAM = 50  # the junction's generator: default_rng([layout_seed, JUNCTION_STREAM]), used by nothing else
 
 
 @dataclass(frozen=True)
