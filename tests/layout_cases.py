@@ -126,10 +126,11 @@ def _overlapping_boxes(boxes: list[tuple[np.ndarray, np.ndarray]], what: str) ->
 
 # ----------------------------------------------------------------------------- street
 def street_case(seed: int) -> list[str]:
-    """A street of random valid parameters; a sensor driving along a random drive lane (at 0.6-2.5 m) and a rig of
-    three sensors on a sidewalk; its static layout and one frame's road users."""
+    """A street of random valid parameters and junction kinds; a sensor driving along a random drive lane (at 0.6-2.5 m;
+    along y only through four arms) and a rig of three sensors on a sidewalk; its static layout and one frame's road
+    users, each on its lane, parking strip, sidewalk or crossing."""
     from bpy_pipeline.builders.street import params as street_params
-    from bpy_pipeline.builders.street.layout import place_users, street_layout
+    from bpy_pipeline.builders.street.layout import JUNCTIONS, junction, place_users, street_layout
     from bpy_pipeline.geometry.placement import Distribution
 
     rng = np.random.default_rng(seed)
@@ -153,12 +154,13 @@ def street_case(seed: int) -> list[str]:
         motorcycles=Distribution("normal", u(0.0, 3.0), 1.0, 0.0, 10.0), pedestrians=Distribution("normal", u(0.0, 10.0), 3.0, 0.0, 40.0),
         clearance=u(0.0, 1.0), fov_aware=False,
     )
+    params = dataclasses.replace(params, junction_mix={kind: float(rng.uniform(0.0, 1.0)) for kind in JUNCTIONS})  # every kind, drawn per layout_seed
     street_params.check(params, "scene")
     A, R = params.arm_length, lanes * lane_width + parking
     inner, outer = R + kerb_width, R + kerb_width + sidewalk
     offset = -(int(rng.integers(lanes)) + 0.5) * lane_width * float(rng.choice([-1, 1]))
     path = np.array([[-A, offset, 0.0], [A, offset, 0.0]]) + [0.0, 0.0, u(0.6, 2.5)]
-    if rng.random() < 0.5:
+    if rng.random() < 0.5 and junction(params).arms == (-1, 1):  # along the road along y where it runs whole
         path = path[:, [1, 0, 2]]
     along, across = u(inner + 0.4, A - 0.5) * rng.choice([-1, 1]), u(inner + 0.4, outer - 0.4) * rng.choice([-1, 1])
     station = np.array([along, across, params.kerb_height + u(0.6, 2.5)])
@@ -180,6 +182,13 @@ def street_case(seed: int) -> list[str]:
         for c, h, y in obstacles:
             if rectangles_overlap(user.centre, user.half, user.yaw, c, h, y, 0.0):
                 out.append(f"street {user.kind} {i} overlaps an obstacle at {np.round(c, 2).tolist()}")
+        area = user.where.partition(":")[0]
+        corners = user.centre + np.array([[sx * user.half[0], sy * user.half[1]] for sx in (-1, 1) for sy in (-1, 1)]) @ np.array(
+            [[np.cos(user.yaw), np.sin(user.yaw)], [-np.sin(user.yaw), np.cos(user.yaw)]])
+        if area in ("lane", "parking") and not all(layout.on_road(c) for c in (corners if area == "lane" else [user.centre])):  # a strip narrower than a car: it overhangs the kerb
+            out.append(f"street {user.kind} {i} ({user.where}) reaches off the road ({layout.junction.kind})")
+        if (area == "sidewalk" and not layout.on_sidewalk(user.centre)) or (area == "crossing" and not layout.on_crossing(user.centre)):
+            out.append(f"street person {i} off its {area} ({layout.junction.kind})")
     return out
 
 

@@ -21,6 +21,9 @@ PARAMETER_SETS = [
     StreetScene(),
     StreetScene(lanes_per_direction=2, lane_width=3.25, parking_width=0.0, kerb_width=0.3, kerb_height=0.12, sidewalk_width=2.0, arm_length=60.0),
     StreetScene(lanes_per_direction=3, lane_width=3.0, parking_width=2.5, kerb_width=0.2, kerb_height=0.2, sidewalk_width=5.0, arm_length=150.0),
+    StreetScene(junction_mix={"t_junction": 1.0}, layout_seed=0),  # the arm along -y
+    StreetScene(junction_mix={"t_junction": 1.0}, layout_seed=1, lanes_per_direction=2, parking_width=0.0, arm_length=60.0),  # along +y
+    StreetScene(junction_mix={"straight": 1.0}, sidewalk_width=2.0),
 ]
 
 

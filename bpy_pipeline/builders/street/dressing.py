@@ -4,7 +4,8 @@ hedges and walls, street trees, lamps, bins, bicycle stands, bollards and road w
 The sim-to-real benchmark showed why this exists: a model trained on a street of roads, kerbs,
 facades and road users alone called real trees, fences, terrain and walls cars and people,
 because it had never seen them. Everything here is static (drawn once from the layout's
-generator) and laid out per corner block of the intersection of :mod:`.street`:
+generator) and laid out per corner block of the junction of :mod:`.layout` (where the road along y has no
+arm, the two blocks on that side meet at x = 0 and the plots along the road along x run through):
 
 - *terrain*: each block beyond the sidewalks is ground (class ``terrain``): a height field at
   ``terrain_step`` metres that leaves the sidewalk's edge at its height and then rolls gently
@@ -137,7 +138,8 @@ class Dressing:
 class Terrain:
     """The ground beyond the sidewalks: ``z(x, y)`` (m) at world ``x, y`` of a corner block.
 
-    ``d``, the distance from the nearest sidewalk's outer edge, sets the shape: the ground meets
+    ``d``, the distance from the nearest sidewalk's outer edge (the road along y's only on the sides ``arms`` of
+    its arms), sets the shape: the ground meets
     the sidewalk 3 cm below its top and rises by ``slope * d`` plus a smooth relief of
     ``relief`` metres (a sum of ``waves`` (k, 4): amplitude share, kx, ky, phase), faded in over 4 m.
     """
@@ -147,24 +149,26 @@ class Terrain:
     relief: float
     slope: float
     waves: np.ndarray
+    arms: tuple[int, ...] = (-1, 1)
 
     def z(self, x, y) -> np.ndarray:
         x, y = np.asarray(x, float), np.asarray(y, float)
-        d = np.maximum(np.minimum(np.abs(x), np.abs(y)) - self.walk_outer, 0.0)
+        across_y_road = np.where(np.isin(np.where(y < 0, -1, 1), self.arms), np.abs(x), np.inf)  # no arm on y's side: only the road along x is near
+        d = np.maximum(np.minimum(across_y_road, np.abs(y)) - self.walk_outer, 0.0)
         rolling = np.zeros(np.broadcast(x, y).shape)
         for share, kx, ky, phase in self.waves:
             rolling = rolling + share * np.sin(kx * x + ky * y + phase)
         return self.top - 0.03 + self.slope * d + self.relief * (1.0 - np.exp(-d / 4.0)) * rolling
 
 
-def make_terrain(walk_outer: float, top: float, relief: float, slope: float, rng: np.random.Generator) -> Terrain:
-    """A :class:`Terrain` with four waves of 15-60 m wavelength drawn from ``rng``."""
+def make_terrain(walk_outer: float, top: float, relief: float, slope: float, rng: np.random.Generator, arms: tuple[int, ...] = (-1, 1)) -> Terrain:
+    """A :class:`Terrain` with four waves of 15-60 m wavelength drawn from ``rng`` beside the road along y's ``arms``."""
     k = 2 * math.pi / rng.uniform(15.0, 60.0, 4)
     angle = rng.uniform(0.0, 2 * math.pi, 4)
     share = rng.uniform(0.5, 1.0, 4)
     share /= share.sum()
     waves = np.column_stack([share, k * np.cos(angle), k * np.sin(angle), rng.uniform(0.0, 2 * math.pi, 4)])
-    return Terrain(walk_outer, top, relief, slope, waves)
+    return Terrain(walk_outer, top, relief, slope, waves, tuple(arms))
 
 
 def _height_grid(terrain: Terrain, x0: float, x1: float, y0: float, y1: float, step: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -341,13 +345,14 @@ def prototypes(rng: np.random.Generator) -> Prototypes:
 
 
 # ----------------------------------------------------------------------------- the dressing
-def dress(p, road_half: float, walk_inner: float, walk_outer: float, kerb_height: float, crossing_end: float,
+def dress(p, road_half: float, walk_inner: float, walk_outer: float, kerb_height: float, starts: dict, arms: tuple[int, ...],
           rng: np.random.Generator, clear: SensorPoses = NO_POSES) -> Dressing:
-    """The dressing of :class:`~bpy_pipeline.builders.street.StreetScene` ``p`` around an intersection.
+    """The dressing of :class:`~bpy_pipeline.builders.street.StreetScene` ``p`` around a junction.
 
     road_half : R (m), the carriageway's half width to the kerb; walk_inner / walk_outer : the
-    sidewalks' inner and outer distance from a road's centre line (m); crossing_end : distance from
-    the centre (m) where the crossings end (nothing stands on the sidewalk's corner squares before it).
+    sidewalks' inner and outer distance from a road's centre line (m); starts : per arm ``(axis, sign)``, the
+    distance from the centre (m) where its crossing ends, or 0 without one (nothing stands on the kerb-side band
+    before it); arms : the signs of the road along y's arms (the blocks on a side without one meet at x = 0).
     Buildings are in ``buildings`` (class ``building``), everything else in ``parts``. Each building's
     ``fronts`` entry is its facade line along the plot, ``(start (3,), end (3,), depth, height)`` (m): the
     building is the box standing ``height`` above the line (which lies at the box's bottom, under the
@@ -358,7 +363,7 @@ def dress(p, road_half: float, walk_inner: float, walk_outer: float, kerb_height
     A = p.arm_length
     out = Dressing()
     kinds = prototypes(rng)
-    terrain = make_terrain(walk_outer, kerb_height, p.terrain_relief, p.terrain_slope, rng)
+    terrain = make_terrain(walk_outer, kerb_height, p.terrain_relief, p.terrain_slope, rng, arms)
     z_at = terrain.z
     out.yards = Yards([], terrain, kinds.poles[0], [(kinds.plants[k][0] / kinds.plant_size[k][[0, 0, 1]], kinds.plants[k][1])
                                                    for k in (kinds.crown("round", v) for v in range(CROWN_VARIANTS))])
@@ -423,14 +428,16 @@ def dress(p, road_half: float, walk_inner: float, walk_outer: float, kerb_height
     max_setback = float(p.setback[1])
     for sx in (-1, 1):
         for sy in (-1, 1):
-            # terrain over the whole corner block beyond the sidewalks
+            # terrain over the whole corner block beyond the sidewalks (from x = 0 on a side without a y arm)
+            block_start = walk_outer if sy in arms else 0.0
+            frontages = (0, 1) if sy in arms else (0,)
             if p.terrain:
-                x0, x1 = sorted((sx * walk_outer, sx * A))
+                x0, x1 = sorted((sx * block_start, sx * A))
                 y0, y1 = sorted((sy * walk_outer, sy * A))
                 out.parts.append((f"street_terrain_{len(out.parts):03d}", "terrain", REFLECTIVITY["terrain"], terrain_mesh(terrain, x0, x1, y0, y1, p.terrain_step, rng), None))
             # plots along both frontages (the second starts behind the first's deepest plot)
-            for axis in (0, 1):
-                s = walk_outer if axis == 0 else walk_outer + max_setback + p.building_depth
+            for axis in frontages:
+                s = block_start if axis == 0 else walk_outer + max_setback + p.building_depth
                 while s < A - 2.0:
                     width = min(float(rng.uniform(*p.building_width)), A - s)
                     is_open = rng.random() < p.open_share
@@ -491,8 +498,9 @@ def dress(p, road_half: float, walk_inner: float, walk_outer: float, kerb_height
                             out.count("walls")
                     s += width
             # the kerb-side band of the sidewalks of this block's two arm sides
-            for axis in (0, 1):
+            for axis in frontages:
                 band = walk_inner + 0.7
+                crossing_end = starts[axis, sx if axis == 0 else sy]
                 lined = rng.random() < p.street_trees
                 trees_at = []
                 if lined and p.tree_spacing[1] > 0:
@@ -555,7 +563,8 @@ def dress(p, road_half: float, walk_inner: float, walk_outer: float, kerb_height
                     t0 = float(rng.uniform(crossing_end + 3.0, A - 15.0))
                     length = float(rng.uniform(6.0, 12.0))
                     cx, cy = in_block(t0 + length / 2 + 0.5, lane_mid, sx, sy, axis)
-                    half = np.array([length / 2 + 1.5, p.parking_width / 2]) if axis == 0 else np.array([p.parking_width / 2, length / 2 + 1.5])
+                    across = max(p.parking_width / 2, 0.75)  # the strip, or the cones' and barriers' feet 0.4 m either side of its middle
+                    half = np.array([length / 2 + 1.5, across]) if axis == 0 else np.array([across, length / 2 + 1.5])
                     if not clear_of((cx, cy), half, 0.0, 1.2):
                         continue
                     for t in np.arange(t0, t0 + length, 1.5):

@@ -1,8 +1,10 @@
-"""An urban intersection and its road users: layout, meshes and placement rules. Pure numpy.
+"""An urban street (a four-arm intersection, a T-junction or a straight street) and its road users: layout, meshes and placement rules. Pure numpy.
 
-World frame: the intersection's centre at the origin, z up, the road surface at z = 0. Two
-straight roads cross there, one along x and one along y, each ``arm_length`` metres from the
-centre to its end. Traffic keeps right: on the road along x, lanes driving +x lie at y < 0.
+World frame: the junction's centre at the origin, z up, the road surface at z = 0. The road along
+x runs whole, ``arm_length`` metres either side of the centre; the road along y has the arms of
+the layout's :class:`Junction` (drawn by :func:`junction` from ``junction_mix`` and ``layout_seed``):
+both (``cross``, four arms), one (``t_junction``) or none (``straight``: a residential street, with
+one mid-block zebra crossing). Traffic keeps right: on the road along x, lanes driving +x lie at y < 0.
 Across a road (from its centre line out)::
 
     | drive lanes (lanes_per_direction x lane_width) | parking strip | kerb | sidewalk | facades
@@ -10,7 +12,7 @@ Across a road (from its centre line out)::
 so a road's half width is ``R = lanes_per_direction * lane_width + parking_width``; the kerb
 is a ``kerb_width`` strip ``kerb_height`` high at ``|y| = R``, the sidewalk a slab of the same
 height out to ``R + kerb_width + sidewalk_width``, the buildings' facades stand at its outer
-edge. A zebra crossing spans each arm ``crossing_offset`` metres from the intersection's edge.
+edge. A zebra crossing spans each arm of a junction ``crossing_offset`` metres from its edge.
 
 Road users are upright boxes on the ground for placement (centre, half size, yaw), and meshes in
 their own frame (x forward, y left, z up, origin on the ground below the box centre):
@@ -27,6 +29,9 @@ Placement rules (:func:`place_users`):
   the lane gives the yaw, and the platoon keeps the gap);
 - *parked cars*: in the parking strips, nose along the traffic of their side, never on a crossing
   or in the intersection;
+- *as many per metre*: the counts (``vehicles``, ``parked``, ``bicycles``, ``motorcycles``,
+  ``pedestrians``) are for the four-arm intersection; a junction with fewer arms scales each by its
+  lanes' length (parking strips', sidewalks' area) over the four-arm one's (:attr:`StreetLayout.scale`);
 - *pedestrians*: on a sidewalk (heading along it) or on a crossing (heading across the road);
 - *no overlap*: every footprint keeps ``clearance`` from every other and from poles;
 - *clear of the sensor*: no user's box comes within ``clear.radius`` of a sensor pose of the run
@@ -91,6 +96,50 @@ def draw_reflectivity(rng: np.random.Generator, law: tuple[float, float, float, 
     return float(np.clip(median * math.exp(log_sd * float(rng.standard_normal())), lowest, highest))
 
 
+# ----------------------------------------------------------------------------- the junction
+JUNCTION_STREAM = 50  # the junction's generator: default_rng([layout_seed, JUNCTION_STREAM]), used by nothing else
+
+
+@dataclass(frozen=True)
+class Junction:
+    """Which arms a street has. The road along x always runs whole; ``arms`` are the signs of the road along y's
+    arms (``(-1, 1)``: both, ``(1,)``: +y only, ``()``: none); ``crossings`` the arms ``(axis, sign)`` with a zebra
+    crossing by the centre, in the order the layout lists them."""
+
+    kind: str
+    arms: tuple[int, ...]
+    crossings: tuple[tuple[int, int], ...]
+
+    def has_arm(self, axis: int, sign: int) -> bool:
+        return axis == 0 or sign in self.arms
+
+
+def _t_junction(rng: np.random.Generator) -> Junction:
+    side = int(rng.choice([-1, 1]))
+    return Junction("t_junction", (side,), ((0, -1), (0, 1), (1, side)))
+
+
+# kind -> its junction, drawn from the junction's generator (a T-junction's arm on either side)
+JUNCTIONS = {
+    "cross": lambda rng: Junction("cross", (-1, 1), ((0, -1), (0, 1), (1, -1), (1, 1))),
+    "t_junction": _t_junction,
+    "straight": lambda rng: Junction("straight", (), ((0, 1),)),  # one mid-block zebra crossing
+}
+FOUR_ARMS = JUNCTIONS["cross"](None)
+
+
+def junction(p) -> Junction:
+    """The :class:`Junction` of :class:`~bpy_pipeline.builders.street.StreetScene` ``p``: its kind drawn by the shares
+    ``p.junction_mix`` from ``default_rng([p.layout_seed, JUNCTION_STREAM])`` (no draw when one kind has them all), so
+    the layout's own generator draws the same whichever kind it is."""
+    kinds = [k for k in JUNCTIONS if p.junction_mix.get(k, 0) > 0]
+    rng = np.random.default_rng([int(p.layout_seed), JUNCTION_STREAM])
+    if len(kinds) > 1:
+        shares = np.array([p.junction_mix[k] for k in kinds], float)
+        kinds = [kinds[int(rng.choice(len(kinds), p=shares / shares.sum()))]]
+    return JUNCTIONS[kinds[0]](rng)
+
+
 # ----------------------------------------------------------------------------- the layout
 @dataclass(frozen=True)
 class Lane:
@@ -134,12 +183,14 @@ class Part:
 
 @dataclass
 class StreetLayout:
-    """The static intersection: parts, lanes, walkable areas and obstacles.
+    """The static street: parts, lanes, walkable areas and obstacles.
 
     half_road : R (m), a road's half width to the kerb; walk_inner, walk_outer : the sidewalks'
-    distance from the road's centre line (m); crossings : per arm ``(axis, sign, s0, s1)`` the
+    distance from the road's centre line (m); crossings : per crossed arm ``(axis, sign, s0, s1)`` the
     crossing spans along the road from ``s0`` to ``s1`` (m from the centre); poles : (k, 3)
-    x, y, radius of every pole (lights, signs)
+    x, y, radius of every pole (lights, signs); junction : which arms it has (:class:`Junction`);
+    scale : per ``drive`` / ``parking`` / ``sidewalk``, the drive lanes' length (parking strips',
+    sidewalks' area) over the four-arm intersection's (1.0 for it): what the road users' counts are scaled by
     """
 
     parts: list[Part]
@@ -155,6 +206,8 @@ class StreetLayout:
     blocks: list = field(default_factory=list)
     dressing: dict = field(default_factory=dict)
     yards: object = None  # dressing.Yards: where the "Street Planting" group plants
+    junction: Junction = FOUR_ARMS
+    scale: dict = field(default_factory=dict)
 
     def on_sidewalk(self, xy) -> bool:
         """True when ``xy`` (2,) lies on a sidewalk slab (kerbs excluded)."""
@@ -173,20 +226,23 @@ class StreetLayout:
     def on_road(self, xy) -> bool:
         """True when ``xy`` lies on the carriageway (inside a kerb)."""
         a = np.abs(np.asarray(xy, float))
-        return bool((a <= self.arm_length).all() and a.min() <= self.half_road)
+        on_y_arm = a[0] <= self.half_road and math.copysign(1.0, float(xy[1])) in self.junction.arms
+        return bool((a <= self.arm_length).all() and (a[1] <= self.half_road or on_y_arm))
 
 
-def road_meshes(p) -> tuple[Mesh, Mesh, Mesh, list[tuple[float, float, float, float]]]:
+def road_meshes(p, j: Junction | None = None) -> tuple[Mesh, Mesh, Mesh, list[tuple[float, float, float, float]]]:
     """The carriageway, the kerbs and the sidewalks of :class:`~bpy_pipeline.builders.street.StreetScene` ``p``
-    (meshes, m, world) and the sidewalks' rectangles ``(x0, x1, y0, y1)`` (m). The reference of the "Street Road"
-    Geometry Nodes group (builders/street/road_nodes.py).
+    with the arms of junction ``j`` (default: :func:`junction` of ``p``) (meshes, m, world) and the sidewalks'
+    rectangles ``(x0, x1, y0, y1)`` (m). The reference of the "Street Road" Geometry Nodes group (builders/street/road_nodes.py).
 
-    road : the road along x whole (2 arm_length x 2 R), the road along y in two halves beside it;
+    road : the road along x whole (2 arm_length x 2 R), the road along y's arms beside it;
     kerbs : per arm and side a ``kerb_width`` x ``kerb_height`` box at ``|across| = R``, the x road's from the
     corner (``R``), the y road's from ``R + kerb_width``; sidewalks : per arm and side a slab ``kerb_height`` high
     from ``R + kerb_width`` to ``R + kerb_width + sidewalk_width`` across, the x road's from ``R + kerb_width``,
-    the y road's from ``R + kerb_width + sidewalk_width`` along.
+    the y road's from ``R + kerb_width + sidewalk_width`` along. On a side of the road along x without an arm
+    across it, its kerb and its sidewalk run whole (one box each, ``-arm_length`` to ``arm_length``).
     """
+    j = junction(p) if j is None else j
     lw, n, pw = p.lane_width, p.lanes_per_direction, p.parking_width
     R = n * lw + pw
     A = p.arm_length
@@ -194,12 +250,18 @@ def road_meshes(p) -> tuple[Mesh, Mesh, Mesh, list[tuple[float, float, float, fl
     inner, outer = R + kw, R + kw + sw
     # carriageway: the road along x whole, the road along y in two halves beside it
     road = [primitives.translated(primitives.plane(2 * A, 2 * R), (0.0, 0.0, 0.0))]
-    for sign in (-1, 1):
+    for sign in j.arms:
         road.append(primitives.translated(primitives.plane(2 * R, A - R), (0.0, sign * (A + R) / 2, 0.0)))
     # kerbs and sidewalks: along each arm, on both sides, up to the corner squares
     kerbs, walks, walk_rects = [], [], []
     for sx in (-1, 1):
         for sy in (-1, 1):
+            if sy not in j.arms:  # no arm across this side: its kerb and sidewalk run whole
+                if sx == 1:
+                    kerbs.append(box_mesh(-A, A, *sorted((sy * R, sy * inner)), 0.0, kh))
+                    walk_rects.append((-A, A, *sorted((sy * inner, sy * outer))))
+                    walks.append(box_mesh(*walk_rects[-1], 0.0, kh))
+                continue
             # kerb along the x road (y = sy R) from the corner to the arm's end, and along the y road
             kerbs.append(box_mesh(*sorted((sx * R, sx * A)), *sorted((sy * R, sy * inner)), 0.0, kh))
             kerbs.append(box_mesh(*sorted((sx * R, sx * inner)), *sorted((sy * inner, sy * A)), 0.0, kh))
@@ -210,8 +272,10 @@ def road_meshes(p) -> tuple[Mesh, Mesh, Mesh, list[tuple[float, float, float, fl
 
 
 def street_layout(p, rng: np.random.Generator, clear: SensorPoses = NO_POSES) -> StreetLayout:
-    """The static intersection of :class:`~bpy_pipeline.builders.street.StreetScene` ``p``, its buildings drawn from ``rng``;
-    traffic lights, signs and the dressing that would come within ``clear.radius`` of a sensor pose of ``clear`` are left out."""
+    """The static street of :class:`~bpy_pipeline.builders.street.StreetScene` ``p`` at its :func:`junction`, its buildings
+    drawn from ``rng``; traffic lights, signs and the dressing that would come within ``clear.radius`` of a sensor pose of
+    ``clear`` are left out."""
+    j = junction(p)
     lw, n, pw = p.lane_width, p.lanes_per_direction, p.parking_width
     R = n * lw + pw
     A = p.arm_length
@@ -223,46 +287,38 @@ def street_layout(p, rng: np.random.Generator, clear: SensorPoses = NO_POSES) ->
     def add(name, class_name, reflectivity, mesh, material="diffuse", inst=None, scatter=None):
         parts.append(Part(name, class_name, reflectivity, next(instance) if inst is None else inst, mesh, material, scatter))
 
-    road, kerbs, walks, walk_rects = road_meshes(p)
+    road, kerbs, walks, walk_rects = road_meshes(p, j)
     add("street_road", "road", REFLECTIVITY["road"], road)
     add("street_kerbs", "kerb", REFLECTIVITY["kerb"], kerbs)
     add("street_sidewalks", "sidewalk", REFLECTIVITY["sidewalk"], walks)
     # markings: zebra crossings and dashed centre lines, 5 mm thick, class road
     crossings, marks = [], []
     c0, c1 = R + kw + p.crossing_offset, R + kw + p.crossing_offset + p.crossing_width
+    starts = {}  # (axis, sign) of each arm -> m from the centre beyond which its centre line, parking strip and kerb-side items run
     for axis in (0, 1):
         for sign in (-1, 1):
-            crossings.append((axis, sign, c0, c1))
-            for k in range(int((2 * R) // 1.0)):
+            if not j.has_arm(axis, sign):
+                continue
+            crossed = (axis, sign) in j.crossings
+            starts[axis, sign] = c1 if crossed else 0.0
+            if crossed:
+                crossings.append((axis, sign, c0, c1))
+            for k in range(int((2 * R) // 1.0) if crossed else 0):
                 across0 = -R + 0.25 + k * 1.0
                 if across0 + 0.5 > R - 0.1:
                     break
                 lo, hi = sorted((sign * c0, sign * c1))
                 marks.append(box_mesh(lo, hi, across0, across0 + 0.5, 0.0, MARKING_THICKNESS) if axis == 0 else box_mesh(across0, across0 + 0.5, lo, hi, 0.0, MARKING_THICKNESS))
-            for s in np.arange(c1 + 1.0, A - 3.0, 6.0):  # dashed centre line beyond the crossing
+            for s in np.arange(starts[axis, sign] + 1.0, A - 3.0, 6.0):  # dashed centre line beyond the crossing
                 lo, hi = sorted((sign * s, sign * (s + 3.0)))
                 marks.append(box_mesh(lo, hi, -0.06, 0.06, 0.0, MARKING_THICKNESS) if axis == 0 else box_mesh(-0.06, 0.06, lo, hi, 0.0, MARKING_THICKNESS))
     add("street_markings", "road", REFLECTIVITY["marking"], primitives.merge(marks))
-    # lanes: drive lanes through the intersection, parking strips beyond the crossings
-    lanes = []
-    for axis in (0, 1):
-        for direction in (1, -1):
-            for k in range(n):
-                offset = -direction * (k + 0.5) * lw  # keep right
-                a, b = np.array([-direction * A, offset]), np.array([direction * A, offset])
-                lanes.append(Lane(a if axis == 0 else a[::-1].copy(), b if axis == 0 else b[::-1].copy(), lw, "drive", axis))
-            if pw > 0:
-                offset = -direction * (n * lw + pw / 2)
-                for end in (1, -1):  # one parking strip per arm and side, from beyond the crossing to the arm's end
-                    s0, s1 = c1 + 1.0, A - 1.0
-                    a = np.array([end * s0 if direction * end > 0 else end * s1, offset])
-                    b = np.array([end * s1 if direction * end > 0 else end * s0, offset])
-                    lanes.append(Lane(a if axis == 0 else a[::-1].copy(), b if axis == 0 else b[::-1].copy(), pw, "parking", axis))
-    # traffic lights at the four corners, facing the approaching traffic; signs along the sidewalks
+    lanes = _lanes(p, R, starts)
+    # traffic lights at the corners beside the road along y's arms, facing the approaching traffic; signs along the sidewalks
     poles = []
     light_meshes, sign_meshes = [], []
     for sx in (-1, 1):
-        for sy in (-1, 1):
+        for sy in j.arms:
             x, y = sx * (inner + 0.5), sy * (inner + 0.5)
             if not clear.clear_of_box((x, y), (0.15, 0.15), 0.0, 0.0, kh + 3.9):
                 continue
@@ -274,6 +330,7 @@ def street_layout(p, rng: np.random.Generator, clear: SensorPoses = NO_POSES) ->
         add(f"street_traffic_light_{k}", "traffic light", REFLECTIVITY["traffic light"], mesh)
     for k in range(p.signs):
         axis, sx, sy = int(rng.integers(2)), int(rng.choice([-1, 1])), int(rng.choice([-1, 1]))
+        axis = axis if j.has_arm(axis, sy) else 0  # by the road along x where the drawn arm is missing
         s = float(rng.uniform(c1 + 2.0, A - 2.0))
         x, y = (sx * s, sy * (inner + 0.4)) if axis == 0 else (sx * (inner + 0.4), sy * s)
         if not clear.clear_of_circle((x, y), 0.31, 0.0, kh + 2.8):  # the pole and its turning plate
@@ -289,14 +346,56 @@ def street_layout(p, rng: np.random.Generator, clear: SensorPoses = NO_POSES) ->
     # walls, street trees, lamps, furniture and road works (builders/street/dressing.py)
     from .dressing import dress
 
-    dressing = dress(p, R, inner, outer, kh, c1, rng, clear)
+    dressing = dress(p, R, inner, outer, kh, starts, j.arms, rng, clear)
     for mesh, front in zip(dressing.buildings, dressing.fronts, strict=True):
         add(f"street_building_{len(parts):03d}", "building", draw_reflectivity(rng, BUILDING), mesh)
         parts[-1] = dataclasses.replace(parts[-1], front=front)
     for name, class_name, reflectivity, mesh, scatter in dressing.parts:
         add(name, class_name, reflectivity, mesh, scatter=scatter)
     poles += dressing.circles
-    return StreetLayout(parts, lanes, R, inner, outer, A, kh, crossings, np.array(poles, float).reshape(-1, 3), walk_rects, dressing.blocks, dressing.counts, dressing.yards)
+    return StreetLayout(parts, lanes, R, inner, outer, A, kh, crossings, np.array(poles, float).reshape(-1, 3), walk_rects, dressing.blocks, dressing.counts,
+                        dressing.yards, j, _scale(p, R, c1, lanes, walk_rects))
+
+
+def _lanes(p, R: float, starts: dict) -> list[Lane]:
+    """Drive lanes along the arms ``starts`` holds (``(axis, sign)``: the road along x's through the junction, a lone
+    y arm's from the road along x's edge) and, with ``parking_width``, one parking strip per arm and side from 1 m
+    beyond ``starts[axis, sign]`` (m from the centre: the arm's crossing's far edge, or 0) to 1 m before the arm's end."""
+    lw, n, pw, A = p.lane_width, p.lanes_per_direction, p.parking_width, p.arm_length
+    lanes = []
+    for axis in (0, 1):
+        for direction in (1, -1):
+            if (axis, direction) not in starts and (axis, -direction) not in starts:
+                continue
+            first = -direction * A if (axis, -direction) in starts else direction * R  # where the lane enters and leaves the road
+            last = direction * A if (axis, direction) in starts else -direction * R
+            for k in range(n):
+                offset = -direction * (k + 0.5) * lw  # keep right
+                a, b = np.array([first, offset]), np.array([last, offset])
+                lanes.append(Lane(a if axis == 0 else a[::-1].copy(), b if axis == 0 else b[::-1].copy(), lw, "drive", axis))
+            if pw > 0:
+                offset = -direction * (n * lw + pw / 2)
+                for end in (1, -1):  # one parking strip per arm and side, from beyond the crossing to the arm's end
+                    if (axis, end) not in starts:
+                        continue
+                    s0, s1 = starts[axis, end] + 1.0, A - 1.0
+                    a = np.array([end * s0 if direction * end > 0 else end * s1, offset])
+                    b = np.array([end * s1 if direction * end > 0 else end * s0, offset])
+                    lanes.append(Lane(a if axis == 0 else a[::-1].copy(), b if axis == 0 else b[::-1].copy(), pw, "parking", axis))
+    return lanes
+
+
+def _scale(p, R: float, c1: float, lanes: list[Lane], walk_rects) -> dict:
+    """Per ``drive``, ``parking`` and ``sidewalk``: the street's drive lanes' length (parking strips' length, sidewalks'
+    area) over those of the four-arm intersection of the same ``p`` (:attr:`StreetLayout.scale`)."""
+    four = _lanes(p, R, {(axis, sign): c1 for axis in (0, 1) for sign in (-1, 1)})
+
+    def extent(lanes, rects) -> dict:
+        return {kind: sum(lane.length for lane in lanes if lane.kind == kind) for kind in ("drive", "parking")} | {
+            "sidewalk": sum((x1 - x0) * (y1 - y0) for x0, x1, y0, y1 in rects)}
+
+    street, reference = extent(lanes, walk_rects), extent(four, road_meshes(p, FOUR_ARMS)[3])
+    return {kind: street[kind] / reference[kind] if reference[kind] > 0 else 1.0 for kind in street}
 
 
 # ----------------------------------------------------------------------------- road users
@@ -388,7 +487,7 @@ def place_users(p, layout: StreetLayout, rng: np.random.Generator, views=(), tri
     shares = np.array([p.vehicle_mix.get(k, 0.0) for k in VEHICLES], float)
     shares = shares / shares.sum()
     # moving vehicles along the drive lanes, platooning
-    wanted = sample_count(p.vehicles, rng)
+    wanted = _scaled(sample_count(p.vehicles, rng), layout, "drive")
     out.wanted["vehicles"] = wanted
     for _ in range(wanted):
         kind = VEHICLES[int(rng.choice(len(VEHICLES), p=shares))]
@@ -412,7 +511,7 @@ def place_users(p, layout: StreetLayout, rng: np.random.Generator, views=(), tri
                 out.platoons += platoon
                 break
     # parked cars in the parking strips
-    wanted = sample_count(p.parked, rng) if parking else 0
+    wanted = _scaled(sample_count(p.parked, rng), layout, "parking") if parking else 0
     out.wanted["parked"] = wanted
     for _ in range(wanted):
         kind = "car" if rng.random() < 0.85 else "van"
@@ -426,7 +525,7 @@ def place_users(p, layout: StreetLayout, rng: np.random.Generator, views=(), tri
     # cyclists and motorcyclists at the right edge of the rightmost drive lanes
     rightmost = [i for i in drive if abs(abs(_lane_offset(layout.lanes[i])) - (p.lanes_per_direction - 0.5) * p.lane_width) < 1e-6]
     for kind, dist in (("bicycle", p.bicycles), ("motorcycle", p.motorcycles)):
-        wanted = sample_count(dist, rng)
+        wanted = _scaled(sample_count(dist, rng), layout, "drive")
         out.wanted[kind] = wanted
         for _ in range(wanted):
             size = _draw_size(kind, rng)
@@ -437,7 +536,7 @@ def place_users(p, layout: StreetLayout, rng: np.random.Generator, views=(), tri
                 if accept(RoadUser(kind, lane.at(s, lateral), lane.heading, size, MARKING_THICKNESS, f"lane:{i}")):
                     break
     # pedestrians on sidewalks and crossings
-    wanted = sample_count(p.pedestrians, rng)
+    wanted = _scaled(sample_count(p.pedestrians, rng), layout, "sidewalk")
     out.wanted["person"] = wanted
     for _ in range(wanted):
         size = _draw_size("person", rng)
@@ -451,8 +550,7 @@ def place_users(p, layout: StreetLayout, rng: np.random.Generator, views=(), tri
                 yaw = (math.pi / 2 if axis == 0 else 0.0) + (math.pi if rng.random() < 0.5 else 0.0)
                 where, z = "crossing", MARKING_THICKNESS
             else:
-                centre = _sidewalk_point(layout, rng)
-                axis = 0 if abs(centre[1]) < abs(centre[0]) else 1
+                centre, axis = _sidewalk_point(layout, rng)
                 yaw = (0.0 if axis == 0 else math.pi / 2) + (math.pi if rng.random() < 0.5 else 0.0) + float(rng.normal(0.0, 0.15))
                 where, z = "sidewalk", layout.kerb_height
             if accept(RoadUser("person", centre, yaw, size, z, where)):
@@ -460,17 +558,33 @@ def place_users(p, layout: StreetLayout, rng: np.random.Generator, views=(), tri
     return out
 
 
+def _scaled(count: int, layout: StreetLayout, extent: str) -> int:
+    """``count`` road users drawn for the four-arm intersection, scaled to ``layout``'s ``extent`` (:attr:`StreetLayout.scale`)."""
+    scale = layout.scale.get(extent, 1.0)
+    return count if scale == 1.0 else int(round(count * scale))
+
+
 def _lane_offset(lane: Lane) -> float:
     """Signed distance of a drive lane's centre line from its road's centre line."""
     return float(lane.start[1] if lane.road == 0 else lane.start[0])
 
 
-def _sidewalk_point(layout: StreetLayout, rng) -> np.ndarray:
-    """A point drawn uniformly on the sidewalk bands (0.4 m from their edges)."""
-    lo, hi, A = layout.walk_inner + 0.4, layout.walk_outer - 0.4, layout.arm_length - 0.5
-    band = float(rng.uniform(lo, hi)) * float(rng.choice([-1, 1]))
-    along = float(rng.uniform(lo, A)) * float(rng.choice([-1, 1]))
-    return np.array([along, band]) if rng.random() < 0.5 else np.array([band, along])
+def _sidewalk_point(layout: StreetLayout, rng) -> tuple[np.ndarray, int]:
+    """A point (2,) drawn uniformly on the sidewalks (0.4 m from their edges) and the axis of the road it runs along.
+
+    Four arms: eight bands of one length, each from the corner square out (the square belongs to the road along
+    x's band); fewer: the sidewalk rectangles (:attr:`StreetLayout.walks`) by their area."""
+    if layout.junction.arms == FOUR_ARMS.arms:
+        lo, hi, A = layout.walk_inner + 0.4, layout.walk_outer - 0.4, layout.arm_length - 0.5
+        band = float(rng.uniform(lo, hi)) * float(rng.choice([-1, 1]))
+        along = float(rng.uniform(lo, A)) * float(rng.choice([-1, 1]))
+        centre = np.array([along, band]) if rng.random() < 0.5 else np.array([band, along])
+        return centre, 0 if abs(centre[1]) < abs(centre[0]) else 1
+    rects = np.array(layout.walks, float)
+    size = np.column_stack([rects[:, 1] - rects[:, 0], rects[:, 3] - rects[:, 2]])
+    margin = np.minimum(0.4, size / 2)  # a sidewalk narrower than 0.8 m: its middle
+    x0, x1, y0, y1 = (rects + np.column_stack([margin[:, 0], -margin[:, 0], margin[:, 1], -margin[:, 1]]))[int(rng.choice(len(rects), p=size.prod(1) / size.prod(1).sum()))]
+    return np.array([rng.uniform(x0, x1), rng.uniform(y0, y1)]), 0 if x1 - x0 > y1 - y0 else 1
 
 
 # ----------------------------------------------------------------------------- the users' meshes

@@ -1,4 +1,5 @@
-"""``scene.builder: street``: an urban intersection with road users placed along its lanes, sidewalks and crossings."""
+"""``scene.builder: street``: an urban street (an intersection, a T-junction or a straight street) with road users
+placed along its lanes, sidewalks and crossings."""
 
 from __future__ import annotations
 
@@ -14,12 +15,17 @@ from ...geometry.placement import Distribution, check_distribution
 
 @dataclass(frozen=True)
 class StreetScene:
-    """``scene.builder: street``: two roads crossing (builders/street/layout.py has the layout and the rules), in metres.
+    """``scene.builder: street``: a road along x, crossed by a road along y, met by one, or alone (builders/street/layout.py
+    has the layout and the rules), in metres.
 
-    Static scene (drawn once from ``layout_seed``, the same in every frame): ``lanes_per_direction``
+    Static scene (drawn once from ``layout_seed``, the same in every frame): the junction's kind by the shares
+    ``junction_mix`` (``cross``: four arms; ``t_junction``: the road along x whole, the road
+    along y on one side of it; ``straight``: the road along x alone, a residential street with one mid-block zebra
+    crossing and no traffic lights; the road users' counts are for four arms, scaled to the lanes, parking strips and
+    sidewalks the junction has, so there are as many per metre); ``lanes_per_direction``
     drive lanes of ``lane_width`` each way, a ``parking_width`` strip by each kerb (0: none), kerbs
     ``kerb_width`` x ``kerb_height``, sidewalks ``sidewalk_width`` wide, zebra crossings
-    ``crossing_width`` wide ``crossing_offset`` from the intersection, four traffic lights, ``signs``
+    ``crossing_width`` wide ``crossing_offset`` from the junction, a traffic light at each corner it has, ``signs``
     traffic signs; each road reaches ``arm_length`` from the centre (100 m: a car-roof sensor's
     range). Beyond the sidewalks (builders/street/dressing.py): terrain rolling by
     ``terrain_relief`` (m) and rising by ``terrain_slope`` away from the road, on a ``terrain_step``
@@ -55,6 +61,7 @@ class StreetScene:
     """
 
     arm_length: float = field(default=100.0, metadata=meta("m"))
+    junction_mix: dict = field(default_factory=lambda: {"cross": 1.0}, metadata=meta("", help="shares of the junction kinds drawn per layout: cross, t_junction, straight"))
     lanes_per_direction: int = field(default=1, metadata=meta(""))
     lane_width: float = field(default=3.5, metadata=meta("m"))
     parking_width: float = field(default=2.2, metadata=meta("m"))
@@ -129,9 +136,10 @@ def check(params: StreetScene, where: str) -> None:
     reach = half_road + params.kerb_width + params.crossing_offset + params.crossing_width + 10.0
     if params.arm_length < reach:
         raise InputError(f"{where}.arm_length: must be at least {reach:.1f} m (the road's half width, kerb, crossing and 10 m of lane), got {params.arm_length}")
-    from .layout import VEHICLES
+    from .layout import JUNCTIONS, VEHICLES
     from .dressing import BOUNDARIES
 
+    _check_shares(params.junction_mix, tuple(JUNCTIONS), f"{where}.junction_mix")
     mix = params.boundary_mix
     if not mix or any(k not in BOUNDARIES for k in mix) or any(not isinstance(v, (int, float)) or v < 0 for v in mix.values()) or sum(mix.values()) <= 0:
         raise InputError(f"{where}.boundary_mix: expected shares >= 0 (not all 0) of {', '.join(BOUNDARIES)}, got {mix}")
@@ -143,6 +151,13 @@ def check(params: StreetScene, where: str) -> None:
         raise InputError(f"{where}.vehicle_mix: expected shares >= 0 (not all 0) of {', '.join(VEHICLES)}, got {params.vehicle_mix}")
     for key in ("vehicles", "parked", "bicycles", "motorcycles", "pedestrians", "platoon_gap"):
         check_distribution(getattr(params, key), f"{where}.{key}", low=0.0)
+
+
+def _check_shares(mix, kinds, key: str) -> None:
+    """``mix`` must map some of ``kinds`` to numbers >= 0, not all 0; else one line naming ``key``."""
+    if not isinstance(mix, dict) or not mix or any(k not in kinds for k in mix) or any(isinstance(v, bool) or not isinstance(v, (int, float)) or not v >= 0 for v in mix.values()) \
+            or sum(mix.values()) <= 0:
+        raise InputError(f"{key}: expected shares >= 0 (not all 0) of {', '.join(kinds)}, got {mix}")
 
 
 def ego_station(params: StreetScene, frame: int) -> np.ndarray | None:

@@ -2,9 +2,10 @@
 
 A real node group a Blender user can open and edit. The street's ``street_road``, ``street_kerbs``
 and ``street_sidewalks`` objects are meshes whose edges are the roads' centre lines (z = 0, one
-edge per road, made curves by Mesh to Curve: the first runs through the intersection, every
-further one crosses it at its middle); each runs the group, which builds what ``Part`` asks for as the pure
-:func:`~bpy_pipeline.builders.street.layout.road_meshes` does:
+edge per road, made curves by Mesh to Curve: the first runs through the junction; with ``Junction`` 0
+(four arms) every further one crosses it at its middle, with 1 (a T-junction) every further one is an arm
+from the junction's centre out, with 2 (a straight street) there is none); each runs the group, which builds
+what ``Part`` asks for as the pure :func:`~bpy_pipeline.builders.street.layout.road_meshes` does:
 
 - the cross-section from the inputs: half road ``R = Lanes x Lane Width + Parking Width``, the kerb
   a ``Kerb Width`` x ``Kerb Height`` rectangle at ``|across|`` from ``R``, the sidewalk a ``Sidewalk
@@ -13,7 +14,10 @@ further one crosses it at its middle); each runs the group, which builds what ``
   carriageway), ``R`` (kerbs) or ``R + Kerb Width`` (sidewalks), a crossing road's by ``R``,
   ``R + Kerb Width`` and ``R + Kerb Width + Sidewalk Width`` (Trim Curve by length);
 - the profile swept along the arms (Curve to Mesh, normals Z up, caps filled): a line ``2 R`` wide
-  for the carriageway, the two rectangles for the kerbs and the sidewalks.
+  for the carriageway, the two rectangles for the kerbs and the sidewalks;
+- a T-junction's arm trimmed from its start by the same gaps; the through road's kerb and sidewalk are
+  cut only on the arm's side (the side its points' mean lies on), and run whole on the other; a
+  straight street's run whole on both.
 
 Same surfaces as the pure function: the same vertices (within float32 rounding at their
 coordinates), quads where it has two triangles (the export splits them on the same plane).
@@ -29,14 +33,16 @@ import bpy
 import numpy as np
 
 from ...scenes.nodes import GroupBuilder, add_group_modifier, current_group, new_group, stamp
+from .layout import FOUR_ARMS, JUNCTIONS, Junction, junction
 
 GROUP = "Street Road"
-VERSION = 1  # bump when the group changes, so a file holding an older one gets the new one
+VERSION = 2  # bump when the group changes, so a file holding an older one gets the new one
 PARTS = ("road", "kerbs", "sidewalks")  # the Part input's values, in order
 
 ROAD_INPUTS = [
     ("Geometry", "NodeSocketGeometry"),
     ("Part", "NodeSocketInt", 0, "what to build: 0 the carriageway, 1 the kerbs, 2 the sidewalks", 0, 2),
+    ("Junction", "NodeSocketInt", 0, "0 four arms (every further edge crosses the first), 1 a T-junction (every further edge an arm from the centre out), 2 a straight road (the first edge alone)", 0, 2),
     ("Lanes", "NodeSocketInt", 1, "drive lanes per direction", 1, 16),
     ("Lane Width", "NodeSocketFloat", 3.5, "m, one drive lane", 0.5, 10.0),
     ("Parking Width", "NodeSocketFloat", 2.2, "m, the parking strip by each kerb (0: none)", 0.0, 10.0),
@@ -54,6 +60,20 @@ def _arms(b: GroupBuilder, curve, gap) -> bpy.types.NodeSocket:
     first = b.node("GeometryNodeTrimCurve", {"Curve": curve, "Start": 0.0, "End": b.math("SUBTRACT", half, gap)}, options={"mode": "LENGTH"})
     second = b.node("GeometryNodeTrimCurve", {"Curve": curve, "Start": b.math("ADD", half, gap), "End": length}, options={"mode": "LENGTH"})
     return _join(b, b.out(first), b.out(second))
+
+
+def _from(b: GroupBuilder, curve, gap) -> bpy.types.NodeSocket:
+    """``curve``'s splines without their first ``gap`` metres (a T-junction's arm beyond the road it meets)."""
+    length = b.out(b.node("GeometryNodeSplineLength"), "Length")
+    return b.out(b.node("GeometryNodeTrimCurve", {"Curve": curve, "Start": gap, "End": length}, options={"mode": "LENGTH"}))
+
+
+def _sides(b: GroupBuilder, geometry, side) -> tuple[bpy.types.NodeSocket, bpy.types.NodeSocket]:
+    """``geometry``'s faces on the ``side`` (a number whose sign is the side's, along y) and those on the other side."""
+    y = b.out(b.node("ShaderNodeSeparateXYZ", {0: b.out(b.node("GeometryNodeInputPosition"))}), "Y")
+    split = b.node("GeometryNodeSeparateGeometry", {"Geometry": geometry, "Selection": b.compare("GREATER_THAN", b.math("MULTIPLY", y, side), 0.0)},
+                   options={"domain": "FACE"})
+    return b.out(split, "Selection"), b.out(split, "Inverted")
 
 
 def _join(b: GroupBuilder, *geometries) -> bpy.types.NodeSocket:
@@ -94,26 +114,45 @@ def road_group() -> bpy.types.NodeTree:
         return b.out(b.node("GeometryNodeCurveToMesh", {"Curve": curve, "Profile Curve": profile, "Fill Caps": True}))
 
     line = b.out(b.node("GeometryNodeCurvePrimitiveLine", {"Start": b.combine(b.math("MULTIPLY", half_road, -1.0), 0.0, 0.0), "End": b.combine(half_road, 0.0, 0.0)}))
-    road = _join(b, sweep(through, line), sweep(_arms(b, crossing, half_road), line))
     kerb = _rectangles(b, half_road, g("Kerb Width"), g("Kerb Height"))
-    kerbs = _join(b, sweep(_arms(b, through, half_road), kerb), sweep(_arms(b, crossing, inner), kerb))
     walk = _rectangles(b, inner, g("Sidewalk Width"), g("Kerb Height"))
-    walks = _join(b, sweep(_arms(b, through, inner), walk), sweep(_arms(b, crossing, outer), walk))
+    # four arms: the crossing road cut at its middle
+    cross = (_join(b, sweep(through, line), sweep(_arms(b, crossing, half_road), line)),
+             _join(b, sweep(_arms(b, through, half_road), kerb), sweep(_arms(b, crossing, inner), kerb)),
+             _join(b, sweep(_arms(b, through, inner), walk), sweep(_arms(b, crossing, outer), walk)))
+    # a T-junction: the arm from the centre out; the through road's kerb and sidewalk cut on the arm's side only
+    y = b.out(b.node("ShaderNodeSeparateXYZ", {0: b.out(b.node("GeometryNodeInputPosition"))}), "Y")
+    side = b.out(b.node("GeometryNodeAttributeStatistic", {"Geometry": crossing, "Attribute": y}, options={"data_type": "FLOAT", "domain": "POINT"}), "Mean")
+    t_junction = [_join(b, sweep(through, line), sweep(_from(b, crossing, half_road), line))]
+    for profile, through_gap, arm_gap in ((kerb, half_road, inner), (walk, inner, outer)):
+        cut, _ = _sides(b, sweep(_arms(b, through, through_gap), profile), side)
+        _, whole = _sides(b, sweep(through, profile), side)
+        t_junction.append(_join(b, cut, whole, sweep(_from(b, crossing, arm_gap), profile)))
+    # a straight road: the through road alone, whole
+    straight = (sweep(through, line), sweep(through, kerb), sweep(through, walk))
 
     chosen = b.node("GeometryNodeIndexSwitch", {"Index": g("Part")}, data_type="GEOMETRY")
     chosen.index_switch_items.new()  # two items by default
-    for k, geometry in enumerate((road, kerbs, walks)):
-        b.links.new(geometry, chosen.inputs[k + 1])
+    for k, geometries in enumerate(zip(cross, t_junction, straight)):
+        by_junction = b.node("GeometryNodeIndexSwitch", {"Index": g("Junction")}, data_type="GEOMETRY")
+        by_junction.index_switch_items.new()
+        for kind, geometry in enumerate(geometries):
+            b.links.new(geometry, by_junction.inputs[kind + 1])
+        b.links.new(b.out(by_junction), chosen.inputs[k + 1])
     labelled = b.node("GeometryNodeStoreNamedAttribute", {"Geometry": b.out(chosen), "Name": "lidar_instance", "Value": g("Instance")},
                       options={"data_type": "INT", "domain": "FACE"})
     b.links.new(b.out(labelled), b.socket(b.outputs.inputs, "Geometry"))
     return stamp(b.finish(), VERSION)
 
 
-def centre_lines(arm_length: float) -> list[np.ndarray]:
-    """The roads' centre lines ((2, 3) m each): the road along x (through), then the road along y (crossing)."""
+def centre_lines(arm_length: float, j: Junction = FOUR_ARMS) -> list[np.ndarray]:
+    """The roads' centre lines ((2, 3) m each) of junction ``j``: the road along x (through), then the road along y
+    (crossing) with four arms, its arm from the centre out at a T-junction, nothing more on a straight street."""
     a = float(arm_length)
-    return [np.array([[-a, 0.0, 0.0], [a, 0.0, 0.0]]), np.array([[0.0, -a, 0.0], [0.0, a, 0.0]])]
+    through = np.array([[-a, 0.0, 0.0], [a, 0.0, 0.0]])
+    if len(j.arms) == 2:
+        return [through, np.array([[0.0, -a, 0.0], [0.0, a, 0.0]])]
+    return [through] + [np.array([[0.0, 0.0, 0.0], [0.0, sign * a, 0.0]]) for sign in j.arms]
 
 
 def road_inputs(params) -> dict:
@@ -127,11 +166,12 @@ def road_object(name: str, part: str, params, collection: bpy.types.Collection, 
 
     A mesh, not a curve object: the depsgraph gives a curve object's Geometry Nodes mesh both as the
     object and as an instance of it, which the export would read twice."""
-    lines = centre_lines(params.arm_length)
+    j = junction(params)
+    lines = centre_lines(params.arm_length, j)
     mesh = bpy.data.meshes.new(name)
     mesh.from_pydata(np.concatenate(lines).tolist(), [(2 * k, 2 * k + 1) for k in range(len(lines))], [])
     mesh.update()
     obj = bpy.data.objects.new(name, mesh)
     collection.objects.link(obj)
-    add_group_modifier(obj, road_group(), {"Part": PARTS.index(part), "Instance": int(instance)} | road_inputs(params))
+    add_group_modifier(obj, road_group(), {"Part": PARTS.index(part), "Junction": list(JUNCTIONS).index(j.kind), "Instance": int(instance)} | road_inputs(params))
     return obj
