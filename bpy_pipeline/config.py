@@ -37,7 +37,7 @@ from .lidar.effects.materials import MaterialsConfig
 from .lidar.effects.weather import WeatherConfig
 
 from .builders import BUILDERS as BUILDER_REGISTRY
-from .builders.population import population_from_dict, population_to_dict
+from .population.params import population_from_dict, population_to_dict
 from .builders.railway.params import RailwayScene
 from .io.writers import frame_writers
 from .schema import convert, from_dict, meta, reference, to_plain
@@ -58,7 +58,7 @@ class SceneConfig:
 
     builder: str = "railway"
     params: typing.Any = field(default_factory=RailwayScene)
-    population: typing.Any = None  # builders.population.Population: people, arms, cars placed per frame (None: none)
+    population: typing.Any = None  # population.params.Population: people, arms, cars placed per frame (None: none)
 
 
 # ----------------------------------------------------------------------------- sensor, effects, output

@@ -100,7 +100,7 @@ def test_asset_sets_stand_upright_at_drawn_heights_with_glass_windows_and_animat
     from bpy_pipeline.buffers import MATERIAL_ID
     from bpy_pipeline.config import load_config
     from bpy_pipeline.export import export_scene
-    from bpy_pipeline.geometry.population import meshes_cross
+    from bpy_pipeline.population.placer import meshes_cross
     from bpy_pipeline.labels import load_class_table
     from bpy_pipeline.stages.scene import build_frame_scene
 

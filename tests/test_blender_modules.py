@@ -1,6 +1,6 @@
 """Blender-side modules no other test imports by name: the blend and primitives builders' scenes, the shared box
 prototypes (scenes/box_nodes.py), the hall's, the street's scatter and planting groups called directly, and the
-population's standing places (scenes/population.py). Every mesh is read as the export reads it (the depsgraph)."""
+population's standing places (population/scene.py). Every mesh is read as the export reads it (the depsgraph)."""
 
 import os
 
@@ -120,10 +120,10 @@ def test_the_planting_group_has_its_documented_inputs_and_is_made_once(empty):
 
 def test_standing_places_prefer_walkable_classes_and_else_detect_floors():
     from bpy_pipeline.buffers import ObjectTable, SceneBuffers
-    from bpy_pipeline.builders.population import PlacementRules
+    from bpy_pipeline.population.params import PlacementRules
     from bpy_pipeline.geometry import primitives
     from bpy_pipeline.labels import load_class_table
-    from bpy_pipeline.scenes.population import find_places
+    from bpy_pipeline.population.scene import find_places
 
     table = load_class_table()
     floor = primitives.plane(10.0, 10.0)

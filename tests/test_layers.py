@@ -25,13 +25,15 @@ PACKAGE = Path(__file__).resolve().parents[1] / "bpy_pipeline"
 
 # layer -> what it must not import (prefixes of dotted names below bpy_pipeline)
 FORBIDDEN = {
-    "geometry": ("lidar", "io", "config", "pipeline", "builders", "scenes", "mixing", "plan", "stages", "dataset", "api", "cli", "rig", "frame"),
-    "lidar": ("io", "config", "pipeline", "builders", "scenes", "mixing", "plan", "stages", "dataset", "api", "cli", "rig", "frame"),
-    "io": ("pipeline", "builders", "scenes", "plan", "stages", "dataset", "api", "cli", "mixing", "lidar", "rig", "config"),
-    "mixing": ("pipeline", "builders", "scenes", "plan", "stages", "dataset", "api", "cli", "rig", "config", "frame", "evaluate"),
+    "geometry": ("lidar", "io", "config", "pipeline", "builders", "population", "scenes", "mixing", "plan", "stages", "dataset", "api", "cli", "rig", "frame"),
+    "lidar": ("io", "config", "pipeline", "builders", "population", "scenes", "mixing", "plan", "stages", "dataset", "api", "cli", "rig", "frame"),
+    "io": ("pipeline", "builders", "population", "scenes", "plan", "stages", "dataset", "api", "cli", "mixing", "lidar", "rig", "config"),
+    "mixing": ("pipeline", "builders", "population.params", "population.scene", "scenes", "plan", "stages", "dataset", "api", "cli", "rig", "config", "frame", "evaluate"),
+    # the population every builder gets: its section and placement, and its Blender side on the shared one
+    "population": ("lidar", "io", "config", "pipeline", "builders", "mixing", "plan", "stages", "dataset", "api", "cli", "rig", "frame"),
 }
 BUILDER_PACKAGES = tuple(sorted(p.parent.name for p in (PACKAGE / "builders").glob("*/__init__.py")))
-FORBIDDEN["scenes"] = tuple(f"builders.{b}" for b in BUILDER_PACKAGES)
+FORBIDDEN["scenes"] = ("population",) + tuple(f"builders.{b}" for b in BUILDER_PACKAGES)
 # what io may use of lidar: the point record and the sensor's layout (its spec, rings, columns, frame time)
 ALLOWED = {"io": ("lidar.points", "lidar.sensor.grid", "lidar.sensor.sensors")}
 
@@ -212,7 +214,7 @@ def test_the_graph_sees_imports_inside_functions(tmp_path):
             ("bpy_pipeline.builders.railway.params", "bpy_pipeline.builders.railway.scene", 6, True),
             ("bpy_pipeline.builders.railway.scene", "bpy_pipeline.scenes.objects", 7, False),
             ("bpy_pipeline.scenes.box_nodes", "bpy_pipeline.builders.street.scatter_nodes", 8, False),
-            ("bpy_pipeline.scenes.population", "bpy_pipeline.builders.population", 9, False)]
+            ("bpy_pipeline.population.scene", "bpy_pipeline.population.params", 9, False)]
     assert [line for _, _, line in wrong_way(rows)] == [3, 4, 5, 8]
     assert circles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
 

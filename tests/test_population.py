@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from bpy_pipeline.geometry import human, primitives
-from bpy_pipeline.geometry.population import Placer, meshes_cross, person_shape, place_on_spots, placement_matrix, segments_cross
+from bpy_pipeline.population.placer import Placer, meshes_cross, person_shape, place_on_spots, placement_matrix, segments_cross
 from bpy_pipeline.geometry.surfaces import find_surfaces, floor_and_seats, on_surface
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -284,7 +284,7 @@ def test_the_visibility_rule_refuses_hidden_objects_and_objects_that_hide_others
 
 
 def test_keep_out_is_the_gap_between_footprints():
-    from bpy_pipeline.geometry.population import footprint
+    from bpy_pipeline.population.placer import footprint
 
     v, t = room()
     floor = find_surfaces(v, t)[0]

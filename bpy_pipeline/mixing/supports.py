@@ -40,7 +40,7 @@ from .ground import PointIndex, fit_plane
 from .placement import Placement, boxes_overlap
 from .section import RealPopulation, SupportParams
 
-GAP = 0.01  # m: a placed object floats this far above its surface (as geometry/population.py)
+GAP = 0.01  # m: a placed object floats this far above its surface (as population/placer.py)
 KINDS_OF_SURFACE = ("floor", "desk", "other")
 
 
@@ -359,7 +359,7 @@ def _place_arm(shape: dict, k: int, xy: np.ndarray, z: float, yaw: float, surfac
     """``(placement, why)``: the arm of ``shape`` with its base at ``xy`` on surface ``k`` at height ``z``, or ``None`` and the reason."""
     from ..geometry.kinematics import capsules_world, forward
     from ..geometry.objects import arm_mesh
-    from ..geometry.population import placement_matrix
+    from ..population.placer import placement_matrix
 
     model, q = shape["model"], shape["q"]
     local, _ = arm_mesh(model, q)

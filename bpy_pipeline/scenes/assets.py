@@ -301,7 +301,7 @@ class AssetSlot:
         return self.objects[key]
 
     def show(self, model: AssetModel, placed, class_name: str, instance: int, reflectivity: float | None) -> None:
-        """Show ``model`` as ``placed`` (:class:`~bpy_pipeline.geometry.population.Placed`), tagged ``class_name``."""
+        """Show ``model`` as ``placed`` (:class:`~bpy_pipeline.population.placer.Placed`), tagged ``class_name``."""
         objs = self._objects_for(model)
         for key, others in self.objects.items():
             if key != model.entry.name:

@@ -21,7 +21,7 @@ def build_populated(scene, context: BuildContext) -> BuildResult:
     population = getattr(scene, "population", None)
     if population is None or not population.kinds:
         return result
-    from ..scenes.population import populate
+    from ..population.scene import populate
 
     return dataclasses.replace(populate(population, context, result), dynamic=None, dynamic_parts=None)  # the population stands outside the builder's dynamic collection
 

@@ -3,11 +3,11 @@
 The scene's own geometry (what the builder built, or the user's .blend) is exported once with the
 population hidden; its horizontal surfaces are found once (``geometry/surfaces.py``) and kept while
 that geometry stays the same (a digest of its triangles). Each frame then draws the objects from
-the frame's generator, places them with ``geometry/population.py`` against the exported triangles,
+the frame's generator, places them with ``population/placer.py`` against the exported triangles,
 and shows them: pool objects are moved, posed, relabelled, shown or hidden, never rebuilt, so frame
 k after frame k - 1 is the same as frame k alone.
 
-Each kind has a side here (:data:`SIDES`, keyed like :data:`~bpy_pipeline.builders.population.KINDS`)
+Each kind has a side here (:data:`SIDES`, keyed like :data:`~bpy_pipeline.population.params.KINDS`)
 that loads what its draws need (the arm's model, asset meshes) and owns its pool of objects.
 """
 
@@ -21,14 +21,14 @@ import bpy
 import numpy as np
 from mathutils import Matrix
 
-from ..builders.population import KINDS, count_of
+from .params import KINDS, count_of
 from ..geometry import human
 from ..geometry.clearance import NO_POSES
 from ..geometry.objects import COLOURS, STYLES, car_meshes, car_surfaces
-from ..geometry.population import Placer, place_on_spots
+from .placer import Placer, place_on_spots
 from ..geometry.surfaces import find_surfaces, floor_and_seats
-from .objects import mesh_data, scene_collection, tag
-from .people import PersonRig
+from ..scenes.objects import mesh_data, scene_collection, tag
+from ..scenes.people import PersonRig
 
 COLLECTION = "LiDAR Population"
 KEY = "population"  # where the run's BuildContext.keep holds the pools
@@ -118,7 +118,7 @@ def _asset_models(params, kind_name: str, manifest: str):
     """The asset models of ``params.assets`` (a set of the assets manifest), or ``None`` (procedural)."""
     if not params.assets:
         return None
-    from .assets import load_models
+    from ..scenes.assets import load_models
 
     return load_models(params.assets, KINDS.get(kind_name).manifest_kind, f"scene.population.{kind_name}.assets", manifest or None)
 
@@ -129,7 +129,7 @@ class PersonSide(Side):
 
     def new_slot(self, index, placed):
         if self.models:
-            from .assets import AssetSlot
+            from ..scenes.assets import AssetSlot
 
             return AssetSlot(self.collection, f"person_{index:03d}")
         return PersonRig(self.collection, index)
@@ -153,18 +153,18 @@ class RobotArmSide(Side):
         if self.params.assets:
             return _asset_models(self.params, "robot_arm", self.manifest)
         if self.params.model.lower().endswith(".urdf"):  # the robot's own link meshes (ROS-Industrial style)
-            from .robot_arm import load_urdf_arm
+            from ..scenes.robot_arm import load_urdf_arm
 
             return load_urdf_arm(self.params.model)
         return kinematics.load_arm(self.params.model) if self.params.model else kinematics.load_arm()
 
     def new_slot(self, index, placed):
         if isinstance(self.models, list):
-            from .assets import AssetSlot
+            from ..scenes.assets import AssetSlot
 
             return AssetSlot(self.collection, f"robot_{index:03d}")
         from ..geometry.urdf import MeshedArm
-        from .robot_arm import RobotArm
+        from ..scenes.robot_arm import RobotArm
 
         if isinstance(self.models, MeshedArm):
             return RobotArm(self.models.model, self.collection, 50 + index, self.models.meshes)
@@ -198,7 +198,7 @@ class CarSide(Side):
 
     def new_slot(self, index, placed):
         if self.models:
-            from .assets import AssetSlot
+            from ..scenes.assets import AssetSlot
 
             return AssetSlot(self.collection, f"car_{index:03d}")
         return PartsSlot(self.collection, f"car_{index:03d}", list(self.meshes[0]))
@@ -333,7 +333,7 @@ class PopulationScene:
             warnings.append("scene.population: the scene has no floor to stand on (no lidar_walkable object and no horizontal surface found)")
         info["rejections"] = dict(placer.rejections)
         bpy.context.view_layer.update()
-        self.last = placed_by_instance  # {instance: geometry.population.Placed} of this frame
+        self.last = placed_by_instance  # {instance: population.placer.Placed} of this frame
         return headings, info, tuple(warnings)
 
 
