@@ -20,7 +20,7 @@ import bpy
 import numpy as np
 from mathutils import Matrix
 
-from .bpy_pipeline.compat import set_modifier_input
+from .bpy_pipeline.blender.compat import set_modifier_input
 
 COLLECTION = "LiDAR Clouds"
 COLOR = "Col"

@@ -10,9 +10,9 @@ from common import arguments, best_of, report
 
 import bpy
 
-from bpy_pipeline.export import export_scene
+from bpy_pipeline.blender.export import export_scene
 from bpy_pipeline.labels import load_class_table
-from bpy_pipeline.scenes.objects import mesh_object, scene_collection, tag
+from bpy_pipeline.blender.mesh_objects import mesh_object, scene_collection, tag
 
 
 def gn_object(name: str, build) -> bpy.types.Object:

@@ -186,7 +186,7 @@ def blender_bvhtree(setup: Setup, threads: int, count: int):
 
 
 def blender_scene_ray_cast(setup: Setup, threads: int, count: int):
-    from bpy_pipeline.scenes.objects import mesh_object, scene_collection
+    from bpy_pipeline.blender.mesh_objects import mesh_object, scene_collection
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     start = time.perf_counter()

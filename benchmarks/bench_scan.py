@@ -34,7 +34,7 @@ from embreex.mesh_construction import TriangleMesh
 
 from bpy_pipeline.buffers import SceneBuffers
 from bpy_pipeline.config import load_config
-from bpy_pipeline.export import export_scene
+from bpy_pipeline.blender.export import export_scene
 from bpy_pipeline.geometry import primitives
 from bpy_pipeline.geometry.transforms import pose_matrix
 from bpy_pipeline.labels import load_class_table
@@ -46,7 +46,7 @@ from bpy_pipeline.lidar.cast.scanner import scan
 from bpy_pipeline.lidar.sensor.sensors import resolve_sensor, sensor_pattern
 from bpy_pipeline.frame import frame_rng
 from bpy_pipeline.stages.view import sensor_pose
-from bpy_pipeline.scenes import build_scene
+from bpy_pipeline.blender import build_scene
 
 REPEAT = 7
 

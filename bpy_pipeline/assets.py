@@ -45,7 +45,7 @@ class AssetEntry:
 
     name: str
     kind: str
-    set: str  # "": an entry of no set (the industrial hall's own people, scenes/people.py)
+    set: str  # "": an entry of no set (the industrial hall's own people, blender/people.py)
     path: Path
     sha256: str
     licence: str

@@ -1,6 +1,6 @@
 """Scene buffers: the one type that crosses the bpy boundary (docs/layout.md, "A frame's path through the stages").
 
-``export.py`` fills them from Blender's evaluated depsgraph; everything after that (scanner,
+``blender/export.py`` fills them from Blender's evaluated depsgraph; everything after that (scanner,
 effects, writers) reads only these numpy arrays and never imports bpy.
 """
 

@@ -351,14 +351,14 @@ def _scene_from_dict(data) -> SceneConfig:
 def sensor_trajectory(sensor: SensorConfig, path=None) -> Trajectory | None:
     """The configured :class:`~.lidar.sensor.platform.Trajectory`, ``None`` for a static sensor.
 
-    path : (k, 3) float64 world polyline of ``trajectory.curve`` (``scenes.curves.curve_polyline``);
+    path : (k, 3) float64 world polyline of ``trajectory.curve`` (``blender.curves.curve_polyline``);
         needed only when the trajectory follows a curve of the scene
     """
     section = sensor.trajectory
     if section is None:
         return None
     if section.curve and path is None:
-        raise ValueError("sensor_trajectory: a curve trajectory needs the curve's polyline (scenes.curves.curve_polyline)")
+        raise ValueError("sensor_trajectory: a curve trajectory needs the curve's polyline (blender.curves.curve_polyline)")
     points = path if section.curve else section.waypoints
     return Trajectory(
         points,

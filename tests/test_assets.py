@@ -99,7 +99,7 @@ def test_asset_sets_stand_upright_at_drawn_heights_with_glass_windows_and_animat
 
     from bpy_pipeline.buffers import MATERIAL_ID
     from bpy_pipeline.config import load_config
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.population.placer import meshes_cross
     from bpy_pipeline.labels import load_class_table
     from bpy_pipeline.stages.scene import build_frame_scene
@@ -150,7 +150,7 @@ def _lying_person(tmp_path) -> Path:
 
     from bpy_pipeline.geometry import human
     from bpy_pipeline.geometry.objects import person_mesh
-    from bpy_pipeline.scenes.objects import mesh_data
+    from bpy_pipeline.blender.mesh_objects import mesh_data
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     obj = bpy.data.objects.new("walker", mesh_data("walker", *person_mesh(human.neutral_angles(), 1.8)))
@@ -180,7 +180,7 @@ def test_a_wrongly_oriented_asset_is_named_in_one_line_and_its_declared_up_axis_
     _manifest(tmp_path, [_entry(file, up_axis="Z")])
     result = build_frame_scene(config, 0, keep={})
     assert result.info["population"]["person"]["placed"] == 2
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.labels import load_class_table
 
     buffers = export_scene(load_class_table())
@@ -206,7 +206,7 @@ def test_a_missing_set_is_a_config_error_before_blender(tmp_path):
 
 @pytest.mark.bpy
 def test_a_rig_without_animations_is_posed_within_its_bones_rotation_limits(bpy_scene):
-    from bpy_pipeline.scenes.assets import apply_pose, draw_pose, load_models, _rotation_limits
+    from bpy_pipeline.blender.asset_models import apply_pose, draw_pose, load_models, _rotation_limits
 
     model = load_models("project_people", "person", "test")[0]
     rig = model.armature
@@ -239,7 +239,7 @@ def test_fbx_and_blend_car_files_import_upright_with_their_glass(bpy_scene, tmp_
     """The shipped sedan re-saved as FBX (Blender's exporter, Y up) and as a .blend (Z up), both with up_axis auto."""
     import bpy
 
-    from bpy_pipeline.scenes.assets import load_models
+    from bpy_pipeline.blender.asset_models import load_models
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     bpy.ops.import_scene.gltf(filepath=str(TEST_ASSETS / "car_sedan.glb"))

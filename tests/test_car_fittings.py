@@ -89,7 +89,7 @@ OFF = {"parking": "scene.car_fittings=false", "street": "scene.car_fittings=fals
 @pytest.mark.parametrize("builder", sorted(BUILDERS))
 def test_every_builders_cars_carry_plates_and_lamps_inside_their_boxes(bpy_scene, builder):
     from bpy_pipeline.config import load_config
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.geometry.boxes import fit_boxes
     from bpy_pipeline.labels import load_class_table
     from bpy_pipeline.lidar.effects.materials import model_id
@@ -135,7 +135,7 @@ def test_a_parking_cars_plates_read_the_retroreflectors_value_with_material_mode
     ``effects.materials.objects`` they read above every body point and are lost only at grazing entrance
     (the model's 60 degrees); without, they read as the diffuse 0.8 they are tagged."""
     from bpy_pipeline.config import load_config
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.labels import load_class_table
     from bpy_pipeline.lidar.effects.materials import model_id
     from bpy_pipeline.frame import frame_rng

@@ -52,7 +52,7 @@ def test_the_group_builds_the_pure_hall(changes):
 
 
 def test_labels_as_before():
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.labels import load_class_table
     from bpy_pipeline.builders.industrial_hall.scene import INSTANCE
 
@@ -67,7 +67,7 @@ def test_labels_as_before():
 def test_a_racks_levels_edited_in_its_modifier_change_what_the_export_reads():
     import bpy
 
-    from bpy_pipeline.compat import set_modifier_input
+    from bpy_pipeline.blender.compat import set_modifier_input
     from bpy_pipeline.geometry.indoor import shelf
 
     params, layout = build()

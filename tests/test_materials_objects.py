@@ -64,7 +64,7 @@ def test_parts_that_cannot_be_told_apart_are_one_line():
 
 def test_export_reads_roughness_metallic_and_lidar_material():
     bpy = pytest.importorskip("bpy")
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     made = {}

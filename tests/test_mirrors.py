@@ -294,11 +294,11 @@ def test_pipeline_scene_mirror_through_blender(tmp_path):
     import bpy
 
     from bpy_pipeline.config import config_from_dict
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.labels import load_class_table
     from bpy_pipeline.frame import frame_rng
     from bpy_pipeline.stages.scan import scan_buffers
-    from bpy_pipeline.scenes import build_scene
+    from bpy_pipeline.blender import build_scene
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     shapes = [  # the 45 degree mirror (a plane's normal is +z before rotation) and the side wall

@@ -105,7 +105,7 @@ def test_the_layout_keeps_bays_pillars_and_ramp_apart_and_the_robot_on_the_drive
 # ----------------------------------------------------------------------------- the built scene
 def _frame(config, index, keep=None):
     """Build frame ``index`` (on the scene ``keep`` holds from earlier frames, when given) and export it."""
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.labels import load_class_table
     from bpy_pipeline.frame import frame_rng
     from bpy_pipeline.stages.scene import build_frame_scene

@@ -77,7 +77,7 @@ def _rows_by_instance(buffers: SceneBuffers) -> dict:
 
 def _hall(seed: int, **params):
     from bpy_pipeline.config import load_config
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.labels import load_class_table
     from bpy_pipeline.frame import frame_rng
     from bpy_pipeline.stages.scene import build_frame_scene
@@ -167,7 +167,7 @@ def test_a_new_frame_reposes_without_rebuilding(bpy_scene):
 @pytest.mark.bpy
 def test_assets_in_the_manifest_replace_the_procedural_people(bpy_scene, tmp_path):
     from bpy_pipeline.errors import InputError
-    from bpy_pipeline.scenes.people import load_assets
+    from bpy_pipeline.blender.people import load_assets
 
     obj = tmp_path / "mannequin.obj"
     corners = [(x, y, z) for x in (-0.2, 0.2) for y in (0.0, 1.7) for z in (-0.12, 0.12)]  # OBJ is y-up

@@ -46,7 +46,7 @@ def _trees(obj) -> tuple[np.ndarray, np.ndarray]:
 def _set(obj, name, value):
     import bpy
 
-    from bpy_pipeline.compat import set_modifier_input
+    from bpy_pipeline.blender.compat import set_modifier_input
 
     set_modifier_input(obj.modifiers["Street Planting"], name, value)  # what a user does in the modifier panel
     obj.update_tag()
@@ -90,7 +90,7 @@ def test_the_trees_keep_the_density_clearance_yards_and_sizes_they_are_given():
 def test_the_trees_are_labelled_trunk_and_vegetation_and_scanned():
     import bpy  # noqa: F401  (the test needs Blender's module loaded)
 
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.io import read_ply
     from bpy_pipeline.labels import load_class_table
     from bpy_pipeline.plan import run_frames
@@ -128,7 +128,7 @@ def test_same_seed_same_trees_and_none_at_density_zero():
     assert len(_trees(bpy.data.objects["street_yard_trees"])[0]) > len(first[0])
     _street()  # the default: the group plants nothing, and the ground it would plant on is no geometry of the scene
     assert all(len(m) == 0 for m in _trees(bpy.data.objects["street_yard_trees"]))
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.labels import load_class_table
 
     assert not any(name.startswith("street_yard_trees") for name in export_scene(load_class_table()).objects.names)
@@ -137,7 +137,7 @@ def test_same_seed_same_trees_and_none_at_density_zero():
 def test_a_density_edited_in_the_modifier_panel_is_what_the_export_reads():
     import bpy
 
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.labels import load_class_table
 
     _street()

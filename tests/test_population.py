@@ -135,7 +135,7 @@ def _instances(buffers):
 def test_placed_objects_never_cross_each_other_or_the_hall_and_stand_on_allowed_surfaces(bpy_scene, tmp_path):
     import bpy
 
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.geometry import kinematics
     from bpy_pipeline.labels import load_class_table
     from bpy_pipeline.stages.scene import build_frame_scene
@@ -201,7 +201,7 @@ def test_frame_k_after_k_minus_1_is_frame_k_alone(bpy_scene, tmp_path):
 @pytest.mark.bpy
 def test_population_works_on_a_procedural_builder(bpy_scene):
     from bpy_pipeline.config import load_config
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.labels import load_class_table
     from bpy_pipeline.stages.scene import build_frame_scene
 

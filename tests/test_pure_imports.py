@@ -24,7 +24,7 @@ import bpy_pipeline
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "bpy_pipeline"
-BPY_SIDE = {"bpy_pipeline.export", "bpy_pipeline.compat", "bpy_pipeline.scenes", "bpy_pipeline.population.scene"}  # and the builders' Blender files (blender_file)
+BPY_SIDE = {"bpy_pipeline.blender", "bpy_pipeline.population.scene"}  # and the builders' Blender files (blender_file)
 PURE_PACKAGES = ("geometry", "lidar", "io", "mixing", "evaluate", "population")  # never import Blender, not even inside a function (their BPY_SIDE aside)
 BLENDER_MODULES = ("bpy", "bmesh", "mathutils")
 
@@ -131,7 +131,7 @@ def test_the_pure_packages_import_no_blender_module_anywhere():
     assert not found, "Blender imports in the pure part: " + ", ".join(f"{k} imports {v}" for k, v in found.items())
 
 
-@pytest.mark.parametrize("source", ["def f():\n    import bpy\n", "def f():\n    from mathutils import Matrix\n", "from ..scenes import objects\n", "import bmesh\n",
+@pytest.mark.parametrize("source", ["def f():\n    import bpy\n", "def f():\n    from mathutils import Matrix\n", "from ..blender import mesh_objects\n", "import bmesh\n",
                                     "from ..builders.railway import scene\n", "def f():\n    from ..builders.street.scatter_nodes import scatter_group\n"])
 def test_the_check_finds_a_blender_import(source):
     """The check above fails on a real import of Blender in a pure module, inside a function too (a builder's Blender files too)."""

@@ -79,7 +79,7 @@ def build(*overrides, seed=0, view=None):
     import bpy
 
     from bpy_pipeline.frame import frame_rng
-    from bpy_pipeline.scenes import build_scene
+    from bpy_pipeline.blender import build_scene
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     config = load_config(None, list(overrides))
@@ -133,7 +133,7 @@ def test_collinear_alignment_gives_a_straight_track():
 def test_the_track_follows_a_curve_and_its_node_group_is_editable():
     import bpy
 
-    from bpy_pipeline.compat import set_modifier_input
+    from bpy_pipeline.blender.compat import set_modifier_input
     from bpy_pipeline.builders.railway.alignment import arc_through
 
     build("scene.track.mid=[0, 25, 0]", "scene.stations.count=0", "scene.track.design_speed=0")  # no cant: rails level across
@@ -176,7 +176,7 @@ def test_every_class_of_the_scene_appears_in_the_output(tmp_path):
 
 
 def test_same_seed_same_scene():
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.lidar.sensor.view import view_of
     from bpy_pipeline.labels import load_class_table
 

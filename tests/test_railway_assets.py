@@ -77,7 +77,7 @@ def make_asset(path: Path, parts: dict) -> Path:
     """Write ``parts`` ({object name: (lo, hi, material name or None)}) with Blender's OBJ or PLY exporter."""
     import bpy
 
-    from bpy_pipeline.scenes.objects import mesh_data
+    from bpy_pipeline.blender.mesh_objects import mesh_data
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     for name, (lo, hi, material) in parts.items():
@@ -98,7 +98,7 @@ def build(*overrides):
     import bpy
 
     from bpy_pipeline.builders.railway import scene as railway
-    from bpy_pipeline.scenes.objects import COLLECTION
+    from bpy_pipeline.blender.mesh_objects import COLLECTION
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     params = load_config(None, ["scene.detail.mode=fixed", "scene.detail.stones=false", *overrides]).scene.params

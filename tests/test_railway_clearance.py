@@ -111,10 +111,10 @@ def clashes(overrides: list[str]) -> list[tuple[str, str]]:
     without being a joint."""
     import bpy
 
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.labels import load_class_table
     from bpy_pipeline.frame import frame_rng
-    from bpy_pipeline.scenes import build_scene
+    from bpy_pipeline.blender import build_scene
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     config = load_config(None, ["scene.detail.mode=fixed", "scene.catenary.points_per_10m=10", "scene.supports.mast_type=mixed", *overrides])
@@ -178,7 +178,7 @@ def test_registration_arms_are_about_a_metre_long():
     import bpy
 
     from bpy_pipeline.frame import frame_rng
-    from bpy_pipeline.scenes import build_scene
+    from bpy_pipeline.blender import build_scene
 
     for layout, tracks in (("single", 2), ("both_sides", 4), ("gantry", 3)):
         bpy.ops.wm.read_factory_settings(use_empty=True)

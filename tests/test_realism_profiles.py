@@ -99,7 +99,7 @@ def test_intensity_in_the_real_sensors_units(real_scan):
 @pytest.mark.bpy
 def test_reflectivity_from_the_material_base_colour(bpy_scene):
     """No ``lidar_reflectivity``: the albedo of the base colour; the property stays the override."""
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.labels import load_class_table
 
     bpy = bpy_scene

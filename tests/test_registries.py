@@ -29,7 +29,7 @@ def build_pillar(params: PillarScene, context) -> BuildResult:
     import bpy  # noqa: F401  (a builder's Blender side)
 
     from bpy_pipeline.geometry import primitives
-    from bpy_pipeline.scenes.objects import mesh_object, scene_collection, tag
+    from bpy_pipeline.blender.mesh_objects import mesh_object, scene_collection, tag
 
     collection = scene_collection()
     tag(mesh_object("pillar", primitives.box(0.5, 0.5, params.height), collection, (params.x, 0.0, params.height / 2), (0.0, 0.0, 0.0)), "pillar")

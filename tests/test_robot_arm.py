@@ -84,10 +84,10 @@ def test_a_bad_arm_file_names_the_key(tmp_path):
 def test_blender_chain_evaluates_to_the_forward_kinematics(bpy_scene):
     import bpy
 
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.labels import load_class_table
-    from bpy_pipeline.scenes.objects import scene_collection
-    from bpy_pipeline.scenes.robot_arm import RobotArm
+    from bpy_pipeline.blender.mesh_objects import scene_collection
+    from bpy_pipeline.blender.robot_arm import RobotArm
 
     arm = kinematics.load_arm()
     robot = RobotArm(arm, scene_collection(), 0)

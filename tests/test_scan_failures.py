@@ -325,11 +325,11 @@ def test_a_blender_object_with_a_nan_vertex_is_an_input_error_naming_it(tmp_path
     import bpy
 
     from bpy_pipeline.config import config_from_dict
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.labels import load_class_table
     from bpy_pipeline.frame import frame_rng
     from bpy_pipeline.stages.scan import scan_buffers
-    from bpy_pipeline.scenes.objects import mesh_object, scene_collection
+    from bpy_pipeline.blender.mesh_objects import mesh_object, scene_collection
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     collection = scene_collection()
@@ -362,11 +362,11 @@ def test_a_blender_scene_10_km_from_the_origin_keeps_a_tenth_of_a_millimetre():
     import bpy
 
     from bpy_pipeline.config import config_from_dict
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.labels import load_class_table
     from bpy_pipeline.frame import frame_rng
     from bpy_pipeline.stages.scan import scan_buffers
-    from bpy_pipeline.scenes import build_scene
+    from bpy_pipeline.blender import build_scene
 
     offset = np.array([6000.0, -8000.0, 0.0])
     shapes = [

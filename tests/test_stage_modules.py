@@ -116,7 +116,7 @@ def test_kept_scan_reads_a_file_once_while_frames_share_it(real_scan_config):
 @pytest.mark.bpy
 def test_the_camera_stage_renders_each_object_in_its_class_colour(blender_renders, bpy_scene):
     from bpy_pipeline.geometry import primitives
-    from bpy_pipeline.scenes.objects import mesh_object, scene_collection
+    from bpy_pipeline.blender.mesh_objects import mesh_object, scene_collection
     from bpy_pipeline.stages.camera import camera_stage
 
     config = load_config({"output": {"kitti": {"camera": {"resolution": [160, 60]}}}})

@@ -153,7 +153,7 @@ BUSY_RAW = {k: {"kind": d.kind, "mean": d.mean, "std": d.std, "min": d.min, "max
 
 @pytest.mark.bpy
 def test_exported_street_has_no_intersections_and_users_stand_on_their_ground(bpy_scene):
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.labels import load_class_table
     from bpy_pipeline.stages.scene import build_frame_scene
 
@@ -211,7 +211,7 @@ def test_road_users_kept_across_frames_are_the_frames_parts_and_the_spares_expor
     """The users' objects are kept and refilled frame after frame: after a frame with more parts than the next, the
     next frame's objects carry exactly its parts (names, tags, vertices), and the spare ones export no triangle."""
     from bpy_pipeline.builders.street.scene import Intersection
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.labels import load_class_table
 
     street_scene = Intersection(_config().scene.params)

@@ -131,7 +131,7 @@ def _buildings(layout) -> list:
 def test_the_street_has_live_road_and_scatter_groups(street_frame):
     import bpy
 
-    from bpy_pipeline.compat import get_modifier_input, interface_inputs
+    from bpy_pipeline.blender.compat import get_modifier_input, interface_inputs
 
     layout, params = street_frame
     modifiers = [(obj.name, m) for obj in bpy.data.objects if obj.name.startswith("street_") for m in obj.modifiers if m.type == "NODES"]
@@ -148,7 +148,7 @@ def test_the_street_has_live_road_and_scatter_groups(street_frame):
 
 @pytest.mark.bpy
 def test_the_export_labels_the_swept_parts_as_the_pure_parts(street_frame):
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.labels import load_class_table
 
     layout, params = street_frame
@@ -167,8 +167,8 @@ def test_the_export_labels_the_swept_parts_as_the_pure_parts(street_frame):
 def test_a_wider_lane_in_the_modifier_moves_the_road_and_nothing_else(street_frame):
     import bpy
 
-    from bpy_pipeline.compat import set_modifier_input
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.compat import set_modifier_input
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.labels import load_class_table
 
     _, params = street_frame
@@ -207,8 +207,8 @@ def test_a_wider_lane_in_the_modifier_moves_the_road_and_nothing_else(street_fra
 def test_a_taller_building_in_its_modifier_moves_its_roof_and_nothing_else(street_frame):
     import bpy
 
-    from bpy_pipeline.compat import set_modifier_input
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.compat import set_modifier_input
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.labels import load_class_table
 
     layout, params = street_frame

@@ -92,7 +92,7 @@ def test_a_urdf_arm_is_placed_with_its_own_meshes_posed_within_its_limits(bpy_sc
     import sys
 
     from bpy_pipeline.config import load_config
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.population.placer import meshes_cross
     from bpy_pipeline.labels import load_class_table
     from bpy_pipeline.stages.scene import build_frame_scene

@@ -336,7 +336,7 @@ def person_object(rng: np.random.Generator, size=None) -> list[ObjectPart]:
     return fit_to_box([part], (v.max(axis=0) - v.min(axis=0)) if size is None else size)
 
 
-ARM_REFLECTIVITY = 0.55  # painted metal (as scenes/robot_arm.py)
+ARM_REFLECTIVITY = 0.55  # painted metal (as blender/robot_arm.py)
 
 
 def robot_arm_object(rng: np.random.Generator, size=None) -> list[ObjectPart]:

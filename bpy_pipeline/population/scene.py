@@ -27,8 +27,8 @@ from ..geometry.clearance import NO_POSES
 from ..geometry.objects import COLOURS, STYLES, car_meshes, car_surfaces
 from .placer import Placer, place_on_spots
 from ..geometry.surfaces import find_surfaces, floor_and_seats
-from ..scenes.objects import mesh_data, scene_collection, tag
-from ..scenes.people import PersonRig
+from ..blender.mesh_objects import mesh_data, scene_collection, tag
+from ..blender.people import PersonRig
 
 COLLECTION = "LiDAR Population"
 KEY = "population"  # where the run's BuildContext.keep holds the pools
@@ -118,7 +118,7 @@ def _asset_models(params, kind_name: str, manifest: str):
     """The asset models of ``params.assets`` (a set of the assets manifest), or ``None`` (procedural)."""
     if not params.assets:
         return None
-    from ..scenes.assets import load_models
+    from ..blender.asset_models import load_models
 
     return load_models(params.assets, KINDS.get(kind_name).manifest_kind, f"scene.population.{kind_name}.assets", manifest or None)
 
@@ -129,7 +129,7 @@ class PersonSide(Side):
 
     def new_slot(self, index, placed):
         if self.models:
-            from ..scenes.assets import AssetSlot
+            from ..blender.asset_models import AssetSlot
 
             return AssetSlot(self.collection, f"person_{index:03d}")
         return PersonRig(self.collection, index)
@@ -153,18 +153,18 @@ class RobotArmSide(Side):
         if self.params.assets:
             return _asset_models(self.params, "robot_arm", self.manifest)
         if self.params.model.lower().endswith(".urdf"):  # the robot's own link meshes (ROS-Industrial style)
-            from ..scenes.robot_arm import load_urdf_arm
+            from ..blender.robot_arm import load_urdf_arm
 
             return load_urdf_arm(self.params.model)
         return kinematics.load_arm(self.params.model) if self.params.model else kinematics.load_arm()
 
     def new_slot(self, index, placed):
         if isinstance(self.models, list):
-            from ..scenes.assets import AssetSlot
+            from ..blender.asset_models import AssetSlot
 
             return AssetSlot(self.collection, f"robot_{index:03d}")
         from ..geometry.urdf import MeshedArm
-        from ..scenes.robot_arm import RobotArm
+        from ..blender.robot_arm import RobotArm
 
         if isinstance(self.models, MeshedArm):
             return RobotArm(self.models.model, self.collection, 50 + index, self.models.meshes)
@@ -198,7 +198,7 @@ class CarSide(Side):
 
     def new_slot(self, index, placed):
         if self.models:
-            from ..scenes.assets import AssetSlot
+            from ..blender.asset_models import AssetSlot
 
             return AssetSlot(self.collection, f"car_{index:03d}")
         return PartsSlot(self.collection, f"car_{index:03d}", list(self.meshes[0]))
@@ -279,7 +279,7 @@ class PopulationScene:
 
     def static_scene(self):
         """The scene without the population, exported (world, m), and its standing places (kept while unchanged)."""
-        from ..export import export_scene
+        from ..blender.export import export_scene
         from ..labels import load_class_table
 
         for side in self.sides.values():

@@ -49,7 +49,7 @@ def each_member(*stages: tuple[str | None, StageFunction]) -> StageFunction:
     frame's add them up, timing by timing."""
 
     def members_stage(frame: Frame, run: Run) -> None:
-        from ..export import export_scene
+        from ..blender.export import export_scene
 
         config = run.config
         if not run.members:

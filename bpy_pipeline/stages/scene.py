@@ -88,7 +88,7 @@ def export_stage(frame: Frame, run: Run) -> None:
     ``dynamic_parts``): the frame's buffers are the static world's, then those. The rays, limited to the sensor's
     range, do the culling the export would do.
     """
-    from ..export import export_scene, parts_buffers
+    from ..blender.export import export_scene, parts_buffers
 
     max_range = reach(frame, run.config)
     centre = frame.pose[:3, 3]

@@ -103,7 +103,7 @@ def scene_trajectory(config: Config) -> Trajectory | None:
     section = config.sensor.trajectory
     if section is None or not section.curve:
         return sensor_trajectory(config.sensor)
-    from ..scenes.curves import curve_polyline
+    from ..blender.curves import curve_polyline
 
     return sensor_trajectory(config.sensor, curve_polyline(section.curve))
 

@@ -65,7 +65,7 @@ def evaluated(obj) -> np.ndarray:
 
 
 def set_input(obj, name, value):
-    from bpy_pipeline.compat import set_modifier_input
+    from bpy_pipeline.blender.compat import set_modifier_input
 
     set_modifier_input(obj.modifiers[0], name, value)  # as a user would from the Python console
     obj.update_tag()
@@ -77,7 +77,7 @@ def beams(points) -> dict:
 
 
 def exported_pieces(names) -> dict:
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.labels import load_class_table
 
     buffers = export_scene(load_class_table())
@@ -127,7 +127,7 @@ def main() -> dict:
     before = scan(config, "railway_before")
     for obj in bpy.data.objects:
         if obj.name.endswith(".contact_wire"):
-            from bpy_pipeline.compat import get_modifier_input
+            from bpy_pipeline.blender.compat import get_modifier_input
 
             set_input(obj, "Sag", get_modifier_input(obj.modifiers[0], "Sag") + 0.3)
     after = scan(config, "railway_after")

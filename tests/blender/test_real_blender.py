@@ -676,7 +676,7 @@ def test_gui_node_editor_shows_the_catenary_wire_group(gui):
 
 SAG_EDIT = """
 import importlib
-compat = importlib.import_module('bl_ext.user_default.lidar_pipeline.bpy_pipeline.compat')  # the installed extension's copy
+compat = importlib.import_module('bl_ext.user_default.lidar_pipeline.bpy_pipeline.blender.compat')  # the installed extension's copy
 get_modifier_input, set_modifier_input = compat.get_modifier_input, compat.set_modifier_input
 edited = 0
 for obj in bpy.data.objects:

@@ -21,9 +21,9 @@ from __future__ import annotations
 
 import bpy
 
-from ...scenes import box_nodes
-from ...scenes.box_nodes import select
-from ...scenes.nodes import GroupBuilder, add_group_modifier, current_group, new_group, stamp
+from ...blender import box_nodes
+from ...blender.box_nodes import select
+from ...blender.nodes import GroupBuilder, add_group_modifier, current_group, new_group, stamp
 
 GROUP = "Industrial Hall"
 VERSION = 2  # 2: the Instance input, stored as lidar_instance

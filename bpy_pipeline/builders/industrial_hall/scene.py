@@ -22,10 +22,10 @@ from ...geometry.collision import box_axes, capsule_box_gaps, capsule_gaps
 from ...geometry.indoor import hall_layout
 from ...geometry.placement import sample, sample_count
 from ...geometry.transforms import pose_matrix
-from ...scenes import box_nodes
-from ...scenes.objects import scene_collection, tag
-from ...scenes.people import AssetPerson, PersonRig, import_asset, load_assets
-from ...scenes.robot_arm import RobotArm
+from ...blender import box_nodes
+from ...blender.mesh_objects import scene_collection, tag
+from ...blender.people import AssetPerson, PersonRig, import_asset, load_assets
+from ...blender.robot_arm import RobotArm
 from . import hall_nodes
 
 INSTANCE = {"floor": 1, "wall": 2, "ceiling": 3, "desk": 10, "shelf": 40, "robot arm": 100, "person": 200}

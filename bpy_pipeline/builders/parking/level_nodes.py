@@ -30,10 +30,10 @@ import dataclasses
 import bpy
 import numpy as np
 
-from ...compat import get_modifier_inputs
-from ...scenes import box_nodes
-from ...scenes.box_nodes import select
-from ...scenes.nodes import GroupBuilder, add_group_modifier, current_group, new_group, stamp
+from ...blender.compat import get_modifier_inputs
+from ...blender import box_nodes
+from ...blender.box_nodes import select
+from ...blender.nodes import GroupBuilder, add_group_modifier, current_group, new_group, stamp
 
 GROUP = "Parking Level"
 VERSION = 3  # 2: the Instance input, stored as lidar_instance; 3: doorways in the long walls

@@ -32,8 +32,8 @@ from ...geometry.objects import COLOURS, STYLES, car_meshes, car_surfaces, style
 from ...geometry.indoor import parking_station
 from ...geometry.placement import FloorBoxPlacer, insert_sequentially, sample, sample_count, turn_about
 from ...lidar.cast.raycast import RayCaster
-from ...scenes import box_nodes
-from ...scenes.objects import mesh_data, scene_collection, tag
+from ...blender import box_nodes
+from ...blender.mesh_objects import mesh_data, scene_collection, tag
 from . import level_nodes as parking_nodes
 from .layout import level_layout
 

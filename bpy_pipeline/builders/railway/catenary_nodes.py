@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import bpy
 
-from ...scenes.nodes import GroupBuilder, add_group_modifier, current_group, new_group, stamp
+from ...blender.nodes import GroupBuilder, add_group_modifier, current_group, new_group, stamp
 
 WIRE = "Catenary Wire"
 DROPPERS = "Catenary Droppers"

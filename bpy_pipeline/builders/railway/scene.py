@@ -36,8 +36,8 @@ import numpy as np
 
 from ...geometry.lod import equal_perimeter_radius
 from ...geometry.primitives import merge
-from ...scenes.nodes import add_group_modifier
-from ...scenes.objects import mesh_data, mesh_object, scene_collection, tag
+from ...blender.nodes import add_group_modifier
+from ...blender.mesh_objects import mesh_data, mesh_object, scene_collection, tag
 from . import parts as railway_parts, trackside
 from .catenary import parabolic_sag
 from .terrain import terrain_mesh

@@ -17,8 +17,8 @@ import mathutils
 import numpy as np
 
 from ...errors import InputError
-from ...scenes.assets import world_arrays
-from ...scenes.objects import mesh_data, tag
+from ...blender.asset_models import world_arrays
+from ...blender.mesh_objects import mesh_data, tag
 from .assets import SLOTS, part_class, placements
 
 DATA_KINDS = ("objects", "meshes", "materials", "images", "textures", "cameras", "lights", "actions", "armatures", "collections", "node_groups")

@@ -18,7 +18,7 @@ import math
 
 import bpy
 
-from ...scenes.nodes import GroupBuilder, current_group, new_group, stamp
+from ...blender.nodes import GroupBuilder, current_group, new_group, stamp
 
 PARTS = {"all": 0, "rails": 1, "sleepers": 2, "ballast": 3, "embankment": 4, "stones": 5, "ground": 6}
 VERSION = 4  # bump when the groups change, so a file holding older groups gets new ones

@@ -4,7 +4,7 @@ A material model turns a return's ``lidar_reflectivity`` ``rho`` and its cosine 
 apparent reflectance ``a`` the receiver sees (what the intensity, drop and weather models read; a
 Lambertian target gives ``rho cos``). Points take a model by their class (``effects.materials.classes``,
 e.g. ``{car: glossy_paint, traffic sign: retroreflector}``), or by the object they hit
-(``effects.materials.objects: true``: each object's model as export.py read it from its Blender
+(``effects.materials.objects: true``: each object's model as blender/export.py read it from its Blender
 material, :func:`model_from_material`: a ``lidar_material`` custom property naming a model, else a
 Principled BSDF roughness at or below :data:`GLOSSY_ROUGHNESS` (clear coat, polished metal) is
 ``glossy_paint``; an object's model wins over its class's). Classes and objects not named keep the

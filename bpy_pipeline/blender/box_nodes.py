@@ -14,7 +14,7 @@ import numpy as np
 from ..geometry import primitives
 from ..geometry.indoor import _prism_along_y
 from .nodes import GroupBuilder, excluded_collection
-from .objects import mesh_object
+from .mesh_objects import mesh_object
 
 PROTOTYPES = "LiDAR Box Prototypes"
 BOX = "box prototype"

@@ -24,7 +24,7 @@ from mathutils import Matrix
 
 from ..assets import asset_set, auto_unit_scale, orientation_error, up_rotation
 from ..errors import InputError
-from .objects import mesh_data, tag
+from .mesh_objects import mesh_data, tag
 
 TEMPLATES = "LiDAR Asset Templates"
 GLASS_REFLECTIVITY = 0.08

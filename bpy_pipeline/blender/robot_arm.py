@@ -15,7 +15,7 @@ from mathutils import Matrix
 
 from ..geometry.kinematics import ArmModel
 from ..geometry.objects import link_meshes
-from .objects import mesh_object, tag
+from .mesh_objects import mesh_object, tag
 
 REFLECTIVITY = 0.55  # painted metal (Staubli's melon-yellow; an assumption, not measured)
 

@@ -24,7 +24,7 @@ from mathutils import Matrix
 from ..assets import MANIFEST, AssetEntry, read_manifest
 from ..errors import InputError
 from ..geometry import human
-from .objects import mesh_data, tag
+from .mesh_objects import mesh_data, tag
 
 BONE_TAILS = {"head": (0.0, 0.0, 1.0), "forearm_l": (0.0, 0.135, 0.38), "forearm_r": (0.0, -0.135, 0.38), "foot_l": (0.12, 0.085, 0.02), "foot_r": (0.12, -0.085, 0.02)}
 BONE_CHILD = {"pelvis": "spine", "spine": "head", "upper_arm_l": "forearm_l", "upper_arm_r": "forearm_r", "thigh_l": "shank_l", "shank_l": "foot_l", "thigh_r": "shank_r", "shank_r": "foot_r"}
