@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from bpy_pipeline import cli
-from bpy_pipeline.__main__ import main
+from bpy_pipeline.cli.commands import main
 from bpy_pipeline.errors import InputError
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -304,7 +304,7 @@ def test_fit_intensity_scale_zero_prints_one_line_not_numpy_warnings(tmp_path):
 
 
 # ----------------------------------------------------------------------------- 7. optional dependencies
-BLOCK = "import sys; sys.modules.update({name: None for name in ARGS}); from bpy_pipeline.__main__ import main; sys.exit(main(sys.argv[1:]))"
+BLOCK = "import sys; sys.modules.update({name: None for name in ARGS}); from bpy_pipeline.cli.commands import main; sys.exit(main(sys.argv[1:]))"
 
 
 @pytest.mark.parametrize("blocked, argv, fragment", [

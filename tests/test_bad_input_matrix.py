@@ -172,7 +172,7 @@ def test_argparse_errors_are_one_line(argv, fragment):
 
 @pytest.mark.parametrize("option", [["--fields", "0"], ["--intensity-field", "9"], ["--rings", "0"]])
 def test_fit_options_that_cannot_read_a_scan(option, tmp_path, capsys):
-    from bpy_pipeline.__main__ import main
+    from bpy_pipeline.cli.commands import main
 
     scan = write(tmp_path / "s.bin", np.zeros((32 * 4, 5), np.float32).tobytes())
     code = main(["fit", str(scan), "--out", str(tmp_path / "m.yaml"), *option])

@@ -12,7 +12,7 @@ import pytest
 pytest.importorskip("scipy", reason="evaluate needs the evaluate extra (pip install '.[evaluate]')")
 pytest.importorskip("lightgbm", reason="evaluate's reference model needs LightGBM (pip install '.[evaluate]')")
 
-from bpy_pipeline.__main__ import main
+from bpy_pipeline.cli.commands import main
 from bpy_pipeline.evaluate import label_maps, labelled, metrics
 from bpy_pipeline.evaluate.features import FEATURE_NAMES, point_features
 from bpy_pipeline.evaluate.labelled import LabelledScan, load_scans

@@ -31,7 +31,7 @@ def test_wheel_holds_every_data_file_the_package_reads(wheel):
     source = {p.relative_to(ROOT).as_posix() for p in (ROOT / "bpy_pipeline").rglob("*.py")}
     assert source <= names, f"modules missing from the wheel: {sorted(source - names)[:5]}"
     entry = zipfile.ZipFile(wheel).read(next(n for n in names if n.endswith("entry_points.txt"))).decode()
-    assert "bpy-pipeline = bpy_pipeline.__main__:console" in entry
+    assert "bpy-pipeline = bpy_pipeline.cli.commands:console" in entry
     metadata = zipfile.ZipFile(wheel).read(next(n for n in names if n.endswith("METADATA"))).decode()
     requires = [line for line in metadata.splitlines() if line.startswith("Requires-Dist:") and "extra ==" not in line]
     assert not any("trimesh" in line for line in requires), "trimesh is a test dependency, not a runtime one"

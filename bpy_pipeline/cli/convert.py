@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from .subcommand import Command
 
 POINT_FORMATS = ("semantickitti", "ply", "npy", "las", "pcd", "range_image")
 # SemanticKITTI training id -> raw id (semantic-kitti.yaml, learning_map_inv)
@@ -214,3 +215,11 @@ def convert_main(args) -> int:
     c = converted.info["conversion"]
     print(f"{c['source_returns']:,} returns of {c['scan']} -> {c['converted']:,} points of {args.to} ({args.method}, {c['convert_ms']:.0f} ms, labels: {c['labels']}); {len(record['files'])} files in {args.out}")
     return 0
+
+
+def arguments(p) -> None:
+    add_convert_arguments(p).set_defaults(func=convert_main)
+
+
+COMMAND = Command("convert", "a dense real scan, labels carried, in a sparser sensor's pattern",
+                  "Resample a dense real scan (and its labels) into a sparser sensor preset's firings and write it as a dataset (docs/mixing.md).", arguments)

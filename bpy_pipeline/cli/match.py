@@ -40,6 +40,7 @@ import yaml
 
 from ..errors import InputError
 from ..yaml_text import load_yaml
+from .subcommand import Command
 
 CLASSES = ("car", "person", "bicyclist")  # SemanticKITTI training names that KITTI boxes label too
 OBJECT_TYPE = {"car": "car", "person": "person", "bicyclist": "cyclist"}  # class -> insertable object type
@@ -276,3 +277,12 @@ def match_main(args) -> int:
             raise InputError(f"--report: cannot write {args.report} ({err.strerror or err})") from None
     print(f"written: {args.out}")
     return 0
+
+
+def arguments(p) -> None:
+    add_match_arguments(p).set_defaults(func=match_main)
+
+
+COMMAND = Command("match", "fit object counts, distances and headings to labelled real scans; write them into a config",
+                  "Fit per-class object counts, distance and heading histograms (and the points-per-object curve) to "
+                  "labelled real frames and write them as the builder's placement distributions (docs/match.md).", arguments)
