@@ -149,7 +149,8 @@ def street_ways():
             else:
                 mesh_object(part.name, part.mesh, collection)
 
-    return build, {"scattered kinds": sum(p.scatter is not None for p in layout.parts), "swept parts": sum(p.name in SWEPT for p in layout.parts), "buildings": sum(p.front is not None for p in layout.parts)}
+    return build, {"scattered kinds": sum(p.scatter is not None for p in layout.parts), "swept parts": sum(p.name in SWEPT for p in layout.parts),
+                   "buildings": sum(p.front is not None for p in layout.parts)}
 
 
 def counts(builder: str) -> dict:
@@ -247,7 +248,8 @@ def main() -> None:
         rows.append(row | counts(builder) | {"layout": ", ".join(f"{k} {v}" for k, v in notes.items())})
     report("builder_nodes" + suffix, rows, args.out, notes={"repeats": repeats, "railway length m": length})
     if known.before is not None:
-        report("builder_nodes_frames" + suffix, whole_frames(known.before, known.runs, chosen), args.out, notes={"before": f"the code in {known.before.name} (before the groups)", "runs": known.runs})
+        report("builder_nodes_frames" + suffix, whole_frames(known.before, known.runs, chosen), args.out,
+               notes={"before": f"the code in {known.before.name} (before the groups)", "runs": known.runs})
 
 
 if __name__ == "__main__":

@@ -68,7 +68,8 @@ def main():
         gn_object("grid" if "grid" in label else "inst", build)
         buffers = export_scene(table)
         seconds = best_of(lambda: export_scene(table), repeat=3)
-        rows.append({"scene": label, "triangles": len(buffers.triangles), "objects": len(buffers.objects), "export_s": seconds, "triangles_per_s": len(buffers.triangles) / seconds})
+        rows.append({"scene": label, "triangles": len(buffers.triangles), "objects": len(buffers.objects), "export_s": seconds,
+                     "triangles_per_s": len(buffers.triangles) / seconds})
         for group in list(bpy.data.node_groups):
             bpy.data.node_groups.remove(group)
     report("export" + ("_small" if args.small else ""), rows, args.out)

@@ -134,7 +134,8 @@ def main():
         imports = {"procedural": 0.0, "assets_same_detail": import_seconds(same), "assets_dense": import_seconds(dense)}
     reference = measured["procedural"][0]
     for name, (seconds, triangles) in measured.items():
-        rows.append({"scenario": name, "build_s": round(seconds, 4), "ratio": round(seconds / reference, 3), "import_s": round(imports[name], 4), "support_triangles": triangles})
+        rows.append({"scenario": name, "build_s": round(seconds, 4), "ratio": round(seconds / reference, 3), "import_s": round(imports[name], 4),
+                     "support_triangles": triangles})
     report("railway_assets", rows, args.out, {"scene": "the thesis's 300 m line, every support built" if not args.small else "a 120 m line", "repeat": REPEAT})
 
 

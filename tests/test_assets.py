@@ -24,7 +24,8 @@ def _manifest(tmp_path, entries):
 
 
 def _entry(file: Path, **more):
-    return {"name": file.stem, "kind": "person", "set": "mine", "path": file.name, "sha256": hashlib.sha256(file.read_bytes()).hexdigest(), "licence": "CC0-1.0", **more}
+    return {"name": file.stem, "kind": "person", "set": "mine", "path": file.name, "sha256": hashlib.sha256(file.read_bytes()).hexdigest(),
+            "licence": "CC0-1.0", **more}
 
 
 # ----------------------------------------------------------------------------- pure: the manifest
@@ -109,7 +110,8 @@ def test_asset_sets_stand_upright_at_drawn_heights_with_glass_windows_and_animat
         "person": {"count": 3, "assets": "project_people", "height": {"kind": "uniform", "min": 1.6, "max": 1.9}},
         "robot_arm": {"count": 1, "assets": "project_robots"},
     }
-    config = load_config({"seed": 4, "scene": {"builder": "blend", "path": str(_hall(tmp_path)), "population": population}, "sensor": {"preset": "vlp16", "position": [0, 0, 2.5]}})
+    config = load_config({"seed": 4, "scene": {"builder": "blend", "path": str(_hall(tmp_path)), "population": population},
+                          "sensor": {"preset": "vlp16", "position": [0, 0, 2.5]}})
     keep, poses = {}, set()
     for frame in range(3):
         result = build_frame_scene(config, frame, keep=keep)
@@ -190,7 +192,8 @@ def test_a_wrongly_oriented_asset_is_named_in_one_line_and_its_declared_up_axis_
     out = tmp_path / "out"
     _manifest(tmp_path, [_entry(file)])
     cfg = tmp_path / "c.yaml"
-    cfg.write_text(yaml.safe_dump({"scene": {"builder": "blend", "path": str(hall), "population": population}, "sensor": {"preset": "vlp16", "position": [0, 0, 2.5]}}))
+    cfg.write_text(yaml.safe_dump({"scene": {"builder": "blend", "path": str(hall), "population": population},
+                                   "sensor": {"preset": "vlp16", "position": [0, 0, 2.5]}}))
     run = subprocess.run([sys.executable, str(ROOT / "run.py"), "--config", str(cfg), "--out", str(out)], cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert run.returncode == 2
     lines = [line for line in run.stderr.strip().splitlines() if line.strip()]
@@ -199,9 +202,13 @@ def test_a_wrongly_oriented_asset_is_named_in_one_line_and_its_declared_up_axis_
 
 
 def test_a_missing_set_is_a_config_error_before_blender(tmp_path):
-    result = subprocess.run([sys.executable, str(ROOT / "run.py"), "--out", str(tmp_path / "o"), "--set", "scene.builder=primitives", "--set", "scene.population={car: {count: 1, assets: sports_cars}}"], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    result = subprocess.run([sys.executable, str(ROOT / "run.py"), "--out", str(tmp_path / "o"), "--set", "scene.builder=primitives", "--set",
+                             "scene.population={car: {count: 1, assets: sports_cars}}"], cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert result.returncode == 2
-    assert result.stderr.strip().startswith("error: scene.population.car.assets: no car asset of set 'sports_cars'") and len(result.stderr.strip().splitlines()) == 1
+    assert (
+        result.stderr.strip().startswith("error: scene.population.car.assets: no car asset of set 'sports_cars'")
+        and len(result.stderr.strip().splitlines()) == 1
+    )
 
 
 @pytest.mark.bpy
@@ -264,7 +271,8 @@ def test_asset_frames_are_the_same_whatever_came_before(bpy_scene, tmp_path):
     from bpy_pipeline.plan import run_frames
 
     population = {"car": {"count": 1, "assets": "project_cars"}, "person": {"count": {"min": 1, "max": 4}, "assets": "project_people"}}
-    data = {"seed": 9, "frames": 4, "scene": {"builder": "blend", "path": str(_hall(tmp_path)), "population": population}, "sensor": {"preset": "vlp16", "position": [0, 0, 2.5]}, "output": {"formats": ["ply"], "preview": False}}
+    data = {"seed": 9, "frames": 4, "scene": {"builder": "blend", "path": str(_hall(tmp_path)), "population": population},
+            "sensor": {"preset": "vlp16", "position": [0, 0, 2.5]}, "output": {"formats": ["ply"], "preview": False}}
     config = load_config(data)
     for _ in run_frames(config, tmp_path / "all"):
         pass

@@ -78,7 +78,8 @@ def test_a_street_vehicle_tags_its_fittings_and_draws_nothing_for_them():
 
 BUILDERS = {  # config overrides whose scene has procedural cars, and the classes those cars take
     "parking": (["scene.builder=parking", "scene.cars={kind: normal, mean: 4, std: 0, min: 0, max: 40}"], {"car"}),
-    "street": (["scene.builder=street", "scene.vehicles={kind: normal, mean: 8, std: 0, min: 0, max: 40}", "scene.parked={kind: normal, mean: 6, std: 0, min: 0, max: 40}"],
+    "street": (["scene.builder=street", "scene.vehicles={kind: normal, mean: 8, std: 0, min: 0, max: 40}",
+                "scene.parked={kind: normal, mean: 6, std: 0, min: 0, max: 40}"],
                set(street.VEHICLES)),
     "population": (["scene.builder=parking", "scene.cars={kind: normal, mean: 0, std: 0, min: 0, max: 0}", "scene.population={car: {count: 3}}"], {"car"}),
 }

@@ -24,7 +24,10 @@ def excess(blender: np.ndarray, pure: np.ndarray) -> float:
     (Blender holds the ends and evaluates fields in float32); <= 0 when every point is within."""
     assert blender.shape == pure.shape, (blender.shape, pure.shape)
     allowed = 1e-6 + ULPS * EPS32 * np.abs(pure).max(axis=1, keepdims=True)
-    print(f"max |blender - pure| {np.abs(blender - pure).max(initial=0):.3g} m, in float32 steps of the coordinate {(np.abs(blender - pure) / (EPS32 * np.abs(pure).max(axis=1, keepdims=True))).max(initial=0):.2f}")
+    print(
+        f"max |blender - pure| {np.abs(blender - pure).max(initial=0):.3g} m, in float32 steps of the coordinate "
+        f"{(np.abs(blender - pure) / (EPS32 * np.abs(pure).max(axis=1, keepdims=True))).max(initial=0):.2f}"
+    )
     return float((np.abs(blender - pure) - allowed).max(initial=-1.0))
 
 
@@ -63,7 +66,8 @@ def railway():
     from bpy_pipeline.blender import build_scene
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
-    config = load_config(None, ["scene.builder=railway", "scene.catenary.double_contact_probability=1", "scene.catenary.feeders=true", "scene.catenary.earth_wire=true"])
+    config = load_config(None, ["scene.builder=railway", "scene.catenary.double_contact_probability=1", "scene.catenary.feeders=true",
+                                "scene.catenary.earth_wire=true"])
     return build_scene(config.scene, frame_rng(0, 0), None).scene
 
 

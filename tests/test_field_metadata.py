@@ -63,7 +63,9 @@ def test_every_number_of_a_builders_parameters_carries_its_unit():
     missing = []
     for cls in classes:
         hints = typing.get_type_hints(cls)
-        missing += [f"{cls.__module__}.{cls.__name__}.{f.name}" for f in dataclasses.fields(cls) if numeric(hints[f.name]) and f.metadata.get("unit") not in UNITS]
+        missing += [
+            f"{cls.__module__}.{cls.__name__}.{f.name}" for f in dataclasses.fields(cls) if numeric(hints[f.name]) and f.metadata.get("unit") not in UNITS
+        ]
     assert not missing, f"numeric builder fields without meta(unit=...): {missing}"
     assert len(classes) >= 15
 
@@ -79,7 +81,9 @@ def test_every_number_the_panel_shows_of_the_lidar_sections_carries_its_unit():
     missing = []
     for cls in classes:
         hints = typing.get_type_hints(cls)
-        missing += [f"{cls.__module__}.{cls.__name__}.{f.name}" for f in dataclasses.fields(cls) if numeric(hints[f.name]) and f.metadata.get("unit") not in UNITS]
+        missing += [
+            f"{cls.__module__}.{cls.__name__}.{f.name}" for f in dataclasses.fields(cls) if numeric(hints[f.name]) and f.metadata.get("unit") not in UNITS
+        ]
     assert not missing, f"numeric fields without meta(unit=...): {missing}"
     assert len(classes) >= 40
 

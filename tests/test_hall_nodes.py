@@ -31,7 +31,8 @@ def build(**changes):
 def pure_meshes(layout) -> dict:
     from bpy_pipeline.geometry.indoor import boxes_mesh
 
-    return {"floor": boxes_mesh(layout.floor), "ceiling": boxes_mesh(layout.ceiling), "walls": boxes_mesh(layout.walls)} | {f.name: f.mesh() for f in layout.furniture}
+    return {"floor": boxes_mesh(layout.floor), "ceiling": boxes_mesh(layout.ceiling),
+            "walls": boxes_mesh(layout.walls)} | {f.name: f.mesh() for f in layout.furniture}
 
 
 @pytest.mark.parametrize("changes", [

@@ -65,7 +65,12 @@ def test_the_trees_keep_the_density_clearance_yards_and_sizes_they_are_given():
     base = trunks[:, :3, 3] + (0.0, 0.0, 0.2)  # a trunk starts 0.2 m under the ground
     np.testing.assert_allclose(crowns[:, :2, 3], base[:, :2], atol=1e-4)  # each crown on its trunk
     rects = np.array(yards.rects)
-    inside = (base[:, None, 0] >= rects[None, :, 0] - 1e-3) & (base[:, None, 0] <= rects[None, :, 1] + 1e-3) & (base[:, None, 1] >= rects[None, :, 2] - 1e-3) & (base[:, None, 1] <= rects[None, :, 3] + 1e-3)
+    inside = (
+        (base[:, None, 0] >= rects[None, :, 0] - 1e-3)
+        & (base[:, None, 0] <= rects[None, :, 1] + 1e-3)
+        & (base[:, None, 1] >= rects[None, :, 2] - 1e-3)
+        & (base[:, None, 1] <= rects[None, :, 3] + 1e-3)
+    )
     assert inside.any(axis=1).all()
     assert np.abs(base[:, 2] - yards.terrain.z(base[:, 0], base[:, 1])).max() < 0.02  # on the ground (sampled every 2 m)
     gaps = np.linalg.norm(base[:, None, :2] - base[None, :, :2], axis=2) + np.eye(len(base)) * 1e9
@@ -98,7 +103,8 @@ def test_the_trees_are_labelled_trunk_and_vegetation_and_scanned():
     layout, config = _street(yard_trees=4.0)
     table = load_class_table()
     buffers = export_scene(table)
-    rows = {name: (buffers.objects.class_names[k], int(buffers.objects.instance[k])) for k, name in enumerate(buffers.objects.names) if name.startswith("street_yard_trees")}
+    rows = {name: (buffers.objects.class_names[k], int(buffers.objects.instance[k])) for k,
+            name in enumerate(buffers.objects.names) if name.startswith("street_yard_trees")}
     top = max(part.instance for part in layout.parts)
     assert rows == {"street_yard_trees.trunk": ("trunk", top + 1), **{f"street_yard_trees.crown.{k:02d}": ("vegetation", top + 2) for k in range(3)}}
     # the scan: points on the new trees carry their labels

@@ -125,7 +125,8 @@ def test_bad_trajectory_config_names_its_key(trajectory, extra, message):
 
 
 def test_trajectory_config_round_trips_and_builds():
-    config = config_from_dict({"frames": 2, "sensor": {"preset": "railway_tls", "rotation_deg": [0, 0, 90], "trajectory": {"waypoints": [[0, 0, 0], [0, 100, 0]], "speed": 1.5, "height": 0.5}}})
+    config = config_from_dict({"frames": 2, "sensor": {"preset": "railway_tls", "rotation_deg": [0, 0, 90],
+                                                       "trajectory": {"waypoints": [[0, 0, 0], [0, 100, 0]], "speed": 1.5, "height": 0.5}}})
     assert config_from_dict(config_to_dict(config)) == config
     assert "position" not in config_to_dict(config)["sensor"]
     pose = sensor_trajectory(config.sensor).poses([10.0])[0]

@@ -103,7 +103,9 @@ def test_the_builders_blender_side_is_named_so():
         source = path.read_text()
         module_level = {n.lineno for n in ast.parse(source).body if isinstance(n, (ast.Import, ast.ImportFrom))}
         imports_blender = any(line in module_level for line, _ in blender_imports(source, name.rpartition(".")[0]))
-        assert imports_blender == blender_file(name), f"{path.relative_to(ROOT)}: " + ("imports Blender but is not named scene*.py or *_nodes.py" if imports_blender else "is named as the Blender side but imports no Blender module")
+        assert imports_blender == blender_file(name), f"{path.relative_to(ROOT)}: " + (
+            "imports Blender but is not named scene*.py or *_nodes.py" if imports_blender else "is named as the Blender side but imports no Blender module"
+        )
     assert builder_geometry() and all(p.name not in ("scene.py", "params.py") for p in builder_geometry())
 
 
@@ -131,14 +133,16 @@ def test_the_pure_packages_import_no_blender_module_anywhere():
     assert not found, "Blender imports in the pure part: " + ", ".join(f"{k} imports {v}" for k, v in found.items())
 
 
-@pytest.mark.parametrize("source", ["def f():\n    import bpy\n", "def f():\n    from mathutils import Matrix\n", "from ..blender import mesh_objects\n", "import bmesh\n",
+@pytest.mark.parametrize("source", ["def f():\n    import bpy\n", "def f():\n    from mathutils import Matrix\n", "from ..blender import mesh_objects\n",
+                                    "import bmesh\n",
                                     "from ..builders.railway import scene\n", "def f():\n    from ..builders.street.scatter_nodes import scatter_group\n"])
 def test_the_check_finds_a_blender_import(source):
     """The check above fails on a real import of Blender in a pure module, inside a function too (a builder's Blender files too)."""
     assert blender_imports(source, "bpy_pipeline.lidar")
     assert not blender_imports("def f():\n    from ..geometry import lod\n    import numpy\n", "bpy_pipeline.lidar")
     assert not blender_imports("from ..builders.railway import layout, catenary\nfrom ..builders.street.params import StreetScene\n", "bpy_pipeline.lidar")
-    assert blender_imports("from .scene_assets import asset_parts\n", "bpy_pipeline.builders.railway") and not blender_imports("from .layout import plan\n", "bpy_pipeline.builders.railway")
+    assert blender_imports("from .scene_assets import asset_parts\n", "bpy_pipeline.builders.railway") and not blender_imports("from .layout import plan\n",
+                                                                                                                               "bpy_pipeline.builders.railway")
 
 
 def test_pure_modules_import_and_run_with_bpy_blocked():

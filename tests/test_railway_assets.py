@@ -30,7 +30,8 @@ CANTILEVER = {
     "Insulator.001": ((-0.04, 0.2, 6.8), (0.04, 0.5, 7.0), None),
 }
 SMALL_SCAN = ["sensor.preset=railway_tls", "sensor.sampling_factor=0.3", "effects.ideal=true", "scene.detail.stones=false",
-              "scene.track.start=[-40,0,0]", "scene.track.mid=[0,0,0]", "scene.track.end=[40,0,0]", "scene.catenary.enabled=false", "scene.catenary.feeders=false"]
+              "scene.track.start=[-40,0,0]", "scene.track.mid=[0,0,0]", "scene.track.end=[40,0,0]", "scene.catenary.enabled=false",
+              "scene.catenary.feeders=false"]
 
 
 def box(lo, hi) -> tuple[np.ndarray, np.ndarray]:

@@ -120,5 +120,6 @@ def test_blender_chain_evaluates_to_the_forward_kinematics(bpy_scene):
         assert buffers.objects.class_names[row] == "robot arm" and buffers.objects.instance[row] == 7
         vertices = buffers.vertices[np.unique(buffers.triangles[buffers.triangle_object == row])]
         mine = np.flatnonzero(arm.capsule_link == link)
-        gap = np.min([segment_distance(vertices, vertices, np.broadcast_to(a[k], vertices.shape), np.broadcast_to(b[k], vertices.shape)) - r[k] for k in mine], axis=0)
+        gap = np.min([segment_distance(vertices, vertices, np.broadcast_to(a[k], vertices.shape), np.broadcast_to(b[k], vertices.shape)) - r[k] for k in mine],
+                     axis=0)
         assert gap.max() < 1e-5

@@ -185,7 +185,9 @@ def test_exported_street_has_no_intersections_and_users_stand_on_their_ground(bp
         assert objects.class_names[rows[0]] == ("person" if placed["kind"] == "person" else placed["kind"])
     riders = [r for r in users if objects.class_names[r] in ("rider", "motorcyclist")]
     rides = {"rider": "bicycle", "motorcyclist": "motorcycle"}  # a rider is labelled by what it rides
-    assert riders and all(objects.class_names[min(x for x in users if objects.instance[x] == objects.instance[r])] == rides[objects.class_names[r]] for r in riders)
+    assert riders and all(
+        objects.class_names[min(x for x in users if objects.instance[x] == objects.instance[r])] == rides[objects.class_names[r]] for r in riders
+    )
 
 
 @pytest.mark.bpy
@@ -218,7 +220,8 @@ def test_road_users_kept_across_frames_are_the_frames_parts_and_the_spares_expor
 
     def parts(count: int, shift: float):
         box = (np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], float), np.array([[0, 1, 2], [0, 1, 3], [0, 2, 3], [1, 2, 3]], np.int32))
-        return [(f"street_user_{k:03d}_car_body", "car", "diffuse", 0.3, 1000 + k, (box[0] * (k + 1) + [shift + 10 * k, 50.0, 0.0], box[1])) for k in range(count)]
+        return [(f"street_user_{k:03d}_car_body", "car", "diffuse", 0.3, 1000 + k,
+                 (box[0] * (k + 1) + [shift + 10 * k, 50.0, 0.0], box[1])) for k in range(count)]
 
     street_scene._show_users(parts(5, 0.0))
     second = parts(2, 3.0)

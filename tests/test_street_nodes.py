@@ -92,12 +92,14 @@ def test_every_scattered_kind_is_a_live_street_scatter_modifier(street_frame):
 
     layout, _ = street_frame
     scattered = _scattered(layout)
-    assert {p.name for p in scattered} == {"street_trunks", "street_plants", "street_lamps_bollards", "street_bins", "street_bicycle_stands", "street_cones", "street_barriers"}
+    assert {p.name for p in scattered} == {"street_trunks", "street_plants", "street_lamps_bollards", "street_bins", "street_bicycle_stands", "street_cones",
+                                           "street_barriers"}
     street_objects = [obj for obj in bpy.data.objects if obj.name.startswith("street_") and ".prototype." not in obj.name]
     modifiers = [(obj.name, m) for obj in street_objects for m in obj.modifiers if m.type == "NODES" and m.node_group.name == "Street Scatter"]
     assert sorted(name for name, _ in modifiers) == sorted(p.name for p in scattered)  # one per scattered kind, none elsewhere
     others = {m.node_group.name for obj in street_objects for m in obj.modifiers if m.type == "NODES"} - {"Street Scatter"}
-    assert others == {"Street Road", "Street Facade", "Street Planting"}  # the carriageway, kerbs, sidewalks and buildings (tests/test_street_road_nodes.py), the yards (tests/test_planting_nodes.py)
+    # the carriageway, kerbs, sidewalks and buildings (tests/test_street_road_nodes.py), the yards (tests/test_planting_nodes.py)
+    assert others == {"Street Road", "Street Facade", "Street Planting"}
     assert {"Prototypes", "Density", "Seed", "Scale", "Realize"} <= set(interface_inputs(bpy.data.node_groups["Street Scatter"]))
     for part in scattered:
         obj = bpy.data.objects[part.name]

@@ -141,9 +141,11 @@ def test_the_street_has_live_road_and_scatter_groups(street_frame):
     assert facades == sorted(p.name for p in _buildings(layout)) and all(name.startswith("street_building_") for name in facades)
     assert {m.node_group.name for _, m in modifiers} == {"Street Facade", "Street Planting", "Street Road", "Street Scatter"}
     assert len(modifiers) == 3 + 7 + len(facades) + 1 == 46  # the default layout's 35 buildings, the yards
-    assert {"Part", "Lanes", "Lane Width", "Parking Width", "Kerb Width", "Kerb Height", "Sidewalk Width", "Instance"} <= set(interface_inputs(bpy.data.node_groups["Street Road"]))
+    assert {"Part", "Lanes", "Lane Width", "Parking Width", "Kerb Width", "Kerb Height", "Sidewalk Width",
+            "Instance"} <= set(interface_inputs(bpy.data.node_groups["Street Road"]))
     modifier = bpy.data.objects["street_road"].modifiers[0]
-    assert get_modifier_input(modifier, "Lane Width") == pytest.approx(params.lane_width) and get_modifier_input(modifier, "Lanes") == params.lanes_per_direction
+    assert get_modifier_input(modifier, "Lane Width") == pytest.approx(params.lane_width) and get_modifier_input(modifier,
+                                                                                                                 "Lanes") == params.lanes_per_direction
 
 
 @pytest.mark.bpy

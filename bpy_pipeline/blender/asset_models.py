@@ -54,7 +54,9 @@ def _import(entry) -> list:
                 if obj is not None:
                     bpy.context.scene.collection.objects.link(obj)
     except (RuntimeError, AttributeError) as err:
-        raise InputError(f"{entry.where}.path: Blender cannot import {entry.path.name} ({str(err).strip().splitlines()[-1] if str(err).strip() else type(err).__name__})") from None
+        raise InputError(
+            f"{entry.where}.path: Blender cannot import {entry.path.name} ({str(err).strip().splitlines()[-1] if str(err).strip() else type(err).__name__})"
+        ) from None
     shapes = {b.custom_shape for o in bpy.data.objects if o.type == "ARMATURE" and o.pose for b in o.pose.bones if b.custom_shape}
     return [o for o in bpy.data.objects if o not in before and o not in shapes and o.users_collection]
 

@@ -169,7 +169,10 @@ def run_main(args) -> int:
     try:
         import bpy
     except ImportError:
-        raise InputError("bpy: Blender's Python module is not installed; pip install 'bpy==4.5.*' (Python 3.11), or run blender --background --python-exit-code 1 --python run.py -- ...") from None
+        raise InputError(
+            "bpy: Blender's Python module is not installed; pip install 'bpy==4.5.*' (Python 3.11), or run blender --background --python-exit-code 1 --python "
+            "run.py -- ..."
+        ) from None
     bpy.ops.wm.read_factory_settings(use_empty=True)
     from ..plan import run
 

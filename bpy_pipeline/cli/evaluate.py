@@ -41,7 +41,8 @@ def evaluate_arguments(p) -> None:
     from ..evaluate.models import MAX_POINTS_PER_SCAN, MODELS
 
     p.add_argument("--train", action="append", required=True, metavar="DATASET", help="generated dataset folder (ply/) or labelled scans (repeatable)")
-    p.add_argument("--test", action="append", required=True, metavar="REAL", help="real labelled scan: SemanticKITTI .bin (+ .label), X_points.npy (+ X_labels.npy), "
+    p.add_argument("--test", action="append", required=True, metavar="REAL",
+                   help="real labelled scan: SemanticKITTI .bin (+ .label), X_points.npy (+ X_labels.npy), "
                    "KITTI object .bin (+ label_2, calib), or a folder of them (repeatable)")
     p.add_argument("--reference", action="append", metavar="REAL", help="real labelled scans to train the reference on, leave one group out (repeatable)")
     p.add_argument("--classes", default="car,person", help="evaluation classes, SemanticKITTI training names, comma separated (default car,person)")
@@ -50,7 +51,8 @@ def evaluate_arguments(p) -> None:
     p.add_argument("--seed", type=int, default=0, help="model, sampling and bootstrap seed (default 0)")
     p.add_argument("--every", type=int, default=1, help="use every N-th frame of the generated datasets (default 1)")
     p.add_argument("--max-frames", type=int, default=None, help="at most this many frames of each generated dataset")
-    p.add_argument("--max-points-per-scan", type=int, default=MAX_POINTS_PER_SCAN, help=f"background points sampled from each training scan (default {MAX_POINTS_PER_SCAN})")
+    p.add_argument("--max-points-per-scan", type=int, default=MAX_POINTS_PER_SCAN,
+                   help=f"background points sampled from each training scan (default {MAX_POINTS_PER_SCAN})")
     p.add_argument("--jobs", type=int, default=1, help="model threads (default 1)")
     p.set_defaults(func=run_evaluate)
 

@@ -30,7 +30,8 @@ def fit_effects(args) -> int:
         raise InputError(f"--empty-radius: must be a finite number of metres >= 0, got {args.empty_radius}")
     if not (np.isfinite(options.intensity_scale) and options.intensity_scale > 0):
         raise InputError(f"--intensity-scale: must be a finite number > 0 (the intensity of an apparent reflectance of 1), got {options.intensity_scale}")
-    for key, least, most in (("folds", 0, fitting.MAX_FOLDS), ("mlp_steps", 1, fitting.MAX_MLP_STEPS), ("max_gap", 0, fitting.MAX_GAP)):  # they multiply the work
+    # they multiply the work
+    for key, least, most in (("folds", 0, fitting.MAX_FOLDS), ("mlp_steps", 1, fitting.MAX_MLP_STEPS), ("max_gap", 0, fitting.MAX_GAP)):
         if not least <= getattr(options, key) <= most:
             raise InputError(f"--{key.replace('_', '-')}: must lie in {least}..{most:,}, got {getattr(options, key):,}")
     if min(options.range_bins, options.incidence_bins, options.noise_range_bins, options.noise_incidence_bins, options.min_samples,
@@ -43,7 +44,10 @@ def fit_effects(args) -> int:
     if not out.parent.is_dir() and (out.parent.exists() or any(p.exists() and not p.is_dir() for p in out.parents)):
         raise InputError(f"--out: {out.parent} is not a folder (a file stands in the path); give a path in a folder")
     if args.fields < 4 or not 0 <= args.intensity_field < args.fields or args.ring_field >= args.fields or args.rings < 1:
-        raise InputError(f"fit: need --fields >= 4 (x y z intensity), 0 <= --intensity-field < --fields, --ring-field < --fields and --rings >= 1; got --fields {args.fields}, --intensity-field {args.intensity_field}, --ring-field {args.ring_field}, --rings {args.rings}")
+        raise InputError(
+            "fit: need --fields >= 4 (x y z intensity), 0 <= --intensity-field < --fields, --ring-field < --fields and --rings >= 1; got --fields "
+            f"{args.fields}, --intensity-field {args.intensity_field}, --ring-field {args.ring_field}, --rings {args.rings}"
+        )
     ring_field = None if args.ring_field < 0 else args.ring_field
     scans = [fitting.read_scan(path, args.rings, args.fields, args.intensity_field, ring_field, args.empty_radius) for path in args.scans]
     scan = scans[0] if len(scans) == 1 else fitting.stack_scans(scans)
@@ -61,7 +65,10 @@ def fit_effects(args) -> int:
     print(f"threshold: exponent {t.exponent:g}, softness {t.softness:.3g}, 50 % range at 10 % / 80 %: {t.range_at(0.1):.1f} m / {t.range_at(0.8):.1f} m")
     kept = int((~np.isnan(models.drop_table.values)).sum())
     print(f"table: {options.range_bins} x {options.incidence_bins} bins, {kept} with >= {options.min_samples} samples")
-    print(f"mlp: {models.drop_mlp.parameters} weights over {options.mlp_range_bins} x {options.mlp_incidence_bins} bins with >= {options.min_samples} samples (drop; noise likewise), seed {options.seed}")
+    print(
+        f"mlp: {models.drop_mlp.parameters} weights over {options.mlp_range_bins} x {options.mlp_incidence_bins} bins with >= {options.min_samples} samples "
+        f"(drop; noise likewise), seed {options.seed}"
+    )
     print(f"noise: sigma {models.noise_range[0] * 1000:.1f} mm + {models.noise_range[1] * 1000:.2f} mm per m (from {src['noise_samples']} samples)")
     if "cross_validation" in report:
         cv = report["cross_validation"]
@@ -80,7 +87,8 @@ def fit_effects(args) -> int:
 def arguments(p) -> None:
     from ..lidar.fit.fitting import FitOptions
 
-    p.add_argument("scans", nargs="+", metavar="SCAN", help="organised sweep(s): float32 .bin (x y z intensity ring per firing, column after column) or .npy (rings, columns, >= 4)")
+    p.add_argument("scans", nargs="+", metavar="SCAN",
+                   help="organised sweep(s): float32 .bin (x y z intensity ring per firing, column after column) or .npy (rings, columns, >= 4)")
     p.add_argument("--out", required=True, metavar="FILE.yaml", help="model file to write")
     p.add_argument("--rings", type=int, default=32, help="rings (channels) per column (default 32, an HDL-32E)")
     p.add_argument("--fields", type=int, default=5, help=".bin: float32 fields per firing (default 5)")

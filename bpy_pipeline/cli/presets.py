@@ -43,7 +43,8 @@ def show_sensor(args) -> int:
     if args.name not in names:
         raise InputError(f"sensors show: unknown preset {args.name!r}; allowed: {', '.join(names)}")
     spec = sensors.resolve_sensor({"preset": args.name}, where=args.name)
-    shown = {"fields": sensors.spec_fields(spec), "summary": sensors.spec_summary(spec), "effects": sensors.preset_effects(args.name), "sources": sensors.preset_sources(args.name)}
+    shown = {"fields": sensors.spec_fields(spec), "summary": sensors.spec_summary(spec), "effects": sensors.preset_effects(args.name),
+             "sources": sensors.preset_sources(args.name)}
     print(yaml.safe_dump(shown, sort_keys=False, width=100, default_flow_style=None), end="")
     if args.rays:
         if Path(args.rays).is_dir() or not Path(args.rays).parent.is_dir():

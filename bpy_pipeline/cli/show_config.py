@@ -31,5 +31,9 @@ def arguments(p) -> None:
     p.set_defaults(func=print_resolved)
 
 
-COMMAND = Command("config", "print the resolved config with the source of each value",
-                  "Print the resolved config: each value with where it comes from (default < preset < builder < profile < config < --set; bpy_pipeline/resolved.py).", arguments)
+COMMAND = Command(
+    "config",
+    "print the resolved config with the source of each value",
+    "Print the resolved config: each value with where it comes from (default < preset < builder < profile < config < --set; bpy_pipeline/resolved.py).",
+    arguments,
+)

@@ -226,7 +226,8 @@ def car_meshes(style: CarStyle, fittings: bool, height: float = NOMINAL_HEIGHT) 
 def car_surfaces(paint: float) -> dict:
     """Part name -> ``(lidar_material, reflectivity)`` of every part of a car (:data:`PARTS`, :data:`FITTINGS`)
     whose paint has reflectivity ``paint``: what a builder tags each part's object with."""
-    return {"body": ("diffuse", paint), "windows": ("glass", GLASS_REFLECTIVITY), "interior": ("diffuse", INTERIOR_REFLECTIVITY), "tyres": ("diffuse", TYRE_REFLECTIVITY), **FITTINGS}
+    return {"body": ("diffuse", paint), "windows": ("glass", GLASS_REFLECTIVITY), "interior": ("diffuse", INTERIOR_REFLECTIVITY),
+            "tyres": ("diffuse", TYRE_REFLECTIVITY), **FITTINGS}
 
 
 def style_size(style: CarStyle, height: float = NOMINAL_HEIGHT) -> np.ndarray:

@@ -344,7 +344,8 @@ def _place_person(shape: dict, k: int, xy: np.ndarray, z: float, yaw: float, sur
         return None, "real_points"
     v, t, _ = body_mesh(person.a, person.b, person.radius)
     p = Populated("person", "person", centre, size, yaw, "population", -1, [ObjectPart(v, np.asarray(t, np.int32), "diffuse", PERSON_REFLECTIVITY)],
-                  {"pose": shape["pose"], "height": round(shape["height"], 4), "feet_z": round(float(person.support[2]), 4), "surface": surfaces.chosen[k].kind})
+                  {"pose": shape["pose"], "height": round(shape["height"], 4), "feet_z": round(float(person.support[2]), 4),
+                   "surface": surfaces.chosen[k].kind})
     return p, ""
 
 
@@ -386,7 +387,8 @@ KINDS = {
 }
 
 
-def populate(points: np.ndarray, spec: RealPopulation, rng: np.random.Generator, placed: list | None = None, supports: list[FoundSurface] | None = None) -> tuple[list[Populated], dict]:
+def populate(points: np.ndarray, spec: RealPopulation, rng: np.random.Generator, placed: list | None = None,
+             supports: list[FoundSurface] | None = None) -> tuple[list[Populated], dict]:
     """People and arms on the surfaces of a real scan (module notes); ``(placements, log)``.
 
     points : (n, 3) float64 the scan's kept returns (sensor frame, m); placed : objects placed before (kept ``keep_out`` from)

@@ -248,7 +248,8 @@ def find_places(buffers, rules) -> StandingPlaces:
     detected = find_surfaces(v, t, **common)
     floors, seats = floor_and_seats(detected, tuple(rules.seat_height), rules.floor_band)
     source = "detected"
-    for mask, name in ((_custom_property_rows(buffers, "lidar_walkable"), "lidar_walkable"), (_class_rows(buffers, rules.walkable_classes), "walkable_classes")):
+    for mask, name in ((_custom_property_rows(buffers, "lidar_walkable"), "lidar_walkable"),
+                       (_class_rows(buffers, rules.walkable_classes), "walkable_classes")):
         found = find_surfaces(v, t, mask, **common) if mask.any() else []
         if found:
             floors, source = found, name
@@ -310,7 +311,8 @@ class PopulationScene:
             return buffers.vertices, buffers.triangles[surface.triangles]
 
         placed_by_instance = {}
-        headings, info, warnings = {}, {"surfaces": places.source, "floors": [round(s.z, 3) for s in places.floors], "seats": [round(s.z, 3) for s in places.seats]}, []
+        headings, info, warnings = {}, {"surfaces": places.source, "floors": [round(s.z, 3) for s in places.floors],
+                                        "seats": [round(s.z, 3) for s in places.seats]}, []
         for k, (name, params) in enumerate(self.population.kinds):
             kind, side = KINDS.get(name), self.sides[name]
             wanted = count_of(params, rng)
@@ -326,9 +328,13 @@ class PopulationScene:
             base = rules.instance_base + 1000 * k
             headings.update(side.show(placements, base, rng))
             placed_by_instance.update({base + i: p for i, p in enumerate(placements)})
-            info[name] = {"wanted": wanted, "placed": len(placements), "instances": [base + i for i in range(len(placements))], "poses": [p.shape.detail.get("pose", "") for p in placements]}
+            info[name] = {"wanted": wanted, "placed": len(placements), "instances": [base + i for i in range(len(placements))],
+                          "poses": [p.shape.detail.get("pose", "") for p in placements]}
             if len(placements) < wanted:
-                warnings.append(f"scene.population.{name}: placed {len(placements)} of {wanted}; no free spot fit the rest in {rules.tries} tries each (rejections: {dict(placer.rejections)})")
+                warnings.append(
+                    f"scene.population.{name}: placed {len(placements)} of {wanted}; no free spot fit the rest in {rules.tries} tries each (rejections: "
+                    f"{dict(placer.rejections)})"
+                )
         if not any(len(s.spots) for s in places.floors):
             warnings.append("scene.population: the scene has no floor to stand on (no lidar_walkable object and no horizontal surface found)")
         info["rejections"] = dict(placer.rejections)

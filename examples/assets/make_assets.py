@@ -101,7 +101,8 @@ def make_robot(path: Path) -> None:
     obj = bpy.data.objects.new("robot_arm", mesh_data("robot_arm", *arm_mesh(model, q)))
     bpy.context.scene.collection.objects.link(obj)
     _only([obj])
-    bpy.ops.wm.obj_export(filepath=str(path), export_selected_objects=True, export_materials=False, export_uv=False, export_normals=False, up_axis="Y", forward_axis="NEGATIVE_Z")
+    bpy.ops.wm.obj_export(filepath=str(path), export_selected_objects=True, export_materials=False, export_uv=False, export_normals=False, up_axis="Y",
+                          forward_axis="NEGATIVE_Z")
 
 
 def main(out: Path) -> dict:

@@ -105,7 +105,8 @@ class ParkingGarage:
         self.collection = scene_collection()
         meshes = self.layout.meshes()
         prototypes = box_nodes.prototypes(self.collection)  # the level's pieces through the "Parking Level" group
-        self.static = [tag(parking_nodes.level_object(name, name, params, self.collection, prototypes, INSTANCE[name]), name, reflectivity=STATIC_REFLECTIVITY[name], instance=INSTANCE[name])
+        self.static = [tag(parking_nodes.level_object(name, name, params, self.collection, prototypes, INSTANCE[name]), name,
+                           reflectivity=STATIC_REFLECTIVITY[name], instance=INSTANCE[name])
                        for name in meshes]
         self.caster = RayCaster(_buffers(meshes), frame=np.eye(4))
         self.paints = []
@@ -222,7 +223,8 @@ class ParkingGarage:
             "stopped": log.stopped,
             "rejections": dict(placer.rejections),
             "cars": [
-                {"instance": INSTANCE["car"] + k, "style": STYLES[car.style].name, "colour": COLOURS[car.colour][0], "size": np.round(car.size, 4).tolist(), "visible_fraction": round(box.visible_fraction, 4)}
+                {"instance": INSTANCE["car"] + k, "style": STYLES[car.style].name, "colour": COLOURS[car.colour][0], "size": np.round(car.size, 4).tolist(),
+                 "visible_fraction": round(box.visible_fraction, 4)}
                 for k, (car, box) in enumerate(log.placed)
             ],
         }
@@ -239,5 +241,6 @@ def _buffers(meshes: dict) -> SceneBuffers:
         owner.append(np.full(len(t), row, np.int32))
         offset += len(v)
     k = len(meshes)
-    objects = ObjectTable(list(meshes), [""] * k, list(meshes), np.zeros(k, np.uint16), np.arange(1, k + 1, dtype=np.uint32), np.full(k, MATERIAL_ID["diffuse"], np.uint8), np.full(k, 0.5, np.float32))
+    objects = ObjectTable(list(meshes), [""] * k, list(meshes), np.zeros(k, np.uint16), np.arange(1, k + 1, dtype=np.uint32),
+                          np.full(k, MATERIAL_ID["diffuse"], np.uint8), np.full(k, 0.5, np.float32))
     return SceneBuffers(np.concatenate(vertices), np.concatenate(triangles).astype(np.int32), np.concatenate(owner), objects)

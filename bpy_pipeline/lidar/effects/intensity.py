@@ -49,19 +49,24 @@ class ReadingModel:
     The mean gain and offset are ``effects.intensity.scale`` and ``effects.intensity.offset``."""
 
     enabled: bool = field(default=False, metadata=meta(help="read the reflectance through the unit's lasers (reflectance model only)"))
-    compensated_range: float = field(default=28.0, metadata=meta("m", soft=(0, 10000), help="the reading is range-compensated up to here (KITTI 000008: 28); > 0"))
+    compensated_range: float = field(default=28.0,
+                                     metadata=meta("m", soft=(0, 10000), help="the reading is range-compensated up to here (KITTI 000008: 28); > 0"))
     exponent: float = field(default=2.0, metadata=meta("", 0, 10, help="beyond it the reading falls as (R_c / R)^exponent (the lidar equation's 2; fitted: 2)"))
-    gain_sd: float = field(default=0.16, metadata=meta("", 0, 2, help="sd of ln(gain) across lasers (KITTI 000008's road: robust sd of its per-ring log medians)"))
+    gain_sd: float = field(default=0.16,
+                           metadata=meta("", 0, 2, help="sd of ln(gain) across lasers (KITTI 000008's road: robust sd of its per-ring log medians)"))
     offset_sd: float = field(default=0.0, metadata=meta("", 0, 2, help="sd of the offset across lasers (not identifiable on one frame: 0)"))
-    noise_sd: float = field(default=0.075, metadata=meta("", 0, 2, help="sd of ln of a per-return factor (KITTI 000008's road: robust within-ring log spread, 8-20 m)"))
+    noise_sd: float = field(default=0.075,
+                            metadata=meta("", 0, 2, help="sd of ln of a per-return factor (KITTI 000008's road: robust within-ring log spread, 8-20 m)"))
     unit_seed: int = field(default=0, metadata=meta(help="the sensor unit: its lasers' gains and offsets are drawn from this seed (>= 0)"))
-    response: float = field(default=1.0, metadata=meta("", soft=(0, 4), help="gamma: the reading grows as (a f(R))^gamma (1: linear; below 1: a compressing receiver); > 0"))
+    response: float = field(default=1.0,
+                            metadata=meta("", soft=(0, 4), help="gamma: the reading grows as (a f(R))^gamma (1: linear; below 1: a compressing receiver); > 0"))
 
 
 def check_reading(reading: ReadingModel, offset: float, model: str = "reflectance") -> None:
     """One-line :class:`InputError` for a reading model's value out of range (``offset``, ``model``: ``effects.intensity``'s)."""
     key = "effects.intensity.reading"
-    for name, value in (("compensated_range", reading.compensated_range), ("exponent", reading.exponent), ("gain_sd", reading.gain_sd), ("offset_sd", reading.offset_sd), ("noise_sd", reading.noise_sd),
+    for name, value in (("compensated_range", reading.compensated_range), ("exponent", reading.exponent), ("gain_sd", reading.gain_sd),
+                        ("offset_sd", reading.offset_sd), ("noise_sd", reading.noise_sd),
                         ("response", reading.response)):
         if not (isinstance(value, (int, float)) and math.isfinite(value)):
             raise InputError(f"{key}.{name}: must be a finite number, got {value!r}")
@@ -99,7 +104,8 @@ def range_factor(range_m: np.ndarray, compensated_range: float, exponent: float)
     return np.minimum(np.float32(1.0), (np.float32(compensated_range) / r) ** np.float32(exponent))
 
 
-def read_out(value: np.ndarray, range_m: np.ndarray, ring: np.ndarray, reading: ReadingModel, scale: float, offset: float, rng: np.random.Generator | None) -> np.ndarray:
+def read_out(value: np.ndarray, range_m: np.ndarray, ring: np.ndarray, reading: ReadingModel, scale: float, offset: float,
+             rng: np.random.Generator | None) -> np.ndarray:
     """The reading ``clip(g_k (a f(R))^gamma n - o_k, 0, 1)`` (module notes) of apparent reflectances ``value`` (p,);
     range_m (p,) m; ring (p,) laser ids; ``rng`` draws the per-return factor (needed when ``noise_sd`` > 0).
     Returns (p,) float32."""
@@ -126,7 +132,8 @@ def reflectance(beam: np.ndarray, incidence_exponent: float = 1.0) -> np.ndarray
     return beam["reflectivity"] * cos * beam["gain"]
 
 
-def lidar_intensity(range_m: np.ndarray, beam: np.ndarray, alpha: float, reference_range: float, reference_reflectivity: float = 1.0, incidence_exponent: float = 1.0) -> np.ndarray:
+def lidar_intensity(range_m: np.ndarray, beam: np.ndarray, alpha: float, reference_range: float, reference_reflectivity: float = 1.0,
+                    incidence_exponent: float = 1.0) -> np.ndarray:
     """The lidar equation ``rho cos g exp(-2 alpha R) / R^2`` over its value for the reference target.
 
     range_m : (p,) metres; alpha : 1/m atmospheric extinction; the reference is a Lambertian
@@ -186,14 +193,28 @@ class IntensityConfig:
     """``effects.intensity``: what a point's intensity (0..1) says."""
 
     model: Literal["reflectance", "lidar", "carla"] = field(default="reflectance", metadata=meta(help="rho cos g | lidar equation | CARLA exp(-a R)"))
-    alpha: float = field(default=0.0, metadata=meta("1/m", low=0, help="atmospheric extinction, two-way exp(-2 alpha R): `lidar` intensity and `threshold` drop"))
-    reference_range: float = field(default=10.0, metadata=meta("m", low=0, low_open=True, help="`lidar`: a target of reference_reflectivity at normal incidence here reads 1"))
+    alpha: float = field(default=0.0,
+                         metadata=meta("1/m", low=0, help="atmospheric extinction, two-way exp(-2 alpha R): `lidar` intensity and `threshold` drop"))
+    reference_range: float = field(default=10.0,
+                                   metadata=meta("m", low=0, low_open=True,
+                                                 help="`lidar`: a target of reference_reflectivity at normal incidence here reads 1"))
     reference_reflectivity: float = field(default=1.0, metadata=meta("", 0, 1, low_open=True, help="`lidar`: the reflectivity that reads 1 at reference_range"))
     attenuation_rate: float = field(default=0.004, metadata=meta("1/m", low=0, help="`carla`: CARLA's atmosphere_attenuation_rate"))
-    incidence_exponent: float = field(default=1.0, metadata=meta("", low=0, help="`reflectance` and `lidar`: rho cos(theta)^k; 1 Lambertian, 0 as real road returns read (KITTI, nuScenes)"))
-    scale: float = field(default=1.0, metadata=meta("", low=0, low_open=True, help="the model's value times this, clipped to 0..1 (Velodyne's 0..100 % diffuse in 0..255: 100 / 255)"))
-    steps: int = field(default=0, metadata=meta("", 0, 65535, help="quantise to k / steps as the sensor's integer intensity does (255: nuScenes 0..255; 100: KITTI 0.01); 0 = continuous"))
-    offset: float = field(default=0.0, metadata=meta("", 0, 1, high_open=True, help="subtracted after scale, clipped at 0: a receiver that reads weak returns as 0 (KITTI's car paint); 0 = none"))
+    incidence_exponent: float = field(
+        default=1.0, metadata=meta("", low=0, help="`reflectance` and `lidar`: rho cos(theta)^k; 1 Lambertian, 0 as real road returns read (KITTI, nuScenes)")
+    )
+    scale: float = field(default=1.0,
+                         metadata=meta("", low=0, low_open=True,
+                                       help="the model's value times this, clipped to 0..1 (Velodyne's 0..100 % diffuse in 0..255: 100 / 255)"))
+    steps: int = field(
+        default=0,
+        metadata=meta(
+            "", 0, 65535, help="quantise to k / steps as the sensor's integer intensity does (255: nuScenes 0..255; 100: KITTI 0.01); 0 = continuous"
+        ),
+    )
+    offset: float = field(default=0.0,
+                          metadata=meta("", 0, 1, high_open=True,
+                                        help="subtracted after scale, clipped at 0: a receiver that reads weak returns as 0 (KITTI's car paint); 0 = none"))
     reading: ReadingModel = field(default_factory=ReadingModel)  # per-laser gain/offset reading apart from detection (module notes); opt-in
 
 

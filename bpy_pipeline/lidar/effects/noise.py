@@ -76,7 +76,12 @@ def perturb(points: np.ndarray, beam: np.ndarray, noise, rng: np.random.Generato
         ring = points["ring"]
         if ring.max() >= len(bias):
             raise InputError(f"effects.noise.ring_bias: {len(bias)} values but the scan has ring {int(ring.max())}; give one per ring")
-    fits = jitter == 0 and points.dtype == POINT_DTYPE and points.flags.c_contiguous and (np.isscalar(sigma) or (sigma.dtype == np.float32 and sigma.shape == (n,)))
+    fits = (
+        jitter == 0
+        and points.dtype == POINT_DTYPE
+        and points.flags.c_contiguous
+        and (np.isscalar(sigma) or (sigma.dtype == np.float32 and sigma.shape == (n,)))
+    )
     kernels = effects_kernels.compiled() if fits else None
     if kernels is not None:  # the same operations in one compiled pass over the records (effects_kernels.py)
         draw = rng.standard_normal(n, dtype=np.float32) if has_noise else _NONE32
