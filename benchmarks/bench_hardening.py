@@ -85,8 +85,8 @@ def lock_race(tries: int) -> dict:
             held = [p.communicate(timeout=120)[0].split() for p in procs]
             spans = [(float(h[1]), float(h[2])) for h in held if h and h[0] == "took"]
             overlap = len(spans) == 2 and max(a for a, _ in spans) < min(b for _, b in spans)
-            outcomes["both held it at once" if overlap else "one then the other" if len(spans) == 2 else {1: "one took it",
-                                                                                                          0: "neither took it"}[len(spans)]] += 1
+            outcome = "both held it at once" if overlap else "one then the other" if len(spans) == 2 else {1: "one took it", 0: "neither took it"}[len(spans)]
+            outcomes[outcome] += 1
     return {"what": "two --resume on a stale lock", "tries": tries,
             **{k: outcomes.get(k, 0) for k in ("both held it at once", "one took it", "one then the other", "neither took it")}}
 

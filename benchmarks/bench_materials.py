@@ -326,8 +326,8 @@ def insertion(small: bool, out) -> None:
        within, then overlap. Held out: the rows chosen, unchanged."""
     fit, held = insertions()
     seeds = INSERTION_SEEDS[:1] if small else INSERTION_SEEDS
-    grid = {"diffuse, clear glass (before)": ({}, BEFORE), "diffuse, clear glass, plates and lamps (default)": ({}, {"car_glass": CarGlass(enabled=False),
-                                                                                                                     "car_fittings": True})}
+    grid = {"diffuse, clear glass (before)": ({}, BEFORE),
+            "diffuse, clear glass, plates and lamps (default)": ({}, {"car_glass": CarGlass(enabled=False), "car_fittings": True})}
     for w, t, r in GLASS_GRID[:1] if small else GLASS_GRID:
         grid[f"diffuse, glass ws {w} tint {t} cabin {r}"] = ({}, {"car_glass": CarGlass(enabled=True, windshield=w, tinted=t, interior=r),
                                                                   "car_fittings": False})
@@ -546,8 +546,8 @@ def parts(small: bool, out) -> None:
         paint = CarPaint(enabled=True, upper_from=h, paints={k: [share, round(c * rho, 4)] for k, (share, rho) in BASE_PAINTS.items()},
                          parts={"body": {"model": "glossy_paint", "specular": spec, "lobe_deg": lobe},
                                 "upper": {"model": "glossy_paint", "diffuse": u, "specular": spec, "lobe_deg": lobe}})
-        grid[f"parts: coat {c}, upper {u}, lobe {spec} / {lobe:g} deg, upper from {h}"] = (effects, {"car_glass": glass, "car_fittings": True,
-                                                                                                     "car_paint": paint})
+        grid[f"parts: coat {c}, upper {u}, lobe {spec} / {lobe:g} deg, upper from {h}"] = (
+            effects, {"car_glass": glass, "car_fittings": True, "car_paint": paint})
     rows = []
     for name, (eff, scene) in grid.items():
         rows.append({"paint": name, **fit.score(eff, seeds, scene)})
@@ -678,8 +678,8 @@ def spread(small: bool, out) -> None:
             "share of seeds within 0.7-1.4 per car": np.round(((ratios >= 0.7) & (ratios <= 1.4)).mean(axis=0), 2).tolist(),
             "real zero-reading share per car": frame.real_zero_shares,
             f"sim/real per car, every car one paint ({min(PAINT_SEEDS, len(seeds))} seeds)": by_paint,
-            "cars within 0.7-1.4 per seed (min, median, max)": [int(v) for v in np.percentile(((ratios >= 0.7) & (ratios <= 1.4)).sum(axis=1), [0, 50, 100],
-                                                                                              method="nearest")],
+            "cars within 0.7-1.4 per seed (min, median, max)": [
+                int(v) for v in np.percentile(((ratios >= 0.7) & (ratios <= 1.4)).sum(axis=1), [0, 50, 100], method="nearest")],
             "overlap (min, median, max)": [round(float(v), 3) for v in np.percentile(overlap, [0, 50, 100], method="nearest")],
             "real car points": int(len(frame.real_on)),
             "overlap of the real points with a resample of themselves (median, 10th percentile)": resample_overlap(frame.real_on),

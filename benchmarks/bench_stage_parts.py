@@ -74,9 +74,10 @@ def railway(frames: int, repeats: int) -> dict:
         raw = best(lambda: list(pool.map(lambda s: scene.run(o32[s], d32[s], dists=float(far[0]), output=1), spans)), repeats)
         out = {"rays": len(d32), "raw_embreex_s": raw}
         if caster.kernels is not None and caster.kernels.traces:
-            out["compiled_embree_calls_s"] = best(lambda: list(pool.map(lambda s: caster.kernels.trace_rays(caster.embree_handles, caster.part_triangle,
-                                                                                                            caster.part_shift, far[s], origin, d64[s], tfar[s],
-                                                                                                            prim[s]), spans)), repeats)
+            def trace(s):
+                return caster.kernels.trace_rays(caster.embree_handles, caster.part_triangle, caster.part_shift, far[s], origin, d64[s], tfar[s], prim[s])
+
+            out["compiled_embree_calls_s"] = best(lambda: list(pool.map(trace, spans)), repeats)
 
     def whole():
         for _ in scanner.scan_chunks(caster, first.buffers, pattern, first.pose, spec.min_range, spec.max_range, chunk_rays=CHUNK_RAYS):
@@ -105,8 +106,8 @@ def cone(repeats: int) -> list:
         if kernels is not None:
             row["compiled_s"] = best(lambda: cone_pairs(directions, axes, cos_limit, kernels), repeats)
             row["kept_share"] = float(kernels.cone_blocks(directions, axes, cos_limit - CONE_MARGIN).mean())
-            row["same_pairs"] = all(np.array_equal(a, b) for a, b in zip(cone_pairs(directions, axes, cos_limit, kernels),
-                                                                         cone_pairs(directions, axes, cos_limit)))
+            row["same_pairs"] = all(np.array_equal(a, b) for a,
+                                    b in zip(cone_pairs(directions, axes, cos_limit, kernels), cone_pairs(directions, axes, cos_limit)))
         rows.append(row)
     return rows
 

@@ -28,8 +28,8 @@ FORBIDDEN = {
     "geometry": ("lidar", "io", "config", "pipeline", "builders", "population", "blender", "mixing", "plan", "stages", "dataset", "api", "cli", "rig", "frame"),
     "lidar": ("io", "config", "pipeline", "builders", "population", "blender", "mixing", "plan", "stages", "dataset", "api", "cli", "rig", "frame"),
     "io": ("pipeline", "builders", "population", "blender", "plan", "stages", "dataset", "api", "cli", "mixing", "lidar", "rig", "config"),
-    "mixing": ("pipeline", "builders", "population.params", "population.scene", "blender", "plan", "stages", "dataset", "api", "cli", "rig", "config", "frame",
-               "evaluate"),
+    "mixing": ("pipeline", "builders", "population.params", "population.scene", "blender", "plan", "stages", "dataset", "api", "cli", "rig", "config",
+               "frame", "evaluate"),
     # the population every builder gets: its section and placement, and its Blender side on the shared one
     "population": ("lidar", "io", "config", "pipeline", "builders", "mixing", "plan", "stages", "dataset", "api", "cli", "rig", "frame"),
 }

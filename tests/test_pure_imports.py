@@ -141,8 +141,8 @@ def test_the_check_finds_a_blender_import(source):
     assert blender_imports(source, "bpy_pipeline.lidar")
     assert not blender_imports("def f():\n    from ..geometry import lod\n    import numpy\n", "bpy_pipeline.lidar")
     assert not blender_imports("from ..builders.railway import layout, catenary\nfrom ..builders.street.params import StreetScene\n", "bpy_pipeline.lidar")
-    assert blender_imports("from .scene_assets import asset_parts\n", "bpy_pipeline.builders.railway") and not blender_imports("from .layout import plan\n",
-                                                                                                                               "bpy_pipeline.builders.railway")
+    assert blender_imports("from .scene_assets import asset_parts\n",
+                           "bpy_pipeline.builders.railway") and not blender_imports("from .layout import plan\n", "bpy_pipeline.builders.railway")
 
 
 def test_pure_modules_import_and_run_with_bpy_blocked():

@@ -41,8 +41,8 @@ def segment_hits(a, b, triangles) -> bool:
 def meshes_intersect(va, ta, vb, tb, margin=0.01) -> bool:
     """Whether two triangle meshes ((n, 3) vertices, (m, 3) indices each) pass through each other:
     an edge of a triangle of one crosses a triangle of the other."""
-    lo, hi = np.maximum(va[ta].reshape(-1, 3).min(0), vb[tb].reshape(-1, 3).min(0)) - margin, np.minimum(va[ta].reshape(-1, 3).max(0),
-                                                                                                         vb[tb].reshape(-1, 3).max(0)) + margin
+    lo, hi = np.maximum(va[ta].reshape(-1, 3).min(0),
+                        vb[tb].reshape(-1, 3).min(0)) - margin, np.minimum(va[ta].reshape(-1, 3).max(0), vb[tb].reshape(-1, 3).max(0)) + margin
     if (lo > hi).any():
         return False
 
@@ -90,8 +90,8 @@ def joint(a, b) -> bool:
             return ra == rb and abs(ia - ib) <= 1
         if "section_insulator" in (ka, kb):  # it clamps its own contact wire
             return {ka, kb} == {"section_insulator", "contact_wire"} and ia == ib and track(ra) == track(rb)
-        return "droppers" in (ka, kb) and ia == ib and track(ra) == track(rb) and {ka, kb} <= {"droppers", "contact_wire", "messenger_wire",
-                                                                                               "auxiliary_messenger"}
+        return ("droppers" in (ka, kb) and ia == ib and track(ra) == track(rb)
+                and {ka, kb} <= {"droppers", "contact_wire", "messenger_wire", "auxiliary_messenger"})
     fitting, wire_ = (a, b) if a[0] not in wire else (b, a)
     (kf, support, who), (kw, span, run) = fitting, wire_
     if support not in (span, span + 1):

@@ -105,8 +105,8 @@ def test_rays_aimed_at_vertices_and_edges_from_outside_hit_there(name):
         beam /= np.linalg.norm(beam, axis=1, keepdims=True)
         local = world - pose[:3, 3]
         # The ray enters the solid at the target: outside just before it, inside just after.
-        enters = (depth_inside(targets - pose[:3, 3] + 0.01 * beam, local, triangles) > 1e-5) & (depth_inside(targets - pose[:3, 3] - 0.01 * beam, local,
-                                                                                                              triangles) < -1e-5)
+        enters = (depth_inside(targets - pose[:3, 3] + 0.01 * beam, local,
+                               triangles) > 1e-5) & (depth_inside(targets - pose[:3, 3] - 0.01 * beam, local, triangles) < -1e-5)
         got, exact = cast(scene(solid=(world, triangles)), pose_matrix(sensor, rng.uniform(-180, 180, 3)), targets)
         # 1e-5 m: a re-traced ray may land on a neighbour of the triangle it slipped past (its plane is
         # then solved a JITTER-sized step away from where the original ray meets the surface)

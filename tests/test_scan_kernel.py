@@ -280,8 +280,8 @@ def test_the_static_part_is_kept_only_for_the_same_bytes_and_a_far_vertex_is_ref
     signed = same.vertices.copy()
     signed[triangles.min(), 0] = 0.0  # a zero of the other sign: the same value, other bytes
     same.vertices[triangles.min(), 0] = -0.0
-    assert not raycast.same_geometry(raycast.static_geometry(same, every), raycast.static_geometry(SceneBuffers(signed, big.triangles, big.triangle_object,
-                                                                                                                big.objects), every))
+    assert not raycast.same_geometry(raycast.static_geometry(same, every),
+                                     raycast.static_geometry(SceneBuffers(signed, big.triangles, big.triangle_object, big.objects), every))
     assert raycast.same_geometry(("key", 1), ("key", 1)) and not raycast.same_geometry(("key", 1), ("key", 2)) and not raycast.same_geometry(("key", 1), kept)
 
     changed = room()

@@ -144,8 +144,8 @@ def test_the_street_has_live_road_and_scatter_groups(street_frame):
     assert {"Part", "Lanes", "Lane Width", "Parking Width", "Kerb Width", "Kerb Height", "Sidewalk Width",
             "Instance"} <= set(interface_inputs(bpy.data.node_groups["Street Road"]))
     modifier = bpy.data.objects["street_road"].modifiers[0]
-    assert get_modifier_input(modifier, "Lane Width") == pytest.approx(params.lane_width) and get_modifier_input(modifier,
-                                                                                                                 "Lanes") == params.lanes_per_direction
+    assert get_modifier_input(modifier,
+                              "Lane Width") == pytest.approx(params.lane_width) and get_modifier_input(modifier, "Lanes") == params.lanes_per_direction
 
 
 @pytest.mark.bpy

@@ -76,17 +76,12 @@ def test_a_fitted_capsule_holds_its_mesh():
 def test_bad_urdfs_are_named(tmp_path):
     path = tmp_path / "bad.urdf"
     cases = {
-        "<robot name='x'><link name='a'/><link name='b'/><joint name='j' type='prismatic'><parent link='a'/><child link='b'/></joint></robot>": "joint 'j': "
-                                                                                                                                                "joint type "
-                                                                                                                                                "'prismatic' "
-                                                                                                                                                "cannot be "
-                                                                                                                                                "posed",
-        "<robot name='x'><link name='a'/><link name='b'/><joint name='j' type='revolute'><parent link='a'/><child link='b'/></joint></robot>": "joint 'j': a "
-                                                                                                                                               "revolute joint "
-                                                                                                                                               "needs <limit "
-                                                                                                                                               "lower upper>",
-        "<robot name='x'><link name='a'><visual><geometry><mesh filename='gone.stl'/></geometry></visual></link></robot>": "link 'a' visual[0]: mesh "
-                                                                                                                           "'gone.stl' not found",
+        "<robot name='x'><link name='a'/><link name='b'/><joint name='j' type='prismatic'><parent link='a'/><child link='b'/></joint></robot>":
+            "joint 'j': joint type 'prismatic' cannot be posed",
+        "<robot name='x'><link name='a'/><link name='b'/><joint name='j' type='revolute'><parent link='a'/><child link='b'/></joint></robot>":
+            "joint 'j': a revolute joint needs <limit lower upper>",
+        "<robot name='x'><link name='a'><visual><geometry><mesh filename='gone.stl'/></geometry></visual></link></robot>":
+            "link 'a' visual[0]: mesh 'gone.stl' not found",
         "<robot name='x'><link name='a'/></robot>": "no revolute joint: nothing to pose",
         "<robot": "not valid XML",
     }

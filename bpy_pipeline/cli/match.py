@@ -228,8 +228,8 @@ def match(sources: Sequence[str | Path], config_path: str | Path, out: str | Pat
     stats, frames = fit_real(sources, classes, min_points)
     config, notes = matched_config(base, stats)
     out = Path(out)
-    text = f"# matched to {len(frames)} labelled real frame(s) by bpy-pipeline match\n" + yaml.safe_dump(config, sort_keys=False, width=120,
-                                                                                                         default_flow_style=None)
+    text = f"# matched to {len(frames)} labelled real frame(s) by bpy-pipeline match\n"
+    text += yaml.safe_dump(config, sort_keys=False, width=120, default_flow_style=None)
     load_config(load_yaml(text), [])  # refuse before writing anything a run would refuse
     try:
         out.parent.mkdir(parents=True, exist_ok=True)

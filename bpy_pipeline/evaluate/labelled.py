@@ -496,8 +496,8 @@ def load_scans(sources: Iterable[str | Path | LabelledScan], classes: Sequence[s
             frames = folder_frames(path)
             if not frames:
                 raise InputError(
-                    f"{path}: holds no labelled frames (X_points.npy + X_labels.npy, .bin + .label, KITTI .bin + label_2 + calib) and is no generated dataset "
-                    "(ply/)"
+                    f"{path}: holds no labelled frames (X_points.npy + X_labels.npy, .bin + .label, KITTI .bin + label_2 + calib) and is no generated "
+                    "dataset (ply/)"
                 )
             out += load_scans(frames, classes, every, max_frames, image_size)
             continue

@@ -134,8 +134,8 @@ def convert_scan(firings, spec, target_offset=(0.0, 0.0, 0.0), method: str = "ra
 METHODS = ("cones", "mesh", "hybrid")  # the parking paper's, the meshed ray cast, ours (module notes)
 
 
-def cones_with_source(points: np.ndarray, spec, target_offset=(0.0, 0.0, 0.0), max_range: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray,
-                                                                                                                        np.ndarray]:
+def cones_with_source(points: np.ndarray, spec, target_offset=(0.0, 0.0, 0.0),
+                      max_range: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """:func:`project_to_cones` with where each point came from: ``(points (k, 3), ring (k,), column (k,), source (k,))``,
     ``source`` the row of ``points`` (n, 3) that the cell kept (its nearest)."""
     p = np.asarray(points, float) - np.asarray(target_offset, float)

@@ -291,8 +291,8 @@ def _firing_order(azimuth: np.ndarray, ring: np.ndarray, step: float) -> float |
     return sense if forward.mean() >= FIRING_ORDER_SHARE else None
 
 
-def _gaps_in_firing_order(azimuth: np.ndarray, ring: np.ndarray, rings: int, step: float, sense: float, phase: float, span: np.ndarray) -> tuple[np.ndarray,
-                                                                                                                                                 np.ndarray]:
+def _gaps_in_firing_order(azimuth: np.ndarray, ring: np.ndarray, rings: int, step: float, sense: float, phase: float,
+                          span: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The empty firings of a scan whose rings list their returns in firing order: ``(ring (g,), azimuth (g,) deg)``.
 
     Between two consecutive returns of a ring that lie ``d`` apart (in the sense ``sense``; a step back counts as

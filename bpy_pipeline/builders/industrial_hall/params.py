@@ -102,9 +102,8 @@ def check_furniture(params: IndustrialHallScene, where: str) -> None:
         top = max(c[2] + h[2] for c, h in item.parts)
         if not sensor.clear_of_box((low + high) / 2, (high - low) / 2, 0.0, 0.0, top):
             raise InputError(
-                f"{where}.sensor_height: the sensor {params.sensor_height} m above the hall's centre comes within {CLEARANCE} m of {item.name} ({top:.2f} m "
-                "high); "
-                f"hang it higher or move the furniture (desk_rows, desks_per_row, shelves)"
+                f"{where}.sensor_height: the sensor {params.sensor_height} m above the hall's centre comes within {CLEARANCE} m of {item.name} "
+                f"({top:.2f} m high); hang it higher or move the furniture (desk_rows, desks_per_row, shelves)"
             )
 
 

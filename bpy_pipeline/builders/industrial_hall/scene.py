@@ -156,8 +156,8 @@ class IndustrialHall:
                 else:
                     origin, yaw, support = self._area_point(rng), float(rng.uniform(-np.pi, np.pi)), 0.0
                 person = human.pose_person(angles, height, build, kind, origin, yaw, support)
-            if self._hits_static(person.a, person.b, person.radius, STATIC_CLEARANCE) or not self.sensor_poses.clear_of_capsules(person.a, person.b,
-                                                                                                                                 person.radius):
+            if self._hits_static(person.a, person.b, person.radius,
+                                 STATIC_CLEARANCE) or not self.sensor_poses.clear_of_capsules(person.a, person.b, person.radius):
                 continue
             if kind != "sitting" and not self._walkable(person.support[:2]):
                 continue

@@ -274,16 +274,14 @@ def check_station_clearance(params: RailwayScene, where: str) -> None:
     )
     if st.side in mast_sides and abs(st.offset - sup.mast_offset) < MAST_REACH + STATION_CLEARANCE - 1e-9:
         raise InputError(
-            f"{where}.stations.offset: stations {st.offset} m beyond the outer track stand in the masts' line ({where}.supports.mast_offset: {sup.mast_offset} "
-            "m) "
-            f"on the {st.side}; keep them at least {MAST_REACH + STATION_CLEARANCE:.2f} m apart"
+            f"{where}.stations.offset: stations {st.offset} m beyond the outer track stand in the masts' line ({where}.supports.mast_offset: "
+            f"{sup.mast_offset} m) on the {st.side}; keep them at least {MAST_REACH + STATION_CLEARANCE:.2f} m apart"
         )
     side = params.trackside
     if side.fences and abs(st.offset - side.fence_offset) < STATION_CLEARANCE + 0.05:
         raise InputError(
             f"{where}.stations.offset: stations {st.offset} m beyond the outer track stand in the fence's line ({where}.trackside.fence_offset: "
-            f"{side.fence_offset} m); "
-            f"keep them at least {STATION_CLEARANCE + 0.05:g} m apart"
+            f"{side.fence_offset} m); keep them at least {STATION_CLEARANCE + 0.05:g} m apart"
         )
 
 
