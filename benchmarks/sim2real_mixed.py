@@ -317,8 +317,8 @@ def main() -> None:
         "cpu_s_per_frame": facts["cpu_s_per_frame"],
         "cpu_s_emptying_all": facts["cpu_s_emptying"],
         "backgrounds": [dict(b, source=Path(b["source"]).name) for b in facts["backgrounds"]],
-        "what": "CPU s per frame: the whole pipeline run (Blender's empty scene reset, mixing, PLY writing) over its frames; mixing_ms: the record's stage "
-                "wall times",
+        "what": "CPU s per frame: the whole pipeline run (Blender's empty scene reset, mixing, PLY writing) over its frames; "
+                "mixing_ms: the record's stage wall times",
     }
     report("sim2real_mixed", rows, args.out if args.out else RESULTS, notes)
 
