@@ -20,7 +20,7 @@ import bpy
 import numpy as np
 from mathutils import Matrix
 
-from .bpy_pipeline.compat import set_modifier_input
+from .bpy_pipeline.blender.compat import set_modifier_input
 
 COLLECTION = "LiDAR Clouds"
 COLOR = "Col"
@@ -151,7 +151,8 @@ def cloud_object(name: str, points: np.ndarray, rgba: np.ndarray, radius: float,
     return obj
 
 
-def show_frame(points: np.ndarray, pose: np.ndarray, color_lut: np.ndarray, names: dict[int, str] | None = None, name: str = "LiDAR cloud", radius: float = 0.02) -> list[bpy.types.Object]:
+def show_frame(points: np.ndarray, pose: np.ndarray, color_lut: np.ndarray, names: dict[int, str] | None = None, name: str = "LiDAR cloud",
+               radius: float = 0.02) -> list[bpy.types.Object]:
     """Replace the clouds in the viewport by this frame's: one object per class of direct returns, then per class of ghosts.
 
     points : (p,) POINT_DTYPE records; pose : (4, 4) the frame they are in (the sensor pose, or

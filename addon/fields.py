@@ -172,7 +172,8 @@ def _property(view: FieldView, default, update=None):
     if view.kind == "flags":
         return bpy.props.EnumProperty(name=name, items=items, default=set(default), options={"ENUM_FLAG"}, **extra)
     if view.kind == "ivector":  # pixel sizes, counts: whole numbers, X/Y/Z labels for three
-        return bpy.props.IntVectorProperty(name=name, size=view.size, default=tuple(int(v) for v in default), subtype="XYZ" if view.size == 3 else "NONE", **extra)
+        return bpy.props.IntVectorProperty(name=name, size=view.size, default=tuple(int(v) for v in default), subtype="XYZ" if view.size == 3 else "NONE",
+                                           **extra)
     if view.kind == "vector":
         if view.size == 3:  # X/Y/Z labels; EULER and TRANSLATION carry degrees and the length unit
             subtype, unit = {"angle": ("EULER", "ROTATION"), "length": ("TRANSLATION", "LENGTH")}.get(view.unit, ("XYZ", "NONE"))

@@ -102,7 +102,7 @@ class FrameJob:
 
 
 def scene_built() -> bool:
-    from .bpy_pipeline.scenes.objects import COLLECTION
+    from .bpy_pipeline.blender.mesh_objects import COLLECTION
 
     collection = bpy.data.collections.get(COLLECTION)
     return collection is not None and len(collection.all_objects) > 0
@@ -415,7 +415,7 @@ class LIDAR_OT_tag_selected(bpy.types.Operator):
         return bool(context.selected_objects)
 
     def execute(self, context):
-        from .bpy_pipeline.scenes.objects import tag
+        from .bpy_pipeline.blender.mesh_objects import tag
 
         settings = context.scene.lidar
         for obj in context.selected_objects:

@@ -81,8 +81,8 @@ def draw_advanced(layout, group, view, section: str) -> int:
 
 def other_geometry(scene) -> list:
     """Renderable geometry outside the built scene and the clouds (the startup cube): export would scan it too."""
-    from .bpy_pipeline.export import GEOMETRY_TYPES
-    from .bpy_pipeline.scenes.objects import COLLECTION
+    from .bpy_pipeline.blender.export import GEOMETRY_TYPES
+    from .bpy_pipeline.blender.mesh_objects import COLLECTION
 
     own = {o.name for name in (COLLECTION, cloud.COLLECTION) if (c := bpy.data.collections.get(name)) for o in c.all_objects}
     return [o for o in scene.objects if o.type in GEOMETRY_TYPES and not o.hide_render and o.name not in own]

@@ -49,7 +49,7 @@ def railway_ways(length: float):
     from bpy_pipeline.geometry.lod import equal_perimeter_radius
     from bpy_pipeline.builders.railway.layout import MIN_WIRE_SIDES, level_of_detail, plan
     from bpy_pipeline.builders.railway import catenary_nodes
-    from bpy_pipeline.scenes.objects import wire_object
+    from bpy_pipeline.blender.mesh_objects import wire_object
     from bpy_pipeline.builders.railway.scene import _bevel_sides, _dropper_wires
     import dataclasses
 
@@ -82,9 +82,9 @@ def railway_ways(length: float):
 def parking_ways():
     from bpy_pipeline.builders.parking.params import ParkingScene
     from bpy_pipeline.geometry.indoor import parking_layout
-    from bpy_pipeline.scenes import box_nodes
+    from bpy_pipeline.blender import box_nodes
     from bpy_pipeline.builders.parking import level_nodes as parking_nodes
-    from bpy_pipeline.scenes.objects import mesh_object
+    from bpy_pipeline.blender.mesh_objects import mesh_object
 
     params = ParkingScene()
     meshes = parking_layout(params).meshes()
@@ -100,9 +100,9 @@ def parking_ways():
 def hall_ways():
     from bpy_pipeline.builders.industrial_hall.params import IndustrialHallScene
     from bpy_pipeline.geometry.indoor import boxes_mesh, hall_layout
-    from bpy_pipeline.scenes import box_nodes
+    from bpy_pipeline.blender import box_nodes
     from bpy_pipeline.builders.industrial_hall import hall_nodes
-    from bpy_pipeline.scenes.objects import mesh_object
+    from bpy_pipeline.blender.mesh_objects import mesh_object
 
     params = IndustrialHallScene()
     layout = hall_layout(params)
@@ -128,7 +128,7 @@ def street_ways():
 
     from bpy_pipeline.builders.street.params import StreetScene
     from bpy_pipeline.builders.street import layout as street
-    from bpy_pipeline.scenes.objects import mesh_object
+    from bpy_pipeline.blender.mesh_objects import mesh_object
     from bpy_pipeline.builders.street.facade_nodes import facade_object
     from bpy_pipeline.builders.street.road_nodes import road_object
     from bpy_pipeline.builders.street.scatter_nodes import prototypes_collection, scatter_object
@@ -149,7 +149,8 @@ def street_ways():
             else:
                 mesh_object(part.name, part.mesh, collection)
 
-    return build, {"scattered kinds": sum(p.scatter is not None for p in layout.parts), "swept parts": sum(p.name in SWEPT for p in layout.parts), "buildings": sum(p.front is not None for p in layout.parts)}
+    return build, {"scattered kinds": sum(p.scatter is not None for p in layout.parts), "swept parts": sum(p.name in SWEPT for p in layout.parts),
+                   "buildings": sum(p.front is not None for p in layout.parts)}
 
 
 def counts(builder: str) -> dict:
@@ -214,9 +215,9 @@ def main() -> None:
     args = arguments(__doc__.splitlines()[0])
     import bpy
 
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.labels import load_class_table
-    from bpy_pipeline.scenes.objects import scene_collection
+    from bpy_pipeline.blender.mesh_objects import scene_collection
 
     table = load_class_table()
     repeats = 2 if args.small else 5
@@ -247,7 +248,8 @@ def main() -> None:
         rows.append(row | counts(builder) | {"layout": ", ".join(f"{k} {v}" for k, v in notes.items())})
     report("builder_nodes" + suffix, rows, args.out, notes={"repeats": repeats, "railway length m": length})
     if known.before is not None:
-        report("builder_nodes_frames" + suffix, whole_frames(known.before, known.runs, chosen), args.out, notes={"before": f"the code in {known.before.name} (before the groups)", "runs": known.runs})
+        report("builder_nodes_frames" + suffix, whole_frames(known.before, known.runs, chosen), args.out,
+               notes={"before": f"the code in {known.before.name} (before the groups)", "runs": known.runs})
 
 
 if __name__ == "__main__":

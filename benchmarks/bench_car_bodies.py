@@ -17,7 +17,8 @@ from common import ROOT, arguments, report
 from bpy_pipeline.geometry.objects import BODIES, style_size
 
 REAL = ROOT.parent / "shared" / "real_scans"
-ANCHORS = {"KITTI (mmdetection3d anchor)": (3.9, 1.6, 1.56), "Lyft (mmdetection3d anchor)": (4.75, 1.92, 1.71), "Waymo (mmdetection3d anchor)": (4.73, 2.08, 1.77)}
+ANCHORS = {"KITTI (mmdetection3d anchor)": (3.9, 1.6, 1.56), "Lyft (mmdetection3d anchor)": (4.75, 1.92, 1.71),
+           "Waymo (mmdetection3d anchor)": (4.73, 2.08, 1.77)}
 
 
 def kitti_cars() -> np.ndarray:
@@ -46,11 +47,14 @@ def main() -> None:
     rows = []
     for kind in dict.fromkeys(kinds):
         s = sizes[[k == kind for k in kinds]]
-        rows.append({"source": f"ours: {kind}", "n": len(s), **{f"{a}_m": f"{s[:, i].min():.2f}-{s[:, i].max():.2f}" for i, a in enumerate(("length", "width", "height"))}})
-    rows.append({"source": "ours: all", "n": len(sizes), **{f"{a}_m": f"{sizes[:, i].min():.2f}-{sizes[:, i].max():.2f}" for i, a in enumerate(("length", "width", "height"))}})
+        rows.append({"source": f"ours: {kind}", "n": len(s), **{f"{a}_m": f"{s[:, i].min():.2f}-{s[:, i].max():.2f}" for i,
+                                                                a in enumerate(("length", "width", "height"))}})
+    rows.append({"source": "ours: all", "n": len(sizes), **{f"{a}_m": f"{sizes[:, i].min():.2f}-{sizes[:, i].max():.2f}" for i,
+                                                            a in enumerate(("length", "width", "height"))}})
     real = kitti_cars()
     if len(real):
-        rows.append({"source": "KITTI labelled Car boxes (000008, 004747)", "n": len(real), **{f"{a}_m": f"{real[:, i].min():.2f}-{real[:, i].max():.2f}" for i, a in enumerate(("length", "width", "height"))}})
+        rows.append({"source": "KITTI labelled Car boxes (000008, 004747)", "n": len(real),
+                     **{f"{a}_m": f"{real[:, i].min():.2f}-{real[:, i].max():.2f}" for i, a in enumerate(("length", "width", "height"))}})
     for name, (length, width, height) in ANCHORS.items():
         rows.append({"source": name, "n": 1, "length_m": f"{length:.2f}", "width_m": f"{width:.2f}", "height_m": f"{height:.2f}"})
     report("car_bodies", rows, args.out, {"bodies": {b.name: [round(float(v), 3) for v in style_size(b, b.height)] for b in BODIES}})

@@ -96,7 +96,8 @@ def main() -> None:
         job("industrial hall (people and robots move)", ["scene.builder=industrial_hall", *(["sensor.columns=512"] if args.small else [])], frames),
         job("parking (the sensor moves: nothing kept)", ["scene.builder=parking"], frames),
     ]
-    report("caster_reuse", rows, args.out, {"note": "median seconds per frame after the first; speedup = fresh / kept time of the scan and boxes stages; same bytes checked per frame"})
+    report("caster_reuse", rows, args.out,
+           {"note": "median seconds per frame after the first; speedup = fresh / kept time of the scan and boxes stages; same bytes checked per frame"})
 
 
 if __name__ == "__main__":

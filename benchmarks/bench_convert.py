@@ -90,7 +90,8 @@ def accuracy(repeat: int, tmp) -> list[dict]:
         rows.append({
             "method": NAMES[method], "ms": round(ms, 1), "source_returns": out.info["conversion"]["source_returns"], "truth_returns": int(truth_valid.sum()),
             "converted": int(len(pts)), "reproduced": round(float(both.sum() / truth_valid.sum()), 4), "spurious": int((have & ~truth_valid).sum()),
-            "error_median_m": round(float(np.median(error)), 4), "error_mean_m": round(float(error.mean()), 4), "error_p90_m": round(float(np.percentile(error, 90)), 4),
+            "error_median_m": round(float(np.median(error)), 4), "error_mean_m": round(float(error.mean()), 4),
+            "error_p90_m": round(float(np.percentile(error, 90)), 4),
             "error_p99_m": round(float(np.percentile(error, 99)), 3), "label_agreement": round(float((label[both] == truth_obj[both]).mean()), 4),
         })
     return rows
@@ -151,14 +152,16 @@ def chart(acc, curves, path):
     colours = {"cones": "tab:orange", "mesh": "tab:blue", "hybrid": "tab:green"}
     ax = axes[0]
     for row, method in zip(acc, METHODS):
-        ax.scatter(row["ms"], row["error_mean_m"], s=60, color=colours[method], label=f"{row['method']}: {row['reproduced']:.0%} reproduced, labels {row['label_agreement']:.1%} right")
+        ax.scatter(row["ms"], row["error_mean_m"], s=60, color=colours[method],
+                   label=f"{row['method']}: {row['reproduced']:.0%} reproduced, labels {row['label_agreement']:.1%} right")
         ax.errorbar(row["ms"], row["error_mean_m"], yerr=[[0], [max(row["error_p99_m"] - row["error_mean_m"], 0)]], color=colours[method], capsize=4)
     ax.set_xlabel("ms per conversion (street, HDL-64E -> HDL-32E)")
     ax.set_ylabel("position error vs the HDL-32E's own scan, m (mean, bar to p99)")
     ax.set_yscale("log")
     ax.legend(fontsize=7)
     rings = np.arange(32)
-    for ax, key, label in zip(axes[1:], ("returns_share", "elevation_deg", "range_m"), ("returns per ring / 1084 columns", "median elevation of the ring's returns, deg", "median range of the ring's returns, m")):
+    for ax, key, label in zip(axes[1:], ("returns_share", "elevation_deg", "range_m"),
+                              ("returns per ring / 1084 columns", "median elevation of the ring's returns, deg", "median range of the ring's returns, m")):
         for name, stats in curves.items():
             values = np.array([np.nan if v is None else v for v in stats[key]], float)
             method = next((m for m in METHODS if NAMES[m] in name), None)

@@ -64,7 +64,8 @@ def railway_scan_s(sampling: float) -> float:
     """Seconds of one run.py railway frame with railway_tls at ``sampling_factor`` (PLY only)."""
     with tempfile.TemporaryDirectory() as out:
         start = time.perf_counter()
-        subprocess.run([sys.executable, str(ROOT / "run.py"), "--out", str(Path(out) / "run"), "--set", "sensor.preset=railway_tls", "--set", f"sensor.sampling_factor={sampling}",
+        subprocess.run([sys.executable, str(ROOT / "run.py"), "--out", str(Path(out) / "run"), "--set", "sensor.preset=railway_tls", "--set",
+                        f"sensor.sampling_factor={sampling}",
                         "--set", "output.formats=[ply]", "--set", "output.preview=false"], check=True, capture_output=True)
         return time.perf_counter() - start
 
@@ -74,16 +75,20 @@ def main() -> None:
     long_run, window, short_run = (150, 25, 30) if args.small else (2000, 100, 200)
     times = frame_times(long_run)
     first, last = statistics.median(times[:window]), statistics.median(times[-window:])
-    rows = [{"what": f"{long_run} parking frames, one folder", "first_frames_s": first, "last_frames_s": last, "last_over_first": last / first, "window": window}]
+    rows = [{"what": f"{long_run} parking frames, one folder", "first_frames_s": first, "last_frames_s": last, "last_over_first": last / first,
+             "window": window}]
     rates = {}
     for workers in (1, 2):
         rates[workers], load = workers_run(short_run, workers)
-        rows.append({"what": f"{short_run} parking frames, --workers {workers}", "frames_per_s": rates[workers], "speedup": rates[workers] / rates[1], "load_avg_1min": load})
+        rows.append({"what": f"{short_run} parking frames, --workers {workers}", "frames_per_s": rates[workers], "speedup": rates[workers] / rates[1],
+                     "load_avg_1min": load})
     sampling = 0.25 if args.small else 1.0  # rays grow with the square of the sampling factor
     railway = railway_scan_s(sampling) / sampling**2
     rows.append({"what": "projection: the parking paper's 6,740 scans", "hours_1_worker": 6740 / rates[1] / 3600, "hours_2_workers": 6740 / rates[2] / 3600})
-    rows.append({"what": "projection: the railway thesis's 140 simulations (23 M rays each)", "one_simulation_s": railway, "hours_1_worker": 140 * railway / 3600, "thesis_hours": "8-10"})
-    report("dataset", rows, args.out, {"cores": os.cpu_count(), "note": "ratios within one run; load_avg shows other work on the machine during the workers' runs"})
+    rows.append({"what": "projection: the railway thesis's 140 simulations (23 M rays each)", "one_simulation_s": railway,
+                 "hours_1_worker": 140 * railway / 3600, "thesis_hours": "8-10"})
+    report("dataset", rows, args.out,
+           {"cores": os.cpu_count(), "note": "ratios within one run; load_avg shows other work on the machine during the workers' runs"})
 
 
 if __name__ == "__main__":

@@ -43,7 +43,7 @@ import bpy
 
 from bpy_pipeline.builders.primitives.params import PrimitivesScene, Shape
 from bpy_pipeline.config import SceneConfig
-from bpy_pipeline.export import export_scene
+from bpy_pipeline.blender.export import export_scene
 from bpy_pipeline.labels import load_class_table
 from bpy_pipeline.lidar.effects.divergence import Divergence, scan_footprint
 from bpy_pipeline.lidar.cast.raycast import RayCaster
@@ -51,7 +51,7 @@ from bpy_pipeline.lidar.cast.scanner import scan
 from bpy_pipeline.lidar.sensor.sensors import azimuth_step, azimuths, elevation_step, elevations, resolve_sensor, sensor_pattern
 from bpy_pipeline.lidar.sensor.rays import Pattern
 from bpy_pipeline.frame import frame_rng
-from bpy_pipeline.scenes import build_scene
+from bpy_pipeline.blender import build_scene
 
 DIAMETER = 0.012  # m, a contact wire
 SLOPE = 0.05  # the TLS wire's slope, and the VLP-16 wires' tilt: phases vary from crossing to crossing

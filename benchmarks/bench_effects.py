@@ -29,7 +29,7 @@ from bpy_pipeline.stages.scene import build_frame_scene
 from bpy_pipeline.stages.view import sensor_pose
 from bpy_pipeline.stages import scan as scan_stages  # the effects stage's own apply_effects is the one patched
 from bpy_pipeline.config import effects_from_dict, load_config
-from bpy_pipeline.export import export_scene
+from bpy_pipeline.blender.export import export_scene
 from bpy_pipeline.labels import load_class_table
 from bpy_pipeline.lidar.fit import fitting
 from bpy_pipeline.lidar.effects.apply import write_model_file

@@ -10,9 +10,9 @@ from common import arguments, best_of, report
 
 import bpy
 
-from bpy_pipeline.export import export_scene
+from bpy_pipeline.blender.export import export_scene
 from bpy_pipeline.labels import load_class_table
-from bpy_pipeline.scenes.objects import mesh_object, scene_collection, tag
+from bpy_pipeline.blender.mesh_objects import mesh_object, scene_collection, tag
 
 
 def gn_object(name: str, build) -> bpy.types.Object:
@@ -68,7 +68,8 @@ def main():
         gn_object("grid" if "grid" in label else "inst", build)
         buffers = export_scene(table)
         seconds = best_of(lambda: export_scene(table), repeat=3)
-        rows.append({"scene": label, "triangles": len(buffers.triangles), "objects": len(buffers.objects), "export_s": seconds, "triangles_per_s": len(buffers.triangles) / seconds})
+        rows.append({"scene": label, "triangles": len(buffers.triangles), "objects": len(buffers.objects), "export_s": seconds,
+                     "triangles_per_s": len(buffers.triangles) / seconds})
         for group in list(bpy.data.node_groups):
             bpy.data.node_groups.remove(group)
     report("export" + ("_small" if args.small else ""), rows, args.out)

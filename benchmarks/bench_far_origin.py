@@ -163,7 +163,8 @@ def chart(rows: list[dict], path) -> None:
     left.text(1.2, 1.3e-4, "0.1 mm", color="grey")
     rays, wire = rows[0]["rays"], rows[0]["exact_wire_hits"]
     left.set(xlabel="distance of the scene from the world origin (m)", ylabel="largest position error (m)", title="Points on the right surface")
-    right.set(xlabel="distance of the scene from the world origin (m)", ylabel=f"rays (of {rays:,}; {wire} hit the 12 mm wire)", title="Rays on another surface or none")
+    right.set(xlabel="distance of the scene from the world origin (m)", ylabel=f"rays (of {rays:,}; {wire} hit the 12 mm wire)",
+              title="Rays on another surface or none")
     left.legend(fontsize=8)
     for ax in (left, right):
         ax.grid(True, which="major", alpha=0.3)

@@ -252,11 +252,13 @@ def chart(rows, pick, real_ring, raw_ring, sim_ring, centre, real_range, sim_ran
 
     fig, ax = plt.subplots(2, 2, figsize=(13, 9))
     shown = [r for r in rows if r["model"] != "carla"]
-    for panel, key, label in ((ax[0, 0], "parameters", "parameters (measured bins for tables)"), (ax[0, 1], "cost_ms_per_Mpts", "drop decision, ms per million points")):
+    for panel, key, label in ((ax[0, 0], "parameters", "parameters (measured bins for tables)"),
+                              (ax[0, 1], "cost_ms_per_Mpts", "drop decision, ms per million points")):
         for r in shown:
             colour = "tab:green" if r["model"] == pick else ("tab:blue" if r["within_noise"] else "tab:grey")
             panel.errorbar(max(r[key], 0.5 if key == "parameters" else 0.1), r["minus_best"], yerr=r["se"], fmt="o", color=colour, capsize=3)
-            panel.annotate(r["model"], (max(r[key], 0.5 if key == "parameters" else 0.1), r["minus_best"]), fontsize=7, xytext=(4, 3), textcoords="offset points")
+            panel.annotate(r["model"], (max(r[key], 0.5 if key == "parameters" else 0.1), r["minus_best"]), fontsize=7, xytext=(4, 3),
+                           textcoords="offset points")
         panel.set_xscale("log")
         panel.set_yscale("symlog", linthresh=0.002)
         panel.axhline(0, color="k", lw=0.5)

@@ -85,8 +85,10 @@ def lock_race(tries: int) -> dict:
             held = [p.communicate(timeout=120)[0].split() for p in procs]
             spans = [(float(h[1]), float(h[2])) for h in held if h and h[0] == "took"]
             overlap = len(spans) == 2 and max(a for a, _ in spans) < min(b for _, b in spans)
-            outcomes["both held it at once" if overlap else "one then the other" if len(spans) == 2 else {1: "one took it", 0: "neither took it"}[len(spans)]] += 1
-    return {"what": "two --resume on a stale lock", "tries": tries, **{k: outcomes.get(k, 0) for k in ("both held it at once", "one took it", "one then the other", "neither took it")}}
+            outcome = "both held it at once" if overlap else "one then the other" if len(spans) == 2 else {1: "one took it", 0: "neither took it"}[len(spans)]
+            outcomes[outcome] += 1
+    return {"what": "two --resume on a stale lock", "tries": tries,
+            **{k: outcomes.get(k, 0) for k in ("both held it at once", "one took it", "one then the other", "neither took it")}}
 
 
 def estimate_error(small: bool) -> list[dict]:
@@ -105,7 +107,8 @@ def estimate_error(small: bool) -> list[dict]:
                 subprocess.run([sys.executable, str(ROOT / "run.py"), "--out", out, *argv], check=True, capture_output=True)
                 measured.append(time.perf_counter() - start)
         best = min(measured)
-        rows.append({"job": name, "estimate_s": round(estimate.seconds, 3), "measured_s": round(best, 3), "error": round(estimate.seconds / best - 1, 3), "rays_per_frame": estimate.rays_per_frame, "triangles": estimate.triangles})
+        rows.append({"job": name, "estimate_s": round(estimate.seconds, 3), "measured_s": round(best, 3), "error": round(estimate.seconds / best - 1, 3),
+                     "rays_per_frame": estimate.rays_per_frame, "triangles": estimate.triangles})
     return rows
 
 
@@ -133,7 +136,9 @@ def main():
         rows.append(fuzz_outcomes())
     if "estimate" in parts:
         rows += estimate_error(args.small)
-    report("hardening" + ("_small" if args.small else "") + ("" if args.parts == "race,fuzz,estimate" else "_" + args.parts.replace(",", "_")), rows, args.out, {"command": "python benchmarks/bench_hardening.py" + (" --small" if args.small else ""), "load_average_before": round(load, 2), "error": "estimate / measured - 1 (python run.py end to end, best of 3)"})
+    report("hardening" + ("_small" if args.small else "") + ("" if args.parts == "race,fuzz,estimate" else "_" + args.parts.replace(",", "_")), rows, args.out,
+           {"command": "python benchmarks/bench_hardening.py" + (" --small" if args.small else ""), "load_average_before": round(load, 2),
+            "error": "estimate / measured - 1 (python run.py end to end, best of 3)"})
 
 
 if __name__ == "__main__":

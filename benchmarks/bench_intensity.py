@@ -177,8 +177,11 @@ def print_table(title: str, rows: list[dict]) -> None:
     print(f"\n{title}")
     print(f"{'class':11s} {'ours max%':>9s} {'real max%':>9s} {'ours dist':>9s} {'real dist':>9s} {'ours med':>8s} {'real med':>8s} {'W1':>7s}")
     for r in rows:
-        print(f"{r['class']:11s} {r.get('ours_at_max_pct', ''):>9} {r.get('real_at_max_pct', ''):>9} {r.get('ours_distinct', ''):>9} {r.get('real_distinct', ''):>9} "
-              f"{r.get('ours_median', ''):>8} {r.get('real_median', ''):>8} {r['wasserstein'] if r['wasserstein'] is not None else '':>7}")
+        print(
+            f"{r['class']:11s} {r.get('ours_at_max_pct', ''):>9} {r.get('real_at_max_pct', ''):>9} {r.get('ours_distinct', ''):>9} "
+            f"{r.get('real_distinct', ''):>9} "
+            f"{r.get('ours_median', ''):>8} {r.get('real_median', ''):>8} {r['wasserstein'] if r['wasserstein'] is not None else '':>7}"
+        )
 
 
 PRIOR = {"road": 0.12, "sidewalk": 0.25, "building": 0.4, "vegetation": 0.5, "terrain": 0.4, "pole": 0.3}  # the street's values before the fit
@@ -233,7 +236,8 @@ def fit_law(seed: int = 0) -> dict:
             best = res
     (s, gamma, o, rc, e, sd), rho = unpack(best.x)
     return {"frames": [f for f in FIT_FRAMES if f.startswith("semantickitti")], "loss": round(float(best.fun), 4),
-            "law": {"scale": round(s, 3), "response": round(gamma, 3), "offset": round(o, 3), "compensated_range": round(rc, 1), "exponent": round(e, 2), "log_sd": round(sd, 3)},
+            "law": {"scale": round(s, 3), "response": round(gamma, 3), "offset": round(o, 3), "compensated_range": round(rc, 1), "exponent": round(e, 2),
+                    "log_sd": round(sd, 3)},
             "reflectivity": {n: round(v, 3) for n, v in rho.items()}, "prior": PRIOR}
 
 
@@ -255,13 +259,17 @@ def main() -> None:
         (args.out / "intensity_fit.json").write_text(json.dumps({"benchmark": "intensity_fit", **fitted}, indent=2) + "\n")
         return
     layouts, frames = (1, 1) if args.small else (3, 2)
-    result = {"frames": {"ours": f"{layouts} layouts x {frames} frames of {CONFIG.relative_to(ROOT)} (scene.layout_seed 100..)", "fit": list(FIT_FRAMES), "check": list(CHECK_FRAMES)},
+    result = {"frames": {"ours": f"{layouts} layouts x {frames} frames of {CONFIG.relative_to(ROOT)} (scene.layout_seed 100..)", "fit": list(FIT_FRAMES),
+                         "check": list(CHECK_FRAMES)},
               **measure(layouts, frames, args.keep)}
     print_table("fit frames", result["fit"])
     print_table("check frames", result["check"])
     for name, rows in result["points_per_object"]["ours"].items():
         real = result["points_per_object"]["real"][name]
-        print(f"points per {name}: " + ", ".join(f"{o['range_m']} m ours {o['median_points']} ({o['objects']}) real {r['median_points']} ({r['objects']})" for o, r in zip(rows, real)))
+        print(
+            f"points per {name}: "
+            + ", ".join(f"{o['range_m']} m ours {o['median_points']} ({o['objects']}) real {r['median_points']} ({r['objects']})" for o, r in zip(rows, real))
+        )
     args.out.mkdir(parents=True, exist_ok=True)
     if args.before:
         (args.out / "intensity_before.json").write_text(json.dumps({"benchmark": "intensity_before", **result}, indent=2) + "\n")
@@ -275,13 +283,17 @@ def main() -> None:
             b = old.get(r["class"], {})
             summary.append({"frames": part, "class": r["class"], "at_max_pct_before": b.get("ours_at_max_pct"), "at_max_pct_after": r.get("ours_at_max_pct"),
                             "distinct_before": b.get("ours_distinct"), "distinct_after": r.get("ours_distinct"), "median_before": b.get("ours_median"),
-                            "median_after": r.get("ours_median"), "median_real": r.get("real_median"), "w1_before": b.get("wasserstein"), "w1_after": r["wasserstein"],
+                            "median_after": r.get("ours_median"), "median_real": r.get("real_median"), "w1_before": b.get("wasserstein"),
+                            "w1_after": r["wasserstein"],
                             "w1_ratio": round(r["wasserstein"] / b["wasserstein"], 3) if b.get("wasserstein") and r["wasserstein"] is not None else None})
     name = "intensity_small" if args.small else "intensity_round21"
     (args.out / f"{name}.json").write_text(json.dumps({"benchmark": name, "summary": summary, "after": result, "before": before}, indent=2) + "\n")
     print(f"\nbefore -> after (W1 ratio under 0.5 and at max under 2 % is the target): {args.out / (name + '.json')}")
     for s in summary:
-        print(f"  {s['frames']:5s} {s['class']:10s} max% {s['at_max_pct_before']} -> {s['at_max_pct_after']}  W1 {s['w1_before']} -> {s['w1_after']} (x{s['w1_ratio']})")
+        print(
+            f"  {s['frames']:5s} {s['class']:10s} max% {s['at_max_pct_before']} -> {s['at_max_pct_after']}  W1 {s['w1_before']} -> {s['w1_after']} "
+            f"(x{s['w1_ratio']})"
+        )
 
 
 if __name__ == "__main__":

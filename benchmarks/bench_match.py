@@ -88,8 +88,10 @@ def compare(real: dict, synth: dict) -> dict:
     return {
         "mean_count_real": float(np.mean(real["counts"])), "mean_count_synthetic": float(np.mean(synth["counts"])) if len(synth["counts"]) else 0.0,
         "tv_count": tv(np.pad(c_real, (0, top - len(c_real))), np.pad(c_syn, (0, top - len(c_syn)))),
-        "tv_distance": tv(histogram(np.asarray(real["distances"]), DISTANCE_EDGES)["weights"], histogram(np.asarray(synth["distances"]), DISTANCE_EDGES)["weights"]) if len(synth["distances"]) else None,
-        "tv_heading": tv(histogram(np.asarray(real["headings"]), HEADING_EDGES)["weights"], histogram(np.asarray(synth["headings"]), HEADING_EDGES)["weights"]) if len(synth["headings"]) else None,
+        "tv_distance": tv(histogram(np.asarray(real["distances"]), DISTANCE_EDGES)["weights"],
+                          histogram(np.asarray(synth["distances"]), DISTANCE_EDGES)["weights"]) if len(synth["distances"]) else None,
+        "tv_heading": tv(histogram(np.asarray(real["headings"]), HEADING_EDGES)["weights"],
+                         histogram(np.asarray(synth["headings"]), HEADING_EDGES)["weights"]) if len(synth["headings"]) else None,
     }
 
 
@@ -123,7 +125,8 @@ def main():
         "command": "python benchmarks/bench_match.py" + (" --small" if args.small else ""),
         "real_frames": names, "frames_per_run": frames, "background": BACKGROUND, "run_s": seconds, "match_notes": notes,
         "real": stats_report(stats, names),
-        "synthetic_points_per_object": {label: {c: {"distances": [round(float(d), 2) for d in v["distances"]], "points": v["points"]} for c, v in r.items()} for label, r in runs.items()},
+        "synthetic_points_per_object": {label: {c: {"distances": [round(float(d), 2) for d in v["distances"]], "points": v["points"]} for c,
+                                                v in r.items()} for label, r in runs.items()},
         "tv": "total variation distance of the normalised histograms (count per frame, distance in 5 m bins to 80 m, heading in 30 deg bins)",
     }
     name = "match" + ("_small" if args.small else "")

@@ -93,7 +93,8 @@ def boxes_4747(real_xyz: np.ndarray) -> list[dict]:
         centre = to_lidar @ np.array([x, y - h / 2, z, 1.0])
         bottom = to_lidar @ np.array([x, y, z, 1.0])
         heading = to_lidar[:3, :3] @ np.array([math.cos(ry), 0.0, -math.sin(ry)])
-        box = {"centre": centre[:3], "bottom_z": float(bottom[2]), "size": np.array([l, w, h]), "yaw": math.atan2(heading[1], heading[0]), "occluded": int(f[2])}
+        box = {"centre": centre[:3], "bottom_z": float(bottom[2]), "size": np.array([l, w, h]), "yaw": math.atan2(heading[1], heading[0]),
+               "occluded": int(f[2])}
         box["real_points"] = int(in_box(real_xyz, box).sum())
         out.append(box)
     return out
@@ -257,7 +258,8 @@ class Insertion:
                 inside = valid & in_box(f.origin[mine] + f.range[mine][:, None] * f.direction[mine], box, 0.1)
                 t = tally.setdefault(f"car {k}", np.zeros(4))
                 t += [len(mine), (~valid).sum(), inside.sum(), (valid & ~inside).sum()]
-        return {car: {"firings": int(t[0]), "no return": round(t[1] / max(t[0], 1), 2), "in the box": round(t[2] / max(t[0], 1), 2), "beyond": round(t[3] / max(t[0], 1), 2)}
+        return {car: {"firings": int(t[0]), "no return": round(t[1] / max(t[0], 1), 2), "in the box": round(t[2] / max(t[0], 1), 2),
+                      "beyond": round(t[3] / max(t[0], 1), 2)}
                 for car, t in tally.items() if t[0] >= 10}
 
     def road_empty_share(self) -> float:
@@ -324,9 +326,11 @@ def insertion(small: bool, out) -> None:
        within, then overlap. Held out: the rows chosen, unchanged."""
     fit, held = insertions()
     seeds = INSERTION_SEEDS[:1] if small else INSERTION_SEEDS
-    grid = {"diffuse, clear glass (before)": ({}, BEFORE), "diffuse, clear glass, plates and lamps (default)": ({}, {"car_glass": CarGlass(enabled=False), "car_fittings": True})}
+    grid = {"diffuse, clear glass (before)": ({}, BEFORE),
+            "diffuse, clear glass, plates and lamps (default)": ({}, {"car_glass": CarGlass(enabled=False), "car_fittings": True})}
     for w, t, r in GLASS_GRID[:1] if small else GLASS_GRID:
-        grid[f"diffuse, glass ws {w} tint {t} cabin {r}"] = ({}, {"car_glass": CarGlass(enabled=True, windshield=w, tinted=t, interior=r), "car_fittings": False})
+        grid[f"diffuse, glass ws {w} tint {t} cabin {r}"] = ({}, {"car_glass": CarGlass(enabled=True, windshield=w, tinted=t, interior=r),
+                                                                  "car_fittings": False})
     rows = []
 
     def run(names):
@@ -363,13 +367,15 @@ def insertion(small: bool, out) -> None:
     rank = lambda r: (r["within 0.7-1.4"], r["overlap"])  # noqa: E731
     best = max(rows[first_paint:], key=rank)
     paint_only = max((r for r in rows[first_paint:] if "intensity" not in r["paint"]), key=rank)
-    chosen = ("diffuse, clear glass (before)", "diffuse, clear glass, plates and lamps (default)", best_glass["paint"], "diffuse, best glass, plates and lamps", paint_only["paint"], best["paint"])
+    chosen = ("diffuse, clear glass (before)", "diffuse, clear glass, plates and lamps (default)", best_glass["paint"], "diffuse, best glass, plates and lamps",
+              paint_only["paint"], best["paint"])
     held_rows = []
     for name in dict.fromkeys(chosen):
         held_rows.append({"paint": name, **held.score(*grid[name][:1], seeds, grid[name][1])})
         held_rows[-1]["closeness"] = closeness(held_rows[-1])
         print(held_rows[-1], flush=True)
-    cars = {f.name: [{"distance_m": round(float(np.linalg.norm(b["centre"][:2])), 1), "occluded": b["occluded"], "real_points": n} for b, n in zip(f.boxes, f.real_counts)] for f in (fit, held)}
+    cars = {f.name: [{"distance_m": round(float(np.linalg.norm(b["centre"][:2])), 1), "occluded": b["occluded"], "real_points": n} for b,
+                     n in zip(f.boxes, f.real_counts)] for f in (fit, held)}
     section = {"rows": rows + held_rows, "cars": cars, "best glass on 000008": best_glass["paint"], "plates and lamps kept": fittings,
                "best on 000008": best["paint"], "best paint alone on 000008": paint_only["paint"],
                "seeds": list(seeds), "cut_margin_m": CUT_MARGIN, "ground_clearance_m": GROUND_CLEARANCE,
@@ -385,7 +391,8 @@ def insertion(small: bool, out) -> None:
 
 # --- the reading apart from detection (effects.intensity.reading): fitted on 000008's own points, then the insertion ---
 
-READING_FIT_GRID = {"offset": (0.0, 0.05, 0.1, 0.15, 0.2, 0.3), "compensated_range": (15.0, 20.0, 22.0, 25.0, 28.0, 32.0), "exponent": (1.0, 1.5, 2.0, 2.5, 3.0, 4.0)}
+READING_FIT_GRID = {"offset": (0.0, 0.05, 0.1, 0.15, 0.2, 0.3), "compensated_range": (15.0, 20.0, 22.0, 25.0, 28.0, 32.0),
+                    "exponent": (1.0, 1.5, 2.0, 2.5, 3.0, 4.0)}
 ROAD_REFLECTIVITY = 0.10  # the asphalt of docs/realism.md's table (the profile's scale 3 came from it)
 
 
@@ -421,7 +428,9 @@ def reading_fit() -> dict:
         height = z - (plane[0] * x + plane[1] * y + plane[2])
         ground = (np.abs(height) < 0.08) & ~on_car
     robust = lambda v: float(np.subtract(*np.percentile(v, [75, 25])) / 1.349)  # noqa: E731
-    medians = np.array([np.median(value[ground & (ring == k) & (r > 5) & (r < 25)]) for k in np.unique(ring) if (ground & (ring == k) & (r > 5) & (r < 25)).sum() >= 30])
+    medians = np.array(
+        [np.median(value[ground & (ring == k) & (r > 5) & (r < 25)]) for k in np.unique(ring) if (ground & (ring == k) & (r > 5) & (r < 25)).sum() >= 30]
+    )
     spread = []
     for k in np.unique(ring):
         m = ground & (ring == k) & (r > 8) & (r < 20) & (value > 0)
@@ -442,7 +451,8 @@ def reading_fit() -> dict:
             for n in READING_FIT_GRID["exponent"]:
                 f = np.minimum(1.0, (rc / rf) ** n)
                 sims = [np.clip(np.rint(((draws[d] + o) * f * np.exp(noise_sd * noise[d]) - o) * 100) / 100, 0, 1) for d in range(8)]
-                per_bin = [float(np.mean([intersection(vf[(rf >= lo) & (rf < hi)], q[(rf >= lo) & (rf < hi)], BINS) for q in sims])) for lo, hi in zip(edges[:-1], edges[1:])]
+                per_bin = [float(np.mean([intersection(vf[(rf >= lo) & (rf < hi)], q[(rf >= lo) & (rf < hi)], BINS) for q in sims])) for lo,
+                           hi in zip(edges[:-1], edges[1:])]
                 scores.append((float(np.mean(per_bin)), o, rc, n, per_bin))
     best = max(scores, key=lambda t: t[0])
     zero_by_range = {f"{lo}-{hi} m": round(float((vf[(rf >= lo) & (rf < hi)] == 0).mean()), 3) for lo, hi in zip(edges[:-1], edges[1:])}
@@ -536,7 +546,8 @@ def parts(small: bool, out) -> None:
         paint = CarPaint(enabled=True, upper_from=h, paints={k: [share, round(c * rho, 4)] for k, (share, rho) in BASE_PAINTS.items()},
                          parts={"body": {"model": "glossy_paint", "specular": spec, "lobe_deg": lobe},
                                 "upper": {"model": "glossy_paint", "diffuse": u, "specular": spec, "lobe_deg": lobe}})
-        grid[f"parts: coat {c}, upper {u}, lobe {spec} / {lobe:g} deg, upper from {h}"] = (effects, {"car_glass": glass, "car_fittings": True, "car_paint": paint})
+        grid[f"parts: coat {c}, upper {u}, lobe {spec} / {lobe:g} deg, upper from {h}"] = (
+            effects, {"car_glass": glass, "car_fittings": True, "car_paint": paint})
     rows = []
     for name, (eff, scene) in grid.items():
         rows.append({"paint": name, **fit.score(eff, seeds, scene)})
@@ -550,10 +561,12 @@ def parts(small: bool, out) -> None:
         print(held_rows[-1], flush=True)
     chosen_paint = grid[chosen["paint"]][1]["car_paint"]
     payload = json.loads(path.read_text()) if path.exists() else payload
-    payload["parts"] = {"receiver": receiver, "glass": {"windshield": 0.6, "tinted": 0.7}, "grid": {k: [list(v) if isinstance(v, tuple) else v for v in vs] for k, vs in PARTS_GRID.items()},
+    payload["parts"] = {"receiver": receiver, "glass": {"windshield": 0.6, "tinted": 0.7},
+                        "grid": {k: [list(v) if isinstance(v, tuple) else v for v in vs] for k, vs in PARTS_GRID.items()},
                         "base paints (share, 905 nm reflectance)": BASE_PAINTS,
                         "rank": "admissible: cars within 0.7-1.4 >= the reference's and closeness <= the reference's + 0.02; of those the highest overlap",
-                        "chosen on 000008": chosen["paint"], "chosen paints": chosen_paint.paints, "chosen parts": chosen_paint.parts, "chosen upper_from": chosen_paint.upper_from,
+                        "chosen on 000008": chosen["paint"], "chosen paints": chosen_paint.paints, "chosen parts": chosen_paint.parts,
+                        "chosen upper_from": chosen_paint.upper_from,
                         "rows": rows + held_rows, "seeds": list(seeds)}
     out.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(payload, indent=2) + "\n")
@@ -605,10 +618,17 @@ def detection(small: bool, out) -> None:
         held_rows[-1]["closeness"] = closeness(held_rows[-1])
         print(held_rows[-1], flush=True)
     payload = json.loads(path.read_text()) if path.exists() else payload
-    payload["detection"] = {"receiver": receiver, "glass": {"windshield": 0.6, "tinted": 0.7}, "grid": {"detection": list(DETECTION_GRID["detection"]), "parts": [list(p) for p in DETECTION_GRID["parts"]]},
-                            "rank": "stated before the grid ran: admissible: cars within 0.7-1.4 >= the reference's, within on returned firings >= the reference's, "
-                                    "closeness <= the reference's + 0.02; of those (the reference among them) the highest overlap",
-                            "chosen on 000008": chosen["paint"], "chosen parts": grid[chosen["paint"]][1]["car_paint"].parts, "rows": rows + held_rows, "seeds": list(seeds)}
+    payload["detection"] = {
+        "receiver": receiver,
+        "glass": {"windshield": 0.6, "tinted": 0.7},
+        "grid": {"detection": list(DETECTION_GRID["detection"]), "parts": [list(p) for p in DETECTION_GRID["parts"]]},
+        "rank": "stated before the grid ran: admissible: cars within 0.7-1.4 >= the reference's, within on returned firings >= the reference's, "
+        "closeness <= the reference's + 0.02; of those (the reference among them) the highest overlap",
+        "chosen on 000008": chosen["paint"],
+        "chosen parts": grid[chosen["paint"]][1]["car_paint"].parts,
+        "rows": rows + held_rows,
+        "seeds": list(seeds),
+    }
     out.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(payload, indent=2) + "\n")
 
@@ -646,24 +666,29 @@ def spread(small: bool, out) -> None:
     for frame in insertions():
         rows = [frame.score(effects, [seed], scene) for seed in seeds]
         ratios = np.array([r["sim/real per car"] for r in rows])  # (seeds, cars)
-        by_paint = {name: frame.score(effects, seeds[:PAINT_SEEDS], {**scene, "car_paint": CarPaint(enabled=True, paints={name: [1.0, reflectance]})})["sim/real per car"]
+        by_paint = {name: frame.score(effects, seeds[:PAINT_SEEDS],
+                                      {**scene, "car_paint": CarPaint(enabled=True, paints={name: [1.0, reflectance]})})["sim/real per car"]
                     for name, (_, reflectance) in PAINTS.items()}
         overlap = np.array([r["overlap"] for r in rows])
         frames[frame.name] = {
             "real points per car": frame.real_counts,
             "sim/real mean per car": np.round(ratios.mean(axis=0), 2).tolist(),
-            "sim/real 10-90th percentile per car": [[round(float(lo), 2), round(float(hi), 2)] for lo, hi in zip(np.percentile(ratios, 10, axis=0), np.percentile(ratios, 90, axis=0))],
+            "sim/real 10-90th percentile per car": [[round(float(lo), 2), round(float(hi), 2)] for lo,
+                                                    hi in zip(np.percentile(ratios, 10, axis=0), np.percentile(ratios, 90, axis=0))],
             "share of seeds within 0.7-1.4 per car": np.round(((ratios >= 0.7) & (ratios <= 1.4)).mean(axis=0), 2).tolist(),
             "real zero-reading share per car": frame.real_zero_shares,
             f"sim/real per car, every car one paint ({min(PAINT_SEEDS, len(seeds))} seeds)": by_paint,
-            "cars within 0.7-1.4 per seed (min, median, max)": [int(v) for v in np.percentile(((ratios >= 0.7) & (ratios <= 1.4)).sum(axis=1), [0, 50, 100], method="nearest")],
+            "cars within 0.7-1.4 per seed (min, median, max)": [
+                int(v) for v in np.percentile(((ratios >= 0.7) & (ratios <= 1.4)).sum(axis=1), [0, 50, 100], method="nearest")],
             "overlap (min, median, max)": [round(float(v), 3) for v in np.percentile(overlap, [0, 50, 100], method="nearest")],
             "real car points": int(len(frame.real_on)),
             "overlap of the real points with a resample of themselves (median, 10th percentile)": resample_overlap(frame.real_on),
         }
         print(frame.name, frames[frame.name], flush=True)
     payload = json.loads(path.read_text()) if path.exists() else payload
-    payload["spread"] = {"seeds": len(seeds), "models": "part models (parts' fitted defaults), glass 0.6 / 0.7, plates and lamps, the fitted reading; no detection", "frames": frames}
+    payload["spread"] = {"seeds": len(seeds),
+                         "models": "part models (parts' fitted defaults), glass 0.6 / 0.7, plates and lamps, the fitted reading; no detection",
+                         "frames": frames}
     out.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(payload, indent=2) + "\n")
 
@@ -673,10 +698,23 @@ def main() -> None:
     parser.add_argument("--small", action="store_true", help="a small size, for CI (checks the benchmark runs)")
     parser.add_argument("--out", type=Path, default=RESULTS, help="folder for the JSON results")
     parser.add_argument("--insertion", action="store_true", help="the insertion comparison only (into materials.json's insertion section)")
-    parser.add_argument("--reading", action="store_true", help="the reading model (effects.intensity.reading) fitted on 000008 and on the insertion (materials.json's reading section)")
-    parser.add_argument("--detection", action="store_true", help="the car parts' detection reflectivity apart from their reading, fitted on 000008, held out on 004747 (materials.json's detection section)")
-    parser.add_argument("--spread", action="store_true", help=f"the chosen car models seed by seed ({SPREAD_SEEDS} seeds) on both frames: how much one draw moves each car (materials.json's spread section)")
-    parser.add_argument("--parts", action="store_true", help="a reflectance model per car part (scene.car_paint) on the insertion, fitted on 000008, held out on 004747 (materials.json's parts section)")
+    parser.add_argument("--reading", action="store_true",
+                        help="the reading model (effects.intensity.reading) fitted on 000008 and on the insertion (materials.json's reading section)")
+    parser.add_argument(
+        "--detection",
+        action="store_true",
+        help="the car parts' detection reflectivity apart from their reading, fitted on 000008, held out on 004747 (materials.json's detection section)",
+    )
+    parser.add_argument(
+        "--spread",
+        action="store_true",
+        help=f"the chosen car models seed by seed ({SPREAD_SEEDS} seeds) on both frames: how much one draw moves each car (materials.json's spread section)",
+    )
+    parser.add_argument(
+        "--parts",
+        action="store_true",
+        help="a reflectance model per car part (scene.car_paint) on the insertion, fitted on 000008, held out on 004747 (materials.json's parts section)",
+    )
     args = parser.parse_args()
     if not KITTI.exists() or not KITTI_4747.exists():
         print(f"skipped: {KITTI} or {KITTI_4747} is absent")
@@ -707,9 +745,11 @@ def main() -> None:
     for row in rows + held_rows:
         row["scan over diffuse"] = round(row.pop("seconds") / (base if row["frame"] == fit.name else held_base), 3)
     rows += held_rows + dual_rows(fit)
-    cars = {frame.name: [{"distance_m": round(float(np.linalg.norm(b["centre"][:2])), 1), "occluded": b["occluded"], "real_points": b["real_points"]} for b in frame.boxes] for frame in (fit, held)}
+    cars = {frame.name: [{"distance_m": round(float(np.linalg.norm(b["centre"][:2])), 1), "occluded": b["occluded"],
+                          "real_points": b["real_points"]} for b in frame.boxes] for frame in (fit, held)}
     path = args.out / "materials.json"
-    kept = {k: v for k, v in json.loads(path.read_text()).items() if k in ("insertion", "reading", "parts", "detection", "spread")} if path.exists() else {}  # the --insertion, --reading, --parts and --detection sections stay
+    # the --insertion, --reading, --parts and --detection sections stay
+    kept = {k: v for k, v in json.loads(path.read_text()).items() if k in ("insertion", "reading", "parts", "detection", "spread")} if path.exists() else {}
     report("materials", rows, args.out, {"cars": cars, "best on 000008": best["paint"], "best paint alone on 000008": paint_only["paint"]})
     if kept:
         payload = json.loads(path.read_text())

@@ -34,12 +34,12 @@ from common import arguments, best_of, report
 import bpy
 
 from bpy_pipeline.config import load_config
-from bpy_pipeline.export import export_scene
+from bpy_pipeline.blender.export import export_scene
 from bpy_pipeline.labels import load_class_table
 from bpy_pipeline.lidar.sensor.mirror_sensor import MirrorFrame
 from bpy_pipeline.frame import frame_rng
 from bpy_pipeline.stages.scan import scan_buffers
-from bpy_pipeline.scenes import build_scene
+from bpy_pipeline.blender import build_scene
 
 HEIGHT = 6.0  # m, sensor above the floor
 
@@ -54,22 +54,28 @@ def hall_shapes(rng: np.random.Generator) -> list[dict]:
         shapes.append({"type": "plane", "size": [24, 7.5], "position": [x, y, 3.75], "rotation_deg": [90, 0, yaw], "class": "wall", "name": f"wall_{i}"})
     for i in range(8):
         x, y = rng.uniform(-6, 6, 2)
-        shapes.append({"type": "box", "size": [1.6, 0.8, 0.72], "position": [x, y, 0.36], "rotation_deg": [0, 0, float(rng.uniform(0, 180))], "class": "desk", "name": f"desk_{i}"})
+        shapes.append({"type": "box", "size": [1.6, 0.8, 0.72], "position": [x, y, 0.36], "rotation_deg": [0, 0, float(rng.uniform(0, 180))], "class": "desk",
+                       "name": f"desk_{i}"})
     for i in range(6):
         x, y = rng.uniform(-5, 5, 2)
         height = float(rng.uniform(1.6, 1.9))
-        shapes.append({"type": "cylinder", "size": [0.22, height - 0.25], "position": [x, y, (height - 0.25) / 2], "class": "person", "name": f"person_{i}", "segments": 24})
+        shapes.append({"type": "cylinder", "size": [0.22, height - 0.25], "position": [x, y, (height - 0.25) / 2], "class": "person", "name": f"person_{i}",
+                       "segments": 24})
         shapes.append({"type": "sphere", "size": 0.12, "position": [x, y, height - 0.12], "class": "person", "name": f"head_{i}", "segments": 16})
-    arm = [([0.6, 0.6, 0.5], [2.5, -2.0, 0.25]), ([0.25, 0.25, 1.1], [2.5, -2.0, 1.05]), ([0.9, 0.2, 0.2], [2.9, -2.0, 1.6]), ([0.15, 0.15, 0.5], [3.3, -2.0, 1.35])]
+    arm = [([0.6, 0.6, 0.5], [2.5, -2.0, 0.25]), ([0.25, 0.25, 1.1], [2.5, -2.0, 1.05]), ([0.9, 0.2, 0.2], [2.9, -2.0, 1.6]),
+           ([0.15, 0.15, 0.5], [3.3, -2.0, 1.35])]
     shapes += [{"type": "box", "size": size, "position": pos, "class": "robot arm", "name": f"arm_{i}"} for i, (size, pos) in enumerate(arm)]
     return shapes
 
 
 VARIANTS = {
     "hall": [],
-    "hall + mirror wall": [{"type": "plane", "size": [10, 4], "position": [4.5, 0, 2], "rotation_deg": [90, 0, -90], "class": "wall", "material": "mirror", "reflectivity": 0.9, "name": "mirror_wall"}],
-    "hall + mirror floor": [{"type": "plane", "size": [8, 8], "position": [0, 0, 0.01], "class": "floor", "material": "mirror", "reflectivity": 0.8, "name": "polished_floor"}],
-    "hall + glass partition": [{"type": "plane", "size": [10, 3], "position": [-4.0, 0, 1.5], "rotation_deg": [90, 0, -90], "class": "wall", "material": "glass", "reflectivity": 0.1, "name": "glass"}],
+    "hall + mirror wall": [{"type": "plane", "size": [10, 4], "position": [4.5, 0, 2], "rotation_deg": [90, 0, -90], "class": "wall", "material": "mirror",
+                            "reflectivity": 0.9, "name": "mirror_wall"}],
+    "hall + mirror floor": [{"type": "plane", "size": [8, 8], "position": [0, 0, 0.01], "class": "floor", "material": "mirror", "reflectivity": 0.8,
+                             "name": "polished_floor"}],
+    "hall + glass partition": [{"type": "plane", "size": [10, 3], "position": [-4.0, 0, 1.5], "rotation_deg": [90, 0, -90], "class": "wall",
+                                "material": "glass", "reflectivity": 0.1, "name": "glass"}],
 }
 
 

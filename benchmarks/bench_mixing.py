@@ -51,7 +51,8 @@ def error_row(name, ms, firings, points, inserted, exact_firing, exact_range, ex
     dr = np.abs(r - np.array([lookup[k] for k in firing[both].tolist()])) if both.any() else np.zeros(1)
     row = {
         "method": name, "ms_per_frame": round(ms, 2), "inserted_points": int(inserted.sum()),
-        "angle_median_deg": float(np.degrees(np.median(angle))), "angle_p95_deg": float(np.degrees(np.percentile(angle, 95))), "angle_max_deg": float(np.degrees(angle.max())),
+        "angle_median_deg": float(np.degrees(np.median(angle))), "angle_p95_deg": float(np.degrees(np.percentile(angle, 95))),
+        "angle_max_deg": float(np.degrees(angle.max())),
         "points_sharing_a_firing": int(shared), "range_diff_median_m": float(np.median(dr)), "range_diff_p95_m": float(np.percentile(dr, 95)),
     }
     row.update(extra or {})
@@ -161,7 +162,8 @@ def conversion(repeat: int) -> list[dict]:
         firings = recover_firings(read_real_scan(KITTI), "hdl64e")
         for method in ("cones", "raycast"):
             ms = best_of(lambda: convert_scan(firings, target, offset, method), repeat) * 1e3
-            rows.append({"method": f"KITTI 000008 (front view) -> VLP-16, {method}", "ms": round(ms, 2), "source_returns": int(firings.valid.sum()), "converted": int(len(convert_scan(firings, target, offset, method)))})
+            rows.append({"method": f"KITTI 000008 (front view) -> VLP-16, {method}", "ms": round(ms, 2), "source_returns": int(firings.valid.sum()),
+                         "converted": int(len(convert_scan(firings, target, offset, method)))})
     return rows
 
 

@@ -82,12 +82,18 @@ def main() -> None:
             config = load_config(data)
             rows.append(row(name, "populated in place", frames(config, rebuild=False)))
             rows.append(row(name, "rebuilt every frame", frames(config, rebuild=True)))
-    report("population", rows, args.out, {
-        "paper_seconds_per_frame": PAPER_SECONDS,
-        "stages": "build: open the .blend (first frame) and draw/place/pose the population; export: evaluated depsgraph to buffers; scan: Embree through the sensor's mirrors; boxes: 3D boxes with occlusion; write: PLY/NPY/labels",
-        "medians_over": "the frames after the first",
-        "load_average_after": [round(x, 2) for x in os.getloadavg()],  # other jobs on the machine inflate every figure
-    })
+    report(
+        "population",
+        rows,
+        args.out,
+        {
+            "paper_seconds_per_frame": PAPER_SECONDS,
+            "stages": "build: open the .blend (first frame) and draw/place/pose the population; export: evaluated depsgraph to buffers; scan: Embree through "
+                      "the sensor's mirrors; boxes: 3D boxes with occlusion; write: PLY/NPY/labels",
+            "medians_over": "the frames after the first",
+            "load_average_after": [round(x, 2) for x in os.getloadavg()],  # other jobs on the machine inflate every figure
+        },
+    )
 
 
 if __name__ == "__main__":

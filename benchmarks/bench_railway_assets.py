@@ -39,7 +39,7 @@ def build_seconds(params) -> tuple[float, int]:
     import bpy
 
     from bpy_pipeline.builders.railway import scene as railway
-    from bpy_pipeline.scenes.objects import COLLECTION
+    from bpy_pipeline.blender.mesh_objects import COLLECTION
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     start = time.perf_counter()
@@ -77,7 +77,7 @@ def make_assets(folder: Path, small: bool, cuts: int) -> dict:
     from mathutils import Matrix
 
     from bpy_pipeline.builders.railway import scene as railway
-    from bpy_pipeline.scenes.objects import COLLECTION
+    from bpy_pipeline.blender.mesh_objects import COLLECTION
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     params = params_of(small)
@@ -90,7 +90,7 @@ def make_assets(folder: Path, small: bool, cuts: int) -> dict:
     objects = bpy.data.collections[COLLECTION].objects
     # the masts stand as instances of the "Railway Supports" group: support 0's is made an object of its own, from the pure mesh
     from bpy_pipeline.builders.railway.scene import _mast_mesh
-    from bpy_pipeline.scenes.objects import mesh_object
+    from bpy_pipeline.blender.mesh_objects import mesh_object
 
     mast_object = mesh_object(f"support.00.mast.{mast.side}", _mast_mesh(mast, params.catenary), bpy.data.collections[COLLECTION])
     mast_object.matrix_world = Matrix(support.frame.tolist())
@@ -134,7 +134,8 @@ def main():
         imports = {"procedural": 0.0, "assets_same_detail": import_seconds(same), "assets_dense": import_seconds(dense)}
     reference = measured["procedural"][0]
     for name, (seconds, triangles) in measured.items():
-        rows.append({"scenario": name, "build_s": round(seconds, 4), "ratio": round(seconds / reference, 3), "import_s": round(imports[name], 4), "support_triangles": triangles})
+        rows.append({"scenario": name, "build_s": round(seconds, 4), "ratio": round(seconds / reference, 3), "import_s": round(imports[name], 4),
+                     "support_triangles": triangles})
     report("railway_assets", rows, args.out, {"scene": "the thesis's 300 m line, every support built" if not args.small else "a 120 m line", "repeat": REPEAT})
 
 

@@ -35,12 +35,15 @@ def main():
         analytic = (ratio * spans) ** 3 / (3 * spans**2)
         worst = float(np.max(np.abs(errors / analytic - 1)))
         # where the parabola's error reaches the scanner's accuracy: s^3 / (3 L^2) = e with s = r L  ->  L = 3 e / r^3
-        rows.append({"wire": label, "sag_ratio": ratio, "error_at_50m_m": parabola_error(50.0, ratio * 50.0), "error_at_65m_m": parabola_error(65.0, ratio * 65.0),
+        rows.append({"wire": label, "sag_ratio": ratio, "error_at_50m_m": parabola_error(50.0, ratio * 50.0),
+                     "error_at_65m_m": parabola_error(65.0, ratio * 65.0),
                      "span_where_error_reaches_2mm_m": 3 * ACCURACY / ratio**3, "max_rel_dev_from_s3_over_3L2": worst})
     law = np.array([parabola_error(L, sag_for_span(L, 0.5, 50.0, 2.0)) for L in spans])
     curves["messenger, sag law 0.5 m at 50 m, alpha 2"] = law
-    rows.append({"wire": "messenger, sag law (alpha 2)", "sag_ratio": None, "error_at_50m_m": parabola_error(50.0, 0.5), "error_at_65m_m": parabola_error(65.0, sag_for_span(65.0, 0.5, 50.0, 2.0)),
-                 "span_where_error_reaches_2mm_m": float(np.interp(ACCURACY, law, spans)) if law.max() > ACCURACY else None, "max_rel_dev_from_s3_over_3L2": None})
+    rows.append({"wire": "messenger, sag law (alpha 2)", "sag_ratio": None, "error_at_50m_m": parabola_error(50.0, 0.5),
+                 "error_at_65m_m": parabola_error(65.0, sag_for_span(65.0, 0.5, 50.0, 2.0)),
+                 "span_where_error_reaches_2mm_m": float(np.interp(ACCURACY, law, spans)) if law.max() > ACCURACY else None,
+                 "max_rel_dev_from_s3_over_3L2": None})
     elapsed = time.perf_counter() - start
 
     import matplotlib

@@ -20,12 +20,12 @@ from common import arguments, report
 import bpy
 
 from bpy_pipeline.config import load_config
-from bpy_pipeline.export import export_scene
+from bpy_pipeline.blender.export import export_scene
 from bpy_pipeline.labels import load_class_table
 from bpy_pipeline.frame import frame_rng
 from bpy_pipeline.stages.scan import scan_buffers
 from bpy_pipeline.stages.view import scene_view, sensor_pose
-from bpy_pipeline.scenes import build_scene
+from bpy_pipeline.blender import build_scene
 
 WIRES = ("contact_wire", "messenger_wire", "feeder", "earth_wire")
 

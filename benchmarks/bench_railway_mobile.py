@@ -131,7 +131,8 @@ def hits(small: bool, tmp: Path) -> tuple[list[dict], dict]:
     from bpy_pipeline.io import read_ply
 
     base = ["scene.builder=railway", "scene.track.start=[-10, 0, 0]", "scene.track.mid=[160, 0, 0]", "scene.track.end=[330, 0, 0]",
-            "scene.supports.layout=single", "scene.stations.chainages=[10, 110, 210]", "frames=3", "sensor.preset=railway_tls", "sensor.vertical_fov_deg=[2, 60]",
+            "scene.supports.layout=single", "scene.stations.chainages=[10, 110, 210]", "frames=3", "sensor.preset=railway_tls",
+            "sensor.vertical_fov_deg=[2, 60]",
             "sensor.horizontal_fov_deg=[-45, 45]", f"sensor.sampling_factor={0.25 if small else 1.0}", "output.formats=[ply,railway_layout]"]
     rows, curves = [], {}
     for model, extra in MODELS.items():
@@ -149,7 +150,8 @@ def hits(small: bool, tmp: Path) -> tuple[list[dict], dict]:
         scan_s = sum(f["timings_s"]["scan"] + f["timings_s"].get("effects", 0.0) for f in manifest["frames"])  # the trace and the drop models
         for kind, bins in rates.items():
             for (lo, hi), (hit, total) in zip(BINS, bins):
-                rows.append({"model": model, "class": kind, "distance_m": f"{lo}-{hi}", "hit": hit, "total": total, "rate": hit / total if total else None, "scan_s": scan_s})
+                rows.append({"model": model, "class": kind, "distance_m": f"{lo}-{hi}", "hit": hit, "total": total, "rate": hit / total if total else None,
+                             "scan_s": scan_s})
     return rows, curves
 
 

@@ -149,7 +149,8 @@ def main() -> None:
     result.update({"classes": list(CLASSES), "layouts": layouts, "frames_per_layout": frames, "generation": cost, "real": [f.name for f in real_files],
                    "targets": TARGETS, "config": "examples/street/ego_hdl64e.yaml", "load_average_at_start": os.getloadavg()[0],
                    "settings": {"tree_points_per_class": TREE_POINTS_PER_CLASS, "tree_folds": TREE_FOLDS, "network_folds": NETWORK_FOLDS,
-                                "network_epochs": rangenet_settings()["epochs"], "network_min_steps": rangenet_settings()["min_steps"], "threads": args.threads}})
+                                "network_epochs": rangenet_settings()["epochs"], "network_min_steps": rangenet_settings()["min_steps"],
+                                "threads": args.threads}})
     if "training" in parts:
         if args.small:
             import bpy_pipeline.evaluate.rangenet as rangenet

@@ -158,7 +158,11 @@ def trimesh_embree(setup: Setup, threads: int):
     location, ray, triangle = intersector.intersects_location(origins, setup.directions, multiple_hits=False)
     far = np.linalg.norm(location - setup.origin, axis=1) > setup.max_range  # trimesh has no maximum distance
     ray, location, triangle = ray[~far], location[~far], triangle[~far]
-    return (lambda: intersector.intersects_location(origins, setup.directions, multiple_hits=False)), build, setup.score(ray, location, setup.buffers.triangle_object[triangle])
+    return (
+        (lambda: intersector.intersects_location(origins, setup.directions, multiple_hits=False)),
+        build,
+        setup.score(ray, location, setup.buffers.triangle_object[triangle]),
+    )
 
 
 def subset_of(setup: Setup, count: int) -> np.ndarray:
@@ -186,7 +190,7 @@ def blender_bvhtree(setup: Setup, threads: int, count: int):
 
 
 def blender_scene_ray_cast(setup: Setup, threads: int, count: int):
-    from bpy_pipeline.scenes.objects import mesh_object, scene_collection
+    from bpy_pipeline.blender.mesh_objects import mesh_object, scene_collection
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     start = time.perf_counter()
@@ -288,7 +292,8 @@ def chart(rows: list[dict], path) -> None:
     for i, r in enumerate(r for r in rows if r.get("rays_per_s")):
         ax.loglog(r["rays_per_s"], max(r["max_error_m"], 1e-15), "o")
         ax.annotate(r["method"], (r["rays_per_s"], max(r["max_error_m"], 1e-15)), textcoords="offset points", xytext=(6, 5 if i % 2 else -12), fontsize=8)
-    ax.set(xlabel="rays per second", ylabel="largest position error (m)", title=f"Speed against accuracy ({rows[0]['rays']:,} rays, {rows[0]['triangles']:,} triangles)")
+    ax.set(xlabel="rays per second", ylabel="largest position error (m)",
+           title=f"Speed against accuracy ({rows[0]['rays']:,} rays, {rows[0]['triangles']:,} triangles)")
     ax.axhline(1e-4, color="grey", lw=0.8, ls=":")
     ax.grid(True, which="major", alpha=0.3)
     lo, hi = ax.get_xlim()
@@ -301,13 +306,15 @@ def chart(rows: list[dict], path) -> None:
 def main():
     args = arguments(__doc__)
     threads = default_threads()
-    RayCaster(SceneBuffers.from_meshes({"warm-up": primitives.box(1, 1, 1)}), frame=np.eye(4))  # numba's import and kernel load (~0.6 s, once a process) out of the timings
+    # numba's import and kernel load (~0.6 s, once a process) out of the timings
+    RayCaster(SceneBuffers.from_meshes({"warm-up": primitives.box(1, 1, 1)}), frame=np.eye(4))
     setup = Setup(args.small)
     count = 5000 if args.small else 50000  # rays timed for Blender's ray casts (a Python loop)
     methods = [
         ("embreex raw", embreex_raw, threads, "float32 distance"),
         ("RayCaster.intersect", raycaster, threads, "sensor frame, float64 re-solve"),
-        ("scan (records)", full_scan, threads, "point records: float32 x y z" + ("; compiled kernel" if kernels.numba_available() else "; numba absent: numpy path")),
+        ("scan (records)", full_scan, threads,
+         "point records: float32 x y z" + ("; compiled kernel" if kernels.numba_available() else "; numba absent: numpy path")),
         ("scan (records, numpy path)", lambda s, t: full_scan(s, t, "numpy"), threads, "point records, kernel='numpy'"),
         ("trimesh + embreex", trimesh_embree, 1, "trimesh.ray.ray_pyembree"),
         ("Blender BVHTree", lambda s, t: blender_bvhtree(s, t, count), 1, f"Python loop; {count:,} rays timed, extrapolated"),
@@ -347,7 +354,8 @@ def main():
         if r.get("rays_per_s"):
             r["vs_embreex_raw"] = r["rays_per_s"] / reference
     name = "raycasters" + ("_small" if args.small else "")
-    report(name, rows, args.out, {"threads": threads, "wire_hits_exact": int((setup.exact_row == list(BOXES).index("wire")).sum()), "vertex_rays": vertex_ray_count})
+    report(name, rows, args.out, {"threads": threads, "wire_hits_exact": int((setup.exact_row == list(BOXES).index("wire")).sum()),
+                                  "vertex_rays": vertex_ray_count})
     chart(rows, args.out / f"{name}.png")
 
 

@@ -101,7 +101,8 @@ def scores(found: list, truth_mask: dict, n: int) -> dict:
             if s.kind == kind:
                 got[s.index] = True
         tp = int((got & truth).sum())
-        out[kind] = {"precision": round(tp / max(int(got.sum()), 1), 4), "recall": round(tp / max(int(truth.sum()), 1), 4), "found": int(sum(s.kind == kind for s in found))}
+        out[kind] = {"precision": round(tp / max(int(got.sum()), 1), 4), "recall": round(tp / max(int(truth.sum()), 1), 4),
+                     "found": int(sum(s.kind == kind for s in found))}
     return out
 
 
@@ -135,7 +136,11 @@ def chart(rows: list[dict], hall: dict, path: Path) -> None:
     import matplotlib.pyplot as plt
 
     fig, (a, b) = plt.subplots(1, 2, figsize=(14, 5.5))
-    labels = [f"{r['scan'].replace('SemanticKITTI seq01_000000', 'SemKITTI 01/0').replace('SemanticKITTI ', 'SemKITTI ').replace('synthetic ', '')}\n{r['kind'].replace('floor vs ', 'floor: ')}" for r in rows]
+    labels = [
+        f"{r['scan'].replace('SemanticKITTI seq01_000000', 'SemKITTI 01/0').replace('SemanticKITTI ', 'SemKITTI ').replace('synthetic ', '')}\n"
+        f"{r['kind'].replace('floor vs ', 'floor: ')}"
+        for r in rows
+    ]
     x = np.arange(len(rows))
     a.tick_params(axis="x", labelrotation=0)
     a.bar(x - 0.2, [r["precision"] for r in rows], 0.4, label="precision")

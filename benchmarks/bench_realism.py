@@ -45,7 +45,8 @@ from common import ROOT, arguments, best_of, report
 
 import bpy_pipeline
 from bpy_pipeline.config import effects_from_dict
-from bpy_pipeline.geometry.objects import STYLES, car_parts, fit_to_box, person_object, ObjectPart, PARTS, GLASS_REFLECTIVITY, INTERIOR_REFLECTIVITY, TYRE_REFLECTIVITY
+from bpy_pipeline.geometry.objects import (STYLES, car_parts, fit_to_box, person_object, ObjectPart, PARTS, GLASS_REFLECTIVITY, INTERIOR_REFLECTIVITY,
+                                           TYRE_REFLECTIVITY)
 from bpy_pipeline.lidar.fit import fitting
 from bpy_pipeline.lidar.sensor.sensors import elevations, preset_effects, resolve_sensor
 
@@ -161,8 +162,11 @@ def hdl32e_replay(small: bool) -> tuple[list[dict], dict, dict]:
             "range_intersection_sim": round(intersection(rr, sr, RANGE_BINS), 3), "range_intersection_ideal": round(intersection(rr, ir, RANGE_BINS), 3),
         })
     totals = {k: sum(p[k] for p in per_ring) for k in ("real_returns", "sim_returns", "ideal_returns")}
-    rows.append({"case": "hdl32e replay", "quantity": "returns (all rings)", "real": totals["real_returns"], "sim": totals["sim_returns"], "ideal": totals["ideal_returns"], "sim/real": round(totals["sim_returns"] / totals["real_returns"], 3)})
-    rows.append({"case": "hdl32e replay", "quantity": "range hist. intersection (median ring)", "sim": float(np.nanmedian([p["range_intersection_sim"] for p in per_ring])), "ideal": float(np.nanmedian([p["range_intersection_ideal"] for p in per_ring]))})
+    rows.append({"case": "hdl32e replay", "quantity": "returns (all rings)", "real": totals["real_returns"], "sim": totals["sim_returns"],
+                 "ideal": totals["ideal_returns"], "sim/real": round(totals["sim_returns"] / totals["real_returns"], 3)})
+    rows.append({"case": "hdl32e replay", "quantity": "range hist. intersection (median ring)",
+                 "sim": float(np.nanmedian([p["range_intersection_sim"] for p in per_ring])),
+                 "ideal": float(np.nanmedian([p["range_intersection_ideal"] for p in per_ring]))})
     # intensity per range band, in the sensor's 0..255
     real_i, real_r = real_intensity[real_valid], real_range[real_valid]
     sim_i = np.rint(sim["intensity"].astype(np.float64) * 255)
@@ -173,7 +177,8 @@ def hdl32e_replay(small: bool) -> tuple[list[dict], dict, dict]:
         bands.append({"band_m": [lo, hi], "real_median": float(np.median(a)) if len(a) else None, "sim_median": float(np.median(b)) if len(b) else None,
                       "real_p90": float(np.percentile(a, 90)) if len(a) else None, "sim_p90": float(np.percentile(b, 90)) if len(b) else None,
                       "intersection": round(intersection(a, b, np.arange(0, 257) - 0.5), 3)})
-        rows.append({"case": "hdl32e replay", "quantity": f"intensity {lo:g}-{hi:g} m (median real / sim)", "real": bands[-1]["real_median"], "sim": bands[-1]["sim_median"], "intersection": bands[-1]["intersection"]})
+        rows.append({"case": "hdl32e replay", "quantity": f"intensity {lo:g}-{hi:g} m (median real / sim)", "real": bands[-1]["real_median"],
+                     "sim": bands[-1]["sim_median"], "intersection": bands[-1]["intersection"]})
     # drop fraction against range and incidence: the real firings, and the same firings through the preset's drop model
     samples = fitting.drop_samples(scan, geometry)
     effects = effects_from_dict(preset_effects("hdl32e"))
@@ -186,16 +191,24 @@ def hdl32e_replay(small: bool) -> tuple[list[dict], dict, dict]:
     drop = []
     for i in range(len(DROP_RANGES) - 1):
         for j in range(len(DROP_INCIDENCE) - 1):
-            m = (samples.range >= DROP_RANGES[i]) & (samples.range < DROP_RANGES[i + 1]) & (incidence >= DROP_INCIDENCE[j]) & (incidence < DROP_INCIDENCE[j + 1])
+            m = (
+                (samples.range >= DROP_RANGES[i])
+                & (samples.range < DROP_RANGES[i + 1])
+                & (incidence >= DROP_INCIDENCE[j])
+                & (incidence < DROP_INCIDENCE[j + 1])
+            )
             if m.sum() >= 50:
                 drop.append({"range_m": [round(DROP_RANGES[i], 2), round(DROP_RANGES[i + 1], 2)], "incidence_deg": [DROP_INCIDENCE[j], DROP_INCIDENCE[j + 1]],
                              "firings": int(m.sum()), "real": round(float(samples.dropped[m].mean()), 4), "sim": round(float(simulated[m].mean()), 4)})
-    rows.append({"case": "hdl32e sweep", "quantity": "drop fraction (all firings with a target)", "real": round(float(samples.dropped.mean()), 4), "sim": round(float(simulated.mean()), 4)})
+    rows.append({"case": "hdl32e sweep", "quantity": "drop fraction (all firings with a target)", "real": round(float(samples.dropped.mean()), 4),
+                 "sim": round(float(simulated.mean()), 4)})
     by_range = []
     for i in range(len(DROP_RANGES) - 1):
         m = (samples.range >= DROP_RANGES[i]) & (samples.range < DROP_RANGES[i + 1])
-        by_range.append({"range_m": [round(DROP_RANGES[i], 2), round(DROP_RANGES[i + 1], 2)], "real": round(float(samples.dropped[m].mean()), 4), "sim": round(float(simulated[m].mean()), 4), "firings": int(m.sum())})
-        rows.append({"case": "hdl32e sweep", "quantity": f"drop {DROP_RANGES[i]:.1f}-{DROP_RANGES[i + 1]:.1f} m", "real": by_range[-1]["real"], "sim": by_range[-1]["sim"]})
+        by_range.append({"range_m": [round(DROP_RANGES[i], 2), round(DROP_RANGES[i + 1], 2)], "real": round(float(samples.dropped[m].mean()), 4),
+                         "sim": round(float(simulated[m].mean()), 4), "firings": int(m.sum())})
+        rows.append({"case": "hdl32e sweep", "quantity": f"drop {DROP_RANGES[i]:.1f}-{DROP_RANGES[i + 1]:.1f} m", "real": by_range[-1]["real"],
+                     "sim": by_range[-1]["sim"]})
     repeat = 1 if small else 3
     t_ideal = best_of(lambda: bpy_pipeline.scan(meshes, "hdl32e", effects={"ideal": True}, seed=0), repeat)
     t_real = best_of(lambda: bpy_pipeline.scan(meshes, "hdl32e", seed=0), repeat)
@@ -311,7 +324,8 @@ def ring_noise(xyz: np.ndarray, rings: np.ndarray) -> dict:
     out = {}
     for lo, hi in NOISE_BANDS:
         x = residual[(at >= lo) & (at < hi)]
-        out[f"{lo:g}-{hi:g}"] = {"sigma_mm": round(float(1.4826 * np.median(np.abs(x - np.median(x)))) * 1000, 2) if len(x) >= 50 else None, "triples": int(len(x))}
+        out[f"{lo:g}-{hi:g}"] = {"sigma_mm": round(float(1.4826 * np.median(np.abs(x - np.median(x)))) * 1000, 2) if len(x) >= 50 else None,
+                                 "triples": int(len(x))}
     return out
 
 
@@ -326,13 +340,15 @@ def kitti_cars(small: bool) -> tuple[list[dict], dict, dict]:
     ground_z = float(np.mean([b["bottom_z"] for b in boxes]))
     table = elevations(resolve_sensor({"preset": "hdl64e"}))
     real_rings = ring_of(real_xyz, table)
-    variants = {"default": {}, "ideal": {"effects": {"ideal": True}}, "white paint": {"paint": WHITE}, "black paint": {"paint": BLACK}, "opaque windows": {"glass": False}}
+    variants = {"default": {}, "ideal": {"effects": {"ideal": True}}, "white paint": {"paint": WHITE}, "black paint": {"paint": BLACK},
+                "opaque windows": {"glass": False}}
     if small:
         variants = {k: variants[k] for k in ("default", "ideal")}
     rows, per_car = [], []
     clouds = {}
     for name, variant in variants.items():
-        objects = {f"car {k}": placed(car(b["size"], variant.get("paint", SILVER), variant.get("glass", True)), b["centre"], b["yaw"]) for k, b in enumerate(boxes)}
+        objects = {f"car {k}": placed(car(b["size"], variant.get("paint", SILVER), variant.get("glass", True)), b["centre"], b["yaw"]) for k,
+                   b in enumerate(boxes)}
         cloud = bpy_pipeline.scan(scene_of(objects, ground_z), "hdl64e", effects=variant.get("effects"), seed=8)
         xyz = np.column_stack([cloud["x"], cloud["y"], cloud["z"]]).astype(np.float64)
         sim_slopes = image_slopes(xyz)
@@ -369,12 +385,14 @@ def kitti_cars(small: bool) -> tuple[list[dict], dict, dict]:
                 continue
             intensity.append({"surface": what, "band_m": [lo, hi], "real_median": round(float(np.median(a)), 3), "sim_median": round(float(np.median(b)), 3),
                               "intersection": round(intersection(a, b, np.arange(0, 1.02, 0.02) - 0.01), 3), "real_n": int(len(a)), "sim_n": int(len(b))})
-            rows.append({"case": "kitti intensity", "quantity": f"{what} {lo:g}-{hi:g} m (median real / sim)", "real": intensity[-1]["real_median"], "sim": intensity[-1]["sim_median"], "intersection": intensity[-1]["intersection"]})
+            rows.append({"case": "kitti intensity", "quantity": f"{what} {lo:g}-{hi:g} m (median real / sim)", "real": intensity[-1]["real_median"],
+                         "sim": intensity[-1]["sim_median"], "intersection": intensity[-1]["intersection"]})
     # range noise: the same estimator on the real scan and on the simulated one (road and cars)
     noise_real = ring_noise(real_xyz, real_rings)
     noise_sim = ring_noise(sim_xyz, sim_cloud["ring"])
     for band in noise_real:
-        rows.append({"case": "kitti noise", "quantity": f"range sigma {band} m (mm, ring-wise)", "real": noise_real[band]["sigma_mm"], "sim": noise_sim[band]["sigma_mm"]})
+        rows.append({"case": "kitti noise", "quantity": f"range sigma {band} m (mm, ring-wise)", "real": noise_real[band]["sigma_mm"],
+                     "sim": noise_sim[band]["sigma_mm"]})
     charts = {"real": real, "real_car": on_car_real, "sim": sim_cloud, "sim_car": on_car_sim, "per_car": per_car}
     return rows, {"ground_z_m": ground_z, "image_slopes_x_y": window.round(4).tolist(), "cars": per_car, "intensity": intensity,
                   "noise": {"real": noise_real, "sim": noise_sim}}, charts
@@ -398,7 +416,8 @@ def points_against_distance(small: bool, ground_z: float) -> tuple[list[dict], d
                 xyz = np.column_stack([cloud["x"], cloud["y"], cloud["z"]]).astype(np.float64)
                 entry[f"{what}_{name}"] = int(in_box(xyz, box, 0.02).sum())
         curve.append(entry)
-        rows.append({"case": "points vs distance", "quantity": f"{d:g} m: car / person", "sim": f"{entry['car_default']} / {entry['person_default']}", "ideal": f"{entry['car_ideal']} / {entry['person_ideal']}"})
+        rows.append({"case": "points vs distance", "quantity": f"{d:g} m: car / person", "sim": f"{entry['car_default']} / {entry['person_default']}",
+                     "ideal": f"{entry['car_ideal']} / {entry['person_ideal']}"})
     return rows, {"curve": curve, "car_size_m": size_car.tolist(), "person_size_m": [round(float(x), 3) for x in person_size]}
 
 
@@ -450,7 +469,14 @@ def chart(path: Path, hdl32e: dict, kitti: dict, curve: dict, cars: list[dict]) 
     ax.plot(d, [c["person_default"] for c in curve["curve"]], "s-", label="person, default")
     ax.plot(d, [c["person_ideal"] for c in curve["curve"]], "s:", label="person, ideal")
     ax.plot([c["distance_m"] for c in cars], [c["real_label"] for c in cars], "k*", markersize=10, label="KITTI cars (real)")
-    ax.set_xscale("log"), ax.set_yscale("log"), ax.set_xlabel("distance (m)"), ax.set_ylabel("points on object"), ax.set_title("HDL-64E: points per object"), ax.legend(fontsize=8)
+    (
+        ax.set_xscale("log"),
+        ax.set_yscale("log"),
+        ax.set_xlabel("distance (m)"),
+        ax.set_ylabel("points on object"),
+        ax.set_title("HDL-64E: points per object"),
+        ax.legend(fontsize=8),
+    )
     from matplotlib.ticker import ScalarFormatter
 
     for ax in (axes[0, 0], axes[0, 2], axes[1, 2]):

@@ -39,7 +39,8 @@ def timed(args: list[str], env: dict | None = None) -> tuple[float, float]:
     with tempfile.TemporaryDirectory() as out:
         before = resource.getrusage(resource.RUSAGE_CHILDREN)
         start = time.perf_counter()
-        done = subprocess.run([sys.executable, str(ROOT / "run.py"), "--out", str(Path(out) / "run"), *args], capture_output=True, text=True, env={**os.environ, **(env or {})})
+        done = subprocess.run([sys.executable, str(ROOT / "run.py"), "--out", str(Path(out) / "run"), *args], capture_output=True, text=True,
+                              env={**os.environ, **(env or {})})
         if done.returncode != 0:
             raise RuntimeError(f"run.py {' '.join(args)}: {done.stderr.strip()[-500:]}")
         wall = time.perf_counter() - start
@@ -54,26 +55,34 @@ def main() -> None:
     jobs = [
         ("default job", [], 1, None, None),
         (f"{parking_frames} parking frames", ["--set", "scene.builder=parking", "--frames", str(parking_frames)], parking_frames, None, None),
-        (f"{parking_frames} parking frames, --workers 2", ["--set", "scene.builder=parking", "--frames", str(parking_frames), "--workers", "2"], parking_frames, None, None),
-        (f"{hall_frames} industrial-hall frames", ["--set", "scene.builder=industrial_hall", "--frames", str(hall_frames)], hall_frames, 27.6, "the human-robot paper: 27.6 s per frame"),
-        ("railway thesis scan, 23 M rays", ["--set", "sensor.preset=railway_tls", "--set", f"sensor.sampling_factor={sampling}", "--set", "output.formats=[ply]", "--set", "output.preview=false"], sampling**2, 240.0, "the railway thesis: about 240 s"),
+        (f"{parking_frames} parking frames, --workers 2", ["--set", "scene.builder=parking", "--frames", str(parking_frames), "--workers", "2"], parking_frames,
+         None, None),
+        (f"{hall_frames} industrial-hall frames", ["--set", "scene.builder=industrial_hall", "--frames", str(hall_frames)], hall_frames, 27.6,
+         "the human-robot paper: 27.6 s per frame"),
+        ("railway thesis scan, 23 M rays", ["--set", "sensor.preset=railway_tls", "--set", f"sensor.sampling_factor={sampling}", "--set",
+                                            "output.formats=[ply]", "--set", "output.preview=false"], sampling**2, 240.0, "the railway thesis: about 240 s"),
     ]
     sweep = REAL_SCANS / "nuscenes_hdl32e_sweep.bin"
     from bpy_pipeline.builders import BUILDERS
 
     if "real_scan" in BUILDERS and sweep.exists():
-        cars = "[" + ", ".join(f"{{type: car, center: [{x}, {y}, -0.9], size: [4.5, 1.9, 1.6], yaw_deg: {a}}}" for x, y, a in ((8, 4, 0), (-10, 5, 90), (12, -6, 30), (20, 2, 0), (-6, -8, 180))) + "]"
-        jobs.append(("mixed real-scan frame, 5 cars", ["--set", "scene.builder=real_scan", "--set", f"scene.path={sweep}", "--set", f"scene.objects={cars}"], 1, None, None))
+        cars = "[" + ", ".join(f"{{type: car, center: [{x}, {y}, -0.9], size: [4.5, 1.9, 1.6], yaw_deg: {a}}}" for x, y,
+                               a in ((8, 4, 0), (-10, 5, 90), (12, -6, 30), (20, 2, 0), (-6, -8, 180))) + "]"
+        jobs.append(("mixed real-scan frame, 5 cars", ["--set", "scene.builder=real_scan", "--set", f"scene.path={sweep}", "--set", f"scene.objects={cars}"], 1,
+                     None, None))
     rows = []
     for name, run_args, frames, reference_s, source in jobs:
         took, cpu = timed(run_args, {"OPENBLAS_NUM_THREADS": "1"})
         per_frame = took / frames
-        row = {"job": name, "wall_s": took, "s_per_frame": per_frame, "fps": 1 / per_frame, "fps_per_core": 1 / per_frame / cores, "cpu_s": cpu, "cores_used": cpu / took}
+        row = {"job": name, "wall_s": took, "s_per_frame": per_frame, "fps": 1 / per_frame, "fps_per_core": 1 / per_frame / cores, "cpu_s": cpu,
+               "cores_used": cpu / took}
         print(name, row, flush=True)
         if reference_s is not None:
             row.update({"reference_s_per_frame": reference_s, "faster_than_reference": reference_s / per_frame, "reference": source})
         rows.append(row)
-    report("reference_jobs", rows, args.out, {"cores": cores, "small": args.small, "note": "end to end with run.py, start-up included; the thesis scan at --small is 1/16 of the rays, scaled up"})
+    report("reference_jobs", rows, args.out,
+           {"cores": cores, "small": args.small,
+            "note": "end to end with run.py, start-up included; the thesis scan at --small is 1/16 of the rays, scaled up"})
 
 
 if __name__ == "__main__":

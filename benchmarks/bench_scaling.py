@@ -48,7 +48,8 @@ def terrain(triangles: int) -> SceneBuffers:
 def pattern_of(rays: int):
     """A 64-channel spinning pattern (-25..+15 deg) of about ``rays`` rays."""
     columns = max(1, rays // 64)
-    return sensor_pattern(resolve_sensor({"preset": "custom", "channels": 64, "vertical_fov_deg": [-25, 15], "columns": columns, "min_range": 0.0, "max_range": 150.0}))
+    return sensor_pattern(resolve_sensor({"preset": "custom", "channels": 64, "vertical_fov_deg": [-25, 15], "columns": columns, "min_range": 0.0,
+                                          "max_range": 150.0}))
 
 
 class Traced:
@@ -96,7 +97,8 @@ def chart(size_rows: list[dict], ray_rows: list[dict], path) -> None:
     import matplotlib.pyplot as plt
 
     fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4.2), sharey=True)
-    for key, label, style in (("raw_embreex_rays_per_s", "raw embreex", "o-"), ("intersect_rays_per_s", "RayCaster.intersect", "s-"), ("scan_rays_per_s", "scan (records)", "^-")):
+    for key, label, style in (("raw_embreex_rays_per_s", "raw embreex", "o-"), ("intersect_rays_per_s", "RayCaster.intersect", "s-"),
+                              ("scan_rays_per_s", "scan (records)", "^-")):
         left.loglog([r["triangles"] for r in size_rows], [r[key] for r in size_rows], style, label=label)
         right.loglog([r["rays"] for r in ray_rows], [r[key] for r in ray_rows], style, label=label)
     left.set(xlabel="triangles in the scene", ylabel="rays per second", title=f"Scene size ({size_rows[0]['rays']:,} rays a scan)")

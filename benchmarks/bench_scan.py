@@ -34,7 +34,7 @@ from embreex.mesh_construction import TriangleMesh
 
 from bpy_pipeline.buffers import SceneBuffers
 from bpy_pipeline.config import load_config
-from bpy_pipeline.export import export_scene
+from bpy_pipeline.blender.export import export_scene
 from bpy_pipeline.geometry import primitives
 from bpy_pipeline.geometry.transforms import pose_matrix
 from bpy_pipeline.labels import load_class_table
@@ -46,7 +46,7 @@ from bpy_pipeline.lidar.cast.scanner import scan
 from bpy_pipeline.lidar.sensor.sensors import resolve_sensor, sensor_pattern
 from bpy_pipeline.frame import frame_rng
 from bpy_pipeline.stages.view import sensor_pose
-from bpy_pipeline.scenes import build_scene
+from bpy_pipeline.blender import build_scene
 
 REPEAT = 7
 
@@ -89,7 +89,8 @@ def set_up(buffers: SceneBuffers, pose: np.ndarray, threads: int) -> dict:
     cache = CasterCache(threads)
     cache.caster(buffers, pose)
     kept_s = best_of(lambda: cache.caster(buffers, pose), REPEAT)
-    return {"caster_ns_per_triangle": caster_s / m * 1e9, "embree_build_ns_per_triangle": build_s / m * 1e9, "triangle_mesh_ns_per_triangle": copy_s / m * 1e9, "cached_ns_per_triangle": kept_s / m * 1e9}
+    return {"caster_ns_per_triangle": caster_s / m * 1e9, "embree_build_ns_per_triangle": build_s / m * 1e9, "triangle_mesh_ns_per_triangle": copy_s / m * 1e9,
+            "cached_ns_per_triangle": kept_s / m * 1e9}
 
 
 def measure(label: str, buffers: SceneBuffers, pattern, pose: np.ndarray, min_range: float, max_range: float, threads: int, small: bool = False) -> dict:
@@ -135,7 +136,8 @@ def kernel_pass(caster: RayCaster, buffers: SceneBuffers, pattern, min_range: fl
     origins = np.zeros((1, 3))
     identity = np.zeros(0, np.int64) if caster.embree_triangle is None else caster.embree_triangle
     none = np.zeros(0, np.bool_)
-    return best_of(lambda: kernels.fill_diffuse(caster.kernels, tfar, prim, identity, none, origins, d, caster, buffers.objects, pattern.ring, pattern.time, min_range, max_range, points, beam, ray), REPEAT)
+    return best_of(lambda: kernels.fill_diffuse(caster.kernels, tfar, prim, identity, none, origins, d, caster, buffers.objects, pattern.ring, pattern.time,
+                                                min_range, max_range, points, beam, ray), REPEAT)
 
 
 def box_scene(small: bool):
@@ -172,7 +174,8 @@ def railway_scene(small: bool, terrain_side: int = 0):
 def main():
     args = arguments(__doc__)
     threads = default_threads()
-    RayCaster(SceneBuffers.from_meshes({"warm-up": primitives.box(1, 1, 1)}), frame=np.eye(4))  # numba's import and kernel load (~0.6 s, once a process) out of the timings
+    # numba's import and kernel load (~0.6 s, once a process) out of the timings
+    RayCaster(SceneBuffers.from_meshes({"warm-up": primitives.box(1, 1, 1)}), frame=np.eye(4))
     rows = []
     buffers, pattern, pose, spec = box_scene(args.small)
     rows.append(measure("os1_128 in a 40 m box", buffers, pattern, pose, spec.min_range, spec.max_range, threads, args.small))

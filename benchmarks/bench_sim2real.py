@@ -68,7 +68,8 @@ ABLATION = {
     "ideal scan (no noise, drop)": ["effects.ideal=true"],
     "more yard trees": ["scene.yard_trees=2"],  # the "Street Planting" group's trees added (2 per 100 m^2 of yard, 4 m apart)
     "material models": ["effects.materials.objects=true"],  # the vehicles' plates (retroreflector) and lamps (glossy) as their models
-    "glossy vehicles": ["effects.materials.objects=true", "effects.materials.classes={car: glossy_paint, van: glossy_paint, truck: glossy_paint, bus: glossy_paint}"],
+    "glossy vehicles": ["effects.materials.objects=true",
+                        "effects.materials.classes={car: glossy_paint, van: glossy_paint, truck: glossy_paint, bus: glossy_paint}"],
 }
 
 
@@ -167,7 +168,8 @@ def main() -> None:
     work = args.work or Path(tempfile.mkdtemp(prefix="sim2real_"))
     seed = 0
     test = labelled.load_scans([REAL / f for f in TEST_FRAMES], CLASSES)  # 000700 as shared now is in its sensor's frame
-    result = {"classes": list(CLASSES), "test": [s.name for s in test], "load_average_at_start": os.getloadavg()[0], "layouts": layouts, "frames_per_layout": frames}
+    result = {"classes": list(CLASSES), "test": [s.name for s in test], "load_average_at_start": os.getloadavg()[0], "layouts": layouts,
+              "frames_per_layout": frames}
 
     # real only: leave one group out over the real frames themselves
     predictions, folds = leave_one_group_out(test, test, CLASSES, seed, "lgbm", 20000, 1)

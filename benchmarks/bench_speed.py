@@ -35,7 +35,8 @@ Every run's environment is this one's without ``PYTHONDONTWRITEBYTECODE`` (:func
 from its bytecode caches, as an installed package does. The scan and write parts run in a subprocess per checkout (``--baseline CHECKOUT`` adds the same
 measurement of another checkout, interleaved); each subprocess reports which ``bpy_pipeline`` it imported.
 
-    python benchmarks/bench_speed.py [--small] [--old DIR] [--old-env KEY=VALUE] [--baseline DIR] [--frames N] [--railway N] [--parking N] [--street N] [--street-standing N] [--scaling N] [--merge]
+    python benchmarks/bench_speed.py [--small] [--old DIR] [--old-env KEY=VALUE] [--baseline DIR] [--frames N] [--railway N]
+                                     [--parking N] [--street N] [--street-standing N] [--scaling N] [--merge]
 
 ``--small`` (< 60 s): the scan and write parts (5 frames), 20 parking frames against one process with 2 workers,
 no older checkout unless given. Results: ``benchmarks/results/speed.json`` (``speed_small.json``).
@@ -147,7 +148,8 @@ def stage_part(frames: int, job: str = "box") -> dict:
     cpu = cpu_part(config, made[-1].buffers, raw_trace)
     pool.shutdown()
     return {**cpu, "job": job, "code": str(Path(bpy_pipeline.__file__).parent), "rays": len(d32), "points": len(last.points), "frames": frames,
-            "scan_s": scan, "effects_s": effects, "raw_embreex_s": best_trace, "scan_ratio": best_trace / scan, "scan_with_effects_ratio": best_trace / (scan + effects),
+            "scan_s": scan, "effects_s": effects, "raw_embreex_s": best_trace, "scan_ratio": best_trace / scan,
+            "scan_with_effects_ratio": best_trace / (scan + effects),
             "write_s": write, "raw_write_s": best_write, "write_over_raw": write / best_write,
             "raw_write_sliced_s": best_sliced, "write_over_raw_sliced": write / best_sliced,
             "interleaved_scan_ratio": statistics.median(r / s for s, _, r, _, _, _ in pairs),
@@ -155,7 +157,7 @@ def stage_part(frames: int, job: str = "box") -> dict:
             "interleaved_write_over_raw": statistics.median(w / r for _, _, _, w, r, _ in pairs),
             "interleaved_write_over_raw_sliced": statistics.median(w / r for _, _, _, w, _, r in pairs),
             "bytes_written": sum(len(b) for b in blobs), "files": list(last.files),
-            "timings_frames_2_3": [{k: round(v, 4) for k, v in f.timings.items()} for f in later]}  # fmt: skip
+            "timings_frames_2_3": [{k: round(v, 4) for k, v in f.timings.items()} for f in later]}
 
 
 def cpu_part(config, buffers, raw_trace, frames: int = 8) -> dict:
@@ -197,13 +199,15 @@ def cpu_part(config, buffers, raw_trace, frames: int = 8) -> dict:
     scan_module.apply_effects = apply_effects
     traced = [s - e for s, e in zip(stage, effects)]
     return {"scan_cpu_s": statistics.median(stage), "effects_cpu_s": statistics.median(effects), "raw_embreex_cpu_s": statistics.median(raw),
-            "cpu_scan_ratio": statistics.median(raw) / statistics.median(stage), "cpu_scan_without_effects_ratio": statistics.median(raw) / statistics.median(traced)}  # fmt: skip
+            "cpu_scan_ratio": statistics.median(raw) / statistics.median(stage),
+            "cpu_scan_without_effects_ratio": statistics.median(raw) / statistics.median(traced)}
 
 
 def in_checkout(code: Path, frames: int, job: str = "box") -> dict:
     """:func:`stage_part` in a subprocess importing ``code``'s bpy_pipeline (cwd and PYTHONPATH there)."""
     env = {**run_environment(), "PYTHONPATH": str(code), "OPENBLAS_NUM_THREADS": "1"}
-    done = subprocess.run([sys.executable, str(HERE / "bench_speed.py"), "--part", "stages", "--job", job, "--frames", str(frames)], cwd=code, env=env, capture_output=True, text=True)
+    done = subprocess.run([sys.executable, str(HERE / "bench_speed.py"), "--part", "stages", "--job", job, "--frames", str(frames)], cwd=code, env=env,
+                          capture_output=True, text=True)
     if done.returncode != 0:
         raise RuntimeError(f"stages in {code}: {done.stderr.strip()[-800:]}")
     row = json.loads(done.stdout.strip().splitlines()[-1])
@@ -221,7 +225,8 @@ def run_environment() -> dict:
 
 def run_py(code: Path, args: list[str], workers: int = 1, env: dict | None = None) -> dict:
     """``run.py ARGS`` of checkout ``code`` end to end, with ``env`` added to the environment: wall s, CPU s (it and its
-    workers), the run's peak resident memory (MiB, without its workers'), records' mean stage timings; and from the times its ``frame k/n`` lines came: the first one's
+    workers), the run's peak resident memory (MiB, without its workers'), records' mean stage timings; and from the times its ``frame k/n`` lines
+    came: the first one's
     (start-up and the first frame), the frames per second from the first line to the last (the frames after
     the first) and the time from the last line to the exit (the indexes, the manifest)."""
     with tempfile.TemporaryDirectory(dir=os.environ.get("BENCH_SPEED_TMP")) as tmp:
@@ -230,8 +235,9 @@ def run_py(code: Path, args: list[str], workers: int = 1, env: dict | None = Non
         start = time.perf_counter()
         command = [sys.executable, str(code / "run.py"), "--out", str(out), *args] + (["--workers", str(workers)] if workers > 1 else [])
         with open(Path(tmp) / "stderr", "w+") as errors:
+            # each line as it is printed
             process = subprocess.Popen(command, cwd=code, stdout=subprocess.PIPE, stderr=errors, text=True,
-                                       env={**run_environment(), "OPENBLAS_NUM_THREADS": "1", "PYTHONPATH": str(code), "PYTHONUNBUFFERED": "1", **(env or {})})  # each line as it is printed
+                                       env={**run_environment(), "OPENBLAS_NUM_THREADS": "1", "PYTHONPATH": str(code), "PYTHONUNBUFFERED": "1", **(env or {})})
             lines = [time.perf_counter() - start for line in process.stdout if line.startswith("frame ")]
             _, status, usage = os.wait4(process.pid, 0)  # the run's own peak resident memory (its workers' are not in it)
             process.returncode = os.waitstatus_to_exitcode(status)
@@ -247,15 +253,18 @@ def run_py(code: Path, args: list[str], workers: int = 1, env: dict | None = Non
     for record in records:
         for key, value in (record.get("timings_s") or record.get("timings") or {}).items():
             stages[key] = stages.get(key, 0.0) + value / len(records)
-    timeline = {"first_frame_s": lines[0], "later_fps": (len(lines) - 1) / (lines[-1] - lines[0]), "after_last_frame_s": wall - lines[-1]} if len(lines) > 1 else {}
-    return {"wall_s": wall, "cpu_s": (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime), "frames": len(records), "fps": len(records) / wall,
-            "peak_rss_mb": usage.ru_maxrss / 1024, "stage_s_per_frame": stages, **timeline}  # fmt: skip
+    timeline = {"first_frame_s": lines[0], "later_fps": (len(lines) - 1) / (lines[-1] - lines[0]),
+                "after_last_frame_s": wall - lines[-1]} if len(lines) > 1 else {}
+    return {"wall_s": wall, "cpu_s": (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime), "frames": len(records),
+            "fps": len(records) / wall,
+            "peak_rss_mb": usage.ru_maxrss / 1024, "stage_s_per_frame": stages, **timeline}
 
 
 def accepts_ego(code: Path) -> bool:
     """Whether checkout ``code``'s street builder knows ``ego_vehicle``."""
     builders = code / "bpy_pipeline" / "builders"
-    return any(f.exists() and "ego_vehicle" in f.read_text() for f in (builders / "street.py", builders / "street" / "params.py"))  # a module, or a package since the layout issue
+    # a module, or a package since the layout issue
+    return any(f.exists() and "ego_vehicle" in f.read_text() for f in (builders / "street.py", builders / "street" / "params.py"))
 
 
 def compare(name: str, new_args: list[str], old_args: list[str] | None, old: Path | None, rounds: int, old_env: dict | None = None) -> dict:
@@ -313,10 +322,21 @@ def main() -> None:
             if args.baseline is not None:
                 results["stages"].append({"checkout": "baseline", **in_checkout(args.baseline.resolve(), args.frames, job)})
     for row in results["stages"]:
-        print(f"{row['checkout']} {row.get('job', 'box')}: scan {row['scan_s'] * 1e3:.1f} ms + effects {row.get('effects_s', 0.0) * 1e3:.1f} ms vs raw {row['raw_embreex_s'] * 1e3:.1f} ms "
-              f"(ratio {row['scan_ratio']:.2f}, interleaved {row['interleaved_scan_ratio']:.2f}; with the effects {row.get('scan_with_effects_ratio', row['scan_ratio']):.2f}, CPU {row['cpu_scan_ratio']:.2f}); "
-              f"write {row['write_s'] * 1e3:.1f} ms vs raw {row['raw_write_s'] * 1e3:.1f} ms ({row['write_over_raw']:.2f}x, interleaved {row['interleaved_write_over_raw']:.2f}x)"
-              + (f", vs raw in slices {row['raw_write_sliced_s'] * 1e3:.1f} ms ({row['write_over_raw_sliced']:.2f}x, interleaved {row['interleaved_write_over_raw_sliced']:.2f}x)" if "raw_write_sliced_s" in row else ""), flush=True)  # fmt: skip
+        print(
+            f"{row['checkout']} {row.get('job', 'box')}: scan {row['scan_s'] * 1e3:.1f} ms + effects {row.get('effects_s', 0.0) * 1e3:.1f} ms vs raw "
+            f"{row['raw_embreex_s'] * 1e3:.1f} ms "
+            f"(ratio {row['scan_ratio']:.2f}, interleaved {row['interleaved_scan_ratio']:.2f}; with the effects "
+            f"{row.get('scan_with_effects_ratio', row['scan_ratio']):.2f}, CPU {row['cpu_scan_ratio']:.2f}); "
+            f"write {row['write_s'] * 1e3:.1f} ms vs raw {row['raw_write_s'] * 1e3:.1f} ms ({row['write_over_raw']:.2f}x, interleaved "
+            f"{row['interleaved_write_over_raw']:.2f}x)"
+            + (
+                f", vs raw in slices {row['raw_write_sliced_s'] * 1e3:.1f} ms ({row['write_over_raw_sliced']:.2f}x, interleaved "
+                f"{row['interleaved_write_over_raw_sliced']:.2f}x)"
+                if "raw_write_sliced_s" in row
+                else ""
+            ),
+            flush=True,
+        )
     old_env = dict(item.split("=", 1) for item in args.old_env)
     old = args.old.resolve() if args.old is not None else (ROOT if old_env else None)
     results["fps"] = []
@@ -328,9 +348,12 @@ def main() -> None:
         results["fps"].append(compare(f"{parking} parking frames", job, job, old, rounds, old_env))
     if street:
         old_street = (EGO if accepts_ego(old) else EGO_STATIC) if old is not None else None
-        row = compare(f"{street} street frames, hdl64e on a car roof", [*EGO, "--frames", str(street)], None if old is None else [*old_street, "--frames", str(street)], old, rounds, old_env)
+        row = compare(f"{street} street frames, hdl64e on a car roof", [*EGO, "--frames", str(street)],
+                      None if old is None else [*old_street, "--frames", str(street)], old, rounds, old_env)
         if old is not None and old_street is EGO_STATIC:
-            row["old_note"] = "the older code has no scene.ego_vehicle: its street builder with the hdl64e standing where the ego starts (right-hand lane, static)"
+            row["old_note"] = (
+                "the older code has no scene.ego_vehicle: its street builder with the hdl64e standing where the ego starts (right-hand lane, static)"
+            )
         results["fps"].append(row)
     if args.street_standing:
         job = [*EGO_STATIC, "--frames", str(args.street_standing)]
@@ -351,8 +374,12 @@ def main() -> None:
                                    # what two workers of one core each can give over the one process at most: its wall time is its
                                    # CPU time over the cores it kept busy, two workers get two cores' worth
                                    "cores_busy_one_process": one["cpu_s"] / one["wall_s"], "speed_up_ceiling": 2.0 * one["wall_s"] / one["cpu_s"]})  # fmt: skip
-        print(f"{scaling} parking frames: one process {one['fps']:.2f} frames/s ({one['cpu_s'] / one['wall_s']:.2f} cores busy), one process on one thread {single['fps']:.2f}, "
-              f"2 workers {two['fps']:.2f} ({two['fps'] / one['fps']:.2f}x and {two['fps'] / single['fps']:.2f}x, best of {rounds} alternating rounds each)", flush=True)
+        print(
+            f"{scaling} parking frames: one process {one['fps']:.2f} frames/s ({one['cpu_s'] / one['wall_s']:.2f} cores busy), one process on one thread "
+            f"{single['fps']:.2f}, "
+            f"2 workers {two['fps']:.2f} ({two['fps'] / one['fps']:.2f}x and {two['fps'] / single['fps']:.2f}x, best of {rounds} alternating rounds each)",
+            flush=True,
+        )
     for row in results["fps"]:
         if "old" in row:
             print(f"{row['job']}: {row['new']['fps']:.2f} frames/s against {row['old']['fps']:.2f} ({row['fps_new_over_old']:.2f}x)"

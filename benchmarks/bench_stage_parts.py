@@ -74,7 +74,10 @@ def railway(frames: int, repeats: int) -> dict:
         raw = best(lambda: list(pool.map(lambda s: scene.run(o32[s], d32[s], dists=float(far[0]), output=1), spans)), repeats)
         out = {"rays": len(d32), "raw_embreex_s": raw}
         if caster.kernels is not None and caster.kernels.traces:
-            out["compiled_embree_calls_s"] = best(lambda: list(pool.map(lambda s: caster.kernels.trace_rays(caster.embree_handles, caster.part_triangle, caster.part_shift, far[s], origin, d64[s], tfar[s], prim[s]), spans)), repeats)
+            def trace(s):
+                return caster.kernels.trace_rays(caster.embree_handles, caster.part_triangle, caster.part_shift, far[s], origin, d64[s], tfar[s], prim[s])
+
+            out["compiled_embree_calls_s"] = best(lambda: list(pool.map(trace, spans)), repeats)
 
     def whole():
         for _ in scanner.scan_chunks(caster, first.buffers, pattern, first.pose, spec.min_range, spec.max_range, chunk_rays=CHUNK_RAYS):
@@ -103,7 +106,8 @@ def cone(repeats: int) -> list:
         if kernels is not None:
             row["compiled_s"] = best(lambda: cone_pairs(directions, axes, cos_limit, kernels), repeats)
             row["kept_share"] = float(kernels.cone_blocks(directions, axes, cos_limit - CONE_MARGIN).mean())
-            row["same_pairs"] = all(np.array_equal(a, b) for a, b in zip(cone_pairs(directions, axes, cos_limit, kernels), cone_pairs(directions, axes, cos_limit)))
+            row["same_pairs"] = all(np.array_equal(a, b) for a,
+                                    b in zip(cone_pairs(directions, axes, cos_limit, kernels), cone_pairs(directions, axes, cos_limit)))
         rows.append(row)
     return rows
 
@@ -112,7 +116,7 @@ def export(repeats: int) -> list:
     import bpy
 
     from bpy_pipeline.config import load_config
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.labels import load_class_table
     from bpy_pipeline.frame import frame_rng
     from bpy_pipeline.stages.scene import build_frame_scene
@@ -123,7 +127,8 @@ def export(repeats: int) -> list:
         config = load_config(None, [f"scene.builder={builder}"])
         build_frame_scene(config, 0, frame_rng(config.seed, 0), {})
         buffers = export_scene(table)
-        rows.append({"builder": builder, "objects": len(buffers.objects), "triangles": len(buffers.triangles), "export_s": best(lambda: export_scene(table), repeats), "blender": bpy.app.version_string})
+        rows.append({"builder": builder, "objects": len(buffers.objects), "triangles": len(buffers.triangles),
+                     "export_s": best(lambda: export_scene(table), repeats), "blender": bpy.app.version_string})
     return rows
 
 
@@ -164,7 +169,8 @@ def boxes_from_scan(jobs: dict, rounds: int) -> dict:
                     stage[way].append(statistics.median(f.timings["boxes"] for f in made[1:]))
                     boxes[way] = b"".join(f.boxes.tobytes() for f in made)
             out[name] = {"frames": config.frames, "boxes_stage_s": {way: [round(v, 5) for v in values] for way, values in stage.items()},
-                         "best_ratio_traced_over_scan_counts": round(min(stage["traced"]) / min(stage["scan_counts"]), 3), "same_boxes": boxes["scan_counts"] == boxes["traced"]}  # fmt: skip
+                         "best_ratio_traced_over_scan_counts": round(min(stage["traced"]) / min(stage["scan_counts"]), 3),
+                         "same_boxes": boxes["scan_counts"] == boxes["traced"]}
     finally:
         scan.counts_direct_returns = counted
     return out
@@ -177,21 +183,29 @@ def main() -> None:
     parser.add_argument("--name", default=None, help="results file name (default stage_parts.json; --small stage_parts_small.json)")
     args = parser.parse_args()
     repeats, frames = (1, 3) if args.small else (3, 7)
-    result = {"cone": cone(repeats), "export": export(1 if args.small else 10), "ego_street": ego_street(frames), "railway": railway(2 if args.small else 6, repeats),
+    result = {"cone": cone(repeats), "export": export(1 if args.small else 10), "ego_street": ego_street(frames),
+              "railway": railway(2 if args.small else 6, repeats),
               "boxes_from_scan": boxes_from_scan({"garage": (None, ["scene.builder=parking", f"frames={6 if args.small else 30}"]),
-                                                  "ego_street": (str(ROOT / "examples/street/ego_hdl64e.yaml"), [f"frames={frames}"])}, 1 if args.small else 3)}  # fmt: skip
+                                                  "ego_street": (str(ROOT / "examples/street/ego_hdl64e.yaml"), [f"frames={frames}"])}, 1 if args.small else 3)}
     for row in result["cone"]:
-        print(f"cone {row['preset']}: numpy {row['numpy_s'] * 1e3:.1f} ms, compiled {row.get('compiled_s', float('nan')) * 1e3:.1f} ms, kept {row.get('kept_share', 1.0):.3f}, same pairs {row.get('same_pairs')}", flush=True)
+        print(
+            f"cone {row['preset']}: numpy {row['numpy_s'] * 1e3:.1f} ms, compiled {row.get('compiled_s', float('nan')) * 1e3:.1f} ms, kept "
+            f"{row.get('kept_share', 1.0):.3f}, same pairs {row.get('same_pairs')}",
+            flush=True,
+        )
     for row in result["export"]:
         print(f"export {row['builder']}: {row['export_s'] * 1e3:.1f} ms ({row['objects']} objects, {row['triangles']} triangles)")
     for key, stages in result["ego_street"].items():
         print(f"ego street {key}: " + ", ".join(f"{k} {v * 1e3:.1f} ms" for k, v in stages.items()))
     r = result["railway"]
     print(f"railway: raw embreex {r['raw_embreex_s'] * 1e3:.1f} ms, compiled Embree calls {r.get('compiled_embree_calls_s', float('nan')) * 1e3:.1f} ms, "
-          f"scan alone {r['scan_alone_s'] * 1e3:.1f} ms ({r['scan_alone_ratio']:.2f} of raw), in the run {[round(s * 1e3, 1) for s in r['scan_in_run_s']]} ms")  # fmt: skip
+          f"scan alone {r['scan_alone_s'] * 1e3:.1f} ms ({r['scan_alone_ratio']:.2f} of raw), in the run {[round(s * 1e3, 1) for s in r['scan_in_run_s']]} ms")
     for name, g in result["boxes_from_scan"].items():
-        print(f"{name} boxes stage: with the scan's counts {[round(v * 1e3, 2) for v in g['boxes_stage_s']['scan_counts']]} ms, traced again {[round(v * 1e3, 2) for v in g['boxes_stage_s']['traced']]} ms "
-              f"({g['best_ratio_traced_over_scan_counts']:.2f}x best against best), the same boxes: {g['same_boxes']}")  # fmt: skip
+        print(
+            f"{name} boxes stage: with the scan's counts {[round(v * 1e3, 2) for v in g['boxes_stage_s']['scan_counts']]} ms, traced again "
+            f"{[round(v * 1e3, 2) for v in g['boxes_stage_s']['traced']]} ms "
+            f"({g['best_ratio_traced_over_scan_counts']:.2f}x best against best), the same boxes: {g['same_boxes']}"
+        )
     args.out.mkdir(parents=True, exist_ok=True)
     path = args.out / (args.name or ("stage_parts_small.json" if args.small else "stage_parts.json"))
     path.write_text(json.dumps(result, indent=1))

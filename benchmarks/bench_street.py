@@ -34,7 +34,8 @@ BOX_CLASSES = ["car", "van", "truck", "bus", "person", "bicycle", "motorcycle", 
 
 
 # Sparse traffic, about the thesis's objects per frame: a few users in the whole intersection.
-SPARSE = {"vehicles": {"mean": 2.0, "std": 1.5, "max": 10.0}, "parked": {"mean": 1.0, "std": 1.0, "max": 5.0}, "pedestrians": {"mean": 2.0, "std": 1.5, "max": 10.0},
+SPARSE = {"vehicles": {"mean": 2.0, "std": 1.5, "max": 10.0}, "parked": {"mean": 1.0, "std": 1.0, "max": 5.0},
+          "pedestrians": {"mean": 2.0, "std": 1.5, "max": 10.0},
           "bicycles": {"mean": 0.5, "std": 0.7, "max": 3.0}, "motorcycles": {"mean": 0.5, "std": 0.7, "max": 3.0}}
 
 
@@ -139,7 +140,8 @@ def chart(rows: list, path) -> None:
     for g, (sensor, traffic) in enumerate(groups):
         for j, fov in enumerate((True, False)):
             r = next(r for r in place if (r["sensor"], r["traffic"], r["fov_aware"]) == (sensor, traffic, fov))
-            bar = right.bar(g + (j - 0.5) * 0.38, r["kept_share"] * 100, 0.36, color="tab:blue" if fov else "tab:orange", label=("field-of-view aware" if fov else "anywhere") if g == 0 else None)
+            bar = right.bar(g + (j - 0.5) * 0.38, r["kept_share"] * 100, 0.36, color="tab:blue" if fov else "tab:orange",
+                            label=("field-of-view aware" if fov else "anywhere") if g == 0 else None)
             right.text(bar[0].get_x() + 0.18, bar[0].get_height(), f"{r['boxes_per_kept_frame']:.1f}", ha="center", va="bottom", fontsize=7)
     thesis = 100 * THESIS["kept"] / THESIS["frames"]
     right.axhline(thesis, color="tab:grey", ls="--", lw=1, label=f"thesis, CARLA ({thesis:.0f} %, {THESIS['objects_per_frame']} obj.)")
@@ -158,15 +160,19 @@ def main() -> None:
     rows = []
     speed_rig, speed_single = interleaved([config(frames, True), config(frames, True, single=True)], frames)
     for name, result in (("3-camera rig", speed_rig), ("middle camera alone", speed_single)):
-        rows.append({"part": "speed", "sensor": name, "frames": frames, "wall_s": result["wall_s"], "fps": result["fps"], "ratio_to_one_camera": result["wall_s"] / speed_single["wall_s"],
+        rows.append({"part": "speed", "sensor": name, "frames": frames, "wall_s": result["wall_s"], "fps": result["fps"],
+                     "ratio_to_one_camera": result["wall_s"] / speed_single["wall_s"],
                      **{k: result[k] for k in ("build_s", "export_s", "scan_s", "boxes_s", "write_s") if k in result}})
     rig = measure(config(frames, True))
-    cases = [("3-camera rig", "default", {}), ("3-camera rig", "sparse", {}), ("one camera, 10 m, 12 deg down", "sparse", {"single": True, "max_range": 10.0, "pitch": 12.0})]
+    cases = [("3-camera rig", "default", {}), ("3-camera rig", "sparse", {}),
+             ("one camera, 10 m, 12 deg down", "sparse", {"single": True, "max_range": 10.0, "pitch": 12.0})]
     for sensor, traffic, extra in cases:
         for fov in (True, False):
             result = rig if (sensor, traffic, fov) == ("3-camera rig", "default", True) else measure(config(frames, fov, traffic=traffic, **extra))
-            rows.append({"part": "placement", "sensor": sensor, "traffic": traffic, "fov_aware": fov, "frames": result["frames"], "kept": result["kept"], "kept_share": result["kept_share"],
-                         "boxes_per_kept_frame": result["boxes_per_kept_frame"], "out_of_view_refused": result["out_of_view_refused"], "boxes_by_class": json.dumps(result["boxes_by_class"], sort_keys=True)})
+            rows.append({"part": "placement", "sensor": sensor, "traffic": traffic, "fov_aware": fov, "frames": result["frames"], "kept": result["kept"],
+                         "kept_share": result["kept_share"],
+                         "boxes_per_kept_frame": result["boxes_per_kept_frame"], "out_of_view_refused": result["out_of_view_refused"],
+                         "boxes_by_class": json.dumps(result["boxes_by_class"], sort_keys=True)})
     name = "street_small" if args.small else "street"
     notes = {"thesis": THESIS, "thesis_kept_share": THESIS["kept"] / THESIS["frames"], "rig": "flash_post_240 (3 x flash96x16_carla, 2 m post)",
              "speed_reference": "the middle camera alone on the same frames, measured in the same run"}

@@ -71,7 +71,11 @@ def part(frames: int, keep: Path | None = None) -> dict:
         start = time.perf_counter()
         timings = [dict(f.timings) | {f"cpu_{k}": v for k, v in cpu[f.index].items()} for f in plan.run_frames(config, out, overlap=False)]
         wall = time.perf_counter() - start
-        digests = {str(p.relative_to(out)): hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(out.rglob("*")) if p.is_file() and not str(p.relative_to(out)).startswith(SKIPPED)}
+        digests = {
+            str(p.relative_to(out)): hashlib.sha256(p.read_bytes()).hexdigest()
+            for p in sorted(out.rglob("*"))
+            if p.is_file() and not str(p.relative_to(out)).startswith(SKIPPED)
+        }
         if keep is not None:
             import numpy as np
 
@@ -81,13 +85,15 @@ def part(frames: int, keep: Path | None = None) -> dict:
             for ply in sorted((out / "ply").glob("*.ply")):
                 np.save(keep / f"{ply.stem}.npy", read_ply(ply))
     usage = resource.getrusage(resource.RUSAGE_SELF)
-    return {"code": str(Path(bpy_pipeline.__file__).parent), "timings": timings, "wall_s": wall, "cpu_s": usage.ru_utime + usage.ru_stime, "peak_rss_mb": usage.ru_maxrss / 1024, "digests": digests}
+    return {"code": str(Path(bpy_pipeline.__file__).parent), "timings": timings, "wall_s": wall, "cpu_s": usage.ru_utime + usage.ru_stime,
+            "peak_rss_mb": usage.ru_maxrss / 1024, "digests": digests}
 
 
 def in_checkout(code: Path, frames: int, keep: Path) -> dict:
     """:func:`part` in a subprocess importing ``code``'s package (cwd and PYTHONPATH there)."""
     env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"} | {"PYTHONPATH": str(code), "OPENBLAS_NUM_THREADS": "1"}
-    done = subprocess.run([sys.executable, str(HERE / "bench_street_frame.py"), "--part", "--frames", str(frames), "--keep", str(keep)], cwd=code, env=env, capture_output=True, text=True)
+    done = subprocess.run([sys.executable, str(HERE / "bench_street_frame.py"), "--part", "--frames", str(frames), "--keep", str(keep)], cwd=code, env=env,
+                          capture_output=True, text=True)
     if done.returncode != 0:
         raise RuntimeError(f"{code}: {done.stderr.strip()[-800:]}")
     row = json.loads(done.stdout.strip().splitlines()[-1])
@@ -114,8 +120,9 @@ def compare_points(new: Path, old: Path) -> dict:
             differ |= a[name].view(f"u{a[name].itemsize}") != b[name].view(f"u{b[name].itemsize}")
         differing += int(differ.sum())
         labels = (a["semantic"] != b["semantic"]) | (a["instance"] != b["instance"])
-        relabelled += [{"frame": path.stem, "point": int(i), "new": [int(a["semantic"][i]), int(a["instance"][i]), float(a["range"][i])], "old": [int(b["semantic"][i]), int(b["instance"][i]), float(b["range"][i])]}
-                       for i in np.flatnonzero(labels)]  # fmt: skip
+        relabelled += [{"frame": path.stem, "point": int(i), "new": [int(a["semantic"][i]), int(a["instance"][i]), float(a["range"][i])],
+                        "old": [int(b["semantic"][i]), int(b["instance"][i]), float(b["range"][i])]}
+                       for i in np.flatnonzero(labels)]
         same = ~labels
         if same.any():
             xyz = lambda r: np.column_stack([r["x"], r["y"], r["z"]])[same].astype(np.float64)  # noqa: E731
@@ -128,7 +135,8 @@ def summary(row: dict) -> dict:
     later = row["timings"][1:]
     stages = {k: round(statistics.median(t.get(k, 0.0) for t in later), 4) for k in later[0] if not k.startswith("cpu_")}
     cpu = {k.removeprefix("cpu_"): round(statistics.median(t.get(k, 0.0) for t in later), 4) for k in later[0] if k.startswith("cpu_") and k != "cpu_pose"}
-    return {"stages_s": stages, "frame_s": round(sum(stages.values()), 4), "stages_cpu_s": cpu, "frame_cpu_s": round(sum(cpu.values()), 4), "wall_s": round(row["wall_s"], 3), "cpu_s": round(row["cpu_s"], 3), "peak_rss_mb": round(row["peak_rss_mb"], 1)}
+    return {"stages_s": stages, "frame_s": round(sum(stages.values()), 4), "stages_cpu_s": cpu, "frame_cpu_s": round(sum(cpu.values()), 4),
+            "wall_s": round(row["wall_s"], 3), "cpu_s": round(row["cpu_s"], 3), "peak_rss_mb": round(row["peak_rss_mb"], 1)}
 
 
 def main() -> None:
@@ -165,8 +173,11 @@ def main() -> None:
         result["files_differing"] = sorted(k for k in set(digests["new"]) | set(digests["old"]) if digests["new"].get(k) != digests["old"].get(k))
         result["points"] = compare_points(kept / "new", kept / "old")
         result["frame_cpu_old_over_new"] = round(result["best_cpu"]["old"]["frame_cpu_s"] / result["best_cpu"]["new"]["frame_cpu_s"], 3)
-        print(f"a frame's stages: {new['frame_s'] * 1e3:.0f} ms against {old['frame_s'] * 1e3:.0f} ms ({result['frame_old_over_new']:.2f}x), CPU {result['frame_cpu_old_over_new']:.2f}x; {result['files']} files, the same bytes: {result['same_files']}; "
-              f"points: {result['points']['points_differing']} of {result['points']['points']} differ, relabelled {result['points']['relabelled']}")  # fmt: skip
+        print(
+            f"a frame's stages: {new['frame_s'] * 1e3:.0f} ms against {old['frame_s'] * 1e3:.0f} ms ({result['frame_old_over_new']:.2f}x), CPU "
+            f"{result['frame_cpu_old_over_new']:.2f}x; {result['files']} files, the same bytes: {result['same_files']}; "
+            f"points: {result['points']['points_differing']} of {result['points']['points']} differ, relabelled {result['points']['relabelled']}"
+        )
     shutil.rmtree(kept, ignore_errors=True)
     args.out.mkdir(parents=True, exist_ok=True)
     path = args.out / args.name

@@ -24,10 +24,10 @@ def main() -> None:
     import numpy as np
 
     from bpy_pipeline.builders.street.params import StreetScene
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.builders.street import layout as street
     from bpy_pipeline.labels import load_class_table
-    from bpy_pipeline.scenes.objects import mesh_object, scene_collection, tag
+    from bpy_pipeline.blender.mesh_objects import mesh_object, scene_collection, tag
     from bpy_pipeline.builders.street.scatter_nodes import prototypes_collection, scatter_object
 
     bpy.ops.wm.read_factory_settings(use_empty=True)

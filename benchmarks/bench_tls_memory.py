@@ -36,7 +36,7 @@ from bpy_pipeline.stages.view import sensor_pose
 config = load_config(None, json.loads(sys.argv[3]))
 imported = time.perf_counter() - start
 if sys.argv[2] == "setup":  # build, export and the caster, no scan
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.labels import load_class_table
     from bpy_pipeline.lidar.cast.raycast import RayCaster
     build_frame_scene(config, 0)

@@ -41,7 +41,8 @@ def timed(args: list[str], out: Path) -> tuple[float, float]:
     """``(wall s, CPU s)`` of ``run.py ARGS --out OUT`` and its workers (one BLAS thread in the parent, as the workers have)."""
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     start = time.perf_counter()
-    done = subprocess.run([sys.executable, str(ROOT / "run.py"), "--out", str(out), *args], capture_output=True, text=True, env={**os.environ, "OPENBLAS_NUM_THREADS": "1"})
+    done = subprocess.run([sys.executable, str(ROOT / "run.py"), "--out", str(out), *args], capture_output=True, text=True,
+                          env={**os.environ, "OPENBLAS_NUM_THREADS": "1"})
     if done.returncode != 0:
         raise RuntimeError(f"run.py {' '.join(args)}: {done.stderr.strip()[-800:]}")
     wall = time.perf_counter() - start
@@ -80,7 +81,9 @@ def main() -> None:
         job("industrial hall", ["--set", "scene.builder=industrial_hall"], hall),
         job("parking, long run (start-up amortised)", ["--set", "scene.builder=parking"], long_parking),
     ]
-    report("workers" + ("_small" if args.small else ""), rows, args.out, {"cores": os.cpu_count(), "rounds": ROUNDS, "note": "wall time end to end with run.py (start-up included), best of the rounds; speedup = one process / two workers"})
+    report("workers" + ("_small" if args.small else ""), rows, args.out,
+           {"cores": os.cpu_count(), "rounds": ROUNDS,
+            "note": "wall time end to end with run.py (start-up included), best of the rounds; speedup = one process / two workers"})
 
 
 if __name__ == "__main__":

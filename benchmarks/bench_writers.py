@@ -91,9 +91,12 @@ def bench_las(n: int, folder: Path) -> list[dict]:
     offset, scale = np.floor([pts[c].min() for c in "xyz"]), np.full(3, 0.001)
     rows = []
     # the records alone (no disk): the loop before, the structured array now, and PLY's records
-    build = {name: best_of(fn, 5) for name, fn in (("before", lambda: las_records_before(pts, classification, offset, scale)), ("after", lambda: las_module.las_records(pts, classification, offset, scale)), ("ply", lambda: ply_records(pts)))}
+    build = {name: best_of(fn, 5) for name, fn in (("before", lambda: las_records_before(pts, classification, offset, scale)),
+                                                   ("after", lambda: las_module.las_records(pts, classification, offset, scale)),
+                                                   ("ply", lambda: ply_records(pts)))}
     for name in ("before", "after"):
-        row = {"case": f"LAS records {n} points", "variant": name, "ns_per_point": build[name] / n * 1e9, "per_byte_vs_ply": (build[name] / RECORD_DTYPE.itemsize) / (build["ply"] / PLY_DTYPE.itemsize)}
+        row = {"case": f"LAS records {n} points", "variant": name, "ns_per_point": build[name] / n * 1e9,
+               "per_byte_vs_ply": (build[name] / RECORD_DTYPE.itemsize) / (build["ply"] / PLY_DTYPE.itemsize)}
         if name == "after":
             row["speedup"] = build["before"] / build["after"]
         rows.append(row)
@@ -108,8 +111,10 @@ def bench_las(n: int, folder: Path) -> list[dict]:
         pts_before["semantic"] = np.minimum(pts_before["semantic"], 255)
         before_s = best_of(lambda: before(folder / "b.las", pts_before), 5)
         before_bytes = (folder / "b.las").stat().st_size
-        rows.append({"case": f"LAS file {n} points", "variant": f"before ({LAS_BEFORE})", "ns_per_point": before_s / n * 1e9, "per_byte_vs_ply": (before_s / before_bytes) / (ply_s / ply_bytes)})
-    rows.append({"case": f"LAS file {n} points", "variant": "after", "ns_per_point": after_s / n * 1e9, "per_byte_vs_ply": (after_s / after_bytes) / (ply_s / ply_bytes), **({"speedup": before_s / after_s} if before is not None else {})})
+        rows.append({"case": f"LAS file {n} points", "variant": f"before ({LAS_BEFORE})", "ns_per_point": before_s / n * 1e9,
+                     "per_byte_vs_ply": (before_s / before_bytes) / (ply_s / ply_bytes)})
+    rows.append({"case": f"LAS file {n} points", "variant": "after", "ns_per_point": after_s / n * 1e9,
+                 "per_byte_vs_ply": (after_s / after_bytes) / (ply_s / ply_bytes), **({"speedup": before_s / after_s} if before is not None else {})})
     rows.append({"case": f"PLY file {n} points", "variant": "reference", "ns_per_point": ply_s / n * 1e9, "per_byte_vs_ply": 1.0})
     return rows
 
@@ -158,7 +163,8 @@ def parking_like(cars: int, people: int, rng: np.random.Generator):
         headings[100 + k] = yaw
     for k in range(people):
         angle, distance = rng.uniform(-np.pi, np.pi), rng.uniform(3, 15)
-        person = human.pose_person(human.neutral_angles(), 1.75, 1.0, "standing", (distance * np.cos(angle), distance * np.sin(angle)), rng.uniform(-np.pi, np.pi))
+        person = human.pose_person(human.neutral_angles(), 1.75, 1.0, "standing", (distance * np.cos(angle), distance * np.sin(angle)),
+                                   rng.uniform(-np.pi, np.pi))
         parts.append((f"person{k}", "person", 200 + k, human.body_mesh(person.a, person.b, person.radius)[:2]))
         headings[200 + k] = person.yaw
     vertices, triangles, owner, offset = [], [], [], 0
@@ -168,7 +174,8 @@ def parking_like(cars: int, people: int, rng: np.random.Generator):
         owner.append(np.full(len(t), row, np.int32))
         offset += len(v)
     k = len(parts)
-    table = ObjectTable([p[0] for p in parts], [""] * k, [p[1] for p in parts], np.zeros(k, np.uint16), np.array([p[2] for p in parts], np.uint32), np.zeros(k, np.uint8), np.full(k, 0.5, np.float32))
+    table = ObjectTable([p[0] for p in parts], [""] * k, [p[1] for p in parts], np.zeros(k, np.uint16), np.array([p[2] for p in parts], np.uint32),
+                        np.zeros(k, np.uint8), np.full(k, 0.5, np.float32))
     return SceneBuffers(np.concatenate(vertices), np.concatenate(triangles).astype(np.int32), np.concatenate(owner), table), headings
 
 
@@ -191,7 +198,8 @@ def bench_boxes(cars: int, people: int) -> list[dict]:
     same = bool((before["visible"] == after["visible"]).all() and (before["unoccluded"] == after["unoccluded"]).all())
     return [
         {"case": f"boxes: {cars} cars, {people} people", "variant": "before: a caster per object", "ms": before_s * 1e3},
-        {"case": f"boxes: {cars} cars, {people} people", "variant": "after: one cast for all", "ms": after_s * 1e3, "speedup": before_s / after_s, "same_counts": same},
+        {"case": f"boxes: {cars} cars, {people} people", "variant": "after: one cast for all", "ms": after_s * 1e3, "speedup": before_s / after_s,
+         "same_counts": same},
     ]
 
 

@@ -47,7 +47,8 @@ def report(name: str, rows: list[dict], out: Path, notes: dict | None = None) ->
         blender = None
     import os
 
-    payload = {"benchmark": name, "rows": rows, "notes": notes or {}, "machine": {"cores": os.cpu_count(), "python": platform.python_version(), "blender": blender}}
+    payload = {"benchmark": name, "rows": rows, "notes": notes or {},
+               "machine": {"cores": os.cpu_count(), "python": platform.python_version(), "blender": blender}}
     out.mkdir(parents=True, exist_ok=True)
     (out / f"{name}.json").write_text(json.dumps(payload, indent=2) + "\n")
 

@@ -33,7 +33,8 @@ def _returns(firings: Firings, valid: np.ndarray) -> np.ndarray:
     return firings.origin[valid] + firings.range[valid, None] * firings.direction[valid]
 
 
-def parking_paper_insert(firings: Firings, valid: np.ndarray, buffers: SceneBuffers, placements: list[Placement], preset: str = "hdl32e", threads: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+def parking_paper_insert(firings: Firings, valid: np.ndarray, buffers: SceneBuffers, placements: list[Placement], preset: str = "hdl32e",
+                         threads: int | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The parking paper's method (module notes); ``valid`` (f,) the real firings that returned."""
     spec = resolve_sensor({"preset": preset}, "preset")
     pattern = sensor_pattern(spec)
@@ -91,7 +92,8 @@ def _lookup(zbuffer: dict, cell: float, directions: np.ndarray) -> np.ndarray:
     return np.where(found, zbuffer["range"][at] if len(zbuffer["key"]) else np.inf, np.inf)
 
 
-def kitti_paper_insert(firings: Firings, valid: np.ndarray, buffers: SceneBuffers, preset: str = "hdl32e", spacing: float = 0.02, cell_deg: float = 0.1, rng: np.random.Generator | None = None) -> tuple[np.ndarray, np.ndarray]:
+def kitti_paper_insert(firings: Firings, valid: np.ndarray, buffers: SceneBuffers, preset: str = "hdl32e", spacing: float = 0.02, cell_deg: float = 0.1,
+                       rng: np.random.Generator | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The KITTI paper's method (module notes), the sensor's nominal resolution (``preset``) for the wall."""
     rng = rng or np.random.default_rng(0)
     spec = resolve_sensor({"preset": preset}, "preset")
@@ -119,7 +121,8 @@ def kitti_paper_insert(firings: Firings, valid: np.ndarray, buffers: SceneBuffer
         wi, wj = np.meshgrid(i, j, indexing="ij")
         w_az = az.min() + res_h * wi.reshape(-1) + rng.uniform(-0.3, 0.3, wi.size) * res_h
         w_el = el.min() + res_v * wj.reshape(-1) + rng.uniform(-0.3, 0.3, wi.size) * res_v
-        wall = np.column_stack([np.cos(np.radians(w_el)) * np.cos(np.radians(w_az)), np.cos(np.radians(w_el)) * np.sin(np.radians(w_az)), np.sin(np.radians(w_el))])
+        wall = np.column_stack([np.cos(np.radians(w_el)) * np.cos(np.radians(w_az)), np.cos(np.radians(w_el)) * np.sin(np.radians(w_az)),
+                                np.sin(np.radians(w_el))])
         # where a real return already is (within half a step), the wall adds nothing: it fills losses only
         occupied, _ = spherical_zbuffer(out_points, res_h / 2)
         free = ~np.isfinite(_lookup(occupied, res_h / 2, wall))

@@ -120,7 +120,9 @@ def read_npy_background(path: Path) -> Background:
         raise InputError(f"{labels_path}: expected {len(xyz)} integer labels (n,) or (n, 1), got {labels.dtype} {labels.shape}")
     bad = (labels < 0) | (labels >= len(LEARNING_MAP_INV))
     if bad.any():
-        raise InputError(f"{labels_path}: SemanticKITTI training ids are 0..{len(LEARNING_MAP_INV) - 1}; label {int(labels[bad][0])} at point {int(np.flatnonzero(bad)[0])}")
+        raise InputError(
+            f"{labels_path}: SemanticKITTI training ids are 0..{len(LEARNING_MAP_INV) - 1}; label {int(labels[bad][0])} at point {int(np.flatnonzero(bad)[0])}"
+        )
     keep = ~np.isin(labels, MOVABLE_TRAINING_IDS)
     out = np.zeros((int(keep.sum()), 4), np.float32)
     out[:, :3] = xyz[keep, :3]
@@ -312,10 +314,12 @@ def main() -> None:
                 "inserted_points": record["inserted_points"], "mixing_ms": round(sum(record["timings_ms"].values()), 1),
             })  # fmt: skip
     notes = {
-        "cpu_s_per_frame": facts["cpu_s_per_frame"], "cpu_s_emptying_all": facts["cpu_s_emptying"],
+        "cpu_s_per_frame": facts["cpu_s_per_frame"],
+        "cpu_s_emptying_all": facts["cpu_s_emptying"],
         "backgrounds": [dict(b, source=Path(b["source"]).name) for b in facts["backgrounds"]],
-        "what": "CPU s per frame: the whole pipeline run (Blender's empty scene reset, mixing, PLY writing) over its frames; mixing_ms: the record's stage wall times",
-    }  # fmt: skip
+        "what": "CPU s per frame: the whole pipeline run (Blender's empty scene reset, mixing, PLY writing) over its frames; "
+                "mixing_ms: the record's stage wall times",
+    }
     report("sim2real_mixed", rows, args.out if args.out else RESULTS, notes)
 
 

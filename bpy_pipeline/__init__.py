@@ -8,7 +8,7 @@ The public API (stable names; :mod:`bpy_pipeline.api` has a runnable example):
 - the readers :func:`read_ply`, :func:`read_semantickitti`, :func:`read_las`, :func:`read_npy_folder`,
   :func:`read_dataset` (a run's manifest with its frames' records).
 
-The pure part (config, geometry, lidar, io) runs anywhere; ``scenes``, ``export`` and ``run`` need ``bpy``.
+The pure part (config, geometry, lidar, io) runs anywhere; ``blender`` and ``run`` need ``bpy``.
 """
 
 import os as _os

@@ -104,7 +104,10 @@ def scene_buffers(meshes: SceneBuffers | Mapping) -> SceneBuffers:
             check_fraction(value, f"meshes (scene buffers) object {meshes.objects.names[k]!r} reflectivity")
         return meshes
     if not isinstance(meshes, Mapping):
-        raise InputError(f"meshes: expected scene buffers or a mapping {{name: (vertices (n, 3), triangles (m, 3)[, class, material, reflectivity])}}, got {type(meshes).__name__}")
+        raise InputError(
+            f"meshes: expected scene buffers or a mapping {{name: (vertices (n, 3), triangles (m, 3)[, class, material, reflectivity])}}, got "
+            f"{type(meshes).__name__}"
+        )
     from .labels import load_class_table
     from .lidar.effects.materials import part_material
 
@@ -124,12 +127,14 @@ def scene_buffers(meshes: SceneBuffers | Mapping) -> SceneBuffers:
         surface.append(model)
         reflectivity.append(0.5 if extra[2] is None else check_fraction(extra[2], f"meshes[{name!r}] reflectivity"))
     objects = buffers.objects
-    buffers.objects = ObjectTable(objects.names, objects.parents, classes, np.array([table.id_of(c) for c in classes], np.uint16), objects.instance, np.array(materials, np.uint8), np.array(reflectivity, np.float32),
+    buffers.objects = ObjectTable(objects.names, objects.parents, classes, np.array([table.id_of(c) for c in classes], np.uint16), objects.instance,
+                                  np.array(materials, np.uint8), np.array(reflectivity, np.float32),
                                   np.array(surface, np.uint8) if any(surface) else None)
     return buffers
 
 
-def scan(meshes: SceneBuffers | Mapping, sensor: str | Mapping = "vlp16", pose: np.ndarray | None = None, effects: Mapping | None = None, seed: int = 0, frame: int = 0) -> np.ndarray:
+def scan(meshes: SceneBuffers | Mapping, sensor: str | Mapping = "vlp16", pose: np.ndarray | None = None, effects: Mapping | None = None, seed: int = 0,
+         frame: int = 0) -> np.ndarray:
     """Scan meshes with a sensor without touching Blender: ``(p,)`` POINT_DTYPE records in the sensor frame.
 
     meshes : scene buffers, or ``{name: (vertices (n, 3), triangles (m, 3)[, class, material, reflectivity])}`` in world metres

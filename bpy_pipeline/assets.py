@@ -45,7 +45,7 @@ class AssetEntry:
 
     name: str
     kind: str
-    set: str  # "": an entry of no set (the industrial hall's own people, scenes/people.py)
+    set: str  # "": an entry of no set (the industrial hall's own people, blender/people.py)
     path: Path
     sha256: str
     licence: str
@@ -79,7 +79,9 @@ def read_manifest(path: str | Path | None = None) -> list[AssetEntry]:
             raise InputError(f"{where}: needs name, kind, path, sha256 and licence (strings)")
         unknown = set(entry) - {"name", "kind", "set", "path", "sha256", "licence", "source", "up_axis", "unit_scale", "glass_materials"}
         if unknown:
-            raise InputError(f"{where}.{sorted(unknown)[0]}: unknown key; allowed: name, kind, set, path, sha256, licence, source, up_axis, unit_scale, glass_materials")
+            raise InputError(
+                f"{where}.{sorted(unknown)[0]}: unknown key; allowed: name, kind, set, path, sha256, licence, source, up_axis, unit_scale, glass_materials"
+            )
         if entry["kind"] not in KINDS:
             raise InputError(f"{where}.kind: expected one of {', '.join(KINDS)}, got {entry['kind']!r}")
         file = (path.parent / entry["path"]).resolve()
@@ -99,7 +101,8 @@ def read_manifest(path: str | Path | None = None) -> list[AssetEntry]:
         digest = hashlib.sha256(file.read_bytes()).hexdigest()
         if digest != entry["sha256"].lower():
             raise InputError(f"{where}.sha256: {file.name} has sha256 {digest}, the manifest says {entry['sha256']}")
-        out.append(AssetEntry(entry["name"], entry["kind"], str(entry.get("set", "")), file, digest, entry["licence"], str(entry.get("source", "")), "auto" if up == "AUTO" else up, None if scale == "auto" else float(scale), tuple(g.lower() for g in glass), where))
+        out.append(AssetEntry(entry["name"], entry["kind"], str(entry.get("set", "")), file, digest, entry["licence"], str(entry.get("source", "")),
+                              "auto" if up == "AUTO" else up, None if scale == "auto" else float(scale), tuple(g.lower() for g in glass), where))
     return out
 
 
@@ -109,7 +112,9 @@ def asset_set(name: str, kind: str, where: str, path: str | Path | None = None) 
     chosen = [e for e in entries if e.kind == kind and name in (e.set, e.name)]
     if not chosen:
         sets = sorted({e.set for e in entries if e.kind == kind})
-        raise InputError(f"{where}: no {kind} asset of set {name!r} is present in {Path(path) if path else MANIFEST}; sets of kind {kind}: {', '.join(sets) or 'none'}")
+        raise InputError(
+            f"{where}: no {kind} asset of set {name!r} is present in {Path(path) if path else MANIFEST}; sets of kind {kind}: {', '.join(sets) or 'none'}"
+        )
     return chosen
 
 

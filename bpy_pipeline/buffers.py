@@ -1,6 +1,6 @@
 """Scene buffers: the one type that crosses the bpy boundary (docs/layout.md, "A frame's path through the stages").
 
-``export.py`` fills them from Blender's evaluated depsgraph; everything after that (scanner,
+``blender/export.py`` fills them from Blender's evaluated depsgraph; everything after that (scanner,
 effects, writers) reads only these numpy arrays and never imports bpy.
 """
 
@@ -101,9 +101,11 @@ class SceneBuffers:
         a, b = self.objects, other.objects
         surface = None if a.surface is None or b.surface is None else np.concatenate([a.surface, b.surface])
         objects = ObjectTable(a.names + b.names, a.parents + b.parents, a.class_names + b.class_names, np.concatenate([a.semantic, b.semantic]),
-                              np.concatenate([a.instance, b.instance]), np.concatenate([a.material, b.material]), np.concatenate([a.reflectivity, b.reflectivity]), surface)  # fmt: skip
-        return SceneBuffers(np.concatenate([self.vertices, other.vertices]), np.concatenate([self.triangles, other.triangles + np.int32(len(self.vertices))]).astype(np.int32),
-                            np.concatenate([self.triangle_object, other.triangle_object + np.int32(len(a))]).astype(np.int32), objects)  # fmt: skip
+                              np.concatenate([a.instance, b.instance]), np.concatenate([a.material, b.material]),
+                              np.concatenate([a.reflectivity, b.reflectivity]), surface)
+        return SceneBuffers(np.concatenate([self.vertices, other.vertices]),
+                            np.concatenate([self.triangles, other.triangles + np.int32(len(self.vertices))]).astype(np.int32),
+                            np.concatenate([self.triangle_object, other.triangle_object + np.int32(len(a))]).astype(np.int32), objects)
 
     def check(self) -> None:
         """``InputError`` for an empty scene, non-finite vertices or triangle indices out of range (naming the object)."""

@@ -37,7 +37,7 @@ from .lidar.effects.materials import MaterialsConfig
 from .lidar.effects.weather import WeatherConfig
 
 from .builders import BUILDERS as BUILDER_REGISTRY
-from .builders.population import population_from_dict, population_to_dict
+from .population.params import population_from_dict, population_to_dict
 from .builders.railway.params import RailwayScene
 from .io.writers import frame_writers
 from .schema import convert, from_dict, meta, reference, to_plain
@@ -58,7 +58,7 @@ class SceneConfig:
 
     builder: str = "railway"
     params: typing.Any = field(default_factory=RailwayScene)
-    population: typing.Any = None  # builders.population.Population: people, arms, cars placed per frame (None: none)
+    population: typing.Any = None  # population.params.Population: people, arms, cars placed per frame (None: none)
 
 
 # ----------------------------------------------------------------------------- sensor, effects, output
@@ -86,7 +86,8 @@ class EdgeDropConfig:
     """``sensor.reflector.edge_drop``: returns lost where a beam splits on a mirror edge (lidar/sensor/mirror_sensor.py)."""
 
     mask: str = field(default="generated", metadata=meta(help="generated | none | path of a measured (rows, columns) .npy of drop probabilities"))
-    probability: float = field(default=0.95, metadata=meta("", 0, 1, help="generated: drop probability where the footprint straddles an edge (the paper: > 90 %)"))
+    probability: float = field(default=0.95,
+                               metadata=meta("", 0, 1, help="generated: drop probability where the footprint straddles an edge (the paper: > 90 %)"))
     beam_diameter: float = field(default=0.01, metadata=meta("m", low=0, help="generated: the beam's width where it meets the mirror (assumed; measure it)"))
 
 
@@ -99,7 +100,8 @@ class ReflectorConfig:
 
     enabled: bool = False
     segments: int = field(default=8, metadata=meta(help="mirror segments around the spin axis"))
-    inclination_deg: float = field(default=34.0, metadata=meta("deg", help="between each mirror and the spin axis: horizontal beams leave 2x this below the horizon"))
+    inclination_deg: float = field(default=34.0,
+                                   metadata=meta("deg", help="between each mirror and the spin axis: horizontal beams leave 2x this below the horizon"))
     azimuth_deg: float = field(default=0.0, metadata=meta("deg", help="azimuth of segment 0's centre"))
     distance: float = field(default=0.1, metadata=meta("m", help="optical centre to each mirror along its central horizontal beam"))
     bottom: float = field(default=0.09, metadata=meta("m", help="along the slope from that central point down to the segment's lower edge"))
@@ -118,14 +120,17 @@ class SensorConfig:
     trajectory: TrajectoryConfig | None = None  # a moving sensor instead of the static position
     divergence: Divergence = field(default_factory=Divergence)  # off unless rays > 1
     reflector: ReflectorConfig = field(default_factory=ReflectorConfig)  # the sensor's own mirrors; off by default
-    rig: tuple = field(default=(), metadata=meta(help="sensor rig (bpy_pipeline/rig.py): RigSensor s on the platform placed by position/rotation_deg; spec is the first's"))
+    rig: tuple = field(default=(),
+                       metadata=meta(help="sensor rig (bpy_pipeline/rig.py): RigSensor s on the platform placed by position/rotation_deg; spec is the first's"))
 
 
 @dataclass(frozen=True)
 class GlassConfig:
     """``effects.mirrors.glass``: how beams meet ``glass`` objects (car windows), lidar/cast/scanner.py."""
 
-    normal_return_deg: float = field(default=5.0, metadata=meta("deg", 0, 90, high_open=True, help="met this close to normal incidence, the glass itself returns the beam (0: never)"))
+    normal_return_deg: float = field(default=5.0,
+                                     metadata=meta("deg", 0, 90, high_open=True,
+                                                   help="met this close to normal incidence, the glass itself returns the beam (0: never)"))
     reflect_fraction: float = field(default=0.0, metadata=meta("", 0, 1, help="share of the other beams that reflect like a mirror instead of passing through"))
     max_passes: int = field(default=8, metadata=meta("", 0, 65535, help="glass surfaces a beam may pass through; one more loses it"))
 
@@ -137,7 +142,9 @@ class MirrorConfig:
     max_bounces: int = field(default=3, metadata=meta("", 0, 255, help="reflections before a beam is given up (a point's bounces is uint8)"))
     label: Literal["target", "reflection"] = field(default="target", metadata=meta(help="class of points seen through a mirror"))
     ideal: bool = field(default=False, metadata=meta(help="report mirrored points at the true hit instead of behind the mirror"))
-    normal_return_deg: float = field(default=0.5, metadata=meta("deg", 0, 90, high_open=True, help="a mirror met this close to normal incidence returns the beam itself (0: never)"))
+    normal_return_deg: float = field(default=0.5,
+                                     metadata=meta("deg", 0, 90, high_open=True,
+                                                   help="a mirror met this close to normal incidence returns the beam itself (0: never)"))
     glass: GlassConfig = field(default_factory=GlassConfig)
 
 
@@ -176,11 +183,14 @@ class BoxesConfig:
     """
 
     formats: list[str] | Literal["auto"] = field(default="auto", metadata=meta(help="box writers (io/writers.py)"))
-    classes: list[str] = field(default_factory=lambda: list(BOX_CLASSES), metadata=meta(help="classes that get a box: every vehicle class, person, rider (a cyclist), motorcyclist and robot arm"))
+    classes: list[str] = field(default_factory=lambda: list(BOX_CLASSES),
+                               metadata=meta(help="classes that get a box: every vehicle class, person, rider (a cyclist), motorcyclist and robot arm"))
     names: dict = field(default_factory=dict)
     min_points: dict = field(default_factory=lambda: {"car": 12, "van": 12, "truck": 12, "bus": 12})
     min_points_default: int = field(default=6, metadata=meta("", low=0, help="labelled points a box needs when min_points does not name its class"))
-    occlusion_levels: tuple[float, float, float] = field(default=(0.8, 0.4, 0.1), metadata=meta("", 0, 1, help="visible / unoccluded point fractions from which a box is occlusion level 0, 1, 2 (below t2: 3)"))
+    occlusion_levels: tuple[float, float, float] = field(
+        default=(0.8, 0.4, 0.1), metadata=meta("", 0, 1, help="visible / unoccluded point fractions from which a box is occlusion level 0, 1, 2 (below t2: 3)")
+    )
 
 
 @dataclass(frozen=True)
@@ -196,7 +206,8 @@ class CameraConfig:
     """
 
     resolution: tuple[int, int] = field(default=(1242, 375), metadata=meta("px", low=1, help="[width, height]"))
-    fov_deg: float = field(default=81.4, metadata=meta("deg", 0, 180, low_open=True, high_open=True, help="horizontal field of view (KITTI's own P2: 81.4 deg on 1242 px)"))
+    fov_deg: float = field(default=81.4,
+                           metadata=meta("deg", 0, 180, low_open=True, high_open=True, help="horizontal field of view (KITTI's own P2: 81.4 deg on 1242 px)"))
     position: tuple[float, float, float] = field(default=(0.0, 0.0, 0.0), metadata=meta("m", help="in the sensor frame"))
     rotation_deg: tuple[float, float, float] = field(default=(0.0, 0.0, 0.0), metadata=meta("deg", help="Blender XYZ Euler angles in the sensor frame"))
     render: bool = False
@@ -242,7 +253,9 @@ class SemanticKittiOutput:
 @dataclass(frozen=True)
 class OutputConfig:
     formats: list[str] = field(default_factory=lambda: ["ply", "semantickitti"], metadata=meta(help="writers of io/writers.py"))
-    frame: Literal["sensor", "world", "kitti"] = field(default="sensor", metadata=meta(help="the points' frame; kitti: level, ground at z = -1.73 m (geometry/transforms.output_pose)"))
+    frame: Literal["sensor", "world", "kitti"] = field(
+        default="sensor", metadata=meta(help="the points' frame; kitti: level, ground at z = -1.73 m (geometry/transforms.output_pose)")
+    )
     preview: bool = True
     sequence: int = field(default=0, metadata=meta(help="older configs only: SemanticKITTI sequences follow output.split (0 is accepted)"))
     boxes: BoxesConfig = field(default_factory=BoxesConfig)
@@ -268,7 +281,8 @@ class LimitsConfig:
     anything, with the estimate's figures and the key to raise (bpy_pipeline/estimate.py). Never
     changes a frame's bytes (not part of the run key)."""
 
-    rays_per_frame: float = field(default=5e7, metadata=meta("", low=0, help="every ray of every sensor of a frame (the thesis scanner at full resolution: 2.3e7)"))
+    rays_per_frame: float = field(default=5e7,
+                                  metadata=meta("", low=0, help="every ray of every sensor of a frame (the thesis scanner at full resolution: 2.3e7)"))
     triangles: float = field(default=5e7, metadata=meta("", low=0, help="triangles of a frame's scene, estimated from the config"))
     objects: float = field(default=1e4, metadata=meta("", low=0, help="objects of a frame's scene (placed people, cars, shapes, ...)"))
     seconds: float = field(default=7 * 86400.0, metadata=meta("s", low=0, help="estimated seconds of the selected frames in one process"))
@@ -351,14 +365,14 @@ def _scene_from_dict(data) -> SceneConfig:
 def sensor_trajectory(sensor: SensorConfig, path=None) -> Trajectory | None:
     """The configured :class:`~.lidar.sensor.platform.Trajectory`, ``None`` for a static sensor.
 
-    path : (k, 3) float64 world polyline of ``trajectory.curve`` (``scenes.curves.curve_polyline``);
+    path : (k, 3) float64 world polyline of ``trajectory.curve`` (``blender.curves.curve_polyline``);
         needed only when the trajectory follows a curve of the scene
     """
     section = sensor.trajectory
     if section is None:
         return None
     if section.curve and path is None:
-        raise ValueError("sensor_trajectory: a curve trajectory needs the curve's polyline (scenes.curves.curve_polyline)")
+        raise ValueError("sensor_trajectory: a curve trajectory needs the curve's polyline (blender.curves.curve_polyline)")
     points = path if section.curve else section.waypoints
     return Trajectory(
         points,
@@ -400,7 +414,10 @@ def _rig_from_dict(sensor_data: dict) -> tuple:
 
     if sensor_data:  # position, rotation_deg and trajectory are popped already: they place the platform
         extra = sorted(sensor_data)[0]
-        raise InputError(f"sensor.{extra}: with sensor.rig, give each sensor's preset and fields in its rig entry (sensor.rig[k].{extra}); sensor keeps position, rotation_deg and trajectory")
+        raise InputError(
+            f"sensor.{extra}: with sensor.rig, give each sensor's preset and fields in its rig entry (sensor.rig[k].{extra}); sensor keeps position, "
+            "rotation_deg and trajectory"
+        )
     return rig_from_data(data, "sensor.rig")
 
 
@@ -481,7 +498,8 @@ def config_from_dict(data) -> Config:
         given = sensor_data
         if "rig" in given:  # a rig of the config's own: the builder's sensor fields do not apply to it
             defaults = {k: v for k, v in defaults.items() if k in ("position", "rotation_deg")}
-        sensor_data = {**defaults, **sensor_data, **({"reflector": {**defaults["reflector"], **(sensor_data.get("reflector") or {})}} if "reflector" in defaults else {})}
+        sensor_data = {**defaults, **sensor_data,
+                       **({"reflector": {**defaults["reflector"], **(sensor_data.get("reflector") or {})}} if "reflector" in defaults else {})}
         if "trajectory" in given and "position" not in given:  # a trajectory given replaces the builder's position
             sensor_data.pop("position", None)
     if builder.output is not None:  # the builder's output defaults, under the config's
@@ -502,7 +520,9 @@ def config_from_dict(data) -> Config:
     config = from_dict(Config, data, "")
     config = dataclasses.replace(config, scene=scene, sensor=sensor)
     if not 1 <= config.frames <= MAX_FRAMES:
-        raise InputError(f"frames: must be 1 .. {MAX_FRAMES:,} (a billion frames is centuries of scanning; run parts of a larger set as separate runs), got {config.frames}")
+        raise InputError(
+            f"frames: must be 1 .. {MAX_FRAMES:,} (a billion frames is centuries of scanning; run parts of a larger set as separate runs), got {config.frames}"
+        )
     for name in (f.name for f in dataclasses.fields(LimitsConfig)):
         if not getattr(config.limits, name) > 0:
             raise InputError(f"limits.{name}: must be > 0, got {getattr(config.limits, name)}")

@@ -111,7 +111,8 @@ def write_frame_files(frame, staging: Path, names: list[str]) -> list[Path]:
             failed[name] = err
 
     later = [name for name in names if writers[name].beside is not None]
-    threads = [threading.Thread(target=contextvars.copy_context().run, args=(background, name), name=f"frame {frame.index} {name} writer") for name in later] if threaded else []
+    threads = [threading.Thread(target=contextvars.copy_context().run, args=(background, name),
+                                name=f"frame {frame.index} {name} writer") for name in later] if threaded else []
     for thread in threads:
         thread.start()
     try:
@@ -220,19 +221,31 @@ def take_lock(path: Path, say: Callable[[str], None] = lambda text: None) -> int
             try:
                 if not _flock(old, path):
                     holder = _holder(path) or {}
-                    raise InputError(f"--out: {path.parent} is being written by pid {holder.get('pid', '?')} on {holder.get('host', '?')} (since {holder.get('started', '?')}); wait for it, or stop that run")
+                    raise InputError(
+                        f"--out: {path.parent} is being written by pid {holder.get('pid', '?')} on {holder.get('host', '?')} (since "
+                        f"{holder.get('started', '?')}); wait for it, or stop that run"
+                    )
                 if not _same_file(old, path):
                     continue  # replaced or removed since we opened it: look again
                 holder = _holder(path)
                 if holder is None:
                     age = time.time() - os.fstat(old).st_mtime
                     if age < GARBAGE_LOCK_AGE_S:
-                        raise InputError(f"--out: {path} is empty or unreadable and nobody holds it ({age:.0f} s old; taken over from {GARBAGE_LOCK_AGE_S:.0f} s on); remove {path} if no run writes {path.parent}")
+                        raise InputError(
+                            f"--out: {path} is empty or unreadable and nobody holds it ({age:.0f} s old; taken over from {GARBAGE_LOCK_AGE_S:.0f} s on); "
+                            f"remove {path} if no run writes {path.parent}"
+                        )
                     say(f"warning: {path.parent}: taking over an unreadable lock nobody holds ({age:.0f} s old)")
                 elif holder.get("host") != me["host"]:
-                    raise InputError(f"--out: {path.parent} is locked by pid {holder.get('pid', '?')} on {holder.get('host', '?')} (since {holder.get('started', '?')}); this host cannot tell whether that run lives: remove {path} if it is dead")
+                    raise InputError(
+                        f"--out: {path.parent} is locked by pid {holder.get('pid', '?')} on {holder.get('host', '?')} (since {holder.get('started', '?')}); "
+                        f"this host cannot tell whether that run lives: remove {path} if it is dead"
+                    )
                 elif isinstance(holder.get("pid"), int) and holder["pid"] != me["pid"] and _pid_alive(holder["pid"]):
-                    raise InputError(f"--out: {path.parent} is locked by the live pid {holder['pid']} on this host (since {holder.get('started', '?')}), which holds no file lock; stop it, or remove {path} if it is not a bpy_pipeline run")
+                    raise InputError(
+                        f"--out: {path.parent} is locked by the live pid {holder['pid']} on this host (since {holder.get('started', '?')}), which holds no "
+                        f"file lock; stop it, or remove {path} if it is not a bpy_pipeline run"
+                    )
                 else:
                     say(f"warning: {path.parent}: taking over the lock of a run that ended without releasing it (pid {holder.get('pid', '?')})")
                 try:
@@ -330,13 +343,19 @@ class Dataset:
         """Refuse, resume or overwrite an existing run; clean up what a killed run left; write the manifest."""
         for name in (RECORDS, MOVING, STAGING):  # the run's own folders: removed from and written into, never through a link
             if (self.out / name).is_symlink() or ((self.out / name).exists() and not (self.out / name).is_dir()):
-                raise InputError(f"--out: {self.out / name} is a link or a file, not the run's own folder; remove it or give another --out (nothing was removed)")
+                raise InputError(
+                    f"--out: {self.out / name} is a link or a file, not the run's own folder; remove it or give another --out (nothing was removed)"
+                )
         manifest_path = self.out / MANIFEST_NAME
         old = read_manifest(self.out) if manifest_path.exists() else None
         if old is not None and self.mode in ("new", "resume") and not is_our_manifest(old):
             raise InputError(f"--out: {manifest_path} is not a bpy_pipeline run's manifest; give another --out (nothing there is touched)")
         if old is not None and self.mode == "new":
-            what = f"seed {old.get('seed')}, {len(list((self.out / RECORDS).glob('*.json')))} frames" if old.get("format") == DATASET_FORMAT else "an earlier version's output"
+            what = (
+                f"seed {old.get('seed')}, {len(list((self.out / RECORDS).glob('*.json')))} frames"
+                if old.get("format") == DATASET_FORMAT
+                else "an earlier version's output"
+            )
             raise InputError(f"--out: {self.out} holds another run ({what}); give --resume to continue it (same config and seed) or --overwrite to replace it")
         if old is not None and self.mode == "overwrite":
             self._remove_old(old)
@@ -346,7 +365,10 @@ class Dataset:
             self._check_same_run(old)
             had = (old.get("config") or {}).get("frames")
             if isinstance(had, int) and self.config.frames < had:  # a resume may extend a run, never shrink it
-                raise InputError(f"--resume: {self.out} holds a run of {had} frames, this config has frames: {self.config.frames}; give --frames {had} or more (more extends the run), or --overwrite")
+                raise InputError(
+                    f"--resume: {self.out} holds a run of {had} frames, this config has frames: {self.config.frames}; give --frames {had} or more (more "
+                    "extends the run), or --overwrite"
+                )
             self.committed = self._verified(self._read_records())
             manifest = {**old, "config": config_to_dict(self.config)}  # the frame count may have grown
         else:
@@ -358,6 +380,7 @@ class Dataset:
         from .lidar.sensor.sensors import spec_summary
         from .frame import versions
 
+        # relative: inside Blender the package is bl_ext.<repo>.<id>.bpy_pipeline
         return {
             "format": DATASET_FORMAT,
             "version": DATASET_VERSION,
@@ -366,7 +389,7 @@ class Dataset:
             "run_key": run_key(self.config),
             "versions": versions(),
             "sensor": spec_summary(self.config.sensor.spec),
-            "class_table": {int(k): v for k, v in __import__(f"{__package__}.labels", fromlist=["x"]).load_class_table().names.items()},  # relative: inside Blender the package is bl_ext.<repo>.<id>.bpy_pipeline
+            "class_table": {int(k): v for k, v in __import__(f"{__package__}.labels", fromlist=["x"]).load_class_table().names.items()},
         }
 
     def _check_same_run(self, manifest: dict) -> None:
@@ -376,7 +399,9 @@ class Dataset:
             old = manifest.get("config") or {}
             new = config_to_dict(self.config)
             keys = [k for k in sorted(set(old) | set(new)) if k not in ("frames", "threads", "limits") and old.get(k) != new.get(k)]
-            raise InputError(f"--resume: {self.out} holds a run with another config or seed (differs in: {', '.join(keys) or 'versions'}); give --overwrite to replace it")
+            raise InputError(
+                f"--resume: {self.out} holds a run with another config or seed (differs in: {', '.join(keys) or 'versions'}); give --overwrite to replace it"
+            )
 
     def _remove_old(self, manifest: dict) -> None:
         """Remove the old run: the files its records, intents and manifest name (confined to ``OUT``), its records,
@@ -384,7 +409,9 @@ class Dataset:
         the run did not write stays. Every file is checked deletable first; one that is not refuses the overwrite
         with the old run whole."""
         if not is_our_manifest(manifest):
-            raise InputError(f"--overwrite: {self.out / MANIFEST_NAME} is not a bpy_pipeline run's manifest; refusing to remove anything from {self.out}: give another --out")
+            raise InputError(
+                f"--overwrite: {self.out / MANIFEST_NAME} is not a bpy_pipeline run's manifest; refusing to remove anything from {self.out}: give another --out"
+            )
         files = self._files_of_run(manifest)
         for path in files:
             why = undeletable(path)
@@ -536,7 +563,8 @@ class Dataset:
     def skip(self, frame, reason: str) -> dict:
         """Record ``frame`` as skipped (``output.skip_empty``): a record with ``"skipped": true``, the reason
         and its counts, and no files; the frame index stays taken, so a resume or another worker never makes it again."""
-        record = {"index": frame.index, "skipped": True, "reason": reason, "files": [], "sha256": {}, "points": int(len(frame.points)) if frame.points is not None else 0,
+        record = {"index": frame.index, "skipped": True, "reason": reason, "files": [], "sha256": {},
+                  "points": int(len(frame.points)) if frame.points is not None else 0,
                   "timings_s": {k: round(v, 4) for k, v in frame.timings.items()}}
         if frame.scene is not None and frame.scene.info is not None:
             record["scene"] = frame.scene.info
@@ -569,7 +597,8 @@ class Dataset:
                     (self.out / name).rmdir()
             manifest = read_manifest(self.out)
             manifest["indexes"] = sorted(set(manifest.get("indexes") or []) | set(indexes))  # what --overwrite removes beside the frames
-            manifest["summary"] = {"frames": len(records), "points": int(sum(r["points"] for r in records)), "frame_indices": _ranges([r["index"] for r in records])}
+            manifest["summary"] = {"frames": len(records), "points": int(sum(r["points"] for r in records)),
+                                   "frame_indices": _ranges([r["index"] for r in records])}
             skipped = [i for i, r in self._read_records().items() if r.get("skipped")]
             if skipped:
                 manifest["summary"]["skipped"] = {"frames": len(skipped), "frame_indices": _ranges(skipped)}
@@ -731,7 +760,9 @@ def frame_record(frame, digests: dict[str, str]) -> dict:
     if frame.rig is not None:
         record["rig"] = frame.rig.record()
     if frame.boxes is not None:
-        record["boxes"] = [{"class": str(b["class_name"]), "instance": int(b["instance"]), "points": int(b["points"]), "visible": int(b["visible"]), "unoccluded": int(b["unoccluded"]), "occlusion": int(b["occlusion"]), "truncation": round(float(b["truncation"]), 4)} for b in frame.boxes]
+        record["boxes"] = [{"class": str(b["class_name"]), "instance": int(b["instance"]), "points": int(b["points"]), "visible": int(b["visible"]),
+                            "unoccluded": int(b["unoccluded"]), "occlusion": int(b["occlusion"]),
+                            "truncation": round(float(b["truncation"]), 4)} for b in frame.boxes]
     return record
 
 
@@ -740,8 +771,11 @@ def empty_frame_cause(frame) -> str:
     spec = frame.config.sensor.spec
     if frame.buffers is None or not len(frame.buffers.triangles):
         return f"No object lies within the sensor's max_range ({spec.max_range} m) of its position {list(map(float, frame.pose[:3, 3].round(2)))}."
-    return (f"The sensor ({spec.name}, {spec.vertical_fov_deg} deg vertical field, max_range {spec.max_range} m) at {list(map(float, frame.pose[:3, 3].round(2)))} "
-            f"sees none of the scene's {len(frame.buffers.triangles)} triangles: check its position, rotation and field of view (a sensor on or under the ground sees nothing).")
+    return (
+        f"The sensor ({spec.name}, {spec.vertical_fov_deg} deg vertical field, max_range {spec.max_range} m) at {list(map(float, frame.pose[:3, 3].round(2)))} "
+        f"sees none of the scene's {len(frame.buffers.triangles)} triangles: check its position, rotation and field of view (a sensor on or under the ground "
+        "sees nothing)."
+    )
 
 
 def available_memory() -> int:
@@ -770,7 +804,10 @@ def check_writable(out: Path, config: Config) -> None:
     rays = ray_count(config.sensor.spec)
     memory, frame_bytes = available_memory(), rays * POINT_DTYPE.itemsize * 2
     if memory and frame_bytes > memory:
-        raise InputError(f"sensor: {rays:.3g} rays per frame need about {size(frame_bytes)} of memory for their points; {size(memory)} are available. Lower the resolution or the field of view")
+        raise InputError(
+            f"sensor: {rays:.3g} rays per frame need about {size(frame_bytes)} of memory for their points; {size(memory)} are available. Lower the resolution "
+            "or the field of view"
+        )
     need = rays * BYTES_PER_POINT * max(len(config.output.formats), 1)
     free = shutil.disk_usage(out).free
     if need > free:

@@ -226,6 +226,8 @@ def check_limits(estimate: Estimate, config: Config) -> Estimate:
     for key, (figure, what) in CHECKS.items():
         value, limit = figure(estimate), getattr(config.limits, key)
         if value > limit:
-            raise InputError(f"limits.{key}: this run is estimated at {value:.3g} {what}, above the limit of {limit:.3g} "
-                             f"({estimate.line()}); make less work (frames, sensor resolution, scene size) or raise it with --set limits.{key}={value * 1.1:.3g}")
+            raise InputError(
+                f"limits.{key}: this run is estimated at {value:.3g} {what}, above the limit of {limit:.3g} "
+                f"({estimate.line()}); make less work (frames, sensor resolution, scene size) or raise it with --set limits.{key}={value * 1.1:.3g}"
+            )
     return estimate

@@ -62,7 +62,8 @@ def worker_command(out: str, frames: list[int], threads: int) -> list[str]:
     return [sys.executable, "-m", "bpy_pipeline", "run", *args]
 
 
-def run_parallel(config: Config, out: str, frames: list[int], mode: str, workers: int = 1, ray_address: str | None = None, log: Callable[[str], None] = print) -> int:
+def run_parallel(config: Config, out: str, frames: list[int], mode: str, workers: int = 1, ray_address: str | None = None,
+                 log: Callable[[str], None] = print) -> int:
     """Make ``frames`` of ``config`` into ``out`` with ``workers`` local processes or on the Ray cluster at
     ``ray_address``; returns the exit code (0 when every frame is committed)."""
     from .stages.view import frames_per_scene

@@ -195,7 +195,8 @@ def empty_reason(frame: Frame, run: Run) -> str | None:
     return None if objects >= need else f"{objects} labelled object{'s' if objects != 1 else ''}, fewer than output.min_objects ({need})"
 
 
-def run_frames(config: Config, out_dir: str | Path, build: bool = True, frames: Iterable[int] | None = None, mode: str = "new", log: Callable[[str], None] | None = None, overlap: bool = True) -> Iterator[Frame]:
+def run_frames(config: Config, out_dir: str | Path, build: bool = True, frames: Iterable[int] | None = None, mode: str = "new",
+               log: Callable[[str], None] | None = None, overlap: bool = True) -> Iterator[Frame]:
     """The frames of a run, one at a time: each is committed to the dataset in ``out_dir`` when it is yielded.
 
     frames : the frame indices to make (default: all of ``config.frames``); any subset gives the same
@@ -249,7 +250,8 @@ def run_frames(config: Config, out_dir: str | Path, build: bool = True, frames: 
         if kept:
             yield frame
 
-    with Dataset.open(out_dir, config, mode, log=log) as dataset, ThreadPoolExecutor(1, "finishing") if overlap and overlaps(config, until_kept) else nullcontext() as beside:
+    with Dataset.open(out_dir, config, mode,
+                      log=log) as dataset, ThreadPoolExecutor(1, "finishing") if overlap and overlaps(config, until_kept) else nullcontext() as beside:
         pending = None  # the frame whose finishing stages run beside this one's first
         for index in frames:
             if until_kept and sum(1 for r in dataset.committed.values() if not r.get("skipped")) >= config.frames:
@@ -272,7 +274,10 @@ def run_frames(config: Config, out_dir: str | Path, build: bool = True, frames: 
                 pending = None
         else:
             if until_kept and log is not None:
-                log(f"warning: output.frames_kept: {MAX_INDICES_PER_KEPT * config.frames} frame indices gave fewer than {config.frames} kept frames; the scene rarely holds {output.min_objects} labelled objects")
+                log(
+                    f"warning: output.frames_kept: {MAX_INDICES_PER_KEPT * config.frames} frame indices gave fewer than {config.frames} kept frames; the scene "
+                    f"rarely holds {output.min_objects} labelled objects"
+                )
         if pending is not None:
             yield from done(pending)
 

@@ -1,4 +1,4 @@
-"""Registries: one name -> entry table per extension point (builders, ray patterns, drop models, writers).
+"""Registries: one name -> entry table per extension point (builders, ray patterns, drop, noise and intensity models, writers, commands).
 
 Each extension module registers its entry (the function and the dataclass of its config section)
 with one line; the pipeline looks entries up by the name the config gives and never names a

@@ -217,7 +217,8 @@ class RigFrame:
         """Plain data for the frame's record: per sensor, its preset, pose (world), points and boxes."""
         out = []
         for k, (sensor, frame) in enumerate(zip(self.sensors, self.frames)):
-            entry = {"index": k, "preset": sensor.spec.name, "pose": frame.pose.tolist(), "points": int(len(frame.points)), "timings_s": {n: round(v, 4) for n, v in frame.timings.items()}}
+            entry = {"index": k, "preset": sensor.spec.name, "pose": frame.pose.tolist(), "points": int(len(frame.points)),
+                     "timings_s": {n: round(v, 4) for n, v in frame.timings.items()}}
             if frame.boxes is not None:
                 entry["boxes"] = [{"class": str(b["class_name"]), "instance": int(b["instance"]), "points": int(b["points"])} for b in frame.boxes]
             out.append(entry)

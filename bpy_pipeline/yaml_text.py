@@ -40,7 +40,9 @@ def check_yaml_size(text: str, where: str) -> None:
         nonlocal values
         values += n
         if values > MAX_VALUES:
-            raise InputError(f"{where}: holds more than {MAX_VALUES:,} values (aliases expanded), not a config (a scene of more objects belongs in a .blend or mesh file)")
+            raise InputError(
+                f"{where}: holds more than {MAX_VALUES:,} values (aliases expanded), not a config (a scene of more objects belongs in a .blend or mesh file)"
+            )
 
     for event in yaml.parse(text, Loader=SAFE_LOADER):
         if isinstance(event, yaml.ScalarEvent):

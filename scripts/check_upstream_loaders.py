@@ -219,7 +219,8 @@ def items_through_getitem(dataset_class, cfg_file: str, tools: Path, training: b
     os.chdir(tools)
     try:
         cfg = cfg_from_yaml_file(cfg_file, EasyDict())
-        dataset = dataset_class(dataset_cfg=cfg.DATA_CONFIG, class_names=cfg.CLASS_NAMES, training=training, root_path=None, logger=common_utils.create_logger())
+        dataset = dataset_class(dataset_cfg=cfg.DATA_CONFIG, class_names=cfg.CLASS_NAMES, training=training, root_path=None,
+                                logger=common_utils.create_logger())
         boxes, voxels = 0, 0
         for k in range(len(dataset)):
             item = dataset[k]
@@ -256,7 +257,8 @@ def check_openpcdet(checkout: Path, out: Path, work: Path) -> None:
             try:
                 report(name, True, items_through_getitem(KittiDataset, cfg_file, root / "tools", training))
             except Exception as err:
-                report(name, cfg_file.startswith("cfgs/"), f"{type(err).__name__}: {err}" + (" (the stock config: reported, not a failure)" if cfg_file.startswith("cfgs/") else ""))
+                report(name, cfg_file.startswith("cfgs/"),
+                       f"{type(err).__name__}: {err}" + (" (the stock config: reported, not a failure)" if cfg_file.startswith("cfgs/") else ""))
     if (root / "data" / "custom").is_dir():
         try:
             run_main("pcdet.datasets.custom.custom_dataset", ["create_custom_infos", str(root / "tools/cfgs/dataset_configs/custom_dataset.yaml")])
@@ -275,7 +277,8 @@ def check_openpcdet(checkout: Path, out: Path, work: Path) -> None:
             try:
                 report(name, True, items_through_getitem(CustomDataset, cfg_file, root / "tools", training))
             except Exception as err:
-                report(name, cfg_file.startswith("stock"), f"{type(err).__name__}: {err}" + (" (the stock config: reported, not a failure)" if cfg_file.startswith("stock") else ""))
+                report(name, cfg_file.startswith("stock"),
+                       f"{type(err).__name__}: {err}" + (" (the stock config: reported, not a failure)" if cfg_file.startswith("stock") else ""))
     sys.path.remove(str(root))
 
 
@@ -300,7 +303,8 @@ def check_mmdet3d(checkout: Path, out: Path, work: Path) -> None:
     try:
         import mmdet3d.datasets  # noqa: F401  (registers the datasets and transforms, as register_all_modules does)
 
-        run_main_file(checkout / "tools" / "create_data.py", ["kitti", "--root-path", "./data/kitti", "--out-dir", "./data/kitti", "--extra-tag", "kitti", "--with-plane"])
+        run_main_file(checkout / "tools" / "create_data.py", ["kitti", "--root-path", "./data/kitti", "--out-dir", "./data/kitti", "--extra-tag", "kitti",
+                                                              "--with-plane"])
         db = pickle.loads((root / "data/kitti/kitti_dbinfos_train.pkl").read_bytes())
         report(f"{tag}: mmdetection3d create_data.py kitti --with-plane", True, "gt database " + ", ".join(f"{k} {len(v)}" for k, v in sorted(db.items())))
     except Exception as err:

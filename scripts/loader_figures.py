@@ -114,7 +114,10 @@ if __name__ == "__main__":
     for folder in sys.argv[1:]:
         out = Path(folder)
         manifest = json.loads((out / "manifest.json").read_text())
-        print(f"\n{out}: builder {manifest['config']['scene']['builder']}, {manifest['summary']['frames']} frames, split {manifest['config']['output']['split']}\n")
+        print(
+            f"\n{out}: builder {manifest['config']['scene']['builder']}, {manifest['summary']['frames']} frames, split "
+            f"{manifest['config']['output']['split']}\n"
+        )
         print("| loader | split | frames | classes read (points) / box types (boxes) |\n|---|---|---|---|")
         for loader, split, frames, what in rows(out):
             print(f"| {loader} | {split} | {frames} | {what} |")

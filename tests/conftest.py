@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-# Node groups kept between runs (bpy_pipeline/scenes/group_cache.py) go to a folder of this test process (and the runs
+# Node groups kept between runs (bpy_pipeline/blender/group_cache.py) go to a folder of this test process (and the runs
 # it starts), never the user's cache; removed at exit
 if "BPY_PIPELINE_CACHE" not in os.environ:
     os.environ["BPY_PIPELINE_CACHE"] = tempfile.mkdtemp(prefix="bpy_pipeline_cache_")

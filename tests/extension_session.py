@@ -60,7 +60,11 @@ def lidar_classes() -> list[str]:
 def frame_files(out: Path) -> dict[str, str]:
     import hashlib
 
-    return {str(p.relative_to(out)): hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(out.rglob("*")) if p.is_file() and p.name != "manifest.json" and p.parent.name != "records"}  # records hold timings
+    return {
+        str(p.relative_to(out)): hashlib.sha256(p.read_bytes()).hexdigest()
+        for p in sorted(out.rglob("*"))
+        if p.is_file() and p.name != "manifest.json" and p.parent.name != "records"
+    }  # records hold timings
 
 
 class FakeLayout:
@@ -128,11 +132,15 @@ settings = bpy.context.scene.lidar
 report["builders"] = sorted(settings.bl_rna.properties["builder"].enum_items.keys())
 report["fresh_panel_is_default_config"] = cfg.config_from_dict(panel.settings_to_dict(settings)) == cfg.config_from_dict({})
 settings.sensor.preset = "hdl32e"  # its own effects profile (range-proportional noise) replaces the default preset's
-report["preset_brings_its_profile"] = cfg.config_from_dict(panel.settings_to_dict(settings)).effects == cfg.config_from_dict({"sensor": {"preset": "hdl32e"}}).effects
+report["preset_brings_its_profile"] = (
+    cfg.config_from_dict(panel.settings_to_dict(settings)).effects == cfg.config_from_dict({"sensor": {"preset": "hdl32e"}}).effects
+)
 settings.sensor.preset = cfg.config_to_dict(cfg.config_from_dict({}))["sensor"]["preset"]
 report["preset_back_brings_default_effects"] = cfg.config_from_dict(panel.settings_to_dict(settings)).effects == cfg.config_from_dict({}).effects
 settings.effects.ideal = True  # the panel's Ideal: the preset's noise and drop go, as ideal: true does in a config
-report["panel_ideal_is_config_ideal"] = cfg.config_from_dict(panel.settings_to_dict(settings)).effects == cfg.config_from_dict({"effects": {"ideal": True}}).effects
+report["panel_ideal_is_config_ideal"] = (
+    cfg.config_from_dict(panel.settings_to_dict(settings)).effects == cfg.config_from_dict({"effects": {"ideal": True}}).effects
+)
 sigma = settings.effects.noise.sigma
 settings.effects.noise.sigma = 0.05  # a value the user set stays
 report["panel_ideal_keeps_what_the_user_set"] = cfg.config_from_dict(panel.settings_to_dict(settings)).effects.noise.sigma == 0.05
@@ -295,7 +303,9 @@ if report["trajectory_offered"]:
     settings.pose_source = "FIXED"
 settings.out_dir = ""
 report["default_output"] = str(operators.output_dir(settings))
-report["default_output_in_user_folder"] = Path(report["default_output"]).is_relative_to(os.environ["BLENDER_USER_RESOURCES"]) and not Path(report["default_output"]).is_relative_to(extension_dir)
+report["default_output_in_user_folder"] = Path(report["default_output"]).is_relative_to(os.environ["BLENDER_USER_RESOURCES"]) and not Path(
+    report["default_output"]
+).is_relative_to(extension_dir)
 
 # ----------------------------------------------------------------------------- a bad value: one line naming the key
 settings.sensor.max_range = 0.1  # below the preset's min_range

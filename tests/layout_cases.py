@@ -71,7 +71,8 @@ def nearest_parts(points: np.ndarray, parts: list[tuple[str, tuple]]) -> list[tu
     meshes = [mesh for _, mesh in parts]
     owner = np.repeat(np.arange(len(parts)), [len(t) for _, t in meshes])
     offsets = np.cumsum([0] + [len(v) for v, _ in meshes])
-    merged = (np.concatenate([np.asarray(v, float).reshape(-1, 3) for v, _ in meshes]), np.concatenate([np.asarray(t).reshape(-1, 3) + o for (_, t), o in zip(meshes, offsets)]))
+    merged = (np.concatenate([np.asarray(v, float).reshape(-1, 3) for v, _ in meshes]),
+              np.concatenate([np.asarray(t).reshape(-1, 3) + o for (_, t), o in zip(meshes, offsets)]))
     distance = triangle_distances(points, merged)
     close = distance < CLEAR
     return [(parts[k][0], float(distance[close & (owner == k)].min())) for k in np.unique(owner[close])]
@@ -318,7 +319,8 @@ def primitives_case(seed: int) -> list[str]:
     shapes = []
     for _ in range(int(rng.integers(1, 6))):
         kind = str(rng.choice(list(sizes)))
-        shapes.append(Shape(kind, sizes[kind](), tuple(float(v) for v in rng.uniform(-20, 20, 3)), tuple(float(v) for v in rng.uniform(-180, 180, 3)), segments=int(rng.integers(3, 48))))
+        shapes.append(Shape(kind, sizes[kind](), tuple(float(v) for v in rng.uniform(-20, 20, 3)), tuple(float(v) for v in rng.uniform(-180, 180, 3)),
+                            segments=int(rng.integers(3, 48))))
     primitives_params.check(PrimitivesScene(shapes), "scene")
     meshes = [_placed_primitive(shape, pose_matrix) for shape in shapes]
     assert all(len(v) and np.isfinite(v).all() for v, _ in meshes)

@@ -29,8 +29,10 @@ def test_public_names():
 
 
 def test_scan_example_runs_without_bpy():
-    blocked = "import sys\nclass Block:\n    def find_spec(self, name, path=None, target=None):\n        if name.split('.')[0] in ('bpy', 'mathutils'):\n            raise ImportError(name)\nsys.meta_path.insert(0, Block())\n"
-    result = subprocess.run([sys.executable, "-c", blocked + scan_part() + "\nassert 'bpy' not in sys.modules\nprint('ok')"], cwd=ROOT, capture_output=True, text=True)
+    blocked = ("import sys\nclass Block:\n    def find_spec(self, name, path=None, target=None):\n"
+               "        if name.split('.')[0] in ('bpy', 'mathutils'):\n            raise ImportError(name)\nsys.meta_path.insert(0, Block())\n")
+    result = subprocess.run([sys.executable, "-c", blocked + scan_part() + "\nassert 'bpy' not in sys.modules\nprint('ok')"], cwd=ROOT, capture_output=True,
+                            text=True)
     assert result.returncode == 0, result.stderr
     assert result.stdout.strip().endswith("ok")
 
@@ -45,9 +47,12 @@ def test_whole_example_runs_with_bpy(tmp_path):
 def test_scan_labels_and_effects_follow_the_arguments():
     v = np.array([[x, y, z] for x in (-10, 10) for y in (-10, 10) for z in (-1.5, 2.5)], float)
     t = np.array([[0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3], [0, 4, 5], [0, 5, 1], [2, 3, 7], [2, 7, 6], [0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5]])
-    ideal = bpy_pipeline.scan({"room": (v, t, "wall", "diffuse", 0.7)}, {"preset": "vlp16", "rotation_hz": 20.0}, effects={"ideal": True, "noise": {"sigma": 0.0}})
-    noisy = bpy_pipeline.scan({"room": (v, t, "wall", "diffuse", 0.7)}, {"preset": "vlp16", "rotation_hz": 20.0}, effects={"ideal": True, "noise": {"sigma": 0.05}}, seed=3)
-    again = bpy_pipeline.scan({"room": (v, t, "wall", "diffuse", 0.7)}, {"preset": "vlp16", "rotation_hz": 20.0}, effects={"ideal": True, "noise": {"sigma": 0.05}}, seed=3)
+    ideal = bpy_pipeline.scan({"room": (v, t, "wall", "diffuse", 0.7)}, {"preset": "vlp16", "rotation_hz": 20.0},
+                              effects={"ideal": True, "noise": {"sigma": 0.0}})
+    noisy = bpy_pipeline.scan({"room": (v, t, "wall", "diffuse", 0.7)}, {"preset": "vlp16", "rotation_hz": 20.0},
+                              effects={"ideal": True, "noise": {"sigma": 0.05}}, seed=3)
+    again = bpy_pipeline.scan({"room": (v, t, "wall", "diffuse", 0.7)}, {"preset": "vlp16", "rotation_hz": 20.0},
+                              effects={"ideal": True, "noise": {"sigma": 0.05}}, seed=3)
     from bpy_pipeline.labels import load_class_table
 
     assert len(ideal) == len(noisy) and set(np.unique(ideal["semantic"])) == {load_class_table().id_of("wall")}

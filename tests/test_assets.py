@@ -24,7 +24,8 @@ def _manifest(tmp_path, entries):
 
 
 def _entry(file: Path, **more):
-    return {"name": file.stem, "kind": "person", "set": "mine", "path": file.name, "sha256": hashlib.sha256(file.read_bytes()).hexdigest(), "licence": "CC0-1.0", **more}
+    return {"name": file.stem, "kind": "person", "set": "mine", "path": file.name, "sha256": hashlib.sha256(file.read_bytes()).hexdigest(),
+            "licence": "CC0-1.0", **more}
 
 
 # ----------------------------------------------------------------------------- pure: the manifest
@@ -99,8 +100,8 @@ def test_asset_sets_stand_upright_at_drawn_heights_with_glass_windows_and_animat
 
     from bpy_pipeline.buffers import MATERIAL_ID
     from bpy_pipeline.config import load_config
-    from bpy_pipeline.export import export_scene
-    from bpy_pipeline.geometry.population import meshes_cross
+    from bpy_pipeline.blender.export import export_scene
+    from bpy_pipeline.population.placer import meshes_cross
     from bpy_pipeline.labels import load_class_table
     from bpy_pipeline.stages.scene import build_frame_scene
 
@@ -109,7 +110,8 @@ def test_asset_sets_stand_upright_at_drawn_heights_with_glass_windows_and_animat
         "person": {"count": 3, "assets": "project_people", "height": {"kind": "uniform", "min": 1.6, "max": 1.9}},
         "robot_arm": {"count": 1, "assets": "project_robots"},
     }
-    config = load_config({"seed": 4, "scene": {"builder": "blend", "path": str(_hall(tmp_path)), "population": population}, "sensor": {"preset": "vlp16", "position": [0, 0, 2.5]}})
+    config = load_config({"seed": 4, "scene": {"builder": "blend", "path": str(_hall(tmp_path)), "population": population},
+                          "sensor": {"preset": "vlp16", "position": [0, 0, 2.5]}})
     keep, poses = {}, set()
     for frame in range(3):
         result = build_frame_scene(config, frame, keep=keep)
@@ -150,7 +152,7 @@ def _lying_person(tmp_path) -> Path:
 
     from bpy_pipeline.geometry import human
     from bpy_pipeline.geometry.objects import person_mesh
-    from bpy_pipeline.scenes.objects import mesh_data
+    from bpy_pipeline.blender.mesh_objects import mesh_data
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     obj = bpy.data.objects.new("walker", mesh_data("walker", *person_mesh(human.neutral_angles(), 1.8)))
@@ -180,7 +182,7 @@ def test_a_wrongly_oriented_asset_is_named_in_one_line_and_its_declared_up_axis_
     _manifest(tmp_path, [_entry(file, up_axis="Z")])
     result = build_frame_scene(config, 0, keep={})
     assert result.info["population"]["person"]["placed"] == 2
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.labels import load_class_table
 
     buffers = export_scene(load_class_table())
@@ -190,7 +192,8 @@ def test_a_wrongly_oriented_asset_is_named_in_one_line_and_its_declared_up_axis_
     out = tmp_path / "out"
     _manifest(tmp_path, [_entry(file)])
     cfg = tmp_path / "c.yaml"
-    cfg.write_text(yaml.safe_dump({"scene": {"builder": "blend", "path": str(hall), "population": population}, "sensor": {"preset": "vlp16", "position": [0, 0, 2.5]}}))
+    cfg.write_text(yaml.safe_dump({"scene": {"builder": "blend", "path": str(hall), "population": population},
+                                   "sensor": {"preset": "vlp16", "position": [0, 0, 2.5]}}))
     run = subprocess.run([sys.executable, str(ROOT / "run.py"), "--config", str(cfg), "--out", str(out)], cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert run.returncode == 2
     lines = [line for line in run.stderr.strip().splitlines() if line.strip()]
@@ -199,14 +202,18 @@ def test_a_wrongly_oriented_asset_is_named_in_one_line_and_its_declared_up_axis_
 
 
 def test_a_missing_set_is_a_config_error_before_blender(tmp_path):
-    result = subprocess.run([sys.executable, str(ROOT / "run.py"), "--out", str(tmp_path / "o"), "--set", "scene.builder=primitives", "--set", "scene.population={car: {count: 1, assets: sports_cars}}"], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    result = subprocess.run([sys.executable, str(ROOT / "run.py"), "--out", str(tmp_path / "o"), "--set", "scene.builder=primitives", "--set",
+                             "scene.population={car: {count: 1, assets: sports_cars}}"], cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert result.returncode == 2
-    assert result.stderr.strip().startswith("error: scene.population.car.assets: no car asset of set 'sports_cars'") and len(result.stderr.strip().splitlines()) == 1
+    assert (
+        result.stderr.strip().startswith("error: scene.population.car.assets: no car asset of set 'sports_cars'")
+        and len(result.stderr.strip().splitlines()) == 1
+    )
 
 
 @pytest.mark.bpy
 def test_a_rig_without_animations_is_posed_within_its_bones_rotation_limits(bpy_scene):
-    from bpy_pipeline.scenes.assets import apply_pose, draw_pose, load_models, _rotation_limits
+    from bpy_pipeline.blender.asset_models import apply_pose, draw_pose, load_models, _rotation_limits
 
     model = load_models("project_people", "person", "test")[0]
     rig = model.armature
@@ -239,7 +246,7 @@ def test_fbx_and_blend_car_files_import_upright_with_their_glass(bpy_scene, tmp_
     """The shipped sedan re-saved as FBX (Blender's exporter, Y up) and as a .blend (Z up), both with up_axis auto."""
     import bpy
 
-    from bpy_pipeline.scenes.assets import load_models
+    from bpy_pipeline.blender.asset_models import load_models
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     bpy.ops.import_scene.gltf(filepath=str(TEST_ASSETS / "car_sedan.glb"))
@@ -264,7 +271,8 @@ def test_asset_frames_are_the_same_whatever_came_before(bpy_scene, tmp_path):
     from bpy_pipeline.plan import run_frames
 
     population = {"car": {"count": 1, "assets": "project_cars"}, "person": {"count": {"min": 1, "max": 4}, "assets": "project_people"}}
-    data = {"seed": 9, "frames": 4, "scene": {"builder": "blend", "path": str(_hall(tmp_path)), "population": population}, "sensor": {"preset": "vlp16", "position": [0, 0, 2.5]}, "output": {"formats": ["ply"], "preview": False}}
+    data = {"seed": 9, "frames": 4, "scene": {"builder": "blend", "path": str(_hall(tmp_path)), "population": population},
+            "sensor": {"preset": "vlp16", "position": [0, 0, 2.5]}, "output": {"formats": ["ply"], "preview": False}}
     config = load_config(data)
     for _ in run_frames(config, tmp_path / "all"):
         pass

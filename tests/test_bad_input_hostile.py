@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from bpy_pipeline import cli
-from bpy_pipeline.__main__ import main
+from bpy_pipeline.cli.commands import main
 from bpy_pipeline.errors import InputError
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -115,7 +115,9 @@ def test_rain_at_300_mm_h_through_a_100_mrad_beam_is_estimated_and_drawn_in_boun
     config = load_config({"sensor": {"preset": "vlp16"}, "effects": {"weather": {"rain": {"rate": 300}, "divergence_mrad": 100}}})
     estimate = estimate_run(config)
     assert estimate.particles > 1e8 and estimate.parts["weather"] > 60  # a hundred million drops, minutes a frame
-    refused("limits.particles", check_limits, estimate, load_config({"sensor": {"preset": "vlp16"}, "effects": {"weather": {"rain": {"rate": 300}, "divergence_mrad": 100}}, "limits": {"particles": 1e8}}))
+    refused("limits.particles", check_limits, estimate, load_config({"sensor": {"preset": "vlp16"},
+                                                                     "effects": {"weather": {"rain": {"rate": 300}, "divergence_mrad": 100}},
+                                                                     "limits": {"particles": 1e8}}))
     check_limits(estimate_run(load_config({"sensor": {"preset": "vlp16"}, "effects": {"weather": {"rain": {"rate": 10}}}})), config)
     detect = threshold_model(config.effects, fitted_models(config.effects.drop)).detection_probability
     r = np.full(400, 100.0)  # 400 returns at 100 m: about 1.7e7 drops in their cones
@@ -196,7 +198,8 @@ def test_api_calls_with_wrong_types_raise_input_error_and_commit_nothing(what, t
 def test_uint64_labels_are_refused_not_cut(tmp_path, capsys):
     scan, _ = npy_frame(tmp_path / "real")
     np.save(tmp_path / "big.npy", np.full(2000, 2**40 + 10, np.uint64))
-    code, err = command(capsys, "convert", str(scan), "--labels", str(tmp_path / "big.npy"), "--label-space", "raw", "--to", "vlp16", "--out", str(tmp_path / "out"))
+    code, err = command(capsys, "convert", str(scan), "--labels", str(tmp_path / "big.npy"), "--label-space", "raw", "--to", "vlp16", "--out",
+                        str(tmp_path / "out"))
     assert code == 2
     one_line(err, "do not fit SemanticKITTI's uint32")
 
@@ -215,7 +218,8 @@ def test_from_a_preset_whose_rings_are_not_the_scans_is_refused(real_scan, name,
     assert not (tmp_path / "out").exists()
 
 
-@pytest.mark.parametrize("name, preset", [("kitti_hdl64e_000001.bin", "hdl64e"), ("semantickitti_seq01_000000_points.npy", "hdl64e"), ("nuscenes_hdl32e_sweep.bin", "hdl32e")])
+@pytest.mark.parametrize("name, preset", [("kitti_hdl64e_000001.bin", "hdl64e"), ("semantickitti_seq01_000000_points.npy", "hdl64e"),
+                                          ("nuscenes_hdl32e_sweep.bin", "hdl32e")])
 def test_from_the_scans_own_preset_still_converts(real_scan, name, preset, tmp_path, capsys):
     code, err = command(capsys, "convert", str(real_scan(name)), "--from", preset, "--to", "vlp16", "--out", str(tmp_path / "out"))
     assert code == 0, err
@@ -287,11 +291,13 @@ def test_a_scan_with_nan_rows_matches_its_own_labels(tmp_path, capsys):
     labels = np.full(3000, 40, np.uint32)
     labels[:1500] = 10
     labels.tofile(tmp_path / "scan.label")
-    code, err = command(capsys, "convert", str(scan), "--format", "kitti", "--labels", str(tmp_path / "scan.label"), "--from", "hdl64e", "--to", "vlp16", "--out", str(tmp_path / "out"))
+    code, err = command(capsys, "convert", str(scan), "--format", "kitti", "--labels", str(tmp_path / "scan.label"), "--from", "hdl64e", "--to", "vlp16",
+                        "--out", str(tmp_path / "out"))
     assert code == 0, err
     short = tmp_path / "short.label"
     labels[:2989].tofile(short)
-    code, err = command(capsys, "convert", str(scan), "--format", "kitti", "--labels", str(short), "--from", "hdl64e", "--to", "vlp16", "--out", str(tmp_path / "out2"))
+    code, err = command(capsys, "convert", str(scan), "--format", "kitti", "--labels", str(short), "--from", "hdl64e", "--to", "vlp16", "--out",
+                        str(tmp_path / "out2"))
     assert code == 2
     one_line(err, "holds 2989 labels for the scan's 3000 points")
 
@@ -304,7 +310,7 @@ def test_fit_intensity_scale_zero_prints_one_line_not_numpy_warnings(tmp_path):
 
 
 # ----------------------------------------------------------------------------- 7. optional dependencies
-BLOCK = "import sys; sys.modules.update({name: None for name in ARGS}); from bpy_pipeline.__main__ import main; sys.exit(main(sys.argv[1:]))"
+BLOCK = "import sys; sys.modules.update({name: None for name in ARGS}); from bpy_pipeline.cli.commands import main; sys.exit(main(sys.argv[1:]))"
 
 
 @pytest.mark.parametrize("blocked, argv, fragment", [

@@ -71,7 +71,8 @@ CLI_ROWS = [
     ("frames 2**63", ["--set", f"frames={2**63}"], "frames: must be 1 .. 1,000,000,000"),
     ("frames 1e9 with the last --shard", ["--frames", str(10**9), "--shard", "9/10"], "limits.seconds"),
     ("100k people in the garage", ["--set", "scene={builder: parking, population: {person: {count: 100000}}}"], "limits."),
-    ("100k primitive shapes", ["--set", "scene={builder: primitives, shapes: [" + ", ".join(["{type: box}"] * 100000) + "]}"], "holds more than 100,000 values"),
+    ("100k primitive shapes", ["--set", "scene={builder: primitives, shapes: [" + ", ".join(["{type: box}"] * 100000) + "]}"],
+     "holds more than 100,000 values"),
     ("12k primitive shapes", ["--set", "scene={builder: primitives, shapes: [" + ", ".join(["{type: box}"] * 12000) + "]}"], "limits.objects"),
     ("a 3.7e8-ray sensor", ["--set", "sensor.sampling_factor=4"], "limits.rays_per_frame"),
     ("sphere segments 1e6", ["--set", "scene={builder: primitives, shapes: [{type: sphere, segments: 1000000}]}"], "limits.triangles"),
@@ -86,18 +87,24 @@ CLI_ROWS = [
     ("limits zero", ["--set", "limits.seconds=0"], "limits.seconds: must be > 0"),
     ("frames 0", ["--frames", "0"], "frames: must be 1"),
     # a sensor the builder cannot keep 0.5 m clear of its solids (docs/builders.md, what every builder guarantees)
-    ("railway stations in the masts' line", ["--set", "scene={builder: railway, supports: {layout: single, side: left}, stations: {side: left, offset: 3.5}}"], "scene.stations.offset: stations 3.5 m beyond the outer track stand in the masts' line"),
-    ("railway stations in the fence's line", ["--set", "scene={builder: railway, trackside: {fences: true, fence_offset: 4.2}}"], "scene.stations.offset: stations 4.0 m beyond the outer track stand in the fence's line"),
-    ("parking sensor 0.2 m under the ceiling", ["--set", "scene={builder: parking, sensor_height: 2.4}"], "scene.sensor_height: must be below the ceiling (2.6 m) by at least 0.5 m"),
+    ("railway stations in the masts' line", ["--set", "scene={builder: railway, supports: {layout: single, side: left}, stations: {side: left, offset: 3.5}}"],
+     "scene.stations.offset: stations 3.5 m beyond the outer track stand in the masts' line"),
+    ("railway stations in the fence's line", ["--set", "scene={builder: railway, trackside: {fences: true, fence_offset: 4.2}}"],
+     "scene.stations.offset: stations 4.0 m beyond the outer track stand in the fence's line"),
+    ("parking sensor 0.2 m under the ceiling", ["--set", "scene={builder: parking, sensor_height: 2.4}"],
+     "scene.sensor_height: must be below the ceiling (2.6 m) by at least 0.5 m"),
     ("parking driveway narrower than the robot's clearance", ["--set", "scene={builder: parking, driveway_width: 0.8}"], "scene.driveway_width: at least 1 m"),
-    ("hall desks past its walls", ["--set", "scene={builder: industrial_hall, desks_per_row: 9}"], "scene.desks_per_row: 2 row(s) of 9 desk(s) and 3 shelf rack(s) do not fit"),
-    ("hall sensor on a shelf", ["--set", "scene={builder: industrial_hall, width: 5, sensor_height: 2.5}"], "scene.sensor_height: the sensor 2.5 m above the hall's centre comes within 0.5 m of shelf_0"),
+    ("hall desks past its walls", ["--set", "scene={builder: industrial_hall, desks_per_row: 9}"],
+     "scene.desks_per_row: 2 row(s) of 9 desk(s) and 3 shelf rack(s) do not fit"),
+    ("hall sensor on a shelf", ["--set", "scene={builder: industrial_hall, width: 5, sensor_height: 2.5}"],
+     "scene.sensor_height: the sensor 2.5 m above the hall's centre comes within 0.5 m of shelf_0"),
 ]
 
 
 @pytest.mark.parametrize("what, argv, fragment", CLI_ROWS, ids=[r[0] for r in CLI_ROWS])
 def test_command_line_row(what, argv, fragment, capsys, tmp_path):
-    code, err = run_cli(capsys, "--out", str(tmp_path / "out") if "--out" not in argv else argv[argv.index("--out") + 1], *[a for i, a in enumerate(argv) if not (a == "--out" or (i and argv[i - 1] == "--out"))])
+    code, err = run_cli(capsys, "--out", str(tmp_path / "out") if "--out" not in argv else argv[argv.index("--out") + 1],
+                        *[a for i, a in enumerate(argv) if not (a == "--out" or (i and argv[i - 1] == "--out"))])
     assert code == 2, err
     one_line(err, fragment)
     assert not (tmp_path / "out").exists(), "refused before any work: nothing written"
@@ -172,7 +179,7 @@ def test_argparse_errors_are_one_line(argv, fragment):
 
 @pytest.mark.parametrize("option", [["--fields", "0"], ["--intensity-field", "9"], ["--rings", "0"]])
 def test_fit_options_that_cannot_read_a_scan(option, tmp_path, capsys):
-    from bpy_pipeline.__main__ import main
+    from bpy_pipeline.cli.commands import main
 
     scan = write(tmp_path / "s.bin", np.zeros((32 * 4, 5), np.float32).tobytes())
     code = main(["fit", str(scan), "--out", str(tmp_path / "m.yaml"), *option])
@@ -420,7 +427,8 @@ def test_a_held_lock_is_refused_naming_its_holder(tmp_path):
     from bpy_pipeline.dataset import release_lock, take_lock
 
     lock = tmp_path / ".lock"
-    holder = subprocess.Popen([PY, "-c", f"import sys, time; sys.path.insert(0, {str(ROOT)!r}); from bpy_pipeline.dataset import take_lock; from pathlib import Path; "
+    holder = subprocess.Popen([PY, "-c",
+                               f"import sys, time; sys.path.insert(0, {str(ROOT)!r}); from bpy_pipeline.dataset import take_lock; from pathlib import Path; "
                                f"take_lock(Path({str(lock)!r})); print('held', flush=True); time.sleep(60)"], stdout=subprocess.PIPE, text=True)
     try:
         assert holder.stdout.readline().strip() == "held"
@@ -485,7 +493,8 @@ def test_sigterm_is_one_line_exit_143_lock_released_frames_kept(tmp_path):
     pytest.importorskip("bpy")
     out = tmp_path / "out"
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
-    proc = subprocess.Popen([PY, "run.py", "--set", "scene.builder=parking", "--frames", "200", "--out", str(out)], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    proc = subprocess.Popen([PY, "run.py", "--set", "scene.builder=parking", "--frames", "200", "--out", str(out)], cwd=ROOT, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, env=env)
     deadline = time.time() + 120
     while time.time() < deadline and len(list((out / "records").glob("*.json"))) < 2:
         time.sleep(0.1)
@@ -497,5 +506,6 @@ def test_sigterm_is_one_line_exit_143_lock_released_frames_kept(tmp_path):
     assert not (out / ".lock").exists()
     kept = len(list((out / "records").glob("*.json")))
     assert kept >= 2
-    result = subprocess_run([PY, "run.py", "--set", "scene.builder=parking", "--frames", "200", "--out", str(out), "--frames-range", f"0:{kept}", "--resume"], timeout=300)
+    result = subprocess_run([PY, "run.py", "--set", "scene.builder=parking", "--frames", "200", "--out", str(out), "--frames-range", f"0:{kept}", "--resume"],
+                            timeout=300)
     assert result.returncode == 0, result.stderr

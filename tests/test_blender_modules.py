@@ -1,6 +1,6 @@
 """Blender-side modules no other test imports by name: the blend and primitives builders' scenes, the shared box
-prototypes (scenes/box_nodes.py), the hall's, the street's scatter and planting groups called directly, and the
-population's standing places (scenes/population.py). Every mesh is read as the export reads it (the depsgraph)."""
+prototypes (blender/box_nodes.py), the hall's, the street's scatter and planting groups called directly, and the
+population's standing places (population/scene.py). Every mesh is read as the export reads it (the depsgraph)."""
 
 import os
 
@@ -28,7 +28,7 @@ def test_blend_builder_opens_the_file_once_and_knows_when_it_changed(empty, tmp_
     from bpy_pipeline.builders.blend import params as blend_params
     from bpy_pipeline.builders.blend import scene as blend_scene
     from bpy_pipeline.geometry import primitives
-    from bpy_pipeline.scenes.objects import mesh_object, scene_collection
+    from bpy_pipeline.blender.mesh_objects import mesh_object, scene_collection
 
     bpy = empty
     mesh_object("users_cube", primitives.box(1.0, 1.0, 1.0), scene_collection())
@@ -68,8 +68,8 @@ def test_the_hall_group_builds_a_desk_on_the_shared_unit_box_as_the_pure_desk(em
     from bpy_pipeline.builders.industrial_hall import hall_nodes
     from bpy_pipeline.builders.industrial_hall.params import IndustrialHallScene
     from bpy_pipeline.geometry.indoor import desk
-    from bpy_pipeline.scenes import box_nodes
-    from bpy_pipeline.scenes.objects import scene_collection
+    from bpy_pipeline.blender import box_nodes
+    from bpy_pipeline.blender.mesh_objects import scene_collection
 
     collection = scene_collection()
     prototypes = box_nodes.prototypes(collection)
@@ -92,7 +92,7 @@ def test_scatter_points_carry_each_items_transform_and_the_group_places_the_pure
     from bpy_pipeline.builders.street import scatter_nodes
     from bpy_pipeline.builders.street.dressing import Scatter
     from bpy_pipeline.geometry import primitives
-    from bpy_pipeline.scenes.objects import scene_collection
+    from bpy_pipeline.blender.mesh_objects import scene_collection
 
     scatter = Scatter([primitives.box(0.4, 0.4, 1.0), primitives.cylinder(0.2, 2.0, 8)])
     scatter.add(0, (1.0, 2.0, 0.0), 0.3, (1.0, 2.0, 1.0))
@@ -120,10 +120,10 @@ def test_the_planting_group_has_its_documented_inputs_and_is_made_once(empty):
 
 def test_standing_places_prefer_walkable_classes_and_else_detect_floors():
     from bpy_pipeline.buffers import ObjectTable, SceneBuffers
-    from bpy_pipeline.builders.population import PlacementRules
+    from bpy_pipeline.population.params import PlacementRules
     from bpy_pipeline.geometry import primitives
     from bpy_pipeline.labels import load_class_table
-    from bpy_pipeline.scenes.population import find_places
+    from bpy_pipeline.population.scene import find_places
 
     table = load_class_table()
     floor = primitives.plane(10.0, 10.0)

@@ -56,9 +56,11 @@ def test_coverage_of_all_objects_at_once_is_each_objects_coverage():
         assert expected.any() and not expected.all()
         assert np.array_equal(covered_by_owner(points, owner, samples, sample_owner, count, cell), expected)
         assert np.array_equal(covered_by_owner(points, owner, samples, sample_owner, count, cell, where=where), expected & where)
-        assert np.array_equal(covered_by_owner(points, owner, samples, sample_owner, count, cell, where=where, distance=np.linalg.norm(samples, axis=1)), expected & where)
+        assert np.array_equal(covered_by_owner(points, owner, samples, sample_owner, count, cell, where=where, distance=np.linalg.norm(samples, axis=1)),
+                              expected & where)
         every = np.ones(len(samples), bool)  # a mask of all True takes the way of no mask
-        assert np.array_equal(covered_by_owner(points, owner, samples, sample_owner, count, cell, where=every, distance=np.linalg.norm(samples, axis=1)), expected)
+        assert np.array_equal(covered_by_owner(points, owner, samples, sample_owner, count, cell, where=every, distance=np.linalg.norm(samples, axis=1)),
+                              expected)
 
 
 def test_coverage_of_small_objects_across_the_seam_and_at_a_pole():
@@ -84,9 +86,11 @@ def test_coverage_of_small_objects_across_the_seam_and_at_a_pole():
         assert expected[sample_owner == 0].any() and expected[sample_owner == 1].any() and expected[sample_owner == 2].any()
         assert not expected[sample_owner >= count - 3].any()
         assert np.array_equal(covered_by_owner(points, owner, samples, sample_owner, count, cell), expected)
-        assert np.array_equal(covered_by_owner(points, owner, samples, sample_owner, count, cell, where=where, distance=np.linalg.norm(samples, axis=1)), expected & where)
+        assert np.array_equal(covered_by_owner(points, owner, samples, sample_owner, count, cell, where=where, distance=np.linalg.norm(samples, axis=1)),
+                              expected & where)
         every = np.ones(len(samples), bool)  # a mask of all True takes the way of no mask
-        assert np.array_equal(covered_by_owner(points, owner, samples, sample_owner, count, cell, where=every, distance=np.linalg.norm(samples, axis=1)), expected)
+        assert np.array_equal(covered_by_owner(points, owner, samples, sample_owner, count, cell, where=every, distance=np.linalg.norm(samples, axis=1)),
+                              expected)
 
 
 def _surface_samples_level_by_level(triangles, spacing):
@@ -186,7 +190,8 @@ def test_the_placers_occlusion_tests_of_every_box_at_once_are_one_box_at_a_time(
         with np.errstate(divide="ignore", invalid="ignore"):
             for box in placer.boxes:
                 expected |= _ray_box_distance(placer.sensor, directions, box.centre, box_axes(box.yaw), box.half) < distance - 1e-6
-            hidden = [_ray_box_distance(placer.sensor, _rays(placer, box)[0], candidate.centre, box_axes(candidate.yaw), candidate.half) < _rays(placer, box)[1] - 1e-6 for box in placer.boxes]
+            hidden = [_ray_box_distance(placer.sensor, _rays(placer, box)[0], candidate.centre, box_axes(candidate.yaw),
+                                        candidate.half) < _rays(placer, box)[1] - 1e-6 for box in placer.boxes]
         assert np.array_equal(placer._blocked(directions, distance, placer.boxes), expected)
         got = placer._hidden_by(candidate)
         assert len(got) == len(placer.boxes) and all(np.array_equal(a, b) for a, b in zip(got, hidden))
@@ -213,7 +218,8 @@ def _capsule_ring_by_ring(a, b, radius, segments=10, rings=3, flat_start=False):
     v = np.cross(w, u)
     phi = np.linspace(0.0, 2 * np.pi, segments, endpoint=False)
     circle = np.cos(phi)[:, None] * u + np.sin(phi)[:, None] * v
-    rows = [(a, 0.0, radius)] if flat_start else [(a, -radius * np.cos(np.pi / 2 * k / (rings + 1)), radius * np.sin(np.pi / 2 * k / (rings + 1))) for k in range(1, rings + 1)] + [(a, 0.0, radius)]
+    rows = [(a, 0.0, radius)] if flat_start else [(a, -radius * np.cos(np.pi / 2 * k / (rings + 1)),
+                                                   radius * np.sin(np.pi / 2 * k / (rings + 1))) for k in range(1, rings + 1)] + [(a, 0.0, radius)]
     rows += [(b, 0.0, radius)] + [(b, radius * np.cos(np.pi / 2 * k / (rings + 1)), radius * np.sin(np.pi / 2 * k / (rings + 1))) for k in range(rings, 0, -1)]
     vertices = np.concatenate([[a if flat_start else a - radius * w], *[c + o * w + r * circle for c, o, r in rows], [b + radius * w]])
     j = np.arange(segments)
@@ -496,7 +502,8 @@ def test_suspect_rays_moved_four_ways_in_one_query_are_one_query_a_way():
     """:meth:`RayCaster.retrace` asks Embree once for the four moved copies of every suspect ray; the answer
     is what four queries, one a way in order, keep (a later way wins only when strictly nearer)."""
     vertices, triangles = primitives.uv_sphere(1.0, 24)
-    buffers = SceneBuffers.from_meshes({"ball": (vertices, triangles), "wall": (np.array([[3.0, -5, -5], [3, 5, -5], [3, 5, 5], [3, -5, 5]]), np.array([[0, 2, 1], [0, 3, 2]]))})
+    buffers = SceneBuffers.from_meshes({"ball": (vertices, triangles),
+                                        "wall": (np.array([[3.0, -5, -5], [3, 5, -5], [3, 5, 5], [3, -5, 5]]), np.array([[0, 2, 1], [0, 3, 2]]))})
     caster = RayCaster(buffers, frame=np.eye(4), threads=1)
     rng = np.random.default_rng(3)
     n = 400
@@ -538,7 +545,8 @@ def test_objects_wholly_covered_get_the_truncation_their_samples_give(monkeypatc
 
     sensor = resolve_sensor({"preset": "vlp16", "rotation_hz": 10.0}, "sensor")
     rng = np.random.default_rng(3)
-    placed = [(8.0, 0.0, 0.0), (-9.0, 0.0, 0.0), (-9.0, 0.4, 1.2), (4.0, 3.0, 0.7), (2.5, -1.0, 0.3), (98.0, 5.0, 0.1), (0.0, 0.0, 2.5), (1.2, 0.2, 0.0), (0.6, 0.0, 0.0), (150.0, 0.0, 0.0)]
+    placed = [(8.0, 0.0, 0.0), (-9.0, 0.0, 0.0), (-9.0, 0.4, 1.2), (4.0, 3.0, 0.7), (2.5, -1.0, 0.3), (98.0, 5.0, 0.1), (0.0, 0.0, 2.5), (1.2, 0.2, 0.0),
+              (0.6, 0.0, 0.0), (150.0, 0.0, 0.0)]
     placed += [(*rng.uniform(-40, 40, 2), rng.uniform(-np.pi, np.pi)) for _ in range(25)]
     near = rng.uniform(2.5, 9.0, 40), rng.uniform(-np.pi, np.pi, 40)  # where the lowest and highest beams cut cars
     placed += [(r * np.cos(a), r * np.sin(a), yaw) for r, a, yaw in zip(*near, rng.uniform(-np.pi, np.pi, 40))]
@@ -552,12 +560,14 @@ def test_objects_wholly_covered_get_the_truncation_their_samples_give(monkeypatc
         triangles.append(t + 8 * row)
         owner.append(np.full(len(t), row, np.int32))
     k = len(placed)
-    objects = ObjectTable([f"car{i}" for i in range(k)], [""] * k, ["car"] * k, np.zeros(k, np.uint16), np.arange(1, k + 1, dtype=np.uint32), np.zeros(k, np.uint8), np.full(k, 0.5, np.float32))
+    objects = ObjectTable([f"car{i}" for i in range(k)], [""] * k, ["car"] * k, np.zeros(k, np.uint16), np.arange(1, k + 1, dtype=np.uint32),
+                          np.zeros(k, np.uint8), np.full(k, 0.5, np.float32))
     buffers = SceneBuffers(np.concatenate(vertices), np.concatenate(triangles).astype(np.int32), np.concatenate(owner), objects)
     shortcut = []
     found = vis.wholly_covered
     narrow = resolve_sensor({"preset": "vlp16", "rotation_hz": 10.0, "horizontal_fov_deg": [-60.0, 75.0]}, "sensor")  # cars cut at its sides too
-    level, low, tilted = (pose_matrix([0.0, 0.0, 1.6], [0.0, 0.0, 0.0]), pose_matrix([0.0, 0.0, 0.3], [0.0, 0.0, 0.0]), pose_matrix([0.3, -0.2, 1.6], [4.0, -3.0, 30.0]))
+    level, low, tilted = (pose_matrix([0.0, 0.0, 1.6], [0.0, 0.0, 0.0]), pose_matrix([0.0, 0.0, 0.3], [0.0, 0.0, 0.0]),
+                          pose_matrix([0.3, -0.2, 1.6], [4.0, -3.0, 30.0]))
     for sensor, pose in ((sensor, level), (sensor, low), (sensor, tilted), (narrow, level)):
         ours, reference = fit_boxes(buffers, ["car"]), fit_boxes(buffers, ["car"])
         monkeypatch.setattr(vis, "wholly_covered", lambda *a: shortcut.append(found(*a)) or shortcut[-1])

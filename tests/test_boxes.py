@@ -37,7 +37,8 @@ def scene(parts):
     k = len(parts)
     material = np.array([p[4] if len(p) > 4 else 0 for p in parts], np.uint8)
     reflectivity = np.array([p[5] if len(p) > 5 else 0.5 for p in parts], np.float32)
-    objects = ObjectTable([p[0] for p in parts], [""] * k, [p[1] for p in parts], np.zeros(k, np.uint16), np.array([p[2] for p in parts], np.uint32), material, reflectivity)
+    objects = ObjectTable([p[0] for p in parts], [""] * k, [p[1] for p in parts], np.zeros(k, np.uint16), np.array([p[2] for p in parts], np.uint32), material,
+                          reflectivity)
     return SceneBuffers(np.concatenate(vertices), np.concatenate(triangles).astype(np.int32), np.concatenate(owner), objects)
 
 
@@ -208,8 +209,13 @@ def test_kitti_and_openpcdet_files_round_trip(tmp_path):
     boxes = sample_boxes(np.random.default_rng(2))
     points = box_points(boxes)
     lut = np.zeros((64, 3), np.uint8)
-    written = kitti.write_frame(tmp_path, "000007", points, boxes, CameraConfig(), lut, {"person": "Pedestrian"}) + openpcdet.write_frame(tmp_path, "000007", points, boxes, {"person": "Pedestrian"})
-    assert {p.relative_to(tmp_path).as_posix() for p in written} == {"kitti/training/label_2/000007.txt", "kitti/training/calib/000007.txt", "kitti/training/velodyne/000007.bin", "kitti/training/planes/000007.txt", "kitti/training/image_2/000007.png", "openpcdet/labels/000007.txt", "openpcdet/points/000007.npy"}
+    written = kitti.write_frame(tmp_path, "000007", points, boxes, CameraConfig(), lut, {"person": "Pedestrian"}) + openpcdet.write_frame(
+        tmp_path, "000007", points, boxes, {"person": "Pedestrian"}
+    )
+    assert {p.relative_to(tmp_path).as_posix() for p in written} == {"kitti/training/label_2/000007.txt", "kitti/training/calib/000007.txt",
+                                                                     "kitti/training/velodyne/000007.bin", "kitti/training/planes/000007.txt",
+                                                                     "kitti/training/image_2/000007.png", "openpcdet/labels/000007.txt",
+                                                                     "openpcdet/points/000007.npy"}
     tr = np.array((tmp_path / "kitti/training/calib/000007.txt").read_text().splitlines()[5].split()[1:], float).reshape(3, 4)
     read_kitti = bx.read_kitti_labels(tmp_path / "kitti/training/label_2/000007.txt", tr)
     pcdet = bx.read_openpcdet_labels(tmp_path / "openpcdet/labels/000007.txt")
@@ -266,7 +272,8 @@ def test_pipeline_writes_boxes_that_hold_the_hall_points(tmp_path):
     from bpy_pipeline.plan import run
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
-    config = load_config(None, ["scene.builder=industrial_hall", "frames=2", "sensor.columns=1024", "output.formats=[ply]", "output.preview=false", "sensor.reflector.edge_drop.mask=none", "effects.ideal=true"])
+    config = load_config(None, ["scene.builder=industrial_hall", "frames=2", "sensor.columns=1024", "output.formats=[ply]", "output.preview=false",
+                                "sensor.reflector.edge_drop.mask=none", "effects.ideal=true"])
     run(config, tmp_path, log=lambda *_: None)
     manifest = read_dataset(tmp_path)
     checked = 0
@@ -310,7 +317,8 @@ def test_visible_counts_from_the_scans_direct_returns_are_the_traced_ones(kernel
     surfaces = MirrorGlassRules(mirror_return_deg=0.5, glass_return_deg=5.0, glass_reflect=glass_reflect)
     rays = list(iter_pattern(SENSOR, 1 << 14))
     caster = RayCaster(buffers, frame=POSE)
-    points = np.concatenate([p for p, _ in scan_chunks(caster, buffers, rays, POSE, SENSOR.min_range, SENSOR.max_range, max_bounces=3, surfaces=surfaces, rng=np.random.default_rng(0))])
+    points = np.concatenate([p for p, _ in scan_chunks(caster, buffers, rays, POSE, SENSOR.min_range, SENSOR.max_range, max_bounces=3, surfaces=surfaces,
+                                                       rng=np.random.default_rng(0))])
     ghosts = points["bounces"] > 0
     assert (ghosts & (points["instance"] == 4)).sum() > 1000  # the mirror's returns
     traced = gb.fit_boxes(buffers, ["person", "pillar", "wall"], {k: p.yaw for k, p in people.items()})
@@ -346,7 +354,8 @@ def test_a_box_short_of_its_instance_keeps_the_trace():
     from bpy_pipeline.stages.annotate import boxes_hold_their_instances
 
     buffers, people = people_and_pillar()
-    whole, _ = people_and_pillar([("cart", "motorcycle", 10, upright_box((1.0, 1.6, 1.0), (8.0, 1.6), 0.0))])  # beside person 10, outside its box's sphere, its instance
+    # beside person 10, outside its box's sphere, its instance
+    whole, _ = people_and_pillar([("cart", "motorcycle", 10, upright_box((1.0, 1.6, 1.0), (8.0, 1.6), 0.0))])
     classes = ["person", "pillar", "wall"]
     boxes = gb.fit_boxes(whole, classes, {k: p.yaw for k, p in people.items()})
     assert not boxes_hold_their_instances(whole, boxes, classes)
@@ -356,7 +365,8 @@ def test_a_box_short_of_its_instance_keeps_the_trace():
     points = np.concatenate([p for p, _ in scan_chunks(caster, whole, rays, POSE, SENSOR.min_range, SENSOR.max_range)])
     traced, counted = boxes.copy(), boxes.copy()
     visibility(whole, traced, rays, POSE, SENSOR.min_range, SENSOR.max_range, cell_deg=2.5, caster=caster)
-    visibility(whole, counted, rays, POSE, SENSOR.min_range, SENSOR.max_range, cell_deg=2.5, caster=caster, direct_returns=points["instance"][points["bounces"] == 0].astype(np.int64))
+    visibility(whole, counted, rays, POSE, SENSOR.min_range, SENSOR.max_range, cell_deg=2.5, caster=caster,
+               direct_returns=points["instance"][points["bounces"] == 0].astype(np.int64))
     ten = boxes["instance"] == 10
     assert counted["visible"][ten] > traced["visible"][ten]  # why the guard is there
     # the annotate stage's boxes with the scan's returns given are the trace's: it keeps the trace for this scene
@@ -364,7 +374,8 @@ def test_a_box_short_of_its_instance_keeps_the_trace():
     from bpy_pipeline.stages.annotate import world_boxes
 
     config = load_config(None, ["sensor.preset=vlp16", "output.boxes.formats=[kitti]", "output.boxes.classes=[person]"])
-    given = world_boxes(whole, config, POSE, points, {k: p.yaw for k, p in people.items()}, caster=caster, direct_returns=points["instance"][points["bounces"] == 0].astype(np.int64))
+    given = world_boxes(whole, config, POSE, points, {k: p.yaw for k, p in people.items()}, caster=caster,
+                        direct_returns=points["instance"][points["bounces"] == 0].astype(np.int64))
     plain = world_boxes(whole, config, POSE, points, {k: p.yaw for k, p in people.items()}, caster=caster)
     assert len(given) == 3 and given.tobytes() == plain.tobytes()
 
@@ -462,7 +473,8 @@ def test_dont_care_boxes_are_kitti_regions_after_the_boxes():
     kinds = [line.split()[0] for line in lines]
     assert kinds == ["Pedestrian", "Misc", "Pedestrian", "DontCare", "DontCare"]  # the boxed objects first, as the loaders need
     fields = lines[-1].split()
-    assert fields[1:4] == ["-1", "-1", "-10"] and fields[8:] == ["-1", "-1", "-1", "-1000", "-1000", "-1000", "-10"] and float(fields[6]) >= float(fields[4]) >= 0
+    assert fields[1:4] == ["-1", "-1", "-10"] and fields[8:] == ["-1", "-1", "-1", "-1000", "-1000", "-1000",
+                                                                 "-10"] and float(fields[6]) >= float(fields[4]) >= 0
 
 
 def test_kitti_difficulty_is_what_both_samplers_keep():

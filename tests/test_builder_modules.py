@@ -115,7 +115,8 @@ def test_fence_posts_and_the_platform_follow_their_parameters(railway):
     params, layout = railway
     side = dataclasses.replace(params.trackside, fence_post_spacing=5.0, platform_length=40.0)
     v, t = trackside.fence(layout.alignment, layout.section.surface, side, 8.0)
-    assert len(t) > 0 and np.isclose(v[:, 2].max() - layout.alignment.point(np.zeros(1))[0, 2] - float(layout.section.surface(8.0)), side.fence_height, atol=0.05)
+    assert len(t) > 0 and np.isclose(v[:, 2].max() - layout.alignment.point(np.zeros(1))[0, 2] - float(layout.section.surface(8.0)), side.fence_height,
+                                     atol=0.05)
     nearest = float(layout.section.offsets[-1])
     pv, _ = trackside.platform(layout.alignment, layout.section.surface, side, layout.section.rail_top, nearest)
     assert np.isclose(pv[:, 2].max() - layout.alignment.point(np.zeros(1))[0, 2], layout.section.rail_top + side.platform_height, atol=1e-6)

@@ -51,7 +51,8 @@ def test_every_body_is_a_valid_car_in_its_box_with_glass(body):
     for name, (v, t) in parts.items():
         check_mesh(v, t, name)
         assert len(t) > 0
-        assert (v.min(axis=0) >= [-size[0] / 2, -size[1] / 2 - 0.01, -1e-9]).all() and (v.max(axis=0) <= [size[0] / 2, size[1] / 2 + 0.01, size[2] + 1e-9]).all()
+        assert (v.min(axis=0) >= [-size[0] / 2, -size[1] / 2 - 0.01,
+                                  -1e-9]).all() and (v.max(axis=0) <= [size[0] / 2, size[1] / 2 + 0.01, size[2] + 1e-9]).all()
     made = car_object(np.random.default_rng(0), None, "all", BODIES.index(body))
     assert [p.material for p in made] == ["diffuse", "glass", "diffuse", "diffuse"]
     v = np.concatenate([p.vertices for p in made])

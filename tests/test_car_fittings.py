@@ -78,7 +78,8 @@ def test_a_street_vehicle_tags_its_fittings_and_draws_nothing_for_them():
 
 BUILDERS = {  # config overrides whose scene has procedural cars, and the classes those cars take
     "parking": (["scene.builder=parking", "scene.cars={kind: normal, mean: 4, std: 0, min: 0, max: 40}"], {"car"}),
-    "street": (["scene.builder=street", "scene.vehicles={kind: normal, mean: 8, std: 0, min: 0, max: 40}", "scene.parked={kind: normal, mean: 6, std: 0, min: 0, max: 40}"],
+    "street": (["scene.builder=street", "scene.vehicles={kind: normal, mean: 8, std: 0, min: 0, max: 40}",
+                "scene.parked={kind: normal, mean: 6, std: 0, min: 0, max: 40}"],
                set(street.VEHICLES)),
     "population": (["scene.builder=parking", "scene.cars={kind: normal, mean: 0, std: 0, min: 0, max: 0}", "scene.population={car: {count: 3}}"], {"car"}),
 }
@@ -89,7 +90,7 @@ OFF = {"parking": "scene.car_fittings=false", "street": "scene.car_fittings=fals
 @pytest.mark.parametrize("builder", sorted(BUILDERS))
 def test_every_builders_cars_carry_plates_and_lamps_inside_their_boxes(bpy_scene, builder):
     from bpy_pipeline.config import load_config
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.geometry.boxes import fit_boxes
     from bpy_pipeline.labels import load_class_table
     from bpy_pipeline.lidar.effects.materials import model_id
@@ -135,7 +136,7 @@ def test_a_parking_cars_plates_read_the_retroreflectors_value_with_material_mode
     ``effects.materials.objects`` they read above every body point and are lost only at grazing entrance
     (the model's 60 degrees); without, they read as the diffuse 0.8 they are tagged."""
     from bpy_pipeline.config import load_config
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.labels import load_class_table
     from bpy_pipeline.lidar.effects.materials import model_id
     from bpy_pipeline.frame import frame_rng

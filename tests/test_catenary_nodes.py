@@ -24,7 +24,10 @@ def excess(blender: np.ndarray, pure: np.ndarray) -> float:
     (Blender holds the ends and evaluates fields in float32); <= 0 when every point is within."""
     assert blender.shape == pure.shape, (blender.shape, pure.shape)
     allowed = 1e-6 + ULPS * EPS32 * np.abs(pure).max(axis=1, keepdims=True)
-    print(f"max |blender - pure| {np.abs(blender - pure).max(initial=0):.3g} m, in float32 steps of the coordinate {(np.abs(blender - pure) / (EPS32 * np.abs(pure).max(axis=1, keepdims=True))).max(initial=0):.2f}")
+    print(
+        f"max |blender - pure| {np.abs(blender - pure).max(initial=0):.3g} m, in float32 steps of the coordinate "
+        f"{(np.abs(blender - pure) / (EPS32 * np.abs(pure).max(axis=1, keepdims=True))).max(initial=0):.2f}"
+    )
     return float((np.abs(blender - pure) - allowed).max(initial=-1.0))
 
 
@@ -46,7 +49,7 @@ def evaluated(obj) -> tuple[np.ndarray, np.ndarray]:
 def set_input(obj, name, value):
     import bpy
 
-    from bpy_pipeline.compat import set_modifier_input
+    from bpy_pipeline.blender.compat import set_modifier_input
 
     set_modifier_input(obj.modifiers[0], name, value)  # what a user does in the modifier panel
     obj.update_tag()
@@ -60,17 +63,18 @@ def railway():
 
     from bpy_pipeline.config import load_config
     from bpy_pipeline.frame import frame_rng
-    from bpy_pipeline.scenes import build_scene
+    from bpy_pipeline.blender import build_scene
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
-    config = load_config(None, ["scene.builder=railway", "scene.catenary.double_contact_probability=1", "scene.catenary.feeders=true", "scene.catenary.earth_wire=true"])
+    config = load_config(None, ["scene.builder=railway", "scene.catenary.double_contact_probability=1", "scene.catenary.feeders=true",
+                                "scene.catenary.earth_wire=true"])
     return build_scene(config.scene, frame_rng(0, 0), None).scene
 
 
 def test_every_wire_and_dropper_set_is_a_live_catenary_modifier(railway):
     import bpy
 
-    from bpy_pipeline.compat import get_modifier_input
+    from bpy_pipeline.blender.compat import get_modifier_input
 
     spans = [o for o in bpy.data.objects if o.name.startswith("span.") and not o.name.endswith("section_insulator")]
     assert len(spans) == len(railway.wires) + len(railway.droppers)
@@ -100,7 +104,7 @@ def test_the_wire_group_hangs_the_thesis_parabola(railway):
         assert len(edges) == samples - 1
         worst = max(worst, excess(points, pure))
         # the swept tube: every vertex its radius from the pure centreline (the ring's plane bisects the bend)
-        from bpy_pipeline.compat import get_modifier_input
+        from bpy_pipeline.blender.compat import get_modifier_input
 
         radius = get_modifier_input(obj.modifiers[0], "Radius")
         tube, _ = evaluated(obj)
@@ -122,7 +126,7 @@ def test_wire_group_against_the_pure_parabola(start, end, sag, samples):
     import bpy
 
     from bpy_pipeline.builders.railway import catenary_nodes
-    from bpy_pipeline.scenes.objects import scene_collection
+    from bpy_pipeline.blender.mesh_objects import scene_collection
 
     collection = scene_collection("catenary test")
     pure = catenary.parabolic_sag(start, end, sag, samples)
@@ -171,7 +175,7 @@ def test_the_droppers_group_hangs_the_layouts_droppers_and_places_the_thesis_spa
 def test_a_sag_edited_in_the_modifier_moves_what_the_export_reads(railway):
     import bpy
 
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.labels import load_class_table
 
     wire = next(w for w in railway.wires if w.kind == "contact_wire")
@@ -198,7 +202,7 @@ def test_a_wire_is_in_the_exported_scene_once(railway):
     mesh; the export reads it once: each wire's triangles equal its evaluated mesh's, and no triangle repeats."""
     import bpy
 
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.labels import load_class_table
 
     buffers = export_scene(load_class_table())

@@ -50,7 +50,8 @@ output:
 
 
 def test_set_overrides_reach_nested_keys_and_list_items():
-    config = load_config(None, ["scene.builder=primitives", "scene.shapes=[{type: sphere, size: 2}]", "scene.shapes.0.reflectivity=0.25", "sensor.max_range=30"])
+    config = load_config(None, ["scene.builder=primitives", "scene.shapes=[{type: sphere, size: 2}]", "scene.shapes.0.reflectivity=0.25",
+                                "sensor.max_range=30"])
     assert config.scene.params.shapes[0].reflectivity == 0.25
     assert config.sensor.spec.max_range == 30.0
 

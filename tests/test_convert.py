@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from bpy_pipeline.__main__ import main
+from bpy_pipeline.cli.commands import main
 from bpy_pipeline.buffers import SceneBuffers
 from bpy_pipeline.cli.convert import TRAINING_TO_RAW, convert, project_classes
 from bpy_pipeline.geometry import primitives

@@ -18,7 +18,8 @@ from bpy_pipeline.io import read_dataset
 pytestmark = pytest.mark.bpy
 ROOT = Path(__file__).resolve().parents[1]
 PARKING = ["--set", "scene.builder=parking", "--set", "output.formats=[ply,semantickitti]", "--seed", "11"]
-RAILWAY = ["--set", "scene.stations.count=3", "--set", "sensor.horizontal_resolution_deg=1.0", "--set", "sensor.vertical_resolution_deg=1.0", "--set", "output.formats=[ply]", "--set", "output.preview=false", "--seed", "2"]
+RAILWAY = ["--set", "scene.stations.count=3", "--set", "sensor.horizontal_resolution_deg=1.0", "--set", "sensor.vertical_resolution_deg=1.0", "--set",
+           "output.formats=[ply]", "--set", "output.preview=false", "--seed", "2"]
 
 
 def cli(*args, env=None, **kwargs):
@@ -27,11 +28,17 @@ def cli(*args, env=None, **kwargs):
 
 def frame_files(out: Path) -> dict[str, bytes]:
     """Every file of the frames (not the manifest, records or indexes, which hold timings or the run's extent)."""
-    skip = {"manifest.json", "train.txt", "val.txt", "test.txt", "semantic-kitti.yaml", "calib.txt", "poses.txt", "times.txt", "npy_train.json", "npy_val.json", "npy_test.json",
+    skip = {"manifest.json", "train.txt", "val.txt", "test.txt", "semantic-kitti.yaml", "calib.txt", "poses.txt", "times.txt", "npy_train.json", "npy_val.json",
+            "npy_test.json",
             "semantickitti_infos_train.pkl", "semantickitti_infos_val.pkl", "semantickitti_infos_test.pkl",
-            "openpcdet_kitti_dataset.yaml", "openpcdet_pv_rcnn.yaml", "openpcdet_pointpillar.yaml", "mmdet3d_pointpillars_kitti.py", "custom_dataset.yaml", "pv_rcnn.yaml"}  # the writers' index files
+            "openpcdet_kitti_dataset.yaml", "openpcdet_pv_rcnn.yaml", "openpcdet_pointpillar.yaml", "mmdet3d_pointpillars_kitti.py", "custom_dataset.yaml",
+            "pv_rcnn.yaml"}  # the writers' index files
     files = (p for p in sorted(out.rglob("*")) if p.is_file() and p.name not in skip)
-    return {str(p.relative_to(out)): p.read_bytes() for p in files if p.parent.name != "records" and not any(part.startswith(".") for part in p.relative_to(out).parts)}
+    return {
+        str(p.relative_to(out)): p.read_bytes()
+        for p in files
+        if p.parent.name != "records" and not any(part.startswith(".") for part in p.relative_to(out).parts)
+    }
 
 
 def consistent(out: Path) -> set[int]:
@@ -88,7 +95,9 @@ def test_a_second_run_into_the_folder_refuses(full_parking, tmp_path):
     fewer = cli("--out", str(out), "--frames", "3", *PARKING)
     for done in (other_seed, fewer):
         assert done.returncode == 2
-        assert done.stderr.strip().splitlines() == [f"error: --out: {out} holds another run (seed 11, 10 frames); give --resume to continue it (same config and seed) or --overwrite to replace it"]
+        assert done.stderr.strip().splitlines() == [
+            f"error: --out: {out} holds another run (seed 11, 10 frames); give --resume to continue it (same config and seed) or --overwrite to replace it"
+        ]
     resumed_other = cli("--out", str(out), "--frames", "10", *PARKING, "--seed", "12", "--resume")
     assert resumed_other.returncode == 2 and "another config or seed (differs in: seed)" in resumed_other.stderr
     assert frame_files(out) == frame_files(full_parking)
@@ -99,7 +108,8 @@ def test_a_second_run_into_the_folder_refuses(full_parking, tmp_path):
 
 def test_two_runs_at_once_one_refuses(tmp_path):
     out = tmp_path / "busy"
-    first = subprocess.Popen([sys.executable, str(ROOT / "run.py"), "--out", str(out), "--frames", "40", *PARKING], cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    first = subprocess.Popen([sys.executable, str(ROOT / "run.py"), "--out", str(out), "--frames", "40", *PARKING], cwd=ROOT, stdout=subprocess.DEVNULL,
+                             stderr=subprocess.PIPE, text=True)
     try:
         deadline = time.time() + 60
         while not (out / ".lock").exists() and time.time() < deadline:
@@ -118,7 +128,8 @@ def test_kill_9_at_random_points_then_resume_gives_the_uninterrupted_bytes(full_
     runs = int(os.environ.get("BPY_PIPELINE_KILL_RUNS", "20"))
     for k in range(runs):
         out = tmp_path / f"killed{k}"
-        proc = subprocess.Popen([sys.executable, str(ROOT / "run.py"), "--out", str(out), "--frames", "10", *PARKING], cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        proc = subprocess.Popen([sys.executable, str(ROOT / "run.py"), "--out", str(out), "--frames", "10", *PARKING], cwd=ROOT, stdout=subprocess.DEVNULL,
+                                stderr=subprocess.DEVNULL)
         time.sleep(float(rng.uniform(0.6, 2.4)))
         proc.send_signal(signal.SIGKILL)
         proc.wait()
@@ -208,7 +219,8 @@ def test_a_local_ray_cluster_gives_the_bytes_of_one_process(full_parking, tmp_pa
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
     env = {**os.environ, "RAY_USAGE_STATS_ENABLED": "0"}
-    start = subprocess.run([str(ray_cli), "start", "--head", "--node-ip-address=127.0.0.1", f"--port={port}", "--num-cpus=2", "--include-dashboard=false", "--disable-usage-stats"], capture_output=True, text=True, timeout=180, env=env)
+    start = subprocess.run([str(ray_cli), "start", "--head", "--node-ip-address=127.0.0.1", f"--port={port}", "--num-cpus=2", "--include-dashboard=false",
+                            "--disable-usage-stats"], capture_output=True, text=True, timeout=180, env=env)
     if start.returncode != 0:
         pytest.skip(f"a local Ray cluster would not start: {start.stderr.strip().splitlines()[-1:]}")
     try:

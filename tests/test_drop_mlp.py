@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from bpy_pipeline.__main__ import main
+from bpy_pipeline.cli.commands import main
 from bpy_pipeline.config import effects_from_dict
 from bpy_pipeline.errors import InputError
 from bpy_pipeline.lidar.fit import fitting

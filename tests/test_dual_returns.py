@@ -65,7 +65,8 @@ def test_a_beam_straddling_a_box_edge_gives_its_strongest_and_last_returns():
 def test_dual_holds_the_strongest_and_last_single_modes_byte_for_byte():
     scene, beams = scene_and_beams()
     caster = RayCaster(scene, frame=np.eye(4))
-    run = {pick: scan_footprint(caster, scene, beams, np.eye(4), Divergence(mrad=10.0, rays=37, pick=pick), 0.2, 150.0) for pick in ("strongest", "last", "dual")}
+    run = {pick: scan_footprint(caster, scene, beams, np.eye(4), Divergence(mrad=10.0, rays=37, pick=pick), 0.2,
+                                150.0) for pick in ("strongest", "last", "dual")}
     dual, dual_facts = run["dual"]
     index = return_index(dual)
     assert dual[index == 0].tobytes() == run["strongest"][0].tobytes() and dual_facts[index == 0].tobytes() == run["strongest"][1].tobytes()

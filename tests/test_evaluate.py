@@ -12,7 +12,7 @@ import pytest
 pytest.importorskip("scipy", reason="evaluate needs the evaluate extra (pip install '.[evaluate]')")
 pytest.importorskip("lightgbm", reason="evaluate's reference model needs LightGBM (pip install '.[evaluate]')")
 
-from bpy_pipeline.__main__ import main
+from bpy_pipeline.cli.commands import main
 from bpy_pipeline.evaluate import label_maps, labelled, metrics
 from bpy_pipeline.evaluate.features import FEATURE_NAMES, point_features
 from bpy_pipeline.evaluate.labelled import LabelledScan, load_scans
@@ -71,7 +71,8 @@ def test_project_classes_map_through_labels_yaml_to_semantickitti_names():
 
 def test_kitti_types_and_class_names():
     classes = ("car", "person")
-    assert [label_maps.kitti_type_to_eval(t, classes) for t in ("Car", "Pedestrian", "Person_sitting", "Cyclist", "Van", "Truck", "Tram", "Misc", "DontCare")] == [0, 1, 1, -1, -1, -1, -1, -1, -1]
+    assert [label_maps.kitti_type_to_eval(t, classes) for t in ("Car", "Pedestrian", "Person_sitting", "Cyclist", "Van", "Truck", "Tram", "Misc",
+                                                                "DontCare")] == [0, 1, 1, -1, -1, -1, -1, -1, -1]
     assert label_maps.kitti_type_to_eval("Cyclist", ("car", "bicyclist")) == 1
     assert label_maps.parse_classes("car, Traffic_Sign,other-ground") == ("car", "traffic-sign", "other-ground")
 
@@ -292,7 +293,8 @@ def test_evaluate_command_end_to_end_on_a_generated_street(tmp_path):
     (raw | (cloud["instance"].astype(np.uint32) << 16)).astype(np.uint32).tofile(real / "000001.label")
     out = tmp_path / "report.json"
     result = subprocess.run([sys.executable, "-m", "bpy_pipeline", "evaluate", "--train", str(data), "--max-frames", "1", "--test", str(real / "000001.bin"),
-                             "--classes", "car,person", "--out", str(out), "--max-points-per-scan", "5000"], cwd=ROOT, capture_output=True, text=True, timeout=300)
+                             "--classes", "car,person", "--out", str(out), "--max-points-per-scan", "5000"], cwd=ROOT, capture_output=True, text=True,
+                            timeout=300)
     assert result.returncode == 0, result.stderr
     assert "car" in result.stdout and "person" in result.stdout and "IoU" in result.stdout
     report = json.loads(out.read_text())

@@ -10,7 +10,7 @@ import pytest
 
 pytest.importorskip("scipy", reason="the realism report needs scipy (pip install '.[evaluate]')")
 
-from bpy_pipeline.__main__ import main
+from bpy_pipeline.cli.commands import main
 from bpy_pipeline.evaluate import realism
 from bpy_pipeline.evaluate.labelled import LabelledScan, load_scans
 

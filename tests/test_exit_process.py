@@ -39,7 +39,8 @@ def test_waits_for_threads_runs_atexit_flushes_and_skips_the_teardown(tmp_path):
     assert done.returncode == 3, done.stderr
     assert done.stdout == "unflushedatexit ran\n"
     assert marker.read_text() == "written"
-    normal = subprocess.run([sys.executable, "-c", PROGRAM.replace("exit_process(3)", "sys.exit(3)"), str(marker)], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    normal = subprocess.run([sys.executable, "-c", PROGRAM.replace("exit_process(3)", "sys.exit(3)"), str(marker)], cwd=ROOT, capture_output=True, text=True,
+                            timeout=120)
     assert "torn down" in normal.stdout  # the teardown the other run skipped
 
 

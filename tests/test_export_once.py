@@ -34,7 +34,7 @@ def _text(name: str):
 def test_a_curve_or_text_object_is_exported_once(make):
     import bpy
 
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.labels import load_class_table
 
     bpy.ops.wm.read_factory_settings(use_empty=True)

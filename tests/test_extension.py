@@ -38,7 +38,11 @@ def build_script():
 
 
 def frame_files(out: Path) -> dict[str, str]:
-    return {str(p.relative_to(out)): hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(out.rglob("*")) if p.is_file() and p.name != "manifest.json" and p.parent.name != "records"}  # records hold timings
+    return {
+        str(p.relative_to(out)): hashlib.sha256(p.read_bytes()).hexdigest()
+        for p in sorted(out.rglob("*"))
+        if p.is_file() and p.name != "manifest.json" and p.parent.name != "records"
+    }  # records hold timings
 
 
 @pytest.fixture(scope="module")
@@ -120,7 +124,8 @@ def test_installs_from_the_zip_with_its_own_wheels(session):
     assert report["install"] == ["FINISHED"] and report["enabled"]
     assert report["bundled"] == {"embreex": "True", "yaml": "True"}
     assert {"__init__.py", "bpy_pipeline/config.py", "assets_manifest/labels.yaml"} <= set(report["extension_files"])
-    operators = {"LIDAR_OT_build_scene", "LIDAR_OT_scan", "LIDAR_OT_show_cloud", "LIDAR_OT_generate", "LIDAR_OT_config_load", "LIDAR_OT_config_save", "LIDAR_OT_config_reset", "LIDAR_OT_tag_selected", "LIDAR_OT_clear_tags"}
+    operators = {"LIDAR_OT_build_scene", "LIDAR_OT_scan", "LIDAR_OT_show_cloud", "LIDAR_OT_generate", "LIDAR_OT_config_load", "LIDAR_OT_config_save",
+                 "LIDAR_OT_config_reset", "LIDAR_OT_tag_selected", "LIDAR_OT_clear_tags"}
     assert operators <= set(report["classes"])
     sections = {"LIDAR_PT_run", "LIDAR_PT_scene", "LIDAR_PT_sensor", "LIDAR_PT_effects", "LIDAR_PT_output", "LIDAR_PT_legend", "LIDAR_PT_labels"}
     advanced = {"LIDAR_PT_scene_advanced", "LIDAR_PT_sensor_advanced", "LIDAR_PT_effects_advanced", "LIDAR_PT_output_advanced"}
@@ -131,7 +136,8 @@ def test_installs_from_the_zip_with_its_own_wheels(session):
     assert set(report["every_builder"]) == set(cfg.BUILDER_PARAMS) - {"blend"}
     needs_input = {name: built for name, (_, _, built) in report["every_builder"].items() if isinstance(built, str)}
     assert all(message.startswith("Error: scene.path:") for message in needs_input.values()), needs_input  # real_scan: a scan file
-    assert all(same and (drawn > 10 or name in needs_input) and built for name, (same, drawn, built) in report["every_builder"].items()), report["every_builder"]
+    assert all(same and (drawn > 10 or name in needs_input) and built for name,
+               (same, drawn, built) in report["every_builder"].items()), report["every_builder"]
     assert {"Parking Level", "Industrial Hall", "Track", "Street Road"} <= set(report["kept_groups"])  # under the extension's user folder
 
 
@@ -174,7 +180,8 @@ def test_panel_yaml_round_trip_and_run_py(session, tmp_path):
     assert report["generate_invoke"] == ["FINISHED"] and report["generate_invoke_files"] == report["generate_files"]
     for config in ("job.yaml", "saved.yaml"):
         out = tmp_path / config
-        result = subprocess.run([sys.executable, str(ROOT / "run.py"), "--config", str(work / config), "--out", str(out)], capture_output=True, text=True, timeout=300)
+        result = subprocess.run([sys.executable, str(ROOT / "run.py"), "--config", str(work / config), "--out", str(out)], capture_output=True, text=True,
+                                timeout=300)
         assert result.returncode == 0, result.stderr
         assert frame_files(out) == report["generate_files"]
 

@@ -21,7 +21,8 @@ def report(tmp_path_factory) -> dict:
     work = tmp_path_factory.mktemp("checkout")
     home = work / "home"
     env = dict(os.environ, HOME=str(home), BLENDER_USER_RESOURCES=str(home / "blender"))
-    result = subprocess.run([sys.executable, str(ROOT / "tests" / "extension_checkout_session.py"), str(work)], capture_output=True, text=True, timeout=600, env=env, cwd=work)
+    result = subprocess.run([sys.executable, str(ROOT / "tests" / "extension_checkout_session.py"), str(work)], capture_output=True, text=True, timeout=600,
+                            env=env, cwd=work)
     assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
     return json.loads((work / "report.json").read_text())
 

@@ -55,7 +55,7 @@ def nested_classes(cls, seen=None) -> list[type]:
 def test_every_number_of_a_builders_parameters_carries_its_unit():
     """The panel shows them: each one's unit comes from its metadata, never from its name."""
     from bpy_pipeline.builders import BUILDERS
-    from bpy_pipeline.builders.population import Population
+    from bpy_pipeline.population.params import Population
 
     classes = [c for name, entry in BUILDERS.items() for c in nested_classes(entry.params)] + nested_classes(Population)
     # a Distribution's numbers take the unit of the field that holds it (a count, metres, degrees): not listed
@@ -63,7 +63,9 @@ def test_every_number_of_a_builders_parameters_carries_its_unit():
     missing = []
     for cls in classes:
         hints = typing.get_type_hints(cls)
-        missing += [f"{cls.__module__}.{cls.__name__}.{f.name}" for f in dataclasses.fields(cls) if numeric(hints[f.name]) and f.metadata.get("unit") not in UNITS]
+        missing += [
+            f"{cls.__module__}.{cls.__name__}.{f.name}" for f in dataclasses.fields(cls) if numeric(hints[f.name]) and f.metadata.get("unit") not in UNITS
+        ]
     assert not missing, f"numeric builder fields without meta(unit=...): {missing}"
     assert len(classes) >= 15
 
@@ -79,7 +81,9 @@ def test_every_number_the_panel_shows_of_the_lidar_sections_carries_its_unit():
     missing = []
     for cls in classes:
         hints = typing.get_type_hints(cls)
-        missing += [f"{cls.__module__}.{cls.__name__}.{f.name}" for f in dataclasses.fields(cls) if numeric(hints[f.name]) and f.metadata.get("unit") not in UNITS]
+        missing += [
+            f"{cls.__module__}.{cls.__name__}.{f.name}" for f in dataclasses.fields(cls) if numeric(hints[f.name]) and f.metadata.get("unit") not in UNITS
+        ]
     assert not missing, f"numeric fields without meta(unit=...): {missing}"
     assert len(classes) >= 40
 

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from bpy_pipeline.__main__ import main
+from bpy_pipeline.cli.commands import main
 from bpy_pipeline.config import effects_from_dict
 from bpy_pipeline.errors import InputError
 from bpy_pipeline.lidar.fit import fitting
@@ -126,7 +126,8 @@ def test_a_saved_and_loaded_model_gives_the_same_probabilities(tmp_path):
         np.testing.assert_array_equal(mine.values, theirs.values)  # NaN (discarded bins) in the same places
         np.testing.assert_array_equal(mine.samples, theirs.samples)
     rng = np.random.default_rng(5)
-    samples = fitting.Samples(rng.uniform(1, 120, 5000), rng.uniform(0, 1, 5000), rng.uniform(0, 1, 5000), np.zeros(5000, int), np.zeros(5000, int), np.zeros(5000, bool))
+    samples = fitting.Samples(rng.uniform(1, 120, 5000), rng.uniform(0, 1, 5000), rng.uniform(0, 1, 5000), np.zeros(5000, int), np.zeros(5000, int),
+                              np.zeros(5000, bool))
     points, beam = fitting.samples_as_points(samples)
     for model in ("uniform", "threshold", "table"):
         effects = effects_from_dict({"drop": {"model": model, "model_file": str(path)}})

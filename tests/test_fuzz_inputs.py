@@ -26,7 +26,8 @@ from bpy_pipeline.errors import InputError  # noqa: E402
 
 FUZZ = settings(deadline=None, derandomize=True, suppress_health_check=list(HealthCheck), database=None)
 OUTCOMES: collections.Counter = collections.Counter()  # examples by outcome (benchmarks/bench_hardening.py reports them)
-BASES = [{}, {"scene": {"builder": "parking"}}, {"scene": {"builder": "industrial_hall"}}, {"scene": {"builder": "primitives"}}, {"scene": {"builder": "street"}}]
+BASES = [{}, {"scene": {"builder": "parking"}}, {"scene": {"builder": "industrial_hall"}}, {"scene": {"builder": "primitives"}},
+         {"scene": {"builder": "street"}}]
 
 
 def one_line(err: InputError) -> None:
@@ -143,7 +144,9 @@ def test_pcd_headers_read_whole_or_refuse(fields, sizes, types, count_field, wid
 @settings(FUZZ, max_examples=100)
 @given(
     fmt=st.sampled_from(["binary_little_endian", "binary_big_endian", "ascii", "binary"]),
-    elements=st.lists(st.tuples(st.sampled_from(["vertex", "face", "extra"]), counts, st.lists(st.sampled_from(["float x", "float y", "float z", "uchar intensity", "list uchar int vertex_indices", "double time", "bogus t"]), max_size=4)), max_size=3),
+    elements=st.lists(st.tuples(st.sampled_from(["vertex", "face", "extra"]), counts,
+                                st.lists(st.sampled_from(["float x", "float y", "float z", "uchar intensity", "list uchar int vertex_indices", "double time",
+                                                          "bogus t"]), max_size=4)), max_size=3),
     payload=st.binary(max_size=300),
 )
 def test_ply_headers_read_whole_or_refuse(fmt, elements, payload):

@@ -1,4 +1,4 @@
-"""Geometry Nodes groups kept on disk between runs (bpy_pipeline/scenes/group_cache.py): a group the same code made
+"""Geometry Nodes groups kept on disk between runs (bpy_pipeline/blender/group_cache.py): a group the same code made
 is appended instead of made again, with the same geometry; nothing is kept when switched off; a damaged file is
 made again; a group whose names are taken in the session is made, not appended under other names."""
 
@@ -43,7 +43,7 @@ def exported_digest(overrides) -> str:
 
 def never_made(monkeypatch):
     """Fail if any group is made node by node from here on."""
-    from bpy_pipeline.scenes import nodes
+    from bpy_pipeline.blender import nodes
 
     def refuse(*args, **kwargs):
         raise AssertionError("a group was made, not appended")
@@ -66,7 +66,7 @@ def test_a_kept_group_is_appended_and_builds_the_same_scene(cache, monkeypatch, 
 
 def test_switched_off_nothing_is_kept(monkeypatch, tmp_path):
     from bpy_pipeline.builders.parking.level_nodes import level_group
-    from bpy_pipeline.scenes import group_cache
+    from bpy_pipeline.blender import group_cache
 
     monkeypatch.setenv("BPY_PIPELINE_CACHE", "")
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))  # where it would go without the variable
@@ -77,7 +77,7 @@ def test_switched_off_nothing_is_kept(monkeypatch, tmp_path):
 
 def test_a_damaged_file_is_made_again_and_kept_anew(cache):
     from bpy_pipeline.builders.parking import level_nodes
-    from bpy_pipeline.scenes import group_cache
+    from bpy_pipeline.blender import group_cache
 
     fresh()
     level_nodes.level_group()
@@ -93,7 +93,7 @@ def test_names_taken_in_the_session_are_not_appended_under_others(cache):
     import bpy
 
     from bpy_pipeline.builders.railway import track_nodes
-    from bpy_pipeline.scenes import group_cache
+    from bpy_pipeline.blender import group_cache
 
     fresh()
     track_nodes.track_group()
@@ -104,7 +104,7 @@ def test_names_taken_in_the_session_are_not_appended_under_others(cache):
 
 
 def test_changed_code_reads_another_file(cache, monkeypatch):
-    from bpy_pipeline.scenes import group_cache
+    from bpy_pipeline.blender import group_cache
 
     before = group_cache.path_of("Parking Level", 3)
     monkeypatch.setattr(group_cache, "code_digest", lambda: "0" * 16)

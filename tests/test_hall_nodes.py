@@ -31,7 +31,8 @@ def build(**changes):
 def pure_meshes(layout) -> dict:
     from bpy_pipeline.geometry.indoor import boxes_mesh
 
-    return {"floor": boxes_mesh(layout.floor), "ceiling": boxes_mesh(layout.ceiling), "walls": boxes_mesh(layout.walls)} | {f.name: f.mesh() for f in layout.furniture}
+    return {"floor": boxes_mesh(layout.floor), "ceiling": boxes_mesh(layout.ceiling),
+            "walls": boxes_mesh(layout.walls)} | {f.name: f.mesh() for f in layout.furniture}
 
 
 @pytest.mark.parametrize("changes", [
@@ -52,7 +53,7 @@ def test_the_group_builds_the_pure_hall(changes):
 
 
 def test_labels_as_before():
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.labels import load_class_table
     from bpy_pipeline.builders.industrial_hall.scene import INSTANCE
 
@@ -67,7 +68,7 @@ def test_labels_as_before():
 def test_a_racks_levels_edited_in_its_modifier_change_what_the_export_reads():
     import bpy
 
-    from bpy_pipeline.compat import set_modifier_input
+    from bpy_pipeline.blender.compat import set_modifier_input
     from bpy_pipeline.geometry.indoor import shelf
 
     params, layout = build()

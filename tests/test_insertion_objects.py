@@ -112,7 +112,8 @@ def test_obj_usemtl_glass_and_ply_meshes(tmp_path):
 def test_bad_object_types_are_refused_in_one_line(tmp_path):
     lying = tmp_path / "car.glb"
     lying.write_bytes(b"glTF" + struct.pack("<II", 2, 40) + b"\0" * 28)
-    cases = {"spaceship": "scene.objects[0].type", str(tmp_path / "absent.glb"): "absent.glb", str(lying): "not a readable glTF", str(tmp_path / "a.stl"): ".glb, .gltf"}
+    cases = {"spaceship": "scene.objects[0].type", str(tmp_path / "absent.glb"): "absent.glb", str(lying): "not a readable glTF",
+             str(tmp_path / "a.stl"): ".glb, .gltf"}
     for kind, expected in cases.items():
         with pytest.raises(InputError) as err:
             check_type(kind, "scene.objects[0].type")
@@ -143,7 +144,8 @@ def sweep(real_scan):
 
 
 def test_cyclists_are_one_instance_with_one_class(sweep):
-    section = RealScanScene(path=str(sweep), objects=[ObjectBox("cyclist", (7.0, 2.5, -0.95), (0, 0, 0), 30.0), ObjectBox("cyclist", (9.0, -3.0, -0.95), (0, 0, 0), -60.0)])
+    section = RealScanScene(path=str(sweep), objects=[ObjectBox("cyclist", (7.0, 2.5, -0.95), (0, 0, 0), 30.0),
+                                                      ObjectBox("cyclist", (9.0, -3.0, -0.95), (0, 0, 0), -60.0)])
     m = mix_frame(section, np.random.default_rng(2))
     rider = load_class_table().id_of("rider")
     new = m.points[m.inserted]
@@ -203,7 +205,10 @@ def test_rule_cars_take_a_drawn_bodys_size_and_classic_keeps_the_old_draw(sweep)
 def test_the_cli_writes_cyclists_and_gltf_cars_as_kitti_labels_and_refuses_bad_types(sweep, tmp_path):
     car = glass_car(tmp_path / "car.glb")
     objects = f"[{{type: cyclist, center: [7, 2.5, -0.95], yaw_deg: 30}}, {{type: '{car}', center: [10, -3, -1.0]}}]"
-    run = lambda out, *extra: subprocess.run([sys.executable, str(ROOT / "run.py"), "--out", str(out), "--set", "scene.builder=real_scan", "--set", f"scene.path={sweep}", "--set", "output.preview=false", *extra], capture_output=True, text=True, timeout=300)  # noqa: E731
+    def run(out, *extra):
+        return subprocess.run([sys.executable, str(ROOT / "run.py"), "--out", str(out), "--set", "scene.builder=real_scan", "--set", f"scene.path={sweep}",
+                               "--set", "output.preview=false", *extra], capture_output=True, text=True, timeout=300)
+
     done = run(tmp_path / "a", "--set", f"scene.objects={objects}", "--set", "effects.ideal=true")
     assert done.returncode == 0, done.stderr
     (label,) = sorted((tmp_path / "a").glob("kitti/**/label_2/000000.txt"))

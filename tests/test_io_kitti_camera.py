@@ -9,11 +9,12 @@ from bpy_pipeline.io import kitti
 
 
 @pytest.mark.bpy
-@pytest.mark.parametrize("camera", [CameraConfig(), CameraConfig(resolution=(640, 240), fov_deg=70.0, position=(0.2, -0.1, 0.3), rotation_deg=(0.0, 5.0, 20.0))])
+@pytest.mark.parametrize("camera", [CameraConfig(), CameraConfig(resolution=(640, 240), fov_deg=70.0, position=(0.2, -0.1, 0.3),
+                                                                 rotation_deg=(0.0, 5.0, 20.0))])
 def test_rendered_box_lies_where_calib_projects_it(blender_renders, bpy_scene, camera):
     bpy = bpy_scene
-    from bpy_pipeline.scenes.camera import render_camera
-    from bpy_pipeline.scenes.objects import mesh_object, scene_collection
+    from bpy_pipeline.blender.camera_render import render_camera
+    from bpy_pipeline.blender.mesh_objects import mesh_object, scene_collection
     from bpy_pipeline.geometry import primitives
 
     pose = pose_matrix([3.0, -2.0, 1.5], [0.0, 0.0, 30.0])  # sensor to world

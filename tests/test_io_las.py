@@ -128,7 +128,8 @@ def test_classification_is_asprs_where_the_meaning_matches(tmp_path):
     laspy = laspy_or_skip()
     las = laspy.read(write_las(tmp_path / "c.las", asprs_sample()))
     code = dict(zip(np.asarray(las.semantic).tolist(), np.asarray(las.classification).tolist()))
-    expected = {"unlabeled": 1, "ground": 2, "wall": 6, "building": 6, "rail": 10, "road": 11, "contact wire": 14, "earth wire": 13, "mast": 15, "insulator": 16}
+    expected = {"unlabeled": 1, "ground": 2, "wall": 6, "building": 6, "rail": 10, "road": 11, "contact wire": 14, "earth wire": 13, "mast": 15,
+                "insulator": 16}
     for name, asprs in expected.items():
         assert code[CLASS[name]] == asprs, name
     for name in ("ballast", "pillar", "reflection", "car", "person", "robot arm"):  # no ASPRS meaning: user-definable 64 + raw id
@@ -156,7 +157,9 @@ def test_pdal_reads_the_file(tmp_path):
     except ImportError:
         pdal_module = None
     if pdal is None and pdal_module is None:
-        pytest.skip("PDAL is not installed (neither the pdal command nor the Python bindings; pip install pdal needs libpdal, which Debian 12 does not package)")
+        pytest.skip(
+            "PDAL is not installed (neither the pdal command nor the Python bindings; pip install pdal needs libpdal, which Debian 12 does not package)"
+        )
     pts = asprs_sample(200)
     path = write_las(tmp_path / "c.las", pts)
     if pdal_module is not None:

@@ -101,7 +101,8 @@ def test_sustech_frame_is_a_pcd_of_0_255_intensity_and_a_label_per_box(tmp_path)
     assert np.allclose(back["intensity"], [0.0, 127.5, 255.0]) and np.allclose(back["x"], [1, 2, 3])
     objects = json.loads(label.read_text())
     assert [o["obj_type"] for o in objects] == ["Car", "Arm"] and [o["obj_id"] for o in objects] == ["4", "9"]
-    assert objects[0]["psr"] == {"position": {"x": 1.0, "y": 2.0, "z": 3.0}, "rotation": {"x": 0.0, "y": 0.0, "z": 0.5}, "scale": {"x": 4.0, "y": 2.0, "z": 1.5}}
+    assert objects[0]["psr"] == {"position": {"x": 1.0, "y": 2.0, "z": 3.0}, "rotation": {"x": 0.0, "y": 0.0, "z": 0.5},
+                                 "scale": {"x": 4.0, "y": 2.0, "z": 1.5}}
     assert sustech.sustech_type("unknown thing") == "Misc" and sustech.label_type("robot_arm") == "RobotArm"
 
 

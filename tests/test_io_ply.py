@@ -72,7 +72,8 @@ def cloudcompare_export(ply, tmp_path):
     """CloudCompare's command-line mode: open ``ply`` and save it as ASCII with a header (all its scalar fields)."""
     if shutil.which("CloudCompare") is None:
         pytest.skip("CloudCompare is not installed (Debian: apt-get install cloudcompare xvfb)")
-    command = ["CloudCompare", "-SILENT", "-AUTO_SAVE", "OFF", "-O", str(ply), "-C_EXPORT_FMT", "ASC", "-SEP", "SPACE", "-ADD_HEADER", "-SAVE_CLOUDS", "FILE", str(tmp_path / "cc.asc")]
+    command = ["CloudCompare", "-SILENT", "-AUTO_SAVE", "OFF", "-O", str(ply), "-C_EXPORT_FMT", "ASC", "-SEP", "SPACE", "-ADD_HEADER", "-SAVE_CLOUDS", "FILE",
+               str(tmp_path / "cc.asc")]
     if shutil.which("xvfb-run"):  # CloudCompare is a Qt program: it needs a display even in silent mode
         command = ["xvfb-run", "-a", *command]
     done = subprocess.run(command, capture_output=True, text=True, timeout=120)

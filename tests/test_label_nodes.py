@@ -21,7 +21,7 @@ def rows(buffers) -> dict:
 
 
 def export():
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.labels import load_class_table
 
     return export_scene(load_class_table())
@@ -30,7 +30,7 @@ def export():
 def set_input(obj, name, value):
     import bpy
 
-    from bpy_pipeline.compat import set_modifier_input
+    from bpy_pipeline.blender.compat import set_modifier_input
 
     set_modifier_input(obj.modifiers[0], name, value)
     obj.update_tag()
@@ -61,7 +61,7 @@ def test_a_mesh_whose_faces_carry_instances_exports_one_row_per_instance():
     import bpy
 
     from bpy_pipeline.geometry import primitives
-    from bpy_pipeline.scenes.objects import mesh_object, scene_collection, tag
+    from bpy_pipeline.blender.mesh_objects import mesh_object, scene_collection, tag
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     two = primitives.merge([primitives.box(1, 1, 1), primitives.translated(primitives.box(1, 1, 1), (3, 0, 0))])

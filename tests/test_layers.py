@@ -3,7 +3,7 @@
 Layers, top to bottom (docs/layout.md): cli/api -> plan/stages -> builders, dataset -> mixing, io -> lidar -> geometry.
 A builder is one package, ``builders/<name>/``: its pure geometry (every file but ``params.py``, ``__init__.py`` and
 the Blender side ``scene*.py`` / ``*_nodes.py``) keeps geometry's rule, its own package's geometry aside; the shared
-Blender helpers (``scenes``) serve every builder and import no builder's package.
+Blender side (``blender``) serves every builder and the population, and imports neither.
 An import is an edge from the importing module to the module it names (``from pkg import name`` names
 ``pkg.name`` when that is a module), wherever the statement sits: module level, inside a function, or
 under ``if TYPE_CHECKING`` (an annotation-only import still ties the layers together for a reader), with no
@@ -25,13 +25,16 @@ PACKAGE = Path(__file__).resolve().parents[1] / "bpy_pipeline"
 
 # layer -> what it must not import (prefixes of dotted names below bpy_pipeline)
 FORBIDDEN = {
-    "geometry": ("lidar", "io", "config", "pipeline", "builders", "scenes", "mixing", "plan", "stages", "dataset", "api", "cli", "rig", "frame"),
-    "lidar": ("io", "config", "pipeline", "builders", "scenes", "mixing", "plan", "stages", "dataset", "api", "cli", "rig", "frame"),
-    "io": ("pipeline", "builders", "scenes", "plan", "stages", "dataset", "api", "cli", "mixing", "lidar", "rig", "config"),
-    "mixing": ("pipeline", "builders", "scenes", "plan", "stages", "dataset", "api", "cli", "rig", "config", "frame", "evaluate"),
+    "geometry": ("lidar", "io", "config", "pipeline", "builders", "population", "blender", "mixing", "plan", "stages", "dataset", "api", "cli", "rig", "frame"),
+    "lidar": ("io", "config", "pipeline", "builders", "population", "blender", "mixing", "plan", "stages", "dataset", "api", "cli", "rig", "frame"),
+    "io": ("pipeline", "builders", "population", "blender", "plan", "stages", "dataset", "api", "cli", "mixing", "lidar", "rig", "config"),
+    "mixing": ("pipeline", "builders", "population.params", "population.scene", "blender", "plan", "stages", "dataset", "api", "cli", "rig", "config",
+               "frame", "evaluate"),
+    # the population every builder gets: its section and placement, and its Blender side on the shared one
+    "population": ("lidar", "io", "config", "pipeline", "builders", "mixing", "plan", "stages", "dataset", "api", "cli", "rig", "frame"),
 }
 BUILDER_PACKAGES = tuple(sorted(p.parent.name for p in (PACKAGE / "builders").glob("*/__init__.py")))
-FORBIDDEN["scenes"] = tuple(f"builders.{b}" for b in BUILDER_PACKAGES)
+FORBIDDEN["blender"] = ("population",) + tuple(f"builders.{b}" for b in BUILDER_PACKAGES)
 # what io may use of lidar: the point record and the sensor's layout (its spec, rings, columns, frame time)
 ALLOWED = {"io": ("lidar.points", "lidar.sensor.grid", "lidar.sensor.sensors")}
 
@@ -203,17 +206,18 @@ def test_the_graph_sees_imports_inside_functions(tmp_path):
     probe.write_text("import sys\n\nsys.meta_path.insert(0, object())\n\ndef g():\n    def __getattr__(name):\n        return name\n")
     assert compat_hooks(probe) == ["sys.meta_path at line 3"]  # a function's own __getattr__ is no module hook
     assert path.exists()
-    # a builder's geometry keeps geometry's rule, its own package's geometry aside; shared scenes import no builder's package
+    # a builder's geometry keeps geometry's rule, its own package's geometry aside; the shared Blender side imports no builder's package
     rows = [("bpy_pipeline.builders.railway.layout", "bpy_pipeline.builders.railway.catenary", 1, False),
             ("bpy_pipeline.builders.railway.layout", "bpy_pipeline.geometry.lod", 2, False),
             ("bpy_pipeline.builders.railway.layout", "bpy_pipeline.lidar.points", 3, True),
             ("bpy_pipeline.builders.railway.layout", "bpy_pipeline.builders.railway.scene", 4, True),
             ("bpy_pipeline.builders.railway.layout", "bpy_pipeline.builders.street.layout", 5, False),
             ("bpy_pipeline.builders.railway.params", "bpy_pipeline.builders.railway.scene", 6, True),
-            ("bpy_pipeline.builders.railway.scene", "bpy_pipeline.scenes.objects", 7, False),
-            ("bpy_pipeline.scenes.box_nodes", "bpy_pipeline.builders.street.scatter_nodes", 8, False),
-            ("bpy_pipeline.scenes.population", "bpy_pipeline.builders.population", 9, False)]
-    assert [line for _, _, line in wrong_way(rows)] == [3, 4, 5, 8]
+            ("bpy_pipeline.builders.railway.scene", "bpy_pipeline.blender.mesh_objects", 7, False),
+            ("bpy_pipeline.blender.box_nodes", "bpy_pipeline.builders.street.scatter_nodes", 8, False),
+            ("bpy_pipeline.population.scene", "bpy_pipeline.population.params", 9, False),
+            ("bpy_pipeline.blender.people", "bpy_pipeline.population.placer", 10, True)]
+    assert [line for _, _, line in wrong_way(rows)] == [3, 4, 5, 8, 10]
     assert circles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
 
 

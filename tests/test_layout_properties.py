@@ -114,7 +114,8 @@ size = st.floats(0.05, 3.0, allow_nan=False)
 
 
 @settings(derandomize=True, max_examples=150, deadline=None)
-@given(st.tuples(coordinate, coordinate, coordinate), st.tuples(coordinate, coordinate), st.tuples(size, size), st.floats(-math.pi, math.pi), st.floats(-1.0, 1.0), size)
+@given(st.tuples(coordinate, coordinate, coordinate), st.tuples(coordinate, coordinate), st.tuples(size, size), st.floats(-math.pi, math.pi),
+       st.floats(-1.0, 1.0), size)
 def test_box_distance_is_the_distance_to_the_nearest_point_of_the_box(point, centre, half, yaw, z0, height):
     poses = SensorPoses(np.array([point]))
     got = poses.box_distance(centre, half, yaw, z0, z0 + height)
@@ -182,5 +183,6 @@ def test_a_frame_whose_sensor_stands_inside_a_box_is_warned_about_with_its_index
     warned = [line for line in lines if "enclosed" in line]
     assert len(warned) == 1 and warned[0].startswith("warning: frame 0: ") and "bus_around_the_sensor" in warned[0], lines
     lines.clear()
-    bp.run(bp.load_config({"scene": {"builder": "primitives"}, "sensor": {"preset": "vlp16", "position": [0, 0, 1.5]}, "frames": 1}), tmp_path / "open", log=lines.append)
+    bp.run(bp.load_config({"scene": {"builder": "primitives"}, "sensor": {"preset": "vlp16", "position": [0, 0, 1.5]}, "frames": 1}), tmp_path / "open",
+           log=lines.append)
     assert not [line for line in lines if "enclosed" in line], lines

@@ -129,7 +129,15 @@ class Object3d:
         self.ry = float(label[14])
         self.score = float(label[15]) if len(label) == 16 else -1.0
         height = float(self.box2d[3]) - float(self.box2d[1]) + 1
-        self.level = 0 if height >= 40 and self.truncation <= 0.15 and self.occlusion <= 0 else 1 if height >= 25 and self.truncation <= 0.3 and self.occlusion <= 1 else 2 if height >= 25 and self.truncation <= 0.5 and self.occlusion <= 2 else -1
+        self.level = (
+            0
+            if height >= 40 and self.truncation <= 0.15 and self.occlusion <= 0
+            else 1
+            if height >= 25 and self.truncation <= 0.3 and self.occlusion <= 1
+            else 2
+            if height >= 25 and self.truncation <= 0.5 and self.occlusion <= 2
+            else -1
+        )
 
 
 def openpcdet_kitti_infos(root: Path, split: str, has_label: bool = True) -> list[dict]:
@@ -188,7 +196,8 @@ def openpcdet_kitti_infos(root: Path, split: str, has_label: bool = True) -> lis
 
 def sustech_boxes(out: Path, index: int) -> dict[str, np.ndarray]:
     objects = json.loads((out / "sustech" / "label" / f"{index:06d}.json").read_text())
-    return {o["obj_id"]: np.array([*(o["psr"]["position"][a] for a in "xyz"), *(o["psr"]["scale"][a] for a in "xyz"), o["psr"]["rotation"]["z"]]) for o in objects}
+    return {o["obj_id"]: np.array([*(o["psr"]["position"][a] for a in "xyz"), *(o["psr"]["scale"][a] for a in "xyz"),
+                                   o["psr"]["rotation"]["z"]]) for o in objects}
 
 
 def test_openpcdet_kitti_get_infos(dataset):
@@ -210,7 +219,8 @@ def test_openpcdet_kitti_get_infos(dataset):
             np.testing.assert_allclose(box[:6], truth[match, :6], atol=2e-3)
             assert abs((box[6] - truth[match, 6] + np.pi) % (2 * np.pi) - np.pi) < 1e-3
             seen += 1
-        assert set(annos["name"]) <= {"Car", "Van", "Truck", "Pedestrian", "Person_sitting", "Cyclist", "Tram", "Misc", "DontCare"}  # DontCare: no box in the image
+        # DontCare: no box in the image
+        assert set(annos["name"]) <= {"Car", "Van", "Truck", "Pedestrian", "Person_sitting", "Cyclist", "Tram", "Misc", "DontCare"}
         assert (annos["bbox"][:, 2] > annos["bbox"][:, 0]).all() and (annos["bbox"][:, 3] - annos["bbox"][:, 1] > 0).all()
     assert seen >= 2
 
@@ -259,7 +269,8 @@ def mmdet3d_kitti_infos(data_path: Path, image_ids: list[int], training: bool = 
         gt_boxes_camera = np.concatenate([loc, dims, rots[..., np.newaxis]], axis=1)
         # box_np_ops.box_camera_to_lidar: xyz to lidar, (l, h, w) -> (l, w, h), r -> -r - pi/2; origin (0.5, 0.5, 0)
         xyz_lidar = (np.c_[gt_boxes_camera[:, :3], np.ones(len(gt_boxes_camera))] @ np.linalg.inv((rect @ Trv2c).T))[:, :3]
-        lidar = np.concatenate([xyz_lidar, gt_boxes_camera[:, 3:4], gt_boxes_camera[:, 5:6], gt_boxes_camera[:, 4:5], -gt_boxes_camera[:, 6:7] - np.pi / 2], axis=1)
+        lidar = np.concatenate([xyz_lidar, gt_boxes_camera[:, 3:4], gt_boxes_camera[:, 5:6], gt_boxes_camera[:, 4:5], -gt_boxes_camera[:, 6:7] - np.pi / 2],
+                               axis=1)
         centred = lidar.copy()
         centred[:, 2] += lidar[:, 5] / 2
         num_points_in_gt = np.array([in_box(points_v[:, :3], box).sum() for box in centred], dtype=np.int64)
@@ -315,14 +326,16 @@ def openpcdet_custom_infos(root: Path, split: str) -> list[dict]:
             gt_names.append(line_list[-1])
         gt_boxes_lidar = np.array(gt_boxes, dtype=np.float32)
         points = np.load(root / "points" / ("%s.npy" % sample_idx))
-        infos.append({"point_cloud": {"num_features": 4, "lidar_idx": sample_idx}, "annos": {"name": np.array(gt_names), "gt_boxes_lidar": gt_boxes_lidar[:, :7]}, "points": points})
+        infos.append({"point_cloud": {"num_features": 4, "lidar_idx": sample_idx},
+                      "annos": {"name": np.array(gt_names), "gt_boxes_lidar": gt_boxes_lidar[:, :7]}, "points": points})
     return infos
 
 
 def test_openpcdet_custom_create_infos(dataset):
     root = dataset / "openpcdet"
     train, val = openpcdet_custom_infos(root, "train"), openpcdet_custom_infos(root, "val")
-    assert [int(i["point_cloud"]["lidar_idx"]) for i in train] == [1, 4, 5] and [int(i["point_cloud"]["lidar_idx"]) for i in val] == [0]  # the empty frame is written but not listed
+    # the empty frame is written but not listed
+    assert [int(i["point_cloud"]["lidar_idx"]) for i in train] == [1, 4, 5] and [int(i["point_cloud"]["lidar_idx"]) for i in val] == [0]
     assert (root / "ImageSets" / "test.txt").read_text() == "000003\n"
     assert (root / "labels" / f"{EMPTY:06d}.txt").read_text() == ""
     with pytest.raises(IndexError):  # why: get_infos slices [:, :7], which an empty label file cannot give
@@ -521,9 +534,10 @@ def test_sustech_labels_and_pcd_clouds(dataset):
 # transforms_3d.py (PointsRangeFilter: x, y and z; ObjectRangeFilter: bird's eye view), datasets/kitti_dataset.py (plane).
 # Left out: the samplers' collision test between sampled boxes (boxes_bev_iou_cpu) and the flips, rotations and scalings,
 # which move no item's boxes out of a range they fitted before. The stock values below are the configs' own.
+# tools/cfgs/dataset_configs/kitti_dataset.yaml
 STOCK_KITTI = {"classes": ["Car", "Pedestrian", "Cyclist"], "range": [0, -40, -3, 70.4, 40, 1], "voxel": [0.05, 0.05, 0.1], "fov": True,
                "sampler": {"USE_ROAD_PLANE": True, "PREPARE": {"filter_by_min_points": ["Car:5", "Pedestrian:5", "Cyclist:5"], "filter_by_difficulty": [-1]},
-                           "SAMPLE_GROUPS": ["Car:20", "Pedestrian:15", "Cyclist:15"], "LIMIT_WHOLE_SCENE": True}}  # tools/cfgs/dataset_configs/kitti_dataset.yaml
+                           "SAMPLE_GROUPS": ["Car:20", "Pedestrian:15", "Cyclist:15"], "LIMIT_WHOLE_SCENE": True}}
 STOCK_CUSTOM = {"classes": ["Vehicle", "Pedestrian", "Cyclist"], "range": [-75.2, -75.2, -2, 75.2, 75.2, 4], "voxel": [0.1, 0.1, 0.15], "fov": False,
                 "sampler": {"USE_ROAD_PLANE": False, "PREPARE": {"filter_by_min_points": ["Vehicle:5", "Pedestrian:5", "Cyclist:5"]},
                             "SAMPLE_GROUPS": ["Vehicle:20", "Pedestrian:15", "Cyclist:15"], "LIMIT_WHOLE_SCENE": True}}  # custom_dataset.yaml
@@ -792,7 +806,8 @@ def test_hall_in_the_sensor_frame_is_outside_every_stock_range_the_written_confi
         for item in every_item(infos, getitem):
             assert item["voxels"] > 0 and (len(item["gt_boxes"]) > 0 or not training)
     custom = hall["sensor"] / "openpcdet"
-    infos, getitem = openpcdet_custom_dataset(custom, {**STOCK_CUSTOM, "classes": ["Person"], "sampler": {**STOCK_CUSTOM["sampler"], "SAMPLE_GROUPS": ["Person:15"]}}, False)
+    infos, getitem = openpcdet_custom_dataset(custom, {**STOCK_CUSTOM, "classes": ["Person"],
+                                                       "sampler": {**STOCK_CUSTOM["sampler"], "SAMPLE_GROUPS": ["Person:15"]}}, False)
     assert all(item["voxels"] == 0 for item in every_item(infos, getitem))  # 0.0 % of the points inside z [-2, 4]
     cfg = written_openpcdet(custom / "custom_dataset.yaml", custom / "pv_rcnn.yaml")
     assert cfg["classes"] == ["Person"] and cfg["anchors"] == {"Person": -4.5}

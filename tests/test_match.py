@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 import yaml
 
-from bpy_pipeline.__main__ import main
+from bpy_pipeline.cli.commands import main
 from bpy_pipeline.config import load_config
 from bpy_pipeline.errors import InputError
 from bpy_pipeline.geometry.placement import Distribution, check_distribution, sample, sample_count

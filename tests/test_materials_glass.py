@@ -78,7 +78,8 @@ def car_through_side_window(incidence_deg: float, glass: CarGlass | None, n: int
     aim = corners[left].mean(axis=(0, 1)) + [0.05, 0.0, 0.0]
     a = math.radians(incidence_deg)
     d = np.tile([math.sin(a), -math.cos(a), 0.0], (n, 1))
-    beams = trace_beams(RayCaster(buffers, frame=np.eye(4)), buffers, aim - 8.0 * d[0], d, 0.0, 100.0, surfaces=glass_rules(parts, glass), rng=np.random.default_rng(1))
+    beams = trace_beams(RayCaster(buffers, frame=np.eye(4)), buffers, aim - 8.0 * d[0], d, 0.0, 100.0, surfaces=glass_rules(parts, glass),
+                        rng=np.random.default_rng(1))
     return len(beams.ray) / n
 
 
@@ -112,7 +113,8 @@ def test_the_default_for_inserted_cars_and_builder_cars_unchanged():
     before = car_object(np.random.default_rng(0), placement.size)
     assert parts[0].reflectivity == before[0].reflectivity and np.array_equal(parts[0].vertices, before[0].vertices)
     off = object_parts(placement, np.random.default_rng(0), "classic", CarGlass(enabled=False))
-    assert [p.material for p in off] == ["diffuse", "glass", "diffuse", "diffuse"] and all(np.array_equal(a.triangles, b.triangles) for a, b in zip(off, before))
+    assert [p.material for p in off] == ["diffuse", "glass", "diffuse",
+                                         "diffuse"] and all(np.array_equal(a.triangles, b.triangles) for a, b in zip(off, before))
     # builders' cars (geometry/objects.py car_object without the insertion's glass) keep plain glass and their cabin
     assert [p.material for p in before] == ["diffuse", "glass", "diffuse", "diffuse"]
 

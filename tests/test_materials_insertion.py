@@ -81,7 +81,8 @@ def test_parts_may_name_a_reflectance_model_where_tracing_materials_were_the_onl
     c, s = np.cos(np.radians(60)), np.sin(np.radians(60))
     wall = np.array([[0, -1, -1], [0, 1, -1], [0, 1, 1], [0, -1, 1]], float) @ np.array([[c, s, 0], [-s, c, 0], [0, 0, 1]]).T
     tri = np.array([[0, 1, 2], [0, 2, 3]])
-    meshes = {"glossy": (wall + [30, -3, 0], tri, "car", "glossy_paint", 0.5), "matte": (wall * [1, -1, 1] + [30, 3, 0], tri, "car", "diffuse", 0.5)}  # its mirror image
+    # its mirror image
+    meshes = {"glossy": (wall + [30, -3, 0], tri, "car", "glossy_paint", 0.5), "matte": (wall * [1, -1, 1] + [30, 3, 0], tri, "car", "diffuse", 0.5)}
     sensor = {"preset": "custom", "pattern": "spinning", "channels": 16, "vertical_fov_deg": [-1.5, 1.5], "horizontal_fov_deg": [-10, 10],
               "horizontal_resolution_deg": 0.1, "min_range": 1.0, "max_range": 100.0}
     effects = {"drop": {"model": "threshold", "threshold": {"range_at_10": 50.0, "range_at_80": 120.0, "softness": 0.0}},

@@ -52,7 +52,8 @@ def test_a_glossy_object_loses_oblique_returns_its_matte_part_of_the_same_car_do
     assert glossy_kept[0] == glossy_kept[5] == 200 and glossy_kept[45] == glossy_kept[60] == 0, glossy_kept
     # an object's model wins over its class's: the class says retroreflector, the trim has none, the body glossy
     both = apply_effects(points, beam, effects(objects=True, classes={"car": "retroreflector"}), np.random.default_rng(0), objects=table)
-    assert len(both[both["time"] == 45]) == 200 and (both["intensity"][both["time"] == 45] == 1.0).all()  # the trim, as a retroreflector, saturates; the body stays glossy
+    # the trim, as a retroreflector, saturates; the body stays glossy
+    assert len(both[both["time"] == 45]) == 200 and (both["intensity"][both["time"] == 45] == 1.0).all()
 
 
 def test_parts_that_cannot_be_told_apart_are_one_line():
@@ -64,11 +65,12 @@ def test_parts_that_cannot_be_told_apart_are_one_line():
 
 def test_export_reads_roughness_metallic_and_lidar_material():
     bpy = pytest.importorskip("bpy")
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     made = {}
-    for name, setup in (("paint", {"Roughness": 0.1, "Metallic": 0.8}), ("matte", {"Roughness": 0.7}), ("plate", {"Roughness": 0.7, "lidar_material": "retroreflector"}), ("bare", None)):
+    for name, setup in (("paint", {"Roughness": 0.1, "Metallic": 0.8}), ("matte", {"Roughness": 0.7}),
+                        ("plate", {"Roughness": 0.7, "lidar_material": "retroreflector"}), ("bare", None)):
         mesh = bpy.data.meshes.new(name)
         mesh.from_pydata([(0, 0, 0), (1, 0, 0), (0, 1, 0)], [], [(0, 1, 2)])
         obj = bpy.data.objects.new(name, mesh)

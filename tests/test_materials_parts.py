@@ -149,7 +149,8 @@ def far_dark_returns(n: int = 2000):
     points["x"], points["range"], points["ring"] = 30.0, 30.0, np.arange(n) % 64
     beam = np.zeros(n, BEAM_DTYPE)
     beam["cos_incidence"], beam["reflectivity"], beam["gain"], beam["direction"] = 0.9, 0.01, 1.0, [1.0, 0.0, 0.0]
-    reading = {"enabled": True, "response": 1.0, "compensated_range": 28.0, "exponent": 2.0, "gain_sd": 0.16, "noise_sd": 0.075}  # KITTI 000008's linear reading
+    # KITTI 000008's linear reading
+    reading = {"enabled": True, "response": 1.0, "compensated_range": 28.0, "exponent": 2.0, "gain_sd": 0.16, "noise_sd": 0.075}
     effects = bpy_pipeline.load_config({"sensor": {"preset": "hdl64e"}, "effects": {"intensity": {"scale": 4.5, "offset": 0.15, "reading": reading}}}).effects
     return points, beam, effects
 
@@ -165,7 +166,8 @@ def test_a_part_dark_to_read_but_detectable_is_kept_at_30_m_and_reads_0():
     assert dark.detection is None and seen.detection == 0.3 and detection_reflectivity(beam, rows, [dark]) is None
     floor = detection_reflectivity(beam, rows, [seen])
     assert floor.dtype == np.float32 and np.all(floor == np.float32(0.3))
-    assert np.all(detection_reflectivity(beam, rows, [part_model({"model": "dark_paint", "reflectivity": 0.01, "detection": 0.001}, "p")]) == np.float32(0.01))  # max(own, detection)
+    # max(own, detection)
+    assert np.all(detection_reflectivity(beam, rows, [part_model({"model": "dark_paint", "reflectivity": 0.01, "detection": 0.001}, "p")]) == np.float32(0.01))
     lost, _ = _effects(points.copy(), beam.copy(), effects, np.random.default_rng(0), None, [dark], rows)
     kept, kept_rows = _effects(points.copy(), beam.copy(), effects, np.random.default_rng(0), None, [seen], rows)
     assert len(lost) < 0.1 * len(points)  # as dark to the drop model as to the reading: dropped at 30 m
@@ -190,7 +192,8 @@ def test_detection_unset_leaves_the_frame_byte_identical(real_scan):
     scan = real_scan("kitti_hdl64e_000008_frontfov.bin")
     section = RealScanScene(path=str(scan), format="kitti", preset="hdl64e", objects=[ObjectBox("car", (8.0, 0.5, -0.95), (4.5, 1.8, 1.5), 20.0)],
                             car_glass=CarGlass(enabled=True), car_paint=CarPaint(enabled=True))
-    reading = {"enabled": True, "response": 1.0, "compensated_range": 28.0, "exponent": 2.0, "gain_sd": 0.16, "noise_sd": 0.075}  # KITTI 000008's linear reading
+    # KITTI 000008's linear reading
+    reading = {"enabled": True, "response": 1.0, "compensated_range": 28.0, "exponent": 2.0, "gain_sd": 0.16, "noise_sd": 0.075}
     effects = bpy_pipeline.load_config({"sensor": {"preset": "hdl64e"}, "effects": {"intensity": {"scale": 4.5, "offset": 0.15, "reading": reading}}}).effects
 
     def run(paint):

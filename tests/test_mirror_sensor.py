@@ -121,7 +121,8 @@ def test_rays_that_miss_every_segment_are_lost():
     assert 0.3 < rays.kept.mean() < 0.9 and (np.abs(b[rays.kept]) <= 0.02 + 1e-9).all()
     assert np.isnan(rays.direction[~rays.kept]).all() and (rays.segment[~rays.kept] == -1).all()
     narrow = trace_mirrors(dataclasses.replace(PAPER, width=0.05), pattern.directions)  # gaps between the segments
-    a = np.einsum("ij,ij->i", narrow.origin, np.column_stack([-np.sin(np.radians(45.0 * narrow.segment)), np.cos(np.radians(45.0 * narrow.segment)), np.zeros(len(pattern))]))
+    a = np.einsum("ij,ij->i", narrow.origin, np.column_stack([-np.sin(np.radians(45.0 * narrow.segment)), np.cos(np.radians(45.0 * narrow.segment)),
+                                                              np.zeros(len(pattern))]))
     assert 0.3 < narrow.kept.mean() < 0.9 and (np.abs(a[narrow.kept]) <= 0.025 + 1e-9).all()
     reflected = reflect_pattern(pattern, short)
     assert len(reflected) == rays.kept.sum() and np.array_equal(reflected.ring, pattern.ring[rays.kept])

@@ -294,15 +294,16 @@ def test_pipeline_scene_mirror_through_blender(tmp_path):
     import bpy
 
     from bpy_pipeline.config import config_from_dict
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.labels import load_class_table
     from bpy_pipeline.frame import frame_rng
     from bpy_pipeline.stages.scan import scan_buffers
-    from bpy_pipeline.scenes import build_scene
+    from bpy_pipeline.blender import build_scene
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     shapes = [  # the 45 degree mirror (a plane's normal is +z before rotation) and the side wall
-        {"name": "mirror", "type": "plane", "size": 2, "position": [5, 0, 1.5], "rotation_deg": [0, -90, -45], "class": "wall", "material": "mirror", "reflectivity": 0.9},
+        {"name": "mirror", "type": "plane", "size": 2, "position": [5, 0, 1.5], "rotation_deg": [0, -90, -45], "class": "wall", "material": "mirror",
+         "reflectivity": 0.9},
         {"name": "wall", "type": "plane", "size": 30, "position": [5, 6, 1.5], "rotation_deg": [90, 0, 0], "class": "wall"},
     ]
     config = config_from_dict({

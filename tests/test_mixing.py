@@ -84,7 +84,8 @@ def test_wall_points_lie_on_real_firings_and_follow_the_rings(sweep):
 
 def test_one_return_per_firing_and_nothing_behind_inserted_hits(sweep):
     path, scan, f = sweep
-    section = RealScanScene(path=str(path), parking_rule=ParkingRule(enabled=True), objects=[ObjectBox("car", (8.0, -3.0, -1.0), (4.5, 1.8, 1.6), 20.0), ObjectBox("person", (6.0, 2.0, -0.95))])
+    section = RealScanScene(path=str(path), parking_rule=ParkingRule(enabled=True),
+                            objects=[ObjectBox("car", (8.0, -3.0, -1.0), (4.5, 1.8, 1.6), 20.0), ObjectBox("person", (6.0, 2.0, -0.95))])
     m = mix_frame(section, np.random.default_rng(3))
     assert len(np.unique(m.firing)) == len(m.firing)
     assert m.inserted.sum() > 100 and len(m.placements) >= 2
@@ -123,7 +124,8 @@ def test_remove_and_reinsert_gives_back_the_returns(sweep, tmp_path):
     lo, hi = v.min(axis=0), v.max(axis=0)
     cut = mix_frame(RealScanScene(path=str(path), remove=[box]), np.random.default_rng(0))
     assert cut.info["removed"] == inside.sum()
-    back = mix_frame(RealScanScene(path=str(path), remove=[box], objects=[ObjectBox(str(mesh), tuple((lo + hi) / 2), tuple(hi - lo), 0.0)]), np.random.default_rng(0))
+    back = mix_frame(RealScanScene(path=str(path), remove=[box], objects=[ObjectBox(str(mesh), tuple((lo + hi) / 2), tuple(hi - lo), 0.0)]),
+                     np.random.default_rng(0))
     original = f.returns
     new = back.inserted
     k = back.firing[new]

@@ -18,7 +18,8 @@ def run(*args):
 def test_real_scan_run_writes_a_mixed_frame(real_scan, tmp_path):
     sweep = real_scan("nuscenes_hdl32e_sweep.bin")
     out = tmp_path / "run"
-    done = run("--out", str(out), "--set", "scene.builder=real_scan", "--set", f"scene.path={sweep}", "--set", f"scene.objects={OBJECTS}", "--set", "effects.ideal=true", "--set", "output.preview=false")
+    done = run("--out", str(out), "--set", "scene.builder=real_scan", "--set", f"scene.path={sweep}", "--set", f"scene.objects={OBJECTS}", "--set",
+               "effects.ideal=true", "--set", "output.preview=false")
     assert done.returncode == 0, done.stderr
     xyzi = np.fromfile(out / "sequences/00/velodyne/000000.bin", np.float32).reshape(-1, 4)  # frame 0: the first train unit
     label = np.fromfile(out / "sequences/00/labels/000000.label", np.uint32)
@@ -48,7 +49,8 @@ def test_real_scan_bad_input_exits_2_naming_the_key(tmp_path, real_scan):
 
 def test_real_scan_frame_range_gives_the_full_runs_bytes(real_scan, tmp_path):
     sweep = real_scan("nuscenes_hdl32e_sweep.bin")
-    common = ["--frames", "3", "--set", "scene.builder=real_scan", "--set", f"scene.path={sweep}", "--set", "scene.parking_rule.enabled=true", "--set", "output.preview=false", "--set", "output.formats=[semantickitti]"]
+    common = ["--frames", "3", "--set", "scene.builder=real_scan", "--set", f"scene.path={sweep}", "--set", "scene.parking_rule.enabled=true", "--set",
+              "output.preview=false", "--set", "output.formats=[semantickitti]"]
     full, part = run("--out", str(tmp_path / "full"), *common), run("--out", str(tmp_path / "part"), *common, "--frames-range", "2:3")
     assert full.returncode == 0 and part.returncode == 0, full.stderr + part.stderr
     for kind in ("velodyne/000002.bin", "labels/000002.label"):  # frame 2 is val: sequence 08 (output.split)

@@ -18,7 +18,8 @@ def test_the_profile_is_table_2s_best_row_by_name():
     config = load_config(None, ["scene.builder=real_scan", "scene.path=scan.bin", "scene.noise=parking_paper_best"])
     assert config.scene.params.noise == BEST
     # dropout, per-object range noise, interior points and the cut-off; no class flips (Table 2: they cost 0.4 IoU)
-    assert (BEST.dropout_max, BEST.range_sigma, BEST.interior_points, BEST.cutoff_probability, BEST.cutoff_fraction, BEST.class_flip) == (0.003, (0.001, 0.03), 15, 0.6, (0.2, 0.8), 0.0)
+    assert (BEST.dropout_max, BEST.range_sigma, BEST.interior_points, BEST.cutoff_probability, BEST.cutoff_fraction,
+            BEST.class_flip) == (0.003, (0.001, 0.03), 15, 0.6, (0.2, 0.8), 0.0)
     assert NOISE_PROFILES["parking_paper_all"].class_flip == 0.02 and NOISE_PROFILES["none"] == NoiseInjections()
     mapping = load_config(None, ["scene.builder=real_scan", "scene.path=scan.bin", "scene.noise={dropout_max: 0.001}"])
     assert mapping.scene.params.noise.dropout_max == 0.001  # a mapping still works

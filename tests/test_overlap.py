@@ -139,7 +139,8 @@ def test_kill_9_while_a_frame_finishes_beside_the_next_then_resume_gives_the_uni
     args = [a for o in GARAGE for a in ("--set", o)]
 
     def cli(out: Path, *extra):
-        return subprocess.run([sys.executable, str(ROOT / "run.py"), "--out", str(out), "--frames", "16", *args, *extra], cwd=ROOT, capture_output=True, text=True, timeout=600)
+        return subprocess.run([sys.executable, str(ROOT / "run.py"), "--out", str(out), "--frames", "16", *args, *extra], cwd=ROOT, capture_output=True,
+                              text=True, timeout=600)
 
     reference = tmp_path / "full"
     assert cli(reference).returncode == 0
@@ -147,7 +148,8 @@ def test_kill_9_while_a_frame_finishes_beside_the_next_then_resume_gives_the_uni
     interrupted = 0
     for k in range(int(os.environ.get("BPY_PIPELINE_KILL_RUNS", "6"))):
         out = tmp_path / f"killed{k}"
-        proc = subprocess.Popen([sys.executable, str(ROOT / "run.py"), "--out", str(out), "--frames", "16", *args], cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        proc = subprocess.Popen([sys.executable, str(ROOT / "run.py"), "--out", str(out), "--frames", "16", *args], cwd=ROOT, stdout=subprocess.DEVNULL,
+                                stderr=subprocess.DEVNULL)
         deadline = time.time() + 300
         while not (out / "records" / "000000.json").exists() and proc.poll() is None and time.time() < deadline:
             time.sleep(0.02)

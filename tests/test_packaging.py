@@ -31,7 +31,7 @@ def test_wheel_holds_every_data_file_the_package_reads(wheel):
     source = {p.relative_to(ROOT).as_posix() for p in (ROOT / "bpy_pipeline").rglob("*.py")}
     assert source <= names, f"modules missing from the wheel: {sorted(source - names)[:5]}"
     entry = zipfile.ZipFile(wheel).read(next(n for n in names if n.endswith("entry_points.txt"))).decode()
-    assert "bpy-pipeline = bpy_pipeline.__main__:console" in entry
+    assert "bpy-pipeline = bpy_pipeline.cli.commands:console" in entry
     metadata = zipfile.ZipFile(wheel).read(next(n for n in names if n.endswith("METADATA"))).decode()
     requires = [line for line in metadata.splitlines() if line.startswith("Requires-Dist:") and "extra ==" not in line]
     assert not any("trimesh" in line for line in requires), "trimesh is a test dependency, not a runtime one"
@@ -43,7 +43,8 @@ def test_wheel_in_a_fresh_venv_runs_a_frame_with_the_console_command(wheel, tmp_
     venv = tmp_path / "venv"
     subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True, timeout=120)
     python = venv / "bin" / "python"
-    site = Path(subprocess.run([str(python), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"], capture_output=True, text=True, check=True).stdout.strip())
+    site = Path(subprocess.run([str(python), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"], capture_output=True, text=True,
+                               check=True).stdout.strip())
     # The dependencies (bpy is 300 MB) come from this environment, appended after the venv's own
     # site-packages; only directories are added, so this environment's editable install of the
     # project is not (its finder is a .pth file, which a plain path line does not run).
@@ -53,12 +54,15 @@ def test_wheel_in_a_fresh_venv_runs_a_frame_with_the_console_command(wheel, tmp_
     work = tmp_path / "elsewhere"  # not the repository: nothing may be found through the working directory
     work.mkdir()
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH",)}
-    where = subprocess.run([str(python), "-c", "import bpy_pipeline, bpy_pipeline.labels as l; print(bpy_pipeline.__file__); print(l.load_class_table().names[1])"], cwd=work, env=env, capture_output=True, text=True)
+    where = subprocess.run([str(python), "-c",
+                            "import bpy_pipeline, bpy_pipeline.labels as l; print(bpy_pipeline.__file__); print(l.load_class_table().names[1])"], cwd=work,
+                           env=env, capture_output=True, text=True)
     assert where.returncode == 0, where.stderr
     assert Path(where.stdout.split()[0]).is_relative_to(venv), where.stdout
     out = tmp_path / "out"
     command = [str(venv / "bin" / "bpy-pipeline"), "run", "--out", str(out), "--frames", "1",
-               "--set", "scene.builder=primitives", "--set", "scene.shapes=[{type: box, size: 4, position: [6, 0, 0], class: wall}, {type: plane, size: 30, class: ground}]",
+               "--set", "scene.builder=primitives", "--set",
+               "scene.shapes=[{type: box, size: 4, position: [6, 0, 0], class: wall}, {type: plane, size: 30, class: ground}]",
                "--set", "sensor.preset=vlp16", "--set", "sensor.position=[0, 0, 1.5]", "--set", "output.formats=[ply,semantickitti]"]
     result = subprocess.run(command, cwd=work, env=env, capture_output=True, text=True, timeout=600)
     assert result.returncode == 0, result.stderr[-3000:]

@@ -72,7 +72,8 @@ def test_counts_and_distances_follow_the_paper():
 
 
 def test_a_box_is_refused_where_it_collides_or_hides():
-    placer = FloorBoxPlacer((0.0, 0.0, 1.5), ((-20, -20), (20, 20)), obstacles=[(np.array([0.0, 8.0]), np.array([0.5, 0.5]), 0.0)], clearance=0.3, min_visible=0.5, keep_out=1.0)
+    placer = FloorBoxPlacer((0.0, 0.0, 1.5), ((-20, -20), (20, 20)), obstacles=[(np.array([0.0, 8.0]), np.array([0.5, 0.5]), 0.0)], clearance=0.3,
+                            min_visible=0.5, keep_out=1.0)
     half = np.array([2.2, 0.9, 0.8])
     first = placer.try_place((6.0, 0.0), 0.0, half)
     assert first is not None and first.visible_fraction == 1.0
@@ -105,7 +106,7 @@ def test_the_layout_keeps_bays_pillars_and_ramp_apart_and_the_robot_on_the_drive
 # ----------------------------------------------------------------------------- the built scene
 def _frame(config, index, keep=None):
     """Build frame ``index`` (on the scene ``keep`` holds from earlier frames, when given) and export it."""
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.labels import load_class_table
     from bpy_pipeline.frame import frame_rng
     from bpy_pipeline.stages.scene import build_frame_scene
@@ -178,8 +179,15 @@ def test_same_seed_same_frame_whatever_came_before(bpy_scene, tmp_path):
     # a run twice (the second reuses the built level) writes the same bytes; another seed does not
     outputs = []
     for name, seed in (("a", 0), ("b", 0), ("c", 5)):
-        run(config if seed == 0 else load_config(None, ["scene.builder=parking", "frames=2", "output.formats=[ply]", "output.preview=false", f"seed={seed}"]), tmp_path / name, log=lambda *_: None)
-        outputs.append({p.relative_to(tmp_path / name): p.read_bytes() for p in sorted((tmp_path / name).rglob("*")) if p.is_file() and p.name != "manifest.json" and p.parent.name != "records"})
+        run(config if seed == 0 else load_config(None, ["scene.builder=parking", "frames=2", "output.formats=[ply]", "output.preview=false", f"seed={seed}"]),
+            tmp_path / name, log=lambda *_: None)
+        outputs.append(
+            {
+                p.relative_to(tmp_path / name): p.read_bytes()
+                for p in sorted((tmp_path / name).rglob("*"))
+                if p.is_file() and p.name != "manifest.json" and p.parent.name != "records"
+            }
+        )
     assert outputs[0] == outputs[1] and outputs[0].keys() == outputs[2].keys()
     labels = Path("openpcdet/labels/000001.txt")
     assert outputs[0][labels] != outputs[2][labels]

@@ -25,7 +25,7 @@ def excess(blender: np.ndarray, pure: np.ndarray) -> float:
 
 def exported(names) -> dict:
     """``{name: (vertices (n, 3), triangles (m, 3))}`` of the objects ``names`` as the export reads them (unused vertices dropped)."""
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.labels import load_class_table
 
     buffers = export_scene(load_class_table())
@@ -83,7 +83,7 @@ def test_the_group_builds_the_pure_level(changes):
 
 
 def test_labels_as_before_and_prototypes_unseen():
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.labels import load_class_table
     from bpy_pipeline.builders.parking.scene import INSTANCE
 
@@ -98,7 +98,7 @@ def test_labels_as_before_and_prototypes_unseen():
 def test_a_bay_width_edited_in_the_modifier_moves_the_pillars():
     import bpy
 
-    from bpy_pipeline.compat import set_modifier_input
+    from bpy_pipeline.blender.compat import set_modifier_input
     from bpy_pipeline.geometry.indoor import parking_layout
 
     params, layout = build()
@@ -146,7 +146,7 @@ def test_a_bay_width_edited_in_the_modifier_moves_the_cars_to_the_new_bays():
     of the pure level with 2.8 m bays (built from the values read back from the modifier), not in the old ones."""
     import bpy
 
-    from bpy_pipeline.compat import set_modifier_input
+    from bpy_pipeline.blender.compat import set_modifier_input
     from bpy_pipeline.geometry.indoor import parking_layout
     from bpy_pipeline.stages.scene import build_frame_scene
 
@@ -177,7 +177,7 @@ def test_an_unedited_level_keeps_the_yaml_values_despite_float32_inputs():
 def test_an_impossible_edit_is_one_line_naming_the_input():
     import bpy
 
-    from bpy_pipeline.compat import set_modifier_input
+    from bpy_pipeline.blender.compat import set_modifier_input
     from bpy_pipeline.errors import InputError
     from bpy_pipeline.stages.scene import build_frame_scene
 

@@ -77,7 +77,7 @@ def _rows_by_instance(buffers: SceneBuffers) -> dict:
 
 def _hall(seed: int, **params):
     from bpy_pipeline.config import load_config
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.labels import load_class_table
     from bpy_pipeline.frame import frame_rng
     from bpy_pipeline.stages.scene import build_frame_scene
@@ -118,7 +118,8 @@ def test_people_stand_on_walkable_floor_or_sit_on_desks(bpy_scene):
 
     kinds = set()
     for seed in range(3):
-        config, state, buffers, hall = _hall(seed, people="{kind: normal, mean: 8, std: 0, min: 0, max: 12}", poses="{standing: 1, walking: 1, sitting: 2, crouching: 1}")
+        config, state, buffers, hall = _hall(seed, people="{kind: normal, mean: 8, std: 0, min: 0, max: 12}",
+                                             poses="{standing: 1, walking: 1, sitting: 2, crouching: 1}")
         layout = hall_layout(config.scene.params)
         desks = [f for f in layout.furniture if f.class_name == "desk"]
         footprints = [f.footprint for f in layout.furniture]
@@ -167,7 +168,7 @@ def test_a_new_frame_reposes_without_rebuilding(bpy_scene):
 @pytest.mark.bpy
 def test_assets_in_the_manifest_replace_the_procedural_people(bpy_scene, tmp_path):
     from bpy_pipeline.errors import InputError
-    from bpy_pipeline.scenes.people import load_assets
+    from bpy_pipeline.blender.people import load_assets
 
     obj = tmp_path / "mannequin.obj"
     corners = [(x, y, z) for x in (-0.2, 0.2) for y in (0.0, 1.7) for z in (-0.12, 0.12)]  # OBJ is y-up
@@ -192,7 +193,9 @@ def test_assets_in_the_manifest_replace_the_procedural_people(bpy_scene, tmp_pat
     # the same mannequin written Z up lies down when read Y up: one clear error, not a hall of people "not placed"
     lying = tmp_path / "lying.obj"
     lying.write_text("".join(f"v {x} {z} {y}\n" for x, y, z in corners) + "".join("f " + " ".join(map(str, f)) + "\n" for f in faces))
-    manifest.write_text(f"assets:\n  - {{name: lying, kind: person, path: lying.obj, sha256: {hashlib.sha256(lying.read_bytes()).hexdigest()}, licence: CC0-1.0}}\n")
+    manifest.write_text(
+        f"assets:\n  - {{name: lying, kind: person, path: lying.obj, sha256: {hashlib.sha256(lying.read_bytes()).hexdigest()}, licence: CC0-1.0}}\n"
+    )
     with pytest.raises(InputError, match=r"^asset 'lying': lying.obj does not stand upright as a person when read Y up"):
         _hall(0, assets=str(manifest), people="{kind: normal, mean: 4, std: 0, min: 0, max: 12}")
 
@@ -210,7 +213,8 @@ def test_the_intersection_check_sees_overlapping_bodies():
         np.concatenate([v for v, _ in parts]),
         np.concatenate([t + o for (_, t), o in zip(parts, offsets)]).astype(np.int32),
         np.concatenate([np.full(len(t), k, np.int32) for k, (_, t) in enumerate(parts)]),
-        ObjectTable(["a", "b", "c"], [""] * 3, ["person"] * 3, np.full(3, 21, np.uint16), np.arange(1, 4, dtype=np.uint32), np.zeros(3, np.uint8), np.full(3, 0.5, np.float32)),
+        ObjectTable(["a", "b", "c"], [""] * 3, ["person"] * 3, np.full(3, 21, np.uint16), np.arange(1, 4, dtype=np.uint32), np.zeros(3, np.uint8),
+                    np.full(3, 0.5, np.float32)),
     )
     assert _crossings(buffers, [0], [1]) > 0 and _crossings(buffers, [1], [0]) > 0
     assert _crossings(buffers, [0], [2]) == 0 and _crossings(buffers, [2], [1]) == 0

@@ -46,7 +46,7 @@ def _trees(obj) -> tuple[np.ndarray, np.ndarray]:
 def _set(obj, name, value):
     import bpy
 
-    from bpy_pipeline.compat import set_modifier_input
+    from bpy_pipeline.blender.compat import set_modifier_input
 
     set_modifier_input(obj.modifiers["Street Planting"], name, value)  # what a user does in the modifier panel
     obj.update_tag()
@@ -65,7 +65,12 @@ def test_the_trees_keep_the_density_clearance_yards_and_sizes_they_are_given():
     base = trunks[:, :3, 3] + (0.0, 0.0, 0.2)  # a trunk starts 0.2 m under the ground
     np.testing.assert_allclose(crowns[:, :2, 3], base[:, :2], atol=1e-4)  # each crown on its trunk
     rects = np.array(yards.rects)
-    inside = (base[:, None, 0] >= rects[None, :, 0] - 1e-3) & (base[:, None, 0] <= rects[None, :, 1] + 1e-3) & (base[:, None, 1] >= rects[None, :, 2] - 1e-3) & (base[:, None, 1] <= rects[None, :, 3] + 1e-3)
+    inside = (
+        (base[:, None, 0] >= rects[None, :, 0] - 1e-3)
+        & (base[:, None, 0] <= rects[None, :, 1] + 1e-3)
+        & (base[:, None, 1] >= rects[None, :, 2] - 1e-3)
+        & (base[:, None, 1] <= rects[None, :, 3] + 1e-3)
+    )
     assert inside.any(axis=1).all()
     assert np.abs(base[:, 2] - yards.terrain.z(base[:, 0], base[:, 1])).max() < 0.02  # on the ground (sampled every 2 m)
     gaps = np.linalg.norm(base[:, None, :2] - base[None, :, :2], axis=2) + np.eye(len(base)) * 1e9
@@ -90,7 +95,7 @@ def test_the_trees_keep_the_density_clearance_yards_and_sizes_they_are_given():
 def test_the_trees_are_labelled_trunk_and_vegetation_and_scanned():
     import bpy  # noqa: F401  (the test needs Blender's module loaded)
 
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.io import read_ply
     from bpy_pipeline.labels import load_class_table
     from bpy_pipeline.plan import run_frames
@@ -98,7 +103,8 @@ def test_the_trees_are_labelled_trunk_and_vegetation_and_scanned():
     layout, config = _street(yard_trees=4.0)
     table = load_class_table()
     buffers = export_scene(table)
-    rows = {name: (buffers.objects.class_names[k], int(buffers.objects.instance[k])) for k, name in enumerate(buffers.objects.names) if name.startswith("street_yard_trees")}
+    rows = {name: (buffers.objects.class_names[k], int(buffers.objects.instance[k])) for k,
+            name in enumerate(buffers.objects.names) if name.startswith("street_yard_trees")}
     top = max(part.instance for part in layout.parts)
     assert rows == {"street_yard_trees.trunk": ("trunk", top + 1), **{f"street_yard_trees.crown.{k:02d}": ("vegetation", top + 2) for k in range(3)}}
     # the scan: points on the new trees carry their labels
@@ -128,7 +134,7 @@ def test_same_seed_same_trees_and_none_at_density_zero():
     assert len(_trees(bpy.data.objects["street_yard_trees"])[0]) > len(first[0])
     _street()  # the default: the group plants nothing, and the ground it would plant on is no geometry of the scene
     assert all(len(m) == 0 for m in _trees(bpy.data.objects["street_yard_trees"]))
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.labels import load_class_table
 
     assert not any(name.startswith("street_yard_trees") for name in export_scene(load_class_table()).objects.names)
@@ -137,7 +143,7 @@ def test_same_seed_same_trees_and_none_at_density_zero():
 def test_a_density_edited_in_the_modifier_panel_is_what_the_export_reads():
     import bpy
 
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.labels import load_class_table
 
     _street()

@@ -125,7 +125,8 @@ def test_bad_trajectory_config_names_its_key(trajectory, extra, message):
 
 
 def test_trajectory_config_round_trips_and_builds():
-    config = config_from_dict({"frames": 2, "sensor": {"preset": "railway_tls", "rotation_deg": [0, 0, 90], "trajectory": {"waypoints": [[0, 0, 0], [0, 100, 0]], "speed": 1.5, "height": 0.5}}})
+    config = config_from_dict({"frames": 2, "sensor": {"preset": "railway_tls", "rotation_deg": [0, 0, 90],
+                                                       "trajectory": {"waypoints": [[0, 0, 0], [0, 100, 0]], "speed": 1.5, "height": 0.5}}})
     assert config_from_dict(config_to_dict(config)) == config
     assert "position" not in config_to_dict(config)["sensor"]
     pose = sensor_trajectory(config.sensor).poses([10.0])[0]
@@ -254,7 +255,7 @@ def curve_object(name, points, location=(0, 0, 0), rotation_z=0.0, cyclic=False,
 def test_curve_polyline_reads_the_evaluated_world_space_centreline():
     import bpy
 
-    from bpy_pipeline.scenes.curves import curve_polyline
+    from bpy_pipeline.blender.curves import curve_polyline
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     square = np.array([[0, 0, 0], [10, 0, 0], [10, 10, 0], [0, 10, 0]], float)
@@ -276,7 +277,7 @@ def test_pipeline_follows_a_curve_of_the_scene(tmp_path):
     import bpy
 
     from bpy_pipeline.plan import run_frames
-    from bpy_pipeline.scenes.objects import mesh_data, tag
+    from bpy_pipeline.blender.mesh_objects import mesh_data, tag
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     wall = bpy.data.objects.new("wall", mesh_data("wall", quad(0, 0.0, 100.0), np.array([[0, 1, 2], [0, 2, 3]])))

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from bpy_pipeline.geometry import human, primitives
-from bpy_pipeline.geometry.population import Placer, meshes_cross, person_shape, place_on_spots, placement_matrix, segments_cross
+from bpy_pipeline.population.placer import Placer, meshes_cross, person_shape, place_on_spots, placement_matrix, segments_cross
 from bpy_pipeline.geometry.surfaces import find_surfaces, floor_and_seats, on_surface
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -91,7 +91,8 @@ def test_people_sit_on_seat_edges_and_stand_on_floors():
     spots = [(s, s.spots, None) for s in floors] + [(s, s.edges, s.outward) for s in seats]
     rng = np.random.default_rng(3)
     for pose in ("sitting", "sitting", "standing", "crouching"):
-        placed = place_on_spots("person", lambda r, p=pose: person_shape(human.sample_pose(p, r), 1.7, 1.0, p), rng, placer, spots, 60, lambda s: (v, t[s.triangles]))
+        placed = place_on_spots("person", lambda r, p=pose: person_shape(human.sample_pose(p, r), 1.7, 1.0, p), rng, placer, spots, 60,
+                                lambda s: (v, t[s.triangles]))
         assert placed is not None, placer.rejections
         lowest = placed.vertices[placed.vertices[:, 2].argmin()]
         if pose == "sitting":  # thighs on the desk top, feet hanging in front of its edge
@@ -116,8 +117,10 @@ def _hall(tmp_path):
 def _config(blend, extra=(), population=None):
     from bpy_pipeline.config import load_config
 
-    population = population or {"person": {"count": 5, "poses": {"standing": 0.3, "walking": 0.3, "sitting": 0.4}}, "robot_arm": {"count": 1}, "car": {"count": 1}}
-    return load_config({"seed": 2, "frames": 3, "scene": {"builder": "blend", "path": str(blend), "population": population}, "sensor": {"preset": "vlp16", "position": [0, 0, 2.5]}, "output": {"formats": ["ply"], "preview": False}}, list(extra))
+    population = population or {"person": {"count": 5, "poses": {"standing": 0.3, "walking": 0.3, "sitting": 0.4}}, "robot_arm": {"count": 1},
+                                "car": {"count": 1}}
+    return load_config({"seed": 2, "frames": 3, "scene": {"builder": "blend", "path": str(blend), "population": population},
+                        "sensor": {"preset": "vlp16", "position": [0, 0, 2.5]}, "output": {"formats": ["ply"], "preview": False}}, list(extra))
 
 
 def _instances(buffers):
@@ -135,7 +138,7 @@ def _instances(buffers):
 def test_placed_objects_never_cross_each_other_or_the_hall_and_stand_on_allowed_surfaces(bpy_scene, tmp_path):
     import bpy
 
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.geometry import kinematics
     from bpy_pipeline.labels import load_class_table
     from bpy_pipeline.stages.scene import build_frame_scene
@@ -201,11 +204,12 @@ def test_frame_k_after_k_minus_1_is_frame_k_alone(bpy_scene, tmp_path):
 @pytest.mark.bpy
 def test_population_works_on_a_procedural_builder(bpy_scene):
     from bpy_pipeline.config import load_config
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.labels import load_class_table
     from bpy_pipeline.stages.scene import build_frame_scene
 
-    config = load_config(None, ["scene.builder=parking", "scene.cars={kind: normal, mean: 3, std: 0, min: 0, max: 9}", "scene.population={person: {count: 4, poses: {standing: 1}}}"])
+    config = load_config(None, ["scene.builder=parking", "scene.cars={kind: normal, mean: 3, std: 0, min: 0, max: 9}",
+                                "scene.population={person: {count: 4, poses: {standing: 1}}}"])
     keep = {}
     result = build_frame_scene(config, 0, keep=keep)
     assert result.info["population"]["person"]["placed"] == 4 and result.info["cars_placed"] == 3
@@ -238,7 +242,8 @@ def test_bad_population_keys_exit_2_with_one_line_naming_the_key(tmp_path):
         "scene.population={placement: {walkable_classes: [lava]}}": "scene.population.placement.walkable_classes[0]: unknown class 'lava'",
     }
     for assignment, message in cases.items():
-        result = subprocess.run([sys.executable, str(ROOT / "run.py"), "--out", str(tmp_path / "o"), "--set", "scene.builder=primitives", "--set", assignment], cwd=ROOT, capture_output=True, text=True, timeout=120)
+        result = subprocess.run([sys.executable, str(ROOT / "run.py"), "--out", str(tmp_path / "o"), "--set", "scene.builder=primitives", "--set", assignment],
+                                cwd=ROOT, capture_output=True, text=True, timeout=120)
         assert result.returncode == 2, (assignment, result.stderr)
         lines = result.stderr.strip().splitlines()
         assert len(lines) == 1 and message in lines[0], (assignment, result.stderr)
@@ -257,7 +262,8 @@ def test_a_scene_without_blender_refuses_a_population():
 def test_population_round_trips_through_the_saved_config():
     from bpy_pipeline.config import config_from_dict, config_to_dict, load_config
 
-    config = load_config(None, ["scene.builder=primitives", "scene.population={person: {count: {min: 1, max: 5}}, robot_arm: {count: 1, positions: [[0, 0, 90]]}, car: {count: 2}}"])
+    config = load_config(None, ["scene.builder=primitives",
+                                "scene.population={person: {count: {min: 1, max: 5}}, robot_arm: {count: 1, positions: [[0, 0, 90]]}, car: {count: 2}}"])
     again = config_from_dict(config_to_dict(config))
     assert again.scene.population == config.scene.population
     assert config.scene.population.kinds[0][1].count.kind == "uniform" and config.output.boxes.formats == ["kitti", "openpcdet"]
@@ -284,7 +290,7 @@ def test_the_visibility_rule_refuses_hidden_objects_and_objects_that_hide_others
 
 
 def test_keep_out_is_the_gap_between_footprints():
-    from bpy_pipeline.geometry.population import footprint
+    from bpy_pipeline.population.placer import footprint
 
     v, t = room()
     floor = find_surfaces(v, t)[0]

@@ -79,7 +79,7 @@ def build(*overrides, seed=0, view=None):
     import bpy
 
     from bpy_pipeline.frame import frame_rng
-    from bpy_pipeline.scenes import build_scene
+    from bpy_pipeline.blender import build_scene
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     config = load_config(None, list(overrides))
@@ -133,7 +133,7 @@ def test_collinear_alignment_gives_a_straight_track():
 def test_the_track_follows_a_curve_and_its_node_group_is_editable():
     import bpy
 
-    from bpy_pipeline.compat import set_modifier_input
+    from bpy_pipeline.blender.compat import set_modifier_input
     from bpy_pipeline.builders.railway.alignment import arc_through
 
     build("scene.track.mid=[0, 25, 0]", "scene.stations.count=0", "scene.track.design_speed=0")  # no cant: rails level across
@@ -146,7 +146,8 @@ def test_the_track_follows_a_curve_and_its_node_group_is_editable():
     assert np.abs(offset).max() == pytest.approx(1.435 / 2 + 0.036 + 0.075, abs=0.002)
     group = bpy.data.node_groups["Track"]
     names = {item.name for item in group.interface.items_tree if getattr(item, "in_out", None) == "INPUT"}
-    assert {"Gauge", "Sleeper Spacing", "Ballast Height", "Ballast Shoulder", "Tracks", "Track Spacing", "Embankment Height", "Embankment Slope", "Rail Head Width"} <= names
+    assert {"Gauge", "Sleeper Spacing", "Ballast Height", "Ballast Shoulder", "Tracks", "Track Spacing", "Embankment Height", "Embankment Slope",
+            "Rail Head Width"} <= names
     rails_obj = bpy.data.objects["rails.t0"]
     set_modifier_input(rails_obj.modifiers[0], "Gauge", 1.0)  # what a user does in the modifier panel
     rails_obj.update_tag()
@@ -176,7 +177,7 @@ def test_every_class_of_the_scene_appears_in_the_output(tmp_path):
 
 
 def test_same_seed_same_scene():
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.lidar.sensor.view import view_of
     from bpy_pipeline.labels import load_class_table
 
@@ -323,7 +324,11 @@ def test_a_cutting_with_undulating_ground():
     section = layout.section
     ground = evaluated_vertices(bpy.data.objects["ground"])
     d = np.abs(ground[:, 1])
-    bottom, slope, top = d <= section.embankment_top_half, (d > section.embankment_top_half + 0.1) & (d < section.embankment_toe_half - 0.1), d > section.embankment_toe_half + 5
+    bottom, slope, top = (
+        d <= section.embankment_top_half,
+        (d > section.embankment_top_half + 0.1) & (d < section.embankment_toe_half - 0.1),
+        d > section.embankment_toe_half + 5,
+    )
     assert np.allclose(ground[bottom, 2], 0.0) and np.allclose(ground[slope, 2], section.surface(ground[slope, 1]))  # formation, then the slopes
     # undulating about the top by at most the amplitude (three waves of weights 1, 1/2, 1/4 over 1.75: std 0.46 x 0.5 m)
     assert ground[top, 2].mean() == pytest.approx(4.0, abs=0.2) and 0.15 < ground[top, 2].std() < 0.35 and np.abs(ground[top, 2] - 4.0).max() <= 0.5 + 1e-6

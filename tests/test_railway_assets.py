@@ -30,7 +30,8 @@ CANTILEVER = {
     "Insulator.001": ((-0.04, 0.2, 6.8), (0.04, 0.5, 7.0), None),
 }
 SMALL_SCAN = ["sensor.preset=railway_tls", "sensor.sampling_factor=0.3", "effects.ideal=true", "scene.detail.stones=false",
-              "scene.track.start=[-40,0,0]", "scene.track.mid=[0,0,0]", "scene.track.end=[40,0,0]", "scene.catenary.enabled=false", "scene.catenary.feeders=false"]
+              "scene.track.start=[-40,0,0]", "scene.track.mid=[0,0,0]", "scene.track.end=[40,0,0]", "scene.catenary.enabled=false",
+              "scene.catenary.feeders=false"]
 
 
 def box(lo, hi) -> tuple[np.ndarray, np.ndarray]:
@@ -77,7 +78,7 @@ def make_asset(path: Path, parts: dict) -> Path:
     """Write ``parts`` ({object name: (lo, hi, material name or None)}) with Blender's OBJ or PLY exporter."""
     import bpy
 
-    from bpy_pipeline.scenes.objects import mesh_data
+    from bpy_pipeline.blender.mesh_objects import mesh_data
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     for name, (lo, hi, material) in parts.items():
@@ -98,7 +99,7 @@ def build(*overrides):
     import bpy
 
     from bpy_pipeline.builders.railway import scene as railway
-    from bpy_pipeline.scenes.objects import COLLECTION
+    from bpy_pipeline.blender.mesh_objects import COLLECTION
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     params = load_config(None, ["scene.detail.mode=fixed", "scene.detail.stones=false", *overrides]).scene.params

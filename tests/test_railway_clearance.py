@@ -41,7 +41,8 @@ def segment_hits(a, b, triangles) -> bool:
 def meshes_intersect(va, ta, vb, tb, margin=0.01) -> bool:
     """Whether two triangle meshes ((n, 3) vertices, (m, 3) indices each) pass through each other:
     an edge of a triangle of one crosses a triangle of the other."""
-    lo, hi = np.maximum(va[ta].reshape(-1, 3).min(0), vb[tb].reshape(-1, 3).min(0)) - margin, np.minimum(va[ta].reshape(-1, 3).max(0), vb[tb].reshape(-1, 3).max(0)) + margin
+    lo, hi = np.maximum(va[ta].reshape(-1, 3).min(0),
+                        vb[tb].reshape(-1, 3).min(0)) - margin, np.minimum(va[ta].reshape(-1, 3).max(0), vb[tb].reshape(-1, 3).max(0)) + margin
     if (lo > hi).any():
         return False
 
@@ -89,7 +90,8 @@ def joint(a, b) -> bool:
             return ra == rb and abs(ia - ib) <= 1
         if "section_insulator" in (ka, kb):  # it clamps its own contact wire
             return {ka, kb} == {"section_insulator", "contact_wire"} and ia == ib and track(ra) == track(rb)
-        return "droppers" in (ka, kb) and ia == ib and track(ra) == track(rb) and {ka, kb} <= {"droppers", "contact_wire", "messenger_wire", "auxiliary_messenger"}
+        return ("droppers" in (ka, kb) and ia == ib and track(ra) == track(rb)
+                and {ka, kb} <= {"droppers", "contact_wire", "messenger_wire", "auxiliary_messenger"})
     fitting, wire_ = (a, b) if a[0] not in wire else (b, a)
     (kf, support, who), (kw, span, run) = fitting, wire_
     if support not in (span, span + 1):
@@ -111,10 +113,10 @@ def clashes(overrides: list[str]) -> list[tuple[str, str]]:
     without being a joint."""
     import bpy
 
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.labels import load_class_table
     from bpy_pipeline.frame import frame_rng
-    from bpy_pipeline.scenes import build_scene
+    from bpy_pipeline.blender import build_scene
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     config = load_config(None, ["scene.detail.mode=fixed", "scene.catenary.points_per_10m=10", "scene.supports.mast_type=mixed", *overrides])
@@ -178,7 +180,7 @@ def test_registration_arms_are_about_a_metre_long():
     import bpy
 
     from bpy_pipeline.frame import frame_rng
-    from bpy_pipeline.scenes import build_scene
+    from bpy_pipeline.blender import build_scene
 
     for layout, tracks in (("single", 2), ("both_sides", 4), ("gantry", 3)):
         bpy.ops.wm.read_factory_settings(use_empty=True)

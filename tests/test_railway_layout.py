@@ -18,7 +18,8 @@ def params(*overrides):
 
 
 def test_spans_are_jittered_within_bounds_and_fill_the_line():
-    p = params("scene.track.start=[0, 0, 0]", "scene.track.mid=[500, 0, 0]", "scene.track.end=[1000, 0, 0]", "scene.supports.span=48", "scene.supports.span_jitter=2")
+    p = params("scene.track.start=[0, 0, 0]", "scene.track.mid=[500, 0, 0]", "scene.track.end=[1000, 0, 0]", "scene.supports.span=48",
+               "scene.supports.span_jitter=2")
     layout = plan(p, np.random.default_rng(3))
     spans = layout.spans
     assert len(spans) == 20 and spans.min() >= 46 and spans.max() <= 50 and spans.std() > 0.3
@@ -190,7 +191,8 @@ def test_tension_sections_overlap_over_one_span_with_the_ending_run_rising():
                "scene.supports.span_jitter=0", "scene.catenary.tension_length=150", "scene.track.tracks=2", "scene.supports.layout=both_sides")
     layout = plan(p, np.random.default_rng(0))
     cat = p.catenary
-    assert [(o.span, o.track, o.ending, o.starting) for o in layout.overlaps] == [(3, 0, "t0", "t0s1"), (3, 1, "t1", "t1s1"), (7, 0, "t0s1", "t0s2"), (7, 1, "t1s1", "t1s2")]
+    assert [(o.span, o.track, o.ending, o.starting) for o in layout.overlaps] == [(3, 0, "t0", "t0s1"), (3, 1, "t1", "t1s1"), (7, 0, "t0s1", "t0s2"),
+                                                                                  (7, 1, "t1s1", "t1s2")]
     wires = {(w.run, w.span, w.kind): w for w in layout.wires}
     for o in layout.overlaps:
         ending, starting = wires[(o.ending, o.span, "contact_wire")], wires[(o.starting, o.span, "contact_wire")]

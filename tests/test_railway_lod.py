@@ -38,7 +38,8 @@ def test_path_distance_is_to_the_nearest_point_of_the_polyline():
     assert view.distance([midway])[0] == pytest.approx(0.0, abs=1e-9)
     # a straight path and wires along it: parallel, collinear and point-like segments
     straight = PathView(np.array([[5.0, 0, 0], [20, 0, 0]]), 0.001, 100.0)
-    assert straight.segment_distance([[0, 1, 0], [0, 0, 0], [0, 0, 0], [-3, 0, 4]], [[10, 1, 0], [1, 0, 0], [-4, 0, 0], [-3, 0, 4]]).tolist() == pytest.approx([1, 4, 5, 8.944272], abs=1e-6)
+    assert straight.segment_distance([[0, 1, 0], [0, 0, 0], [0, 0, 0], [-3, 0, 4]],
+                                     [[10, 1, 0], [1, 0, 0], [-4, 0, 0], [-3, 0, 4]]).tolist() == pytest.approx([1, 4, 5, 8.944272], abs=1e-6)
 
 
 def test_a_moving_sensor_gets_the_path_of_the_whole_run_whatever_the_frame_range():
@@ -52,7 +53,8 @@ def test_a_moving_sensor_gets_the_path_of_the_whole_run_whatever_the_frame_range
     assert view.step == pytest.approx(math.radians(0.0709)) and view.motion_spacing == pytest.approx(25 / 200)
     other = load_config(None, [*LINE, "sensor.preset=railway_profiler", "frames=2", "sensor.trajectory={curve: track_centreline, speed: 10, height: 4.2}"])
     assert scene_view(other, 0, 1).following({}) is None  # the curve is the builder's: fixed detail until it is known
-    assert scene_view(load_config(None, ["scene.builder=parking", "scene.place_sensor=false", "sensor.trajectory={waypoints: [[0, 0, 0], [5, 0, 0]], speed: 1}"]), 0, 1) is None
+    assert scene_view(load_config(None, ["scene.builder=parking", "scene.place_sensor=false",
+                                         "sensor.trajectory={waypoints: [[0, 0, 0], [5, 0, 0]], speed: 1}"]), 0, 1) is None
 
 
 def samples_per_metre(layout, detail, kind):
@@ -116,7 +118,8 @@ def test_a_mobile_run_builds_stones_and_fine_wires_along_its_path_only(tmp_path)
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     # a trolley at 0.5 m/s from 100 m along the line, its profiler coarsened to 0.5 deg so stones stay few
-    config = load_config(None, [*LINE, "sensor.preset=railway_profiler", "sensor.horizontal_resolution_deg=0.5", "sensor.columns=20", "sensor.rotation_deg=[0, 0, 30]",
+    config = load_config(None, [*LINE, "sensor.preset=railway_profiler", "sensor.horizontal_resolution_deg=0.5", "sensor.columns=20",
+                                "sensor.rotation_deg=[0, 0, 30]",
                                 "sensor.trajectory={curve: track_centreline, speed: 0.5, height: 1.5, start_distance: 100}", "frames=3", "effects.ideal=true",
                                 "output.formats=[ply]", "output.preview=false", "output.frame=world"])
     manifest = run(config, tmp_path, log=lambda *_: None)

@@ -99,7 +99,7 @@ def test_intensity_in_the_real_sensors_units(real_scan):
 @pytest.mark.bpy
 def test_reflectivity_from_the_material_base_colour(bpy_scene):
     """No ``lidar_reflectivity``: the albedo of the base colour; the property stays the override."""
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.labels import load_class_table
 
     bpy = bpy_scene
@@ -133,7 +133,8 @@ def test_incidence_exponent_sets_how_intensity_and_drop_follow_incidence():
     assert cos.min() < 0.5 and np.all(cos <= 1 + 1e-6)  # grazing returns read less under Lambert's law
     from bpy_pipeline.lidar.effects.drop.threshold import probability
 
-    effects = load_config({"scene": {"builder": "primitives"}, "sensor": {"preset": "vlp16"}, "effects": {"ideal": True, "drop": {"model": "threshold"}}}).effects
+    effects = load_config({"scene": {"builder": "primitives"}, "sensor": {"preset": "vlp16"},
+                           "effects": {"ideal": True, "drop": {"model": "threshold"}}}).effects
     from bpy_pipeline.lidar.points import BEAM_DTYPE, empty_points
 
     points, beam = empty_points(2), np.zeros(2, BEAM_DTYPE)
@@ -159,7 +160,8 @@ def test_realism_benchmark_runs_small_and_its_figures_hold(tmp_path, real_scan):
     for name in ("nuscenes_hdl32e_sweep.bin", "kitti_hdl64e_000008_frontfov.bin", "kitti_000008_boxes.json"):
         real_scan(name)
     root = Path(__file__).resolve().parents[1]
-    done = subprocess.run([sys.executable, str(root / "benchmarks" / "bench_realism.py"), "--small", "--out", str(tmp_path)], capture_output=True, text=True, timeout=300)
+    done = subprocess.run([sys.executable, str(root / "benchmarks" / "bench_realism.py"), "--small", "--out", str(tmp_path)], capture_output=True, text=True,
+                          timeout=300)
     assert done.returncode == 0, done.stderr
     result = json.loads((tmp_path / "realism_small.json").read_text())
     assert (tmp_path / "realism_small.png").stat().st_size > 10_000

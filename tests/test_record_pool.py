@@ -43,5 +43,6 @@ def test_a_held_scan_keeps_its_bytes_through_later_scans():
         assert other.tobytes() != kept.tobytes()
         del other
     assert first.tobytes() == kept.tobytes() and first_beam.tobytes() == kept_beam.tobytes()
-    fresh, _ = scan(RayCaster(buffers, frame=np.eye(4), kernel="numba"), buffers, pattern, pose_matrix([0.2, -0.3, 0.1], [0, 0, 0]), spec.min_range, spec.max_range)
+    fresh, _ = scan(RayCaster(buffers, frame=np.eye(4), kernel="numba"), buffers, pattern, pose_matrix([0.2, -0.3, 0.1], [0, 0, 0]), spec.min_range,
+                    spec.max_range)
     assert fresh.tobytes() == kept.tobytes()

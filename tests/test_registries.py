@@ -29,7 +29,7 @@ def build_pillar(params: PillarScene, context) -> BuildResult:
     import bpy  # noqa: F401  (a builder's Blender side)
 
     from bpy_pipeline.geometry import primitives
-    from bpy_pipeline.scenes.objects import mesh_object, scene_collection, tag
+    from bpy_pipeline.blender.mesh_objects import mesh_object, scene_collection, tag
 
     collection = scene_collection()
     tag(mesh_object("pillar", primitives.box(0.5, 0.5, params.height), collection, (params.x, 0.0, params.height / 2), (0.0, 0.0, 0.0)), "pillar")
@@ -78,7 +78,8 @@ def test_toy_builder_and_writer_validate_from_a_config(toys):
 def test_toy_builder_and_writer_run(toys, bpy_scene, tmp_path):
     from bpy_pipeline.plan import run
 
-    config = load_config({"scene": {"builder": "pillar", "x": 5.0}, "sensor": {"preset": "vlp16", "position": [0, 0, 1]}, "effects": {"ideal": True}, "output": {"formats": ["xyz", "ply"], "preview": False}})
+    config = load_config({"scene": {"builder": "pillar", "x": 5.0}, "sensor": {"preset": "vlp16", "position": [0, 0, 1]}, "effects": {"ideal": True},
+                          "output": {"formats": ["xyz", "ply"], "preview": False}})
     manifest = run(config, tmp_path, log=lambda *_: None)
     xyz = np.loadtxt(tmp_path / "xyz" / "000000.xyz")
     assert manifest["frames"][0]["scene"] == {"pillar_x": 5.0}

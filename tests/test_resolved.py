@@ -38,11 +38,13 @@ def test_a_preset_named_by_the_config_replaces_the_builders_sensor_and_ideal_dro
 
 
 def test_the_command_prints_yaml_with_sources_and_refuses_a_bad_key_in_one_line():
-    done = subprocess.run([sys.executable, "-m", "bpy_pipeline", "config", "--resolved", "--set", "seed=9"], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    done = subprocess.run([sys.executable, "-m", "bpy_pipeline", "config", "--resolved", "--set", "seed=9"], cwd=ROOT, capture_output=True, text=True,
+                          timeout=120)
     assert done.returncode == 0, done.stderr
     assert "seed: 9  # --set\n" in done.stdout
     assert yaml.safe_load(done.stdout)["seed"] == 9  # comments aside, it is the YAML of the tree
-    bad = subprocess.run([sys.executable, "-m", "bpy_pipeline", "config", "--resolved", "--set", "sensor.nope=1"], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    bad = subprocess.run([sys.executable, "-m", "bpy_pipeline", "config", "--resolved", "--set", "sensor.nope=1"], cwd=ROOT, capture_output=True, text=True,
+                         timeout=120)
     assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1 and "sensor.nope" in bad.stderr
 
 

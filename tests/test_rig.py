@@ -86,7 +86,8 @@ def _street(sensor, formats, effects=None, frames=1, **output):
 # Random effects draw from each sensor's own generator (rig.member_rng), a single run from the frame's:
 # the runs compare byte for byte with deterministic effects; the generators are compared on their own below.
 EXACT = {"drop": {"model": "none"}, "noise": {"sigma": 0.0}}
-THREE_CAMERAS = {"position": list(PLATFORM), "rotation_deg": [0.0, 0.0, 0.0], "rig": [{"preset": "flash96x16_carla", "position": [0.0, 0.0, 2.0], "rotation_deg": [0.0, 0.0, 45.0 + y]} for y in YAWS]}
+THREE_CAMERAS = {"position": list(PLATFORM), "rotation_deg": [0.0, 0.0, 0.0],
+                 "rig": [{"preset": "flash96x16_carla", "position": [0.0, 0.0, 2.0], "rotation_deg": [0.0, 0.0, 45.0 + y]} for y in YAWS]}
 
 
 @pytest.mark.bpy
@@ -104,7 +105,8 @@ def test_three_camera_rig_is_the_union_of_three_single_camera_runs_byte_for_byte
     merged = np.array(vertex.tolist(), dtype=RIG_POINT_DTYPE)
     min_points = rig_config.output.boxes.min_points
     for k, yaw in enumerate(YAWS):
-        single = _street({"preset": "flash96x16_carla", "position": [PLATFORM[0], PLATFORM[1], PLATFORM[2] + 2.0], "rotation_deg": [0.0, 0.0, 45.0 + yaw]}, ["ply"], effects=EXACT)
+        single = _street({"preset": "flash96x16_carla", "position": [PLATFORM[0], PLATFORM[1], PLATFORM[2] + 2.0], "rotation_deg": [0.0, 0.0, 45.0 + yaw]},
+                         ["ply"], effects=EXACT)
         run(single, tmp_path / f"single{k}", log=lambda s: None)
         alone = (tmp_path / f"single{k}" / "ply" / "000000.ply").read_bytes()
         assert (tmp_path / "rig" / "rig" / f"sensor{k}" / "000000.ply").read_bytes() == alone
@@ -123,7 +125,8 @@ def test_three_camera_rig_is_the_union_of_three_single_camera_runs_byte_for_byte
     assert record["points"] == len(merged) == sum(s["points"] for s in record["rig"]["sensors"])
     per_sensor = {b["instance"] for s in record["rig"]["sensors"] for b in s.get("boxes", [])}
     assert per_sensor <= {b["instance"] for b in record["boxes"]}  # a box kept by one camera is kept merged
-    members = {stage: [s["timings_s"][stage] for s in record["rig"]["sensors"]] for stage in ("scan", "effects")}  # each camera times its trace and its effects apart
+    # each camera times its trace and its effects apart
+    members = {stage: [s["timings_s"][stage] for s in record["rig"]["sensors"]] for stage in ("scan", "effects")}
     assert all(t > 0 for t in members["scan"] + members["effects"])
     assert record["timings_s"]["effects"] == pytest.approx(sum(members["effects"]), abs=5e-4)  # the frame adds them up
     assert record["timings_s"]["scan"] >= sum(members["scan"]) - 5e-4  # and merges the clouds in its scan
@@ -166,7 +169,8 @@ def test_skip_empty_records_skipped_frames_and_can_fill_the_requested_kept_frame
     from bpy_pipeline.plan import run
 
     sparse = {"builder": "street", "vehicles": {"mean": 0.0, "std": 1.0, "max": 3.0}, "parked": {"mean": 0.0, "std": 0.0, "max": 0.0},
-              "pedestrians": {"mean": 0.0, "std": 1.0, "max": 3.0}, "bicycles": {"mean": 0.0, "std": 0.0, "max": 0.0}, "motorcycles": {"mean": 0.0, "std": 0.0, "max": 0.0}}
+              "pedestrians": {"mean": 0.0, "std": 1.0, "max": 3.0}, "bicycles": {"mean": 0.0, "std": 0.0, "max": 0.0},
+              "motorcycles": {"mean": 0.0, "std": 0.0, "max": 0.0}}
     data = {"seed": 1, "frames": 6, "scene": sparse, "sensor": THREE_CAMERAS,
             "output": {"formats": ["ply"], "preview": False, "skip_empty": True, "boxes": {"formats": ["openpcdet"], "classes": BOX_CLASSES}}}
     run(load_config(data), tmp_path / "a", log=lambda s: None)
@@ -182,7 +186,8 @@ def test_skip_empty_records_skipped_frames_and_can_fill_the_requested_kept_frame
     manifest = json.loads((tmp_path / "a" / "manifest.json").read_text())
     assert manifest["summary"]["frames"] == 6 - len(skipped) and manifest["summary"]["skipped"]["frames"] == len(skipped)
     sets = tmp_path / "a" / "openpcdet" / "ImageSets"
-    image_set = [i for name in ("train", "val", "test") if (sets / f"{name}.txt").exists() for i in (sets / f"{name}.txt").read_text().split()]  # output.split; no file for an empty split
+    # output.split; no file for an empty split
+    image_set = [i for name in ("train", "val", "test") if (sets / f"{name}.txt").exists() for i in (sets / f"{name}.txt").read_text().split()]
     assert sorted(int(i) for i in image_set) == [r["index"] for r in records if not r.get("skipped")]
     # `frames` kept frames: indices go on; the first indices skip exactly as before
     data["output"]["frames_kept"] = True

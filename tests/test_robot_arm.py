@@ -84,10 +84,10 @@ def test_a_bad_arm_file_names_the_key(tmp_path):
 def test_blender_chain_evaluates_to_the_forward_kinematics(bpy_scene):
     import bpy
 
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.labels import load_class_table
-    from bpy_pipeline.scenes.objects import scene_collection
-    from bpy_pipeline.scenes.robot_arm import RobotArm
+    from bpy_pipeline.blender.mesh_objects import scene_collection
+    from bpy_pipeline.blender.robot_arm import RobotArm
 
     arm = kinematics.load_arm()
     robot = RobotArm(arm, scene_collection(), 0)
@@ -120,5 +120,6 @@ def test_blender_chain_evaluates_to_the_forward_kinematics(bpy_scene):
         assert buffers.objects.class_names[row] == "robot arm" and buffers.objects.instance[row] == 7
         vertices = buffers.vertices[np.unique(buffers.triangles[buffers.triangle_object == row])]
         mine = np.flatnonzero(arm.capsule_link == link)
-        gap = np.min([segment_distance(vertices, vertices, np.broadcast_to(a[k], vertices.shape), np.broadcast_to(b[k], vertices.shape)) - r[k] for k in mine], axis=0)
+        gap = np.min([segment_distance(vertices, vertices, np.broadcast_to(a[k], vertices.shape), np.broadcast_to(b[k], vertices.shape)) - r[k] for k in mine],
+                     axis=0)
         assert gap.max() < 1e-5

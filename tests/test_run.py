@@ -98,7 +98,8 @@ BAD = {
     "malformed": (["--config", "{tmp}/bad.yaml"], "bad.yaml: not valid YAML"),
     "unknown key": (["--set", "scene.wheels=4"], "scene.wheels: unknown key"),
     "wrong type": (["--set", "sensor.channels=many"], "sensor.channels: expected an integer"),
-    "unknown class": (["--set", "scene.builder=primitives", "--set", "scene.shapes=[{type: box, class: banana, name: crate}]"], "object 'crate': lidar_class: unknown class 'banana'"),
+    "unknown class": (["--set", "scene.builder=primitives", "--set", "scene.shapes=[{type: box, class: banana, name: crate}]"],
+                      "object 'crate': lidar_class: unknown class 'banana'"),
     "min range": (["--set", "sensor.min_range=500"], "sensor.min_range: must be >= 0 and below sensor.max_range"),
     "empty scene": (["--set", "scene.builder=primitives", "--set", "scene.shapes=[]"], "scene: nothing to scan"),
     "missing blend": (["--set", "scene.builder=blend", "--set", "scene.path={tmp}/gone.blend"], "scene.path: "),
@@ -106,9 +107,12 @@ BAD = {
     "config not utf-8": (["--config", "{tmp}/latin1.yaml"], "latin1.yaml: not UTF-8 text"),
     "scene as a scalar": (["--set", "scene=railway"], "scene: expected a mapping"),
     "sensor as a list": (["--set", "sensor=[1, 2]"], "sensor: expected a mapping"),
-    "rays beyond memory": (["--set", "sensor.preset=railway_tls", "--set", "sensor.sampling_factor=6.3", "--set", "limits.rays_per_frame=1e10"], "rays per frame need about"),
-    "a hall of 100000 people": (["--set", "scene.builder=industrial_hall", "--set", "scene.people={mean: 100000, std: 0, min: 0, max: 100000}"], "scene.people.max: must be <= 500"),
-    "scene out of range": (["--set", "scene.builder=primitives", "--set", "sensor.preset=vlp16", "--set", "sensor.position=[5000, 0, 1]"], "no object of the scene lies within max_range"),
+    "rays beyond memory": (["--set", "sensor.preset=railway_tls", "--set", "sensor.sampling_factor=6.3", "--set", "limits.rays_per_frame=1e10"],
+                           "rays per frame need about"),
+    "a hall of 100000 people": (["--set", "scene.builder=industrial_hall", "--set", "scene.people={mean: 100000, std: 0, min: 0, max: 100000}"],
+                                "scene.people.max: must be <= 500"),
+    "scene out of range": (["--set", "scene.builder=primitives", "--set", "sensor.preset=vlp16", "--set", "sensor.position=[5000, 0, 1]"],
+                           "no object of the scene lies within max_range"),
 }
 
 
@@ -171,13 +175,21 @@ def test_full_disk_refused_before_any_work(tiny_mount):
 def test_disk_full_during_a_frame_leaves_no_half_frame(tiny_mount):
     """The estimate passes (a small scan) but the disk fills while a later frame is written."""
     out = tiny_mount("size=8m")
-    result = run("--out", str(out / "run"), "--set", "scene.builder=primitives", "--set", "sensor.preset=vlp16", "--set", "sensor.position=[0, 0, 1.5]", "--frames", "40", "--set", "output.formats=[ply,las]")
+    result = run("--out", str(out / "run"), "--set", "scene.builder=primitives", "--set", "sensor.preset=vlp16", "--set", "sensor.position=[0, 0, 1.5]",
+                 "--frames", "40", "--set", "output.formats=[ply,las]")
     assert result.returncode == 2 and "no space left on the device" in result.stderr, result.stderr
     from bpy_pipeline.io import read_dataset
 
     records = read_dataset(out / "run")["frames"]
     recorded = {f for r in records for f in r["files"]}
-    on_disk = {str(p.relative_to(out / "run")) for p in (out / "run").rglob("*") if p.is_file() and p.parts[-2] not in ("records",) and not any(s.startswith(".") for s in p.relative_to(out / "run").parts) and p.name != "manifest.json"}
+    on_disk = {
+        str(p.relative_to(out / "run"))
+        for p in (out / "run").rglob("*")
+        if p.is_file()
+        and p.parts[-2] not in ("records",)
+        and not any(s.startswith(".") for s in p.relative_to(out / "run").parts)
+        and p.name != "manifest.json"
+    }
     assert 0 < len(records) < 40 and on_disk <= recorded
 
 
@@ -188,8 +200,10 @@ def test_empty_frame_warns_with_the_likely_cause(tmp_path):
 
 
 def test_noise_never_pushes_a_range_past_max_range(tmp_path):
-    result = run("--out", str(tmp_path / "o"), "--set", "scene.builder=primitives", "--set", "scene.shapes=[{type: box, size: [1, 30, 30], position: [10.2, 0, 0], class: wall}]",
-                 "--set", "sensor.preset=vlp16", "--set", "sensor.position=[0, 0, 0]", "--set", "sensor.max_range=10", "--set", "effects.noise.sigma=0.5", "--set", "output.formats=[ply]")
+    result = run("--out", str(tmp_path / "o"), "--set", "scene.builder=primitives", "--set",
+                 "scene.shapes=[{type: box, size: [1, 30, 30], position: [10.2, 0, 0], class: wall}]",
+                 "--set", "sensor.preset=vlp16", "--set", "sensor.position=[0, 0, 0]", "--set", "sensor.max_range=10", "--set", "effects.noise.sigma=0.5",
+                 "--set", "output.formats=[ply]")
     assert result.returncode == 0, result.stderr
     from bpy_pipeline.io import read_ply
 
@@ -199,14 +213,18 @@ def test_noise_never_pushes_a_range_past_max_range(tmp_path):
 
 def test_fit_out_under_a_regular_file(tmp_path, real_scan):
     (tmp_path / "file").write_text("x")
-    result = subprocess.run([sys.executable, "-m", "bpy_pipeline", "fit", str(real_scan("nuscenes_hdl32e_sweep.bin")), "--out", str(tmp_path / "file" / "model.yaml")], cwd=ROOT, capture_output=True, text=True)
-    assert result.returncode == 2 and result.stderr.strip().splitlines() == [f"error: --out: {tmp_path / 'file'} is not a folder (a file stands in the path); give a path in a folder"]
+    result = subprocess.run([sys.executable, "-m", "bpy_pipeline", "fit", str(real_scan("nuscenes_hdl32e_sweep.bin")), "--out",
+                             str(tmp_path / "file" / "model.yaml")], cwd=ROOT, capture_output=True, text=True)
+    assert result.returncode == 2 and result.stderr.strip().splitlines() == [
+        f"error: --out: {tmp_path / 'file'} is not a folder (a file stands in the path); give a path in a folder"
+    ]
 
 
 @pytest.mark.parametrize("builder", ["parking", "street", "industrial_hall"])
 def test_a_run_of_the_geometry_nodes_builders_frees_what_blender_allocates(tmp_path, builder):
     """Blender reports memory it never freed when it exits ("Not freed memory blocks"): the export of the
     builders' Geometry Nodes instancers must leave none (4.5's instance point clouds did)."""
-    result = run("--set", f"scene.builder={builder}", "--set", "frames=1", "--set", "output.formats=[ply]", "--set", "output.preview=false", "--out", str(tmp_path / "out"))
+    result = run("--set", f"scene.builder={builder}", "--set", "frames=1", "--set", "output.formats=[ply]", "--set", "output.preview=false", "--out",
+                 str(tmp_path / "out"))
     assert result.returncode == 0, result.stderr
     assert "Not freed memory blocks" not in result.stderr + result.stdout

@@ -22,11 +22,11 @@ def scanned():
     import bpy
 
     from bpy_pipeline.config import config_from_dict
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.labels import load_class_table
     from bpy_pipeline.frame import frame_rng
     from bpy_pipeline.stages.scan import scan_buffers
-    from bpy_pipeline.scenes import build_scene
+    from bpy_pipeline.blender import build_scene
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     config = config_from_dict(

@@ -31,7 +31,8 @@ def scene(**meshes) -> SceneBuffers:
 def icosphere(radius: float, subdivisions: int):
     """A geodesic sphere: an icosahedron whose faces are split in four ``subdivisions`` times (outward winding)."""
     p = (1 + 5**0.5) / 2
-    vertices = [np.array(v, float) for v in ([-1, p, 0], [1, p, 0], [-1, -p, 0], [1, -p, 0], [0, -1, p], [0, 1, p], [0, -1, -p], [0, 1, -p], [p, 0, -1], [p, 0, 1], [-p, 0, -1], [-p, 0, 1])]
+    vertices = [np.array(v, float) for v in ([-1, p, 0], [1, p, 0], [-1, -p, 0], [1, -p, 0], [0, -1, p], [0, 1, p], [0, -1, -p], [0, 1, -p], [p, 0, -1],
+                                             [p, 0, 1], [-p, 0, -1], [-p, 0, 1])]
     vertices = [v / np.linalg.norm(v) for v in vertices]
     faces = [(0, 11, 5), (0, 5, 1), (0, 1, 7), (0, 7, 10), (0, 10, 11), (1, 5, 9), (5, 11, 4), (11, 10, 2), (10, 7, 6), (7, 1, 8),
              (3, 9, 4), (3, 4, 2), (3, 2, 6), (3, 6, 8), (3, 8, 9), (4, 9, 5), (2, 4, 11), (6, 2, 10), (8, 6, 7), (9, 8, 1)]  # fmt: skip
@@ -46,7 +47,8 @@ def icosphere(radius: float, subdivisions: int):
                 middle[key] = len(vertices) - 1
             return middle[key]
 
-        faces = [f for a, b, c in faces for f in ((a, mid(a, b), mid(c, a)), (b, mid(b, c), mid(a, b)), (c, mid(c, a), mid(b, c)), (mid(a, b), mid(b, c), mid(c, a)))]
+        faces = [f for a, b, c in faces for f in ((a, mid(a, b), mid(c, a)), (b, mid(b, c), mid(a, b)), (c, mid(c, a), mid(b, c)),
+                                                  (mid(a, b), mid(b, c), mid(c, a)))]
     return np.array(vertices) * radius, np.array(faces, np.int32)
 
 
@@ -103,7 +105,8 @@ def test_rays_aimed_at_vertices_and_edges_from_outside_hit_there(name):
         beam /= np.linalg.norm(beam, axis=1, keepdims=True)
         local = world - pose[:3, 3]
         # The ray enters the solid at the target: outside just before it, inside just after.
-        enters = (depth_inside(targets - pose[:3, 3] + 0.01 * beam, local, triangles) > 1e-5) & (depth_inside(targets - pose[:3, 3] - 0.01 * beam, local, triangles) < -1e-5)
+        enters = (depth_inside(targets - pose[:3, 3] + 0.01 * beam, local,
+                               triangles) > 1e-5) & (depth_inside(targets - pose[:3, 3] - 0.01 * beam, local, triangles) < -1e-5)
         got, exact = cast(scene(solid=(world, triangles)), pose_matrix(sensor, rng.uniform(-180, 180, 3)), targets)
         # 1e-5 m: a re-traced ray may land on a neighbour of the triangle it slipped past (its plane is
         # then solved a JITTER-sized step away from where the original ray meets the surface)
@@ -325,11 +328,11 @@ def test_a_blender_object_with_a_nan_vertex_is_an_input_error_naming_it(tmp_path
     import bpy
 
     from bpy_pipeline.config import config_from_dict
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.labels import load_class_table
     from bpy_pipeline.frame import frame_rng
     from bpy_pipeline.stages.scan import scan_buffers
-    from bpy_pipeline.scenes.objects import mesh_object, scene_collection
+    from bpy_pipeline.blender.mesh_objects import mesh_object, scene_collection
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     collection = scene_collection()
@@ -362,11 +365,11 @@ def test_a_blender_scene_10_km_from_the_origin_keeps_a_tenth_of_a_millimetre():
     import bpy
 
     from bpy_pipeline.config import config_from_dict
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.labels import load_class_table
     from bpy_pipeline.frame import frame_rng
     from bpy_pipeline.stages.scan import scan_buffers
-    from bpy_pipeline.scenes import build_scene
+    from bpy_pipeline.blender import build_scene
 
     offset = np.array([6000.0, -8000.0, 0.0])
     shapes = [

@@ -48,7 +48,8 @@ def vertex_pattern(buffers: SceneBuffers, origin: np.ndarray) -> Pattern:
     """Rays from ``origin`` aimed exactly at every vertex (some slip between the triangles there), plus a spinning sensor's."""
     d = buffers.vertices - origin
     d /= np.linalg.norm(d, axis=1, keepdims=True)
-    spin = sensor_pattern(resolve_sensor({"preset": "custom", "channels": 32, "vertical_fov_deg": [-60, 60], "horizontal_resolution_deg": 1.0, "min_range": 0.0, "max_range": 100.0}))
+    spin = sensor_pattern(resolve_sensor({"preset": "custom", "channels": 32, "vertical_fov_deg": [-60, 60], "horizontal_resolution_deg": 1.0, "min_range": 0.0,
+                                          "max_range": 100.0}))
     directions = np.concatenate([d, spin.directions])
     return Pattern(directions, np.arange(len(directions)).astype(np.uint16), np.linspace(0.0, 0.1, len(directions)))
 
@@ -200,7 +201,8 @@ def test_a_kept_static_caster_with_a_moving_part_gives_one_casters_bytes(kernel)
     for field in ("material", "semantic", "reflectivity"):
         getattr(last.objects, field)[:] = getattr(base.objects, field)[order]
     pose = pose_matrix([0.3, 0.2, 0.4], [0, 0, 10])
-    spec = resolve_sensor({"preset": "custom", "channels": 32, "vertical_fov_deg": [-60, 60], "horizontal_resolution_deg": 1.0, "min_range": 0.0, "max_range": 100.0})
+    spec = resolve_sensor({"preset": "custom", "channels": 32, "vertical_fov_deg": [-60, 60], "horizontal_resolution_deg": 1.0, "min_range": 0.0,
+                           "max_range": 100.0})
     pattern = sensor_pattern(spec)
     for buffers, moving, reused in ((last, np.array([False, False, False, True, True]), 2), (base, np.array([False, True, True, False, False]), 0)):
         cache = CasterCache(threads=2, kernel=kernel)
@@ -278,7 +280,8 @@ def test_the_static_part_is_kept_only_for_the_same_bytes_and_a_far_vertex_is_ref
     signed = same.vertices.copy()
     signed[triangles.min(), 0] = 0.0  # a zero of the other sign: the same value, other bytes
     same.vertices[triangles.min(), 0] = -0.0
-    assert not raycast.same_geometry(raycast.static_geometry(same, every), raycast.static_geometry(SceneBuffers(signed, big.triangles, big.triangle_object, big.objects), every))
+    assert not raycast.same_geometry(raycast.static_geometry(same, every),
+                                     raycast.static_geometry(SceneBuffers(signed, big.triangles, big.triangle_object, big.objects), every))
     assert raycast.same_geometry(("key", 1), ("key", 1)) and not raycast.same_geometry(("key", 1), ("key", 2)) and not raycast.same_geometry(("key", 1), kept)
 
     changed = room()

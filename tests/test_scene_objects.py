@@ -1,4 +1,4 @@
-"""Blender objects from numpy arrays (``scenes/objects.py``): a mesh written through its attributes reads back as
+"""Blender objects from numpy arrays (``blender/mesh_objects.py``): a mesh written through its attributes reads back as
 the arrays it was made from, and objects removed in one batch take their orphaned data with them."""
 
 import numpy as np
@@ -11,7 +11,7 @@ pytestmark = pytest.mark.bpy
 def test_a_mesh_reads_back_as_the_arrays_it_was_made_from(shape):
     import bpy
 
-    from bpy_pipeline.scenes.objects import mesh_data
+    from bpy_pipeline.blender.mesh_objects import mesh_data
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     rng = np.random.default_rng(4)
@@ -33,7 +33,7 @@ def test_a_mesh_reads_back_as_the_arrays_it_was_made_from(shape):
 def test_objects_removed_at_once_take_only_their_orphaned_meshes():
     import bpy
 
-    from bpy_pipeline.scenes.objects import mesh_data, remove_objects
+    from bpy_pipeline.blender.mesh_objects import mesh_data, remove_objects
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     triangle = (np.eye(3), np.array([[0, 1, 2]]))
@@ -53,7 +53,7 @@ def test_export_gives_blenders_loop_triangles_and_their_faces_ids(faces):
     either way the triangles (world), and a FACE attribute's ids per triangle, are Blender's loop triangles'."""
     import bpy
 
-    from bpy_pipeline.export import INSTANCE_ATTRIBUTE, export_scene
+    from bpy_pipeline.blender.export import INSTANCE_ATTRIBUTE, export_scene
     from bpy_pipeline.labels import load_class_table
 
     bpy.ops.wm.read_factory_settings(use_empty=True)

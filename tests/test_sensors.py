@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import yaml
 
-from bpy_pipeline.__main__ import main
+from bpy_pipeline.cli.commands import main
 from bpy_pipeline.config import config_from_dict, config_to_dict, load_config
 from bpy_pipeline.errors import InputError
 from bpy_pipeline.lidar.sensor.sensors import (

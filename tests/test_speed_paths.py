@@ -132,7 +132,8 @@ def test_digests_taken_while_writing_are_the_files_sha256(tmp_path):
 
     points = cloud(3000)
     with digests_while_writing() as digests:
-        files = [write_ply(tmp_path / "a.ply", points), *write_semantickitti(tmp_path, 0, 0, points), preview.write_preview(tmp_path / "p.png", points, load_class_table().color_lut())]
+        files = [write_ply(tmp_path / "a.ply", points), *write_semantickitti(tmp_path, 0, 0, points),
+                 preview.write_preview(tmp_path / "p.png", points, load_class_table().color_lut())]
     assert len(digests) == 4
     for path in files:
         assert digests[os.path.abspath(path)] == hashlib.sha256(Path(path).read_bytes()).hexdigest()
@@ -166,8 +167,9 @@ def test_frame_files_keep_the_writers_order_and_a_failure_beside_is_raised(tmp_p
     written = write_frame_files(frame, tmp_path / "a", ["ply", "preview", "semantickitti", "kitti"])
     names = [str(Path(p).relative_to(tmp_path / "a")) for p in written]
     assert names == ["ply/000000.ply", "preview/000000.png", "sequences/00/velodyne/000000.bin", "sequences/00/labels/000000.label",
-                     "kitti/training/velodyne/000000.bin", "kitti/training/label_2/000000.txt", "kitti/training/calib/000000.txt", "kitti/training/planes/000000.txt",
-                     "kitti/training/image_2/000000.png"]  # fmt: skip
+                     "kitti/training/velodyne/000000.bin", "kitti/training/label_2/000000.txt", "kitti/training/calib/000000.txt",
+                     "kitti/training/planes/000000.txt",
+                     "kitti/training/image_2/000000.png"]
     assert started == (["frame 0 preview writer", "frame 0 kitti writer"] if threaded else [])
     alone = write_frame_files(frame, tmp_path / "c", ["kitti"])  # one writer: its image after its text, here
     assert [str(Path(p).relative_to(tmp_path / "c")) for p in alone] == names[4:] and len(started) == (2 if threaded else 0)

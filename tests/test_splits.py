@@ -80,14 +80,15 @@ def test_semantickitti_sequences_follow_the_split():
 
 
 @pytest.mark.parametrize("override, key", [
-    ("output.split.by=random", "output.split.by"), ("output.split.train=1.2", "output.split.train"), ("output.split={train: 0.5, val: 0.1, test: 0.1}", "output.split"),
+    ("output.split.by=random", "output.split.by"), ("output.split.train=1.2", "output.split.train"),
+    ("output.split={train: 0.5, val: 0.1, test: 0.1}", "output.split"),
     ("output.split={by: block, block: -2}", "output.split.block"), ("output.split={by: fold, folds: 1}", "output.split.folds"),
     ("output.split={by: fold, folds: 3, fold: 3}", "output.split.fold"), ("output.split.seed=-1", "output.split.seed"),
     ("output.split={by: frame, block: 4}", "output.split.block"), ("output.sequence=3", "output.sequence"),
     ("output.semantickitti.labels=kitti", "output.semantickitti.labels"), ("output.class_map={car: [car, lorry]}", "output.class_map.car"),
     ("output.class_map={car: [car], auto: [car]}", "output.class_map.auto"), ("output.class_map={ignore: [reflection]}", "output.class_map"),
     ("output.class_map={car: van}", "output.class_map.car"), ("output.kitti.val_fraction=1.5", "output.kitti.val_fraction"),
-])  # fmt: skip
+])
 def test_bad_split_and_label_keys_get_one_line_naming_the_key(override, key):
     frames = ["frames=20", "scene.builder=parking"]
     with pytest.raises(InputError) as err:

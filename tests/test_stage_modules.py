@@ -76,7 +76,8 @@ def real_scan_config(real_scan):
 
     def make(frame="sensor"):
         scene = {"builder": "real_scan", "path": str(path), "objects": [{"type": "box", "center": [12.0, 0.0, 0.0], "size": [0.5, 8.0, 3.0]}]}
-        return load_config({"scene": scene, "output": {"frame": frame, "boxes": {"formats": ["kitti"], "classes": ["box"] if "box" in TABLE.names else ["car"]}},
+        return load_config({"scene": scene,
+                            "output": {"frame": frame, "boxes": {"formats": ["kitti"], "classes": ["box"] if "box" in TABLE.names else ["car"]}},
                             "sensor": {"position": [100.0, 50.0, 0.0], "rotation_deg": [0, 0, 90]}})
 
     return make
@@ -116,13 +117,14 @@ def test_kept_scan_reads_a_file_once_while_frames_share_it(real_scan_config):
 @pytest.mark.bpy
 def test_the_camera_stage_renders_each_object_in_its_class_colour(blender_renders, bpy_scene):
     from bpy_pipeline.geometry import primitives
-    from bpy_pipeline.scenes.objects import mesh_object, scene_collection
+    from bpy_pipeline.blender.mesh_objects import mesh_object, scene_collection
     from bpy_pipeline.stages.camera import camera_stage
 
     config = load_config({"output": {"kitti": {"camera": {"resolution": [160, 60]}}}})
     v, t = primitives.box(2.0, 2.0, 2.0)
     mesh_object("cube", (v + np.array([8.0, 0.0, 0.0]), t), scene_collection())
-    objects = ObjectTable(["cube"], [""], ["car"], np.array([TABLE.id_of("car")], np.uint16), np.array([1], np.uint32), np.zeros(1, np.uint8), np.ones(1, np.float32))
+    objects = ObjectTable(["cube"], [""], ["car"], np.array([TABLE.id_of("car")], np.uint16), np.array([1], np.uint32), np.zeros(1, np.uint8),
+                          np.ones(1, np.float32))
     frame = Frame(0, config, frame_rng(0, 0))
     frame.place(np.eye(4))
     frame.buffers = SceneBuffers(np.zeros((0, 3)), np.zeros((0, 3), np.int32), np.zeros(0, np.int32), objects)

@@ -153,7 +153,7 @@ BUSY_RAW = {k: {"kind": d.kind, "mean": d.mean, "std": d.std, "min": d.min, "max
 
 @pytest.mark.bpy
 def test_exported_street_has_no_intersections_and_users_stand_on_their_ground(bpy_scene):
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.labels import load_class_table
     from bpy_pipeline.stages.scene import build_frame_scene
 
@@ -185,7 +185,9 @@ def test_exported_street_has_no_intersections_and_users_stand_on_their_ground(bp
         assert objects.class_names[rows[0]] == ("person" if placed["kind"] == "person" else placed["kind"])
     riders = [r for r in users if objects.class_names[r] in ("rider", "motorcyclist")]
     rides = {"rider": "bicycle", "motorcyclist": "motorcycle"}  # a rider is labelled by what it rides
-    assert riders and all(objects.class_names[min(x for x in users if objects.instance[x] == objects.instance[r])] == rides[objects.class_names[r]] for r in riders)
+    assert riders and all(
+        objects.class_names[min(x for x in users if objects.instance[x] == objects.instance[r])] == rides[objects.class_names[r]] for r in riders
+    )
 
 
 @pytest.mark.bpy
@@ -211,14 +213,15 @@ def test_road_users_kept_across_frames_are_the_frames_parts_and_the_spares_expor
     """The users' objects are kept and refilled frame after frame: after a frame with more parts than the next, the
     next frame's objects carry exactly its parts (names, tags, vertices), and the spare ones export no triangle."""
     from bpy_pipeline.builders.street.scene import Intersection
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.labels import load_class_table
 
     street_scene = Intersection(_config().scene.params)
 
     def parts(count: int, shift: float):
         box = (np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], float), np.array([[0, 1, 2], [0, 1, 3], [0, 2, 3], [1, 2, 3]], np.int32))
-        return [(f"street_user_{k:03d}_car_body", "car", "diffuse", 0.3, 1000 + k, (box[0] * (k + 1) + [shift + 10 * k, 50.0, 0.0], box[1])) for k in range(count)]
+        return [(f"street_user_{k:03d}_car_body", "car", "diffuse", 0.3, 1000 + k,
+                 (box[0] * (k + 1) + [shift + 10 * k, 50.0, 0.0], box[1])) for k in range(count)]
 
     street_scene._show_users(parts(5, 0.0))
     second = parts(2, 3.0)

@@ -149,7 +149,7 @@ def test_blender_builds_each_kind_as_its_pure_parts(kind):
     every static part with the pure layout's class and triangle count, and the swept parts at its vertices."""
     import bpy
 
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.labels import load_class_table
     from bpy_pipeline.stages.scene import build_frame_scene
 

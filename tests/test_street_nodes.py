@@ -57,7 +57,7 @@ def _realized(obj) -> np.ndarray:
 def _set(obj, name, value):
     import bpy
 
-    from bpy_pipeline.compat import set_modifier_input
+    from bpy_pipeline.blender.compat import set_modifier_input
 
     set_modifier_input(obj.modifiers[0], name, value)  # what a user does in the modifier panel
     obj.update_tag()
@@ -88,16 +88,18 @@ def _scattered(layout):
 def test_every_scattered_kind_is_a_live_street_scatter_modifier(street_frame):
     import bpy
 
-    from bpy_pipeline.compat import get_modifier_input, interface_inputs
+    from bpy_pipeline.blender.compat import get_modifier_input, interface_inputs
 
     layout, _ = street_frame
     scattered = _scattered(layout)
-    assert {p.name for p in scattered} == {"street_trunks", "street_plants", "street_lamps_bollards", "street_bins", "street_bicycle_stands", "street_cones", "street_barriers"}
+    assert {p.name for p in scattered} == {"street_trunks", "street_plants", "street_lamps_bollards", "street_bins", "street_bicycle_stands", "street_cones",
+                                           "street_barriers"}
     street_objects = [obj for obj in bpy.data.objects if obj.name.startswith("street_") and ".prototype." not in obj.name]
     modifiers = [(obj.name, m) for obj in street_objects for m in obj.modifiers if m.type == "NODES" and m.node_group.name == "Street Scatter"]
     assert sorted(name for name, _ in modifiers) == sorted(p.name for p in scattered)  # one per scattered kind, none elsewhere
     others = {m.node_group.name for obj in street_objects for m in obj.modifiers if m.type == "NODES"} - {"Street Scatter"}
-    assert others == {"Street Road", "Street Facade", "Street Planting"}  # the carriageway, kerbs, sidewalks and buildings (tests/test_street_road_nodes.py), the yards (tests/test_planting_nodes.py)
+    # the carriageway, kerbs, sidewalks and buildings (tests/test_street_road_nodes.py), the yards (tests/test_planting_nodes.py)
+    assert others == {"Street Road", "Street Facade", "Street Planting"}
     assert {"Prototypes", "Density", "Seed", "Scale", "Realize"} <= set(interface_inputs(bpy.data.node_groups["Street Scatter"]))
     for part in scattered:
         obj = bpy.data.objects[part.name]
@@ -132,7 +134,7 @@ def test_the_group_places_the_prototypes_as_the_pure_function_does(street_frame)
 @pytest.mark.bpy
 def test_the_export_labels_instances_by_their_scatter_object_and_scans_as_the_pure_meshes(street_frame):
     from bpy_pipeline.buffers import SceneBuffers
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.labels import load_class_table
     from bpy_pipeline.lidar.cast.raycast import RayCaster
 
@@ -189,7 +191,7 @@ def test_the_export_labels_instances_by_their_scatter_object_and_scans_as_the_pu
 def test_editing_an_input_or_a_point_edits_what_the_export_reads(street_frame):
     import bpy
 
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.labels import load_class_table
 
     layout, _ = street_frame

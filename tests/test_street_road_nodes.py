@@ -134,7 +134,7 @@ def _buildings(layout) -> list:
 def test_the_street_has_live_road_and_scatter_groups(street_frame):
     import bpy
 
-    from bpy_pipeline.compat import get_modifier_input, interface_inputs
+    from bpy_pipeline.blender.compat import get_modifier_input, interface_inputs
 
     layout, params = street_frame
     modifiers = [(obj.name, m) for obj in bpy.data.objects if obj.name.startswith("street_") for m in obj.modifiers if m.type == "NODES"]
@@ -144,14 +144,16 @@ def test_the_street_has_live_road_and_scatter_groups(street_frame):
     assert facades == sorted(p.name for p in _buildings(layout)) and all(name.startswith("street_building_") for name in facades)
     assert {m.node_group.name for _, m in modifiers} == {"Street Facade", "Street Planting", "Street Road", "Street Scatter"}
     assert len(modifiers) == 3 + 7 + len(facades) + 1 == 46  # the default layout's 35 buildings, the yards
-    assert {"Part", "Lanes", "Lane Width", "Parking Width", "Kerb Width", "Kerb Height", "Sidewalk Width", "Instance"} <= set(interface_inputs(bpy.data.node_groups["Street Road"]))
+    assert {"Part", "Lanes", "Lane Width", "Parking Width", "Kerb Width", "Kerb Height", "Sidewalk Width",
+            "Instance"} <= set(interface_inputs(bpy.data.node_groups["Street Road"]))
     modifier = bpy.data.objects["street_road"].modifiers[0]
-    assert get_modifier_input(modifier, "Lane Width") == pytest.approx(params.lane_width) and get_modifier_input(modifier, "Lanes") == params.lanes_per_direction
+    assert get_modifier_input(modifier,
+                              "Lane Width") == pytest.approx(params.lane_width) and get_modifier_input(modifier, "Lanes") == params.lanes_per_direction
 
 
 @pytest.mark.bpy
 def test_the_export_labels_the_swept_parts_as_the_pure_parts(street_frame):
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.labels import load_class_table
 
     layout, params = street_frame
@@ -170,8 +172,8 @@ def test_the_export_labels_the_swept_parts_as_the_pure_parts(street_frame):
 def test_a_wider_lane_in_the_modifier_moves_the_road_and_nothing_else(street_frame):
     import bpy
 
-    from bpy_pipeline.compat import set_modifier_input
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.compat import set_modifier_input
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.labels import load_class_table
 
     _, params = street_frame
@@ -210,8 +212,8 @@ def test_a_wider_lane_in_the_modifier_moves_the_road_and_nothing_else(street_fra
 def test_a_taller_building_in_its_modifier_moves_its_roof_and_nothing_else(street_frame):
     import bpy
 
-    from bpy_pipeline.compat import set_modifier_input
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.compat import set_modifier_input
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.labels import load_class_table
 
     layout, params = street_frame

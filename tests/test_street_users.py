@@ -12,7 +12,7 @@ def test_users_from_arrays_are_the_users_read_back_from_blender():
     import bpy
 
     from bpy_pipeline.config import load_config
-    from bpy_pipeline.export import export_scene, parts_buffers
+    from bpy_pipeline.blender.export import export_scene, parts_buffers
     from bpy_pipeline.frame import Frame, Run, frame_rng
     from bpy_pipeline.stages.scene import build_stage, export_stage, pose_stage
 

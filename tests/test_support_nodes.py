@@ -26,7 +26,7 @@ def build(overrides):
 
     from bpy_pipeline.config import load_config
     from bpy_pipeline.frame import frame_rng
-    from bpy_pipeline.scenes import build_scene
+    from bpy_pipeline.blender import build_scene
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     config = load_config(None, ["scene.builder=railway", "scene.detail.mode=fixed", "scene.detail.stones=false", *overrides])
@@ -74,7 +74,7 @@ def test_the_export_labels_each_instanced_mast_as_its_own_object():
     import bpy
 
     from bpy_pipeline.builders.railway import support_nodes
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.labels import load_class_table
 
     _, layout = build(PARAMETER_SETS[1])

@@ -58,7 +58,8 @@ def test_the_chain_folds_fixed_joints_and_keeps_each_joints_turn(tmp_path):
     model = arm_from_urdf(arm, [np.zeros((0, 3)), primitives.box(0.1, 0.1, 0.5)[0], primitives.box(0.1, 0.1, 0.5)[0]])
     q = np.array([0.7, -0.4])
     frames = kinematics.forward(model, q)
-    expected = frames[1] @ np.block([[rpy_matrix((np.pi / 2, 0, 0)) @ kinematics.axis_rotations(np.array([1.0, 0, 0]), np.array(-0.4)), np.array([[0], [0], [0.5]])], [np.zeros((1, 3)), np.ones((1, 1))]])
+    expected = frames[1] @ np.block([[rpy_matrix((np.pi / 2, 0, 0)) @ kinematics.axis_rotations(np.array([1.0, 0, 0]), np.array(-0.4)),
+                                      np.array([[0], [0], [0.5]])], [np.zeros((1, 3)), np.ones((1, 1))]])
     np.testing.assert_allclose(frames[2], expected, atol=1e-12)
 
 
@@ -75,9 +76,12 @@ def test_a_fitted_capsule_holds_its_mesh():
 def test_bad_urdfs_are_named(tmp_path):
     path = tmp_path / "bad.urdf"
     cases = {
-        "<robot name='x'><link name='a'/><link name='b'/><joint name='j' type='prismatic'><parent link='a'/><child link='b'/></joint></robot>": "joint 'j': joint type 'prismatic' cannot be posed",
-        "<robot name='x'><link name='a'/><link name='b'/><joint name='j' type='revolute'><parent link='a'/><child link='b'/></joint></robot>": "joint 'j': a revolute joint needs <limit lower upper>",
-        "<robot name='x'><link name='a'><visual><geometry><mesh filename='gone.stl'/></geometry></visual></link></robot>": "link 'a' visual[0]: mesh 'gone.stl' not found",
+        "<robot name='x'><link name='a'/><link name='b'/><joint name='j' type='prismatic'><parent link='a'/><child link='b'/></joint></robot>":
+            "joint 'j': joint type 'prismatic' cannot be posed",
+        "<robot name='x'><link name='a'/><link name='b'/><joint name='j' type='revolute'><parent link='a'/><child link='b'/></joint></robot>":
+            "joint 'j': a revolute joint needs <limit lower upper>",
+        "<robot name='x'><link name='a'><visual><geometry><mesh filename='gone.stl'/></geometry></visual></link></robot>":
+            "link 'a' visual[0]: mesh 'gone.stl' not found",
         "<robot name='x'><link name='a'/></robot>": "no revolute joint: nothing to pose",
         "<robot": "not valid XML",
     }
@@ -92,8 +96,8 @@ def test_a_urdf_arm_is_placed_with_its_own_meshes_posed_within_its_limits(bpy_sc
     import sys
 
     from bpy_pipeline.config import load_config
-    from bpy_pipeline.export import export_scene
-    from bpy_pipeline.geometry.population import meshes_cross
+    from bpy_pipeline.blender.export import export_scene
+    from bpy_pipeline.population.placer import meshes_cross
     from bpy_pipeline.labels import load_class_table
     from bpy_pipeline.stages.scene import build_frame_scene
 
@@ -104,7 +108,8 @@ def test_a_urdf_arm_is_placed_with_its_own_meshes_posed_within_its_limits(bpy_sc
         sys.path.pop(0)
     urdf = toy_arm(tmp_path)
     hall = build_hall(tmp_path / "hall.blend")
-    config = load_config({"scene": {"builder": "blend", "path": str(hall), "population": {"robot_arm": {"count": 2, "model": str(urdf)}}}, "sensor": {"preset": "vlp16", "position": [0, 0, 2.5]}})
+    config = load_config({"scene": {"builder": "blend", "path": str(hall), "population": {"robot_arm": {"count": 2, "model": str(urdf)}}},
+                          "sensor": {"preset": "vlp16", "position": [0, 0, 2.5]}})
     keep = {}
     for frame in range(3):
         result = build_frame_scene(config, frame, keep=keep)

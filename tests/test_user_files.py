@@ -15,7 +15,7 @@ import pytest
 from test_convert import street
 
 from bpy_pipeline import cli
-from bpy_pipeline.__main__ import main
+from bpy_pipeline.cli.commands import main
 from bpy_pipeline.config import config_from_dict
 from bpy_pipeline.dataset import Dataset
 from bpy_pipeline.io import read_manifest

@@ -100,7 +100,8 @@ def street(visibility_m=None):
         v = np.array([c - t * width / 2, c + t * width / 2, c + t * width / 2 + [0, 0, height], c - t * width / 2 + [0, 0, height]])
         return (v, np.array([[0, 1, 2], [0, 2, 3]]), cls, "diffuse", refl)
 
-    meshes = {"road": (np.array([[-150, -150, -1.73], [150, -150, -1.73], [150, 150, -1.73], [-150, 150, -1.73]], float), np.array([[0, 1, 2], [0, 2, 3]]), "road", "diffuse", 0.1)}
+    meshes = {"road": (np.array([[-150, -150, -1.73], [150, -150, -1.73], [150, 150, -1.73], [-150, 150, -1.73]], float), np.array([[0, 1, 2], [0, 2, 3]]),
+                       "road", "diffuse", 0.1)}
     for k, (dist, refl) in enumerate([(8, 0.3), (15, 0.6), (25, 0.2), (40, 0.5), (60, 0.8), (85, 0.4), (110, 0.7)]):
         az = k * 51.0
         meshes[f"wall{k}"] = quad([dist * math.cos(math.radians(az)), dist * math.sin(math.radians(az)), -1.73], az, dist * 0.6, 12.0, refl, "wall")
@@ -310,7 +311,8 @@ def test_weather_frames_alone_and_over_workers_give_the_full_runs_bytes(tmp_path
                "--set", "effects.weather.fog.visibility=30", "--set", "effects.weather.snow.rate=2", "--set", "effects.weather.rain.rate=10"]
 
     def run(out, *extra):
-        done = subprocess.run([sys.executable, str(ROOT / "run.py"), "--out", str(out), *weather, *extra], cwd=ROOT, capture_output=True, text=True, timeout=600)
+        done = subprocess.run([sys.executable, str(ROOT / "run.py"), "--out", str(out), *weather, *extra], cwd=ROOT, capture_output=True, text=True,
+                              timeout=600)
         assert done.returncode == 0, done.stderr
         return {p.name: p.read_bytes() for p in sorted((out / "ply").glob("*.ply"))}
 

@@ -64,7 +64,7 @@ class BuildResult:
         every frame)
     static_world : a token the builder keeps while its static world is unchanged (a new one for a world built anew)
     dynamic_parts : the ``dynamic`` collection's objects as arrays, in its order, when they are plain tagged meshes
-        (:func:`~bpy_pipeline.export.parts_buffers`): the export stage then takes them as they are instead of reading
+        (:func:`~bpy_pipeline.blender.export.parts_buffers`): the export stage then takes them as they are instead of reading
         them back from Blender (the same buffers); ``None``: read from Blender
     """
 

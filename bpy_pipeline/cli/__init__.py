@@ -1,6 +1,7 @@
 """The command line: ``run`` here (run.py and ``bpy-pipeline run``) with what every subcommand shares (one-line
-errors, exit codes), and one module per other subcommand: :mod:`.convert`, :mod:`.match`, :mod:`.tiles`;
-``bpy_pipeline/__main__.py`` dispatches ``bpy-pipeline <subcommand>``.
+errors, exit codes), and one module per other subcommand (:mod:`.presets`, :mod:`.fit`, :mod:`.show_config`,
+:mod:`.evaluate`, :mod:`.convert`, :mod:`.match`; :mod:`.tiles` runs alone); :mod:`.commands` dispatches
+``bpy-pipeline <subcommand>``.
 
 ``run``: ``[--config FILE] [--out DIR] [--seed N] [--frames N] [--set key.path=value ...]`` plus the dataset
 options: ``--frames-range A:B``, ``--shard i/n``, ``--resume``, ``--overwrite``, ``--workers N``,
@@ -21,6 +22,7 @@ import threading
 from typing import NoReturn
 
 from ..errors import InputError
+from .subcommand import Command
 
 
 def script_arguments(argv: list[str]) -> list[str]:
@@ -167,7 +169,10 @@ def run_main(args) -> int:
     try:
         import bpy
     except ImportError:
-        raise InputError("bpy: Blender's Python module is not installed; pip install 'bpy==4.5.*' (Python 3.11), or run blender --background --python-exit-code 1 --python run.py -- ...") from None
+        raise InputError(
+            "bpy: Blender's Python module is not installed; pip install 'bpy==4.5.*' (Python 3.11), or run blender --background --python-exit-code 1 --python "
+            "run.py -- ..."
+        ) from None
     bpy.ops.wm.read_factory_settings(use_empty=True)
     from ..plan import run
 
@@ -175,6 +180,8 @@ def run_main(args) -> int:
     return 0
 
 
+COMMAND = Command("run", "generate labeled frames (as run.py)", "Generate labeled LiDAR frames from a config.",
+                  lambda p: add_run_arguments(p).set_defaults(func=run_main))
 MAX_WORKERS = 256
 RAY_CONNECT_TIMEOUT_S = 10.0  # --ray HOST:PORT: the head must answer within this
 

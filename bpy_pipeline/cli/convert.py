@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from .subcommand import Command
 
 POINT_FORMATS = ("semantickitti", "ply", "npy", "las", "pcd", "range_image")
 # SemanticKITTI training id -> raw id (semantic-kitti.yaml, learning_map_inv)
@@ -69,18 +70,25 @@ def read_labels(path: str | Path, n: int, space: str = "auto") -> np.ndarray:
         except (ValueError, OSError, EOFError) as err:
             raise InputError(f"--labels: {path}: not a numpy array file ({err})") from None
         if not isinstance(array, np.ndarray) or array.dtype.kind not in "iu" or array.ndim not in (1, 2) or (array.ndim == 2 and array.shape[1] != 1):
-            raise InputError(f"--labels: {path}: expected one integer a point, (n,) or (n, 1), got {getattr(array, 'dtype', type(array))} {getattr(array, 'shape', '')}")
+            raise InputError(
+                f"--labels: {path}: expected one integer a point, (n,) or (n, 1), got {getattr(array, 'dtype', type(array))} {getattr(array, 'shape', '')}"
+            )
         if array.size and array.min() < 0:
             raise InputError(f"--labels: {path}: negative labels (first at point {int(np.flatnonzero(array.reshape(-1) < 0)[0])})")
         if array.size and int(array.max()) > np.iinfo(np.uint32).max:
-            raise InputError(f"--labels: {path}: labels up to {int(array.max())} do not fit SemanticKITTI's uint32 (semantic | instance << 16); first at point {int(np.argmax(array.reshape(-1) > np.iinfo(np.uint32).max))}")
+            raise InputError(
+                f"--labels: {path}: labels up to {int(array.max())} do not fit SemanticKITTI's uint32 (semantic | instance << 16); first at point "
+                f"{int(np.argmax(array.reshape(-1) > np.iinfo(np.uint32).max))}"
+            )
         labels = array.reshape(-1).astype(np.uint32)
         space = "train" if space == "auto" else space
     if len(labels) != n:
         raise InputError(f"--labels: {path} holds {len(labels)} labels for the scan's {n} points")
     if space == "train":
         if len(labels) and labels.max() >= len(TRAINING_TO_RAW):
-            raise InputError(f"--labels: {path}: training ids are 0..{len(TRAINING_TO_RAW) - 1}, got {int(labels.max())}; give --label-space raw for raw SemanticKITTI ids")
+            raise InputError(
+                f"--labels: {path}: training ids are 0..{len(TRAINING_TO_RAW) - 1}, got {int(labels.max())}; give --label-space raw for raw SemanticKITTI ids"
+            )
         labels = TRAINING_TO_RAW[labels]
     return labels
 
@@ -158,7 +166,8 @@ def convert(scan_path, to: str, labels=None, method: str = "hybrid", lift: float
     return Converted(out, source, carried, info)
 
 
-def write_converted(converted: Converted, out: str | Path, to: str, formats=("semantickitti",), overwrite: bool = False, scan_path: str = "", inputs=()) -> dict:
+def write_converted(converted: Converted, out: str | Path, to: str, formats=("semantickitti",), overwrite: bool = False, scan_path: str = "",
+                    inputs=()) -> dict:
     """Write a converted scan as a one-frame dataset under ``out`` (the run's manifest, record and writers); returns its record.
 
     inputs : other files the conversion read (its labels); ``overwrite`` refuses when one lies inside ``out``, as the scan"""
@@ -174,7 +183,8 @@ def write_converted(converted: Converted, out: str | Path, to: str, formats=("se
     overrides = ["scene.builder=real_scan", f"scene.path={scan_path}", f"sensor.preset={to}", "sensor.position=[0, 0, 0]", "frames=1",
                  f"output.formats=[{', '.join(formats)}]", "output.boxes.formats=[]", "output.preview=false"]
     config = load_config(None, overrides)
-    frame = Frame(index=0, config=config, rng=frame_rng(config.seed, 0), buffers=SceneBuffers.from_meshes({}), points=converted.points, scene=BuildResult(info=converted.info))
+    frame = Frame(index=0, config=config, rng=frame_rng(config.seed, 0), buffers=SceneBuffers.from_meshes({}), points=converted.points,
+                  scene=BuildResult(info=converted.info))
     with Dataset.open(out, config, "overwrite" if overwrite else "new", inputs=[p for p in inputs if p]) as dataset:
         return dataset.commit(frame)
 
@@ -184,10 +194,12 @@ def add_convert_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser
 
     p.add_argument("scan", metavar="SCAN", help="the dense real scan (nuscenes, kitti, semantickitti .bin; npy, ply, las, pcd)")
     p.add_argument("--labels", metavar="FILE", help="its labels: a SemanticKITTI .label, or a .npy of SemanticKITTI training ids (one a point)")
-    p.add_argument("--label-space", default="auto", choices=LABEL_SPACES, help="ids in --labels: raw SemanticKITTI or training ids (auto: raw for .label, train for .npy)")
+    p.add_argument("--label-space", default="auto", choices=LABEL_SPACES,
+                   help="ids in --labels: raw SemanticKITTI or training ids (auto: raw for .label, train for .npy)")
     p.add_argument("--to", required=True, metavar="PRESET", help="the sparser sensor's preset (spinning: hdl32e, vlp16, ...)")
     p.add_argument("--out", required=True, metavar="DIR", help="the dataset folder to write")
-    p.add_argument("--method", default="hybrid", choices=METHODS, help="cones (the parking paper's), mesh (ray cast at the meshed scan), hybrid (ours: mesh, cones where it misses)")
+    p.add_argument("--method", default="hybrid", choices=METHODS,
+                   help="cones (the parking paper's), mesh (ray cast at the meshed scan), hybrid (ours: mesh, cones where it misses)")
     p.add_argument("--from", dest="source", metavar="PRESET", help="the scan's own sensor, where the file lacks its rings (e.g. hdl64e)")
     p.add_argument("--format", choices=None, metavar="FORMAT", help="the scan's format when its name does not tell")
     p.add_argument("--lift", type=float, default=0.0, metavar="M", help="the target's centre this many metres above the scan's (default 0)")
@@ -212,5 +224,16 @@ def convert_main(args) -> int:
     converted = convert(args.scan, args.to, args.labels, args.method, args.lift, args.source, args.format, args.label_space, args.threads)
     record = write_converted(converted, args.out, args.to, formats, args.overwrite, str(Path(args.scan).resolve()), [args.labels])
     c = converted.info["conversion"]
-    print(f"{c['source_returns']:,} returns of {c['scan']} -> {c['converted']:,} points of {args.to} ({args.method}, {c['convert_ms']:.0f} ms, labels: {c['labels']}); {len(record['files'])} files in {args.out}")
+    print(
+        f"{c['source_returns']:,} returns of {c['scan']} -> {c['converted']:,} points of {args.to} ({args.method}, {c['convert_ms']:.0f} ms, labels: "
+        f"{c['labels']}); {len(record['files'])} files in {args.out}"
+    )
     return 0
+
+
+def arguments(p) -> None:
+    add_convert_arguments(p).set_defaults(func=convert_main)
+
+
+COMMAND = Command("convert", "a dense real scan, labels carried, in a sparser sensor's pattern",
+                  "Resample a dense real scan (and its labels) into a sparser sensor preset's firings and write it as a dataset (docs/mixing.md).", arguments)

@@ -40,6 +40,7 @@ import yaml
 
 from ..errors import InputError
 from ..yaml_text import load_yaml
+from .subcommand import Command
 
 CLASSES = ("car", "person", "bicyclist")  # SemanticKITTI training names that KITTI boxes label too
 OBJECT_TYPE = {"car": "car", "person": "person", "bicyclist": "cyclist"}  # class -> insertable object type
@@ -97,7 +98,8 @@ def real_objects(scans, classes: Sequence[str], min_points: int = 10) -> tuple[l
                 continue
             xyz = scan.points[mask].astype(np.float64)
             centre = xyz.mean(axis=0)
-            out.append(RealObject(classes[label], scan.name, centre, float(np.hypot(centre[0], centre[1])), heading_of(xyz[:, :2], centre[:2]), int(mask.sum())))
+            out.append(RealObject(classes[label], scan.name, centre, float(np.hypot(centre[0], centre[1])), heading_of(xyz[:, :2], centre[:2]),
+                                  int(mask.sum())))
     return out, [s.name for s in scans]
 
 
@@ -159,7 +161,10 @@ def matched_config(base: dict, stats: dict[str, ClassStats]) -> tuple[dict, list
     scene = out.setdefault("scene", {})
     builder = scene.get("builder")
     if builder not in MATCH_BUILDERS:
-        raise InputError(f"--config: scene.builder is {builder!r}; match writes the placement distributions of {', '.join(MATCH_BUILDERS)} (the real_scan builder's parking rules, the parking builder's cars)")
+        raise InputError(
+            f"--config: scene.builder is {builder!r}; match writes the placement distributions of {', '.join(MATCH_BUILDERS)} (the real_scan builder's parking "
+            "rules, the parking builder's cars)"
+        )
     notes = []
     if builder == "parking":
         if "car" not in stats:
@@ -223,7 +228,8 @@ def match(sources: Sequence[str | Path], config_path: str | Path, out: str | Pat
     stats, frames = fit_real(sources, classes, min_points)
     config, notes = matched_config(base, stats)
     out = Path(out)
-    text = f"# matched to {len(frames)} labelled real frame(s) by bpy-pipeline match\n" + yaml.safe_dump(config, sort_keys=False, width=120, default_flow_style=None)
+    text = f"# matched to {len(frames)} labelled real frame(s) by bpy-pipeline match\n"
+    text += yaml.safe_dump(config, sort_keys=False, width=120, default_flow_style=None)
     load_config(load_yaml(text), [])  # refuse before writing anything a run would refuse
     try:
         out.parent.mkdir(parents=True, exist_ok=True)
@@ -238,7 +244,8 @@ def add_match_arguments(p):
     """The arguments of ``bpy-pipeline match``."""
     p.add_argument("real", nargs="+", metavar="REAL", help="labelled real frames: SemanticKITTI .bin (+ .label), X_points.npy (+ X_labels.npy), "
                    "KITTI object .bin (+ label_2, calib), or a folder of them")
-    p.add_argument("--config", required=True, metavar="BASE.yaml", help=f"the config to match (scene.builder: {' or '.join(MATCH_BUILDERS)}); its other keys are kept")
+    p.add_argument("--config", required=True, metavar="BASE.yaml",
+                   help=f"the config to match (scene.builder: {' or '.join(MATCH_BUILDERS)}); its other keys are kept")
     p.add_argument("--out", required=True, metavar="MATCHED.yaml", help="the matched config to write")
     p.add_argument("--classes", default=",".join(CLASSES), help=f"classes to fit, SemanticKITTI training names (default {','.join(CLASSES)})")
     p.add_argument("--min-points", type=int, default=10, help="objects with fewer points are not counted (default 10)")
@@ -276,3 +283,12 @@ def match_main(args) -> int:
             raise InputError(f"--report: cannot write {args.report} ({err.strerror or err})") from None
     print(f"written: {args.out}")
     return 0
+
+
+def arguments(p) -> None:
+    add_match_arguments(p).set_defaults(func=match_main)
+
+
+COMMAND = Command("match", "fit object counts, distances and headings to labelled real scans; write them into a config",
+                  "Fit per-class object counts, distance and heading histograms (and the points-per-object curve) to "
+                  "labelled real frames and write them as the builder's placement distributions (docs/match.md).", arguments)

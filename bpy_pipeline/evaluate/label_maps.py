@@ -193,4 +193,7 @@ def check_kitti_classes(classes: Sequence[str], where: str) -> None:
     """``InputError`` when ``classes`` holds none of what KITTI boxes can label (car, person, bicyclist). With some of
     them, such a frame is scored on those only (``LabelledScan.known``)."""
     if not any(c in KITTI_CLASSES for c in classes):
-        raise InputError(f"{where}: a KITTI object frame labels only {', '.join(KITTI_CLASSES)}; it cannot test {', '.join(classes)} (add one of those to --classes or drop it from --test)")
+        raise InputError(
+            f"{where}: a KITTI object frame labels only {', '.join(KITTI_CLASSES)}; it cannot test {', '.join(classes)} (add one of those to --classes or drop "
+            "it from --test)"
+        )

@@ -391,7 +391,9 @@ def read_generated(folder: Path, classes: Sequence[str], every: int = 1, max_fra
         raise InputError(f"{folder}: every and max_frames must be >= 1, got {every} and {max_frames}")
     manifest = read_manifest(folder) if (folder / "manifest.json").is_file() else {}
     class_names = manifest.get("class_table")
-    if class_names is not None and not (isinstance(class_names, dict) and class_names and all(str(k).isdigit() and int(k) < 1 << 16 and isinstance(v, str) for k, v in class_names.items())):
+    if class_names is not None and not (isinstance(class_names,
+                                                   dict) and class_names and all(str(k).isdigit() and int(k) < 1 << 16 and isinstance(v, str) for k,
+                                                                                 v in class_names.items())):
         raise InputError(f"{folder / 'manifest.json'}: class_table must map class ids (0..65535) to names, got {type(class_names).__name__}")
     output = (manifest.get("config") or {}).get("output") or {}
     points_frame = output.get("frame", "sensor")
@@ -458,7 +460,10 @@ def kind_of(path: Path) -> str:
         raise InputError(f"{path}: no such file or folder")
     guess = KINDS.get(path.suffix.lower())
     if guess is None:
-        raise InputError(f"{path}: not a labelled scan: give a .bin (SemanticKITTI with .label, or KITTI object with label_2 and calib), an X_points.npy with X_labels.npy, or a generated dataset folder")
+        raise InputError(
+            f"{path}: not a labelled scan: give a .bin (SemanticKITTI with .label, or KITTI object with label_2 and calib), an X_points.npy with X_labels.npy, "
+            "or a generated dataset folder"
+        )
     return guess(path)
 
 
@@ -490,7 +495,10 @@ def load_scans(sources: Iterable[str | Path | LabelledScan], classes: Sequence[s
         if path.is_dir() and not ((path / "ply").is_dir() or (path / "manifest.json").is_file()):
             frames = folder_frames(path)
             if not frames:
-                raise InputError(f"{path}: holds no labelled frames (X_points.npy + X_labels.npy, .bin + .label, KITTI .bin + label_2 + calib) and is no generated dataset (ply/)")
+                raise InputError(
+                    f"{path}: holds no labelled frames (X_points.npy + X_labels.npy, .bin + .label, KITTI .bin + label_2 + calib) and is no generated "
+                    "dataset (ply/)"
+                )
             out += load_scans(frames, classes, every, max_frames, image_size)
             continue
         read = READERS[kind_of(path)](path, classes, every=every, max_frames=max_frames, image_size=image_size)

@@ -114,7 +114,9 @@ def fit_trees(scans: Sequence[LabelledScan], classes: Sequence[str], seed: int, 
     x, y = training_sample(scans, classes, np.random.default_rng(seed), max_points_per_scan)
     counts = np.bincount(y, minlength=len(classes) + 1)
     if not counts[: len(classes)].any():
-        raise InputError(f"--train: the training scans ({', '.join(s.name for s in scans[:3])}{', ...' if len(scans) > 3 else ''}) hold no point of {', '.join(classes)}")
+        raise InputError(
+            f"--train: the training scans ({', '.join(s.name for s in scans[:3])}{', ...' if len(scans) > 3 else ''}) hold no point of {', '.join(classes)}"
+        )
     if counts[len(classes)] == 0:
         raise InputError(f"--train: the training scans hold no background point (labelled, none of {', '.join(classes)})")
     present = counts > 0

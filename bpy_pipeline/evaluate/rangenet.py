@@ -168,7 +168,9 @@ def fit_rangenet(scans: Sequence[LabelledScan], classes: Sequence[str], seed: in
     allowed = np.stack([_other_allowed(s, classes) for s in scans])
     counts = np.bincount(np.concatenate([i.labels[i.labels >= 0] for i in images]), minlength=n_labels)[:n_labels]
     if not counts[: len(classes)].any():
-        raise InputError(f"--train: the training scans ({', '.join(s.name for s in scans[:3])}{', ...' if len(scans) > 3 else ''}) hold no point of {', '.join(classes)}")
+        raise InputError(
+            f"--train: the training scans ({', '.join(s.name for s in scans[:3])}{', ...' if len(scans) > 3 else ''}) hold no point of {', '.join(classes)}"
+        )
     share = counts / max(counts.sum(), 1)
     weights = np.where(counts > 0, 1.0 / (share + WEIGHT_EPSILON), 0.0)
     weights = weights / weights[counts > 0].mean()

@@ -232,8 +232,13 @@ def findings(report: dict) -> list[dict]:
             out.append({"score": w / 20.0, "what": f"range {name}", "text": f"{name} ranges: Wasserstein {w:.1f} m between generated and real"})
     bev = report["bev"]
     if math.isfinite(bev["jsd"]):
-        out.append({"score": bev["jsd"], "what": "BEV occupancy",
-                    "text": f"bird's-eye-view occupancy: JSD {bev['jsd']:.3f}, MMD {bev['mmd']:.2e} (LiDAR Diffusion Models on KITTI-360: JSD 0.211, MMD 3.84e-4)"})
+        out.append(
+            {
+                "score": bev["jsd"],
+                "what": "BEV occupancy",
+                "text": f"bird's-eye-view occupancy: JSD {bev['jsd']:.3f}, MMD {bev['mmd']:.2e} (LiDAR Diffusion Models on KITTI-360: JSD 0.211, MMD 3.84e-4)",
+            }
+        )
     return sorted(out, key=lambda f: -f["score"])
 
 

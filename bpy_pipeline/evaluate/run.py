@@ -62,7 +62,8 @@ def leave_one_group_out(reference: Sequence[LabelledScan], test: Sequence[Labell
         for i, scan in enumerate(test):
             if disjoint or scan.group in groups:
                 predictions[i] = trained.predict(scan)
-        folds.append({"test_group": ", ".join(groups) or "all (no test group among the reference groups)", "train": _names(train), "seconds": round(time.perf_counter() - start, 2)})
+        folds.append({"test_group": ", ".join(groups) or "all (no test group among the reference groups)", "train": _names(train),
+                      "seconds": round(time.perf_counter() - start, 2)})
         if log:
             log(f"reference fold {', '.join(groups) or 'all'}: trained on {len(train)} scans in {folds[-1]['seconds']} s")
     return predictions, folds
@@ -107,7 +108,10 @@ def evaluate(train: Iterable[Source], test: Iterable[Source], classes: str | Seq
     say = log or (lambda *_: None)
     train_scans, left_train = with_remission(load_scans(list(train), classes, every, max_frames, image_size), model)
     if not train_scans:
-        raise InputError("--train: the training set is empty (give a generated dataset folder or labelled scans" + (", with remission, for --model rangenet)" if left_train else ")"))
+        raise InputError(
+            "--train: the training set is empty (give a generated dataset folder or labelled scans"
+            + (", with remission, for --model rangenet)" if left_train else ")")
+        )
     test_scans, left_test = with_remission(load_scans(list(test), classes, 1, None, image_size), model)
     if not test_scans:
         raise InputError("--test: no test scan given" + (f" with remission ({model} reads it; use rangenet-geometry for these)" if left_test else ""))

@@ -157,7 +157,10 @@ def boxes_in_frame(boxes: np.ndarray, frame: np.ndarray, where: str = "output.fr
     frame = np.asarray(frame, float)
     if frame[2, 2] < np.cos(np.radians(0.5)):
         tilt = np.degrees(np.arccos(np.clip(frame[2, 2], -1, 1)))
-        raise InputError(f"{where}: 3D box labels need a level point frame, but the sensor is tilted {tilt:.1f} deg from vertical; write the points in a level frame (output.frame: world or kitti)")
+        raise InputError(
+            f"{where}: 3D box labels need a level point frame, but the sensor is tilted {tilt:.1f} deg from vertical; write the points in a level frame "
+            "(output.frame: world or kitti)"
+        )
     out = boxes.copy()
     out["centre"] = (boxes["centre"] - frame[:3, 3]) @ frame[:3, :3]
     yaw = np.arctan2(frame[1, 0], frame[0, 0])

@@ -52,7 +52,9 @@ def check_pose(pose, where: str = "pose") -> np.ndarray:
     r = p[:3, :3]
     error = max(float(np.abs(r.T @ r - np.eye(3)).max()), abs(float(np.linalg.det(r)) - 1.0), float(np.abs(p[3] - [0, 0, 0, 1]).max()))
     if error > RIGID_TOLERANCE:
-        raise InputError(f"{where}: not a rigid transform (rotation orthonormal with determinant +1, last row 0 0 0 1) to {RIGID_TOLERANCE:g}; off by {error:.3g}")
+        raise InputError(
+            f"{where}: not a rigid transform (rotation orthonormal with determinant +1, last row 0 0 0 1) to {RIGID_TOLERANCE:g}; off by {error:.3g}"
+        )
     return p
 
 

@@ -252,7 +252,8 @@ def capsule_meshes(a, b, radius, segments: int = 10, rings: int = 3, flat_start:
     offsets = np.concatenate(start_offsets + end_offsets, axis=1)  # (c, rows)
     radii = np.concatenate(start_radii + end_radii, axis=1)
     centres = np.concatenate([np.repeat(a[:, None], n_start, 1), np.repeat(b[:, None], len(end_offsets), 1)], axis=1)  # (c, rows, 3)
-    ring_vertices = (centres[:, :, None, :] + (offsets[:, :, None] * w[:, None, :])[:, :, None, :]) + radii[:, :, None, None] * circle[:, None]  # (c, rows, s, 3)
+    # (c, rows, s, 3)
+    ring_vertices = (centres[:, :, None, :] + (offsets[:, :, None] * w[:, None, :])[:, :, None, :]) + radii[:, :, None, None] * circle[:, None]
     start_pole = a if flat_start else a - radius[:, None] * w
     end_pole = b + radius[:, None] * w
     vertices = np.concatenate([start_pole[:, None], ring_vertices.reshape(len(a), -1, 3), end_pole[:, None]], axis=1)

@@ -192,7 +192,8 @@ def shelf(name: str, centre_xy, size, levels: int) -> Furniture:
     parts = []
     for sx in (-1, 1):
         for sy in (-1, 1):
-            parts.append((np.array([centre_xy[0] + sx * (length / 2 - 0.03), centre_xy[1] + sy * (depth / 2 - 0.03), height / 2]), np.array([0.03, 0.03, height / 2])))
+            parts.append((np.array([centre_xy[0] + sx * (length / 2 - 0.03), centre_xy[1] + sy * (depth / 2 - 0.03), height / 2]),
+                          np.array([0.03, 0.03, height / 2])))
     for z in np.linspace(0.1, height - 0.015, max(levels, 1)):
         parts.append((np.array([centre_xy[0], centre_xy[1], z]), np.array([length / 2, depth / 2, 0.015])))
     return Furniture(name, "shelf", parts)

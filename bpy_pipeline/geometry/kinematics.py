@@ -227,7 +227,8 @@ def is_valid(model: ArmModel, q: np.ndarray, base: np.ndarray | None = None, flo
     return ok
 
 
-def random_configuration(model: ArmModel, rng: np.random.Generator, base: np.ndarray | None = None, floor_z: float | None = None, batch: int = 64, max_batches: int = 50) -> np.ndarray:
+def random_configuration(model: ArmModel, rng: np.random.Generator, base: np.ndarray | None = None, floor_z: float | None = None, batch: int = 64,
+                         max_batches: int = 50) -> np.ndarray:
     """``(j,)`` joint angles drawn uniformly within the limits, rejected until :func:`is_valid`.
 
     Draws ``batch`` candidates at a time and returns the first valid one, so the result depends

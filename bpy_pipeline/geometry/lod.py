@@ -133,7 +133,8 @@ def _segment_pair_distance(a, b, p, q) -> np.ndarray:
     s = np.where(a2 > tiny, s, 0.0)
     t = np.where(e2 > tiny, (cross * s + f) / np.where(e2 > tiny, e2, 1.0), 0.0)
     safe_a2 = np.where(a2 > tiny, a2, 1.0)
-    s = np.where(t < 0.0, np.where(a2 > tiny, np.clip(-c / safe_a2, 0.0, 1.0), 0.0), np.where(t > 1.0, np.where(a2 > tiny, np.clip((cross - c) / safe_a2, 0.0, 1.0), 0.0), s))
+    s = np.where(t < 0.0, np.where(a2 > tiny, np.clip(-c / safe_a2, 0.0, 1.0), 0.0),
+                 np.where(t > 1.0, np.where(a2 > tiny, np.clip((cross - c) / safe_a2, 0.0, 1.0), 0.0), s))
     t = np.clip(t, 0.0, 1.0)
     point_like = (e2 <= tiny) & (a2 > tiny)  # the second segment is a point: the first's nearest point to it
     s = np.where(point_like, np.clip(-c / safe_a2, 0.0, 1.0), s)

@@ -226,7 +226,8 @@ def car_meshes(style: CarStyle, fittings: bool, height: float = NOMINAL_HEIGHT) 
 def car_surfaces(paint: float) -> dict:
     """Part name -> ``(lidar_material, reflectivity)`` of every part of a car (:data:`PARTS`, :data:`FITTINGS`)
     whose paint has reflectivity ``paint``: what a builder tags each part's object with."""
-    return {"body": ("diffuse", paint), "windows": ("glass", GLASS_REFLECTIVITY), "interior": ("diffuse", INTERIOR_REFLECTIVITY), "tyres": ("diffuse", TYRE_REFLECTIVITY), **FITTINGS}
+    return {"body": ("diffuse", paint), "windows": ("glass", GLASS_REFLECTIVITY), "interior": ("diffuse", INTERIOR_REFLECTIVITY),
+            "tyres": ("diffuse", TYRE_REFLECTIVITY), **FITTINGS}
 
 
 def style_size(style: CarStyle, height: float = NOMINAL_HEIGHT) -> np.ndarray:
@@ -336,7 +337,7 @@ def person_object(rng: np.random.Generator, size=None) -> list[ObjectPart]:
     return fit_to_box([part], (v.max(axis=0) - v.min(axis=0)) if size is None else size)
 
 
-ARM_REFLECTIVITY = 0.55  # painted metal (as scenes/robot_arm.py)
+ARM_REFLECTIVITY = 0.55  # painted metal (as blender/robot_arm.py)
 
 
 def robot_arm_object(rng: np.random.Generator, size=None) -> list[ObjectPart]:

@@ -269,7 +269,8 @@ class FloorBoxPlacer:
     clear : :class:`~.clearance.SensorPoses` of the whole run: no box comes within their radius (``near_sensor``)
     """
 
-    def __init__(self, sensor, region, obstacles=(), static_distance=None, clearance: float = 0.3, min_visible: float = 0.3, keep_out: float = 1.0, samples_per_side: int = 4,
+    def __init__(self, sensor, region, obstacles=(), static_distance=None, clearance: float = 0.3, min_visible: float = 0.3, keep_out: float = 1.0,
+                 samples_per_side: int = 4,
                  clear: SensorPoses = NO_POSES):
         self.sensor = np.asarray(sensor, float)
         self.region = (np.asarray(region[0], float), np.asarray(region[1], float))
@@ -361,7 +362,8 @@ class FloorBoxPlacer:
         if self.obstacles:
             if self._obstacle_reach is None:  # (centres (o, 2), circumscribed radii grown by clearance / 2 (o,))
                 grow = self.clearance / 2.0
-                self._obstacle_reach = (np.array([o[0][:2] for o in self.obstacles], float), np.array([np.hypot(o[1][0] + grow, o[1][1] + grow) for o in self.obstacles], float))
+                self._obstacle_reach = (np.array([o[0][:2] for o in self.obstacles], float),
+                                        np.array([np.hypot(o[1][0] + grow, o[1][1] + grow) for o in self.obstacles], float))
             for k in rectangles_near(centre_xy, half, self.clearance, *self._obstacle_reach):
                 o_centre, o_half, o_yaw = self.obstacles[k]
                 if rectangles_overlap(centre_xy, half[:2], yaw, o_centre, o_half, o_yaw, self.clearance):

@@ -163,7 +163,8 @@ def find_surfaces(
                 direction = np.array([di, dj], float)
                 edges.append(spots[missing] + np.append(direction * cell / 2, 0.0))
                 outward.append(np.repeat(direction[None], missing.sum(), axis=0))
-        out.append(Surface(z, area, members, spots, np.concatenate(edges) if edges else np.zeros((0, 3)), np.concatenate(outward) if outward else np.zeros((0, 2))))
+        out.append(Surface(z, area, members, spots, np.concatenate(edges) if edges else np.zeros((0, 3)),
+                           np.concatenate(outward) if outward else np.zeros((0, 2))))
     return sorted(out, key=lambda s: s.z)
 
 

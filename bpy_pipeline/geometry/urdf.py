@@ -185,7 +185,8 @@ def read_urdf(path: str | Path) -> UrdfArm:
         current = child
     if not names:
         raise InputError(f"{where}: no revolute joint: nothing to pose")
-    return UrdfArm(root.get("name", path.stem), chain_links, names, np.array(origins), np.array(rpys), np.array(axes), np.array(lower), np.array(upper), visuals)
+    return UrdfArm(root.get("name", path.stem), chain_links, names, np.array(origins), np.array(rpys), np.array(axes), np.array(lower), np.array(upper),
+                   visuals)
 
 
 def fit_capsule(vertices: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:

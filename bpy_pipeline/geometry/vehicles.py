@@ -42,13 +42,15 @@ def vehicle_parts(kind: str, size) -> dict[str, Mesh]:
         hood = x1 - 0.14 * L
         body.append(box_mesh(hood, x1, -y, y, clearance, 0.5 * H))
         body.append(box_mesh(x0, hood, -y, y, clearance, H))
-        glass.append(quad_mesh((hood + 0.01, -y + 0.1, 0.55 * H), (hood + 0.01, y - 0.1, 0.55 * H), (hood + 0.01, y - 0.1, 0.92 * H), (hood + 0.01, -y + 0.1, 0.92 * H)))
+        glass.append(quad_mesh((hood + 0.01, -y + 0.1, 0.55 * H), (hood + 0.01, y - 0.1, 0.55 * H), (hood + 0.01, y - 0.1, 0.92 * H),
+                               (hood + 0.01, -y + 0.1, 0.92 * H)))
     elif kind == "truck":
         cab = x1 - 2.2
         body.append(box_mesh(cab, x1, -y + 0.05, y - 0.05, clearance, 0.92 * H))
         body.append(box_mesh(x0, cab - 0.3, -y, y, clearance + 0.4, H))
         body.append(box_mesh(x0 + 0.2, cab, -0.4, 0.4, clearance, clearance + 0.4))  # chassis under the cargo box
-        glass.append(quad_mesh((x1 + 0.01, -y + 0.2, 0.55 * H), (x1 + 0.01, y - 0.2, 0.55 * H), (x1 + 0.01, y - 0.2, 0.85 * H), (x1 + 0.01, -y + 0.2, 0.85 * H)))
+        glass.append(quad_mesh((x1 + 0.01, -y + 0.2, 0.55 * H), (x1 + 0.01, y - 0.2, 0.55 * H), (x1 + 0.01, y - 0.2, 0.85 * H),
+                               (x1 + 0.01, -y + 0.2, 0.85 * H)))
     else:  # bus
         body.append(box_mesh(x0, x1, -y, y, clearance, H))
         for side in (-1, 1):

@@ -8,7 +8,7 @@ Files (frame ``NNNNNN``)::
     kitti/training/planes/NNNNNN.txt     the road plane a b c d in the rectified camera frame, as KITTI's (OpenPCDet's
                                          USE_ROAD_PLANE, mmdetection3d's --with-plane): the builders' ground, world z = 0
     kitti/training/image_2/NNNNNN.png    the camera's view: Blender's rendering where the pipeline gives one
-                                         (:mod:`bpy_pipeline.scenes.camera`), else the labelled points it sees
+                                         (:mod:`bpy_pipeline.blender.camera_render`), else the labelled points it sees
     kitti/testing/...                    the same files for the frames of the test split (``output.split``)
     kitti/ImageSets/{train,val,test}.txt frame stems of each split that holds a frame (none for an empty split)
 
@@ -234,7 +234,7 @@ def write_image(out_dir: str | os.PathLike, stem: str, points: np.ndarray, camer
                 to_points: np.ndarray | None = None) -> Path:
     """A frame's ``image_2`` PNG under ``out_dir/kitti/<folder>``; returns its path.
 
-    image : ``(height, width, 3) uint8`` the camera's rendering of the scene (:func:`bpy_pipeline.scenes.camera.render_camera`);
+    image : ``(height, width, 3) uint8`` the camera's rendering of the scene (:func:`bpy_pipeline.blender.camera_render.render_camera`);
         without one, the projection of the labelled points (:func:`render_image`)
     """
     image_path = Path(out_dir) / "kitti" / folder / "image_2" / f"{stem}.png"

@@ -106,7 +106,8 @@ def object_buffers(placements: list[Placement], parts: list[list[ObjectPart]], i
             rows.append(np.full(len(part.triangles), row, np.int32))
             offset += len(part.vertices)
     k = len(names)
-    table = ObjectTable(names, [""] * k, classes, np.array(sem, np.uint16), np.array(inst, np.uint32), np.array(material, np.uint8), np.array(reflect, np.float32),
+    table = ObjectTable(names, [""] * k, classes, np.array(sem, np.uint16), np.array(inst, np.uint32), np.array(material, np.uint8),
+                        np.array(reflect, np.float32),
                         np.array(surface, np.uint8) if any(surface) else None)
     if not k:
         return SceneBuffers(np.zeros((0, 3)), np.zeros((0, 3), np.int32), np.zeros(0, np.int32), table)
@@ -170,7 +171,8 @@ def near_objects(firings: Firings, buffers: SceneBuffers, instance: int | None =
     return np.flatnonzero(near)
 
 
-def cast_firings(firings: Firings, buffers: SceneBuffers, max_range: float, threads: int | None = None, surfaces: MirrorGlassRules | None = None, rng=None, rows: np.ndarray | None = None) -> InsertedHits:
+def cast_firings(firings: Firings, buffers: SceneBuffers, max_range: float, threads: int | None = None, surfaces: MirrorGlassRules | None = None, rng=None,
+                 rows: np.ndarray | None = None) -> InsertedHits:
     """Every firing (or the firings ``rows``) against ``buffers`` alone; the nearest hit of each.
 
     Only the firings that pass an object's bounding sphere (:func:`near_objects`) go to Embree; the others cannot hit.
@@ -183,7 +185,8 @@ def cast_firings(firings: Firings, buffers: SceneBuffers, max_range: float, thre
     caster = RayCaster(buffers, frame=np.eye(4), threads=threads)
     origin = firings.origin[rows]
     shared = not origin.any()
-    beams = trace_beams(caster, buffers, np.zeros(3) if shared else origin, firings.direction[rows], 0.0, max_range, 3, surfaces=surfaces or MirrorGlassRules(glass_return_deg=5.0), rng=rng)
+    beams = trace_beams(caster, buffers, np.zeros(3) if shared else origin, firings.direction[rows], 0.0, max_range, 3,
+                        surfaces=surfaces or MirrorGlassRules(glass_return_deg=5.0), rng=rng)
     return InsertedHits(rows[beams.ray], beams.path, buffers.triangle_object[beams.triangle], beams.cos_incidence, beams.gain, beams.bounces)
 
 

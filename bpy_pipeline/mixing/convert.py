@@ -80,7 +80,8 @@ def project_to_cones(points: np.ndarray, spec, target_offset=(0.0, 0.0, 0.0), ma
     return cones_with_source(points, spec, target_offset, max_range)[:3]
 
 
-def raycast_convert(grid_points: np.ndarray, valid: np.ndarray, spec, target_offset=(0.0, 0.0, 0.0), threads: int | None = None, max_jump: float = 0.1) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def raycast_convert(grid_points: np.ndarray, valid: np.ndarray, spec, target_offset=(0.0, 0.0, 0.0), threads: int | None = None,
+                    max_jump: float = 0.1) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The meshed alternative: ``(points (k, 3) in the target frame, ring (k,), column (k,))`` of the target's firings that hit the mesh.
 
     grid_points : (rings, columns, 3) the dense scan organised (source frame); valid : (rings, columns) bool
@@ -133,7 +134,8 @@ def convert_scan(firings, spec, target_offset=(0.0, 0.0, 0.0), method: str = "ra
 METHODS = ("cones", "mesh", "hybrid")  # the parking paper's, the meshed ray cast, ours (module notes)
 
 
-def cones_with_source(points: np.ndarray, spec, target_offset=(0.0, 0.0, 0.0), max_range: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def cones_with_source(points: np.ndarray, spec, target_offset=(0.0, 0.0, 0.0),
+                      max_range: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """:func:`project_to_cones` with where each point came from: ``(points (k, 3), ring (k,), column (k,), source (k,))``,
     ``source`` the row of ``points`` (n, 3) that the cell kept (its nearest)."""
     p = np.asarray(points, float) - np.asarray(target_offset, float)
@@ -159,7 +161,8 @@ def cones_with_source(points: np.ndarray, spec, target_offset=(0.0, 0.0, 0.0), m
     return projected, ring[pick], column[pick], rows[pick]
 
 
-def raycast_with_source(grid_points: np.ndarray, valid: np.ndarray, spec, target_offset=(0.0, 0.0, 0.0), threads: int | None = None, max_jump: float = 0.1) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def raycast_with_source(grid_points: np.ndarray, valid: np.ndarray, spec, target_offset=(0.0, 0.0, 0.0), threads: int | None = None,
+                        max_jump: float = 0.1) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """:func:`raycast_convert` with where each point came from: ``(points (k, 3), ring (k,), column (k,), cell (k,))``,
     ``cell`` the flat index ``r * columns + c`` into ``grid_points`` (rings, columns, 3) of the hit triangle's corner
     nearest the hit."""
@@ -194,7 +197,8 @@ def organised(firings) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return grid, valid, row
 
 
-def convert_firings(firings, spec, target_offset=(0.0, 0.0, 0.0), method: str = "hybrid", threads: int | None = None, max_jump: float = 0.1) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def convert_firings(firings, spec, target_offset=(0.0, 0.0, 0.0), method: str = "hybrid", threads: int | None = None,
+                    max_jump: float = 0.1) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """A real scan's firings (:class:`~.firings.Firings`) resampled into ``spec``'s pattern mounted at ``target_offset``
     (m, the scan's frame), each converted point naming the firing it came from.
 

@@ -147,7 +147,8 @@ def check_preset_fits(scan: RealScan, spec, elevation_deg: np.ndarray, ring: np.
         spread = [np.subtract(*np.percentile(elevation_deg[ring == k], [75, 25])) for k in range(rings) if count[k] >= 20]
         ratio = float(np.median(spread)) / float(np.median(np.diff(np.sort(table)))) if spread else 0.0
         if ratio > RING_SPREAD:
-            why = f"has rings finer than preset {spec.name}'s (each of its rings spreads over {ratio:.2f} of the preset's ring spacing; the preset's own scans: under {RING_SPREAD})"
+            why = (f"has rings finer than preset {spec.name}'s (each of its rings spreads over {ratio:.2f} of the preset's ring spacing; "
+                   f"the preset's own scans: under {RING_SPREAD})")
     if why:
         raise InputError(f"scene.preset: {scan.path} {why}: give the scan's own sensor")
 
@@ -290,7 +291,8 @@ def _firing_order(azimuth: np.ndarray, ring: np.ndarray, step: float) -> float |
     return sense if forward.mean() >= FIRING_ORDER_SHARE else None
 
 
-def _gaps_in_firing_order(azimuth: np.ndarray, ring: np.ndarray, rings: int, step: float, sense: float, phase: float, span: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _gaps_in_firing_order(azimuth: np.ndarray, ring: np.ndarray, rings: int, step: float, sense: float, phase: float,
+                          span: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The empty firings of a scan whose rings list their returns in firing order: ``(ring (g,), azimuth (g,) deg)``.
 
     Between two consecutive returns of a ring that lie ``d`` apart (in the sense ``sense``; a step back counts as

@@ -264,7 +264,8 @@ def mix_place(state: MixState) -> None:
         if section.kitti_rule.enabled:
             placed, rule_log["kitti"] = kitti_rule(scene, section.kitti_rule, xyz[ground.ground], real, rng)
             placements += placed
-        rule_log["ground"] = {"method": ground.method, "normal": [round(float(v), 5) for v in ground.normal], "offset": round(ground.offset, 4), "points": int(ground.ground.sum())}
+        rule_log["ground"] = {"method": ground.method, "normal": [round(float(v), 5) for v in ground.normal], "offset": round(ground.offset, 4),
+                              "points": int(ground.ground.sum())}
     if section.population.people or section.population.arms:  # people and arms on the floors and desks found in the scan (.supports)
         from .supports import populate
 
@@ -275,7 +276,8 @@ def mix_place(state: MixState) -> None:
     state.instances = [first_instance + k for k in range(len(placements))]
     state.semantic_ids = [table.id_of(p.class_name, "scene.objects.class") for p in placements]
     paint = section.car_paint if section.car_paint.enabled else None  # each car's pigment from its own generator (rng is not advanced)
-    parts = [getattr(p, "parts", None) or object_parts(p, rng, section.car_bodies, section.car_glass, section.car_fittings, paint, paint and car_generator(rng, k))
+    parts = [getattr(p, "parts", None) or object_parts(p, rng, section.car_bodies, section.car_glass, section.car_fittings, paint,
+                                                       paint and car_generator(rng, k))
              for k, p in enumerate(placements)]  # populated ones carry theirs
     state.paints = [part.paint for object_parts_ in parts for part in object_parts_]  # the rows of object_buffers, in order
     state.surfaces = glass_rules(parts, section.car_glass)
@@ -396,7 +398,8 @@ def mix_annotate(state: MixState) -> None:
     """The frame's boxes (:func:`mixed_boxes`) and its record (``info``)."""
     firings, section, scan = state.firings, state.section, state.scan
     labelled = labelled_boxes(firings, state.semantic_real, state.instance_real, state.table) if scan.labels is not None and section.keep_labels else []
-    state.boxes = mixed_boxes(firings, state.valid, state.placements, state.instances, state.buffers, state.visible_rays, state.points, section, firings.returns, state.occluded, labelled, state.threads)
+    state.boxes = mixed_boxes(firings, state.valid, state.placements, state.instances, state.buffers, state.visible_rays, state.points, section,
+                              firings.returns, state.occluded, labelled, state.threads)
     state.lap("boxes")
     state.info = {
         "scan": {"path": str(scan.path), "format": scan.format, "points": int(len(scan)), "notes": list(scan.notes)},
@@ -415,7 +418,8 @@ def mix_annotate(state: MixState) -> None:
 MIX_STEPS = (mix_background, mix_place, mix_cast, mix_effects, mix_annotate)  # in this order: the generator's draws follow it
 
 
-def mix_frame(section: RealScanScene, rng: np.random.Generator, effects=None, threads: int | None = None, table: ClassTable | None = None, scan: RealScan | None = None, firings: Firings | None = None, frame: int = 0) -> MixedFrame:
+def mix_frame(section: RealScanScene, rng: np.random.Generator, effects=None, threads: int | None = None, table: ClassTable | None = None,
+              scan: RealScan | None = None, firings: Firings | None = None, frame: int = 0) -> MixedFrame:
     """Insert ``section``'s objects into its real scan, exact per firing (module notes): :data:`MIX_STEPS` in turn
     (the real-scan frame plan runs the same steps as its stages, :mod:`bpy_pipeline.stages.mixing`).
 

@@ -49,7 +49,8 @@ def fit_plane(points: np.ndarray) -> tuple[np.ndarray, float]:
     return normal, float(normal @ centre)
 
 
-def ransac_ground(points: np.ndarray, threshold: float = 0.15, iterations: int = 200, lowest: float = 0.35, max_tilt_deg: float = 20.0, seed: int = 0) -> Ground:
+def ransac_ground(points: np.ndarray, threshold: float = 0.15, iterations: int = 200, lowest: float = 0.35, max_tilt_deg: float = 20.0,
+                  seed: int = 0) -> Ground:
     """RANSAC plane through the ``lowest`` share of ``(n, 3)`` returns (by z), tilted at most ``max_tilt_deg``;
     the returns within ``threshold`` m of it are ground. Its own generator (``seed``): the ground of a scan
     does not depend on the frame's draws."""
@@ -79,7 +80,8 @@ def ransac_ground(points: np.ndarray, threshold: float = 0.15, iterations: int =
     return Ground(mask, best[0], best[1], "ransac")
 
 
-def local_ground(points: np.ndarray, normal: np.ndarray, offset: float, threshold: float, cell: float = 2.0, rise: float = 0.25, reach: float = 1.5) -> np.ndarray:
+def local_ground(points: np.ndarray, normal: np.ndarray, offset: float, threshold: float, cell: float = 2.0, rise: float = 0.25,
+                 reach: float = 1.5) -> np.ndarray:
     """``(n,)`` bool: returns within ``threshold`` m of the plane ``(normal, offset)``, or within ``rise`` m
     above the lowest return of their ``cell`` m xy grid cell where that lowest return lies within ``reach`` m
     of the plane (a minimum-height grid: the ground a single plane misses on cambered or sloped roads)."""

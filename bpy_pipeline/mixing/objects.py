@@ -50,7 +50,9 @@ def read_ply_groups(p: Path) -> list[Group]:
         v = np.column_stack([vertex[k] for k in "xyz"]).astype(np.float64)
         faces = [np.asarray(f, np.int64) for f in face.data[face.data.dtype.names[0]]]
     except Exception as err:  # plyfile raises many types on a lying header or short data
-        raise InputError(f"{p}: not a readable PLY mesh with vertex x y z and faces ({type(err).__name__}: {str(err).splitlines()[0] if str(err) else ''})") from None
+        raise InputError(
+            f"{p}: not a readable PLY mesh with vertex x y z and faces ({type(err).__name__}: {str(err).splitlines()[0] if str(err) else ''})"
+        ) from None
     return [(v, faces, "")]
 
 

@@ -21,8 +21,8 @@ sets it, by a generator of its own per car (:func:`car_generator`: the frame's g
 rest of the frame draws as before). Applied to the inserted returns with the effects (:func:`paint_beam`), where a
 part's model wins over ``effects.materials``. A part may also set ``detection`` (0..1): the reflectivity the drop decision
 sees at least, ``max(own, detection)``, while the reading stays the part's own (:func:`detection_reflectivity`; the
-receiver's reading floor lies above its detection floor, docs/realism.md); unset by default. Opt-in (``enabled``; its defaults fitted on KITTI 000008): held out on
-004747 it lifts the reflectance overlap but loses the 28-37 m cars' points (docs/realism.md); off: nothing is drawn or changed.
+receiver's reading floor lies above its detection floor, docs/realism.md); unset by default. Opt-in (``enabled``; its defaults fitted on KITTI
+000008): held out on 004747 it lifts the reflectance overlap but loses the 28-37 m cars' points (docs/realism.md); off: nothing is drawn or changed.
 """
 
 from __future__ import annotations
@@ -132,7 +132,9 @@ class CarPaint:
 
     enabled: bool = field(default=False, metadata=meta(help="paint the inserted cars' parts by their material models"))
     paints: dict = field(default_factory=lambda: {k: list(v) for k, v in PAINTS.items()}, metadata=meta(help="the body's pigments drawn per car"))
-    upper_from: float = field(default=0.58, metadata=meta("", soft=(0, 1), help="fraction of the car's height from which the body is upper (0..1; beltlines lie at 0.50-0.62; fitted)"))
+    upper_from: float = field(default=0.58,
+                              metadata=meta("", soft=(0, 1),
+                                            help="fraction of the car's height from which the body is upper (0..1; beltlines lie at 0.50-0.62; fitted)"))
     parts: dict = field(default_factory=dict, metadata=meta(help="part name -> its material model, over the default parts"))
 
     def __post_init__(self):

@@ -36,7 +36,8 @@ class Placement:
     body: int = -1
 
     def info(self) -> dict:
-        return {"type": self.type, "class": self.class_name, "center": [round(float(v), 4) for v in self.centre], "size": [round(float(v), 4) for v in self.size], "yaw_deg": round(math.degrees(self.yaw), 3), "rule": self.rule}
+        return {"type": self.type, "class": self.class_name, "center": [round(float(v), 4) for v in self.centre],
+                "size": [round(float(v), 4) for v in self.size], "yaw_deg": round(math.degrees(self.yaw), 3), "rule": self.rule}
 
 
 def nominal_size(kind: str) -> np.ndarray:

@@ -40,7 +40,7 @@ from .ground import PointIndex, fit_plane
 from .placement import Placement, boxes_overlap
 from .section import RealPopulation, SupportParams
 
-GAP = 0.01  # m: a placed object floats this far above its surface (as geometry/population.py)
+GAP = 0.01  # m: a placed object floats this far above its surface (as population/placer.py)
 KINDS_OF_SURFACE = ("floor", "desk", "other")
 
 
@@ -344,7 +344,8 @@ def _place_person(shape: dict, k: int, xy: np.ndarray, z: float, yaw: float, sur
         return None, "real_points"
     v, t, _ = body_mesh(person.a, person.b, person.radius)
     p = Populated("person", "person", centre, size, yaw, "population", -1, [ObjectPart(v, np.asarray(t, np.int32), "diffuse", PERSON_REFLECTIVITY)],
-                  {"pose": shape["pose"], "height": round(shape["height"], 4), "feet_z": round(float(person.support[2]), 4), "surface": surfaces.chosen[k].kind})
+                  {"pose": shape["pose"], "height": round(shape["height"], 4), "feet_z": round(float(person.support[2]), 4),
+                   "surface": surfaces.chosen[k].kind})
     return p, ""
 
 
@@ -359,7 +360,7 @@ def _place_arm(shape: dict, k: int, xy: np.ndarray, z: float, yaw: float, surfac
     """``(placement, why)``: the arm of ``shape`` with its base at ``xy`` on surface ``k`` at height ``z``, or ``None`` and the reason."""
     from ..geometry.kinematics import capsules_world, forward
     from ..geometry.objects import arm_mesh
-    from ..geometry.population import placement_matrix
+    from ..population.placer import placement_matrix
 
     model, q = shape["model"], shape["q"]
     local, _ = arm_mesh(model, q)
@@ -386,7 +387,8 @@ KINDS = {
 }
 
 
-def populate(points: np.ndarray, spec: RealPopulation, rng: np.random.Generator, placed: list | None = None, supports: list[FoundSurface] | None = None) -> tuple[list[Populated], dict]:
+def populate(points: np.ndarray, spec: RealPopulation, rng: np.random.Generator, placed: list | None = None,
+             supports: list[FoundSurface] | None = None) -> tuple[list[Populated], dict]:
     """People and arms on the surfaces of a real scan (module notes); ``(placements, log)``.
 
     points : (n, 3) float64 the scan's kept returns (sensor frame, m); placed : objects placed before (kept ``keep_out`` from)

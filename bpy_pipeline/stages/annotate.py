@@ -21,7 +21,9 @@ from ..rig import out_of_reach
 from .view import scan_surfaces
 
 
-def world_boxes(buffers: SceneBuffers, config: Config, pose: np.ndarray, points: np.ndarray, headings: dict | None = None, frame: int = 0, rng: np.random.Generator | None = None, rays: SensorRays | None = None, skip_unseen: bool = False, caster=None, direct_returns: np.ndarray | None = None) -> np.ndarray:
+def world_boxes(buffers: SceneBuffers, config: Config, pose: np.ndarray, points: np.ndarray, headings: dict | None = None, frame: int = 0,
+                rng: np.random.Generator | None = None, rays: SensorRays | None = None, skip_unseen: bool = False, caster=None,
+                direct_returns: np.ndarray | None = None) -> np.ndarray:
     """Every box of ``output.boxes.classes`` in the world frame with truncation, occlusion and its points, none dropped
     (:func:`sensor_boxes` keeps those with their minimum points and moves them into the points' frame).
 
@@ -41,13 +43,15 @@ def world_boxes(buffers: SceneBuffers, config: Config, pose: np.ndarray, points:
         steps = [v for v in angular_resolution(spec) if v is not None and np.isfinite(v)]
         cell = float(np.clip(max(steps) if steps else 1.0, 0.2, 5.0))
         near = np.ones(len(boxes), bool)
-        if skip_unseen and not config.sensor.reflector.enabled and config.effects.mirrors.glass.reflect_fraction in (0.0, 1.0):  # no draw depends on which boxes are traced
+        # no draw depends on which boxes are traced
+        if skip_unseen and not config.sensor.reflector.enabled and config.effects.mirrors.glass.reflect_fraction in (0.0, 1.0):
             near = ~out_of_reach(spec, pose, boxes["centre"], np.linalg.norm(boxes["size"], axis=1) / 2 + 1e-3)
             boxes["truncation"] = 1.0
         traced = boxes[near]
         if direct_returns is not None and not boxes_hold_their_instances(buffers, traced, section.classes):
             direct_returns = None
-        visibility(buffers, traced, patterns, pose, spec.min_range, spec.max_range, cell, caster=caster, surfaces=scan_surfaces(config), rng=rng, direct_returns=direct_returns)
+        visibility(buffers, traced, patterns, pose, spec.min_range, spec.max_range, cell, caster=caster, surfaces=scan_surfaces(config), rng=rng,
+                   direct_returns=direct_returns)
         boxes[near] = traced
         boxes["occlusion"] = occlusion_levels(boxes["visible"], boxes["unoccluded"], section.occlusion_levels)
         count_points(boxes, points)
@@ -64,7 +68,9 @@ def boxes_hold_their_instances(buffers: SceneBuffers, boxes: np.ndarray, classes
     return all(objects.class_names[r] in wanted for r in np.flatnonzero(np.isin(objects.instance, boxes["instance"])))
 
 
-def labelled_boxes(buffers: SceneBuffers, config: Config, pose: np.ndarray, points: np.ndarray, headings: dict | None = None, frame: int = 0, rng: np.random.Generator | None = None, rays: SensorRays | None = None, caster=None, direct_returns: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+def labelled_boxes(buffers: SceneBuffers, config: Config, pose: np.ndarray, points: np.ndarray, headings: dict | None = None, frame: int = 0,
+                   rng: np.random.Generator | None = None, rays: SensorRays | None = None, caster=None,
+                   direct_returns: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """``(boxes, thin)``: the frame's 3D box labels (:data:`~bpy_pipeline.geometry.boxes.BOX_DTYPE`) with their class's
     minimum points, and the boxes with fewer but some (KITTI's DontCare regions: objects seen, too thin to label), both
     in the frame of the points (:func:`world_boxes`, then the points' frame)."""
@@ -86,4 +92,5 @@ frame_boxes = sensor_boxes  # the name pipeline.py gave it (mixing's boxes are m
 
 def annotate_stage(frame: Frame, run: Run) -> None:
     """The frame's 3D box labels and its thin boxes (in the plan when a box format is asked for)."""
-    frame.boxes, frame.thin_boxes = labelled_boxes(frame.buffers, run.config, frame.pose, frame.points, frame.scene.headings, frame.index, frame.rng, run.rays, frame.caster, frame.direct_returns)
+    frame.boxes, frame.thin_boxes = labelled_boxes(frame.buffers, run.config, frame.pose, frame.points, frame.scene.headings, frame.index, frame.rng, run.rays,
+                                                   frame.caster, frame.direct_returns)

@@ -12,7 +12,8 @@ from .view import scan_surfaces
 
 def flash_image(frame: Frame, config) -> object:
     """``(returns, rows, columns)`` FLASH_IMAGE_DTYPE of the flash camera of ``config`` at ``frame.pose`` in ``frame.buffers``."""
-    images = flash_images(frame.buffers, config.sensor.spec, frame.pose, FLASH_SUB_RAYS, FLASH_SEPARATION, FLASH_RETURNS, scan_surfaces(config), config.threads or None)
+    images = flash_images(frame.buffers, config.sensor.spec, frame.pose, FLASH_SUB_RAYS, FLASH_SEPARATION, FLASH_RETURNS, scan_surfaces(config),
+                          config.threads or None)
     return flash_image_array(images)
 
 

@@ -39,7 +39,8 @@ def rig_members(run: Run) -> list[Run]:
 def member_boxes_stage(frame: Frame, run: Run) -> None:
     """A member's boxes in the world, none dropped yet (:func:`merged_boxes_stage` merges them, then keeps each
     member's where it holds their minimum points, in its frame)."""
-    frame.boxes = world_boxes(frame.buffers, run.config, frame.pose, frame.points, frame.scene.headings, frame.index, frame.rng, run.rays, skip_unseen=True, caster=frame.caster, direct_returns=frame.direct_returns)
+    frame.boxes = world_boxes(frame.buffers, run.config, frame.pose, frame.points, frame.scene.headings, frame.index, frame.rng, run.rays, skip_unseen=True,
+                              caster=frame.caster, direct_returns=frame.direct_returns)
 
 
 def each_member(*stages: tuple[str | None, StageFunction]) -> StageFunction:
@@ -49,7 +50,7 @@ def each_member(*stages: tuple[str | None, StageFunction]) -> StageFunction:
     frame's add them up, timing by timing."""
 
     def members_stage(frame: Frame, run: Run) -> None:
-        from ..export import export_scene
+        from ..blender.export import export_scene
 
         config = run.config
         if not run.members:
@@ -71,7 +72,12 @@ def each_member(*stages: tuple[str | None, StageFunction]) -> StageFunction:
             for timing, took in sub.timings.items():
                 frame.timings[timing] = frame.timings.get(timing, 0.0) + took
             frame.rig.frames.append(sub)
-            reach = max(reach, float(np.linalg.norm(matrix[:3, 3])) + sensor.spec.max_range + (0.0 if frame.trajectory is None else frame.trajectory.reach(frame.index, frame_time(sensor.spec))))
+            reach = max(
+                reach,
+                float(np.linalg.norm(matrix[:3, 3]))
+                + sensor.spec.max_range
+                + (0.0 if frame.trajectory is None else frame.trajectory.reach(frame.index, frame_time(sensor.spec))),
+            )
         start = time.perf_counter()
         frame.buffers = export_scene(run.table, run.rules, keep_within=(frame.pose[:3, 3], reach))
         frame.timings["export"] = frame.timings.get("export", 0.0) + time.perf_counter() - start

@@ -21,9 +21,10 @@ def build_populated(scene, context: BuildContext) -> BuildResult:
     population = getattr(scene, "population", None)
     if population is None or not population.kinds:
         return result
-    from ..scenes.population import populate
+    from ..population.scene import populate
 
-    return dataclasses.replace(populate(population, context, result), dynamic=None, dynamic_parts=None)  # the population stands outside the builder's dynamic collection
+    # the population stands outside the builder's dynamic collection
+    return dataclasses.replace(populate(population, context, result), dynamic=None, dynamic_parts=None)
 
 
 def build_frame_scene(config: Config, index: int = 0, rng=None, keep: dict | None = None) -> BuildResult:
@@ -88,7 +89,7 @@ def export_stage(frame: Frame, run: Run) -> None:
     ``dynamic_parts``): the frame's buffers are the static world's, then those. The rays, limited to the sensor's
     range, do the culling the export would do.
     """
-    from ..export import export_scene, parts_buffers
+    from ..blender.export import export_scene, parts_buffers
 
     max_range = reach(frame, run.config)
     centre = frame.pose[:3, 3]
@@ -104,7 +105,9 @@ def export_stage(frame: Frame, run: Run) -> None:
         else:
             dynamic = export_scene(run.table, run.rules, keep_within=(centre, max_range), only=scene.dynamic)
         frame.buffers = static.joined(dynamic)
-        near = len(frame.buffers.triangles) > len(static.triangles) or (bounds is not None and float(np.linalg.norm(np.clip(centre, *bounds) - centre)) <= max_range)
+        near = len(frame.buffers.triangles) > len(static.triangles) or (
+            bounds is not None and float(np.linalg.norm(np.clip(centre, *bounds) - centre)) <= max_range
+        )
         if near or not len(frame.buffers.triangles):
             return
     else:
@@ -112,5 +115,8 @@ def export_stage(frame: Frame, run: Run) -> None:
         if len(frame.buffers.triangles) or not len(export_scene(run.table, run.rules).triangles):
             return
     where = [round(float(v), 2) for v in centre]
-    raise InputError(f"sensor: no object of the scene lies within max_range ({max_range} m) of the sensor at {where} in frame {frame.index}; move the sensor or raise sensor.max_range")
+    raise InputError(
+        f"sensor: no object of the scene lies within max_range ({max_range} m) of the sensor at {where} in frame {frame.index}; move the sensor or raise "
+        "sensor.max_range"
+    )
 

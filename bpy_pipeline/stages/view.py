@@ -86,7 +86,8 @@ def sensor_poses(config: Config) -> SensorPoses:
         trajectory = sensor_trajectory(config.sensor)
         duration = min(config.frames * frame_time(config.sensor.spec), trajectory.duration)
         s0, s1 = trajectory.distance([0.0, duration])
-        arc = np.unique(np.concatenate([np.linspace(s0, s1, int(np.ceil((s1 - s0) / PATH_STEP)) + 1), trajectory.arc[(trajectory.arc > s0) & (trajectory.arc < s1)]]))
+        arc = np.unique(np.concatenate([np.linspace(s0, s1, int(np.ceil((s1 - s0) / PATH_STEP)) + 1),
+                                        trajectory.arc[(trajectory.arc > s0) & (trajectory.arc < s1)]]))
         poses = trajectory.poses(np.interp(arc, trajectory.clock_arc, trajectory.clock_times) - trajectory.start_time)
         step = PATH_STEP
     else:
@@ -103,7 +104,7 @@ def scene_trajectory(config: Config) -> Trajectory | None:
     section = config.sensor.trajectory
     if section is None or not section.curve:
         return sensor_trajectory(config.sensor)
-    from ..scenes.curves import curve_polyline
+    from ..blender.curves import curve_polyline
 
     return sensor_trajectory(config.sensor, curve_polyline(section.curve))
 

@@ -6,7 +6,7 @@ Writes (all CC0-1.0, made by this project, no download):
 
 * ``car_sedan.glb``: the procedural sedan (geometry/objects.py) as one mesh with four materials,
   ``paint``, ``window_glass``, ``interior`` and ``tyre`` (the window material becomes ``glass``);
-* ``person_rigged.glb``: the procedural person (scenes/people.py), 1.75 m, its body skinned to its
+* ``person_rigged.glb``: the procedural person (blender/people.py), 1.75 m, its body skinned to its
   skeleton, with four animations (standing, walking, sitting, crouching: three keyframes each, poses
   drawn within the joint limits of geometry/human.py from a fixed seed);
 * ``robot_arm.obj``: the default six-axis arm in one pose (Y up, as OBJ files usually are).
@@ -29,8 +29,8 @@ sys.path.insert(0, str(ROOT))
 
 from bpy_pipeline.geometry import human, kinematics  # noqa: E402
 from bpy_pipeline.geometry.objects import STYLES, arm_mesh, car_parts  # noqa: E402
-from bpy_pipeline.scenes.objects import mesh_data  # noqa: E402
-from bpy_pipeline.scenes.people import body_data, pose_bases, rest_matrices, skeleton  # noqa: E402
+from bpy_pipeline.blender.mesh_objects import mesh_data  # noqa: E402
+from bpy_pipeline.blender.people import body_data, pose_bases, rest_matrices, skeleton  # noqa: E402
 
 CAR_MATERIALS = {"body": "paint", "windows": "window_glass", "interior": "interior", "tyres": "tyre"}
 PERSON_HEIGHT = 1.75  # m
@@ -101,7 +101,8 @@ def make_robot(path: Path) -> None:
     obj = bpy.data.objects.new("robot_arm", mesh_data("robot_arm", *arm_mesh(model, q)))
     bpy.context.scene.collection.objects.link(obj)
     _only([obj])
-    bpy.ops.wm.obj_export(filepath=str(path), export_selected_objects=True, export_materials=False, export_uv=False, export_normals=False, up_axis="Y", forward_axis="NEGATIVE_Z")
+    bpy.ops.wm.obj_export(filepath=str(path), export_selected_objects=True, export_materials=False, export_uv=False, export_normals=False, up_axis="Y",
+                          forward_axis="NEGATIVE_Z")
 
 
 def main(out: Path) -> dict:

@@ -54,7 +54,8 @@ def extension_zip(work):
     if not ENABLED:
         pytest.skip("real-Blender lane: run tests/blender/run_lane.sh")
     out = work / "dist"
-    result = subprocess.run([sys.executable, str(ROOT / "scripts" / "build_extension.py"), "--platform", "linux-x64", "--out", str(out)], capture_output=True, text=True, timeout=600)
+    result = subprocess.run([sys.executable, str(ROOT / "scripts" / "build_extension.py"), "--platform", "linux-x64", "--out", str(out)], capture_output=True,
+                            text=True, timeout=600)
     assert result.returncode == 0, result.stderr
     (path,) = result.stdout.split()
     return out / os.path.basename(path)

@@ -27,7 +27,8 @@ OUT, WORK = Path(sys.argv[-2]), Path(sys.argv[-1])
 def config_of(builder: str, *overrides):
     from bpy_pipeline.config import load_config
 
-    return load_config({"seed": 0, "frames": 1, "scene": {"builder": builder}, "effects": {"ideal": True}, "output": {"formats": ["ply"], "preview": False}}, list(overrides))
+    return load_config({"seed": 0, "frames": 1, "scene": {"builder": builder}, "effects": {"ideal": True}, "output": {"formats": ["ply"], "preview": False}},
+                       list(overrides))
 
 
 def built(builder: str, *overrides):
@@ -65,7 +66,7 @@ def evaluated(obj) -> np.ndarray:
 
 
 def set_input(obj, name, value):
-    from bpy_pipeline.compat import set_modifier_input
+    from bpy_pipeline.blender.compat import set_modifier_input
 
     set_modifier_input(obj.modifiers[0], name, value)  # as a user would from the Python console
     obj.update_tag()
@@ -77,7 +78,7 @@ def beams(points) -> dict:
 
 
 def exported_pieces(names) -> dict:
-    from bpy_pipeline.export import export_scene
+    from bpy_pipeline.blender.export import export_scene
     from bpy_pipeline.labels import load_class_table
 
     buffers = export_scene(load_class_table())
@@ -127,7 +128,7 @@ def main() -> dict:
     before = scan(config, "railway_before")
     for obj in bpy.data.objects:
         if obj.name.endswith(".contact_wire"):
-            from bpy_pipeline.compat import get_modifier_input
+            from bpy_pipeline.blender.compat import get_modifier_input
 
             set_input(obj, "Sag", get_modifier_input(obj.modifiers[0], "Sag") + 0.3)
     after = scan(config, "railway_after")
@@ -159,7 +160,8 @@ def main() -> dict:
     # hall: pieces against the pure boxes
     config, _ = built("industrial_hall")
     layout = hall_layout(config.scene.params)
-    pure = {"floor": boxes_mesh(layout.floor), "ceiling": boxes_mesh(layout.ceiling), "walls": boxes_mesh(layout.walls)} | {f.name: f.mesh() for f in layout.furniture}
+    pure = {"floor": boxes_mesh(layout.floor), "ceiling": boxes_mesh(layout.ceiling),
+            "walls": boxes_mesh(layout.walls)} | {f.name: f.mesh() for f in layout.furniture}
     got = exported_pieces(list(pure))
     found["max_vertex_difference_m"]["industrial_hall"] = max(float(np.abs(got[n] - pure[n][0][pure[n][1]].reshape(-1, 3)).max()) for n in pure)
 
@@ -182,7 +184,9 @@ def main() -> dict:
     from bpy_pipeline.builders.street.layout import street_layout
 
     buildings = [p for p in street_layout(config.scene.params, np.random.default_rng(config.scene.params.layout_seed)).parts if p.front is not None]
-    found["max_vertex_difference_m"]["street facades"] = max(float(np.abs(ordered(evaluated(bpy.data.objects[p.name])) - ordered(p.mesh[0])).max()) for p in buildings)
+    found["max_vertex_difference_m"]["street facades"] = max(
+        float(np.abs(ordered(evaluated(bpy.data.objects[p.name])) - ordered(p.mesh[0])).max()) for p in buildings
+    )
     set_input(bpy.data.objects["street_road"], "Lane Width", config.scene.params.lane_width - 1.0)
     found["street_lane_width"] = compare(before, scan(config, "street_wider"), "road")
     return found
@@ -204,7 +208,8 @@ def compare(before, after, edited: str) -> dict:
     xyz = lambda p, idx: np.column_stack([p["x"][idx], p["y"][idx], p["z"][idx]]).astype(float)  # noqa: E731
     moved = np.linalg.norm(xyz(before, i[other]) - xyz(after, j[other]), axis=1)
     edited_before, edited_after = before[before["semantic"] == k], after[after["semantic"] == k]
-    return {"edited_points": [len(edited_before), len(edited_after)], "edited_mean_z": [float(edited_before["z"].mean()) if len(edited_before) else None, float(edited_after["z"].mean()) if len(edited_after) else None],
+    return {"edited_points": [len(edited_before), len(edited_after)], "edited_mean_z": [float(edited_before["z"].mean()) if len(edited_before) else None,
+                                                                                        float(edited_after["z"].mean()) if len(edited_after) else None],
             "edited_changed": bool(len(edited_before) != len(edited_after) or not np.array_equal(edited_before["x"], edited_after["x"])),
             "other_beams": int(other.sum()), "other_moved_over_1mm": int((moved > 1e-3).sum())}
 

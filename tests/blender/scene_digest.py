@@ -19,7 +19,7 @@ import bpy
 import numpy as np
 
 from bpy_pipeline import config as cfg
-from bpy_pipeline.export import export_scene
+from bpy_pipeline.blender.export import export_scene
 from bpy_pipeline.labels import load_class_table
 from bpy_pipeline.stages.scene import build_frame_scene
 

@@ -64,7 +64,8 @@ def module_run(out: Path, args: list[str]) -> subprocess.CompletedProcess:
 
 
 def blender_run(chroot, work: Path, out: Path, args: list[str], before: list[str] = ()) -> subprocess.CompletedProcess:
-    return chroot.blender([*before, "--background", "--python-exit-code", "1", "--python", RUN, "--", "--out", str(out), *args], work / f"home-{chroot.suite}", cwd=work)
+    return chroot.blender([*before, "--background", "--python-exit-code", "1", "--python", RUN, "--", "--out", str(out), *args], work / f"home-{chroot.suite}",
+                          cwd=work)
 
 
 @pytest.fixture(scope="session")
@@ -254,7 +255,10 @@ def test_gui_build_scene_scan_leaves_the_cube_out(gui, work):
     session.call(f"bpy.context.scene.lidar.out_dir = {str(out)!r}")
     rows = main_buttons(session, state)
     session.click(*centre(rows[0][0]))  # Build scene
-    built = session.wait("c = bpy.data.collections.get('LiDAR Scene'); reply['done'] = bool(c and len(c.all_objects) > 20); reply['n'] = len(c.all_objects) if c else 0", timeout=120)
+    built = session.wait(
+        "c = bpy.data.collections.get('LiDAR Scene'); reply['done'] = bool(c and len(c.all_objects) > 20); reply['n'] = len(c.all_objects) if c else 0",
+        timeout=120,
+    )
     assert built["n"] > 20
     rows = main_buttons(session, state)
     session.click(*centre(rows[0][1]))  # Scan: the startup cube is not part of the built scene, a dialog asks
@@ -317,7 +321,8 @@ for obj in objs:
     n = len(data.vertices) if obj.type == 'MESH' else len(data.points)
     col = np.empty(n * 4, np.float32); data.attributes['Col'].data.foreach_get('color', col)
     sem = np.empty(n, np.int32); data.attributes['semantic'].data.foreach_get('value', sem)
-    out[obj.name] = {'type': obj.type, 'data': type(data).__name__, 'points': n, 'semantic': sem.tolist()[::97], 'colors': col.reshape(-1, 4)[::97].round(5).tolist(), 'object_color': list(obj.color)}
+    out[obj.name] = {'type': obj.type, 'data': type(data).__name__, 'points': n, 'semantic': sem.tolist()[::97],
+                     'colors': col.reshape(-1, 4)[::97].round(5).tolist(), 'object_color': list(obj.color)}
 reply['clouds'] = out
 reply['legend'] = [(e.name, e.class_id, e.points, [round(c, 5) for c in e.color]) for e in bpy.context.scene.lidar.legend]
 """
@@ -408,7 +413,12 @@ def test_gui_generate_shows_progress_and_esc_keeps_finished_frames(gui):
     session.call(f"s = bpy.context.scene.lidar; s.out_dir = {str(out)!r}; s.frames = 30")
     rows = main_buttons(session, state)
     session.click(*centre(rows[2][1]))  # Generate frames
-    progress = session.wait(f"import pathlib; n = len(list(pathlib.Path({str(out)!r}).glob('records/*.json'))); reply.update(done=n >= 2, n=n, status=bpy.context.scene.lidar.status)", timeout=300, every=0.2)
+    progress = session.wait(
+        f"import pathlib; n = len(list(pathlib.Path({str(out)!r}).glob('records/*.json'))); reply.update(done=n >= 2, n=n, "
+        "status=bpy.context.scene.lidar.status)",
+        timeout=300,
+        every=0.2,
+    )
     assert progress["status"].startswith("LiDAR: ") and "/30 frames done (Esc to cancel)" in progress["status"], progress
     _, path = session.screenshot("generate_progress")
     keep_shot(session.chroot.suite, path, "generate_progress", (0, 400, state["window"]["width"], state["window"]["height"]), width=900)
@@ -467,7 +477,8 @@ bpy.context.view_layer.objects.active = cube
         img, path, boxes = find_panels(session, state)
     assert tag_row is not None, boxes
     session.click(*centre(tag_row[0]))  # Tag selected
-    tagged = session.wait("c = bpy.data.objects['Cube']; reply.update(done='lidar_class' in c, tags={k: c[k] for k in c.keys() if k.startswith('lidar_')})", timeout=30)
+    tagged = session.wait("c = bpy.data.objects['Cube']; reply.update(done='lidar_class' in c, tags={k: c[k] for k in c.keys() if k.startswith('lidar_')})",
+                          timeout=30)
     assert tagged["tags"] == {"lidar_class": "car", "lidar_material": "mirror", "lidar_reflectivity": pytest.approx(0.75)}
     time.sleep(0.5)
     _, path = session.screenshot("labels")
@@ -575,7 +586,11 @@ def test_figures_frame_time(chroot, work):
     if target:
         path = Path(target)
         existing = json.loads(path.read_text()) if path.is_file() else {}
-        existing.setdefault("job", "default job (railway, its default sensor preset, full resolution); background: 3 frames; GUI: the Scan button after Build scene (its build time is not in the frame, the scene was built before); seconds per frame = build + export + scan + write from the frame records")
+        existing.setdefault(
+            "job",
+            "default job (railway, its default sensor preset, full resolution); background: 3 frames; GUI: the Scan button after Build scene (its build time "
+            "is not in the frame, the scene was built before); seconds per frame = build + export + scan + write from the frame records",
+        )
         existing.setdefault("blenders", {})[chroot.suite] = figures
         import bpy
 
@@ -590,7 +605,8 @@ def test_node_groups_match_the_pure_functions_and_an_edited_input_rescans(chroot
     out = work / f"nodes-{chroot.suite}.json"
     folder = work / f"nodes-{chroot.suite}"
     folder.mkdir(exist_ok=True)
-    result = chroot.blender(["--background", "--factory-startup", "--python-exit-code", "1", "--python", str(ROOT / "tests" / "blender" / "nodes_check.py"), "--", str(out), str(folder)],
+    result = chroot.blender(["--background", "--factory-startup", "--python-exit-code", "1", "--python", str(ROOT / "tests" / "blender" / "nodes_check.py"),
+                             "--", str(out), str(folder)],
                             work / f"home-{chroot.suite}", timeout=600)
     assert result.returncode == 0 and out.is_file(), result.stdout[-3000:] + result.stderr[-3000:]
     found = json.loads(out.read_text())
@@ -601,9 +617,15 @@ def test_node_groups_match_the_pure_functions_and_an_edited_input_rescans(chroot
     assert found["railway_masts"] >= 3 and found["max_vertex_difference_m"]["railway masts"] <= 1e-5  # float32 realized: 3e-6 m measured
     assert counts["parking"]["groups"] == ["Parking Level"] and counts["parking"]["modifiers"] == 5
     assert counts["industrial_hall"]["groups"] == ["Industrial Hall"] and counts["industrial_hall"]["modifiers"] >= 3
-    assert counts["street"]["groups"] == ["Street Facade", "Street Planting", "Street Road", "Street Scatter"] and counts["street"]["modifiers"] == 7 + 3 + 35 + 1  # 35 buildings, the yards
+    assert counts["street"]["groups"] == ["Street Facade", "Street Planting", "Street Road",
+                                          "Street Scatter"] and counts["street"]["modifiers"] == 7 + 3 + 35 + 1  # 35 buildings, the yards
     difference = found["max_vertex_difference_m"]
-    assert difference["catenary wires"] <= 1e-5 and difference["parking"] <= 1e-5 and difference["parking doorways"] <= 1e-5 and difference["industrial_hall"] <= 1e-5, difference
+    assert (
+        difference["catenary wires"] <= 1e-5
+        and difference["parking"] <= 1e-5
+        and difference["parking doorways"] <= 1e-5
+        and difference["industrial_hall"] <= 1e-5
+    ), difference
     sag = found["railway_sag"]  # every contact wire 0.3 m lower at mid-span: its points lower, nothing else moved
     assert sag["edited_changed"] and sag["edited_mean_z"][1] < sag["edited_mean_z"][0] - 0.05 and sag["other_moved_over_1mm"] == 0, sag
     bays = found["parking_bay_width"]  # 2.8 m bays: the pillars moved to where the pure level with 2.8 m bays has them
@@ -669,14 +691,15 @@ def test_gui_node_editor_shows_the_catenary_wire_group(gui):
             session.call(call)
         time.sleep(1.0)
         _, path = session.screenshot("node_editor")
-        keep_shot(session.chroot.suite, path, "node_editor_catenary_wire", (area["x"], area["y"], area["x"] + area["width"], area["y"] + area["height"]), width=1100)
+        keep_shot(session.chroot.suite, path, "node_editor_catenary_wire", (area["x"], area["y"], area["x"] + area["width"], area["y"] + area["height"]),
+                  width=1100)
     finally:
         session.call(NODE_AREA + "area.ui_type = 'VIEW_3D'")
 
 
 SAG_EDIT = """
 import importlib
-compat = importlib.import_module('bl_ext.user_default.lidar_pipeline.bpy_pipeline.compat')  # the installed extension's copy
+compat = importlib.import_module('bl_ext.user_default.lidar_pipeline.bpy_pipeline.blender.compat')  # the installed extension's copy
 get_modifier_input, set_modifier_input = compat.get_modifier_input, compat.set_modifier_input
 edited = 0
 for obj in bpy.data.objects:

@@ -25,7 +25,8 @@ JOBS = {
     "default": ["--set", "sensor.horizontal_resolution_deg=0.5", "--set", "sensor.vertical_resolution_deg=0.5"],
     "parking": ["--set", "scene.builder=parking", "--frames", "3", "--seed", "7"],
     "industrial_hall": ["--set", "scene.builder=industrial_hall", "--frames", "2", "--seed", "5", "--set", "sensor.columns=512"],
-    "primitives": ["--set", "scene.builder=primitives", "--set", "sensor.preset=vlp16", "--set", "sensor.position=[0,0,1]", "--set", "effects.noise.sigma=0.01", "--set", "effects.drop.model=uniform", "--set", "effects.drop.probability=0.1"],
+    "primitives": ["--set", "scene.builder=primitives", "--set", "sensor.preset=vlp16", "--set", "sensor.position=[0,0,1]", "--set", "effects.noise.sigma=0.01",
+                   "--set", "effects.drop.model=uniform", "--set", "effects.drop.probability=0.1"],
 }
 
 
@@ -72,7 +73,8 @@ def digests(out: Path) -> dict:
 def run_job(name: str, out: Path, extra: list[str] = ()) -> dict:
     """Run job ``name`` into ``out`` (PLY and SemanticKITTI, ideal effects beyond what the job sets)."""
     # effects.ideal: the recorded bytes are those of the ideal scan (before presets carried their realistic effects)
-    args = [sys.executable, str(ROOT / "run.py"), "--out", str(out), *JOBS[name], "--set", "output.formats=[ply,semantickitti]", "--set", "effects.ideal=true", *extra]
+    args = [sys.executable, str(ROOT / "run.py"), "--out", str(out), *JOBS[name], "--set", "output.formats=[ply,semantickitti]", "--set", "effects.ideal=true",
+            *extra]
     done = subprocess.run(args, cwd=ROOT, capture_output=True, text=True, timeout=600)
     if done.returncode != 0:
         raise RuntimeError(f"{name}: {done.stderr.strip()}")

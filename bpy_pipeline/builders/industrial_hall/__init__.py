@@ -1,4 +1,5 @@
-"""The ``industrial_hall`` builder. ``params`` (the ``scene`` section, its check, ``build``, the registration): pure (its layout is the shared :mod:`~bpy_pipeline.geometry.indoor`); ``scene``, ``hall_nodes``: Blender (bpy).
+"""The ``industrial_hall`` builder. ``params`` (the ``scene`` section, its check, ``build``, the registration): pure (its layout is the shared
+:mod:`~bpy_pipeline.geometry.indoor`); ``scene``, ``hall_nodes``: Blender (bpy).
 
 The package's names are its ``params``' (``bpy_pipeline.builders.industrial_hall`` was that module before the builders became packages).
 """

@@ -13,7 +13,8 @@ in the same order. ``Part`` picks the output:
   top of a ``Size`` rack.
 
 Each desk and rack keeps its own object (and so its class and instance, the object's ``lidar_*``
-tags, and ``Instance`` stored as the named attribute ``lidar_instance`` the export reads first); changing ``Levels`` or ``Size`` in a rack's modifier rebuilds that rack. People and robots
+tags, and ``Instance`` stored as the named attribute ``lidar_instance`` the export reads first); changing ``Levels`` or ``Size`` in a rack's modifier
+rebuilds that rack. People and robots
 still avoid the furniture of the YAML's hall (the placement reads the pure layout).
 """
 
@@ -21,9 +22,9 @@ from __future__ import annotations
 
 import bpy
 
-from ...scenes import box_nodes
-from ...scenes.box_nodes import select
-from ...scenes.nodes import GroupBuilder, add_group_modifier, current_group, new_group, stamp
+from ...blender import box_nodes
+from ...blender.box_nodes import select
+from ...blender.nodes import GroupBuilder, add_group_modifier, current_group, new_group, stamp
 
 GROUP = "Industrial Hall"
 VERSION = 2  # 2: the Instance input, stored as lidar_instance
@@ -86,7 +87,8 @@ def hall_group() -> bpy.types.NodeTree:
     is_top = b.compare("LESS_THAN", i, 0.5)
     lx, ly = corners(m("SUBTRACT", i, 1.0), 0.075)
     leg_height = m("SUBTRACT", top, 0.04)
-    desk = box_nodes.place(b, 5, xyz(select(b, is_top, lx, cx), select(b, is_top, ly, cy), select(b, is_top, m("MULTIPLY", leg_height, 0.5), m("SUBTRACT", top, 0.02))),
+    desk = box_nodes.place(b, 5, xyz(select(b, is_top, lx, cx), select(b, is_top, ly, cy),
+                                     select(b, is_top, m("MULTIPLY", leg_height, 0.5), m("SUBTRACT", top, 0.02))),
                            xyz(select(b, is_top, 0.05, length), select(b, is_top, 0.05, depth), select(b, is_top, leg_height, 0.04)), box)
 
     # a rack: four uprights, then the boards at linspace(0.1, height - 0.015, levels)
@@ -94,7 +96,8 @@ def hall_group() -> bpy.types.NodeTree:
     ux, uy = corners(i, 0.03)
     levels = m("MAXIMUM", g("Levels"), 1.0)
     board_z = m("ADD", 0.1, m("MULTIPLY", m("SUBTRACT", i, 4.0), m("DIVIDE", m("SUBTRACT", top, 0.115), m("MAXIMUM", m("SUBTRACT", levels, 1.0), 1.0))))
-    shelf = box_nodes.place(b, m("ADD", levels, 4.0), xyz(select(b, upright, cx, ux), select(b, upright, cy, uy), select(b, upright, board_z, m("MULTIPLY", top, 0.5))),
+    shelf = box_nodes.place(b, m("ADD", levels, 4.0), xyz(select(b, upright, cx, ux), select(b, upright, cy, uy),
+                                                          select(b, upright, board_z, m("MULTIPLY", top, 0.5))),
                             xyz(select(b, upright, length, 0.06), select(b, upright, depth, 0.06), select(b, upright, 0.03, top)), box)
 
     box_nodes.finish(b, box_nodes.pick(b, g("Part"), [floor, ceiling, walls, desk, shelf]), g("Realize"), g("Instance"))

@@ -86,9 +86,12 @@ def check_furniture(params: IndustrialHallScene, where: str) -> None:
     rows = f"{params.desk_rows} row(s) of {params.desks_per_row} desk(s) and {params.shelves} shelf rack(s)"
     boxes = [item.footprint for item in layout.furniture]
     for k, (low, high) in enumerate(boxes):
-        if (low < layout.low - 1e-9).any() or (high > layout.high + 1e-9).any() or any((np.minimum(high, h) - np.maximum(low, l) > 1e-9).all() for l, h in boxes[:k]):
-            raise InputError(f"{where}.desks_per_row: {rows} do not fit the hall's {params.length:g} x {params.width:g} m floor without overlapping or "
-                             f"reaching past its walls; use fewer desks (desk_rows, desks_per_row) or shelves, smaller desk_size or shelf_size, or a larger hall")
+        if (low < layout.low - 1e-9).any() or (high > layout.high + 1e-9).any() or any((np.minimum(high, h) - np.maximum(low, l) > 1e-9).all() for l,
+                                                                                       h in boxes[:k]):
+            raise InputError(
+                f"{where}.desks_per_row: {rows} do not fit the hall's {params.length:g} x {params.width:g} m floor without overlapping or "
+                f"reaching past its walls; use fewer desks (desk_rows, desks_per_row) or shelves, smaller desk_size or shelf_size, or a larger hall"
+            )
     if not params.place_sensor:
         return
     if params.sensor_height > params.height - CLEARANCE:
@@ -98,8 +101,10 @@ def check_furniture(params: IndustrialHallScene, where: str) -> None:
         low, high = item.footprint
         top = max(c[2] + h[2] for c, h in item.parts)
         if not sensor.clear_of_box((low + high) / 2, (high - low) / 2, 0.0, 0.0, top):
-            raise InputError(f"{where}.sensor_height: the sensor {params.sensor_height} m above the hall's centre comes within {CLEARANCE} m of {item.name} ({top:.2f} m high); "
-                             f"hang it higher or move the furniture (desk_rows, desks_per_row, shelves)")
+            raise InputError(
+                f"{where}.sensor_height: the sensor {params.sensor_height} m above the hall's centre comes within {CLEARANCE} m of {item.name} "
+                f"({top:.2f} m high); hang it higher or move the furniture (desk_rows, desks_per_row, shelves)"
+            )
 
 
 def station(params: IndustrialHallScene, frame: int) -> np.ndarray | None:
@@ -129,5 +134,6 @@ def output_defaults(params: IndustrialHallScene) -> dict:
     return {"kitti": {"camera": {"position": [round(x, 4), 0.0, round(KITTI_SENSOR_HEIGHT - float(params.sensor_height), 4)], "resolution": [1242, 750]}}}
 
 
-register_builder("industrial_hall", Builder(IndustrialHallScene, build, check, station, sensor=SENSOR, boxes=True, release_sensor=refuse_sensor_placement("industrial_hall"),
+register_builder("industrial_hall",
+                 Builder(IndustrialHallScene, build, check, station, sensor=SENSOR, boxes=True, release_sensor=refuse_sensor_placement("industrial_hall"),
                                             output=output_defaults))

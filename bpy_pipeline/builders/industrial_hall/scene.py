@@ -22,10 +22,10 @@ from ...geometry.collision import box_axes, capsule_box_gaps, capsule_gaps
 from ...geometry.indoor import hall_layout
 from ...geometry.placement import sample, sample_count
 from ...geometry.transforms import pose_matrix
-from ...scenes import box_nodes
-from ...scenes.objects import scene_collection, tag
-from ...scenes.people import AssetPerson, PersonRig, import_asset, load_assets
-from ...scenes.robot_arm import RobotArm
+from ...blender import box_nodes
+from ...blender.mesh_objects import scene_collection, tag
+from ...blender.people import AssetPerson, PersonRig, import_asset, load_assets
+from ...blender.robot_arm import RobotArm
 from . import hall_nodes
 
 INSTANCE = {"floor": 1, "wall": 2, "ceiling": 3, "desk": 10, "shelf": 40, "robot arm": 100, "person": 200}
@@ -44,9 +44,12 @@ class IndustrialHall:
         self.layout = hall_layout(params)
         prototypes = box_nodes.prototypes(self.collection)  # every piece through the "Industrial Hall" group
         self.static = [
-            tag(hall_nodes.hall_object("floor", "floor", params, self.collection, prototypes, INSTANCE["floor"]), "floor", reflectivity=0.3, instance=INSTANCE["floor"]),
-            tag(hall_nodes.hall_object("ceiling", "ceiling", params, self.collection, prototypes, INSTANCE["ceiling"]), "ceiling", reflectivity=0.5, instance=INSTANCE["ceiling"]),
-            tag(hall_nodes.hall_object("walls", "walls", params, self.collection, prototypes, INSTANCE["wall"]), "wall", reflectivity=0.5, instance=INSTANCE["wall"]),
+            tag(hall_nodes.hall_object("floor", "floor", params, self.collection, prototypes, INSTANCE["floor"]), "floor", reflectivity=0.3,
+                instance=INSTANCE["floor"]),
+            tag(hall_nodes.hall_object("ceiling", "ceiling", params, self.collection, prototypes, INSTANCE["ceiling"]), "ceiling", reflectivity=0.5,
+                instance=INSTANCE["ceiling"]),
+            tag(hall_nodes.hall_object("walls", "walls", params, self.collection, prototypes, INSTANCE["wall"]), "wall", reflectivity=0.5,
+                instance=INSTANCE["wall"]),
         ]
         p = params
         for k, item in enumerate(self.layout.furniture):
@@ -131,7 +134,8 @@ class IndustrialHall:
         _, (a, b, radius) = self.assets[asset]
         placement = pose_matrix([origin[0], origin[1], 0.0], [0.0, 0.0, np.degrees(yaw)])
         ends = np.array([a, b]) * height + placement[:3, 3]
-        return human.Person(human.neutral_angles(), height, 1.0, "standing", placement, np.repeat(placement[None], len(human.SEGMENTS), 0), ends[:1], ends[1:], np.array([radius * height]), placement[:3, 3].copy())
+        return human.Person(human.neutral_angles(), height, 1.0, "standing", placement, np.repeat(placement[None], len(human.SEGMENTS), 0), ends[:1], ends[1:],
+                            np.array([radius * height]), placement[:3, 3].copy())
 
     def _place_person(self, rng, kind, robots, people, asset=None):
         p = self.params
@@ -152,7 +156,8 @@ class IndustrialHall:
                 else:
                     origin, yaw, support = self._area_point(rng), float(rng.uniform(-np.pi, np.pi)), 0.0
                 person = human.pose_person(angles, height, build, kind, origin, yaw, support)
-            if self._hits_static(person.a, person.b, person.radius, STATIC_CLEARANCE) or not self.sensor_poses.clear_of_capsules(person.a, person.b, person.radius):
+            if self._hits_static(person.a, person.b, person.radius,
+                                 STATIC_CLEARANCE) or not self.sensor_poses.clear_of_capsules(person.a, person.b, person.radius):
                 continue
             if kind != "sitting" and not self._walkable(person.support[:2]):
                 continue
@@ -195,7 +200,10 @@ class IndustrialHall:
                 missed, in_a_row = missed + 1, in_a_row + 1
                 if in_a_row >= p.max_consecutive_failures:
                     missed += count - wanted - 1
-                    warnings = (f"scene.people: placed {len(people)} of {count} people; {in_a_row} in a row fit nowhere, so the rest were given up (scene.max_consecutive_failures)",)
+                    warnings = (
+                        f"scene.people: placed {len(people)} of {count} people; {in_a_row} in a row fit nowhere, so the rest were given up "
+                        "(scene.max_consecutive_failures)",
+                    )
                     break
             else:
                 in_a_row = 0
@@ -226,8 +234,10 @@ class IndustrialHall:
             headings[instance] = person.yaw
         bpy.context.view_layer.update()
         info = {
-            "robots": [{"instance": INSTANCE["robot arm"] + r, "joints_deg": np.degrees(q).round(3).tolist(), "base": base[:3, 3].round(4).tolist()} for r, (base, q, _) in enumerate(robots)],
-            "people": [{"instance": INSTANCE["person"] + k, "pose": person.pose, "height": round(person.height, 4), "build": build} for k, (person, build, _) in enumerate(people)],
+            "robots": [{"instance": INSTANCE["robot arm"] + r, "joints_deg": np.degrees(q).round(3).tolist(), "base": base[:3, 3].round(4).tolist()} for r,
+                       (base, q, _) in enumerate(robots)],
+            "people": [{"instance": INSTANCE["person"] + k, "pose": person.pose, "height": round(person.height, 4), "build": build} for k,
+                       (person, build, _) in enumerate(people)],
             "people_wanted": count,
             "people_not_placed": missed,
         }

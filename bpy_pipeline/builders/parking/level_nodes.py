@@ -30,10 +30,10 @@ import dataclasses
 import bpy
 import numpy as np
 
-from ...compat import get_modifier_inputs
-from ...scenes import box_nodes
-from ...scenes.box_nodes import select
-from ...scenes.nodes import GroupBuilder, add_group_modifier, current_group, new_group, stamp
+from ...blender.compat import get_modifier_inputs
+from ...blender import box_nodes
+from ...blender.box_nodes import select
+from ...blender.nodes import GroupBuilder, add_group_modifier, current_group, new_group, stamp
 
 GROUP = "Parking Level"
 VERSION = 3  # 2: the Instance input, stored as lidar_instance; 3: doorways in the long walls
@@ -108,7 +108,8 @@ def level_group() -> bpy.types.NodeTree:
     first = b.compare("LESS_THAN", i, 0.5)
     ceiling_centre = xyz(select(b, first, m("MULTIPLY", m("ADD", x0, outer_x), 0.5), m("MULTIPLY", m("SUBTRACT", x0, outer_x), 0.5)),
                          select(b, first, m("MULTIPLY", m("SUBTRACT", front, outer_y), 0.5), 0.0), m("ADD", h, m("MULTIPLY", slab, 0.5)))
-    ceiling_size = xyz(select(b, first, m("SUBTRACT", outer_x, x0), m("ADD", x0, outer_x)), select(b, first, m("ADD", front, outer_y), m("MULTIPLY", outer_y, 2.0)), slab)
+    ceiling_size = xyz(select(b, first, m("SUBTRACT", outer_x, x0), m("ADD", x0, outer_x)),
+                       select(b, first, m("ADD", front, outer_y), m("MULTIPLY", outer_y, 2.0)), slab)
     ceiling = box_nodes.place(b, b.switch("INT", ramp, 1, 2), ceiling_centre, ceiling_size, box)
 
     # pillars: [gap][group of bays][gap]... both sides of the driveway, none in the ramp's row past its start
@@ -119,7 +120,8 @@ def level_group() -> bpy.types.NodeTree:
     start = m("MULTIPLY", m("ADD", m("MULTIPLY", groups, pitch), gap), -0.5)
     x = m("ADD", m("ADD", start, m("MULTIPLY", m("FLOOR", m("DIVIDE", i, 2.0)), pitch)), m("MULTIPLY", gap, 0.5))
     half_pillar = m("MULTIPLY", g("Pillar Size"), 0.5)
-    in_ramp = b.out(b.node("FunctionNodeBooleanMath", {0: b.compare("GREATER_THAN", side, 0.0), 1: b.compare("GREATER_THAN", m("ADD", x, half_pillar), ramp_x0)}, operation="AND"))
+    in_ramp = b.out(b.node("FunctionNodeBooleanMath", {0: b.compare("GREATER_THAN", side, 0.0),
+                                                       1: b.compare("GREATER_THAN", m("ADD", x, half_pillar), ramp_x0)}, operation="AND"))
     in_ramp = b.out(b.node("FunctionNodeBooleanMath", {0: in_ramp, 1: ramp}, operation="AND"))
     pillars = box_nodes.place(b, m("MULTIPLY", m("ADD", groups, 1.0), 2.0), xyz(x, m("MULTIPLY", side, m("ADD", front, half_pillar)), m("MULTIPLY", h, 0.5)),
                               xyz(g("Pillar Size"), g("Pillar Size"), h), box, selection=in_ramp)
@@ -132,10 +134,11 @@ def level_group() -> bpy.types.NodeTree:
     return stamp(b.finish(), VERSION)
 
 
+# input -> ParkingScene field (:func:`inputs_of`)
 FIELDS = {"Length": "length", "Driveway Width": "driveway_width", "Bay Width": "bay_width", "Bay Depth": "bay_depth",
           "Ceiling Height": "ceiling_height", "Slab Thickness": "slab_thickness", "Wall Thickness": "wall_thickness",
           "Pillar Size": "pillar_size", "Pillar Every": "pillar_every", "Ramp Length": "ramp_length",
-          "Wall Openings": "wall_openings", "Opening Width": "opening_width", "Opening Height": "opening_height"}  # input -> ParkingScene field (:func:`inputs_of`)
+          "Wall Openings": "wall_openings", "Opening Width": "opening_width", "Opening Height": "opening_height"}
 
 INTS = {"pillar_every", "wall_openings"}
 
@@ -181,5 +184,6 @@ def level_object(name: str, part: str, params, collection, prototypes: dict, ins
     mesh = bpy.data.meshes.new(name)
     obj = bpy.data.objects.new(name, mesh)
     collection.objects.link(obj)
-    add_group_modifier(obj, level_group(), inputs_of(params) | {"Part": PARTS[part], "Box": prototypes["box"], "Wedge": prototypes["wedge"], "Instance": int(instance)})
+    add_group_modifier(obj, level_group(), inputs_of(params) | {"Part": PARTS[part], "Box": prototypes["box"], "Wedge": prototypes["wedge"],
+                                                                "Instance": int(instance)})
     return obj

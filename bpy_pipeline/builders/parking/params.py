@@ -71,7 +71,8 @@ class ParkingScene:
 
 
 
-MAY_BE_ZERO = {"ramp_length", "wall_openings", "sensor_start", "sensor_step", "near_rejection_distance", "car_clearance", "min_visible_fraction", "near_rejection_probability", "max_consecutive_failures"}
+MAY_BE_ZERO = {"ramp_length", "wall_openings", "sensor_start", "sensor_step", "near_rejection_distance", "car_clearance", "min_visible_fraction",
+               "near_rejection_probability", "max_consecutive_failures"}
 
 
 def check(params: ParkingScene, where: str) -> None:
@@ -87,11 +88,20 @@ def check(params: ParkingScene, where: str) -> None:
     if params.opening_height >= params.ceiling_height:
         raise InputError(f"{where}.opening_height: must be below the ceiling ({params.ceiling_height} m), got {params.opening_height}")
     if params.wall_openings and params.opening_width >= params.length / (params.wall_openings + 1):
-        raise InputError(f"{where}.opening_width: {params.wall_openings} doorways a wall leave no wall between them unless under {params.length / (params.wall_openings + 1):.3f} m (length / (wall_openings + 1)), got {params.opening_width}")
+        raise InputError(
+            f"{where}.opening_width: {params.wall_openings} doorways a wall leave no wall between them unless under "
+            f"{params.length / (params.wall_openings + 1):.3f} m (length / (wall_openings + 1)), got {params.opening_width}"
+        )
     if params.place_sensor and params.sensor_height > params.ceiling_height - CLEARANCE:
-        raise InputError(f"{where}.sensor_height: must be below the ceiling ({params.ceiling_height} m) by at least {CLEARANCE} m (the sensor keeps clear of every solid), got {params.sensor_height}")
+        raise InputError(
+            f"{where}.sensor_height: must be below the ceiling ({params.ceiling_height} m) by at least {CLEARANCE} m (the sensor keeps clear of every solid), "
+            f"got {params.sensor_height}"
+        )
     if params.place_sensor and params.driveway_width < 2 * CLEARANCE:
-        raise InputError(f"{where}.driveway_width: at least {2 * CLEARANCE:g} m (the sensor robot drives along its middle, {CLEARANCE} m clear of the pillars), got {params.driveway_width}")
+        raise InputError(
+            f"{where}.driveway_width: at least {2 * CLEARANCE:g} m (the sensor robot drives along its middle, {CLEARANCE} m clear of the pillars), got "
+            f"{params.driveway_width}"
+        )
 
 
 def station(params: ParkingScene, frame: int) -> np.ndarray | None:
@@ -109,4 +119,5 @@ def build(params: ParkingScene, context: BuildContext) -> BuildResult:
 
 
 # the paper's VLP-16 at 20 Hz: 0.4 deg, 16 channels, +-15 deg (its table 1)
-register_builder("parking", Builder(ParkingScene, build, check, station, sensor={"preset": "vlp16", "rotation_hz": 20.0}, boxes=True, release_sensor=refuse_sensor_placement("parking")))
+register_builder("parking", Builder(ParkingScene, build, check, station, sensor={"preset": "vlp16", "rotation_hz": 20.0}, boxes=True,
+                                    release_sensor=refuse_sensor_placement("parking")))

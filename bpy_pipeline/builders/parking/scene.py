@@ -32,8 +32,8 @@ from ...geometry.objects import COLOURS, STYLES, car_meshes, car_surfaces, style
 from ...geometry.indoor import parking_station
 from ...geometry.placement import FloorBoxPlacer, insert_sequentially, sample, sample_count, turn_about
 from ...lidar.cast.raycast import RayCaster
-from ...scenes import box_nodes
-from ...scenes.objects import mesh_data, scene_collection, tag
+from ...blender import box_nodes
+from ...blender.mesh_objects import mesh_data, scene_collection, tag
 from . import level_nodes as parking_nodes
 from .layout import level_layout
 
@@ -105,7 +105,8 @@ class ParkingGarage:
         self.collection = scene_collection()
         meshes = self.layout.meshes()
         prototypes = box_nodes.prototypes(self.collection)  # the level's pieces through the "Parking Level" group
-        self.static = [tag(parking_nodes.level_object(name, name, params, self.collection, prototypes, INSTANCE[name]), name, reflectivity=STATIC_REFLECTIVITY[name], instance=INSTANCE[name])
+        self.static = [tag(parking_nodes.level_object(name, name, params, self.collection, prototypes, INSTANCE[name]), name,
+                           reflectivity=STATIC_REFLECTIVITY[name], instance=INSTANCE[name])
                        for name in meshes]
         self.caster = RayCaster(_buffers(meshes), frame=np.eye(4))
         self.paints = []
@@ -222,7 +223,8 @@ class ParkingGarage:
             "stopped": log.stopped,
             "rejections": dict(placer.rejections),
             "cars": [
-                {"instance": INSTANCE["car"] + k, "style": STYLES[car.style].name, "colour": COLOURS[car.colour][0], "size": np.round(car.size, 4).tolist(), "visible_fraction": round(box.visible_fraction, 4)}
+                {"instance": INSTANCE["car"] + k, "style": STYLES[car.style].name, "colour": COLOURS[car.colour][0], "size": np.round(car.size, 4).tolist(),
+                 "visible_fraction": round(box.visible_fraction, 4)}
                 for k, (car, box) in enumerate(log.placed)
             ],
         }
@@ -239,5 +241,6 @@ def _buffers(meshes: dict) -> SceneBuffers:
         owner.append(np.full(len(t), row, np.int32))
         offset += len(v)
     k = len(meshes)
-    objects = ObjectTable(list(meshes), [""] * k, list(meshes), np.zeros(k, np.uint16), np.arange(1, k + 1, dtype=np.uint32), np.full(k, MATERIAL_ID["diffuse"], np.uint8), np.full(k, 0.5, np.float32))
+    objects = ObjectTable(list(meshes), [""] * k, list(meshes), np.zeros(k, np.uint16), np.arange(1, k + 1, dtype=np.uint32),
+                          np.full(k, MATERIAL_ID["diffuse"], np.uint8), np.full(k, 0.5, np.float32))
     return SceneBuffers(np.concatenate(vertices), np.concatenate(triangles).astype(np.int32), np.concatenate(owner), objects)

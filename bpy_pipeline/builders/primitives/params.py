@@ -23,7 +23,9 @@ class Shape:
     """
 
     type: Literal["plane", "box", "sphere", "cylinder"]
-    size: float | list[float] = field(default=1.0, metadata=meta("m", help="plane, box: edge length (a number or [x, y] / [x, y, z]); sphere: radius; cylinder: [radius, height]"))
+    size: float | list[float] = field(
+        default=1.0, metadata=meta("m", help="plane, box: edge length (a number or [x, y] / [x, y, z]); sphere: radius; cylinder: [radius, height]")
+    )
     position: Vec3 = field(default=(0.0, 0.0, 0.0), metadata=meta("m"))
     rotation_deg: Vec3 = field(default=(0.0, 0.0, 0.0), metadata=meta("deg"))
     class_name: str = field(default="unlabeled", metadata={"key": "class"})

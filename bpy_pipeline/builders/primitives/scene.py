@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...geometry import primitives
-from ...scenes.objects import mesh_object, scene_collection, tag
+from ...blender.mesh_objects import mesh_object, scene_collection, tag
 
 
 def shape_mesh(shape):

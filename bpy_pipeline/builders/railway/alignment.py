@@ -297,7 +297,9 @@ def with_transitions(arc: Alignment, transition: float, where: str = "alignment"
 
     lo, hi = max(arc.length, 2 * transition * 1.0001), 2 * arc.length + 4 * transition
     if chord_of(lo) > chord:
-        raise InputError(f"{where}.transition_length: two transitions of {transition:g} m do not fit a {turn * 180 / np.pi:.3g} deg curve between the points; shorten them")
+        raise InputError(
+            f"{where}.transition_length: two transitions of {transition:g} m do not fit a {turn * 180 / np.pi:.3g} deg curve between the points; shorten them"
+        )
     for _ in range(80):
         mid = (lo + hi) / 2
         lo, hi = (mid, hi) if chord_of(mid) < chord else (lo, mid)

@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import bpy
 
-from ...scenes.nodes import GroupBuilder, add_group_modifier, current_group, new_group, stamp
+from ...blender.nodes import GroupBuilder, add_group_modifier, current_group, new_group, stamp
 
 WIRE = "Catenary Wire"
 DROPPERS = "Catenary Droppers"
@@ -133,7 +133,8 @@ def droppers_group() -> bpy.types.NodeTree:
     points = b.node("GeometryNodePoints", {"Count": n, "Position": _hang(b, cs, ce, g("Contact Sag"), t_even)})
     vertices = b.node("GeometryNodePointsToVertices", {"Points": b.out(points)})
     # a point stores its t so the clearance and the upper end read the clipped value
-    stored = b.node("GeometryNodeStoreNamedAttribute", {"Geometry": b.out(vertices), "Name": "t", "Value": t_even}, options={"data_type": "FLOAT", "domain": "POINT"})
+    stored = b.node("GeometryNodeStoreNamedAttribute", {"Geometry": b.out(vertices), "Name": "t", "Value": t_even},
+                    options={"data_type": "FLOAT", "domain": "POINT"})
     t_stored = b.out(b.node("GeometryNodeInputNamedAttribute", {"Name": "t"}, options={"data_type": "FLOAT"}), "Attribute")
     near_middle = b.compare("LESS_THAN", b.math("MULTIPLY", b.math("ABSOLUTE", b.math("SUBTRACT", t_stored, 0.5)), span), g("Clearance"))
     kept = b.node("GeometryNodeDeleteGeometry", {"Geometry": b.out(stored), "Selection": near_middle}, options={"domain": "POINT", "mode": "ALL"})

@@ -135,7 +135,8 @@ def cant_angle(track, alignment: Alignment) -> float:
     e = cant(track, alignment)
     if e == 0.0:
         return 0.0
-    left_turn = float(np.dot(alignment.lateral(np.array([alignment.length / 2]))[0], alignment.centre - alignment.point(np.array([alignment.length / 2]))[0])) > 0
+    left_turn = float(np.dot(alignment.lateral(np.array([alignment.length / 2]))[0],
+                             alignment.centre - alignment.point(np.array([alignment.length / 2]))[0])) > 0
     angle = math.asin(min(e / (track.gauge + track.rail.head_width), 1.0))
     return -angle if left_turn else angle
 
@@ -397,14 +398,16 @@ def plan(params, rng: np.random.Generator) -> RailwayLayout:
         shifts = (-0.25, 0.25) if double[i] else (0.0,)
         for j, (half, shift) in enumerate(zip(halves, shifts)):
             run = run_name(i, sec, bool(j))
-            contact = _wire("contact_wire", run, k, world(a.frame, lateral_a + half, contact_z + rise_a), world(b.frame, lateral_b + half, contact_z + rise_b), cat)
+            contact = _wire("contact_wire", run, k, world(a.frame, lateral_a + half, contact_z + rise_a), world(b.frame, lateral_b + half, contact_z + rise_b),
+                            cat)
             wires.append(contact)
             t = catenary.dropper_positions(contact.length, cat.dropper_spacing, cat.dropper_jitter, rng, shift)
             if cat.section_insulator_every > 0 and (k + 1) % cat.section_insulator_every == 0:  # a section insulator at mid-span
                 t = t[np.abs(t - 0.5) * contact.length >= SECTION_INSULATOR_CLEARANCE]
             above = messenger if auxiliary is None else auxiliary
             droppers.append(Droppers(run, k, t, contact.points_at(t), above.points_at(t), cat.dropper_diameter))
-            if auxiliary is not None and j == 0:  # the upper tier, from the auxiliary messenger to the messenger, a quarter spacing on (clear of a second contact wire's droppers)
+            # the upper tier, from the auxiliary messenger to the messenger, a quarter spacing on (clear of a second contact wire's droppers)
+            if auxiliary is not None and j == 0:
                 up = np.clip(t + 0.25 * cat.dropper_spacing / max(contact.length, 1e-9), 0.02, 0.98)
                 droppers.append(Droppers(base + "p", k, up, auxiliary.points_at(up), messenger.points_at(up), cat.dropper_diameter))
 
@@ -442,7 +445,8 @@ def _wire(kind: str, run: str, span: int, start, end, cat) -> Wire:
     length = float(np.linalg.norm((np.asarray(end) - np.asarray(start))[:2]))
     reference = {"contact_wire": cat.contact_wire_sag, "messenger_wire": cat.messenger_wire_sag, "feeder": cat.feeder_sag, "earth_wire": cat.earth_wire_sag,
                  "auxiliary_messenger": cat.auxiliary_messenger_sag}[kind]
-    diameter = {"contact_wire": cat.contact_wire_diameter, "messenger_wire": cat.messenger_wire_diameter, "feeder": cat.feeder_diameter, "earth_wire": cat.earth_wire_diameter,
+    diameter = {"contact_wire": cat.contact_wire_diameter, "messenger_wire": cat.messenger_wire_diameter, "feeder": cat.feeder_diameter,
+                "earth_wire": cat.earth_wire_diameter,
                 "auxiliary_messenger": cat.auxiliary_messenger_diameter}[kind]
     sag = catenary.sag_for_span(length, reference, cat.sag_reference_length, cat.sag_exponent)
     return Wire(kind, WIRE_CLASSES[kind], run, span, np.asarray(start, float), np.asarray(end, float), sag, diameter)
@@ -576,12 +580,16 @@ def check_railway(params, where: str = "scene") -> None:
     if not 0 <= sup.span_jitter < sup.span:
         raise InputError(f"{s}.span_jitter: must lie in [0, span) = [0, {sup.span}), got {sup.span_jitter} (a span must keep a length)")
     if sup.mast_offset < track.sleeper_length / 2 + 0.3:
-        raise InputError(f"{s}.mast_offset: a mast must stand clear of the sleepers, at least {track.sleeper_length / 2 + 0.3:.3g} m from the track centre, got {sup.mast_offset}")
+        raise InputError(
+            f"{s}.mast_offset: a mast must stand clear of the sleepers, at least {track.sleeper_length / 2 + 0.3:.3g} m from the track centre, got "
+            f"{sup.mast_offset}"
+        )
     limits = {"single": (1, 2), "both_sides": (1, 4), "gantry": (2, 5), "auto": (1, 5)}[sup.layout]
     if not limits[0] <= track.tracks <= limits[1]:
         raise InputError(f"{s}.layout: {sup.layout} serves {limits[0]} to {limits[1]} tracks, {t}.tracks is {track.tracks}")
 
-    for key in ("contact_wire_height", "system_height", "contact_wire_diameter", "messenger_wire_diameter", "feeder_diameter", "earth_wire_diameter", "dropper_diameter", "dropper_spacing"):
+    for key in ("contact_wire_height", "system_height", "contact_wire_diameter", "messenger_wire_diameter", "feeder_diameter", "earth_wire_diameter",
+                "dropper_diameter", "dropper_spacing"):
         _positive(getattr(cat, key), f"{c}.{key}")
     for key in ("stagger", "contact_wire_sag", "messenger_wire_sag", "feeder_sag", "earth_wire_sag", "sag_reference_length", "dropper_jitter"):
         _positive(getattr(cat, key), f"{c}.{key}", allow_zero=True)
@@ -606,13 +614,21 @@ def check_railway(params, where: str = "scene") -> None:
         low = cat.auxiliary_messenger_height - sag(cat.auxiliary_messenger_sag) + sag(cat.contact_wire_sag)
         high = clearance - cat.auxiliary_messenger_height + sag(cat.auxiliary_messenger_sag) - sag(cat.contact_wire_sag)
         if min(low, high) < MIN_DROPPER / 2:
-            raise InputError(f"{c}.auxiliary_messenger_height: the auxiliary messenger must hang clear of the contact wire and the messenger over a {longest:g} m span (0.075 m each), got {cat.auxiliary_messenger_height}")
+            raise InputError(
+                f"{c}.auxiliary_messenger_height: the auxiliary messenger must hang clear of the contact wire and the messenger over a {longest:g} m span "
+                f"(0.075 m each), got {cat.auxiliary_messenger_height}"
+            )
     if cat.enabled and clearance < MIN_DROPPER:
-        raise InputError(f"{c}.system_height: the messenger would sag to {clearance:.3g} m above the contact wire over a {longest:g} m span; raise it or lower messenger_wire_sag")
+        raise InputError(
+            f"{c}.system_height: the messenger would sag to {clearance:.3g} m above the contact wire over a {longest:g} m span; raise it or lower "
+            "messenger_wire_sag"
+        )
     messenger = section.rail_top + cat.contact_wire_height + cat.system_height
     lowest = float(min(section.surface(section.offsets[0] - sup.mast_offset), section.surface(section.offsets[-1] + sup.mast_offset)))
     if sup.layout != "gantry" and lowest + sup.mast_height < messenger + STAY_RISE + 0.1:
-        raise InputError(f"{s}.mast_height: a mast must reach above the cantilever ({messenger + STAY_RISE + 0.1 - lowest:.3g} m over its base), got {sup.mast_height}")
+        raise InputError(
+            f"{s}.mast_height: a mast must reach above the cantilever ({messenger + STAY_RISE + 0.1 - lowest:.3g} m over its base), got {sup.mast_height}"
+        )
 
     if st.count < 0:
         raise InputError(f"{where}.stations.count: must be >= 0, got {st.count}")

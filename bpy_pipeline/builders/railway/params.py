@@ -48,7 +48,9 @@ class RailwayTrack:
     sleeper_width: float = field(default=0.26, metadata=meta("m", help="along the track"))
     sleeper_height: float = field(default=0.22, metadata=meta("m"))
     ballast_height: float = field(default=0.35, metadata=meta("m", help="under the sleepers"))
-    crib_height: float = field(default=0.17, metadata=meta("m", help="ballast between the sleepers, above their underside (0 to sleeper_height; 0: bare sleepers on the bed)"))
+    crib_height: float = field(
+        default=0.17, metadata=meta("m", help="ballast between the sleepers, above their underside (0 to sleeper_height; 0: bare sleepers on the bed)")
+    )
     ballast_shoulder: float = field(default=0.5, metadata=meta("m", help="beyond the sleeper ends"))
     ballast_slope: float = field(default=1.5, metadata=meta("", help="horizontal per vertical"))
     tracks: int = field(default=1, metadata=meta("", help="1..5"))
@@ -118,14 +120,18 @@ class RailwayCatenary:
     dropper_jitter: float = field(default=0.2, metadata=meta("m", help="PENDULUM_JITTER, +- along the span"))
     points_per_10m: int = field(default=20, metadata=meta("", help="CURVE_RESOLUTION_POINTS_PER_10M, for scene.detail.mode fixed"))
     anchors: bool = False  # the end masts anchor the wires: a pulley bracket and a tensioning weight stack behind each
-    section_insulator_every: int = field(default=0, metadata=meta("", help="a section insulator on the contact wires at the middle of every k-th span (0: none)"))
+    section_insulator_every: int = field(default=0,
+                                         metadata=meta("", help="a section insulator on the contact wires at the middle of every k-th span (0: none)"))
     auxiliary_messenger: bool = False  # PA: a wire between messenger and contact wire, the droppers in two tiers
     auxiliary_messenger_height: float = field(default=0.3, metadata=meta("m", help="above the contact wire at the supports (assumed)"))
-    auxiliary_messenger_sag: float = field(default=0.1, metadata=meta("m", help="at the reference length (assumed: between the contact wire's and the messenger's)"))
+    auxiliary_messenger_sag: float = field(default=0.1,
+                                           metadata=meta("m", help="at the reference length (assumed: between the contact wire's and the messenger's)"))
     auxiliary_messenger_diameter: float = field(default=0.0105, metadata=meta("m", help="(assumed: a 65 mm^2 bronze wire)"))
     steady_arms: bool = False  # the registration arm ends in a steady arm, a part apart (class steady arm), hinged steady_arm_length from the wire
     steady_arm_length: float = field(default=0.5, metadata=meta("m", help="horizontal reach of the steady arm (part of registration_arm_length)"))
-    tension_length: float = field(default=0.0, metadata=meta("m", help="tension sections about this long, overlapping over one span at each end (0: one section for the line)"))
+    tension_length: float = field(
+        default=0.0, metadata=meta("m", help="tension sections about this long, overlapping over one span at each end (0: one section for the line)")
+    )
     overlap_spacing: float = field(default=0.2, metadata=meta("m", help="between the two wire runs side by side over an overlap span"))
     overlap_rise: float = field(default=0.5, metadata=meta("m", help="the run out of service rises over the overlap span towards its anchor"))
 
@@ -174,7 +180,8 @@ class RailwayTrackside:
     platform_edge: float = field(default=1.65, metadata=meta("m", help="from the centre of the nearest track"))
     platform_width: float = field(default=4.0, metadata=meta("m"))
     platform_height: float = field(default=0.76, metadata=meta("m", help="above the rail heads"))
-    vegetation_per_100m: float = field(default=0.0, metadata=meta("", help="trees and bushes per side and 100 m, beyond the fences (or 2 m beyond the masts); 0: none"))
+    vegetation_per_100m: float = field(default=0.0,
+                                       metadata=meta("", help="trees and bushes per side and 100 m, beyond the fences (or 2 m beyond the masts); 0: none"))
 
 
 @dataclass(frozen=True)
@@ -222,18 +229,26 @@ def check(params: RailwayScene, where: str) -> None:
         if not getattr(side, key) >= 0:
             raise InputError(f"{where}.trackside.{key}: must be >= 0 m, got {getattr(side, key)}")
     if side.fences and side.fence_offset <= params.supports.mast_offset + 0.5:
-        raise InputError(f"{where}.trackside.fence_offset: a fence must stand beyond the masts ({params.supports.mast_offset + 0.5} m), got {side.fence_offset}")
+        raise InputError(
+            f"{where}.trackside.fence_offset: a fence must stand beyond the masts ({params.supports.mast_offset + 0.5} m), got {side.fence_offset}"
+        )
     if params.catenary.section_insulator_every < 0:
         raise InputError(f"{where}.catenary.section_insulator_every: must be >= 0 (0: none), got {params.catenary.section_insulator_every}")
     cat = params.catenary
     if cat.tension_length < 0:
         raise InputError(f"{where}.catenary.tension_length: must be >= 0 m (0: one tension section for the whole line), got {cat.tension_length}")
     if not 0 < cat.overlap_spacing < params.track.track_spacing / 4:
-        raise InputError(f"{where}.catenary.overlap_spacing: must lie in (0, {params.track.track_spacing / 4:g}) m (a quarter of the track spacing), got {cat.overlap_spacing}")
+        raise InputError(
+            f"{where}.catenary.overlap_spacing: must lie in (0, {params.track.track_spacing / 4:g}) m (a quarter of the track spacing), got "
+            f"{cat.overlap_spacing}"
+        )
     if not 0 < cat.overlap_rise <= 1.0:
         raise InputError(f"{where}.catenary.overlap_rise: must lie in (0, 1] m, got {cat.overlap_rise}")
     if cat.steady_arms and not 0.2 <= cat.steady_arm_length <= cat.registration_arm_length - 0.2:
-        raise InputError(f"{where}.catenary.steady_arm_length: must lie in [0.2, registration_arm_length - 0.2 = {cat.registration_arm_length - 0.2:g}] m, got {cat.steady_arm_length}")
+        raise InputError(
+            f"{where}.catenary.steady_arm_length: must lie in [0.2, registration_arm_length - 0.2 = {cat.registration_arm_length - 0.2:g}] m, got "
+            f"{cat.steady_arm_length}"
+        )
     check_station_clearance(params, where)
     if params.reroll_every < 0:
         raise InputError(f"{where}.reroll_every: must be >= 0 (0: one railway per run; k: a new railway every k frames), got {params.reroll_every}")
@@ -254,14 +269,20 @@ def check_station_clearance(params: RailwayScene, where: str) -> None:
     st, sup = params.stations, params.supports
     if not params.place_sensor:
         return
-    mast_sides = {"single": {sup.side}, "both_sides": {"right", "left"}, "gantry": {"right", "left"}}.get(sup.layout, {sup.side} if params.track.tracks == 1 else {"right", "left"})
+    mast_sides = {"single": {sup.side}, "both_sides": {"right", "left"}, "gantry": {"right", "left"}}.get(
+        sup.layout, {sup.side} if params.track.tracks == 1 else {"right", "left"}
+    )
     if st.side in mast_sides and abs(st.offset - sup.mast_offset) < MAST_REACH + STATION_CLEARANCE - 1e-9:
-        raise InputError(f"{where}.stations.offset: stations {st.offset} m beyond the outer track stand in the masts' line ({where}.supports.mast_offset: {sup.mast_offset} m) "
-                         f"on the {st.side}; keep them at least {MAST_REACH + STATION_CLEARANCE:.2f} m apart")
+        raise InputError(
+            f"{where}.stations.offset: stations {st.offset} m beyond the outer track stand in the masts' line ({where}.supports.mast_offset: "
+            f"{sup.mast_offset} m) on the {st.side}; keep them at least {MAST_REACH + STATION_CLEARANCE:.2f} m apart"
+        )
     side = params.trackside
     if side.fences and abs(st.offset - side.fence_offset) < STATION_CLEARANCE + 0.05:
-        raise InputError(f"{where}.stations.offset: stations {st.offset} m beyond the outer track stand in the fence's line ({where}.trackside.fence_offset: {side.fence_offset} m); "
-                         f"keep them at least {STATION_CLEARANCE + 0.05:g} m apart")
+        raise InputError(
+            f"{where}.stations.offset: stations {st.offset} m beyond the outer track stand in the fence's line ({where}.trackside.fence_offset: "
+            f"{side.fence_offset} m); keep them at least {STATION_CLEARANCE + 0.05:g} m apart"
+        )
 
 
 def station(params: RailwayScene, frame: int) -> np.ndarray | None:

@@ -36,12 +36,13 @@ import numpy as np
 
 from ...geometry.lod import equal_perimeter_radius
 from ...geometry.primitives import merge
-from ...scenes.nodes import add_group_modifier
-from ...scenes.objects import mesh_data, mesh_object, scene_collection, tag
+from ...blender.nodes import add_group_modifier
+from ...blender.mesh_objects import mesh_data, mesh_object, scene_collection, tag
 from . import parts as railway_parts, trackside
 from .catenary import parabolic_sag
 from .terrain import terrain_mesh
-from .layout import ARM_RISE, BEAM_RADIUS, EARTH_BRACKET, FEEDER_BRACKET, MIN_WIRE_SIDES, STAY_RISE, RailwayLayout, cant_angle, cantilevers, level_of_detail, plan
+from .layout import (ARM_RISE, BEAM_RADIUS, EARTH_BRACKET, FEEDER_BRACKET, MIN_WIRE_SIDES, STAY_RISE, RailwayLayout, cant_angle, cantilevers,
+                     level_of_detail, plan)
 from . import catenary_nodes, scene_assets as railway_assets, support_nodes
 from .track_nodes import PARTS, track_group
 
@@ -51,7 +52,8 @@ STONE_CENTRES = "track_stone_centres"
 REFLECTIVITY = {
     "rail": 0.6, "sleeper": 0.4, "ballast": 0.35, "ground": 0.3, "mast": 0.5, "gantry": 0.5, "cantilever": 0.5,
     "registration arm": 0.5, "steady arm": 0.5, "insulator": 0.4, "contact wire": 0.7, "messenger wire": 0.7, "dropper": 0.6,
-    "feeder wire": 0.6, "earth wire": 0.6, "auxiliary messenger": 0.7, "anchor": 0.5, "tensioning weight": 0.3, "section insulator": 0.4, "fence": 0.4, "signal": 0.5, "platform": 0.35, "vegetation": 0.45,
+    "feeder wire": 0.6, "earth wire": 0.6, "auxiliary messenger": 0.7, "anchor": 0.5, "tensioning weight": 0.3, "section insulator": 0.4, "fence": 0.4,
+    "signal": 0.5, "platform": 0.35, "vegetation": 0.45,
 }
 
 
@@ -118,7 +120,8 @@ def _track(params, layout, detail, centreline, seed: int, collection, roll: floa
         "Rail Foot Width": rail.foot_width, "Rail Foot Height": rail.foot_height, "Rail Web Width": rail.web_width,
         "Rail Web Height": rail.web_height, "Rail Head Width": rail.head_width, "Rail Head Height": rail.head_height,
         "Sleeper Spacing": track.sleeper_spacing, "Sleeper Length": track.sleeper_length, "Sleeper Width": track.sleeper_width,
-        "Sleeper Height": track.sleeper_height, "Ballast Height": track.ballast_height, "Crib Height": track.crib_height, "Ballast Shoulder": track.ballast_shoulder,
+        "Sleeper Height": track.sleeper_height, "Ballast Height": track.ballast_height, "Crib Height": track.crib_height,
+        "Ballast Shoulder": track.ballast_shoulder,
         "Ballast Slope": track.ballast_slope, "Embankment Height": track.embankment_height, "Embankment Slope": track.embankment_slope,
         "Embankment Berm": track.embankment_berm, "Ground Width": track.ground_width, "Stone Size": params.detail.stone_size, "Seed": seed, "Cant Angle": roll,
     }
@@ -196,10 +199,12 @@ def _supports(params, layout: RailwayLayout, detail, collection) -> None:
         for plan_ in cantilevers(support, section, cat, params.track.track_spacing, beam_underside):
             i = plan_.track
             steady = min(cat.steady_arm_length, plan_.arm_length - 0.2) if cat.steady_arms else 0.0
-            pieces = railway_parts.cantilever(plan_.root_y, plan_.attach_y, contact_z, messenger_z, STAY_RISE, plan_.drop_from, plan_.arm_length, ARM_RISE, steady)
+            pieces = railway_parts.cantilever(plan_.root_y, plan_.attach_y, contact_z, messenger_z, STAY_RISE, plan_.drop_from, plan_.arm_length, ARM_RISE,
+                                              steady)
             if plan_.beam is not None:  # a mast's beam out to the drop tube of a farther track
                 y0, y1, z = plan_.beam
-                pieces["cantilever"] = merge([pieces["cantilever"], railway_parts.tube((0.0, y0, z), (0.0, y1 + np.sign(y1 - y0) * BEAM_RADIUS, z), BEAM_RADIUS)])
+                pieces["cantilever"] = merge([pieces["cantilever"],
+                                              railway_parts.tube((0.0, y0, z), (0.0, y1 + np.sign(y1 - y0) * BEAM_RADIUS, z), BEAM_RADIUS)])
             _placed(f"{label}.cantilever.t{i}", pieces["cantilever"], frame, "cantilever", collection)
             _placed(f"{label}.registration_arm.t{i}", pieces["registration arm"], frame, "registration arm", collection)
             _placed(f"{label}.insulators.t{i}", pieces["insulator"], frame, "insulator", collection)
@@ -256,7 +261,8 @@ def _anchors_and_sections(params, layout: RailwayLayout, detail, collection) -> 
                 centre = (centre + twin.points_at([0.5])[0]) / 2
             direction = wire.end - wire.start
             yaw = math.atan2(direction[1], direction[0])
-            obj = mesh_object(f"span.{wire.run}.{wire.span:02d}.section_insulator", railway_parts.section_insulator(), collection, location=tuple(centre), rotation=(0.0, 0.0, yaw))
+            obj = mesh_object(f"span.{wire.run}.{wire.span:02d}.section_insulator", railway_parts.section_insulator(), collection, location=tuple(centre),
+                              rotation=(0.0, 0.0, yaw))
             tag(obj, "section insulator", reflectivity=REFLECTIVITY["section insulator"])
 
 
@@ -266,7 +272,8 @@ def _trackside(params, layout: RailwayLayout, rng: np.random.Generator, collecti
     side, section, alignment = params.trackside, layout.section, layout.alignment
     if side.fences:
         for name, lateral in (("right", section.offsets[0] - side.fence_offset), ("left", section.offsets[-1] + side.fence_offset)):
-            tag(mesh_object(f"fence.{name}", trackside.fence(alignment, section.surface, side, lateral), collection), "fence", reflectivity=REFLECTIVITY["fence"])
+            tag(mesh_object(f"fence.{name}", trackside.fence(alignment, section.surface, side, lateral), collection), "fence",
+                reflectivity=REFLECTIVITY["fence"])
     signals = np.asarray(trackside.signal_frames(layout, side, rng), float).reshape(-1, 4, 4)
     for k, frame in enumerate(signals):
         tag(mesh_object(f"signal.{k:02d}", trackside.signal(frame, side.signal_height, -1.0), collection), "signal", reflectivity=REFLECTIVITY["signal"])
@@ -296,13 +303,15 @@ def _wires(layout: RailwayLayout, detail, collection) -> None:
         samples, sides = setting
         points = parabolic_sag(wire.start, wire.end, wire.sag, samples, f"span {wire.run}.{wire.span}")
         sides = _bevel_sides(sides)
-        obj = catenary_nodes.wire_object(f"span.{wire.run}.{wire.span:02d}.{wire.kind}", points, wire.sag, equal_perimeter_radius(wire.diameter / 2, sides), sides, collection)
+        obj = catenary_nodes.wire_object(f"span.{wire.run}.{wire.span:02d}.{wire.kind}", points, wire.sag, equal_perimeter_radius(wire.diameter / 2, sides),
+                                         sides, collection)
         tag(obj, wire.class_name, reflectivity=REFLECTIVITY[wire.class_name])
     for droppers, built in zip(layout.droppers, detail.droppers):
         if built and len(droppers.t):
             lower, upper = _dropper_wires(droppers, by_key)
             name = f"span.{droppers.run}.{droppers.span:02d}.droppers"
-            obj = catenary_nodes.droppers_object(name, droppers, lower, upper, equal_perimeter_radius(droppers.diameter / 2, MIN_WIRE_SIDES), MIN_WIRE_SIDES, collection)
+            obj = catenary_nodes.droppers_object(name, droppers, lower, upper, equal_perimeter_radius(droppers.diameter / 2, MIN_WIRE_SIDES), MIN_WIRE_SIDES,
+                                                 collection)
             tag(obj, "dropper", reflectivity=REFLECTIVITY["dropper"])
 
 

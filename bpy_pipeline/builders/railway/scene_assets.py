@@ -17,8 +17,8 @@ import mathutils
 import numpy as np
 
 from ...errors import InputError
-from ...scenes.assets import world_arrays
-from ...scenes.objects import mesh_data, tag
+from ...blender.asset_models import world_arrays
+from ...blender.mesh_objects import mesh_data, tag
 from .assets import SLOTS, part_class, placements
 
 DATA_KINDS = ("objects", "meshes", "materials", "images", "textures", "cameras", "lights", "actions", "armatures", "collections", "node_groups")
@@ -97,7 +97,8 @@ def _ifc(path: Path, key: str) -> list[Piece]:
             materials = tuple(getattr(m, "name", "") or "" for m in geometry.materials) or ("",)
             ids = np.asarray(geometry.material_ids, np.int32)
             ids = ids if len(ids) == len(faces) else np.zeros(len(faces), np.int32)
-            out.append(Piece(product.Name or product.is_a(), np.asarray(geometry.verts, float).reshape(-1, 3), faces, np.clip(ids, 0, len(materials) - 1), materials))
+            out.append(Piece(product.Name or product.is_a(), np.asarray(geometry.verts, float).reshape(-1, 3), faces, np.clip(ids, 0, len(materials) - 1),
+                             materials))
         if not iterator.next():
             return out
 

@@ -27,7 +27,7 @@ from __future__ import annotations
 import bpy
 import numpy as np
 
-from ...scenes.nodes import GroupBuilder, add_group_modifier, current_group, excluded_collection, new_group, stamp
+from ...blender.nodes import GroupBuilder, add_group_modifier, current_group, excluded_collection, new_group, stamp
 
 SUPPORTS = "Railway Supports"
 VERSION = 1  # bump when the group changes, so a file holding an older one gets the new one

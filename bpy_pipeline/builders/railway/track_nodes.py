@@ -18,7 +18,7 @@ import math
 
 import bpy
 
-from ...scenes.nodes import GroupBuilder, current_group, new_group, stamp
+from ...blender.nodes import GroupBuilder, current_group, new_group, stamp
 
 PARTS = {"all": 0, "rails": 1, "sleepers": 2, "ballast": 3, "embankment": 4, "stones": 5, "ground": 6}
 VERSION = 4  # bump when the groups change, so a file holding older groups gets new ones
@@ -107,19 +107,25 @@ def ballast_stones_group() -> bpy.types.NodeTree:
     distance = b.out(b.node("GeometryNodeProximity", {"Geometry": b.get("Centres"), "Sample Position": position}, target_element="POINTS"), "Distance")
     normal_z = b.out(b.node("ShaderNodeSeparateXYZ", {0: b.out(b.node("GeometryNodeInputNormal"))}), "Z")
     reach = b.math("ADD", b.get("Radius"), 2.0)
-    near_face = b.out(b.node("FunctionNodeBooleanMath", {0: b.compare("LESS_THAN", distance, reach), 1: b.compare("GREATER_THAN", normal_z, 0.5)}, operation="AND"))
-    faces = b.node("GeometryNodeDeleteGeometry", {"Geometry": b.get("Bed"), "Selection": b.out(b.node("FunctionNodeBooleanMath", {0: near_face}, operation="NOT"))}, domain="FACE")
+    near_face = b.out(b.node("FunctionNodeBooleanMath", {0: b.compare("LESS_THAN", distance, reach), 1: b.compare("GREATER_THAN", normal_z, 0.5)},
+                             operation="AND"))
+    faces = b.node("GeometryNodeDeleteGeometry", {"Geometry": b.get("Bed"),
+                                                  "Selection": b.out(b.node("FunctionNodeBooleanMath", {0: near_face}, operation="NOT"))}, domain="FACE")
     size = b.get("Stone Size")
     points = b.node(
         "GeometryNodeDistributePointsOnFaces",
-        {"Mesh": b.out(faces), "Distance Min": b.math("MULTIPLY", size, 0.9), "Density Max": b.math("DIVIDE", 1.5, b.math("MULTIPLY", size, size)), "Seed": b.get("Seed")},
+        {"Mesh": b.out(faces), "Distance Min": b.math("MULTIPLY", size, 0.9), "Density Max": b.math("DIVIDE", 1.5, b.math("MULTIPLY", size, size)),
+         "Seed": b.get("Seed")},
         distribute_method="POISSON",
     )
-    inside = b.node("GeometryNodeDeleteGeometry", {"Geometry": b.out(points, "Points"), "Selection": b.compare("GREATER_THAN", distance, b.get("Radius"))}, domain="POINT")
+    inside = b.node("GeometryNodeDeleteGeometry", {"Geometry": b.out(points, "Points"), "Selection": b.compare("GREATER_THAN", distance, b.get("Radius"))},
+                    domain="POINT")
     stone = b.node("GeometryNodeMeshIcoSphere", {"Radius": b.math("MULTIPLY", size, 0.5), "Subdivisions": 1})
     seed = b.get("Seed")
-    angles = b.out(b.node("FunctionNodeRandomValue", {"Min": (0.0, 0.0, 0.0), "Max": (2 * math.pi,) * 3, "Seed": b.math("ADD", seed, 1.0)}, data_type="FLOAT_VECTOR"))
-    scales = b.out(b.node("FunctionNodeRandomValue", {"Min": (0.7, 0.7, 0.45), "Max": (1.3, 1.3, 0.8), "Seed": b.math("ADD", seed, 2.0)}, data_type="FLOAT_VECTOR"))
+    angles = b.out(b.node("FunctionNodeRandomValue", {"Min": (0.0, 0.0, 0.0), "Max": (2 * math.pi,) * 3, "Seed": b.math("ADD", seed, 1.0)},
+                          data_type="FLOAT_VECTOR"))
+    scales = b.out(b.node("FunctionNodeRandomValue", {"Min": (0.7, 0.7, 0.45), "Max": (1.3, 1.3, 0.8), "Seed": b.math("ADD", seed, 2.0)},
+                          data_type="FLOAT_VECTOR"))
     rotation = b.out(b.node("FunctionNodeEulerToRotation", {"Euler": angles}))
     instances = b.node("GeometryNodeInstanceOnPoints", {"Points": b.out(inside), "Instance": b.out(stone, "Mesh"), "Rotation": rotation, "Scale": scales})
     real = b.node("GeometryNodeRealizeInstances", {"Geometry": b.out(instances)})
@@ -176,7 +182,8 @@ def track_group() -> bpy.types.NodeTree:
     # the cant so the inner rail keeps its height; bed, embankment and ground stay level
     centre = b.out(b.node("GeometryNodeSetCurveTilt", {"Curve": canted, "Tilt": 0.0}))
 
-    lines = b.node("GeometryNodeGroup", {"Curve": canted, "Tracks": g("Tracks"), "Track Spacing": g("Track Spacing"), "Track": g("Track")}, node_tree=centrelines_group())
+    lines = b.node("GeometryNodeGroup", {"Curve": canted, "Tracks": g("Tracks"), "Track Spacing": g("Track Spacing"), "Track": g("Track")},
+                   node_tree=centrelines_group())
     tilt = b.out(b.node("GeometryNodeInputCurveTilt"))
     half_cant = b.math("MULTIPLY", b.math("ABSOLUTE", b.math("SINE", tilt)), b.math("MULTIPLY", b.math("ADD", g("Gauge"), g("Rail Head Width")), 0.5))
     tracks = b.out(b.node("GeometryNodeSetPosition", {"Geometry": b.out(lines), "Offset": b.combine(0.0, 0.0, half_cant)}))
@@ -196,7 +203,10 @@ def track_group() -> bpy.types.NodeTree:
     rolled = b.out(b.node("FunctionNodeAlignRotationToVector", {"Rotation": along, "Vector": left}, axis="Y", pivot_axis="X"))
     facing = b.switch("ROTATION", b.compare("NOT_EQUAL", g("Cant Angle"), 0.0), along, rolled)
     block = b.node("GeometryNodeMeshCube", {"Size": b.combine(g("Sleeper Width"), g("Sleeper Length"), g("Sleeper Height"))})
-    lifted = b.node("GeometryNodeTransform", {"Geometry": b.out(block, "Mesh"), "Translation": b.combine(0.0, 0.0, b.math("ADD", g("Ballast Height"), b.math("MULTIPLY", g("Sleeper Height"), 0.5)))}, options={"mode": "COMPONENTS"})
+    lifted = b.node("GeometryNodeTransform", {"Geometry": b.out(block, "Mesh"),
+                                              "Translation": b.combine(0.0, 0.0,
+                                                                       b.math("ADD", g("Ballast Height"), b.math("MULTIPLY", g("Sleeper Height"), 0.5)))},
+                    options={"mode": "COMPONENTS"})
     placed = b.node("GeometryNodeInstanceOnPoints", {"Points": b.out(stations, "Points"), "Instance": b.out(lifted), "Rotation": facing})
     sleepers = b.out(b.node("GeometryNodeRealizeInstances", {"Geometry": b.out(placed)}))
 
@@ -207,7 +217,8 @@ def track_group() -> bpy.types.NodeTree:
     toe = b.math("ADD", top, b.math("MULTIPLY", b.math("MULTIPLY", bed_height, g("Ballast Slope")), 2.0))
 
     def trapezoid(bottom_width, top_width, height, centre_height):
-        shape = b.node("GeometryNodeCurvePrimitiveQuadrilateral", {"Bottom Width": bottom_width, "Top Width": top_width, "Height": height, "Offset": 0.0}, mode="TRAPEZOID")
+        shape = b.node("GeometryNodeCurvePrimitiveQuadrilateral", {"Bottom Width": bottom_width, "Top Width": top_width, "Height": height, "Offset": 0.0},
+                       mode="TRAPEZOID")
         moved = b.node("GeometryNodeTransform", {"Geometry": b.out(shape), "Translation": b.combine(0.0, centre_height, 0.0)}, options={"mode": "COMPONENTS"})
         return profile_to_frame(b, b.out(moved))
 
@@ -222,14 +233,16 @@ def track_group() -> bpy.types.NodeTree:
 
     half_ground = b.math("MULTIPLY", g("Ground Width"), 0.5)
     ground_z = b.math("MULTIPLY", g("Embankment Height"), -1.0)
-    strip = b.node("GeometryNodeCurvePrimitiveLine", {"Start": b.combine(b.math("MULTIPLY", half_ground, -1.0), ground_z, 0.0), "End": b.combine(half_ground, ground_z, 0.0)}, mode="POINTS")
+    strip = b.node("GeometryNodeCurvePrimitiveLine", {"Start": b.combine(b.math("MULTIPLY", half_ground, -1.0), ground_z, 0.0),
+                                                      "End": b.combine(half_ground, ground_z, 0.0)}, mode="POINTS")
     ground = b.out(b.node("GeometryNodeCurveToMesh", {"Curve": centre, "Profile Curve": profile_to_frame(b, b.out(strip))}))
 
     # stones: the bed again on a finely resampled centreline, so faces far from every centre drop out early
     fine = b.node("GeometryNodeResampleCurve", {"Curve": centre, "Length": 2.0}, options={"mode": "LENGTH"})
     fine_bed = b.out(b.node("GeometryNodeCurveToMesh", {"Curve": b.out(fine), "Profile Curve": bed_profile}))
     centres = b.node("GeometryNodeObjectInfo", {"Object": g("Stone Centres")}, transform_space="RELATIVE")
-    stones = b.out(b.node("GeometryNodeGroup", {"Bed": fine_bed, "Centres": b.out(centres, "Geometry"), "Radius": g("Stone Radius"), "Stone Size": g("Stone Size"), "Seed": g("Seed")}, node_tree=ballast_stones_group()))
+    stones = b.out(b.node("GeometryNodeGroup", {"Bed": fine_bed, "Centres": b.out(centres, "Geometry"), "Radius": g("Stone Radius"),
+                                                "Stone Size": g("Stone Size"), "Seed": g("Seed")}, node_tree=ballast_stones_group()))
 
     everything = b.node("GeometryNodeJoinGeometry")
     parts = [rails, sleepers, bed, bank, stones, ground]

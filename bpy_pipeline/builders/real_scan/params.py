@@ -33,7 +33,10 @@ def check(params: RealScanScene, where: str) -> None:
         raise InputError(f"{where}.max_range: must be >= 0, got {params.max_range}")
     park = params.parking_rule
     if not 0.0 <= park.near_rejection_probability <= 1.0 or park.near_rejection_distance < 0:
-        raise InputError(f"{where}.parking_rule.near_rejection_probability / near_rejection_distance: need 0..1 and >= 0 m, got {park.near_rejection_probability:g} and {park.near_rejection_distance:g}")
+        raise InputError(
+            f"{where}.parking_rule.near_rejection_probability / near_rejection_distance: need 0..1 and >= 0 m, got {park.near_rejection_probability:g} and "
+            f"{park.near_rejection_distance:g}"
+        )
     rule = params.kitti_rule
     if rule.enabled:
         check_type(rule.type, f"{where}.kitti_rule.type")

@@ -18,7 +18,7 @@ are Blender's own draw (Distribute Points on Faces' generator), so no pure funct
 point for point; the tests check what the inputs promise: count, spacing, where they stand, sizes.
 
 Labels: the trunk and crown prototypes carry their ``lidar_*`` tags (``trunk`` and ``vegetation``,
-one instance id each), which their instances take (``export.py``).
+one instance id each), which their instances take (``blender/export.py``).
 """
 
 from __future__ import annotations
@@ -27,8 +27,8 @@ import math
 
 import bpy
 
-from ...scenes.nodes import GroupBuilder, add_group_modifier, current_group, new_group, stamp
-from ...scenes.objects import mesh_object, tag
+from ...blender.nodes import GroupBuilder, add_group_modifier, current_group, new_group, stamp
+from ...blender.mesh_objects import mesh_object, tag
 from .dressing import REFLECTIVITY, yard_ground
 
 GROUP = "Street Planting"

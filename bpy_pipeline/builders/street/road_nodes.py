@@ -32,7 +32,7 @@ from __future__ import annotations
 import bpy
 import numpy as np
 
-from ...scenes.nodes import GroupBuilder, add_group_modifier, current_group, new_group, stamp
+from ...blender.nodes import GroupBuilder, add_group_modifier, current_group, new_group, stamp
 from .layout import FOUR_ARMS, JUNCTIONS, Junction, junction
 
 GROUP = "Street Road"

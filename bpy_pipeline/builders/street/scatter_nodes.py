@@ -25,8 +25,8 @@ from __future__ import annotations
 import bpy
 import numpy as np
 
-from ...scenes.nodes import GroupBuilder, add_group_modifier, current_group, excluded_collection, new_group, stamp
-from ...scenes.objects import mesh_object
+from ...blender.nodes import GroupBuilder, add_group_modifier, current_group, excluded_collection, new_group, stamp
+from ...blender.mesh_objects import mesh_object
 
 GROUP = "Street Scatter"
 PROTOTYPES = "LiDAR Street Prototypes"  # the collection (excluded from the view layer) holding each kind's prototypes
@@ -74,7 +74,7 @@ def scatter_group() -> bpy.types.NodeTree:
 def prototypes_collection(parent: bpy.types.Collection, name: str = PROTOTYPES) -> bpy.types.Collection:
     """A new, empty collection ``name`` under ``parent``, excluded from the view layer (its objects are
     seen only where a group instances them); a stale one, its objects and its kinds are removed first
-    (:func:`~bpy_pipeline.scenes.nodes.excluded_collection`)."""
+    (:func:`~bpy_pipeline.blender.nodes.excluded_collection`)."""
     return excluded_collection(parent, name)
 
 

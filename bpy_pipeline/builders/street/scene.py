@@ -27,7 +27,7 @@ from __future__ import annotations
 import bpy
 import numpy as np
 
-from ...scenes.objects import fill_mesh, mesh_object, scene_collection, tag
+from ...blender.mesh_objects import fill_mesh, mesh_object, scene_collection, tag
 from . import layout as street
 from .facade_nodes import facade_object
 from .planting_nodes import planting_object
@@ -82,7 +82,7 @@ class Intersection:
         The objects stay in the collection's order, so the export sees the parts in the order of ``parts``.
         Only objects whose name changes are renamed (a rename costs Blender a pass over its names): first to
         names no part takes, so that no new name is still another object's, then to their own. The spares
-        are ``street_user_kept_K`` by their place. Returns the parts as :func:`~bpy_pipeline.export.parts_buffers`
+        are ``street_user_kept_K`` by their place. Returns the parts as :func:`~bpy_pipeline.blender.export.parts_buffers`
         takes them: ``(object name, its lidar properties, vertices, triangles)``.
         """
         kept = list(self.users.objects)

@@ -73,7 +73,8 @@ __all__ = ["apply_effects", "CHUNK_POINTS", "BinnedTable", "FittedModels", "MODE
 CHUNK_POINTS = 1 << 16  # records per work item: a chunk's fields stay in cache across the passes over it
 
 
-def apply_effects(points: np.ndarray, beam: np.ndarray, effects, rng: np.random.Generator, threads: int | None = None, objects=None, pool: Executor | None = None,
+def apply_effects(points: np.ndarray, beam: np.ndarray, effects, rng: np.random.Generator, threads: int | None = None, objects=None,
+                  pool: Executor | None = None,
                   detection: np.ndarray | None = None) -> np.ndarray:
     """The configured effects (``config.EffectsConfig``) in a fixed order; returns new records.
 

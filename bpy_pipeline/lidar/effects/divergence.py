@@ -290,7 +290,8 @@ def scan_footprint_chunks(
         sub_to_local = to_local if to_local.ndim == 2 else np.repeat(to_local, k, axis=0)
         points, facts, ray = scan_chunk(caster, buffers, sub, sub_to_local, min_range, max_range, max_bounces, ghost_semantic, ideal, **trace)
         beam = ray // k
-        row, distance, energy = reduce_returns(beam, points["range"].astype(np.float64), points["intensity"].astype(np.float64), k, divergence.pick, divergence.separation)
+        row, distance, energy = reduce_returns(beam, points["range"].astype(np.float64), points["intensity"].astype(np.float64), k, divergence.pick,
+                                               divergence.separation)
         out, out_facts, beam = points[row], facts[row], beam[row]
         strongest = out["intensity"].astype(np.float64)
         share = np.divide(energy, strongest, out=np.zeros_like(energy), where=strongest > 0)  # <= 1

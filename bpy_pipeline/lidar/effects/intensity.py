@@ -5,7 +5,8 @@ incidence times the mirror gain ``g`` (product of the reflectivities of the mirr
 what range-compensated sensors report ("calibrated reflectivity"). ``lidar``: the lidar equation for
 an extended Lambertian target, ``P ~ rho cos(theta) g exp(-2 alpha R) / R^2``, normalised so that a
 target of ``reference_reflectivity`` at normal incidence at ``reference_range`` reads 1 (nearer or
-brighter returns saturate at 1, as a receiver does). ``carla``: CARLA's ``exp(-a R)``.
+brighter returns saturate at 1, as a receiver does). ``carla``: CARLA's ``exp(-a R)``. The models are a registry
+(:data:`INTENSITY_MODELS`; a new one is a :func:`register_intensity_model` call).
 
 The reading apart from detection (``effects.intensity.reading``, :class:`ReadingModel`, opt-in): the drop
 models decide detection from the received power (the apparent reflectance ``a`` and the range, as
@@ -30,11 +31,12 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from functools import lru_cache
-from typing import Literal
+from typing import Callable, Literal
 
 import numpy as np
 
 from ...errors import InputError
+from ...registry import Registry
 from ...schema import meta
 from .base import Chunk, Effect, register_effect
 
@@ -49,19 +51,24 @@ class ReadingModel:
     The mean gain and offset are ``effects.intensity.scale`` and ``effects.intensity.offset``."""
 
     enabled: bool = field(default=False, metadata=meta(help="read the reflectance through the unit's lasers (reflectance model only)"))
-    compensated_range: float = field(default=28.0, metadata=meta("m", soft=(0, 10000), help="the reading is range-compensated up to here (KITTI 000008: 28); > 0"))
+    compensated_range: float = field(default=28.0,
+                                     metadata=meta("m", soft=(0, 10000), help="the reading is range-compensated up to here (KITTI 000008: 28); > 0"))
     exponent: float = field(default=2.0, metadata=meta("", 0, 10, help="beyond it the reading falls as (R_c / R)^exponent (the lidar equation's 2; fitted: 2)"))
-    gain_sd: float = field(default=0.16, metadata=meta("", 0, 2, help="sd of ln(gain) across lasers (KITTI 000008's road: robust sd of its per-ring log medians)"))
+    gain_sd: float = field(default=0.16,
+                           metadata=meta("", 0, 2, help="sd of ln(gain) across lasers (KITTI 000008's road: robust sd of its per-ring log medians)"))
     offset_sd: float = field(default=0.0, metadata=meta("", 0, 2, help="sd of the offset across lasers (not identifiable on one frame: 0)"))
-    noise_sd: float = field(default=0.075, metadata=meta("", 0, 2, help="sd of ln of a per-return factor (KITTI 000008's road: robust within-ring log spread, 8-20 m)"))
+    noise_sd: float = field(default=0.075,
+                            metadata=meta("", 0, 2, help="sd of ln of a per-return factor (KITTI 000008's road: robust within-ring log spread, 8-20 m)"))
     unit_seed: int = field(default=0, metadata=meta(help="the sensor unit: its lasers' gains and offsets are drawn from this seed (>= 0)"))
-    response: float = field(default=1.0, metadata=meta("", soft=(0, 4), help="gamma: the reading grows as (a f(R))^gamma (1: linear; below 1: a compressing receiver); > 0"))
+    response: float = field(default=1.0,
+                            metadata=meta("", soft=(0, 4), help="gamma: the reading grows as (a f(R))^gamma (1: linear; below 1: a compressing receiver); > 0"))
 
 
 def check_reading(reading: ReadingModel, offset: float, model: str = "reflectance") -> None:
     """One-line :class:`InputError` for a reading model's value out of range (``offset``, ``model``: ``effects.intensity``'s)."""
     key = "effects.intensity.reading"
-    for name, value in (("compensated_range", reading.compensated_range), ("exponent", reading.exponent), ("gain_sd", reading.gain_sd), ("offset_sd", reading.offset_sd), ("noise_sd", reading.noise_sd),
+    for name, value in (("compensated_range", reading.compensated_range), ("exponent", reading.exponent), ("gain_sd", reading.gain_sd),
+                        ("offset_sd", reading.offset_sd), ("noise_sd", reading.noise_sd),
                         ("response", reading.response)):
         if not (isinstance(value, (int, float)) and math.isfinite(value)):
             raise InputError(f"{key}.{name}: must be a finite number, got {value!r}")
@@ -76,7 +83,7 @@ def check_reading(reading: ReadingModel, offset: float, model: str = "reflectanc
             raise InputError(f"{key}.{name}: must lie in 0..2, got {getattr(reading, name)}")
     if not isinstance(reading.unit_seed, int) or isinstance(reading.unit_seed, bool) or reading.unit_seed < 0:
         raise InputError(f"{key}.unit_seed: must be a whole number >= 0, got {reading.unit_seed!r}")
-    if reading.enabled and model != "reflectance":
+    if reading.enabled and INTENSITY_MODELS.get(model).apparent is None:
         raise InputError(f"{key}.enabled: the reading model reads the reflectance model's value; effects.intensity.model is {model!r}")
     if reading.enabled and offset >= 1:
         raise InputError(f"effects.intensity.offset: must lie in 0..1 with the reading model, got {offset}")
@@ -99,7 +106,8 @@ def range_factor(range_m: np.ndarray, compensated_range: float, exponent: float)
     return np.minimum(np.float32(1.0), (np.float32(compensated_range) / r) ** np.float32(exponent))
 
 
-def read_out(value: np.ndarray, range_m: np.ndarray, ring: np.ndarray, reading: ReadingModel, scale: float, offset: float, rng: np.random.Generator | None) -> np.ndarray:
+def read_out(value: np.ndarray, range_m: np.ndarray, ring: np.ndarray, reading: ReadingModel, scale: float, offset: float,
+             rng: np.random.Generator | None) -> np.ndarray:
     """The reading ``clip(g_k (a f(R))^gamma n - o_k, 0, 1)`` (module notes) of apparent reflectances ``value`` (p,);
     range_m (p,) m; ring (p,) laser ids; ``rng`` draws the per-return factor (needed when ``noise_sd`` > 0).
     Returns (p,) float32."""
@@ -126,7 +134,8 @@ def reflectance(beam: np.ndarray, incidence_exponent: float = 1.0) -> np.ndarray
     return beam["reflectivity"] * cos * beam["gain"]
 
 
-def lidar_intensity(range_m: np.ndarray, beam: np.ndarray, alpha: float, reference_range: float, reference_reflectivity: float = 1.0, incidence_exponent: float = 1.0) -> np.ndarray:
+def lidar_intensity(range_m: np.ndarray, beam: np.ndarray, alpha: float, reference_range: float, reference_reflectivity: float = 1.0,
+                    incidence_exponent: float = 1.0) -> np.ndarray:
     """The lidar equation ``rho cos g exp(-2 alpha R) / R^2`` over its value for the reference target.
 
     range_m : (p,) metres; alpha : 1/m atmospheric extinction; the reference is a Lambertian
@@ -146,6 +155,49 @@ def carla_intensity(range_m: np.ndarray, attenuation_rate: float) -> np.ndarray:
     return np.exp(np.float32(-attenuation_rate) * np.asarray(range_m, np.float32))
 
 
+@dataclass(frozen=True)
+class IntensityModel:
+    """An intensity model's registry entry (``effects.intensity.model`` names one).
+
+    value : ``value(range_m, beam, intensity) -> (p,) float32`` in 0..1 before the sensor's units (``scale``,
+        ``steps``, ``offset``); range_m (p,) m, beam (p,) BEAM_DTYPE, ``intensity`` the ``effects.intensity`` section
+    apparent : ``apparent(beam, intensity) -> (p,) float32`` the apparent reflectance the reading model
+        (``effects.intensity.reading``) reads instead, unclipped; ``None``: the reading model does not read this model
+    """
+
+    value: Callable[..., np.ndarray]
+    apparent: Callable[..., np.ndarray] | None = None
+
+
+INTENSITY_MODELS: Registry[IntensityModel] = Registry("intensity model", "effects.intensity.model")
+
+
+def register_intensity_model(name: str, model: IntensityModel) -> IntensityModel:
+    """Make ``effects.intensity.model: name`` give each point ``model``'s value."""
+    return INTENSITY_MODELS.register(name, model)
+
+
+def _apparent_reflectance(beam, intensity):
+    return reflectance(beam, intensity.incidence_exponent)
+
+
+def _reflectance_value(range_m, beam, intensity):
+    return np.clip(_apparent_reflectance(beam, intensity), 0.0, 1.0)
+
+
+def _lidar_value(range_m, beam, intensity):
+    return lidar_intensity(range_m, beam, intensity.alpha, intensity.reference_range, intensity.reference_reflectivity, intensity.incidence_exponent)
+
+
+def _carla_value(range_m, beam, intensity):
+    return carla_intensity(range_m, intensity.attenuation_rate)
+
+
+register_intensity_model("reflectance", IntensityModel(_reflectance_value, _apparent_reflectance))
+register_intensity_model("lidar", IntensityModel(_lidar_value))
+register_intensity_model("carla", IntensityModel(_carla_value))
+
+
 def compute_intensity(range_m: np.ndarray, beam: np.ndarray, intensity, ring: np.ndarray | None = None, rng: np.random.Generator | None = None) -> np.ndarray:
     """The configured intensity model (``config.IntensityConfig``) of each point, (p,) float32 in 0..1.
 
@@ -154,19 +206,14 @@ def compute_intensity(range_m: np.ndarray, beam: np.ndarray, intensity, ring: np
     With ``intensity.reading.enabled`` (:class:`ReadingModel`) the ``reflectance`` value is read by the
     lasers' gains and offsets instead (``ring`` (p,) laser ids and ``rng`` the frame's generator needed).
     """
+    model = INTENSITY_MODELS.get(intensity.model)
     reading = getattr(intensity, "reading", None)
-    if reading is not None and reading.enabled and intensity.model == "reflectance":
+    if reading is not None and reading.enabled and model.apparent is not None:
         if ring is None:
             raise ValueError("compute_intensity: the reading model needs each point's ring")
-        value = read_out(reflectance(beam, intensity.incidence_exponent), range_m, ring, reading, intensity.scale, intensity.offset, rng)
+        value = read_out(model.apparent(beam, intensity), range_m, ring, reading, intensity.scale, intensity.offset, rng)
         return sensor_units(value, 1.0, intensity.steps, 0.0)
-    if intensity.model == "lidar":
-        value = lidar_intensity(range_m, beam, intensity.alpha, intensity.reference_range, intensity.reference_reflectivity, intensity.incidence_exponent)
-    elif intensity.model == "carla":
-        value = carla_intensity(range_m, intensity.attenuation_rate)
-    else:
-        value = np.clip(reflectance(beam, intensity.incidence_exponent), 0.0, 1.0)
-    return sensor_units(value, intensity.scale, intensity.steps, getattr(intensity, "offset", 0.0))
+    return sensor_units(model.value(range_m, beam, intensity), intensity.scale, intensity.steps, getattr(intensity, "offset", 0.0))
 
 
 def sensor_units(value: np.ndarray, scale: float = 1.0, steps: int = 0, offset: float = 0.0) -> np.ndarray:
@@ -185,15 +232,25 @@ def sensor_units(value: np.ndarray, scale: float = 1.0, steps: int = 0, offset: 
 class IntensityConfig:
     """``effects.intensity``: what a point's intensity (0..1) says."""
 
-    model: Literal["reflectance", "lidar", "carla"] = field(default="reflectance", metadata=meta(help="rho cos g | lidar equation | CARLA exp(-a R)"))
-    alpha: float = field(default=0.0, metadata=meta("1/m", low=0, help="atmospheric extinction, two-way exp(-2 alpha R): `lidar` intensity and `threshold` drop"))
-    reference_range: float = field(default=10.0, metadata=meta("m", low=0, low_open=True, help="`lidar`: a target of reference_reflectivity at normal incidence here reads 1"))
+    model: Literal[INTENSITY_MODELS.names()] = field(default="reflectance", metadata=meta(help="rho cos g | lidar equation | CARLA exp(-a R)"))
+    alpha: float = field(default=0.0,
+                         metadata=meta("1/m", low=0, help="atmospheric extinction, two-way exp(-2 alpha R): `lidar` intensity and `threshold` drop"))
+    reference_range: float = field(default=10.0,
+                                   metadata=meta("m", low=0, low_open=True,
+                                                 help="`lidar`: a target of reference_reflectivity at normal incidence here reads 1"))
     reference_reflectivity: float = field(default=1.0, metadata=meta("", 0, 1, low_open=True, help="`lidar`: the reflectivity that reads 1 at reference_range"))
     attenuation_rate: float = field(default=0.004, metadata=meta("1/m", low=0, help="`carla`: CARLA's atmosphere_attenuation_rate"))
-    incidence_exponent: float = field(default=1.0, metadata=meta("", low=0, help="`reflectance` and `lidar`: rho cos(theta)^k; 1 Lambertian, 0 as real road returns read (KITTI, nuScenes)"))
-    scale: float = field(default=1.0, metadata=meta("", low=0, low_open=True, help="the model's value times this, clipped to 0..1 (Velodyne's 0..100 % diffuse in 0..255: 100 / 255)"))
-    steps: int = field(default=0, metadata=meta("", 0, 65535, help="quantise to k / steps as the sensor's integer intensity does (255: nuScenes 0..255; 100: KITTI 0.01); 0 = continuous"))
-    offset: float = field(default=0.0, metadata=meta("", 0, 1, high_open=True, help="subtracted after scale, clipped at 0: a receiver that reads weak returns as 0 (KITTI's car paint); 0 = none"))
+    incidence_exponent: float = field(
+        default=1.0, metadata=meta("", low=0, help="`reflectance` and `lidar`: rho cos(theta)^k; 1 Lambertian, 0 as real road returns read (KITTI, nuScenes)")
+    )
+    scale: float = field(default=1.0,
+                         metadata=meta("", low=0, low_open=True,
+                                       help="the model's value times this, clipped to 0..1 (Velodyne's 0..100 % diffuse in 0..255: 100 / 255)"))
+    steps: int = field(default=0, metadata=meta(
+        "", 0, 65535, help="quantise to k / steps as the sensor's integer intensity does (255: nuScenes 0..255; 100: KITTI 0.01); 0 = continuous"))
+    offset: float = field(default=0.0,
+                          metadata=meta("", 0, 1, high_open=True,
+                                        help="subtracted after scale, clipped at 0: a receiver that reads weak returns as 0 (KITTI's car paint); 0 = none"))
     reading: ReadingModel = field(default_factory=ReadingModel)  # per-laser gain/offset reading apart from detection (module notes); opt-in
 
 

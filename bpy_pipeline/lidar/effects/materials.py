@@ -4,7 +4,7 @@ A material model turns a return's ``lidar_reflectivity`` ``rho`` and its cosine 
 apparent reflectance ``a`` the receiver sees (what the intensity, drop and weather models read; a
 Lambertian target gives ``rho cos``). Points take a model by their class (``effects.materials.classes``,
 e.g. ``{car: glossy_paint, traffic sign: retroreflector}``), or by the object they hit
-(``effects.materials.objects: true``: each object's model as export.py read it from its Blender
+(``effects.materials.objects: true``: each object's model as blender/export.py read it from its Blender
 material, :func:`model_from_material`: a ``lidar_material`` custom property naming a model, else a
 Principled BSDF roughness at or below :data:`GLOSSY_ROUGHNESS` (clear coat, polished metal) is
 ``glossy_paint``; an object's model wins over its class's). Classes and objects not named keep the
@@ -57,7 +57,8 @@ from .weather import wet_ground_factor
 class GlossyPaint:
     """``effects.materials.glossy_paint``."""
 
-    diffuse: float = field(default=0.03, metadata=meta("", 0, 1, help="the pigment's diffuse reflectance under the coat at 905 nm (dark: KITTI cars read about 0-0.1)"))
+    diffuse: float = field(default=0.03,
+                           metadata=meta("", 0, 1, help="the pigment's diffuse reflectance under the coat at 905 nm (dark: KITTI cars read about 0-0.1)"))
     specular: float = field(default=0.6, metadata=meta("", 0, 10, help="the coat's return at normal incidence"))
     lobe_deg: float = field(default=8.0, metadata=meta("deg", 0.1, 90, help="one sigma of the specular lobe, in incidence"))
 
@@ -66,7 +67,8 @@ class GlossyPaint:
 class Retroreflector:
     """``effects.materials.retroreflector``."""
 
-    reflectivity: float = field(default=10.0, metadata=meta("", 0, 1000, help="apparent reflectance at normal entrance, in units of a white diffuse target (saturates)"))
+    reflectivity: float = field(default=10.0,
+                                metadata=meta("", 0, 1000, help="apparent reflectance at normal entrance, in units of a white diffuse target (saturates)"))
     max_angle_deg: float = field(default=60.0, metadata=meta("deg", 1, 90, help="entrance angle beyond which the sheeting no longer returns"))
 
 
@@ -187,8 +189,10 @@ def check_materials(materials: MaterialsConfig, where: str = "effects.materials"
         if not isinstance(model, str) or model not in MATERIAL_MODELS:
             raise InputError(f"{where}.classes.{name}: unknown material model {model!r}; allowed: {', '.join(MATERIAL_MODELS)}")
     g, r, d = materials.glossy_paint, materials.retroreflector, materials.dark_paint
-    for key, value, lo, hi in (("glossy_paint.diffuse", g.diffuse, 0, 1), ("glossy_paint.specular", g.specular, 0, 10), ("glossy_paint.lobe_deg", g.lobe_deg, 0.1, 90),
-                               ("retroreflector.reflectivity", r.reflectivity, 0, 1000), ("retroreflector.max_angle_deg", r.max_angle_deg, 1, 90), ("dark_paint.reflectivity", d.reflectivity, 0, 1)):
+    for key, value, lo, hi in (("glossy_paint.diffuse", g.diffuse, 0, 1), ("glossy_paint.specular", g.specular, 0, 10),
+                               ("glossy_paint.lobe_deg", g.lobe_deg, 0.1, 90),
+                               ("retroreflector.reflectivity", r.reflectivity, 0, 1000), ("retroreflector.max_angle_deg", r.max_angle_deg, 1, 90),
+                               ("dark_paint.reflectivity", d.reflectivity, 0, 1)):
         if not lo <= value <= hi:
             raise InputError(f"{where}.{key}: must lie in {lo}..{hi}, got {value}")
 
@@ -210,8 +214,12 @@ def object_models(points: np.ndarray, beam: np.ndarray, objects) -> np.ndarray:
     clash = (sorted_keys[1:] == sorted_keys[:-1]) & (sorted_models[1:] != sorted_models[:-1])
     if clash.any():
         a, b = order[np.flatnonzero(clash)[0]], order[np.flatnonzero(clash)[0] + 1]
-        raise InputError(f"object {objects.names[b]!r}: shares instance {int(objects.instance[a])} and lidar_reflectivity {float(objects.reflectivity[a]):g} with {objects.names[a]!r} "
-                         f"but has another reflectance model ({model_name(int(surface[b])) or 'diffuse'} against {model_name(int(surface[a])) or 'diffuse'}); give one a different lidar_reflectivity")
+        raise InputError(
+            f"object {objects.names[b]!r}: shares instance {int(objects.instance[a])} and lidar_reflectivity {float(objects.reflectivity[a]):g} with "
+            f"{objects.names[a]!r} "
+            f"but has another reflectance model ({model_name(int(surface[b])) or 'diffuse'} against {model_name(int(surface[a])) or 'diffuse'}); give one a "
+            "different lidar_reflectivity"
+        )
     point_keys = (points["instance"].astype(np.uint64) << np.uint64(32)) | beam["reflectivity"].astype(np.float32).view(np.uint32).astype(np.uint64)
     at = np.clip(np.searchsorted(sorted_keys, point_keys), 0, len(sorted_keys) - 1)
     found = sorted_keys[at] == point_keys
@@ -320,7 +328,12 @@ class CarGlass:
 
     enabled: bool = field(default=False, metadata=meta(help="opt-in: on KITTI 004747 (held out) it puts no more cars within 0.7-1.4x (docs/realism.md)"))
     index: float = field(default=GLASS_INDEX, metadata=meta("", soft=(1, 3), help="the glass's refractive index near 905 nm (1..3)"))
-    windshield: float = field(default=0.6, metadata=meta("", soft=(0, 1), help="the front pane's internal transmittance (0..1; fitted on KITTI 000008, benchmarks/bench_materials.py --insertion)"))
+    windshield: float = field(
+        default=0.6,
+        metadata=meta(
+            "", soft=(0, 1), help="the front pane's internal transmittance (0..1; fitted on KITTI 000008, benchmarks/bench_materials.py --insertion)"
+        ),
+    )
     tinted: float = field(default=0.7, metadata=meta("", soft=(0, 1), help="the side and rear panes' internal transmittance (0..1; fitted on KITTI 000008)"))
     interior: float = field(default=0.15, metadata=meta("", soft=(0, 1), help="the cabin's reflectivity (0..1; fitted on KITTI 000008: 0.05 and 0.15 tried)"))
 
@@ -331,7 +344,8 @@ class CarGlass:
                 raise InputError(f"scene.car_glass.{key}: must be a number in {lo:g}..{hi:g}, got {value!r}")
 
 
-GLASS_PANES = {"windshield_glass": "windshield", "tinted_glass": "tinted"}  # part material -> the CarGlass field of its internal transmittance (traced as glass)
+# part material -> the CarGlass field of its internal transmittance (traced as glass)
+GLASS_PANES = {"windshield_glass": "windshield", "tinted_glass": "tinted"}
 
 
 def pane_internal(materials: list[str], glass: CarGlass) -> np.ndarray:

@@ -1,7 +1,8 @@
 """Range noise (``effects.noise``): Gaussian along the beam, a per-ring range bias, angular jitter.
 
 Gaussian along the beam with sigma ``constant``, growing with ``range`` (``sigma + sigma_per_metre R``), from a
-``table`` over (range, incidence angle) or from an ``mlp`` over it (both fitted to real scans, :mod:`.models`);
+``table`` over (range, incidence angle) or from an ``mlp`` over it (both fitted to real scans, :mod:`.models`): the
+sigma models are a registry (:data:`NOISE_MODELS`; a new one is a :func:`register_noise_model` call);
 a fixed per-ring range bias (``ring_bias``, metres per ring, as each laser of a multi-beam sensor has its own);
 angular jitter (``angular_jitter_deg``, one sigma in azimuth and in elevation; the point turns about the sensor at
 its range, the small-angle view of a beam pointing slightly off). The last effect on a chunk: it moves the points
@@ -12,11 +13,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import Callable, Literal
 
 import numpy as np
 
 from ...errors import InputError
+from ...registry import Registry
 from ...schema import meta
 from ..points import POINT_DTYPE
 from . import effects_kernels
@@ -25,10 +27,60 @@ from .models import FittedModels, check_model_file
 
 
 @dataclass(frozen=True)
+class NoiseModel:
+    """A range-noise model's registry entry (``effects.noise.model`` names one).
+
+    sigma : ``sigma(points, beam, noise, models) -> float | (p,) float32``: the range noise sigma (m) of each point
+        (POINT_DTYPE records, BEAM_DTYPE facts, the ``effects.noise`` section, the fitted models of its
+        ``model_file`` or ``None``); a float when every point has the same
+    fitted : the ``FittedModels`` attribute a model file may give this model (``None``: none)
+    inline : ``inline(noise) -> bool``: the section gives the parameters inline as well (an error with a model file)
+    inline_keys : those inline keys, for the message
+    """
+
+    sigma: Callable[..., np.ndarray | float]
+    fitted: str | None = None
+    inline: Callable[..., bool] = lambda noise: False
+    inline_keys: str = ""
+
+
+NOISE_MODELS: Registry[NoiseModel] = Registry("noise model", "effects.noise.model")
+
+
+def register_noise_model(name: str, model: NoiseModel) -> NoiseModel:
+    """Make ``effects.noise.model: name`` draw range noise with ``model``'s sigma."""
+    return NOISE_MODELS.register(name, model)
+
+
+def _range_sigma(points, beam, noise, models):
+    sigma, slope = models.noise_range if models is not None and models.noise_range is not None else (noise.sigma, noise.sigma_per_metre)
+    return np.float32(sigma) + np.float32(slope) * points["range"]
+
+
+def _mlp_sigma(points, beam, noise, models):
+    if models is None or models.noise_mlp is None:
+        raise InputError("effects.noise.model_file: the mlp noise model needs a model file holding a noise mlp (python -m bpy_pipeline fit)")
+    return models.noise_mlp.lookup(points["range"], beam["cos_incidence"])
+
+
+def _table_sigma(points, beam, noise, models):
+    if models is None or models.noise_table is None:
+        raise InputError("effects.noise.model_file: the table noise model needs a model file holding a noise table (python -m bpy_pipeline fit)")
+    return models.noise_table.lookup(points["range"], beam["cos_incidence"])
+
+
+register_noise_model("constant", NoiseModel(lambda points, beam, noise, models: noise.sigma))
+register_noise_model("range", NoiseModel(_range_sigma, "noise_range", lambda noise: (noise.sigma, noise.sigma_per_metre) != (0.0, 0.0),
+                                         "sigma / sigma_per_metre"))
+register_noise_model("table", NoiseModel(_table_sigma, "noise_table"))
+register_noise_model("mlp", NoiseModel(_mlp_sigma, "noise_mlp"))
+
+
+@dataclass(frozen=True)
 class NoiseConfig:
     """``effects.noise``: Gaussian range noise along the beam, per-ring bias, angular jitter."""
 
-    model: Literal["constant", "range", "table", "mlp"] = "constant"
+    model: Literal[NOISE_MODELS.names()] = "constant"  # a name of NOISE_MODELS
     sigma: float = field(default=0.0, metadata=meta("m", low=0, help="Gaussian along the beam (`range`: at zero range)"))
     sigma_per_metre: float = field(default=0.0, metadata=meta("", low=0, help="m of sigma per m of range (`range`)"))
     model_file: str = field(default="", metadata=meta(help="a file of `python -m bpy_pipeline fit`: `range` and `table` take their parameters from it"))
@@ -37,19 +89,8 @@ class NoiseConfig:
 
 
 def noise_sigma(points: np.ndarray, beam: np.ndarray, noise, models: FittedModels | None = None) -> np.ndarray | float:
-    """Range noise sigma (m) of each point: a float for ``constant``, else (p,) float32."""
-    if noise.model == "constant":
-        return noise.sigma
-    if noise.model == "range":
-        sigma, slope = models.noise_range if models is not None and models.noise_range is not None else (noise.sigma, noise.sigma_per_metre)
-        return np.float32(sigma) + np.float32(slope) * points["range"]
-    if noise.model == "mlp":
-        if models is None or models.noise_mlp is None:
-            raise InputError("effects.noise.model_file: the mlp noise model needs a model file holding a noise mlp (python -m bpy_pipeline fit)")
-        return models.noise_mlp.lookup(points["range"], beam["cos_incidence"])
-    if models is None or models.noise_table is None:
-        raise InputError("effects.noise.model_file: the table noise model needs a model file holding a noise table (python -m bpy_pipeline fit)")
-    return models.noise_table.lookup(points["range"], beam["cos_incidence"])
+    """Range noise sigma (m) of each point by the model ``noise.model`` names: a float for ``constant``, else (p,) float32."""
+    return NOISE_MODELS.get(noise.model).sigma(points, beam, noise, models)
 
 
 _NONE32 = np.zeros(0, np.float32)
@@ -76,7 +117,12 @@ def perturb(points: np.ndarray, beam: np.ndarray, noise, rng: np.random.Generato
         ring = points["ring"]
         if ring.max() >= len(bias):
             raise InputError(f"effects.noise.ring_bias: {len(bias)} values but the scan has ring {int(ring.max())}; give one per ring")
-    fits = jitter == 0 and points.dtype == POINT_DTYPE and points.flags.c_contiguous and (np.isscalar(sigma) or (sigma.dtype == np.float32 and sigma.shape == (n,)))
+    fits = (
+        jitter == 0
+        and points.dtype == POINT_DTYPE
+        and points.flags.c_contiguous
+        and (np.isscalar(sigma) or (sigma.dtype == np.float32 and sigma.shape == (n,)))
+    )
     kernels = effects_kernels.compiled() if fits else None
     if kernels is not None:  # the same operations in one compiled pass over the records (effects_kernels.py)
         draw = rng.standard_normal(n, dtype=np.float32) if has_noise else _NONE32
@@ -138,8 +184,7 @@ class Noise(Effect):
         count = None if spec is None else rings(spec)
         if noise.ring_bias and count is not None and len(noise.ring_bias) != count:
             raise InputError(f"effects.noise.ring_bias: one value per ring ({count} for this sensor), got {len(noise.ring_bias)}")
-        check_model_file("noise", noise, {"range": ("noise_range", (noise.sigma, noise.sigma_per_metre) != (0.0, 0.0), "sigma / sigma_per_metre"),
-                                          "table": ("noise_table", False, ""), "mlp": ("noise_mlp", False, "")})
+        check_model_file("noise", noise, {name: (model.fitted, model.inline(noise), model.inline_keys) for name, model in NOISE_MODELS.items() if model.fitted})
 
     def prepare(self, effects, models: dict) -> None:
         if models["noise"] is not None and models["noise"].noise_table is not None:

@@ -30,7 +30,8 @@ class DropConfig:
     carla: CarlaDrop = field(default_factory=CarlaDrop)
     threshold: ThresholdDrop = field(default_factory=ThresholdDrop)
     params: dict = field(default_factory=dict, metadata=meta(help="for a model that takes its parameters here (its own dataclass checks them)"))
-    model_file: str = field(default="", metadata=meta(help="a file of `python -m bpy_pipeline fit`: `uniform`, `threshold` and `table` take their parameters from it"))
+    model_file: str = field(default="",
+                            metadata=meta(help="a file of `python -m bpy_pipeline fit`: `uniform`, `threshold` and `table` take their parameters from it"))
 
 
 def drop_probability(points: np.ndarray, beam: np.ndarray, effects, models: FittedModels | None = None) -> np.ndarray | None:
@@ -71,7 +72,9 @@ class Drop(Effect):
         check_positive(drop.threshold.range_at_10, "effects.drop.threshold.range_at_10")
         check_positive(drop.threshold.softness, "effects.drop.threshold.softness", allow_zero=True)
         if drop.threshold.range_at_80 and drop.threshold.range_at_80 <= drop.threshold.range_at_10:
-            raise InputError(f"effects.drop.threshold.range_at_80: must exceed range_at_10 ({drop.threshold.range_at_10} m), or be 0, got {drop.threshold.range_at_80}")
+            raise InputError(
+                f"effects.drop.threshold.range_at_80: must exceed range_at_10 ({drop.threshold.range_at_10} m), or be 0, got {drop.threshold.range_at_80}"
+            )
         if not 0 <= drop.threshold.floor < 1:
             raise InputError(f"effects.drop.threshold.floor: must lie in 0..1 (a share of returns lost at any range), got {drop.threshold.floor}")
         model = DROP_MODELS.get(drop.model)

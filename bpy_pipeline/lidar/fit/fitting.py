@@ -683,7 +683,9 @@ def fit_models(scan: OrganisedScan, options: FitOptions = FitOptions()) -> tuple
     geometry = scan_geometry(scan, options.max_gap, options.agree, options.intensity_scale)
     samples = drop_samples(scan, geometry, options.min_range, options.max_range)
     if len(samples) < options.min_samples or not samples.dropped.any() or samples.dropped.all():
-        raise InputError(f"fit: {len(samples)} firings with a known target, {int(samples.dropped.sum())} of them empty: too few to fit (need both returns and drops)")
+        raise InputError(
+            f"fit: {len(samples)} firings with a known target, {int(samples.dropped.sum())} of them empty: too few to fit (need both returns and drops)"
+        )
     noise = noise_samples(scan, geometry, options.min_range, options.max_range)
     r_edges = np.geomspace(options.min_range, options.max_range, options.range_bins + 1)
     n_edges = np.geomspace(options.min_range, options.max_range, options.noise_range_bins + 1)
@@ -707,5 +709,6 @@ def fit_models(scan: OrganisedScan, options: FitOptions = FitOptions()) -> tuple
     report = {"samples": samples, "noise": noise, "geometry": geometry}
     if options.folds > 1:
         names = ["uniform", "threshold", f"table {options.range_bins}x{options.incidence_bins}", f"mlp {options.mlp_range_bins}x{options.mlp_incidence_bins}"]
-        report["cross_validation"] = cross_validate(samples, names, options.folds, scan.shape[1], {"range": (options.min_range, options.max_range), "min_samples": options.min_samples, "mlp": options.mlp})
+        report["cross_validation"] = cross_validate(samples, names, options.folds, scan.shape[1],
+                                                    {"range": (options.min_range, options.max_range), "min_samples": options.min_samples, "mlp": options.mlp})
     return models, report

@@ -1,6 +1,7 @@
 """The super-resolution mirror LiDAR: a spinning sensor that sees the world through its own ring of mirrors.
 
-The sensor of *Raphael: Realistic 3D Data Generation and Unsupervised Learning for Enhanced Human-Robot Detection in the Real World* is an Ouster OS1-128 (128 channels
+The sensor of *Raphael: Realistic 3D Data Generation and Unsupervised Learning for Enhanced Human-Robot Detection in the Real World* is an Ouster
+OS1-128 (128 channels
 over 45 deg, 2048 columns, 10 Hz) mounted overhead inside ``segments`` planar mirrors arranged
 around it. Every ray reflects once on the sensor's own mirrors before it enters the scene, so
 the whole 360 x 45 deg sweep is folded down onto the floor below: each segment maps its own
@@ -131,7 +132,8 @@ def facets(reflector) -> Facets:
     if n >= 3:  # the hips where neighbouring facets meet: |a| <= (distance - b sin i) tan(pi / n)
         t = math.tan(math.pi / n)
         norm = math.hypot(1.0, t * math.sin(incl))
-        edges += [(1.0 / norm, t * math.sin(incl) / norm, reflector.distance * t / norm), (-1.0 / norm, t * math.sin(incl) / norm, reflector.distance * t / norm)]
+        edges += [(1.0 / norm, t * math.sin(incl) / norm, reflector.distance * t / norm),
+                  (-1.0 / norm, t * math.sin(incl) / norm, reflector.distance * t / norm)]
     if reflector.width > 0:
         edges += [(1.0, 0.0, reflector.width / 2), (-1.0, 0.0, reflector.width / 2)]
     return Facets(reflector.distance * u, normal, across, up, np.array(edges))

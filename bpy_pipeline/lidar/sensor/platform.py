@@ -1,7 +1,7 @@
 """Moving platforms: a sensor carried along a path, as sensor-to-world poses over time. Pure numpy.
 
 A :class:`Trajectory` is a polyline of world points (waypoints from the config, or a curve of
-the scene read by ``scenes.curves``) and a clock: either a constant ``speed`` (m/s) or one
+the scene read by ``blender.curves``) and a clock: either a constant ``speed`` (m/s) or one
 time per waypoint (s; the platform moves at constant speed between two waypoints and may
 dwell at a repeated one). Positions interpolate linearly in arc length along the polyline.
 

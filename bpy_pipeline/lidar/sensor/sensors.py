@@ -97,7 +97,8 @@ class SensorSpec:
 
 
 # ----------------------------------------------------------------------------- presets and overrides
-PROFILE_KEYS = ("effects", "sources", "return_modes")  # a preset's effects profile, where its numbers come from, the real sensor's return modes; not SensorSpec fields
+# a preset's effects profile, where its numbers come from, the real sensor's return modes; not SensorSpec fields
+PROFILE_KEYS = ("effects", "sources", "return_modes")
 
 
 @lru_cache(maxsize=1)

@@ -89,7 +89,9 @@ __all__ = [
 def _weather_config() -> type:
     """``effects.weather``: one section per registered kind (each off unless given), and the particles' beam divergence."""
     fields = [(name, kind.config, field(default_factory=kind.config)) for name, kind in WEATHER_KINDS.items()]
-    fields.append(("divergence_mrad", float, field(default=0.0, metadata=meta("", 0, 100, help="full-angle beam divergence in mrad for the particles (0: sensor.divergence.mrad, else 3 mrad)"))))
+    fields.append(("divergence_mrad", float,
+                   field(default=0.0,
+                         metadata=meta("", 0, 100, help="full-angle beam divergence in mrad for the particles (0: sensor.divergence.mrad, else 3 mrad)"))))
     names = ", ".join(WEATHER_KINDS.names())
     cls = dataclasses.make_dataclass("WeatherConfig", fields, frozen=True, namespace={
         "__doc__": f"``effects.weather``: {names}, each off unless given; ``effects.ideal: true`` turns them off.",

@@ -61,7 +61,8 @@ def _visible_mass(limit: float, medium: _Particles, divergence: float, detect, e
     full = medium.reflectivity * overlap(grid) * np.exp(-extinction * grid)  # a particle covering the whole footprint
     with np.errstate(divide="ignore", invalid="ignore"):
         d_min = np.where(full >= hi, divergence * grid * np.sqrt(hi / np.maximum(full, 1e-300)), np.inf)
-    density = medium.per_m3 * np.pi * (divergence / 2.0) ** 2 * grid**2 * np.where(np.isfinite(d_min), medium.tail(np.where(np.isfinite(d_min), d_min, 0.0)), 0.0)
+    density = medium.per_m3 * np.pi * (divergence / 2.0) ** 2 * grid**2 * np.where(np.isfinite(d_min), medium.tail(np.where(np.isfinite(d_min), d_min, 0.0)),
+                                                                                   0.0)
     cumulative = np.concatenate([[0.0], np.cumsum((density[1:] + density[:-1]) / 2 * np.diff(grid))])
     return grid, cumulative, d_min
 

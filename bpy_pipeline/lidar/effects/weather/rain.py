@@ -22,8 +22,10 @@ class RainConfig:
     """``effects.weather.rain``: Goodin et al.'s rain (Electronics 2019) with droplet returns."""
 
     rate: float = field(default=0.0, metadata=meta("mm/h", 0, MAX_RAIN, help="rain rate (0: no rain)"))
-    droplet_reflectivity: float = field(default=0.02, metadata=meta("", 0, 1, help="a drop returns like this diffuse target over its share of the footprint (assumed)"))
-    min_diameter_mm: float = field(default=0.5, metadata=meta("", 0, 6, low_open=True, help="drop diameter in mm; smaller drops are left to the extinction alone"))
+    droplet_reflectivity: float = field(default=0.02,
+                                        metadata=meta("", 0, 1, help="a drop returns like this diffuse target over its share of the footprint (assumed)"))
+    min_diameter_mm: float = field(default=0.5,
+                                   metadata=meta("", 0, 6, low_open=True, help="drop diameter in mm; smaller drops are left to the extinction alone"))
 
 
 def rain_alpha(rate: float) -> float:

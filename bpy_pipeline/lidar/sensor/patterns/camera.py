@@ -103,7 +103,8 @@ def pinhole_extent(spec) -> tuple[np.ndarray, np.ndarray]:
     return np.degrees(np.arctan(z[[0, -1]] / np.sqrt(1 + np.min(y**2)))), np.degrees(np.arctan(y[[0, -1]]))
 
 
-register_pattern("pinhole", RayPattern(pinhole_rays, count, pinhole_resolution, check, density_key, azimuth_step, lambda spec: None, pinhole_elevations, pinhole_azimuths, derive, rings=channels, extent=pinhole_extent))
+register_pattern("pinhole", RayPattern(pinhole_rays, count, pinhole_resolution, check, density_key, azimuth_step, lambda spec: None, pinhole_elevations,
+                                       pinhole_azimuths, derive, rings=channels, extent=pinhole_extent))
 
 
 # ----------------------------------------------------------------------------- grid
@@ -141,4 +142,5 @@ def grid_resolution(spec) -> tuple[float, float]:
     return azimuth_step(spec), grid_elevation_step(spec)
 
 
-register_pattern("grid", RayPattern(grid_rays, count, grid_resolution, check, density_key, azimuth_step, grid_elevation_step, grid_elevations, grid_azimuths, derive, rings=channels))
+register_pattern("grid", RayPattern(grid_rays, count, grid_resolution, check, density_key, azimuth_step, grid_elevation_step, grid_elevations, grid_azimuths,
+                                    derive, rings=channels))

@@ -55,7 +55,9 @@ def check(spec, where: str) -> None:
     if not lo < hi <= lo + 360:
         raise InputError(f"{where}.horizontal_fov_deg: the profile's angular window, expected [min, max] with min < max <= min + 360, got {[lo, hi]}")
     if not 0 < spec.horizontal_resolution_deg <= hi - lo:
-        raise InputError(f"{where}.horizontal_resolution_deg: the angle between a profile's rays must lie in (0, {hi - lo}], got {spec.horizontal_resolution_deg}")
+        raise InputError(
+            f"{where}.horizontal_resolution_deg: the angle between a profile's rays must lie in (0, {hi - lo}], got {spec.horizontal_resolution_deg}"
+        )
     if spec.columns < 1:
         raise InputError(f"{where}.columns: profiles per frame, must be >= 1, got {spec.columns}")
     if spec.columns > MAX_RINGS:

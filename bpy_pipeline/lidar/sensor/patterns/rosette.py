@@ -61,4 +61,5 @@ def rays(spec):
     return chunk
 
 
-register_pattern("rosette", RayPattern(rays, count, resolution, check, lambda spec: "point_rate_hz", frame_time=frame_time, per_frame=True, extent=sampled_extent))
+register_pattern("rosette", RayPattern(rays, count, resolution, check, lambda spec: "point_rate_hz", frame_time=frame_time, per_frame=True,
+                                       extent=sampled_extent))

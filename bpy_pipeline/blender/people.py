@@ -24,10 +24,12 @@ from mathutils import Matrix
 from ..assets import MANIFEST, AssetEntry, read_manifest
 from ..errors import InputError
 from ..geometry import human
-from .objects import mesh_data, tag
+from .mesh_objects import mesh_data, tag
 
-BONE_TAILS = {"head": (0.0, 0.0, 1.0), "forearm_l": (0.0, 0.135, 0.38), "forearm_r": (0.0, -0.135, 0.38), "foot_l": (0.12, 0.085, 0.02), "foot_r": (0.12, -0.085, 0.02)}
-BONE_CHILD = {"pelvis": "spine", "spine": "head", "upper_arm_l": "forearm_l", "upper_arm_r": "forearm_r", "thigh_l": "shank_l", "shank_l": "foot_l", "thigh_r": "shank_r", "shank_r": "foot_r"}
+BONE_TAILS = {"head": (0.0, 0.0, 1.0), "forearm_l": (0.0, 0.135, 0.38), "forearm_r": (0.0, -0.135, 0.38), "foot_l": (0.12, 0.085, 0.02),
+              "foot_r": (0.12, -0.085, 0.02)}
+BONE_CHILD = {"pelvis": "spine", "spine": "head", "upper_arm_l": "forearm_l", "upper_arm_r": "forearm_r", "thigh_l": "shank_l", "shank_l": "foot_l",
+              "thigh_r": "shank_r", "shank_r": "foot_r"}
 SKELETON = "LiDAR Person Skeleton"
 
 
@@ -206,7 +208,10 @@ def import_asset(asset: AssetEntry) -> tuple[bpy.types.Mesh, np.ndarray]:
 
         if not upright("person", high - low):  # a lying person would fit nowhere: say so instead of placing none
             extent = ", ".join(f"{k} {v:.2f}" for k, v in zip("xyz", high - low))
-            raise InputError(f"asset {asset.name!r}: {asset.path.name} does not stand upright as a person when read Y up as glTF and OBJ are (extent {extent}); re-export it Y up, or give it a set and its up_axis in the manifest and place it with scene.population")
+            raise InputError(
+                f"asset {asset.name!r}: {asset.path.name} does not stand upright as a person when read Y up as glTF and OBJ are (extent {extent}); re-export "
+                "it Y up, or give it a set and its up_axis in the manifest and place it with scene.population"
+            )
         vertices = (vertices - [(low[0] + high[0]) / 2, (low[1] + high[1]) / 2, low[2]]) / (high[2] - low[2])
         mesh = mesh_data(name, vertices, triangles)
         mesh.use_fake_user = True

@@ -1,8 +1,9 @@
-"""The Blender side (bpy) that several builders share: objects and tags, node-group helpers, boxes by nodes,
-people, the robot arm, assets, curves, the camera, the population; and :func:`build_scene`.
+"""The shared Blender side (bpy): the export to scene buffers, version differences, objects and tags, node-group helpers,
+boxes by nodes, people, the robot arm, asset files, curves, the camera rendering; and :func:`build_scene`.
 
-Each builder's own Blender side lives in its package (``builders/<name>/scene.py``, ``*_nodes.py``);
-the registry entries and parameters are pure (:mod:`bpy_pipeline.builders`).
+Each builder's own Blender side lives in its package (``builders/<name>/scene.py``, ``*_nodes.py``), the
+population's in :mod:`bpy_pipeline.population.scene`; the registry entries and parameters are pure
+(:mod:`bpy_pipeline.builders`).
 """
 
 from __future__ import annotations

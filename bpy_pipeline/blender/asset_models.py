@@ -24,7 +24,7 @@ from mathutils import Matrix
 
 from ..assets import asset_set, auto_unit_scale, orientation_error, up_rotation
 from ..errors import InputError
-from .objects import mesh_data, tag
+from .mesh_objects import mesh_data, tag
 
 TEMPLATES = "LiDAR Asset Templates"
 GLASS_REFLECTIVITY = 0.08
@@ -54,7 +54,9 @@ def _import(entry) -> list:
                 if obj is not None:
                     bpy.context.scene.collection.objects.link(obj)
     except (RuntimeError, AttributeError) as err:
-        raise InputError(f"{entry.where}.path: Blender cannot import {entry.path.name} ({str(err).strip().splitlines()[-1] if str(err).strip() else type(err).__name__})") from None
+        raise InputError(
+            f"{entry.where}.path: Blender cannot import {entry.path.name} ({str(err).strip().splitlines()[-1] if str(err).strip() else type(err).__name__})"
+        ) from None
     shapes = {b.custom_shape for o in bpy.data.objects if o.type == "ARMATURE" and o.pose for b in o.pose.bones if b.custom_shape}
     return [o for o in bpy.data.objects if o not in before and o not in shapes and o.users_collection]
 
@@ -301,7 +303,7 @@ class AssetSlot:
         return self.objects[key]
 
     def show(self, model: AssetModel, placed, class_name: str, instance: int, reflectivity: float | None) -> None:
-        """Show ``model`` as ``placed`` (:class:`~bpy_pipeline.geometry.population.Placed`), tagged ``class_name``."""
+        """Show ``model`` as ``placed`` (:class:`~bpy_pipeline.population.placer.Placed`), tagged ``class_name``."""
         objs = self._objects_for(model)
         for key, others in self.objects.items():
             if key != model.entry.name:

@@ -22,9 +22,9 @@ from typing import Callable
 
 import numpy as np
 
-from .clearance import NO_POSES, SensorPoses
-from .collision import rectangles_overlap
-from .surfaces import Surface, on_surface
+from ..geometry.clearance import NO_POSES, SensorPoses
+from ..geometry.collision import rectangles_overlap
+from ..geometry.surfaces import Surface, on_surface
 
 GAP = 0.01  # m: a placed object floats this far above its surface, so touching is never counted as crossing
 
@@ -316,7 +316,7 @@ def place_on_spots(
 # ----------------------------------------------------------------------------- shapes of the built-in kinds
 def person_shape(angles: np.ndarray, height: float, build: float, pose: str) -> Shape:
     """A procedural body (:mod:`.human`) as a :class:`Shape`; seated bodies rest pelvis and thighs on z = 0."""
-    from . import human
+    from ..geometry import human
 
     person = human.pose_person(angles, height, build, pose, (0.0, 0.0), 0.0, 0.0)
     vertices, triangles, _ = human.body_mesh(person.a, person.b, person.radius)
@@ -332,7 +332,7 @@ def arm_shape(model, q: np.ndarray, mesh: tuple | None = None) -> Shape:
 
     mesh : the posed ``(vertices, triangles)`` in the base frame (a URDF arm's own meshes); default its capsules
     """
-    from .objects import arm_mesh
+    from ..geometry.objects import arm_mesh
 
     vertices, triangles = arm_mesh(model, q) if mesh is None else mesh
     lift = -vertices[:, 2].min()

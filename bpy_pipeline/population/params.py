@@ -12,8 +12,8 @@ The section works on top of every builder (``blend``: the user's own file; the p
         placement: {keep_out: 0.3}
 
 Each kind is a registry entry (:data:`KINDS`) owning its config dataclass and the function that draws
-one candidate :class:`~bpy_pipeline.geometry.population.Shape` from the frame's generator; the
-Blender side (``scenes/population.py``) owns the objects that show them. Where things may stand:
+one candidate :class:`~bpy_pipeline.population.placer.Shape` from the frame's generator; the
+Blender side (``population/scene.py``) owns the objects that show them. Where things may stand:
 objects with the custom property ``lidar_walkable`` (people, arms and cars) and ``lidar_seat``
 (seated people) when the scene has any, else the horizontal surfaces found in the static geometry
 (``geometry/surfaces.py``: the floor, and seat-height tops for seated people).
@@ -165,7 +165,7 @@ def _draw_person(params: PersonPopulation, models, rng: np.random.Generator):
     """A procedural person in a pose drawn by the weights, or an asset person (``models``: asset models)."""
     from ..geometry import human
     from ..geometry.placement import sample
-    from ..geometry.population import mesh_shape, person_shape
+    from .placer import mesh_shape, person_shape
 
     height = float(sample(params.height, rng))
     if models:
@@ -184,7 +184,7 @@ def _draw_person(params: PersonPopulation, models, rng: np.random.Generator):
 
 def _draw_arm(params: RobotArmPopulation, models, rng: np.random.Generator):
     from ..geometry import kinematics
-    from ..geometry.population import arm_shape, mesh_shape
+    from .placer import arm_shape, mesh_shape
 
     if isinstance(models, list):  # robot assets at their own size
         k = int(rng.integers(len(models)))
@@ -203,7 +203,7 @@ def _draw_car(params: CarPopulation, models, rng: np.random.Generator):
     """A car of a procedural style (length and width +-3 % about the style's proportions) or an asset car, at a drawn height."""
     from ..geometry.objects import COLOURS, STYLES, car_meshes, style_size
     from ..geometry.placement import sample
-    from ..geometry.population import Shape, box_support, mesh_shape
+    from .placer import Shape, box_support, mesh_shape
     from ..geometry.primitives import merge
 
     height = float(sample(params.height, rng))

@@ -14,7 +14,7 @@ import numpy as np
 from ..geometry import primitives
 from ..geometry.indoor import _prism_along_y
 from .nodes import GroupBuilder, excluded_collection
-from .objects import mesh_object
+from .mesh_objects import mesh_object
 
 PROTOTYPES = "LiDAR Box Prototypes"
 BOX = "box prototype"
@@ -66,7 +66,8 @@ def label(b: GroupBuilder, geometry, instance) -> bpy.types.NodeSocket:
 
 
 FINISH_INPUTS = [  # the interface rows of what :func:`finish` reads, for a group's INPUTS
-    ("Instance", "NodeSocketInt", 0, "instance id of what the group makes, stored as the named attribute lidar_instance the export reads (0: the object's lidar_instance)", 0, 2**31 - 1),
+    ("Instance", "NodeSocketInt", 0,
+     "instance id of what the group makes, stored as the named attribute lidar_instance the export reads (0: the object's lidar_instance)", 0, 2**31 - 1),
     ("Realize", "NodeSocketBool", False, "realize the instances into one mesh (the export reads instances as they are)"),
 ]
 

@@ -3,11 +3,11 @@
 The scene's own geometry (what the builder built, or the user's .blend) is exported once with the
 population hidden; its horizontal surfaces are found once (``geometry/surfaces.py``) and kept while
 that geometry stays the same (a digest of its triangles). Each frame then draws the objects from
-the frame's generator, places them with ``geometry/population.py`` against the exported triangles,
+the frame's generator, places them with ``population/placer.py`` against the exported triangles,
 and shows them: pool objects are moved, posed, relabelled, shown or hidden, never rebuilt, so frame
 k after frame k - 1 is the same as frame k alone.
 
-Each kind has a side here (:data:`SIDES`, keyed like :data:`~bpy_pipeline.builders.population.KINDS`)
+Each kind has a side here (:data:`SIDES`, keyed like :data:`~bpy_pipeline.population.params.KINDS`)
 that loads what its draws need (the arm's model, asset meshes) and owns its pool of objects.
 """
 
@@ -21,14 +21,14 @@ import bpy
 import numpy as np
 from mathutils import Matrix
 
-from ..builders.population import KINDS, count_of
+from .params import KINDS, count_of
 from ..geometry import human
 from ..geometry.clearance import NO_POSES
 from ..geometry.objects import COLOURS, STYLES, car_meshes, car_surfaces
-from ..geometry.population import Placer, place_on_spots
+from .placer import Placer, place_on_spots
 from ..geometry.surfaces import find_surfaces, floor_and_seats
-from .objects import mesh_data, scene_collection, tag
-from .people import PersonRig
+from ..blender.mesh_objects import mesh_data, scene_collection, tag
+from ..blender.people import PersonRig
 
 COLLECTION = "LiDAR Population"
 KEY = "population"  # where the run's BuildContext.keep holds the pools
@@ -118,7 +118,7 @@ def _asset_models(params, kind_name: str, manifest: str):
     """The asset models of ``params.assets`` (a set of the assets manifest), or ``None`` (procedural)."""
     if not params.assets:
         return None
-    from .assets import load_models
+    from ..blender.asset_models import load_models
 
     return load_models(params.assets, KINDS.get(kind_name).manifest_kind, f"scene.population.{kind_name}.assets", manifest or None)
 
@@ -129,7 +129,7 @@ class PersonSide(Side):
 
     def new_slot(self, index, placed):
         if self.models:
-            from .assets import AssetSlot
+            from ..blender.asset_models import AssetSlot
 
             return AssetSlot(self.collection, f"person_{index:03d}")
         return PersonRig(self.collection, index)
@@ -153,18 +153,18 @@ class RobotArmSide(Side):
         if self.params.assets:
             return _asset_models(self.params, "robot_arm", self.manifest)
         if self.params.model.lower().endswith(".urdf"):  # the robot's own link meshes (ROS-Industrial style)
-            from .robot_arm import load_urdf_arm
+            from ..blender.robot_arm import load_urdf_arm
 
             return load_urdf_arm(self.params.model)
         return kinematics.load_arm(self.params.model) if self.params.model else kinematics.load_arm()
 
     def new_slot(self, index, placed):
         if isinstance(self.models, list):
-            from .assets import AssetSlot
+            from ..blender.asset_models import AssetSlot
 
             return AssetSlot(self.collection, f"robot_{index:03d}")
         from ..geometry.urdf import MeshedArm
-        from .robot_arm import RobotArm
+        from ..blender.robot_arm import RobotArm
 
         if isinstance(self.models, MeshedArm):
             return RobotArm(self.models.model, self.collection, 50 + index, self.models.meshes)
@@ -198,7 +198,7 @@ class CarSide(Side):
 
     def new_slot(self, index, placed):
         if self.models:
-            from .assets import AssetSlot
+            from ..blender.asset_models import AssetSlot
 
             return AssetSlot(self.collection, f"car_{index:03d}")
         return PartsSlot(self.collection, f"car_{index:03d}", list(self.meshes[0]))
@@ -248,7 +248,8 @@ def find_places(buffers, rules) -> StandingPlaces:
     detected = find_surfaces(v, t, **common)
     floors, seats = floor_and_seats(detected, tuple(rules.seat_height), rules.floor_band)
     source = "detected"
-    for mask, name in ((_custom_property_rows(buffers, "lidar_walkable"), "lidar_walkable"), (_class_rows(buffers, rules.walkable_classes), "walkable_classes")):
+    for mask, name in ((_custom_property_rows(buffers, "lidar_walkable"), "lidar_walkable"),
+                       (_class_rows(buffers, rules.walkable_classes), "walkable_classes")):
         found = find_surfaces(v, t, mask, **common) if mask.any() else []
         if found:
             floors, source = found, name
@@ -279,7 +280,7 @@ class PopulationScene:
 
     def static_scene(self):
         """The scene without the population, exported (world, m), and its standing places (kept while unchanged)."""
-        from ..export import export_scene
+        from ..blender.export import export_scene
         from ..labels import load_class_table
 
         for side in self.sides.values():
@@ -310,7 +311,8 @@ class PopulationScene:
             return buffers.vertices, buffers.triangles[surface.triangles]
 
         placed_by_instance = {}
-        headings, info, warnings = {}, {"surfaces": places.source, "floors": [round(s.z, 3) for s in places.floors], "seats": [round(s.z, 3) for s in places.seats]}, []
+        headings, info, warnings = {}, {"surfaces": places.source, "floors": [round(s.z, 3) for s in places.floors],
+                                        "seats": [round(s.z, 3) for s in places.seats]}, []
         for k, (name, params) in enumerate(self.population.kinds):
             kind, side = KINDS.get(name), self.sides[name]
             wanted = count_of(params, rng)
@@ -326,14 +328,18 @@ class PopulationScene:
             base = rules.instance_base + 1000 * k
             headings.update(side.show(placements, base, rng))
             placed_by_instance.update({base + i: p for i, p in enumerate(placements)})
-            info[name] = {"wanted": wanted, "placed": len(placements), "instances": [base + i for i in range(len(placements))], "poses": [p.shape.detail.get("pose", "") for p in placements]}
+            info[name] = {"wanted": wanted, "placed": len(placements), "instances": [base + i for i in range(len(placements))],
+                          "poses": [p.shape.detail.get("pose", "") for p in placements]}
             if len(placements) < wanted:
-                warnings.append(f"scene.population.{name}: placed {len(placements)} of {wanted}; no free spot fit the rest in {rules.tries} tries each (rejections: {dict(placer.rejections)})")
+                warnings.append(
+                    f"scene.population.{name}: placed {len(placements)} of {wanted}; no free spot fit the rest in {rules.tries} tries each (rejections: "
+                    f"{dict(placer.rejections)})"
+                )
         if not any(len(s.spots) for s in places.floors):
             warnings.append("scene.population: the scene has no floor to stand on (no lidar_walkable object and no horizontal surface found)")
         info["rejections"] = dict(placer.rejections)
         bpy.context.view_layer.update()
-        self.last = placed_by_instance  # {instance: geometry.population.Placed} of this frame
+        self.last = placed_by_instance  # {instance: population.placer.Placed} of this frame
         return headings, info, tuple(warnings)
 
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import bpy
 
-from ..compat import set_modifier_input, set_node_option
+from .compat import set_modifier_input, set_node_option
 from . import group_cache
 
 
@@ -30,7 +30,7 @@ class GroupBuilder:
     Values given for node inputs are linked when they are sockets and set as defaults otherwise;
     inputs are named (the first *available* socket of that name, as nodes such as Random Value
     keep unavailable sockets of other types) or numbered. ``options`` are node enum options
-    (``mode``, ``data_type``...) set through :func:`~bpy_pipeline.compat.set_node_option` before the
+    (``mode``, ``data_type``...) set through :func:`~bpy_pipeline.blender.compat.set_node_option` before the
     inputs, since they decide which sockets are available.
     """
 

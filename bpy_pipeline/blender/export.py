@@ -9,7 +9,8 @@ or for instances the instanced object if it is tagged, else the instancer. Untag
 a class from the name rules (their name, then their ancestors' names) or ``unlabeled``.
 Geometry Nodes may label what they make through the named attribute ``lidar_instance`` (INT, see
 :data:`INSTANCE_ATTRIBUTE`): on an instancer's instances (each instance's own from Blender 5.3,
-the group's ``Instance`` input before: :func:`~bpy_pipeline.compat.instance_attribute`) or on a mesh's faces or points; a value > 0 is the instance id of that geometry (its class
+the group's ``Instance`` input before: :func:`~bpy_pipeline.blender.compat.instance_attribute`) or on a mesh's faces or points; a value > 0 is the
+instance id of that geometry (its class
 stays its owner's), so one object may carry many instances, realized or not.
 An object with a ``lidar_parts`` list of names may label faces or points with the named attribute
 ``lidar_part`` (INT, :data:`PART_ATTRIBUTE`): p > 0 makes them the row named ``lidar_parts[p - 1]``, labelled
@@ -25,11 +26,11 @@ from collections import defaultdict
 import bpy
 import numpy as np
 
-from .buffers import MATERIAL_ID, MATERIALS, ObjectTable, SceneBuffers
+from ..buffers import MATERIAL_ID, MATERIALS, ObjectTable, SceneBuffers
 from .compat import instance_attribute
-from .errors import InputError
-from .labels import ClassTable
-from .lidar.effects.materials import MATERIAL_MODELS, model_from_material, model_id
+from ..errors import InputError
+from ..labels import ClassTable
+from ..lidar.effects.materials import MATERIAL_MODELS, model_from_material, model_id
 
 GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "META", "FONT"}
 VIRTUAL_DEFORM = ("ARMATURE", "LATTICE", "CURVE")  # parent types that deform a child's mesh without a modifier
@@ -326,7 +327,7 @@ class _Tags(dict):
 
 def parts_buffers(table: ClassTable, parts, extra_rules=(), keep_within=None) -> SceneBuffers:
     """What :func:`export_scene` gives for plain mesh objects with no parent, modifier or transform, tagged by
-    :func:`~.scenes.objects.tag` and filled by :func:`~.scenes.objects.fill_mesh`, from their arrays: the same rows
+    :func:`~.mesh_objects.tag` and filled by :func:`~.mesh_objects.fill_mesh`, from their arrays: the same rows
     and bytes without reading them back from Blender (a builder's objects placed every frame, ``tests/test_street_users.py``).
 
     parts : ``[(name, lidar properties {"lidar_class": ..., ...}, vertices (n, 3) world, triangles (m, 3))]`` in the
@@ -376,8 +377,14 @@ def _drawn_as_instance(depsgraph) -> set[str]:
     candidates = {obj.name_full for obj in depsgraph.scene_eval.objects if obj.type in GEOMETRY_TYPES - {"MESH"}}
     if not candidates:
         return set()
-    return {instance.parent.name_full for instance in depsgraph.object_instances
-            if instance.is_instance and instance.parent.name_full in candidates and instance.object.type == "MESH" and instance.object.name_full == instance.parent.name_full}
+    return {
+        instance.parent.name_full
+        for instance in depsgraph.object_instances
+        if instance.is_instance
+        and instance.parent.name_full in candidates
+        and instance.object.type == "MESH"
+        and instance.object.name_full == instance.parent.name_full
+    }
 
 
 def _mesh_key(obj, is_instance: bool) -> tuple:

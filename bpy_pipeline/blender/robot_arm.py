@@ -15,7 +15,7 @@ from mathutils import Matrix
 
 from ..geometry.kinematics import ArmModel
 from ..geometry.objects import link_meshes
-from .objects import mesh_object, tag
+from .mesh_objects import mesh_object, tag
 
 REFLECTIVITY = 0.55  # painted metal (Staubli's melon-yellow; an assumption, not measured)
 
@@ -91,7 +91,9 @@ def _import_mesh(path, where: str) -> tuple[np.ndarray, np.ndarray]:
         else:
             raise InputError(f"{where}: mesh {path.name}: expected .stl, .obj, .dae, .glb or .gltf")
     except (RuntimeError, AttributeError) as err:
-        raise InputError(f"{where}: Blender cannot import {path.name} ({str(err).strip().splitlines()[-1] if str(err).strip() else type(err).__name__})") from None
+        raise InputError(
+            f"{where}: Blender cannot import {path.name} ({str(err).strip().splitlines()[-1] if str(err).strip() else type(err).__name__})"
+        ) from None
     objects = [o for o in bpy.data.objects if o not in before]
     depsgraph = bpy.context.evaluated_depsgraph_get()
     parts = []

@@ -78,7 +78,8 @@ def instance_attribute(instancer, attribute: str, modifier_input: str) -> Callab
     if not modifiers:
         return None  # only Geometry Nodes store attributes on instances
     if VERSION < (5, 3, 0):
-        given = [(m, items[modifier_input]) for m in modifiers for items in [interface_inputs(m.node_group)] if modifier_input in items]  # each interface read once
+        # each interface read once
+        given = [(m, items[modifier_input]) for m in modifiers for items in [interface_inputs(m.node_group)] if modifier_input in items]
         value = int(_input_value(*given[-1])) if given else 0
         return (lambda index: value) if value > 0 else None
     geometry = instancer.evaluated_geometry()  # held while read
