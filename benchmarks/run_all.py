@@ -45,6 +45,7 @@ BENCHMARKS = [
     "bench_weather_particles.py",
     "bench_layout_seeds.py",
     "bench_rangenet.py",
+    "bench_rangenet_ablation.py",
 ]
 
 if __name__ == "__main__":

@@ -143,10 +143,12 @@ def label_lines(boxes: np.ndarray, points: np.ndarray, camera, maps: ClassMaps |
     k, tr = camera_matrices(camera, to_points)
     resolution = tuple(int(v) for v in camera.resolution)
     xyz = np.stack([points["x"], points["y"], points["z"]], axis=1)
+    owner = np.argsort(points["instance"], kind="stable")  # the points of each instance, in their order, by one sort
+    owners = points["instance"][owner]
     lines, dont_care = [], []
     regions = boxes[:0] if regions is None else regions
     for box, region in [(b, False) for b in boxes] + [(b, True) for b in regions]:
-        mine = xyz[points["instance"] == box["instance"]]
+        mine = xyz[owner[np.searchsorted(owners, box["instance"], "left") : np.searchsorted(owners, box["instance"], "right")]]
         uv, depth = project(mine, k, tr)
         seen = in_image(uv, depth, resolution)
         if not seen.any():
