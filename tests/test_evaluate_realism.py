@@ -98,3 +98,24 @@ def test_a_missing_input_is_one_line_and_exit_2(tmp_path, capsys):
     err = capsys.readouterr().err
     assert code == 2 and "nothing: no such file or folder" in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "r.json").exists() and not (tmp_path / "r.png").exists()
+
+
+def test_per_class_figures_read_the_field_every_real_source_labels():
+    """A generated car beside the sensor (where KITTI's box-labelled frames label nothing) moves no per-class figure;
+    the same car ahead does."""
+    rng = np.random.default_rng(1)
+    real = [_scan(rng, f"r{i}", 100, lambda n: rng.uniform(0.1, 0.6, n).astype(np.float32)) for i in range(3)]
+
+    def with_car_at(scan, where):
+        car = rng.uniform([-2, -0.9, -1.7], [2, 0.9, -0.2], (400, 3)).astype(np.float32) + np.array([*where, 0], np.float32)
+        return LabelledScan(scan.name, scan.group, np.concatenate([scan.points, car]), np.r_[scan.labels, np.zeros(400, np.int64)],
+                            np.r_[scan.instances, np.full(400, 7)], CLASSES, remission=np.r_[scan.remission, np.full(400, 0.3, np.float32)])
+
+    beside = [with_car_at(s, (0.0, -4.0)) for s in real]
+    ahead = [with_car_at(s, (5.0, -1.0)) for s in real]
+    same = realism.realism_report(beside, real, CLASSES)
+    assert same["range_wasserstein_m"]["car"] == pytest.approx(0.0, abs=1e-9)
+    assert same["points_per_object"]["car"]["generated_objects"] == same["points_per_object"]["car"]["real_objects"]
+    moved = realism.realism_report(ahead, real, CLASSES)
+    assert moved["range_wasserstein_m"]["car"] > 1.0
+    assert moved["points_per_object"]["car"]["generated_objects"] > moved["points_per_object"]["car"]["real_objects"]

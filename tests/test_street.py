@@ -280,7 +280,7 @@ def test_street_trees_clear_the_traffic_and_obstacles_keep_users_off_the_furnitu
 
 
 def test_ego_vehicle_places_the_roof_sensor_in_its_lane_and_keeps_its_footprint_free():
-    from bpy_pipeline.builders.street.params import ego_station
+    from bpy_pipeline.builders.street.params import ego_keep_free, ego_station
     from bpy_pipeline.builders.street.layout import EGO_HALF
 
     params = StreetScene(ego_vehicle=True, **BUSY)
@@ -289,9 +289,14 @@ def test_ego_vehicle_places_the_roof_sensor_in_its_lane_and_keeps_its_footprint_
     assert len(set(np.round(xs, 6))) == 20 and all(-params.ego_span <= x <= params.ego_span for x in xs)  # 7.3 m steps cycling over 120 m
     assert all(p[1, 3] == -params.lane_width / 2 and p[2, 3] == params.ego_height for p in poses)
     layout = street.street_layout(params, np.random.default_rng(0))
-    reserved = [(poses[3][:2, 3], np.array(EGO_HALF), 0.0)]
+    reserved = [ego_keep_free(params, poses[3])]
+    centre, half, yaw = reserved[0]
+    assert yaw == 0.0 and np.allclose(half, (EGO_HALF[0] + params.ego_headway / 2, EGO_HALF[1]))
+    assert np.isclose(centre[0] + half[0], poses[3][0, 3] + EGO_HALF[0] + params.ego_headway)  # the headway ahead of the front
     placement = street.place_users(params, layout, np.random.default_rng(1), reserved=reserved)
     assert placement.users
     for user in placement.users:
         assert not rectangles_overlap(user.centre, user.half, user.yaw, *reserved[0], params.clearance)
+    ahead = [u for u in placement.users if abs(u.centre[1] - poses[3][1, 3]) < 1.0 and 0 < u.centre[0] - poses[3][0, 3] < EGO_HALF[0] + params.ego_headway]
+    assert not ahead  # nobody in the ego's lane within its headway
     assert ego_station(StreetScene(), 0) is None

@@ -2,6 +2,11 @@
 
 What it measures (every figure: generated against real; a class only on the real scans that label it):
 
+Every per-class figure (intensity, points per object, ranges) reads the points within +-:data:`LABELLED_DEG` of straight
+ahead on both sides: KITTI's object frames label only what their camera sees (+-40.7 degrees) and SqueezeSeg's frames
+hold only the front 90 degrees, so a class's real points lie there, and a generated frame's cars beside the sensor
+(which no real box-labelled frame labels) would otherwise read as a range gap that is none.
+
 - **intensity** per class, over the real scans that carry remission: the 1-Wasserstein distance between the two
   distributions (0..1 units of remission), the share of points saturated (remission >= :data:`SATURATED`),
   the number of distinct values and the median;
@@ -47,6 +52,7 @@ OBJECT_CLASSES = ("car", "truck", "other-vehicle", "person", "bicyclist")
 MIN_OBJECT_POINTS = 5
 MIN_OBJECTS = 3  # real objects in a range band for its ratio
 FRONT_DEG = 45.0  # returns per row: azimuths within this of straight ahead
+LABELLED_DEG = 40.0  # per-class figures: azimuths within this of straight ahead, the field every real source labels (KITTI's camera: +-40.7)
 BEV_FIELD_M = 160.0
 BEV_BINS = 100
 MMD_SIGMA = 0.5
@@ -69,12 +75,22 @@ def intensity_figures(generated: np.ndarray, real: np.ndarray) -> dict:
     return {"wasserstein": float(wasserstein_distance(generated, real)) if both else math.nan, "generated": side(generated), "real": side(real)}
 
 
+def in_labelled_field(points: np.ndarray) -> np.ndarray:
+    """``(n,)`` bool: ``(n, 3)`` sensor-frame points within +-:data:`LABELLED_DEG` of straight ahead (x forward)."""
+    return np.abs(np.degrees(np.arctan2(points[:, 1], points[:, 0]))) <= LABELLED_DEG
+
+
+def class_points(scan: LabelledScan, c: int) -> np.ndarray:
+    """``(n,)`` bool: the scan's points of class index ``c`` in the labelled field (:func:`in_labelled_field`)."""
+    return (scan.labels == c) & in_labelled_field(scan.points)
+
+
 def object_sizes(scans: Sequence[LabelledScan], c: int) -> np.ndarray:
     """``(k, 2)`` float64 rows of (points, median range m) of every object of class index ``c`` with at least
-    :data:`MIN_OBJECT_POINTS` points."""
+    :data:`MIN_OBJECT_POINTS` points in the labelled field (:func:`class_points`)."""
     rows = []
     for scan in scans:
-        mask = scan.labels == c
+        mask = class_points(scan, c)
         if not mask.any():
             continue
         ids, inverse = np.unique(scan.instances[mask], return_inverse=True)
@@ -168,7 +184,7 @@ def realism_report(generated: Iterable[str | Path], real: Iterable[str | Path], 
         raise InputError("--generated: no generated frame")
     if not rea:
         raise InputError("--real: no real labelled scan")
-    report: dict = {"classes": list(classes), "generated": [s.name for s in gen], "real": [s.name for s in rea],
+    report: dict = {"classes": list(classes), "generated": [s.name for s in gen], "real": [s.name for s in rea], "labelled_field_deg": LABELLED_DEG,
                     "saturated_at": SATURATED, "intensity": {}, "points_per_object": {}, "range_wasserstein_m": {}}
     from scipy.stats import wasserstein_distance
 
@@ -176,11 +192,11 @@ def realism_report(generated: Iterable[str | Path], real: Iterable[str | Path], 
     real_i = [s for s in rea if s.remission is not None]
     report["real_without_remission"] = [s.name for s in rea if s.remission is None]
     for c, name in enumerate(classes):
-        g = np.concatenate([s.remission[s.labels == c] for s in gen_i] or [np.zeros(0)])
-        r = np.concatenate([s.remission[s.labels == c] for s in real_i if s.knows(name)] or [np.zeros(0)])
+        g = np.concatenate([s.remission[class_points(s, c)] for s in gen_i] or [np.zeros(0)])
+        r = np.concatenate([s.remission[class_points(s, c)] for s in real_i if s.knows(name)] or [np.zeros(0)])
         report["intensity"][name] = intensity_figures(g, r)
-        gr = np.concatenate([np.linalg.norm(s.points[s.labels == c], axis=1) for s in gen] or [np.zeros(0)])
-        rr = np.concatenate([np.linalg.norm(s.points[s.labels == c], axis=1) for s in rea if s.knows(name)] or [np.zeros(0)])
+        gr = np.concatenate([np.linalg.norm(s.points[class_points(s, c)], axis=1) for s in gen] or [np.zeros(0)])
+        rr = np.concatenate([np.linalg.norm(s.points[class_points(s, c)], axis=1) for s in rea if s.knows(name)] or [np.zeros(0)])
         report["range_wasserstein_m"][name] = float(wasserstein_distance(gr, rr)) if len(gr) and len(rr) else math.nan
         if name in OBJECT_CLASSES:
             report["points_per_object"][name] = points_per_object(object_sizes(gen, c), object_sizes([s for s in rea if s.knows(name)], c))

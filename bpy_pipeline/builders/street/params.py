@@ -53,8 +53,10 @@ class StreetScene:
     ``ego_vehicle``: the sensor rides on the roof of a car in the right-hand lane of the road along
     x, ``ego_height`` (m) above the road (KITTI's HDL-64E: 1.73), heading +x; frame k places it
     ``k * ego_step`` metres further along, cycling over ``[-ego_span, ego_span]``, so consecutive
-    frames see the street from different places. The ego car's footprint is kept free of road users;
-    its body is not built (recorded scans leave the ego vehicle out).
+    frames see the street from different places. The ego car's footprint and ``ego_headway`` metres of its lane
+    ahead of it are kept free of road users (15 m: about 1.4 s at 40 km/h, the time gap urban drivers keep; without
+    it a car could stand a hand's width in front of the ego's bumper, which no recorded drive shows); its body is not
+    built (recorded scans leave the ego vehicle out).
 
     ``car_fittings``: every vehicle's licence plates and lamps (geometry/vehicles.py ``vehicle_fittings``), tagged
     ``retroreflector`` and ``glossy_paint`` (applied with ``effects.materials.objects: true``); ``false`` leaves them out.
@@ -108,11 +110,12 @@ class StreetScene:
     ego_height: float = field(default=1.73, metadata=meta("m"))
     ego_span: float = field(default=60.0, metadata=meta("m"))
     ego_step: float = field(default=7.3, metadata=meta("m"))
+    ego_headway: float = field(default=15.0, metadata=meta("m", help="free lane ahead of the ego car's front: the gap a driver keeps to the vehicle ahead"))
     car_fittings: bool = True
 
 
 MAX_YARD_TREES = 100.0  # per 100 m^2: one tree a square metre (Distribute Points on Faces draws that many before thinning)
-MAY_BE_ZERO = {"ego_span", "parking_width", "signs", "layout_seed", "crossing_offset", "platoon_probability", "crossing_share", "clearance", "min_in_view",
+MAY_BE_ZERO = {"ego_span", "ego_headway", "parking_width", "signs", "layout_seed", "crossing_offset", "platoon_probability", "crossing_share", "clearance", "min_in_view",
                "setback", "open_share", "street_trees", "tree_spacing", "yard_plants", "yard_trees", "lamp_spacing", "furniture_per_100m", "roadworks",
                "terrain_relief", "terrain_slope"}
 
@@ -158,6 +161,16 @@ def _check_shares(mix, kinds, key: str) -> None:
     if not isinstance(mix, dict) or not mix or any(k not in kinds for k in mix) or any(isinstance(v, bool) or not isinstance(v, (int, float)) or not v >= 0 for v in mix.values()) \
             or sum(mix.values()) <= 0:
         raise InputError(f"{key}: expected shares >= 0 (not all 0) of {', '.join(kinds)}, got {mix}")
+
+
+def ego_keep_free(params: StreetScene, pose: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """The rectangle ``(centre (2,), half size (2,), yaw)`` (m, radians) no road user may enter around the ego car whose roof
+    sensor stands at ``(4, 4)`` ``pose``: its footprint (:data:`~.layout.EGO_HALF`) and ``ego_headway`` metres ahead of it."""
+    from .layout import EGO_HALF
+
+    ahead = float(params.ego_headway) / 2
+    yaw = float(np.arctan2(pose[1, 0], pose[0, 0]))
+    return np.asarray(pose[:2, 3], float) + ahead * np.array([np.cos(yaw), np.sin(yaw)]), np.array(EGO_HALF) + (ahead, 0.0), yaw
 
 
 def ego_station(params: StreetScene, frame: int) -> np.ndarray | None:
