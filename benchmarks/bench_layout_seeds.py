@@ -64,7 +64,8 @@ def default_street_row(seeds: int, kind: str) -> dict:
             crashed += 1
             first = first or f"seed {seed}: {traceback.format_exc(limit=1).splitlines()[-1]}"
     seconds = time.perf_counter() - start
-    return {"builder": f"street (defaults, {kind})", "seeds": seeds, "built": seeds - crashed, "refused_in_one_line": 0, "crashed": crashed, "broke_an_invariant": 0,
+    return {"builder": f"street (defaults, {kind})", "seeds": seeds, "built": seeds - crashed, "refused_in_one_line": 0, "crashed": crashed,
+            "broke_an_invariant": 0,
             "share_that_build_%": round(100.0 * (seeds - crashed) / seeds, 2), "ms_per_seed": round(1000 * seconds / seeds, 1), "first_failure": first}
 
 

@@ -186,7 +186,8 @@ def street_case(seed: int) -> list[str]:
         area = user.where.partition(":")[0]
         corners = user.centre + np.array([[sx * user.half[0], sy * user.half[1]] for sx in (-1, 1) for sy in (-1, 1)]) @ np.array(
             [[np.cos(user.yaw), np.sin(user.yaw)], [-np.sin(user.yaw), np.cos(user.yaw)]])
-        if area in ("lane", "parking") and not all(layout.on_road(c) for c in (corners if area == "lane" else [user.centre])):  # a strip narrower than a car: it overhangs the kerb
+        # a parked car's centre only: a strip narrower than a car lets it overhang the kerb
+        if area in ("lane", "parking") and not all(layout.on_road(c) for c in (corners if area == "lane" else [user.centre])):
             out.append(f"street {user.kind} {i} ({user.where}) reaches off the road ({layout.junction.kind})")
         if (area == "sidewalk" and not layout.on_sidewalk(user.centre)) or (area == "crossing" and not layout.on_crossing(user.centre)):
             out.append(f"street person {i} off its {area} ({layout.junction.kind})")
