@@ -167,7 +167,8 @@ SEMANTIC_KITTI = {  # raw id: (name, BGR colour, training id)
     255: ("moving-motorcyclist", (90, 30, 150), 8), 256: ("moving-on-rails", (255, 0, 0), 5), 257: ("moving-bus", (250, 80, 100), 5),
     258: ("moving-truck", (180, 30, 80), 4), 259: ("moving-other-vehicle", (255, 0, 0), 5),
 }  # fmt: skip
-SEMANTIC_KITTI_LEARNING_MAP_INV = {0: 0, 1: 10, 2: 11, 3: 15, 4: 18, 5: 20, 6: 30, 7: 31, 8: 32, 9: 40, 10: 44, 11: 48, 12: 49, 13: 50, 14: 51, 15: 70, 16: 71, 17: 72, 18: 80, 19: 81}  # fmt: skip
+SEMANTIC_KITTI_LEARNING_MAP_INV = {0: 0, 1: 10, 2: 11, 3: 15, 4: 18, 5: 20, 6: 30, 7: 31, 8: 32, 9: 40, 10: 44, 11: 48, 12: 49, 13: 50, 14: 51, 15: 70, 16: 71,
+                                   17: 72, 18: 80, 19: 81}  # fmt: skip
 LABEL_SPACES = ("semantickitti", "project")
 
 

@@ -74,13 +74,14 @@ def _write_kitti(frame, out: Path) -> list[Path]:
     to_points = sensor_to_output(output.frame, frame.pose, output.kitti.camera.position)
     found = (getattr(getattr(frame, "mixed", None), "rule_log", None) or {}).get("ground")  # a real scan's, where the mixing looked
     ground = kitti.points_ground(frame.pose, output.frame, found, output.kitti.camera.position)
-    return kitti.write_frame_text(out, frame_stem(frame.index), frame.points, frame.boxes, output.kitti.camera, output.boxes.names, _kitti_folder(frame), to_points, ground,
-                                  frame.thin_boxes)
+    return kitti.write_frame_text(out, frame_stem(frame.index), frame.points, frame.boxes, output.kitti.camera, output.boxes.names, _kitti_folder(frame),
+                                  to_points, ground, frame.thin_boxes)
 
 
 def _write_kitti_image(frame, out: Path) -> list[Path]:
     """``image_2``: the camera stage's rendering (output.kitti.camera.render), else the points' projection."""
-    return [kitti.write_image(out, frame_stem(frame.index), frame.points, frame.config.output.kitti.camera, load_class_table().color_lut(), frame.images.get("image_2"), _kitti_folder(frame),
+    return [kitti.write_image(out, frame_stem(frame.index), frame.points, frame.config.output.kitti.camera, load_class_table().color_lut(),
+                              frame.images.get("image_2"), _kitti_folder(frame),
                               sensor_to_output(frame.config.output.frame, frame.pose, frame.config.output.kitti.camera.position))]
 
 

@@ -125,7 +125,8 @@ def calib_text(k: np.ndarray, tr: np.ndarray) -> str:
     def row(name, m):
         return name + ": " + " ".join(f"{v:.12e}" for v in np.asarray(m, float).ravel())
 
-    rows = [row(f"P{i}", p) for i in range(4)] + [row("R0_rect", np.eye(3)), row("Tr_velo_to_cam", tr), row("Tr_imu_to_velo", np.hstack([np.eye(3), np.zeros((3, 1))]))]
+    rows = [row(f"P{i}", p) for i in range(4)] + [row("R0_rect", np.eye(3)), row("Tr_velo_to_cam", tr),
+                                                  row("Tr_imu_to_velo", np.hstack([np.eye(3), np.zeros((3, 1))]))]
     return "\n".join(rows) + "\n"
 
 
@@ -208,7 +209,8 @@ def write_frame(out_dir: str | os.PathLike, stem: str, points: np.ndarray, boxes
                 image: np.ndarray | None = None, folder: str = "training", to_points: np.ndarray | None = None, ground: np.ndarray | None = None) -> list[Path]:
     """One frame of the KITTI layout under ``out_dir/kitti/<folder>`` (see the module docstring); returns the paths:
     :func:`write_frame_text`'s, then :func:`write_image`'s."""
-    return write_frame_text(out_dir, stem, points, boxes, camera, names, folder, to_points, ground) + [write_image(out_dir, stem, points, camera, color_lut, image, folder, to_points)]
+    return (write_frame_text(out_dir, stem, points, boxes, camera, names, folder, to_points, ground)
+            + [write_image(out_dir, stem, points, camera, color_lut, image, folder, to_points)])
 
 
 def write_frame_text(out_dir: str | os.PathLike, stem: str, points: np.ndarray, boxes: np.ndarray, camera, names: dict | None = None, folder: str = "training",
@@ -232,8 +234,8 @@ def write_frame_text(out_dir: str | os.PathLike, stem: str, points: np.ndarray, 
             _text(root / "planes" / f"{stem}.txt", plane_text(plane))]
 
 
-def write_image(out_dir: str | os.PathLike, stem: str, points: np.ndarray, camera, color_lut: np.ndarray, image: np.ndarray | None = None, folder: str = "training",
-                to_points: np.ndarray | None = None) -> Path:
+def write_image(out_dir: str | os.PathLike, stem: str, points: np.ndarray, camera, color_lut: np.ndarray, image: np.ndarray | None = None,
+                folder: str = "training", to_points: np.ndarray | None = None) -> Path:
     """A frame's ``image_2`` PNG under ``out_dir/kitti/<folder>``; returns its path.
 
     image : ``(height, width, 3) uint8`` the camera's rendering of the scene (:func:`bpy_pipeline.blender.camera_render.render_camera`);

@@ -342,7 +342,8 @@ def read_las(path: str | os.PathLike) -> np.ndarray:
     n = int(header["point_count"])
     start = int(header["offset_to_point_data"])
     if start + n * length > len(raw) or start < int(header["header_size"]):
-        raise InputError(f"{path}: LAS header point_count claims {n} points of {length} bytes from byte {start}; the file holds {max(len(raw) - start, 0) // max(length, 1)}")
+        raise InputError(f"{path}: LAS header point_count claims {n} points of {length} bytes from byte {start}; "
+                         f"the file holds {max(len(raw) - start, 0) // max(length, 1)}")
     records = np.frombuffer(raw, record, count=n, offset=start)
     out = np.zeros(n, POINT_DTYPE)
     for axis, name in enumerate("xyz"):

@@ -56,7 +56,8 @@ def write_frame_npy(out_dir: str | os.PathLike, frame_index: int, points: np.nda
     return write_npy_folder(Path(out_dir) / "npy" / frame_stem(frame_index), points)
 
 
-def write_frame_preview(out_dir: str | os.PathLike, frame_index: int, points: np.ndarray, color_lut: np.ndarray, boxes: np.ndarray | None = None, names: dict | None = None) -> Path:
+def write_frame_preview(out_dir: str | os.PathLike, frame_index: int, points: np.ndarray, color_lut: np.ndarray, boxes: np.ndarray | None = None,
+                        names: dict | None = None) -> Path:
     """``OUT/preview/NNNNNN.png``: perspective and top view coloured by ``color_lut`` (k, 3) uint8, ``boxes`` drawn, a legend of ``names``."""
     return write_preview(Path(out_dir) / "preview" / f"{frame_stem(frame_index)}.png", points, color_lut, boxes=boxes, names=names)
 

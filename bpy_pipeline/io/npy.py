@@ -56,7 +56,8 @@ def write_npy_folder(folder: str | os.PathLike, points: np.ndarray, maps: ClassM
         "coord": (np.float32, (3,), lambda s: np.stack([pts["x"][s], pts["y"][s], pts["z"][s]], axis=1).astype(np.float32)),
         "strength": (np.float32, (1,), lambda s: pts["intensity"][s].astype(np.float32).reshape(-1, 1)),
         "segment": (np.int32, (), lambda s: maps.segment(pts["semantic"][s])),
-        "instance": (np.int32, (), lambda s: np.where((pts["instance"][s] == 0) | ~maps.things[pts["semantic"][s]], IGNORE_INDEX, pts["instance"][s].astype(np.int64)).astype(np.int32)),
+        "instance": (np.int32, (), lambda s: np.where((pts["instance"][s] == 0) | ~maps.things[pts["semantic"][s]], IGNORE_INDEX,
+                                                      pts["instance"][s].astype(np.int64)).astype(np.int32)),
     }
     with atomic_dir(folder) as tmp:
         for name in NPY_FILES:  # the bytes of np.save, written a chunk at a time

@@ -28,7 +28,8 @@ from .sustech import label_type
 
 def label_lines(boxes: np.ndarray, names: dict | None = None) -> list[str]:
     """OpenPCDet custom-dataset lines ``x y z dx dy dz heading_angle category_name``."""
-    return [" ".join(f"{v:.4f}" for v in (*box["centre"], *box["size"], float(box["heading"]))) + f" {label_type(str(box['class_name']), names)}" for box in boxes]
+    return [" ".join(f"{v:.4f}" for v in (*box["centre"], *box["size"], float(box["heading"]))) + f" {label_type(str(box['class_name']), names)}"
+            for box in boxes]
 
 
 def write_frame(out_dir: str | os.PathLike, stem: str, points: np.ndarray, boxes, names: dict | None = None) -> list[Path]:

@@ -99,7 +99,8 @@ def read_pcd_fields(path: str | os.PathLike) -> dict[str, np.ndarray]:
     except (KeyError, ValueError, IndexError):
         raise InputError(f"{path}: PCD header lacks FIELDS, SIZE, TYPE, POINTS or DATA, or they are not numbers") from None
     if not (len(fields) == len(sizes) == len(types) == len(counts)) or not fields:
-        raise InputError(f"{path}: PCD header: FIELDS ({len(fields)}), SIZE ({len(sizes)}), TYPE ({len(types)}) and COUNT ({len(counts)}) must list the same fields")
+        raise InputError(f"{path}: PCD header: FIELDS ({len(fields)}), SIZE ({len(sizes)}), TYPE ({len(types)}) and COUNT ({len(counts)}) "
+                         "must list the same fields")
     if len(set(fields)) != len(fields):
         raise InputError(f"{path}: PCD header: FIELDS names a field twice ({' '.join(fields)})")
     for name, size, kind_, count in zip(fields, sizes, types, counts):
@@ -117,7 +118,8 @@ def read_pcd_fields(path: str | os.PathLike) -> dict[str, np.ndarray]:
     if kind == "binary":
         have = len(raw) - position
         if have != n * dtype.itemsize:
-            raise InputError(f"{path}: PCD POINTS claims {n} points of {dtype.itemsize} bytes ({n * dtype.itemsize} bytes); the data holds {have} bytes ({have / dtype.itemsize:.6g} points)")
+            raise InputError(f"{path}: PCD POINTS claims {n} points of {dtype.itemsize} bytes ({n * dtype.itemsize} bytes); "
+                             f"the data holds {have} bytes ({have / dtype.itemsize:.6g} points)")
         data = np.frombuffer(raw, dtype, count=n, offset=position)
         return {f: data[f] for f in fields}
     if kind == "ascii":

@@ -218,7 +218,8 @@ def _read_vertices(f, path: Path) -> np.ndarray:
             else:
                 left = os.fstat(f.fileno()).st_size - f.tell()
                 if count * dtype.itemsize > left:
-                    raise InputError(f"{path}: truncated PLY: element vertex claims {count} vertices of {dtype.itemsize} bytes; the file holds {left // max(dtype.itemsize, 1)}")
+                    raise InputError(f"{path}: truncated PLY: element vertex claims {count} vertices of {dtype.itemsize} bytes; "
+                                     f"the file holds {left // max(dtype.itemsize, 1)}")
                 arr = np.fromfile(f, dtype=dtype, count=count)
                 if len(arr) != count:
                     raise InputError(f"{path}: truncated PLY: {len(arr)} of {count} vertices present")

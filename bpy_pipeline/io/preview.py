@@ -73,7 +73,8 @@ def _png(kind: int, rows: np.ndarray, w: int, level: int, palette: np.ndarray | 
     def chunk(kind: bytes, data: bytes) -> bytes:
         return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
 
-    header = chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, kind, 0, 0, 0)) + (b"" if palette is None else chunk(b"PLTE", np.ascontiguousarray(palette, np.uint8).tobytes()))
+    header = (chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, kind, 0, 0, 0))
+              + (b"" if palette is None else chunk(b"PLTE", np.ascontiguousarray(palette, np.uint8).tobytes())))
     return b"\x89PNG\r\n\x1a\n" + header + chunk(b"IDAT", zlib.compress(filtered, level)) + chunk(b"IEND", b"")
 
 
@@ -141,7 +142,8 @@ def _paint_kernels():
 
     @numba.njit(cache=True, nogil=True)
     def perspective(flat, best, xyz, eye, rotation, colors, focal, half_w, half_h, width, panel_width, height, left):  # pragma: no cover
-        for i in range(len(xyz)):  # the camera frame as _camera has it; in front (depth > 0.1): u = half_w + focal * x / depth, v = half_h + focal * y / depth, depth -depth
+        # the camera frame as _camera has it; in front (depth > 0.1): u = half_w + focal * x / depth, v = half_h + focal * y / depth, depth -depth
+        for i in range(len(xyz)):
             dx, dy, dz = xyz[i, 0] - eye[0], xyz[i, 1] - eye[1], xyz[i, 2] - eye[2]
             cam0 = dx * rotation[0, 0] + dy * rotation[0, 1] + dz * rotation[0, 2]
             cam1 = dx * rotation[1, 0] + dy * rotation[1, 1] + dz * rotation[1, 2]
@@ -175,7 +177,8 @@ def splat(image: np.ndarray, col: np.ndarray, row: np.ndarray, depth: np.ndarray
     best = np.full(pixels, -np.inf) if depth_image is None else depth_image.reshape(-1)
     kernel = _splat_kernel()
     if kernel is not None and image.flags.c_contiguous and best.flags.c_contiguous and (depth_image is None or np.shares_memory(best, depth_image)):
-        kernel(image.reshape(pixels, -1), np.ascontiguousarray(pixel, np.int64), np.ascontiguousarray(depth, np.float64), np.ascontiguousarray(colors, image.dtype).reshape(len(pixel), -1), best)
+        kernel(image.reshape(pixels, -1), np.ascontiguousarray(pixel, np.int64), np.ascontiguousarray(depth, np.float64),
+               np.ascontiguousarray(colors, image.dtype).reshape(len(pixel), -1), best)
         return
     np.maximum.at(best, pixel, depth)
     wins = np.flatnonzero(depth >= best[pixel])
@@ -266,13 +269,15 @@ def median(values: np.ndarray) -> float:
     return float(part[(n - 1) // 2] + part[n // 2]) / 2 if n % 2 == 0 else float(part[n // 2])
 
 
-def render_preview(points: np.ndarray, color_lut: np.ndarray, size: tuple[int, int] = SIZE, dot: int = 1, boxes: np.ndarray | None = None, names: dict | None = None) -> np.ndarray:
+def render_preview(points: np.ndarray, color_lut: np.ndarray, size: tuple[int, int] = SIZE, dot: int = 1, boxes: np.ndarray | None = None,
+                   names: dict | None = None) -> np.ndarray:
     """The preview as an ``(height, width, 3) uint8`` RGB array (see the module docstring and :func:`render_indexed` for the arguments)."""
     index, palette = render_indexed(points, color_lut, size, dot, boxes, names)
     return np.take(palette, index[..., 0], axis=0)
 
 
-def render_indexed(points: np.ndarray, color_lut: np.ndarray, size: tuple[int, int] = SIZE, dot: int = 1, boxes: np.ndarray | None = None, names: dict | None = None) -> tuple[np.ndarray, np.ndarray]:
+def render_indexed(points: np.ndarray, color_lut: np.ndarray, size: tuple[int, int] = SIZE, dot: int = 1, boxes: np.ndarray | None = None,
+                   names: dict | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The preview in palette indices: ``(index, palette)``, ``palette[index[..., 0]]`` being the RGB image.
 
     index : (height, width, 1) uint8, or uint16 where more than 253 classes are present; palette : (m, 3)
@@ -408,7 +413,8 @@ def render_indexed(points: np.ndarray, color_lut: np.ndarray, size: tuple[int, i
     return image, palette
 
 
-def write_preview(path: str | os.PathLike, points: np.ndarray, color_lut: np.ndarray, size: tuple[int, int] = SIZE, dot: int = 1, boxes: np.ndarray | None = None, names: dict | None = None) -> Path:
+def write_preview(path: str | os.PathLike, points: np.ndarray, color_lut: np.ndarray, size: tuple[int, int] = SIZE, dot: int = 1,
+                  boxes: np.ndarray | None = None, names: dict | None = None) -> Path:
     """Write the preview of ``points`` as a PNG (see :func:`render_preview` for the arguments).
 
     An empty cloud gives a valid image of background only. Returns the written path.

@@ -76,7 +76,8 @@ def guess_format(path: Path) -> str:
             return "nuscenes"
         if size % 16 == 0 and size % 20 != 0:
             return "kitti"
-        raise InputError(f"scene.format: cannot tell whether {path} is a nuScenes (5 floats a point) or KITTI (4 floats) scan; give scene.format: nuscenes or kitti")
+        raise InputError(f"scene.format: cannot tell whether {path} is a nuScenes (5 floats a point) or KITTI (4 floats) scan; "
+                         "give scene.format: nuscenes or kitti")
     raise InputError(f"scene.format: cannot guess the format of {path}; give one of {', '.join(FORMATS)}")
 
 
@@ -97,7 +98,8 @@ def read_nuscenes(path: Path) -> RealScan:
     ring_values = data[:, 4]
     bad = ~((ring_values >= 0) & (ring_values < MAX_RINGS) & (ring_values == np.round(ring_values)))
     if bad.any():
-        raise InputError(f"{path}: field ring: expected whole numbers 0 .. {MAX_RINGS - 1}; record {int(np.flatnonzero(bad)[0])} has {ring_values[bad][0]:g} ({int(bad.sum())} records out of range)")
+        raise InputError(f"{path}: field ring: expected whole numbers 0 .. {MAX_RINGS - 1}; "
+                         f"record {int(np.flatnonzero(bad)[0])} has {ring_values[bad][0]:g} ({int(bad.sum())} records out of range)")
     ring = ring_values.astype(np.int64)
     rings = int(ring.max()) + 1 if len(ring) else 0
     organised = rings > 0 and len(data) % rings == 0 and bool((ring == np.tile(np.arange(rings), len(data) // rings)).all())
@@ -117,7 +119,8 @@ def label_path(path: Path) -> Path | None:
 
 def read_kitti(path: Path, labels: bool = False) -> RealScan:
     data = _floats(path, 4, "KITTI: x y z reflectance")
-    scan = RealScan(data[:, :3].copy(), np.clip(data[:, 3], 0.0, 1.0), None, None, False, None, "semantickitti" if labels else "kitti", str(path), ["axes: KITTI velodyne (x forward, y left, z up), unchanged"])
+    scan = RealScan(data[:, :3].copy(), np.clip(data[:, 3], 0.0, 1.0), None, None, False, None, "semantickitti" if labels else "kitti", str(path),
+                    ["axes: KITTI velodyne (x forward, y left, z up), unchanged"])
     if labels:
         found = label_path(path)
         if found is None:
@@ -144,11 +147,13 @@ def read_npy(path: Path) -> RealScan:
         flat = array.transpose(1, 0, 2).reshape(-1, array.shape[2]).astype(np.float64)  # column after column
         ring = np.tile(np.arange(rings), columns)
         intensity = flat[:, 3] / (255.0 if flat[:, 3].max(initial=0) > 1 else 1.0)
-        return RealScan(flat[:, :3], intensity, ring, None, True, rings, "npy", str(path), ["organised (rings, columns, x y z intensity) taken as the sensor frame"])
+        return RealScan(flat[:, :3], intensity, ring, None, True, rings, "npy", str(path),
+                        ["organised (rings, columns, x y z intensity) taken as the sensor frame"])
     if array.ndim == 2 and array.shape[1] >= 3:
         data = array.astype(np.float64)
         intensity = data[:, 3] if data.shape[1] > 3 else np.zeros(len(data))
-        return RealScan(data[:, :3], intensity / (255.0 if intensity.max(initial=0) > 1 else 1.0), None, None, False, None, "npy", str(path), ["points (n, x y z [intensity]) taken as the sensor frame"])
+        return RealScan(data[:, :3], intensity / (255.0 if intensity.max(initial=0) > 1 else 1.0), None, None, False, None, "npy", str(path),
+                        ["points (n, x y z [intensity]) taken as the sensor frame"])
     raise InputError(f"{path}: expected an organised (rings, columns, >= 4) array or (n, >= 3) points, got shape {array.shape}")
 
 

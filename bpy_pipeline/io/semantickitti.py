@@ -241,7 +241,8 @@ def write_index(out_dir: str | os.PathLike, records: list[dict], config) -> list
     split = {"train": by_split["train"], "valid": by_split["val"], "test": by_split["test"]}
     project = config.output.semantickitti.labels == "project"
     table = (semantic_kitti_yaml if project else semantic_kitti_space_yaml)(counts, split, config.output.class_map or None)
-    space = "the project's raw ids (output.semantickitti.labels: project)" if project else "SemanticKITTI's raw ids (labels.yaml semantickitti:, listed under project_classes)"
+    space = ("the project's raw ids (output.semantickitti.labels: project)" if project
+             else "SemanticKITTI's raw ids (labels.yaml semantickitti:, listed under project_classes)")
     written = []
     with atomic_write(out_dir / "semantic-kitti.yaml") as tmp:
         tmp.write_text(f"# The class table of this dataset in the SemanticKITTI devkit's layout (color_map is BGR).\n"
@@ -265,7 +266,8 @@ def write_index(out_dir: str | os.PathLike, records: list[dict], config) -> list
     calib = "".join(line.replace("Tr_velo_to_cam:", "Tr:") + "\n" for line in calib_text(k, tr).splitlines() if line.startswith(("P", "Tr_velo")))
     for sequence, scans in sequences.items():
         folder = out_dir / "sequences" / f"{sequence:02d}"
-        times = [float(r["trajectory"]["start_time_s"]) if isinstance(r.get("trajectory"), dict) and "start_time_s" in r["trajectory"] else r["index"] * period for r in scans]
+        times = [float(r["trajectory"]["start_time_s"]) if isinstance(r.get("trajectory"), dict) and "start_time_s" in r["trajectory"] else r["index"] * period
+                 for r in scans]
         texts = {
             "calib.txt": calib,
             "poses.txt": pose_lines([np.asarray(r["sensor_pose"], float) for r in scans], tr),

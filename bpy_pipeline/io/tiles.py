@@ -3,8 +3,9 @@
 ``export_tiles(points, out, name, settings, rng)`` cuts one cloud (a frame's POINT_DTYPE records,
 e.g. a railway station's 23 M-point scan) into tiles (:mod:`bpy_pipeline.geometry.tiles`) and
 writes each as a Pointcept folder (:func:`~.npy.write_npy_folder`: coord, strength, segment,
-instance; ``segment`` in the coarse classes of labels.yaml with ``coarse``, named in ``coarse.json``) plus ``core.npy`` ((n,) bool: the point lies in the tile's own core, not in the overlap
-it shares with a neighbour)::
+instance; ``segment`` in the coarse classes of labels.yaml with ``coarse``, named in ``coarse.json``)
+plus ``core.npy`` ((n,) bool: the point lies in the tile's own core, not in the overlap it shares
+with a neighbour)::
 
     OUT/<name>/<name>_x<i>_y<j>/{coord,strength,segment,instance,core}.npy
     OUT/<name>/tiles.json        per tile: key, bounds (m), points before and after sampling,

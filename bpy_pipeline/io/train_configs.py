@@ -159,7 +159,8 @@ def openpcdet_dataset_yaml(dataset: str, data_path: str, info_prefix: str, class
         + ("             filter_by_difficulty: [-1],\n" if kitti else "")
         + "          }\n"
         + f"          SAMPLE_GROUPS: {_yaml_list([f'{c}:{sample_groups.get(c, 15)}' for c in classes])}\n"
-        + "          NUM_POINT_FEATURES: 4\n          DATABASE_WITH_FAKELIDAR: False\n          REMOVE_EXTRA_WIDTH: [0.0, 0.0, 0.0]\n          LIMIT_WHOLE_SCENE: True\n\n"
+        + "          NUM_POINT_FEATURES: 4\n          DATABASE_WITH_FAKELIDAR: False\n          REMOVE_EXTRA_WIDTH: [0.0, 0.0, 0.0]\n"
+          "          LIMIT_WHOLE_SCENE: True\n\n"
         + f"        - NAME: random_world_flip\n          ALONG_AXIS_LIST: {flip}\n\n"
         + "        - NAME: random_world_rotation\n          WORLD_ROT_ANGLE: [-0.78539816, 0.78539816]\n\n"
         + "        - NAME: random_world_scaling\n          WORLD_SCALE_RANGE: [0.95, 1.05]\n\n"
@@ -169,7 +170,8 @@ def openpcdet_dataset_yaml(dataset: str, data_path: str, info_prefix: str, class
     )
 
 
-def openpcdet_model_yaml(stock: str, dataset_yaml: str, model_yaml: str, classes: list[str], anchors: dict, header: str, stride: int = 8, data: str = "") -> str:
+def openpcdet_model_yaml(stock: str, dataset_yaml: str, model_yaml: str, classes: list[str], anchors: dict, header: str, stride: int = 8,
+                         data: str = "") -> str:
     """An OpenPCDet model yaml (at ``model_yaml``, its path from ``tools/``): the stock model ``stock`` with this run's
     classes, dataset yaml and anchors (``{type: (size, bottom, matched, unmatched)}``, in ``classes`` order, on a feature
     map of ``stride``); ``data``: the lines of DATA_CONFIG the stock model sets itself (after the dataset yaml's)."""
@@ -210,7 +212,8 @@ def mmdet3d_config(classes: list[str], min_points: dict, point_range: list[float
         + f"point_cloud_range = {point_range}\ndata_root = 'data/kitti/'\nclass_names = {stock}\nmetainfo = dict(classes=class_names)\nbackend_args = None\n\n"
         + "db_sampler = dict(\n    data_root=data_root,\n    info_path=data_root + 'kitti_dbinfos_train.pkl',\n    rate=1.0,\n"
         + f"    prepare=dict(filter_by_difficulty=[-1], filter_by_min_points=dict({', '.join(f'{c}={min_points.get(c, MIN_POINTS)}' for c in stock)})),\n"
-        + f"    classes=class_names,\n    sample_groups=dict({', '.join(f'{c}=15' for c in stock)}),\n    points_loader={points},\n    backend_args=backend_args)\n\n"
+        + f"    classes=class_names,\n    sample_groups=dict({', '.join(f'{c}=15' for c in stock)}),\n    points_loader={points},\n"
+          "    backend_args=backend_args)\n\n"
         + f"train_pipeline = [\n    {points},\n    dict(type='LoadAnnotations3D', with_bbox_3d=True, with_label_3d=True),\n"
         + "    dict(type='ObjectSample', db_sampler=db_sampler, use_ground_plane=True),\n    dict(type='RandomFlip3D', flip_ratio_bev_horizontal=0.5),\n"
         + "    dict(type='GlobalRotScaleTrans', rot_range=[-0.78539816, 0.78539816], scale_ratio_range=[0.95, 1.05]),\n"
@@ -241,7 +244,8 @@ def write_kitti_configs(out_dir: str | os.PathLike, records: list[dict], config)
     """The KITTI layout's OpenPCDet dataset and model yamls and mmdetection3d config (module docstring); none (and none
     left from before) when the train frames hold no sampled object of the stock three classes."""
     root = Path(out_dir) / "kitti"
-    files = [root / "openpcdet_kitti_dataset.yaml", root / "openpcdet_pv_rcnn.yaml", root / "openpcdet_pointpillar.yaml", root / "mmdet3d_pointpillars_kitti.py"]
+    files = [root / "openpcdet_kitti_dataset.yaml", root / "openpcdet_pv_rcnn.yaml", root / "openpcdet_pointpillar.yaml",
+             root / "mmdet3d_pointpillars_kitti.py"]
     sets = split_indices([r["index"] for r in records], config.output.split, config.frames)
     present = sampled_kitti_types(root / "training", sets.get("train", []))
     classes = [c for c in ("Car", "Pedestrian", "Cyclist") if present.get(c)]
@@ -258,13 +262,15 @@ def write_kitti_configs(out_dir: str | os.PathLike, records: list[dict], config)
                f"# The ground lies at z = {ground:.2f} m in the points' frame (KITTI: -1.73): z range and anchors moved by {shift:+.2f} m; "
                f"the camera stands at x, y = {xy[0]:.2f}, {xy[1]:.2f} m, where the forward range starts.\n")
     dataset = openpcdet_dataset_yaml("KittiDataset", "../data/kitti", "kitti", classes, min_points, {"Car": 20, "Pedestrian": 15, "Cyclist": 15},
-                                     point_range, True, "", header + comment + "# Pair: openpcdet_pv_rcnn.yaml or openpcdet_pointpillar.yaml beside it (tools/cfgs/kitti_models/pv_rcnn.yaml, pointpillar.yaml).\n")
+                                     point_range, True, "",
+                                     header + comment + "# Pair: openpcdet_pv_rcnn.yaml or openpcdet_pointpillar.yaml beside it "
+                                                        "(tools/cfgs/kitti_models/pv_rcnn.yaml, pointpillar.yaml).\n")
     anchors = {c: (ANCHORS[c][0], round(ANCHORS[c][1] + shift, 2), ANCHORS[c][2], ANCHORS[c][3]) for c in classes}
     dataset_yaml = "../data/kitti/openpcdet_kitti_dataset.yaml"
     model = openpcdet_model_yaml("cfgs/kitti_models/pv_rcnn.yaml", dataset_yaml, "../data/kitti/openpcdet_pv_rcnn.yaml", classes, anchors, header + comment)
     pillar_range = moved_range(PILLAR_RANGE, shift, xy)
-    pillars = openpcdet_model_yaml("cfgs/kitti_models/pointpillar.yaml", dataset_yaml, "../data/kitti/openpcdet_pointpillar.yaml", classes, anchors, header + comment,
-                                   stride=2, data=pillar_data_config(pillar_range))
+    pillars = openpcdet_model_yaml("cfgs/kitti_models/pointpillar.yaml", dataset_yaml, "../data/kitti/openpcdet_pointpillar.yaml", classes, anchors,
+                                   header + comment, stride=2, data=pillar_data_config(pillar_range))
     mmdet3d = mmdet3d_config(classes, min_points, pillar_range, shift, header + comment)
     return [_write(path, text) for path, text in zip(files, (dataset, model, pillars, mmdet3d))]
 

@@ -52,7 +52,8 @@ def scan_stage(frame: Frame, run: Run) -> None:
         caster = run.casters.caster(frame.buffers, frame.pose, moving_objects(frame))
     frame.caster = caster
     ghost = run.table.id_of("reflection") if config.effects.mirrors.label == "reflection" else None
-    options = {"max_bounces": config.effects.mirrors.max_bounces, "ghost_semantic": ghost, "ideal": config.effects.mirrors.ideal, "chunk_rays": CHUNK_RAYS, "surfaces": scan_surfaces(config), "rng": frame.rng}
+    options = {"max_bounces": config.effects.mirrors.max_bounces, "ghost_semantic": ghost, "ideal": config.effects.mirrors.ideal, "chunk_rays": CHUNK_RAYS,
+               "surfaces": scan_surfaces(config), "rng": frame.rng}
     patterns = run.rays.patterns(frame.index)  # a mirror sensor's leave through its own mirrors
     pose = frame.pose_at if frame.moving else frame.pose  # the scanner casts a static sensor's rays from one pose
     if config.sensor.divergence.active:
@@ -71,7 +72,8 @@ def counts_direct_returns(config: Config, frame: Frame) -> bool:
     draw: the boxes' trace would draw again from the frame's generator). Every return of the scan with no mirror met
     lies on the first object its ray meets, as the trace's do, so the counts are the same."""
     mirrors = config.effects.mirrors
-    return bool(config.output.boxes.formats) and not frame.moving and not config.sensor.divergence.active and not config.sensor.reflector.enabled and mirrors.glass.reflect_fraction in (0.0, 1.0)
+    return (bool(config.output.boxes.formats) and not frame.moving and not config.sensor.divergence.active and not config.sensor.reflector.enabled
+            and mirrors.glass.reflect_fraction in (0.0, 1.0))
 
 
 def timed_pulls(items: Iterable, timings: dict, key: str) -> Iterator:
@@ -105,7 +107,8 @@ def effects_stage(frame: Frame, run: Run) -> None:
             if mask is not None:  # returns lost where the beam split on an edge of the sensor's own mirrors
                 keep = drop_at_edges(points, mask, config.sensor.spec, frame.rng)
                 points, beam = points[keep], beam[keep]
-            points = apply_effects(points, beam, config.effects, frame.rng, threads=run.threads, objects=frame.buffers.objects, pool=run.casters.pool)  # the run's threads
+            # the run's threads
+            points = apply_effects(points, beam, config.effects, frame.rng, threads=run.threads, objects=frame.buffers.objects, pool=run.casters.pool)
             inside = (points["range"] >= spec.min_range) & (points["range"] <= spec.max_range)
             if not inside.all():  # noise never pushes a return past the sensor's limits: such returns are dropped
                 points = points[inside]
@@ -169,7 +172,8 @@ def collect_points(parts: Iterable[np.ndarray], expected: int) -> np.ndarray:
     return out[:n]
 
 
-def scan_buffers(buffers: SceneBuffers, config: Config, rng: np.random.Generator, frame: int = 0, trajectory: Trajectory | None = None) -> tuple[np.ndarray, np.ndarray]:
+def scan_buffers(buffers: SceneBuffers, config: Config, rng: np.random.Generator, frame: int = 0,
+                 trajectory: Trajectory | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Scan exported buffers with the configured sensor and effects: ``(points, pose (4, 4))``.
 
     frame : frame index: a moving sensor's frame k starts k frame times along its path (and a

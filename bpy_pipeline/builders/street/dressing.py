@@ -220,7 +220,8 @@ def hoop_mesh(base, yaw: float, width: float = 0.6, height: float = 0.8, thickne
     a = base + [-s * width / 2, c * width / 2, 0.0]
     b = base + [s * width / 2, -c * width / 2, 0.0]
     up = np.array([0.0, 0.0, height])
-    return primitives.merge([beam_mesh(a - [0, 0, 0.1], a + up, thickness), beam_mesh(b - [0, 0, 0.1], b + up, thickness), beam_mesh(a + up, b + up, thickness)])
+    return primitives.merge([beam_mesh(a - [0, 0, 0.1], a + up, thickness), beam_mesh(b - [0, 0, 0.1], b + up, thickness),
+                             beam_mesh(a + up, b + up, thickness)])
 
 
 def unit_cylinder(sides: int) -> Mesh:
@@ -403,7 +404,8 @@ def dress(p, road_half: float, walk_inner: float, walk_outer: float, kerb_height
             top = height - crown_height / 2.0  # the crown's centre above the ground
             yaw = float(rng.uniform(0.0, 2 * math.pi))
             r = vegetation.default_trunk_radius(height)  # from 0.2 m under the ground into the crown's middle
-            if not (clear_of((x, y), r, ground - 0.2, ground + top) and clear_of((x, y), radius + LEAF_CARD, ground + height - crown_height - LEAF_CARD, ground + height + LEAF_CARD)):
+            if not (clear_of((x, y), r, ground - 0.2, ground + top)
+                    and clear_of((x, y), radius + LEAF_CARD, ground + height - crown_height - LEAF_CARD, ground + height + LEAF_CARD)):
                 return False
             plants.add(k, (x, y, ground + top), yaw, (radius / r0, radius / r0, crown_height / h0))
             trunks.add(0, (x, y, ground - 0.2), 0.0, (r, r, top + 0.2))
@@ -434,7 +436,8 @@ def dress(p, road_half: float, walk_inner: float, walk_outer: float, kerb_height
             if p.terrain:
                 x0, x1 = sorted((sx * block_start, sx * A))
                 y0, y1 = sorted((sy * walk_outer, sy * A))
-                out.parts.append((f"street_terrain_{len(out.parts):03d}", "terrain", REFLECTIVITY["terrain"], terrain_mesh(terrain, x0, x1, y0, y1, p.terrain_step, rng), None))
+                out.parts.append((f"street_terrain_{len(out.parts):03d}", "terrain", REFLECTIVITY["terrain"],
+                                  terrain_mesh(terrain, x0, x1, y0, y1, p.terrain_step, rng), None))
             # plots along both frontages (the second starts behind the first's deepest plot)
             for axis in frontages:
                 s = block_start if axis == 0 else walk_outer + max_setback + p.building_depth

@@ -27,7 +27,8 @@ FACADE_INPUTS = [
     ("Geometry", "NodeSocketGeometry"),
     ("Depth", "NodeSocketFloat", 12.0, "m, the building from its facade line back (to the line's left)", 0.1, 1000.0),
     ("Height", "NodeSocketFloat", 10.0, "m, the building's top above its facade line (the line lies 0.3 m under the lowest ground)", 0.1, 1000.0),
-    ("Instance", "NodeSocketInt", 0, "instance id of what the group makes, stored as the named attribute lidar_instance the export reads (0: the object's lidar_instance)", 0, 2**31 - 1),
+    ("Instance", "NodeSocketInt", 0,
+     "instance id of what the group makes, stored as the named attribute lidar_instance the export reads (0: the object's lidar_instance)", 0, 2**31 - 1),
 ]
 
 

@@ -308,7 +308,8 @@ def street_layout(p, rng: np.random.Generator, clear: SensorPoses = NO_POSES) ->
                 if across0 + 0.5 > R - 0.1:
                     break
                 lo, hi = sorted((sign * c0, sign * c1))
-                marks.append(box_mesh(lo, hi, across0, across0 + 0.5, 0.0, MARKING_THICKNESS) if axis == 0 else box_mesh(across0, across0 + 0.5, lo, hi, 0.0, MARKING_THICKNESS))
+                marks.append(box_mesh(lo, hi, across0, across0 + 0.5, 0.0, MARKING_THICKNESS) if axis == 0
+                             else box_mesh(across0, across0 + 0.5, lo, hi, 0.0, MARKING_THICKNESS))
             for s in np.arange(starts[axis, sign] + 1.0, A - 3.0, 6.0):  # dashed centre line beyond the crossing
                 lo, hi = sorted((sign * s, sign * (s + 3.0)))
                 marks.append(box_mesh(lo, hi, -0.06, 0.06, 0.0, MARKING_THICKNESS) if axis == 0 else box_mesh(-0.06, 0.06, lo, hi, 0.0, MARKING_THICKNESS))
@@ -455,7 +456,8 @@ def place_users(p, layout: StreetLayout, rng: np.random.Generator, views=(), tri
     last_in_lane: dict[int, RoadUser] = {}
 
     grow = p.clearance / 2.0
-    reach = {"obstacles": (np.array([c[:2] for c, _, _ in obstacles], float).reshape(-1, 2), np.array([math.hypot(h[0] + grow, h[1] + grow) for _, h, _ in obstacles])),
+    reach = {"obstacles": (np.array([c[:2] for c, _, _ in obstacles], float).reshape(-1, 2),
+                           np.array([math.hypot(h[0] + grow, h[1] + grow) for _, h, _ in obstacles])),
              "users": (np.zeros((0, 2)), np.zeros(0))}  # centres (n, 2) and circumscribed radii grown by clearance / 2 (n,)
 
     def free(centre, half, yaw) -> bool:
@@ -481,7 +483,8 @@ def place_users(p, layout: StreetLayout, rng: np.random.Generator, views=(), tri
             return False
         out.users.append(user)
         centres, radii = reach["users"]
-        reach["users"] = (np.vstack([centres, np.asarray(user.centre, float)[None, :2]]), np.append(radii, math.hypot(user.half[0] + grow, user.half[1] + grow)))
+        reach["users"] = (np.vstack([centres, np.asarray(user.centre, float)[None, :2]]),
+                          np.append(radii, math.hypot(user.half[0] + grow, user.half[1] + grow)))
         return True
 
     shares = np.array([p.vehicle_mix.get(k, 0.0) for k in VEHICLES], float)
@@ -583,7 +586,8 @@ def _sidewalk_point(layout: StreetLayout, rng) -> tuple[np.ndarray, int]:
     rects = np.array(layout.walks, float)
     size = np.column_stack([rects[:, 1] - rects[:, 0], rects[:, 3] - rects[:, 2]])
     margin = np.minimum(0.4, size / 2)  # a sidewalk narrower than 0.8 m: its middle
-    x0, x1, y0, y1 = (rects + np.column_stack([margin[:, 0], -margin[:, 0], margin[:, 1], -margin[:, 1]]))[int(rng.choice(len(rects), p=size.prod(1) / size.prod(1).sum()))]
+    x0, x1, y0, y1 = (rects + np.column_stack([margin[:, 0], -margin[:, 0], margin[:, 1], -margin[:, 1]]))[
+        int(rng.choice(len(rects), p=size.prod(1) / size.prod(1).sum()))]
     return np.array([rng.uniform(x0, x1), rng.uniform(y0, y1)]), 0 if x1 - x0 > y1 - y0 else 1
 
 
@@ -613,7 +617,8 @@ def user_meshes(user: RoadUser, rng: np.random.Generator, fittings: bool = True)
         v, t, _ = human.body_mesh(person.a, person.b, person.radius, 8, 2)
         return [("body", "person", "diffuse", draw_reflectivity(rng, CLOTHING), (v, t))]
     parts = two_wheeler_parts(user.kind, user.size)
-    out = [(name, user.kind, "diffuse", REFLECTIVITY["frame"] if name == "frame" else REFLECTIVITY["tyre"], transformed(mesh, user.centre, user.yaw, user.z)) for name, mesh in parts.items()]
+    out = [(name, user.kind, "diffuse", REFLECTIVITY["frame"] if name == "frame" else REFLECTIVITY["tyre"],
+            transformed(mesh, user.centre, user.yaw, user.z)) for name, mesh in parts.items()]
     angles = human.sample_pose("sitting", rng, build)
     seat = saddle_height(user.kind, user.size)
     c, s = math.cos(user.yaw), math.sin(user.yaw)

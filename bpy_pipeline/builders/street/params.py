@@ -63,7 +63,8 @@ class StreetScene:
     """
 
     arm_length: float = field(default=100.0, metadata=meta("m"))
-    junction_mix: dict = field(default_factory=lambda: {"cross": 1.0}, metadata=meta("", help="shares of the junction kinds drawn per layout: cross, t_junction, straight"))
+    junction_mix: dict = field(default_factory=lambda: {"cross": 1.0},
+                               metadata=meta("", help="shares of the junction kinds drawn per layout: cross, t_junction, straight"))
     lanes_per_direction: int = field(default=1, metadata=meta(""))
     lane_width: float = field(default=3.5, metadata=meta("m"))
     parking_width: float = field(default=2.2, metadata=meta("m"))
@@ -115,9 +116,9 @@ class StreetScene:
 
 
 MAX_YARD_TREES = 100.0  # per 100 m^2: one tree a square metre (Distribute Points on Faces draws that many before thinning)
-MAY_BE_ZERO = {"ego_span", "ego_headway", "parking_width", "signs", "layout_seed", "crossing_offset", "platoon_probability", "crossing_share", "clearance", "min_in_view",
-               "setback", "open_share", "street_trees", "tree_spacing", "yard_plants", "yard_trees", "lamp_spacing", "furniture_per_100m", "roadworks",
-               "terrain_relief", "terrain_slope"}
+MAY_BE_ZERO = {"ego_span", "ego_headway", "parking_width", "signs", "layout_seed", "crossing_offset", "platoon_probability", "crossing_share", "clearance",
+               "min_in_view", "setback", "open_share", "street_trees", "tree_spacing", "yard_plants", "yard_trees", "lamp_spacing", "furniture_per_100m",
+               "roadworks", "terrain_relief", "terrain_slope"}
 
 
 def check(params: StreetScene, where: str) -> None:
@@ -138,7 +139,8 @@ def check(params: StreetScene, where: str) -> None:
     half_road = params.lanes_per_direction * params.lane_width + params.parking_width
     reach = half_road + params.kerb_width + params.crossing_offset + params.crossing_width + 10.0
     if params.arm_length < reach:
-        raise InputError(f"{where}.arm_length: must be at least {reach:.1f} m (the road's half width, kerb, crossing and 10 m of lane), got {params.arm_length}")
+        raise InputError(f"{where}.arm_length: must be at least {reach:.1f} m (the road's half width, kerb, crossing and 10 m of lane), "
+                         f"got {params.arm_length}")
     from .layout import JUNCTIONS, VEHICLES
     from .dressing import BOUNDARIES
 
@@ -150,7 +152,8 @@ def check(params: StreetScene, where: str) -> None:
         raise InputError(f"{where}.tree_spacing: street trees stand at least 2 m apart, got {list(params.tree_spacing)}")
 
     unknown = [k for k in params.vehicle_mix if k not in VEHICLES]
-    if unknown or not params.vehicle_mix or any(not isinstance(v, (int, float)) or v < 0 for v in params.vehicle_mix.values()) or sum(params.vehicle_mix.values()) <= 0:
+    if unknown or not params.vehicle_mix or any(not isinstance(v, (int, float)) or v < 0 for v in params.vehicle_mix.values()) \
+            or sum(params.vehicle_mix.values()) <= 0:
         raise InputError(f"{where}.vehicle_mix: expected shares >= 0 (not all 0) of {', '.join(VEHICLES)}, got {params.vehicle_mix}")
     for key in ("vehicles", "parked", "bicycles", "motorcycles", "pedestrians", "platoon_gap"):
         check_distribution(getattr(params, key), f"{where}.{key}", low=0.0)
@@ -158,8 +161,8 @@ def check(params: StreetScene, where: str) -> None:
 
 def _check_shares(mix, kinds, key: str) -> None:
     """``mix`` must map some of ``kinds`` to numbers >= 0, not all 0; else one line naming ``key``."""
-    if not isinstance(mix, dict) or not mix or any(k not in kinds for k in mix) or any(isinstance(v, bool) or not isinstance(v, (int, float)) or not v >= 0 for v in mix.values()) \
-            or sum(mix.values()) <= 0:
+    if not isinstance(mix, dict) or not mix or any(k not in kinds for k in mix) \
+            or any(isinstance(v, bool) or not isinstance(v, (int, float)) or not v >= 0 for v in mix.values()) or sum(mix.values()) <= 0:
         raise InputError(f"{key}: expected shares >= 0 (not all 0) of {', '.join(kinds)}, got {mix}")
 
 
@@ -189,7 +192,8 @@ def release_ego(params: StreetScene, raw_scene: dict, sensor_data: dict) -> Stre
     if params.ego_vehicle:
         for key in ("position", "trajectory"):
             if sensor_data.get(key) is not None:
-                raise InputError(f"sensor.{key}: scene.ego_vehicle places the sensor on the ego car's roof; leave sensor.{key} out or set scene.ego_vehicle: false")
+                raise InputError(f"sensor.{key}: scene.ego_vehicle places the sensor on the ego car's roof; "
+                                 f"leave sensor.{key} out or set scene.ego_vehicle: false")
     return params
 
 
@@ -202,4 +206,5 @@ def build(params: StreetScene, context: BuildContext) -> BuildResult:
 
 # The sparse-camera thesis: three flash cameras on a 2 m post at a corner of the intersection,
 # looking across it (the platform's yaw 45 deg points the middle camera at the centre).
-register_builder("street", Builder(StreetScene, build, check, station=ego_station, release_sensor=release_ego, sensor={"rig": "flash_post_240", "position": [-7.6, -7.6, 0.15], "rotation_deg": [0.0, 0.0, 45.0]}, boxes=True))
+register_builder("street", Builder(StreetScene, build, check, station=ego_station, release_sensor=release_ego,
+                                   sensor={"rig": "flash_post_240", "position": [-7.6, -7.6, 0.15], "rotation_deg": [0.0, 0.0, 45.0]}, boxes=True))

@@ -70,8 +70,10 @@ def planting_group() -> bpy.types.NodeTree:
     others = b.out(b.node("GeometryNodeRealizeInstances", {"Geometry": b.out(b.node("GeometryNodeObjectInfo", {"Object": g("Keep Clear Of")},
                                                                                         options={"transform_space": "RELATIVE"}), "Geometry")}))
     near = b.out(b.node("GeometryNodeProximity", {"Geometry": others}, options={"target_element": "POINTS"}), "Distance")
-    any_other = b.compare("GREATER_THAN", b.out(b.node("GeometryNodeAttributeDomainSize", {"Geometry": others}, options={"component": "MESH"}), "Point Count"), 0, data_type="INT")
-    too_near = b.out(b.node("FunctionNodeBooleanMath", {0: any_other, 1: b.compare("LESS_THAN", near, g("Clearance"))}, operation="AND"))  # no geometry: nothing near
+    any_other = b.compare("GREATER_THAN", b.out(b.node("GeometryNodeAttributeDomainSize", {"Geometry": others}, options={"component": "MESH"}), "Point Count"),
+                          0, data_type="INT")
+    # no geometry: nothing near
+    too_near = b.out(b.node("FunctionNodeBooleanMath", {0: any_other, 1: b.compare("LESS_THAN", near, g("Clearance"))}, operation="AND"))
     points = b.out(b.node("GeometryNodeDeleteGeometry", {"Geometry": b.out(distribute, "Points"), "Selection": too_near},
                           options={"domain": "POINT"}))
     height = uniform(g("Height Min"), g("Height Max"), 1)

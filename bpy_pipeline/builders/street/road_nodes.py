@@ -42,14 +42,16 @@ PARTS = ("road", "kerbs", "sidewalks")  # the Part input's values, in order
 ROAD_INPUTS = [
     ("Geometry", "NodeSocketGeometry"),
     ("Part", "NodeSocketInt", 0, "what to build: 0 the carriageway, 1 the kerbs, 2 the sidewalks", 0, 2),
-    ("Junction", "NodeSocketInt", 0, "0 four arms (every further edge crosses the first), 1 a T-junction (every further edge an arm from the centre out), 2 a straight road (the first edge alone)", 0, 2),
+    ("Junction", "NodeSocketInt", 0, "0 four arms (every further edge crosses the first), 1 a T-junction (every further edge an arm from the centre out), "
+     "2 a straight road (the first edge alone)", 0, 2),
     ("Lanes", "NodeSocketInt", 1, "drive lanes per direction", 1, 16),
     ("Lane Width", "NodeSocketFloat", 3.5, "m, one drive lane", 0.5, 10.0),
     ("Parking Width", "NodeSocketFloat", 2.2, "m, the parking strip by each kerb (0: none)", 0.0, 10.0),
     ("Kerb Width", "NodeSocketFloat", 0.15, "m, the kerb across", 0.01, 2.0),
     ("Kerb Height", "NodeSocketFloat", 0.15, "m, the kerb's and the sidewalk's top above the road", 0.0, 1.0),
     ("Sidewalk Width", "NodeSocketFloat", 3.5, "m, the sidewalk beyond the kerb", 0.1, 50.0),
-    ("Instance", "NodeSocketInt", 0, "instance id of what the group makes, stored as the named attribute lidar_instance the export reads (0: the object's lidar_instance)", 0, 2**31 - 1),
+    ("Instance", "NodeSocketInt", 0,
+     "instance id of what the group makes, stored as the named attribute lidar_instance the export reads (0: the object's lidar_instance)", 0, 2**31 - 1),
 ]
 
 
@@ -88,7 +90,8 @@ def _rectangles(b: GroupBuilder, inner, width, height) -> bpy.types.NodeSocket:
     rectangle = b.out(b.node("GeometryNodeCurvePrimitiveQuadrilateral", {"Width": width, "Height": height}, options={"mode": "RECTANGLE"}))
     centre = b.math("ADD", inner, b.math("MULTIPLY", width, 0.5))
     lift = b.math("MULTIPLY", height, -0.5)  # Curve to Mesh with Z-up normals turns the profile's y down
-    sides = [b.out(b.node("GeometryNodeTransform", {"Geometry": rectangle, "Translation": b.combine(b.math("MULTIPLY", centre, sign), lift, 0.0)})) for sign in (-1.0, 1.0)]
+    sides = [b.out(b.node("GeometryNodeTransform", {"Geometry": rectangle, "Translation": b.combine(b.math("MULTIPLY", centre, sign), lift, 0.0)}))
+             for sign in (-1.0, 1.0)]
     return _join(b, *sides)
 
 
@@ -113,7 +116,8 @@ def road_group() -> bpy.types.NodeTree:
     def sweep(curve, profile):
         return b.out(b.node("GeometryNodeCurveToMesh", {"Curve": curve, "Profile Curve": profile, "Fill Caps": True}))
 
-    line = b.out(b.node("GeometryNodeCurvePrimitiveLine", {"Start": b.combine(b.math("MULTIPLY", half_road, -1.0), 0.0, 0.0), "End": b.combine(half_road, 0.0, 0.0)}))
+    line = b.out(b.node("GeometryNodeCurvePrimitiveLine",
+                        {"Start": b.combine(b.math("MULTIPLY", half_road, -1.0), 0.0, 0.0), "End": b.combine(half_road, 0.0, 0.0)}))
     kerb = _rectangles(b, half_road, g("Kerb Width"), g("Kerb Height"))
     walk = _rectangles(b, inner, g("Sidewalk Width"), g("Kerb Height"))
     # four arms: the crossing road cut at its middle
@@ -173,5 +177,6 @@ def road_object(name: str, part: str, params, collection: bpy.types.Collection, 
     mesh.update()
     obj = bpy.data.objects.new(name, mesh)
     collection.objects.link(obj)
-    add_group_modifier(obj, road_group(), {"Part": PARTS.index(part), "Junction": list(JUNCTIONS).index(j.kind), "Instance": int(instance)} | road_inputs(params))
+    add_group_modifier(obj, road_group(),
+                       {"Part": PARTS.index(part), "Junction": list(JUNCTIONS).index(j.kind), "Instance": int(instance)} | road_inputs(params))
     return obj

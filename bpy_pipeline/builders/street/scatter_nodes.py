@@ -38,7 +38,8 @@ SCATTER_INPUTS = [
     ("Density", "NodeSocketFloat", 1.0, "share of the items kept (1: every item; less thins them at random)", 0.0, 1.0),
     ("Seed", "NodeSocketInt", 0, "which items Density keeps"),
     ("Scale", "NodeSocketFloat", 1.0, "every item's scale times this", 0.0, 100.0),
-    ("Instance", "NodeSocketInt", 0, "instance id of what the group makes, stored as the named attribute lidar_instance the export reads (0: the object's lidar_instance)", 0, 2**31 - 1),
+    ("Instance", "NodeSocketInt", 0,
+     "instance id of what the group makes, stored as the named attribute lidar_instance the export reads (0: the object's lidar_instance)", 0, 2**31 - 1),
     ("Realize", "NodeSocketBool", False, "realize the instances into one mesh (the export reads instances as they are)"),
 ]
 
@@ -55,8 +56,10 @@ def scatter_group() -> bpy.types.NodeTree:
     def attribute(name: str, data_type: str) -> bpy.types.NodeSocket:
         return b.out(b.node("GeometryNodeInputNamedAttribute", {"Name": name}, data_type=data_type), "Attribute")
 
-    prototypes = b.node("GeometryNodeCollectionInfo", {"Collection": g("Prototypes"), "Separate Children": True, "Reset Children": True}, options={"transform_space": "ORIGINAL"})
-    keep = b.out(b.node("FunctionNodeRandomValue", {"Probability": g("Density"), "Seed": g("Seed")}, data_type="BOOLEAN"), "Value")  # the available (boolean) one
+    prototypes = b.node("GeometryNodeCollectionInfo", {"Collection": g("Prototypes"), "Separate Children": True, "Reset Children": True},
+                        options={"transform_space": "ORIGINAL"})
+    # the available (boolean) one
+    keep = b.out(b.node("FunctionNodeRandomValue", {"Probability": g("Density"), "Seed": g("Seed")}, data_type="BOOLEAN"), "Value")
     rotation = b.out(b.node("FunctionNodeEulerToRotation", {"Euler": b.combine(0.0, 0.0, attribute("yaw", "FLOAT"))}))
     scale = b.vector_math("SCALE", attribute("scale", "FLOAT_VECTOR"), scale=g("Scale"))
     instances = b.node(

@@ -49,7 +49,8 @@ class Intersection:
         self.layout = street.street_layout(params, np.random.default_rng(params.layout_seed), sensor_poses)
         self.collection = scene_collection()
         prototypes = prototypes_collection(self.collection)
-        self.static = [tag(self._static_object(part, prototypes), part.class_name, part.material, part.reflectivity, part.instance) for part in self.layout.parts]
+        self.static = [tag(self._static_object(part, prototypes), part.class_name, part.material, part.reflectivity, part.instance)
+                       for part in self.layout.parts]
         planting_instance = max((part.instance or 0 for part in self.layout.parts), default=0) + 1  # after every static part's id
         trunks = next((obj for obj in self.static if obj.name == "street_trunks"), None)
         self.static.append(planting_object(self.layout.yards, params, self.collection, prototypes, planting_instance, trunks))
@@ -102,7 +103,8 @@ class Intersection:
             tag(obj, class_name, material, reflectivity, instance)
         for obj in kept[len(parts) :]:  # an empty mesh exports nothing
             fill_mesh(obj.data, np.zeros((0, 3)), np.zeros((0, 3), np.int32))
-        return [(obj.name, {"lidar_class": class_name, "lidar_material": material, "lidar_reflectivity": float(reflectivity), "lidar_instance": int(instance)}, *mesh)
+        return [(obj.name, {"lidar_class": class_name, "lidar_material": material, "lidar_reflectivity": float(reflectivity),
+                            "lidar_instance": int(instance)}, *mesh)
                 for obj, (_, class_name, material, reflectivity, instance, mesh) in zip(kept, parts)]  # fmt: skip
 
     def populate(self, rng: np.random.Generator, view=None):
@@ -133,7 +135,8 @@ class Intersection:
             "platooning": placement.platoons,
             "fov_aware": bool(views) and bool(self.params.fov_aware),
             "placed": [
-                {"instance": USER_INSTANCE + k, "kind": u.kind, "where": u.where, "centre": np.round(u.centre, 3).tolist(), "yaw": round(float(u.yaw), 4), "size": np.round(u.size, 3).tolist()}
+                {"instance": USER_INSTANCE + k, "kind": u.kind, "where": u.where, "centre": np.round(u.centre, 3).tolist(), "yaw": round(float(u.yaw), 4),
+                 "size": np.round(u.size, 3).tolist()}
                 for k, u in enumerate(placement.users)
             ],
         }

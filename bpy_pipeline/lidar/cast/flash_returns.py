@@ -78,7 +78,8 @@ def footprint_directions(spec: SensorSpec, sub: int) -> np.ndarray:
     return out
 
 
-def flash_images(buffers, spec: SensorSpec, pose: np.ndarray, sub: int = 3, separation: float = 0.3, max_returns: int = 2, surfaces=None, threads: int | None = None) -> FlashImages:
+def flash_images(buffers, spec: SensorSpec, pose: np.ndarray, sub: int = 3, separation: float = 0.3, max_returns: int = 2, surfaces=None,
+                 threads: int | None = None) -> FlashImages:
     """The :class:`FlashImages` of a flash camera of ``spec`` at ``pose`` (4, 4) in ``buffers`` (see the module docstring)."""
     rows, columns = int(spec.channels), int(spec.columns)
     directions = footprint_directions(spec, sub).reshape(-1, 3)

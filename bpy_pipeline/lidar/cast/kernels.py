@@ -46,39 +46,45 @@ def compiled() -> SimpleNamespace | None:
     from . import numba_kernels as nk
 
     traced = nk.register_embree()
-    return SimpleNamespace(fill_diffuse=nk.fill_diffuse, trace_rays=nk.trace_rays, traces=traced, back_face_rays=nk.back_face_rays, triangle_planes=nk.triangle_planes, cone_pairs=nk.cone_pairs, cone_blocks=nk.cone_blocks)
+    return SimpleNamespace(fill_diffuse=nk.fill_diffuse, trace_rays=nk.trace_rays, traces=traced, back_face_rays=nk.back_face_rays,
+                           triangle_planes=nk.triangle_planes, cone_pairs=nk.cone_pairs, cone_blocks=nk.cone_blocks)
 
 
 NO_PARTS = (np.zeros(0, np.uint64), (IDENTITY, IDENTITY), np.zeros((0, 3)), np.zeros(0, np.float32))  # handles, part maps, shifts, limits: Embree not called
 
 
-def fill_diffuse(kernels: SimpleNamespace, tfar, prim, prim_triangle, moved, origins, directions, caster, objects, ring, time, min_range, max_distance, points, beam, ray, ray_base: int = 0):
+def fill_diffuse(kernels: SimpleNamespace, tfar, prim, prim_triangle, moved, origins, directions, caster, objects, ring, time, min_range, max_distance, points,
+                 beam, ray, ray_base: int = 0):
     """Records of the diffuse returns from Embree's answer ``tfar``, ``prim`` (n,); returns ``(count, front, back, specular)``.
 
     Records go into the first ``count`` rows of ``points`` and ``beam`` (room for n), their ray
     indices (+ ``ray_base``) into ``ray``; ``front``, ``back`` (k,) bool flag the objects hit from
     the front and from behind; ``specular`` (s,) int64 the rays left to the numpy path (glass, mirrors).
     """
-    return _fill(kernels, False, *NO_PARTS, tfar, prim, prim_triangle, moved, origins, directions, caster, objects, ring, time, min_range, max_distance, points, beam, ray, ray_base)
+    return _fill(kernels, False, *NO_PARTS, tfar, prim, prim_triangle, moved, origins, directions, caster, objects, ring, time, min_range, max_distance, points,
+                 beam, ray, ray_base)
 
 
-def trace_fill(kernels: SimpleNamespace, caster, far, origins, directions, objects, ring, time, min_range, max_distance, points, beam, ray, tfar, prim, ray_base: int = 0):
+def trace_fill(kernels: SimpleNamespace, caster, far, origins, directions, objects, ring, time, min_range, max_distance, points, beam, ray, tfar, prim,
+               ray_base: int = 0):
     """:func:`fill_diffuse` with Embree called inside the pass, on the caster's scenes; Embree's answer goes into ``tfar``, ``prim``.
 
     far : (n,) float32 the rays' limits; origins (1, 3) or (n, 3), directions (n, 3) float64, local
     frame. Needs ``kernels.traces`` and ``caster.embree_handles``.
     """
     prim_triangle = IDENTITY if caster.embree_triangle is None else caster.embree_triangle
-    return _fill(kernels, True, caster.embree_handles, caster.part_triangle, caster.part_shift, far, tfar, prim, prim_triangle, NO_RAYS, origins, directions, caster, objects, ring, time, min_range, max_distance, points, beam, ray, ray_base)
+    return _fill(kernels, True, caster.embree_handles, caster.part_triangle, caster.part_shift, far, tfar, prim, prim_triangle, NO_RAYS, origins, directions,
+                 caster, objects, ring, time, min_range, max_distance, points, beam, ray, ray_base)
 
 
-def _fill(kernels, trace, handles, part_triangle, part_shift, far, tfar, prim, prim_triangle, moved, origins, directions, caster, objects, ring, time, min_range, max_distance, points, beam, ray, ray_base):
+def _fill(kernels, trace, handles, part_triangle, part_shift, far, tfar, prim, prim_triangle, moved, origins, directions, caster, objects, ring, time,
+          min_range, max_distance, points, beam, ray, ray_base):
     """``kernels.fill_diffuse`` (:func:`.numba_kernels.fill_diffuse`) with the caster's and objects' arrays; returns ``(count, front, back, specular)``."""
     front, back = np.zeros(len(objects), np.bool_), np.zeros(len(objects), np.bool_)
     specular = np.empty(len(directions), np.int64)
     scene = (caster.plane_normal, caster.plane_offset, caster.triangle_object, objects.material, objects.semantic, objects.instance, objects.reflectivity)
-    count, m = kernels.fill_diffuse(trace, handles, part_triangle, part_shift, far, tfar, prim, prim_triangle, moved, origins, directions, scene, ring, time, float(min_range), float(max_distance), int(ray_base),
-                                    points, beam, ray, front, back, specular)  # fmt: skip
+    count, m = kernels.fill_diffuse(trace, handles, part_triangle, part_shift, far, tfar, prim, prim_triangle, moved, origins, directions, scene, ring, time,
+                                    float(min_range), float(max_distance), int(ray_base), points, beam, ray, front, back, specular)  # fmt: skip
     return count, front, back, specular[:m]
 
 

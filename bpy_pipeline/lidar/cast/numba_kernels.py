@@ -52,7 +52,8 @@ jit = numba.njit(nogil=True, cache=True, error_model="numpy", fastmath=False)
 
 
 @jit
-def fill_diffuse(trace, handles, part_triangle, part_shift, far, tfar, prim, prim_triangle, moved, origins, directions, scene, ring, time, min_range, max_distance, ray_base, points, beam, ray, front, back, specular_out):
+def fill_diffuse(trace, handles, part_triangle, part_shift, far, tfar, prim, prim_triangle, moved, origins, directions, scene, ring, time, min_range,
+                 max_distance, ray_base, points, beam, ray, front, back, specular_out):
     """Records of the rays whose hit returns from a diffuse surface; returns ``(records, specular rays)``.
 
     trace : False: ``tfar`` (n,) float32 and ``prim`` (n,) int32 hold Embree's answer (-1: a miss);
@@ -202,7 +203,8 @@ def trace_rays(handles, part_triangle, part_shift, far, origins, directions, tfa
     word, real, address = ray_hit()
     for i in range(n):
         j = 0 if shared else i
-        tfar[i], prim[i] = nearest_hit(handles, part_triangle, part_shift, word, real, address, origins[j, 0], origins[j, 1], origins[j, 2], directions[i, 0], directions[i, 1], directions[i, 2], far[i])
+        tfar[i], prim[i] = nearest_hit(handles, part_triangle, part_shift, word, real, address, origins[j, 0], origins[j, 1], origins[j, 2], directions[i, 0],
+                                       directions[i, 1], directions[i, 2], far[i])
 
 
 @jit

@@ -222,7 +222,8 @@ class RayCaster:
     farther than :data:`MAX_COORDINATE` from the local origin.
     """
 
-    def __init__(self, buffers: SceneBuffers, frame=None, threads: int | None = None, chunk: int = 32768, kernel: str | None = None, *, static: StaticPart | None = None, record_pool: RecordPool | None = None, pool: ThreadPoolExecutor | None = None):
+    def __init__(self, buffers: SceneBuffers, frame=None, threads: int | None = None, chunk: int = 32768, kernel: str | None = None, *,
+                 static: StaticPart | None = None, record_pool: RecordPool | None = None, pool: ThreadPoolExecutor | None = None):
         if len(buffers.triangles):
             buffers.check()
         vertices = np.asarray(buffers.vertices, np.float64)
@@ -276,7 +277,8 @@ class RayCaster:
         # For the compiled pass that calls Embree itself: the parts' scenes and primitive maps ((0,): the identity)
         handles = [p.handle for p in self.parts]
         self.embree_handles = np.array(handles, np.uint64) if all(handles) else None
-        self.part_triangle = tuple(p.triangle if p.triangle is not None else np.zeros(0, np.int64) for p in self.parts) + (np.zeros(0, np.int64),) * (2 - len(self.parts))
+        self.part_triangle = (tuple(p.triangle if p.triangle is not None else np.zeros(0, np.int64) for p in self.parts)
+                              + (np.zeros(0, np.int64),) * (2 - len(self.parts)))
         self._pool = pool
         self._closed: dict[int, bool] = {}
         self._corner_scales = None
@@ -327,7 +329,8 @@ class RayCaster:
         def run(start):
             s = slice(start, start + self.chunk)
             if traces:  # Embree called from the compiled pass: the same hits, without embreex's arrays per call (about half of a small call's time)
-                self.kernels.trace_rays(self.embree_handles, self.part_triangle, self.part_shift, far[s], origins32[s], directions32[s], tfar_out[s], prim_out[s])
+                self.kernels.trace_rays(self.embree_handles, self.part_triangle, self.part_shift, far[s],
+                                        origins32[s], directions32[s], tfar_out[s], prim_out[s])
                 return
             limit = np.array(far[s], np.float32)  # a copy: embreex writes the hits' distances into it
             d32 = directions32[s] if directions32.dtype == np.float32 else np.ascontiguousarray(directions32[s], np.float32)

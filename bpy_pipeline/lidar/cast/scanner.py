@@ -187,7 +187,8 @@ def trace_beams(
         material = objects.material[obj]
         beam = i if rows is None else rows[i]
         if rows is None and not (material != DIFFUSE).any():  # one segment, only diffuse hits: nothing to gather
-            beams = Beams(beam, path, point, hits.triangle, np.zeros(len(i), np.uint8), np.full(len(i), -1, np.int32), np.ones(len(i)), cos_incidence, seg_d, single=True)
+            beams = Beams(beam, path, point, hits.triangle, np.zeros(len(i), np.uint8), np.full(len(i), -1, np.int32), np.ones(len(i)),
+                          cos_incidence, seg_d, single=True)
             near = beams.path >= min_range
             return beams if near.all() else beams.select(near)
         reflectivity = objects.reflectivity[obj].astype(np.float64)
@@ -218,7 +219,8 @@ def trace_beams(
             modelled[pick] = np.isfinite(share)
             through[pick] &= ~np.isfinite(share) | (rng.random(len(pick)) < np.nan_to_num(share))
         if returns.any():
-            done.append((beam[returns], path[returns], point[returns], hits.triangle[returns], bounces[i][returns], mirror[i][returns], gain[i][returns], cos_incidence[returns], seg_d[returns]))
+            done.append((beam[returns], path[returns], point[returns], hits.triangle[returns], bounces[i][returns], mirror[i][returns], gain[i][returns],
+                         cos_incidence[returns], seg_d[returns]))
         go = reflect | through
         if not go.any():
             break
@@ -238,7 +240,8 @@ def trace_beams(
     if len(done) == 1:
         beams = Beams(*done[0])
     elif not done:
-        beams = Beams(np.zeros(0, np.int64), np.zeros(0), np.zeros((0, 3)), np.zeros(0, np.int64), np.zeros(0, np.uint8), np.zeros(0, np.int32), np.zeros(0), np.zeros(0), np.zeros((0, 3)))
+        beams = Beams(np.zeros(0, np.int64), np.zeros(0), np.zeros((0, 3)), np.zeros(0, np.int64), np.zeros(0, np.uint8), np.zeros(0, np.int32), np.zeros(0),
+                      np.zeros(0), np.zeros((0, 3)))
     else:
         fields = [np.concatenate(column) for column in zip(*done)]
         slot = np.full(n, -1, np.int64)  # each beam returns at most once: firing order by scattering, not sorting
@@ -322,7 +325,8 @@ IDENTITY = np.zeros(0, np.int64)
 
 
 def _fused_chunk(caster: RayCaster, buffers: SceneBuffers, pattern: Pattern, origin: np.ndarray, world_d: np.ndarray, min_range: float, max_range: float,
-                 max_bounces: int = 3, ghost_semantic=None, ideal: bool = False, surfaces: MirrorGlassRules | None = None, rng: np.random.Generator | None = None):  # fmt: skip
+                 max_bounces: int = 3, ghost_semantic=None, ideal: bool = False,
+                 surfaces: MirrorGlassRules | None = None, rng: np.random.Generator | None = None):  # fmt: skip
     """:func:`scan_chunk` through the compiled kernel (:mod:`.kernels`).
 
     Each of the caster's threads takes a part of the rays and, ray by ray, calls Embree and fills
@@ -347,7 +351,8 @@ def _fused_chunk(caster: RayCaster, buffers: SceneBuffers, pattern: Pattern, ori
 
     def part(j, moved=NO_RAYS):
         s, r = slice(starts[j], starts[j] + caster.chunk), slice(rows[j], rows[j + 1])
-        return fill_diffuse(caster.kernels, tfar[s], prim[s], prim_triangle, moved[s] if len(moved) else moved, origins if shared else origins[s], world_d[s], caster, objects, pattern.ring[s], pattern.time[s], min_range, max_range, points[r], beam[r], ray[r], starts[j])
+        return fill_diffuse(caster.kernels, tfar[s], prim[s], prim_triangle, moved[s] if len(moved) else moved, origins if shared else origins[s], world_d[s],
+                            caster, objects, pattern.ring[s], pattern.time[s], min_range, max_range, points[r], beam[r], ray[r], starts[j])
 
     if caster.kernels.traces and caster.embree_handles is not None:
         # Embree called inside the pass, each thread over its part of the rays: the records of part
@@ -360,8 +365,8 @@ def _fused_chunk(caster: RayCaster, buffers: SceneBuffers, pattern: Pattern, ori
 
         def traced(j):
             s, r = slice(starts[j], starts[j] + caster.chunk), slice(rows[j], rows[j + 1])
-            out = trace_fill(caster.kernels, caster, far[s], origins if shared else origins[s], world_d[s], objects, pattern.ring[s], pattern.time[s], min_range, max_range,
-                             points[r], beam[r], ray[r], tfar[s], prim[s], starts[j])  # fmt: skip
+            out = trace_fill(caster.kernels, caster, far[s], origins if shared else origins[s], world_d[s], objects, pattern.ring[s], pattern.time[s],
+                             min_range, max_range, points[r], beam[r], ray[r], tfar[s], prim[s], starts[j])  # fmt: skip
             joined.finished(j, out[0])
             return out
 
@@ -371,7 +376,8 @@ def _fused_chunk(caster: RayCaster, buffers: SceneBuffers, pattern: Pattern, ori
     else:  # Embree's answer first, then the compiled pass: each part of the rays fills its rows, placed by the hits before it
         tfar, prim = caster._embree(origins32, directions32, far)
         rows = hit_rows(prim, starts, caster.chunk)
-        points, beam, ray = caster.record_pool.take(rows[-1], POINT_DTYPE), caster.record_pool.take(rows[-1], BEAM_DTYPE), caster.record_pool.take(rows[-1], np.int64)
+        points, beam, ray = (caster.record_pool.take(rows[-1], POINT_DTYPE), caster.record_pool.take(rows[-1], BEAM_DTYPE),
+                             caster.record_pool.take(rows[-1], np.int64))
         parts = caster.map(part, range(len(starts)))
     front = np.logical_or.reduce([p[1] for p in parts])
     back = np.logical_or.reduce([p[2] for p in parts])
@@ -380,7 +386,8 @@ def _fused_chunk(caster: RayCaster, buffers: SceneBuffers, pattern: Pattern, ori
     if len(suspect):  # the pass again, with the re-traced rays (their hit counts may differ)
         tfar, prim, moved = caster.retrace(suspect, local, world_d, far, tfar, prim)
         rows = hit_rows(prim, starts, caster.chunk)
-        points, beam, ray = caster.record_pool.take(rows[-1], POINT_DTYPE), caster.record_pool.take(rows[-1], BEAM_DTYPE), caster.record_pool.take(rows[-1], np.int64)
+        points, beam, ray = (caster.record_pool.take(rows[-1], POINT_DTYPE), caster.record_pool.take(rows[-1], BEAM_DTYPE),
+                             caster.record_pool.take(rows[-1], np.int64))
         parts = caster.map(lambda j: part(j, moved), range(len(starts)))
     filled = np.array([p[0] for p in parts], np.int64)
     if not (filled == np.diff(rows)).all():  # rows left empty by misses (when traced in the pass), range limits, absorbers, glass and mirrors
@@ -538,9 +545,10 @@ def scan(*args, **kwargs) -> tuple[np.ndarray, np.ndarray]:
 
     Without ``chunk_rays``, one :class:`Pattern` (its rays already in memory) goes through in chunks
     of :data:`WHOLE_PATTERN_RAYS`: a whole sensor frame at once, so its records need no join and
-    the threads meet twice per frame, not twice per 262 k rays (``benchmarks/bench_scan.py``). The extra memory is about 12 bytes per ray (Embree's distances and
-    triangles, the limits). Slipped rays are looked for per chunk, so a chunk size may decide, in
-    rare cases, whether a ray is traced again (the pipeline keeps its own fixed chunks).
+    the threads meet twice per frame, not twice per 262 k rays (``benchmarks/bench_scan.py``). The extra
+    memory is about 12 bytes per ray (Embree's distances and triangles, the limits). Slipped rays are
+    looked for per chunk, so a chunk size may decide, in rare cases, whether a ray is traced again (the
+    pipeline keeps its own fixed chunks).
     """
     patterns = args[2] if len(args) > 2 else kwargs.get("patterns")
     if "chunk_rays" not in kwargs and len(args) < 10 and isinstance(patterns, Pattern):

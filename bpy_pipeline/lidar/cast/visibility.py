@@ -27,7 +27,8 @@ from .raycast import RayCaster, row_norms
 from .scanner import scan_chunk, trace_beams
 from ..sensor.rays import Pattern
 
-CONE_MARGIN = 1e-12  # cosine: the cone prefilter lets through pairs this far outside an object's cone, so its dot products' rounding never drops a pair the exact test keeps
+# cosine: the cone prefilter lets through pairs this far outside an object's cone, so its dot products' rounding never drops a pair the exact test keeps
+CONE_MARGIN = 1e-12
 CONE_BLOCK = 16384  # rays per block of the numpy cone test: a (block, k) matrix, not (n, k)
 SAMPLE_SPACING = 0.1  # m between surface samples for truncation (wider on objects that would need more than about:)
 MAX_SAMPLES = 4000  # x 2 (surface_samples' area bound)
@@ -177,8 +178,8 @@ def visibility(
         # samples within the range limits of objects some ray passes (no other sample can count)
         passed = np.bincount(point_owner, minlength=len(boxes)) > 0
         partial = ~whole_view[point_owner]
-        covered = covered_by_owner(seen[partial], point_owner[partial], samples, sample_owner, len(boxes), cell_deg, where=inside & passed[sample_owner], distance=distance,
-                                   point_cells=(point_cells[0][partial], point_cells[1][partial]))  # fmt: skip
+        covered = covered_by_owner(seen[partial], point_owner[partial], samples, sample_owner, len(boxes), cell_deg, where=inside & passed[sample_owner],
+                                   distance=distance, point_cells=(point_cells[0][partial], point_cells[1][partial]))  # fmt: skip
     order = np.argsort(sample_owner, kind="stable")
     bounds = np.searchsorted(sample_owner[order], np.arange(len(boxes) + 1))
     for k in range(len(boxes)):
@@ -216,7 +217,8 @@ BOX_MARGIN = 0.01  # m (and as much again per 10 km of coordinates): a box grown
 CORNER_PAIRS = np.array([(i, j) for i in range(8) for j in range(i + 1, 8)])  # (28, 2): every two corners, the footprint's edges among them
 
 
-def wholly_covered(boxes: np.ndarray, pose: np.ndarray, point_cells: tuple[np.ndarray, np.ndarray], point_owner: np.ndarray, min_range: float, max_range: float, cell_deg: float) -> np.ndarray:
+def wholly_covered(boxes: np.ndarray, pose: np.ndarray, point_cells: tuple[np.ndarray, np.ndarray], point_owner: np.ndarray, min_range: float, max_range: float,
+                   cell_deg: float) -> np.ndarray:
     """``(k,)`` bool: is every surface sample of box k's object surely within the range limits and covered (truncation 0)?
 
     boxes : (k,) world-frame BOX_DTYPE, each the tightest box around its object's vertices (so around every surface
@@ -260,7 +262,8 @@ def wholly_covered(boxes: np.ndarray, pose: np.ndarray, point_cells: tuple[np.nd
     # each box's marks in a window of its cells and one more on every side (no column twice: narrower than a turn)
     height, width = row1 - row0 + 3, col1 - col0 + 3
     passed = np.bincount(point_owner, minlength=len(boxes))[: len(boxes)] > 0
-    candidate = passed & (np.sqrt((near * near).sum(axis=1)) >= min_range) & (np.sqrt((far * far).sum(axis=1)) <= max_range) & (np.hypot(near[:, 0], near[:, 1]) > 0.0) & (width <= grid.columns)
+    candidate = (passed & (np.sqrt((near * near).sum(axis=1)) >= min_range) & (np.sqrt((far * far).sum(axis=1)) <= max_range)
+                 & (np.hypot(near[:, 0], near[:, 1]) > 0.0) & (width <= grid.columns))
     if not candidate.any():
         return out
     size = np.where(candidate, height * width, 0)
@@ -299,7 +302,8 @@ def cone_pairs(directions: np.ndarray, axes: np.ndarray, cos_limit: np.ndarray, 
     return np.concatenate(rays).astype(np.int64), np.concatenate(boxes).astype(np.int64)
 
 
-def covered_by_owner(points: np.ndarray, point_owner: np.ndarray, samples: np.ndarray, sample_owner: np.ndarray, count: int, cell_deg: float, where: np.ndarray | None = None, distance: np.ndarray | None = None,
+def covered_by_owner(points: np.ndarray, point_owner: np.ndarray, samples: np.ndarray, sample_owner: np.ndarray, count: int, cell_deg: float,
+                     where: np.ndarray | None = None, distance: np.ndarray | None = None,
                      point_cells: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:  # fmt: skip
     """``(s,)`` bool: is each sample's direction covered by the passing points of its own object?
 
@@ -364,13 +368,15 @@ def covered_by_owner(points: np.ndarray, point_owner: np.ndarray, samples: np.nd
 IDENTITY4 = np.eye(4)
 
 
-def _scene_returns(caster, buffers: SceneBuffers, chunk: Pattern, traced: np.ndarray, box_instance: np.ndarray, box_of_triangle: np.ndarray, min_range: float, max_range: float, surfaces, rng) -> np.ndarray:
+def _scene_returns(caster, buffers: SceneBuffers, chunk: Pattern, traced: np.ndarray, box_instance: np.ndarray, box_of_triangle: np.ndarray, min_range: float,
+                   max_range: float, surfaces, rng) -> np.ndarray:
     """``(k,)`` rays ``traced`` (indices into ``chunk``) whose return through the whole scene is from box k's objects
     (``box_instance`` (k,), ``box_of_triangle`` (m,) -1 for none), no mirror met."""
     if chunk.origins is None and getattr(caster, "kernels", None) is not None:
         # the compiled scan of those rays (Embree and the records in one pass; the same hits and draws as
         # trace_beams: tests/test_scan_kernel.py): with no mirror bounces a record's instance is that of its beam's last object
-        points, _, _ = scan_chunk(caster, buffers, Pattern(chunk.directions[traced], chunk.ring[traced], chunk.time[traced]), IDENTITY4, min_range, max_range, max_bounces=0, surfaces=surfaces, rng=rng)
+        points, _, _ = scan_chunk(caster, buffers, Pattern(chunk.directions[traced], chunk.ring[traced], chunk.time[traced]), IDENTITY4, min_range, max_range,
+                                  max_bounces=0, surfaces=surfaces, rng=rng)
         return counts_per_instance(box_instance, points["instance"][points["bounces"] == 0].astype(np.int64))
     o = chunk.origins[traced] if chunk.origins is not None else np.zeros(3)
     beams = trace_beams(caster, buffers, o, chunk.directions[traced], min_range, max_range, max_bounces=0, surfaces=surfaces, rng=rng)
