@@ -86,7 +86,9 @@ REFLECTIVITY = {"road": 0.15, "marking": 0.6, "sidewalk": 0.25, "kerb": 0.35, "b
 # (dark and metallic paints return 1-5 %, white up to 0.5), CLOTHING a pedestrian's or rider's; both fitted to
 # KITTI and SemanticKITTI car and person remission through the hdl64e reading (docs/realism.md).
 BUILDING = (0.55, 0.4, 0.15, 0.95)
-PAINT = (0.04, 1.2, 0.002, 0.8)
+# a body's paint stays below every fitting's reflectivity (FITTINGS' plates: 0.8), so a body and its plates never share an
+# (instance, reflectivity) key: the material models tell a point's object by that key (lidar/effects/materials.py)
+PAINT = (0.04, 1.2, 0.002, 0.79)
 CLOTHING = (0.5, 0.6, 0.05, 0.95)
 
 
