@@ -280,8 +280,8 @@ def test_street_trees_clear_the_traffic_and_obstacles_keep_users_off_the_furnitu
 
 
 def test_ego_vehicle_places_the_roof_sensor_in_its_lane_and_keeps_its_footprint_free():
-    from bpy_pipeline.builders.street.params import ego_keep_free, ego_station
-    from bpy_pipeline.builders.street.layout import EGO_HALF
+    from bpy_pipeline.builders.street.params import ego_station
+    from bpy_pipeline.builders.street.layout import EGO_HALF, ego_keep_free
 
     params = StreetScene(ego_vehicle=True, **BUSY)
     poses = [ego_station(params, k) for k in range(20)]

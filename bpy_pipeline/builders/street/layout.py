@@ -92,6 +92,14 @@ PAINT = (0.04, 1.2, 0.002, 0.79)
 CLOTHING = (0.5, 0.6, 0.05, 0.95)
 
 
+def ego_keep_free(params, pose: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """The rectangle ``(centre (2,), half size (2,), yaw)`` (m, radians) no road user may enter around the ego car whose roof
+    sensor stands at ``(4, 4)`` ``pose``: its footprint (:data:`EGO_HALF`) and ``params.ego_headway`` metres ahead of it."""
+    ahead = float(params.ego_headway) / 2
+    yaw = float(np.arctan2(pose[1, 0], pose[0, 0]))
+    return np.asarray(pose[:2, 3], float) + ahead * np.array([np.cos(yaw), np.sin(yaw)]), np.array(EGO_HALF) + (ahead, 0.0), yaw
+
+
 def draw_reflectivity(rng: np.random.Generator, law: tuple[float, float, float, float]) -> float:
     """One object's reflectivity: ``median exp(log_sd z)``, ``z`` standard normal from ``rng``, clipped to ``[lowest, highest]``."""
     median, log_sd, lowest, highest = law

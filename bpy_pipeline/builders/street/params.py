@@ -166,16 +166,6 @@ def _check_shares(mix, kinds, key: str) -> None:
         raise InputError(f"{key}: expected shares >= 0 (not all 0) of {', '.join(kinds)}, got {mix}")
 
 
-def ego_keep_free(params: StreetScene, pose: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
-    """The rectangle ``(centre (2,), half size (2,), yaw)`` (m, radians) no road user may enter around the ego car whose roof
-    sensor stands at ``(4, 4)`` ``pose``: its footprint (:data:`~.layout.EGO_HALF`) and ``ego_headway`` metres ahead of it."""
-    from .layout import EGO_HALF
-
-    ahead = float(params.ego_headway) / 2
-    yaw = float(np.arctan2(pose[1, 0], pose[0, 0]))
-    return np.asarray(pose[:2, 3], float) + ahead * np.array([np.cos(yaw), np.sin(yaw)]), np.array(EGO_HALF) + (ahead, 0.0), yaw
-
-
 def ego_station(params: StreetScene, frame: int) -> np.ndarray | None:
     """The level frame ``(4, 4)`` of the ego car's roof sensor in frame ``frame``, or ``None`` without ``ego_vehicle``."""
     if not params.ego_vehicle:

@@ -29,7 +29,6 @@ import numpy as np
 
 from ...blender.mesh_objects import fill_mesh, mesh_object, scene_collection, tag
 from . import layout as street
-from .params import ego_keep_free
 from .facade_nodes import facade_object
 from .planting_nodes import planting_object
 from .road_nodes import road_object
@@ -113,7 +112,7 @@ class Intersection:
         views = tuple(getattr(view, "fields", ()) or ())
         reserved = []
         if self.params.ego_vehicle:  # the ego car under the roof sensor: its footprint and its headway stay free
-            reserved = [ego_keep_free(self.params, v.pose) for v in views]
+            reserved = [street.ego_keep_free(self.params, v.pose) for v in views]
         placement = street.place_users(self.params, self.layout, rng, views, reserved=reserved, clear=self.sensor_poses)
         headings, parts = {}, []
         for k, user in enumerate(placement.users):
