@@ -57,7 +57,7 @@ class SceneConfig:
     """``scene``: the builder's name and its parameters (:mod:`bpy_pipeline.builders` owns both)."""
 
     builder: str = "railway"
-    params: typing.Any = field(default_factory=RailwayScene)
+    params: typing.Any = field(default_factory=RailwayScene, metadata={"inline": True})  # its keys are scene's (scene.track_gauge)
     population: typing.Any = None  # population.params.Population: people, arms, cars placed per frame (None: none)
 
 
@@ -114,7 +114,7 @@ class ReflectorConfig:
 class SensorConfig:
     """The sensor: a preset resolved with field-by-field overrides, its pose or trajectory, its beam footprint."""
 
-    spec: SensorSpec
+    spec: SensorSpec = field(metadata={"inline": True})  # its keys are sensor's (sensor.max_range)
     position: Vec3 = field(default=(0.0, -4.0, 0.0), metadata=meta("m", help="world (the station point; the preset's mount_height is added)"))
     rotation_deg: Vec3 = field(default=(0.0, 0.0, 0.0), metadata=meta("deg", help="roll, pitch, yaw"))
     trajectory: TrajectoryConfig | None = None  # a moving sensor instead of the static position

@@ -7,9 +7,11 @@ be spelled differently in YAML than in Python.
 
 A field's unit, allowed range and help live in its metadata, written with :func:`meta`
 (``sigma: float = field(default=0.0, metadata=meta("m", low=0, help="along the beam"))``), and nowhere else:
-:func:`from_dict` refuses a value outside the range (naming the key, the range and the unit), the Blender
-panel takes the unit and soft limits (addon/fields.py), and :func:`reference` lists every field for the
-generated docs/config.md.
+:func:`from_dict` refuses a value outside the range (naming the key, the range and the unit) while it reads YAML,
+:func:`check_ranges` refuses the same in a tree built or changed in Python (``bpy_pipeline.run`` checks the Config it
+is given), the Blender panel takes the unit and soft limits (addon/fields.py), and :func:`reference` lists every field
+for the generated docs/config.md. The sections' own checks keep only the rules a range cannot say (one field against
+another, names, shapes, "0 or 1..100000").
 """
 
 from __future__ import annotations
@@ -81,6 +83,24 @@ def check_range(value, m, path: str) -> None:
     if below or above:
         verb = "lie in" if low is not None and high is not None else "be"
         raise InputError(f"{path}: must {verb} {range_text(m)}, got {value}")
+
+
+def check_ranges(obj, path: str = "") -> None:
+    """``InputError`` naming the key path of the first value of dataclass ``obj`` (and of the dataclasses it holds,
+    directly or in a list or tuple) outside its field's metadata range: what :func:`from_dict` checks while it reads
+    YAML, for a tree built or changed in Python. A field with ``metadata={"inline": True}`` (a section whose keys are
+    written in its parent's mapping: ``scene``'s parameters, ``sensor``'s spec) adds no key to the path."""
+    for f in dataclasses.fields(obj):
+        value = getattr(obj, f.name)
+        key = path if f.metadata.get("inline") else _join(path, key_of(f))
+        if dataclasses.is_dataclass(value) and not isinstance(value, type):
+            check_ranges(value, key)
+        elif isinstance(value, (list, tuple)) and any(dataclasses.is_dataclass(v) and not isinstance(v, type) for v in value):
+            for k, item in enumerate(value):
+                if dataclasses.is_dataclass(item) and not isinstance(item, type):
+                    check_ranges(item, f"{key}[{k}]")
+        else:
+            check_range(value, f.metadata, key)
 
 
 def _type_name(hint) -> str:
