@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import numbers
 import types
 import typing
 from typing import Literal
@@ -68,17 +69,18 @@ def range_text(m) -> str:
 
 def check_range(value, m, path: str) -> None:
     """``InputError`` naming ``path`` when ``value`` (a number, or each number of a list or tuple) lies outside the
-    range of metadata ``m``."""
+    range of metadata ``m``, or is no number at all (a field with a range holds numbers: a tree built in Python may
+    hold anything)."""
     if value is None or isinstance(value, bool) or (m.get("low") is None and m.get("high") is None):
         return
     if isinstance(value, (list, tuple)):
         for k, v in enumerate(value):
             check_range(v, m, f"{path}[{k}]")
         return
-    if not isinstance(value, (int, float)):
-        return
+    if not isinstance(value, numbers.Real):
+        raise InputError(f"{path}: expected a number, got {value!r}")
     low, high = m.get("low"), m.get("high")
-    below = low is not None and (value < low or (m.get("low_open") and value == low))
+    below = value != value or (low is not None and (value < low or (m.get("low_open") and value == low)))  # NaN lies in no range
     above = high is not None and (value > high or (m.get("high_open") and value == high))
     if below or above:
         verb = "lie in" if low is not None and high is not None else "be"
