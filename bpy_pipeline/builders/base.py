@@ -8,7 +8,6 @@ when called. A frame's scene is built by :func:`build_scene`, which hands the bu
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
@@ -17,7 +16,6 @@ import numpy as np
 from ..errors import InputError
 from ..geometry.clearance import NO_POSES, SensorPoses
 from ..registry import Registry
-from ..schema import check_positive
 
 
 @dataclass
@@ -165,13 +163,3 @@ def refuse_sensor_placement(name: str) -> Callable[[Any, dict, dict], Any]:
         return params
 
     return release
-
-
-def check_sizes(params, where: str, may_be_zero: set) -> None:
-    """Every number (and number pair) of an indoor scene's parameters positive, or >= 0 where allowed."""
-    for f in dataclasses.fields(params):
-        value = getattr(params, f.name)
-        if isinstance(value, bool) or not isinstance(value, (int, float, tuple)):
-            continue
-        for v in value if isinstance(value, tuple) else (value,):
-            check_positive(v, f"{where}.{f.name}", allow_zero=f.name in may_be_zero)
