@@ -95,14 +95,24 @@ def check_ranges(obj, path: str = "") -> None:
     for f in dataclasses.fields(obj):
         value = getattr(obj, f.name)
         key = path if f.metadata.get("inline") else _join(path, key_of(f))
-        if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        if _section(value):
             check_ranges(value, key)
-        elif isinstance(value, (list, tuple)) and any(dataclasses.is_dataclass(v) and not isinstance(v, type) for v in value):
+        elif isinstance(value, (list, tuple)) and any(_section(v) or _named_section(v) for v in value):
             for k, item in enumerate(value):
-                if dataclasses.is_dataclass(item) and not isinstance(item, type):
+                if _section(item):
                     check_ranges(item, f"{key}[{k}]")
+                elif _named_section(item):  # (name, section): written under its name (scene.population.person)
+                    check_ranges(item[1], _join(key, item[0]))
         else:
             check_range(value, f.metadata, key)
+
+
+def _section(value) -> bool:
+    return dataclasses.is_dataclass(value) and not isinstance(value, type)
+
+
+def _named_section(value) -> bool:
+    return isinstance(value, tuple) and len(value) == 2 and isinstance(value[0], str) and _section(value[1])
 
 
 def _type_name(hint) -> str:
