@@ -591,8 +591,8 @@ def _check_boxes(config: Config) -> Config:
         if not isinstance(value, str) or not value or any(c.isspace() for c in value):
             raise InputError(f"output.boxes.names.{name}: expected one word (label files split on spaces), got {value!r}")
     t0, t1, t2 = boxes.occlusion_levels
-    if not 1 >= t0 >= t1 >= t2 >= 0:
-        raise InputError(f"output.boxes.occlusion_levels: expected three fractions 1 >= t0 >= t1 >= t2 >= 0, got {list(boxes.occlusion_levels)}")
+    if not t0 >= t1 >= t2:  # each a fraction 0..1: the field's metadata
+        raise InputError(f"output.boxes.occlusion_levels: expected three fractions t0 >= t1 >= t2, got {list(boxes.occlusion_levels)}")
     names = {table.names[table.id_of(k)]: v for k, v in boxes.names.items()}
     min_points = {table.names[table.id_of(k)]: v for k, v in boxes.min_points.items()}
     boxes = dataclasses.replace(boxes, classes=classes, names=names, min_points=min_points)
