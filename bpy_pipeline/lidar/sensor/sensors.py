@@ -76,8 +76,8 @@ class SensorSpec:
     description: str = ""
     pattern: str = "spinning"  # a name of lidar/sensor/patterns (PATTERNS)
     channels: int = field(default=16, metadata=meta(""))
-    vertical_fov_deg: tuple[float, float] = field(default=(-15.0, 15.0), metadata=meta("deg"))
-    elevations_deg: list[float] = field(default_factory=list, metadata=meta("deg"))
+    vertical_fov_deg: tuple[float, float] = field(default=(-15.0, 15.0), metadata=meta("deg", -90, 90))
+    elevations_deg: list[float] = field(default_factory=list, metadata=meta("deg", -90, 90))
     horizontal_fov_deg: tuple[float, float] = field(default=(-180.0, 180.0), metadata=meta("deg"))
     horizontal_resolution_deg: float = field(default=0.2, metadata=meta("deg"))
     rotation_hz: float = field(default=10.0, metadata=meta("Hz", low=0, low_open=True))
