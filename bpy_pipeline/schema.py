@@ -221,12 +221,6 @@ def to_plain(value):
     return value
 
 
-def check_positive(value: float, path: str, allow_zero: bool = False) -> None:
-    """``InputError`` naming ``path`` unless ``value`` > 0 (>= 0 with ``allow_zero``)."""
-    if value < 0 or (value == 0 and not allow_zero):
-        raise InputError(f"{path}: must be {'>= 0' if allow_zero else '> 0'}, got {value}")
-
-
 def reference(cls, path: str = "") -> list[tuple[str, str, str, str, str, str]]:
     """``[(key path, type, default, unit, range, help)]`` of every field of dataclass ``cls`` and the
     dataclasses nested in it, as docs/config.md lists them (a field without :func:`meta` has empty unit,

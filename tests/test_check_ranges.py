@@ -78,11 +78,12 @@ CLEANED = {
     "bpy_pipeline/lidar/effects/divergence.py": "sensor.divergence.", "bpy_pipeline/lidar/effects/materials.py": "",
     **{str(p.relative_to(ROOT)): "scene." for p in (ROOT / "bpy_pipeline/builders").glob("*/params.py")},
     "bpy_pipeline/builders/railway/layout.py": "scene.", "bpy_pipeline/builders/railway/assets.py": "scene.",
+    "bpy_pipeline/geometry/placement.py": "scene.",
 }
 # "<key>: must lie in", "must be >= 0", "must be in 0..1", "must be a number in", "must be 1 .. 5"; the key as written in
 # the message: a literal path, or its tail after a placeholder ("{where}.rate" -> ".rate")
 RANGE_WORDING = re.compile(r"""(?:\}|["'])([\w.\[\]]*\.?[\w]+): (?:must (?:lie in|be (?:in |a number in |[<>]=? ?-?\d|\d+ \.\.))|at least \d|at most \d)""")
-POSITIVE_CALL = re.compile(r"""(?:check_positive|_positive)\([^,]+, f?["'](?:\{\w+\})?([\w.]+)["']""")
+POSITIVE_CALL = re.compile(r"""_positive\([^,]+, f?["'](?:\{\w+\})?([\w.]+)["']""")
 
 
 def ranged_keys() -> set[str]:
