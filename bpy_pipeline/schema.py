@@ -73,6 +73,8 @@ def check_range(value, m, path: str) -> None:
     hold anything)."""
     if value is None or isinstance(value, bool) or (m.get("low") is None and m.get("high") is None):
         return
+    if hasattr(value, "tolist") and not isinstance(value, numbers.Real):  # a numpy array given in Python
+        value = value.tolist()
     if isinstance(value, (list, tuple)):
         for k, v in enumerate(value):
             check_range(v, m, f"{path}[{k}]")

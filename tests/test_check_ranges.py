@@ -128,3 +128,13 @@ def test_the_repeat_finder_finds_the_hand_checks_that_were_removed():
     kept = {"sensors.py": ('raise InputError(f"{where}.min_range: must be >= 0 and below {where}.max_range")', "sensor."),  # two fields' rule
             "real_scan.py": ('raise InputError(f"{where}.kitti_rule.min_range: must be 0 .. kitti_rule.max_range ({rule.max_range:g})")', "scene.")}
     assert not repeated_ranges(kept, keys)
+
+
+def test_numpy_numbers_and_arrays_built_in_python_are_numbers():
+    import numpy as np
+
+    from bpy_pipeline.builders.street.params import StreetScene
+
+    check_ranges(dataclasses.replace(StreetScene(), lanes_per_direction=np.int64(2), setback=np.array([0.0, 8.0])), "scene")
+    with pytest.raises(InputError, match=r"^scene\.setback\[0\]: must be >= 0 m, got -1\.0$"):
+        check_ranges(dataclasses.replace(StreetScene(), setback=np.array([-1.0, 8.0])), "scene")
