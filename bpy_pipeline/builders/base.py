@@ -76,7 +76,7 @@ class BuildResult:
 
 
 def no_check(params, where: str) -> None:
-    """Parameters that need no check beyond their types."""
+    """Parameters that need no check beyond their types and their fields' metadata ranges (the schema checks both)."""
 
 
 def no_station(params, frame: int) -> None:
@@ -98,7 +98,8 @@ class Builder:
 
     params : the dataclass of its ``scene`` section (the keys after ``builder``)
     build : ``build(params, context) -> BuildResult``; builds the scene in the current Blender scene
-    check : ``check(params, where)``: ``InputError`` naming the key when the parameters cannot build a scene
+    check : ``check(params, where)``: ``InputError`` naming the key when the parameters cannot build a scene (the
+        rules between fields; each field's own range is its metadata's, checked by the schema)
     station : ``station(params, frame) -> (4, 4) | None``: the level frame the scene places the sensor
         at in frame ``frame`` (the sensor's rotation and mount height are applied on top), ``None``
         where the config's ``sensor.position`` applies
