@@ -61,7 +61,7 @@ def test_a_rig_member_and_a_population_kind_are_named_as_in_yaml():
     with pytest.raises(InputError, match=r"^sensor\.rig\[1\]\.mount_height: must be >= 0 m, got -1\.0$"):
         check_ranges(dataclasses.replace(config, sensor=rig))
     population = population_from_dict({"person": {"count": 2}})
-    bad = Population(((("person", dataclasses.replace(PersonPopulation(), reflectivity=(0.1, 1.5)))),), population.placement)
+    bad = Population((("person", dataclasses.replace(PersonPopulation(), reflectivity=(0.1, 1.5))),), population.placement)
     with pytest.raises(InputError, match=r"^scene\.population\.person\.reflectivity\[1\]: must lie in 0\.\.1, got 1\.5$"):
         check_ranges(bad, "scene.population")
 
