@@ -32,6 +32,7 @@ from .buffers import ObjectTable, SceneBuffers
 from .config import Config, config_from_dict
 from .config import load_config as _load_config
 from .errors import InputError
+from .schema import check_ranges
 from .evaluate import evaluate  # noqa: F401  (train on generated scans, IoU on real ones: docs/evaluate.md)
 
 
@@ -48,13 +49,15 @@ def run(config: Config, out: str | Path, frames: Iterable[int] | None = None, mo
     manifest with the frames' records. Blender's scene is reset to an empty one first (needs ``bpy``).
 
     mode : ``new`` (refuse a folder holding another run), ``resume`` or ``overwrite`` (see :mod:`.dataset`)
-    Every argument is checked before anything is written: a bad one raises :class:`InputError` and commits no frame.
+    Every argument is checked before anything is written: a bad one raises :class:`InputError` and commits no frame;
+    a Config built or changed in Python (``dataclasses.replace``) has every field's range checked as a loaded one.
     """
     from .errors import path_argument
     from .estimate import check_limits, estimate_run
 
     if not isinstance(config, Config):
         raise InputError(f"config: expected a Config (bpy_pipeline.load_config(...) of a file or a mapping), got {type(config).__name__}")
+    check_ranges(config)  # every field's metadata range, as load_config checks them: a Config built or changed in Python too
     path_argument(out, "out")
     frames = checked_frames(frames, config.frames)
     if mode not in ("new", "resume", "overwrite"):

@@ -57,7 +57,7 @@ class SceneConfig:
     """``scene``: the builder's name and its parameters (:mod:`bpy_pipeline.builders` owns both)."""
 
     builder: str = "railway"
-    params: typing.Any = field(default_factory=RailwayScene)
+    params: typing.Any = field(default_factory=RailwayScene, metadata={"inline": True})  # its keys are scene's (scene.track_gauge)
     population: typing.Any = None  # population.params.Population: people, arms, cars placed per frame (None: none)
 
 
@@ -99,14 +99,15 @@ class ReflectorConfig:
     """
 
     enabled: bool = False
-    segments: int = field(default=8, metadata=meta(help="mirror segments around the spin axis"))
+    segments: int = field(default=8, metadata=meta("", low=1, help="mirror segments around the spin axis"))
     inclination_deg: float = field(default=34.0,
-                                   metadata=meta("deg", help="between each mirror and the spin axis: horizontal beams leave 2x this below the horizon"))
+                                   metadata=meta("deg", 0, 90, low_open=True, high_open=True,
+                                                 help="between each mirror and the spin axis: horizontal beams leave 2x this below the horizon"))
     azimuth_deg: float = field(default=0.0, metadata=meta("deg", help="azimuth of segment 0's centre"))
-    distance: float = field(default=0.1, metadata=meta("m", help="optical centre to each mirror along its central horizontal beam"))
-    bottom: float = field(default=0.09, metadata=meta("m", help="along the slope from that central point down to the segment's lower edge"))
-    top: float = field(default=0.05, metadata=meta("m", help="along the slope up to its upper edge"))
-    width: float = field(default=0.0, metadata=meta("m", help="each segment's width; 0 = full facets meeting edge to edge"))
+    distance: float = field(default=0.1, metadata=meta("m", low=0, low_open=True, help="optical centre to each mirror along its central horizontal beam"))
+    bottom: float = field(default=0.09, metadata=meta("m", low=0, help="along the slope from that central point down to the segment's lower edge"))
+    top: float = field(default=0.05, metadata=meta("m", low=0, help="along the slope up to its upper edge (top + bottom > 0)"))
+    width: float = field(default=0.0, metadata=meta("m", low=0, help="each segment's width; 0 = full facets meeting edge to edge"))
     edge_drop: EdgeDropConfig = field(default_factory=EdgeDropConfig)
 
 
@@ -114,7 +115,7 @@ class ReflectorConfig:
 class SensorConfig:
     """The sensor: a preset resolved with field-by-field overrides, its pose or trajectory, its beam footprint."""
 
-    spec: SensorSpec
+    spec: SensorSpec = field(metadata={"inline": True})  # its keys are sensor's (sensor.max_range)
     position: Vec3 = field(default=(0.0, -4.0, 0.0), metadata=meta("m", help="world (the station point; the preset's mount_height is added)"))
     rotation_deg: Vec3 = field(default=(0.0, 0.0, 0.0), metadata=meta("deg", help="roll, pitch, yaw"))
     trajectory: TrajectoryConfig | None = None  # a moving sensor instead of the static position
@@ -220,7 +221,8 @@ class KittiConfig:
     ``val_fraction`` (older configs): the val share of ``output.split``, train the rest, no test.
     """
 
-    val_fraction: float | None = field(default=None, metadata=meta("", 0, 1, help="older configs: the val share of output.split, train the rest, no test"))
+    val_fraction: float | None = field(default=None,
+                                      metadata=meta("", 0, 1, high_open=True, help="older configs: the val share of output.split, train the rest, no test"))
     camera: CameraConfig = field(default_factory=CameraConfig)
 
 
@@ -239,7 +241,7 @@ class SplitConfig:
     block: int = field(default=0, metadata=meta("", low=0, help="frames per block (0: 10)"))
     folds: int = field(default=5, metadata=meta(help="contiguous folds (by: fold)"))
     fold: int = field(default=-1, metadata=meta(help="the fold that is val (-1: the last)"))
-    seed: int | None = field(default=None, metadata=meta(help="draws where the split's sequence starts (null: its start)"))
+    seed: int | None = field(default=None, metadata=meta("", low=0, help="draws where the split's sequence starts (null: its start)"))
 
 
 @dataclass(frozen=True)
@@ -260,7 +262,7 @@ class OutputConfig:
     sequence: int = field(default=0, metadata=meta(help="older configs only: SemanticKITTI sequences follow output.split (0 is accepted)"))
     boxes: BoxesConfig = field(default_factory=BoxesConfig)
     skip_empty: bool = field(default=False, metadata=meta(help="a frame with fewer than min_objects labelled objects is recorded as skipped, no files"))
-    min_objects: int = field(default=1, metadata=meta(help="objects of output.boxes.classes with their minimum points (skip_empty)"))
+    min_objects: int = field(default=1, metadata=meta("", low=0, help="objects of output.boxes.classes with their minimum points (skip_empty)"))
     frames_kept: bool = field(default=False, metadata=meta(help="skip_empty: `frames` counts kept frames; indices go on past it (full runs only)"))
     kitti: KittiConfig = field(default_factory=KittiConfig)  # KITTI layout camera
     split: SplitConfig = field(default_factory=SplitConfig)  # train/val/test of every format and index
@@ -282,12 +284,14 @@ class LimitsConfig:
     changes a frame's bytes (not part of the run key)."""
 
     rays_per_frame: float = field(default=5e7,
-                                  metadata=meta("", low=0, help="every ray of every sensor of a frame (the thesis scanner at full resolution: 2.3e7)"))
-    triangles: float = field(default=5e7, metadata=meta("", low=0, help="triangles of a frame's scene, estimated from the config"))
-    objects: float = field(default=1e4, metadata=meta("", low=0, help="objects of a frame's scene (placed people, cars, shapes, ...)"))
-    seconds: float = field(default=7 * 86400.0, metadata=meta("s", low=0, help="estimated seconds of the selected frames in one process"))
-    bytes: float = field(default=1e12, metadata=meta("", low=0, help="estimated bytes written by the selected frames"))
-    particles: float = field(default=1e9, metadata=meta("", low=0, help="rain drops and snow flakes drawn a frame, at most (145 ns each: 2.4 min a frame)"))
+                                  metadata=meta("", low=0, low_open=True,
+                                                help="every ray of every sensor of a frame (the thesis scanner at full resolution: 2.3e7)"))
+    triangles: float = field(default=5e7, metadata=meta("", low=0, low_open=True, help="triangles of a frame's scene, estimated from the config"))
+    objects: float = field(default=1e4, metadata=meta("", low=0, low_open=True, help="objects of a frame's scene (placed people, cars, shapes, ...)"))
+    seconds: float = field(default=7 * 86400.0, metadata=meta("s", low=0, low_open=True, help="estimated seconds of the selected frames in one process"))
+    bytes: float = field(default=1e12, metadata=meta("", low=0, low_open=True, help="estimated bytes written by the selected frames"))
+    particles: float = field(default=1e9,
+                             metadata=meta("", low=0, low_open=True, help="rain drops and snow flakes drawn a frame, at most (145 ns each: 2.4 min a frame)"))
 
 
 MAX_FRAMES = 10**9  # frame indices are 6+ digit file names and records; a billion frames is centuries of scanning
@@ -295,9 +299,10 @@ MAX_FRAMES = 10**9  # frame indices are 6+ digit file names and records; a billi
 
 @dataclass(frozen=True)
 class Config:
-    seed: int = field(default=0, metadata=meta(help="the run's seed: every frame's generator derives from (seed, frame index)"))
-    frames: int = field(default=1, metadata=meta(help="frames to make"))
-    threads: int = field(default=0, metadata=meta(help="ray-casting threads per process (0: the cores available); never changes the output"))
+    seed: int = field(default=0, metadata=meta("", low=0, help="the run's seed: every frame's generator derives from (seed, frame index)"))
+    frames: int = field(default=1, metadata=meta("", 1, MAX_FRAMES,
+                                                 help="frames to make (a billion is centuries of scanning; run parts of a larger set as separate runs)"))
+    threads: int = field(default=0, metadata=meta("", low=0, help="ray-casting threads per process (0: the cores available); never changes the output"))
     scene: SceneConfig = field(default_factory=SceneConfig)
     # The default job: the railway thesis's terrestrial scanner (table 4.3) 2 m above a station
     # point 4 m beside the track, at 0.2 x 0.2 degrees (1.4 M rays) so it runs in seconds.
@@ -519,19 +524,6 @@ def config_from_dict(data) -> Config:
     data["effects"] = realistic_effects(data.get("effects"), spec)  # the preset's effects profile unless effects.ideal
     config = from_dict(Config, data, "")
     config = dataclasses.replace(config, scene=scene, sensor=sensor)
-    if not 1 <= config.frames <= MAX_FRAMES:
-        raise InputError(
-            f"frames: must be 1 .. {MAX_FRAMES:,} (a billion frames is centuries of scanning; run parts of a larger set as separate runs), got {config.frames}"
-        )
-    for name in (f.name for f in dataclasses.fields(LimitsConfig)):
-        if not getattr(config.limits, name) > 0:
-            raise InputError(f"limits.{name}: must be > 0, got {getattr(config.limits, name)}")
-    if config.output.kitti.val_fraction is not None and not 0.0 <= config.output.kitti.val_fraction < 1.0:
-        raise InputError(f"output.kitti.val_fraction: must be >= 0 and < 1 (the share of frames in val; 0: none), got {config.output.kitti.val_fraction}")
-    if config.seed < 0:
-        raise InputError(f"seed: must be >= 0, got {config.seed}")
-    if config.threads < 0:
-        raise InputError(f"threads: must be >= 0 (0: the cores available), got {config.threads}")
     if trajectory is not None and trajectory.waypoints:  # a curve's path is checked once the scene is built
         sensor_trajectory(sensor).check_frames(config.frames, frame_time(sensor.spec))
     _check_effects(config.effects, config.sensor.spec)
@@ -542,8 +534,6 @@ def config_from_dict(data) -> Config:
     config = _check_boxes(config)
     config = _check_split(config)
     _check_writers(config)
-    if config.output.min_objects < 0:
-        raise InputError(f"output.min_objects: must be >= 0, got {config.output.min_objects}")
     if config.output.frame == "kitti" and (config.sensor.rig or BUILDER_REGISTRY.get(config.scene.builder).plan != "scene"):
         raise InputError("output.frame: kitti stands on a builder's ground under one sensor; a sensor rig or a real scan writes sensor or world")
     if config.output.frames_kept and not config.output.skip_empty:
@@ -601,8 +591,8 @@ def _check_boxes(config: Config) -> Config:
         if not isinstance(value, str) or not value or any(c.isspace() for c in value):
             raise InputError(f"output.boxes.names.{name}: expected one word (label files split on spaces), got {value!r}")
     t0, t1, t2 = boxes.occlusion_levels
-    if not 1 >= t0 >= t1 >= t2 >= 0:
-        raise InputError(f"output.boxes.occlusion_levels: expected three fractions 1 >= t0 >= t1 >= t2 >= 0, got {list(boxes.occlusion_levels)}")
+    if not t0 >= t1 >= t2:  # each a fraction 0..1: the field's metadata
+        raise InputError(f"output.boxes.occlusion_levels: expected three fractions t0 >= t1 >= t2, got {list(boxes.occlusion_levels)}")
     names = {table.names[table.id_of(k)]: v for k, v in boxes.names.items()}
     min_points = {table.names[table.id_of(k)]: v for k, v in boxes.min_points.items()}
     boxes = dataclasses.replace(boxes, classes=classes, names=names, min_points=min_points)

@@ -60,7 +60,7 @@ RIG_PRESETS: dict[str, list[dict]] = {
 class RigSensor:
     """One sensor of a rig: its spec and its pose on the platform (m, degrees)."""
 
-    spec: SensorSpec
+    spec: SensorSpec = field(metadata={"inline": True})  # its keys are the rig entry's (sensor.rig[k].max_range)
     position: tuple[float, float, float] = (0.0, 0.0, 0.0)
     rotation_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
 

@@ -7,15 +7,18 @@ be spelled differently in YAML than in Python.
 
 A field's unit, allowed range and help live in its metadata, written with :func:`meta`
 (``sigma: float = field(default=0.0, metadata=meta("m", low=0, help="along the beam"))``), and nowhere else:
-:func:`from_dict` refuses a value outside the range (naming the key, the range and the unit), the Blender
-panel takes the unit and soft limits (addon/fields.py), and :func:`reference` lists every field for the
-generated docs/config.md.
+:func:`from_dict` refuses a value outside the range (naming the key, the range and the unit) while it reads YAML,
+:func:`check_ranges` refuses the same in a tree built or changed in Python (``bpy_pipeline.run`` checks the Config it
+is given), the Blender panel takes the unit and soft limits (addon/fields.py), and :func:`reference` lists every field
+for the generated docs/config.md. The sections' own checks keep only the rules a range cannot say (one field against
+another, names, shapes, "0 or 1..100000").
 """
 
 from __future__ import annotations
 
 import dataclasses
 import functools
+import numbers
 import types
 import typing
 from typing import Literal
@@ -66,21 +69,52 @@ def range_text(m) -> str:
 
 def check_range(value, m, path: str) -> None:
     """``InputError`` naming ``path`` when ``value`` (a number, or each number of a list or tuple) lies outside the
-    range of metadata ``m``."""
+    range of metadata ``m``, or is no number at all (a field with a range holds numbers: a tree built in Python may
+    hold anything)."""
     if value is None or isinstance(value, bool) or (m.get("low") is None and m.get("high") is None):
         return
+    if hasattr(value, "tolist") and not isinstance(value, numbers.Real):  # a numpy array given in Python
+        value = value.tolist()
     if isinstance(value, (list, tuple)):
         for k, v in enumerate(value):
             check_range(v, m, f"{path}[{k}]")
         return
-    if not isinstance(value, (int, float)):
-        return
+    if not isinstance(value, numbers.Real):
+        raise InputError(f"{path}: expected a number, got {value!r}")
     low, high = m.get("low"), m.get("high")
-    below = low is not None and (value < low or (m.get("low_open") and value == low))
+    below = value != value or (low is not None and (value < low or (m.get("low_open") and value == low)))  # NaN lies in no range
     above = high is not None and (value > high or (m.get("high_open") and value == high))
     if below or above:
         verb = "lie in" if low is not None and high is not None else "be"
         raise InputError(f"{path}: must {verb} {range_text(m)}, got {value}")
+
+
+def check_ranges(obj, path: str = "") -> None:
+    """``InputError`` naming the key path of the first value of dataclass ``obj`` (and of the dataclasses it holds,
+    directly or in a list or tuple) outside its field's metadata range: what :func:`from_dict` checks while it reads
+    YAML, for a tree built or changed in Python. A field with ``metadata={"inline": True}`` (a section whose keys are
+    written in its parent's mapping: ``scene``'s parameters, ``sensor``'s spec) adds no key to the path."""
+    for f in dataclasses.fields(obj):
+        value = getattr(obj, f.name)
+        key = path if f.metadata.get("inline") else _join(path, key_of(f))
+        if _section(value):
+            check_ranges(value, key)
+        elif isinstance(value, (list, tuple)) and any(_section(v) or _named_section(v) for v in value):
+            for k, item in enumerate(value):
+                if _section(item):
+                    check_ranges(item, f"{key}[{k}]")
+                elif _named_section(item):  # (name, section): written under its name (scene.population.person)
+                    check_ranges(item[1], _join(key, item[0]))
+        else:
+            check_range(value, f.metadata, key)
+
+
+def _section(value) -> bool:
+    return dataclasses.is_dataclass(value) and not isinstance(value, type)
+
+
+def _named_section(value) -> bool:
+    return isinstance(value, tuple) and len(value) == 2 and isinstance(value[0], str) and _section(value[1])
 
 
 def _type_name(hint) -> str:
@@ -187,12 +221,6 @@ def to_plain(value):
     if isinstance(value, (list, tuple)):
         return [to_plain(v) for v in value]
     return value
-
-
-def check_positive(value: float, path: str, allow_zero: bool = False) -> None:
-    """``InputError`` naming ``path`` unless ``value`` > 0 (>= 0 with ``allow_zero``)."""
-    if value < 0 or (value == 0 and not allow_zero):
-        raise InputError(f"{path}: must be {'>= 0' if allow_zero else '> 0'}, got {value}")
 
 
 def reference(cls, path: str = "") -> list[tuple[str, str, str, str, str, str]]:

@@ -67,8 +67,8 @@ def write(path: Path, text: str | bytes) -> Path:
 
 # ----------------------------------------------------------------------------- command line rows (in-process)
 CLI_ROWS = [
-    ("frames 1e12 with --frames-range 0:1", ["--frames", str(10**12), "--frames-range", "0:1"], "frames: must be 1 .. 1,000,000,000"),
-    ("frames 2**63", ["--set", f"frames={2**63}"], "frames: must be 1 .. 1,000,000,000"),
+    ("frames 1e12 with --frames-range 0:1", ["--frames", str(10**12), "--frames-range", "0:1"], "frames: must lie in 1..1000000000"),
+    ("frames 2**63", ["--set", f"frames={2**63}"], "frames: must lie in 1..1000000000"),
     ("frames 1e9 with the last --shard", ["--frames", str(10**9), "--shard", "9/10"], "limits.seconds"),
     ("100k people in the garage", ["--set", "scene={builder: parking, population: {person: {count: 100000}}}"], "limits."),
     ("100k primitive shapes", ["--set", "scene={builder: primitives, shapes: [" + ", ".join(["{type: box}"] * 100000) + "]}"],
@@ -85,7 +85,7 @@ CLI_ROWS = [
     ("--ray at a bad address", ["--ray", "256.1.1.1:1"], "--ray: no Ray head answers at 256.1.1.1:1"),
     ("--ray without a port", ["--ray", "somewhere"], "--ray: expected auto or HOST:PORT"),
     ("limits zero", ["--set", "limits.seconds=0"], "limits.seconds: must be > 0"),
-    ("frames 0", ["--frames", "0"], "frames: must be 1"),
+    ("frames 0", ["--frames", "0"], "frames: must lie in 1.."),
     # a sensor the builder cannot keep 0.5 m clear of its solids (docs/builders.md, what every builder guarantees)
     ("railway stations in the masts' line", ["--set", "scene={builder: railway, supports: {layout: single, side: left}, stations: {side: left, offset: 3.5}}"],
      "scene.stations.offset: stations 3.5 m beyond the outer track stand in the masts' line"),

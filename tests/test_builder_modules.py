@@ -40,19 +40,19 @@ def test_refuse_sensor_placement_names_the_key_unless_the_scene_lets_go():
     assert release(type("P", (), {"place_sensor": False})(), {}, {"position": [0, 0, 0]}) is not None
 
 
-def test_check_sizes_names_the_first_bad_number():
-    @dataclasses.dataclass(frozen=True)
-    class Room:
-        width: float = 4.0
-        gap: float = 0.0
-        size: tuple = (1.0, -2.0)
-        lit: bool = False
+def test_an_indoor_scenes_sizes_are_its_fields_ranges():
+    """Sizes positive, counts and gaps >= 0: each field's metadata, checked for parameters built in Python as for YAML."""
+    from bpy_pipeline.builders.parking.params import ParkingScene
+    from bpy_pipeline.builders.street.params import StreetScene
+    from bpy_pipeline.schema import check_ranges
 
-    base.check_sizes(dataclasses.replace(Room(), size=(1.0, 2.0)), "scene", {"gap"})
-    with pytest.raises(InputError, match=r"^scene.gap"):
-        base.check_sizes(Room(), "scene", set())
-    with pytest.raises(InputError, match=r"^scene.size"):
-        base.check_sizes(Room(), "scene", {"gap"})
+    check_ranges(dataclasses.replace(ParkingScene(), ramp_length=0.0, wall_openings=0), "scene")  # may be zero
+    with pytest.raises(InputError, match=r"^scene\.bay_width: must be > 0 m, got 0\.0$"):
+        check_ranges(dataclasses.replace(ParkingScene(), bay_width=0.0), "scene")
+    with pytest.raises(InputError, match=r"^scene\.setback\[0\]: must be >= 0 m, got -1\.0$"):
+        check_ranges(dataclasses.replace(StreetScene(), setback=(-1.0, 8.0)), "scene")
+    with pytest.raises(InputError, match=r"^scene\.roadworks: must lie in 0\.\.1, got 1\.5$"):
+        load_config({"scene": {"builder": "street", "roadworks": 1.5}})
 
 
 # ----------------------------------------------------------------------------- railway terrain

@@ -16,6 +16,7 @@ from bpy_pipeline.lidar.effects.drop import base as drop_base
 from bpy_pipeline.lidar.effects.weather import WEATHER_KINDS, WeatherConfig, fog, kind, particles, rain, snow
 from bpy_pipeline.lidar.points import BEAM_DTYPE, empty_points
 from bpy_pipeline.lidar.sensor.sensors import resolve_sensor
+from bpy_pipeline.schema import check_ranges
 
 Z = 4.0  # binomial and normal intervals at 4 sigma
 
@@ -228,8 +229,8 @@ def test_rain_closed_forms():
     drops = rain._rain_particles(rain.RainConfig(rate=10.0))
     lam = rain.marshall_palmer_lambda(10.0)
     assert math.isclose(lam, 4.1 * 10.0**-0.21) and math.isclose(drops.per_m3, 8000 / lam * math.exp(-lam * 0.5))
-    with pytest.raises(InputError, match=r"^w.rate: must lie in 0..300 mm/h"):
-        rain.Rain().check(rain.RainConfig(rate=301.0), "w")
+    with pytest.raises(InputError, match=r"^w.rate: must lie in 0..300 mm/h, got 301.0$"):  # the field's range, one source
+        check_ranges(rain.RainConfig(rate=301.0), "w")
 
 
 def test_snow_closed_forms_and_a_wet_ground_is_darker():

@@ -108,10 +108,10 @@ def test_off_by_default_leaves_the_intensity_as_it_was():
 
 @pytest.mark.parametrize("reading, fragment", [
     ({"gain_sd": -1}, "effects.intensity.reading.gain_sd: must lie in 0..2"),
-    ({"compensated_range": 0}, "effects.intensity.reading.compensated_range: must lie in (0, 10000]"),
+    ({"compensated_range": 0}, "effects.intensity.reading.compensated_range: must lie in 0..10000 m (0 excluded), got 0"),
     ({"exponent": 1e9}, "effects.intensity.reading.exponent: must lie in 0..10"),
     ({"noise_sd": float("nan")}, "effects.intensity.reading.noise_sd: "),
-    ({"unit_seed": -3}, "effects.intensity.reading.unit_seed: must be a whole number"),
+    ({"unit_seed": -3}, "effects.intensity.reading.unit_seed: must be >= 0, got -3"),
     ({"colour": 1}, "effects.intensity.reading.colour: unknown key"),
 ])
 def test_bad_values_are_one_line(reading, fragment):

@@ -17,6 +17,7 @@ from bpy_pipeline.mixing.cast import car_part_names, object_parts
 from bpy_pipeline.mixing.frame import MIX_STEPS, MixState
 from bpy_pipeline.mixing.paint import CAR_PARTS, DEFAULT_PARTS, CarPaint, car_generator, part_model
 from bpy_pipeline.mixing.placement import Placement
+from bpy_pipeline.schema import check_ranges
 
 PLACEMENT = Placement("car", "car", np.zeros(3), np.array([4.5, 1.8, 1.5]), 0.0)
 
@@ -108,7 +109,7 @@ def test_a_part_named_changes_only_that_parts_points(real_scan):
 
 
 @pytest.mark.parametrize("key, value, match", [
-    ("upper_from", 1.5, r"^scene\.car_paint\.upper_from: must be a number in 0\.\.1"),
+    ("upper_from", 1.5, r"^scene\.car_paint\.upper_from: must lie in 0\.\.1, got 1\.5$"),
     ("paints", {"black": [1.2, 0.05]}, r"^scene\.car_paint\.paints\.black: expected \[share"),
     ("parts", {"roof": {"model": "dark_paint"}}, r"^scene\.car_paint\.parts: unknown car part 'roof'|^scene\.car_paint\.parts.*roof"),
     ("parts", {"cabin": {"model": "velvet"}}, r"^scene\.car_paint\.parts\.cabin\.model: expected one of"),
@@ -119,8 +120,8 @@ def test_a_part_named_changes_only_that_parts_points(real_scan):
     ("parts", {"glass": {"model": "wet", "detection": "bright"}}, r"^scene\.car_paint\.parts\.glass\.detection: must be a reflectivity in 0\.\.1"),
 ])
 def test_bad_car_paint_values_are_one_line_and_exit_2(tmp_path, capsys, key, value, match):
-    with pytest.raises(InputError, match=match):
-        CarPaint(**{key: value})
+    with pytest.raises(InputError, match=match):  # built in Python: its own rules, then its fields' ranges
+        check_ranges(CarPaint(**{key: value}), "scene.car_paint")
     import json
 
     config = tmp_path / "c.yaml"

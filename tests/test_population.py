@@ -238,7 +238,7 @@ def test_bad_population_keys_exit_2_with_one_line_naming_the_key(tmp_path):
         "scene.population={person: {count: 2, colour: red}}": "scene.population.person.colour: unknown key",
         "scene.population=[person]": "scene.population: expected a mapping",
         "scene.population={robot_arm: {positions: [[0, 0]]}}": "scene.population.robot_arm.positions[0]: expected a list of 3 numbers",
-        "scene.population={placement: {min_visible: 2}}": "scene.population.placement.min_visible: must be in 0..1",
+        "scene.population={placement: {min_visible: 2}}": "scene.population.placement.min_visible: must lie in 0..1, got 2",
         "scene.population={placement: {walkable_classes: [lava]}}": "scene.population.placement.walkable_classes[0]: unknown class 'lava'",
     }
     for assignment, message in cases.items():

@@ -91,7 +91,7 @@ def test_same_seed_same_layout():
 
 BAD = {
     "scene.supports.span=0": r"^scene.supports.span: must be > 0",
-    "scene.supports.span_jitter=50": r"^scene.supports.span_jitter: must lie in \[0, span\)",
+    "scene.supports.span_jitter=50": r"^scene.supports.span_jitter: must stay below span \(50.0 m\)",
     "scene.track.end=[-75, 0, 0]": r"^scene.track: start and end coincide",
     "scene.track.tracks=6": r"^scene.track.tracks: must lie in 1..5",
     "scene.supports.layout=gantry": r"^scene.supports.layout: gantry serves 2 to 5 tracks",

@@ -309,7 +309,7 @@ def test_overrides_replace_what_they_name():
         ({"horizontal_fov_deg": [0, 400]}, "sensor.horizontal_fov_deg"),
         ({"horizontal_resolution_deg": -1}, "sensor.horizontal_resolution_deg"),
         ({"horizontal_resolution_deg": 1e-6}, "sensor.horizontal_resolution_deg"),
-        ({"elevations_deg": [0, 95]}, "sensor.elevations_deg"),
+        ({"elevations_deg": [0, 95]}, "sensor.elevations_deg[1]"),  # the item outside the range
         ({"channels": 4, "elevations_deg": [1, 2]}, "sensor.elevations_deg"),
         ({"pattern": "lissajous"}, "sensor.pattern"),
         ({"spin": "up"}, "sensor.spin"),

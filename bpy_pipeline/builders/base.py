@@ -8,7 +8,6 @@ when called. A frame's scene is built by :func:`build_scene`, which hands the bu
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
@@ -17,7 +16,6 @@ import numpy as np
 from ..errors import InputError
 from ..geometry.clearance import NO_POSES, SensorPoses
 from ..registry import Registry
-from ..schema import check_positive
 
 
 @dataclass
@@ -78,7 +76,7 @@ class BuildResult:
 
 
 def no_check(params, where: str) -> None:
-    """Parameters that need no check beyond their types."""
+    """Parameters that need no check beyond their types and their fields' metadata ranges (the schema checks both)."""
 
 
 def no_station(params, frame: int) -> None:
@@ -100,7 +98,8 @@ class Builder:
 
     params : the dataclass of its ``scene`` section (the keys after ``builder``)
     build : ``build(params, context) -> BuildResult``; builds the scene in the current Blender scene
-    check : ``check(params, where)``: ``InputError`` naming the key when the parameters cannot build a scene
+    check : ``check(params, where)``: ``InputError`` naming the key when the parameters cannot build a scene (the
+        rules between fields; each field's own range is its metadata's, checked by the schema)
     station : ``station(params, frame) -> (4, 4) | None``: the level frame the scene places the sensor
         at in frame ``frame`` (the sensor's rotation and mount height are applied on top), ``None``
         where the config's ``sensor.position`` applies
@@ -165,13 +164,3 @@ def refuse_sensor_placement(name: str) -> Callable[[Any, dict, dict], Any]:
         return params
 
     return release
-
-
-def check_sizes(params, where: str, may_be_zero: set) -> None:
-    """Every number (and number pair) of an indoor scene's parameters positive, or >= 0 where allowed."""
-    for f in dataclasses.fields(params):
-        value = getattr(params, f.name)
-        if isinstance(value, bool) or not isinstance(value, (int, float, tuple)):
-            continue
-        for v in value if isinstance(value, tuple) else (value,):
-            check_positive(v, f"{where}.{f.name}", allow_zero=f.name in may_be_zero)

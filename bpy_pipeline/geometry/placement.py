@@ -20,7 +20,7 @@ from typing import Callable, Literal
 import numpy as np
 
 from ..errors import InputError
-from ..schema import check_positive, meta
+from ..schema import meta
 from .clearance import NO_POSES, SensorPoses
 from .collision import box_axes, rectangle_inside, rectangles_near, rectangles_overlap
 
@@ -34,7 +34,7 @@ class Distribution:
 
     kind: Literal["normal", "uniform", "histogram"] = "normal"
     mean: float = field(default=0.0, metadata=meta(help="normal: the mean, in the quantity's unit"))
-    std: float = field(default=1.0, metadata=meta(help="normal: the standard deviation"))
+    std: float = field(default=1.0, metadata=meta("", low=0, help="normal: the standard deviation"))
     min: float = field(default=0.0, metadata=meta(help="the lowest value drawn"))
     max: float = field(default=1.0, metadata=meta(help="the highest value drawn"))
     edges: list[float] = field(default_factory=list, metadata=meta(help="histogram: (b + 1,) increasing bin edges"))
@@ -55,7 +55,6 @@ def check_distribution(d: Distribution, where: str, low: float | None = None, hi
         return
     if d.min > d.max:
         raise InputError(f"{where}.min: must not exceed max ({d.max}), got {d.min}")
-    check_positive(d.std, f"{where}.std", allow_zero=True)
     if low is not None and d.min < low:
         raise InputError(f"{where}.min: must be >= {low}, got {d.min}")
     if high is not None and d.max > high:

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..errors import InputError
 from ..geometry.transforms import sensor_to_output
 from ..labels import load_class_table
 from . import kitti, npy, openpcdet, semantickitti, sustech, train_configs
@@ -40,14 +39,6 @@ def _check_range_image(config) -> None:
 def _write_preview(frame, out: Path) -> list[Path]:
     table = load_class_table()
     return [write_frame_preview(out, frame.index, frame.points, table.color_lut(), frame.boxes, table.names)]
-
-
-def _check_kitti(config) -> None:
-    camera = config.output.kitti.camera
-    if len(camera.resolution) != 2 or min(int(v) for v in camera.resolution) < 1:
-        raise InputError(f"output.kitti.camera.resolution: expected [width, height] in pixels >= 1, got {list(camera.resolution)}")
-    if not 0.0 < float(camera.fov_deg) < 180.0:
-        raise InputError(f"output.kitti.camera.fov_deg: must be > 0 and < 180 degrees, got {camera.fov_deg}")
 
 
 def _write_npy(frame, out: Path) -> list[Path]:
@@ -115,7 +106,7 @@ def _index_openpcdet(out: Path, records: list[dict], config) -> list[Path]:
     return openpcdet.write_index(out, records, config) + train_configs.write_custom_configs(out, records, config, with_boxes)
 
 
-register_writer("kitti", Writer(_write_kitti, _check_kitti, _index_kitti, boxes=True, beside=_write_kitti_image))
+register_writer("kitti", Writer(_write_kitti, index=_index_kitti, boxes=True, beside=_write_kitti_image))  # its camera's ranges: the fields' metadata
 register_writer("openpcdet", Writer(_write_openpcdet, index=_index_openpcdet, boxes=True))
 register_writer("sustech", Writer(_write_sustech, boxes=True))
 

@@ -51,7 +51,8 @@ WEIGHT = 10**6  # fractions as integers, so the quota sequence is exact on every
 
 
 def resolve(split, frames: int, scene_frames: int, val_fraction: float | None = None, where: str = "output.split"):
-    """The ``output.split`` section with ``by``, ``block`` and ``fold`` resolved; ``InputError`` naming the key otherwise.
+    """The ``output.split`` section with ``by``, ``block`` and ``fold`` resolved; ``InputError`` naming the key otherwise
+    (the fields' ranges are their metadata's, checked by the schema).
 
     split : the section (``by`` auto | scene | block | frame | fold; ``train val test`` fractions; ``block``
         frames per block, 0: :data:`DEFAULT_BLOCK`; ``folds``; ``fold`` the val fold, -1: the last; ``seed``)
@@ -65,20 +66,13 @@ def resolve(split, frames: int, scene_frames: int, val_fraction: float | None = 
         raise InputError(f"{where}.by: expected one of {', '.join(BY)}, got {split.by!r}")
     fractions = (split.train, split.val, split.test)
     if val_fraction is not None:
-        if not 0.0 <= float(val_fraction) < 1.0:
-            raise InputError(f"output.kitti.val_fraction: must be >= 0 and < 1, got {val_fraction}")
         given = (1.0 - float(val_fraction), float(val_fraction), 0.0)
         if not (np.allclose(fractions, given) or np.allclose(fractions, (0.7, 0.15, 0.15))):
             raise InputError(f"output.kitti.val_fraction: give the split's fractions in {where} (train, val, test) alone; both are given")
         split = dataclasses.replace(split, train=given[0], val=given[1], test=given[2])
         fractions = given
-    for name, value in zip(SPLITS, fractions):
-        if isinstance(value, bool) or not 0.0 <= float(value) <= 1.0:
-            raise InputError(f"{where}.{name}: a fraction 0 .. 1, got {value!r}")
     if abs(sum(fractions) - 1.0) > 1e-6 or split.train <= 0:
         raise InputError(f"{where}: train, val and test must add up to 1 with train > 0, got {split.train} + {split.val} + {split.test}")
-    if split.seed is not None and (isinstance(split.seed, bool) or split.seed < 0):
-        raise InputError(f"{where}.seed: an integer >= 0 or null, got {split.seed!r}")
     several = scene_frames < ONE_SCENE  # the builder draws new scenes during a run (not only for this frame count: a resume may grow it)
     by, block, fold = split.by, int(split.block), int(split.fold)
     if by == "auto":
@@ -91,8 +85,6 @@ def resolve(split, frames: int, scene_frames: int, val_fraction: float | None = 
         block = scene_frames
     elif by == "block":
         block = block or DEFAULT_BLOCK
-        if block < 1:
-            raise InputError(f"{where}.block: frames per block, an integer >= 1, got {split.block}")
     elif by == "frame":
         if block not in (0, 1):
             raise InputError(f"{where}.block: with by: frame a unit is one frame; give block with by: block")

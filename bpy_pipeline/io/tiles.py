@@ -19,12 +19,13 @@ A whole dataset folder: ``python -m bpy_pipeline.cli.tiles DATASET OUT --size 10
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import InputError
+from ..schema import check_ranges, meta
 from ..geometry.tiles import SAMPLING_METHODS, sample, tiles
 from .atomic import atomic_write
 from .npy import write_npy_folder
@@ -36,26 +37,22 @@ class TileSettings:
     """size, overlap (m, in plan); points per tile (0: keep all); method ``random`` | ``fps``; class_aware;
     max_range (m from the sensor, the ``range`` field; 0: no crop); min_points: tiles with fewer core points are skipped."""
 
-    size: float = 10.0
-    overlap: float = 0.0
-    points: int = 8192
+    size: float = field(default=10.0, metadata=meta("m", low=0, low_open=True))
+    overlap: float = field(default=0.0, metadata=meta("m", low=0, help="below size"))
+    points: int = field(default=8192, metadata=meta("", low=0, help="0: keep every point"))
     method: str = "random"
     class_aware: bool = False
-    max_range: float = 0.0
+    max_range: float = field(default=0.0, metadata=meta("m", low=0, help="0: no crop"))
     min_points: int = 1
     coarse: bool = False  # segment.npy holds the coarse classes of labels.yaml (coarse.json names them)
 
     def check(self) -> None:
-        if not self.size > 0:
-            raise InputError(f"tiles.size: must be > 0 m, got {self.size}")
-        if not 0 <= self.overlap < self.size:
-            raise InputError(f"tiles.overlap: must lie in [0, size) = [0, {self.size}) m, got {self.overlap}")
-        if self.points < 0:
-            raise InputError(f"tiles.points: must be >= 0 (0: keep every point), got {self.points}")
+        """``InputError`` naming the key: the fields' ranges (their metadata), the overlap below the size, a known method."""
+        check_ranges(self, "tiles")
+        if self.overlap >= self.size:
+            raise InputError(f"tiles.overlap: must stay below size ({self.size} m), got {self.overlap}")
         if self.method not in SAMPLING_METHODS:
             raise InputError(f"tiles.method: must be one of {', '.join(SAMPLING_METHODS)}, got {self.method!r}")
-        if self.max_range < 0:
-            raise InputError(f"tiles.max_range: must be >= 0 m (0: no crop), got {self.max_range}")
 
 
 def coarse_classes(path: Path | None = None) -> tuple[list[str], np.ndarray]:

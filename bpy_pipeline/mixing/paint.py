@@ -27,15 +27,15 @@ receiver's reading floor lies above its detection floor, docs/realism.md); unset
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
 
 from ..errors import InputError
-from ..schema import meta
+from ..schema import check_ranges, meta
 from ..geometry.objects import ObjectPart
-from ..lidar.effects.materials import MATERIAL_MODELS, MaterialsConfig, apply_materials, check_materials
+from ..lidar.effects.materials import MATERIAL_MODELS, apply_materials
 from ..registry import Registry
 
 
@@ -117,10 +117,7 @@ def part_model(spec, where: str, pigment: float | None = None) -> PartModel | No
     if pigment is not None and PIGMENT.get(name) and PIGMENT[name] not in rest:
         rest[PIGMENT[name]] = float(pigment)
     params = params_type(**{k: float(v) for k, v in rest.items()})
-    try:  # the models' own ranges (lidar/effects/materials.py check_materials), named as this part's keys
-        check_materials(replace(MaterialsConfig(), **{name: params}), "@")
-    except InputError as err:
-        raise InputError(str(err).replace(f"@.{name}.", f"{where}.", 1)) from None
+    check_ranges(params, where)  # the model's own ranges (its fields' metadata), named as this part's keys
     return PartModel(name, params, detection)
 
 
@@ -133,15 +130,12 @@ class CarPaint:
     enabled: bool = field(default=False, metadata=meta(help="paint the inserted cars' parts by their material models"))
     paints: dict = field(default_factory=lambda: {k: list(v) for k, v in PAINTS.items()}, metadata=meta(help="the body's pigments drawn per car"))
     upper_from: float = field(default=0.58,
-                              metadata=meta("", soft=(0, 1),
-                                            help="fraction of the car's height from which the body is upper (0..1; beltlines lie at 0.50-0.62; fitted)"))
+                              metadata=meta("", 0, 1, help="fraction of the car's height from which the body is upper (beltlines lie at 0.50-0.62; fitted)"))
     parts: dict = field(default_factory=dict, metadata=meta(help="part name -> its material model, over the default parts"))
 
     def __post_init__(self):
         if not isinstance(self.enabled, bool):
             raise InputError(f"scene.car_paint.enabled: must be true or false, got {self.enabled!r}")
-        if isinstance(self.upper_from, bool) or not isinstance(self.upper_from, (int, float)) or not 0.0 <= self.upper_from <= 1.0:
-            raise InputError(f"scene.car_paint.upper_from: must be a number in 0..1, got {self.upper_from!r}")
         if not isinstance(self.paints, dict) or not self.paints:
             raise InputError(f"scene.car_paint.paints: expected a mapping name -> [share, reflectance], got {self.paints!r}")
         for name, value in self.paints.items():

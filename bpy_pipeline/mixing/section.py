@@ -23,7 +23,7 @@ class ObjectBox:
 
     type: str = "car"
     center: tuple[float, float, float] = field(default=(10.0, 0.0, 0.0), metadata=meta("m", help="box centre, sensor frame"))
-    size: tuple[float, float, float] = field(default=(0.0, 0.0, 0.0), metadata=meta("m", help="0: the type's nominal size"))
+    size: tuple[float, float, float] = field(default=(0.0, 0.0, 0.0), metadata=meta("m", low=0, help="0: the type's nominal size"))
     yaw_deg: float = field(default=0.0, metadata=meta("deg"))
     class_name: str = field(default="", metadata={"key": "class"})  # "" : the type's class (car, person, rider, robot arm; a file's by its name)
 
@@ -33,7 +33,7 @@ class RemoveBox:
     """A box whose real returns are cut out before insertion (to swap a real object for a synthetic one)."""
 
     center: tuple[float, float, float] = field(default=(0.0, 0.0, 0.0), metadata=meta("m", help="box centre, sensor frame"))
-    size: tuple[float, float, float] = field(default=(1.0, 1.0, 1.0), metadata=meta("m"))
+    size: tuple[float, float, float] = field(default=(1.0, 1.0, 1.0), metadata=meta("m", low=0, low_open=True))
     yaw_deg: float = field(default=0.0, metadata=meta("deg"))
 
 
@@ -65,8 +65,8 @@ class ParkingRule:
     box_margin: float = field(default=0.1, metadata=meta("", help="the box grown by this share when real returns in it are counted (0.1: 10 %)"))
     min_ground_points: int = field(default=3, metadata=meta(""))
     max_hidden_fraction: float = field(default=0.5, metadata=meta(""))
-    near_rejection_distance: float = field(default=5.0, metadata=meta("m"))
-    near_rejection_probability: float = field(default=0.1, metadata=meta(""))
+    near_rejection_distance: float = field(default=5.0, metadata=meta("m", low=0))
+    near_rejection_probability: float = field(default=0.1, metadata=meta("", 0, 1))
 
 
 @dataclass(frozen=True)
@@ -148,21 +148,21 @@ class SupportParams:
         scan do not depend on the frame's draws)
     """
 
-    threshold: float = field(default=0.05, metadata=meta("m", help="a plane's inlier distance"))
-    iterations: int = field(default=300, metadata=meta(""))
-    max_tilt_deg: float = field(default=10.0, metadata=meta("deg"))
-    max_planes: int = field(default=10, metadata=meta(""))
-    min_inliers: int = field(default=30, metadata=meta(""))
-    voxel: float = field(default=0.1, metadata=meta("m", help="the cells a plane's inliers are thinned to"))
-    eps: float = field(default=0.4, metadata=meta("m", help="DBSCAN: cells within eps"))
-    min_samples: int = field(default=4, metadata=meta(""))
-    min_area: float = field(default=0.25, metadata=meta("m^2"))
-    min_width: float = field(default=0.3, metadata=meta("m"))
-    desk_height: tuple[float, float] = field(default=(0.4, 1.2), metadata=meta("m"))
-    floor_band: float = field(default=0.2, metadata=meta("m", help="surfaces this near the floor's plane are floor"))
-    headroom: float = field(default=0.8, metadata=meta("m"))
-    max_covered: float = field(default=0.25, metadata=meta(""))
-    sample: int = field(default=20000, metadata=meta(""))
+    threshold: float = field(default=0.05, metadata=meta("m", low=0, low_open=True, help="a plane's inlier distance"))
+    iterations: int = field(default=300, metadata=meta("", low=1))
+    max_tilt_deg: float = field(default=10.0, metadata=meta("deg", 0, 90, high_open=True))
+    max_planes: int = field(default=10, metadata=meta("", low=1))
+    min_inliers: int = field(default=30, metadata=meta("", low=1))
+    voxel: float = field(default=0.1, metadata=meta("m", low=0, low_open=True, help="the cells a plane's inliers are thinned to"))
+    eps: float = field(default=0.4, metadata=meta("m", low=0, low_open=True, help="DBSCAN: cells within eps"))
+    min_samples: int = field(default=4, metadata=meta("", low=1))
+    min_area: float = field(default=0.25, metadata=meta("m^2", low=0, low_open=True))
+    min_width: float = field(default=0.3, metadata=meta("m", low=0, low_open=True))
+    desk_height: tuple[float, float] = field(default=(0.4, 1.2), metadata=meta("m", low=0))
+    floor_band: float = field(default=0.2, metadata=meta("m", low=0, low_open=True, help="surfaces this near the floor's plane are floor"))
+    headroom: float = field(default=0.8, metadata=meta("m", low=0, low_open=True))
+    max_covered: float = field(default=0.25, metadata=meta("", 0, 1))
+    sample: int = field(default=20000, metadata=meta("", low=1))
     seed: int = field(default=0, metadata=meta(""))
 
 
@@ -180,21 +180,21 @@ class RealPopulation:
     min_range, max_range : m from the sensor in the plane (0: no limit)
     """
 
-    people: int = field(default=0, metadata=meta(""))
-    arms: int = field(default=0, metadata=meta(""))
+    people: int = field(default=0, metadata=meta("", low=0))
+    arms: int = field(default=0, metadata=meta("", low=0))
     people_on: list[str] = field(default_factory=lambda: ["floor"])
     arms_on: list[str] = field(default_factory=lambda: ["desk"])
     person_height: Distribution = field(default_factory=lambda: Distribution("normal", 1.72, 0.09, 1.50, 1.98))
-    tries: int = field(default=60, metadata=meta(""))
-    keep_out: float = field(default=0.3, metadata=meta("m", help="between objects' boxes"))
-    clearance: float = field(default=0.1, metadata=meta("m"))
-    max_points: int = field(default=0, metadata=meta(""))
-    margin: float = field(default=0.03, metadata=meta("m", help="an arm's capsules keep this far from real returns"))
-    reach: float = field(default=0.3, metadata=meta("m"))
-    arm_reach: float = field(default=0.2, metadata=meta("m"))
-    step: float = field(default=0.05, metadata=meta("m"))
-    min_range: float = field(default=1.0, metadata=meta("m"))
-    max_range: float = field(default=0.0, metadata=meta("m"))
+    tries: int = field(default=60, metadata=meta("", low=1))
+    keep_out: float = field(default=0.3, metadata=meta("m", low=0, help="between objects' boxes"))
+    clearance: float = field(default=0.1, metadata=meta("m", low=0))
+    max_points: int = field(default=0, metadata=meta("", low=0))
+    margin: float = field(default=0.03, metadata=meta("m", low=0, help="an arm's capsules keep this far from real returns"))
+    reach: float = field(default=0.3, metadata=meta("m", low=0))
+    arm_reach: float = field(default=0.2, metadata=meta("m", low=0))
+    step: float = field(default=0.05, metadata=meta("m", low=0))
+    min_range: float = field(default=1.0, metadata=meta("m", low=0))
+    max_range: float = field(default=0.0, metadata=meta("m", low=0))
     supports: SupportParams = field(default_factory=SupportParams)
 
 
@@ -238,7 +238,7 @@ class RealScanScene:
     keep_labels: bool = True
     real_boxes: list[ObjectBox] = field(default_factory=list)
     ground: Literal["auto", "ransac", "patchwork"] = "auto"
-    max_range: float = field(default=0.0, metadata=meta("m"))
+    max_range: float = field(default=0.0, metadata=meta("m", low=0))
     car_bodies: Literal["all", "classic"] = "all"
     population: RealPopulation = field(default_factory=RealPopulation)
     car_glass: CarGlass = field(default_factory=CarGlass)

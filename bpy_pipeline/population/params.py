@@ -29,7 +29,7 @@ import numpy as np
 from ..errors import InputError
 from ..geometry.placement import sample_count
 from ..registry import Registry
-from ..schema import check_positive, from_dict, to_plain, meta
+from ..schema import from_dict, to_plain, meta
 from ..geometry.placement import Distribution, check_distribution
 
 
@@ -47,7 +47,7 @@ class PersonPopulation:
     height: Distribution = field(default_factory=lambda: Distribution("normal", 1.72, 0.09, 1.50, 1.98))
     poses: dict = field(default_factory=lambda: {"standing": 0.4, "walking": 0.4, "sitting": 0.1, "crouching": 0.1})
     assets: str = ""
-    reflectivity: tuple[float, float] = field(default=(0.15, 0.6), metadata=meta(""))
+    reflectivity: tuple[float, float] = field(default=(0.15, 0.6), metadata=meta("", 0, 1, help="[min, max] of the clothing's reflectivity"))
 
 
 @dataclass(frozen=True)
@@ -61,7 +61,7 @@ class RobotArmPopulation:
     count: int | Distribution = 1
     model: str = ""
     positions: list[tuple[float, float, float]] = field(default_factory=list)
-    reflectivity: float = field(default=0.55, metadata=meta(""))
+    reflectivity: float = field(default=0.55, metadata=meta("", 0, 1))
     assets: str = ""
 
 
@@ -93,15 +93,15 @@ class PlacementRules:
         objects of these classes are the floors (seats); none of them in the scene: surfaces are detected
     """
 
-    keep_out: float = field(default=0.3, metadata=meta("m"))
-    tries: int = field(default=60, metadata=meta(""))
-    cell: float = field(default=0.1, metadata=meta("m"))
-    seat_height: tuple[float, float] = field(default=(0.35, 0.8), metadata=meta("m"))
-    floor_band: float = field(default=0.3, metadata=meta("m"))
-    min_area: float = field(default=0.25, metadata=meta("m^2"))
-    instance_base: int = field(default=10000, metadata=meta(""))
+    keep_out: float = field(default=0.3, metadata=meta("m", low=0))
+    tries: int = field(default=60, metadata=meta("", low=0, low_open=True))
+    cell: float = field(default=0.1, metadata=meta("m", low=0, low_open=True))
+    seat_height: tuple[float, float] = field(default=(0.35, 0.8), metadata=meta("m", low=0, help="[min, max]"))
+    floor_band: float = field(default=0.3, metadata=meta("m", low=0))
+    min_area: float = field(default=0.25, metadata=meta("m^2", low=0, low_open=True))
+    instance_base: int = field(default=10000, metadata=meta("", low=0, low_open=True))
     manifest: str = ""
-    min_visible: float = field(default=0.0, metadata=meta(""))
+    min_visible: float = field(default=0.0, metadata=meta("", 0, 1))
     walkable_classes: list[str] = field(default_factory=lambda: ["floor", "ground", "road", "sidewalk", "platform"])
     seat_classes: list[str] = field(default_factory=list)
 
@@ -146,14 +146,12 @@ def _check_person(params: PersonPopulation, where: str) -> None:
     if any(isinstance(w, bool) or not isinstance(w, (int, float)) or w < 0 for w in params.poses.values()) or sum(params.poses.values()) <= 0:
         raise InputError(f"{where}.poses: weights must be numbers >= 0, not all zero, got {params.poses!r}")
     lo, hi = params.reflectivity
-    if not 0 <= lo <= hi <= 1:
-        raise InputError(f"{where}.reflectivity: expected 0 <= min <= max <= 1, got {list(params.reflectivity)}")
+    if lo > hi:
+        raise InputError(f"{where}.reflectivity: expected [min, max] with min <= max, got {list(params.reflectivity)}")
 
 
 def _check_arm(params: RobotArmPopulation, where: str) -> None:
     _check_common(params, where)
-    if not 0 <= params.reflectivity <= 1:
-        raise InputError(f"{where}.reflectivity: must be in 0..1, got {params.reflectivity}")
 
 
 def _check_car(params: CarPopulation, where: str) -> None:
@@ -230,7 +228,7 @@ KINDS.register("car", PopulationKind(CarPopulation, "car", "car", _draw_car, _ch
 class Population:
     """``scene.population``: ``kinds`` ((name, params), ...) in the order given, and the placement rules."""
 
-    kinds: tuple = ()
+    kinds: tuple = field(default=(), metadata={"inline": True})  # (name, params) pairs: their keys are the section's (scene.population.person)
     placement: PlacementRules = field(default_factory=PlacementRules)
 
 
@@ -256,20 +254,14 @@ def population_from_dict(data, where: str = "scene.population") -> Population | 
         kind.check(params, f"{where}.{key}")
         kinds.append((key, params))
     p = placement
-    check_positive(p.keep_out, f"{where}.placement.keep_out", allow_zero=True)
-    for name in ("tries", "cell", "min_area", "instance_base"):
-        check_positive(getattr(p, name), f"{where}.placement.{name}")
-    check_positive(p.floor_band, f"{where}.placement.floor_band", allow_zero=True)
     from ..labels import load_class_table
 
     table = load_class_table()
     for key in ("walkable_classes", "seat_classes"):
         for i, name in enumerate(getattr(p, key)):
             table.id_of(name, f"{where}.placement.{key}[{i}]")
-    if not 0 <= p.min_visible <= 1:
-        raise InputError(f"{where}.placement.min_visible: must be in 0..1, got {p.min_visible}")
-    if not 0 <= p.seat_height[0] <= p.seat_height[1]:
-        raise InputError(f"{where}.placement.seat_height: expected 0 <= min <= max, got {list(p.seat_height)}")
+    if p.seat_height[0] > p.seat_height[1]:
+        raise InputError(f"{where}.placement.seat_height: expected [min, max] with min <= max, got {list(p.seat_height)}")
     from ..assets import asset_set
 
     for key, params in kinds:  # the asset sets named exist (checked before any Blender work)

@@ -9,7 +9,7 @@ import numpy as np
 from ...schema import meta
 from ...errors import InputError
 from ...geometry.transforms import KITTI_SENSOR_HEIGHT
-from ..base import Builder, BuildContext, BuildResult, check_sizes, refuse_sensor_placement, register_builder
+from ..base import Builder, BuildContext, BuildResult, refuse_sensor_placement, register_builder
 from ...geometry.placement import Distribution, check_distribution
 
 
@@ -31,40 +31,39 @@ class IndustrialHallScene:
     meshes (empty: assets_manifest/assets.yaml); the procedural people are used when it lists none.
     """
 
-    length: float = field(default=16.0, metadata=meta("m"))
-    width: float = field(default=12.0, metadata=meta("m"))
-    height: float = field(default=5.0, metadata=meta("m"))
-    wall_thickness: float = field(default=0.3, metadata=meta("m"))
-    desk_rows: int = field(default=2, metadata=meta(""))
-    desks_per_row: int = field(default=3, metadata=meta(""))
-    desk_size: tuple[float, float] = field(default=(1.6, 0.8), metadata=meta("m"))
-    desk_height: float = field(default=0.72, metadata=meta("m"))
-    shelves: int = field(default=3, metadata=meta(""))
-    shelf_size: tuple[float, float, float] = field(default=(2.0, 0.6, 2.2), metadata=meta("m"))
-    shelf_levels: int = field(default=4, metadata=meta(""))
+    length: float = field(default=16.0, metadata=meta("m", low=0, low_open=True))
+    width: float = field(default=12.0, metadata=meta("m", low=0, low_open=True))
+    height: float = field(default=5.0, metadata=meta("m", low=0, low_open=True))
+    wall_thickness: float = field(default=0.3, metadata=meta("m", low=0, low_open=True))
+    desk_rows: int = field(default=2, metadata=meta("", low=0))
+    desks_per_row: int = field(default=3, metadata=meta("", low=0))
+    desk_size: tuple[float, float] = field(default=(1.6, 0.8), metadata=meta("m", low=0, low_open=True))
+    desk_height: float = field(default=0.72, metadata=meta("m", low=0, low_open=True))
+    shelves: int = field(default=3, metadata=meta("", low=0))
+    shelf_size: tuple[float, float, float] = field(default=(2.0, 0.6, 2.2), metadata=meta("m", low=0, low_open=True))
+    shelf_levels: int = field(default=4, metadata=meta("", low=0, low_open=True))
     place_sensor: bool = True
-    sensor_height: float = field(default=4.5, metadata=meta("m"))
-    area_radius: float = field(default=4.5, metadata=meta("m", help="people and robots stand within this of the point below the sensor (0: anywhere)"))
-    robots: int = field(default=1, metadata=meta(""))
+    sensor_height: float = field(default=4.5, metadata=meta("m", low=0, low_open=True))
+    area_radius: float = field(default=4.5, metadata=meta("m", low=0, help="people and robots stand within this of the point below the sensor (0: anywhere)"))
+    robots: int = field(default=1, metadata=meta("", low=0))
     robot_model: str = ""
     people: Distribution = field(default_factory=lambda: Distribution("normal", 4.4, 2.0, 0.0, 12.0))
     person_height: Distribution = field(default_factory=lambda: Distribution("normal", 1.72, 0.09, 1.50, 1.98))
     poses: dict = field(default_factory=lambda: {"standing": 0.35, "walking": 0.35, "sitting": 0.15, "crouching": 0.15})
-    person_clearance: float = field(default=0.05, metadata=meta("m"))
-    placement_tries: int = field(default=60, metadata=meta(""))
-    max_consecutive_failures: int = field(default=10, metadata=meta("", help="people in a row that fit nowhere end the frame's placement (with a warning)"))
+    person_clearance: float = field(default=0.05, metadata=meta("m", low=0))
+    placement_tries: int = field(default=60, metadata=meta("", low=0, low_open=True))
+    max_consecutive_failures: int = field(default=10, metadata=meta("", low=0, low_open=True,
+                                                                    help="people in a row that fit nowhere end the frame's placement (with a warning)"))
     assets: str = ""
 
 
 
 MAX_PEOPLE = 500  # per frame: far more than a hall of 16 x 12 m holds, and placement tries grow with it
-MAY_BE_ZERO = {"person_clearance", "robots", "shelves", "desk_rows", "desks_per_row", "area_radius"}
 
 
 def check(params: IndustrialHallScene, where: str) -> None:
     from ...geometry.human import POSES
 
-    check_sizes(params, where, MAY_BE_ZERO)
     check_distribution(params.people, f"{where}.people", low=0.0, high=MAX_PEOPLE)
     check_distribution(params.person_height, f"{where}.person_height", low=0.5, high=2.5)
     if not params.poses or any(k not in POSES for k in params.poses):

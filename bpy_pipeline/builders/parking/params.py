@@ -10,7 +10,7 @@ import numpy as np
 from ...schema import meta
 from ...errors import InputError
 from ...geometry.clearance import CLEARANCE
-from ..base import Builder, BuildContext, BuildResult, check_sizes, refuse_sensor_placement, register_builder
+from ..base import Builder, BuildContext, BuildResult, refuse_sensor_placement, register_builder
 from ...geometry.placement import Distribution, check_distribution
 
 
@@ -39,47 +39,40 @@ class ParkingScene:
     ``retroreflector`` and ``glossy_paint``; ``false`` leaves them out.
     """
 
-    length: float = field(default=60.0, metadata=meta("m"))
-    driveway_width: float = field(default=6.5, metadata=meta("m"))
-    bay_width: float = field(default=2.5, metadata=meta("m"))
-    bay_depth: float = field(default=5.0, metadata=meta("m"))
-    ceiling_height: float = field(default=2.6, metadata=meta("m"))
-    slab_thickness: float = field(default=0.3, metadata=meta("m"))
-    wall_thickness: float = field(default=0.3, metadata=meta("m"))
-    pillar_size: float = field(default=0.6, metadata=meta("m"))
-    pillar_every: int = field(default=3, metadata=meta(""))
-    ramp_length: float = field(default=16.0, metadata=meta("m"))
-    wall_openings: int = field(default=0, metadata=meta(""))
-    opening_width: float = field(default=1.2, metadata=meta("m"))
-    opening_height: float = field(default=2.1, metadata=meta("m"))
+    length: float = field(default=60.0, metadata=meta("m", low=0, low_open=True))
+    driveway_width: float = field(default=6.5, metadata=meta("m", low=0, low_open=True))
+    bay_width: float = field(default=2.5, metadata=meta("m", low=0, low_open=True))
+    bay_depth: float = field(default=5.0, metadata=meta("m", low=0, low_open=True))
+    ceiling_height: float = field(default=2.6, metadata=meta("m", low=0, low_open=True))
+    slab_thickness: float = field(default=0.3, metadata=meta("m", low=0, low_open=True))
+    wall_thickness: float = field(default=0.3, metadata=meta("m", low=0, low_open=True))
+    pillar_size: float = field(default=0.6, metadata=meta("m", low=0, low_open=True))
+    pillar_every: int = field(default=3, metadata=meta("", low=0, low_open=True))
+    ramp_length: float = field(default=16.0, metadata=meta("m", low=0))
+    wall_openings: int = field(default=0, metadata=meta("", low=0))
+    opening_width: float = field(default=1.2, metadata=meta("m", low=0, low_open=True))
+    opening_height: float = field(default=2.1, metadata=meta("m", low=0, low_open=True))
     place_sensor: bool = True
-    sensor_height: float = field(default=1.51, metadata=meta("m"))
-    sensor_start: float = field(default=4.0, metadata=meta("m"))
-    sensor_step: float = field(default=2.0, metadata=meta("m"))
+    sensor_height: float = field(default=1.51, metadata=meta("m", low=0, low_open=True))
+    sensor_start: float = field(default=4.0, metadata=meta("m", low=0))
+    sensor_step: float = field(default=2.0, metadata=meta("m", low=0))
     cars: Distribution = field(default_factory=lambda: Distribution("normal", 5.0, 4.0, 0.0, 40.0))
     car_distance: Distribution = field(default_factory=lambda: Distribution("normal", 10.0, 20.0, 2.5, 20.0))
     car_height: Distribution = field(default_factory=lambda: Distribution("uniform", 1.625, 0.0, 1.55, 1.70))
-    near_rejection_distance: float = field(default=5.0, metadata=meta("m"))
-    near_rejection_probability: float = field(default=0.1, metadata=meta(""))
+    near_rejection_distance: float = field(default=5.0, metadata=meta("m", low=0))
+    near_rejection_probability: float = field(default=0.1, metadata=meta("", 0, 1))
     placement: Literal["free", "bays"] = "free"
-    rotation_step_deg: float = field(default=10.0, metadata=meta("deg"))
-    rotations: int = field(default=36, metadata=meta(""))
-    max_consecutive_failures: int = field(default=10, metadata=meta(""))
-    min_visible_fraction: float = field(default=0.3, metadata=meta(""))
-    car_clearance: float = field(default=0.3, metadata=meta("m"))
+    rotation_step_deg: float = field(default=10.0, metadata=meta("deg", low=0, low_open=True))
+    rotations: int = field(default=36, metadata=meta("", low=0, low_open=True))
+    max_consecutive_failures: int = field(default=10, metadata=meta("", low=0))
+    min_visible_fraction: float = field(default=0.3, metadata=meta("", 0, 1))
+    car_clearance: float = field(default=0.3, metadata=meta("m", low=0))
     car_fittings: bool = True
 
 
 
-MAY_BE_ZERO = {"ramp_length", "wall_openings", "sensor_start", "sensor_step", "near_rejection_distance", "car_clearance", "min_visible_fraction",
-               "near_rejection_probability", "max_consecutive_failures"}
-
-
 def check(params: ParkingScene, where: str) -> None:
-    check_sizes(params, where, MAY_BE_ZERO)
-    for key in ("near_rejection_probability", "min_visible_fraction"):
-        if getattr(params, key) > 1:
-            raise InputError(f"{where}.{key}: must lie in 0..1, got {getattr(params, key)}")
+    """``InputError`` naming the key of a rule between the fields (each field's range is its metadata's, the schema's)."""
     check_distribution(params.cars, f"{where}.cars", low=0.0)
     check_distribution(params.car_distance, f"{where}.car_distance", low=0.0)
     check_distribution(params.car_height, f"{where}.car_height", low=0.5, high=4.0)

@@ -30,8 +30,8 @@ class Shape:
     rotation_deg: Vec3 = field(default=(0.0, 0.0, 0.0), metadata=meta("deg"))
     class_name: str = field(default="unlabeled", metadata={"key": "class"})
     material: str = "diffuse"  # one of buffers.MATERIALS
-    reflectivity: float = field(default=0.5, metadata=meta(""))
-    segments: int = field(default=64, metadata=meta(""))
+    reflectivity: float = field(default=0.5, metadata=meta("", 0, 1))
+    segments: int = field(default=64, metadata=meta("", low=3, help="spheres and cylinders: segments around"))
     name: str = ""
 
 
@@ -53,18 +53,15 @@ SIZES = {"plane": (1, 2), "box": (1, 3), "sphere": (1,), "cylinder": (2,)}  # ho
 
 
 def check(params: PrimitivesScene, where: str) -> None:
+    """``InputError`` naming the key of a shape's size of the wrong count or sign, or an unknown material (the fields' ranges: the schema's)."""
     for i, shape in enumerate(params.shapes):
         at = f"{where}.shapes[{i}]"
         sizes = [shape.size] if isinstance(shape.size, float) else shape.size
         want = SIZES[shape.type]
         if len(sizes) not in want or any(s <= 0 for s in sizes):
             raise InputError(f"{at}.size: a {shape.type} takes {' or '.join(map(str, want))} positive number(s), got {shape.size}")
-        if not 0 <= shape.reflectivity <= 1:
-            raise InputError(f"{at}.reflectivity: must lie in 0..1, got {shape.reflectivity}")
         if shape.material not in MATERIALS:
             raise InputError(f"{at}.material: expected one of {', '.join(MATERIALS)}, got {shape.material!r}")
-        if shape.segments < 3:
-            raise InputError(f"{at}.segments: must be >= 3, got {shape.segments}")
 
 
 def build(params: PrimitivesScene, context: BuildContext) -> BuildResult:

@@ -157,8 +157,6 @@ def check_assets(assets, where: str, known_classes) -> None:
                 import ifcopenshell  # noqa: F401
             except ImportError:
                 raise InputError(f"{key}: an .ifc asset needs ifcopenshell (pip install 'bpy-pipeline[ifc]'); or give a .glb, .gltf, .obj or .ply") from None
-    if not assets.unit_scale > 0:
-        raise InputError(f"{where}.unit_scale: must be > 0 (metres per file unit), got {assets.unit_scale}")
     known = {normalise(c) for c in known_classes}
     for pattern, class_name in assets.classes.items():
         if not isinstance(pattern, str) or not isinstance(class_name, str):

@@ -9,8 +9,11 @@ import numpy as np
 
 from ...schema import meta
 from ...errors import InputError
-from ..base import Builder, BuildContext, BuildResult, check_sizes, register_builder
+from ..base import Builder, BuildContext, BuildResult, register_builder
 from ...geometry.placement import Distribution, check_distribution
+
+
+MAX_YARD_TREES = 100.0  # per 100 m^2: one tree a square metre (Distribute Points on Faces draws that many before thinning)
 
 
 @dataclass(frozen=True)
@@ -62,76 +65,63 @@ class StreetScene:
     ``retroreflector`` and ``glossy_paint`` (applied with ``effects.materials.objects: true``); ``false`` leaves them out.
     """
 
-    arm_length: float = field(default=100.0, metadata=meta("m"))
+    arm_length: float = field(default=100.0, metadata=meta("m", low=0, low_open=True))
     junction_mix: dict = field(default_factory=lambda: {"cross": 1.0},
                                metadata=meta("", help="shares of the junction kinds drawn per layout: cross, t_junction, straight"))
-    lanes_per_direction: int = field(default=1, metadata=meta(""))
-    lane_width: float = field(default=3.5, metadata=meta("m"))
-    parking_width: float = field(default=2.2, metadata=meta("m"))
-    kerb_width: float = field(default=0.15, metadata=meta("m"))
-    kerb_height: float = field(default=0.15, metadata=meta("m"))
-    sidewalk_width: float = field(default=3.5, metadata=meta("m"))
-    crossing_width: float = field(default=4.0, metadata=meta("m"))
-    crossing_offset: float = field(default=1.0, metadata=meta("m"))
-    signs: int = field(default=4, metadata=meta(""))
-    building_depth: float = field(default=10.0, metadata=meta("m"))
-    building_width: tuple[float, float] = field(default=(8.0, 16.0), metadata=meta("m"))
-    building_height: tuple[float, float] = field(default=(6.0, 20.0), metadata=meta("m"))
-    setback: tuple[float, float] = field(default=(0.0, 8.0), metadata=meta("m"))
-    open_share: float = field(default=0.3, metadata=meta(""))
-    plot_depth: float = field(default=20.0, metadata=meta("m"))
+    lanes_per_direction: int = field(default=1, metadata=meta("", low=0, low_open=True))
+    lane_width: float = field(default=3.5, metadata=meta("m", low=0, low_open=True))
+    parking_width: float = field(default=2.2, metadata=meta("m", low=0))
+    kerb_width: float = field(default=0.15, metadata=meta("m", low=0, low_open=True))
+    kerb_height: float = field(default=0.15, metadata=meta("m", low=0, low_open=True))
+    sidewalk_width: float = field(default=3.5, metadata=meta("m", low=0, low_open=True))
+    crossing_width: float = field(default=4.0, metadata=meta("m", low=0, low_open=True))
+    crossing_offset: float = field(default=1.0, metadata=meta("m", low=0))
+    signs: int = field(default=4, metadata=meta("", low=0))
+    building_depth: float = field(default=10.0, metadata=meta("m", low=0, low_open=True))
+    building_width: tuple[float, float] = field(default=(8.0, 16.0), metadata=meta("m", low=0, low_open=True))
+    building_height: tuple[float, float] = field(default=(6.0, 20.0), metadata=meta("m", low=0, low_open=True))
+    setback: tuple[float, float] = field(default=(0.0, 8.0), metadata=meta("m", low=0))
+    open_share: float = field(default=0.3, metadata=meta("", 0, 1))
+    plot_depth: float = field(default=20.0, metadata=meta("m", low=0, low_open=True))
     boundary_mix: dict = field(default_factory=lambda: {"fence": 0.35, "hedge": 0.3, "wall": 0.15, "none": 0.2})
-    street_trees: float = field(default=0.6, metadata=meta(""))
-    tree_spacing: tuple[float, float] = field(default=(8.0, 16.0), metadata=meta("m"))
-    yard_plants: float = field(default=1.5, metadata=meta(""))
-    yard_trees: float = field(default=0.0, metadata=meta(""))
-    yard_tree_clearance: float = field(default=4.0, metadata=meta("m"))
-    yard_tree_height: tuple[float, float] = field(default=(4.0, 14.0), metadata=meta("m"))
-    lamp_spacing: float = field(default=28.0, metadata=meta("m"))
-    furniture_per_100m: float = field(default=3.0, metadata=meta(""))
-    roadworks: float = field(default=0.25, metadata=meta(""))
+    street_trees: float = field(default=0.6, metadata=meta("", 0, 1))
+    tree_spacing: tuple[float, float] = field(default=(8.0, 16.0), metadata=meta("m", low=0))
+    yard_plants: float = field(default=1.5, metadata=meta("", low=0))
+    yard_trees: float = field(default=0.0, metadata=meta("", 0, MAX_YARD_TREES, help="more trees per 100 m^2 of yard (0: none)"))
+    yard_tree_clearance: float = field(default=4.0, metadata=meta("m", low=0.5, help="apart, at least a trunk's width"))
+    yard_tree_height: tuple[float, float] = field(default=(4.0, 14.0), metadata=meta("m", low=2, help="[min, max]: their crowns clear 1.5 m"))
+    lamp_spacing: float = field(default=28.0, metadata=meta("m", low=0))
+    furniture_per_100m: float = field(default=3.0, metadata=meta("", low=0))
+    roadworks: float = field(default=0.25, metadata=meta("", 0, 1))
     terrain: bool = True
-    terrain_step: float = field(default=1.0, metadata=meta("m"))
-    terrain_relief: float = field(default=0.5, metadata=meta("m"))
-    terrain_slope: float = field(default=0.04, metadata=meta(""))
-    layout_seed: int = field(default=0, metadata=meta(""))
+    terrain_step: float = field(default=1.0, metadata=meta("m", low=0, low_open=True))
+    terrain_relief: float = field(default=0.5, metadata=meta("m", low=0))
+    terrain_slope: float = field(default=0.04, metadata=meta("", low=0))
+    layout_seed: int = field(default=0, metadata=meta("", low=0))
     vehicles: Distribution = field(default_factory=lambda: Distribution("normal", 16.0, 5.0, 0.0, 60.0))
     vehicle_mix: dict = field(default_factory=lambda: {"car": 0.7, "van": 0.15, "truck": 0.08, "bus": 0.07})
-    platoon_probability: float = field(default=0.5, metadata=meta(""))
+    platoon_probability: float = field(default=0.5, metadata=meta("", 0, 1))
     platoon_gap: Distribution = field(default_factory=lambda: Distribution("uniform", 7.0, 0.0, 3.0, 12.0))
     parked: Distribution = field(default_factory=lambda: Distribution("normal", 20.0, 6.0, 0.0, 80.0))
     bicycles: Distribution = field(default_factory=lambda: Distribution("normal", 3.0, 2.0, 0.0, 20.0))
     motorcycles: Distribution = field(default_factory=lambda: Distribution("normal", 1.0, 1.0, 0.0, 20.0))
     pedestrians: Distribution = field(default_factory=lambda: Distribution("normal", 16.0, 6.0, 0.0, 80.0))
-    crossing_share: float = field(default=0.3, metadata=meta(""))
-    clearance: float = field(default=0.5, metadata=meta("m"))
+    crossing_share: float = field(default=0.3, metadata=meta("", 0, 1))
+    clearance: float = field(default=0.5, metadata=meta("m", low=0))
     fov_aware: bool = True
-    min_in_view: float = field(default=0.3, metadata=meta(""))
+    min_in_view: float = field(default=0.3, metadata=meta("", 0, 1))
     ego_vehicle: bool = False
-    ego_height: float = field(default=1.73, metadata=meta("m"))
-    ego_span: float = field(default=60.0, metadata=meta("m"))
-    ego_step: float = field(default=7.3, metadata=meta("m"))
-    ego_headway: float = field(default=15.0, metadata=meta("m", help="free lane ahead of the ego car's front: the gap a driver keeps to the vehicle ahead"))
+    ego_height: float = field(default=1.73, metadata=meta("m", low=0, low_open=True))
+    ego_span: float = field(default=60.0, metadata=meta("m", low=0))
+    ego_step: float = field(default=7.3, metadata=meta("m", low=0, low_open=True))
+    ego_headway: float = field(default=15.0,
+                               metadata=meta("m", low=0, help="free lane ahead of the ego car's front: the gap a driver keeps to the vehicle ahead"))
     car_fittings: bool = True
 
 
-MAX_YARD_TREES = 100.0  # per 100 m^2: one tree a square metre (Distribute Points on Faces draws that many before thinning)
-MAY_BE_ZERO = {"ego_span", "ego_headway", "parking_width", "signs", "layout_seed", "crossing_offset", "platoon_probability", "crossing_share", "clearance",
-               "min_in_view", "setback", "open_share", "street_trees", "tree_spacing", "yard_plants", "yard_trees", "lamp_spacing", "furniture_per_100m",
-               "roadworks", "terrain_relief", "terrain_slope"}
 
 
 def check(params: StreetScene, where: str) -> None:
-    check_sizes(params, where, MAY_BE_ZERO)
-    for key in ("platoon_probability", "crossing_share", "min_in_view", "open_share", "street_trees", "roadworks"):
-        if getattr(params, key) > 1:
-            raise InputError(f"{where}.{key}: must lie in 0..1, got {getattr(params, key)}")
-    if params.yard_trees > MAX_YARD_TREES:
-        raise InputError(f"{where}.yard_trees: at most {MAX_YARD_TREES:g} trees per 100 m^2 of yard, got {params.yard_trees}")
-    if params.yard_tree_clearance < 0.5:
-        raise InputError(f"{where}.yard_tree_clearance: at least 0.5 m (a trunk's width), got {params.yard_tree_clearance}")
-    if params.yard_tree_height[0] < 2.0:
-        raise InputError(f"{where}.yard_tree_height: trees of at least 2 m (their crowns clear 1.5 m), got {list(params.yard_tree_height)}")
     for key in ("building_width", "building_height", "setback", "tree_spacing", "yard_tree_height"):
         lo, hi = getattr(params, key)
         if lo > hi:

@@ -85,7 +85,8 @@ class Effect:
     order: int = 0
 
     def check(self, effects, spec=None) -> None:
-        """``InputError`` naming the key of the first bad value of ``effects.<section>`` (``spec``: the sensor, or ``None``)."""
+        """``InputError`` naming the key of the first bad value of ``effects.<section>`` (``spec``: the sensor, or ``None``)
+        beyond its fields' metadata ranges, which the schema checks (:func:`~bpy_pipeline.schema.from_dict`)."""
 
     def prepare(self, effects, models: dict) -> None:
         """Once per call before the chunks share them: build what the chunks only read (tables, rasters)."""

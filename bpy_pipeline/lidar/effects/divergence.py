@@ -72,11 +72,11 @@ class Divergence:
     aperture : beam diameter at the sensor's exit window, metres
     """
 
-    mrad: float = field(default=0.0, metadata=meta("", help="full divergence angle, mrad"))
-    rays: int = field(default=1, metadata=meta("", help="sub-rays per beam (1: off)"))
+    mrad: float = field(default=0.0, metadata=meta("", 0, MAX_MRAD, help="full divergence angle, mrad (lidars have 0.1..10)"))
+    rays: int = field(default=1, metadata=meta("", 1, MAX_SUB_RAYS, help="sub-rays per beam (1: off)"))
     pick: Literal["first", "strongest", "last", "dual"] = field(default="first", metadata={"key": "return"})
-    separation: float = field(default=0.5, metadata=meta("m"))
-    aperture: float = field(default=0.0, metadata=meta("m"))
+    separation: float = field(default=0.5, metadata=meta("m", low=0))
+    aperture: float = field(default=0.0, metadata=meta("m", low=0))
 
     @property
     def active(self) -> bool:
@@ -85,15 +85,7 @@ class Divergence:
 
 
 def check_divergence(divergence: Divergence, where: str = "sensor.divergence") -> None:
-    """``InputError`` naming the key when the footprint model cannot describe a beam."""
-    if not 0 <= divergence.mrad <= MAX_MRAD:
-        raise InputError(f"{where}.mrad: must lie in 0..{MAX_MRAD:g} (full-angle divergence in milliradians; lidars have 0.1..10), got {divergence.mrad}")
-    if not 1 <= divergence.rays <= MAX_SUB_RAYS:
-        raise InputError(f"{where}.rays: must lie in 1..{MAX_SUB_RAYS} sub-rays a beam, got {divergence.rays}")
-    if divergence.separation < 0:
-        raise InputError(f"{where}.separation: must be >= 0 m, got {divergence.separation}")
-    if divergence.aperture < 0:
-        raise InputError(f"{where}.aperture: must be >= 0 m, got {divergence.aperture}")
+    """``InputError`` naming the key when the footprint model cannot describe a beam (beyond its fields' ranges, the schema's)."""
     if divergence.rays > 1 and divergence.mrad == 0 and divergence.aperture == 0:
         raise InputError(f"{where}.rays: {divergence.rays} sub-rays of a zero-width beam all coincide; set mrad (or aperture) > 0, or rays: 1")
 

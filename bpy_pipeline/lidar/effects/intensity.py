@@ -28,7 +28,6 @@ on SemanticKITTI and KITTI frames (docs/realism.md, "The HDL-64E's reading, fitt
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from functools import lru_cache
 from typing import Callable, Literal
@@ -52,41 +51,24 @@ class ReadingModel:
 
     enabled: bool = field(default=False, metadata=meta(help="read the reflectance through the unit's lasers (reflectance model only)"))
     compensated_range: float = field(default=28.0,
-                                     metadata=meta("m", soft=(0, 10000), help="the reading is range-compensated up to here (KITTI 000008: 28); > 0"))
+                                     metadata=meta("m", 0, 10000, low_open=True, help="the reading is range-compensated up to here (KITTI 000008: 28)"))
     exponent: float = field(default=2.0, metadata=meta("", 0, 10, help="beyond it the reading falls as (R_c / R)^exponent (the lidar equation's 2; fitted: 2)"))
     gain_sd: float = field(default=0.16,
                            metadata=meta("", 0, 2, help="sd of ln(gain) across lasers (KITTI 000008's road: robust sd of its per-ring log medians)"))
     offset_sd: float = field(default=0.0, metadata=meta("", 0, 2, help="sd of the offset across lasers (not identifiable on one frame: 0)"))
     noise_sd: float = field(default=0.075,
                             metadata=meta("", 0, 2, help="sd of ln of a per-return factor (KITTI 000008's road: robust within-ring log spread, 8-20 m)"))
-    unit_seed: int = field(default=0, metadata=meta(help="the sensor unit: its lasers' gains and offsets are drawn from this seed (>= 0)"))
+    unit_seed: int = field(default=0, metadata=meta("", low=0, help="the sensor unit: its lasers' gains and offsets are drawn from this seed"))
     response: float = field(default=1.0,
-                            metadata=meta("", soft=(0, 4), help="gamma: the reading grows as (a f(R))^gamma (1: linear; below 1: a compressing receiver); > 0"))
+                            metadata=meta("", 0, 4, low_open=True,
+                                          help="gamma: the reading grows as (a f(R))^gamma (1: linear; below 1: a compressing receiver)"))
 
 
-def check_reading(reading: ReadingModel, offset: float, model: str = "reflectance") -> None:
-    """One-line :class:`InputError` for a reading model's value out of range (``offset``, ``model``: ``effects.intensity``'s)."""
-    key = "effects.intensity.reading"
-    for name, value in (("compensated_range", reading.compensated_range), ("exponent", reading.exponent), ("gain_sd", reading.gain_sd),
-                        ("offset_sd", reading.offset_sd), ("noise_sd", reading.noise_sd),
-                        ("response", reading.response)):
-        if not (isinstance(value, (int, float)) and math.isfinite(value)):
-            raise InputError(f"{key}.{name}: must be a finite number, got {value!r}")
-    if not 0 < reading.compensated_range <= 10000:
-        raise InputError(f"{key}.compensated_range: must lie in (0, 10000] metres, got {reading.compensated_range}")
-    if not 0 <= reading.exponent <= 10:
-        raise InputError(f"{key}.exponent: must lie in 0..10, got {reading.exponent}")
-    if not 0 < reading.response <= 4:
-        raise InputError(f"{key}.response: must lie in (0, 4], got {reading.response}")
-    for name in ("gain_sd", "offset_sd", "noise_sd"):
-        if not 0 <= getattr(reading, name) <= 2:
-            raise InputError(f"{key}.{name}: must lie in 0..2, got {getattr(reading, name)}")
-    if not isinstance(reading.unit_seed, int) or isinstance(reading.unit_seed, bool) or reading.unit_seed < 0:
-        raise InputError(f"{key}.unit_seed: must be a whole number >= 0, got {reading.unit_seed!r}")
+def check_reading(reading: ReadingModel, model: str = "reflectance") -> None:
+    """One-line :class:`InputError` when the reading model is on under an intensity model it cannot read (``model``:
+    ``effects.intensity``'s); its fields' ranges are their metadata's (the schema checks them)."""
     if reading.enabled and INTENSITY_MODELS.get(model).apparent is None:
-        raise InputError(f"{key}.enabled: the reading model reads the reflectance model's value; effects.intensity.model is {model!r}")
-    if reading.enabled and offset >= 1:
-        raise InputError(f"effects.intensity.offset: must lie in 0..1 with the reading model, got {offset}")
+        raise InputError(f"effects.intensity.reading.enabled: the reading model reads the reflectance model's value; effects.intensity.model is {model!r}")
 
 
 @lru_cache(maxsize=64)
@@ -260,8 +242,7 @@ class Intensity(Effect):
     name, section, config, order = "intensity", "intensity", IntensityConfig, 20
 
     def check(self, effects, spec=None) -> None:
-        intensity = effects.intensity
-        check_reading(intensity.reading, intensity.offset, intensity.model)
+        check_reading(effects.intensity.reading, effects.intensity.model)
 
     def apply(self, chunk: Chunk, rng: np.random.Generator) -> None:
         chunk.intensity = compute_intensity(chunk.points["range"], chunk.beam, chunk.effects.intensity, chunk.points["ring"], rng)

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ...errors import InputError
-from ...schema import check_positive, from_dict, meta
+from ...schema import from_dict, meta
 from .base import Chunk, Effect, register_effect
 from .drop import DROP_MODELS
 from .drop.carla import CarlaDrop
@@ -62,21 +62,10 @@ class Drop(Effect):
 
     def check(self, effects, spec=None) -> None:
         drop = effects.drop
-        probabilities = {"effects.drop.carla.general_rate": drop.carla.general_rate, "effects.drop.carla.zero_intensity": drop.carla.zero_intensity}
-        for key, value in probabilities.items():
-            if not 0 <= value <= 1:
-                raise InputError(f"{key}: must lie in 0..1, got {value}")
-        if not 0 < drop.carla.intensity_limit <= 1:
-            raise InputError(f"effects.drop.carla.intensity_limit: must lie in (0, 1], got {drop.carla.intensity_limit}")
-        check_positive(drop.carla.attenuation_rate, "effects.drop.carla.attenuation_rate", allow_zero=True)
-        check_positive(drop.threshold.range_at_10, "effects.drop.threshold.range_at_10")
-        check_positive(drop.threshold.softness, "effects.drop.threshold.softness", allow_zero=True)
         if drop.threshold.range_at_80 and drop.threshold.range_at_80 <= drop.threshold.range_at_10:
             raise InputError(
                 f"effects.drop.threshold.range_at_80: must exceed range_at_10 ({drop.threshold.range_at_10} m), or be 0, got {drop.threshold.range_at_80}"
             )
-        if not 0 <= drop.threshold.floor < 1:
-            raise InputError(f"effects.drop.threshold.floor: must lie in 0..1 (a share of returns lost at any range), got {drop.threshold.floor}")
         model = DROP_MODELS.get(drop.model)
         if model.params is not None:
             from_dict(model.params, drop.params, "effects.drop.params")

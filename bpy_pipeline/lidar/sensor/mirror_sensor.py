@@ -99,23 +99,15 @@ class MirrorRays:
 
 
 def check_reflector(reflector, where: str = "sensor.reflector") -> None:
-    """``InputError`` naming the key when the mirror geometry cannot be built."""
+    """``InputError`` naming the key when the mirror geometry cannot be built (beyond its fields' ranges, the schema's)."""
     n, incl = reflector.segments, reflector.inclination_deg
-    if n < 1:
-        raise InputError(f"{where}.segments: must be >= 1, got {n}")
     if n < 3 and reflector.width <= 0:
         raise InputError(f"{where}.width: {n} segment(s) do not close around the sensor; give each a width > 0 m (or use >= 3 segments)")
-    if not 0 < incl < 90:
-        raise InputError(f"{where}.inclination_deg: must lie strictly between 0 and 90 (angle between a mirror and the spin axis), got {incl}")
-    if reflector.distance <= 0:
-        raise InputError(f"{where}.distance: must be > 0 m (optical centre to each mirror along its central beam), got {reflector.distance}")
-    if reflector.bottom < 0 or reflector.top < 0 or reflector.bottom + reflector.top <= 0:
-        raise InputError(f"{where}.top: top and bottom must be >= 0 m with a sum > 0, got top {reflector.top}, bottom {reflector.bottom}")
+    if reflector.bottom + reflector.top <= 0:
+        raise InputError(f"{where}.top: top and bottom must have a sum > 0 m, got top {reflector.top}, bottom {reflector.bottom}")
     apex = reflector.distance / math.sin(math.radians(incl))
     if n >= 3 and reflector.top >= apex:
         raise InputError(f"{where}.top: the segments meet {apex:.4g} m up the slope; top must be below that, got {reflector.top}")
-    if reflector.width < 0:
-        raise InputError(f"{where}.width: must be >= 0 m (0 = full facets, edge to edge), got {reflector.width}")
 
 
 def facets(reflector) -> Facets:

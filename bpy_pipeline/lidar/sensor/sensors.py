@@ -76,23 +76,23 @@ class SensorSpec:
     description: str = ""
     pattern: str = "spinning"  # a name of lidar/sensor/patterns (PATTERNS)
     channels: int = field(default=16, metadata=meta(""))
-    vertical_fov_deg: tuple[float, float] = field(default=(-15.0, 15.0), metadata=meta("deg"))
-    elevations_deg: list[float] = field(default_factory=list, metadata=meta("deg"))
+    vertical_fov_deg: tuple[float, float] = field(default=(-15.0, 15.0), metadata=meta("deg", -90, 90))
+    elevations_deg: list[float] = field(default_factory=list, metadata=meta("deg", -90, 90))
     horizontal_fov_deg: tuple[float, float] = field(default=(-180.0, 180.0), metadata=meta("deg"))
     horizontal_resolution_deg: float = field(default=0.2, metadata=meta("deg"))
-    rotation_hz: float = field(default=10.0, metadata=meta("Hz"))
+    rotation_hz: float = field(default=10.0, metadata=meta("Hz", low=0, low_open=True))
     min_range: float = field(default=0.5, metadata=meta("m"))
     max_range: float = field(default=100.0, metadata=meta("m"))
-    vertical_resolution_deg: float = field(default=0.0, metadata=meta("deg"))
-    columns: int = field(default=0, metadata=meta(""))
-    firing_rate_hz: float = field(default=0.0, metadata=meta("Hz"))
-    sampling_factor: float = field(default=1.0, metadata=meta(""))
+    vertical_resolution_deg: float = field(default=0.0, metadata=meta("deg", low=0, help="0: from channels"))
+    columns: int = field(default=0, metadata=meta("", low=0, help="0: from horizontal_resolution_deg"))
+    firing_rate_hz: float = field(default=0.0, metadata=meta("Hz", low=0, help="0: from horizontal_resolution_deg"))
+    sampling_factor: float = field(default=1.0, metadata=meta("", low=0, low_open=True, help="1: the nominal resolution"))
     spin: Literal["ccw", "cw"] = "ccw"
-    mount_height: float = field(default=0.0, metadata=meta("m"))
+    mount_height: float = field(default=0.0, metadata=meta("m", low=0, help="above the station point"))
     rotor_hz: tuple[float, float] = field(default=(121.57, -77.73), metadata=meta("Hz"))
     deflection_deg: tuple[float, float] = field(default=(9.6, 9.6), metadata=meta("deg"))
-    point_rate_hz: float = field(default=100000.0, metadata=meta("Hz"))
-    frame_time_s: float = field(default=0.0, metadata=meta("s"))
+    point_rate_hz: float = field(default=100000.0, metadata=meta("Hz", low=0, low_open=True))
+    frame_time_s: float = field(default=0.0, metadata=meta("s", low=0, help="0: 1 / rotation_hz"))
     rays_file: str = ""
 
 
@@ -186,24 +186,10 @@ def _derive(spec: SensorSpec, section: dict, where: str) -> SensorSpec:
 
 
 def check_sensor(spec: SensorSpec, where: str = "sensor") -> None:
-    """``InputError`` naming the field when a spec cannot describe a real sensor."""
+    """``InputError`` naming the field when a spec cannot describe a real sensor (beyond its fields' ranges, the schema's)."""
     pattern = PATTERNS.get(spec.pattern, f"{where}.pattern")
     if not 0 <= spec.min_range < spec.max_range:
         raise InputError(f"{where}.min_range: must be >= 0 and below {where}.max_range ({spec.min_range} >= {spec.max_range})")
-    if spec.rotation_hz <= 0:
-        raise InputError(f"{where}.rotation_hz: must be > 0, got {spec.rotation_hz}")
-    if spec.mount_height < 0:
-        raise InputError(f"{where}.mount_height: must be >= 0 (metres above the station point), got {spec.mount_height}")
-    if spec.sampling_factor <= 0:
-        raise InputError(f"{where}.sampling_factor: must be > 0 (1 = nominal resolution), got {spec.sampling_factor}")
-    if spec.columns < 0:
-        raise InputError(f"{where}.columns: must be >= 0 (0 = from horizontal_resolution_deg), got {spec.columns}")
-    if spec.firing_rate_hz < 0:
-        raise InputError(f"{where}.firing_rate_hz: must be >= 0 (0 = from horizontal_resolution_deg), got {spec.firing_rate_hz}")
-    if spec.vertical_resolution_deg < 0:
-        raise InputError(f"{where}.vertical_resolution_deg: must be >= 0 (0 = from channels), got {spec.vertical_resolution_deg}")
-    if spec.frame_time_s < 0:
-        raise InputError(f"{where}.frame_time_s: must be >= 0 (0 = 1 / rotation_hz), got {spec.frame_time_s}")
     pattern.check(spec, where)
     rays = ray_count(spec)
     if rays < 1:

@@ -20,10 +20,10 @@ from .base import DropModel, register_drop_model
 class CarlaDrop:
     """``effects.drop.carla``: CARLA's RayCastLidar drop-off, with CARLA's defaults."""
 
-    general_rate: float = field(default=0.45, metadata=meta("", help="dropoff_general_rate: rays lost whatever they hit"))
-    intensity_limit: float = field(default=0.8, metadata=meta("", help="dropoff_intensity_limit: above it, never lost"))
-    zero_intensity: float = field(default=0.4, metadata=meta("", help="dropoff_zero_intensity: probability of losing a zero-intensity point"))
-    attenuation_rate: float = field(default=0.004, metadata=meta("", help="atmosphere_attenuation_rate: intensity exp(-a R), 1/m"))
+    general_rate: float = field(default=0.45, metadata=meta("", 0, 1, help="dropoff_general_rate: rays lost whatever they hit"))
+    intensity_limit: float = field(default=0.8, metadata=meta("", 0, 1, low_open=True, help="dropoff_intensity_limit: above it, never lost"))
+    zero_intensity: float = field(default=0.4, metadata=meta("", 0, 1, help="dropoff_zero_intensity: probability of losing a zero-intensity point"))
+    attenuation_rate: float = field(default=0.004, metadata=meta("", low=0, help="atmosphere_attenuation_rate: intensity exp(-a R), 1/m"))
 
 
 def carla_keep_probability(intensity: np.ndarray, intensity_limit: float, zero_intensity: float) -> np.ndarray:

@@ -21,10 +21,12 @@ from .base import DropModel, register_drop_model
 class ThresholdDrop:
     """``effects.drop.threshold``: a detection threshold from a datasheet's ranges (normal incidence, 50 % detection)."""
 
-    range_at_10: float = field(default=40.0, metadata=meta("m", help="for a 10 % reflectivity target (Ouster OS1: 40; sparse 3D camera: 10)"))
+    range_at_10: float = field(default=40.0,
+                               metadata=meta("m", low=0, low_open=True, help="for a 10 % reflectivity target (Ouster OS1: 40; sparse 3D camera: 10)"))
     range_at_80: float = field(default=120.0, metadata=meta("m", help="for an 80 % target (0: unknown, the lidar equation's R^2 decides)"))
-    softness: float = field(default=0.1, metadata=meta("", help="width of the transition in ln(received power); 0 for a hard cut"))
-    floor: float = field(default=0.0, metadata=meta("", help="share of returns lost whatever the target (a fitted scan's near-range drop); 0 for none"))
+    softness: float = field(default=0.1, metadata=meta("", low=0, help="width of the transition in ln(received power); 0 for a hard cut"))
+    floor: float = field(default=0.0,
+                         metadata=meta("", 0, 1, high_open=True, help="share of returns lost whatever the target (a fitted scan's near-range drop); 0: none"))
 
 
 @dataclass(frozen=True)

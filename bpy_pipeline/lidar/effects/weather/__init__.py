@@ -66,7 +66,6 @@ from dataclasses import field
 
 import numpy as np
 
-from ....errors import InputError
 from ....schema import meta
 from ..base import Chunk, Effect, register_effect
 from ..drop.threshold import threshold_model
@@ -105,11 +104,9 @@ WeatherConfig = _weather_config()
 
 
 def check_weather(weather, where: str = "effects.weather") -> None:
-    """``InputError`` naming the key of the first value outside what the models allow."""
+    """``InputError`` naming the key of the first value the kinds refuse beyond their fields' ranges (the schema's), or an unknown class."""
     for name, kind in WEATHER_KINDS.items():
         kind.check(getattr(weather, name), f"{where}.{name}")
-    if not 0 <= weather.divergence_mrad <= 100:
-        raise InputError(f"{where}.divergence_mrad: must lie in 0..100 mrad (0: the sensor's), got {weather.divergence_mrad}")
     from ....labels import load_class_table
 
     table = load_class_table()

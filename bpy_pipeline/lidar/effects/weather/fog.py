@@ -85,11 +85,6 @@ class Fog(WeatherKind):
     def check(self, fog: FogConfig, where: str) -> None:
         if not (fog.visibility == 0 or 1.0 <= fog.visibility <= MAX_VISIBILITY):
             raise InputError(f"{where}.visibility: must be 0 (no fog) or 1..{MAX_VISIBILITY:g} m (meteorological optical range), got {fog.visibility}")
-        for key, value, hi in (("backscatter", fog.backscatter, 1.0), ("gamma", fog.gamma, 1.0), ("pulse_ns", fog.pulse_ns, 1000.0)):
-            if not 0 < value <= hi:
-                raise InputError(f"{where}.{key}: must lie in (0, {hi:g}], got {value}")
-        if not 0 <= fog.noise <= 100:
-            raise InputError(f"{where}.noise: must lie in 0..100 m, got {fog.noise}")
 
     def active(self, fog: FogConfig) -> bool:
         return fog.visibility > 0

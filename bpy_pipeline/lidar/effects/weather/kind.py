@@ -57,7 +57,8 @@ class WeatherKind:
     label: str | None = None
 
     def check(self, section, where: str) -> None:
-        """``InputError`` naming ``where.<key>`` of the first value outside what the model allows."""
+        """``InputError`` naming ``where.<key>`` of the first value the model cannot take beyond its field's metadata range
+        (which the schema checks: :func:`~bpy_pipeline.schema.from_dict`, :func:`~bpy_pipeline.schema.check_ranges`)."""
 
     def check_labels(self, section, where: str, table) -> None:
         """``InputError`` for a class name of the section that ``table`` (the class table) does not know."""

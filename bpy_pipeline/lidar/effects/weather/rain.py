@@ -9,7 +9,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ....errors import InputError
 from ....schema import meta
 from .kind import Returns, WeatherKind, register_weather_kind
 from .particles import _Particles
@@ -64,14 +63,6 @@ class Rain(WeatherKind):
     """Attenuation ``exp(-2 alpha R)``, droplet returns, and range noise on the returns of hard targets."""
 
     name, config, label = "rain", RainConfig, "rain"
-
-    def check(self, rain: RainConfig, where: str) -> None:
-        if not 0 <= rain.rate <= MAX_RAIN:
-            raise InputError(f"{where}.rate: must lie in 0..{MAX_RAIN:g} mm/h, got {rain.rate}")
-        if not 0 <= rain.droplet_reflectivity <= 1:
-            raise InputError(f"{where}.droplet_reflectivity: must lie in 0..1, got {rain.droplet_reflectivity}")
-        if not 0 < rain.min_diameter_mm <= 6:
-            raise InputError(f"{where}.min_diameter_mm: must lie in (0, 6] mm, got {rain.min_diameter_mm}")
 
     def active(self, rain: RainConfig) -> bool:
         return rain.rate > 0

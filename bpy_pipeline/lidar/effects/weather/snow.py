@@ -9,7 +9,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ....errors import InputError
 from ....schema import meta
 from .kind import Returns, WeatherKind, register_weather_kind
 from .particles import _Particles
@@ -90,16 +89,6 @@ class Snow(WeatherKind):
     """A wet ground's darker returns; the flakes' occlusion ``exp(-k R)`` and their returns."""
 
     name, config, label = "snow", SnowConfig, "snow"
-
-    def check(self, snow: SnowConfig, where: str) -> None:
-        if not 0 <= snow.rate <= MAX_SNOW:
-            raise InputError(f"{where}.rate: must lie in 0..{MAX_SNOW:g} mm/h (water equivalent), got {snow.rate}")
-        if not 0.05 <= snow.terminal_velocity <= 10:
-            raise InputError(f"{where}.terminal_velocity: must lie in 0.05..10 m/s, got {snow.terminal_velocity}")
-        if not 0.005 <= snow.density <= 0.9:
-            raise InputError(f"{where}.density: must lie in 0.005..0.9 g/cm^3, got {snow.density}")
-        if not 0 <= snow.flake_reflectivity <= 1:
-            raise InputError(f"{where}.flake_reflectivity: must lie in 0..1, got {snow.flake_reflectivity}")
 
     def check_labels(self, snow: SnowConfig, where: str, table) -> None:
         for name in snow.wet_classes:

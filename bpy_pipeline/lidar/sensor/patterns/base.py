@@ -123,7 +123,7 @@ def derive_rows(spec, section: dict, where: str, rows: int | None, source: str) 
 
 
 def check_rows(spec, where: str) -> None:
-    """Rows and the horizontal field of a pattern fired in rows and columns."""
+    """Rows and the horizontal field of a pattern fired in rows and columns (each angle within -90..90: the fields' metadata)."""
     if spec.channels < 1:
         raise InputError(f"{where}.channels: must be >= 1, got {spec.channels}")
     if spec.channels > MAX_RINGS:
@@ -133,10 +133,6 @@ def check_rows(spec, where: str) -> None:
         raise InputError(f"{where}.{key}: gives {spec.channels} rows, more than the {MAX_RINGS} ring ids of uint16; coarsen it")
     if spec.elevations_deg and len(spec.elevations_deg) != spec.channels:
         raise InputError(f"{where}.elevations_deg: lists {len(spec.elevations_deg)} angles for {spec.channels} channels")
-    if not all(-90 <= e <= 90 for e in spec.elevations_deg):
-        raise InputError(f"{where}.elevations_deg: elevations must lie in -90..90 degrees")
-    if not all(-90 <= e <= 90 for e in spec.vertical_fov_deg):
-        raise InputError(f"{where}.vertical_fov_deg: elevations must lie in -90..90 degrees")
     if spec.vertical_fov_deg[0] > spec.vertical_fov_deg[1]:
         raise InputError(f"{where}.vertical_fov_deg: expected [min, max], got {list(spec.vertical_fov_deg)}")
     lo, hi = spec.horizontal_fov_deg

@@ -62,8 +62,6 @@ def check(spec, where: str) -> None:
         raise InputError(f"{where}.columns: profiles per frame, must be >= 1, got {spec.columns}")
     if spec.columns > MAX_RINGS:
         raise InputError(f"{where}.columns: {spec.columns} profiles per frame exceed the {MAX_RINGS} ring ids of uint16")
-    if not spec.rotation_hz > 0:
-        raise InputError(f"{where}.rotation_hz: profiles per second, must be > 0, got {spec.rotation_hz}")
 
 
 def frame_time(spec) -> float:

@@ -29,8 +29,6 @@ def check(spec, where: str) -> None:
     d1, d2 = spec.deflection_deg
     if d1 < 0 or d2 < 0 or not 0 < d1 + d2 <= 90:
         raise InputError(f"{where}.deflection_deg: two angles >= 0 with 0 < sum <= 90, got {list(spec.deflection_deg)}")
-    if spec.point_rate_hz <= 0:
-        raise InputError(f"{where}.point_rate_hz: must be > 0, got {spec.point_rate_hz}")
 
 
 def resolution(spec) -> tuple[float, float]:
