@@ -124,26 +124,30 @@ def mixed_test(real: list, frame) -> list[int]:
 
 class Predictions:
     """Each part's predictions on the real test frames, kept in ``--work`` so that a later run of another part reads
-    them: ``folder/<model>_<part>.npz`` (one ``(n,)`` int64 array per scan name) and ``.json`` (the commit)."""
+    them: ``folder/<model>_<key>.npz`` (one ``(n,)`` int64 array per scan name) and ``.json`` (what made them)."""
 
     def __init__(self, folder: Path):
         self.folder = folder
 
-    def save(self, model: str, part: str, scans: list, predictions: list, commit: str) -> None:
+    def save(self, model: str, key: str, scans: list, predictions: list, made: dict) -> None:
         self.folder.mkdir(parents=True, exist_ok=True)
-        np.savez_compressed(self.folder / f"{model}_{part}.npz", **{s.name.replace("/", "__"): p for s, p in zip(scans, predictions)})
-        (self.folder / f"{model}_{part}.json").write_text(json.dumps({"commit": commit, "scans": [s.name for s in scans]}))
+        np.savez_compressed(self.folder / f"{model}_{key}.npz", **{s.name.replace("/", "__"): p for s, p in zip(scans, predictions)})
+        (self.folder / f"{model}_{key}.json").write_text(json.dumps({**made, "scans": [s.name for s in scans]}))
 
-    def load(self, model: str, part: str, scans: list) -> list | None:
-        """The kept predictions for ``scans`` (checked against their point counts), or ``None``."""
-        path = self.folder / f"{model}_{part}.npz"
-        if not path.is_file():
+    def load(self, model: str, key: str, scans: list, made: dict | None = None) -> tuple[list, dict] | None:
+        """The kept predictions for ``scans`` (checked against their point counts and, with ``made``, made with
+        those settings) and what made them; or ``None``."""
+        path = self.folder / f"{model}_{key}.npz"
+        if not path.is_file() or not path.with_suffix(".json").is_file():
+            return None
+        info = json.loads(path.with_suffix(".json").read_text())
+        if made and any(info.get(k) != v for k, v in made.items()):
             return None
         kept = np.load(path)
         keys = [s.name.replace("/", "__") for s in scans]
         if any(k not in kept for k in keys) or any(len(kept[k]) != len(s) for k, s in zip(keys, scans)):
             return None
-        return [kept[k] for k in keys]
+        return [kept[k] for k in keys], info
 
 
 def part_synthetic(name: str, synthetic: list, test: list, steps: int | None, seed: int, threads: int, log) -> tuple[dict, list]:
@@ -167,11 +171,12 @@ def part_real(name: str, test: list, steps: int | None, seed: int, threads: int,
     return {**summary(block), "steps": steps, "folds": [{"test_group": f["test_group"], "train": f["train"], "seconds": f["seconds"]} for f in fold_rows]}, predictions
 
 
-def part_mixed(name: str, synthetic: list, test: list, real_predictions: list, synthetic_predictions: list | None, steps: int | None,
-               seed: int, threads: int, log, frames=MIXED_FRAMES) -> dict:
+def part_mixed(name: str, synthetic: list, test: list, real_predictions: list | None, synthetic_predictions: list | None,
+               steps: int | None, seed: int, threads: int, log, kept: Predictions, commit: str, frames=MIXED_FRAMES) -> dict:
     """For each of ``frames`` among ``test``: the model trained on the synthetic frames plus that one real
     frame (:func:`mixed_training`), scored on every real frame of another group, beside the real-only (leave group
-    out) and the synthetic-only predictions on the same frames."""
+    out) and the synthetic-only predictions on the same frames. Its predictions are kept in ``kept`` and reused
+    when made with the same settings; without ``real_predictions`` it trains and keeps them, and scores nothing."""
     out = {"share": MIXED_SHARE, "steps": steps, "frames": {}}
     by_name = {s.name: s for s in test}
     for frame_name in frames:
@@ -179,22 +184,34 @@ def part_mixed(name: str, synthetic: list, test: list, real_predictions: list, s
             continue
         frame = by_name[frame_name]
         train = mixed_training(synthetic, frame)
-        start = time.perf_counter()
-        model = fit(train, CLASSES, seed, TREE_POINTS_PER_CLASS, name, threads, log, steps)
-        seconds = time.perf_counter() - start
+        made = {"steps": steps, "seed": seed, "train_frames": len(train), "copies": len(train) - len(synthetic), "synthetic_frames": len(synthetic)}
+        found = kept.load(name, f"mixed_{frame_name}", test, made)
+        if found is None:
+            start = time.perf_counter()
+            model = fit(train, CLASSES, seed, TREE_POINTS_PER_CLASS, name, threads, log, steps)
+            seconds = round(time.perf_counter() - start, 1)
+            predictions = [model.predict(s) for s in test]
+            info = {**made, "train_seconds": seconds, "threads": threads, "commit": commit}
+            kept.save(name, f"mixed_{frame_name}", test, predictions, info)
+        else:
+            predictions, info = found
+            log(f"{name} synthetic + {frame_name}: its predictions kept in {kept.folder}")
         on = mixed_test(test, frame)
         scans = [test[i] for i in on]
-        mixed = score(scans, [model.predict(s) for s in scans], CLASSES, seed)
+        block = {"test": [s.name for s in scans], **{k: info[k] for k in ("copies", "train_seconds", "threads", "commit")}}
+        out["frames"][frame_name] = block
+        if real_predictions is None:
+            log(f"{name} synthetic + {frame_name}: trained; no real-only predictions in {kept.folder} to score against (run --parts real)")
+            continue
+        mixed = score(scans, [predictions[i] for i in on], CLASSES, seed)
         real = score(scans, [real_predictions[i] for i in on], CLASSES, seed)
-        block = {"test": [s.name for s in scans], "copies": len(train) - len(synthetic), "train_seconds": round(seconds, 1),
-                 "mixed": summary(mixed), "real_only": summary(real)}
+        block.update(mixed=summary(mixed), real_only=summary(real))
         if synthetic_predictions is not None:
             block["synthetic_only"] = summary(score(scans, [synthetic_predictions[i] for i in on], CLASSES, seed))
         block["beats"] = {c: bool(mixed["classes"][c]["iou"] > real["classes"][c]["iou"]) for c in CLASSES
                           if math.isfinite(mixed["classes"][c]["iou"]) and math.isfinite(real["classes"][c]["iou"])}
         block["beats"]["miou"] = bool(mixed["miou"] > real["miou"])
-        out["frames"][frame_name] = block
-        log(f"{name} synthetic + {frame_name}: mIoU {mixed['miou']:.3f} against real-only {real['miou']:.3f} on the same {len(scans)} frames ({seconds:.0f} s)")
+        log(f"{name} synthetic + {frame_name}: mIoU {mixed['miou']:.3f} against real-only {real['miou']:.3f} on the same {len(scans)} frames")
     return out
 
 
@@ -270,23 +287,21 @@ def main() -> None:
             if "synthetic" in parts:
                 block, synthetic_predictions = part_synthetic(name, synthetic, test, steps, seed, args.threads, log)
                 entry["synthetic_only"] = {**block, "commit": commit}
-                kept.save(name, "synthetic", test, synthetic_predictions, commit)
+                kept.save(name, "synthetic", test, synthetic_predictions, {"steps": steps, "seed": seed, "commit": commit})
                 write()
             if "real" in parts:
                 folds = NETWORK_FOLDS if name in NEEDS_TORCH else TREE_FOLDS
                 block, real_predictions = part_real(name, test, steps, seed, args.threads, log, folds)
                 entry["real_only"] = {**block, "commit": commit}
-                kept.save(name, "real", test, real_predictions, commit)
+                kept.save(name, "real", test, real_predictions, {"steps": steps, "seed": seed, "folds": folds, "commit": commit})
                 write()
             with_ratios(entry)
             if "mixed" in parts:
-                real_predictions = real_predictions or kept.load(name, "real", test)
-                if real_predictions is None:
-                    log(f"{name} mixed: no real-only predictions in {kept.folder}: run --parts real with this --work first")
-                else:
-                    synthetic_predictions = synthetic_predictions or kept.load(name, "synthetic", test)
-                    entry["mixed"] = {**part_mixed(name, synthetic, test, real_predictions, synthetic_predictions, steps, seed, args.threads, log,
-                                                     MIXED_FRAMES[:1] if args.small else MIXED_FRAMES), "commit": commit}
+                same = {"steps": steps, "seed": seed}
+                real_predictions = real_predictions or (kept.load(name, "real", test, same) or [None])[0]
+                synthetic_predictions = synthetic_predictions or (kept.load(name, "synthetic", test, same) or [None])[0]
+                entry["mixed"] = part_mixed(name, synthetic, test, real_predictions, synthetic_predictions, steps, seed, args.threads, log, kept,
+                                            commit, MIXED_FRAMES[:1] if args.small else MIXED_FRAMES)
             write()  # each model as soon as it is done
     if "realism" in parts:
         from bpy_pipeline.evaluate.realism import realism_report, summary_lines
