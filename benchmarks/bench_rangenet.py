@@ -158,7 +158,7 @@ def part_synthetic(name: str, synthetic: list, test: list, steps: int | None, se
     predictions = [model.predict(s) for s in test]
     block = score(test, predictions, CLASSES, seed)
     log(f"{name} synthetic-only: mIoU {block['miou']:.3f} ({seconds:.0f} s)")
-    return {**summary(block), "train_frames": len(synthetic), "steps": steps, "train_seconds": round(seconds, 1),
+    return {**summary(block), "train_frames": len(synthetic), "steps": steps, "threads": threads, "train_seconds": round(seconds, 1),
             "false_positives": {c: block["classes"][c]["false_positives"] for c in ("car", "person")}}, predictions
 
 
@@ -168,7 +168,7 @@ def part_real(name: str, test: list, steps: int | None, seed: int, threads: int,
     predictions, fold_rows = leave_one_group_out(test, test, CLASSES, seed, name, TREE_POINTS_PER_CLASS, threads, log, folds, steps)
     block = score(test, predictions, CLASSES, seed)
     log(f"{name} real-only: mIoU {block['miou']:.3f} ({time.perf_counter() - start:.0f} s)")
-    return {**summary(block), "steps": steps, "folds": [{"test_group": f["test_group"], "train": f["train"], "seconds": f["seconds"]} for f in fold_rows]}, predictions
+    return {**summary(block), "steps": steps, "threads": threads, "folds": [{"test_group": f["test_group"], "train": f["train"], "seconds": f["seconds"]} for f in fold_rows]}, predictions
 
 
 def part_mixed(name: str, synthetic: list, test: list, real_predictions: list | None, synthetic_predictions: list | None,
@@ -233,7 +233,7 @@ def main() -> None:
     parser.add_argument("--parts", default=",".join(PARTS), help=f"comma-separated, of {', '.join(PARTS)} (default all)")
     parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results")
     parser.add_argument("--work", type=Path, default=None, help="keep the generated frames and the predictions here and reuse them (default: a temporary folder)")
-    parser.add_argument("--threads", type=int, default=2, help="threads of each model (default 2)")
+    parser.add_argument("--threads", type=int, default=1, help="threads of each model (default 1: on a loaded machine 2 threads a model train slower)")
     parser.add_argument("--name", default="rangenet", help="results file name (NAME.json, NAME_realism.png)")
     args = parser.parse_args()
     if not (REAL / REAL_FRAMES[0]).is_file():
@@ -266,7 +266,7 @@ def main() -> None:
     result.update({"classes": list(CLASSES), "layouts": layouts, "frames_per_layout": frames, "generation": cost, "real": [f.name for f in real_files],
                    "targets": TARGETS, "config": "examples/street/ego_hdl64e.yaml", "load_average_at_start": os.getloadavg()[0],
                    "settings": {"tree_points_per_class": TREE_POINTS_PER_CLASS, "tree_folds": TREE_FOLDS, "network_folds": NETWORK_FOLDS or "one per group",
-                                "mixed_frames": list(MIXED_FRAMES), "mixed_share": MIXED_SHARE, "threads": args.threads}})
+                                "mixed_frames": list(MIXED_FRAMES), "mixed_share": MIXED_SHARE}})
 
     def write() -> None:
         args.out.mkdir(parents=True, exist_ok=True)
