@@ -240,8 +240,9 @@ def main() -> None:
         print(f"SKIP: the real scans are not at {REAL} (set BPY_PIPELINE_REAL_SCANS)")
         return
     models = [m.strip() for m in args.models.split(",") if m.strip()]
-    parts = [p for p in PARTS if p in {p.strip() for p in args.parts.split(",") if p.strip()}]
-    if set(models) - set(MODELS) or not parts or {p.strip() for p in args.parts.split(",") if p.strip()} - set(PARTS):
+    asked = {p.strip() for p in args.parts.split(",") if p.strip()}
+    parts = [p for p in PARTS if p in asked]
+    if set(models) - set(MODELS) or not asked or asked - set(PARTS):
         parser.error(f"--models: of {', '.join(MODELS)}; --parts: of {', '.join(PARTS)}")
     if any(m in NEEDS_TORCH for m in models):
         try:
