@@ -19,8 +19,8 @@ that made it, so a later run of one part reuses the others' blocks):
 
 - ``synthetic``: the model trained on the synthetic frames alone;
 - ``real``: the same model trained on the real frames, leaving groups out (a group: a SemanticKITTI sequence, a
-  KITTI frame, the SqueezeSeg drive), the groups dealt into :data:`NETWORK_FOLDS` folds for the networks and
-  :data:`TREE_FOLDS` for LightGBM. The networks train every fold for as many steps as
+  KITTI frame, the SqueezeSeg drive), the groups dealt into :data:`NETWORK_FOLDS` folds for the networks
+  (``--network-folds 0``: one per group) and :data:`TREE_FOLDS` for LightGBM. The networks train every fold for as many steps as
   the synthetic model (12 passes over the 72 frames: 216 steps), whatever the fold's size;
 - ``mixed``: for each fully labelled real frame that carries remission (:data:`MIXED_FRAMES`), the model trained
   on the synthetic frames plus that one frame (a quarter of the frames drawn: :data:`MIXED_SHARE`), for the same
@@ -234,6 +234,7 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results")
     parser.add_argument("--work", type=Path, default=None, help="keep the generated frames and the predictions here and reuse them (default: a temporary folder)")
     parser.add_argument("--threads", type=int, default=1, help="threads of each model (default 1: on a loaded machine 2 threads a model train slower)")
+    parser.add_argument("--network-folds", type=int, default=NETWORK_FOLDS, help=f"folds by group of the networks' real reference (default {NETWORK_FOLDS}; 0: one per group)")
     parser.add_argument("--name", default="rangenet", help="results file name (NAME.json, NAME_realism.png)")
     args = parser.parse_args()
     if not (REAL / REAL_FRAMES[0]).is_file():
@@ -266,7 +267,7 @@ def main() -> None:
     result = json.loads(path.read_text()) if path.is_file() else {}
     result.update({"classes": list(CLASSES), "layouts": layouts, "frames_per_layout": frames, "generation": cost, "real": [f.name for f in real_files],
                    "targets": TARGETS, "config": "examples/street/ego_hdl64e.yaml", "load_average_at_start": os.getloadavg()[0],
-                   "settings": {"tree_points_per_class": TREE_POINTS_PER_CLASS, "tree_folds": TREE_FOLDS, "network_folds": NETWORK_FOLDS or "one per group",
+                   "settings": {"tree_points_per_class": TREE_POINTS_PER_CLASS, "tree_folds": TREE_FOLDS,
                                 "mixed_frames": list(MIXED_FRAMES), "mixed_share": MIXED_SHARE}})
 
     def write() -> None:
@@ -291,7 +292,7 @@ def main() -> None:
                 kept.save(name, "synthetic", test, synthetic_predictions, {"steps": steps, "seed": seed, "commit": commit})
                 write()
             if "real" in parts:
-                folds = NETWORK_FOLDS if name in NEEDS_TORCH else TREE_FOLDS
+                folds = (args.network_folds or None) if name in NEEDS_TORCH else TREE_FOLDS
                 block, real_predictions = part_real(name, test, steps, seed, args.threads, log, folds)
                 entry["real_only"] = {**block, "commit": commit}
                 kept.save(name, "real", test, real_predictions, {"steps": steps, "seed": seed, "folds": folds, "commit": commit})
