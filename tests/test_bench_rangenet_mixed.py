@@ -10,9 +10,9 @@ import pytest
 pytest.importorskip("scipy", reason="evaluate needs the evaluate extra (pip install '.[evaluate]')")
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 
-from bench_rangenet import mixed_test, mixed_training  # noqa: E402
+from bench_rangenet import mixed_test, mixed_training
 
-from bpy_pipeline.evaluate.labelled import LabelledScan  # noqa: E402
+from bpy_pipeline.evaluate.labelled import LabelledScan
 
 
 def _scan(name, group):
