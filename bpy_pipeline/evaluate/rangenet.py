@@ -9,9 +9,9 @@ IoU and the intervals are those of :mod:`.metrics`, as for the LightGBM model. A
 Training: Adam (lr 2e-3, cosine decay over the run) for ``steps`` steps in batches of :data:`BATCH`; by default
 :func:`default_steps`: :data:`EPOCHS` passes over the training frames, at least :data:`MIN_STEPS` steps. To
 compare two training sets fairly give both the same ``steps`` (``evaluate`` trains its real reference for as
-many steps as the model trained on ``--train``). Each frame turned by a random
-angle about z and mirrored left-right with probability 0.5; class-weighted cross-entropy (weight
-1 / (share of pixels + 0.001), as RangeNet++). A scan that labels only some classes (``known``: KITTI boxes) adds a
+many steps as the model trained on ``--train``). Each frame is turned by a random angle about z and mirrored
+left-right with probability 0.5; class-weighted cross-entropy (weight 1 / (share of pixels + 0.001), as
+RangeNet++). A scan that labels only some classes (``known``: KITTI boxes) adds a
 partial-label term for its "other" pixels: -log of the probability of all the classes it does not know
 (they are not car, person or bicyclist, but may be road or building).
 
