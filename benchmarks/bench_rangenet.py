@@ -80,7 +80,7 @@ REAL_FRAMES = (
 SMALL_FRAMES = ("semantickitti_seq08_000720.bin", "semantickitti_spvnas_000000.bin")
 MODELS = ("lgbm", "rangenet", "rangenet-geometry")
 PARTS = ("synthetic", "real", "mixed", "realism")
-# folds by group of the networks' real-only reference (None: one per group). 4 deals rangenet's 8 groups so that each
+# folds by group of the networks' real-only reference (--network-folds 0: one per group). 4 deals rangenet's 8 groups so that each
 # fold pairs one of the four with many objects (004747, sequence 08, spvnas, the SqueezeSeg drive) with a one-object
 # KITTI frame: each model trains on 6 of the 8 groups, at half the cost of one training per group.
 NETWORK_FOLDS = 4
