@@ -242,13 +242,15 @@ def _write_npy_pair(folder: Path, stem: str, n=100, labels_n=None):
     np.save(folder / f"{stem}_labels.npy", rng.integers(0, 20, (labels_n or n, 1)).astype(np.int32))
 
 
-@pytest.mark.parametrize("case", ["missing_label", "length", "classes", "empty_train", "kitti_calib", "bin_no_labels"])
+@pytest.mark.parametrize("case", ["missing_label", "length", "classes", "empty_train", "kitti_calib", "bin_no_labels", "steps"])
 def test_bad_input_one_line_exit_2(tmp_path, capsys, case):
     _write_npy_pair(tmp_path, "good")
     good = str(tmp_path / "good_points.npy")
     out = str(tmp_path / "r.json")
     args = {"classes": ["--train", good, "--test", good, "--classes", "car,tree"]}.get(case)
-    if case == "missing_label":
+    if case == "steps":  # the trees take no steps
+        args, named = ["--train", good, "--test", good, "--steps", "5"], "--steps"
+    elif case == "missing_label":
         np.save(tmp_path / "lonely_points.npy", np.zeros((5, 3), np.float32))
         args, named = ["--train", good, "--test", str(tmp_path / "lonely_points.npy")], "lonely_labels.npy"
     elif case == "length":

@@ -95,3 +95,26 @@ def test_rangenet_without_torch_is_one_line_naming_the_extra(monkeypatch):
     scans = [_frame(rng, "a", "a")]
     with pytest.raises(InputError, match=r"bpy_pipeline\[network\]"):
         evaluate(scans, scans, CLASSES, model="rangenet")
+
+
+def test_rangenet_steps_are_the_given_ones_and_the_reference_trains_as_long_as_the_model(monkeypatch):
+    pytest.importorskip("torch", reason="--model rangenet needs torch (pip install '.[network]')")
+    import bpy_pipeline.evaluate.rangenet as rangenet
+
+    rng = np.random.default_rng(3)
+    two = [_frame(rng, "a0", "a"), _frame(rng, "b0", "b", (-6.0, -4.0))]
+    monkeypatch.setattr(rangenet, "WIDTH", 64)
+    logged = []
+    model = rangenet.fit_rangenet(two, CLASSES, steps=3, log=logged.append)
+    assert model.steps == 3 and [m.split(",")[0] for m in logged] == ["rangenet: step 1/3", "rangenet: step 3/3"]
+    monkeypatch.setattr(rangenet, "MIN_STEPS", 2)
+    monkeypatch.setattr(rangenet, "EPOCHS", 4)  # default: 4 passes over the --train frames in batches of 4
+    train = [*two, _frame(rng, "c0", "c", (7.0, -5.0)), _frame(rng, "d0", "d", (-8.0, 3.0)), _frame(rng, "e0", "e", (9.0, 1.0))]
+    report = evaluate(train, two, CLASSES, reference=two, model="rangenet", draws=10)
+    assert report["steps"] == rangenet.default_steps(5) == 5  # ceil(4 * 5 / 4); the reference folds hold 1 frame each
+    assert [f["steps"] for f in report["real_reference"]["folds"]] == [5, 5]
+    given = evaluate(two, two, CLASSES, reference=two, model="rangenet", draws=10, steps=2)
+    assert given["steps"] == 2 and [f["steps"] for f in given["real_reference"]["folds"]] == [2, 2]
+    for bad, model in ((0, "rangenet"), (2.5, "rangenet"), (3, "lgbm")):
+        with pytest.raises(InputError, match="--steps"):
+            evaluate(two, two, CLASSES, model=model, steps=bad)

@@ -30,7 +30,7 @@ def run_evaluate(args) -> int:
     if args.every < 1 or (args.max_frames is not None and args.max_frames < 1) or args.jobs < 1:
         raise InputError("evaluate: --every, --max-frames and --jobs must be >= 1")
     report = evaluate(args.train, args.test, args.classes, args.reference, args.model, args.seed, args.every, args.max_frames,
-                      args.max_points_per_scan, args.jobs, log=lambda m: print(m, file=sys.stderr))
+                      args.max_points_per_scan, args.jobs, log=lambda m: print(m, file=sys.stderr), steps=args.steps)
     write_report(out, report)
     print(table(report))
     print(f"written: {out}")
@@ -54,6 +54,8 @@ def evaluate_arguments(p) -> None:
     p.add_argument("--max-points-per-scan", type=int, default=MAX_POINTS_PER_SCAN,
                    help=f"background points sampled from each training scan (default {MAX_POINTS_PER_SCAN})")
     p.add_argument("--jobs", type=int, default=1, help="model threads (default 1)")
+    p.add_argument("--steps", type=int, default=None, help="the networks' training steps, for --train's model and every --reference fold alike "
+                   "(default: 12 passes over the --train frames in batches of 4, at least 120)")
     p.set_defaults(func=run_evaluate)
 
 

@@ -97,13 +97,17 @@ def training_sample(scans: Sequence[LabelledScan], classes: Sequence[str], rng: 
 
 
 def fit(scans: Sequence[LabelledScan], classes: Sequence[str], seed: int = 0, max_points_per_scan: int = MAX_POINTS_PER_SCAN,
-        model: str = "lgbm", n_jobs: int = 1, log=None):
+        model: str = "lgbm", n_jobs: int = 1, log=None, steps: int | None = None):
     """Train model ``model`` (:data:`MODELS`) on ``scans``: a :class:`Model`, or a
-    :class:`~.rangenet.RangeNetModel`; ``InputError`` when the training set is empty or holds no point of any
-    requested class."""
+    :class:`~.rangenet.RangeNetModel`; ``steps``: the networks' training steps (``None``: their default, see
+    :func:`~.rangenet.default_steps`; the trees take none). ``InputError`` when the training set is empty or
+    holds no point of any requested class, or for ``steps`` with a tree model."""
     if model not in MODELS:
         raise InputError(f"--model: unknown model {model!r}; allowed: {', '.join(MODELS)}")
-    return MODELS[model](scans, tuple(classes), seed, max_points_per_scan, model, n_jobs, log)
+    if steps is not None and model not in NEEDS_TORCH:
+        raise InputError(f"--steps: only for the networks ({', '.join(sorted(NEEDS_TORCH))}), not --model {model}")
+    options = {"steps": steps} if model in NEEDS_TORCH else {}
+    return MODELS[model](scans, tuple(classes), seed, max_points_per_scan, model, n_jobs, log, **options)
 
 
 def fit_trees(scans: Sequence[LabelledScan], classes: Sequence[str], seed: int, max_points_per_scan: int, model: str, n_jobs: int, log=None) -> Model:
@@ -128,15 +132,15 @@ def fit_trees(scans: Sequence[LabelledScan], classes: Sequence[str], seed: int, 
 
 
 def _network(remission: bool):
-    def train(scans, classes, seed, max_points_per_scan, model, n_jobs, log=None):
+    def train(scans, classes, seed, max_points_per_scan, model, n_jobs, log=None, steps=None):
         from .rangenet import fit_rangenet
 
-        return fit_rangenet(scans, classes, seed, n_jobs, remission=remission, name=model, log=log)
+        return fit_rangenet(scans, classes, seed, n_jobs, remission=remission, name=model, log=log, steps=steps)
 
     return train
 
 
-# name -> trainer(scans, classes, seed, max_points_per_scan, name, n_jobs, log) -> a model with predict(scan)
+# name -> trainer(scans, classes, seed, max_points_per_scan, name, n_jobs, log[, steps: the networks']) -> a model with predict(scan)
 MODELS: dict[str, Callable[..., object]] = {"lgbm": fit_trees, "forest": fit_trees, "rangenet": _network(True), "rangenet-geometry": _network(False)}
 READS_REMISSION = frozenset({"rangenet"})  # models whose input holds the scans' remission
 NEEDS_TORCH = frozenset({"rangenet", "rangenet-geometry"})

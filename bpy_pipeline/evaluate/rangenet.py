@@ -6,10 +6,12 @@ channels), a decoder with skip connections brings it back, and a 1 x 1 head scor
 takes its pixel's class (back-projection, as RangeNet++ without its k-nearest-neighbour clean-up), so the
 IoU and the intervals are those of :mod:`.metrics`, as for the LightGBM model. About 0.35 M parameters.
 
-Training: Adam (lr 2e-3, cosine decay), :data:`EPOCHS` passes over the training frames (at least
-:data:`MIN_STEPS` steps, for a handful of real frames) in batches of :data:`BATCH`, each frame turned by a random
-angle about z and mirrored left-right with probability 0.5; class-weighted cross-entropy (weight
-1 / (share of pixels + 0.001), as RangeNet++). A scan that labels only some classes (``known``: KITTI boxes) adds a
+Training: Adam (lr 2e-3, cosine decay over the run) for ``steps`` steps in batches of :data:`BATCH`; by default
+:func:`default_steps`: :data:`EPOCHS` passes over the training frames, at least :data:`MIN_STEPS` steps. To
+compare two training sets fairly give both the same ``steps`` (``evaluate`` trains its real reference for as
+many steps as the model trained on ``--train``). Each frame is turned by a random angle about z and mirrored
+left-right with probability 0.5; class-weighted cross-entropy (weight 1 / (share of pixels + 0.001), as
+RangeNet++). A scan that labels only some classes (``known``: KITTI boxes) adds a
 partial-label term for its "other" pixels: -log of the probability of all the classes it does not know
 (they are not car, person or bicyclist, but may be road or building).
 
@@ -119,6 +121,7 @@ class RangeNetModel:
     training_points : (C + 1,) labelled pixels of each label in the training images
     seconds : training time
     threads : torch threads for predictions
+    steps : training steps taken
     """
 
     name: str
@@ -128,6 +131,7 @@ class RangeNetModel:
     training_points: list[int] = field(default_factory=list)
     seconds: float = 0.0
     threads: int = 1
+    steps: int = 0
 
     def predict(self, scan: LabelledScan) -> np.ndarray:
         """``(n,)`` int64 predicted labels (0..C) of every point of ``scan``: its pixel's class."""
@@ -153,9 +157,19 @@ def _other_allowed(scan: LabelledScan, classes: Sequence[str]) -> np.ndarray:
     return allowed
 
 
+def default_steps(n_scans: int, epochs: int | None = None) -> int:
+    """Training steps for ``n_scans`` frames: ``epochs`` (``None``: :data:`EPOCHS`) passes in batches of
+    :data:`BATCH`, at least :data:`MIN_STEPS`."""
+    return max(MIN_STEPS, math.ceil((EPOCHS if epochs is None else epochs) * n_scans / BATCH))
+
+
 def fit_rangenet(scans: Sequence[LabelledScan], classes: Sequence[str], seed: int = 0, n_jobs: int = 1, remission: bool = True,
-                 name: str = "rangenet", epochs: int = EPOCHS, log=None) -> RangeNetModel:
-    """Train the network on ``scans`` (module notes); ``InputError`` without torch, or when no scan holds a requested class."""
+                 name: str = "rangenet", epochs: int | None = None, log=None, steps: int | None = None) -> RangeNetModel:
+    """Train the network on ``scans`` for ``steps`` steps (``None``: :func:`default_steps` of ``len(scans)`` and
+    ``epochs``); module notes. ``InputError`` without torch, when ``steps`` is not an integer >= 1, or when no scan
+    holds a requested class. A scan listed twice is drawn twice as often (oversampling)."""
+    if steps is not None and (isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 1):
+        raise InputError(f"--steps: expected an integer >= 1, got {steps!r}")
     torch = torch_module()
     classes = tuple(classes)
     n_labels = len(classes) + 1
@@ -164,7 +178,8 @@ def fit_rangenet(scans: Sequence[LabelledScan], classes: Sequence[str], seed: in
     torch.manual_seed(seed)
     torch.use_deterministic_algorithms(True)
     torch.set_num_threads(n_jobs)
-    images: list[RangeImage] = [project(s, WIDTH, remission) for s in scans]
+    projected = {id(s): project(s, WIDTH, remission) for s in {id(s): s for s in scans}.values()}  # a repeated scan once
+    images: list[RangeImage] = [projected[id(s)] for s in scans]
     allowed = np.stack([_other_allowed(s, classes) for s in scans])
     counts = np.bincount(np.concatenate([i.labels[i.labels >= 0] for i in images]), minlength=n_labels)[:n_labels]
     if not counts[: len(classes)].any():
@@ -175,7 +190,7 @@ def fit_rangenet(scans: Sequence[LabelledScan], classes: Sequence[str], seed: in
     weights = np.where(counts > 0, 1.0 / (share + WEIGHT_EPSILON), 0.0)
     weights = weights / weights[counts > 0].mean()
     network = _network(torch, len(CHANNELS), n_labels)
-    steps = max(MIN_STEPS, math.ceil(epochs * len(scans) / BATCH))
+    steps = int(steps) if steps is not None else default_steps(len(scans), epochs)
     optimiser = torch.optim.Adam(network.parameters(), lr=LEARNING_RATE)
     schedule = torch.optim.lr_scheduler.CosineAnnealingLR(optimiser, steps)
     weight_t = torch.from_numpy(weights.astype(np.float32))
@@ -208,7 +223,7 @@ def fit_rangenet(scans: Sequence[LabelledScan], classes: Sequence[str], seed: in
         if log and (step % 50 == 0 or step == steps - 1):
             log(f"{name}: step {step + 1}/{steps}, loss {loss.item():.3f}, {time.perf_counter() - start:.0f} s")
     network.eval()
-    return RangeNetModel(name, classes, network, remission, [int(c) for c in counts], round(time.perf_counter() - start, 2), n_jobs)
+    return RangeNetModel(name, classes, network, remission, [int(c) for c in counts], round(time.perf_counter() - start, 2), n_jobs, steps)
 
 
 def parameter_count(model: RangeNetModel) -> int:

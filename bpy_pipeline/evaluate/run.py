@@ -6,6 +6,10 @@ sequence never sit on both sides. When no test scan shares a group with a refere
 once, on all of them. The report gives both IoUs per class with their intervals, the mean IoU, and the ratios
 synthetic / real.
 
+The networks (``rangenet``, ``rangenet-geometry``) train every reference fold for as many steps as the model
+trained on ``train`` (``steps``, by default :func:`~.rangenet.default_steps` of the training frames): the real
+reference gets the same optimisation budget as the model it is compared with, however few its frames.
+
 A model that reads remission (``rangenet``) is trained and tested on the scans that carry it only; the others
 are listed in the report's ``left_out`` (SemanticKITTI 000700 and sequence 01 as shared have none).
 """
@@ -44,11 +48,12 @@ def fold_groups(groups: Sequence[str], max_folds: int | None = None) -> list[lis
 
 
 def leave_one_group_out(reference: Sequence[LabelledScan], test: Sequence[LabelledScan], classes: Sequence[str], seed: int, model: str,
-                        max_points_per_scan: int, n_jobs: int, log=None, max_folds: int | None = None) -> tuple[list[np.ndarray], list[dict]]:
+                        max_points_per_scan: int, n_jobs: int, log=None, max_folds: int | None = None,
+                        steps: int | None = None) -> tuple[list[np.ndarray], list[dict]]:
     """Predictions for every test scan by a model trained on the reference scans of the other groups (of the other
-    folds' groups with ``max_folds``); and the folds (``{test_group, train: [names], seconds}``; ``test_group``
-    names a fold's groups, comma-separated). When no test scan shares a group with a reference scan, one model
-    trained on all the reference scans predicts every test scan.
+    folds' groups with ``max_folds``); and the folds (``{test_group, train: [names], seconds, steps}``; ``test_group``
+    names a fold's groups, comma-separated); ``steps``: each fold's training steps (the networks'). When no test
+    scan shares a group with a reference scan, one model trained on all the reference scans predicts every test scan.
     ``InputError`` when a group leaves nothing to train on."""
     predictions: list[np.ndarray | None] = [None] * len(test)
     folds = []
@@ -58,12 +63,12 @@ def leave_one_group_out(reference: Sequence[LabelledScan], test: Sequence[Labell
         if not train:
             raise InputError(f"--reference: no reference scan outside group {', '.join(groups)} to train on (leave-one-group-out needs two groups or more)")
         start = time.perf_counter()
-        trained = fit(train, classes, seed, max_points_per_scan, model, n_jobs, log)
+        trained = fit(train, classes, seed, max_points_per_scan, model, n_jobs, log, steps)
         for i, scan in enumerate(test):
             if disjoint or scan.group in groups:
                 predictions[i] = trained.predict(scan)
         folds.append({"test_group": ", ".join(groups) or "all (no test group among the reference groups)", "train": _names(train),
-                      "seconds": round(time.perf_counter() - start, 2)})
+                      "seconds": round(time.perf_counter() - start, 2), "steps": getattr(trained, "steps", None)})
         if log:
             log(f"reference fold {', '.join(groups) or 'all'}: trained on {len(train)} scans in {folds[-1]['seconds']} s")
     return predictions, folds
@@ -78,7 +83,8 @@ def with_remission(scans: Sequence[LabelledScan], model: str) -> tuple[list[Labe
 
 def evaluate(train: Iterable[Source], test: Iterable[Source], classes: str | Sequence[str] = ("car", "person"), reference: Iterable[Source] | None = None,
              model: str = "lgbm", seed: int = 0, every: int = 1, max_frames: int | None = None, max_points_per_scan: int = MAX_POINTS_PER_SCAN,
-             n_jobs: int = 1, draws: int = DRAWS, image_size: tuple[int, int] = IMAGE_SIZE, log=None, max_folds: int | None = None) -> dict:
+             n_jobs: int = 1, draws: int = DRAWS, image_size: tuple[int, int] = IMAGE_SIZE, log=None, max_folds: int | None = None,
+             steps: int | None = None) -> dict:
     """Train ``model`` on ``train``, test on ``test``; with ``reference``, the same model trained on real frames
     (leave-one-group-out) on the same test scans. Returns the report (JSON-able; NaN where a class is absent).
 
@@ -93,6 +99,8 @@ def evaluate(train: Iterable[Source], test: Iterable[Source], classes: str | Seq
     image_size : KITTI image width, height (px) bounding the labelled field of view
     log : ``print``-like progress callback, or ``None``
     max_folds : at most this many leave-group-out folds for the reference (groups dealt round-robin), ``None``: one per group
+    steps : the networks' training steps, for the model on ``train`` and every reference fold alike (``None``: the
+        default for the ``train`` frames, :func:`~.rangenet.default_steps`); not for the trees
     """
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise InputError(f"--seed: expected an integer >= 0, got {seed!r}")
@@ -101,6 +109,8 @@ def evaluate(train: Iterable[Source], test: Iterable[Source], classes: str | Seq
     classes = parse_classes(classes)
     if model not in MODELS:
         raise InputError(f"--model: unknown model {model!r}; allowed: {', '.join(MODELS)}")
+    if steps is not None and (model not in NEEDS_TORCH or isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 1):
+        raise InputError(f"--steps: an integer >= 1 for the networks ({', '.join(sorted(NEEDS_TORCH))}); got {steps!r} with --model {model}")
     if model in NEEDS_TORCH:
         from .rangenet import torch_module
 
@@ -120,8 +130,12 @@ def evaluate(train: Iterable[Source], test: Iterable[Source], classes: str | Seq
     if left_out:
         say(f"{model} reads remission: left out {len(left_out)} scans without it ({', '.join(left_out)})")
     say(f"train: {len(train_scans)} scans, test: {len(test_scans)}, reference: {len(reference_scans)}; classes {', '.join(classes)}")
+    if model in NEEDS_TORCH and steps is None:
+        from .rangenet import default_steps
+
+        steps = default_steps(len(train_scans))
     start = time.perf_counter()
-    trained = fit(train_scans, classes, seed, max_points_per_scan, model, n_jobs, say)
+    trained = fit(train_scans, classes, seed, max_points_per_scan, model, n_jobs, say, steps)
     fit_seconds = time.perf_counter() - start
     say(f"{model}: trained on {sum(trained.training_points)} points in {fit_seconds:.1f} s")
     synthetic = score(test_scans, [trained.predict(s) for s in test_scans], classes, seed, draws)
@@ -134,10 +148,10 @@ def evaluate(train: Iterable[Source], test: Iterable[Source], classes: str | Seq
     report = {
         "classes": list(classes), "model": model, "seed": seed, "features": list(CHANNELS if model in NEEDS_TORCH else FEATURE_NAMES),
         "train": _names(train_scans), "test": _names(test_scans), "reference": _names(reference_scans),
-        "synthetic": synthetic, "real_reference": None, "ratio": None, "left_out": left_out,
+        "synthetic": synthetic, "real_reference": None, "ratio": None, "left_out": left_out, "steps": steps,
     }
     if reference_scans:
-        predictions, folds = leave_one_group_out(reference_scans, test_scans, classes, seed, model, max_points_per_scan, n_jobs, say, max_folds)
+        predictions, folds = leave_one_group_out(reference_scans, test_scans, classes, seed, model, max_points_per_scan, n_jobs, say, max_folds, steps)
         real = score(test_scans, predictions, classes, seed, draws)
         real["folds"] = folds
         report["real_reference"] = real
