@@ -110,9 +110,8 @@ class Intersection:
         from ..base import BuildResult
 
         views = tuple(getattr(view, "fields", ()) or ())
-        reserved = []
-        if self.params.ego_vehicle:  # the ego car under the roof sensor: its footprint and its headway stay free
-            reserved = [street.ego_keep_free(self.params, v.pose) for v in views]
+        # the ego car under the roof sensor: its footprint and its headway stay free
+        reserved = [street.ego_keep_free(self.params, v.pose) for v in views] if self.params.ego_vehicle else []
         placement = street.place_users(self.params, self.layout, rng, views, reserved=reserved, clear=self.sensor_poses)
         headings, parts = {}, []
         for k, user in enumerate(placement.users):
