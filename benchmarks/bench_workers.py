@@ -16,7 +16,10 @@ workers getting fewer than two cores. ``cpu_ratio`` = one process's CPU time / t
 - industrial-hall frames (the mirror LiDAR's 262 k rays: the scan dominates, and one process
   already traces on both cores);
 - a long parking run (1,000 frames), where each worker's own start-up and scene build (a second
-  Blender) weigh little against its frames.
+  Blender) weigh little against its frames;
+- the ego street example (``examples/street/ego_hdl64e.yaml``, 60 frames): its frames hold the interpreter on two
+  threads (the next frame's build beside this frame's boxes and write), so a second process finds a core one
+  process leaves idle.
 
 Run: python benchmarks/bench_workers.py [--small]
 """
@@ -75,11 +78,12 @@ def job(name: str, args: list[str], frames: int) -> dict:
 
 def main() -> None:
     args = arguments(__doc__.splitlines()[0])
-    parking, hall, long_parking = (20, 4, 40) if args.small else (200, 30, 1000)
+    parking, hall, long_parking, street = (20, 4, 40, 6) if args.small else (200, 30, 1000, 60)
     rows = [
         job("parking", ["--set", "scene.builder=parking"], parking),
         job("industrial hall", ["--set", "scene.builder=industrial_hall"], hall),
         job("parking, long run (start-up amortised)", ["--set", "scene.builder=parking"], long_parking),
+        job("the ego street example", ["--config", str(ROOT / "examples" / "street" / "ego_hdl64e.yaml")], street),
     ]
     report("workers" + ("_small" if args.small else ""), rows, args.out,
            {"cores": os.cpu_count(), "rounds": ROUNDS,
