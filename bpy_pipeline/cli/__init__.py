@@ -208,6 +208,23 @@ def _terminate(signum, frame) -> None:
     raise Terminated()
 
 
+STOPPED = {KeyboardInterrupt: ("interrupted", 130), Terminated: ("terminated (SIGTERM)", 143)}  # what stopped a run: its words, its exit code
+
+
+def stopped_by(err: BaseException) -> type | None:
+    """The :data:`STOPPED` kind ``err`` is, or was raised from (its ``__cause__`` chain): a signal that lands while a C
+    extension runs Python (numba loading a cached kernel) comes back wrapped, as a ``SystemError`` whose cause is the
+    handler's exception. An error raised while handling one (its ``__context__`` only) is another failure: not followed."""
+    seen = set()
+    while err is not None and id(err) not in seen:
+        seen.add(id(err))
+        kind = next((k for k in STOPPED if isinstance(err, k)), None)
+        if kind is not None:
+            return kind
+        err = err.__cause__
+    return None
+
+
 def guarded(func, args) -> int:
     """``func(args)`` with bad input, Ctrl-C and SIGTERM turned into one line and an exit code (2, 130, 143)."""
     try:
@@ -219,12 +236,13 @@ def guarded(func, args) -> int:
     except InputError as err:
         print(f"error: {err}", file=sys.stderr)
         return err.exit_code
-    except KeyboardInterrupt:
-        print("interrupted: every frame written so far is committed; --resume continues the run", file=sys.stderr)
-        return 130
-    except Terminated:
-        print("terminated (SIGTERM): every frame written so far is committed; --resume continues the run", file=sys.stderr)
-        return 143
+    except BaseException as err:
+        kind = stopped_by(err)
+        if kind is None:
+            raise
+        words, code = STOPPED[kind]
+        print(f"{words}: every frame written so far is committed; --resume continues the run", file=sys.stderr)
+        return code
     finally:
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
