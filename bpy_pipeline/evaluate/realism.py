@@ -2,11 +2,6 @@
 
 What it measures (every figure: generated against real; a class only on the real scans that label it):
 
-Every per-class figure (intensity, points per object, ranges) reads the points within +-:data:`LABELLED_DEG` of straight
-ahead on both sides: KITTI's object frames label only what their camera sees (+-40.7 degrees) and SqueezeSeg's frames
-hold only the front 90 degrees, so a class's real points lie there, and a generated frame's cars beside the sensor
-(which no real box-labelled frame labels) would otherwise read as a range gap that is none.
-
 - **intensity** per class, over the real scans that carry remission: the 1-Wasserstein distance between the two
   distributions (0..1 units of remission), the share of points saturated (remission >= :data:`SATURATED`),
   the number of distinct values and the median;
@@ -28,6 +23,11 @@ hold only the front 90 degrees, so a class's real points lie there, and a genera
   the per-scan normalised histograms under a Gaussian kernel on their Euclidean distance (sigma 0.5), as
   GraphRNN's ``compute_mmd`` that those papers use. Real scans cropped to the camera's view (SqueezeSeg's
   front 90 degrees) are left out of it.
+
+Every per-class figure (intensity, points per object, ranges) reads the points within +-:data:`LABELLED_DEG` of straight
+ahead on both sides: KITTI's object frames label only what their camera sees (+-40.7 degrees) and SqueezeSeg's frames
+hold only the front 90 degrees, so a class's real points lie there, and a generated frame's cars beside the sensor
+(which no real box-labelled frame labels) would otherwise read as a range gap that is none.
 
 :func:`findings` turns the figures into sentences ranked by how far apart the two sides are; :func:`plot`
 draws one PNG of them. Pure numpy, scipy and matplotlib (the plot); never imports bpy.
