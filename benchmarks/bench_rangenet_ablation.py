@@ -15,7 +15,7 @@ with each other here, and the default with ``bench_rangenet.py``'s figure there.
     python benchmarks/bench_rangenet_ablation.py [--layouts 3] [--frames 12] [--variants "default,effects off (ideal scan)"] [--work DIR]
     python benchmarks/bench_rangenet_ablation.py --small     # 1 layout x 2 frames, 2 real frames, few steps: that it runs
 
-Results: benchmarks/results/rangenet_ablation.json (``--name``).
+Results: benchmarks/results/rangenet_ablation.json (``--name``); a run of some ``--variants`` adds them to the file's others.
 """
 
 from __future__ import annotations
@@ -88,9 +88,11 @@ def main() -> None:
     seed = 0
     start = time.perf_counter()
     real, _ = with_remission(labelled.load_scans([REAL / f for f in (SMALL_FRAMES if args.small else REAL_FRAMES)], CLASSES), MODEL)
-    result = {"model": MODEL, "classes": list(CLASSES), "layouts": layouts, "frames_per_layout": frames, "test": [s.name for s in real],
-              "load_average_at_start": os.getloadavg()[0], "variants": {}}
     path = args.out / (f"{args.name}_small.json" if args.small else f"{args.name}.json")
+    result = json.loads(path.read_text()) if path.is_file() else {}  # a run of some variants adds to the others'
+    result.update({"model": MODEL, "classes": list(CLASSES), "layouts": layouts, "frames_per_layout": frames, "test": [s.name for s in real],
+                   "load_average_at_start": os.getloadavg()[0]})
+    result.setdefault("variants", {})
     for name in names:
         folder = work / "".join(ch if ch.isalnum() else "_" for ch in name)
         cost = generate(folder, layouts, frames, VARIANTS[name], reuse=True)
