@@ -2,7 +2,8 @@
 
 The street (examples/street/ego_hdl64e.yaml) is generated over ``--layouts`` x ``--frames`` frames once per variant
 (:data:`VARIANTS`: ``--set`` overrides of the default street: the effects off, the intensity without the unit's reading,
-the lidar equation's intensity, no drop, the material models, glossy vehicles, light rain). On each the range-image
+the lidar equation's intensity, no drop, the material models, glossy vehicles, light rain; and the street's levels of
+detail: bare, no vegetation, no terrain, no fences, walls and furniture, 40 m arms). On each the range-image
 network (``bpy-pipeline evaluate --model rangenet``: x y z range remission mask) is trained alone, with the same
 seed and settings, and tested on the real HDL-64E frames of ../shared/real_scans that carry remission (the same 11 as
 ``bench_rangenet.py``): per class IoU with its 95 % interval (bootstrap over objects) and mIoU over the classes both
@@ -15,7 +16,8 @@ with each other here, and the default with ``bench_rangenet.py``'s figure there.
     python benchmarks/bench_rangenet_ablation.py [--layouts 3] [--frames 12] [--variants "default,effects off (ideal scan)"] [--work DIR]
     python benchmarks/bench_rangenet_ablation.py --small     # 1 layout x 2 frames, 2 real frames, few steps: that it runs
 
-Results: benchmarks/results/rangenet_ablation.json (``--name``); a run of some ``--variants`` adds them to the file's others.
+Results: benchmarks/results/rangenet_ablation.json (``--name``; a run of some ``--variants`` adds them to the file's
+others) and beside it the chart of real IoU against the generation's frames per second (``rangenet_ablation.png``).
 """
 
 from __future__ import annotations
@@ -51,7 +53,35 @@ VARIANTS = {
     "material models": ABLATION["material models"],
     "glossy vehicles": ABLATION["glossy vehicles"],
     "light rain (4 mm/h)": ["effects.weather.rain.rate=4"],
+    # the street's levels of detail (bench_sim2real.py's): what each costs against what it is worth
+    **{name: ABLATION[name] for name in ("bare (the street before)", "no vegetation", "no terrain", "no fences walls furniture", "40 m arms")},
 }
+
+
+def chart(result: dict, path: Path) -> None:
+    """Real mIoU and car IoU (95 % intervals) against the generation's frames per second, one point a variant."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(12, 4.5))
+    for ax, what in zip(axes, ("miou", "car")):
+        for name, row in result["variants"].items():
+            fps = row["generation"]["frames"] / max(row["generation"]["wall_s"], 1e-9)
+            if what == "miou":
+                ax.plot(fps, row["miou"], "o")
+                ax.annotate(name, (fps, row["miou"]), fontsize=7, xytext=(4, 4), textcoords="offset points")
+            else:
+                iou, (lo, hi) = row["classes"]["car"]["iou"], row["classes"]["car"]["interval"]
+                ax.errorbar(fps, iou, yerr=[[iou - lo], [hi - iou]], fmt="o", capsize=3)
+                ax.annotate(name, (fps, iou), fontsize=7, xytext=(4, 4), textcoords="offset points")
+        ax.set_xlabel("generated frames per second (PLY and labels, 2 cores)")
+        ax.set_ylabel("real mIoU" if what == "miou" else "real car IoU (95 % interval)")
+    fig.suptitle("The range-image network trained on each variant of the street, tested on real HDL-64E scans")
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
 
 
 def main() -> None:
@@ -105,6 +135,8 @@ def main() -> None:
               f"person {block['classes']['person']['iou']:.3f}", flush=True)
         args.out.mkdir(parents=True, exist_ok=True)
         path.write_text(json.dumps(json_safe(result), indent=1) + "\n")  # each variant as soon as it is done
+    if not args.small:
+        chart(result, path.with_suffix(".png"))
     result["load_average_at_end"] = os.getloadavg()[0]
     result["seconds"] = round(time.perf_counter() - start, 1)
     path.write_text(json.dumps(json_safe(result), indent=1) + "\n")
