@@ -35,7 +35,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from bench_rangenet import CLASSES, REAL, REAL_FRAMES, SMALL_FRAMES, TREE_POINTS_PER_CLASS, summary  # noqa: E402
+from bench_rangenet import CLASSES, REAL, REAL_FRAMES, SMALL_FRAMES, SMALL_STEPS, TREE_POINTS_PER_CLASS, summary  # noqa: E402
 from bench_sim2real import ABLATION, generate  # noqa: E402
 
 from bpy_pipeline.evaluate import labelled  # noqa: E402
@@ -70,12 +70,12 @@ def chart(result: dict, path: Path) -> None:
         for name, row in result["variants"].items():
             fps = row["generation"]["frames"] / max(row["generation"]["wall_s"], 1e-9)
             if what == "miou":
-                ax.plot(fps, row["miou"], "o")
-                ax.annotate(name, (fps, row["miou"]), fontsize=7, xytext=(4, 4), textcoords="offset points")
+                iou, error = row["miou"], None
             else:
                 iou, (lo, hi) = row["classes"]["car"]["iou"], row["classes"]["car"]["interval"]
-                ax.errorbar(fps, iou, yerr=[[iou - lo], [hi - iou]], fmt="o", capsize=3)
-                ax.annotate(name, (fps, iou), fontsize=7, xytext=(4, 4), textcoords="offset points")
+                error = [[iou - lo], [hi - iou]]
+            ax.errorbar(fps, iou, yerr=error, fmt="o", capsize=3)
+            ax.annotate(name, (fps, iou), fontsize=7, xytext=(4, 4), textcoords="offset points")
         ax.set_xlabel("generated frames per second (PLY and labels, 2 cores)")
         ax.set_ylabel("real mIoU" if what == "miou" else "real car IoU (95 % interval)")
     fig.suptitle("The range-image network trained on each variant of the street, tested on real HDL-64E scans")
@@ -110,10 +110,6 @@ def main() -> None:
     if unknown:
         parser.error(f"--variants: unknown {', '.join(unknown)}; allowed: {'; '.join(VARIANTS)}")
     layouts, frames = (1, 2) if args.small else (args.layouts, args.frames)
-    if args.small:
-        import bpy_pipeline.evaluate.rangenet as rangenet
-
-        rangenet.MIN_STEPS, rangenet.EPOCHS = 4, 1
     work = args.work or Path(tempfile.mkdtemp(prefix="rangenet_ablation_"))
     seed = 0
     start = time.perf_counter()
@@ -128,7 +124,7 @@ def main() -> None:
         cost = generate(folder, layouts, frames, VARIANTS[name], reuse=True)
         train, _ = with_remission([s for d in sorted(folder.glob("layout*")) for s in labelled.load_scans([d], CLASSES)], MODEL)
         begun = time.perf_counter()
-        model = fit(train, CLASSES, seed, TREE_POINTS_PER_CLASS, MODEL, args.threads)
+        model = fit(train, CLASSES, seed, TREE_POINTS_PER_CLASS, MODEL, args.threads, steps=SMALL_STEPS if args.small else None)
         block = score(real, [model.predict(s) for s in real], CLASSES, seed)
         result["variants"][name] = {**summary(block), "sets": VARIANTS[name], "generation": cost, "train_seconds": round(time.perf_counter() - begun, 1)}
         print(f"[{time.perf_counter() - start:6.0f} s] {name}: mIoU {block['miou']:.3f}, car {block['classes']['car']['iou']:.3f}, "
