@@ -29,7 +29,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from .collision import capsule_gaps
-from .kinematics import axis_rotations
 
 # name, parent, joint position at rest (units of H, person frame)
 SEGMENTS = (
@@ -182,6 +181,30 @@ def _dof_rounds() -> tuple[tuple[np.ndarray, np.ndarray], ...]:
 DOF_ROUNDS = _dof_rounds()
 
 
+def _rodrigues_terms() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per degree of freedom and entry of its rotation (row by row, (k, 9)) the terms of
+    :func:`~.kinematics.axis_rotations`: ``axis_i axis_j`` (times ``1 - cos``), the signed axis component
+    (times ``sin``, 0 on the diagonal) and whether ``cos`` is added (the diagonal)."""
+    x, y, z = DOF_AXIS.T
+    zero = np.zeros_like(x)
+    pairs = np.stack([x * x, x * y, x * z, y * x, y * y, y * z, z * x, z * y, z * z], 1)
+    signed = np.stack([zero, -z, y, z, zero, -x, -y, x, zero], 1)  # a - b s is a + (-b) s, bit for bit
+    return pairs, signed, np.tile(np.eye(3, dtype=bool).ravel(), (len(DOFS), 1))
+
+
+DOF_PAIRS, DOF_SIGNED, DOF_DIAGONAL = _rodrigues_terms()
+
+
+def dof_rotations(angles: np.ndarray) -> np.ndarray:
+    """``(k, 3, 3)`` each degree of freedom's rotation about its axis by ``angles (k,)`` degrees: the numbers of
+    :func:`~.kinematics.axis_rotations` (``c + a_i a_i t`` on the diagonal, ``a_i a_j t -+ a_k s`` off it, ``t = 1 - c``),
+    every entry in one array expression."""
+    radians = np.radians(np.asarray(angles, float))
+    c, s = np.cos(radians)[:, None], np.sin(radians)[:, None]
+    pairs = DOF_PAIRS * (1.0 - c)
+    return (pairs + np.where(DOF_DIAGONAL, c, DOF_SIGNED * s)).reshape(-1, 3, 3)
+
+
 def joint_rotations(angles: np.ndarray) -> np.ndarray:
     """``(s, 3, 3)`` joint rotation of each segment for ``angles (k,)`` in degrees.
 
@@ -189,7 +212,7 @@ def joint_rotations(angles: np.ndarray) -> np.ndarray:
     one round (every segment's first, second, third degree of freedom) are one stacked ``matmul``, the same
     3 x 3 products as one at a time.
     """
-    per_dof = axis_rotations(DOF_AXIS, np.radians(np.asarray(angles, float)))  # (k, 3, 3)
+    per_dof = dof_rotations(angles)  # (k, 3, 3)
     out = np.repeat(np.eye(3)[None], len(SEGMENTS), axis=0)
     for segments, dofs in DOF_ROUNDS:
         out[segments] = out[segments] @ per_dof[dofs]

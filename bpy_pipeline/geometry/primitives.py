@@ -18,12 +18,16 @@ def plane(size_x: float, size_y: float):
     return vertices, np.array([[0, 1, 2], [0, 2, 3]], np.int32)
 
 
+UNIT_CORNERS = np.array([[x, y, z] for x in (-0.5, 0.5) for y in (-0.5, 0.5) for z in (-0.5, 0.5)])  # (8, 3) a unit box's corners
+UNIT_CORNERS.flags.writeable = False
+BOX_TRIANGLES = np.array([t for a, b, c, d in [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
+                          for t in ((a, b, c), (a, c, d))], np.int32)  # (12, 3) its faces, two triangles each
+BOX_TRIANGLES.flags.writeable = False
+
+
 def box(size_x: float, size_y: float, size_z: float):
-    """An axis-aligned box."""
-    corners = np.array([[x, y, z] for x in (-0.5, 0.5) for y in (-0.5, 0.5) for z in (-0.5, 0.5)])
-    faces = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
-    triangles = np.array([t for a, b, c, d in faces for t in ((a, b, c), (a, c, d))], np.int32)
-    return corners * [size_x, size_y, size_z], triangles
+    """An axis-aligned box: ``(vertices (8, 3), triangles (12, 3))``, new arrays."""
+    return UNIT_CORNERS * [size_x, size_y, size_z], BOX_TRIANGLES.copy()
 
 
 def prism(profile_yz: np.ndarray, x0: float, x1: float):
