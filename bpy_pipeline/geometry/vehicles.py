@@ -86,7 +86,10 @@ def vehicle_fittings(body: np.ndarray, length: float) -> dict[str, Mesh]:
         for side in (-1.0, 1.0):
             c = side * (half - 0.15)
             lights.append((*sorted((x - out * 0.06, x + out * 0.01)), c - lw / 2, c + lw / 2, mid - lh / 2, mid + lh / 2))
-    return {name: primitives.boxes_mesh(np.array(b)[:, 0::2], np.array(b)[:, 1::2]) for name, b in (("plates", plates), ("lights", lights))}
+    bounds = np.array(plates + lights)  # every box at once: each box's vertices are its own products
+    vertices, triangles = primitives.boxes_mesh(bounds[:, 0::2], bounds[:, 1::2])
+    cut = 8 * len(plates)  # vertices of the plates; 12 triangles per 8
+    return {"plates": (vertices[:cut], triangles[: 12 * len(plates)]), "lights": (vertices[cut:], triangles[12 * len(plates) :] - cut)}
 
 
 def two_wheeler_parts(kind: str, size) -> dict[str, Mesh]:
