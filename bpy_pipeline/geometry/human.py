@@ -108,6 +108,8 @@ CAPSULE_A = np.array([c[1] for c in CAPSULES], float)
 CAPSULE_B = np.array([c[2] for c in CAPSULES], float)
 CAPSULE_RADIUS = np.array([c[3] for c in CAPSULES], float)
 SEATED_SEGMENTS = ("pelvis", "thigh_l", "thigh_r")  # what rests on a desk top
+SEATED_CAPSULES = np.isin(CAPSULE_SEGMENT, [SEGMENT_INDEX[s] for s in SEATED_SEGMENTS])  # (c,) their capsules
+SEATED_CAPSULES.flags.writeable = False
 BUILDS = {"slim": 0.88, "medium": 1.0, "broad": 1.13}  # capsule radius factors
 POSES = ("standing", "walking", "sitting", "crouching")
 
@@ -390,7 +392,7 @@ def pose_person(angles: np.ndarray, height: float, build: float, pose: str, posi
     """
     rotations = joint_rotations(angles)
     a, b, r = capsules(_frames(rotations, height), height, build)
-    rests = np.isin(CAPSULE_SEGMENT, [SEGMENT_INDEX[s] for s in SEATED_SEGMENTS]) if pose == "sitting" else np.ones(len(r), bool)
+    rests = SEATED_CAPSULES if pose == "sitting" else np.ones(len(r), bool)
     bottoms = np.minimum(a[:, 2], b[:, 2]) - r
     lift = support_z - bottoms[rests].min()
     placement = np.eye(4)
