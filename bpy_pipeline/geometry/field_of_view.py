@@ -27,11 +27,12 @@ class FieldOfView:
         """``(n,)`` bool: which world ``points`` (n, 3) lie inside the field of view and range."""
         local = (np.asarray(points, float) - self.pose[:3, 3]) @ self.pose[:3, :3]
         r = np.linalg.norm(local, axis=1)
-        az = np.degrees(np.arctan2(local[:, 1], local[:, 0]))
         el = np.degrees(np.arcsin(np.clip(local[:, 2] / np.maximum(r, 1e-12), -1, 1)))
-        full = self.azimuth[1] - self.azimuth[0] >= 360.0
-        in_az = full | ((az >= self.azimuth[0]) & (az <= self.azimuth[1]))
-        return in_az & (el >= self.elevation[0]) & (el <= self.elevation[1]) & (r >= self.min_range) & (r <= self.max_range)
+        inside = (el >= self.elevation[0]) & (el <= self.elevation[1]) & (r >= self.min_range) & (r <= self.max_range)
+        if self.azimuth[1] - self.azimuth[0] >= 360.0:  # all round: every azimuth
+            return inside
+        az = np.degrees(np.arctan2(local[:, 1], local[:, 0]))
+        return inside & (az >= self.azimuth[0]) & (az <= self.azimuth[1])
 
 
 @lru_cache(maxsize=8)

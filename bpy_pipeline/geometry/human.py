@@ -283,7 +283,7 @@ def _level_feet(angles: np.ndarray) -> np.ndarray:
             frame = frame @ local[s]
         forward = frame[:3, 0]
         pitch_down = np.degrees(np.arctan2(-forward[2], np.hypot(forward[0], forward[1])))  # toes below heel > 0
-        angles[k] = np.clip(-pitch_down, LOWER[k], UPPER[k])
+        angles[k] = min(max(-pitch_down, LOWER[k]), UPPER[k])  # np.clip's numbers, without its array set-up
     return angles
 
 

@@ -497,19 +497,20 @@ def place_users(p, layout: StreetLayout, rng: np.random.Generator, views=(), tri
         return True
 
     def accept(user: RoadUser) -> bool:
-        if not free(user.centre, user.half, user.yaw):
+        half = user.half
+        if not free(user.centre, half, user.yaw):
             out.collisions += 1
             return False
-        if not clear.clear_of_box(user.centre, user.half, user.yaw, user.z, user.z + user.size[2]):
+        if not clear.clear_of_box(user.centre, half, user.yaw, user.z, user.z + user.size[2]):
             out.near_sensor += 1
             return False
-        if in_view_fraction(views, user.centre, user.half, user.yaw, user.size[2], user.z) < p.min_in_view:
+        if in_view_fraction(views, user.centre, half, user.yaw, user.size[2], user.z) < p.min_in_view:
             out.out_of_view[user.kind] = out.out_of_view.get(user.kind, 0) + 1
             return False
         out.users.append(user)
         centres, radii = reach["users"]
         reach["users"] = (np.vstack([centres, np.asarray(user.centre, float)[None, :2]]),
-                          np.append(radii, math.hypot(user.half[0] + grow, user.half[1] + grow)))
+                          np.append(radii, math.hypot(half[0] + grow, half[1] + grow)))
         return True
 
     shares = np.array([p.vehicle_mix.get(k, 0.0) for k in VEHICLES], float)
