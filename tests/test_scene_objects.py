@@ -110,14 +110,14 @@ def test_a_mesh_refilled_with_its_own_triangles_is_the_mesh_filled_anew():
 
     from bpy_pipeline.blender.mesh_objects import fill_mesh, mesh_object
     from bpy_pipeline.geometry import human
+    from bpy_pipeline.geometry.primitives import box_mesh
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     collection = bpy.context.scene.collection
     a, b, r = human.capsules(human.segment_frames(human.neutral_angles(), 1.7), 1.7)
     body = human.body_mesh(a, b, r, 8, 2)[:2]
     moved = (body[0] * 1.3 + (0.4, -0.2, 0.5), body[1])
-    box = (np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (0, 2)], float),
-           np.array([[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1], [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]], np.int32))
+    box = box_mesh(-1.0, 1.0, -1.0, 1.0, 0.0, 2.0)
     kept = mesh_object("kept", body, collection)
     for mesh in (moved, box, (np.zeros((0, 3)), np.zeros((0, 3), np.int32)), moved, body):
         _mesh_state(bpy, kept)  # its bounds and BVH made before the refill
