@@ -54,9 +54,9 @@ def fill_mesh(mesh: bpy.types.Mesh, vertices: np.ndarray, triangles: np.ndarray)
     arrays take the numpy buffer in one copy; ``vertices.co`` and ``loops.vertex_index`` go value by value
     (the same mesh, 3x slower: a street frame makes about 150 meshes). Refilling a mesh an object already
     uses changes its geometry only, where a new object or mesh makes Blender rebuild the scene's relations.
-    A mesh that has these triangles already (:func:`has_triangles`) keeps them and its edges and takes the new
-    positions only: the polygons' ``loop_start`` goes value by value and the edges are found anew, 50 times
-    the positions' cost for a pedestrian's body. Otherwise the mesh is emptied and filled.
+    A mesh holding these triangles already (:func:`has_triangles`: a road user's part where the last frame had the
+    same kind of part) keeps them and its edges and takes the new positions only; emptied and filled anew it costs
+    50 times as much for a pedestrian's body (the polygons' ``loop_start`` go value by value, the edges are found again).
     """
     vertices = np.ascontiguousarray(vertices, np.float32).reshape(-1)
     triangles = np.ascontiguousarray(triangles, np.int32).reshape(-1)
