@@ -21,6 +21,46 @@ def test_every_pose_lies_within_the_joint_limits_without_self_intersection():
     assert not human.within_limits(np.where(np.arange(len(human.DOFS)) == human.DOF_INDEX["shank_l.flexion"], 170.0, 0.0))
 
 
+def _frames_one_at_a_time(angles, height, placement=None):
+    """The segments' frames as the module's docstring writes them: every rotation and product one at a time."""
+    per_dof = kinematics.axis_rotations(human.DOF_AXIS, np.radians(angles))
+    rotations = np.repeat(np.eye(3)[None], len(human.SEGMENTS), axis=0)
+    for k, s in enumerate(human.DOF_SEGMENT):
+        rotations[s] = rotations[s] @ per_dof[k]
+    frames = np.empty((len(human.SEGMENTS), 4, 4))
+    for s, parent in enumerate(human.PARENT):
+        local = np.eye(4)
+        local[:3, :3] = rotations[s]
+        local[:3, 3] = (human.JOINT[s] - (human.JOINT[parent] if parent >= 0 else 0.0)) * height
+        frames[s] = (frames[parent] if parent >= 0 else (np.eye(4) if placement is None else placement)) @ local
+    return per_dof, rotations, frames
+
+
+def test_stacked_rotations_and_frames_are_the_products_one_at_a_time_bit_for_bit():
+    """The degrees of freedom's rotations (one array expression), the joints' (one stacked product per round), the frames
+    (one per level) and the levelled feet (each foot's chain) are the numbers of the one-at-a-time products."""
+    rng = np.random.default_rng(8)
+    for k in range(300):
+        angles = rng.uniform(human.LOWER, human.UPPER)
+        angles[rng.integers(len(angles), size=6)] = (0.0, -0.0, 90.0, -90.0, 180.0, 45.0)[k % 6]  # signed zeros, exact angles
+        placement = np.eye(4)
+        placement[:3, :3] = kinematics.axis_rotations(np.array([0.0, 0.0, 1.0]), rng.uniform(-4, 4))
+        placement[:3, 3] = rng.normal(size=3) * 40
+        height = rng.uniform(1.2, 2.0)
+        per_dof, rotations, frames = _frames_one_at_a_time(angles, height, placement)
+        assert human.dof_rotations(angles).tobytes() == per_dof.tobytes()
+        assert human.joint_rotations(angles).tobytes() == rotations.tobytes()
+        assert human.segment_frames(angles, height, placement).tobytes() == frames.tobytes()
+        assert human.segment_frames(angles, height).tobytes() == _frames_one_at_a_time(angles, height)[2].tobytes()
+        levelled = angles.copy()
+        for side in "lr":
+            foot = human.DOF_INDEX[f"foot_{side}.flexion"]
+            levelled[foot] = 0.0
+            forward = _frames_one_at_a_time(levelled, 1.0)[2][human.SEGMENT_INDEX[f"foot_{side}"], :3, 0]
+            levelled[foot] = np.clip(-np.degrees(np.arctan2(-forward[2], np.hypot(forward[0], forward[1]))), human.LOWER[foot], human.UPPER[foot])
+        assert human._level_feet(angles).tobytes() == levelled.tobytes()
+
+
 def test_segment_lengths_follow_the_height():
     frames = human.segment_frames(np.zeros(len(human.DOFS)), 1.8)
     joint = {name: frames[human.SEGMENT_INDEX[name], :3, 3] for name in human.SEGMENT_NAMES}

@@ -83,3 +83,45 @@ def test_export_gives_blenders_loop_triangles_and_their_faces_ids(faces):
     got_order = np.lexsort(got.reshape(len(got), -1).T)
     np.testing.assert_allclose(got[got_order], corners[order], atol=1e-6)
     assert np.array_equal(instance[got_order], (face % 3 + 1)[order])
+
+
+def _mesh_state(bpy, obj) -> tuple:
+    """What a mesh object holds: its positions, corners, polygons, edges, evaluated bounds and a ray's hit."""
+    mesh = obj.data
+    co = np.empty(len(mesh.vertices) * 3, np.float32)
+    mesh.vertices.foreach_get("co", co)
+    corners = np.empty(len(mesh.loops), np.int32)
+    mesh.loops.foreach_get("vertex_index", corners)
+    starts = np.empty(len(mesh.polygons), np.int32)
+    mesh.polygons.foreach_get("loop_start", starts)
+    edges = np.empty(len(mesh.edges) * 2, np.int32)
+    mesh.edges.foreach_get("vertices", edges)
+    graph = bpy.context.evaluated_depsgraph_get()
+    bounds = np.array([list(c) for c in obj.evaluated_get(graph).bound_box])
+    hit = obj.ray_cast((0.1, 0.1, 50.0), (0.0, 0.0, -1.0))
+    return co.tobytes(), corners.tobytes(), starts.tobytes(), np.sort(edges.reshape(-1, 2), 0).tobytes(), bounds.tobytes(), hit[0], tuple(hit[1])
+
+
+def test_a_mesh_refilled_with_its_own_triangles_is_the_mesh_filled_anew():
+    """fill_mesh keeps the triangles (and edges) a mesh has already and writes its positions only: its bounds, its BVH (a
+    ray cast) and everything read back are those of a mesh filled from nothing with the same arrays; other triangles, or
+    none, refill it whole."""
+    import bpy
+
+    from bpy_pipeline.blender.mesh_objects import fill_mesh, mesh_object
+    from bpy_pipeline.geometry import human
+    from bpy_pipeline.geometry.primitives import box_mesh
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    collection = bpy.context.scene.collection
+    a, b, r = human.capsules(human.segment_frames(human.neutral_angles(), 1.7), 1.7)
+    body = human.body_mesh(a, b, r, 8, 2)[:2]
+    moved = (body[0] * 1.3 + (0.4, -0.2, 0.5), body[1])
+    box = box_mesh(-1.0, 1.0, -1.0, 1.0, 0.0, 2.0)
+    kept = mesh_object("kept", body, collection)
+    for mesh in (moved, box, (np.zeros((0, 3)), np.zeros((0, 3), np.int32)), moved, body):
+        _mesh_state(bpy, kept)  # its bounds and BVH made before the refill
+        fill_mesh(kept.data, *mesh)
+        fresh = mesh_object("fresh", mesh, collection)
+        assert _mesh_state(bpy, kept) == _mesh_state(bpy, fresh)
+        bpy.data.objects.remove(fresh)

@@ -192,6 +192,12 @@ def _cross3(p: np.ndarray, q: np.ndarray) -> np.ndarray:
     return np.stack([p1 * q2 - p2 * q1, p2 * q0 - p0 * q2, p0 * q1 - p1 * q0], -1)
 
 
+def _norms(p: np.ndarray) -> np.ndarray:
+    """``(n,)`` lengths of ``(n, 3)`` float64 vectors, each ``np.linalg.norm`` of its row, bit for bit: the row's dot
+    product with itself is the same BLAS dot (a stacked row-by-column ``matmul`` is one dot per row), then its root."""
+    return np.sqrt(np.matmul(p[:, None, :], p[:, :, None]).reshape(-1))
+
+
 @lru_cache(maxsize=32)
 def capsule_topology(segments: int, rings: int, flat_start: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """What every capsule mesh of these counts shares: ``(cos (s,), sin (s,) around the axis, triangles (m, 3) int32)``.
@@ -226,14 +232,11 @@ def capsule_meshes(a, b, radius, segments: int = 10, rings: int = 3, flat_start:
     a, b = np.asarray(a, float).reshape(-1, 3), np.asarray(b, float).reshape(-1, 3)
     radius = np.asarray(radius, float).reshape(-1)
     axis = b - a
-    w = np.empty_like(axis)
-    for i in range(len(axis)):  # numpy's norm per capsule: the bits of the one-capsule code
-        length = float(np.linalg.norm(axis[i]))
-        w[i] = axis[i] / length if length > 1e-12 else (0.0, 0.0, 1.0)
+    length = _norms(axis)
+    w = np.where((length > 1e-12)[:, None], axis / np.where(length > 1e-12, length, 1.0)[:, None], np.array([0.0, 0.0, 1.0]))
     helper = np.where((np.abs(w[:, 0]) < 0.9)[:, None], np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0]))
     u = _cross3(w, helper)
-    for i in range(len(u)):
-        u[i] /= np.linalg.norm(u[i])
+    u /= _norms(u)[:, None]
     v = _cross3(w, u)
     cos_phi, sin_phi, triangles = capsule_topology(segments, rings, flat_start)
     circle = cos_phi[None, :, None] * u[:, None, :] + sin_phi[None, :, None] * v[:, None, :]  # (c, s, 3)

@@ -29,7 +29,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from .collision import capsule_gaps
-from .kinematics import axis_rotations
 
 # name, parent, joint position at rest (units of H, person frame)
 SEGMENTS = (
@@ -109,6 +108,8 @@ CAPSULE_A = np.array([c[1] for c in CAPSULES], float)
 CAPSULE_B = np.array([c[2] for c in CAPSULES], float)
 CAPSULE_RADIUS = np.array([c[3] for c in CAPSULES], float)
 SEATED_SEGMENTS = ("pelvis", "thigh_l", "thigh_r")  # what rests on a desk top
+SEATED_CAPSULES = np.isin(CAPSULE_SEGMENT, [SEGMENT_INDEX[s] for s in SEATED_SEGMENTS])  # (c,) their capsules
+SEATED_CAPSULES.flags.writeable = False
 BUILDS = {"slim": 0.88, "medium": 1.0, "broad": 1.13}  # capsule radius factors
 POSES = ("standing", "walking", "sitting", "crouching")
 
@@ -155,13 +156,89 @@ def within_limits(angles: np.ndarray, tolerance: float = 1e-9) -> bool:
     return bool(((angles >= LOWER - tolerance) & (angles <= UPPER + tolerance)).all())
 
 
+def _chain(s: int) -> list[int]:
+    """The segments from the pelvis down to segment ``s``."""
+    return ([] if PARENT[s] < 0 else _chain(PARENT[s])) + [s]
+
+
+# the segments by their depth in the skeleton (the pelvis, its children, theirs, ...): a level's frames need only
+# the level above's, so one stacked product places a level
+DEPTH = np.array([len(_chain(s)) - 1 for s in range(len(SEGMENTS))])
+LEVELS = tuple(np.flatnonzero(DEPTH == d) for d in range(DEPTH.max() + 1))
+OFFSET = JOINT - np.where(PARENT[:, None] >= 0, JOINT[PARENT], 0.0)  # (s, 3) each joint from its parent's, units of H
+FOOT_CHAINS = {side: _chain(SEGMENT_INDEX[f"foot_{side}"]) for side in "lr"}  # pelvis, thigh, shank, foot
+
+
+def _dof_rounds() -> tuple[tuple[np.ndarray, np.ndarray], ...]:
+    """Round ``r`` of the joint rotations: ``(segments, dofs)``, the segments with more than ``r`` degrees of freedom
+    and their ``r``-th one (from 0, in the order :data:`DOFS` lists them)."""
+    per_segment = [np.flatnonzero(DOF_SEGMENT == s) for s in range(len(SEGMENTS))]
+    rounds = []
+    for r in range(max(map(len, per_segment))):
+        segments = np.array([s for s, dofs in enumerate(per_segment) if len(dofs) > r])
+        rounds.append((segments, np.array([per_segment[s][r] for s in segments])))
+    return tuple(rounds)
+
+
+DOF_ROUNDS = _dof_rounds()
+
+
+def _rodrigues_terms() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per degree of freedom and entry of its rotation (row by row, (k, 9)) the terms of
+    :func:`~.kinematics.axis_rotations`: ``axis_i axis_j`` (times ``1 - cos``), the signed axis component
+    (times ``sin``, 0 on the diagonal) and whether ``cos`` is added (the diagonal)."""
+    x, y, z = DOF_AXIS.T
+    zero = np.zeros_like(x)
+    pairs = np.stack([x * x, x * y, x * z, y * x, y * y, y * z, z * x, z * y, z * z], 1)
+    signed = np.stack([zero, -z, y, z, zero, -x, -y, x, zero], 1)  # a - b s is a + (-b) s, bit for bit
+    return pairs, signed, np.tile(np.eye(3, dtype=bool).ravel(), (len(DOFS), 1))
+
+
+DOF_PAIRS, DOF_SIGNED, DOF_DIAGONAL = _rodrigues_terms()
+
+
+def dof_rotations(angles: np.ndarray) -> np.ndarray:
+    """``(k, 3, 3)`` each degree of freedom's rotation about its axis by ``angles (k,)`` degrees: the numbers of
+    :func:`~.kinematics.axis_rotations` (``c + a_i a_i t`` on the diagonal, ``a_i a_j t -+ a_k s`` off it, ``t = 1 - c``),
+    every entry in one array expression."""
+    radians = np.radians(np.asarray(angles, float))
+    c, s = np.cos(radians)[:, None], np.sin(radians)[:, None]
+    pairs = DOF_PAIRS * (1.0 - c)
+    return (pairs + np.where(DOF_DIAGONAL, c, DOF_SIGNED * s)).reshape(-1, 3, 3)
+
+
 def joint_rotations(angles: np.ndarray) -> np.ndarray:
-    """``(s, 3, 3)`` joint rotation of each segment for ``angles (k,)`` in degrees."""
-    per_dof = axis_rotations(DOF_AXIS, np.radians(np.asarray(angles, float)))  # (k, 3, 3)
+    """``(s, 3, 3)`` joint rotation of each segment for ``angles (k,)`` in degrees.
+
+    Each segment's is the identity times its degrees of freedom's rotations in their listed order; the products of
+    one round (every segment's first, second, third degree of freedom) are one stacked ``matmul``, the same
+    3 x 3 products as one at a time.
+    """
+    per_dof = dof_rotations(angles)  # (k, 3, 3)
     out = np.repeat(np.eye(3)[None], len(SEGMENTS), axis=0)
-    for k, s in enumerate(DOF_SEGMENT):
-        out[s] = out[s] @ per_dof[k]
+    for segments, dofs in DOF_ROUNDS:
+        out[segments] = out[segments] @ per_dof[dofs]
     return out
+
+
+def _locals(rotations: np.ndarray, height: float) -> np.ndarray:
+    """``(s, 4, 4)`` each segment's frame in its parent's: turned by ``rotations (s, 3, 3)``, at its joint (``height`` m)."""
+    local = np.zeros((len(SEGMENTS), 4, 4))
+    local[:, :3, :3] = rotations
+    local[:, :3, 3] = OFFSET * height
+    local[:, 3, 3] = 1.0
+    return local
+
+
+def _frames(rotations: np.ndarray, height: float, placement: np.ndarray | None = None) -> np.ndarray:
+    """:func:`segment_frames` from the segments' joint ``rotations (s, 3, 3)``: one stacked product per level of :data:`LEVELS`."""
+    local = _locals(rotations, height)
+    frames = np.empty((len(SEGMENTS), 4, 4))
+    base = np.eye(4) if placement is None else np.asarray(placement, float)
+    frames[LEVELS[0]] = base @ local[LEVELS[0]]
+    for level in LEVELS[1:]:
+        frames[level] = frames[PARENT[level]] @ local[level]
+    return frames
 
 
 def segment_frames(angles: np.ndarray, height: float, placement: np.ndarray | None = None) -> np.ndarray:
@@ -169,15 +246,7 @@ def segment_frames(angles: np.ndarray, height: float, placement: np.ndarray | No
 
     placement : (4, 4) the person's frame in the world (identity by default)
     """
-    rotations = joint_rotations(angles)
-    frames = np.empty((len(SEGMENTS), 4, 4))
-    base = np.eye(4) if placement is None else np.asarray(placement, float)
-    for s, parent in enumerate(PARENT):
-        local = np.eye(4)
-        local[:3, :3] = rotations[s]
-        local[:3, 3] = (JOINT[s] - (JOINT[parent] if parent >= 0 else 0.0)) * height
-        frames[s] = (frames[parent] if parent >= 0 else base) @ local
-    return frames
+    return _frames(joint_rotations(angles), height, placement)
 
 
 def capsules(frames: np.ndarray, height: float, build: float = 1.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -198,15 +267,23 @@ def self_gap(angles: np.ndarray, height: float = 1.0, build: float = 1.0) -> flo
 
 
 def _level_feet(angles: np.ndarray) -> np.ndarray:
-    """Set the ankles so each foot's sole is level (within the ankle's limits); returns new angles."""
+    """Set the ankles so each foot's sole is level (within the ankle's limits); returns new angles.
+
+    A foot's frame is placed with its ankle at 0 degrees through its chain only (pelvis, thigh, shank, foot:
+    the products :func:`segment_frames` makes for them).
+    """
+    feet = [DOF_INDEX[f"foot_{side}.flexion"] for side in "lr"]
+    flat = angles.copy()
+    flat[feet] = 0.0
+    local = _locals(joint_rotations(flat), 1.0)
     angles = angles.copy()
-    for side in "lr":
-        k = DOF_INDEX[f"foot_{side}.flexion"]
-        angles[k] = 0.0
-        frames = segment_frames(angles, 1.0)
-        forward = frames[SEGMENT_INDEX[f"foot_{side}"], :3, 0]
+    for side, k in zip("lr", feet):
+        frame = np.eye(4)
+        for s in FOOT_CHAINS[side]:
+            frame = frame @ local[s]
+        forward = frame[:3, 0]
         pitch_down = np.degrees(np.arctan2(-forward[2], np.hypot(forward[0], forward[1])))  # toes below heel > 0
-        angles[k] = np.clip(-pitch_down, LOWER[k], UPPER[k])
+        angles[k] = min(max(-pitch_down, LOWER[k]), UPPER[k])  # np.clip's numbers, without its array set-up
     return angles
 
 
@@ -313,16 +390,16 @@ def pose_person(angles: np.ndarray, height: float, build: float, pose: str, posi
     The body comes to rest with its lowest capsule point on ``support_z`` (standing, walking,
     crouching: the floor), or with the lowest point of its pelvis and thighs on it (sitting).
     """
-    local = segment_frames(angles, height)
-    a, b, r = capsules(local, height, build)
-    rests = np.isin(CAPSULE_SEGMENT, [SEGMENT_INDEX[s] for s in SEATED_SEGMENTS]) if pose == "sitting" else np.ones(len(r), bool)
+    rotations = joint_rotations(angles)
+    a, b, r = capsules(_frames(rotations, height), height, build)
+    rests = SEATED_CAPSULES if pose == "sitting" else np.ones(len(r), bool)
     bottoms = np.minimum(a[:, 2], b[:, 2]) - r
     lift = support_z - bottoms[rests].min()
     placement = np.eye(4)
     c, s = np.cos(yaw), np.sin(yaw)
     placement[:3, :3] = [[c, -s, 0], [s, c, 0], [0, 0, 1]]
     placement[:3, 3] = [position_xy[0], position_xy[1], lift]
-    frames = segment_frames(angles, height, placement)
+    frames = _frames(rotations, height, placement)
     a, b, r = capsules(frames, height, build)
     low = np.argmin(np.where(rests, np.minimum(a[:, 2], b[:, 2]) - r, np.inf))
     end = a[low] if a[low, 2] <= b[low, 2] else b[low]

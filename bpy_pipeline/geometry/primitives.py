@@ -18,12 +18,16 @@ def plane(size_x: float, size_y: float):
     return vertices, np.array([[0, 1, 2], [0, 2, 3]], np.int32)
 
 
+UNIT_CORNERS = np.array([[x, y, z] for x in (-0.5, 0.5) for y in (-0.5, 0.5) for z in (-0.5, 0.5)])  # (8, 3) a unit box's corners
+UNIT_CORNERS.flags.writeable = False
+BOX_TRIANGLES = np.array([t for a, b, c, d in [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
+                          for t in ((a, b, c), (a, c, d))], np.int32)  # (12, 3) its faces, two triangles each
+BOX_TRIANGLES.flags.writeable = False
+
+
 def box(size_x: float, size_y: float, size_z: float):
-    """An axis-aligned box."""
-    corners = np.array([[x, y, z] for x in (-0.5, 0.5) for y in (-0.5, 0.5) for z in (-0.5, 0.5)])
-    faces = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
-    triangles = np.array([t for a, b, c, d in faces for t in ((a, b, c), (a, c, d))], np.int32)
-    return corners * [size_x, size_y, size_z], triangles
+    """An axis-aligned box: ``(vertices (8, 3), triangles (12, 3))``, new arrays."""
+    return UNIT_CORNERS * [size_x, size_y, size_z], BOX_TRIANGLES.copy()
 
 
 def prism(profile_yz: np.ndarray, x0: float, x1: float):
@@ -115,6 +119,22 @@ def wheel_mesh(x: float, y: float, radius: float, width: float, sides: int = 12)
     return v + [x, y, radius], t.copy()
 
 
+def wheels_mesh(xy, radius: float, width: float, sides: int = 12) -> tuple[np.ndarray, np.ndarray]:
+    """Wheels of one size touching the ground at ``xy`` ((k, 2) m), one mesh: ``merge`` of each one's :func:`wheel_mesh`,
+    the same vertices, made at once."""
+    v, t = wheel_shape(float(radius), float(width), int(sides))
+    xy = np.asarray(xy, float).reshape(-1, 2)
+    at = np.column_stack([xy, np.full(len(xy), radius)])  # (k, 3): what each wheel's vertices are moved by
+    return (v[None] + at[:, None]).reshape(-1, 3), (t[None] + len(v) * np.arange(len(xy), dtype=np.int32)[:, None, None]).reshape(-1, 3).astype(np.int32)
+
+
+def quads_mesh(quads) -> tuple[np.ndarray, np.ndarray]:
+    """Quads from their corners ``(k, 4, 3)`` (m), one mesh: ``merge`` of each one's :func:`quad_mesh`."""
+    corners = np.asarray(quads, float).reshape(-1, 4, 3)
+    triangles = np.array([[0, 1, 2], [0, 2, 3]], np.int32)[None] + 4 * np.arange(len(corners), dtype=np.int32)[:, None, None]
+    return corners.reshape(-1, 3), triangles.reshape(-1, 3).astype(np.int32)
+
+
 @lru_cache(maxsize=64)
 def wheel_shape(radius: float, width: float, sides: int) -> tuple[np.ndarray, np.ndarray]:
     """A wheel's cylinder with its axis along y, centred on the origin: ``(vertices (n, 3), triangles (m, 3))``, read only.
@@ -128,14 +148,21 @@ def wheel_shape(radius: float, width: float, sides: int) -> tuple[np.ndarray, np
 
 
 def beam_mesh(p0, p1, thickness: float) -> tuple[np.ndarray, np.ndarray]:
-    """A square beam of ``thickness`` (m) from ``p0`` to ``p1`` (3,)."""
+    """A square beam of ``thickness`` (m) from ``p0`` to ``p1`` (3,).
+
+    Lengths are ``np.linalg.norm``'s numbers (the root of the vector's dot with itself), cross products ``np.cross``'s
+    (:func:`~.collision._cross3`), without their general-shape set-up: a frame's bicycles have six beams each.
+    """
+    from .collision import _cross3
+
     p0, p1 = np.asarray(p0, float), np.asarray(p1, float)
     axis = p1 - p0
-    w = axis / np.linalg.norm(axis)
-    u = np.cross(w, [0.0, 1.0, 0.0] if abs(w[1]) < 0.9 else [1.0, 0.0, 0.0])
-    u /= np.linalg.norm(u)
-    v, t = box(thickness, thickness, float(np.linalg.norm(axis)))
-    return v @ np.column_stack([u, np.cross(w, u), w]).T + (p0 + p1) / 2, t
+    length = math.sqrt(axis.dot(axis))
+    w = axis / length
+    u = _cross3(w, np.array([0.0, 1.0, 0.0] if abs(w[1]) < 0.9 else [1.0, 0.0, 0.0]))
+    u /= math.sqrt(u.dot(u))
+    v, t = box(thickness, thickness, length)
+    return v @ np.column_stack([u, _cross3(w, u), w]).T + (p0 + p1) / 2, t
 
 
 def beams_mesh(p0, p1, thickness) -> tuple[np.ndarray, np.ndarray]:

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import primitives
-from .primitives import beam_mesh, box_mesh, quad_mesh, wheel_mesh
+from .primitives import beam_mesh, box_mesh, quads_mesh, wheels_mesh
 
 Mesh = tuple[np.ndarray, np.ndarray]  # vertices (n, 3) float64, triangles (m, 3) int32
 
@@ -27,37 +27,38 @@ def vehicle_parts(kind: str, size) -> dict[str, Mesh]:
     clearance = 0.55 * radius
     tyre_w = 0.2 if kind in ("car", "van") else 0.3
     axles = {"car": (0.33, -0.33), "van": (0.34, -0.34), "truck": (0.38, -0.3), "bus": (0.36, -0.28)}[kind]
-    tyres = primitives.merge([wheel_mesh(a * L, side * (y - 0.02 - tyre_w / 2), radius, tyre_w) for a in axles for side in (-1, 1)])
-    body, glass = [], []
+    tyres = wheels_mesh([(a * L, side * (y - 0.02 - tyre_w / 2)) for a in axles for side in (-1, 1)], radius, tyre_w)
+    body, glass = [], []  # boxes (x0, x1, y0, y1, z0, z1), quads (4 corners)
     if kind == "car":
         belt = 0.58 * H
-        body.append(box_mesh(x0, x1, -y, y, clearance, belt))
+        body.append((x0, x1, -y, y, clearance, belt))
         cx0, cx1, cy = x0 + 0.26 * L, x1 - 0.3 * L, y - 0.08
-        body.append(box_mesh(cx0, cx1, -cy, cy, belt, H))
-        glass.append(quad_mesh((cx1 + 0.01, -cy, belt + 0.05), (cx1 + 0.01, cy, belt + 0.05), (cx1 + 0.01, cy, H - 0.05), (cx1 + 0.01, -cy, H - 0.05)))
+        body.append((cx0, cx1, -cy, cy, belt, H))
+        glass.append(((cx1 + 0.01, -cy, belt + 0.05), (cx1 + 0.01, cy, belt + 0.05), (cx1 + 0.01, cy, H - 0.05), (cx1 + 0.01, -cy, H - 0.05)))
         for side in (-1, 1):
             gy = side * (cy + 0.01)
-            glass.append(quad_mesh((cx0 + 0.1, gy, belt + 0.05), (cx1 - 0.1, gy, belt + 0.05), (cx1 - 0.1, gy, H - 0.06), (cx0 + 0.1, gy, H - 0.06)))
+            glass.append(((cx0 + 0.1, gy, belt + 0.05), (cx1 - 0.1, gy, belt + 0.05), (cx1 - 0.1, gy, H - 0.06), (cx0 + 0.1, gy, H - 0.06)))
     elif kind == "van":
         hood = x1 - 0.14 * L
-        body.append(box_mesh(hood, x1, -y, y, clearance, 0.5 * H))
-        body.append(box_mesh(x0, hood, -y, y, clearance, H))
-        glass.append(quad_mesh((hood + 0.01, -y + 0.1, 0.55 * H), (hood + 0.01, y - 0.1, 0.55 * H), (hood + 0.01, y - 0.1, 0.92 * H),
-                               (hood + 0.01, -y + 0.1, 0.92 * H)))
+        body.append((hood, x1, -y, y, clearance, 0.5 * H))
+        body.append((x0, hood, -y, y, clearance, H))
+        glass.append(((hood + 0.01, -y + 0.1, 0.55 * H), (hood + 0.01, y - 0.1, 0.55 * H), (hood + 0.01, y - 0.1, 0.92 * H),
+                      (hood + 0.01, -y + 0.1, 0.92 * H)))
     elif kind == "truck":
         cab = x1 - 2.2
-        body.append(box_mesh(cab, x1, -y + 0.05, y - 0.05, clearance, 0.92 * H))
-        body.append(box_mesh(x0, cab - 0.3, -y, y, clearance + 0.4, H))
-        body.append(box_mesh(x0 + 0.2, cab, -0.4, 0.4, clearance, clearance + 0.4))  # chassis under the cargo box
-        glass.append(quad_mesh((x1 + 0.01, -y + 0.2, 0.55 * H), (x1 + 0.01, y - 0.2, 0.55 * H), (x1 + 0.01, y - 0.2, 0.85 * H),
-                               (x1 + 0.01, -y + 0.2, 0.85 * H)))
+        body.append((cab, x1, -y + 0.05, y - 0.05, clearance, 0.92 * H))
+        body.append((x0, cab - 0.3, -y, y, clearance + 0.4, H))
+        body.append((x0 + 0.2, cab, -0.4, 0.4, clearance, clearance + 0.4))  # chassis under the cargo box
+        glass.append(((x1 + 0.01, -y + 0.2, 0.55 * H), (x1 + 0.01, y - 0.2, 0.55 * H), (x1 + 0.01, y - 0.2, 0.85 * H),
+                      (x1 + 0.01, -y + 0.2, 0.85 * H)))
     else:  # bus
-        body.append(box_mesh(x0, x1, -y, y, clearance, H))
+        body.append((x0, x1, -y, y, clearance, H))
         for side in (-1, 1):
             gy = side * (y + 0.01)
-            glass.append(quad_mesh((x0 + 0.5, gy, 0.4 * H), (x1 - 0.5, gy, 0.4 * H), (x1 - 0.5, gy, 0.85 * H), (x0 + 0.5, gy, 0.85 * H)))
-        glass.append(quad_mesh((x1 + 0.01, -y + 0.1, 0.3 * H), (x1 + 0.01, y - 0.1, 0.3 * H), (x1 + 0.01, y - 0.1, 0.9 * H), (x1 + 0.01, -y + 0.1, 0.9 * H)))
-    return {"body": primitives.merge(body), "glass": primitives.merge(glass), "tyres": tyres}
+            glass.append(((x0 + 0.5, gy, 0.4 * H), (x1 - 0.5, gy, 0.4 * H), (x1 - 0.5, gy, 0.85 * H), (x0 + 0.5, gy, 0.85 * H)))
+        glass.append(((x1 + 0.01, -y + 0.1, 0.3 * H), (x1 + 0.01, y - 0.1, 0.3 * H), (x1 + 0.01, y - 0.1, 0.9 * H), (x1 + 0.01, -y + 0.1, 0.9 * H)))
+    bounds = np.array(body, float)
+    return {"body": primitives.boxes_mesh(bounds[:, 0::2], bounds[:, 1::2]), "glass": quads_mesh(glass), "tyres": tyres}
 
 
 PLATE_SIZE = (0.52, 0.11)  # m: an EU licence plate (520 x 110 mm); geometry/objects.py's cars use it too
@@ -86,7 +87,10 @@ def vehicle_fittings(body: np.ndarray, length: float) -> dict[str, Mesh]:
         for side in (-1.0, 1.0):
             c = side * (half - 0.15)
             lights.append((*sorted((x - out * 0.06, x + out * 0.01)), c - lw / 2, c + lw / 2, mid - lh / 2, mid + lh / 2))
-    return {name: primitives.boxes_mesh(np.array(b)[:, 0::2], np.array(b)[:, 1::2]) for name, b in (("plates", plates), ("lights", lights))}
+    bounds = np.array(plates + lights)  # every box at once: each box's vertices are its own products
+    vertices, triangles = primitives.boxes_mesh(bounds[:, 0::2], bounds[:, 1::2])
+    cut = 8 * len(plates)  # vertices of the plates; 12 triangles per 8
+    return {"plates": (vertices[:cut], triangles[: 12 * len(plates)]), "lights": (vertices[cut:], triangles[12 * len(plates) :] - cut)}
 
 
 def two_wheeler_parts(kind: str, size) -> dict[str, Mesh]:
@@ -98,7 +102,7 @@ def two_wheeler_parts(kind: str, size) -> dict[str, Mesh]:
     radius = 0.34 if kind == "bicycle" else 0.3
     width = 0.04 if kind == "bicycle" else 0.12
     front, rear = L / 2 - radius, -L / 2 + radius
-    wheels = primitives.merge([wheel_mesh(front, -width / 2, radius, width), wheel_mesh(rear, -width / 2, radius, width)])
+    wheels = wheels_mesh([(front, -width / 2), (rear, -width / 2)], radius, width)
     seat = saddle_height(kind, size)
     hub = radius
     if kind == "bicycle":

@@ -46,6 +46,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
@@ -161,19 +162,33 @@ class Lane:
     kind: str  # drive | parking
     road: int  # 0: the road along x, 1: along y
 
-    @property
+    @cached_property
     def heading(self) -> float:
         d = self.end - self.start
         return math.atan2(d[1], d[0])
 
-    @property
+    @cached_property
     def length(self) -> float:
         return float(np.linalg.norm(self.end - self.start))
 
+    @cached_property
+    def direction(self) -> np.ndarray:
+        """(2,) the unit vector along the lane (read only)."""
+        d = (self.end - self.start) / self.length
+        d.flags.writeable = False
+        return d
+
+    @cached_property
+    def left(self) -> np.ndarray:
+        """(2,) the unit vector to the lane's left (read only)."""
+        d = self.direction
+        left = np.array([-d[1], d[0]])
+        left.flags.writeable = False
+        return left
+
     def at(self, s: float, lateral: float = 0.0) -> np.ndarray:
         """(2,) point ``s`` metres along the lane, ``lateral`` metres to its left."""
-        d = (self.end - self.start) / self.length
-        return self.start + s * d + lateral * np.array([-d[1], d[0]])
+        return self.start + s * self.direction + lateral * self.left
 
 
 @dataclass(frozen=True)
@@ -482,19 +497,20 @@ def place_users(p, layout: StreetLayout, rng: np.random.Generator, views=(), tri
         return True
 
     def accept(user: RoadUser) -> bool:
-        if not free(user.centre, user.half, user.yaw):
+        half = user.half
+        if not free(user.centre, half, user.yaw):
             out.collisions += 1
             return False
-        if not clear.clear_of_box(user.centre, user.half, user.yaw, user.z, user.z + user.size[2]):
+        if not clear.clear_of_box(user.centre, half, user.yaw, user.z, user.z + user.size[2]):
             out.near_sensor += 1
             return False
-        if in_view_fraction(views, user.centre, user.half, user.yaw, user.size[2], user.z) < p.min_in_view:
+        if in_view_fraction(views, user.centre, half, user.yaw, user.size[2], user.z) < p.min_in_view:
             out.out_of_view[user.kind] = out.out_of_view.get(user.kind, 0) + 1
             return False
         out.users.append(user)
         centres, radii = reach["users"]
         reach["users"] = (np.vstack([centres, np.asarray(user.centre, float)[None, :2]]),
-                          np.append(radii, math.hypot(user.half[0] + grow, user.half[1] + grow)))
+                          np.append(radii, math.hypot(half[0] + grow, half[1] + grow)))
         return True
 
     shares = np.array([p.vehicle_mix.get(k, 0.0) for k in VEHICLES], float)
@@ -510,7 +526,7 @@ def place_users(p, layout: StreetLayout, rng: np.random.Generator, views=(), tri
             lane = layout.lanes[i]
             leader = last_in_lane.get(i)
             if leader is not None and rng.random() < p.platoon_probability:
-                s_leader = float(np.dot(leader.centre - lane.start, (lane.end - lane.start) / lane.length))
+                s_leader = float(np.dot(leader.centre - lane.start, lane.direction))
                 s = s_leader - (leader.size[0] + size[0]) / 2 - float(sample(p.platoon_gap, rng))
                 platoon = True
             else:
@@ -549,6 +565,7 @@ def place_users(p, layout: StreetLayout, rng: np.random.Generator, views=(), tri
                 if accept(RoadUser(kind, lane.at(s, lateral), lane.heading, size, MARKING_THICKNESS, f"lane:{i}")):
                     break
     # pedestrians on sidewalks and crossings
+    sidewalks = _sidewalks(layout)
     wanted = _scaled(sample_count(p.pedestrians, rng), layout, "sidewalk")
     out.wanted["person"] = wanted
     for _ in range(wanted):
@@ -563,7 +580,7 @@ def place_users(p, layout: StreetLayout, rng: np.random.Generator, views=(), tri
                 yaw = (math.pi / 2 if axis == 0 else 0.0) + (math.pi if rng.random() < 0.5 else 0.0)
                 where, z = "crossing", MARKING_THICKNESS
             else:
-                centre, axis = _sidewalk_point(layout, rng)
+                centre, axis = _sidewalk_point(layout, rng, sidewalks)
                 yaw = (0.0 if axis == 0 else math.pi / 2) + (math.pi if rng.random() < 0.5 else 0.0) + float(rng.normal(0.0, 0.15))
                 where, z = "sidewalk", layout.kerb_height
             if accept(RoadUser("person", centre, yaw, size, z, where)):
@@ -582,22 +599,29 @@ def _lane_offset(lane: Lane) -> float:
     return float(lane.start[1] if lane.road == 0 else lane.start[0])
 
 
-def _sidewalk_point(layout: StreetLayout, rng) -> tuple[np.ndarray, int]:
+def _sidewalks(layout: StreetLayout) -> tuple[np.ndarray, np.ndarray]:
+    """What :func:`_sidewalk_point` draws from on a junction with fewer than four arms: the sidewalk rectangles
+    (:attr:`StreetLayout.walks`) 0.4 m in from their edges, ``(x0, x1, y0, y1)`` (k, 4) m, and each one's share of
+    their area (k,)."""
+    rects = np.array(layout.walks, float).reshape(-1, 4)
+    size = np.column_stack([rects[:, 1] - rects[:, 0], rects[:, 3] - rects[:, 2]])
+    margin = np.minimum(0.4, size / 2)  # a sidewalk narrower than 0.8 m: its middle
+    return rects + np.column_stack([margin[:, 0], -margin[:, 0], margin[:, 1], -margin[:, 1]]), size.prod(1) / size.prod(1).sum()
+
+
+def _sidewalk_point(layout: StreetLayout, rng, sidewalks: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, int]:
     """A point (2,) drawn uniformly on the sidewalks (0.4 m from their edges) and the axis of the road it runs along.
 
     Four arms: eight bands of one length, each from the corner square out (the square belongs to the road along
-    x's band); fewer: the sidewalk rectangles (:attr:`StreetLayout.walks`) by their area."""
+    x's band); fewer: the rectangles of ``sidewalks`` (:func:`_sidewalks`) by their area."""
     if layout.junction.arms == FOUR_ARMS.arms:
         lo, hi, A = layout.walk_inner + 0.4, layout.walk_outer - 0.4, layout.arm_length - 0.5
         band = float(rng.uniform(lo, hi)) * float(rng.choice([-1, 1]))
         along = float(rng.uniform(lo, A)) * float(rng.choice([-1, 1]))
         centre = np.array([along, band]) if rng.random() < 0.5 else np.array([band, along])
         return centre, 0 if abs(centre[1]) < abs(centre[0]) else 1
-    rects = np.array(layout.walks, float)
-    size = np.column_stack([rects[:, 1] - rects[:, 0], rects[:, 3] - rects[:, 2]])
-    margin = np.minimum(0.4, size / 2)  # a sidewalk narrower than 0.8 m: its middle
-    x0, x1, y0, y1 = (rects + np.column_stack([margin[:, 0], -margin[:, 0], margin[:, 1], -margin[:, 1]]))[
-        int(rng.choice(len(rects), p=size.prod(1) / size.prod(1).sum()))]
+    rects, shares = sidewalks
+    x0, x1, y0, y1 = rects[int(rng.choice(len(rects), p=shares))]
     return np.array([rng.uniform(x0, x1), rng.uniform(y0, y1)]), 0 if x1 - x0 > y1 - y0 else 1
 
 

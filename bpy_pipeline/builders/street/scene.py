@@ -81,8 +81,8 @@ class Intersection:
         Each kept object is renamed and its mesh refilled in place: objects and meshes made and removed every
         frame made Blender rebuild the whole scene's relations twice a frame (about 40 ms of a street frame).
         The objects stay in the collection's order, so the export sees the parts in the order of ``parts``.
-        Only objects whose name changes are renamed (a rename costs Blender a pass over its names): first to
-        names no part takes, so that no new name is still another object's, then to their own. The spares
+        Only objects and meshes whose name changes are renamed (a rename costs Blender a pass over its names): those
+        holding a name another part takes first to names no part takes, then each to its own. The spares
         are ``street_user_kept_K`` by their place. Returns the parts as :func:`~bpy_pipeline.blender.export.parts_buffers`
         takes them: ``(object name, its lidar properties, vertices, triangles)``.
         """
@@ -92,11 +92,18 @@ class Intersection:
             kept.append(bpy.data.objects.new(name, bpy.data.meshes.new(name)))
             self.users.objects.link(kept[-1])
         names = [part[0] for part in parts] + [f"street_user_kept_{k:03d}" for k in range(len(parts), len(kept))]
-        renamed = [(obj, name) for obj, name in zip(kept, names) if obj.name != name or obj.data.name != name]
-        for k, (obj, _) in enumerate(renamed):
-            obj.name = obj.data.name = f"street_user_renamed_{k:03d}"
-        for obj, name in renamed:
-            obj.name = obj.data.name = name
+        renamed = [(obj, obj.name, obj.data.name, name) for obj, name in zip(kept, names) if obj.name != name or obj.data.name != name]
+        wanted = {name for *_, name in renamed}
+        for k, (obj, held, held_data, name) in enumerate(renamed):  # out of the way: names another object or mesh takes
+            if held != name and held in wanted:
+                obj.name = f"street_user_renamed_{k:03d}"
+            if held_data != name and held_data in wanted:
+                obj.data.name = f"street_user_renamed_{k:03d}"
+        for obj, held, held_data, name in renamed:
+            if held != name:
+                obj.name = name
+            if held_data != name:
+                obj.data.name = name
         for obj, (name, class_name, material, reflectivity, instance, mesh) in zip(kept, parts):
             fill_mesh(obj.data, *mesh)
             tag(obj, class_name, material, reflectivity, instance)
