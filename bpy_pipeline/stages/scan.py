@@ -58,22 +58,36 @@ def scan_stage(frame: Frame, run: Run) -> None:
     pose = frame.pose_at if frame.moving else frame.pose  # the scanner casts a static sensor's rays from one pose
     if config.sensor.divergence.active:
         frame.chunks = scan_footprint_chunks(caster, frame.buffers, patterns, pose, config.sensor.divergence, spec.min_range, spec.max_range, **options)
-    else:
-        frame.chunks = scan_chunks(caster, frame.buffers, patterns, pose, spec.min_range, spec.max_range, **options)
+    else:  # with each return's ray when the boxes take their counts from them
+        frame.chunks = scan_chunks(caster, frame.buffers, patterns, pose, spec.min_range, spec.max_range, with_rays=counts_direct_returns(config, frame),
+                                   **options)
 
 
 def counts_direct_returns(config: Config, frame: Frame) -> bool:
-    """Whether the effects stage keeps the instance of each return that met no mirror (``frame.direct_returns``), so
-    the boxes count their ``visible`` rays from the scan (:func:`~bpy_pipeline.lidar.cast.visibility.visibility`'s
-    ``direct_returns``) instead of tracing again the rays that pass them. It does when boxes are asked for and that
+    """Whether the effects stage keeps, per ray, the instance of its return that met no mirror (``frame.direct_returns``,
+    :func:`direct_returns_per_ray`), so the boxes take from the scan their ``visible`` rays and the ``unoccluded``
+    ones whose return is the box's object (:func:`~bpy_pipeline.lidar.cast.visibility.visibility`'s ``direct_returns``)
+    instead of tracing again the rays that pass them. It does when boxes are asked for and that
     trace would cast the scan's own rays from the scan's pose and make the same draws: a sensor that stands still
     during the frame (the boxes' trace casts from the frame's first pose), one ray a firing (no beam divergence), rays
     from the sensor's centre (none of its own mirrors) and glass that reflects all of the beams it meets or none (no
     draw: the boxes' trace would draw again from the frame's generator). Every return of the scan with no mirror met
-    lies on the first object its ray meets, as the trace's do, so the counts are the same."""
+    lies on the first object its ray meets, as the trace's do, so the counts are the same. The scan then yields each
+    return's ray with it (:func:`~bpy_pipeline.lidar.cast.scanner.scan_chunks`' ``with_rays``)."""
     mirrors = config.effects.mirrors
     return (bool(config.output.boxes.formats) and not frame.moving and not config.sensor.divergence.active and not config.sensor.reflector.enabled
             and mirrors.glass.reflect_fraction in (0.0, 1.0))
+
+
+def direct_returns_per_ray(parts: list[tuple[np.ndarray, np.ndarray]], rays: int) -> np.ndarray:
+    """``(n,)`` int64: per ray of the scan, the instance of its return that met no mirror, -1 for none.
+
+    parts : ``(ray, instance)`` pairs of ``(d,)`` int64 arrays, the scan's returns that met no mirror, chunk by chunk
+    rays : the scan's ray count (``n`` is at least that, and beyond the last ray with such a return)"""
+    out = np.full(max([rays] + [int(ray.max()) + 1 for ray, _ in parts if len(ray)]), -1, np.int64)
+    for ray, instance in parts:
+        out[ray] = instance
+    return out
 
 
 def timed_pulls(items: Iterable, timings: dict, key: str) -> Iterator:
@@ -101,9 +115,10 @@ def effects_stage(frame: Frame, run: Run) -> None:
     to_output = sensor_to_output(config.output.frame, frame.pose, config.output.kitti.camera.position)
 
     def finished(chunks):
-        for points, beam in chunks:
-            if direct is not None:
-                direct.append(points["instance"][points["bounces"] == 0].astype(np.int64))
+        for points, beam, *ray in chunks:
+            if direct is not None:  # the ray and instance of each return that met no mirror
+                hit = points["bounces"] == 0
+                direct.append((ray[0][hit], points["instance"][hit].astype(np.int64)))
             if mask is not None:  # returns lost where the beam split on an edge of the sensor's own mirrors
                 keep = drop_at_edges(points, mask, config.sensor.spec, frame.rng)
                 points, beam = points[keep], beam[keep]
@@ -120,7 +135,7 @@ def effects_stage(frame: Frame, run: Run) -> None:
     frame.points = collect_points(finished(timed_pulls(frame.chunks, frame.timings, "scan")), ray_count(config.sensor.spec))
     frame.chunks = None
     warn_enclosed(frame, run)
-    frame.direct_returns = None if direct is None else np.concatenate(direct) if direct else np.zeros(0, np.int64)
+    frame.direct_returns = None if direct is None else direct_returns_per_ray(direct, ray_count(config.sensor.spec))
     frame.timings["effects"] = frame.timings.get("effects", 0.0) + time.perf_counter() - start - (frame.timings["scan"] - traced)
 
 
