@@ -226,17 +226,19 @@ def meets_boxes(boxes: np.ndarray, pose: np.ndarray, origins: np.ndarray, direct
     A box holds its object's vertices (:func:`~bpy_pipeline.geometry.boxes.fit_boxes`), so a ray whose line misses it
     grown by far more than the rounding of the casts misses every triangle of the object. The slab test in each box's
     frame; a line along a face's plane (a 0/0 in it) counts as meeting it."""
-    heading = boxes["heading"][box]
-    c, s = np.cos(heading), np.sin(heading)
-    world_o = origins @ pose[:3, :3].T + pose[:3, 3] - boxes["centre"][box]
-    world_d = directions @ pose[:3, :3].T
-    local_o = np.stack([c * world_o[:, 0] + s * world_o[:, 1], c * world_o[:, 1] - s * world_o[:, 0], world_o[:, 2]], axis=1)
-    local_d = np.stack([c * world_d[:, 0] + s * world_d[:, 1], c * world_d[:, 1] - s * world_d[:, 0], world_d[:, 2]], axis=1)
-    half = boxes["size"][box] / 2 + (BOX_MARGIN * (1.0 + np.abs(boxes["centre"][box]).max(axis=1) / 1e4))[:, None]
+    c, s = np.cos(boxes["heading"]), np.sin(boxes["heading"])
+    axes = np.zeros((len(boxes), 3, 3))  # rows: each box's axes in the world
+    axes[:, 0, 0], axes[:, 0, 1], axes[:, 1, 0], axes[:, 1, 1], axes[:, 2, 2] = c, s, -s, c, 1.0
+    turn = (axes @ np.asarray(pose, float)[:3, :3])[box]  # (p, 3, 3): sensor-frame vectors into the pair's box's frame
+    sensor = np.einsum("kij,kj->ki", axes, pose[:3, 3] - boxes["centre"])  # the sensor's centre in each box's frame
+    local_d = np.einsum("pij,pj->pi", turn, directions)
+    local_o = sensor[box] + np.einsum("pij,pj->pi", turn, origins)
+    half = (boxes["size"] / 2 + (BOX_MARGIN * (1.0 + np.abs(boxes["centre"]).max(axis=1) / 1e4))[:, None])[box]
     with np.errstate(divide="ignore", invalid="ignore"):
         low, high = (-half - local_o) / local_d, (half - local_o) / local_d
-    near = np.minimum(low, high).max(axis=1)  # a nan (0/0) stays nan: the comparison below is False, the line kept
-    far = np.maximum(low, high).min(axis=1)
+    enter, leave = np.minimum(low, high), np.maximum(low, high)  # a nan (0/0) stays nan: the comparison below is False, the line kept
+    near = np.maximum(np.maximum(enter[:, 0], enter[:, 1]), enter[:, 2])
+    far = np.minimum(np.minimum(leave[:, 0], leave[:, 1]), leave[:, 2])
     return ~(near > far)
 
 
