@@ -226,19 +226,20 @@ def meets_boxes(boxes: np.ndarray, pose: np.ndarray, origins: np.ndarray, direct
     A box holds its object's vertices (:func:`~bpy_pipeline.geometry.boxes.fit_boxes`), so a ray whose line misses it
     grown by far more than the rounding of the casts misses every triangle of the object. The slab test in each box's
     frame; a line along a face's plane (a 0/0 in it) counts as meeting it."""
-    c, s = np.cos(boxes["heading"]), np.sin(boxes["heading"])
-    axes = np.zeros((len(boxes), 3, 3))  # rows: each box's axes in the world
-    axes[:, 0, 0], axes[:, 0, 1], axes[:, 1, 0], axes[:, 1, 1], axes[:, 2, 2] = c, s, -s, c, 1.0
-    turn = (axes @ np.asarray(pose, float)[:3, :3])[box]  # (p, 3, 3): sensor-frame vectors into the pair's box's frame
-    sensor = np.einsum("kij,kj->ki", axes, pose[:3, 3] - boxes["centre"])  # the sensor's centre in each box's frame
-    local_d = np.einsum("pij,pj->pi", turn, directions)
-    local_o = sensor[box] + np.einsum("pij,pj->pi", turn, origins)
-    half = (boxes["size"] / 2 + (BOX_MARGIN * (1.0 + np.abs(boxes["centre"]).max(axis=1) / 1e4))[:, None])[box]
+    rotation = np.asarray(pose, float)[:3, :3]
+    world_d = rotation @ directions.T  # (3, p): coordinate by coordinate
+    world_o = rotation @ origins.T + (pose[:3, 3] - boxes["centre"]).T[:, box]  # from the box's centre
+    c, s = np.cos(boxes["heading"])[box], np.sin(boxes["heading"])[box]
+    half = (boxes["size"] / 2 + (BOX_MARGIN * (1.0 + np.abs(boxes["centre"]).max(axis=1) / 1e4))[:, None]).T[:, box]
+    # the box's frame: x along its heading, y across, z up
+    local = ((c * world_o[0] + s * world_o[1], c * world_d[0] + s * world_d[1]), (c * world_o[1] - s * world_o[0], c * world_d[1] - s * world_d[0]),
+             (world_o[2], world_d[2]))  # fmt: skip
+    near, far = np.full(len(box), -np.inf), np.full(len(box), np.inf)
     with np.errstate(divide="ignore", invalid="ignore"):
-        low, high = (-half - local_o) / local_d, (half - local_o) / local_d
-    enter, leave = np.minimum(low, high), np.maximum(low, high)  # a nan (0/0) stays nan: the comparison below is False, the line kept
-    near = np.maximum(np.maximum(enter[:, 0], enter[:, 1]), enter[:, 2])
-    far = np.minimum(np.minimum(leave[:, 0], leave[:, 1]), leave[:, 2])
+        for h, (o, d) in zip(half, local):  # a nan (0/0) makes near or far nan: the comparison below is False, the line kept
+            low, high = (-h - o) / d, (h - o) / d
+            near = np.maximum(near, np.minimum(low, high))
+            far = np.minimum(far, np.maximum(low, high))
     return ~(near > far)
 
 
