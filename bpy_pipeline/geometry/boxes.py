@@ -165,14 +165,14 @@ def box_corners(boxes: np.ndarray, grow=0.0) -> np.ndarray:
     """
     grow = np.broadcast_to(np.asarray(grow, float), (len(boxes),))
     signs = np.array([[1, 1], [1, -1], [-1, -1], [-1, 1]], float)
+    c, s = np.cos(boxes["heading"]), np.sin(boxes["heading"])
+    turn = np.stack([np.stack([c, s], axis=-1), np.stack([-s, c], axis=-1)], axis=1)  # (k, 2, 2): box k's [[c, s], [-s, c]]
+    local = signs * (np.asarray(boxes["size"][:, :2]) / 2 + grow[:, None])[:, None]  # (k, 4, 2)
+    xy = np.matmul(local, turn) + np.asarray(boxes["centre"][:, :2])[:, None]  # box by box, as one box's product gives it
     out = np.zeros((len(boxes), 8, 3))
-    for k, box in enumerate(boxes):
-        c, s = np.cos(box["heading"]), np.sin(box["heading"])
-        local = signs * (np.asarray(box["size"][:2]) / 2 + grow[k])
-        xy = local @ np.array([[c, s], [-s, c]]) + np.asarray(box["centre"][:2])
-        out[k, :4, :2] = out[k, 4:, :2] = xy
-        out[k, :4, 2] = box["centre"][2] - (box["size"][2] / 2 + grow[k])
-        out[k, 4:, 2] = box["centre"][2] + (box["size"][2] / 2 + grow[k])
+    out[:, :4, :2] = out[:, 4:, :2] = xy
+    out[:, :4, 2] = (boxes["centre"][:, 2] - (boxes["size"][:, 2] / 2 + grow))[:, None]
+    out[:, 4:, 2] = (boxes["centre"][:, 2] + (boxes["size"][:, 2] / 2 + grow))[:, None]
     return out
 
 

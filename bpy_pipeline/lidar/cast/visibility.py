@@ -197,15 +197,16 @@ def visibility(
         partial = ~whole_view[point_owner]
         covered = covered_by_owner(seen[partial], point_owner[partial], samples, sample_owner, len(boxes), cell_deg, where=inside & passed[sample_owner],
                                    distance=distance, point_cells=(point_cells[0][partial], point_cells[1][partial]))  # fmt: skip
-    order = np.argsort(sample_owner, kind="stable")
+    order = np.argsort(sample_owner, kind="stable")  # the samples box by box, each box's in their order
     bounds = np.searchsorted(sample_owner[order], np.arange(len(boxes) + 1))
-    for k in range(len(boxes)):
-        if whole_view[k]:
-            boxes["truncation"][k] = 0.0
-            continue
-        mine = order[bounds[k] : bounds[k + 1]]
+    area, covered = area[order], covered[order]
+    truncation = np.where(whole_view, 0.0, 1.0)  # 1: no area
+    for k in np.flatnonzero(~whole_view):
+        mine = slice(bounds[k], bounds[k + 1])
         whole = area[mine].sum()
-        boxes["truncation"][k] = float(1.0 - area[mine][covered[mine]].sum() / whole) if whole > 0 else 1.0
+        if whole > 0:
+            truncation[k] = 1.0 - area[mine][covered[mine]].sum() / whole
+    boxes["truncation"] = truncation
 
 
 def chunk_returns(direct_returns: np.ndarray, first: int, count: int) -> np.ndarray:
