@@ -135,23 +135,46 @@ def fit_boxes(buffers: SceneBuffers, classes, headings: dict | None = None) -> n
     return out
 
 
+def object_triangles(buffers: SceneBuffers, box_of_row: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(triangle, box)``: the ``(t,)`` increasing triangles of the objects that have a box and each one's box.
+
+    box_of_row : ``(objects,)`` each object's box, -1 for none
+    Exported buffers list each object's triangles together, objects in order (``triangle_object`` never decreases):
+    each object's triangles are then a range found by a search, and the scene's other triangles are not gathered;
+    other buffers take one pass over every triangle (the same answer)."""
+    box_of_row = np.asarray(box_of_row, np.int64)
+    owner = buffers.triangle_object
+    if len(owner) > 1 and not (owner[1:] >= owner[:-1]).all():
+        triangle = np.flatnonzero((box_of_row >= 0)[owner])
+        return triangle, box_of_row[owner[triangle]]
+    rows = np.flatnonzero(box_of_row >= 0)
+    start, end = np.searchsorted(owner, rows, "left"), np.searchsorted(owner, rows, "right")
+    count = end - start
+    triangle = np.arange(int(count.sum()), dtype=np.int64) + np.repeat(start - (np.cumsum(count) - count), count)
+    return triangle, np.repeat(box_of_row[rows], count)
+
+
 def instance_vertices(buffers: SceneBuffers, box_of_row: np.ndarray, count: int) -> tuple[np.ndarray, np.ndarray]:
     """``(vertices, bounds)``: the vertex rows the triangles of each of ``count`` boxes use, box by box, increasing
     within each (``(v,)``), and the ``(count + 1,)`` bounds of each box's part: box k's are
     ``vertices[bounds[k]:bounds[k + 1]]``. ``box_of_row`` : ``(objects,)`` each object's box, -1 for none.
 
-    A vertex used by one box (a box's objects have vertices of their own) is marked with its box once; a vertex
-    that two boxes share is found in both (a sort of the (box, vertex) pairs)."""
-    mine = np.flatnonzero((box_of_row >= 0)[buffers.triangle_object])
-    corners = buffers.triangles[mine].ravel()
-    owner = np.repeat(box_of_row[buffers.triangle_object[mine]], 3)
-    vertex_box = np.full(len(buffers.vertices), -1, np.int32)
-    vertex_box[corners] = owner
-    if np.array_equal(vertex_box[corners], owner):
+    A vertex used by one box (a box's objects have vertices of their own) is marked with its box once, in a table of
+    the vertex rows from the lowest used to the highest; a vertex that two boxes share is found in both (a sort of the
+    (box, vertex) pairs)."""
+    triangle, box = object_triangles(buffers, box_of_row)
+    corners = buffers.triangles[triangle].ravel()
+    if not len(corners):
+        return np.zeros(0, np.int64), np.zeros(count + 1, np.int64)
+    owner = np.repeat(box, 3)
+    low = int(corners.min())
+    vertex_box = np.full(int(corners.max()) - low + 1, -1, np.int32)
+    vertex_box[corners - low] = owner
+    if np.array_equal(vertex_box[corners - low], owner):
         used = np.flatnonzero(vertex_box >= 0)
         box = vertex_box[used]
         order = np.argsort(box, kind="stable")
-        vertices, box = used[order], box[order]
+        vertices, box = used[order] + low, box[order]
     else:
         pairs = np.unique(owner * len(buffers.vertices) + corners)
         vertices, box = pairs % len(buffers.vertices), pairs // len(buffers.vertices)

@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...buffers import SceneBuffers
-from ...geometry.boxes import box_corners
+from ...geometry.boxes import box_corners, object_triangles
 from .raycast import RayCaster, row_norms
 from .scanner import scan_chunk, trace_beams
 from ..sensor.rays import Pattern
@@ -123,9 +123,7 @@ def visibility(
     box_of_row = np.full(len(objects), -1, np.int64)  # each object's box: the one of its instance
     for k, instance in enumerate(boxes["instance"]):
         box_of_row[objects.instance == instance] = k
-    box_of_triangle = box_of_row[buffers.triangle_object]
-    boxed = np.flatnonzero(box_of_triangle >= 0)  # the objects' triangles, and their object
-    owner = box_of_triangle[boxed]
+    boxed, owner = object_triangles(buffers, box_of_row)  # the objects' triangles, and their object
     centres = (boxes["centre"] - pose[:3, 3]) @ pose[:3, :3]  # bounding spheres in the sensor frame
     radii = np.linalg.norm(boxes["size"], axis=1) / 2 + 1e-3
     # the scan's answers leave some objects nothing to trace alone: their caster is built after the last chunk, for the others
@@ -158,7 +156,7 @@ def visibility(
         seen_points.append(origins[ray] + along[:, None] * d)  # the ray's point closest to the object's centre
         seen_boxes.append(k)
         if direct_returns is None:  # the whole scene, each passing ray once: a ray whose first hit is object k passes k's sphere
-            visible += _scene_returns(caster, buffers, chunk, np.unique(ray), boxes["instance"], box_of_triangle, min_range, max_range, surfaces, rng)
+            visible += _scene_returns(caster, buffers, chunk, np.unique(ray), boxes["instance"], box_of_row, min_range, max_range, surfaces, rng)
             # every object alone, each (ray, object) pair once
             unoccluded += alone.count(origins[ray], d, k, along, min_range, max_range, surfaces, rng)
         else:  # the pairs whose ray's first hit is their object count; of the others, those whose ray meets the object's
@@ -438,10 +436,10 @@ def covered_by_owner(points: np.ndarray, point_owner: np.ndarray, samples: np.nd
 IDENTITY4 = np.eye(4)
 
 
-def _scene_returns(caster, buffers: SceneBuffers, chunk: Pattern, traced: np.ndarray, box_instance: np.ndarray, box_of_triangle: np.ndarray, min_range: float,
+def _scene_returns(caster, buffers: SceneBuffers, chunk: Pattern, traced: np.ndarray, box_instance: np.ndarray, box_of_row: np.ndarray, min_range: float,
                    max_range: float, surfaces, rng) -> np.ndarray:
     """``(k,)`` rays ``traced`` (indices into ``chunk``) whose return through the whole scene is from box k's objects
-    (``box_instance`` (k,), ``box_of_triangle`` (m,) -1 for none), no mirror met."""
+    (``box_instance`` (k,), ``box_of_row`` (objects,) each object's box, -1 for none), no mirror met."""
     if chunk.origins is None and getattr(caster, "kernels", None) is not None:
         # the compiled scan of those rays (Embree and the records in one pass; the same hits and draws as
         # trace_beams: tests/test_scan_kernel.py): with no mirror bounces a record's instance is that of its beam's last object
@@ -450,7 +448,7 @@ def _scene_returns(caster, buffers: SceneBuffers, chunk: Pattern, traced: np.nda
         return counts_per_instance(box_instance, points["instance"][points["bounces"] == 0].astype(np.int64))
     o = chunk.origins[traced] if chunk.origins is not None else np.zeros(3)
     beams = trace_beams(caster, buffers, o, chunk.directions[traced], min_range, max_range, max_bounces=0, surfaces=surfaces, rng=rng)
-    hit = box_of_triangle[beams.triangle]
+    hit = box_of_row[buffers.triangle_object[beams.triangle]]
     direct = (hit >= 0) & (beams.bounces == 0)
     return np.bincount(hit[direct], minlength=len(box_instance))
 
@@ -459,10 +457,13 @@ def _used_vertices(triangles: np.ndarray, count: int) -> tuple[np.ndarray, np.nd
     """``np.unique(triangles, return_inverse=True)`` for ``triangles`` indexing ``count`` vertices, without the sort:
     the ``(u,)`` vertices used, increasing, and ``triangles`` renumbered into them (``(3 m,)``, flattened)."""
     flat = np.asarray(triangles).ravel()
-    mark = np.zeros(count, bool)
-    mark[flat] = True
+    if not len(flat):
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    low = int(flat.min())  # a table of the vertex rows from the lowest used to the highest
+    mark = np.zeros(int(flat.max()) - low + 1, bool)
+    mark[flat - low] = True
     renumber = np.cumsum(mark) - 1
-    return np.flatnonzero(mark), renumber[flat]
+    return np.flatnonzero(mark) + low, renumber[flat - low]
 
 
 class AloneCaster:
