@@ -136,34 +136,36 @@ def visibility(
     end = 0
     for chunk in [patterns] if isinstance(patterns, Pattern) else patterns:
         start, end = end, end + len(chunk)  # the chunk's rays among all the chunks'
-        origins = np.zeros((len(chunk), 3)) if chunk.origins is None else chunk.origins
+        origins = chunk.origins  # None: every ray leaves the sensor's centre
         # a cone test from the sensor's centre first, widened by the farthest ray origin, then the
         # exact ray-sphere test on the (ray, object) pairs it lets through
-        shift = 0.0 if chunk.origins is None else float(np.linalg.norm(origins, axis=1).max())
+        shift = 0.0 if origins is None else float(np.linalg.norm(origins, axis=1).max())
         reach = radii + shift
         cos_limit = np.where(distance > reach, np.sqrt(np.clip(1.0 - (reach / np.maximum(distance, 1e-12)) ** 2, 0.0, 1.0)), -2.0)
         ray, k = cone_pairs(chunk.directions, centres / np.maximum(distance, 1e-12)[:, None], cos_limit, getattr(caster, "kernels", None))
         if len(ray) == 0:
             continue
         d = chunk.directions[ray]
-        offset = centres[k] - origins[ray]
+        offset = centres[k] if origins is None else centres[k] - origins[ray]
         along = np.einsum("ij,ij->i", offset, d)
         miss2 = np.einsum("ij,ij->i", offset, offset) - along**2
-        passing = (miss2 <= radii[k] ** 2) & (along >= -radii[k]) & (along - radii[k] <= max_range)
+        radius = radii[k]
+        passing = (miss2 <= radius**2) & (along >= -radius) & (along - radius <= max_range)
         ray, k, along, d = ray[passing], k[passing], along[passing], d[passing]
         if len(ray) == 0:
             continue
-        seen_points.append(origins[ray] + along[:, None] * d)  # the ray's point closest to the object's centre
+        # the ray's point closest to the object's centre (+ 0.0 from the sensor's centre: a -0.0 made 0.0, as adding the origin does)
+        seen_points.append(along[:, None] * d + (0.0 if origins is None else origins[ray]))
         seen_boxes.append(k)
         if direct_returns is None:  # the whole scene, each passing ray once: a ray whose first hit is object k passes k's sphere
             visible += _scene_returns(caster, buffers, chunk, np.unique(ray), boxes["instance"], box_of_row, min_range, max_range, surfaces, rng)
             # every object alone, each (ray, object) pair once
-            unoccluded += alone.count(origins[ray], d, k, along, min_range, max_range, surfaces, rng)
+            unoccluded += alone.count(ray_origins(origins, ray), d, k, along, min_range, max_range, surfaces, rng)
         else:  # the pairs whose ray's first hit is their object count; of the others, those whose ray meets the object's
             # box are traced alone after the last chunk (a ray that misses the box misses the object)
             known = chunk_returns(direct_returns, start, len(chunk))[ray] == boxes["instance"][k]
             unoccluded += np.bincount(k[known], minlength=len(boxes))
-            o, d, k, along = origins[ray[~known]], d[~known], k[~known], along[~known]
+            o, d, k, along = ray_origins(origins, ray[~known]), d[~known], k[~known], along[~known]
             meets = meets_boxes(boxes, pose, o, d, k)
             left.append((o[meets], d[meets], k[meets], along[meets]))
     if left:
@@ -205,6 +207,11 @@ def visibility(
         if whole > 0:
             truncation[k] = 1.0 - area[mine][covered[mine]].sum() / whole
     boxes["truncation"] = truncation
+
+
+def ray_origins(origins: np.ndarray | None, ray: np.ndarray) -> np.ndarray:
+    """``(p, 3)``: the origins of rays ``ray`` of a chunk whose ``origins`` are ``(n, 3)`` or ``None`` (the sensor's centre)."""
+    return np.zeros((len(ray), 3)) if origins is None else origins[ray]
 
 
 def chunk_returns(direct_returns: np.ndarray, first: int, count: int) -> np.ndarray:
