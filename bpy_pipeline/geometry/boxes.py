@@ -148,7 +148,8 @@ def object_triangles(buffers: SceneBuffers, box_of_row: np.ndarray) -> tuple[np.
         triangle = np.flatnonzero((box_of_row >= 0)[owner])
         return triangle, box_of_row[owner[triangle]]
     rows = np.flatnonzero(box_of_row >= 0)
-    start, end = np.searchsorted(owner, rows, "left"), np.searchsorted(owner, rows, "right")
+    key = rows.astype(owner.dtype)  # the table's own type: no copy of it for the search
+    start, end = np.searchsorted(owner, key, "left"), np.searchsorted(owner, key, "right")
     count = end - start
     triangle = np.arange(int(count.sum()), dtype=np.int64) + np.repeat(start - (np.cumsum(count) - count), count)
     return triangle, np.repeat(box_of_row[rows], count)
