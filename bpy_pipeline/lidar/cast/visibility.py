@@ -109,7 +109,8 @@ def visibility(
         the trace would draw again (:func:`~bpy_pipeline.stages.scan.counts_direct_returns`): ``visible`` counts them
         and the rays passing the boxes are not traced through the scene again (the same counts); a (ray, object) pair
         whose ray's return is on the object's instance counts as ``unoccluded`` without its trace alone (the object is
-        the first thing the ray meets in the whole scene, so alone too, up to the rounding of the two casts)
+        the first thing the ray meets in the whole scene, so alone too, up to the rounding of the two casts). Only for
+        boxes that hold every object of their instance (:func:`~bpy_pipeline.stages.annotate.boxes_hold_their_instances`)
     The rays that pass within an object's bounding sphere are traced the scanner's way (glass
     passed through, no mirror bounces), per chunk once through the whole scene for all objects
     together (unless ``direct_returns`` has their answer) and once against all objects alone
