@@ -296,14 +296,15 @@ def scan_with_direct_returns(caster, buffers, rays, **options):
     """``(points, direct_returns)``: the scan of ``rays`` (chunks) from ``POSE`` and, per ray, the instance of its return
     that met no mirror, -1 for none (what the effects stage keeps for the boxes: ``frame.direct_returns``)."""
     from bpy_pipeline.lidar.cast.scanner import scan_chunks
-    from bpy_pipeline.stages.scan import direct_returns_per_ray
+    from bpy_pipeline.stages.scan import add_direct_returns
 
-    points, parts = [], []
+    points, direct = [], np.full(100, -1, np.int64)  # short: the table grows
     for p, _, ray in scan_chunks(caster, buffers, rays, POSE, SENSOR.min_range, SENSOR.max_range, with_rays=True, **options):
         hit = p["bounces"] == 0
         points.append(p.copy())
-        parts.append((ray[hit], p["instance"][hit].astype(np.int64)))
-    return np.concatenate(points), direct_returns_per_ray(parts, sum(len(r) for r in rays))
+        direct = add_direct_returns(direct, ray[hit], p["instance"][hit])
+    assert len(direct) <= sum(len(r) for r in rays)
+    return np.concatenate(points), direct
 
 
 def people_pillar_mirror_and_glass():

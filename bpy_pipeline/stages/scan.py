@@ -65,7 +65,7 @@ def scan_stage(frame: Frame, run: Run) -> None:
 
 def counts_direct_returns(config: Config, frame: Frame) -> bool:
     """Whether the effects stage keeps, per ray, the instance of its return that met no mirror (``frame.direct_returns``,
-    :func:`direct_returns_per_ray`), so the boxes take from the scan their ``visible`` rays and the ``unoccluded``
+    :func:`add_direct_returns`), so the boxes take from the scan their ``visible`` rays and the ``unoccluded``
     ones whose return is the box's object (:func:`~bpy_pipeline.lidar.cast.visibility.visibility`'s ``direct_returns``)
     instead of tracing again the rays that pass them. It does when boxes are asked for and that
     trace would cast the scan's own rays from the scan's pose and make the same draws: a sensor that stands still
@@ -79,15 +79,14 @@ def counts_direct_returns(config: Config, frame: Frame) -> bool:
             and mirrors.glass.reflect_fraction in (0.0, 1.0))
 
 
-def direct_returns_per_ray(parts: list[tuple[np.ndarray, np.ndarray]], rays: int) -> np.ndarray:
-    """``(n,)`` int64: per ray of the scan, the instance of its return that met no mirror, -1 for none.
-
-    parts : ``(ray, instance)`` pairs of ``(d,)`` int64 arrays, the scan's returns that met no mirror, chunk by chunk
-    rays : the scan's ray count (``n`` is at least that, and beyond the last ray with such a return)"""
-    out = np.full(max([rays] + [int(ray.max()) + 1 for ray, _ in parts if len(ray)]), -1, np.int64)
-    for ray, instance in parts:
-        out[ray] = instance
-    return out
+def add_direct_returns(table: np.ndarray, ray: np.ndarray, instance: np.ndarray) -> np.ndarray:
+    """``table``, per ray of the scan the instance of its return that met no mirror (-1 for none), with the returns
+    ``(d,)`` ``ray`` and their ``(d,)`` ``instance`` written in; a new, longer table (-1 beyond the old end) when a ray
+    lies beyond its end."""
+    if len(ray) and int(ray.max()) >= len(table):
+        table = np.concatenate([table, np.full(int(ray.max()) + 1 - len(table), -1, np.int64)])
+    table[ray] = instance
+    return table
 
 
 def timed_pulls(items: Iterable, timings: dict, key: str) -> Iterator:
@@ -111,14 +110,15 @@ def effects_stage(frame: Frame, run: Run) -> None:
     start, traced = time.perf_counter(), frame.timings.get("scan", 0.0)
     config, spec = run.config, run.config.sensor.spec
     mask = run.rays.edge_mask(frame.index)
-    direct = [] if counts_direct_returns(config, frame) else None
+    direct = np.full(ray_count(spec), -1, np.int64) if counts_direct_returns(config, frame) else None
     to_output = sensor_to_output(config.output.frame, frame.pose, config.output.kitti.camera.position)
 
     def finished(chunks):
+        nonlocal direct
         for points, beam, *ray in chunks:
-            if direct is not None:  # the ray and instance of each return that met no mirror
+            if direct is not None:  # the instance of each return that met no mirror, at its ray
                 hit = points["bounces"] == 0
-                direct.append((ray[0][hit], points["instance"][hit].astype(np.int64)))
+                direct = add_direct_returns(direct, ray[0][hit], points["instance"][hit])
             if mask is not None:  # returns lost where the beam split on an edge of the sensor's own mirrors
                 keep = drop_at_edges(points, mask, config.sensor.spec, frame.rng)
                 points, beam = points[keep], beam[keep]
@@ -135,7 +135,7 @@ def effects_stage(frame: Frame, run: Run) -> None:
     frame.points = collect_points(finished(timed_pulls(frame.chunks, frame.timings, "scan")), ray_count(config.sensor.spec))
     frame.chunks = None
     warn_enclosed(frame, run)
-    frame.direct_returns = None if direct is None else direct_returns_per_ray(direct, ray_count(config.sensor.spec))
+    frame.direct_returns = direct
     frame.timings["effects"] = frame.timings.get("effects", 0.0) + time.perf_counter() - start - (frame.timings["scan"] - traced)
 
 
