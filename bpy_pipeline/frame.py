@@ -79,8 +79,8 @@ class Frame:
     buffers : the exported :class:`~bpy_pipeline.buffers.SceneBuffers` (a real scan's: its inserted objects)
     caster : the scan's :class:`~bpy_pipeline.lidar.cast.raycast.RayCaster` of ``buffers`` at ``pose`` (the boxes reuse it)
     chunks : the scan's ``(points, beam)`` chunks, consumed by the effects stage
-    direct_returns : (d,) int64 the instance of each of the scan's returns that met no mirror, before the effects, when the
-        boxes take their ``visible`` counts from them (:func:`~bpy_pipeline.stages.scan.counts_direct_returns`); else ``None``
+    direct_returns : (n,) int64 per ray of the scan, the instance of its return that met no mirror (before the effects),
+        -1 for none, when the boxes take their counts from them (:func:`~bpy_pipeline.stages.scan.counts_direct_returns`); else ``None``
     points : (p,) POINT_DTYPE records in the output frame (sensor, world or kitti; a rig's: RIG_POINT_DTYPE)
     boxes : (b,) BOX_DTYPE box labels in the output frame, ``None`` when no box format is asked for
     thin_boxes : (t,) BOX_DTYPE boxes of the box classes with some points but fewer than their minimum (KITTI's DontCare

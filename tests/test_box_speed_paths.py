@@ -3,7 +3,8 @@
 - truncation's coverage of every object at once (:func:`covered_by_owner`, each object's window of cells) against one
   :class:`Coverage` per object;
 - :func:`surface_samples` written in place against level by level, and given the triangles' areas against computing them;
-- the vertices an object set uses, without a sort, against ``np.unique``;
+- the vertices an object set uses, without a sort, against ``np.unique``; the boxes' triangles found by a search of
+  exported buffers' ordered objects against a pass over every triangle;
 - the placer's slab test against :func:`~bpy_pipeline.geometry.collision.ray_box_distance`, rays along the box's
   faces and axes included (the whole visibility against its per-object reference: tests/test_boxes.py);
 - a capsule's mesh (every body segment of every person, every frame) built at once against ring by ring, and a
@@ -20,7 +21,8 @@
 import numpy as np
 import pytest
 
-from bpy_pipeline.buffers import SceneBuffers
+from bpy_pipeline.buffers import ObjectTable, SceneBuffers
+from bpy_pipeline.geometry.boxes import fit_boxes, object_triangles
 from bpy_pipeline.geometry import primitives
 from bpy_pipeline.geometry.collision import box_axes, capsule_mesh, capsule_meshes, ray_box_distance, rectangles_near, rectangles_overlap
 from bpy_pipeline.geometry.placement import FloorBoxPlacer, PlacedBox, _slab_distance, facing_samples
@@ -145,6 +147,39 @@ def test_used_vertices_is_unique_with_inverse():
     used, inverse = np.unique(triangles, return_inverse=True)
     used2, inverse2 = _used_vertices(triangles, 6000)
     assert np.array_equal(used, used2) and np.array_equal(inverse.ravel(), inverse2)
+    used3, inverse3 = _used_vertices(triangles + 900, 6000)  # the table starts at the lowest vertex used
+    assert np.array_equal(used + 900, used3) and np.array_equal(inverse.ravel(), inverse3)
+    assert all(len(a) == 0 for a in _used_vertices(np.zeros((0, 3), np.int32), 10))
+
+
+def _objects(rng, count, ordered):
+    """Buffers of ``count`` small random objects (each its own vertices, two of them unused), two objects an instance,
+    classes car or wall; triangles in object order, or shuffled."""
+    vertices, triangles, owner = [], [], []
+    for row in range(count):
+        vertices.append(rng.uniform(-1, 1, (12, 3)) + rng.uniform(-50, 50, 3))
+        triangles.append(rng.integers(0, 10, (int(rng.integers(1, 9)), 3)) + 12 * row)
+        owner.append(np.full(len(triangles[-1]), row, np.int32))
+    triangles, owner = np.concatenate(triangles).astype(np.int32), np.concatenate(owner)
+    if not ordered:
+        order = rng.permutation(len(owner))
+        triangles, owner = triangles[order], owner[order]
+    objects = ObjectTable([f"o{r}" for r in range(count)], [""] * count, [["car", "wall"][r % 3 == 0] for r in range(count)], np.zeros(count, np.uint16),
+                          (np.arange(count) // 2 + 1).astype(np.uint32), np.zeros(count, np.uint8), np.full(count, 0.5, np.float32))
+    return SceneBuffers(np.concatenate(vertices), triangles, owner, objects)
+
+
+def test_boxes_triangles_found_by_a_search_of_ordered_objects_are_the_pass_over_every_triangle():
+    for ordered in (True, False):
+        buffers = _objects(np.random.default_rng(11), 40, ordered)
+        box_of_row = np.where(np.asarray(buffers.objects.class_names) == "car", buffers.objects.instance.astype(np.int64), -1)
+        triangle, box = object_triangles(buffers, box_of_row)
+        expected = np.flatnonzero(box_of_row[buffers.triangle_object] >= 0)
+        assert len(expected) > 50 and np.array_equal(triangle, expected) and np.array_equal(box, box_of_row[buffers.triangle_object[expected]])
+    # the same objects with their triangles in another order: the same boxes
+    headings = {1: 0.3, 4: -2.0}
+    boxes = [fit_boxes(_objects(np.random.default_rng(11), 40, ordered), ["car"], headings) for ordered in (True, False)]
+    assert len(boxes[0]) == 20 and boxes[0].tobytes() == boxes[1].tobytes()
 
 
 def _ray_box_distance(origin, directions, centre, axes, half):

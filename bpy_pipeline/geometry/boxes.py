@@ -87,7 +87,7 @@ RIDER_CLASSES = ("rider", "motorcyclist")  # a two-wheeler's box takes its rider
 
 
 def fit_boxes(buffers: SceneBuffers, classes, headings: dict | None = None) -> np.ndarray:
-    """World-frame boxes (:data:`BOX_DTYPE`) of every instance whose class is in ``classes``.
+    """World-frame boxes (:data:`BOX_DTYPE`) of every instance whose class is in ``classes``, in increasing instance order.
 
     A box's class is its instance's rider class (:data:`RIDER_CLASSES`) when one of its objects has one, else
     its first object's.
@@ -95,39 +95,91 @@ def fit_boxes(buffers: SceneBuffers, classes, headings: dict | None = None) -> n
     headings : ``{instance: yaw radians}`` from the scene builder; instances without one get the
         heading of their footprint's smallest rectangle
     The box is the tightest upright box around the instance's vertices in its heading's frame;
-    it contains every triangle of the instance, hence every point a scan puts on it.
+    it contains every triangle of the instance, hence every point a scan puts on it. All boxes at once
+    (:func:`instance_vertices`), but for each one's rotation of its vertices and the footprints without a heading.
     """
     headings = headings or {}
     objects = buffers.objects
-    wanted = {str(c) for c in classes}
-    rows = [r for r in range(len(objects)) if objects.class_names[r] in wanted]
-    by_instance: dict[int, list[int]] = {}
-    for r in rows:
-        by_instance.setdefault(int(objects.instance[r]), []).append(r)
-    tri_rows = np.asarray(buffers.triangle_object)
-    wanted_row = np.zeros(len(objects), bool)
-    wanted_row[rows] = True
-    mine = np.flatnonzero(wanted_row[tri_rows])  # the wanted objects' triangles, grouped by object row once
-    mine = mine[np.argsort(tri_rows[mine], kind="stable")]
-    bounds = np.searchsorted(tri_rows[mine], np.arange(len(objects) + 1))
-    out = np.zeros(len(by_instance), BOX_DTYPE)
-    for k, (instance, members) in enumerate(sorted(by_instance.items())):
-        triangles = buffers.triangles[np.concatenate([mine[bounds[r] : bounds[r + 1]] for r in members])]
-        vertices = buffers.vertices[np.unique(triangles)]  # sorted vertex indices: the same rows in any triangle order
-        yaw = headings.get(instance)
-        if yaw is None:
-            yaw = footprint_heading(vertices[:, :2])
-        c, s = np.cos(yaw), np.sin(yaw)
-        rotation = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-        local = vertices @ rotation
-        low, high = local.min(axis=0), local.max(axis=0)
-        classes = [objects.class_names[r] for r in members]
-        out[k]["class_name"] = next((c for c in classes if c in RIDER_CLASSES), classes[0])
-        out[k]["instance"] = instance
-        out[k]["centre"] = rotation @ ((low + high) / 2)
-        out[k]["size"] = high - low
-        out[k]["heading"] = wrap_angle(yaw)
+    names = np.asarray(objects.class_names, dtype=object)
+    wanted = np.isin(names, [str(c) for c in classes]) if len(names) else np.zeros(0, bool)
+    instances = np.unique(objects.instance[wanted])
+    out = np.zeros(len(instances), BOX_DTYPE)
+    if not len(instances):
+        return out
+    box_of_row = np.where(wanted, np.searchsorted(instances, objects.instance), -1)
+    vertex_rows, bounds = instance_vertices(buffers, box_of_row, len(instances))
+    if np.any(bounds[1:] == bounds[:-1]):
+        raise ValueError("fit_boxes: an instance of a box class has no triangles")
+    vertices = buffers.vertices[vertex_rows]
+    yaw = np.array([headings.get(int(i), np.nan) for i in instances], float)
+    for k in np.flatnonzero(np.isnan(yaw)):
+        yaw[k] = footprint_heading(vertices[bounds[k] : bounds[k + 1], :2])
+    c, s = np.cos(yaw), np.sin(yaw)
+    rotation = np.zeros((len(instances), 3, 3))
+    rotation[:, 0, 0], rotation[:, 0, 1], rotation[:, 1, 0], rotation[:, 1, 1], rotation[:, 2, 2] = c, -s, s, c, 1.0
+    local = np.empty_like(vertices)
+    for k in range(len(instances)):  # the matrix product box by box, as one box's vertices alone give it
+        local[bounds[k] : bounds[k + 1]] = vertices[bounds[k] : bounds[k + 1]] @ rotation[k]
+    low, high = np.minimum.reduceat(local, bounds[:-1], axis=0), np.maximum.reduceat(local, bounds[:-1], axis=0)
+    rows = np.flatnonzero(wanted)
+    first = np.full(len(instances), len(objects))
+    np.minimum.at(first, box_of_row[rows], rows)  # each box's first object, and its first rider
+    rider = rows[np.isin(names[rows], RIDER_CLASSES)]
+    first_rider = np.full(len(instances), len(objects))
+    np.minimum.at(first_rider, box_of_row[rider], rider)
+    out["class_name"] = names[np.where(first_rider < len(objects), first_rider, first)].astype(str)
+    out["instance"] = instances
+    out["centre"] = np.matmul(rotation, ((low + high) / 2)[:, :, None])[:, :, 0]
+    out["size"] = high - low
+    out["heading"] = wrap_angle(yaw)
     return out
+
+
+def object_triangles(buffers: SceneBuffers, box_of_row: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(triangle, box)``: the ``(t,)`` increasing triangles of the objects that have a box and each one's box.
+
+    box_of_row : ``(objects,)`` each object's box, -1 for none
+    Exported buffers list each object's triangles together, objects in order (``triangle_object`` never decreases):
+    each object's triangles are then a range found by a search, and the scene's other triangles are not gathered;
+    other buffers take one pass over every triangle (the same answer)."""
+    box_of_row = np.asarray(box_of_row, np.int64)
+    owner = buffers.triangle_object
+    if len(owner) > 1 and not (owner[1:] >= owner[:-1]).all():
+        triangle = np.flatnonzero((box_of_row >= 0)[owner])
+        return triangle, box_of_row[owner[triangle]]
+    rows = np.flatnonzero(box_of_row >= 0)
+    key = rows.astype(owner.dtype)  # the table's own type: no copy of it for the search
+    start, end = np.searchsorted(owner, key, "left"), np.searchsorted(owner, key, "right")
+    count = end - start
+    triangle = np.arange(int(count.sum()), dtype=np.int64) + np.repeat(start - (np.cumsum(count) - count), count)
+    return triangle, np.repeat(box_of_row[rows], count)
+
+
+def instance_vertices(buffers: SceneBuffers, box_of_row: np.ndarray, count: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(vertices, bounds)``: the vertex rows the triangles of each of ``count`` boxes use, box by box, increasing
+    within each (``(v,)``), and the ``(count + 1,)`` bounds of each box's part: box k's are
+    ``vertices[bounds[k]:bounds[k + 1]]``. ``box_of_row`` : ``(objects,)`` each object's box, -1 for none.
+
+    A vertex used by one box (a box's objects have vertices of their own) is marked with its box once, in a table of
+    the vertex rows from the lowest used to the highest; a vertex that two boxes share is found in both (a sort of the
+    (box, vertex) pairs)."""
+    triangle, box = object_triangles(buffers, box_of_row)
+    corners = buffers.triangles[triangle].ravel()
+    if not len(corners):
+        return np.zeros(0, np.int64), np.zeros(count + 1, np.int64)
+    owner = np.repeat(box, 3)
+    low = int(corners.min())
+    vertex_box = np.full(int(corners.max()) - low + 1, -1, np.int32)
+    vertex_box[corners - low] = owner
+    if np.array_equal(vertex_box[corners - low], owner):
+        used = np.flatnonzero(vertex_box >= 0)
+        box = vertex_box[used]
+        order = np.argsort(box, kind="stable")
+        vertices, box = used[order] + low, box[order]
+    else:
+        pairs = np.unique(owner * len(buffers.vertices) + corners)
+        vertices, box = pairs % len(buffers.vertices), pairs // len(buffers.vertices)
+    return vertices, np.searchsorted(box, np.arange(count + 1))
 
 
 def box_corners(boxes: np.ndarray, grow=0.0) -> np.ndarray:
@@ -137,14 +189,14 @@ def box_corners(boxes: np.ndarray, grow=0.0) -> np.ndarray:
     """
     grow = np.broadcast_to(np.asarray(grow, float), (len(boxes),))
     signs = np.array([[1, 1], [1, -1], [-1, -1], [-1, 1]], float)
+    c, s = np.cos(boxes["heading"]), np.sin(boxes["heading"])
+    turn = np.stack([np.stack([c, s], axis=-1), np.stack([-s, c], axis=-1)], axis=1)  # (k, 2, 2): box k's [[c, s], [-s, c]]
+    local = signs * (np.asarray(boxes["size"][:, :2]) / 2 + grow[:, None])[:, None]  # (k, 4, 2)
+    xy = np.matmul(local, turn) + np.asarray(boxes["centre"][:, :2])[:, None]  # box by box, as one box's product gives it
     out = np.zeros((len(boxes), 8, 3))
-    for k, box in enumerate(boxes):
-        c, s = np.cos(box["heading"]), np.sin(box["heading"])
-        local = signs * (np.asarray(box["size"][:2]) / 2 + grow[k])
-        xy = local @ np.array([[c, s], [-s, c]]) + np.asarray(box["centre"][:2])
-        out[k, :4, :2] = out[k, 4:, :2] = xy
-        out[k, :4, 2] = box["centre"][2] - (box["size"][2] / 2 + grow[k])
-        out[k, 4:, 2] = box["centre"][2] + (box["size"][2] / 2 + grow[k])
+    out[:, :4, :2] = out[:, 4:, :2] = xy
+    out[:, :4, 2] = (boxes["centre"][:, 2] - (boxes["size"][:, 2] / 2 + grow))[:, None]
+    out[:, 4:, 2] = (boxes["centre"][:, 2] + (boxes["size"][:, 2] / 2 + grow))[:, None]
     return out
 
 

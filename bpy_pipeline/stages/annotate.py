@@ -33,7 +33,8 @@ def world_boxes(buffers: SceneBuffers, config: Config, pose: np.ndarray, points:
         (truncation 1, no visible or unoccluded ray); a rig's narrow sensors see a few of a street's boxes each
     caster : the scan's :class:`~bpy_pipeline.lidar.cast.raycast.RayCaster` of ``buffers`` at ``pose``, reused by the cast (built when ``None``)
     direct_returns : the scan's ``frame.direct_returns`` (:func:`~.scan.counts_direct_returns`), which give the ``visible``
-        counts when every object of a box's instance is of a box class (:func:`boxes_hold_their_instances`)
+        counts and the ``unoccluded`` rays whose first hit is the box's object when every object of a box's instance is
+        of a box class (:func:`boxes_hold_their_instances`)
     """
     section = config.output.boxes
     boxes = fit_boxes(buffers, section.classes, headings)

@@ -58,22 +58,35 @@ def scan_stage(frame: Frame, run: Run) -> None:
     pose = frame.pose_at if frame.moving else frame.pose  # the scanner casts a static sensor's rays from one pose
     if config.sensor.divergence.active:
         frame.chunks = scan_footprint_chunks(caster, frame.buffers, patterns, pose, config.sensor.divergence, spec.min_range, spec.max_range, **options)
-    else:
-        frame.chunks = scan_chunks(caster, frame.buffers, patterns, pose, spec.min_range, spec.max_range, **options)
+    else:  # with each return's ray when the boxes take their counts from them
+        frame.chunks = scan_chunks(caster, frame.buffers, patterns, pose, spec.min_range, spec.max_range, with_rays=counts_direct_returns(config, frame),
+                                   **options)
 
 
 def counts_direct_returns(config: Config, frame: Frame) -> bool:
-    """Whether the effects stage keeps the instance of each return that met no mirror (``frame.direct_returns``), so
-    the boxes count their ``visible`` rays from the scan (:func:`~bpy_pipeline.lidar.cast.visibility.visibility`'s
-    ``direct_returns``) instead of tracing again the rays that pass them. It does when boxes are asked for and that
+    """Whether the effects stage keeps, per ray, the instance of its return that met no mirror (``frame.direct_returns``,
+    :func:`add_direct_returns`), so the boxes take from the scan their ``visible`` rays and the ``unoccluded``
+    ones whose return is the box's object (:func:`~bpy_pipeline.lidar.cast.visibility.visibility`'s ``direct_returns``)
+    instead of tracing again the rays that pass them. It does when boxes are asked for and that
     trace would cast the scan's own rays from the scan's pose and make the same draws: a sensor that stands still
     during the frame (the boxes' trace casts from the frame's first pose), one ray a firing (no beam divergence), rays
     from the sensor's centre (none of its own mirrors) and glass that reflects all of the beams it meets or none (no
     draw: the boxes' trace would draw again from the frame's generator). Every return of the scan with no mirror met
-    lies on the first object its ray meets, as the trace's do, so the counts are the same."""
+    lies on the first object its ray meets, as the trace's do, so the counts are the same. The scan then yields each
+    return's ray with it (:func:`~bpy_pipeline.lidar.cast.scanner.scan_chunks`' ``with_rays``)."""
     mirrors = config.effects.mirrors
     return (bool(config.output.boxes.formats) and not frame.moving and not config.sensor.divergence.active and not config.sensor.reflector.enabled
             and mirrors.glass.reflect_fraction in (0.0, 1.0))
+
+
+def add_direct_returns(table: np.ndarray, ray: np.ndarray, instance: np.ndarray) -> np.ndarray:
+    """``table``, per ray of the scan the instance of its return that met no mirror (-1 for none), with the returns
+    ``(d,)`` ``ray`` and their ``(d,)`` ``instance`` written in; a new, longer table (-1 beyond the old end) when a ray
+    lies beyond its end."""
+    if len(ray) and int(ray.max()) >= len(table):
+        table = np.concatenate([table, np.full(int(ray.max()) + 1 - len(table), -1, np.int64)])
+    table[ray] = instance
+    return table
 
 
 def timed_pulls(items: Iterable, timings: dict, key: str) -> Iterator:
@@ -97,13 +110,15 @@ def effects_stage(frame: Frame, run: Run) -> None:
     start, traced = time.perf_counter(), frame.timings.get("scan", 0.0)
     config, spec = run.config, run.config.sensor.spec
     mask = run.rays.edge_mask(frame.index)
-    direct = [] if counts_direct_returns(config, frame) else None
+    direct = np.full(ray_count(spec), -1, np.int64) if counts_direct_returns(config, frame) else None
     to_output = sensor_to_output(config.output.frame, frame.pose, config.output.kitti.camera.position)
 
     def finished(chunks):
-        for points, beam in chunks:
-            if direct is not None:
-                direct.append(points["instance"][points["bounces"] == 0].astype(np.int64))
+        nonlocal direct
+        for points, beam, *ray in chunks:
+            if direct is not None:  # the instance of each return that met no mirror, at its ray
+                hit = points["bounces"] == 0
+                direct = add_direct_returns(direct, ray[0][hit], points["instance"][hit])
             if mask is not None:  # returns lost where the beam split on an edge of the sensor's own mirrors
                 keep = drop_at_edges(points, mask, config.sensor.spec, frame.rng)
                 points, beam = points[keep], beam[keep]
@@ -120,7 +135,7 @@ def effects_stage(frame: Frame, run: Run) -> None:
     frame.points = collect_points(finished(timed_pulls(frame.chunks, frame.timings, "scan")), ray_count(config.sensor.spec))
     frame.chunks = None
     warn_enclosed(frame, run)
-    frame.direct_returns = None if direct is None else np.concatenate(direct) if direct else np.zeros(0, np.int64)
+    frame.direct_returns = direct
     frame.timings["effects"] = frame.timings.get("effects", 0.0) + time.perf_counter() - start - (frame.timings["scan"] - traced)
 
 

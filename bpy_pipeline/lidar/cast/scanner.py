@@ -490,7 +490,8 @@ def scan_chunks(
     *,
     surfaces: MirrorGlassRules | None = None,
     rng: np.random.Generator | None = None,
-) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+    with_rays: bool = False,
+) -> Iterator[tuple[np.ndarray, ...]]:
     """``(points, beam)`` of a scan, chunk by chunk in firing order; points in the caster's frame.
 
     patterns : the sensor's rays (sensor frame): one :class:`Pattern`, or consecutive chunks of
@@ -505,14 +506,18 @@ def scan_chunks(
     start, for a moving sensor) and they are in the sensor frame, motion-compensated to that pose.
     Rays go through in chunks of at most ``chunk_rays``, so memory does not grow with the ray
     count; each chunk's Embree queries use every core (:meth:`RayCaster.intersect`).
+    with_rays : yield ``(points, beam, ray)``, ``ray`` the ``(p,)`` int64 index of each point's ray among all the
+        rays of ``patterns``, chunk after chunk (valid until the next chunk is pulled)
     """
     world_to_local = caster.world_to_local
+    first = 0
     for chunk in pattern_chunks(patterns, chunk_rays):
         poses = pose(chunk.time) if callable(pose) else pose
-        points, beam, _ = scan_chunk(
+        points, beam, ray = scan_chunk(
             caster, buffers, chunk, world_to_local @ poses, min_range, max_range, max_bounces, ghost_semantic, ideal, surfaces=surfaces, rng=rng
         )
-        yield points, beam
+        yield (points, beam, ray + first) if with_rays else (points, beam)
+        first += len(chunk)
 
 
 def collect(chunks: Iterable[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:

@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...buffers import SceneBuffers
-from ...geometry.boxes import box_corners
+from ...geometry.boxes import box_corners, object_triangles
 from .raycast import RayCaster, row_norms
 from .scanner import scan_chunk, trace_beams
 from ..sensor.rays import Pattern
@@ -104,55 +104,75 @@ def visibility(
     caster : a :class:`RayCaster` of ``buffers`` in the sensor's frame, if one exists already
     surfaces, rng : the scanner's rules for mirrors and glass and a generator for glass that
         reflects a fraction of beams (:func:`~bpy_pipeline.lidar.cast.scanner.trace_beams`)
-    direct_returns : (d,) the instance of each return of the frame's scan of these rays from ``pose`` that met no
-        mirror, when the scan drew nothing the trace would draw again: ``visible`` counts them and the rays passing
-        the boxes are not traced through the scene again (the same counts; :func:`~bpy_pipeline.stages.scan.counts_direct_returns`)
+    direct_returns : (n,) int64 per ray of the frame's scan of these rays from ``pose`` (all chunks', in order; rays
+        beyond it have none), the instance of its return that met no mirror, -1 for none, when the scan drew nothing
+        the trace would draw again (:func:`~bpy_pipeline.stages.scan.counts_direct_returns`): ``visible`` counts them
+        and the rays passing the boxes are not traced through the scene again (the same counts); a (ray, object) pair
+        whose ray's return is on the object's instance counts as ``unoccluded`` without its trace alone (the object is
+        the first thing the ray meets in the whole scene, so alone too, up to the rounding of the two casts). Only for
+        boxes that hold every object of their instance (:func:`~bpy_pipeline.stages.annotate.boxes_hold_their_instances`)
     The rays that pass within an object's bounding sphere are traced the scanner's way (glass
     passed through, no mirror bounces), per chunk once through the whole scene for all objects
     together (unless ``direct_returns`` has their answer) and once against all objects alone
-    (:class:`AloneCaster`), so a car's windows count the same in both.
+    (:class:`AloneCaster`; with ``direct_returns``, after the last chunk, the pairs it does not answer, against the
+    objects they pass), so a car's windows count the same in both.
     """
     if len(boxes) == 0:
         return
     caster = caster or RayCaster(buffers, frame=pose)
     objects = buffers.objects
-    members = [np.flatnonzero(objects.instance == box["instance"]) for box in boxes]
-    box_of_row = np.full(len(objects), -1, np.int64)
-    for k, rows in enumerate(members):
-        box_of_row[rows] = k
-    box_of_triangle = box_of_row[buffers.triangle_object]
+    box_of_row = np.full(len(objects), -1, np.int64)  # each object's box: the one of its instance
+    for k, instance in enumerate(boxes["instance"]):
+        box_of_row[objects.instance == instance] = k
+    boxed, owner = object_triangles(buffers, box_of_row)  # the objects' triangles, and their object
     centres = (boxes["centre"] - pose[:3, 3]) @ pose[:3, :3]  # bounding spheres in the sensor frame
     radii = np.linalg.norm(boxes["size"], axis=1) / 2 + 1e-3
-    alone = AloneCaster(buffers, members, centres, radii, pose)
+    # the scan's answers leave some objects nothing to trace alone: their caster is built after the last chunk, for the others
+    alone = AloneCaster(buffers, boxed, owner, centres, radii, pose) if direct_returns is None else None
+    left = []  # with direct_returns: the (ray origin, direction, object, along) pairs still to trace alone
     visible = np.zeros(len(boxes), np.int64)
     unoccluded = np.zeros(len(boxes), np.int64)
     seen_points, seen_boxes = [], []  # where the rays passing each object are, seen from the sensor
     distance = np.linalg.norm(centres, axis=1)
+    end = 0
     for chunk in [patterns] if isinstance(patterns, Pattern) else patterns:
-        origins = np.zeros((len(chunk), 3)) if chunk.origins is None else chunk.origins
+        start, end = end, end + len(chunk)  # the chunk's rays among all the chunks'
+        origins = chunk.origins  # None: every ray leaves the sensor's centre
         # a cone test from the sensor's centre first, widened by the farthest ray origin, then the
         # exact ray-sphere test on the (ray, object) pairs it lets through
-        shift = 0.0 if chunk.origins is None else float(np.linalg.norm(origins, axis=1).max())
+        shift = 0.0 if origins is None else float(np.linalg.norm(origins, axis=1).max())
         reach = radii + shift
         cos_limit = np.where(distance > reach, np.sqrt(np.clip(1.0 - (reach / np.maximum(distance, 1e-12)) ** 2, 0.0, 1.0)), -2.0)
         ray, k = cone_pairs(chunk.directions, centres / np.maximum(distance, 1e-12)[:, None], cos_limit, getattr(caster, "kernels", None))
         if len(ray) == 0:
             continue
         d = chunk.directions[ray]
-        offset = centres[k] - origins[ray]
+        offset = centres[k] if origins is None else centres[k] - origins[ray]
         along = np.einsum("ij,ij->i", offset, d)
         miss2 = np.einsum("ij,ij->i", offset, offset) - along**2
-        passing = (miss2 <= radii[k] ** 2) & (along >= -radii[k]) & (along - radii[k] <= max_range)
+        radius = radii[k]
+        passing = (miss2 <= radius**2) & (along >= -radius) & (along - radius <= max_range)
         ray, k, along, d = ray[passing], k[passing], along[passing], d[passing]
         if len(ray) == 0:
             continue
-        seen_points.append(origins[ray] + along[:, None] * d)  # the ray's point closest to the object's centre
+        # the ray's point closest to the object's centre (+ 0.0 from the sensor's centre: a -0.0 made 0.0, as adding the origin does)
+        seen_points.append(along[:, None] * d + (0.0 if origins is None else origins[ray]))
         seen_boxes.append(k)
         if direct_returns is None:  # the whole scene, each passing ray once: a ray whose first hit is object k passes k's sphere
-            visible += _scene_returns(caster, buffers, chunk, np.unique(ray), boxes["instance"], box_of_triangle, min_range, max_range, surfaces, rng)
-        # every object alone, each (ray, object) pair once
-        unoccluded += alone.count(origins[ray], d, k, along, min_range, max_range, surfaces, rng)
-    boxes["visible"] = visible if direct_returns is None else counts_per_instance(boxes["instance"], direct_returns)
+            visible += _scene_returns(caster, buffers, chunk, np.unique(ray), boxes["instance"], box_of_row, min_range, max_range, surfaces, rng)
+            # every object alone, each (ray, object) pair once
+            unoccluded += alone.count(ray_origins(origins, ray), d, k, along, min_range, max_range, surfaces, rng)
+        else:  # the pairs whose ray's first hit is their object count; of the others, those whose ray meets the object's
+            # box are traced alone after the last chunk (a ray that misses the box misses the object)
+            known = chunk_returns(direct_returns, start, len(chunk))[ray] == boxes["instance"][k]
+            unoccluded += np.bincount(k[known], minlength=len(boxes))
+            rest = np.flatnonzero(~known)
+            o, d, k, along = ray_origins(origins, ray[rest]), d[rest], k[rest], along[rest]
+            meets = meets_boxes(boxes, pose, o, d, k)
+            left.append((o[meets], d[meets], k[meets], along[meets]))
+    if left:
+        unoccluded += alone_counts(buffers, boxed, owner, centres, radii, pose, *(np.concatenate(a) for a in zip(*left)), min_range, max_range, surfaces, rng)
+    boxes["visible"] = visible if direct_returns is None else counts_per_instance(boxes["instance"], direct_returns[direct_returns >= 0])
     boxes["unoccluded"] = unoccluded
     # truncation: every object's surface sampled in one call (each at its own spacing), then per object the
     # share of its area whose direction the passing rays cover, within the range limits; an object whose every
@@ -160,8 +180,7 @@ def visibility(
     seen = np.concatenate(seen_points) if seen_points else np.zeros((0, 3))
     point_owner = np.concatenate(seen_boxes) if seen_boxes else np.zeros(0, np.int64)
     point_cells = Coverage(np.zeros((0, 3)), cell_deg)._cells(seen)  # each passing point's (row, col), once for both uses
-    owner = box_of_triangle[box_of_triangle >= 0]
-    triangles = buffers.vertices[buffers.triangles[box_of_triangle >= 0]]  # (m, 3, 3)
+    triangles = buffers.vertices[buffers.triangles[boxed]]  # (m, 3, 3)
     tri_area = row_norms(np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])) / 2
     total = np.bincount(owner, tri_area, minlength=len(boxes))
     whole_view = wholly_covered(boxes, pose, point_cells, point_owner, min_range, max_range, cell_deg) & (total > 0)  # no area: 1, as sampled
@@ -180,15 +199,73 @@ def visibility(
         partial = ~whole_view[point_owner]
         covered = covered_by_owner(seen[partial], point_owner[partial], samples, sample_owner, len(boxes), cell_deg, where=inside & passed[sample_owner],
                                    distance=distance, point_cells=(point_cells[0][partial], point_cells[1][partial]))  # fmt: skip
-    order = np.argsort(sample_owner, kind="stable")
+    order = np.argsort(sample_owner, kind="stable")  # the samples box by box, each box's in their order
     bounds = np.searchsorted(sample_owner[order], np.arange(len(boxes) + 1))
-    for k in range(len(boxes)):
-        if whole_view[k]:
-            boxes["truncation"][k] = 0.0
-            continue
-        mine = order[bounds[k] : bounds[k + 1]]
+    area, covered = area[order], covered[order]
+    truncation = np.where(whole_view, 0.0, 1.0)  # 1: no area
+    for k in np.flatnonzero(~whole_view):
+        mine = slice(bounds[k], bounds[k + 1])
         whole = area[mine].sum()
-        boxes["truncation"][k] = float(1.0 - area[mine][covered[mine]].sum() / whole) if whole > 0 else 1.0
+        if whole > 0:
+            truncation[k] = 1.0 - area[mine][covered[mine]].sum() / whole
+    boxes["truncation"] = truncation
+
+
+def ray_origins(origins: np.ndarray | None, ray: np.ndarray) -> np.ndarray:
+    """``(p, 3)``: the origins of rays ``ray`` of a chunk whose ``origins`` are ``(n, 3)`` or ``None`` (the sensor's centre)."""
+    return np.zeros((len(ray), 3)) if origins is None else origins[ray]
+
+
+def chunk_returns(direct_returns: np.ndarray, first: int, count: int) -> np.ndarray:
+    """``(count,)`` int64: ``direct_returns[first:first + count]`` (per ray, the instance of its return that met no
+    mirror), -1 for the rays beyond its end."""
+    part = direct_returns[first : first + count]
+    if len(part) == count:
+        return part
+    out = np.full(count, -1, np.int64)
+    out[: len(part)] = part
+    return out
+
+
+def meets_boxes(boxes: np.ndarray, pose: np.ndarray, origins: np.ndarray, directions: np.ndarray, box: np.ndarray) -> np.ndarray:
+    """``(p,)`` bool: does the line of each ray (``(p, 3)`` origins and directions, sensor frame) meet its box
+    (``box`` (p,) into world-frame ``boxes``) grown by :data:`BOX_MARGIN`?
+
+    A box holds its object's vertices (:func:`~bpy_pipeline.geometry.boxes.fit_boxes`), so a ray whose line misses it
+    grown by far more than the rounding of the casts misses every triangle of the object. The slab test in each box's
+    frame; a line along a face's plane (a 0/0 in it) counts as meeting it."""
+    rotation = np.asarray(pose, float)[:3, :3]
+    world_d = rotation @ np.ascontiguousarray(directions.T)  # (3, p): coordinate by coordinate (a product 5x faster on rows)
+    world_o = rotation @ np.ascontiguousarray(origins.T) + (pose[:3, 3] - boxes["centre"]).T[:, box]  # from the box's centre
+    c, s = np.cos(boxes["heading"])[box], np.sin(boxes["heading"])[box]
+    half = (boxes["size"] / 2 + (BOX_MARGIN * (1.0 + np.abs(boxes["centre"]).max(axis=1) / 1e4))[:, None]).T[:, box]
+    # the box's frame: x along its heading, y across, z up
+    local = ((c * world_o[0] + s * world_o[1], c * world_d[0] + s * world_d[1]), (c * world_o[1] - s * world_o[0], c * world_d[1] - s * world_d[0]),
+             (world_o[2], world_d[2]))  # fmt: skip
+    near, far = np.full(len(box), -np.inf), np.full(len(box), np.inf)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for h, (o, d) in zip(half, local):  # a nan (0/0) makes near or far nan: the comparison below is False, the line kept
+            low, high = (-h - o) / d, (h - o) / d
+            near = np.maximum(near, np.minimum(low, high))
+            far = np.minimum(far, np.maximum(low, high))
+    return ~(near > far)
+
+
+def alone_counts(buffers: SceneBuffers, triangle: np.ndarray, owner: np.ndarray, centres: np.ndarray, radii: np.ndarray, pose: np.ndarray,
+                 origins: np.ndarray, directions: np.ndarray, box: np.ndarray, along: np.ndarray, min_range: float, max_range: float, surfaces,
+                 rng) -> np.ndarray:  # fmt: skip
+    """``(k,)`` returns per object of the ``(p,)`` pairs (:meth:`AloneCaster.count`' arguments) traced alone, in a
+    caster of the objects some pair passes only (``triangle``, ``owner``, ``centres`` and ``radii``: :class:`AloneCaster`'s of all ``k`` objects)."""
+    out = np.zeros(len(centres), np.int64)
+    if len(box) == 0:
+        return out
+    traced, local = np.unique(box, return_inverse=True)
+    renumber = np.full(len(centres), -1, np.int64)
+    renumber[traced] = np.arange(len(traced))
+    mine = renumber[owner] >= 0
+    alone = AloneCaster(buffers, triangle[mine], renumber[owner[mine]], centres[traced], radii[traced], pose)
+    out[traced] = alone.count(origins, directions, local, along, min_range, max_range, surfaces, rng)
+    return out
 
 
 def counts_per_instance(box_instance: np.ndarray, instance: np.ndarray) -> np.ndarray:
@@ -368,10 +445,10 @@ def covered_by_owner(points: np.ndarray, point_owner: np.ndarray, samples: np.nd
 IDENTITY4 = np.eye(4)
 
 
-def _scene_returns(caster, buffers: SceneBuffers, chunk: Pattern, traced: np.ndarray, box_instance: np.ndarray, box_of_triangle: np.ndarray, min_range: float,
+def _scene_returns(caster, buffers: SceneBuffers, chunk: Pattern, traced: np.ndarray, box_instance: np.ndarray, box_of_row: np.ndarray, min_range: float,
                    max_range: float, surfaces, rng) -> np.ndarray:
     """``(k,)`` rays ``traced`` (indices into ``chunk``) whose return through the whole scene is from box k's objects
-    (``box_instance`` (k,), ``box_of_triangle`` (m,) -1 for none), no mirror met."""
+    (``box_instance`` (k,), ``box_of_row`` (objects,) each object's box, -1 for none), no mirror met."""
     if chunk.origins is None and getattr(caster, "kernels", None) is not None:
         # the compiled scan of those rays (Embree and the records in one pass; the same hits and draws as
         # trace_beams: tests/test_scan_kernel.py): with no mirror bounces a record's instance is that of its beam's last object
@@ -380,7 +457,7 @@ def _scene_returns(caster, buffers: SceneBuffers, chunk: Pattern, traced: np.nda
         return counts_per_instance(box_instance, points["instance"][points["bounces"] == 0].astype(np.int64))
     o = chunk.origins[traced] if chunk.origins is not None else np.zeros(3)
     beams = trace_beams(caster, buffers, o, chunk.directions[traced], min_range, max_range, max_bounces=0, surfaces=surfaces, rng=rng)
-    hit = box_of_triangle[beams.triangle]
+    hit = box_of_row[buffers.triangle_object[beams.triangle]]
     direct = (hit >= 0) & (beams.bounces == 0)
     return np.bincount(hit[direct], minlength=len(box_instance))
 
@@ -389,10 +466,13 @@ def _used_vertices(triangles: np.ndarray, count: int) -> tuple[np.ndarray, np.nd
     """``np.unique(triangles, return_inverse=True)`` for ``triangles`` indexing ``count`` vertices, without the sort:
     the ``(u,)`` vertices used, increasing, and ``triangles`` renumbered into them (``(3 m,)``, flattened)."""
     flat = np.asarray(triangles).ravel()
-    mark = np.zeros(count, bool)
-    mark[flat] = True
+    if not len(flat):
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    low = int(flat.min())  # a table of the vertex rows from the lowest used to the highest
+    mark = np.zeros(int(flat.max()) - low + 1, bool)
+    mark[flat - low] = True
     renumber = np.cumsum(mark) - 1
-    return np.flatnonzero(mark), renumber[flat]
+    return np.flatnonzero(mark) + low, renumber[flat - low]
 
 
 class AloneCaster:
@@ -403,22 +483,21 @@ class AloneCaster:
     cast answers "what would this ray hit if object k were alone?" for all pairs at once.
     """
 
-    def __init__(self, buffers: SceneBuffers, members: list[np.ndarray], centres: np.ndarray, radii: np.ndarray, pose: np.ndarray):
+    def __init__(self, buffers: SceneBuffers, triangle: np.ndarray, owner: np.ndarray, centres: np.ndarray, radii: np.ndarray, pose: np.ndarray):
+        """triangle : ``(t,)`` increasing buffer triangles of the ``k`` objects; owner : ``(t,)`` the object (0..k-1) of each
+        centres, radii : ``(k, 3)`` sensor-frame centres and ``(k,)`` radii (m) of their bounding spheres; pose : (4, 4) the sensor's"""
         self.radii = np.asarray(radii, float)
         self.reach = 2.0 * float(radii.max()) + 1e-3
         spacing = 4.0 * float(radii.max()) + 1.0
-        side = int(np.ceil(len(members) ** (1 / 3)))
-        cells = np.stack(np.unravel_index(np.arange(len(members)), (side, side, side)), axis=1) * spacing
+        side = int(np.ceil(len(centres) ** (1 / 3)))
+        cells = np.stack(np.unravel_index(np.arange(len(centres)), (side, side, side)), axis=1) * spacing
         self.move = cells - centres  # (k, 3) sensor frame: object k's translation
-        box_of_row = np.full(len(buffers.objects), -1, np.int64)
-        for k, rows in enumerate(members):
-            box_of_row[rows] = k
-        keep = box_of_row[buffers.triangle_object] >= 0
-        used, triangles = _used_vertices(buffers.triangles[keep], len(buffers.vertices))
-        owner = np.full(len(buffers.vertices), -1, np.int64)  # the box of each used vertex (one object's vertices are its own)
-        owner[buffers.triangles[keep].ravel()] = np.repeat(box_of_row[buffers.triangle_object[keep]], 3)
-        vertices = buffers.vertices[used] + self.move[owner[used]] @ np.asarray(pose, float)[:3, :3].T
-        self.buffers = SceneBuffers(vertices, triangles.reshape(-1, 3).astype(np.int32), buffers.triangle_object[keep], buffers.objects)
+        corners = buffers.triangles[triangle]
+        used, triangles = _used_vertices(corners, len(buffers.vertices))
+        vertex_owner = np.empty(len(used), np.int64)  # the object of each used vertex (one object's vertices are its own)
+        vertex_owner[triangles] = np.repeat(owner, 3)
+        vertices = buffers.vertices[used] + self.move[vertex_owner] @ np.asarray(pose, float)[:3, :3].T
+        self.buffers = SceneBuffers(vertices, triangles.reshape(-1, 3).astype(np.int32), buffers.triangle_object[triangle], buffers.objects)
         self.caster = RayCaster(self.buffers, frame=pose)
 
     def count(self, origins, directions, box, along, min_range, max_range, surfaces, rng) -> np.ndarray:
