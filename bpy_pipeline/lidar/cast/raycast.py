@@ -151,22 +151,27 @@ class EmbreePart:
     handle: int = 0
 
 
-def embree_part(local: np.ndarray, triangles: np.ndarray, subset: np.ndarray | None, normal: np.ndarray) -> EmbreePart | None:
+def embree_part(local: np.ndarray, triangles: np.ndarray, subset: np.ndarray | slice | None, normal: np.ndarray) -> EmbreePart | None:
     """The Embree scene of ``triangles[subset]`` (all when ``None``) without their zero-area ones, committed.
 
-    local : (n, 3) float64 vertices, local frame; normal : (s,) the subset's plane normals (zero: no area)
+    local : (n, 3) float64 vertices, local frame; subset : (s,) int triangle indices, or a slice of them;
+    normal : (s, 3) the subset's plane normals (zero: no area). Embree is given the rows of ``local`` from the
+    lowest to the highest vertex the chosen triangles use (their indices moved down to match): the same
+    float32 corners and primitives, without a copy of the vertices no chosen triangle uses.
     """
     solid = np.flatnonzero(normal.any(axis=1))
     if not len(solid):
         return None
-    count = len(triangles) if subset is None else len(subset)
     if subset is None:
-        index = None if len(solid) == count else solid
+        index = None if len(solid) == len(triangles) else solid
+    elif isinstance(subset, slice):
+        index = solid + subset.start
     else:
         index = subset[solid]
     chosen = triangles if index is None else triangles[index]
+    low, high = int(chosen.min()), int(chosen.max())
     scene = rtcore_scene.EmbreeScene()
-    keep = attach_triangles(scene, local, chosen)
+    keep = attach_triangles(scene, local[low : high + 1], chosen - np.int32(low) if low else chosen)
     # Embree commits the scene on the first query: do it once here, before threads share it.
     scene.run(np.zeros((1, 3), np.float32), np.array([[0, 0, 1]], np.float32), output=1)
     return EmbreePart(scene, None if index is None else index.astype(np.int64), keep, scene_handle(scene))
@@ -257,17 +262,22 @@ class RayCaster:
                 self.plane_normal, self.plane_offset = triangle_planes(local, triangles, self.kernels)  # (m, 3), (m,) local frame
                 parts = [embree_part(local, triangles, None, self.plane_normal)]
             else:
-                moving = np.ones(len(triangles), bool)
-                moving[static.triangle] = False
-                moving = np.flatnonzero(moving)
-                self.plane_normal, self.plane_offset = np.empty((len(triangles), 3)), np.empty(len(triangles))
+                m = len(triangles)
+                self.plane_normal, self.plane_offset = np.empty((m, 3)), np.empty(m)
+                kept, moving = as_block(static.triangle), complement(static.triangle, m)  # slices where they are blocks of rows
+
+                def solve(rows):  # the planes of triangles[rows] into this caster's rows, in place where rows is a slice
+                    if isinstance(rows, slice):
+                        triangle_planes(local, triangles[rows], self.kernels, out=(self.plane_normal[rows], self.plane_offset[rows]))
+                    else:
+                        self.plane_normal[rows], self.plane_offset[rows] = triangle_planes(local, triangles[rows], self.kernels)
+
                 if shift.any():  # the static planes solved again in this frame: the bits a caster built here has
-                    self.plane_normal[static.triangle], self.plane_offset[static.triangle] = triangle_planes(local, triangles[static.triangle], self.kernels)
+                    solve(kept)
                 else:
-                    self.plane_normal[static.triangle], self.plane_offset[static.triangle] = static.normal, static.offset
-                normal, offset = triangle_planes(local, triangles[moving], self.kernels)
-                self.plane_normal[moving], self.plane_offset[moving] = normal, offset
-                parts = [static.part, embree_part(local, triangles, moving, normal)]
+                    self.plane_normal[kept], self.plane_offset[kept] = static.normal, static.offset
+                solve(moving)
+                parts = [static.part, embree_part(local, triangles, moving, self.plane_normal[moving])]
         # (q, 3) float64 added to the rays' local origins for each part: the kept static part's Embree scene lies in the
         # frame it was built in, a translation of this one (CasterCache); Embree only chooses the triangle, solved here
         self.part_shift = np.array([shift if p is parts[0] and static is not None else np.zeros(3) for p in parts if p is not None]).reshape(-1, 3)
@@ -685,9 +695,28 @@ def same_geometry(kept, geometry) -> bool:
     return all(a.dtype == b.dtype and a.shape == b.shape and np.array_equal(raw(a), raw(b)) for a, b in zip(kept, geometry))
 
 
+def as_block(index: np.ndarray) -> np.ndarray | slice:
+    """``index`` (k,) sorted, distinct rows as ``slice(first, last + 1)`` when they are consecutive (a view, no gather), else as given."""
+    if len(index) and int(index[-1]) - int(index[0]) + 1 == len(index):
+        return slice(int(index[0]), int(index[-1]) + 1)
+    return index
+
+
+def complement(index: np.ndarray, m: int) -> np.ndarray | slice:
+    """The rows of ``0..m-1`` not in ``index`` (k,) sorted, distinct: a slice when they are consecutive (:func:`as_block`), else (m - k,) int64."""
+    block = as_block(index)
+    if isinstance(block, slice) and (block.start == 0 or block.stop == m):
+        return slice(block.stop, m) if block.start == 0 else slice(0, block.start)
+    if not len(index):
+        return slice(0, m)
+    rest = np.ones(m, bool)
+    rest[index] = False
+    return np.flatnonzero(rest)
+
+
 def check_extent(local: np.ndarray, triangles: np.ndarray, buffers: SceneBuffers) -> None:
     """``InputError`` naming the first object with a vertex beyond :data:`MAX_COORDINATE` of the local origin."""
-    if not np.abs(local).max(initial=0.0) > MAX_COORDINATE:
+    if not (local.max(initial=0.0) > MAX_COORDINATE or local.min(initial=0.0) < -MAX_COORDINATE):  # |local| without its copy
         return
     too_far = np.abs(local).max(axis=1, initial=0.0) > MAX_COORDINATE
     if too_far.any():
@@ -700,15 +729,16 @@ def check_extent(local: np.ndarray, triangles: np.ndarray, buffers: SceneBuffers
             )
 
 
-def triangle_planes(vertices: np.ndarray, triangles: np.ndarray, compiled=None) -> tuple[np.ndarray, np.ndarray]:
+def triangle_planes(vertices: np.ndarray, triangles: np.ndarray, compiled=None, out=None) -> tuple[np.ndarray, np.ndarray]:
     """Unit normals ``(m, 3)`` float64 (winding order; zero for zero-area triangles) and offsets ``(m,)`` n . v0.
 
     vertices : (n, 3) float64; triangles : (m, 3) int indices. Computed in steps of
     :data:`PLANE_CHUNK` triangles so the temporaries stay small for 10-million-triangle scenes.
     compiled : :func:`.kernels.compiled`'s kernels: one pass, the same bits (``tests/test_scan_kernel.py``)
+    out : ``(normal, offset)`` to write them into ((m, 3) and (m,) float64, C-contiguous, e.g. a block of a caster's rows)
     """
     m = len(triangles)
-    normal, offset = np.empty((m, 3)), np.empty(m)
+    normal, offset = (np.empty((m, 3)), np.empty(m)) if out is None else out
     if compiled is not None and m:
         compiled.triangle_planes(np.ascontiguousarray(vertices, np.float64), np.ascontiguousarray(triangles), normal, offset)
         return normal, offset
