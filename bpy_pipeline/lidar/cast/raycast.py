@@ -48,7 +48,7 @@ import sys
 import threading
 import weakref
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cached_property
 
 import numpy as np
@@ -182,6 +182,9 @@ class StaticPart:
     """What :class:`CasterCache` keeps of the static objects: their Embree scene and planes, local frame.
 
     triangle : (s,) int64 buffer triangles of the static objects; normal (s, 3), offset (s,) their planes
+    rows : (s,) the object row of each of them when it was kept (a copy), or ``None``; closed : whether each of those
+        rows' triangles form closed surfaces (:meth:`RayCaster.closed`), filled by the casters that trace the part
+        while their buffers give its triangles these rows
     """
 
     frame: np.ndarray
@@ -190,6 +193,13 @@ class StaticPart:
     part: EmbreePart | None
     normal: np.ndarray
     offset: np.ndarray
+    rows: np.ndarray | None = None
+    closed: dict = field(default_factory=dict)
+
+    @cached_property
+    def objects(self) -> frozenset:
+        """The object rows of its triangles (of :attr:`rows`; empty without them)."""
+        return frozenset(np.unique(self.rows).tolist()) if self.rows is not None else frozenset()
 
     @cached_property
     def corners(self) -> np.ndarray | None:
@@ -291,6 +301,7 @@ class RayCaster:
                               + (np.zeros(0, np.int64),) * (2 - len(self.parts)))
         self._pool = pool
         self._closed: dict[int, bool] = {}
+        self._static = static
         self._corner_scales = None
         self.record_pool = record_pool if record_pool is not None else RecordPool()
 
@@ -299,10 +310,26 @@ class RayCaster:
         return (np.asarray(points, np.float64) - self.origin) @ self.frame[:3, :3]
 
     def closed(self, row: int) -> bool:
-        """Whether object ``row``'s triangles form closed surfaces (:func:`closed_surface`); kept per caster."""
+        """Whether object ``row``'s triangles form closed surfaces (:func:`closed_surface`); kept per caster, and for
+        the static objects in the kept static part (:attr:`StaticPart.closed`: for the run, while it is reused)."""
         if row not in self._closed:
-            self._closed[row] = closed_surface(self.buffers.triangles[self.triangle_object == row])
+            kept = self._kept_closed
+            if kept is not None and row in self._static.objects:
+                if row not in kept:
+                    kept[row] = closed_surface(self.buffers.triangles[self.triangle_object == row])
+                self._closed[row] = kept[row]
+            else:
+                self._closed[row] = closed_surface(self.buffers.triangles[self.triangle_object == row])
         return self._closed[row]
+
+    @cached_property
+    def _kept_closed(self) -> dict | None:
+        """The static part's :attr:`StaticPart.closed` when these buffers give its triangles the rows it keeps (a static
+        row's triangles are then the same ones: the part's, compared or keyed by the cache), else ``None``."""
+        static = self._static
+        if static is None or static.rows is None or len(static.rows) != len(static.triangle):
+            return None
+        return static.closed if np.array_equal(self.triangle_object[as_block(static.triangle)], static.rows) else None
 
     def corner_scales(self) -> np.ndarray:
         """``(m,)`` float64 largest local coordinate of each triangle's corners; 0 for diffuse ones (never re-launched from).
@@ -644,13 +671,15 @@ class CasterCache:
             self.builds += 1
             if not moving.any() and not follow:  # nothing moves: the whole scene is the static part
                 caster = RayCaster(buffers, frame, self.threads, kernel=self.kernel, record_pool=self.record_pool, pool=self.pool)
-                self.kept = StaticPart(frame, static, geometry, caster.parts[0] if caster.parts else None, caster.plane_normal, caster.plane_offset)
+                self.kept = StaticPart(frame, static, geometry, caster.parts[0] if caster.parts else None, caster.plane_normal, caster.plane_offset,
+                                       np.array(caster.triangle_object), caster._closed)  # fmt: skip
                 return caster
             local = (np.asarray(buffers.vertices, np.float64) - home[:3, 3]) @ home[:3, :3]
             triangles = np.ascontiguousarray(buffers.triangles, np.int32)
             check_extent(local, triangles, buffers)
             normal, offset = triangle_planes(local, triangles[static], choose_kernels(self.kernel))
-            part = self.kept = StaticPart(home, static, geometry, embree_part(local, triangles, static, normal), normal, offset)
+            part = self.kept = StaticPart(home, static, geometry, embree_part(local, triangles, static, normal), normal, offset,
+                                          np.array(buffers.triangle_object[as_block(static)]))
         return RayCaster(buffers, frame, self.threads, kernel=self.kernel, static=part, record_pool=self.record_pool, pool=self.pool)
 
 
