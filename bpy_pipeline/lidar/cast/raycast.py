@@ -314,13 +314,20 @@ class RayCaster:
         the static objects in the kept static part (:attr:`StaticPart.closed`: for the run, while it is reused)."""
         if row not in self._closed:
             kept = self._kept_closed
-            if kept is not None and row in self._static.objects:
+            if kept is None:
+                self._closed[row] = closed_surface(self._triangles_of(row, slice(None)))
+            elif row in self._static.objects:
                 if row not in kept:
-                    kept[row] = closed_surface(self.buffers.triangles[self.triangle_object == row])
+                    kept[row] = closed_surface(self._triangles_of(row, as_block(self._static.triangle)))
                 self._closed[row] = kept[row]
-            else:
-                self._closed[row] = closed_surface(self.buffers.triangles[self.triangle_object == row])
+            else:  # not a row of the static part's triangles: all its triangles are among the others
+                self._closed[row] = closed_surface(self._triangles_of(row, complement(self._static.triangle, len(self.triangle_object))))
         return self._closed[row]
+
+    def _triangles_of(self, row: int, among) -> np.ndarray:
+        """``(t, 3)`` the buffer triangles of object ``row``, in buffer order, searched ``among`` the triangles a slice or
+        (k,) sorted indices give (which must hold all of that row's)."""
+        return self.buffers.triangles[among][self.triangle_object[among] == row]
 
     @cached_property
     def _kept_closed(self) -> dict | None:
