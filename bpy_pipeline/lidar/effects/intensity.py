@@ -40,7 +40,7 @@ from ...schema import meta
 from .base import Chunk, Effect, register_effect
 
 MIN_RANGE = 1e-3  # m: ranges are clamped here before dividing by them
-MAX_RINGS = 1024  # lasers a unit's gains and offsets are drawn for (ring ids at or above wrap round)
+MAX_RINGS = 1024  # lasers a unit's gains and offsets are drawn for (ring ids at or above wrap round); a power of two
 
 
 @dataclass(frozen=True)
@@ -94,7 +94,7 @@ def read_out(value: np.ndarray, range_m: np.ndarray, ring: np.ndarray, reading: 
     range_m (p,) m; ring (p,) laser ids; ``rng`` draws the per-return factor (needed when ``noise_sd`` > 0).
     Returns (p,) float32."""
     gain, off = laser_calibration(int(reading.unit_seed), float(scale), float(offset), float(reading.gain_sd), float(reading.offset_sd))
-    k = np.asarray(ring, np.int64) % MAX_RINGS
+    k = np.asarray(ring, np.int64) & (MAX_RINGS - 1)  # ring mod MAX_RINGS (a power of two: the same for negative ids), without a division
     f = range_factor(range_m, reading.compensated_range, reading.exponent)
     if reading.response == 1.0:
         power = np.asarray(value, np.float32) * gain[k] * f
@@ -112,6 +112,8 @@ def reflectance(beam: np.ndarray, incidence_exponent: float = 1.0) -> np.ndarray
     beam : (p,) BEAM_DTYPE; returns (p,) float32."""
     if incidence_exponent == 1.0:
         return beam["reflectivity"] * beam["cos_incidence"] * beam["gain"]
+    if incidence_exponent == 0.0:  # cos^0 is exactly 1 (NaN's too), and rho times 1 is rho: the same bits
+        return beam["reflectivity"] * beam["gain"]
     cos = np.maximum(beam["cos_incidence"], np.float32(0.0)) ** np.float32(incidence_exponent)
     return beam["reflectivity"] * cos * beam["gain"]
 
