@@ -516,8 +516,11 @@ class RayCaster:
         turned = np.concatenate([d + JITTER * across for across in ways])
         turned /= row_norms(turned)[:, None]
         o32 = np.ascontiguousarray(np.concatenate([o + shift[:, None] * across for across in ways]), np.float32)
-        t4, p4 = self._embree(o32, np.ascontiguousarray(turned, np.float32), np.tile(far[rays], len(ways)))
         best_t, best_p = tfar[rays].copy(), prim[rays].copy()
+        # A way wins only when strictly nearer than the ray's own hit: Embree looks no farther (the nearest hit within
+        # that bound is the one it finds unbounded, and a hit beyond never wins), and skips more of the scene.
+        bound = np.where(best_p >= 0, best_t, far[rays])
+        t4, p4 = self._embree(o32, np.ascontiguousarray(turned, np.float32), np.tile(bound, len(ways)))
         moved = np.zeros(len(rays), bool)
         for t2, p2 in zip(t4.reshape(len(ways), len(rays)), p4.reshape(len(ways), len(rays))):  # in order: a later way wins only when strictly nearer
             better = (p2 >= 0) & ((best_p < 0) | (t2 < best_t))
