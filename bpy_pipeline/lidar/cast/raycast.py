@@ -318,7 +318,7 @@ class RayCaster:
                 self._closed[row] = closed_surface(self._triangles_of(row, slice(None)))
             elif row in self._static.objects:
                 if row not in kept:
-                    kept[row] = closed_surface(self._triangles_of(row, as_block(self._static.triangle)))
+                    kept[row] = closed_surface(self._triangles_of(row, slice(None)))
                 self._closed[row] = kept[row]
             else:  # not a row of the static part's triangles: all its triangles are among the others
                 self._closed[row] = closed_surface(self._triangles_of(row, complement(self._static.triangle, len(self.triangle_object))))
