@@ -4,7 +4,7 @@
 import numpy as np
 
 from bpy_pipeline.buffers import SceneBuffers
-from bpy_pipeline.lidar.cast.raycast import CasterCache, RayCaster
+from bpy_pipeline.lidar.cast.raycast import CasterCache, RayCaster, closed_surface
 
 
 def box_mesh(centre, half, splits=1):
@@ -109,3 +109,39 @@ def test_static_part_follows_a_sensor_that_moves_without_turning():
     for other in (turned, far):
         cache.caster(buffers, other, moving, follow=True)
     assert cache.builds == 3
+
+
+def test_rows_as_a_block_and_their_complement():
+    """``as_block`` gives consecutive sorted rows as a slice, anything else as given; ``complement`` the other rows."""
+    from bpy_pipeline.lidar.cast.raycast import as_block, complement
+
+    assert as_block(np.arange(3, 8)) == slice(3, 8)
+    gaps = np.array([1, 2, 4])
+    assert as_block(gaps) is gaps
+    assert complement(np.arange(0, 5), 9) == slice(5, 9)
+    assert complement(np.arange(4, 9), 9) == slice(0, 4)
+    assert complement(np.arange(0, 9), 9) == slice(9, 9)
+    assert complement(np.zeros(0, np.int64), 9) == slice(0, 9)
+    assert np.array_equal(complement(np.arange(2, 5), 9), [0, 1, 5, 6, 7, 8])
+    assert np.array_equal(complement(gaps, 6), [0, 3, 5])
+
+
+def test_kept_static_part_keeps_its_objects_closedness_and_planes():
+    """The static room first in the buffers (a block of rows) and a moving cart after it, poses moved along x
+    (``follow``): every caster's planes are a fresh caster's bit for bit, and the room's closedness is worked out
+    once for the run (kept in the static part) while the cart's stays each caster's own."""
+    room = box_mesh([20.0, 0, 2], np.array([60.0, 9.0, 4.0]), splits=4)
+    cache = CasterCache(threads=2)
+    for k in range(3):
+        buffers = SceneBuffers.from_meshes({"room": room, "cart": box_mesh([3.0 + k, 1.0, 1.0], np.array([1.0, 0.6, 0.8]), 1 + k)})
+        pose = np.eye(4)
+        pose[:3, 3] = [-30.0 + 7.3 * k, -1.75, 1.73]
+        caster = cache.caster(buffers, pose, np.array([False, True]), key="room", follow=True)
+        fresh = RayCaster(buffers, pose, threads=2)
+        assert np.array_equal(caster.plane_normal.view(np.int64), fresh.plane_normal.view(np.int64))
+        assert np.array_equal(caster.plane_offset.view(np.int64), fresh.plane_offset.view(np.int64))
+        assert [caster.closed(row) for row in (0, 1)] == [closed_surface(buffers.triangles[buffers.triangle_object == row]) for row in (0, 1)]
+        assert list(cache.kept.closed) == [0]  # the cart's row is not the static part's
+    assert cache.builds == 1 and cache.reuses == 2
+    cache.kept.closed[0] = "kept"  # what the part keeps is what the next caster answers
+    assert cache.caster(buffers, pose, np.array([False, True]), key="room", follow=True).closed(0) == "kept"

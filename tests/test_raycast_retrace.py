@@ -1,9 +1,11 @@
-"""Re-traced rays go as far as the query asked, not as far as their first (suspect) hit.
+"""Re-traced rays are bounded by their own first hit (the query's limit where they missed), and the caller's arrays
+stay untouched.
 
 embreex's ``EmbreeScene.run(..., dists=far)`` writes each hit's distance back into ``far``. The
 caster re-traces suspect rays (a back face of an object the same query also hit from the
-front: raycast.py, module notes); those re-traces must be bounded by the query's own limits,
-not by the distances Embree wrote into the first trace's array.
+front: raycast.py, module notes); a moved ray wins only when strictly nearer than the ray's own
+hit, so each re-trace is asked no farther than that hit (from the first trace's answer, a copy),
+and the caller's limits keep their values.
 """
 
 import numpy as np
@@ -26,18 +28,23 @@ def test_retraced_rays_keep_the_querys_range_and_the_callers_arrays_stay_untouch
     directions /= np.linalg.norm(directions, axis=1, keepdims=True)
     limits = np.full(n, 40.0)
 
-    seen = []  # the distance limits every Embree call was given, as it was given them
+    seen, answers = [], []  # the distance limits every Embree call was given, as it was given them, and its answers
     embree = caster._embree
 
     def spy(o32, d32, far):
         seen.append(np.array(far, np.float64))
-        return embree(o32, d32, far)
+        answers.append(tuple(np.array(a) for a in embree(o32, d32, far)))
+        return answers[-1]
 
     caster._embree = spy
     hits = caster.intersect(origins, directions, limits)
     assert len(seen) == 2, "the back-face rays were not re-traced (one first trace, then the moved ones in one query)"
     assert len(seen[1]) == 4 * (n // 2), "each back-face ray is moved four ways"
-    np.testing.assert_array_equal(seen[1], 40.0)  # every re-trace is bounded by the query's 40 m
+    np.testing.assert_array_equal(seen[0], 40.0)
+    back = np.arange(1, n, 2)
+    first_hit = answers[0][0][back].astype(np.float64)
+    assert (answers[0][1][back] >= 0).all() and (first_hit < 40.0).all()
+    np.testing.assert_array_equal(seen[1], np.tile(first_hit, 4))  # every re-trace is bounded by its ray's own hit
     np.testing.assert_array_equal(limits, 40.0)
     # and the answer is the quad itself for every ray, at the exact distance
     assert np.array_equal(hits.ray, np.arange(n))

@@ -336,8 +336,7 @@ def parts_buffers(table: ClassTable, parts, extra_rules=(), keep_within=None) ->
     """
     labeller = _Labeller(table, extra_rules)
     meshes: dict[tuple, tuple] = {}
-    placements: dict[tuple, list[np.ndarray]] = {}
-    identity = np.eye(4)
+    placements: dict[tuple, list[np.ndarray] | None] = {}
     for name, properties, vertices, triangles in parts:
         local = np.asarray(vertices, np.float32).reshape(-1, 3).astype(np.float64)
         if not len(triangles):
@@ -345,16 +344,27 @@ def parts_buffers(table: ClassTable, parts, extra_rules=(), keep_within=None) ->
         if keep_within is not None and not _near_bounds(local.min(axis=0), local.max(axis=0), *keep_within):
             continue
         owner = _Tags(name, properties)
+        # placed by the identity: the world vertices are the local ones plus 0.0, the bits an identity placement's einsum
+        # gives finite coordinates (each times 1 plus the others times 0: exact, and a -0.0 comes out +0.0; a
+        # non-finite vertex is refused by SceneBuffers.check either way, naming the same object)
+        local += 0.0
         meshes[(name, "")] = (local, np.asarray(triangles, np.int32).reshape(-1, 3), None, None)
-        placements[((name, ""), labeller.row(owner, [name]))] = [identity]
+        placements[((name, ""), labeller.row(owner, [name]))] = None
     return _assembled(meshes, placements, labeller)
 
 
 def _assembled(meshes: dict, placements: dict, labeller: _Labeller) -> SceneBuffers:
-    """The buffers of ``placements`` ({(mesh key, row): [world matrices (4, 4)]}) of ``meshes`` ({key: (local vertices, triangles, ...)})."""
+    """The buffers of ``placements`` ({(mesh key, row): [world matrices (4, 4)]}, or ``None`` for a mesh whose vertices
+    are world already) of ``meshes`` ({key: (local vertices, triangles, ...)})."""
     vertices, triangles, triangle_object, offset = [], [], [], 0
     for (key, row), matrices in placements.items():
         local, tris = meshes[key][:2]
+        if matrices is None:
+            vertices.append(local)
+            triangles.append(tris + np.int32(offset))
+            triangle_object.append(np.full(len(tris), row, np.int32))
+            offset += len(local)
+            continue
         stack = np.asarray(matrices)  # (g, 4, 4)
         world = np.einsum("gij,nj->gni", stack[:, :3, :3], local) + stack[:, None, :3, 3]
         vertices.append(world.reshape(-1, 3))
@@ -365,7 +375,7 @@ def _assembled(meshes: dict, placements: dict, labeller: _Labeller) -> SceneBuff
     objects = labeller.table_out()
     if not vertices:
         return SceneBuffers(np.zeros((0, 3)), np.zeros((0, 3), np.int32), np.zeros(0, np.int32), objects)
-    return SceneBuffers(np.concatenate(vertices), np.concatenate(triangles).astype(np.int32), np.concatenate(triangle_object), objects)
+    return SceneBuffers(np.concatenate(vertices), np.concatenate(triangles).astype(np.int32, copy=False), np.concatenate(triangle_object), objects)
 
 
 def _drawn_as_instance(depsgraph) -> set[str]:
@@ -418,5 +428,5 @@ def _near_corners(local: np.ndarray, matrix: np.ndarray, centre, radius: float) 
 
 def _near_bounds(low: np.ndarray, high: np.ndarray, centre, radius: float) -> bool:
     """Whether the world bounds ``low``, ``high`` (3,) come within ``radius`` m of ``centre`` (3,)."""
-    nearest = np.clip(np.asarray(centre, float), low, high)
+    nearest = np.minimum(np.maximum(np.asarray(centre, float), low), high)  # np.clip's values, without its dispatch
     return float(np.linalg.norm(nearest - centre)) <= radius

@@ -48,7 +48,7 @@ import sys
 import threading
 import weakref
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cached_property
 
 import numpy as np
@@ -151,22 +151,27 @@ class EmbreePart:
     handle: int = 0
 
 
-def embree_part(local: np.ndarray, triangles: np.ndarray, subset: np.ndarray | None, normal: np.ndarray) -> EmbreePart | None:
+def embree_part(local: np.ndarray, triangles: np.ndarray, subset: np.ndarray | slice | None, normal: np.ndarray) -> EmbreePart | None:
     """The Embree scene of ``triangles[subset]`` (all when ``None``) without their zero-area ones, committed.
 
-    local : (n, 3) float64 vertices, local frame; normal : (s,) the subset's plane normals (zero: no area)
+    local : (n, 3) float64 vertices, local frame; subset : (s,) int triangle indices, or a slice of them;
+    normal : (s, 3) the subset's plane normals (zero: no area). Embree is given the rows of ``local`` from the
+    lowest to the highest vertex the chosen triangles use (their indices moved down to match): the same
+    float32 corners and primitives, without a copy of the vertices no chosen triangle uses.
     """
     solid = np.flatnonzero(normal.any(axis=1))
     if not len(solid):
         return None
-    count = len(triangles) if subset is None else len(subset)
     if subset is None:
-        index = None if len(solid) == count else solid
+        index = None if len(solid) == len(triangles) else solid
+    elif isinstance(subset, slice):
+        index = solid + subset.start
     else:
         index = subset[solid]
     chosen = triangles if index is None else triangles[index]
+    low, high = int(chosen.min()), int(chosen.max())
     scene = rtcore_scene.EmbreeScene()
-    keep = attach_triangles(scene, local, chosen)
+    keep = attach_triangles(scene, local[low : high + 1], chosen - np.int32(low) if low else chosen)
     # Embree commits the scene on the first query: do it once here, before threads share it.
     scene.run(np.zeros((1, 3), np.float32), np.array([[0, 0, 1]], np.float32), output=1)
     return EmbreePart(scene, None if index is None else index.astype(np.int64), keep, scene_handle(scene))
@@ -177,6 +182,9 @@ class StaticPart:
     """What :class:`CasterCache` keeps of the static objects: their Embree scene and planes, local frame.
 
     triangle : (s,) int64 buffer triangles of the static objects; normal (s, 3), offset (s,) their planes
+    rows : (s,) the object row of each of them when it was kept (a copy), or ``None``; closed : whether each of those
+        rows' triangles form closed surfaces (:meth:`RayCaster.closed`), filled by the casters that trace the part
+        while their buffers give its triangles these rows
     """
 
     frame: np.ndarray
@@ -185,6 +193,13 @@ class StaticPart:
     part: EmbreePart | None
     normal: np.ndarray
     offset: np.ndarray
+    rows: np.ndarray | None = None
+    closed: dict = field(default_factory=dict)
+
+    @cached_property
+    def objects(self) -> frozenset:
+        """The object rows of its triangles (of :attr:`rows`; empty without them)."""
+        return frozenset(np.unique(self.rows).tolist()) if self.rows is not None else frozenset()
 
     @cached_property
     def corners(self) -> np.ndarray | None:
@@ -257,17 +272,22 @@ class RayCaster:
                 self.plane_normal, self.plane_offset = triangle_planes(local, triangles, self.kernels)  # (m, 3), (m,) local frame
                 parts = [embree_part(local, triangles, None, self.plane_normal)]
             else:
-                moving = np.ones(len(triangles), bool)
-                moving[static.triangle] = False
-                moving = np.flatnonzero(moving)
-                self.plane_normal, self.plane_offset = np.empty((len(triangles), 3)), np.empty(len(triangles))
+                m = len(triangles)
+                self.plane_normal, self.plane_offset = np.empty((m, 3)), np.empty(m)
+                kept, moving = as_block(static.triangle), complement(static.triangle, m)  # slices where they are blocks of rows
+
+                def solve(rows):  # the planes of triangles[rows] into this caster's rows, in place where rows is a slice
+                    if isinstance(rows, slice):
+                        triangle_planes(local, triangles[rows], self.kernels, out=(self.plane_normal[rows], self.plane_offset[rows]))
+                    else:
+                        self.plane_normal[rows], self.plane_offset[rows] = triangle_planes(local, triangles[rows], self.kernels)
+
                 if shift.any():  # the static planes solved again in this frame: the bits a caster built here has
-                    self.plane_normal[static.triangle], self.plane_offset[static.triangle] = triangle_planes(local, triangles[static.triangle], self.kernels)
+                    solve(kept)
                 else:
-                    self.plane_normal[static.triangle], self.plane_offset[static.triangle] = static.normal, static.offset
-                normal, offset = triangle_planes(local, triangles[moving], self.kernels)
-                self.plane_normal[moving], self.plane_offset[moving] = normal, offset
-                parts = [static.part, embree_part(local, triangles, moving, normal)]
+                    self.plane_normal[kept], self.plane_offset[kept] = static.normal, static.offset
+                solve(moving)
+                parts = [static.part, embree_part(local, triangles, moving, self.plane_normal[moving])]
         # (q, 3) float64 added to the rays' local origins for each part: the kept static part's Embree scene lies in the
         # frame it was built in, a translation of this one (CasterCache); Embree only chooses the triangle, solved here
         self.part_shift = np.array([shift if p is parts[0] and static is not None else np.zeros(3) for p in parts if p is not None]).reshape(-1, 3)
@@ -281,6 +301,7 @@ class RayCaster:
                               + (np.zeros(0, np.int64),) * (2 - len(self.parts)))
         self._pool = pool
         self._closed: dict[int, bool] = {}
+        self._static = static
         self._corner_scales = None
         self.record_pool = record_pool if record_pool is not None else RecordPool()
 
@@ -289,10 +310,33 @@ class RayCaster:
         return (np.asarray(points, np.float64) - self.origin) @ self.frame[:3, :3]
 
     def closed(self, row: int) -> bool:
-        """Whether object ``row``'s triangles form closed surfaces (:func:`closed_surface`); kept per caster."""
+        """Whether object ``row``'s triangles form closed surfaces (:func:`closed_surface`); kept per caster, and for
+        the static objects in the kept static part (:attr:`StaticPart.closed`: for the run, while it is reused)."""
         if row not in self._closed:
-            self._closed[row] = closed_surface(self.buffers.triangles[self.triangle_object == row])
+            kept = self._kept_closed
+            if kept is None:
+                self._closed[row] = closed_surface(self._triangles_of(row, slice(None)))
+            elif row in self._static.objects:
+                if row not in kept:
+                    kept[row] = closed_surface(self._triangles_of(row, slice(None)))
+                self._closed[row] = kept[row]
+            else:  # not a row of the static part's triangles: all its triangles are among the others
+                self._closed[row] = closed_surface(self._triangles_of(row, complement(self._static.triangle, len(self.triangle_object))))
         return self._closed[row]
+
+    def _triangles_of(self, row: int, among) -> np.ndarray:
+        """``(t, 3)`` the buffer triangles of object ``row``, in buffer order, searched ``among`` the triangles a slice or
+        (k,) sorted indices give (which must hold all of that row's)."""
+        return self.buffers.triangles[among][self.triangle_object[among] == row]
+
+    @cached_property
+    def _kept_closed(self) -> dict | None:
+        """The static part's :attr:`StaticPart.closed` when these buffers give its triangles the rows it keeps (a static
+        row's triangles are then the same ones: the part's, compared or keyed by the cache), else ``None``."""
+        static = self._static
+        if static is None or static.rows is None or len(static.rows) != len(static.triangle):
+            return None
+        return static.closed if np.array_equal(self.triangle_object[as_block(static.triangle)], static.rows) else None
 
     def corner_scales(self) -> np.ndarray:
         """``(m,)`` float64 largest local coordinate of each triangle's corners; 0 for diffuse ones (never re-launched from).
@@ -472,8 +516,11 @@ class RayCaster:
         turned = np.concatenate([d + JITTER * across for across in ways])
         turned /= row_norms(turned)[:, None]
         o32 = np.ascontiguousarray(np.concatenate([o + shift[:, None] * across for across in ways]), np.float32)
-        t4, p4 = self._embree(o32, np.ascontiguousarray(turned, np.float32), np.tile(far[rays], len(ways)))
         best_t, best_p = tfar[rays].copy(), prim[rays].copy()
+        # A way wins only when strictly nearer than the ray's own hit: Embree looks no farther (the nearest hit within
+        # that bound is the one it finds unbounded, and a hit beyond never wins), and skips more of the scene.
+        bound = np.where(best_p >= 0, best_t, far[rays])
+        t4, p4 = self._embree(o32, np.ascontiguousarray(turned, np.float32), np.tile(bound, len(ways)))
         moved = np.zeros(len(rays), bool)
         for t2, p2 in zip(t4.reshape(len(ways), len(rays)), p4.reshape(len(ways), len(rays))):  # in order: a later way wins only when strictly nearer
             better = (p2 >= 0) & ((best_p < 0) | (t2 < best_t))
@@ -634,13 +681,15 @@ class CasterCache:
             self.builds += 1
             if not moving.any() and not follow:  # nothing moves: the whole scene is the static part
                 caster = RayCaster(buffers, frame, self.threads, kernel=self.kernel, record_pool=self.record_pool, pool=self.pool)
-                self.kept = StaticPart(frame, static, geometry, caster.parts[0] if caster.parts else None, caster.plane_normal, caster.plane_offset)
+                self.kept = StaticPart(frame, static, geometry, caster.parts[0] if caster.parts else None, caster.plane_normal, caster.plane_offset,
+                                       np.array(caster.triangle_object), caster._closed)  # fmt: skip
                 return caster
             local = (np.asarray(buffers.vertices, np.float64) - home[:3, 3]) @ home[:3, :3]
             triangles = np.ascontiguousarray(buffers.triangles, np.int32)
             check_extent(local, triangles, buffers)
             normal, offset = triangle_planes(local, triangles[static], choose_kernels(self.kernel))
-            part = self.kept = StaticPart(home, static, geometry, embree_part(local, triangles, static, normal), normal, offset)
+            part = self.kept = StaticPart(home, static, geometry, embree_part(local, triangles, static, normal), normal, offset,
+                                          np.array(buffers.triangle_object[as_block(static)]))
         return RayCaster(buffers, frame, self.threads, kernel=self.kernel, static=part, record_pool=self.record_pool, pool=self.pool)
 
 
@@ -685,9 +734,28 @@ def same_geometry(kept, geometry) -> bool:
     return all(a.dtype == b.dtype and a.shape == b.shape and np.array_equal(raw(a), raw(b)) for a, b in zip(kept, geometry))
 
 
+def as_block(index: np.ndarray) -> np.ndarray | slice:
+    """``index`` (k,) sorted, distinct rows as ``slice(first, last + 1)`` when they are consecutive (a view, no gather), else as given."""
+    if len(index) and int(index[-1]) - int(index[0]) + 1 == len(index):
+        return slice(int(index[0]), int(index[-1]) + 1)
+    return index
+
+
+def complement(index: np.ndarray, m: int) -> np.ndarray | slice:
+    """The rows of ``0..m-1`` not in ``index`` (k,) sorted, distinct: a slice when they are consecutive (:func:`as_block`), else (m - k,) int64."""
+    block = as_block(index)
+    if isinstance(block, slice) and (block.start == 0 or block.stop == m):
+        return slice(block.stop, m) if block.start == 0 else slice(0, block.start)
+    if not len(index):
+        return slice(0, m)
+    rest = np.ones(m, bool)
+    rest[index] = False
+    return np.flatnonzero(rest)
+
+
 def check_extent(local: np.ndarray, triangles: np.ndarray, buffers: SceneBuffers) -> None:
     """``InputError`` naming the first object with a vertex beyond :data:`MAX_COORDINATE` of the local origin."""
-    if not np.abs(local).max(initial=0.0) > MAX_COORDINATE:
+    if not (local.max(initial=0.0) > MAX_COORDINATE or local.min(initial=0.0) < -MAX_COORDINATE):  # |local| without its copy
         return
     too_far = np.abs(local).max(axis=1, initial=0.0) > MAX_COORDINATE
     if too_far.any():
@@ -700,15 +768,16 @@ def check_extent(local: np.ndarray, triangles: np.ndarray, buffers: SceneBuffers
             )
 
 
-def triangle_planes(vertices: np.ndarray, triangles: np.ndarray, compiled=None) -> tuple[np.ndarray, np.ndarray]:
+def triangle_planes(vertices: np.ndarray, triangles: np.ndarray, compiled=None, out=None) -> tuple[np.ndarray, np.ndarray]:
     """Unit normals ``(m, 3)`` float64 (winding order; zero for zero-area triangles) and offsets ``(m,)`` n . v0.
 
     vertices : (n, 3) float64; triangles : (m, 3) int indices. Computed in steps of
     :data:`PLANE_CHUNK` triangles so the temporaries stay small for 10-million-triangle scenes.
     compiled : :func:`.kernels.compiled`'s kernels: one pass, the same bits (``tests/test_scan_kernel.py``)
+    out : ``(normal, offset)`` to write them into ((m, 3) and (m,) float64, C-contiguous, e.g. a block of a caster's rows)
     """
     m = len(triangles)
-    normal, offset = np.empty((m, 3)), np.empty(m)
+    normal, offset = (np.empty((m, 3)), np.empty(m)) if out is None else out
     if compiled is not None and m:
         compiled.triangle_planes(np.ascontiguousarray(vertices, np.float64), np.ascontiguousarray(triangles), normal, offset)
         return normal, offset

@@ -40,7 +40,7 @@ from ...schema import meta
 from .base import Chunk, Effect, register_effect
 
 MIN_RANGE = 1e-3  # m: ranges are clamped here before dividing by them
-MAX_RINGS = 1024  # lasers a unit's gains and offsets are drawn for (ring ids at or above wrap round)
+MAX_RINGS = 1024  # lasers a unit's gains and offsets are drawn for (ring ids at or above wrap round); a power of two
 
 
 @dataclass(frozen=True)
@@ -84,27 +84,36 @@ def laser_calibration(unit_seed: int, scale: float, offset: float, gain_sd: floa
 
 def range_factor(range_m: np.ndarray, compensated_range: float, exponent: float) -> np.ndarray:
     """``f(R)``: 1 up to ``compensated_range``, ``(R_c / R)^exponent`` beyond; (p,) float32."""
-    r = np.maximum(np.asarray(range_m, np.float32), np.float32(MIN_RANGE))
-    return np.minimum(np.float32(1.0), (np.float32(compensated_range) / r) ** np.float32(exponent))
+    f = np.maximum(np.asarray(range_m, np.float32), np.float32(MIN_RANGE))
+    np.divide(np.float32(compensated_range), f, out=f)
+    f **= np.float32(exponent)  # as ``**`` (numpy's square for 2, its power otherwise), in place
+    return np.minimum(np.float32(1.0), f, out=f)
 
 
 def read_out(value: np.ndarray, range_m: np.ndarray, ring: np.ndarray, reading: ReadingModel, scale: float, offset: float,
              rng: np.random.Generator | None) -> np.ndarray:
     """The reading ``clip(g_k (a f(R))^gamma n - o_k, 0, 1)`` (module notes) of apparent reflectances ``value`` (p,);
     range_m (p,) m; ring (p,) laser ids; ``rng`` draws the per-return factor (needed when ``noise_sd`` > 0).
-    Returns (p,) float32."""
+    Returns (p,) float32. Each step in place on one float32 array (the operations and their order as written)."""
     gain, off = laser_calibration(int(reading.unit_seed), float(scale), float(offset), float(reading.gain_sd), float(reading.offset_sd))
-    k = np.asarray(ring, np.int64) % MAX_RINGS
+    k = np.asarray(ring, np.int64) & (MAX_RINGS - 1)  # ring mod MAX_RINGS (a power of two: the same for negative ids), without a division
     f = range_factor(range_m, reading.compensated_range, reading.exponent)
     if reading.response == 1.0:
-        power = np.asarray(value, np.float32) * gain[k] * f
+        power = np.asarray(value, np.float32) * gain[k]
+        power *= f
     else:
-        power = (np.maximum(np.asarray(value, np.float32), np.float32(0.0)) * f) ** np.float32(reading.response) * gain[k]
+        power = np.maximum(np.asarray(value, np.float32), np.float32(0.0))
+        power *= f
+        power **= np.float32(reading.response)
+        power *= gain[k]
     if reading.noise_sd > 0:
         if rng is None:
             raise ValueError("read_out: noise_sd > 0 needs a generator")
-        power *= np.exp(np.float32(reading.noise_sd) * rng.standard_normal(len(power), dtype=np.float32))
-    return np.clip(power - off[k], np.float32(0.0), np.float32(1.0))
+        factor = rng.standard_normal(len(power), dtype=np.float32)
+        factor *= np.float32(reading.noise_sd)
+        power *= np.exp(factor, out=factor)
+    power -= off[k]
+    return np.clip(power, np.float32(0.0), np.float32(1.0), out=power)
 
 
 def reflectance(beam: np.ndarray, incidence_exponent: float = 1.0) -> np.ndarray:
@@ -112,6 +121,8 @@ def reflectance(beam: np.ndarray, incidence_exponent: float = 1.0) -> np.ndarray
     beam : (p,) BEAM_DTYPE; returns (p,) float32."""
     if incidence_exponent == 1.0:
         return beam["reflectivity"] * beam["cos_incidence"] * beam["gain"]
+    if incidence_exponent == 0.0:  # cos^0 is exactly 1 (NaN's too), and rho times 1 is rho: the same bits
+        return beam["reflectivity"] * beam["gain"]
     cos = np.maximum(beam["cos_incidence"], np.float32(0.0)) ** np.float32(incidence_exponent)
     return beam["reflectivity"] * cos * beam["gain"]
 
