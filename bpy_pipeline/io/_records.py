@@ -41,3 +41,22 @@ def as_points(points, where: str) -> np.ndarray:
     for name in POINT_DTYPE.names:
         out[name] = arr[name]
     return out
+
+
+def packed_columns(points: np.ndarray, names: tuple[str, ...], dtype="<f4") -> np.ndarray:
+    """``(n, len(names))`` array of ``dtype`` holding the fields ``names`` of the ``(n,)`` structured ``points``, in that order.
+
+    Where the fields are consecutive and already of ``dtype`` (x, y, z and intensity of :data:`POINT_DTYPE`: float32), each
+    record's bytes are copied as one block; otherwise field by field. The same values either way.
+    """
+    dtype = np.dtype(dtype)
+    out = np.empty((len(points), len(names)), dtype)
+    fields = points.dtype.fields or {}
+    first = fields[names[0]][1] if names[0] in fields else 0
+    if all(name in fields and fields[name][0] == dtype and fields[name][1] == first + i * dtype.itemsize for i, name in enumerate(names)):
+        block = np.dtype({"names": ["b"], "formats": [f"V{len(names) * dtype.itemsize}"], "offsets": [first], "itemsize": points.dtype.itemsize})
+        out.view(f"V{len(names) * dtype.itemsize}")[:, 0] = points.view(block)["b"]
+    else:
+        for i, name in enumerate(names):
+            out[:, i] = points[name]
+    return out

@@ -30,7 +30,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..geometry.boxes import box_corners
-from ._records import as_points
+from ._records import as_points, packed_columns
 from .atomic import atomic_write, hashed_open
 
 BACKGROUND = (24, 24, 28)  # not a class colour of assets_manifest/labels.yaml
@@ -124,6 +124,7 @@ def _paint_kernels():
         return None
     import numba
 
+    # xyz: (n, 3) float32 points, each value taken to float64 as numpy's path has them.
     # numpy's path: col, row = rint(u), rint(v) as int64, kept where 0 <= col < panel_width and 0 <= row < height
     # (the float tests on the rounded values decide alike, also for NaN and out-of-range values, which numpy's
     # int64 cast turns into the smallest int64); then the splat's rule in point order. Written out in both
@@ -131,12 +132,13 @@ def _paint_kernels():
     @numba.njit(cache=True, nogil=True)
     def top(flat, best, xyz, colors, centre0, centre1, scale, half_w, half_h, width, panel_width, height, left):  # pragma: no cover
         for i in range(len(xyz)):  # u = half_w - (y - centre1) * scale, v = half_h - (x - centre0) * scale, depth z
-            col = np.rint(half_w - (xyz[i, 1] - centre1) * scale)
-            row = np.rint(half_h - (xyz[i, 0] - centre0) * scale)
+            col = np.rint(half_w - (np.float64(xyz[i, 1]) - centre1) * scale)
+            row = np.rint(half_h - (np.float64(xyz[i, 0]) - centre0) * scale)
             if col >= 0.0 and col < panel_width and row >= 0.0 and row < height:
                 p = np.int64(row) * width + np.int64(col) + left
-                if xyz[i, 2] >= best[p]:
-                    best[p] = xyz[i, 2]
+                z = np.float64(xyz[i, 2])
+                if z >= best[p]:
+                    best[p] = z
                     for c in range(flat.shape[1]):
                         flat[p, c] = colors[i, c]
 
@@ -144,7 +146,7 @@ def _paint_kernels():
     def perspective(flat, best, xyz, eye, rotation, colors, focal, half_w, half_h, width, panel_width, height, left):  # pragma: no cover
         # the camera frame as _camera has it; in front (depth > 0.1): u = half_w + focal * x / depth, v = half_h + focal * y / depth, depth -depth
         for i in range(len(xyz)):
-            dx, dy, dz = xyz[i, 0] - eye[0], xyz[i, 1] - eye[1], xyz[i, 2] - eye[2]
+            dx, dy, dz = np.float64(xyz[i, 0]) - eye[0], np.float64(xyz[i, 1]) - eye[1], np.float64(xyz[i, 2]) - eye[2]
             cam0 = dx * rotation[0, 0] + dy * rotation[0, 1] + dz * rotation[0, 2]
             cam1 = dx * rotation[1, 0] + dy * rotation[1, 1] + dz * rotation[1, 2]
             cam2 = dx * rotation[2, 0] + dy * rotation[2, 1] + dz * rotation[2, 2]
@@ -247,26 +249,28 @@ def _camera(p: np.ndarray, eye: np.ndarray, rotation: np.ndarray) -> np.ndarray:
 
 
 def percentiles(values: np.ndarray, q) -> list[float]:
-    """``np.percentile(values, q)`` (its default, linear interpolation) for a ``(n,)`` float array with ``n >= 1``, from one
-    partition of a copy at the ranks it needs: the same values at about half the time."""
+    """``np.percentile(values, q)`` (its default, linear interpolation) of a ``(n,)`` float array with ``n >= 1`` taken to
+    float64, from one partition of a copy at the ranks it needs: the same values at about half the time. A float32 array is
+    partitioned as it is (a rank's value is the same in either width), half the bytes."""
     n = len(values)
     at = [float(p) / 100 * (n - 1) for p in q]
     below = [int(np.floor(a)) for a in at]
     ranks = sorted({r for b in below for r in (b, min(b + 1, n - 1))})
-    part = np.partition(np.array(values, np.float64), ranks)
+    part = np.partition(np.array(values), ranks)
     out = []
     for a, b in zip(at, below):
-        lo, hi, t = part[b], part[min(b + 1, n - 1)], a - b
+        lo, hi, t = float(part[b]), float(part[min(b + 1, n - 1)]), a - b
         out.append(float(hi - (hi - lo) * (1 - t) if t >= 0.5 else lo + (hi - lo) * t))  # numpy's lerp, both halves
     return out
 
 
 def median(values: np.ndarray) -> float:
-    """``np.median`` of a ``(n,)`` float array with ``n >= 1``, from one partition at its middle rank(s)."""
+    """``np.median`` of a ``(n,)`` float array with ``n >= 1`` taken to float64, from one partition at its middle rank(s)
+    (a float32 array's as it is, as :func:`percentiles`)."""
     n = len(values)
     middle = sorted({(n - 1) // 2, n // 2})
-    part = np.partition(np.array(values, np.float64), middle)
-    return float(part[(n - 1) // 2] + part[n // 2]) / 2 if n % 2 == 0 else float(part[n // 2])
+    part = np.partition(np.array(values), middle)
+    return (float(part[(n - 1) // 2]) + float(part[n // 2])) / 2 if n % 2 == 0 else float(part[n // 2])
 
 
 def render_preview(points: np.ndarray, color_lut: np.ndarray, size: tuple[int, int] = SIZE, dot: int = 1, boxes: np.ndarray | None = None,
@@ -305,9 +309,7 @@ def render_indexed(points: np.ndarray, color_lut: np.ndarray, size: tuple[int, i
         raise InputError(f"preview: size must be at least (2, 1) pixels and dot >= 1, got size {size}, dot {dot}")
     if lut.ndim != 2 or lut.shape[1] != 3:
         raise InputError(f"preview: color_lut must be a (k, 3) uint8 table, got shape {lut.shape}")
-    xyz = np.empty((len(pts), 3))
-    for axis, name in enumerate("xyz"):
-        xyz[:, axis] = pts[name]
+    xyz = packed_columns(pts, ("x", "y", "z"))  # (n, 3) float32; float64 wherever a value enters arithmetic, as numpy's path has it
     semantic = pts["semantic"]
     if not np.isfinite(xyz).all():  # copies only when some point must go
         keep = np.isfinite(xyz).all(axis=1)
@@ -356,6 +358,7 @@ def render_indexed(points: np.ndarray, color_lut: np.ndarray, size: tuple[int, i
     centre = (low + high) / 2
 
     def top(p):
+        p = np.asarray(p, np.float64)
         return (panel - 1) / 2 - (p[:, 1] - centre[1]) * scale, (height - 1) / 2 - (p[:, 0] - centre[0]) * scale
 
     if kernels is not None:
@@ -381,7 +384,7 @@ def render_indexed(points: np.ndarray, color_lut: np.ndarray, size: tuple[int, i
     focal = 0.5 * panel / np.tan(np.radians(30.0))
 
     def perspective(p):
-        cam = _camera(p, eye, rotation)
+        cam = _camera(np.asarray(p, np.float64), eye, rotation)
         with np.errstate(divide="ignore", invalid="ignore"):
             return (panel - 1) / 2 + focal * cam[:, 0] / cam[:, 2], (height - 1) / 2 + focal * cam[:, 1] / cam[:, 2], cam[:, 2]
 
