@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ._records import packed_columns
 from .atomic import atomic_write, hashed_open, write_text_hashed
 from .kitti import write_image_sets
 from .splits import split_indices
@@ -37,7 +38,7 @@ def write_frame(out_dir: str | os.PathLike, stem: str, points: np.ndarray, boxes
     root = Path(out_dir) / "openpcdet"
     points_path, label = root / "points" / f"{stem}.npy", root / "labels" / f"{stem}.txt"
     with atomic_write(points_path) as tmp, hashed_open(tmp) as handle:  # hashed as written: np.save writes the same bytes through write()
-        np.save(handle, np.column_stack([points["x"], points["y"], points["z"], points["intensity"]]).astype(np.float32))
+        np.save(handle, packed_columns(points, ("x", "y", "z", "intensity"), np.float32))
     with atomic_write(label) as tmp:
         write_text_hashed(tmp, "".join(line + "\n" for line in label_lines(boxes if boxes is not None else [], names)))
     return [points_path, label]
