@@ -190,10 +190,18 @@ def splat(image: np.ndarray, col: np.ndarray, row: np.ndarray, depth: np.ndarray
     image.reshape(pixels, -1)[painted] = np.reshape(colors, (len(pixel), -1))[last[painted]]
 
 
+@cache
+def _glyph(char: str, scale: int) -> np.ndarray:
+    """``(5 * scale, 3 * scale)`` bool: the glyph of ``char`` (a space for an unknown one), each pixel a ``scale`` square."""
+    mask = GLYPHS.get(char, GLYPHS[" "]).repeat(scale, axis=0).repeat(scale, axis=1)
+    mask.flags.writeable = False  # shared by every call
+    return mask
+
+
 def draw_text(image: np.ndarray, text: str, col: int, row: int, scale: int = 2, color=INK) -> int:
     """Write ``text`` (lower-cased; unknown characters as spaces) with its top left at ``(col, row)``; returns the end column."""
     for char in text.lower():
-        mask = GLYPHS.get(char, GLYPHS[" "]).repeat(scale, axis=0).repeat(scale, axis=1)
+        mask = _glyph(char, scale)
         h, w = mask.shape
         r0, c0 = max(row, 0), max(col, 0)
         r1, c1 = min(row + h, image.shape[0]), min(col + w, image.shape[1])
@@ -389,8 +397,8 @@ def render_indexed(points: np.ndarray, color_lut: np.ndarray, size: tuple[int, i
 
     # top view: x up, y left; cropped to the bulk of the points, or of the points of the other classes
     # when one class (a railway's ground rings) holds most of them
-    focus = semantic != ids[counts.argmax()]
-    bulk = xyz[:, :2][focus] if counts.max() > 0.4 * len(semantic) and focus.sum() >= 100 else xyz[:, :2]
+    others = len(semantic) - counts.max()  # the points not of the class that holds most
+    bulk = xyz[:, :2][semantic != ids[counts.argmax()]] if counts.max() > 0.4 * len(semantic) and others >= 100 else xyz[:, :2]
     low, high = (np.array(v) for v in zip(*(percentiles(bulk[:, axis], (1, 99)) for axis in (0, 1))))
     span = np.maximum(high - low, 1e-6)
     low, high = low - 0.05 * span, high + 0.05 * span
