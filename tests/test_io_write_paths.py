@@ -92,3 +92,21 @@ def test_packed_columns_are_the_fields_stacked():
     for names in (("x", "y", "z"), ("x", "y", "z", "intensity"), ("x", "z"), ("intensity", "range")):
         assert np.array_equal(packed_columns(pts, names), np.column_stack([pts[name] for name in names]).astype("<f4"))
     assert packed_columns(pts, ("x", "y", "z"), np.float64).dtype == np.float64
+
+
+def test_the_compiled_labels_are_pack_labels(monkeypatch):
+    from bpy_pipeline.io import semantickitti
+    from bpy_pipeline.io.class_maps import semantic_kitti_lut
+
+    pts = random_points(5000, np.random.default_rng(9), instances=1 << 16)
+    pts["semantic"][:5] = [0, 1, 65535, 40, 255]
+    lut = semantic_kitti_lut()
+    expected = {None: semantickitti.pack_labels(pts["semantic"], pts["instance"]), "lut": semantickitti.pack_labels(lut[pts["semantic"]], pts["instance"])}
+    for kernel in ("compiled", "numpy"):
+        if kernel == "numpy":
+            monkeypatch.setattr(semantickitti, "_labels_kernel", lambda: None)
+        elif semantickitti._labels_kernel() is None:
+            continue
+        assert np.array_equal(semantickitti.frame_labels(pts), expected[None])
+        assert np.array_equal(semantickitti.frame_labels(pts, lut), expected["lut"]) and semantickitti.frame_labels(pts, lut).dtype == np.dtype("<u4")
+        assert np.array_equal(semantickitti.frame_labels(pts[1000:1100], lut), expected["lut"][1000:1100])

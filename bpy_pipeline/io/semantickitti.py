@@ -11,7 +11,9 @@ and a 16-bit instance; ring, time, range and bounces are not kept.
 
 from __future__ import annotations
 
+import importlib.util
 import os
+from functools import cache
 from pathlib import Path
 
 import numpy as np
@@ -52,6 +54,38 @@ def check_instances(instance: np.ndarray, where: str = "SemanticKITTI labels") -
             f"{where}: SemanticKITTI stores instance ids 0..{MAX_INSTANCE} in the high 16 bits of the label; "
             f"{bad} points have larger ids (max {int(instance.max())})"
         )
+
+
+@cache
+def _labels_kernel():
+    """The compiled :func:`frame_labels` (numba, cached on disk), or ``None`` without numba or with
+    ``BPY_PIPELINE_SCAN_KERNEL=numpy``: ``pack(semantic (n,) uint16, instance (n,) uint32, lut (65536,) uint16, use_lut, out (n,) uint32)``."""
+    if os.environ.get("BPY_PIPELINE_SCAN_KERNEL") == "numpy" or importlib.util.find_spec("numba") is None:
+        return None
+    import numba
+
+    @numba.njit(cache=True, nogil=True)
+    def pack(semantic, instance, lut, use_lut, out):  # pragma: no cover (compiled)
+        for i in range(len(out)):
+            label = np.uint32(lut[semantic[i]]) if use_lut else np.uint32(semantic[i])
+            out[i] = label | (np.uint32(instance[i]) << np.uint32(16))
+
+    return pack
+
+
+def frame_labels(points: np.ndarray, semantic_lut: np.ndarray | None = None) -> np.ndarray:
+    """``(n,) <u4``: the ``.label`` values of ``(n,)`` POINT_DTYPE ``points`` (:func:`pack_labels` of ``semantic_lut[semantic]``,
+    or of ``semantic`` without a table, and ``instance``), whose instance ids the caller has checked (:func:`check_instances`).
+    One compiled pass where numba is there and the table covers every uint16 id; the same values either way."""
+    kernel = _labels_kernel()
+    lut = np.zeros(1, np.uint16) if semantic_lut is None else semantic_lut
+    if (kernel is None or points.dtype != POINT_DTYPE or lut.dtype != np.uint16 or lut.ndim != 1
+            or (semantic_lut is not None and len(lut) < 1 << 16)):
+        semantic = points["semantic"] if semantic_lut is None else semantic_lut[points["semantic"]]
+        return np.ascontiguousarray(pack_labels(semantic, points["instance"]), "<u4")
+    out = np.empty(len(points), "<u4")
+    kernel(points["semantic"], points["instance"], lut, semantic_lut is not None, out)
+    return out
 
 
 def _xyzi_block(dtype: np.dtype) -> np.dtype | None:
@@ -102,8 +136,7 @@ def write_semantickitti(root: str | os.PathLike, sequence: int, frame: int, poin
                 for i, name in enumerate(("x", "y", "z", "intensity")):
                     scan[:, i] = pts[name][part]
             f_bin.write(scan)
-            semantic = pts["semantic"][part] if semantic_lut is None else semantic_lut[pts["semantic"][part]]
-            f_label.write(np.ascontiguousarray(pack_labels(semantic, pts["instance"][part], str(label_path))))
+            f_label.write(frame_labels(pts[part], semantic_lut))
     return bin_path, label_path
 
 
