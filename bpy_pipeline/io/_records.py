@@ -3,7 +3,8 @@ steps writers take through them.
 
 Writers convert and write :data:`WRITE_CHUNK` points at a time (:func:`chunks`), so what they
 allocate besides the points themselves stays a few tens of megabytes however large the scan
-(a terrestrial scan holds about 10 million points).
+(a terrestrial scan holds about 10 million points); a frame's PLY and SemanticKITTI files go
+:data:`CACHED_CHUNK` points at a time through one buffer.
 """
 
 from __future__ import annotations
@@ -14,6 +15,9 @@ from ..errors import InputError
 from ..lidar.points import POINT_DTYPE
 
 WRITE_CHUNK = 1 << 20  # points converted and written at a time
+# points converted at a time into one buffer by the frame writers (PLY, SemanticKITTI): a few hundred kB, which the
+# hash and the write call read again while they are still in the core's cache, and no new memory for each chunk
+CACHED_CHUNK = 1 << 14
 
 
 def chunks(n: int, size: int = WRITE_CHUNK) -> list[slice]:
@@ -43,14 +47,15 @@ def as_points(points, where: str) -> np.ndarray:
     return out
 
 
-def packed_columns(points: np.ndarray, names: tuple[str, ...], dtype="<f4") -> np.ndarray:
-    """``(n, len(names))`` array of ``dtype`` holding the fields ``names`` of the ``(n,)`` structured ``points``, in that order.
+def packed_columns(points: np.ndarray, names: tuple[str, ...], dtype="<f4", out: np.ndarray | None = None) -> np.ndarray:
+    """``(n, len(names))`` array of ``dtype`` holding the fields ``names`` of the ``(n,)`` structured ``points``, in that order
+    (in ``out``, a C-contiguous array of that shape and type, when given).
 
     Where the fields are consecutive and already of ``dtype`` (x, y, z and intensity of :data:`POINT_DTYPE`: float32), each
     record's bytes are copied as one block; otherwise field by field. The same values either way.
     """
     dtype = np.dtype(dtype)
-    out = np.empty((len(points), len(names)), dtype)
+    out = np.empty((len(points), len(names)), dtype) if out is None else out
     fields = points.dtype.fields or {}
     first = fields[names[0]][1] if names[0] in fields else 0
     if all(name in fields and fields[name][0] == dtype and fields[name][1] == first + i * dtype.itemsize for i, name in enumerate(names)):

@@ -25,7 +25,7 @@ import numpy as np
 
 from ..errors import InputError, path_argument
 from ..lidar.points import POINT_DTYPE
-from ._records import as_points, chunks
+from ._records import CACHED_CHUNK, as_points, chunks
 from .atomic import atomic_write, hashed_open
 
 # PLY scalar type names (both spellings of the spec) -> numpy type character codes.
@@ -147,14 +147,15 @@ def _records_kernel():
     return copy
 
 
-def ply_records(points: np.ndarray) -> np.ndarray:
-    """``(n,)`` :data:`PLY_DTYPE` records of ``(n,)`` POINT_DTYPE points (instance ids must be < 2**31).
+def ply_records(points: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """``(n,)`` :data:`PLY_DTYPE` records of ``(n,)`` POINT_DTYPE points (instance ids must be < 2**31), in ``out``
+    (a C-contiguous ``(n,)`` PLY_DTYPE array) when given.
 
     POINT_DTYPE points go through one compiled copy of bytes (:func:`_records_kernel`) where numba is there. Otherwise
     fields stored alike in both (x, y, z, intensity; time and range) are copied a run of bytes at a time, the others
     converted field by field. The bytes of a field-by-field copy either way.
     """
-    out = np.empty(len(points), PLY_DTYPE)
+    out = np.empty(len(points), PLY_DTYPE) if out is None else out
     kernel = _records_kernel() if points.dtype == POINT_DTYPE and len(points) else None
     if kernel is not None:
         kernel(np.ascontiguousarray(points).view(np.uint8).reshape(len(points), POINT_DTYPE.itemsize), out.view(np.uint8).reshape(len(out), PLY_DTYPE.itemsize))
@@ -199,8 +200,9 @@ def write_ply(path: str | os.PathLike, points: np.ndarray) -> Path:
         raise InputError(f"{path}: PLY scalar_instance is int (Open3D reads no uint); got instance ids up to {int(pts['instance'].max())}")
     with atomic_write(path) as tmp, hashed_open(tmp) as f:  # hashed as written (the dataset's commit reads no file back)
         f.write(ply_header(len(pts)))
-        for part in chunks(len(pts)):
-            f.write(ply_records(pts[part]))
+        buffer = np.empty(min(len(pts), CACHED_CHUNK), PLY_DTYPE)  # one buffer, reused: no new memory a chunk
+        for part in chunks(len(pts), CACHED_CHUNK):
+            f.write(ply_records(pts[part], buffer[: part.stop - part.start]))
     return path
 
 
