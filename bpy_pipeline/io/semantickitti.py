@@ -11,7 +11,6 @@ and a 16-bit instance; ring, time, range and bounces are not kept.
 
 from __future__ import annotations
 
-import importlib.util
 import os
 from functools import cache
 from pathlib import Path
@@ -20,7 +19,7 @@ import numpy as np
 
 from ..errors import InputError, path_argument
 from ..lidar.points import POINT_DTYPE
-from ._records import CACHED_CHUNK, as_points, chunks, packed_columns
+from ._records import CACHED_CHUNK, as_points, chunks, compiled_passes, packed_columns
 from .atomic import atomic_write, hashed_open
 
 MAX_INSTANCE = 0xFFFF
@@ -60,7 +59,7 @@ def check_instances(instance: np.ndarray, where: str = "SemanticKITTI labels") -
 def _labels_kernel():
     """The compiled :func:`frame_labels` (numba, cached on disk), or ``None`` without numba or with
     ``BPY_PIPELINE_SCAN_KERNEL=numpy``: ``pack(semantic (n,) uint16, instance (n,) uint32, lut (65536,) uint16, use_lut, out (n,) uint32)``."""
-    if os.environ.get("BPY_PIPELINE_SCAN_KERNEL") == "numpy" or importlib.util.find_spec("numba") is None:
+    if not compiled_passes():
         return None
     import numba
 
