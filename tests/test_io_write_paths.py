@@ -110,3 +110,11 @@ def test_the_compiled_labels_are_pack_labels(monkeypatch):
         assert np.array_equal(semantickitti.frame_labels(pts), expected[None])
         assert np.array_equal(semantickitti.frame_labels(pts, lut), expected["lut"]) and semantickitti.frame_labels(pts, lut).dtype == np.dtype("<u4")
         assert np.array_equal(semantickitti.frame_labels(pts[1000:1100], lut), expected["lut"][1000:1100])
+
+
+def test_class_counts_are_bincounts(monkeypatch):
+    ids = np.random.default_rng(10).integers(0, 300, 20000).astype(np.uint16)
+    expected = np.append(np.bincount(ids, minlength=300)[:260], np.count_nonzero(ids >= 260))
+    assert np.array_equal(preview.class_counts(ids, 260), expected) and np.array_equal(preview.class_counts(ids[:0], 260), np.zeros(261))
+    monkeypatch.setattr(preview, "_count_kernel", lambda: None)
+    assert np.array_equal(preview.class_counts(ids, 260), expected)

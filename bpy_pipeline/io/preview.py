@@ -164,6 +164,32 @@ def _paint_kernels():
     return top, perspective
 
 
+@cache
+def _count_kernel():
+    """The compiled count of :func:`class_counts` (numba, cached on disk), or ``None`` (as :func:`_splat_kernel`)."""
+    if _splat_kernel() is None:
+        return None
+    import numba
+
+    @numba.njit(cache=True, nogil=True)
+    def count(ids, counts):  # pragma: no cover (compiled)
+        top = len(counts) - 1
+        for i in range(len(ids)):
+            counts[min(np.int64(ids[i]), top)] += 1
+
+    return count
+
+
+def class_counts(ids: np.ndarray, k: int) -> np.ndarray:
+    """``(k + 1,)`` int64: how many of the ``(n,)`` non-negative integer ``ids`` are ``0 .. k - 1``, then how many are ``k`` or more."""
+    kernel = _count_kernel()
+    if kernel is None:
+        return np.bincount(np.minimum(ids, k), minlength=k + 1)
+    counts = np.zeros(k + 1, np.int64)
+    kernel(ids, counts)
+    return counts
+
+
 def splat(image: np.ndarray, col: np.ndarray, row: np.ndarray, depth: np.ndarray, colors: np.ndarray, depth_image: np.ndarray | None = None) -> None:
     """Paint ``colors`` (n, c) at pixels ``(row, col)`` of ``image`` ((h, w, c): c = 3 for RGB, 1 for palette indices) in place; the largest ``depth`` wins.
 
@@ -366,9 +392,10 @@ def render_indexed(points: np.ndarray, color_lut: np.ndarray, size: tuple[int, i
     frame = np.array(FRAME_COLOURS, np.uint8)
     if len(xyz) == 0:
         return np.zeros((height, width, 1), np.uint8), frame
-    if int(semantic.max()) >= len(lut):
+    per_class = class_counts(semantic, len(lut))  # points per class (a count, not a sort)
+    if per_class[-1]:
         raise InputError(f"preview: semantic id {int(semantic.max())} has no colour (color_lut has {len(lut)} entries)")
-    per_class = np.bincount(semantic, minlength=len(lut))  # points per class (a count, not a sort)
+    per_class = per_class[:-1]
     ids = np.flatnonzero(per_class)
     counts = per_class[ids]
     palette = np.concatenate([frame, lut[ids]])
