@@ -166,7 +166,7 @@ def label_lines(boxes: np.ndarray, points: np.ndarray, camera, maps: ClassMaps |
     regions = boxes[:0] if regions is None else regions
     order = points_of_instances(points["instance"], np.concatenate([boxes["instance"], regions["instance"]]))
     owners = points["instance"][order]
-    xyz = packed_columns(points, ("x", "y", "z"))[order]  # (m, 3) float32: the boxed instances' points, grouped by instance
+    xyz = packed_columns(points[order], ("x", "y", "z"))  # (m, 3) float32: the boxed instances' points, grouped by instance
     lines, dont_care = [], []
     for box, region in [(b, False) for b in boxes] + [(b, True) for b in regions]:
         mine = xyz[np.searchsorted(owners, box["instance"], "left") : np.searchsorted(owners, box["instance"], "right")]
@@ -248,13 +248,14 @@ def render_image(points: np.ndarray, camera, color_lut: np.ndarray, dot: int = 3
     width, height = (int(v) for v in camera.resolution)
     image = np.empty((height, width, 3), np.uint8)
     image.reshape(height, width * 3)[:] = np.tile(np.asarray(IMAGE_BACKGROUND, np.uint8), width)  # row by row: 30x faster than a 3-byte broadcast
-    xyz = packed_columns(points, ("x", "y", "z"))
+    xyz = packed_columns(points, ("x", "y", "z"), np.float64)  # the float32 values, as project takes them
     lut = np.asarray(color_lut, np.uint8)
     kernels = _square_kernels()
     if kernels is not None:  # project's products (the same matrix products), its sum and quotients in the compiled passes
-        cam = np.asarray(xyz, np.float64) @ tr[:, :3].T
+        cam = xyz @ tr[:, :3].T
         kernels.shift_rows(cam, np.ascontiguousarray(tr[:, 3]))
-        kernels.paint_squares(image.reshape(-1, 3), cam @ k.T, cam, points["semantic"], lut, dot, width, height, MIN_DEPTH, np.full(width * height, -np.inf))
+        pix = np.matmul(cam, k.T, out=xyz)  # into xyz's memory, no longer needed
+        kernels.paint_squares(image.reshape(-1, 3), pix, cam, points["semantic"], lut, dot, width, height, MIN_DEPTH, np.full(width * height, -np.inf))
         return image
     uv, depth = project(xyz, k, tr)
     seen = in_image(uv, depth, (width, height))

@@ -37,8 +37,10 @@ def write_frame(out_dir: str | os.PathLike, stem: str, points: np.ndarray, boxes
     """``openpcdet/points/NNNNNN.npy`` and ``openpcdet/labels/NNNNNN.txt`` of one frame."""
     root = Path(out_dir) / "openpcdet"
     points_path, label = root / "points" / f"{stem}.npy", root / "labels" / f"{stem}.txt"
-    with atomic_write(points_path) as tmp, hashed_open(tmp) as handle:  # hashed as written: np.save writes the same bytes through write()
-        np.save(handle, packed_columns(points, ("x", "y", "z", "intensity"), np.float32))
+    block = packed_columns(points, ("x", "y", "z", "intensity"), np.float32)
+    with atomic_write(points_path) as tmp, hashed_open(tmp) as handle:  # hashed as written
+        np.lib.format.write_array_header_1_0(handle, np.lib.format.header_data_from_array_1_0(block))  # np.save's bytes: its header (version 1.0 holds it),
+        handle.write(block)  # then the array, without np.save's copy of it for a file object that is not a file
     with atomic_write(label) as tmp:
         write_text_hashed(tmp, "".join(line + "\n" for line in label_lines(boxes if boxes is not None else [], names)))
     return [points_path, label]
