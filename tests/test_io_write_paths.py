@@ -118,3 +118,30 @@ def test_class_counts_are_bincounts(monkeypatch):
     assert np.array_equal(preview.class_counts(ids, 260), expected) and np.array_equal(preview.class_counts(ids[:0], 260), np.zeros(261))
     monkeypatch.setattr(preview, "_count_kernel", lambda: None)
     assert np.array_equal(preview.class_counts(ids, 260), expected)
+
+
+def test_the_shared_xyzi_block_writes_the_same_files_and_digests(tmp_path):
+    """SemanticKITTI's and the KITTI layout's velodyne files and OpenPCDet's points written from one x y z intensity
+    block and its digest: the bytes and the recorded sha256 of writing each from the points (more than one chunk)."""
+    import hashlib
+    import os
+
+    from bpy_pipeline.io import openpcdet, semantickitti
+    from bpy_pipeline.io._records import CACHED_CHUNK, xyzi_block
+    from bpy_pipeline.io.atomic import atomic_write, digests_while_writing, hashed_open
+
+    pts = random_points(3 * CACHED_CHUNK + 5, np.random.default_rng(12), instances=1 << 16)
+    files = {}
+    for shared in (None, xyzi_block(pts)):
+        out = tmp_path / ("shared" if shared else "alone")
+        with digests_while_writing() as digests:
+            written = [*semantickitti.write_semantickitti(out, 0, 3, pts, xyzi=shared),
+                       *kitti.write_frame_text(out, "000003", pts, None, CameraConfig(), xyzi=shared), *openpcdet.write_frame(out, "000003", pts, None, xyzi=shared)]
+        for path in written:
+            data = path.read_bytes()
+            assert digests[os.path.abspath(path)] == hashlib.sha256(data).hexdigest()
+            files.setdefault(path.relative_to(out), []).append(data)
+    assert len(files) == 8 and all(a == b for a, b in files.values())
+    with pytest.raises(ValueError, match="first write"), atomic_write(tmp_path / "x.bin") as tmp, hashed_open(tmp) as f:
+        f.write(b"header")
+        f.write(xyzi_block(pts).array, xyzi_block(pts).sha256)

@@ -9,8 +9,10 @@ allocate besides the points themselves stays a few tens of megabytes however lar
 
 from __future__ import annotations
 
+import hashlib
 import importlib.util
 import os
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -74,3 +76,21 @@ def packed_columns(points: np.ndarray, names: tuple[str, ...], dtype="<f4", out:
         for i, name in enumerate(names):
             out[:, i] = points[name]
     return out
+
+
+XYZI = ("x", "y", "z", "intensity")
+
+
+@dataclass(frozen=True)
+class XyziBlock:
+    """A cloud's x y z intensity as a velodyne ``.bin`` holds them: ``array`` (n, 4) <f4 (:func:`packed_columns`) and
+    ``sha256``, a hashlib sha256 object of its bytes (for :meth:`~.atomic.HashedFile.write`)."""
+
+    array: np.ndarray
+    sha256: object
+
+
+def xyzi_block(points: np.ndarray) -> XyziBlock:
+    """The :class:`XyziBlock` of the ``(n,)`` structured ``points``."""
+    array = packed_columns(points, XYZI)
+    return XyziBlock(array, hashlib.sha256(array.reshape(-1).view(np.uint8)))

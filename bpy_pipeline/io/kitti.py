@@ -37,7 +37,7 @@ import numpy as np
 from ..geometry.transforms import KITTI_SENSOR_HEIGHT, euler_xyz_matrix, sensor_to_output
 from .atomic import atomic_write, hashed_open, write_text_hashed
 from .class_maps import ClassMaps, load_class_maps
-from ._records import compiled_passes, packed_columns
+from ._records import XYZI, XyziBlock, compiled_passes, packed_columns
 from .preview import encode_png, splat
 from .splits import SPLITS, split_indices
 
@@ -286,7 +286,8 @@ def write_frame(out_dir: str | os.PathLike, stem: str, points: np.ndarray, boxes
 
 
 def write_frame_text(out_dir: str | os.PathLike, stem: str, points: np.ndarray, boxes: np.ndarray, camera, names: dict | None = None, folder: str = "training",
-                     to_points: np.ndarray | None = None, ground: np.ndarray | None = None, regions: np.ndarray | None = None) -> list[Path]:
+                     to_points: np.ndarray | None = None, ground: np.ndarray | None = None, regions: np.ndarray | None = None,
+                     xyzi: XyziBlock | None = None) -> list[Path]:
     """A frame's ``velodyne``, ``label_2``, ``calib`` and ``planes`` files under ``out_dir/kitti/<folder>``; returns their paths.
 
     folder : ``training``, or ``testing`` for a frame of the test split (where the loaders read test frames)
@@ -294,12 +295,13 @@ def write_frame_text(out_dir: str | os.PathLike, stem: str, points: np.ndarray, 
     ground : ``(4,)`` the ground plane ``n . p + d = 0`` in the points' frame (:func:`ground_plane`, :func:`plane_in_frame`);
         ``None``: level, KITTI's 1.73 m below the origin
     regions : BOX_DTYPE boxes too thin to label, written as DontCare regions where the camera sees them (:func:`label_lines`)
+    xyzi : :class:`~._records.XyziBlock` of ``points``, made once for the files that hold these bytes (``velodyne``'s)
     """
     root = Path(out_dir) / "kitti" / folder
     k, tr = camera_matrices(camera, to_points)
     velodyne = root / "velodyne" / f"{stem}.bin"
     with atomic_write(velodyne) as tmp, hashed_open(tmp) as f:  # hashed as written: the commit reads it back no more
-        f.write(packed_columns(points, ("x", "y", "z", "intensity")))
+        f.write(*((xyzi.array, xyzi.sha256) if xyzi is not None else (packed_columns(points, XYZI),)))
     lines = label_lines(boxes if boxes is not None else np.zeros(0, _box_dtype()), points, camera, names=names, to_points=to_points, regions=regions)
     plane = road_plane(tr, np.array([0.0, 0.0, 1.0, KITTI_SENSOR_HEIGHT]) if ground is None else ground)
     return [velodyne, _text(root / "label_2" / f"{stem}.txt", "".join(line + "\n" for line in lines)), _text(root / "calib" / f"{stem}.txt", calib_text(k, tr)),

@@ -19,7 +19,7 @@ import numpy as np
 
 from ..errors import InputError, path_argument
 from ..lidar.points import POINT_DTYPE
-from ._records import CACHED_CHUNK, as_points, chunks, compiled_passes, packed_columns
+from ._records import CACHED_CHUNK, XYZI, XyziBlock, as_points, chunks, compiled_passes, packed_columns
 from .atomic import atomic_write, hashed_open
 
 MAX_INSTANCE = 0xFFFF
@@ -89,7 +89,8 @@ def frame_labels(points: np.ndarray, semantic_lut: np.ndarray | None = None, out
     return out
 
 
-def write_semantickitti(root: str | os.PathLike, sequence: int, frame: int, points: np.ndarray, semantic_lut: np.ndarray | None = None) -> tuple[Path, Path]:
+def write_semantickitti(root: str | os.PathLike, sequence: int, frame: int, points: np.ndarray, semantic_lut: np.ndarray | None = None,
+                        xyzi: XyziBlock | None = None) -> tuple[Path, Path]:
     """Write one frame as ``root/sequences/SS/velodyne/NNNNNN.bin`` and ``.../labels/NNNNNN.label``.
 
     Parameters
@@ -106,6 +107,9 @@ def write_semantickitti(root: str | os.PathLike, sequence: int, frame: int, poin
     semantic_lut : (65536,) uint16, optional
         The label space written: ``semantic_lut[semantic]`` (SemanticKITTI's raw ids:
         :func:`~.class_maps.semantic_kitti_lut`); ``None`` writes ``semantic`` as it is.
+    xyzi : :class:`~._records.XyziBlock`, optional
+        The points' x y z intensity and their sha256, made once for the files that hold these bytes: the ``.bin`` is
+        written from it in one piece.
 
     Returns
     -------
@@ -117,9 +121,12 @@ def write_semantickitti(root: str | os.PathLike, sequence: int, frame: int, poin
     check_instances(pts["instance"], str(label_path))
     with atomic_write(bin_path) as tmp_bin, atomic_write(label_path) as tmp_label, hashed_open(tmp_bin) as f_bin, hashed_open(tmp_label) as f_label:
         scan, labels = np.empty((min(len(pts), CACHED_CHUNK), 4), "<f4"), np.empty(min(len(pts), CACHED_CHUNK), "<u4")  # reused a chunk
+        if xyzi is not None:
+            f_bin.write(xyzi.array, xyzi.sha256)
         for part in chunks(len(pts), CACHED_CHUNK):
             size = part.stop - part.start
-            f_bin.write(packed_columns(pts[part], ("x", "y", "z", "intensity"), out=scan[:size]))
+            if xyzi is None:
+                f_bin.write(packed_columns(pts[part], XYZI, out=scan[:size]))
             f_label.write(frame_labels(pts[part], semantic_lut, labels[:size]))
     return bin_path, label_path
 
