@@ -301,7 +301,10 @@ def write_frame_text(out_dir: str | os.PathLike, stem: str, points: np.ndarray, 
     k, tr = camera_matrices(camera, to_points)
     velodyne = root / "velodyne" / f"{stem}.bin"
     with atomic_write(velodyne) as tmp, hashed_open(tmp) as f:  # hashed as written: the commit reads it back no more
-        f.write(*((xyzi.array, xyzi.sha256) if xyzi is not None else (packed_columns(points, XYZI),)))
+        if xyzi is not None:
+            f.write(xyzi.array, xyzi.sha256)
+        else:
+            f.write(packed_columns(points, XYZI))
     lines = label_lines(boxes if boxes is not None else np.zeros(0, _box_dtype()), points, camera, names=names, to_points=to_points, regions=regions)
     plane = road_plane(tr, np.array([0.0, 0.0, 1.0, KITTI_SENSOR_HEIGHT]) if ground is None else ground)
     return [velodyne, _text(root / "label_2" / f"{stem}.txt", "".join(line + "\n" for line in lines)), _text(root / "calib" / f"{stem}.txt", calib_text(k, tr)),
