@@ -135,7 +135,8 @@ def test_the_shared_xyzi_block_writes_the_same_files_and_digests(tmp_path):
     for shared in (None, xyzi_block(pts)):
         out = tmp_path / ("shared" if shared else "alone")
         with digests_while_writing() as digests:
-            written = [*semantickitti.write_semantickitti(out, 0, 3, pts, xyzi=shared), *kitti.write_frame_text(out, "000003", pts, None, CameraConfig(), xyzi=shared),
+            written = [*semantickitti.write_semantickitti(out, 0, 3, pts, xyzi=shared),
+                       *kitti.write_frame_text(out, "000003", pts, None, CameraConfig(), xyzi=shared),
                        *openpcdet.write_frame(out, "000003", pts, None, xyzi=shared)]
         for path in written:
             data = path.read_bytes()
