@@ -123,6 +123,7 @@ def write_frame_files(frame, staging: Path, names: list[str]) -> list[Path]:
     finally:
         for thread in threads:
             thread.join()
+        frame.shared.clear()  # what the writers shared (Frame.shared), no longer needed
     for name in later:
         if name in failed:
             raise failed[name]

@@ -91,6 +91,8 @@ class Frame:
     mixed : a real-scan frame's working state (:class:`~bpy_pipeline.mixing.frame.MixState`), ``None`` otherwise
     files, record : the frame's files (relative to the output folder) and record, once committed
     timings : seconds per timed stage
+    shared : what the frame's writers make once and share while it is committed ({"xyzi": the x y z intensity block
+        several files hold, :func:`bpy_pipeline.io.formats._xyzi`})
     """
 
     index: int
@@ -115,6 +117,7 @@ class Frame:
     flash: dict[str, np.ndarray] = field(default_factory=dict)
     rig: RigFrame | None = None
     mixed: object = None
+    shared: dict = field(default_factory=dict)
 
     def __post_init__(self):
         self.pose = np.asarray(self.pose, np.float64)

@@ -3,10 +3,16 @@ steps writers take through them.
 
 Writers convert and write :data:`WRITE_CHUNK` points at a time (:func:`chunks`), so what they
 allocate besides the points themselves stays a few tens of megabytes however large the scan
-(a terrestrial scan holds about 10 million points).
+(a terrestrial scan holds about 10 million points); a frame's PLY and SemanticKITTI files go
+:data:`CACHED_CHUNK` points at a time through one buffer.
 """
 
 from __future__ import annotations
+
+import hashlib
+import importlib.util
+import os
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -14,6 +20,15 @@ from ..errors import InputError
 from ..lidar.points import POINT_DTYPE
 
 WRITE_CHUNK = 1 << 20  # points converted and written at a time
+# points converted at a time into one buffer by the frame writers (PLY, SemanticKITTI): a few hundred kB, which the
+# hash and the write call read again while they are still in the core's cache, and no new memory for each chunk
+CACHED_CHUNK = 1 << 14
+
+
+def compiled_passes() -> bool:
+    """Whether the writers' compiled passes (numba, cached on disk) are used: numba is importable and
+    ``BPY_PIPELINE_SCAN_KERNEL`` does not ask for the numpy paths (which write the same bytes)."""
+    return os.environ.get("BPY_PIPELINE_SCAN_KERNEL") != "numpy" and importlib.util.find_spec("numba") is not None
 
 
 def chunks(n: int, size: int = WRITE_CHUNK) -> list[slice]:
@@ -41,3 +56,41 @@ def as_points(points, where: str) -> np.ndarray:
     for name in POINT_DTYPE.names:
         out[name] = arr[name]
     return out
+
+
+def packed_columns(points: np.ndarray, names: tuple[str, ...], dtype="<f4", out: np.ndarray | None = None) -> np.ndarray:
+    """``(n, len(names))`` array of ``dtype`` holding the fields ``names`` of the ``(n,)`` structured ``points``, in that order
+    (in ``out``, a C-contiguous array of that shape and type, when given).
+
+    Where the fields are consecutive and already of ``dtype`` (x, y, z and intensity of :data:`POINT_DTYPE`: float32), each
+    record's bytes are copied as one block; otherwise field by field. The same values either way.
+    """
+    dtype = np.dtype(dtype)
+    out = np.empty((len(points), len(names)), dtype) if out is None else out
+    fields = points.dtype.fields or {}
+    first = fields[names[0]][1] if names[0] in fields else 0
+    if all(name in fields and fields[name][0] == dtype and fields[name][1] == first + i * dtype.itemsize for i, name in enumerate(names)):
+        block = np.dtype({"names": ["b"], "formats": [f"V{len(names) * dtype.itemsize}"], "offsets": [first], "itemsize": points.dtype.itemsize})
+        out.view(f"V{len(names) * dtype.itemsize}")[:, 0] = points.view(block)["b"]
+    else:
+        for i, name in enumerate(names):
+            out[:, i] = points[name]
+    return out
+
+
+XYZI = ("x", "y", "z", "intensity")
+
+
+@dataclass(frozen=True)
+class XyziBlock:
+    """A cloud's x y z intensity as a velodyne ``.bin`` holds them: ``array`` (n, 4) <f4 (:func:`packed_columns`) and
+    ``sha256``, a hashlib sha256 object of its bytes (for :meth:`~.atomic.HashedFile.write`)."""
+
+    array: np.ndarray
+    sha256: object
+
+
+def xyzi_block(points: np.ndarray) -> XyziBlock:
+    """The :class:`XyziBlock` of the ``(n,)`` structured ``points``."""
+    array = packed_columns(points, XYZI)
+    return XyziBlock(array, hashlib.sha256(array.reshape(-1).view(np.uint8)))

@@ -52,7 +52,9 @@ WRITE_SLICE = 1 << 20  # bytes handed to the kernel per write call (see HashedFi
 class HashedFile:
     """A binary file opened for writing whose bytes also go through sha256 (:func:`hashed_open`).
 
-    ``write(data)`` takes bytes or any contiguous buffer (a numpy array's ``memoryview``). It is hashed in one call and
+    ``write(data)`` takes bytes or any contiguous buffer (a numpy array's ``memoryview``). It is hashed in one call (or,
+    for the file's first write, ``write(data, digest)`` takes ``digest``, a sha256 object of exactly ``data``'s bytes, in
+    place of hashing them again: bytes several files hold, hashed once) and
     handed to the kernel in calls of :data:`WRITE_SLICE` bytes: at times, one write call of 2 MB or more cost this
     project's machine (Linux 6.18, ext4) about ten times the kernel time of the same bytes in calls of 1 MB or less
     (``benchmarks/bench_write_calls.py``, docs/performance.md); slices were never slower. Each call lets other
@@ -65,13 +67,18 @@ class HashedFile:
         self.digest = hashlib.sha256()
         self.size = 0
 
-    def write(self, data) -> int:
+    def write(self, data, digest=None) -> int:
         if hasattr(data, "view") and hasattr(data, "dtype"):  # a numpy array: its raw bytes, as ndarray.tofile writes them
             import numpy as np
 
             data = np.ascontiguousarray(data).reshape(-1).view(np.uint8)
         view = memoryview(data).cast("B")
-        self.digest.update(view)
+        if digest is None:
+            self.digest.update(view)
+        elif self.size:
+            raise ValueError(f"{self.path}: a digest of the data written is taken only for a file's first write")
+        else:
+            self.digest = digest.copy()
         for start in range(0, len(view), WRITE_SLICE):
             self.raw.write(view[start : start + WRITE_SLICE])
         self.size += len(view)

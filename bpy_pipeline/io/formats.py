@@ -13,6 +13,7 @@ from pathlib import Path
 from ..geometry.transforms import sensor_to_output
 from ..labels import load_class_table
 from . import kitti, npy, openpcdet, semantickitti, sustech, train_configs
+from ._records import WRITE_CHUNK, XyziBlock, xyzi_block
 from .class_maps import maps_for, semantic_kitti_lut
 from .layout import frame_stem, write_frame_las, write_frame_ply, write_frame_preview
 from .pcd import write_pcd
@@ -46,13 +47,25 @@ def _write_npy(frame, out: Path) -> list[Path]:
     return npy.write_npy_folder(Path(out) / "npy" / frame_stem(frame.index), frame.points, maps_for(frame.config.output.class_map))
 
 
+def _xyzi(frame) -> XyziBlock | None:
+    """The frame's x y z intensity block and its sha256 (:func:`._records.xyzi_block`), made once a frame for the files
+    that hold these bytes (SemanticKITTI's and the KITTI layout's ``velodyne`` files, OpenPCDet's points after their
+    header); ``None`` for a cloud of more than :data:`._records.WRITE_CHUNK` points (written a chunk at a time)."""
+    if len(frame.points) > WRITE_CHUNK:
+        return None
+    if "xyzi" not in frame.shared:
+        frame.shared["xyzi"] = xyzi_block(frame.points)
+    return frame.shared["xyzi"]
+
+
 def _write_semantickitti(frame, out: Path) -> list[Path]:
     """``sequences/SS/{velodyne,labels}/NNNNNN.*``: the sequence of the frame's split, SemanticKITTI's raw ids
     unless ``output.semantickitti.labels: project``."""
     config = frame.config
     lut = None if config.output.semantickitti.labels == "project" else semantic_kitti_lut()
     frame_stem(frame.index)
-    return list(semantickitti.write_semantickitti(out, sequence_of(frame.index, config.output.split, config.frames), frame.index, frame.points, lut))
+    sequence = sequence_of(frame.index, config.output.split, config.frames)
+    return list(semantickitti.write_semantickitti(out, sequence, frame.index, frame.points, lut, _xyzi(frame)))
 
 
 def _kitti_folder(frame) -> str:
@@ -66,7 +79,7 @@ def _write_kitti(frame, out: Path) -> list[Path]:
     found = (getattr(getattr(frame, "mixed", None), "rule_log", None) or {}).get("ground")  # a real scan's, where the mixing looked
     ground = kitti.points_ground(frame.pose, output.frame, found, output.kitti.camera.position)
     return kitti.write_frame_text(out, frame_stem(frame.index), frame.points, frame.boxes, output.kitti.camera, output.boxes.names, _kitti_folder(frame),
-                                  to_points, ground, frame.thin_boxes)
+                                  to_points, ground, frame.thin_boxes, _xyzi(frame))
 
 
 def _write_kitti_image(frame, out: Path) -> list[Path]:
@@ -77,7 +90,7 @@ def _write_kitti_image(frame, out: Path) -> list[Path]:
 
 
 def _write_openpcdet(frame, out: Path) -> list[Path]:
-    return openpcdet.write_frame(out, frame_stem(frame.index), frame.points, frame.boxes, frame.config.output.boxes.names)
+    return openpcdet.write_frame(out, frame_stem(frame.index), frame.points, frame.boxes, frame.config.output.boxes.names, _xyzi(frame))
 
 
 def _write_sustech(frame, out: Path) -> list[Path]:

@@ -28,13 +28,16 @@ fewer points than their class's minimum are DontCare regions, after the boxed ob
 from __future__ import annotations
 
 import os
+from functools import cache
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 
 from ..geometry.transforms import KITTI_SENSOR_HEIGHT, euler_xyz_matrix, sensor_to_output
 from .atomic import atomic_write, hashed_open, write_text_hashed
 from .class_maps import ClassMaps, load_class_maps
+from ._records import XYZI, XyziBlock, compiled_passes, packed_columns
 from .preview import encode_png, splat
 from .splits import SPLITS, split_indices
 
@@ -42,6 +45,7 @@ KITTI_AXES = np.array([[0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]])  # 
 IMAGE_BACKGROUND = (40, 40, 46)
 DONT_CARE = "DontCare -1 -1 -10 0.00 0.00 1.00 1.00 -1 -1 -1 -1000 -1000 -1000 -10"
 MIN_DEPTH = 0.1  # m in front of the camera for a point to project
+MAX_INSTANCE_TABLE = 1 << 22  # instance ids up to this are looked up in a table (4 MB of bools at most); larger ones searched
 
 
 def wrap_angle(angle):
@@ -130,6 +134,22 @@ def calib_text(k: np.ndarray, tr: np.ndarray) -> str:
     return "\n".join(rows) + "\n"
 
 
+def points_of_instances(instance: np.ndarray, wanted: np.ndarray) -> np.ndarray:
+    """``(m,)`` int64 indices of the points whose ``instance`` ((n,) ids) is one of ``wanted`` ((w,) ids), grouped by
+    instance in ascending order, each group in point order (a stable sort of only those points by instance)."""
+    wanted = np.asarray(wanted, np.int64)
+    if len(wanted) == 0 or len(instance) == 0:
+        return np.zeros(0, np.int64)
+    top = int(wanted.max())
+    if 0 <= int(wanted.min()) and top < MAX_INSTANCE_TABLE:  # a table of the ids up to the largest wanted one, then one look-up a point
+        table = np.zeros(top + 2, bool)
+        table[wanted] = True
+        picked = np.flatnonzero(table[np.minimum(instance, top + 1)])
+    else:
+        picked = np.flatnonzero(np.isin(instance, wanted))
+    return picked[np.argsort(instance[picked], kind="stable")]
+
+
 def label_lines(boxes: np.ndarray, points: np.ndarray, camera, maps: ClassMaps | None = None, names: dict | None = None, to_points: np.ndarray | None = None,
                 regions: np.ndarray | None = None) -> list[str]:
     """KITTI label lines of ``boxes`` (BOX_DTYPE, the level points' frame) seen by ``camera`` in ``points`` (POINT_DTYPE).
@@ -143,13 +163,13 @@ def label_lines(boxes: np.ndarray, points: np.ndarray, camera, maps: ClassMaps |
     maps = load_class_maps() if maps is None else maps
     k, tr = camera_matrices(camera, to_points)
     resolution = tuple(int(v) for v in camera.resolution)
-    xyz = np.stack([points["x"], points["y"], points["z"]], axis=1)
-    owner = np.argsort(points["instance"], kind="stable")  # the points of each instance, in their order, by one sort
-    owners = points["instance"][owner]
-    lines, dont_care = [], []
     regions = boxes[:0] if regions is None else regions
+    order = points_of_instances(points["instance"], np.concatenate([boxes["instance"], regions["instance"]]))
+    owners = points["instance"][order]
+    xyz = packed_columns(points[order], ("x", "y", "z"))  # (m, 3) float32: the boxed instances' points, grouped by instance
+    lines, dont_care = [], []
     for box, region in [(b, False) for b in boxes] + [(b, True) for b in regions]:
-        mine = xyz[owner[np.searchsorted(owners, box["instance"], "left") : np.searchsorted(owners, box["instance"], "right")]]
+        mine = xyz[np.searchsorted(owners, box["instance"], "left") : np.searchsorted(owners, box["instance"], "right")]
         uv, depth = project(mine, k, tr)
         seen = in_image(uv, depth, resolution)
         if not seen.any():
@@ -174,6 +194,50 @@ def label_lines(boxes: np.ndarray, points: np.ndarray, camera, maps: ClassMaps |
     return lines + dont_care or [DONT_CARE]
 
 
+@cache
+def _square_kernels():
+    """The compiled passes of :func:`render_image` (numba, cached on disk), or ``None`` without them
+    (:func:`~._records.compiled_passes`: no numba, or ``BPY_PIPELINE_SCAN_KERNEL=numpy``; both paths paint the same pixels).
+
+    ``shift_rows(cam (n, 3), t (3,))``: ``cam += t`` in place. ``paint_squares``: with ``pix = cam @ k.T``, each point's
+    :func:`project` values (``u = pix[:, 0] / cam[:, 2]``, ``v = pix[:, 1] / cam[:, 2]``, depth ``cam[:, 2]``: the same
+    IEEE operations, no fused multiply-add), then numpy's path: the points :func:`in_image` keeps, in order, each painting
+    its dot x dot square (rows of the square outer, columns inner, as np.meshgrid ravels them; clipped to the image) at
+    -depth with :func:`~.preview.splat`'s rule (at least as deep as the pixel's best wins).
+    """
+    if not compiled_passes():
+        return None
+    import numba
+
+    @numba.njit(cache=True, nogil=True)
+    def shift_rows(cam, t):  # pragma: no cover (compiled)
+        for i in range(cam.shape[0]):
+            for j in range(3):
+                cam[i, j] += t[j]
+
+    @numba.njit(cache=True, nogil=True)
+    def paint_squares(flat, pix, cam, semantic, lut, dot, width, height, min_depth, best):  # pragma: no cover (compiled)
+        first = -((dot - 1) // 2)
+        for i in range(len(cam)):
+            d = cam[i, 2]
+            if not d > min_depth:  # behind the camera, or NaN (before dividing: no division by zero)
+                continue
+            u, v = pix[i, 0] / d, pix[i, 1] / d
+            if not (u >= 0 and u < width and v >= 0 and v < height):
+                continue
+            col, row = np.int64(np.floor(u)), np.int64(np.floor(v))
+            colour = lut[min(np.int64(semantic[i]), len(lut) - 1)]
+            for dv in range(first, first + dot):
+                r = min(max(row + dv, 0), height - 1)
+                for du in range(first, first + dot):
+                    p = r * width + min(max(col + du, 0), width - 1)
+                    if -d >= best[p]:
+                        best[p] = -d
+                        flat[p, 0], flat[p, 1], flat[p, 2] = colour[0], colour[1], colour[2]
+
+    return SimpleNamespace(shift_rows=shift_rows, paint_squares=paint_squares)
+
+
 def render_image(points: np.ndarray, camera, color_lut: np.ndarray, dot: int = 3, to_points: np.ndarray | None = None) -> np.ndarray:
     """``(height, width, 3) uint8``: the LiDAR points seen by the camera, coloured by class, nearer over farther.
 
@@ -184,11 +248,19 @@ def render_image(points: np.ndarray, camera, color_lut: np.ndarray, dot: int = 3
     width, height = (int(v) for v in camera.resolution)
     image = np.empty((height, width, 3), np.uint8)
     image.reshape(height, width * 3)[:] = np.tile(np.asarray(IMAGE_BACKGROUND, np.uint8), width)  # row by row: 30x faster than a 3-byte broadcast
-    uv, depth = project(np.stack([points["x"], points["y"], points["z"]], axis=1), k, tr)
+    xyz = packed_columns(points, ("x", "y", "z"), np.float64)  # the float32 values, as project takes them
+    lut = np.asarray(color_lut, np.uint8)
+    kernels = _square_kernels()
+    if kernels is not None:  # project's products (the same matrix products), its sum and quotients in the compiled passes
+        cam = xyz @ tr[:, :3].T
+        kernels.shift_rows(cam, np.ascontiguousarray(tr[:, 3]))
+        pix = np.matmul(cam, k.T, out=xyz)  # into xyz's memory, no longer needed
+        kernels.paint_squares(image.reshape(-1, 3), pix, cam, points["semantic"], lut, dot, width, height, MIN_DEPTH, np.full(width * height, -np.inf))
+        return image
+    uv, depth = project(xyz, k, tr)
     seen = in_image(uv, depth, (width, height))
     if not seen.any():
         return image
-    lut = np.asarray(color_lut, np.uint8)
     semantic = np.minimum(points["semantic"][seen], len(lut) - 1)
     col, row = np.floor(uv[seen]).astype(np.int64).T
     offsets = np.arange(dot) - (dot - 1) // 2
@@ -214,7 +286,8 @@ def write_frame(out_dir: str | os.PathLike, stem: str, points: np.ndarray, boxes
 
 
 def write_frame_text(out_dir: str | os.PathLike, stem: str, points: np.ndarray, boxes: np.ndarray, camera, names: dict | None = None, folder: str = "training",
-                     to_points: np.ndarray | None = None, ground: np.ndarray | None = None, regions: np.ndarray | None = None) -> list[Path]:
+                     to_points: np.ndarray | None = None, ground: np.ndarray | None = None, regions: np.ndarray | None = None,
+                     xyzi: XyziBlock | None = None) -> list[Path]:
     """A frame's ``velodyne``, ``label_2``, ``calib`` and ``planes`` files under ``out_dir/kitti/<folder>``; returns their paths.
 
     folder : ``training``, or ``testing`` for a frame of the test split (where the loaders read test frames)
@@ -222,12 +295,16 @@ def write_frame_text(out_dir: str | os.PathLike, stem: str, points: np.ndarray, 
     ground : ``(4,)`` the ground plane ``n . p + d = 0`` in the points' frame (:func:`ground_plane`, :func:`plane_in_frame`);
         ``None``: level, KITTI's 1.73 m below the origin
     regions : BOX_DTYPE boxes too thin to label, written as DontCare regions where the camera sees them (:func:`label_lines`)
+    xyzi : :class:`~._records.XyziBlock` of ``points``, made once for the files that hold these bytes (``velodyne``'s)
     """
     root = Path(out_dir) / "kitti" / folder
     k, tr = camera_matrices(camera, to_points)
     velodyne = root / "velodyne" / f"{stem}.bin"
     with atomic_write(velodyne) as tmp, hashed_open(tmp) as f:  # hashed as written: the commit reads it back no more
-        f.write(np.column_stack([points["x"], points["y"], points["z"], points["intensity"]]).astype("<f4"))
+        if xyzi is not None:
+            f.write(xyzi.array, xyzi.sha256)
+        else:
+            f.write(packed_columns(points, XYZI))
     lines = label_lines(boxes if boxes is not None else np.zeros(0, _box_dtype()), points, camera, names=names, to_points=to_points, regions=regions)
     plane = road_plane(tr, np.array([0.0, 0.0, 1.0, KITTI_SENSOR_HEIGHT]) if ground is None else ground)
     return [velodyne, _text(root / "label_2" / f"{stem}.txt", "".join(line + "\n" for line in lines)), _text(root / "calib" / f"{stem}.txt", calib_text(k, tr)),

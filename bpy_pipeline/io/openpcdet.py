@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ._records import XYZI, XyziBlock, packed_columns
 from .atomic import atomic_write, hashed_open, write_text_hashed
 from .kitti import write_image_sets
 from .splits import split_indices
@@ -32,12 +33,15 @@ def label_lines(boxes: np.ndarray, names: dict | None = None) -> list[str]:
             for box in boxes]
 
 
-def write_frame(out_dir: str | os.PathLike, stem: str, points: np.ndarray, boxes, names: dict | None = None) -> list[Path]:
-    """``openpcdet/points/NNNNNN.npy`` and ``openpcdet/labels/NNNNNN.txt`` of one frame."""
+def write_frame(out_dir: str | os.PathLike, stem: str, points: np.ndarray, boxes, names: dict | None = None, xyzi: XyziBlock | None = None) -> list[Path]:
+    """``openpcdet/points/NNNNNN.npy`` and ``openpcdet/labels/NNNNNN.txt`` of one frame (the points' array from ``xyzi``,
+    their :class:`~._records.XyziBlock`, when given)."""
     root = Path(out_dir) / "openpcdet"
     points_path, label = root / "points" / f"{stem}.npy", root / "labels" / f"{stem}.txt"
-    with atomic_write(points_path) as tmp, hashed_open(tmp) as handle:  # hashed as written: np.save writes the same bytes through write()
-        np.save(handle, np.column_stack([points["x"], points["y"], points["z"], points["intensity"]]).astype(np.float32))
+    block = xyzi.array if xyzi is not None else packed_columns(points, XYZI)
+    with atomic_write(points_path) as tmp, hashed_open(tmp) as handle:  # hashed as written
+        np.lib.format.write_array_header_1_0(handle, np.lib.format.header_data_from_array_1_0(block))  # np.save's bytes: its header (version 1.0 holds it),
+        handle.write(block)  # then the array, without np.save's copy of it for a file object that is not a file
     with atomic_write(label) as tmp:
         write_text_hashed(tmp, "".join(line + "\n" for line in label_lines(boxes if boxes is not None else [], names)))
     return [points_path, label]

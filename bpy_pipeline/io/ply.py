@@ -17,13 +17,14 @@ dropped when matching properties to :data:`POINT_DTYPE` fields) back into POINT_
 from __future__ import annotations
 
 import os
+from functools import cache
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import InputError, path_argument
 from ..lidar.points import POINT_DTYPE
-from ._records import as_points, chunks
+from ._records import CACHED_CHUNK, as_points, chunks, compiled_passes
 from .atomic import atomic_write, hashed_open
 
 # PLY scalar type names (both spellings of the spec) -> numpy type character codes.
@@ -81,13 +82,82 @@ def _block(dtype: np.dtype, names: tuple[str, ...], rename=lambda n: n) -> np.dt
     return np.dtype({"names": ["b"], "formats": [f"V{size}"], "offsets": [first], "itemsize": dtype.itemsize})
 
 
-def ply_records(points: np.ndarray) -> np.ndarray:
-    """``(n,)`` :data:`PLY_DTYPE` records of ``(n,)`` POINT_DTYPE points (instance ids must be < 2**31).
+def byte_runs(source: np.dtype, target: np.dtype) -> tuple[tuple[int, int, int], ...] | None:
+    """``((source offset or -1, target offset, bytes), ...)``: how a ``target`` record's bytes come from a ``source`` record's,
+    -1 for zero bytes, adjacent runs merged; ``None`` where a field is not a plain copy of bytes. A field is one when both
+    are little-endian and of the same type, or when the source is an unsigned integer and the target an integer at least
+    as wide (zero bytes above; a signed target of the same width reads the same value below 2**31: PLY's instance ids)."""
+    runs: list[list[int]] = []
 
-    Fields stored alike in both (x, y, z, intensity; time and range) are copied a run of bytes at a
-    time, the others converted field by field: the bytes of a field-by-field copy.
+    def add(src: int, dst: int, size: int) -> None:
+        last = runs[-1] if runs else None
+        if last and last[1] + last[2] == dst and ((src < 0 and last[0] < 0) or (src >= 0 and last[0] >= 0 and last[0] + last[2] == src)):
+            last[2] += size
+        else:
+            runs.append([src, dst, size])
+
+    for name in target.names:
+        field = point_field(name)
+        if field not in (source.names or ()):
+            return None
+        (a, src), (b, dst) = source.fields[field][:2], target.fields[name][:2]
+        if a.byteorder == ">" or b.byteorder == ">":
+            return None
+        if a == b:
+            add(src, dst, a.itemsize)
+        elif a.kind == "u" and b.kind in "iu" and b.itemsize >= a.itemsize:
+            add(src, dst, a.itemsize)
+            if b.itemsize > a.itemsize:
+                add(-1, dst + a.itemsize, b.itemsize - a.itemsize)
+        else:
+            return None
+    return tuple(tuple(run) for run in runs)
+
+
+# The runs the compiled copy is written for (POINT_DTYPE -> PLY_DTYPE): x y z intensity semantic; semantic's upper bytes;
+# instance, ring; ring's upper bytes; time, range, bounces
+KERNEL_RUNS = ((0, 0, 18), (-1, 18, 2), (18, 20, 6), (-1, 26, 2), (24, 28, 13))
+
+
+@cache
+def _records_kernel():
+    """The compiled record copy (numba, cached on disk): ``copy(source (n, 37) uint8, target (n, 41) uint8)`` by
+    :data:`KERNEL_RUNS`; ``None`` without numba, with ``BPY_PIPELINE_SCAN_KERNEL=numpy``, or where the two layouts'
+    :func:`byte_runs` are not those runs. The same bytes as the numpy path."""
+    if not compiled_passes() or POINT_DTYPE.itemsize != 37 or PLY_DTYPE.itemsize != 41 or byte_runs(POINT_DTYPE, PLY_DTYPE) != KERNEL_RUNS:
+        return None
+    import numba
+
+    @numba.njit(cache=True, nogil=True)
+    def copy(source, target):  # pragma: no cover (compiled)
+        for r in range(source.shape[0]):
+            for c in range(18):
+                target[r, c] = source[r, c]
+            target[r, 18] = 0
+            target[r, 19] = 0
+            for c in range(6):
+                target[r, 20 + c] = source[r, 18 + c]
+            target[r, 26] = 0
+            target[r, 27] = 0
+            for c in range(13):
+                target[r, 28 + c] = source[r, 24 + c]
+
+    return copy
+
+
+def ply_records(points: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """``(n,)`` :data:`PLY_DTYPE` records of ``(n,)`` POINT_DTYPE points (instance ids must be < 2**31), in ``out``
+    (a C-contiguous ``(n,)`` PLY_DTYPE array) when given.
+
+    POINT_DTYPE points go through one compiled copy of bytes (:func:`_records_kernel`) where numba is there. Otherwise
+    fields stored alike in both (x, y, z, intensity; time and range) are copied a run of bytes at a time, the others
+    converted field by field. The bytes of a field-by-field copy either way.
     """
-    out = np.empty(len(points), PLY_DTYPE)
+    out = np.empty(len(points), PLY_DTYPE) if out is None else out
+    kernel = _records_kernel() if points.dtype == POINT_DTYPE and len(points) else None
+    if kernel is not None:
+        kernel(np.ascontiguousarray(points).view(np.uint8).reshape(len(points), POINT_DTYPE.itemsize), out.view(np.uint8).reshape(len(out), PLY_DTYPE.itemsize))
+        return out
     source = points.dtype
     for run in _runs(source, PLY_DTYPE):
         if len(run) == 1:
@@ -128,8 +198,9 @@ def write_ply(path: str | os.PathLike, points: np.ndarray) -> Path:
         raise InputError(f"{path}: PLY scalar_instance is int (Open3D reads no uint); got instance ids up to {int(pts['instance'].max())}")
     with atomic_write(path) as tmp, hashed_open(tmp) as f:  # hashed as written (the dataset's commit reads no file back)
         f.write(ply_header(len(pts)))
-        for part in chunks(len(pts)):
-            f.write(ply_records(pts[part]))
+        buffer = np.empty(min(len(pts), CACHED_CHUNK), PLY_DTYPE)  # one buffer, reused: no new memory a chunk
+        for part in chunks(len(pts), CACHED_CHUNK):
+            f.write(ply_records(pts[part], buffer[: part.stop - part.start]))
     return path
 
 

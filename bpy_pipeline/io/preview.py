@@ -30,7 +30,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..geometry.boxes import box_corners
-from ._records import as_points
+from ._records import as_points, packed_columns
 from .atomic import atomic_write, hashed_open
 
 BACKGROUND = (24, 24, 28)  # not a class colour of assets_manifest/labels.yaml
@@ -124,6 +124,7 @@ def _paint_kernels():
         return None
     import numba
 
+    # xyz: (n, 3) float32 points, each value taken to float64 as numpy's path has them.
     # numpy's path: col, row = rint(u), rint(v) as int64, kept where 0 <= col < panel_width and 0 <= row < height
     # (the float tests on the rounded values decide alike, also for NaN and out-of-range values, which numpy's
     # int64 cast turns into the smallest int64); then the splat's rule in point order. Written out in both
@@ -131,12 +132,13 @@ def _paint_kernels():
     @numba.njit(cache=True, nogil=True)
     def top(flat, best, xyz, colors, centre0, centre1, scale, half_w, half_h, width, panel_width, height, left):  # pragma: no cover
         for i in range(len(xyz)):  # u = half_w - (y - centre1) * scale, v = half_h - (x - centre0) * scale, depth z
-            col = np.rint(half_w - (xyz[i, 1] - centre1) * scale)
-            row = np.rint(half_h - (xyz[i, 0] - centre0) * scale)
+            col = np.rint(half_w - (np.float64(xyz[i, 1]) - centre1) * scale)
+            row = np.rint(half_h - (np.float64(xyz[i, 0]) - centre0) * scale)
             if col >= 0.0 and col < panel_width and row >= 0.0 and row < height:
                 p = np.int64(row) * width + np.int64(col) + left
-                if xyz[i, 2] >= best[p]:
-                    best[p] = xyz[i, 2]
+                z = np.float64(xyz[i, 2])
+                if z >= best[p]:
+                    best[p] = z
                     for c in range(flat.shape[1]):
                         flat[p, c] = colors[i, c]
 
@@ -144,7 +146,7 @@ def _paint_kernels():
     def perspective(flat, best, xyz, eye, rotation, colors, focal, half_w, half_h, width, panel_width, height, left):  # pragma: no cover
         # the camera frame as _camera has it; in front (depth > 0.1): u = half_w + focal * x / depth, v = half_h + focal * y / depth, depth -depth
         for i in range(len(xyz)):
-            dx, dy, dz = xyz[i, 0] - eye[0], xyz[i, 1] - eye[1], xyz[i, 2] - eye[2]
+            dx, dy, dz = np.float64(xyz[i, 0]) - eye[0], np.float64(xyz[i, 1]) - eye[1], np.float64(xyz[i, 2]) - eye[2]
             cam0 = dx * rotation[0, 0] + dy * rotation[0, 1] + dz * rotation[0, 2]
             cam1 = dx * rotation[1, 0] + dy * rotation[1, 1] + dz * rotation[1, 2]
             cam2 = dx * rotation[2, 0] + dy * rotation[2, 1] + dz * rotation[2, 2]
@@ -160,6 +162,32 @@ def _paint_kernels():
                             flat[p, c] = colors[i, c]
 
     return top, perspective
+
+
+@cache
+def _count_kernel():
+    """The compiled count of :func:`class_counts` (numba, cached on disk), or ``None`` (as :func:`_splat_kernel`)."""
+    if _splat_kernel() is None:
+        return None
+    import numba
+
+    @numba.njit(cache=True, nogil=True)
+    def count(ids, counts):  # pragma: no cover (compiled)
+        top = len(counts) - 1
+        for i in range(len(ids)):
+            counts[min(np.int64(ids[i]), top)] += 1
+
+    return count
+
+
+def class_counts(ids: np.ndarray, k: int) -> np.ndarray:
+    """``(k + 1,)`` int64: how many of the ``(n,)`` non-negative integer ``ids`` are ``0 .. k - 1``, then how many are ``k`` or more."""
+    kernel = _count_kernel()
+    if kernel is None:
+        return np.bincount(np.minimum(ids, k), minlength=k + 1)
+    counts = np.zeros(k + 1, np.int64)
+    kernel(ids, counts)
+    return counts
 
 
 def splat(image: np.ndarray, col: np.ndarray, row: np.ndarray, depth: np.ndarray, colors: np.ndarray, depth_image: np.ndarray | None = None) -> None:
@@ -188,10 +216,18 @@ def splat(image: np.ndarray, col: np.ndarray, row: np.ndarray, depth: np.ndarray
     image.reshape(pixels, -1)[painted] = np.reshape(colors, (len(pixel), -1))[last[painted]]
 
 
+@cache
+def _glyph(char: str, scale: int) -> np.ndarray:
+    """``(5 * scale, 3 * scale)`` bool: the glyph of ``char`` (a space for an unknown one), each pixel a ``scale`` square."""
+    mask = GLYPHS.get(char, GLYPHS[" "]).repeat(scale, axis=0).repeat(scale, axis=1)
+    mask.flags.writeable = False  # shared by every call
+    return mask
+
+
 def draw_text(image: np.ndarray, text: str, col: int, row: int, scale: int = 2, color=INK) -> int:
     """Write ``text`` (lower-cased; unknown characters as spaces) with its top left at ``(col, row)``; returns the end column."""
     for char in text.lower():
-        mask = GLYPHS.get(char, GLYPHS[" "]).repeat(scale, axis=0).repeat(scale, axis=1)
+        mask = _glyph(char, scale)
         h, w = mask.shape
         r0, c0 = max(row, 0), max(col, 0)
         r1, c1 = min(row + h, image.shape[0]), min(col + w, image.shape[1])
@@ -246,27 +282,70 @@ def _camera(p: np.ndarray, eye: np.ndarray, rotation: np.ndarray) -> np.ndarray:
     return cam
 
 
+SAMPLED = 8192  # from this many values on, order statistics are bracketed by a sample first (:func:`order_statistics`)
+GOLDEN = (5**0.5 - 1) / 2  # the sample's positions: multiples of the golden ratio's fraction, a low-discrepancy sequence
+
+
+def order_statistics(values: np.ndarray, ranks: list[int]) -> list[float]:
+    """The values at positions ``ranks`` (sorted, each in ``[0, n)``) of ``np.sort(values)`` ((n,) floats), as floats.
+
+    Exactly what one ``np.partition`` of the whole array gives (NaNs last), cheaper for large arrays: each run of nearby
+    ranks is bracketed by two values of a sorted sample of 2,048, and only the values inside the bracket are
+    partitioned, once the counts show the bracket holds those ranks (else the whole array is, as before).
+    """
+    values = np.ascontiguousarray(values)
+    n = len(values)
+    if n < SAMPLED:
+        part = np.partition(values, ranks)
+        return [float(part[r]) for r in ranks]
+    sample = np.sort(values[(np.arange(2048) * GOLDEN % 1.0 * n).astype(np.int64)])  # spread without a stride: scans are periodic by ring
+    m = len(sample)
+    out: dict[int, float] = {}
+    groups: list[list[int]] = []
+    for r in ranks:  # ranks within a few sample steps of each other share a bracket
+        if groups and r - groups[-1][-1] <= 4 * (n // m):
+            groups[-1].append(r)
+        else:
+            groups.append([r])
+    for group in groups:
+        margin = int(4 * np.sqrt(m * 0.25)) + 8  # four standard deviations of a sample quantile's position, and some
+        low, high = group[0] * m // n - margin, group[-1] * m // n + margin
+        bracket = np.ones(n, bool) if low <= 0 else values >= sample[low]
+        if high < m - 1:
+            bracket &= values <= sample[high]
+        below = 0 if low <= 0 else int(np.count_nonzero(values < sample[low]))
+        inside = values[bracket]
+        if below <= group[0] and group[-1] < below + len(inside):  # every value below the bracket ranks before it, every one above after it
+            part = np.partition(inside, [r - below for r in group])
+            out.update((r, float(part[r - below])) for r in group)
+        else:
+            part = np.partition(values, group)
+            out.update((r, float(part[r])) for r in group)
+    return [out[r] for r in ranks]
+
+
 def percentiles(values: np.ndarray, q) -> list[float]:
-    """``np.percentile(values, q)`` (its default, linear interpolation) for a ``(n,)`` float array with ``n >= 1``, from one
-    partition of a copy at the ranks it needs: the same values at about half the time."""
+    """``np.percentile(values, q)`` (its default, linear interpolation) of a ``(n,)`` float array with ``n >= 1`` taken to
+    float64, from the order statistics it needs (:func:`order_statistics`): the same values at a fraction of the time. A
+    float32 array is searched as it is (a rank's value is the same in either width), half the bytes."""
     n = len(values)
     at = [float(p) / 100 * (n - 1) for p in q]
     below = [int(np.floor(a)) for a in at]
     ranks = sorted({r for b in below for r in (b, min(b + 1, n - 1))})
-    part = np.partition(np.array(values, np.float64), ranks)
+    value = dict(zip(ranks, order_statistics(values, ranks)))
     out = []
     for a, b in zip(at, below):
-        lo, hi, t = part[b], part[min(b + 1, n - 1)], a - b
+        lo, hi, t = value[b], value[min(b + 1, n - 1)], a - b
         out.append(float(hi - (hi - lo) * (1 - t) if t >= 0.5 else lo + (hi - lo) * t))  # numpy's lerp, both halves
     return out
 
 
 def median(values: np.ndarray) -> float:
-    """``np.median`` of a ``(n,)`` float array with ``n >= 1``, from one partition at its middle rank(s)."""
+    """``np.median`` of a ``(n,)`` float array with ``n >= 1`` taken to float64, from its middle order statistic(s)
+    (:func:`order_statistics`; a float32 array's as it is, as :func:`percentiles`)."""
     n = len(values)
-    middle = sorted({(n - 1) // 2, n // 2})
-    part = np.partition(np.array(values, np.float64), middle)
-    return float(part[(n - 1) // 2] + part[n // 2]) / 2 if n % 2 == 0 else float(part[n // 2])
+    lo, hi = order_statistics(values, sorted({(n - 1) // 2, n // 2})) * (2 if n % 2 else 1)
+    return (lo + hi) / 2 if n % 2 == 0 else hi
 
 
 def render_preview(points: np.ndarray, color_lut: np.ndarray, size: tuple[int, int] = SIZE, dot: int = 1, boxes: np.ndarray | None = None,
@@ -305,9 +384,7 @@ def render_indexed(points: np.ndarray, color_lut: np.ndarray, size: tuple[int, i
         raise InputError(f"preview: size must be at least (2, 1) pixels and dot >= 1, got size {size}, dot {dot}")
     if lut.ndim != 2 or lut.shape[1] != 3:
         raise InputError(f"preview: color_lut must be a (k, 3) uint8 table, got shape {lut.shape}")
-    xyz = np.empty((len(pts), 3))
-    for axis, name in enumerate("xyz"):
-        xyz[:, axis] = pts[name]
+    xyz = packed_columns(pts, ("x", "y", "z"))  # (n, 3) float32; float64 wherever a value enters arithmetic, as numpy's path has it
     semantic = pts["semantic"]
     if not np.isfinite(xyz).all():  # copies only when some point must go
         keep = np.isfinite(xyz).all(axis=1)
@@ -315,9 +392,10 @@ def render_indexed(points: np.ndarray, color_lut: np.ndarray, size: tuple[int, i
     frame = np.array(FRAME_COLOURS, np.uint8)
     if len(xyz) == 0:
         return np.zeros((height, width, 1), np.uint8), frame
-    if int(semantic.max()) >= len(lut):
+    per_class = class_counts(semantic, len(lut))  # points per class (a count, not a sort)
+    if per_class[-1]:
         raise InputError(f"preview: semantic id {int(semantic.max())} has no colour (color_lut has {len(lut)} entries)")
-    per_class = np.bincount(semantic, minlength=len(lut))  # points per class (a count, not a sort)
+    per_class = per_class[:-1]
     ids = np.flatnonzero(per_class)
     counts = per_class[ids]
     palette = np.concatenate([frame, lut[ids]])
@@ -346,8 +424,8 @@ def render_indexed(points: np.ndarray, color_lut: np.ndarray, size: tuple[int, i
 
     # top view: x up, y left; cropped to the bulk of the points, or of the points of the other classes
     # when one class (a railway's ground rings) holds most of them
-    focus = semantic != ids[counts.argmax()]
-    bulk = xyz[:, :2][focus] if counts.max() > 0.4 * len(semantic) and focus.sum() >= 100 else xyz[:, :2]
+    others = len(semantic) - counts.max()  # the points not of the class that holds most
+    bulk = xyz[:, :2][semantic != ids[counts.argmax()]] if counts.max() > 0.4 * len(semantic) and others >= 100 else xyz[:, :2]
     low, high = (np.array(v) for v in zip(*(percentiles(bulk[:, axis], (1, 99)) for axis in (0, 1))))
     span = np.maximum(high - low, 1e-6)
     low, high = low - 0.05 * span, high + 0.05 * span
@@ -356,6 +434,7 @@ def render_indexed(points: np.ndarray, color_lut: np.ndarray, size: tuple[int, i
     centre = (low + high) / 2
 
     def top(p):
+        p = np.asarray(p, np.float64)
         return (panel - 1) / 2 - (p[:, 1] - centre[1]) * scale, (height - 1) / 2 - (p[:, 0] - centre[0]) * scale
 
     if kernels is not None:
@@ -381,7 +460,7 @@ def render_indexed(points: np.ndarray, color_lut: np.ndarray, size: tuple[int, i
     focal = 0.5 * panel / np.tan(np.radians(30.0))
 
     def perspective(p):
-        cam = _camera(p, eye, rotation)
+        cam = _camera(np.asarray(p, np.float64), eye, rotation)
         with np.errstate(divide="ignore", invalid="ignore"):
             return (panel - 1) / 2 + focal * cam[:, 0] / cam[:, 2], (height - 1) / 2 + focal * cam[:, 1] / cam[:, 2], cam[:, 2]
 

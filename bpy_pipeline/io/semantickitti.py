@@ -12,13 +12,14 @@ and a 16-bit instance; ring, time, range and bounces are not kept.
 from __future__ import annotations
 
 import os
+from functools import cache
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import InputError, path_argument
 from ..lidar.points import POINT_DTYPE
-from ._records import as_points, chunks
+from ._records import CACHED_CHUNK, XYZI, XyziBlock, as_points, chunks, compiled_passes, packed_columns
 from .atomic import atomic_write, hashed_open
 
 MAX_INSTANCE = 0xFFFF
@@ -54,19 +55,42 @@ def check_instances(instance: np.ndarray, where: str = "SemanticKITTI labels") -
         )
 
 
-def _xyzi_block(dtype: np.dtype) -> np.dtype | None:
-    """A view of ``dtype`` holding x, y, z, intensity as one 16-byte field ``b``, when they are consecutive little-endian float32; else ``None``."""
-    fields = dtype.fields or {}
-    names = ("x", "y", "z", "intensity")
-    if not all(n in fields and fields[n][0] == np.dtype("<f4") for n in names):
+@cache
+def _labels_kernel():
+    """The compiled :func:`frame_labels` (numba, cached on disk), or ``None`` without numba or with
+    ``BPY_PIPELINE_SCAN_KERNEL=numpy``: ``pack(semantic (n,) uint16, instance (n,) uint32, lut (65536,) uint16, use_lut, out (n,) uint32)``."""
+    if not compiled_passes():
         return None
-    first = fields["x"][1]
-    if [fields[n][1] for n in names] != [first, first + 4, first + 8, first + 12]:
-        return None
-    return np.dtype({"names": ["b"], "formats": ["V16"], "offsets": [first], "itemsize": dtype.itemsize})
+    import numba
+
+    @numba.njit(cache=True, nogil=True)
+    def pack(semantic, instance, lut, use_lut, out):  # pragma: no cover (compiled)
+        for i in range(len(out)):
+            label = np.uint32(lut[semantic[i]]) if use_lut else np.uint32(semantic[i])
+            out[i] = label | (np.uint32(instance[i]) << np.uint32(16))
+
+    return pack
 
 
-def write_semantickitti(root: str | os.PathLike, sequence: int, frame: int, points: np.ndarray, semantic_lut: np.ndarray | None = None) -> tuple[Path, Path]:
+def frame_labels(points: np.ndarray, semantic_lut: np.ndarray | None = None, out: np.ndarray | None = None) -> np.ndarray:
+    """``(n,) <u4``: the ``.label`` values of ``(n,)`` POINT_DTYPE ``points`` (:func:`pack_labels` of ``semantic_lut[semantic]``,
+    or of ``semantic`` without a table, and ``instance``), whose instance ids the caller has checked (:func:`check_instances`);
+    in ``out`` ((n,) <u4) when given. One compiled pass where numba is there and the table covers every uint16 id; the same
+    values either way."""
+    out = np.empty(len(points), "<u4") if out is None else out
+    kernel = _labels_kernel()
+    lut = np.zeros(1, np.uint16) if semantic_lut is None else semantic_lut
+    if (kernel is None or points.dtype != POINT_DTYPE or lut.dtype != np.uint16 or lut.ndim != 1
+            or (semantic_lut is not None and len(lut) < 1 << 16)):
+        semantic = points["semantic"] if semantic_lut is None else semantic_lut[points["semantic"]]
+        out[:] = pack_labels(semantic, points["instance"])
+        return out
+    kernel(points["semantic"], points["instance"], lut, semantic_lut is not None, out)
+    return out
+
+
+def write_semantickitti(root: str | os.PathLike, sequence: int, frame: int, points: np.ndarray, semantic_lut: np.ndarray | None = None,
+                        xyzi: XyziBlock | None = None) -> tuple[Path, Path]:
     """Write one frame as ``root/sequences/SS/velodyne/NNNNNN.bin`` and ``.../labels/NNNNNN.label``.
 
     Parameters
@@ -83,6 +107,9 @@ def write_semantickitti(root: str | os.PathLike, sequence: int, frame: int, poin
     semantic_lut : (65536,) uint16, optional
         The label space written: ``semantic_lut[semantic]`` (SemanticKITTI's raw ids:
         :func:`~.class_maps.semantic_kitti_lut`); ``None`` writes ``semantic`` as it is.
+    xyzi : :class:`~._records.XyziBlock`, optional
+        The points' x y z intensity and their sha256, made once for the files that hold these bytes: the ``.bin`` is
+        written from it in one piece.
 
     Returns
     -------
@@ -93,17 +120,14 @@ def write_semantickitti(root: str | os.PathLike, sequence: int, frame: int, poin
     pts = as_points(points, str(bin_path))
     check_instances(pts["instance"], str(label_path))
     with atomic_write(bin_path) as tmp_bin, atomic_write(label_path) as tmp_label, hashed_open(tmp_bin) as f_bin, hashed_open(tmp_label) as f_label:
-        block = _xyzi_block(pts.dtype)
-        for part in chunks(len(pts)):
-            scan = np.empty((part.stop - part.start, 4), "<f4")
-            if block is not None:  # x, y, z, intensity are 16 consecutive float32 bytes of each record: one copy a record
-                scan.view("V16")[:, 0] = pts[part].view(block)["b"]
-            else:
-                for i, name in enumerate(("x", "y", "z", "intensity")):
-                    scan[:, i] = pts[name][part]
-            f_bin.write(scan)
-            semantic = pts["semantic"][part] if semantic_lut is None else semantic_lut[pts["semantic"][part]]
-            f_label.write(np.ascontiguousarray(pack_labels(semantic, pts["instance"][part], str(label_path))))
+        scan, labels = np.empty((min(len(pts), CACHED_CHUNK), 4), "<f4"), np.empty(min(len(pts), CACHED_CHUNK), "<u4")  # reused a chunk
+        if xyzi is not None:
+            f_bin.write(xyzi.array, xyzi.sha256)
+        for part in chunks(len(pts), CACHED_CHUNK):
+            size = part.stop - part.start
+            if xyzi is None:
+                f_bin.write(packed_columns(pts[part], XYZI, out=scan[:size]))
+            f_label.write(frame_labels(pts[part], semantic_lut, labels[:size]))
     return bin_path, label_path
 
 
