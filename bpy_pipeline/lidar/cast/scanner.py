@@ -429,23 +429,28 @@ def spliced(records: tuple[np.ndarray, ...], drop: np.ndarray | None, extra: tup
 
     records, extra : ``(points, beam, ray)`` each, rows in firing order (``ray`` (r,) and (e,) int64 ascending; no ray of
     ``extra`` among the rows kept); drop : (n,) bool per ray of the chunk, or ``None`` to keep every row.
-    Returns the same three arrays, (r - dropped + e,), in memory of ``pool`` (:class:`~.raycast.RecordPool`): the
-    kept rows moved as raw bytes with one mask, the extra rows written to their places (no sort of all the rows).
+    Returns the same three arrays, (r - dropped + e,), in memory of ``pool`` (:class:`~.raycast.RecordPool`): each row
+    put once, as raw bytes, at its place (no sort of all the rows, no copy of the kept rows first).
     """
     ray, more = records[-1], extra[-1]
-    keep = None if drop is None or not drop[ray].any() else ~drop[ray]
-    kept = ray if keep is None else ray[keep]
+    dropped = None if drop is None else drop[ray]
+    kept = ray if dropped is None else ray[~dropped]
     at = np.searchsorted(kept, more) + np.arange(len(more))  # each extra row's place among all
-    base = np.ones(len(kept) + len(more), np.bool_)
+    total = len(kept) + len(more)
+    base = np.ones(total, np.bool_)
     base[at] = False
+    if dropped is None:
+        place = np.flatnonzero(base)
+    else:  # a dropped row goes to the one spare row past the end
+        place = np.full(len(ray), total, np.int64)
+        place[~dropped] = np.flatnonzero(base)
     out = []
     for a, e in zip(records, extra):
         raw = np.dtype((np.void, a.dtype.itemsize))
-        joined = pool.take(len(base), a.dtype)
-        a = np.ascontiguousarray(a).view(raw)
-        joined.view(raw)[base] = a if keep is None else a[keep]
+        joined = pool.take(total + 1, a.dtype)
+        np.put(joined.view(raw), place, np.ascontiguousarray(a).view(raw))
         joined.view(raw)[at] = np.ascontiguousarray(e).view(raw)
-        out.append(joined)
+        out.append(joined[:total])
     return tuple(out)
 
 
