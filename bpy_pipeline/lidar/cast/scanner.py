@@ -446,10 +446,14 @@ def spliced(records: tuple[np.ndarray, ...], drop: np.ndarray | None, extra: tup
         place[~dropped] = np.flatnonzero(base)
     out = []
     for a, e in zip(records, extra):
-        raw = np.dtype((np.void, a.dtype.itemsize))
         joined = pool.take(total + 1, a.dtype)
-        np.put(joined.view(raw), place, np.ascontiguousarray(a).view(raw))
-        joined.view(raw)[at] = np.ascontiguousarray(e).view(raw)
+        raw = a.dtype if a.dtype.names is None else np.dtype((np.void, a.dtype.itemsize))  # records as raw bytes: whole, not field by field
+        target, rows = joined.view(raw), np.ascontiguousarray(a).view(raw)
+        if a.dtype.names is None:
+            target[place] = rows
+        else:  # np.put moves raw records faster than indexing does (a number: slower)
+            np.put(target, place, rows)
+        target[at] = np.ascontiguousarray(e).view(raw)
         out.append(joined[:total])
     return tuple(out)
 
