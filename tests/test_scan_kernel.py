@@ -271,7 +271,10 @@ def test_records_spliced_in_firing_order_without_the_dropped_rays():
     rng = np.random.default_rng(3)
     n = 5000
     ray = np.flatnonzero(rng.random(n) < 0.8)
-    records = (np.frombuffer(rng.bytes(len(ray) * POINT_DTYPE.itemsize), POINT_DTYPE), np.frombuffer(rng.bytes(len(ray) * BEAM_DTYPE.itemsize), BEAM_DTYPE), ray)
+    def noise(k, dtype):  # records of random bytes
+        return np.frombuffer(rng.bytes(k * dtype.itemsize), dtype)
+
+    records = (noise(len(ray), POINT_DTYPE), noise(len(ray), BEAM_DTYPE), ray)
     for case in ("both", "no drop", "nothing added", "ends"):
         drop = np.zeros(n, bool)
         if case != "no drop":
@@ -281,8 +284,7 @@ def test_records_spliced_in_firing_order_without_the_dropped_rays():
         if case == "ends":
             drop[ray[0]] = True
             more = np.union1d(more, [ray[0], n - 1] if n - 1 in free else [ray[0]])
-        extra = (np.frombuffer(rng.bytes(len(more) * POINT_DTYPE.itemsize), POINT_DTYPE), np.frombuffer(rng.bytes(len(more) * BEAM_DTYPE.itemsize), BEAM_DTYPE),
-                 more)
+        extra = (noise(len(more), POINT_DTYPE), noise(len(more), BEAM_DTYPE), more)
         keep = ~drop[ray]
         order = np.argsort(np.concatenate([ray[keep], more]), kind="stable")
         expected = [np.concatenate([a[keep], e])[order] for a, e in zip(records, extra)]
