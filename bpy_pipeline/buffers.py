@@ -6,7 +6,7 @@ effects, writers) reads only these numpy arrays and never imports bpy.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -64,12 +64,16 @@ class SceneBuffers:
     triangles : (m, 3) int32 indices into ``vertices``
     triangle_object : (m,) int32 row of :attr:`objects` each triangle belongs to
     objects : :class:`ObjectTable`
+    leading : the buffers these begin with when :meth:`joined` made them (their rows first, as they are), else ``None``;
+        :meth:`check` checks them on their own once (a static world joined to each frame's moving objects), then only the rest
     """
 
     vertices: np.ndarray
     triangles: np.ndarray
     triangle_object: np.ndarray
     objects: ObjectTable
+    leading: "SceneBuffers | None" = field(default=None, repr=False, compare=False)
+    checked_alone: bool = field(default=False, repr=False, compare=False)  # set once a check of joined buffers checked these on their own
 
     @classmethod
     def from_meshes(cls, meshes: dict, reflectivity: float = 0.5) -> "SceneBuffers":
@@ -97,25 +101,39 @@ class SceneBuffers:
 
     def joined(self, other: "SceneBuffers") -> "SceneBuffers":
         """These buffers, then ``other``'s: vertices, triangles and object rows of ``other`` after these (its indices
-        moved past them). Instance ids are kept as each table has them."""
+        moved past them). Instance ids are kept as each table has them. These buffers are the result's :attr:`leading`
+        ones: they must not change in place while it is used (a check of them is remembered on them)."""
         a, b = self.objects, other.objects
         surface = None if a.surface is None or b.surface is None else np.concatenate([a.surface, b.surface])
         objects = ObjectTable(a.names + b.names, a.parents + b.parents, a.class_names + b.class_names, np.concatenate([a.semantic, b.semantic]),
                               np.concatenate([a.instance, b.instance]), np.concatenate([a.material, b.material]),
                               np.concatenate([a.reflectivity, b.reflectivity]), surface)
         return SceneBuffers(np.concatenate([self.vertices, other.vertices]),
-                            np.concatenate([self.triangles, other.triangles + np.int32(len(self.vertices))]).astype(np.int32),
-                            np.concatenate([self.triangle_object, other.triangle_object + np.int32(len(a))]).astype(np.int32), objects)
+                            np.concatenate([self.triangles, other.triangles + np.int32(len(self.vertices))]).astype(np.int32, copy=False),
+                            np.concatenate([self.triangle_object, other.triangle_object + np.int32(len(a))]).astype(np.int32, copy=False), objects,
+                            leading=self)
 
     def check(self) -> None:
-        """``InputError`` for an empty scene, non-finite vertices or triangle indices out of range (naming the object)."""
+        """``InputError`` for an empty scene, non-finite vertices or triangle indices out of range (naming the object).
+
+        Buffers :meth:`joined` made check their :attr:`leading` buffers on their own the first time (remembered on
+        those: :attr:`checked_alone`), then only their own triangles and vertices after those: a valid leading part
+        stays valid with rows added after it."""
         m = len(self.triangles)
         if m == 0:
             raise InputError("scene: nothing to scan (no object with triangles); add geometry or check scene.builder")
+        first, done = self.leading, (0, 0)  # triangles and vertices at the front known valid
+        if first is not None and len(first.triangles):
+            if not first.checked_alone:
+                first.check()
+                first.checked_alone = True
+            done = (len(first.triangles), len(first.vertices))
         rows = np.asarray(self.triangle_object)
-        if rows.shape != (m,) or rows.min() < 0 or rows.max() >= len(self.objects):
+        rest = rows[done[0] :]
+        if rows.shape != (m,) or rest.min(initial=0) < 0 or rest.max(initial=0) >= len(self.objects):
             raise InputError(f"scene buffers: triangle_object must give each of the {m} triangles a row of the {len(self.objects)}-row object table")
-        if self.triangles.min() < 0 or self.triangles.max() >= len(self.vertices):
+        triangles, vertices = self.triangles[done[0] :], self.vertices[done[1] :]
+        if triangles.min(initial=0) < 0 or triangles.max(initial=0) >= len(self.vertices):
             out_of_range = (self.triangles < 0) | (self.triangles >= len(self.vertices))
             bad_triangle, corner = (int(i[0]) for i in np.nonzero(out_of_range))
             name = self.objects.names[rows[bad_triangle]]
@@ -123,7 +141,7 @@ class SceneBuffers:
                 f"object {name!r}: a triangle refers to vertex {int(self.triangles[bad_triangle, corner])}, "
                 f"but the scene has vertices 0..{len(self.vertices) - 1}; fix or remove its mesh"
             )
-        if not np.isfinite(self.vertices.min(initial=0.0) + self.vertices.max(initial=0.0)):  # a NaN or an infinity spreads to one of them
+        if not np.isfinite(vertices.min(initial=0.0) + vertices.max(initial=0.0)):  # a NaN or an infinity spreads to one of them
             bad_vertex = ~np.isfinite(self.vertices).all(axis=1)
             bad_triangles = np.flatnonzero(bad_vertex[self.triangles].any(axis=1))
             if not len(bad_triangles):

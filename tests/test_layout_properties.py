@@ -168,6 +168,10 @@ def test_a_scan_from_inside_one_object_is_enclosed_and_an_open_scan_is_not():
     assert mixed is None
     fog = enclosing_instance(rng.uniform(0.5, 2.0, rays), np.zeros(rays, np.uint32), rays)  # dense fog: returns of no object
     assert fog is None
+    ranges = np.float32(np.nextafter(np.float32(3.0), np.float32(0.0))) + np.zeros(rays, np.float32)  # float32 records, just under 3 m
+    assert enclosing_instance(ranges, np.full(rays, 7), rays) == (7, 1.0)
+    assert enclosing_instance(ranges, np.full(rays, 7), rays, near=float(ranges[0])) is None  # compared in float32 where exact
+    assert enclosing_instance(ranges, np.full(rays, 7), rays, near=2.9999998) == (7, 1.0)  # in float64 where not (float32 rounds it to the ranges)
 
 
 @pytest.mark.slow

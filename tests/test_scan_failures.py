@@ -271,6 +271,32 @@ def test_triangle_indices_out_of_range_are_an_input_error_naming_the_object():
             RayCaster(buffers, frame=np.eye(4))
 
 
+def test_joined_buffers_check_their_static_part_once_and_every_moving_part(monkeypatch):
+    """A static world joined to each frame's moving objects: its rows are checked on their own the first time, then
+    only the moving rows; a bad moving part is still an error naming its object, with the joined buffers' indices."""
+    static = scene(ground=primitives.plane(20, 20), wall=primitives.translated(primitives.box(1, 4, 2), [5, 0, 1]))
+    car = scene(car=primitives.translated(primitives.box(4, 2, 1.5), [0, 3, 1]))
+    checked = []
+    whole = SceneBuffers.check
+    monkeypatch.setattr(SceneBuffers, "check", lambda self: (checked.append(len(self.triangles)), whole(self))[1])
+    for _ in range(3):
+        static.joined(car).check()
+    assert checked == [26, 14, 26, 26] and static.checked_alone  # the static world alone once, then each frame's buffers
+    torn = scene(car=primitives.translated(primitives.box(4, 2, 1.5), [0, 3, 1]))
+    torn.triangles[4, 1] = 8  # beyond the car's own vertices: beyond the joined buffers' too
+    with pytest.raises(InputError, match=r"^object 'car': a triangle refers to vertex 20, but the scene has vertices 0..19"):
+        static.joined(torn).check()
+    torn.triangles[4, 1] = 0
+    torn.vertices[0, 2] = np.nan
+    with pytest.raises(InputError, match=r"^object 'car': has NaN or infinite vertex"):
+        static.joined(torn).check()
+    broken = scene(ground=primitives.plane(20, 20))
+    broken.vertices[1, 0] = np.inf
+    with pytest.raises(InputError, match=r"^object 'ground': has NaN or infinite vertex"):
+        broken.joined(car).check()
+    assert not broken.checked_alone
+
+
 def test_vertices_beyond_float32_reach_are_an_input_error_naming_the_object():
     """Blender clamps an infinite scale to 3.4e38; Embree silently loses such triangles (from ~5e18 m)."""
     box = primitives.box(1, 1, 1)

@@ -261,6 +261,37 @@ def test_parts_finished_out_of_order_are_joined_in_firing_order():
         assert np.array_equal(ray[:total], np.concatenate([np.arange(s, s + f) for s, f in zip(starts, filled)]))
 
 
+def test_records_spliced_in_firing_order_without_the_dropped_rays():
+    """spliced: the rows of the re-traced rays leave, the re-traced and glass rays' rows come in, all in firing order (the
+    sort of every row it replaces gives the same bytes); the first and last rays among them, none dropped, none added."""
+    from bpy_pipeline.lidar.cast.raycast import RecordPool
+    from bpy_pipeline.lidar.cast.scanner import spliced
+    from bpy_pipeline.lidar.points import BEAM_DTYPE, POINT_DTYPE
+
+    rng = np.random.default_rng(3)
+    n = 5000
+    ray = np.flatnonzero(rng.random(n) < 0.8)
+    def noise(k, dtype):  # records of random bytes
+        return np.frombuffer(rng.bytes(k * dtype.itemsize), dtype)
+
+    records = (noise(len(ray), POINT_DTYPE), noise(len(ray), BEAM_DTYPE), ray)
+    for case in ("both", "no drop", "nothing added", "ends"):
+        drop = np.zeros(n, bool)
+        if case != "no drop":
+            drop[rng.choice(ray, 300, replace=False)] = True
+        free = np.flatnonzero(~np.isin(np.arange(n), ray[~drop[ray]]))
+        more = np.sort(rng.choice(free, 0 if case == "nothing added" else 400, replace=False))
+        if case == "ends":
+            drop[ray[0]] = True
+            more = np.union1d(more, [ray[0], n - 1] if n - 1 in free else [ray[0]])
+        extra = (noise(len(more), POINT_DTYPE), noise(len(more), BEAM_DTYPE), more)
+        keep = ~drop[ray]
+        order = np.argsort(np.concatenate([ray[keep], more]), kind="stable")
+        expected = [np.concatenate([a[keep], e])[order] for a, e in zip(records, extra)]
+        out = spliced(records, None if case == "no drop" else drop, extra, RecordPool())
+        assert all(a.dtype == b.dtype and a.tobytes() == b.tobytes() for a, b in zip(out, expected)), case
+
+
 def test_the_static_part_is_kept_only_for_the_same_bytes_and_a_far_vertex_is_refused_kept_or_built():
     """The kept static part is reused only for the same triangles and vertex bytes (a copy of them is kept, so a
     change made in place to the caller's buffers is seen); a caster that reuses the whole kept part skips its

@@ -126,11 +126,13 @@ def enclosing_instance(ranges, instances, rays: int, share: float = ENCLOSED_SHA
     of its ranges is under ``near`` (a sensor inside a bus, a box or a wall; a garage or hall scanned from inside has its
     returns metres away).
     """
-    ranges, instances = np.asarray(ranges, float).reshape(-1), np.asarray(instances).reshape(-1)
-    if rays <= 0 or np.count_nonzero(instances) < share * rays or np.count_nonzero(ranges < near) < share * rays / 2:
+    ranges, instances = np.asarray(ranges).reshape(-1), np.asarray(instances).reshape(-1)
+    if not (ranges.dtype == np.float32 and float(np.float32(near)) == near):  # float32 ranges (the records') compared as they are where that is exact
+        ranges = ranges.astype(np.float64)
+    if rays <= 0 or np.count_nonzero(ranges < near) < share * rays / 2 or np.count_nonzero(instances) < share * rays:
         return None  # cheap necessary conditions first: half of the object's returns lie nearer than ``near``
     ids, counts = np.unique(instances[instances != 0], return_counts=True)
     top = int(np.argmax(counts))
-    if counts[top] < share * rays or float(np.median(ranges[instances == ids[top]])) >= near:
+    if counts[top] < share * rays or float(np.median(ranges[instances == ids[top]].astype(np.float64))) >= near:
         return None
     return int(ids[top]), float(counts[top] / rays)

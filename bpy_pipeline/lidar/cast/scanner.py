@@ -335,9 +335,9 @@ def _fused_chunk(caster: RayCaster, buffers: SceneBuffers, pattern: Pattern, ori
     called from the pass, embreex traces first and the pass fills each part's records straight
     into the rows they end up in (:func:`.kernels.fill_diffuse`). Slipped rays are found from the objects the passes saw from both
     sides, traced again as the numpy path does (:meth:`RayCaster.retrace`) and the pass repeated
-    over the chunk with them. Rays whose first hit is glass or a mirror's front face go on in
-    :func:`trace_beams` from that hit, and their records are merged in firing order: the same
-    bytes as the numpy path.
+    over those whose hit moved (:func:`_refill`). Rays whose first hit is glass or a mirror's front face go on in
+    :func:`trace_beams` from that hit. The records of both take their places among the others in firing order
+    (:func:`spliced`): the same bytes as the numpy path.
     """
     world_d = np.ascontiguousarray(world_d, np.float64)
     n = len(world_d)
@@ -349,9 +349,9 @@ def _fused_chunk(caster: RayCaster, buffers: SceneBuffers, pattern: Pattern, ori
 
     starts = list(range(0, n, caster.chunk)) or [0]
 
-    def part(j, moved=NO_RAYS):
+    def part(j):
         s, r = slice(starts[j], starts[j] + caster.chunk), slice(rows[j], rows[j + 1])
-        return fill_diffuse(caster.kernels, tfar[s], prim[s], prim_triangle, moved[s] if len(moved) else moved, origins if shared else origins[s], world_d[s],
+        return fill_diffuse(caster.kernels, tfar[s], prim[s], prim_triangle, NO_RAYS, origins if shared else origins[s], world_d[s],
                             caster, objects, pattern.ring[s], pattern.time[s], min_range, max_range, points[r], beam[r], ray[r], starts[j])
 
     if caster.kernels.traces and caster.embree_handles is not None:
@@ -381,25 +381,81 @@ def _fused_chunk(caster: RayCaster, buffers: SceneBuffers, pattern: Pattern, ori
         parts = caster.map(part, range(len(starts)))
     front = np.logical_or.reduce([p[1] for p in parts])
     back = np.logical_or.reduce([p[2] for p in parts])
-    suspect = caster.suspects(front, back, prim, lambda both: back_face_rays(caster.kernels, prim, prim_triangle, world_d, caster, both))
-    moved = None
-    if len(suspect):  # the pass again, with the re-traced rays (their hit counts may differ)
-        tfar, prim, moved = caster.retrace(suspect, local, world_d, far, tfar, prim)
-        rows = hit_rows(prim, starts, caster.chunk)
-        points, beam, ray = (caster.record_pool.take(rows[-1], POINT_DTYPE), caster.record_pool.take(rows[-1], BEAM_DTYPE),
-                             caster.record_pool.take(rows[-1], np.int64))
-        parts = caster.map(lambda j: part(j, moved), range(len(starts)))
     filled = np.array([p[0] for p in parts], np.int64)
     if not (filled == np.diff(rows)).all():  # rows left empty by misses (when traced in the pass), range limits, absorbers, glass and mirrors
         points, beam, ray = (compact(a, rows, filled, caster) for a in (points, beam, ray))
     specular = np.concatenate([p[3] for p in parts])
-    if not len(specular):
+    suspect = caster.suspects(front, back, prim, lambda both: back_face_rays(caster.kernels, prim, prim_triangle, world_d, caster, both))
+    moved, refilled = None, None
+    if len(suspect):
+        tfar, prim, moved = caster.retrace(suspect, local, world_d, far, tfar, prim)
+        again = np.flatnonzero(moved)
+        if len(again):  # only these rays' hits changed, and the pass fills each ray from its own hit alone: they are filled again
+            refilled, glass = _refill(caster, objects, again, tfar, prim, prim_triangle, origins, world_d, pattern, min_range, max_range)
+            specular = np.concatenate([specular[~moved[specular]], glass])
+            specular.sort(kind="stable")
+    if len(specular):
+        first = _first_hits(caster, specular, tfar, prim, moved, local, world_d)
+        beams = trace_beams(caster, buffers, origin, world_d, min_range, max_range, max_bounces, None, surfaces, rng, first=first)
+        more = _records(beams, buffers, pattern, origin, world_d, ghost_semantic, ideal)
+        refilled = more if refilled is None else in_firing_order(refilled, more)
+    if refilled is None:
         return points, beam, ray
-    first = _first_hits(caster, specular, tfar, prim, moved, local, world_d)
-    beams = trace_beams(caster, buffers, origin, world_d, min_range, max_range, max_bounces, None, surfaces, rng, first=first)
-    more = _records(beams, buffers, pattern, origin, world_d, ghost_semantic, ideal)
-    order = np.argsort(np.concatenate([ray, more[2]]), kind="stable")  # firing order (one record per ray at most)
-    return take(join([points, more[0]]), order), take(join([beam, more[1]]), order), np.concatenate([ray, more[2]])[order]
+    return spliced((points, beam, ray), moved, refilled, caster.record_pool)
+
+
+def _refill(caster: RayCaster, objects, again: np.ndarray, tfar, prim, prim_triangle, origins, world_d, pattern: Pattern, min_range: float,
+            max_range: float):
+    """The compiled pass over the re-traced rays ``again`` (a) alone: ``((points, beam, ray), specular)``, the records of
+    those of them that return from a diffuse surface and the (s,) rays among them left to :func:`trace_beams`, both in
+    firing order with indices among the chunk's rays. The pass reads nothing of a ray but its own hit, origin, direction,
+    channel and firing time, and draws nothing: each ray's record is the one a pass over the whole chunk gives it."""
+    k = len(again)
+    points, beam, ray = np.empty(k, POINT_DTYPE), np.empty(k, BEAM_DTYPE), np.empty(k, np.int64)
+    filled, _, _, specular = fill_diffuse(caster.kernels, tfar[again], prim[again], prim_triangle, np.ones(k, np.bool_),
+                                          origins if len(origins) == 1 else origins[again], world_d[again], caster, objects,
+                                          pattern.ring[again], pattern.time[again], min_range, max_range, points, beam, ray)
+    return (points[:filled], beam[:filled], again[ray[:filled]]), again[specular]
+
+
+def in_firing_order(a: tuple[np.ndarray, ...], b: tuple[np.ndarray, ...]) -> tuple[np.ndarray, ...]:
+    """Two sets of ``(points, beam, ray)`` records, each in firing order and no ray in both, joined in firing order."""
+    order = np.argsort(np.concatenate([a[2], b[2]]), kind="stable")
+    return tuple(take(join([x, y]), order) for x, y in zip(a, b))
+
+
+def spliced(records: tuple[np.ndarray, ...], drop: np.ndarray | None, extra: tuple[np.ndarray, ...], pool) -> tuple[np.ndarray, ...]:
+    """``records`` without the rows of the rays ``drop`` flags, with ``extra``'s rows among them: all in firing order.
+
+    records, extra : ``(points, beam, ray)`` each, rows in firing order (``ray`` (r,) and (e,) int64 ascending; no ray of
+    ``extra`` among the rows kept); drop : (n,) bool per ray of the chunk, or ``None`` to keep every row.
+    Returns the same three arrays, (r - dropped + e,), in memory of ``pool`` (:class:`~.raycast.RecordPool`): each row
+    put once, as raw bytes, at its place (no sort of all the rows, no copy of the kept rows first).
+    """
+    ray, more = records[-1], extra[-1]
+    dropped = None if drop is None else drop[ray]
+    kept = ray if dropped is None else ray[~dropped]
+    at = np.searchsorted(kept, more) + np.arange(len(more))  # each extra row's place among all
+    total = len(kept) + len(more)
+    base = np.ones(total, np.bool_)
+    base[at] = False
+    if dropped is None:
+        place = np.flatnonzero(base)
+    else:  # a dropped row goes to the one spare row past the end
+        place = np.full(len(ray), total, np.int64)
+        place[~dropped] = np.flatnonzero(base)
+    out = []
+    for a, e in zip(records, extra):
+        joined = pool.take(total + 1, a.dtype)
+        raw = a.dtype if a.dtype.names is None else np.dtype((np.void, a.dtype.itemsize))  # records as raw bytes: whole, not field by field
+        target, rows = joined.view(raw), np.ascontiguousarray(a).view(raw)
+        if a.dtype.names is None:
+            target[place] = rows
+        else:  # np.put moves raw records faster than indexing does (a number: slower)
+            np.put(target, place, rows)
+        target[at] = np.ascontiguousarray(e).view(raw)
+        out.append(joined[:total])
+    return tuple(out)
 
 
 class InOrder:
