@@ -14,7 +14,7 @@ in the same order (no fused multiply-add, no reassociation), so all give the sam
 Numba is optional (the ``fast`` extra): :func:`compiled` returns ``None`` when it is not
 importable, and the scanner then takes the numpy path. Rays whose first hit is glass or a
 mirror's front face are only listed here: :func:`.scanner.trace_beams` continues them; slipped
-rays are traced again by :meth:`.raycast.RayCaster.retrace` and the pass repeated.
+rays are traced again by :meth:`.raycast.RayCaster.retrace` and the pass repeated over the moved rays.
 """
 
 from __future__ import annotations
