@@ -49,8 +49,14 @@ def one_run(code: Path, measure: str) -> tuple[float, float]:
 
 def summary(runs: list[tuple[float, float]]) -> dict:
     walls, cpus = [r[0] for r in runs], [r[1] for r in runs]
-    return {"wall_median_s": statistics.median(walls), "cpu_median_s": statistics.median(cpus), "wall_min_s": min(walls), "cpu_min_s": min(cpus),
-            "wall_s": walls, "cpu_s": cpus}
+    return {
+        "wall_median_s": statistics.median(walls),
+        "cpu_median_s": statistics.median(cpus),
+        "wall_min_s": min(walls),
+        "cpu_min_s": min(cpus),
+        "wall_s": walls,
+        "cpu_s": cpus,
+    }
 
 
 def relative(path: Path) -> str:
