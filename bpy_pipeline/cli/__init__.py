@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import atexit
+import gc
 import os
 import signal
 import socket
@@ -177,6 +178,7 @@ def run_main(args) -> int:
     empty_file(bpy, started)
     from ..plan import run
 
+    gc.freeze()  # the start's objects (modules, Blender's types, the config) stay for the run: no collection walks them again
     run(config, args.out, log=progress(len(frames), estimate), frames=frames, mode=mode)
     return 0
 
