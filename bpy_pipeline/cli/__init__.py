@@ -178,7 +178,8 @@ def run_main(args) -> int:
     empty_file(bpy, started)
     from ..plan import run
 
-    gc.freeze()  # the start's objects (modules, Blender's types, the config) stay for the run: no collection walks them again
+    if started:  # this process is the run's: the start's objects (modules, Blender's types, the config) stay to its end,
+        gc.freeze()  # and no collection of the garbage collector walks them again
     run(config, args.out, log=progress(len(frames), estimate), frames=frames, mode=mode)
     return 0
 
