@@ -96,10 +96,22 @@ def parse_rules(rules: list, where: str, names: dict[int, str]) -> tuple[NameRul
 
 
 @lru_cache(maxsize=4)
+def _class_file(path: Path):
+    """The parsed class table file ``path`` (read once per process and path; not to be changed by callers)."""
+    return load_yaml(path.read_text())
+
+
 def load_class_table(path: Path = LABELS_PATH) -> ClassTable:
     """Read and check the class table; ``InputError`` naming the file when it is missing or malformed."""
+    return _class_table(Path(path))
+
+
+@lru_cache(maxsize=4)
+def _class_table(path: Path) -> ClassTable:
+    """:func:`load_class_table` of ``path`` as a :class:`~pathlib.Path` (``load_class_table()`` and
+    ``load_class_table(LABELS_PATH)`` are one cache entry, and one parse of the file)."""
     try:
-        raw = load_yaml(Path(path).read_text())
+        raw = _class_file(path)
     except (OSError, yaml.YAMLError) as err:
         raise InputError(f"{path}: cannot read the class table ({err})") from None
     try:
@@ -116,13 +128,17 @@ def load_class_table(path: Path = LABELS_PATH) -> ClassTable:
     return ClassTable(names, colors, learning_map, rules)
 
 
-@lru_cache(maxsize=4)
 def semantickitti_ids(path: Path = LABELS_PATH) -> dict[str, int]:
     """``{project class name: SemanticKITTI raw id}`` from the ``semantickitti:`` section of the class table file
     (every class of the table listed; ``InputError`` naming the file when the section is missing, incomplete or not ids)."""
-    table = load_class_table(path)
+    return _semantickitti_ids(Path(path))
+
+
+@lru_cache(maxsize=4)
+def _semantickitti_ids(path: Path) -> dict[str, int]:
+    table = _class_table(path)
     try:
-        raw = load_yaml(Path(path).read_text()).get("semantickitti")
+        raw = _class_file(path).get("semantickitti")
         ids = {normalise(name): int(value) for name, value in raw.items()}
     except (OSError, yaml.YAMLError, AttributeError, TypeError, ValueError) as err:
         raise InputError(f"{path}: semantickitti: expected a mapping of class name to SemanticKITTI raw id ({err})") from None

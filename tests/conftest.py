@@ -62,6 +62,7 @@ def real_scan():
 # a fresh venv), and tests over about 2 s on a quiet machine (pytest --durations=80).
 SLOW = frozenset({
     "test_dataset.py",  # every test runs run.py: frame ranges, kill -9, workers, Ray
+    "test_empty_file.py",  # three Blender sessions: the factory file emptied two ways
     "test_extension.py",  # builds the zip, installs it in a Blender session
     "test_extension_checkout.py",
     "test_io_kitti_camera.py",  # Workbench renders

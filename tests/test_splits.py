@@ -119,6 +119,24 @@ def test_every_class_has_a_semantickitti_raw_id_of_its_learning_map():
     assert lut[60000] == 0  # ids outside the table: unlabeled
 
 
+def test_the_class_table_file_is_parsed_once_whichever_way_its_path_is_given(monkeypatch):
+    from bpy_pipeline import labels
+
+    parsed = []
+    monkeypatch.setattr(labels, "load_yaml", lambda text: parsed.append(text) or yaml.safe_load(text))
+    caches = (labels._class_file, labels._class_table, labels._semantickitti_ids)
+    for cached in caches:
+        cached.cache_clear()
+    try:
+        table = labels.load_class_table()
+        assert labels.load_class_table(labels.LABELS_PATH) is table and labels.load_class_table(str(labels.LABELS_PATH)) is table
+        assert labels.semantickitti_ids() is labels.semantickitti_ids(labels.LABELS_PATH)
+        assert len(parsed) == 1
+    finally:  # the values parsed by the stand-in are not kept for later tests
+        for cached in caches:
+            cached.cache_clear()
+
+
 def test_the_yaml_speaks_the_devkits_table_and_a_class_map_trains_a_task():
     stock = semantic_kitti_space_yaml()
     assert stock["learning_map"][10] == 1 and stock["learning_map"][52] == 0 and stock["learning_map_inv"][5] == 20
