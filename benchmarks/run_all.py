@@ -10,6 +10,7 @@ BENCHMARKS = [
     "bench_scan.py",
     "bench_caster_reuse.py",
     "bench_workers.py",
+    "bench_sensor_rate.py",
     "bench_default_job.py",
     "bench_effects.py",
     "bench_fitting.py",

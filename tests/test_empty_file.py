@@ -37,8 +37,8 @@ def plain(struct):
             out[prop.identifier] = list(value) if hasattr(value, "__len__") and not isinstance(value, str) else value
     return out
 
-blocks = {name: sorted(b.name for b in getattr(bpy.data, name)) for name in dir(bpy.data)
-          if isinstance(getattr(bpy.data, name, None), bpy.types.bpy_prop_collection)}
+blocks = {name: sorted(b.name for b in getattr(bpy.data, name)) for name in dir(bpy.data)  # all_ids (Blender 5.x): every kind's again
+          if name != "all_ids" and isinstance(getattr(bpy.data, name, None), bpy.types.bpy_prop_collection)}
 scene = bpy.context.scene
 state = {"blocks": blocks, "scene": plain(scene), "render": plain(scene.render), "units": plain(scene.unit_settings),
          "display": plain(scene.display), "world": scene.world and scene.world.name,

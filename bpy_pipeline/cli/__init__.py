@@ -197,8 +197,12 @@ def empty_file(bpy, started: bool) -> None:
         startup file or a .blend of the user's, settings changed) the factory settings are read.
     """
     if started and bpy.app.factory_startup and not bpy.data.filepath:
-        kinds = [getattr(bpy.data, name) for name in dir(bpy.data) if name not in KEPT_DATA]  # objects, meshes, ...
-        bpy.data.batch_remove([block for kind in kinds if isinstance(kind, bpy.types.bpy_prop_collection) for block in kind])
+        # every data block once, by its address: Blender 5.x also lists them all together (``bpy.data.all_ids``)
+        kept = {block.as_pointer() for name in KEPT_DATA for block in getattr(bpy.data, name)}
+        kinds = [getattr(bpy.data, name) for name in dir(bpy.data)]
+        removed = {block.as_pointer(): block for kind in kinds if isinstance(kind, bpy.types.bpy_prop_collection) for block in kind
+                   if isinstance(block, bpy.types.ID) and block.as_pointer() not in kept}
+        bpy.data.batch_remove(list(removed.values()))
     else:
         bpy.ops.wm.read_factory_settings(use_empty=True)
 
