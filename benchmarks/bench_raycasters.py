@@ -47,7 +47,7 @@ from embreex.mesh_construction import TriangleMesh
 from bpy_pipeline.buffers import SceneBuffers
 from bpy_pipeline.geometry import primitives
 from bpy_pipeline.geometry.transforms import pose_matrix
-from bpy_pipeline.lidar.cast import kernels
+from bpy_pipeline.compiled import numba_available
 from bpy_pipeline.lidar.cast.raycast import RayCaster, default_threads
 from bpy_pipeline.lidar.cast.scanner import scan, scan_chunk
 from bpy_pipeline.lidar.sensor.sensors import resolve_sensor, sensor_pattern
@@ -314,7 +314,7 @@ def main():
         ("embreex raw", embreex_raw, threads, "float32 distance"),
         ("RayCaster.intersect", raycaster, threads, "sensor frame, float64 re-solve"),
         ("scan (records)", full_scan, threads,
-         "point records: float32 x y z" + ("; compiled kernel" if kernels.numba_available() else "; numba absent: numpy path")),
+         "point records: float32 x y z" + ("; compiled kernel" if numba_available() else "; numba absent: numpy path")),
         ("scan (records, numpy path)", lambda s, t: full_scan(s, t, "numpy"), threads, "point records, kernel='numpy'"),
         ("trimesh + embreex", trimesh_embree, 1, "trimesh.ray.ray_pyembree"),
         ("Blender BVHTree", lambda s, t: blender_bvhtree(s, t, count), 1, f"Python loop; {count:,} rays timed, extrapolated"),

@@ -27,6 +27,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from bench_street_frame import checkout_environment
+
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 EGO = ["run.py", "--config", "examples/street/ego_hdl64e.yaml"]
@@ -35,8 +37,7 @@ MEASURES = {"import": ["-c", "import bpy_pipeline.cli"], "frames1": [*EGO, "--fr
 
 def one_run(code: Path, measure: str) -> tuple[float, float]:
     """Wall s and CPU s of one process of ``measure`` (:data:`MEASURES`) in checkout ``code``."""
-    env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
-    env.update(PYTHONPATH=str(code), OPENBLAS_NUM_THREADS="1")
+    env = checkout_environment(code)
     with tempfile.TemporaryDirectory(dir=os.environ.get("BENCH_SPEED_TMP")) as tmp:
         args = MEASURES[measure] + (["--out", str(Path(tmp) / "run")] if measure != "import" else [])
         before = resource.getrusage(resource.RUSAGE_CHILDREN)

@@ -36,6 +36,18 @@ ROOT = HERE.parent
 SKIPPED = ("records", "manifest.json")  # files holding timings
 
 
+def output_digests(out: Path) -> dict[str, str]:
+    """``{path relative to out: sha256}`` of every file of a run's folder ``out`` but those holding timings (:data:`SKIPPED`)."""
+    return {str(p.relative_to(out)): hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(out.rglob("*"))
+            if p.is_file() and not str(p.relative_to(out)).startswith(SKIPPED)}  # fmt: skip
+
+
+def checkout_environment(code: Path) -> dict[str, str]:
+    """This process's environment for a subprocess importing checkout ``code``'s package: ``PYTHONPATH`` there, one BLAS
+    thread, and without ``PYTHONDONTWRITEBYTECODE`` (each checkout imported from its bytecode caches, as an installed package is)."""
+    return {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"} | {"PYTHONPATH": str(code), "OPENBLAS_NUM_THREADS": "1"}
+
+
 def part(frames: int, keep: Path | None = None) -> dict:
     """In the checkout on ``PYTHONPATH`` (the working directory): the job's frames one at a time; stage timings, digests;
     each frame's PLY records copied to ``keep`` (when given) as ``.npy``."""
@@ -71,11 +83,7 @@ def part(frames: int, keep: Path | None = None) -> dict:
         start = time.perf_counter()
         timings = [dict(f.timings) | {f"cpu_{k}": v for k, v in cpu[f.index].items()} for f in plan.run_frames(config, out, overlap=False)]
         wall = time.perf_counter() - start
-        digests = {
-            str(p.relative_to(out)): hashlib.sha256(p.read_bytes()).hexdigest()
-            for p in sorted(out.rglob("*"))
-            if p.is_file() and not str(p.relative_to(out)).startswith(SKIPPED)
-        }
+        digests = output_digests(out)
         if keep is not None:
             import numpy as np
 
@@ -91,8 +99,8 @@ def part(frames: int, keep: Path | None = None) -> dict:
 
 def in_checkout(code: Path, frames: int, keep: Path) -> dict:
     """:func:`part` in a subprocess importing ``code``'s package (cwd and PYTHONPATH there)."""
-    env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"} | {"PYTHONPATH": str(code), "OPENBLAS_NUM_THREADS": "1"}
-    done = subprocess.run([sys.executable, str(HERE / "bench_street_frame.py"), "--part", "--frames", str(frames), "--keep", str(keep)], cwd=code, env=env,
+    done = subprocess.run([sys.executable, str(HERE / "bench_street_frame.py"), "--part", "--frames", str(frames), "--keep", str(keep)], cwd=code,
+                          env=checkout_environment(code),
                           capture_output=True, text=True)
     if done.returncode != 0:
         raise RuntimeError(f"{code}: {done.stderr.strip()[-800:]}")

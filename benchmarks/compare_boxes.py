@@ -16,18 +16,17 @@ Results: ``benchmarks/results/<--name>`` (default ``compare_boxes.json``).
 from __future__ import annotations
 
 import argparse
-import hashlib
 import json
-import os
 import pickle
 import subprocess
 import sys
 import tempfile
 from pathlib import Path
 
+from bench_street_frame import checkout_environment, output_digests
+
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
-SKIPPED = ("records", "manifest.json")  # files holding timings
 
 
 def part(config_path: str, overrides: list[str], frames: int, dump: Path) -> None:
@@ -56,18 +55,16 @@ def part(config_path: str, overrides: list[str], frames: int, dump: Path) -> Non
         out = Path(tmp) / "run"
         for _ in plan.run_frames(config, out, overlap=False):
             pass
-        digests = {str(p.relative_to(out)): hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(out.rglob("*"))
-                   if p.is_file() and not str(p.relative_to(out)).startswith(SKIPPED)}  # fmt: skip
+        digests = output_digests(out)
     dump.write_bytes(pickle.dumps({"boxes": boxes, "digests": digests, "code": str(Path(bpy_pipeline.__file__).parent)}))
 
 
 def in_checkout(code: Path, args: argparse.Namespace, dump: Path) -> dict:
     """:func:`part` in a subprocess importing ``code``'s package (cwd and PYTHONPATH there)."""
-    env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"} | {"PYTHONPATH": str(code)}
     command = [sys.executable, str(HERE / "compare_boxes.py"), "--part", "--config", args.config, "--frames", str(args.frames), "--dump", str(dump)]
     for value in args.set:
         command += ["--set", value]
-    done = subprocess.run(command, cwd=code, env=env, capture_output=True, text=True)
+    done = subprocess.run(command, cwd=code, env=checkout_environment(code), capture_output=True, text=True)
     if done.returncode != 0:
         raise RuntimeError(f"{code}: {done.stderr.strip()[-800:]}")
     row = pickle.loads(dump.read_bytes())

@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 
 from bpy_pipeline.buffers import SceneBuffers
+from bpy_pipeline.compiled import numba_available
 from bpy_pipeline.geometry import primitives
 from bpy_pipeline.geometry.transforms import pose_matrix
-from bpy_pipeline.lidar.cast import kernels
 from bpy_pipeline.lidar.cast.raycast import RayCaster, RecordPool
 from bpy_pipeline.lidar.cast.scanner import scan
 from bpy_pipeline.lidar.sensor.sensors import resolve_sensor, sensor_pattern
@@ -30,7 +30,7 @@ def test_busy_while_a_view_lives():
     assert small.base is None  # small arrays are not pooled
 
 
-@pytest.mark.skipif(not kernels.numba_available(), reason="the pool serves the compiled path (numba not installed)")
+@pytest.mark.skipif(not numba_available(), reason="the pool serves the compiled path (numba not installed)")
 def test_a_held_scan_keeps_its_bytes_through_later_scans():
     buffers = SceneBuffers.from_meshes({"box": primitives.box(40.0, 40.0, 10.0)})
     spec = resolve_sensor({"preset": "os1_128"})

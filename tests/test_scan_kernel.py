@@ -18,7 +18,7 @@ from bpy_pipeline.errors import InputError
 from bpy_pipeline.geometry import primitives
 from bpy_pipeline.geometry.transforms import pose_matrix
 from bpy_pipeline.lidar.cast import raycast, scanner
-from bpy_pipeline.lidar.cast.kernels import numba_available
+from bpy_pipeline.compiled import numba_available
 from bpy_pipeline.lidar.cast.raycast import CasterCache, RayCaster
 from bpy_pipeline.lidar.cast.scanner import scan, scan_chunk
 from bpy_pipeline.lidar.sensor.sensors import resolve_sensor, sensor_pattern

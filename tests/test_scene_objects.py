@@ -19,12 +19,8 @@ def test_a_mesh_reads_back_as_the_arrays_it_was_made_from(shape):
     vertices = rng.normal(size=(n, 3)) * 10
     triangles = rng.integers(0, max(n, 1), (m, 3)).astype(np.int32)
     mesh = mesh_data("made", vertices, triangles)
-    co = np.empty(len(mesh.vertices) * 3, np.float32)
-    mesh.vertices.foreach_get("co", co)
-    corners = np.empty(len(mesh.loops), np.int32)
-    mesh.loops.foreach_get("vertex_index", corners)
-    sizes = np.empty(len(mesh.polygons), np.int32)
-    mesh.polygons.foreach_get("loop_total", sizes)
+    co, corners = _read(mesh.vertices, "co", np.float32, 3), _read(mesh.loops, "vertex_index", np.int32)
+    sizes = _read(mesh.polygons, "loop_total", np.int32)
     assert np.array_equal(co, vertices.astype(np.float32).ravel())
     assert np.array_equal(corners, triangles.ravel())
     assert len(mesh.polygons) == m and (sizes == 3).all()
@@ -85,17 +81,18 @@ def test_export_gives_blenders_loop_triangles_and_their_faces_ids(faces):
     assert np.array_equal(instance[got_order], (face % 3 + 1)[order])
 
 
+def _read(items, name: str, dtype, width: int = 1) -> np.ndarray:
+    """``(len(items) * width,)`` array of attribute ``name`` of a Blender collection (``foreach_get``)."""
+    out = np.empty(len(items) * width, dtype)
+    items.foreach_get(name, out)
+    return out
+
+
 def _mesh_state(bpy, obj) -> tuple:
     """What a mesh object holds: its positions, corners, polygons, edges, evaluated bounds and a ray's hit."""
     mesh = obj.data
-    co = np.empty(len(mesh.vertices) * 3, np.float32)
-    mesh.vertices.foreach_get("co", co)
-    corners = np.empty(len(mesh.loops), np.int32)
-    mesh.loops.foreach_get("vertex_index", corners)
-    starts = np.empty(len(mesh.polygons), np.int32)
-    mesh.polygons.foreach_get("loop_start", starts)
-    edges = np.empty(len(mesh.edges) * 2, np.int32)
-    mesh.edges.foreach_get("vertices", edges)
+    co, corners = _read(mesh.vertices, "co", np.float32, 3), _read(mesh.loops, "vertex_index", np.int32)
+    starts, edges = _read(mesh.polygons, "loop_start", np.int32), _read(mesh.edges, "vertices", np.int32, 2)
     graph = bpy.context.evaluated_depsgraph_get()
     bounds = np.array([list(c) for c in obj.evaluated_get(graph).bound_box])
     hit = obj.ray_cast((0.1, 0.1, 50.0), (0.0, 0.0, -1.0))

@@ -10,8 +10,6 @@ allocate besides the points themselves stays a few tens of megabytes however lar
 from __future__ import annotations
 
 import hashlib
-import importlib.util
-import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -23,12 +21,6 @@ WRITE_CHUNK = 1 << 20  # points converted and written at a time
 # points converted at a time into one buffer by the frame writers (PLY, SemanticKITTI): a few hundred kB, which the
 # hash and the write call read again while they are still in the core's cache, and no new memory for each chunk
 CACHED_CHUNK = 1 << 14
-
-
-def compiled_passes() -> bool:
-    """Whether the writers' compiled passes (numba, cached on disk) are used: numba is importable and
-    ``BPY_PIPELINE_SCAN_KERNEL`` does not ask for the numpy paths (which write the same bytes)."""
-    return os.environ.get("BPY_PIPELINE_SCAN_KERNEL") != "numpy" and importlib.util.find_spec("numba") is not None
 
 
 def chunks(n: int, size: int = WRITE_CHUNK) -> list[slice]:

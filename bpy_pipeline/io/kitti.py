@@ -35,9 +35,10 @@ from types import SimpleNamespace
 import numpy as np
 
 from ..geometry.transforms import KITTI_SENSOR_HEIGHT, euler_xyz_matrix, sensor_to_output
+from ..compiled import compiled_wanted
 from .atomic import atomic_write, hashed_open, write_text_hashed
 from .class_maps import ClassMaps, load_class_maps
-from ._records import XYZI, XyziBlock, compiled_passes, packed_columns
+from ._records import XYZI, XyziBlock, packed_columns
 from .preview import encode_png, splat
 from .splits import SPLITS, split_indices
 
@@ -197,7 +198,7 @@ def label_lines(boxes: np.ndarray, points: np.ndarray, camera, maps: ClassMaps |
 @cache
 def _square_kernels():
     """The compiled passes of :func:`render_image` (numba, cached on disk), or ``None`` without them
-    (:func:`~._records.compiled_passes`: no numba, or ``BPY_PIPELINE_SCAN_KERNEL=numpy``; both paths paint the same pixels).
+    (:func:`~bpy_pipeline.compiled.compiled_wanted`: no numba, or ``BPY_PIPELINE_SCAN_KERNEL=numpy``; both paths paint the same pixels).
 
     ``shift_rows(cam (n, 3), t (3,))``: ``cam += t`` in place. ``paint_squares``: with ``pix = cam @ k.T``, each point's
     :func:`project` values (``u = pix[:, 0] / cam[:, 2]``, ``v = pix[:, 1] / cam[:, 2]``, depth ``cam[:, 2]``: the same
@@ -205,7 +206,7 @@ def _square_kernels():
     its dot x dot square (rows of the square outer, columns inner, as np.meshgrid ravels them; clipped to the image) at
     -depth with :func:`~.preview.splat`'s rule (at least as deep as the pixel's best wins).
     """
-    if not compiled_passes():
+    if not compiled_wanted():
         return None
     import numba
 

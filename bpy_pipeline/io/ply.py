@@ -23,8 +23,9 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError, path_argument
+from ..compiled import compiled_wanted
 from ..lidar.points import POINT_DTYPE
-from ._records import CACHED_CHUNK, as_points, chunks, compiled_passes
+from ._records import CACHED_CHUNK, as_points, chunks
 from .atomic import atomic_write, hashed_open
 
 # PLY scalar type names (both spellings of the spec) -> numpy type character codes.
@@ -124,7 +125,7 @@ def _records_kernel():
     """The compiled record copy (numba, cached on disk): ``copy(source (n, 37) uint8, target (n, 41) uint8)`` by
     :data:`KERNEL_RUNS`; ``None`` without numba, with ``BPY_PIPELINE_SCAN_KERNEL=numpy``, or where the two layouts'
     :func:`byte_runs` are not those runs. The same bytes as the numpy path."""
-    if not compiled_passes() or POINT_DTYPE.itemsize != 37 or PLY_DTYPE.itemsize != 41 or byte_runs(POINT_DTYPE, PLY_DTYPE) != KERNEL_RUNS:
+    if not compiled_wanted() or POINT_DTYPE.itemsize != 37 or PLY_DTYPE.itemsize != 41 or byte_runs(POINT_DTYPE, PLY_DTYPE) != KERNEL_RUNS:
         return None
     import numba
 

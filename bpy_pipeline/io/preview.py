@@ -19,7 +19,6 @@ as an indexed PNG: a third of the bytes to compress of an RGB image, with the sa
 
 from __future__ import annotations
 
-import importlib.util
 import os
 import struct
 import zlib
@@ -29,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from ..compiled import compiled_wanted
 from ..geometry.boxes import box_corners
 from ._records import as_points, packed_columns
 from .atomic import atomic_write, hashed_open
@@ -99,7 +99,7 @@ def encode_png_indexed(index: np.ndarray, palette: np.ndarray, level: int = PNG_
 def _splat_kernel():
     """The compiled splat (numba, cached on disk), or ``None`` without numba or when
     ``BPY_PIPELINE_SCAN_KERNEL=numpy`` asks for the numpy path (both paint the same pixels)."""
-    if os.environ.get("BPY_PIPELINE_SCAN_KERNEL") == "numpy" or importlib.util.find_spec("numba") is None:
+    if not compiled_wanted():
         return None
     import numba
 

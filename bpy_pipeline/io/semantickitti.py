@@ -18,8 +18,9 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError, path_argument
+from ..compiled import compiled_wanted
 from ..lidar.points import POINT_DTYPE
-from ._records import CACHED_CHUNK, XYZI, XyziBlock, as_points, chunks, compiled_passes, packed_columns
+from ._records import CACHED_CHUNK, XYZI, XyziBlock, as_points, chunks, packed_columns
 from .atomic import atomic_write, hashed_open
 
 MAX_INSTANCE = 0xFFFF
@@ -59,7 +60,7 @@ def check_instances(instance: np.ndarray, where: str = "SemanticKITTI labels") -
 def _labels_kernel():
     """The compiled :func:`frame_labels` (numba, cached on disk), or ``None`` without numba or with
     ``BPY_PIPELINE_SCAN_KERNEL=numpy``: ``pack(semantic (n,) uint16, instance (n,) uint32, lut (65536,) uint16, use_lut, out (n,) uint32)``."""
-    if not compiled_passes():
+    if not compiled_wanted():
         return None
     import numba
 

@@ -19,19 +19,15 @@ rays are traced again by :meth:`.raycast.RayCaster.retrace` and the pass repeate
 
 from __future__ import annotations
 
-import importlib.util
 from functools import cache
 from types import SimpleNamespace
 
 import numpy as np
 
+from ...compiled import numba_available
+
 IDENTITY = np.zeros(0, np.int64)  # a primitive map that is the identity
 NO_RAYS = np.zeros(0, np.bool_)
-
-
-def numba_available() -> bool:
-    """Whether numba can be imported (without importing it)."""
-    return importlib.util.find_spec("numba") is not None
 
 
 @cache

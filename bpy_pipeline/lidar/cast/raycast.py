@@ -55,6 +55,7 @@ import numpy as np
 from embreex import rtcore_scene
 
 from ...buffers import MATERIAL_ID, SceneBuffers
+from ...compiled import KERNEL_VARIABLE
 from ...errors import InputError
 from . import kernels
 from .embree import attach_triangles, scene_handle
@@ -66,7 +67,6 @@ FOLLOW_GRID = 1024.0  # metres between the origins a static part following a sen
 MAX_SHIFT = 1000.0  # metres a pose may stand from the frame a kept static part was built in (float32 keeps 0.1 mm there)
 MAX_COORDINATE = 1e9  # metres from the local origin; far beyond any scene (Embree overflows and loses triangles from ~5e18 m)
 PLANE_CHUNK = 1 << 20  # triangles per step when computing the planes (bounds the float64 temporaries)
-KERNEL_VARIABLE = "BPY_PIPELINE_SCAN_KERNEL"  # "numpy" forces the numpy path where no kernel is given (tests, comparisons)
 KERNELS = ("auto", "numba", "numpy")
 
 

@@ -13,18 +13,15 @@ give the same bytes (``tests/test_effects_kernels.py``).
 
 from __future__ import annotations
 
-import os
 from functools import cache
 from types import SimpleNamespace
 
-from ..cast.kernels import numba_available
-
-KERNEL_VARIABLE = "BPY_PIPELINE_SCAN_KERNEL"
+from ...compiled import compiled_wanted
 
 
 def compiled() -> SimpleNamespace | None:
     """The compiled effects kernels, or ``None`` (no numba, or ``BPY_PIPELINE_SCAN_KERNEL=numpy``)."""
-    if os.environ.get(KERNEL_VARIABLE) == "numpy" or not numba_available():
+    if not compiled_wanted():
         return None
     return _kernels()
 
