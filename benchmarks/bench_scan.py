@@ -33,6 +33,7 @@ from embreex import rtcore_scene
 from embreex.mesh_construction import TriangleMesh
 
 from bpy_pipeline.buffers import SceneBuffers
+from bpy_pipeline.compiled import numba_available
 from bpy_pipeline.config import load_config
 from bpy_pipeline.blender.export import export_scene
 from bpy_pipeline.geometry import primitives
@@ -186,8 +187,8 @@ def main():
     if not args.small:
         buffers, pattern, pose, spec = railway_scene(False, 708)
         rows.append(measure("railway on a 1 M-triangle GN terrain", buffers, pattern, pose, spec.min_range, spec.max_range, threads, args.small))
-    print(f"ratio = raw embreex time / scan time (target >= 0.8); {threads} threads; numba {'installed' if kernels.numba_available() else 'not installed'}")
-    report("scan" + ("_small" if args.small else ""), rows, args.out, {"threads": threads, "numba": kernels.numba_available(), "repeat": REPEAT})
+    print(f"ratio = raw embreex time / scan time (target >= 0.8); {threads} threads; numba {'installed' if numba_available() else 'not installed'}")
+    report("scan" + ("_small" if args.small else ""), rows, args.out, {"threads": threads, "numba": numba_available(), "repeat": REPEAT})
 
 
 if __name__ == "__main__":
