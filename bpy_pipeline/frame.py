@@ -169,6 +169,9 @@ class Run:
     static_world : ``(token, buffers, bounds)``: the builder's static world exported once (``BuildResult.static_world``,
         ``.dynamic``; :func:`~bpy_pipeline.stages.scene.export_stage`) and its vertices' ``(low, high)`` (``None``: no vertex);
         ``None`` before the first export
+    in_blender : the stages after the build read each frame's objects from Blender (``BuildContext.in_blender``);
+        ``False`` (:func:`~bpy_pipeline.plan.run_frames`, when they read the builder's arrays only): Blender's copy of
+        the frame's road users waits for the run's end (``BuildResult.show``)
     """
 
     config: Config
@@ -186,6 +189,7 @@ class Run:
     casters: CasterCache | None = None
     sensor_poses: SensorPoses | None = None
     static_world: tuple | None = None
+    in_blender: bool = True
 
     def __post_init__(self):
         self.rules = parse_rules(self.config.labels.name_rules, "labels.name_rules", self.table.names)

@@ -66,12 +66,15 @@ class Stage:
     finishing : it calls no Blender and changes nothing the run keeps across frames (it reads the frame, the
         run's config and class table, and uses the run's rays and casters, which two threads may share), so
         a frame's last stages, when all are finishing, may run beside the next frame's first (:func:`run_frames`)
+    reads_blender : it reads the frame's objects from Blender itself (a render, a rig's members' exports), not the
+        builder's arrays: a run with no such stage leaves Blender's copy of each frame's road users to its end
     """
 
     name: str
     function: StageFunction
     timing: str | None
     finishing: bool = False
+    reads_blender: bool = False
 
     def __call__(self, frame: Frame, run: Run) -> None:
         self.function(frame, run)
@@ -81,7 +84,7 @@ def _single(config: Config) -> tuple[Stage, ...]:
     stages = [Stage("build", build_stage, "build"), Stage("pose", pose_stage, "build"), Stage("export", export_stage, "export"),
               Stage("scan", scan_stage, "scan"), Stage("effects", effects_stage, None)]
     if config.output.kitti.camera.render and "kitti" in config.output.boxes.formats:  # Blender renders it: before the finishing stages
-        stages.append(Stage("camera", camera_stage, "camera"))
+        stages.append(Stage("camera", camera_stage, "camera", reads_blender=True))
     if config.output.boxes.formats:
         stages.append(Stage("annotate", annotate_stage, "boxes", finishing=True))
     return tuple(stages)
@@ -89,7 +92,8 @@ def _single(config: Config) -> tuple[Stage, ...]:
 
 def _rig(config: Config) -> tuple[Stage, ...]:
     boxes = bool(config.output.boxes.formats or config.output.skip_empty)
-    stages = [Stage("build", build_stage, "build"), Stage("pose", pose_stage, "build"), Stage("members", members_stage_of(config, boxes), None),
+    stages = [Stage("build", build_stage, "build"), Stage("pose", pose_stage, "build"),
+              Stage("members", members_stage_of(config, boxes), None, reads_blender=True),
               Stage("merge", merge_stage, "scan")]
     if boxes:
         stages.append(Stage("merged boxes", merged_boxes_stage, "boxes", finishing=True))
@@ -215,14 +219,16 @@ def run_frames(config: Config, out_dir: str | Path, build: bool = True, frames: 
     when it is done. An error in frame k + 1's first stages comes after frame k is committed and yielded.
     A stage's timing is its wall time, so beside another frame it holds the turns it waited for the
     interpreter; ``overlap=False`` runs every stage alone (the stage costs of ``benchmarks/bench_speed.py``).
+    When no stage reads the frame's objects from Blender (:attr:`Stage.reads_blender`), a builder that gives its road
+    users as arrays leaves them out of Blender until the run ends (``BuildContext.in_blender``): the same bytes.
     """
     output = config.output
     until_kept = output.skip_empty and output.frames_kept and (frames is None or list(frames) == list(range(config.frames)))  # a full run
     frames = range(config.frames) if frames is None else frames
     if until_kept:  # frame indices go on until `frames` frames are kept (at most MAX_INDICES_PER_KEPT per kept frame)
         frames = range(MAX_INDICES_PER_KEPT * config.frames)
-    run = Run(config, build, log=log)
     stages = plan(config)
+    run = Run(config, build, log=log, in_blender=any(stage.reads_blender for stage in stages))
     cut = finishing_start(stages)
     first, finishing = stages[:cut], stages[cut:]
 
@@ -250,36 +256,40 @@ def run_frames(config: Config, out_dir: str | Path, build: bool = True, frames: 
         if kept:
             yield frame
 
-    with Dataset.open(out_dir, config, mode,
-                      log=log) as dataset, ThreadPoolExecutor(1, "finishing") if overlap and overlaps(config, until_kept) else nullcontext() as beside:
-        pending = None  # the frame whose finishing stages run beside this one's first
-        for index in frames:
-            if until_kept and sum(1 for r in dataset.committed.values() if not r.get("skipped")) >= config.frames:
-                break
-            if dataset.has(index):
-                continue
-            frame, said = Frame(index, config, frame_rng(config.seed, index)), []
-            try:
-                run_stages(frame, run, first, said)
-            except BaseException:
-                if pending is not None:  # the frame before is committed and yielded first, as without the thread
+    try:
+        beside_frames = ThreadPoolExecutor(1, "finishing") if overlap and overlaps(config, until_kept) else nullcontext()
+        with Dataset.open(out_dir, config, mode, log=log) as dataset, beside_frames as beside:
+            pending = None  # the frame whose finishing stages run beside this one's first
+            for index in frames:
+                if until_kept and sum(1 for r in dataset.committed.values() if not r.get("skipped")) >= config.frames:
+                    break
+                if dataset.has(index):
+                    continue
+                frame, said = Frame(index, config, frame_rng(config.seed, index)), []
+                try:
+                    run_stages(frame, run, first, said)
+                except BaseException:
+                    if pending is not None:  # the frame before is committed and yielded first, as without the thread
+                        yield from done(pending)
+                    say(said)
+                    raise
+                if pending is not None:
                     yield from done(pending)
-                say(said)
-                raise
+                pending = (frame, said, beside.submit(finish, frame, said) if beside is not None else finished_now(finish, frame, said))
+                if beside is None:
+                    yield from done(pending)
+                    pending = None
+            else:
+                if until_kept and log is not None:
+                    log(
+                        f"warning: output.frames_kept: {MAX_INDICES_PER_KEPT * config.frames} frame indices gave fewer than {config.frames} kept frames; "
+                        f"the scene rarely holds {output.min_objects} labelled objects"
+                    )
             if pending is not None:
                 yield from done(pending)
-            pending = (frame, said, beside.submit(finish, frame, said) if beside is not None else finished_now(finish, frame, said))
-            if beside is None:
-                yield from done(pending)
-                pending = None
-        else:
-            if until_kept and log is not None:
-                log(
-                    f"warning: output.frames_kept: {MAX_INDICES_PER_KEPT * config.frames} frame indices gave fewer than {config.frames} kept frames; the scene "
-                    f"rarely holds {output.min_objects} labelled objects"
-                )
-        if pending is not None:
-            yield from done(pending)
+    finally:  # Blender then holds the last frame's road users, as when each frame put them there
+        if run.result.show is not None:
+            run.result.show()
 
 
 def finished_now(function: Callable, *args) -> Future:

@@ -31,12 +31,15 @@ class BuildContext:
         scene here (and must give the same result as when built from nothing)
     sensor_poses : :class:`~bpy_pipeline.geometry.clearance.SensorPoses`, every optical centre of the run (all frames,
         rig members, a path); every solid the builder places keeps their ``radius`` from them
+    in_blender : the frame's objects are wanted in Blender as the build returns (``False``: a builder that gives
+        them as arrays, ``BuildResult.dynamic_parts``, may leave Blender's copy to ``BuildResult.show``)
     """
 
     rng: np.random.Generator
     view: Any = None
     keep: dict = field(default_factory=dict)
     sensor_poses: SensorPoses = field(default_factory=lambda: NO_POSES)
+    in_blender: bool = True
 
     def kept(self, key: str, params, make: Callable[[], Any]):
         """The object kept under ``key`` for ``params`` while it is alive, else a new one from ``make()``."""
@@ -64,6 +67,8 @@ class BuildResult:
     dynamic_parts : the ``dynamic`` collection's objects as arrays, in its order, when they are plain tagged meshes
         (:func:`~bpy_pipeline.blender.export.parts_buffers`): the export stage then takes them as they are instead of reading
         them back from Blender (the same buffers); ``None``: read from Blender
+    show : puts ``dynamic_parts`` into Blender's objects where the build left them out (``BuildContext.in_blender``
+        false); does nothing once they are there. ``None``: the build put everything in Blender
     """
 
     headings: dict = field(default_factory=dict)
@@ -73,6 +78,7 @@ class BuildResult:
     dynamic: str | None = None
     static_world: Any = None
     dynamic_parts: tuple | None = None
+    show: Callable[[], None] | None = None
 
 
 def no_check(params, where: str) -> None:

@@ -23,6 +23,9 @@ def build_populated(scene, context: BuildContext) -> BuildResult:
         return result
     from ..population.scene import populate
 
+    if result.show is not None:  # the population is placed among what Blender holds
+        result.show()
+
     # the population stands outside the builder's dynamic collection
     return dataclasses.replace(populate(population, context, result), dynamic=None, dynamic_parts=None)
 
@@ -51,7 +54,8 @@ def build_stage(frame: Frame, run: Run) -> None:
     if run.build and run.scene_frame != first:
         rng = frame.rng if first == frame.index else frame_rng(config.seed, first)
         run.sensor_poses = sensor_poses(config) if run.sensor_poses is None else run.sensor_poses
-        run.result = build_populated(config.scene, BuildContext(rng, scene_view(config, first, per_scene), run.keep, run.sensor_poses))
+        context = BuildContext(rng, scene_view(config, first, per_scene), run.keep, run.sensor_poses, run.in_blender)
+        run.result = build_populated(config.scene, context)
         run.scene_frame = first
         run.trajectory = None
         frame.built = True

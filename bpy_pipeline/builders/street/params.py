@@ -181,7 +181,8 @@ def build(params: StreetScene, context: BuildContext) -> BuildResult:
     """The static intersection once per run, then this frame's road users."""
     from .scene import Intersection
 
-    return context.kept("street", (params, context.sensor_poses), lambda: Intersection(params, context.sensor_poses)).populate(context.rng, context.view)
+    intersection = context.kept("street", (params, context.sensor_poses), lambda: Intersection(params, context.sensor_poses))
+    return intersection.populate(context.rng, context.view, context.in_blender)
 
 
 # The sparse-camera thesis: three flash cameras on a 2 m post at a corner of the intersection,

@@ -55,6 +55,7 @@ class Intersection:
         self.static.append(planting_object(self.layout.yards, params, self.collection, prototypes, planting_instance, trunks))
         self.users = bpy.data.collections.new(USERS_COLLECTION)
         self.collection.children.link(self.users)
+        self.unshown = None  # the last frame's parts while Blender's objects do not hold them (populate's in_blender)
         bpy.context.view_layer.update()
 
     def _static_object(self, part, prototypes) -> bpy.types.Object:
@@ -83,8 +84,7 @@ class Intersection:
         The objects stay in the collection's order, so the export sees the parts in the order of ``parts``.
         Only objects and meshes whose name changes are renamed (a rename costs Blender a pass over its names): those
         holding a name another part takes first to names no part takes, then each to its own. The spares
-        are ``street_user_kept_K`` by their place. Returns the parts as :func:`~bpy_pipeline.blender.export.parts_buffers`
-        takes them: ``(object name, its lidar properties, vertices, triangles)``.
+        are ``street_user_kept_K`` by their place.
         """
         kept = list(self.users.objects)
         while len(kept) < len(parts):
@@ -109,11 +109,18 @@ class Intersection:
             tag(obj, class_name, material, reflectivity, instance)
         for obj in kept[len(parts) :]:  # an empty mesh exports nothing
             fill_mesh(obj.data, np.zeros((0, 3)), np.zeros((0, 3), np.int32))
-        return [(obj.name, {"lidar_class": class_name, "lidar_material": material, "lidar_reflectivity": float(reflectivity),
-                            "lidar_instance": int(instance)}, *mesh)
-                for obj, (_, class_name, material, reflectivity, instance, mesh) in zip(kept, parts)]  # fmt: skip
 
-    def populate(self, rng: np.random.Generator, view=None):
+    def show(self) -> None:
+        """The last frame's road users into Blender's objects, where :meth:`populate` left them out (``in_blender``
+        false); nothing once they are there."""
+        if self.unshown is not None:
+            parts, self.unshown = self.unshown, None
+            self._show_users(parts)
+
+    def populate(self, rng: np.random.Generator, view=None, in_blender: bool = True):
+        """This frame's road users, drawn from ``rng``: placed, meshed, given to the export as arrays
+        (``dynamic_parts``) and, with ``in_blender``, put into Blender's objects now; else by the result's ``show``
+        (a run whose stages read only the arrays fills Blender once, at its end: about 8 ms a street frame)."""
         from ..base import BuildResult
 
         views = tuple(getattr(view, "fields", ()) or ())
@@ -127,7 +134,9 @@ class Intersection:
                 name = f"street_user_{k:03d}_{user.kind}_{part}" if part != "rider" else f"street_user_{k:03d}_{user.kind}_~rider"
                 parts.append((name, class_name, material, reflectivity, instance, mesh))
             headings[instance] = float(user.yaw)
-        shown = self._show_users(parts)  # Blender evaluates them when something reads the scene (an export, a render, the viewport)
+        self.unshown = parts
+        if in_blender:  # Blender evaluates them when something reads the scene (an export, a render, the viewport)
+            self.show()
         kinds = {}
         for user in placement.users:
             kinds[user.kind] = kinds.get(user.kind, 0) + 1
@@ -145,4 +154,7 @@ class Intersection:
                 for k, u in enumerate(placement.users)
             ],
         }
-        return BuildResult(headings=headings, info=info, dynamic=self.users.name, static_world=self, dynamic_parts=tuple(shown))
+        arrays = tuple((name, {"lidar_class": class_name, "lidar_material": material, "lidar_reflectivity": float(reflectivity),
+                               "lidar_instance": int(instance)}, *mesh)
+                       for name, class_name, material, reflectivity, instance, mesh in parts)  # as parts_buffers takes them
+        return BuildResult(headings=headings, info=info, dynamic=self.users.name, static_world=self, dynamic_parts=arrays, show=self.show)

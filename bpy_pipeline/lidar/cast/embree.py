@@ -57,6 +57,7 @@ def _library():
         lib.rtcReleaseGeometry.restype, lib.rtcReleaseGeometry.argtypes = None, [v]
         lib.rtcGetSceneDevice.restype, lib.rtcGetSceneDevice.argtypes = v, [v]
         lib.rtcReleaseDevice.restype, lib.rtcReleaseDevice.argtypes = None, [v]
+        lib.rtcCommitScene.restype, lib.rtcCommitScene.argtypes = None, [v]
         return lib
     return None
 
@@ -90,6 +91,20 @@ def shared_buffers_supported() -> bool:
     asked = lib.rtcGetSceneDevice(scene_handle)  # Embree's own answer must name the same device
     lib.rtcReleaseDevice(asked)
     return asked == device_handle
+
+
+def commit_scene(scene: rtcore_scene.EmbreeScene) -> None:
+    """Build ``scene``'s hierarchy now, once, before threads share it.
+
+    Through the library (``ctypes`` lets go of the interpreter lock while Embree builds, so the run's other
+    thread goes on meanwhile) where this embreex's layout is the one checked; then embreex's own first
+    query, which commits a scene Embree holds unchanged in a few microseconds (and the whole scene
+    where the library was not used).
+    """
+    handle = scene_handle(scene)
+    if handle:
+        _library().rtcCommitScene(handle)
+    scene.run(np.zeros((1, 3), np.float32), np.array([[0, 0, 1]], np.float32), output=1)
 
 
 def scene_handle(scene: rtcore_scene.EmbreeScene) -> int:

@@ -58,7 +58,7 @@ from ...buffers import MATERIAL_ID, SceneBuffers
 from ...compiled import KERNEL_VARIABLE
 from ...errors import InputError
 from . import kernels
-from .embree import attach_triangles, scene_handle
+from .embree import attach_triangles, commit_scene, scene_handle
 from .sharing import share
 
 FAR = 1e30  # stands for "no limit" in Embree's float32 tfar
@@ -172,8 +172,7 @@ def embree_part(local: np.ndarray, triangles: np.ndarray, subset: np.ndarray | s
     low, high = int(chosen.min()), int(chosen.max())
     scene = rtcore_scene.EmbreeScene()
     keep = attach_triangles(scene, local[low : high + 1], chosen - np.int32(low) if low else chosen)
-    # Embree commits the scene on the first query: do it once here, before threads share it.
-    scene.run(np.zeros((1, 3), np.float32), np.array([[0, 0, 1]], np.float32), output=1)
+    commit_scene(scene)
     return EmbreePart(scene, None if index is None else index.astype(np.int64), keep, scene_handle(scene))
 
 
