@@ -60,3 +60,45 @@ def test_a_sensor_out_of_reach_of_the_static_world_is_an_error():
     assert frame.scene.dynamic is not None
     with pytest.raises(InputError, match="sensor.max_range"):
         export_stage(frame, run)
+
+
+
+def test_a_run_reading_only_the_arrays_fills_blender_once_at_its_end(tmp_path):
+    """A run whose stages read the builder's arrays only (no rendered camera, no rig) leaves Blender's copy of each frame's
+    road users out while it runs (``BuildContext.in_blender`` false) and fills it with the last frame's at its end: the
+    objects then hold that frame's parts (names, tags, vertices) and the spares nothing."""
+    import bpy
+
+    from bpy_pipeline.builders.street.scene import USERS_COLLECTION
+    from bpy_pipeline.config import load_config
+    from bpy_pipeline.plan import plan, run_frames
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    config = load_config("examples/street/ego_hdl64e.yaml", ["frames=3", "output.formats=[semantickitti]"])
+    assert not any(stage.reads_blender for stage in plan(config))
+    seen, last = [], None
+    for frame in run_frames(config, tmp_path / "run", overlap=False):
+        seen.append(sum(len(obj.data.vertices) for obj in bpy.data.collections[USERS_COLLECTION].objects))
+        last = frame.scene.dynamic_parts
+    assert seen == [0, 0, 0] and len(last) > 3  # nothing put in Blender while the run went on
+    kept = list(bpy.data.collections[USERS_COLLECTION].objects)
+    assert len(kept) >= len(last) and all(len(obj.data.vertices) == 0 for obj in kept[len(last) :])
+    for obj, (name, tags, vertices, _) in zip(kept, last):
+        co = np.empty(len(obj.data.vertices) * 3, np.float32)
+        obj.data.vertices.foreach_get("co", co)
+        assert obj.name == name and obj["lidar_instance"] == tags["lidar_instance"] and obj["lidar_class"] == tags["lidar_class"]
+        assert np.array_equal(co.reshape(-1, 3), vertices.astype(np.float32))
+
+
+def test_runs_whose_stages_read_blender_keep_filling_it_every_frame():
+    """A rig's members export the scene from Blender, and KITTI's rendered camera image is Blender's: their plans say so,
+    so such runs put each frame's road users into Blender as they build (``Run.in_blender``)."""
+    from bpy_pipeline.config import load_config
+    from bpy_pipeline.plan import plan
+
+    rig = load_config(None, ["scene.builder=street", "frames=1"])
+    assert rig.sensor.rig and any(stage.reads_blender for stage in plan(rig))
+    rendered = load_config("examples/street/ego_hdl64e.yaml", ["output.kitti.camera.render=true"])
+    assert [stage.name for stage in plan(rendered) if stage.reads_blender] == ["camera"]
+    plain = load_config("examples/street/ego_hdl64e.yaml")
+    assert not any(stage.reads_blender for stage in plan(plain))
