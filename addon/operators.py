@@ -88,6 +88,8 @@ class FrameJob:
             return False
         self.done += 1
         self.points = len(frame.points)
+        if frame.scene.show is not None:  # the viewport shows the road users as the frames go
+            frame.scene.show()
         if self.last is not None:
             from .bpy_pipeline.geometry.transforms import output_pose
 

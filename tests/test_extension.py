@@ -193,6 +193,13 @@ def test_cancelled_generation_keeps_finished_frames(session):
 
 
 @pytest.mark.bpy
+def test_the_panel_shows_the_street_road_users_as_frames_go(session):
+    """The panel's frames fill Blender's road users at every step, though the run itself would leave them to its end."""
+    report, _ = session
+    assert len(report["street_users_shown_per_step"]) == 3 and all(n > 0 for n in report["street_users_shown_per_step"])
+
+
+@pytest.mark.bpy
 def test_labels_and_sensor_pose_from_objects(session):
     report, _ = session
     assert report["tag"] == ["FINISHED"] and report["crate_tags"] == {"lidar_class": "car", "lidar_material": "glass", "lidar_reflectivity": 0.25}
