@@ -180,13 +180,14 @@ def visibility(
     seen = np.concatenate(seen_points) if seen_points else np.zeros((0, 3))
     point_owner = np.concatenate(seen_boxes) if seen_boxes else np.zeros(0, np.int64)
     point_cells = Coverage(np.zeros((0, 3)), cell_deg)._cells(seen)  # each passing point's (row, col), once for both uses
-    triangles = buffers.vertices[buffers.triangles[boxed]]  # (m, 3, 3)
-    tri_area = row_norms(np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])) / 2
-    total = np.bincount(owner, tri_area, minlength=len(boxes))
-    whole_view = wholly_covered(boxes, pose, point_cells, point_owner, min_range, max_range, cell_deg) & (total > 0)  # no area: 1, as sampled
+    whole_view = wholly_covered(boxes, pose, point_cells, point_owner, min_range, max_range, cell_deg)
+    whole_view[whole_view] = have_area(buffers, boxed, owner, np.flatnonzero(whole_view))  # no area: 1, as sampled
+    sampled = ~whole_view[owner]  # only these triangles' corners and areas are needed
+    owner = owner[sampled]
+    triangles = buffers.vertices[buffers.triangles[boxed[sampled]]]  # (m, 3, 3)
+    tri_area = triangle_areas(triangles)
+    total = np.bincount(owner, tri_area, minlength=len(boxes))  # each sampled box's sum: its triangles, in their order
     spacing = np.maximum(SAMPLE_SPACING, np.sqrt(total / MAX_SAMPLES))
-    sampled = ~whole_view[owner]
-    owner, triangles, tri_area = owner[sampled], triangles[sampled], tri_area[sampled]
     samples, area, triangle = surface_samples(triangles, spacing[owner], return_triangle=True, area_bound=True, area=tri_area)
     samples = (samples - pose[:3, 3]) @ pose[:3, :3]
     distance = row_norms(samples)
@@ -209,6 +210,33 @@ def visibility(
         if whole > 0:
             truncation[k] = 1.0 - area[mine][covered[mine]].sum() / whole
     boxes["truncation"] = truncation
+
+
+def triangle_areas(triangles: np.ndarray) -> np.ndarray:
+    """``(m,)`` areas (m^2) of ``(m, 3, 3)`` triangles, row by row (a triangle's area does not depend on the others)."""
+    return row_norms(np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])) / 2
+
+
+def have_area(buffers: SceneBuffers, triangle: np.ndarray, owner: np.ndarray, wanted: np.ndarray) -> np.ndarray:
+    """``(w,)`` bool: has box ``wanted[i]`` any triangle of non-zero area (:func:`triangle_areas`)?
+
+    triangle, owner : ``(t,)`` buffer triangles and each one's box (:func:`~bpy_pipeline.geometry.boxes.object_triangles`)
+    A sum of areas is positive when one of them is, so each box's first triangle answers, and only a box whose first
+    has none is looked at whole (a sliver or a point first)."""
+    out = np.zeros(len(wanted), bool)
+    if not len(wanted) or not len(owner):
+        return out
+    starts = np.flatnonzero(np.concatenate([[True], owner[1:] != owner[:-1]]))  # each run of one box's triangles
+    first = np.full(int(max(owner.max(), wanted.max())) + 1, len(owner))
+    np.minimum.at(first, owner[starts], starts)
+    mine = first[wanted] < len(owner)
+    out[mine] = triangle_areas(buffers.vertices[buffers.triangles[triangle[first[wanted[mine]]]]]) > 0
+    rest = wanted[mine & ~out]
+    if len(rest):
+        rows = np.isin(owner, rest)
+        total = np.bincount(owner[rows], triangle_areas(buffers.vertices[buffers.triangles[triangle[rows]]]), minlength=len(first))
+        out[np.isin(wanted, rest)] = total[wanted[np.isin(wanted, rest)]] > 0
+    return out
 
 
 def ray_origins(origins: np.ndarray | None, ray: np.ndarray) -> np.ndarray:
