@@ -120,6 +120,8 @@ def visibility(
     if len(boxes) == 0:
         return
     caster = caster or RayCaster(buffers, frame=pose)
+    kernels = getattr(caster, "kernels", None)
+    passes = compiled_passes(kernels)
     objects = buffers.objects
     box_of_row = np.full(len(objects), -1, np.int64)  # each object's box: the one of its instance
     for k, instance in enumerate(boxes["instance"]):
@@ -143,18 +145,11 @@ def visibility(
         shift = 0.0 if origins is None else float(np.linalg.norm(origins, axis=1).max())
         reach = radii + shift
         cos_limit = np.where(distance > reach, np.sqrt(np.clip(1.0 - (reach / np.maximum(distance, 1e-12)) ** 2, 0.0, 1.0)), -2.0)
-        ray, k = cone_pairs(chunk.directions, centres / np.maximum(distance, 1e-12)[:, None], cos_limit, getattr(caster, "kernels", None))
+        ray, k = cone_pairs(chunk.directions, centres / np.maximum(distance, 1e-12)[:, None], cos_limit, kernels)
+        ray, k, along = sphere_pairs(chunk.directions, origins, ray, k, centres, radii, max_range, passes)
         if len(ray) == 0:
             continue
         d = chunk.directions[ray]
-        offset = centres[k] if origins is None else centres[k] - origins[ray]
-        along = np.einsum("ij,ij->i", offset, d)
-        miss2 = np.einsum("ij,ij->i", offset, offset) - along**2
-        radius = radii[k]
-        passing = (miss2 <= radius**2) & (along >= -radius) & (along - radius <= max_range)
-        ray, k, along, d = ray[passing], k[passing], along[passing], d[passing]
-        if len(ray) == 0:
-            continue
         # the ray's point closest to the object's centre (+ 0.0 from the sensor's centre: a -0.0 made 0.0, as adding the origin does)
         seen_points.append(along[:, None] * d + (0.0 if origins is None else origins[ray]))
         seen_boxes.append(k)
@@ -168,7 +163,7 @@ def visibility(
             unoccluded += np.bincount(k[known], minlength=len(boxes))
             rest = np.flatnonzero(~known)
             o, d, k, along = ray_origins(origins, ray[rest]), d[rest], k[rest], along[rest]
-            meets = meets_boxes(boxes, pose, o, d, k)
+            meets = meets_boxes(boxes, pose, o, d, k, passes)
             left.append((o[meets], d[meets], k[meets], along[meets]))
     if left:
         unoccluded += alone_counts(buffers, boxed, owner, centres, radii, pose, *(np.concatenate(a) for a in zip(*left)), min_range, max_range, surfaces, rng)
@@ -180,7 +175,7 @@ def visibility(
     seen = np.concatenate(seen_points) if seen_points else np.zeros((0, 3))
     point_owner = np.concatenate(seen_boxes) if seen_boxes else np.zeros(0, np.int64)
     point_cells = Coverage(np.zeros((0, 3)), cell_deg)._cells(seen)  # each passing point's (row, col), once for both uses
-    whole_view = wholly_covered(boxes, pose, point_cells, point_owner, min_range, max_range, cell_deg)
+    whole_view = wholly_covered(boxes, pose, point_cells, point_owner, min_range, max_range, cell_deg, passes)
     whole_view[whole_view] = have_area(buffers, boxed, owner, np.flatnonzero(whole_view))  # no area: 1, as sampled
     sampled = ~whole_view[owner]  # only these triangles' corners and areas are needed
     owner = owner[sampled]
@@ -210,6 +205,36 @@ def visibility(
         if whole > 0:
             truncation[k] = 1.0 - area[mine][covered[mine]].sum() / whole
     boxes["truncation"] = truncation
+
+
+def compiled_passes(kernels):
+    """The compiled passes of this cast (:mod:`.visibility_kernels`) when the scan's ``kernels`` are the compiled ones
+    (:func:`.raycast.choose_kernels`), else ``None`` (the numpy paths here: the same bytes)."""
+    if kernels is None:
+        return None
+    from . import visibility_kernels
+
+    return visibility_kernels
+
+
+def sphere_pairs(directions: np.ndarray, origins: np.ndarray | None, ray: np.ndarray, box: np.ndarray, centres: np.ndarray, radii: np.ndarray,
+                 max_range: float, passes=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(ray, box, along)``: the ``(p,)`` (ray, box) pairs (of :func:`cone_pairs`) whose ray passes the box's bounding sphere,
+    in their order, and ``along`` (m) to each ray's point nearest the centre.
+
+    directions, origins : the chunk's ``(n, 3)`` rays and origins (``None``: the sensor's centre); centres, radii :
+    ``(k, 3)`` sensor-frame sphere centres and ``(k,)`` radii (m). A pair passes when its line comes within the radius
+    of the centre, the centre is not more than a radius behind the origin and the sphere begins within ``max_range``.
+    passes : :func:`compiled_passes` (one loop over the pairs) or ``None`` (numpy)."""
+    if passes is not None:
+        return passes.sphere_pairs(directions, np.zeros((0, 3)) if origins is None else origins, ray, box, centres, radii, float(max_range))
+    d = directions[ray]
+    offset = centres[box] if origins is None else centres[box] - origins[ray]
+    along = np.einsum("ij,ij->i", offset, d)
+    miss2 = np.einsum("ij,ij->i", offset, offset) - along**2
+    radius = radii[box]
+    passing = (miss2 <= radius**2) & (along >= -radius) & (along - radius <= max_range)
+    return ray[passing], box[passing], along[passing]
 
 
 def triangle_areas(triangles: np.ndarray) -> np.ndarray:
@@ -255,7 +280,7 @@ def chunk_returns(direct_returns: np.ndarray, first: int, count: int) -> np.ndar
     return out
 
 
-def meets_boxes(boxes: np.ndarray, pose: np.ndarray, origins: np.ndarray, directions: np.ndarray, box: np.ndarray) -> np.ndarray:
+def meets_boxes(boxes: np.ndarray, pose: np.ndarray, origins: np.ndarray, directions: np.ndarray, box: np.ndarray, passes=None) -> np.ndarray:
     """``(p,)`` bool: does the line of each ray (``(p, 3)`` origins and directions, sensor frame) meet its box
     (``box`` (p,) into world-frame ``boxes``) grown by :data:`BOX_MARGIN`?
 
@@ -264,9 +289,15 @@ def meets_boxes(boxes: np.ndarray, pose: np.ndarray, origins: np.ndarray, direct
     frame; a line along a face's plane (a 0/0 in it) counts as meeting it."""
     rotation = np.asarray(pose, float)[:3, :3]
     world_d = rotation @ np.ascontiguousarray(directions.T)  # (3, p): coordinate by coordinate (a product 5x faster on rows)
-    world_o = rotation @ np.ascontiguousarray(origins.T) + (pose[:3, 3] - boxes["centre"]).T[:, box]  # from the box's centre
+    turned_o = rotation @ np.ascontiguousarray(origins.T)
+    shift = (pose[:3, 3] - boxes["centre"]).T  # (3, k) from each box's centre to the sensor
+    half = (boxes["size"] / 2 + (BOX_MARGIN * (1.0 + np.abs(boxes["centre"]).max(axis=1) / 1e4))[:, None]).T
+    if passes is not None:
+        return passes.meets_boxes(turned_o, world_d, np.ascontiguousarray(shift), np.cos(boxes["heading"]), np.sin(boxes["heading"]), np.ascontiguousarray(half),
+                                  np.asarray(box, np.int64))
+    world_o = turned_o + shift[:, box]  # from the box's centre
     c, s = np.cos(boxes["heading"])[box], np.sin(boxes["heading"])[box]
-    half = (boxes["size"] / 2 + (BOX_MARGIN * (1.0 + np.abs(boxes["centre"]).max(axis=1) / 1e4))[:, None]).T[:, box]
+    half = half[:, box]
     # the box's frame: x along its heading, y across, z up
     local = ((c * world_o[0] + s * world_o[1], c * world_d[0] + s * world_d[1]), (c * world_o[1] - s * world_o[0], c * world_d[1] - s * world_d[0]),
              (world_o[2], world_d[2]))  # fmt: skip
@@ -323,7 +354,7 @@ CORNER_PAIRS = np.array([(i, j) for i in range(8) for j in range(i + 1, 8)])  # 
 
 
 def wholly_covered(boxes: np.ndarray, pose: np.ndarray, point_cells: tuple[np.ndarray, np.ndarray], point_owner: np.ndarray, min_range: float, max_range: float,
-                   cell_deg: float) -> np.ndarray:
+                   cell_deg: float, passes=None) -> np.ndarray:
     """``(k,)`` bool: is every surface sample of box k's object surely within the range limits and covered (truncation 0)?
 
     boxes : (k,) world-frame BOX_DTYPE, each the tightest box around its object's vertices (so around every surface
@@ -371,6 +402,8 @@ def wholly_covered(boxes: np.ndarray, pose: np.ndarray, point_cells: tuple[np.nd
                  & (np.hypot(near[:, 0], near[:, 1]) > 0.0) & (width <= grid.columns))
     if not candidate.any():
         return out
+    if passes is not None:
+        return passes.windows_covered(point_owner, point_cells[0], point_cells[1], candidate, row0, col0, height, width, grid.columns)
     size = np.where(candidate, height * width, 0)
     offset = np.cumsum(size) - size
     mask = np.zeros(int(size.sum()), bool)
