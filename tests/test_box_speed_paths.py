@@ -1,7 +1,7 @@
 """The faster ways of the boxes stage and the parking placement give the bits of the ways they replace.
 
-- truncation's coverage of every object at once (:func:`covered_by_owner`, each object's window of cells) against one
-  :class:`Coverage` per object;
+- truncation's coverage of every object at once (:func:`covered_by_owner`, each object's window of cells, in numpy and
+  compiled) against one :class:`Coverage` per object;
 - :func:`surface_samples` written in place against level by level, and given the triangles' areas against computing them;
 - the vertices an object set uses, without a sort, against ``np.unique``; the boxes' triangles found by a search of
   exported buffers' ordered objects against a pass over every triangle;
@@ -26,8 +26,10 @@ from bpy_pipeline.geometry.boxes import fit_boxes, object_triangles
 from bpy_pipeline.geometry import primitives
 from bpy_pipeline.geometry.collision import box_axes, capsule_mesh, capsule_meshes, ray_box_distance, rectangles_near, rectangles_overlap
 from bpy_pipeline.geometry.placement import FloorBoxPlacer, PlacedBox, _slab_distance, facing_samples
-from bpy_pipeline.lidar.cast.raycast import JITTER, RayCaster, row_norms
-from bpy_pipeline.lidar.cast.visibility import Coverage, _centroids, _used_vertices, covered_by_owner, surface_samples
+from bpy_pipeline.lidar.cast.raycast import JITTER, RayCaster, choose_kernels, row_norms
+from bpy_pipeline.lidar.cast.visibility import Coverage, _centroids, _used_vertices, compiled_passes, covered_by_owner, surface_samples
+
+COMPILED = [passes for passes in [compiled_passes(choose_kernels("auto"))] if passes is not None]  # the compiled windows too, where numba is
 
 
 def _unit(v):
@@ -63,6 +65,9 @@ def test_coverage_of_all_objects_at_once_is_each_objects_coverage():
         every = np.ones(len(samples), bool)  # a mask of all True takes the way of no mask
         assert np.array_equal(covered_by_owner(points, owner, samples, sample_owner, count, cell, where=every, distance=np.linalg.norm(samples, axis=1)),
                               expected)
+        for passes in COMPILED:
+            assert np.array_equal(covered_by_owner(points, owner, samples, sample_owner, count, cell, passes=passes), expected)
+            assert np.array_equal(covered_by_owner(points, owner, samples, sample_owner, count, cell, where=where, passes=passes), expected & where)
 
 
 def test_coverage_of_small_objects_across_the_seam_and_at_a_pole():
@@ -93,6 +98,9 @@ def test_coverage_of_small_objects_across_the_seam_and_at_a_pole():
         every = np.ones(len(samples), bool)  # a mask of all True takes the way of no mask
         assert np.array_equal(covered_by_owner(points, owner, samples, sample_owner, count, cell, where=every, distance=np.linalg.norm(samples, axis=1)),
                               expected)
+        for passes in COMPILED:
+            assert np.array_equal(covered_by_owner(points, owner, samples, sample_owner, count, cell, passes=passes), expected)
+            assert np.array_equal(covered_by_owner(points, owner, samples, sample_owner, count, cell, where=where, passes=passes), expected & where)
 
 
 def _surface_samples_level_by_level(triangles, spacing):

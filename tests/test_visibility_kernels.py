@@ -121,3 +121,25 @@ def test_visibility_with_its_compiled_passes_is_the_numpy_visibility(preset, pos
     assert np.array_equal(found[0], found[1]) and 0 < found[0].sum() < len(found[0])
     truncation = results[0]["truncation"]
     assert (truncation == 1).any() and ((truncation > 0) & (truncation < 1)).any() and results[0]["unoccluded"].sum() > 1000
+
+
+def test_the_compiled_windows_are_numpys_sparse_marks_and_the_seam_included():
+    """wholly_covered's windows with marks a cell or two apart (some covered, some with a gap), across the azimuth
+    seam (columns wrap), points outside their window and boxes not asked."""
+    rng = np.random.default_rng(9)
+    columns, count = 720, 300
+    row0, col0 = rng.integers(1, 300, count), rng.integers(0, columns, count)
+    col0[:40] = columns - rng.integers(1, 4, 40)  # windows across the seam
+    height, width = rng.integers(3, 9, count), rng.integers(3, 9, count)
+    candidate = rng.random(count) < 0.9
+    owner = np.repeat(np.arange(count), (height * width * rng.uniform(0.3, 1.2, count)).astype(np.int64))
+    row = row0[owner] - 1 + rng.integers(0, height[owner] + 1, len(owner))
+    col = (col0[owner] - 1 + rng.integers(0, width[owner] + 1, len(owner))) % columns
+    step = rng.integers(2, 4, count)  # every second or third cell only for these boxes: a gap or not
+    sparse = rng.random(count) < 0.5
+    keep = ~sparse[owner] | ((row % step[owner] == 0) & (col % step[owner] == 0))
+    owner, row, col = owner[keep], row[keep], col[keep]
+    numpy_covered = vis.windows_covered(owner, row, col, candidate, row0, col0, height, width, columns)
+    compiled_covered = passes.windows_covered(owner, row, col, candidate, row0, col0, height, width, columns)
+    assert np.array_equal(compiled_covered, numpy_covered)
+    assert 0.1 < numpy_covered[candidate].mean() < 0.9 and not numpy_covered[~candidate].any() and numpy_covered[:40].any()

@@ -194,7 +194,7 @@ def visibility(
         passed = np.bincount(point_owner, minlength=len(boxes)) > 0
         partial = ~whole_view[point_owner]
         covered = covered_by_owner(seen[partial], point_owner[partial], samples, sample_owner, len(boxes), cell_deg, where=inside & passed[sample_owner],
-                                   distance=distance, point_cells=(point_cells[0][partial], point_cells[1][partial]))  # fmt: skip
+                                   distance=distance, point_cells=(point_cells[0][partial], point_cells[1][partial]), passes=passes)  # fmt: skip
     order = np.argsort(sample_owner, kind="stable")  # the samples box by box, each box's in their order
     bounds = np.searchsorted(sample_owner[order], np.arange(len(boxes) + 1))
     area, covered = area[order], covered[order]
@@ -402,14 +402,24 @@ def wholly_covered(boxes: np.ndarray, pose: np.ndarray, point_cells: tuple[np.nd
                  & (np.hypot(near[:, 0], near[:, 1]) > 0.0) & (width <= grid.columns))
     if not candidate.any():
         return out
-    if passes is not None:
-        return passes.windows_covered(point_owner, point_cells[0], point_cells[1], candidate, row0, col0, height, width, grid.columns)
+    return (windows_covered if passes is None else passes.windows_covered)(point_owner, point_cells[0], point_cells[1], candidate, row0, col0, height, width,
+                                                                           grid.columns)
+
+
+def windows_covered(owner: np.ndarray, row: np.ndarray, col: np.ndarray, candidate: np.ndarray, row0: np.ndarray, col0: np.ndarray, height: np.ndarray,
+                    width: np.ndarray, columns: int) -> np.ndarray:
+    """``(k,)`` bool: is every cell of each candidate box's window within one cell of a point's? (:func:`wholly_covered`'s windows)
+
+    owner, row, col : ``(p,)`` int64 each point's box and cell; candidate : ``(k,)`` bool the boxes to answer (others False);
+    row0, col0 : ``(k,)`` the first row and column of each box's directions; height, width : ``(k,)`` its window, with one
+    more cell on every side; columns : the cells in a turn (a window's columns wrap)."""
+    out = np.zeros(len(candidate), bool)
     size = np.where(candidate, height * width, 0)
     offset = np.cumsum(size) - size
     mask = np.zeros(int(size.sum()), bool)
-    mine = candidate[point_owner]
-    owner, row, col = point_owner[mine], point_cells[0][mine], point_cells[1][mine]
-    r, q = row - (row0[owner] - 1), (col - (col0[owner] - 1)) % grid.columns
+    mine = candidate[owner]
+    owner, row, col = owner[mine], row[mine], col[mine]
+    r, q = row - (row0[owner] - 1), (col - (col0[owner] - 1)) % columns
     inside = (r >= 0) & (r < height[owner]) & (q < width[owner])
     mask[(offset[owner] + r * width[owner] + q)[inside]] = True
     for k in np.flatnonzero(candidate):  # a cell is covered when it or one of its eight neighbours is marked
@@ -442,7 +452,7 @@ def cone_pairs(directions: np.ndarray, axes: np.ndarray, cos_limit: np.ndarray, 
 
 def covered_by_owner(points: np.ndarray, point_owner: np.ndarray, samples: np.ndarray, sample_owner: np.ndarray, count: int, cell_deg: float,
                      where: np.ndarray | None = None, distance: np.ndarray | None = None,
-                     point_cells: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:  # fmt: skip
+                     point_cells: tuple[np.ndarray, np.ndarray] | None = None, passes=None) -> np.ndarray:  # fmt: skip
     """``(s,)`` bool: is each sample's direction covered by the passing points of its own object?
 
     points, point_owner : ``(p, 3)`` sensor-frame points where rays pass the objects and ``(p,)`` their object (0..count-1)
@@ -456,6 +466,7 @@ def covered_by_owner(points: np.ndarray, point_owner: np.ndarray, samples: np.nd
     where : ``(s,)`` bool, the samples to look at (the others come back False), or ``None`` for all
     distance : the ``(s,)`` samples' lengths (m, :func:`~.raycast.row_norms`) if the caller has it
     point_cells : the ``(p,)`` rows and columns of ``points`` (``Coverage(..., cell_deg)._cells``) if the caller has them
+    passes : :func:`compiled_passes` (the windows, marks and look-ups in one compiled pass) or ``None`` (numpy)
     """
     if where is not None and where.all():  # every sample counts: no copies by a mask of all True (a quarter of a garage frame's call)
         where = None
@@ -472,35 +483,45 @@ def covered_by_owner(points: np.ndarray, point_owner: np.ndarray, samples: np.nd
         point_row, point_col = grid._cells(points[owned]) if point_cells is None else (point_cells[0][owned], point_cells[1][owned])
         sample_owner = sample_owner.astype(np.int64)
         row, col = grid._cells(samples, distance)
-        low_row, high_row = np.full(count, grid.rows), np.zeros(count, np.int64)
-        low_col, high_col = np.full(count, columns), np.zeros(count, np.int64)
-        for owner, r, c in ((point_owner, point_row, point_col), (sample_owner, row, col)):
-            np.minimum.at(low_row, owner, r)
-            np.maximum.at(high_row, owner, r)
-            np.minimum.at(low_col, owner, c)
-            np.maximum.at(high_col, owner, c)
-        low_row, low_col = np.minimum(low_row, high_row), np.minimum(low_col, high_col)  # an object with no cell: a window of one
-        # a margin row or column is never a sample's, so a point's mark there (row -1 for row 0's neighbour) is
-        # what clamping at a pole gives; a window that would wrap is every column, and its marks wrap
-        whole = high_col - low_col + 3 > columns
-        width = np.where(whole, columns, high_col - low_col + 3)
-        size = (high_row - low_row + 3) * width
-        offset = np.cumsum(size) - size - (low_row - 1) * width - np.where(whole, 0, low_col - 1)  # cell (k, r, c): offset[k] + r width[k] + c
-        mask = np.zeros(int(size.sum()), bool)
-        step, wraps = width[point_owner], whole[point_owner]
-        base = offset[point_owner] + point_row * step
-        for dc in (-1, 0, 1):
-            c = point_col + dc
-            if wraps.any():
-                c = np.where(wraps, c % columns, c)
-            mask[base + c - step] = True
-            mask[base + c] = True
-            mask[base + c + step] = True
-        found = mask[offset[sample_owner] + row * width[sample_owner] + col]
+        found = (owner_covered if passes is None else passes.owner_covered)(point_owner, point_row, point_col, sample_owner, row, col, count, grid.rows,
+                                                                             columns)
     if where is None:
         return found
     covered[where] = found
     return covered
+
+
+def owner_covered(point_owner: np.ndarray, point_row: np.ndarray, point_col: np.ndarray, sample_owner: np.ndarray, row: np.ndarray, col: np.ndarray,
+                  count: int, rows: int, columns: int) -> np.ndarray:
+    """``(s,)`` bool: is each sample's cell within one cell of a point of its own box? (:func:`covered_by_owner`'s windows)
+
+    point_owner, point_row, point_col : ``(p,)`` int64 each point's box (0..count-1) and cell; sample_owner, row, col :
+    ``(s,)`` the samples'; rows, columns : the grid's (:class:`Coverage`)."""
+    low_row, high_row = np.full(count, rows), np.zeros(count, np.int64)
+    low_col, high_col = np.full(count, columns), np.zeros(count, np.int64)
+    for owner, r, c in ((point_owner, point_row, point_col), (sample_owner, row, col)):
+        np.minimum.at(low_row, owner, r)
+        np.maximum.at(high_row, owner, r)
+        np.minimum.at(low_col, owner, c)
+        np.maximum.at(high_col, owner, c)
+    low_row, low_col = np.minimum(low_row, high_row), np.minimum(low_col, high_col)  # an object with no cell: a window of one
+    # a margin row or column is never a sample's, so a point's mark there (row -1 for row 0's neighbour) is
+    # what clamping at a pole gives; a window that would wrap is every column, and its marks wrap
+    whole = high_col - low_col + 3 > columns
+    width = np.where(whole, columns, high_col - low_col + 3)
+    size = (high_row - low_row + 3) * width
+    offset = np.cumsum(size) - size - (low_row - 1) * width - np.where(whole, 0, low_col - 1)  # cell (k, r, c): offset[k] + r width[k] + c
+    mask = np.zeros(int(size.sum()), bool)
+    step, wraps = width[point_owner], whole[point_owner]
+    base = offset[point_owner] + point_row * step
+    for dc in (-1, 0, 1):
+        c = point_col + dc
+        if wraps.any():
+            c = np.where(wraps, c % columns, c)
+        mask[base + c - step] = True
+        mask[base + c] = True
+        mask[base + c + step] = True
+    return mask[offset[sample_owner] + row * width[sample_owner] + col]
 
 
 IDENTITY4 = np.eye(4)

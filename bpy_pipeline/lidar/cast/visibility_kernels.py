@@ -125,3 +125,44 @@ def windows_covered(owner, row, col, candidate, row0, col0, height, width, colum
                 break
         out[j] = covered
     return out
+
+
+@jit
+def owner_covered(point_owner, point_row, point_col, sample_owner, row, col, count, rows, columns):
+    """``(s,)`` bool: is each sample's cell within one cell of a point of its own box? (:func:`.visibility.covered_by_owner`)
+
+    point_owner, point_row, point_col : (p,) int64 each point's box (0..count-1) and cell; sample_owner, row, col : (s,)
+    the samples'; rows, columns : the grid's. Each box's window: the rows and columns its points and samples fall in
+    and one more on every side (every column, wrapping, when that would wrap)."""
+    low_row, high_row = np.full(count, rows, np.int64), np.zeros(count, np.int64)
+    low_col, high_col = np.full(count, columns, np.int64), np.zeros(count, np.int64)
+    for owner, r, c in ((point_owner, point_row, point_col), (sample_owner, row, col)):
+        for i in range(owner.shape[0]):
+            k = owner[i]
+            low_row[k], high_row[k] = min(low_row[k], r[i]), max(high_row[k], r[i])
+            low_col[k], high_col[k] = min(low_col[k], c[i]), max(high_col[k], c[i])
+    whole, width, offset = np.empty(count, np.bool_), np.empty(count, np.int64), np.empty(count, np.int64)
+    at = 0
+    for k in range(count):
+        low_row[k], low_col[k] = min(low_row[k], high_row[k]), min(low_col[k], high_col[k])  # no cell: a window of one
+        whole[k] = high_col[k] - low_col[k] + 3 > columns
+        width[k] = columns if whole[k] else high_col[k] - low_col[k] + 3
+        offset[k] = at - (low_row[k] - 1) * width[k] - (0 if whole[k] else low_col[k] - 1)  # cell (k, r, c): offset[k] + r width[k] + c
+        at += (high_row[k] - low_row[k] + 3) * width[k]
+    mask = np.zeros(at, np.bool_)
+    for i in range(point_owner.shape[0]):
+        k = point_owner[i]
+        step = width[k]
+        base = offset[k] + point_row[i] * step
+        for dc in range(-1, 2):
+            c = point_col[i] + dc
+            if whole[k]:
+                c = c % columns
+            mask[base + c - step] = True
+            mask[base + c] = True
+            mask[base + c + step] = True
+    found = np.empty(sample_owner.shape[0], np.bool_)
+    for j in range(sample_owner.shape[0]):
+        k = sample_owner[j]
+        found[j] = mask[offset[k] + row[j] * width[k] + col[j]]
+    return found
