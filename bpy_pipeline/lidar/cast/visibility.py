@@ -1,5 +1,6 @@
 """What a sensor sees of each 3D box: truncation by its field of view and range, and the rays that reach
-the object through the scene and when it is alone (occlusion). Pure numpy and embreex.
+the object through the scene and when it is alone (occlusion). Pure numpy and embreex; the loops over (ray, box)
+pairs and over cells are compiled where numba is (:mod:`.visibility_kernels`, the same bytes).
 
 Per box and frame (world-frame :data:`~bpy_pipeline.geometry.boxes.BOX_DTYPE` records, filled in place):
 
@@ -243,24 +244,23 @@ def triangle_areas(triangles: np.ndarray) -> np.ndarray:
 
 
 def have_area(buffers: SceneBuffers, triangle: np.ndarray, owner: np.ndarray, wanted: np.ndarray) -> np.ndarray:
-    """``(w,)`` bool: has box ``wanted[i]`` any triangle of non-zero area (:func:`triangle_areas`)?
+    """``(w,)`` bool: has box ``wanted[i]`` a triangle of non-zero area (:func:`triangle_areas`), i.e. a positive sum of them?
 
     triangle, owner : ``(t,)`` buffer triangles and each one's box (:func:`~bpy_pipeline.geometry.boxes.object_triangles`)
-    A sum of areas is positive when one of them is, so each box's first triangle answers, and only a box whose first
-    has none is looked at whole (a sliver or a point first)."""
+    Each box's first triangle answers when it has an area; only a box whose first has none is summed whole."""
     out = np.zeros(len(wanted), bool)
     if not len(wanted) or not len(owner):
         return out
     starts = np.flatnonzero(np.concatenate([[True], owner[1:] != owner[:-1]]))  # each run of one box's triangles
     first = np.full(int(max(owner.max(), wanted.max())) + 1, len(owner))
     np.minimum.at(first, owner[starts], starts)
-    mine = first[wanted] < len(owner)
+    mine = first[wanted] < len(owner)  # the boxes with triangles
     out[mine] = triangle_areas(buffers.vertices[buffers.triangles[triangle[first[wanted[mine]]]]]) > 0
-    rest = wanted[mine & ~out]
-    if len(rest):
-        rows = np.isin(owner, rest)
+    again = mine & ~out
+    if again.any():
+        rows = np.isin(owner, wanted[again])
         total = np.bincount(owner[rows], triangle_areas(buffers.vertices[buffers.triangles[triangle[rows]]]), minlength=len(first))
-        out[np.isin(wanted, rest)] = total[wanted[np.isin(wanted, rest)]] > 0
+        out[again] = total[wanted[again]] > 0
     return out
 
 
