@@ -36,21 +36,15 @@ MAX_SAMPLES = 4000  # x 2 (surface_samples' area bound)
 COUNTED_IDS = 1 << 22  # instance ids below this are counted through a table of every id (counts_per_instance)
 
 
-class Coverage:
-    """The directions a sensor pattern covers: cells of ``cell_deg`` in azimuth and elevation that hold a ray.
+class CellGrid:
+    """Cells of ``cell_deg`` in azimuth (``columns``, wrapping) and elevation (``rows``, clamped at the poles)."""
 
-    A direction is covered when its cell or a neighbouring one holds a ray, so the coverage is
-    exact up to one cell; ``cell_deg`` should be at least the pattern's angular spacing.
-    """
-
-    def __init__(self, directions: np.ndarray, cell_deg: float):
+    def __init__(self, cell_deg: float):
         self.cell = float(cell_deg)
         self.columns = int(np.ceil(360.0 / self.cell))
         self.rows = int(np.ceil(180.0 / self.cell)) + 1
-        self.mask = np.zeros((self.rows, self.columns), bool)
-        self.add(directions)
 
-    def _cells(self, directions: np.ndarray, norm: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    def cells(self, directions: np.ndarray, norm: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """``(n,)`` row and column of ``(n, 3)`` directions; ``norm``: their ``(n,)`` lengths if the caller has them."""
         d = np.asarray(directions, float)
         azimuth = np.degrees(np.arctan2(d[:, 1], d[:, 0])) + 180.0
@@ -60,9 +54,22 @@ class Coverage:
         row = np.clip(np.floor(elevation / self.cell).astype(int), 0, self.rows - 1)
         return row, col
 
+
+class Coverage(CellGrid):
+    """The directions a sensor pattern covers: the cells (:class:`CellGrid`) that hold a ray.
+
+    A direction is covered when its cell or a neighbouring one holds a ray, so the coverage is
+    exact up to one cell; ``cell_deg`` should be at least the pattern's angular spacing.
+    """
+
+    def __init__(self, directions: np.ndarray, cell_deg: float):
+        super().__init__(cell_deg)
+        self.mask = np.zeros((self.rows, self.columns), bool)
+        self.add(directions)
+
     def add(self, directions: np.ndarray) -> None:
         if len(directions):
-            row, col = self._cells(directions)
+            row, col = self.cells(directions)
             self.mask[row, col] = True
             self._grown = None
 
@@ -71,7 +78,7 @@ class Coverage:
         if getattr(self, "_grown", None) is None:  # the mask grown by one cell (azimuth wraps around)
             rows = self.mask | np.vstack([self.mask[1:], self.mask[-1:]]) | np.vstack([self.mask[:1], self.mask[:-1]])
             self._grown = rows | np.roll(rows, 1, axis=1) | np.roll(rows, -1, axis=1)
-        row, col = self._cells(directions)
+        row, col = self.cells(directions)
         return self._grown[row, col]
 
 
@@ -175,7 +182,7 @@ def visibility(
     # direction and distance is surely covered (:func:`wholly_covered`) is 0 without its samples: what they give it
     seen = np.concatenate(seen_points) if seen_points else np.zeros((0, 3))
     point_owner = np.concatenate(seen_boxes) if seen_boxes else np.zeros(0, np.int64)
-    point_cells = Coverage(np.zeros((0, 3)), cell_deg)._cells(seen)  # each passing point's (row, col), once for both uses
+    point_cells = CellGrid(cell_deg).cells(seen)  # each passing point's (row, col), once for both uses
     whole_view = wholly_covered(boxes, pose, point_cells, point_owner, min_range, max_range, cell_deg, passes)
     whole_view[whole_view] = have_area(buffers, boxed, owner, np.flatnonzero(whole_view))  # no area: 1, as sampled
     sampled = ~whole_view[owner]  # only these triangles' corners and areas are needed
@@ -359,8 +366,8 @@ def wholly_covered(boxes: np.ndarray, pose: np.ndarray, point_cells: tuple[np.nd
 
     boxes : (k,) world-frame BOX_DTYPE, each the tightest box around its object's vertices (so around every surface
         sample, up to rounding: grown by :data:`BOX_MARGIN`); point_cells, point_owner : the ``(p,)`` row and column
-        (:class:`Coverage`'s cells of ``cell_deg``) of the sensor-frame points where rays pass the objects, and their ``(p,)`` box
-    A sample counts when its distance is within ``[min_range, max_range]`` and its direction's cell (:class:`Coverage`'s
+        (:class:`CellGrid`'s cells of ``cell_deg``) of the sensor-frame points where rays pass the objects, and their ``(p,)`` box
+    A sample counts when its distance is within ``[min_range, max_range]`` and its direction's cell (:class:`CellGrid`'s
     cells) is within one cell of a passing point's. True only when the box's bounding box in the sensor frame is within
     the limits, and every cell of the directions the box spans (its elevations from its heights and its footprint's
     nearest and farthest horizontal distances, its azimuths from its footprint's corners, widened by :data:`ANGLE_MARGIN`)
@@ -371,7 +378,7 @@ def wholly_covered(boxes: np.ndarray, pose: np.ndarray, point_cells: tuple[np.nd
     out = np.zeros(len(boxes), bool)
     if len(point_owner) == 0 or len(boxes) == 0:
         return out
-    grid = Coverage(np.zeros((0, 3)), cell_deg)
+    grid = CellGrid(cell_deg)
     margin = BOX_MARGIN * (1.0 + np.abs(boxes["centre"]).max(axis=1) / 1e4)
     corners = (box_corners(boxes, margin) - pose[:3, 3]) @ pose[:3, :3]  # (k, 8, 3) sensor frame
     low, high = corners.min(axis=1), corners.max(axis=1)
@@ -465,7 +472,7 @@ def covered_by_owner(points: np.ndarray, point_owner: np.ndarray, samples: np.nd
     its directions span (a whole row band only for an object around the sensor).
     where : ``(s,)`` bool, the samples to look at (the others come back False), or ``None`` for all
     distance : the ``(s,)`` samples' lengths (m, :func:`~.raycast.row_norms`) if the caller has it
-    point_cells : the ``(p,)`` rows and columns of ``points`` (``Coverage(..., cell_deg)._cells``) if the caller has them
+    point_cells : the ``(p,)`` rows and columns of ``points`` (:meth:`CellGrid.cells`) if the caller has them
     passes : :func:`compiled_passes` (the windows, marks and look-ups in one compiled pass) or ``None`` (numpy)
     """
     if where is not None and where.all():  # every sample counts: no copies by a mask of all True (a quarter of a garage frame's call)
@@ -474,15 +481,15 @@ def covered_by_owner(points: np.ndarray, point_owner: np.ndarray, samples: np.nd
     if where is not None:  # only these samples can count: the others' cells are never looked up
         samples, sample_owner = samples[where], sample_owner[where]
         distance = None if distance is None else distance[where]
-    grid = Coverage(np.zeros((0, 3)), cell_deg)
+    grid = CellGrid(cell_deg)
     columns = grid.columns
     owned = (point_owner >= 0) & (point_owner < count)
     point_owner = point_owner[owned].astype(np.int64)
     found = np.zeros(len(samples), bool)
     if len(point_owner):
-        point_row, point_col = grid._cells(points[owned]) if point_cells is None else (point_cells[0][owned], point_cells[1][owned])
+        point_row, point_col = grid.cells(points[owned]) if point_cells is None else (point_cells[0][owned], point_cells[1][owned])
         sample_owner = sample_owner.astype(np.int64)
-        row, col = grid._cells(samples, distance)
+        row, col = grid.cells(samples, distance)
         found = (owner_covered if passes is None else passes.owner_covered)(point_owner, point_row, point_col, sample_owner, row, col, count, grid.rows,
                                                                              columns)
     if where is None:
@@ -496,7 +503,7 @@ def owner_covered(point_owner: np.ndarray, point_row: np.ndarray, point_col: np.
     """``(s,)`` bool: is each sample's cell within one cell of a point of its own box? (:func:`covered_by_owner`'s windows)
 
     point_owner, point_row, point_col : ``(p,)`` int64 each point's box (0..count-1) and cell; sample_owner, row, col :
-    ``(s,)`` the samples'; rows, columns : the grid's (:class:`Coverage`)."""
+    ``(s,)`` the samples'; rows, columns : the grid's (:class:`CellGrid`)."""
     low_row, high_row = np.full(count, rows), np.zeros(count, np.int64)
     low_col, high_col = np.full(count, columns), np.zeros(count, np.int64)
     for owner, r, c in ((point_owner, point_row, point_col), (sample_owner, row, col)):
