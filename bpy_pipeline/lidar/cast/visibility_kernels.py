@@ -1,8 +1,8 @@
 """The compiled passes of the boxes' visibility cast (numba; imported only by :func:`.visibility.compiled_passes`).
 
 Each kernel computes exactly what its numpy path in :mod:`.visibility` computes, operation for operation in the
-same order (no fused multiply-add, no reassociation; a row's dot product summed as numpy 1.26's ``einsum`` sums it,
-``(a0 b0 + a2 b2) + a1 b1``, as :func:`.raycast.dot3` writes it), so both give the same bytes
+same order (no fused multiply-add, no reassociation; a row's dot product summed as :func:`.raycast.dot3` sums it,
+``(a0 b0 + a2 b2) + a1 b1``, numpy 1.26's ``einsum`` order), so both give the same bytes
 (``tests/test_visibility_kernels.py`` runs both): one loop over the (ray, box) pairs instead of some twenty passes
 of numpy temporaries over them.
 """
