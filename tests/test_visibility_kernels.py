@@ -1,7 +1,7 @@
 """The compiled passes of the boxes' visibility cast (bpy_pipeline/lidar/cast/visibility_kernels.py) give the bits of
 their numpy paths: the pairs' sphere test (rays from the sensor's centre and from origins of their own), the boxes' slab
 test (rays along a box's faces and axes, where the numpy path divides 0 by 0), the wholly covered windows, and the
-whole visibility of a street of boxes with and without them."""
+whole visibility of a street of boxes with and without them (the samples' windows: tests/test_box_speed_paths.py)."""
 
 import numpy as np
 import pytest
@@ -94,28 +94,19 @@ def test_the_compiled_slab_test_meets_numpys_boxes_rays_along_faces_included():
 
 @pytest.mark.parametrize("preset, pose, cell", [("vlp16", pose_matrix([0.0, 0.0, 1.6], [0.0, 0.0, 0.0]), 2.0),
                                                 ("hdl64e", pose_matrix([0.3, -0.2, 1.7], [0.0, 0.0, 40.0]), 0.5)])
-def test_visibility_with_its_compiled_passes_is_the_numpy_visibility(preset, pose, cell):
+def test_visibility_with_its_compiled_passes_is_the_numpy_visibility(preset, pose, cell, monkeypatch):
     """Every field of every box, through the whole cast: with the scene traced (no scan answers) and the compiled
     passes or not; some boxes wholly covered, some cut, some beyond the range or the field of view."""
     rng = np.random.default_rng(21)
     buffers = _street(40, rng)
     sensor = resolve_sensor({"preset": preset, "rotation_hz": 10.0}, "sensor")
-    found = []
-    covered = vis.wholly_covered
-
-    def remember(*args):
-        found.append(covered(*args))
-        return found[-1]
-
+    found, covered = [], vis.wholly_covered
+    monkeypatch.setattr(vis, "wholly_covered", lambda *args: found.append(covered(*args)) or found[-1])
     results = []
     for kernel in ("numpy", "numba"):
         boxes = fit_boxes(buffers, ["car"])
         caster = RayCaster(buffers, frame=pose, kernel=kernel)
-        vis.wholly_covered = remember
-        try:
-            vis.visibility(buffers, boxes, iter_pattern(sensor, 1 << 16), pose, sensor.min_range, sensor.max_range, cell_deg=cell, caster=caster)
-        finally:
-            vis.wholly_covered = covered
+        vis.visibility(buffers, boxes, iter_pattern(sensor, 1 << 16), pose, sensor.min_range, sensor.max_range, cell_deg=cell, caster=caster)
         results.append(boxes)
     assert results[0].tobytes() == results[1].tobytes()
     assert np.array_equal(found[0], found[1]) and 0 < found[0].sum() < len(found[0])
