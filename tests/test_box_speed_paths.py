@@ -1,8 +1,9 @@
 """The faster ways of the boxes stage and the parking placement give the bits of the ways they replace.
 
-- truncation's coverage of every object at once (:func:`covered_by_owner`, each object's window of cells) against one
-  :class:`Coverage` per object;
+- truncation's coverage of every object at once (:func:`covered_by_owner`, each object's window of cells, in numpy and
+  compiled) against one :class:`Coverage` per object;
 - :func:`surface_samples` written in place against level by level, and given the triangles' areas against computing them;
+- whether a box has area, from its first triangle, against the sum of all its triangles' areas;
 - the vertices an object set uses, without a sort, against ``np.unique``; the boxes' triangles found by a search of
   exported buffers' ordered objects against a pass over every triangle;
 - the placer's slab test against :func:`~bpy_pipeline.geometry.collision.ray_box_distance`, rays along the box's
@@ -26,8 +27,10 @@ from bpy_pipeline.geometry.boxes import fit_boxes, object_triangles
 from bpy_pipeline.geometry import primitives
 from bpy_pipeline.geometry.collision import box_axes, capsule_mesh, capsule_meshes, ray_box_distance, rectangles_near, rectangles_overlap
 from bpy_pipeline.geometry.placement import FloorBoxPlacer, PlacedBox, _slab_distance, facing_samples
-from bpy_pipeline.lidar.cast.raycast import JITTER, RayCaster, row_norms
-from bpy_pipeline.lidar.cast.visibility import Coverage, _centroids, _used_vertices, covered_by_owner, surface_samples
+from bpy_pipeline.lidar.cast.raycast import JITTER, RayCaster, choose_kernels, row_norms
+from bpy_pipeline.lidar.cast.visibility import Coverage, _centroids, _used_vertices, compiled_passes, covered_by_owner, have_area, surface_samples, triangle_areas
+
+COMPILED = [passes for passes in [compiled_passes(choose_kernels("auto"))] if passes is not None]  # the compiled windows too, where numba is
 
 
 def _unit(v):
@@ -63,6 +66,9 @@ def test_coverage_of_all_objects_at_once_is_each_objects_coverage():
         every = np.ones(len(samples), bool)  # a mask of all True takes the way of no mask
         assert np.array_equal(covered_by_owner(points, owner, samples, sample_owner, count, cell, where=every, distance=np.linalg.norm(samples, axis=1)),
                               expected)
+        for passes in COMPILED:
+            assert np.array_equal(covered_by_owner(points, owner, samples, sample_owner, count, cell, passes=passes), expected)
+            assert np.array_equal(covered_by_owner(points, owner, samples, sample_owner, count, cell, where=where, passes=passes), expected & where)
 
 
 def test_coverage_of_small_objects_across_the_seam_and_at_a_pole():
@@ -93,6 +99,9 @@ def test_coverage_of_small_objects_across_the_seam_and_at_a_pole():
         every = np.ones(len(samples), bool)  # a mask of all True takes the way of no mask
         assert np.array_equal(covered_by_owner(points, owner, samples, sample_owner, count, cell, where=every, distance=np.linalg.norm(samples, axis=1)),
                               expected)
+        for passes in COMPILED:
+            assert np.array_equal(covered_by_owner(points, owner, samples, sample_owner, count, cell, passes=passes), expected)
+            assert np.array_equal(covered_by_owner(points, owner, samples, sample_owner, count, cell, where=where, passes=passes), expected & where)
 
 
 def _surface_samples_level_by_level(triangles, spacing):
@@ -613,3 +622,29 @@ def test_objects_wholly_covered_get_the_truncation_their_samples_give(monkeypatc
         truncation = reference["truncation"]
         assert ((truncation > 0) & (truncation < 1)).sum() >= 3 and (truncation == 1).any()
         assert 5 <= shortcut[-1].sum() < (truncation == 0).sum() + 1 and (truncation[shortcut[-1]] == 0).all()
+
+
+def test_a_box_has_area_when_the_sum_of_its_triangles_areas_is_positive():
+    """have_area against every triangle's area summed: boxes in runs of triangles (an object's), some first triangles
+    slivers or points (then the sum decides), boxes with no area at all and boxes with no triangle."""
+    rng = np.random.default_rng(14)
+    vertices = rng.normal(size=(3000, 3))
+    vertices[:40] = vertices[0]  # triangles of these corners have no area
+    count = 60
+    runs = rng.integers(0, count - 5, 90)  # runs of one box's triangles, a box in several; the last five boxes have none
+    runs[0] = 7
+    owner = np.repeat(runs, rng.integers(1, 12, len(runs)))
+    triangles = rng.integers(40, len(vertices), (len(owner), 3)).astype(np.int32)
+    flat = rng.random(len(owner)) < 0.3
+    flat |= owner == 7  # box 7 has no area at all
+    triangles[flat] = rng.integers(0, 40, (int(flat.sum()), 3))
+    objects = ObjectTable(["o"], [""], ["car"], np.zeros(1, np.uint16), np.ones(1, np.uint32), np.zeros(1, np.uint8), np.ones(1, np.float32))
+    buffers = SceneBuffers(vertices, triangles, np.zeros(len(triangles), np.int32), objects)
+    triangle = np.arange(len(triangles))
+    total = np.bincount(owner, triangle_areas(vertices[triangles]), minlength=count)
+    wanted = np.concatenate([[7], rng.permutation(np.delete(np.arange(count), 7))[:45]])
+    expected = total[wanted] > 0
+    assert np.array_equal(have_area(buffers, triangle, owner, wanted), expected)
+    flat_first = np.array([(owner == k).any() and flat[np.flatnonzero(owner == k)[0]] for k in wanted])
+    assert (flat_first & expected).any() and (flat_first & ~expected).any()  # a flat first, with area after it or not
+    assert (wanted >= count - 5).any()  # a box without triangles

@@ -1,5 +1,6 @@
 """What a sensor sees of each 3D box: truncation by its field of view and range, and the rays that reach
-the object through the scene and when it is alone (occlusion). Pure numpy and embreex.
+the object through the scene and when it is alone (occlusion). Pure numpy and embreex; the loops over (ray, box)
+pairs and over cells are compiled where numba is (:mod:`.visibility_kernels`, the same bytes).
 
 Per box and frame (world-frame :data:`~bpy_pipeline.geometry.boxes.BOX_DTYPE` records, filled in place):
 
@@ -23,7 +24,7 @@ import numpy as np
 
 from ...buffers import SceneBuffers
 from ...geometry.boxes import box_corners, object_triangles
-from .raycast import RayCaster, row_norms
+from .raycast import RayCaster, dot3, row_norms
 from .scanner import scan_chunk, trace_beams
 from ..sensor.rays import Pattern
 
@@ -35,21 +36,15 @@ MAX_SAMPLES = 4000  # x 2 (surface_samples' area bound)
 COUNTED_IDS = 1 << 22  # instance ids below this are counted through a table of every id (counts_per_instance)
 
 
-class Coverage:
-    """The directions a sensor pattern covers: cells of ``cell_deg`` in azimuth and elevation that hold a ray.
+class CellGrid:
+    """Cells of ``cell_deg`` in azimuth (``columns``, wrapping) and elevation (``rows``, clamped at the poles)."""
 
-    A direction is covered when its cell or a neighbouring one holds a ray, so the coverage is
-    exact up to one cell; ``cell_deg`` should be at least the pattern's angular spacing.
-    """
-
-    def __init__(self, directions: np.ndarray, cell_deg: float):
+    def __init__(self, cell_deg: float):
         self.cell = float(cell_deg)
         self.columns = int(np.ceil(360.0 / self.cell))
         self.rows = int(np.ceil(180.0 / self.cell)) + 1
-        self.mask = np.zeros((self.rows, self.columns), bool)
-        self.add(directions)
 
-    def _cells(self, directions: np.ndarray, norm: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    def cells(self, directions: np.ndarray, norm: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """``(n,)`` row and column of ``(n, 3)`` directions; ``norm``: their ``(n,)`` lengths if the caller has them."""
         d = np.asarray(directions, float)
         azimuth = np.degrees(np.arctan2(d[:, 1], d[:, 0])) + 180.0
@@ -59,9 +54,22 @@ class Coverage:
         row = np.clip(np.floor(elevation / self.cell).astype(int), 0, self.rows - 1)
         return row, col
 
+
+class Coverage(CellGrid):
+    """The directions a sensor pattern covers: the cells (:class:`CellGrid`) that hold a ray.
+
+    A direction is covered when its cell or a neighbouring one holds a ray, so the coverage is
+    exact up to one cell; ``cell_deg`` should be at least the pattern's angular spacing.
+    """
+
+    def __init__(self, directions: np.ndarray, cell_deg: float):
+        super().__init__(cell_deg)
+        self.mask = np.zeros((self.rows, self.columns), bool)
+        self.add(directions)
+
     def add(self, directions: np.ndarray) -> None:
         if len(directions):
-            row, col = self._cells(directions)
+            row, col = self.cells(directions)
             self.mask[row, col] = True
             self._grown = None
 
@@ -70,7 +78,7 @@ class Coverage:
         if getattr(self, "_grown", None) is None:  # the mask grown by one cell (azimuth wraps around)
             rows = self.mask | np.vstack([self.mask[1:], self.mask[-1:]]) | np.vstack([self.mask[:1], self.mask[:-1]])
             self._grown = rows | np.roll(rows, 1, axis=1) | np.roll(rows, -1, axis=1)
-        row, col = self._cells(directions)
+        row, col = self.cells(directions)
         return self._grown[row, col]
 
 
@@ -120,6 +128,8 @@ def visibility(
     if len(boxes) == 0:
         return
     caster = caster or RayCaster(buffers, frame=pose)
+    kernels = getattr(caster, "kernels", None)
+    passes = compiled_passes(kernels)
     objects = buffers.objects
     box_of_row = np.full(len(objects), -1, np.int64)  # each object's box: the one of its instance
     for k, instance in enumerate(boxes["instance"]):
@@ -143,18 +153,11 @@ def visibility(
         shift = 0.0 if origins is None else float(np.linalg.norm(origins, axis=1).max())
         reach = radii + shift
         cos_limit = np.where(distance > reach, np.sqrt(np.clip(1.0 - (reach / np.maximum(distance, 1e-12)) ** 2, 0.0, 1.0)), -2.0)
-        ray, k = cone_pairs(chunk.directions, centres / np.maximum(distance, 1e-12)[:, None], cos_limit, getattr(caster, "kernels", None))
+        ray, k = cone_pairs(chunk.directions, centres / np.maximum(distance, 1e-12)[:, None], cos_limit, kernels)
+        ray, k, along = sphere_pairs(chunk.directions, origins, ray, k, centres, radii, max_range, passes)
         if len(ray) == 0:
             continue
         d = chunk.directions[ray]
-        offset = centres[k] if origins is None else centres[k] - origins[ray]
-        along = np.einsum("ij,ij->i", offset, d)
-        miss2 = np.einsum("ij,ij->i", offset, offset) - along**2
-        radius = radii[k]
-        passing = (miss2 <= radius**2) & (along >= -radius) & (along - radius <= max_range)
-        ray, k, along, d = ray[passing], k[passing], along[passing], d[passing]
-        if len(ray) == 0:
-            continue
         # the ray's point closest to the object's centre (+ 0.0 from the sensor's centre: a -0.0 made 0.0, as adding the origin does)
         seen_points.append(along[:, None] * d + (0.0 if origins is None else origins[ray]))
         seen_boxes.append(k)
@@ -168,7 +171,7 @@ def visibility(
             unoccluded += np.bincount(k[known], minlength=len(boxes))
             rest = np.flatnonzero(~known)
             o, d, k, along = ray_origins(origins, ray[rest]), d[rest], k[rest], along[rest]
-            meets = meets_boxes(boxes, pose, o, d, k)
+            meets = meets_boxes(boxes, pose, o, d, k, passes)
             left.append((o[meets], d[meets], k[meets], along[meets]))
     if left:
         unoccluded += alone_counts(buffers, boxed, owner, centres, radii, pose, *(np.concatenate(a) for a in zip(*left)), min_range, max_range, surfaces, rng)
@@ -179,14 +182,15 @@ def visibility(
     # direction and distance is surely covered (:func:`wholly_covered`) is 0 without its samples: what they give it
     seen = np.concatenate(seen_points) if seen_points else np.zeros((0, 3))
     point_owner = np.concatenate(seen_boxes) if seen_boxes else np.zeros(0, np.int64)
-    point_cells = Coverage(np.zeros((0, 3)), cell_deg)._cells(seen)  # each passing point's (row, col), once for both uses
-    triangles = buffers.vertices[buffers.triangles[boxed]]  # (m, 3, 3)
-    tri_area = row_norms(np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])) / 2
-    total = np.bincount(owner, tri_area, minlength=len(boxes))
-    whole_view = wholly_covered(boxes, pose, point_cells, point_owner, min_range, max_range, cell_deg) & (total > 0)  # no area: 1, as sampled
+    point_cells = CellGrid(cell_deg).cells(seen)  # each passing point's (row, col), once for both uses
+    whole_view = wholly_covered(boxes, pose, point_cells, point_owner, min_range, max_range, cell_deg, passes)
+    whole_view[whole_view] = have_area(buffers, boxed, owner, np.flatnonzero(whole_view))  # no area: 1, as sampled
+    sampled = ~whole_view[owner]  # only these triangles' corners and areas are needed
+    owner = owner[sampled]
+    triangles = buffers.vertices[buffers.triangles[boxed[sampled]]]  # (m, 3, 3)
+    tri_area = triangle_areas(triangles)
+    total = np.bincount(owner, tri_area, minlength=len(boxes))  # each sampled box's sum: its triangles, in their order
     spacing = np.maximum(SAMPLE_SPACING, np.sqrt(total / MAX_SAMPLES))
-    sampled = ~whole_view[owner]
-    owner, triangles, tri_area = owner[sampled], triangles[sampled], tri_area[sampled]
     samples, area, triangle = surface_samples(triangles, spacing[owner], return_triangle=True, area_bound=True, area=tri_area)
     samples = (samples - pose[:3, 3]) @ pose[:3, :3]
     distance = row_norms(samples)
@@ -198,7 +202,7 @@ def visibility(
         passed = np.bincount(point_owner, minlength=len(boxes)) > 0
         partial = ~whole_view[point_owner]
         covered = covered_by_owner(seen[partial], point_owner[partial], samples, sample_owner, len(boxes), cell_deg, where=inside & passed[sample_owner],
-                                   distance=distance, point_cells=(point_cells[0][partial], point_cells[1][partial]))  # fmt: skip
+                                   distance=distance, point_cells=(point_cells[0][partial], point_cells[1][partial]), passes=passes)  # fmt: skip
     order = np.argsort(sample_owner, kind="stable")  # the samples box by box, each box's in their order
     bounds = np.searchsorted(sample_owner[order], np.arange(len(boxes) + 1))
     area, covered = area[order], covered[order]
@@ -209,6 +213,62 @@ def visibility(
         if whole > 0:
             truncation[k] = 1.0 - area[mine][covered[mine]].sum() / whole
     boxes["truncation"] = truncation
+
+
+def compiled_passes(kernels):
+    """The compiled passes of this cast (:mod:`.visibility_kernels`) when the scan's ``kernels`` are the compiled ones
+    (:func:`.raycast.choose_kernels`), else ``None`` (the numpy paths here: the same bytes)."""
+    if kernels is None:
+        return None
+    from . import visibility_kernels
+
+    return visibility_kernels
+
+
+def sphere_pairs(directions: np.ndarray, origins: np.ndarray | None, ray: np.ndarray, box: np.ndarray, centres: np.ndarray, radii: np.ndarray,
+                 max_range: float, passes=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(ray, box, along)``: the ``(p,)`` (ray, box) pairs (of :func:`cone_pairs`) whose ray passes the box's bounding sphere,
+    in their order, and ``along`` (m) to each ray's point nearest the centre.
+
+    directions, origins : the chunk's ``(n, 3)`` rays and origins (``None``: the sensor's centre); centres, radii :
+    ``(k, 3)`` sensor-frame sphere centres and ``(k,)`` radii (m). A pair passes when its line comes within the radius
+    of the centre, the centre is not more than a radius behind the origin and the sphere begins within ``max_range``.
+    passes : :func:`compiled_passes` (one loop over the pairs) or ``None`` (numpy)."""
+    if passes is not None:
+        return passes.sphere_pairs(directions, np.zeros((0, 3)) if origins is None else origins, ray, box, centres, radii, float(max_range))
+    d = directions[ray]
+    offset = centres[box] if origins is None else centres[box] - origins[ray]
+    along = dot3(offset, d)  # numpy 1.26's einsum's sums, on any numpy
+    miss2 = dot3(offset, offset) - along**2
+    radius = radii[box]
+    passing = (miss2 <= radius**2) & (along >= -radius) & (along - radius <= max_range)
+    return ray[passing], box[passing], along[passing]
+
+
+def triangle_areas(triangles: np.ndarray) -> np.ndarray:
+    """``(m,)`` areas (m^2) of ``(m, 3, 3)`` triangles, row by row (a triangle's area does not depend on the others)."""
+    return row_norms(np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])) / 2
+
+
+def have_area(buffers: SceneBuffers, triangle: np.ndarray, owner: np.ndarray, wanted: np.ndarray) -> np.ndarray:
+    """``(w,)`` bool: has box ``wanted[i]`` a triangle of non-zero area (:func:`triangle_areas`), i.e. a positive sum of them?
+
+    triangle, owner : ``(t,)`` buffer triangles and each one's box (:func:`~bpy_pipeline.geometry.boxes.object_triangles`)
+    Each box's first triangle answers when it has an area; only a box whose first has none is summed whole."""
+    out = np.zeros(len(wanted), bool)
+    if not len(wanted) or not len(owner):
+        return out
+    starts = np.flatnonzero(np.concatenate([[True], owner[1:] != owner[:-1]]))  # each run of one box's triangles
+    first = np.full(int(max(owner.max(), wanted.max())) + 1, len(owner))
+    np.minimum.at(first, owner[starts], starts)
+    mine = first[wanted] < len(owner)  # the boxes with triangles
+    out[mine] = triangle_areas(buffers.vertices[buffers.triangles[triangle[first[wanted[mine]]]]]) > 0
+    again = mine & ~out
+    if again.any():
+        rows = np.isin(owner, wanted[again])
+        total = np.bincount(owner[rows], triangle_areas(buffers.vertices[buffers.triangles[triangle[rows]]]), minlength=len(first))
+        out[again] = total[wanted[again]] > 0
+    return out
 
 
 def ray_origins(origins: np.ndarray | None, ray: np.ndarray) -> np.ndarray:
@@ -227,7 +287,7 @@ def chunk_returns(direct_returns: np.ndarray, first: int, count: int) -> np.ndar
     return out
 
 
-def meets_boxes(boxes: np.ndarray, pose: np.ndarray, origins: np.ndarray, directions: np.ndarray, box: np.ndarray) -> np.ndarray:
+def meets_boxes(boxes: np.ndarray, pose: np.ndarray, origins: np.ndarray, directions: np.ndarray, box: np.ndarray, passes=None) -> np.ndarray:
     """``(p,)`` bool: does the line of each ray (``(p, 3)`` origins and directions, sensor frame) meet its box
     (``box`` (p,) into world-frame ``boxes``) grown by :data:`BOX_MARGIN`?
 
@@ -236,9 +296,15 @@ def meets_boxes(boxes: np.ndarray, pose: np.ndarray, origins: np.ndarray, direct
     frame; a line along a face's plane (a 0/0 in it) counts as meeting it."""
     rotation = np.asarray(pose, float)[:3, :3]
     world_d = rotation @ np.ascontiguousarray(directions.T)  # (3, p): coordinate by coordinate (a product 5x faster on rows)
-    world_o = rotation @ np.ascontiguousarray(origins.T) + (pose[:3, 3] - boxes["centre"]).T[:, box]  # from the box's centre
+    turned_o = rotation @ np.ascontiguousarray(origins.T)
+    shift = (pose[:3, 3] - boxes["centre"]).T  # (3, k) from each box's centre to the sensor
+    half = (boxes["size"] / 2 + (BOX_MARGIN * (1.0 + np.abs(boxes["centre"]).max(axis=1) / 1e4))[:, None]).T
+    if passes is not None:
+        return passes.meets_boxes(turned_o, world_d, np.ascontiguousarray(shift), np.cos(boxes["heading"]), np.sin(boxes["heading"]), np.ascontiguousarray(half),
+                                  np.asarray(box, np.int64))
+    world_o = turned_o + shift[:, box]  # from the box's centre
     c, s = np.cos(boxes["heading"])[box], np.sin(boxes["heading"])[box]
-    half = (boxes["size"] / 2 + (BOX_MARGIN * (1.0 + np.abs(boxes["centre"]).max(axis=1) / 1e4))[:, None]).T[:, box]
+    half = half[:, box]
     # the box's frame: x along its heading, y across, z up
     local = ((c * world_o[0] + s * world_o[1], c * world_d[0] + s * world_d[1]), (c * world_o[1] - s * world_o[0], c * world_d[1] - s * world_d[0]),
              (world_o[2], world_d[2]))  # fmt: skip
@@ -295,13 +361,13 @@ CORNER_PAIRS = np.array([(i, j) for i in range(8) for j in range(i + 1, 8)])  # 
 
 
 def wholly_covered(boxes: np.ndarray, pose: np.ndarray, point_cells: tuple[np.ndarray, np.ndarray], point_owner: np.ndarray, min_range: float, max_range: float,
-                   cell_deg: float) -> np.ndarray:
+                   cell_deg: float, passes=None) -> np.ndarray:
     """``(k,)`` bool: is every surface sample of box k's object surely within the range limits and covered (truncation 0)?
 
     boxes : (k,) world-frame BOX_DTYPE, each the tightest box around its object's vertices (so around every surface
         sample, up to rounding: grown by :data:`BOX_MARGIN`); point_cells, point_owner : the ``(p,)`` row and column
-        (:class:`Coverage`'s cells of ``cell_deg``) of the sensor-frame points where rays pass the objects, and their ``(p,)`` box
-    A sample counts when its distance is within ``[min_range, max_range]`` and its direction's cell (:class:`Coverage`'s
+        (:class:`CellGrid`'s cells of ``cell_deg``) of the sensor-frame points where rays pass the objects, and their ``(p,)`` box
+    A sample counts when its distance is within ``[min_range, max_range]`` and its direction's cell (:class:`CellGrid`'s
     cells) is within one cell of a passing point's. True only when the box's bounding box in the sensor frame is within
     the limits, and every cell of the directions the box spans (its elevations from its heights and its footprint's
     nearest and farthest horizontal distances, its azimuths from its footprint's corners, widened by :data:`ANGLE_MARGIN`)
@@ -312,7 +378,7 @@ def wholly_covered(boxes: np.ndarray, pose: np.ndarray, point_cells: tuple[np.nd
     out = np.zeros(len(boxes), bool)
     if len(point_owner) == 0 or len(boxes) == 0:
         return out
-    grid = Coverage(np.zeros((0, 3)), cell_deg)
+    grid = CellGrid(cell_deg)
     margin = BOX_MARGIN * (1.0 + np.abs(boxes["centre"]).max(axis=1) / 1e4)
     corners = (box_corners(boxes, margin) - pose[:3, 3]) @ pose[:3, :3]  # (k, 8, 3) sensor frame
     low, high = corners.min(axis=1), corners.max(axis=1)
@@ -343,12 +409,24 @@ def wholly_covered(boxes: np.ndarray, pose: np.ndarray, point_cells: tuple[np.nd
                  & (np.hypot(near[:, 0], near[:, 1]) > 0.0) & (width <= grid.columns))
     if not candidate.any():
         return out
+    return (windows_covered if passes is None else passes.windows_covered)(point_owner, point_cells[0], point_cells[1], candidate, row0, col0, height, width,
+                                                                           grid.columns)
+
+
+def windows_covered(owner: np.ndarray, row: np.ndarray, col: np.ndarray, candidate: np.ndarray, row0: np.ndarray, col0: np.ndarray, height: np.ndarray,
+                    width: np.ndarray, columns: int) -> np.ndarray:
+    """``(k,)`` bool: is every cell of each candidate box's window within one cell of a point's? (:func:`wholly_covered`'s windows)
+
+    owner, row, col : ``(p,)`` int64 each point's box and cell; candidate : ``(k,)`` bool the boxes to answer (others False);
+    row0, col0 : ``(k,)`` the first row and column of each box's directions; height, width : ``(k,)`` its window, with one
+    more cell on every side; columns : the cells in a turn (a window's columns wrap)."""
+    out = np.zeros(len(candidate), bool)
     size = np.where(candidate, height * width, 0)
     offset = np.cumsum(size) - size
     mask = np.zeros(int(size.sum()), bool)
-    mine = candidate[point_owner]
-    owner, row, col = point_owner[mine], point_cells[0][mine], point_cells[1][mine]
-    r, q = row - (row0[owner] - 1), (col - (col0[owner] - 1)) % grid.columns
+    mine = candidate[owner]
+    owner, row, col = owner[mine], row[mine], col[mine]
+    r, q = row - (row0[owner] - 1), (col - (col0[owner] - 1)) % columns
     inside = (r >= 0) & (r < height[owner]) & (q < width[owner])
     mask[(offset[owner] + r * width[owner] + q)[inside]] = True
     for k in np.flatnonzero(candidate):  # a cell is covered when it or one of its eight neighbours is marked
@@ -381,7 +459,7 @@ def cone_pairs(directions: np.ndarray, axes: np.ndarray, cos_limit: np.ndarray, 
 
 def covered_by_owner(points: np.ndarray, point_owner: np.ndarray, samples: np.ndarray, sample_owner: np.ndarray, count: int, cell_deg: float,
                      where: np.ndarray | None = None, distance: np.ndarray | None = None,
-                     point_cells: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:  # fmt: skip
+                     point_cells: tuple[np.ndarray, np.ndarray] | None = None, passes=None) -> np.ndarray:  # fmt: skip
     """``(s,)`` bool: is each sample's direction covered by the passing points of its own object?
 
     points, point_owner : ``(p, 3)`` sensor-frame points where rays pass the objects and ``(p,)`` their object (0..count-1)
@@ -394,7 +472,8 @@ def covered_by_owner(points: np.ndarray, point_owner: np.ndarray, samples: np.nd
     its directions span (a whole row band only for an object around the sensor).
     where : ``(s,)`` bool, the samples to look at (the others come back False), or ``None`` for all
     distance : the ``(s,)`` samples' lengths (m, :func:`~.raycast.row_norms`) if the caller has it
-    point_cells : the ``(p,)`` rows and columns of ``points`` (``Coverage(..., cell_deg)._cells``) if the caller has them
+    point_cells : the ``(p,)`` rows and columns of ``points`` (:meth:`CellGrid.cells`) if the caller has them
+    passes : :func:`compiled_passes` (the windows, marks and look-ups in one compiled pass) or ``None`` (numpy)
     """
     if where is not None and where.all():  # every sample counts: no copies by a mask of all True (a quarter of a garage frame's call)
         where = None
@@ -402,44 +481,54 @@ def covered_by_owner(points: np.ndarray, point_owner: np.ndarray, samples: np.nd
     if where is not None:  # only these samples can count: the others' cells are never looked up
         samples, sample_owner = samples[where], sample_owner[where]
         distance = None if distance is None else distance[where]
-    grid = Coverage(np.zeros((0, 3)), cell_deg)
+    grid = CellGrid(cell_deg)
     columns = grid.columns
     owned = (point_owner >= 0) & (point_owner < count)
     point_owner = point_owner[owned].astype(np.int64)
     found = np.zeros(len(samples), bool)
     if len(point_owner):
-        point_row, point_col = grid._cells(points[owned]) if point_cells is None else (point_cells[0][owned], point_cells[1][owned])
+        point_row, point_col = grid.cells(points[owned]) if point_cells is None else (point_cells[0][owned], point_cells[1][owned])
         sample_owner = sample_owner.astype(np.int64)
-        row, col = grid._cells(samples, distance)
-        low_row, high_row = np.full(count, grid.rows), np.zeros(count, np.int64)
-        low_col, high_col = np.full(count, columns), np.zeros(count, np.int64)
-        for owner, r, c in ((point_owner, point_row, point_col), (sample_owner, row, col)):
-            np.minimum.at(low_row, owner, r)
-            np.maximum.at(high_row, owner, r)
-            np.minimum.at(low_col, owner, c)
-            np.maximum.at(high_col, owner, c)
-        low_row, low_col = np.minimum(low_row, high_row), np.minimum(low_col, high_col)  # an object with no cell: a window of one
-        # a margin row or column is never a sample's, so a point's mark there (row -1 for row 0's neighbour) is
-        # what clamping at a pole gives; a window that would wrap is every column, and its marks wrap
-        whole = high_col - low_col + 3 > columns
-        width = np.where(whole, columns, high_col - low_col + 3)
-        size = (high_row - low_row + 3) * width
-        offset = np.cumsum(size) - size - (low_row - 1) * width - np.where(whole, 0, low_col - 1)  # cell (k, r, c): offset[k] + r width[k] + c
-        mask = np.zeros(int(size.sum()), bool)
-        step, wraps = width[point_owner], whole[point_owner]
-        base = offset[point_owner] + point_row * step
-        for dc in (-1, 0, 1):
-            c = point_col + dc
-            if wraps.any():
-                c = np.where(wraps, c % columns, c)
-            mask[base + c - step] = True
-            mask[base + c] = True
-            mask[base + c + step] = True
-        found = mask[offset[sample_owner] + row * width[sample_owner] + col]
+        row, col = grid.cells(samples, distance)
+        found = (owner_covered if passes is None else passes.owner_covered)(point_owner, point_row, point_col, sample_owner, row, col, count, grid.rows,
+                                                                             columns)
     if where is None:
         return found
     covered[where] = found
     return covered
+
+
+def owner_covered(point_owner: np.ndarray, point_row: np.ndarray, point_col: np.ndarray, sample_owner: np.ndarray, row: np.ndarray, col: np.ndarray,
+                  count: int, rows: int, columns: int) -> np.ndarray:
+    """``(s,)`` bool: is each sample's cell within one cell of a point of its own box? (:func:`covered_by_owner`'s windows)
+
+    point_owner, point_row, point_col : ``(p,)`` int64 each point's box (0..count-1) and cell; sample_owner, row, col :
+    ``(s,)`` the samples'; rows, columns : the grid's (:class:`CellGrid`)."""
+    low_row, high_row = np.full(count, rows), np.zeros(count, np.int64)
+    low_col, high_col = np.full(count, columns), np.zeros(count, np.int64)
+    for owner, r, c in ((point_owner, point_row, point_col), (sample_owner, row, col)):
+        np.minimum.at(low_row, owner, r)
+        np.maximum.at(high_row, owner, r)
+        np.minimum.at(low_col, owner, c)
+        np.maximum.at(high_col, owner, c)
+    low_row, low_col = np.minimum(low_row, high_row), np.minimum(low_col, high_col)  # an object with no cell: a window of one
+    # a margin row or column is never a sample's, so a point's mark there (row -1 for row 0's neighbour) is
+    # what clamping at a pole gives; a window that would wrap is every column, and its marks wrap
+    whole = high_col - low_col + 3 > columns
+    width = np.where(whole, columns, high_col - low_col + 3)
+    size = (high_row - low_row + 3) * width
+    offset = np.cumsum(size) - size - (low_row - 1) * width - np.where(whole, 0, low_col - 1)  # cell (k, r, c): offset[k] + r width[k] + c
+    mask = np.zeros(int(size.sum()), bool)
+    step, wraps = width[point_owner], whole[point_owner]
+    base = offset[point_owner] + point_row * step
+    for dc in (-1, 0, 1):
+        c = point_col + dc
+        if wraps.any():
+            c = np.where(wraps, c % columns, c)
+        mask[base + c - step] = True
+        mask[base + c] = True
+        mask[base + c + step] = True
+    return mask[offset[sample_owner] + row * width[sample_owner] + col]
 
 
 IDENTITY4 = np.eye(4)
