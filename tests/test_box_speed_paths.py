@@ -28,7 +28,8 @@ from bpy_pipeline.geometry import primitives
 from bpy_pipeline.geometry.collision import box_axes, capsule_mesh, capsule_meshes, ray_box_distance, rectangles_near, rectangles_overlap
 from bpy_pipeline.geometry.placement import FloorBoxPlacer, PlacedBox, _slab_distance, facing_samples
 from bpy_pipeline.lidar.cast.raycast import JITTER, RayCaster, choose_kernels, row_norms
-from bpy_pipeline.lidar.cast.visibility import Coverage, _centroids, _used_vertices, compiled_passes, covered_by_owner, have_area, surface_samples, triangle_areas
+from bpy_pipeline.lidar.cast.visibility import (Coverage, _centroids, _used_vertices, compiled_passes, covered_by_owner, have_area, surface_samples,
+                                                triangle_areas)
 
 COMPILED = [passes for passes in [compiled_passes(choose_kernels("auto"))] if passes is not None]  # the compiled windows too, where numba is
 

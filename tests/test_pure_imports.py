@@ -29,7 +29,8 @@ PURE_PACKAGES = ("geometry", "lidar", "io", "mixing", "evaluate", "population") 
 BLENDER_MODULES = ("bpy", "bmesh", "mathutils")
 
 
-OPTIONAL = {"bpy_pipeline.lidar.cast.numba_kernels": "numba", "bpy_pipeline.lidar.cast.visibility_kernels": "numba"}  # modules that need an optional package (the 'fast' extra)
+# modules that need an optional package (the 'fast' extra)
+OPTIONAL = {"bpy_pipeline.lidar.cast.numba_kernels": "numba", "bpy_pipeline.lidar.cast.visibility_kernels": "numba"}
 
 
 def blender_file(name: str) -> bool:

@@ -300,7 +300,8 @@ def meets_boxes(boxes: np.ndarray, pose: np.ndarray, origins: np.ndarray, direct
     shift = (pose[:3, 3] - boxes["centre"]).T  # (3, k) from each box's centre to the sensor
     half = (boxes["size"] / 2 + (BOX_MARGIN * (1.0 + np.abs(boxes["centre"]).max(axis=1) / 1e4))[:, None]).T
     if passes is not None:
-        return passes.meets_boxes(turned_o, world_d, np.ascontiguousarray(shift), np.cos(boxes["heading"]), np.sin(boxes["heading"]), np.ascontiguousarray(half),
+        heading = boxes["heading"]
+        return passes.meets_boxes(turned_o, world_d, np.ascontiguousarray(shift), np.cos(heading), np.sin(heading), np.ascontiguousarray(half),
                                   np.asarray(box, np.int64))
     world_o = turned_o + shift[:, box]  # from the box's centre
     c, s = np.cos(boxes["heading"])[box], np.sin(boxes["heading"])[box]
