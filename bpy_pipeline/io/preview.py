@@ -425,8 +425,9 @@ def render_indexed(points: np.ndarray, color_lut: np.ndarray, size: tuple[int, i
     # top view: x up, y left; cropped to the bulk of the points, or of the points of the other classes
     # when one class (a railway's ground rings) holds most of them
     others = len(semantic) - counts.max()  # the points not of the class that holds most
-    bulk = xyz[:, :2][semantic != ids[counts.argmax()]] if counts.max() > 0.4 * len(semantic) and others >= 100 else xyz[:, :2]
-    low, high = (np.array(v) for v in zip(*(percentiles(bulk[:, axis], (1, 99)) for axis in (0, 1))))
+    keep = semantic != ids[counts.argmax()] if counts.max() > 0.4 * len(semantic) and others >= 100 else None
+    bulk = [xyz[:, axis] if keep is None else xyz[:, axis][keep] for axis in (0, 1)]  # x, y of the bulk, each (m,) float32
+    low, high = (np.array(v) for v in zip(*(percentiles(column, (1, 99)) for column in bulk)))
     span = np.maximum(high - low, 1e-6)
     low, high = low - 0.05 * span, high + 0.05 * span
     inner_w, inner_h = panel - 2 * MARGIN, height - 2 * MARGIN
