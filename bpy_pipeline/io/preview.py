@@ -125,8 +125,8 @@ def _panels_kernel():
         return None
     import numba
 
-    # flat: the (height * width,) image; best_top (height * panel_width,) float32 (the top view's depth is a point's z, a
-    # float32) and best_side (height * panel_width,) float64: each panel's depth per pixel, -inf where empty.
+    # flat: the (height * width,) image; best_top and best_side (height * panel_width,) float64: the top view's and the
+    # perspective's depth per pixel, -inf where empty.
     # xyz: (n, 3) float32 points, each value taken to float64 as numpy's path has them; semantic (n,) class ids, entry
     # their palette indices. numpy's path: col, row = rint(u), rint(v) as int64, kept where 0 <= col < panel_width and
     # 0 <= row < height (the float tests on the rounded values decide alike, also for NaN and out-of-range values, which
@@ -442,24 +442,25 @@ def render_indexed(points: np.ndarray, color_lut: np.ndarray, size: tuple[int, i
     # and its boxes are drawn. With one pixel a point, one compiled pass paints both panels' points first; the top view's
     # boxes then leave alone the perspective's painted pixels they reach into (the points painted over them otherwise).
     kernel = _panels_kernel() if len(du) == 1 else None
+    colors = best = None  # the numpy path's: each point's palette index (n, 1), and the depth per pixel
+
+    def paint(col, row, depth, left, panel_width):
+        inside = (col >= 0) & (col < panel_width) & (row >= 0) & (row < height)
+        col, row, depth, color = col[inside], row[inside], depth[inside], colors[inside]
+        if len(du) == 1:  # one pixel a point: already inside the panel
+            splat(image, col + left, row, depth, color, best)
+            return
+        col = np.clip(col[:, None] + du, 0, panel_width - 1).ravel() + left
+        row = np.clip(row[:, None] + dv, 0, height - 1).ravel()
+        splat(image, col, row, np.repeat(depth, len(du)), np.repeat(color, len(du), axis=0), best)
+
     if kernel is not None:
         best_side, best_top = np.full((2, height * panel), -np.inf)  # each panel's depth per pixel
         kernel(image.reshape(-1), best_top, best_side, np.ascontiguousarray(xyz), semantic, entry, float(centre[0]), float(centre[1]), float(scale),
                eye, rotation, float(focal), (panel - 1) / 2, (height - 1) / 2, width, panel, height)  # fmt: skip
     else:
-        colors = np.take(entry, semantic)[:, None]  # (n, 1): a point's palette index
-        best = np.full((height, width), -np.inf)  # depth per pixel; the two panels' pixels are apart, so one serves both
-
-        def paint(col, row, depth, left, panel_width):
-            inside = (col >= 0) & (col < panel_width) & (row >= 0) & (row < height)
-            col, row, depth, color = col[inside], row[inside], depth[inside], colors[inside]
-            if len(du) == 1:  # one pixel a point: already inside the panel
-                splat(image, col + left, row, depth, color, best)
-                return
-            col = np.clip(col[:, None] + du, 0, panel_width - 1).ravel() + left
-            row = np.clip(row[:, None] + dv, 0, height - 1).ravel()
-            splat(image, col, row, np.repeat(depth, len(du)), np.repeat(color, len(du), axis=0), best)
-
+        colors = np.take(entry, semantic)[:, None]
+        best = np.full((height, width), -np.inf)  # the two panels' pixels are apart, so one serves both
         u, v = top(xyz)
         paint(np.rint(u).astype(np.int64), np.rint(v).astype(np.int64), xyz[:, 2], panel, panel)
     if len(corners):
