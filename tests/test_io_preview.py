@@ -172,10 +172,11 @@ def test_splat_keeps_the_nearest_point_and_the_later_of_equal_depths():
 
 def test_the_compiled_panel_paint_gives_the_numpy_paths_pixels(monkeypatch):
     """A cloud with ties, points behind the perspective camera, points outside both panels and coordinates far off
-    (pixels beyond int64 in the numpy path): the compiled projection-and-splat and the numpy path paint the same image."""
+    (pixels beyond int64 in the numpy path), and boxes whose top-view lines reach into the perspective's panel: the
+    compiled projection-and-splat of both panels and the numpy path (a panel at a time) paint the same image."""
     from bpy_pipeline.io import preview
 
-    if preview._paint_kernels() is None:
+    if preview._panels_kernel() is None:
         pytest.skip("numba is not installed (or BPY_PIPELINE_SCAN_KERNEL=numpy): only the numpy path exists")
     rng = np.random.default_rng(11)
     pts = empty_points(20000)
@@ -184,10 +185,12 @@ def test_the_compiled_panel_paint_gives_the_numpy_paths_pixels(monkeypatch):
     pts["x"][:200] = -40.0  # behind the perspective camera
     pts["y"][200:300] = 1e25  # beyond any pixel, beyond int64 once projected
     pts["semantic"] = rng.integers(0, len(LUT), len(pts))
-    boxes = np.zeros(2, BOX_DTYPE)
+    boxes = np.zeros(4, BOX_DTYPE)
     boxes["size"] = 2.0
+    boxes["centre"][2:] = [[0.0, 60.0, 0.0], [5.0, 35.0, 1.0]]  # far left of the top view's crop (about y within +-20 m): drawn in the perspective's panel
+    boxes["size"][2:] = [[8.0, 50.0, 3.0], [4.0, 30.0, 2.0]]
     compiled = render_preview(pts, LUT, boxes=boxes, names=load_class_table().names)
-    monkeypatch.setattr(preview, "_paint_kernels", lambda: None)
+    monkeypatch.setattr(preview, "_panels_kernel", lambda: None)
     monkeypatch.setattr(preview, "_splat_kernel", lambda: None)
     numpy_path = render_preview(pts, LUT, boxes=boxes, names=load_class_table().names)
     assert (compiled == numpy_path).all() and len(colours(compiled) - FRAME) > 3

@@ -91,7 +91,10 @@ def test_packed_columns_are_the_fields_stacked():
     pts = random_points(1000, np.random.default_rng(8))
     for names in (("x", "y", "z"), ("x", "y", "z", "intensity"), ("x", "z"), ("intensity", "range")):
         assert np.array_equal(packed_columns(pts, names), np.column_stack([pts[name] for name in names]).astype("<f4"))
-    assert packed_columns(pts, ("x", "y", "z"), np.float64).dtype == np.float64
+    pts["x"][:3] = [np.nan, np.inf, -0.0]
+    for names in (("x", "y", "z"), ("x", "y", "z", "intensity"), ("x", "z")):  # as a block then cast, or field by field: the same bits
+        wide = packed_columns(pts, names, np.float64)
+        assert wide.dtype == np.float64 and wide.tobytes() == np.column_stack([pts[name].astype(np.float64) for name in names]).tobytes()
 
 
 def test_the_compiled_labels_are_pack_labels(monkeypatch):

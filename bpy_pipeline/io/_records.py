@@ -54,16 +54,23 @@ def packed_columns(points: np.ndarray, names: tuple[str, ...], dtype="<f4", out:
     """``(n, len(names))`` array of ``dtype`` holding the fields ``names`` of the ``(n,)`` structured ``points``, in that order
     (in ``out``, a C-contiguous array of that shape and type, when given).
 
-    Where the fields are consecutive and already of ``dtype`` (x, y, z and intensity of :data:`POINT_DTYPE`: float32), each
-    record's bytes are copied as one block; otherwise field by field. The same values either way.
+    Where the fields are consecutive and of one type (x, y, z and intensity of :data:`POINT_DTYPE`: float32), each record's
+    bytes are copied as one block, then cast to ``dtype`` when it is another type; otherwise field by field. The same values
+    either way.
     """
     dtype = np.dtype(dtype)
     out = np.empty((len(points), len(names)), dtype) if out is None else out
     fields = points.dtype.fields or {}
-    first = fields[names[0]][1] if names[0] in fields else 0
-    if all(name in fields and fields[name][0] == dtype and fields[name][1] == first + i * dtype.itemsize for i, name in enumerate(names)):
-        block = np.dtype({"names": ["b"], "formats": [f"V{len(names) * dtype.itemsize}"], "offsets": [first], "itemsize": points.dtype.itemsize})
-        out.view(f"V{len(names) * dtype.itemsize}")[:, 0] = points.view(block)["b"]
+    first = fields[names[0]] if names[0] in fields else None
+    stored = first[0] if first is not None else None
+    if first is not None and all(name in fields and fields[name][0] == stored and fields[name][1] == first[1] + i * stored.itemsize
+                                 for i, name in enumerate(names)):
+        size = len(names) * stored.itemsize
+        block = np.dtype({"names": ["b"], "formats": [f"V{size}"], "offsets": [first[1]], "itemsize": points.dtype.itemsize})
+        packed = out if stored == dtype else np.empty((len(points), len(names)), stored)
+        packed.view(f"V{size}")[:, 0] = points.view(block)["b"]
+        if packed is not out:
+            out[...] = packed
     else:
         for i, name in enumerate(names):
             out[:, i] = points[name]

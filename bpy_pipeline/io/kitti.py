@@ -167,7 +167,7 @@ def label_lines(boxes: np.ndarray, points: np.ndarray, camera, maps: ClassMaps |
     regions = boxes[:0] if regions is None else regions
     order = points_of_instances(points["instance"], np.concatenate([boxes["instance"], regions["instance"]]))
     owners = points["instance"][order]
-    xyz = packed_columns(points[order], ("x", "y", "z"))  # (m, 3) float32: the boxed instances' points, grouped by instance
+    xyz = np.stack([points[name][order] for name in ("x", "y", "z")], axis=1)  # (m, 3) float32: the boxed instances' points, grouped by instance
     lines, dont_care = [], []
     for box, region in [(b, False) for b in boxes] + [(b, True) for b in regions]:
         mine = xyz[np.searchsorted(owners, box["instance"], "left") : np.searchsorted(owners, box["instance"], "right")]

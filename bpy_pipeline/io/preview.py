@@ -116,37 +116,38 @@ def _splat_kernel():
 
 
 @cache
-def _paint_kernels():
-    """The compiled projection-to-pixels and splat of each panel (numba, cached on disk): ``(top, perspective)``,
-    or ``None`` (as :func:`_splat_kernel`). Each computes a point's pixel with the numpy path's operations in
-    its order (no fused multiply-add, no fast-math), so both paint the same pixels."""
+def _panels_kernel():
+    """The compiled projection-to-pixels and splat of both panels in one pass over the points (numba, cached on disk), or
+    ``None`` (as :func:`_splat_kernel`). Each point's pixel in each panel comes from the numpy path's operations in its order
+    (no fused multiply-add, no fast-math), so both paint the same pixels: the panels' pixels are apart, so painting a point
+    into both before the next point gives what painting every point into one panel, then into the other, gives."""
     if _splat_kernel() is None:
         return None
     import numba
 
-    # xyz: (n, 3) float32 points, each value taken to float64 as numpy's path has them.
-    # numpy's path: col, row = rint(u), rint(v) as int64, kept where 0 <= col < panel_width and 0 <= row < height
-    # (the float tests on the rounded values decide alike, also for NaN and out-of-range values, which numpy's
-    # int64 cast turns into the smallest int64); then the splat's rule in point order. Written out in both
-    # kernels: a jitted helper called from them would keep numba from caching them on disk.
+    # flat: the (height * width,) image; best_top and best_side (height * panel_width,) float64: the top view's and the
+    # perspective's depth per pixel, -inf where empty.
+    # xyz: (n, 3) float32 points, each value taken to float64 as numpy's path has them; semantic (n,) class ids, entry
+    # their palette indices. numpy's path: col, row = rint(u), rint(v) as int64, kept where 0 <= col < panel_width and
+    # 0 <= row < height (the float tests on the rounded values decide alike, also for NaN and out-of-range values, which
+    # numpy's int64 cast turns into the smallest int64); then the splat's rule in point order (at least as deep wins).
     @numba.njit(cache=True, nogil=True)
-    def top(flat, best, xyz, colors, centre0, centre1, scale, half_w, half_h, width, panel_width, height, left):  # pragma: no cover
-        for i in range(len(xyz)):  # u = half_w - (y - centre1) * scale, v = half_h - (x - centre0) * scale, depth z
-            col = np.rint(half_w - (np.float64(xyz[i, 1]) - centre1) * scale)
-            row = np.rint(half_h - (np.float64(xyz[i, 0]) - centre0) * scale)
-            if col >= 0.0 and col < panel_width and row >= 0.0 and row < height:
-                p = np.int64(row) * width + np.int64(col) + left
-                z = np.float64(xyz[i, 2])
-                if z >= best[p]:
-                    best[p] = z
-                    for c in range(flat.shape[1]):
-                        flat[p, c] = colors[i, c]
-
-    @numba.njit(cache=True, nogil=True)
-    def perspective(flat, best, xyz, eye, rotation, colors, focal, half_w, half_h, width, panel_width, height, left):  # pragma: no cover
-        # the camera frame as _camera has it; in front (depth > 0.1): u = half_w + focal * x / depth, v = half_h + focal * y / depth, depth -depth
+    def panels(flat, best_top, best_side, xyz, semantic, entry, centre0, centre1, scale, eye, rotation, focal, half_w, half_h, width,
+               panel_width, height):  # pragma: no cover (compiled)
         for i in range(len(xyz)):
-            dx, dy, dz = np.float64(xyz[i, 0]) - eye[0], np.float64(xyz[i, 1]) - eye[1], np.float64(xyz[i, 2]) - eye[2]
+            x, y, z = np.float64(xyz[i, 0]), np.float64(xyz[i, 1]), np.float64(xyz[i, 2])
+            colour = entry[semantic[i]]
+            # the top view, right: u = half_w - (y - centre1) * scale, v = half_h - (x - centre0) * scale, depth z
+            col = np.rint(half_w - (y - centre1) * scale)
+            row = np.rint(half_h - (x - centre0) * scale)
+            if col >= 0.0 and col < panel_width and row >= 0.0 and row < height:
+                q = np.int64(row) * panel_width + np.int64(col)
+                if z >= best_top[q]:
+                    best_top[q] = z
+                    flat[np.int64(row) * width + np.int64(col) + panel_width] = colour
+            # the perspective, left, in the camera frame as _camera has it; in front (depth > 0.1):
+            # u = half_w + focal * x / depth, v = half_h + focal * y / depth, depth -depth
+            dx, dy, dz = x - eye[0], y - eye[1], z - eye[2]
             cam0 = dx * rotation[0, 0] + dy * rotation[0, 1] + dz * rotation[0, 2]
             cam1 = dx * rotation[1, 0] + dy * rotation[1, 1] + dz * rotation[1, 2]
             cam2 = dx * rotation[2, 0] + dy * rotation[2, 1] + dz * rotation[2, 2]
@@ -154,14 +155,13 @@ def _paint_kernels():
                 col = np.rint(half_w + focal * cam0 / cam2)
                 row = np.rint(half_h + focal * cam1 / cam2)
                 if col >= 0.0 and col < panel_width and row >= 0.0 and row < height:
-                    p = np.int64(row) * width + np.int64(col) + left
+                    q = np.int64(row) * panel_width + np.int64(col)
                     depth = -cam2
-                    if depth >= best[p]:
-                        best[p] = depth
-                        for c in range(flat.shape[1]):
-                            flat[p, c] = colors[i, c]
+                    if depth >= best_side[q]:
+                        best_side[q] = depth
+                        flat[np.int64(row) * width + np.int64(col)] = colour
 
-    return top, perspective
+    return panels
 
 
 @cache
@@ -237,8 +237,9 @@ def draw_text(image: np.ndarray, text: str, col: int, row: int, scale: int = 2, 
     return col
 
 
-def draw_segments(image: np.ndarray, starts: np.ndarray, ends: np.ndarray, color=INK) -> None:
-    """Lines between pixel positions ``starts`` and ``ends`` (k, 2) as (col, row) floats; parts outside are clipped."""
+def draw_segments(image: np.ndarray, starts: np.ndarray, ends: np.ndarray, color=INK, covered: np.ndarray | None = None) -> None:
+    """Lines between pixel positions ``starts`` and ``ends`` (k, 2) as (col, row) floats; parts outside are clipped, and
+    pixels where ``covered`` ((height, width) bool, optional) is true are left as they are."""
     if len(starts) == 0:
         return
     length = np.ceil(np.abs(ends - starts).max(axis=1)).astype(np.int64) + 1
@@ -251,6 +252,8 @@ def draw_segments(image: np.ndarray, starts: np.ndarray, ends: np.ndarray, color
     points = starts[which] + t[:, None] * (ends[which] - starts[which])
     col, row = np.rint(points).astype(np.int64).T
     keep = (col >= 0) & (col < image.shape[1]) & (row >= 0) & (row < image.shape[0])
+    if covered is not None:
+        keep[keep] = ~covered[row[keep], col[keep]]
     image[row[keep], col[keep]] = color
 
 
@@ -401,32 +404,18 @@ def render_indexed(points: np.ndarray, color_lut: np.ndarray, size: tuple[int, i
     palette = np.concatenate([frame, lut[ids]])
     entry = np.zeros(len(lut), np.uint8 if len(palette) <= 256 else np.uint16)  # each class's palette index
     entry[ids] = np.arange(len(frame), len(palette))
-    colors = np.take(entry, semantic)[:, None]  # (n, 1): a point's palette index
     image = np.zeros((height, width, 1), entry.dtype)  # all background
     panel = width // 2
     corners = box_corners(boxes) if boxes is not None and len(boxes) else np.zeros((0, 8, 3))
     offsets = np.arange(dot) - (dot - 1) // 2
     du, dv = (a.ravel() for a in np.meshgrid(offsets, offsets))
 
-    best = np.full((height, width), -np.inf)  # depth per pixel; the two panels' pixels are apart, so one serves both
-
-    kernels = _paint_kernels() if len(du) == 1 else None  # one pixel a point: each panel in one compiled pass
-
-    def paint(col, row, depth, left, panel_width):
-        inside = (col >= 0) & (col < panel_width) & (row >= 0) & (row < height)
-        col, row, depth, color = col[inside], row[inside], depth[inside], colors[inside]
-        if len(du) == 1:  # one pixel a point: already inside the panel
-            splat(image, col + left, row, depth, color, best)
-            return
-        col = np.clip(col[:, None] + du, 0, panel_width - 1).ravel() + left
-        row = np.clip(row[:, None] + dv, 0, height - 1).ravel()
-        splat(image, col, row, np.repeat(depth, len(du)), np.repeat(color, len(du), axis=0), best)
-
     # top view: x up, y left; cropped to the bulk of the points, or of the points of the other classes
     # when one class (a railway's ground rings) holds most of them
     others = len(semantic) - counts.max()  # the points not of the class that holds most
-    bulk = xyz[:, :2][semantic != ids[counts.argmax()]] if counts.max() > 0.4 * len(semantic) and others >= 100 else xyz[:, :2]
-    low, high = (np.array(v) for v in zip(*(percentiles(bulk[:, axis], (1, 99)) for axis in (0, 1))))
+    keep = semantic != ids[counts.argmax()] if counts.max() > 0.4 * len(semantic) and others >= 100 else None
+    bulk = [xyz[:, axis] if keep is None else xyz[:, axis][keep] for axis in (0, 1)]  # x, y of the bulk, each (m,) float32
+    low, high = (np.array(v) for v in zip(*(percentiles(column, (1, 99)) for column in bulk)))
     span = np.maximum(high - low, 1e-6)
     low, high = low - 0.05 * span, high + 0.05 * span
     inner_w, inner_h = panel - 2 * MARGIN, height - 2 * MARGIN
@@ -436,21 +425,6 @@ def render_indexed(points: np.ndarray, color_lut: np.ndarray, size: tuple[int, i
     def top(p):
         p = np.asarray(p, np.float64)
         return (panel - 1) / 2 - (p[:, 1] - centre[1]) * scale, (height - 1) / 2 - (p[:, 0] - centre[0]) * scale
-
-    if kernels is not None:
-        kernels[0](image.reshape(-1, 1), best.reshape(-1), np.ascontiguousarray(xyz), colors, float(centre[0]), float(centre[1]), float(scale),
-                   (panel - 1) / 2, (height - 1) / 2, width, panel, height, panel)  # fmt: skip
-    else:
-        u, v = top(xyz)
-        paint(np.rint(u).astype(np.int64), np.rint(v).astype(np.int64), xyz[:, 2], panel, panel)
-    if len(corners):
-        cu, cv = top(corners[:, :4].reshape(-1, 3))
-        quad = np.stack([cu, cv], axis=1).reshape(-1, 4, 2) + [panel, 0]
-        draw_segments(image, quad.reshape(-1, 2), np.roll(quad, -1, axis=1).reshape(-1, 2), PEN)
-    bar = nice_length(inner_w / scale)
-    x0, y0 = panel + MARGIN + 6, height - MARGIN - 10
-    image[y0 : y0 + 3, x0 : x0 + int(round(bar * scale))] = PEN
-    draw_text(image, f"{bar:g} m", x0 + int(round(bar * scale)) + 6, y0 - 3, color=PEN)
 
     # perspective: from behind and above the sensor, looking at the middle of the cropped region
     extent = float(np.hypot(*(high - low)))
@@ -464,10 +438,45 @@ def render_indexed(points: np.ndarray, color_lut: np.ndarray, size: tuple[int, i
         with np.errstate(divide="ignore", invalid="ignore"):
             return (panel - 1) / 2 + focal * cam[:, 0] / cam[:, 2], (height - 1) / 2 + focal * cam[:, 1] / cam[:, 2], cam[:, 2]
 
-    if kernels is not None:
-        kernels[1](image.reshape(-1, 1), best.reshape(-1), np.ascontiguousarray(xyz), eye, rotation, colors, float(focal),
-                   (panel - 1) / 2, (height - 1) / 2, width, panel, height, 0)  # fmt: skip
+    # The points go into the top view, its boxes, scale bar and label are drawn, then the points go into the perspective
+    # and its boxes are drawn. With one pixel a point, one compiled pass paints both panels' points first; the top view's
+    # boxes then leave alone the perspective's painted pixels they reach into (the points painted over them otherwise).
+    kernel = _panels_kernel() if len(du) == 1 else None
+    colors = best = None  # the numpy path's: each point's palette index (n, 1), and the depth per pixel
+
+    def paint(col, row, depth, left, panel_width):
+        inside = (col >= 0) & (col < panel_width) & (row >= 0) & (row < height)
+        col, row, depth, color = col[inside], row[inside], depth[inside], colors[inside]
+        if len(du) == 1:  # one pixel a point: already inside the panel
+            splat(image, col + left, row, depth, color, best)
+            return
+        col = np.clip(col[:, None] + du, 0, panel_width - 1).ravel() + left
+        row = np.clip(row[:, None] + dv, 0, height - 1).ravel()
+        splat(image, col, row, np.repeat(depth, len(du)), np.repeat(color, len(du), axis=0), best)
+
+    if kernel is not None:
+        best_side, best_top = np.full((2, height * panel), -np.inf)  # each panel's depth per pixel
+        kernel(image.reshape(-1), best_top, best_side, np.ascontiguousarray(xyz), semantic, entry, float(centre[0]), float(centre[1]), float(scale),
+               eye, rotation, float(focal), (panel - 1) / 2, (height - 1) / 2, width, panel, height)  # fmt: skip
     else:
+        colors = np.take(entry, semantic)[:, None]
+        best = np.full((height, width), -np.inf)  # the two panels' pixels are apart, so one serves both
+        u, v = top(xyz)
+        paint(np.rint(u).astype(np.int64), np.rint(v).astype(np.int64), xyz[:, 2], panel, panel)
+    if len(corners):
+        cu, cv = top(corners[:, :4].reshape(-1, 3))
+        quad = np.stack([cu, cv], axis=1).reshape(-1, 4, 2) + [panel, 0]
+        covered = None
+        if kernel is not None:  # the perspective's pixels already painted
+            covered = np.zeros((height, width), bool)
+            covered[:, :panel] = (best_side > -np.inf).reshape(height, panel)
+        draw_segments(image, quad.reshape(-1, 2), np.roll(quad, -1, axis=1).reshape(-1, 2), PEN, covered)
+    bar = nice_length(inner_w / scale)
+    x0, y0 = panel + MARGIN + 6, height - MARGIN - 10
+    image[y0 : y0 + 3, x0 : x0 + int(round(bar * scale))] = PEN
+    draw_text(image, f"{bar:g} m", x0 + int(round(bar * scale)) + 6, y0 - 3, color=PEN)
+
+    if kernel is None:
         u, v, depth = perspective(xyz)
         front = depth > 0.1
         paint(np.rint(np.where(front, u, -1)).astype(np.int64), np.rint(np.where(front, v, -1)).astype(np.int64), -depth, 0, panel)
