@@ -54,7 +54,7 @@ from functools import cached_property
 import numpy as np
 from embreex import rtcore_scene
 
-from ...buffers import MATERIAL_ID, SceneBuffers
+from ...buffers import SceneBuffers
 from ...compiled import KERNEL_VARIABLE
 from ...errors import InputError
 from . import kernels
@@ -301,7 +301,6 @@ class RayCaster:
         self._pool = pool
         self._closed: dict[int, bool] = {}
         self._static = static
-        self._corner_scales = None
         self.record_pool = record_pool if record_pool is not None else RecordPool()
 
     def to_local(self, points: np.ndarray) -> np.ndarray:
@@ -337,20 +336,12 @@ class RayCaster:
             return None
         return static.closed if np.array_equal(self.triangle_object[as_block(static.triangle)], static.rows) else None
 
-    def corner_scales(self) -> np.ndarray:
-        """``(m,)`` float64 largest local coordinate of each triangle's corners; 0 for diffuse ones (never re-launched from).
-
-        Computed once per caster, for the mirror and glass triangles only (their re-launch offsets).
-        """
-        if self._corner_scales is None:
-            buffers = self.buffers
-            scales = np.zeros(len(buffers.triangles))
-            specular = np.flatnonzero(buffers.objects.material[buffers.triangle_object] != MATERIAL_ID["diffuse"])
-            if len(specular):
-                corners = self.to_local(buffers.vertices[buffers.triangles[specular].reshape(-1)]).reshape(-1, 9)
-                scales[specular] = np.abs(corners).max(axis=1)
-            self._corner_scales = scales
-        return self._corner_scales
+    def corner_scales(self, triangle: np.ndarray) -> np.ndarray:
+        """``(k,)`` float64 largest local coordinate (in absolute value) of the corners of each of ``triangle`` (k,) buffer
+        triangles: the mirror and glass triangles rays are re-launched from (their offsets), only those."""
+        buffers = self.buffers
+        corners = self.to_local(buffers.vertices[buffers.triangles[triangle].reshape(-1)]).reshape(-1, 9)
+        return np.abs(corners).max(axis=1)
 
     def _embree(self, origins32: np.ndarray, directions32: np.ndarray, far: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Embree alone, chunked over the thread pool: ``(tfar, prim)`` per ray; ``far`` is left as it was.
