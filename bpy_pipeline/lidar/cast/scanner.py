@@ -99,7 +99,7 @@ ARRAY_FIELDS = tuple(f for f in Beams.__dataclass_fields__ if f != "single")
 
 def _relaunch_offset(caster: RayCaster, buffers: SceneBuffers, point: np.ndarray, triangle: np.ndarray) -> np.ndarray:
     """``(k,)`` metres to move re-launched rays off their surface (see :data:`OFFSET_ULPS`)."""
-    scale = np.maximum(np.abs(point).max(axis=1), caster.corner_scales()[triangle])
+    scale = np.maximum(np.abs(point).max(axis=1), caster.corner_scales(triangle))
     return OFFSET_ULPS * (1.0 + scale)
 
 
