@@ -350,25 +350,6 @@ def test_compiled_planes_have_numpys_bits():
 
 
 @needs_numba
-def test_compiled_local_coordinates_have_numpys_bits():
-    """The compiled pass into a caster's frame gives numpy's matrix product bit for bit: turned and plain frames, far and
-    near coordinates, exact zeros of both signs (the sign of a zero sum), and every count of points from two on."""
-    from bpy_pipeline.lidar.cast.kernels import compiled
-    from bpy_pipeline.lidar.cast.raycast import local_coordinates
-
-    rng = np.random.default_rng(11)
-    points = rng.normal(size=(30000, 3)) * rng.choice([1e-3, 1.0, 50.0, 1e4], (30000, 1))
-    points[rng.random((30000, 3)) < 0.2] = 0.0
-    points[rng.random((30000, 3)) < 0.2] = -0.0
-    frames = [np.eye(4), pose_matrix([0.0, -0.0, 1.73], [0, 0, 0]), pose_matrix([12.5, -3.0, 1.73], [0, 0, 90]),
-              pose_matrix([-40.2, 7.7, 2.0], [3, -7, 131.5]), pose_matrix([1e3, 2e3, -5.0], [90, 45, -30])]
-    for frame in frames:
-        for n in (2, 3, 7, 17, 1000, 30000):
-            numpy_path = local_coordinates(points[:n], frame)
-            assert local_coordinates(points[:n], frame, compiled()).tobytes() == numpy_path.tobytes()
-
-
-@needs_numba
 def test_embrees_answer_from_the_compiled_pass_is_embreexs():
     """:meth:`RayCaster._embree` through :func:`~bpy_pipeline.lidar.cast.numba_kernels.trace_rays` gives embreex's ``(tfar, prim)``,
     byte for byte: one caster of the room and a kept static part with a moving one, rays from the origin (one row

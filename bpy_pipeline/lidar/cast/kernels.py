@@ -43,7 +43,7 @@ def compiled() -> SimpleNamespace | None:
 
     traced = nk.register_embree()
     return SimpleNamespace(fill_diffuse=nk.fill_diffuse, trace_rays=nk.trace_rays, traces=traced, back_face_rays=nk.back_face_rays,
-                           triangle_planes=nk.triangle_planes, local_points=nk.local_points, cone_pairs=nk.cone_pairs, cone_blocks=nk.cone_blocks)
+                           triangle_planes=nk.triangle_planes, cone_pairs=nk.cone_pairs, cone_blocks=nk.cone_blocks)
 
 
 NO_PARTS = (np.zeros(0, np.uint64), (IDENTITY, IDENTITY), np.zeros((0, 3)), np.zeros(0, np.float32))  # handles, part maps, shifts, limits: Embree not called

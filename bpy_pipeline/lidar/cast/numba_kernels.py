@@ -19,7 +19,6 @@ import llvmlite.binding as llvm
 import numba
 import numpy as np
 from numba import types
-from numba.extending import intrinsic
 
 from ...buffers import MATERIAL_ID
 from . import embree
@@ -225,32 +224,6 @@ def back_face_rays(prim, prim_triangle, directions, plane_normal, triangle_objec
             out[k] = i
             k += 1
     return k
-
-
-@intrinsic
-def fused_multiply_add(typingctx, a, b, c):
-    """``a * b + c`` (float64) rounded once (LLVM's ``fma``: the processor's fused multiply-add)."""
-
-    def codegen(context, builder, signature, args):
-        return builder.fma(*args)
-
-    return types.float64(types.float64, types.float64, types.float64), codegen
-
-
-@jit
-def local_points(points, frame, out):
-    """``(points - frame[:3, 3]) @ frame[:3, :3]`` into ``out`` (n, 3) float64, as numpy's matrix product computes it.
-
-    points : (n, 3) float64 world; frame : (4, 4) float64 local-to-world. numpy hands the product to OpenBLAS's
-    ``dgemm``, which sums each coordinate with fused multiply-adds from 0.0 in the order of the inner index:
-    ``fma(a2, r2j, fma(a1, r1j, fma(a0, r0j, 0.0)))`` for ``a = point - origin``; the same here, bit for bit
-    (``tests/test_scan_kernel.py``), in one pass without the difference's temporary.
-    """
-    ox, oy, oz = frame[0, 3], frame[1, 3], frame[2, 3]
-    for i in range(points.shape[0]):
-        a0, a1, a2 = points[i, 0] - ox, points[i, 1] - oy, points[i, 2] - oz
-        for j in range(3):
-            out[i, j] = fused_multiply_add(a2, frame[2, j], fused_multiply_add(a1, frame[1, j], fused_multiply_add(a0, frame[0, j], 0.0)))
 
 
 @jit

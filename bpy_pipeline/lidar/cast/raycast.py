@@ -304,8 +304,8 @@ class RayCaster:
         self.record_pool = record_pool if record_pool is not None else RecordPool()
 
     def to_local(self, points: np.ndarray) -> np.ndarray:
-        """``(n, 3)`` world points into the local frame (:func:`local_coordinates`)."""
-        return local_coordinates(points, self.frame, self.kernels)
+        """``(n, 3)`` world points into the local frame."""
+        return (np.asarray(points, np.float64) - self.origin) @ self.frame[:3, :3]
 
     def closed(self, row: int) -> bool:
         """Whether object ``row``'s triangles form closed surfaces (:func:`closed_surface`); kept per caster, and for
@@ -674,11 +674,10 @@ class CasterCache:
                 self.kept = StaticPart(frame, static, geometry, caster.parts[0] if caster.parts else None, caster.plane_normal, caster.plane_offset,
                                        np.array(caster.triangle_object), caster._closed)  # fmt: skip
                 return caster
-            compiled = choose_kernels(self.kernel)
-            local = local_coordinates(buffers.vertices, home, compiled)
+            local = (np.asarray(buffers.vertices, np.float64) - home[:3, 3]) @ home[:3, :3]
             triangles = np.ascontiguousarray(buffers.triangles, np.int32)
             check_extent(local, triangles, buffers)
-            normal, offset = triangle_planes(local, triangles[static], compiled)
+            normal, offset = triangle_planes(local, triangles[static], choose_kernels(self.kernel))
             part = self.kept = StaticPart(home, static, geometry, embree_part(local, triangles, static, normal), normal, offset,
                                           np.array(buffers.triangle_object[as_block(static)]))
         return RayCaster(buffers, frame, self.threads, kernel=self.kernel, static=part, record_pool=self.record_pool, pool=self.pool)
@@ -757,24 +756,6 @@ def check_extent(local: np.ndarray, triangles: np.ndarray, buffers: SceneBuffers
                 f"object {name!r}: has vertices more than {MAX_COORDINATE:.0e} m from the local origin (the sensor) "
                 f"({np.abs(local[triangles[bad[0]]]).max():.3g} m); check its scale and location"
             )
-
-
-def local_coordinates(points: np.ndarray, frame: np.ndarray, compiled=None) -> np.ndarray:
-    """``(n, 3)`` float64: world ``points`` (n, 3) in the local frame of ``frame`` ((4, 4) local-to-world),
-    ``(points - origin) @ rotation``.
-
-    compiled : :func:`.kernels.compiled`'s kernels: one pass that sums as numpy's matrix product does through OpenBLAS
-    (:func:`.numba_kernels.local_points`, the same bits; ``tests/test_scan_kernel.py``), without numpy's temporary
-    or its broadcast subtraction (a caster's 145 k vertices: 0.25 ms against 2 ms). One point takes numpy's other
-    routine (a vector times a matrix), so it stays numpy's.
-    """
-    points = np.asarray(points, np.float64)
-    frame = np.asarray(frame, np.float64)
-    if compiled is None or len(points) < 2:
-        return (points - frame[:3, 3]) @ frame[:3, :3]
-    out = np.empty((len(points), 3))
-    compiled.local_points(np.ascontiguousarray(points), np.ascontiguousarray(frame), out)
-    return out
 
 
 def triangle_planes(vertices: np.ndarray, triangles: np.ndarray, compiled=None, out=None) -> tuple[np.ndarray, np.ndarray]:
