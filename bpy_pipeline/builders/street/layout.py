@@ -635,31 +635,44 @@ def user_meshes(user: RoadUser, rng: np.random.Generator, fittings: bool = True)
     draw); a pedestrian walks or stands (:func:`~.human.sample_pose`); a rider sits on the saddle, hands towards the bar, labelled by
     its vehicle (:data:`RIDER_CLASS`: ``rider`` on a bicycle, ``motorcyclist`` on a motorcycle).
     """
+    return users_meshes([user], rng, fittings)[0]
+
+
+def users_meshes(users: list[RoadUser], rng: np.random.Generator, fittings: bool = True) -> list[list[tuple[str, str, str, float, Mesh]]]:
+    """:func:`user_meshes` of each of ``users`` in turn, the same draws from ``rng`` in the same order and the same meshes;
+    the pedestrians' and riders' bodies are posed and meshed together (:func:`~.human.pose_people`,
+    :func:`~.human.body_meshes`) once every user's draws are made."""
     from ...geometry import human
 
-    if user.kind in VEHICLES:
-        paint = draw_reflectivity(rng, PAINT)
-        parts = vehicle_parts(user.kind, user.size)
-        if fittings:
-            parts |= vehicle_fittings(parts["body"][0], user.size[0])
-        surfaces = {"body": ("diffuse", paint), "glass": ("glass", REFLECTIVITY["glass"]), "tyres": ("diffuse", REFLECTIVITY["tyre"]), **FITTINGS}
-        return [(name, user.kind, *surfaces[name], transformed(mesh, user.centre, user.yaw, user.z)) for name, mesh in parts.items() if len(mesh[1])]
-    build = float(rng.choice(list(human.BUILDS.values())))
-    if user.kind == "person":
-        angles = human.sample_pose("walking" if rng.random() < 0.7 else "standing", rng, build)
-        person = human.pose_person(angles, float(user.size[2]), build, "walking", user.centre, user.yaw, user.z)
-        v, t, _ = human.body_mesh(person.a, person.b, person.radius, 8, 2)
-        return [("body", "person", "diffuse", draw_reflectivity(rng, CLOTHING), (v, t))]
-    parts = two_wheeler_parts(user.kind, user.size)
-    out = [(name, user.kind, "diffuse", REFLECTIVITY["frame"] if name == "frame" else REFLECTIVITY["tyre"],
-            transformed(mesh, user.centre, user.yaw, user.z)) for name, mesh in parts.items()]
-    angles = human.sample_pose("sitting", rng, build)
-    seat = saddle_height(user.kind, user.size)
-    c, s = math.cos(user.yaw), math.sin(user.yaw)
-    hip = user.centre + np.array([c, s]) * (-0.1 * user.size[0] - 0.05)
-    rider = human.pose_person(angles, 0.95 * float(user.size[2]), build, "sitting", hip, user.yaw, user.z + seat + 0.005)
-    v, t, _ = human.body_mesh(rider.a, rider.b, rider.radius, 8, 2)
-    out.append(("rider", RIDER_CLASS[user.kind], "diffuse", draw_reflectivity(rng, CLOTHING), (v, t)))
+    out, bodies = [], []  # bodies: (user's index, part, class, clothing, pose_person's arguments)
+    for user in users:
+        if user.kind in VEHICLES:
+            paint = draw_reflectivity(rng, PAINT)
+            parts = vehicle_parts(user.kind, user.size)
+            if fittings:
+                parts |= vehicle_fittings(parts["body"][0], user.size[0])
+            surfaces = {"body": ("diffuse", paint), "glass": ("glass", REFLECTIVITY["glass"]), "tyres": ("diffuse", REFLECTIVITY["tyre"]), **FITTINGS}
+            out.append([(name, user.kind, *surfaces[name], transformed(mesh, user.centre, user.yaw, user.z)) for name, mesh in parts.items() if len(mesh[1])])
+            continue
+        build = float(rng.choice(list(human.BUILDS.values())))
+        if user.kind == "person":
+            angles = human.sample_pose("walking" if rng.random() < 0.7 else "standing", rng, build)
+            pose = (angles, float(user.size[2]), build, "walking", user.centre, user.yaw, user.z)
+            out.append([])
+            bodies.append((len(out) - 1, "body", "person", draw_reflectivity(rng, CLOTHING), pose))
+            continue
+        parts = two_wheeler_parts(user.kind, user.size)
+        out.append([(name, user.kind, "diffuse", REFLECTIVITY["frame"] if name == "frame" else REFLECTIVITY["tyre"],
+                     transformed(mesh, user.centre, user.yaw, user.z)) for name, mesh in parts.items()])
+        angles = human.sample_pose("sitting", rng, build)
+        seat = saddle_height(user.kind, user.size)
+        c, s = math.cos(user.yaw), math.sin(user.yaw)
+        hip = user.centre + np.array([c, s]) * (-0.1 * user.size[0] - 0.05)
+        pose = (angles, 0.95 * float(user.size[2]), build, "sitting", hip, user.yaw, user.z + seat + 0.005)
+        bodies.append((len(out) - 1, "rider", RIDER_CLASS[user.kind], draw_reflectivity(rng, CLOTHING), pose))
+    people = human.pose_people(*(list(column) for column in zip(*(body[4] for body in bodies)))) if bodies else []
+    for (k, part, class_name, clothing, _), mesh in zip(bodies, human.body_meshes(people, 8, 2)):
+        out[k].append((part, class_name, "diffuse", clothing, mesh))
     return out
 
 
