@@ -51,12 +51,12 @@ from functools import cached_property
 import numpy as np
 
 from ...geometry import primitives
-from ...geometry.primitives import box_mesh, transformed
+from ...geometry.primitives import box_mesh, transformed, transformed_parts
 from ...geometry.clearance import NO_POSES, SensorPoses
 from ...geometry.collision import rectangles_near, rectangles_overlap
 from ...geometry.field_of_view import in_view_fraction
 from ...geometry.objects import FITTINGS
-from ...geometry.vehicles import saddle_height, two_wheeler_parts, vehicle_fittings, vehicle_parts
+from ...geometry.vehicles import saddle_height, two_wheeler_parts, vehicles_parts
 
 Mesh = tuple[np.ndarray, np.ndarray]  # vertices (n, 3) float64, triangles (m, 3) int32
 
@@ -644,15 +644,11 @@ def users_meshes(users: list[RoadUser], rng: np.random.Generator, fittings: bool
     :func:`~.human.body_meshes`) once every user's draws are made."""
     from ...geometry import human
 
-    out, bodies = [], []  # bodies: (user's index, part, class, clothing, pose_person's arguments)
+    out, bodies, vehicles = [], [], []  # bodies: (user's index, part, class, clothing, pose_person's arguments); vehicles: (index, paint)
     for user in users:
         if user.kind in VEHICLES:
-            paint = draw_reflectivity(rng, PAINT)
-            parts = vehicle_parts(user.kind, user.size)
-            if fittings:
-                parts |= vehicle_fittings(parts["body"][0], user.size[0])
-            surfaces = {"body": ("diffuse", paint), "glass": ("glass", REFLECTIVITY["glass"]), "tyres": ("diffuse", REFLECTIVITY["tyre"]), **FITTINGS}
-            out.append([(name, user.kind, *surfaces[name], transformed(mesh, user.centre, user.yaw, user.z)) for name, mesh in parts.items() if len(mesh[1])])
+            out.append([])
+            vehicles.append((len(out) - 1, draw_reflectivity(rng, PAINT)))
             continue
         build = float(rng.choice(list(human.BUILDS.values())))
         if user.kind == "person":
@@ -670,6 +666,13 @@ def users_meshes(users: list[RoadUser], rng: np.random.Generator, fittings: bool
         hip = user.centre + np.array([c, s]) * (-0.1 * user.size[0] - 0.05)
         pose = (angles, 0.95 * float(user.size[2]), build, "sitting", hip, user.yaw, user.z + seat + 0.005)
         bodies.append((len(out) - 1, "rider", RIDER_CLASS[user.kind], draw_reflectivity(rng, CLOTHING), pose))
+    shapes = vehicles_parts([users[k].kind for k, _ in vehicles], [users[k].size for k, _ in vehicles], fittings)
+    for (k, paint), parts in zip(vehicles, shapes):
+        user = users[k]
+        surfaces = {"body": ("diffuse", paint), "glass": ("glass", REFLECTIVITY["glass"]), "tyres": ("diffuse", REFLECTIVITY["tyre"]), **FITTINGS}
+        named = [(name, mesh) for name, mesh in parts.items() if len(mesh[1])]
+        moved = transformed_parts([mesh for _, mesh in named], user.centre, user.yaw, user.z)
+        out[k] = [(name, user.kind, *surfaces[name], mesh) for (name, _), mesh in zip(named, moved)]
     people = human.pose_people(*(list(column) for column in zip(*(body[4] for body in bodies)))) if bodies else []
     for (k, part, class_name, clothing, _), mesh in zip(bodies, human.body_meshes(people, 8, 2)):
         out[k].append((part, class_name, "diffuse", clothing, mesh))
