@@ -481,18 +481,15 @@ def place_users(p, layout: StreetLayout, rng: np.random.Generator, views=(), tri
     last_in_lane: dict[int, RoadUser] = {}
 
     grow = p.clearance / 2.0
-    reach = {"obstacles": (np.array([c[:2] for c, _, _ in obstacles], float).reshape(-1, 2),
-                           np.array([math.hypot(h[0] + grow, h[1] + grow) for _, h, _ in obstacles])),
-             "users": (np.zeros((0, 2)), np.zeros(0))}  # centres (n, 2) and circumscribed radii grown by clearance / 2 (n,)
+    # the obstacles', then the placed users' rectangles: centres (n, 2) and circumscribed radii grown by clearance / 2 (n,)
+    reach = [np.array([c[:2] for c, _, _ in obstacles], float).reshape(-1, 2), np.array([math.hypot(h[0] + grow, h[1] + grow) for _, h, _ in obstacles])]
+    rectangles = list(obstacles)  # (centre, half, yaw) in reach's order
 
     def free(centre, half, yaw) -> bool:
-        for k in rectangles_near(centre, half, p.clearance, *reach["obstacles"]):
-            c, h, y = obstacles[k]
+        """No obstacle, then no placed user, overlaps the rectangle (each tested in that order)."""
+        for k in rectangles_near(centre, half, p.clearance, *reach):
+            c, h, y = rectangles[k]
             if rectangles_overlap(centre, half, yaw, c, h, y, p.clearance):
-                return False
-        for k in rectangles_near(centre, half, p.clearance, *reach["users"]):
-            u = out.users[k]
-            if rectangles_overlap(centre, half, yaw, u.centre, u.half, u.yaw, p.clearance):
                 return False
         return True
 
@@ -508,9 +505,9 @@ def place_users(p, layout: StreetLayout, rng: np.random.Generator, views=(), tri
             out.out_of_view[user.kind] = out.out_of_view.get(user.kind, 0) + 1
             return False
         out.users.append(user)
-        centres, radii = reach["users"]
-        reach["users"] = (np.vstack([centres, np.asarray(user.centre, float)[None, :2]]),
-                          np.append(radii, math.hypot(half[0] + grow, half[1] + grow)))
+        rectangles.append((user.centre, half, user.yaw))
+        reach[0] = np.vstack([reach[0], np.asarray(user.centre, float)[None, :2]])
+        reach[1] = np.append(reach[1], math.hypot(half[0] + grow, half[1] + grow))
         return True
 
     shares = np.array([p.vehicle_mix.get(k, 0.0) for k in VEHICLES], float)
