@@ -41,25 +41,23 @@ def segment_distance(p1: np.ndarray, q1: np.ndarray, p2: np.ndarray, q2: np.ndar
     c = np.einsum("...i,...i", d1, r)
     b = np.einsum("...i,...i", d1, d2)
     tiny = 1e-18
-    ae = a * e
-    denom = ae - b * b
+    denom = a * e - b * b
     safe_a = np.where(a > tiny, a, 1.0)
     safe_e = np.where(e > tiny, e, 1.0)
-    s = np.where(denom > tiny * np.maximum(ae, 1.0), _unit((b * f - c * e) / np.where(denom > 0, denom, 1.0)), 0.0)
+    s = np.where(denom > tiny * np.maximum(a * e, 1.0), _unit((b * f - c * e) / np.where(denom > 0, denom, 1.0)), 0.0)
     t = (b * s + f) / safe_e
     # t outside [0, 1]: clamp it and recompute s for the clamped t
-    s_at_start = _unit(-c / safe_a)
-    s = np.where(t < 0.0, s_at_start, np.where(t > 1.0, _unit((b - c) / safe_a), s))
+    s = np.where(t < 0.0, _unit(-c / safe_a), np.where(t > 1.0, _unit((b - c) / safe_a), s))
     t = _unit(t)
-    # degenerate segments (without any, these four leave s and t as they are)
+    # degenerate segments
     point1, point2 = a <= tiny, e <= tiny
-    if point1.any() or point2.any():
-        s = np.where(point1, 0.0, s)
-        t = np.where(point1 & ~point2, _unit(f / safe_e), t)
-        s = np.where(point2 & ~point1, s_at_start, s)
-        t = np.where(point2, 0.0, t)
-    gap = (p1 + d1 * s[..., None]) - (p2 + d2 * t[..., None])
-    return np.sqrt(np.add.reduce(gap * gap, axis=-1))  # np.linalg.norm(gap, axis=-1)'s numbers
+    s = np.where(point1, 0.0, s)
+    t = np.where(point1 & ~point2, _unit(f / safe_e), t)
+    s = np.where(point2 & ~point1, _unit(-c / safe_a), s)
+    t = np.where(point2, 0.0, t)
+    closest1 = p1 + d1 * s[..., None]
+    closest2 = p2 + d2 * t[..., None]
+    return np.linalg.norm(closest1 - closest2, axis=-1)
 
 
 def capsule_gaps(a1, b1, r1, a2, b2, r2) -> np.ndarray:
