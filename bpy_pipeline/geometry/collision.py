@@ -21,17 +21,11 @@ from functools import lru_cache
 import numpy as np
 
 
-def _unit(x):
-    """``x`` clamped to ``[0, 1]``: ``np.clip(x, 0.0, 1.0)``'s numbers (signed zeros and NaN alike) in two ufunc calls,
-    without its wrapper's set-up."""
-    return np.minimum(np.maximum(x, 0.0), 1.0)
-
-
 def segment_distance(p1: np.ndarray, q1: np.ndarray, p2: np.ndarray, q2: np.ndarray) -> np.ndarray:
     """Closest distance between segments ``p1 q1`` and ``p2 q2``; ``(..., 3)`` in, ``(...)`` out.
 
     Ericson, *Real-Time Collision Detection* (2005), 5.1.9, vectorised; zero-length segments
-    (points) are handled, parallel segments too. Parameters are clamped to ``[0, 1]`` by :func:`_unit` (``np.clip``'s numbers).
+    (points) are handled, parallel segments too.
     """
     p1, q1, p2, q2 = (np.asarray(v, np.float64) for v in (p1, q1, p2, q2))
     d1, d2, r = q1 - p1, q2 - p2, p1 - p2
@@ -44,16 +38,16 @@ def segment_distance(p1: np.ndarray, q1: np.ndarray, p2: np.ndarray, q2: np.ndar
     denom = a * e - b * b
     safe_a = np.where(a > tiny, a, 1.0)
     safe_e = np.where(e > tiny, e, 1.0)
-    s = np.where(denom > tiny * np.maximum(a * e, 1.0), _unit((b * f - c * e) / np.where(denom > 0, denom, 1.0)), 0.0)
+    s = np.where(denom > tiny * np.maximum(a * e, 1.0), np.clip((b * f - c * e) / np.where(denom > 0, denom, 1.0), 0.0, 1.0), 0.0)
     t = (b * s + f) / safe_e
     # t outside [0, 1]: clamp it and recompute s for the clamped t
-    s = np.where(t < 0.0, _unit(-c / safe_a), np.where(t > 1.0, _unit((b - c) / safe_a), s))
-    t = _unit(t)
+    s = np.where(t < 0.0, np.clip(-c / safe_a, 0.0, 1.0), np.where(t > 1.0, np.clip((b - c) / safe_a, 0.0, 1.0), s))
+    t = np.clip(t, 0.0, 1.0)
     # degenerate segments
     point1, point2 = a <= tiny, e <= tiny
     s = np.where(point1, 0.0, s)
-    t = np.where(point1 & ~point2, _unit(f / safe_e), t)
-    s = np.where(point2 & ~point1, _unit(-c / safe_a), s)
+    t = np.where(point1 & ~point2, np.clip(f / safe_e, 0.0, 1.0), t)
+    s = np.where(point2 & ~point1, np.clip(-c / safe_a, 0.0, 1.0), s)
     t = np.where(point2, 0.0, t)
     closest1 = p1 + d1 * s[..., None]
     closest2 = p2 + d2 * t[..., None]

@@ -27,7 +27,7 @@ class FieldOfView:
         """``(n,)`` bool: which world ``points`` (n, 3) lie inside the field of view and range."""
         local = (np.asarray(points, float) - self.pose[:3, 3]) @ self.pose[:3, :3]
         r = np.linalg.norm(local, axis=1)
-        el = np.degrees(np.arcsin(np.minimum(np.maximum(local[:, 2] / np.maximum(r, 1e-12), -1.0), 1.0)))  # np.clip's numbers
+        el = np.degrees(np.arcsin(np.clip(local[:, 2] / np.maximum(r, 1e-12), -1, 1)))
         inside = (el >= self.elevation[0]) & (el <= self.elevation[1]) & (r >= self.min_range) & (r <= self.max_range)
         if self.azimuth[1] - self.azimuth[0] >= 360.0:  # all round: every azimuth
             return inside

@@ -288,11 +288,9 @@ def _level_feet(angles: np.ndarray) -> np.ndarray:
 
 
 def _uniform(rng, ranges: dict) -> np.ndarray:
-    """The neutral angles with each of ``ranges`` ({dof name: (low, high)} degrees) drawn uniformly in its order: one
-    ``rng.uniform`` call for them all, the same draws as one call each."""
     angles = neutral_angles()
-    bounds = np.array(list(ranges.values()), float).reshape(-1, 2)
-    angles[[DOF_INDEX[name] for name in ranges]] = rng.uniform(bounds[:, 0], bounds[:, 1])
+    for name, (lo, hi) in ranges.items():
+        angles[DOF_INDEX[name]] = rng.uniform(lo, hi)
     return angles
 
 
@@ -352,7 +350,7 @@ def _draw_pose(kind: str, rng: np.random.Generator) -> np.ndarray:
         for side in "lr":
             angles[DOF_INDEX[f"thigh_{side}.flexion"]] = hip + rng.uniform(-4, 4)
             angles[DOF_INDEX[f"shank_{side}.flexion"]] = knee + rng.uniform(-4, 4)
-    angles = np.minimum(np.maximum(angles, LOWER), UPPER)  # np.clip's numbers, without its wrapper's set-up
+    angles = np.clip(angles, LOWER, UPPER)
     if kind != "sitting":
         angles = _level_feet(angles)
     return angles

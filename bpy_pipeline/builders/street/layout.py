@@ -104,7 +104,7 @@ def ego_keep_free(params, pose: np.ndarray) -> tuple[np.ndarray, np.ndarray, flo
 def draw_reflectivity(rng: np.random.Generator, law: tuple[float, float, float, float]) -> float:
     """One object's reflectivity: ``median exp(log_sd z)``, ``z`` standard normal from ``rng``, clipped to ``[lowest, highest]``."""
     median, log_sd, lowest, highest = law
-    return float(min(max(median * math.exp(log_sd * float(rng.standard_normal())), lowest), highest))
+    return float(np.clip(median * math.exp(log_sd * float(rng.standard_normal())), lowest, highest))
 
 
 # ----------------------------------------------------------------------------- the junction
