@@ -1,5 +1,5 @@
 """The street's road users made together (a frame's people posed and meshed at once, every vehicle's boxes in one
-call) give the bytes of one user at a time, and the numpy shortcuts give the numbers of the calls they stand for."""
+call, each vehicle's parts turned in one product) give the bytes of one user at a time."""
 
 import dataclasses
 
@@ -8,7 +8,7 @@ import pytest
 
 from bpy_pipeline.builders.street import layout as street
 from bpy_pipeline.builders.street.params import StreetScene
-from bpy_pipeline.geometry import collision, human, primitives, vehicles
+from bpy_pipeline.geometry import human, primitives, vehicles
 from bpy_pipeline.geometry.placement import Distribution
 
 
@@ -84,17 +84,3 @@ def test_a_frames_users_meshed_together_are_each_user_meshed_alone():
         for a, b in zip(together, alone):
             assert [p[:4] for p in a] == [p[:4] for p in b]
             assert all(_same(x[4][0], y[4][0]) and _same(x[4][1], y[4][1]) for x, y in zip(a, b))
-
-
-def test_unit_is_np_clip_bit_for_bit():
-    x = np.concatenate([[-0.0, 0.0, -1.0, 1.0, np.nan, np.inf, -np.inf, 1e-300, -1e-300], np.random.default_rng(6).normal(size=1000)])
-    assert _same(collision._unit(x), np.clip(x, 0.0, 1.0))
-
-
-def test_a_pose_familys_draws_in_one_call_are_the_draws_one_at_a_time():
-    ranges = {"spine.lateral": (-6, 6), "head.twist": (-40, 40), "thigh_l.flexion": (-4, 8), "shank_r.flexion": (0, 8)}
-    one, each = np.random.default_rng(7), np.random.default_rng(7)
-    angles = human.neutral_angles()
-    for name, (lo, hi) in ranges.items():
-        angles[human.DOF_INDEX[name]] = each.uniform(lo, hi)
-    assert _same(human._uniform(one, ranges), angles) and one.random() == each.random()
