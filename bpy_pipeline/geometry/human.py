@@ -423,8 +423,7 @@ def pose_people(angles: np.ndarray, heights, builds, poses, positions_xy, yaws, 
     rotations = np.stack([joint_rotations(row) for row in angles])  # (n, s, 3, 3)
     local = np.zeros((n, len(SEGMENTS), 4, 4))
     local[:, :, :3, :3] = rotations
-    for i in range(n):
-        local[i, :, :3, 3] = OFFSET * heights[i]
+    local[:, :, :3, 3] = OFFSET[None] * heights[:, None, None]
     local[:, :, 3, 3] = 1.0
     ends_a = CAPSULE_A[None] * heights[:, None, None]  # (n, c, 3) in each capsule's segment frame, m
     ends_b = CAPSULE_B[None] * heights[:, None, None]

@@ -670,7 +670,7 @@ def users_meshes(users: list[RoadUser], rng: np.random.Generator, fittings: bool
         named = [(name, mesh) for name, mesh in parts.items() if len(mesh[1])]
         moved = transformed_parts([mesh for _, mesh in named], user.centre, user.yaw, user.z)
         out[k] = [(name, user.kind, *surfaces[name], mesh) for (name, _), mesh in zip(named, moved)]
-    people = human.pose_people(*(list(column) for column in zip(*(body[4] for body in bodies)))) if bodies else []
+    people = human.pose_people(*map(list, zip(*(body[4] for body in bodies)))) if bodies else []
     for (k, part, class_name, clothing, _), mesh in zip(bodies, human.body_meshes(people, 8, 2)):
         out[k].append((part, class_name, "diffuse", clothing, mesh))
     return out
