@@ -407,6 +407,57 @@ def pose_person(angles: np.ndarray, height: float, build: float, pose: str, posi
     return Person(np.asarray(angles, float), float(height), float(build), pose, placement, frames, a, b, r, support)
 
 
+def pose_people(angles: np.ndarray, heights, builds, poses, positions_xy, yaws, supports_z) -> list[Person]:
+    """:func:`pose_person` of ``n`` people at once, the same numbers: ``angles (n, k)`` degrees, ``heights (n,)`` m,
+    ``builds (n,)``, ``poses`` (n pose families), ``positions_xy (n, 2)`` m, ``yaws (n,)`` radians, ``supports_z (n,)`` m.
+
+    Each level's frames and each capsule's ends are one stacked product over every person (the same 4 x 4 and
+    3 x 3 products as one person at a time): a street frame poses its pedestrians and riders together.
+    """
+    n = len(poses)
+    if n == 0:
+        return []
+    angles = np.asarray(angles, float).reshape(n, -1)
+    heights = np.asarray(heights, float).reshape(n)
+    builds = np.asarray(builds, float).reshape(n)
+    rotations = np.stack([joint_rotations(row) for row in angles])  # (n, s, 3, 3)
+    local = np.zeros((n, len(SEGMENTS), 4, 4))
+    local[:, :, :3, :3] = rotations
+    local[:, :, :3, 3] = OFFSET[None] * heights[:, None, None]
+    local[:, :, 3, 3] = 1.0
+    ends_a = CAPSULE_A[None] * heights[:, None, None]  # (n, c, 3) in each capsule's segment frame, m
+    ends_b = CAPSULE_B[None] * heights[:, None, None]
+    radius = CAPSULE_RADIUS[None] * heights[:, None] * builds[:, None]  # (n, c)
+
+    def place(base: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        frames = np.empty((n, len(SEGMENTS), 4, 4))
+        frames[:, LEVELS[0]] = base[:, None] @ local[:, LEVELS[0]]
+        for level in LEVELS[1:]:
+            frames[:, level] = frames[:, PARENT[level]] @ local[:, level]
+        f = frames[:, CAPSULE_SEGMENT].reshape(-1, 4, 4)
+        a = np.einsum("cij,cj->ci", f[:, :3, :3], ends_a.reshape(-1, 3)) + f[:, :3, 3]
+        b = np.einsum("cij,cj->ci", f[:, :3, :3], ends_b.reshape(-1, 3)) + f[:, :3, 3]
+        return frames, a.reshape(n, -1, 3), b.reshape(n, -1, 3)
+
+    _, a, b = place(np.broadcast_to(np.eye(4), (n, 4, 4)))
+    rests = np.array([SEATED_CAPSULES if pose == "sitting" else np.ones(len(CAPSULES), bool) for pose in poses])  # (n, c)
+    bottoms = np.minimum(a[..., 2], b[..., 2]) - radius
+    placements = np.zeros((n, 4, 4))
+    for i, (xy, yaw, support_z) in enumerate(zip(positions_xy, yaws, supports_z)):
+        c, s = np.cos(yaw), np.sin(yaw)
+        placements[i, :3, :3] = [[c, -s, 0], [s, c, 0], [0, 0, 1]]
+        placements[i, :3, 3] = [xy[0], xy[1], support_z - bottoms[i][rests[i]].min()]
+        placements[i, 3, 3] = 1.0
+    frames, a, b = place(placements)
+    out = []
+    for i in range(n):
+        low = np.argmin(np.where(rests[i], np.minimum(a[i, :, 2], b[i, :, 2]) - radius[i], np.inf))
+        end = a[i, low] if a[i, low, 2] <= b[i, low, 2] else b[i, low]
+        support = np.array([end[0], end[1], end[2] - radius[i, low]])
+        out.append(Person(angles[i].copy(), float(heights[i]), float(builds[i]), poses[i], placements[i], frames[i], a[i], b[i], radius[i], support))
+    return out
+
+
 def seat_offset(angles: np.ndarray, height: float, build: float, margin: float = 0.02) -> float:
     """How far in front of the hip centre (metres, person frame) a desk edge must be for a seated pose.
 
@@ -438,3 +489,19 @@ def body_mesh(a: np.ndarray, b: np.ndarray, radius: np.ndarray, segments: int = 
     count, per = vertices.shape[:2]
     shifted = triangles[None] + (np.arange(count) * per)[:, None, None]
     return vertices.reshape(-1, 3), shifted.reshape(-1, 3).astype(np.int32), np.repeat(np.arange(count), per)
+
+
+def body_meshes(people: list[Person], segments: int = 10, rings: int = 3) -> list[tuple[np.ndarray, np.ndarray]]:
+    """``[(vertices (n, 3), triangles (m, 3) int32)]``: each person's :func:`body_mesh`, the same numbers, every capsule
+    of every person meshed in one :func:`~.collision.capsule_meshes` call."""
+    if not people:
+        return []
+    from .collision import capsule_meshes
+
+    a = np.concatenate([p.a for p in people])
+    b = np.concatenate([p.b for p in people])
+    vertices, triangles = capsule_meshes(a, b, np.concatenate([p.radius for p in people]), segments, rings)  # (P c, n, 3), (m, 3)
+    count, per = len(people[0].a), vertices.shape[1]
+    shifted = (triangles[None] + (np.arange(count) * per)[:, None, None]).reshape(-1, 3).astype(np.int32)
+    flat = vertices.reshape(len(people), count * per, 3)
+    return [(flat[i], shifted.copy()) for i in range(len(people))]

@@ -191,3 +191,14 @@ def transformed(mesh: tuple[np.ndarray, np.ndarray], centre_xy, yaw: float, z: f
     c, s = math.cos(yaw), math.sin(yaw)
     v = mesh[0] @ np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]]) + [centre_xy[0], centre_xy[1], z]
     return v, mesh[1]
+
+
+def transformed_parts(meshes: list[tuple[np.ndarray, np.ndarray]], centre_xy, yaw: float, z: float = 0.0) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Each of ``meshes`` :func:`transformed`, the same numbers: one product for all their vertices (a row of a
+    product with a 3 x 3 matrix is the same however many rows it has)."""
+    moved = transformed((np.concatenate([v for v, _ in meshes]), None), centre_xy, yaw, z)[0]
+    out, start = [], 0
+    for v, t in meshes:
+        out.append((moved[start : start + len(v)], t))
+        start += len(v)
+    return out

@@ -21,6 +21,14 @@ def vehicle_parts(kind: str, size) -> dict[str, Mesh]:
     belt line and a narrower cabin; van: a cabin over nearly its length; truck: a cab and a cargo
     box; bus: one box with a window band. Glass sits 1 cm outside the body it covers.
     """
+    body, glass, tyres = _outline(kind, size)
+    bounds = np.array(body, float)
+    return {"body": primitives.boxes_mesh(bounds[:, 0::2], bounds[:, 1::2]), "glass": quads_mesh(glass), "tyres": tyres}
+
+
+def _outline(kind: str, size) -> tuple[list, list, Mesh]:
+    """What :func:`vehicle_parts` makes its meshes of: the body's boxes ``[(x0, x1, y0, y1, z0, z1)]`` and the glass quads
+    ``[(4 corners (3,))]`` (m, Python floats) and the tyres' mesh."""
     L, W, H = (float(s) for s in size)
     x0, x1, y = -L / 2, L / 2, W / 2
     radius = {"car": 0.31, "van": 0.34, "truck": 0.5, "bus": 0.5}[kind]
@@ -57,8 +65,7 @@ def vehicle_parts(kind: str, size) -> dict[str, Mesh]:
             gy = side * (y + 0.01)
             glass.append(((x0 + 0.5, gy, 0.4 * H), (x1 - 0.5, gy, 0.4 * H), (x1 - 0.5, gy, 0.85 * H), (x0 + 0.5, gy, 0.85 * H)))
         glass.append(((x1 + 0.01, -y + 0.1, 0.3 * H), (x1 + 0.01, y - 0.1, 0.3 * H), (x1 + 0.01, y - 0.1, 0.9 * H), (x1 + 0.01, -y + 0.1, 0.9 * H)))
-    bounds = np.array(body, float)
-    return {"body": primitives.boxes_mesh(bounds[:, 0::2], bounds[:, 1::2]), "glass": quads_mesh(glass), "tyres": tyres}
+    return body, glass, tyres
 
 
 PLATE_SIZE = (0.52, 0.11)  # m: an EU licence plate (520 x 110 mm); geometry/objects.py's cars use it too
@@ -91,6 +98,67 @@ def vehicle_fittings(body: np.ndarray, length: float) -> dict[str, Mesh]:
     vertices, triangles = primitives.boxes_mesh(bounds[:, 0::2], bounds[:, 1::2])
     cut = 8 * len(plates)  # vertices of the plates; 12 triangles per 8
     return {"plates": (vertices[:cut], triangles[: 12 * len(plates)]), "lights": (vertices[cut:], triangles[12 * len(plates) :] - cut)}
+
+
+def _fitting_boxes(body: list, length: float) -> list[tuple[float, ...]]:
+    """The boxes ``(x0, x1, y0, y1, z0, z1)`` of :func:`vehicle_fittings` (the plates, then the lamps) from the body's boxes
+    (:func:`_outline`), in Python floats: a box's vertex coordinates are :func:`~.primitives.boxes_mesh`'s numbers
+    (``-+0.5 (high - low) + (low + high) / 2``), so each end's face is the same as read from the body's vertices."""
+    (pw, ph), (lw, lh) = PLATE_SIZE, LAMP
+    corners = [[(-0.5 * (hi - lo) + (lo + hi) / 2, 0.5 * (hi - lo) + (lo + hi) / 2) for lo, hi in ((x0, x1), (y0, y1), (z0, z1))]
+               for x0, x1, y0, y1, z0, z1 in body]  # per box: its (low, high) vertex coordinate along x, y and z
+    plates, lights = [], []
+    for out in (1.0, -1.0):  # front, then rear
+        x = out * length / 2
+        face = [(ys, zs) for xs, ys, zs in corners if abs(xs[0] - x) <= 1e-9 or abs(xs[1] - x) <= 1e-9]
+        z0, z1 = min(zs[0] for _, zs in face), max(zs[1] for _, zs in face)
+        half = max(abs(y) for ys, _ in face for y in ys)
+        low = z0 + min(0.2 * (z1 - z0), 0.25)
+        plates.append((*sorted((x, x + out * 0.005)), -pw / 2, pw / 2, low, low + ph))
+        mid = z0 + min(0.6 * (z1 - z0), 0.55)
+        for side in (-1.0, 1.0):
+            c = side * (half - 0.15)
+            lights.append((*sorted((x - out * 0.06, x + out * 0.01)), c - lw / 2, c + lw / 2, mid - lh / 2, mid + lh / 2))
+    return plates + lights
+
+
+def vehicles_parts(kinds, sizes, fittings: bool = True) -> list[dict[str, Mesh]]:
+    """Each vehicle's :func:`vehicle_parts` (with ``fittings``, merged with its :func:`vehicle_fittings`), the same
+    numbers: every vehicle's boxes in one :func:`~.primitives.boxes_mesh`, every glass quad in one array."""
+    outlines = [_outline(kind, size) for kind, size in zip(kinds, sizes)]
+    boxes, quads, counts = [], [], []  # counts: (body boxes, fitting boxes, glass quads) per vehicle
+    for (body, glass, _), size in zip(outlines, sizes):
+        extra = _fitting_boxes(body, float(size[0])) if fittings else []
+        boxes += body + extra
+        quads += glass
+        counts.append((len(body), len(extra), len(glass)))
+    if not outlines:
+        return []
+    bounds = np.array(boxes, float)
+    corners = primitives.boxes_mesh(bounds[:, 0::2], bounds[:, 1::2])[0].reshape(-1, 8, 3)
+    glass = np.asarray(quads, float).reshape(-1, 4, 3)
+    out, at, quad_at = [], 0, 0
+    for (_, _, tyres), (n_body, n_extra, n_glass) in zip(outlines, counts):
+        parts = {"body": (corners[at : at + n_body].reshape(-1, 3), _box_triangles(n_body)),
+                 "glass": (glass[quad_at : quad_at + n_glass].reshape(-1, 3), _quad_triangles(n_glass)), "tyres": tyres}
+        if n_extra:
+            plates = corners[at + n_body : at + n_body + 2].reshape(-1, 3)
+            lights = corners[at + n_body + 2 : at + n_body + n_extra].reshape(-1, 3)
+            parts |= {"plates": (plates, _box_triangles(2)), "lights": (lights, _box_triangles(n_extra - 2))}
+        out.append(parts)
+        at += n_body + n_extra
+        quad_at += n_glass
+    return out
+
+
+def _box_triangles(count: int) -> np.ndarray:
+    """``(12 count, 3)`` int32: :func:`~.primitives.boxes_mesh`'s triangles of ``count`` boxes."""
+    return (primitives.BOX_TRIANGLES + 8 * np.arange(count, dtype=np.int32)[:, None, None]).reshape(-1, 3).astype(np.int32)
+
+
+def _quad_triangles(count: int) -> np.ndarray:
+    """``(2 count, 3)`` int32: :func:`~.primitives.quads_mesh`'s triangles of ``count`` quads."""
+    return (np.array([[0, 1, 2], [0, 2, 3]], np.int32)[None] + 4 * np.arange(count, dtype=np.int32)[:, None, None]).reshape(-1, 3).astype(np.int32)
 
 
 def two_wheeler_parts(kind: str, size) -> dict[str, Mesh]:

@@ -51,12 +51,12 @@ from functools import cached_property
 import numpy as np
 
 from ...geometry import primitives
-from ...geometry.primitives import box_mesh, transformed
+from ...geometry.primitives import box_mesh, transformed, transformed_parts
 from ...geometry.clearance import NO_POSES, SensorPoses
 from ...geometry.collision import rectangles_near, rectangles_overlap
 from ...geometry.field_of_view import in_view_fraction
 from ...geometry.objects import FITTINGS
-from ...geometry.vehicles import saddle_height, two_wheeler_parts, vehicle_fittings, vehicle_parts
+from ...geometry.vehicles import saddle_height, two_wheeler_parts, vehicles_parts
 
 Mesh = tuple[np.ndarray, np.ndarray]  # vertices (n, 3) float64, triangles (m, 3) int32
 
@@ -481,18 +481,15 @@ def place_users(p, layout: StreetLayout, rng: np.random.Generator, views=(), tri
     last_in_lane: dict[int, RoadUser] = {}
 
     grow = p.clearance / 2.0
-    reach = {"obstacles": (np.array([c[:2] for c, _, _ in obstacles], float).reshape(-1, 2),
-                           np.array([math.hypot(h[0] + grow, h[1] + grow) for _, h, _ in obstacles])),
-             "users": (np.zeros((0, 2)), np.zeros(0))}  # centres (n, 2) and circumscribed radii grown by clearance / 2 (n,)
+    # the obstacles', then the placed users' rectangles: centres (n, 2) and circumscribed radii grown by clearance / 2 (n,)
+    reach = [np.array([c[:2] for c, _, _ in obstacles], float).reshape(-1, 2), np.array([math.hypot(h[0] + grow, h[1] + grow) for _, h, _ in obstacles])]
+    rectangles = list(obstacles)  # (centre, half, yaw) in reach's order
 
     def free(centre, half, yaw) -> bool:
-        for k in rectangles_near(centre, half, p.clearance, *reach["obstacles"]):
-            c, h, y = obstacles[k]
+        """No obstacle, then no placed user, overlaps the rectangle (each tested in that order)."""
+        for k in rectangles_near(centre, half, p.clearance, *reach):
+            c, h, y = rectangles[k]
             if rectangles_overlap(centre, half, yaw, c, h, y, p.clearance):
-                return False
-        for k in rectangles_near(centre, half, p.clearance, *reach["users"]):
-            u = out.users[k]
-            if rectangles_overlap(centre, half, yaw, u.centre, u.half, u.yaw, p.clearance):
                 return False
         return True
 
@@ -508,9 +505,9 @@ def place_users(p, layout: StreetLayout, rng: np.random.Generator, views=(), tri
             out.out_of_view[user.kind] = out.out_of_view.get(user.kind, 0) + 1
             return False
         out.users.append(user)
-        centres, radii = reach["users"]
-        reach["users"] = (np.vstack([centres, np.asarray(user.centre, float)[None, :2]]),
-                          np.append(radii, math.hypot(half[0] + grow, half[1] + grow)))
+        rectangles.append((user.centre, half, user.yaw))
+        reach[0] = np.vstack([reach[0], np.asarray(user.centre, float)[None, :2]])
+        reach[1] = np.append(reach[1], math.hypot(half[0] + grow, half[1] + grow))
         return True
 
     shares = np.array([p.vehicle_mix.get(k, 0.0) for k in VEHICLES], float)
@@ -635,31 +632,47 @@ def user_meshes(user: RoadUser, rng: np.random.Generator, fittings: bool = True)
     draw); a pedestrian walks or stands (:func:`~.human.sample_pose`); a rider sits on the saddle, hands towards the bar, labelled by
     its vehicle (:data:`RIDER_CLASS`: ``rider`` on a bicycle, ``motorcyclist`` on a motorcycle).
     """
+    return users_meshes([user], rng, fittings)[0]
+
+
+def users_meshes(users: list[RoadUser], rng: np.random.Generator, fittings: bool = True) -> list[list[tuple[str, str, str, float, Mesh]]]:
+    """:func:`user_meshes` of each of ``users`` in turn, the same draws from ``rng`` in the same order and the same meshes;
+    the pedestrians' and riders' bodies are posed and meshed together (:func:`~.human.pose_people`,
+    :func:`~.human.body_meshes`) once every user's draws are made."""
     from ...geometry import human
 
-    if user.kind in VEHICLES:
-        paint = draw_reflectivity(rng, PAINT)
-        parts = vehicle_parts(user.kind, user.size)
-        if fittings:
-            parts |= vehicle_fittings(parts["body"][0], user.size[0])
+    out, bodies, vehicles = [], [], []  # bodies: (user's index, part, class, clothing, pose_person's arguments); vehicles: (index, paint)
+    for user in users:
+        if user.kind in VEHICLES:
+            out.append([])
+            vehicles.append((len(out) - 1, draw_reflectivity(rng, PAINT)))
+            continue
+        build = float(rng.choice(list(human.BUILDS.values())))
+        if user.kind == "person":
+            angles = human.sample_pose("walking" if rng.random() < 0.7 else "standing", rng, build)
+            pose = (angles, float(user.size[2]), build, "walking", user.centre, user.yaw, user.z)
+            out.append([])
+            bodies.append((len(out) - 1, "body", "person", draw_reflectivity(rng, CLOTHING), pose))
+            continue
+        parts = two_wheeler_parts(user.kind, user.size)
+        out.append([(name, user.kind, "diffuse", REFLECTIVITY["frame"] if name == "frame" else REFLECTIVITY["tyre"],
+                     transformed(mesh, user.centre, user.yaw, user.z)) for name, mesh in parts.items()])
+        angles = human.sample_pose("sitting", rng, build)
+        seat = saddle_height(user.kind, user.size)
+        c, s = math.cos(user.yaw), math.sin(user.yaw)
+        hip = user.centre + np.array([c, s]) * (-0.1 * user.size[0] - 0.05)
+        pose = (angles, 0.95 * float(user.size[2]), build, "sitting", hip, user.yaw, user.z + seat + 0.005)
+        bodies.append((len(out) - 1, "rider", RIDER_CLASS[user.kind], draw_reflectivity(rng, CLOTHING), pose))
+    shapes = vehicles_parts([users[k].kind for k, _ in vehicles], [users[k].size for k, _ in vehicles], fittings)
+    for (k, paint), parts in zip(vehicles, shapes):
+        user = users[k]
         surfaces = {"body": ("diffuse", paint), "glass": ("glass", REFLECTIVITY["glass"]), "tyres": ("diffuse", REFLECTIVITY["tyre"]), **FITTINGS}
-        return [(name, user.kind, *surfaces[name], transformed(mesh, user.centre, user.yaw, user.z)) for name, mesh in parts.items() if len(mesh[1])]
-    build = float(rng.choice(list(human.BUILDS.values())))
-    if user.kind == "person":
-        angles = human.sample_pose("walking" if rng.random() < 0.7 else "standing", rng, build)
-        person = human.pose_person(angles, float(user.size[2]), build, "walking", user.centre, user.yaw, user.z)
-        v, t, _ = human.body_mesh(person.a, person.b, person.radius, 8, 2)
-        return [("body", "person", "diffuse", draw_reflectivity(rng, CLOTHING), (v, t))]
-    parts = two_wheeler_parts(user.kind, user.size)
-    out = [(name, user.kind, "diffuse", REFLECTIVITY["frame"] if name == "frame" else REFLECTIVITY["tyre"],
-            transformed(mesh, user.centre, user.yaw, user.z)) for name, mesh in parts.items()]
-    angles = human.sample_pose("sitting", rng, build)
-    seat = saddle_height(user.kind, user.size)
-    c, s = math.cos(user.yaw), math.sin(user.yaw)
-    hip = user.centre + np.array([c, s]) * (-0.1 * user.size[0] - 0.05)
-    rider = human.pose_person(angles, 0.95 * float(user.size[2]), build, "sitting", hip, user.yaw, user.z + seat + 0.005)
-    v, t, _ = human.body_mesh(rider.a, rider.b, rider.radius, 8, 2)
-    out.append(("rider", RIDER_CLASS[user.kind], "diffuse", draw_reflectivity(rng, CLOTHING), (v, t)))
+        named = [(name, mesh) for name, mesh in parts.items() if len(mesh[1])]
+        moved = transformed_parts([mesh for _, mesh in named], user.centre, user.yaw, user.z)
+        out[k] = [(name, user.kind, *surfaces[name], mesh) for (name, _), mesh in zip(named, moved)]
+    people = human.pose_people(*map(list, zip(*(body[4] for body in bodies)))) if bodies else []
+    for (k, part, class_name, clothing, _), mesh in zip(bodies, human.body_meshes(people, 8, 2)):
+        out[k].append((part, class_name, "diffuse", clothing, mesh))
     return out
 
 

@@ -128,9 +128,9 @@ class Intersection:
         reserved = [street.ego_keep_free(self.params, v.pose) for v in views] if self.params.ego_vehicle else []
         placement = street.place_users(self.params, self.layout, rng, views, reserved=reserved, clear=self.sensor_poses)
         headings, parts = {}, []
-        for k, user in enumerate(placement.users):
+        for k, (user, meshes) in enumerate(zip(placement.users, street.users_meshes(placement.users, rng, self.params.car_fittings))):
             instance = USER_INSTANCE + k
-            for part, class_name, material, reflectivity, mesh in street.user_meshes(user, rng, self.params.car_fittings):
+            for part, class_name, material, reflectivity, mesh in meshes:
                 name = f"street_user_{k:03d}_{user.kind}_{part}" if part != "rider" else f"street_user_{k:03d}_{user.kind}_~rider"
                 parts.append((name, class_name, material, reflectivity, instance, mesh))
             headings[instance] = float(user.yaw)
