@@ -240,18 +240,6 @@ report["cancel"] = {
     "step_after_cancel": job.step(),
 }
 
-# ----------------------------------------------------------------------------- the street's road users in the viewport as frames go
-street_yaml = WORK / "street.yaml"
-street_yaml.write_text("seed: 0\nframes: 3\nscene: {builder: street}\nsensor: {preset: hdl64e, sampling_factor: 0.25, position: [0.0, -1.75, 1.73]}\n"
-                       "output: {formats: [semantickitti]}\n")
-bpy.ops.lidar.config_load(filepath=str(street_yaml))
-settings.out_dir = str(WORK / "out_street")
-job = operators.start_job(bpy.context)
-shown = []
-while job.step():  # each step leaves Blender holding road users (a run that reads only arrays would wait for its end)
-    shown.append(sum(len(o.data.vertices) for o in bpy.data.collections["LiDAR Street Users"].objects))
-report["street_users_shown_per_step"] = shown
-
 # ----------------------------------------------------------------------------- labels for the user's own objects
 bpy.ops.mesh.primitive_cube_add(size=1.0, location=(0, 3, 0.5))
 crate = bpy.context.active_object
@@ -398,6 +386,19 @@ for builder in settings.bl_rna.properties["builder"].enum_items.keys():
 report["every_builder"] = builders
 kept = Path(bpy.utils.extension_path_user(MODULE, path="node_groups"))  # the built groups, kept in the extension's own folder
 report["kept_groups"] = sorted(path.name.split(".v")[0] for path in kept.rglob("*.blend")) if kept.is_dir() else []
+
+# ----------------------------------------------------------------------------- the street's road users in the viewport as frames go
+street_yaml = WORK / "street.yaml"
+street_yaml.write_text("seed: 0\nframes: 3\nscene: {builder: street}\nsensor: {preset: hdl64e, sampling_factor: 0.25, position: [0.0, -1.75, 1.73]}\n"
+                       "output: {formats: [semantickitti]}\n")
+settings = bpy.context.scene.lidar
+bpy.ops.lidar.config_load(filepath=str(street_yaml))
+settings.out_dir = str(WORK / "out_street")
+job = operators.start_job(bpy.context)
+shown = []
+while job.step():  # each step leaves Blender holding road users (a run that reads only arrays would wait for its end)
+    shown.append(sum(len(o.data.vertices) for o in bpy.data.collections["LiDAR Street Users"].objects))
+report["street_users_shown_per_step"] = shown
 
 (WORK / "report.json").write_text(json.dumps(report, indent=1, default=str))
 print("session done")
