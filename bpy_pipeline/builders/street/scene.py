@@ -112,8 +112,8 @@ class Intersection:
 
     def show(self) -> None:
         """The last frame's road users into Blender's objects, where :meth:`populate` left them out (``in_blender``
-        false); nothing once they are there."""
-        if self.unshown is not None:
+        false); nothing once they are there, or when the user has removed the street's objects."""
+        if self.unshown is not None and self.alive():
             parts, self.unshown = self.unshown, None
             self._show_users(parts)
 
