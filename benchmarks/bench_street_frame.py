@@ -48,6 +48,14 @@ def checkout_environment(code: Path) -> dict[str, str]:
     return {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"} | {"PYTHONPATH": str(code), "OPENBLAS_NUM_THREADS": "1"}
 
 
+def write_result(out: Path, name: str, result: dict) -> None:
+    """``result`` as ``out/name`` (indented JSON), and where it went."""
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / name
+    path.write_text(json.dumps(result, indent=1) + "\n")
+    print(f"wrote {path}")
+
+
 def part(frames: int, keep: Path | None = None) -> dict:
     """In the checkout on ``PYTHONPATH`` (the working directory): the job's frames one at a time; stage timings, digests;
     each frame's PLY records copied to ``keep`` (when given) as ``.npy``."""
@@ -187,10 +195,7 @@ def main() -> None:
             f"points: {result['points']['points_differing']} of {result['points']['points']} differ, relabelled {result['points']['relabelled']}"
         )
     shutil.rmtree(kept, ignore_errors=True)
-    args.out.mkdir(parents=True, exist_ok=True)
-    path = args.out / args.name
-    path.write_text(json.dumps(result, indent=1) + "\n")
-    print(f"wrote {path}")
+    write_result(args.out, args.name, result)
 
 
 if __name__ == "__main__":

@@ -16,14 +16,13 @@ Results: ``benchmarks/results/<--name>`` (default ``compare_boxes.json``).
 from __future__ import annotations
 
 import argparse
-import json
 import pickle
 import subprocess
 import sys
 import tempfile
 from pathlib import Path
 
-from bench_street_frame import checkout_environment, output_digests
+from bench_street_frame import checkout_environment, output_digests, write_result
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
@@ -125,10 +124,7 @@ def main() -> None:
     result["files"] = len(files)
     result["files_differing"] = sorted(f for f in files if new["digests"].get(f) != old["digests"].get(f))
     print({k: v for k, v in result.items() if k != "level_changes"})
-    args.out.mkdir(parents=True, exist_ok=True)
-    path = args.out / args.name
-    path.write_text(json.dumps(result, indent=1) + "\n")
-    print(f"wrote {path}")
+    write_result(args.out, args.name, result)
 
 
 if __name__ == "__main__":

@@ -82,18 +82,11 @@ def vehicle_fittings(body: np.ndarray, length: float) -> dict[str, Mesh]:
     ``z0``, the lamps' centres ``min(0.6 (z1 - z0), 0.55)`` m, 0.15 m in from the face's sides. These parts stand the
     millimetres proud of the box ``[-L/2, L/2] x ...`` that holds the other parts.
     """
-    (pw, ph), (lw, lh) = PLATE_SIZE, LAMP
     plates, lights = [], []  # (x0, x1, y0, y1, z0, z1) of each box
     for out in (1.0, -1.0):  # front, then rear
         x = out * length / 2
         face = body[np.abs(body[:, 0] - x) <= 1e-9]
-        z0, z1, half = face[:, 2].min(), face[:, 2].max(), np.abs(face[:, 1]).max()
-        low = z0 + min(0.2 * (z1 - z0), 0.25)
-        plates.append((*sorted((x, x + out * 0.005)), -pw / 2, pw / 2, low, low + ph))
-        mid = z0 + min(0.6 * (z1 - z0), 0.55)
-        for side in (-1.0, 1.0):
-            c = side * (half - 0.15)
-            lights.append((*sorted((x - out * 0.06, x + out * 0.01)), c - lw / 2, c + lw / 2, mid - lh / 2, mid + lh / 2))
+        _end_fittings(out, x, face[:, 2].min(), face[:, 2].max(), np.abs(face[:, 1]).max(), plates, lights)
     bounds = np.array(plates + lights)  # every box at once: each box's vertices are its own products
     vertices, triangles = primitives.boxes_mesh(bounds[:, 0::2], bounds[:, 1::2])
     cut = 8 * len(plates)  # vertices of the plates; 12 triangles per 8
@@ -104,7 +97,6 @@ def _fitting_boxes(body: list, length: float) -> list[tuple[float, ...]]:
     """The boxes ``(x0, x1, y0, y1, z0, z1)`` of :func:`vehicle_fittings` (the plates, then the lamps) from the body's boxes
     (:func:`_outline`), in Python floats: a box's vertex coordinates are :func:`~.primitives.boxes_mesh`'s numbers
     (``-+0.5 (high - low) + (low + high) / 2``), so each end's face is the same as read from the body's vertices."""
-    (pw, ph), (lw, lh) = PLATE_SIZE, LAMP
     corners = [[(-0.5 * (hi - lo) + (lo + hi) / 2, 0.5 * (hi - lo) + (lo + hi) / 2) for lo, hi in ((x0, x1), (y0, y1), (z0, z1))]
                for x0, x1, y0, y1, z0, z1 in body]  # per box: its (low, high) vertex coordinate along x, y and z
     plates, lights = [], []
@@ -112,14 +104,20 @@ def _fitting_boxes(body: list, length: float) -> list[tuple[float, ...]]:
         x = out * length / 2
         face = [(ys, zs) for xs, ys, zs in corners if abs(xs[0] - x) <= 1e-9 or abs(xs[1] - x) <= 1e-9]
         z0, z1 = min(zs[0] for _, zs in face), max(zs[1] for _, zs in face)
-        half = max(abs(y) for ys, _ in face for y in ys)
-        low = z0 + min(0.2 * (z1 - z0), 0.25)
-        plates.append((*sorted((x, x + out * 0.005)), -pw / 2, pw / 2, low, low + ph))
-        mid = z0 + min(0.6 * (z1 - z0), 0.55)
-        for side in (-1.0, 1.0):
-            c = side * (half - 0.15)
-            lights.append((*sorted((x - out * 0.06, x + out * 0.01)), c - lw / 2, c + lw / 2, mid - lh / 2, mid + lh / 2))
+        _end_fittings(out, x, z0, z1, max(abs(y) for ys, _ in face for y in ys), plates, lights)
     return plates + lights
+
+
+def _end_fittings(out: float, x: float, z0: float, z1: float, half: float, plates: list, lights: list) -> None:
+    """The boxes ``(x0, x1, y0, y1, z0, z1)`` of one end's plate and two lamps, appended to ``plates`` and ``lights``: the end
+    faces ``out`` (1 front, -1 rear) at ``x`` (m), its face spans heights ``z0 .. z1`` and ``-half .. half`` across."""
+    (pw, ph), (lw, lh) = PLATE_SIZE, LAMP
+    low = z0 + min(0.2 * (z1 - z0), 0.25)
+    plates.append((*sorted((x, x + out * 0.005)), -pw / 2, pw / 2, low, low + ph))
+    mid = z0 + min(0.6 * (z1 - z0), 0.55)
+    for side in (-1.0, 1.0):
+        c = side * (half - 0.15)
+        lights.append((*sorted((x - out * 0.06, x + out * 0.01)), c - lw / 2, c + lw / 2, mid - lh / 2, mid + lh / 2))
 
 
 def vehicles_parts(kinds, sizes, fittings: bool = True) -> list[dict[str, Mesh]]:
