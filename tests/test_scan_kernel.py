@@ -380,3 +380,39 @@ def test_embrees_answer_from_the_compiled_pass_is_embreexs():
                 for a, b in zip(got, expected):
                     assert a.dtype == b.dtype and a.tobytes() == b.tobytes()
     assert len(two_parts.parts) == 2
+
+
+@needs_numba
+def test_packets_of_rays_at_vertices_and_edges_get_embreexs_answer():
+    """Eight rays a query (``rtcIntersect8``) give each ray the answer embreex's one-ray query gives, byte for byte, where
+    ties are most likely: rays aimed exactly at every vertex and at the middle of every edge (two or more triangles at
+    the same distance), in a sensor's order and shuffled (incoherent packets), a count that leaves the last packet part
+    full, one caster and a kept static part with a moving one."""
+    from types import SimpleNamespace
+
+    from bpy_pipeline.lidar.cast.numba_kernels import PACKET
+
+    base = room()
+    rng = np.random.default_rng(11)
+    pose = pose_matrix([0.3, 0.2, 0.4], [0, 0, 10])
+    cache = CasterCache(threads=1, kernel="numba")
+    moving = np.array([False, True, True, False, False])
+    cache.caster(base, pose, moving)
+    two_parts = cache.caster(moved(base, [1, 2], [0.5, 0.0, 0.0]), pose, moving)
+    for caster in (RayCaster(base, frame=pose, kernel="numba"), two_parts):
+        buffers = caster.buffers
+        corners = buffers.vertices[buffers.triangles]  # (m, 3, 3) world
+        targets = np.concatenate([buffers.vertices, (corners + np.roll(corners, 1, axis=1)).reshape(-1, 3) / 2])
+        targets = targets[: len(targets) - (len(targets) % PACKET == 0)]
+        local = caster.to_local(targets)
+        directions = local / np.linalg.norm(local, axis=1, keepdims=True)
+        assert len(directions) % PACKET
+        embreex = SimpleNamespace(**{**vars(caster.kernels), "traces": False})
+        for order in (np.arange(len(directions)), rng.permutation(len(directions))):
+            _, origins32, directions32, far = caster.launch(np.zeros(3), directions[order], 100.0)
+            got = [a.copy() for a in caster._embree(origins32, directions32, far)]
+            with mock.patch.object(caster, "kernels", embreex):
+                expected = caster._embree(origins32, directions32, far)
+            assert (expected[1] >= 0).mean() > 0.9
+            for a, b in zip(got, expected):
+                assert a.dtype == b.dtype and a.tobytes() == b.tobytes()

@@ -45,7 +45,7 @@ def _library():
     for path in ([None] if os.name == "posix" else []) + found:
         try:
             lib = ctypes.CDLL(path)
-            lib.rtcNewGeometry, lib.rtcIntersect1  # the latter for the compiled pass (lidar/cast/numba_kernels.py)
+            lib.rtcNewGeometry, lib.rtcIntersect8  # the latter for the compiled pass (lidar/cast/numba_kernels.py)
         except (OSError, AttributeError):
             continue
         v, u, z = ctypes.c_void_p, ctypes.c_uint, ctypes.c_size_t

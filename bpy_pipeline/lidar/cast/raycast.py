@@ -353,7 +353,7 @@ class RayCaster:
         nearer hit is kept, as a buffer triangle index. Only Embree (and that merge) runs in the
         worker threads: embreex takes the GIL back after every call, so numpy work on another
         thread would stall it. Where the compiled kernels call Embree themselves, they answer instead
-        (:func:`.numba_kernels.trace_rays`: the same ``rtcIntersect1`` per ray, the same answer).
+        (:func:`.numba_kernels.trace_rays`: ``rtcIntersect8`` on packets of eight rays, the same answer).
         """
 
         n = len(directions32)
