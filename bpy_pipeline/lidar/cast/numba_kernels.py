@@ -29,12 +29,14 @@ from . import embree
 DIFFUSE, MIRROR, GLASS, ABSORBER = (MATERIAL_ID[name] for name in ("diffuse", "mirror", "glass", "absorber"))
 NO_HIT = 0xFFFFFFFF  # Embree's invalid geometry and primitive id
 PACKET = 8  # rays per Embree query (rtcIntersect8)
+BLOCK = 8 * PACKET  # rays traced per call before the pass fills their records (a call costs about what a packet does)
 # RTCRayHit8 (Embree 4, 32-byte aligned), in blocks of PACKET 4-byte words, one word per ray: ray org 0-2, tnear 3,
 # dir 4-6, time 7, tfar 8, mask 9, id 10, flags 11; hit Ng 12-14, u 15, v 16, primID 17, geomID 18, instID[0] 19,
 # instPrimID[0] 20
 ORG, DIR, TFAR, MASK, PRIM_ID, GEOM_ID, INST_ID = 0, 4, 8, 9, 17, 18, 19
-PACKET_WORDS = 21 * PACKET
-ALIGN = 32  # bytes
+PRIM = 21  # beyond Embree's record: the nearest hit's buffer triangle so far, with two parts
+PACKET_WORDS = 22 * PACKET
+ALIGN = 64  # bytes: a cache line (Embree asks for 32)
 
 rtc_intersect8 = types.ExternalFunction("rtcIntersect8", types.void(types.uintp, types.uintp, types.uintp, types.uintp))
 
@@ -92,8 +94,8 @@ def fill_diffuse(trace, handles, part_triangle, part_shift, far, tfar, prim, pri
         j = 0 if shared else i
         ox, oy, oz = origins[j, 0], origins[j, 1], origins[j, 2]
         dx, dy, dz = directions[i, 0], directions[i, 1], directions[i, 2]
-        if trace and i % PACKET == 0:
-            nearest_hits(handles, part_triangle, part_shift, packet, far, origins, directions, i, min(n, i + PACKET), tfar, prim)
+        if trace and i % BLOCK == 0:
+            nearest_hits(handles, part_triangle, part_shift, packet, far, origins, directions, i, min(n, i + BLOCK), tfar, prim)
         p = prim[i]
         if p < 0:
             continue
@@ -172,48 +174,57 @@ def ray_packet():
 
 @jit
 def nearest_hits(handles, part_triangle, part_shift, packet, far, origins, directions, start, stop, tfar, prim):
-    """The nearest hits of rays ``start`` .. ``stop`` - 1 (at most :data:`PACKET`) up to ``far`` (float32) on the scenes
-    ``handles``, one ``rtcIntersect8`` per part in the record ``packet`` of :func:`ray_packet` (each origin and
-    direction rounded to float32): into ``tfar``, ``prim`` (``far``, -1 for a miss). With two parts, the moving one is
-    asked up to the static hit, and the primitive is the nearer hit's buffer triangle (``part_triangle``: each part's
-    map, (0,) for the identity), as :meth:`.raycast.RayCaster._embree` merges them. A part with a shift ((3,) float64
-    of ``part_shift``, not all zero) gets the origin rounded to float32, plus the shift in float64, rounded again
-    (:meth:`.raycast.RayCaster.part_origins`' arithmetic). origins : (n, 3), or (1, 3) shared."""
+    """The nearest hits of rays ``start`` .. ``stop`` - 1 up to ``far`` (float32) on the scenes ``handles``, :data:`PACKET`
+    consecutive rays at a time: one ``rtcIntersect8`` per part in the record ``packet`` of :func:`ray_packet` (each
+    origin and direction rounded to float32), into ``tfar``, ``prim`` (``far``, -1 for a miss). With two parts, the
+    moving one is asked up to the static hit, and the primitive is the nearer hit's buffer triangle (``part_triangle``:
+    each part's map, (0,) for the identity), as :meth:`.raycast.RayCaster._embree` merges them. A part with a shift
+    ((3,) float64 of ``part_shift``, not all zero) gets the origin rounded to float32, plus the shift in float64, rounded
+    again (:meth:`.raycast.RayCaster.part_origins`' arithmetic). origins : (n, 3), or (1, 3) shared.
+    Callers ask for blocks of several packets: a call costs about as much as a packet's own work."""
     word, real, address, valid, valid_address = packet
     shared = origins.shape[0] != directions.shape[0] or directions.shape[0] == 1
-    lanes = stop - start
-    for lane in range(PACKET):
-        valid[lane] = -1 if lane < lanes else 0
-    for lane in range(lanes):
-        tfar[start + lane], prim[start + lane] = far[start + lane], -1
     q = handles.shape[0]
-    for part in range(q):
-        sx, sy, sz = part_shift[part, 0], part_shift[part, 1], part_shift[part, 2]
-        unshifted = sx == 0.0 and sy == 0.0 and sz == 0.0
+    at = PRIM if q > 1 else PRIM_ID  # where the nearest hit's primitive ends up
+    for first in range(start, stop, PACKET):
+        lanes = min(stop - first, PACKET)
+        for lane in range(PACKET):
+            valid[lane] = -1 if lane < lanes else 0
+        for lane in range(lanes):  # no hit yet (nor with no part at all); a later part is asked up to the hit found so far
+            real[TFAR * PACKET + lane] = far[first + lane]
+            word[PRIM * PACKET + lane] = NO_HIT
+            word[PRIM_ID * PACKET + lane] = NO_HIT
+        for part in range(q):
+            sx, sy, sz = part_shift[part, 0], part_shift[part, 1], part_shift[part, 2]
+            unshifted = sx == 0.0 and sy == 0.0 and sz == 0.0
+            for lane in range(lanes):
+                i = first + lane
+                j = 0 if shared else i
+                if unshifted:
+                    x, y, z = np.float32(origins[j, 0]), np.float32(origins[j, 1]), np.float32(origins[j, 2])
+                else:
+                    x = np.float32(np.float64(np.float32(origins[j, 0])) + sx)
+                    y = np.float32(np.float64(np.float32(origins[j, 1])) + sy)
+                    z = np.float32(np.float64(np.float32(origins[j, 2])) + sz)
+                real[ORG * PACKET + lane], real[(ORG + 1) * PACKET + lane], real[(ORG + 2) * PACKET + lane] = x, y, z
+                real[DIR * PACKET + lane] = np.float32(directions[i, 0])
+                real[(DIR + 1) * PACKET + lane] = np.float32(directions[i, 1])
+                real[(DIR + 2) * PACKET + lane] = np.float32(directions[i, 2])
+                word[PRIM_ID * PACKET + lane] = NO_HIT  # primID, geomID, instID[0]: no hit of this part yet
+                word[GEOM_ID * PACKET + lane] = NO_HIT
+                word[INST_ID * PACKET + lane] = NO_HIT
+            rtc_intersect8(valid_address, handles[part], address, 0)
+            if q > 1:  # each hit as its buffer triangle, in the record's spare words
+                mapping = part_triangle[part]
+                identity = mapping.shape[0] == 0
+                for lane in range(lanes):
+                    hit = word[PRIM_ID * PACKET + lane]
+                    if hit != NO_HIT:
+                        word[PRIM * PACKET + lane] = hit if identity else mapping[hit]
         for lane in range(lanes):
-            i = start + lane
-            j = 0 if shared else i
-            if unshifted:
-                x, y, z = np.float32(origins[j, 0]), np.float32(origins[j, 1]), np.float32(origins[j, 2])
-            else:
-                x = np.float32(np.float64(np.float32(origins[j, 0])) + sx)
-                y = np.float32(np.float64(np.float32(origins[j, 1])) + sy)
-                z = np.float32(np.float64(np.float32(origins[j, 2])) + sz)
-            real[ORG * PACKET + lane], real[(ORG + 1) * PACKET + lane], real[(ORG + 2) * PACKET + lane] = x, y, z
-            real[DIR * PACKET + lane] = np.float32(directions[i, 0])
-            real[(DIR + 1) * PACKET + lane] = np.float32(directions[i, 1])
-            real[(DIR + 2) * PACKET + lane] = np.float32(directions[i, 2])
-            real[TFAR * PACKET + lane] = tfar[i]
-            word[PRIM_ID * PACKET + lane] = NO_HIT  # primID, geomID, instID[0]: no hit yet
-            word[GEOM_ID * PACKET + lane] = NO_HIT
-            word[INST_ID * PACKET + lane] = NO_HIT
-        rtc_intersect8(valid_address, handles[part], address, 0)
-        mapping = part_triangle[part]
-        for lane in range(lanes):
-            hit = word[PRIM_ID * PACKET + lane]
-            if hit != NO_HIT:
-                tfar[start + lane] = real[TFAR * PACKET + lane]
-                prim[start + lane] = np.int64(hit) if q == 1 or mapping.shape[0] == 0 else mapping[hit]
+            tfar[first + lane] = real[TFAR * PACKET + lane]
+            hit = word[at * PACKET + lane]
+            prim[first + lane] = -1 if hit == NO_HIT else np.int64(hit)
 
 
 @jit
@@ -224,10 +235,7 @@ def trace_rays(handles, part_triangle, part_shift, far, origins, directions, tfa
     handles, part_triangle, part_shift, far : as :func:`fill_diffuse` takes them; origins (n, 3) or (1, 3) shared, directions
     (n, 3), float32 or float64 (rounded to float32 as numpy's ``astype`` does). A miss keeps ``far`` and gets -1.
     """
-    n = directions.shape[0]
-    packet = ray_packet()
-    for start in range(0, n, PACKET):
-        nearest_hits(handles, part_triangle, part_shift, packet, far, origins, directions, start, min(n, start + PACKET), tfar, prim)
+    nearest_hits(handles, part_triangle, part_shift, ray_packet(), far, origins, directions, 0, directions.shape[0], tfar, prim)
 
 
 @jit
