@@ -34,8 +34,7 @@ BLOCK = 8 * PACKET  # rays traced per call before the pass fills their records (
 # dir 4-6, time 7, tfar 8, mask 9, id 10, flags 11; hit Ng 12-14, u 15, v 16, primID 17, geomID 18, instID[0] 19,
 # instPrimID[0] 20
 ORG, DIR, TFAR, MASK, PRIM_ID, GEOM_ID, INST_ID = 0, 4, 8, 9, 17, 18, 19
-PRIM = 21  # beyond Embree's record: the nearest hit's buffer triangle so far, with two parts
-PACKET_WORDS = 22 * PACKET
+PACKET_WORDS = 21 * PACKET
 ALIGN = 64  # bytes: a cache line (Embree asks for 32)
 
 rtc_intersect8 = types.ExternalFunction("rtcIntersect8", types.void(types.uintp, types.uintp, types.uintp, types.uintp))
@@ -159,8 +158,9 @@ def fill_diffuse(trace, handles, part_triangle, part_shift, far, tfar, prim, pri
 @jit
 def ray_packet():
     """Embree's record of :data:`PACKET` rays and hits (``RTCRayHit8``) on a :data:`ALIGN`-byte boundary, and its lanes'
-    valid flags, set for a query (tnear, time, id and flags 0, every geometry in the mask):
-    ``(word (PACKET_WORDS,) uint32, the same words as float32, its address, valid (PACKET,) int32, their address)``."""
+    valid flags, set for a query (tnear, time, id and flags 0, every geometry in the mask), and room for the lanes'
+    nearest primitives so far: ``(word (PACKET_WORDS,) uint32, the same words as float32, its address, valid (PACKET,)
+    int32, their address, nearest (PACKET,) int64)``."""
     words = np.empty(PACKET_WORDS + ALIGN // 4, np.uint32)
     first = ((ALIGN - words.ctypes.data % ALIGN) % ALIGN) // 4
     word = words[first : first + PACKET_WORDS]
@@ -169,7 +169,7 @@ def ray_packet():
     flags = np.empty(PACKET + ALIGN // 4, np.int32)
     first = ((ALIGN - flags.ctypes.data % ALIGN) % ALIGN) // 4
     valid = flags[first : first + PACKET]
-    return word, word.view(np.float32), word.ctypes.data, valid, valid.ctypes.data
+    return word, word.view(np.float32), word.ctypes.data, valid, valid.ctypes.data, np.empty(PACKET, np.int64)
 
 
 @jit
@@ -182,18 +182,16 @@ def nearest_hits(handles, part_triangle, part_shift, packet, far, origins, direc
     ((3,) float64 of ``part_shift``, not all zero) gets the origin rounded to float32, plus the shift in float64, rounded
     again (:meth:`.raycast.RayCaster.part_origins`' arithmetic). origins : (n, 3), or (1, 3) shared.
     Callers ask for blocks of several packets: a call costs about as much as a packet's own work."""
-    word, real, address, valid, valid_address = packet
+    word, real, address, valid, valid_address, nearest = packet
     shared = origins.shape[0] != directions.shape[0] or directions.shape[0] == 1
     q = handles.shape[0]
-    at = PRIM if q > 1 else PRIM_ID  # where the nearest hit's primitive ends up
     for first in range(start, stop, PACKET):
         lanes = min(stop - first, PACKET)
         for lane in range(PACKET):
             valid[lane] = -1 if lane < lanes else 0
         for lane in range(lanes):  # no hit yet (nor with no part at all); a later part is asked up to the hit found so far
             real[TFAR * PACKET + lane] = far[first + lane]
-            word[PRIM * PACKET + lane] = NO_HIT
-            word[PRIM_ID * PACKET + lane] = NO_HIT
+            nearest[lane] = -1
         for part in range(q):
             sx, sy, sz = part_shift[part, 0], part_shift[part, 1], part_shift[part, 2]
             unshifted = sx == 0.0 and sy == 0.0 and sz == 0.0
@@ -214,17 +212,15 @@ def nearest_hits(handles, part_triangle, part_shift, packet, far, origins, direc
                 word[GEOM_ID * PACKET + lane] = NO_HIT
                 word[INST_ID * PACKET + lane] = NO_HIT
             rtc_intersect8(valid_address, handles[part], address, 0)
-            if q > 1:  # each hit as its buffer triangle, in the record's spare words
-                mapping = part_triangle[part]
-                identity = mapping.shape[0] == 0
-                for lane in range(lanes):
-                    hit = word[PRIM_ID * PACKET + lane]
-                    if hit != NO_HIT:
-                        word[PRIM * PACKET + lane] = hit if identity else mapping[hit]
+            mapping = part_triangle[part]
+            identity = q == 1 or mapping.shape[0] == 0  # one part: Embree's primitive, mapped by the caller
+            for lane in range(lanes):
+                hit = word[PRIM_ID * PACKET + lane]
+                if hit != NO_HIT:
+                    nearest[lane] = np.int64(hit) if identity else mapping[hit]
         for lane in range(lanes):
             tfar[first + lane] = real[TFAR * PACKET + lane]
-            hit = word[at * PACKET + lane]
-            prim[first + lane] = -1 if hit == NO_HIT else np.int64(hit)
+            prim[first + lane] = nearest[lane]
 
 
 @jit
