@@ -3,7 +3,7 @@
 Once Embree has found a ray's triangle, a direct return from a diffuse surface needs: the
 float64 plane solve, the trust test against Embree's float32 distance, the range limits, the
 object's labels and the record. :func:`trace_fill` does all of it per ray, in firing order, right
-after calling Embree for that ray and the next seven itself (on the scenes embreex built, through
+after calling Embree itself for a block of 64 rays, eight at a time (on the scenes embreex built, through
 Embree's own ``rtcIntersect8``: the same hits as embreex's ``rtcIntersect1``); :func:`fill_diffuse` does it in one pass over an answer
 embreex gave (re-traced rays, and where Embree's library cannot be called directly). The numpy
 path makes some 27 passes over ray-sized arrays and 91 over hit-sized ones. The kernels

@@ -5,7 +5,7 @@ order (no fused multiply-add, no reassociation), so both give the same bytes
 (``tests/test_scan_kernel.py``). :func:`trace_fill` also calls Embree itself, eight consecutive
 rays at a time (``rtcIntersect8`` of the library embreex is linked to, on the scenes embreex made,
 each ray rounded as embreex's own loop rounds it): the same hits as ``EmbreeScene.run``'s
-``rtcIntersect1``, with the records written while the packet's answer is still in cache instead of
+``rtcIntersect1``, with the records written while a block's answers are still in cache instead of
 in a second pass over Embree's answer. A sensor's consecutive rays leave one origin side by side,
 so a packet walks Embree's hierarchy together: the railway's labelled scan went from 0.83 to 1.20 times
 the speed of embreex's bare trace (``docs/performance.md``, round twenty-five).
@@ -65,7 +65,7 @@ def fill_diffuse(trace, handles, part_triangle, part_shift, far, tfar, prim, pri
     """Records of the rays whose hit returns from a diffuse surface; returns ``(records, specular rays)``.
 
     trace : False: ``tfar`` (n,) float32 and ``prim`` (n,) int32 hold Embree's answer (-1: a miss);
-        True: Embree is called here, ray by ray, on the scenes ``handles`` ((q,) uint64, q <= 2:
+        True: Embree is called here (:func:`nearest_hits`, blocks of :data:`BLOCK` rays), on the scenes ``handles`` ((q,) uint64, q <= 2:
         the static part, then the moving one; ``part_triangle``: two (p,) int64 maps of their
         primitives to buffer triangles, (0,) for the identity; ``part_shift``: (q, 3) float64 added to a ray's
         origin for that part, :attr:`.raycast.RayCaster.part_shift`) up to ``far`` (n,) float32, and its

@@ -329,8 +329,8 @@ def _fused_chunk(caster: RayCaster, buffers: SceneBuffers, pattern: Pattern, ori
                  surfaces: MirrorGlassRules | None = None, rng: np.random.Generator | None = None):  # fmt: skip
     """:func:`scan_chunk` through the compiled kernel (:mod:`.kernels`).
 
-    Each of the caster's threads takes a part of the rays and, ray by ray, calls Embree and fills
-    the record (solve, trust test, range limits, labels) in one compiled pass
+    Each of the caster's threads takes a part of the rays and, block by block, calls Embree and fills
+    each ray's record (solve, trust test, range limits, labels) in one compiled pass
     (:func:`.kernels.trace_fill`); the parts' records are then joined. Where Embree cannot be
     called from the pass, embreex traces first and the pass fills each part's records straight
     into the rows they end up in (:func:`.kernels.fill_diffuse`). Slipped rays are found from the objects the passes saw from both
