@@ -400,6 +400,7 @@ def test_packets_of_rays_at_vertices_and_edges_get_embreexs_answer():
     cache.caster(base, pose, moving)
     two_parts = cache.caster(moved(base, [1, 2], [0.5, 0.0, 0.0]), pose, moving)
     for caster in (RayCaster(base, frame=pose, kernel="numba"), two_parts):
+        assert caster.kernels.traces and caster.embree_handles is not None  # the packets, not embreex, answer `got`
         buffers = caster.buffers
         corners = buffers.vertices[buffers.triangles]  # (m, 3, 3) world
         targets = np.concatenate([buffers.vertices, (corners + np.roll(corners, 1, axis=1)).reshape(-1, 3) / 2])
