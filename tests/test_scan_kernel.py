@@ -8,6 +8,7 @@ inside a closed mesh. A scene with glass keeps the numpy path. The static-plus-m
 :class:`CasterCache` gives the bytes of one caster of the whole scene.
 """
 
+from types import SimpleNamespace
 from unittest import mock
 
 import numpy as np
@@ -349,23 +350,39 @@ def test_compiled_planes_have_numpys_bits():
         assert a.tobytes() == b.tobytes()
 
 
+def compiled_casters(threads: int) -> tuple[RayCaster, RayCaster]:
+    """The room in one compiled caster whose pass calls Embree itself, and in a caster of a kept static part with the
+    sphere and the crate moving (two Embree parts)."""
+    base = room()
+    pose = pose_matrix([0.3, 0.2, 0.4], [0, 0, 10])
+    cache = CasterCache(threads=threads, kernel="numba")
+    moving = np.array([False, True, True, False, False])
+    cache.caster(base, pose, moving)
+    two_parts = cache.caster(moved(base, [1, 2], [0.5, 0.0, 0.0]), pose, moving)
+    assert len(two_parts.parts) == 2
+    casters = RayCaster(base, frame=pose, kernel="numba"), two_parts
+    for caster in casters:
+        assert caster.kernels.traces and caster.embree_handles is not None  # the compiled pass, not embreex, answers
+    return casters
+
+
+def assert_embreexs_answer(caster: RayCaster, origins32, directions32, far) -> tuple[np.ndarray, np.ndarray]:
+    """:meth:`RayCaster._embree` through the compiled pass gives embreex's own ``(tfar, prim)``, byte for byte; returns embreex's."""
+    got = [a.copy() for a in caster._embree(origins32, directions32, far)]
+    with mock.patch.object(caster, "kernels", SimpleNamespace(**{**vars(caster.kernels), "traces": False})):
+        expected = caster._embree(origins32, directions32, far)
+    for a, b in zip(got, expected):
+        assert a.dtype == b.dtype and a.tobytes() == b.tobytes()
+    return expected
+
+
 @needs_numba
 def test_embrees_answer_from_the_compiled_pass_is_embreexs():
     """:meth:`RayCaster._embree` through :func:`~bpy_pipeline.lidar.cast.numba_kernels.trace_rays` gives embreex's ``(tfar, prim)``,
     byte for byte: one caster of the room and a kept static part with a moving one, rays from the origin (one row
     repeated by strides) and from their own origins, float32 and float64 directions, limits that cut some hits."""
-    from types import SimpleNamespace
-
-    base = room()
     rng = np.random.default_rng(7)
-    pose = pose_matrix([0.3, 0.2, 0.4], [0, 0, 10])
-    cache = CasterCache(threads=2, kernel="numba")
-    moving = np.array([False, True, True, False, False])
-    cache.caster(base, pose, moving)
-    two_parts = cache.caster(moved(base, [1, 2], [0.5, 0.0, 0.0]), pose, moving)
-    for caster in (RayCaster(base, frame=pose, kernel="numba"), two_parts):
-        assert caster.kernels.traces and caster.embree_handles is not None
-        embreex = SimpleNamespace(**{**vars(caster.kernels), "traces": False})
+    for caster in compiled_casters(threads=2):
         n = 5000
         directions = rng.normal(size=(n, 3))
         directions /= np.linalg.norm(directions, axis=1, keepdims=True)
@@ -373,13 +390,8 @@ def test_embrees_answer_from_the_compiled_pass_is_embreexs():
             for d in (directions, directions.astype(np.float32)):
                 _, origins32, directions32, far = caster.launch(origins, directions, 100.0, d if d.dtype == np.float32 else None, convert=False)
                 far[::3] = rng.uniform(0.5, 12.0, len(far[::3])).astype(np.float32)
-                got = [a.copy() for a in caster._embree(origins32, directions32, far)]
-                with mock.patch.object(caster, "kernels", embreex):
-                    expected = caster._embree(origins32, directions32, far)
+                expected = assert_embreexs_answer(caster, origins32, directions32, far)
                 assert (expected[1] >= 0).mean() > 0.5 and (expected[1] < 0).any()
-                for a, b in zip(got, expected):
-                    assert a.dtype == b.dtype and a.tobytes() == b.tobytes()
-    assert len(two_parts.parts) == 2
 
 
 @needs_numba
@@ -388,19 +400,10 @@ def test_packets_of_rays_at_vertices_and_edges_get_embreexs_answer():
     ties are most likely: rays aimed exactly at every vertex and at the middle of every edge (two or more triangles at
     the same distance), in a sensor's order and shuffled (incoherent packets), a count that leaves the last packet part
     full, one caster and a kept static part with a moving one."""
-    from types import SimpleNamespace
-
     from bpy_pipeline.lidar.cast.numba_kernels import PACKET
 
-    base = room()
     rng = np.random.default_rng(11)
-    pose = pose_matrix([0.3, 0.2, 0.4], [0, 0, 10])
-    cache = CasterCache(threads=1, kernel="numba")
-    moving = np.array([False, True, True, False, False])
-    cache.caster(base, pose, moving)
-    two_parts = cache.caster(moved(base, [1, 2], [0.5, 0.0, 0.0]), pose, moving)
-    for caster in (RayCaster(base, frame=pose, kernel="numba"), two_parts):
-        assert caster.kernels.traces and caster.embree_handles is not None  # the packets, not embreex, answer `got`
+    for caster in compiled_casters(threads=1):
         buffers = caster.buffers
         corners = buffers.vertices[buffers.triangles]  # (m, 3, 3) world
         targets = np.concatenate([buffers.vertices, (corners + np.roll(corners, 1, axis=1)).reshape(-1, 3) / 2])
@@ -408,12 +411,7 @@ def test_packets_of_rays_at_vertices_and_edges_get_embreexs_answer():
         local = caster.to_local(targets)
         directions = local / np.linalg.norm(local, axis=1, keepdims=True)
         assert len(directions) % PACKET
-        embreex = SimpleNamespace(**{**vars(caster.kernels), "traces": False})
         for order in (np.arange(len(directions)), rng.permutation(len(directions))):
             _, origins32, directions32, far = caster.launch(np.zeros(3), directions[order], 100.0)
-            got = [a.copy() for a in caster._embree(origins32, directions32, far)]
-            with mock.patch.object(caster, "kernels", embreex):
-                expected = caster._embree(origins32, directions32, far)
+            expected = assert_embreexs_answer(caster, origins32, directions32, far)
             assert (expected[1] >= 0).mean() > 0.9
-            for a, b in zip(got, expected):
-                assert a.dtype == b.dtype and a.tobytes() == b.tobytes()

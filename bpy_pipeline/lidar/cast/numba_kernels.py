@@ -161,14 +161,12 @@ def ray_packet():
     valid flags, set for a query (tnear, time, id and flags 0, every geometry in the mask), and room for the lanes'
     nearest primitives so far: ``(word (PACKET_WORDS,) uint32, the same words as float32, its address, valid (PACKET,)
     int32, their address, nearest (PACKET,) int64)``."""
-    words = np.empty(PACKET_WORDS + ALIGN // 4, np.uint32)
+    words = np.empty(PACKET_WORDS + PACKET + ALIGN // 4, np.uint32)  # the record, then the flags (PACKET_WORDS * 4 bytes: 32-aligned)
     first = ((ALIGN - words.ctypes.data % ALIGN) % ALIGN) // 4
     word = words[first : first + PACKET_WORDS]
     word[:] = 0
     word[MASK * PACKET : (MASK + 1) * PACKET] = NO_HIT
-    flags = np.empty(PACKET + ALIGN // 4, np.int32)
-    first = ((ALIGN - flags.ctypes.data % ALIGN) % ALIGN) // 4
-    valid = flags[first : first + PACKET]
+    valid = words[first + PACKET_WORDS : first + PACKET_WORDS + PACKET].view(np.int32)
     return word, word.view(np.float32), word.ctypes.data, valid, valid.ctypes.data, np.empty(PACKET, np.int64)
 
 
