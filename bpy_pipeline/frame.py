@@ -9,6 +9,7 @@ record need, so a stage is testable alone and a frame range needs no hidden stat
 from __future__ import annotations
 
 import platform
+import sys
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Callable, Iterable, Protocol
 
@@ -40,13 +41,22 @@ def versions() -> dict:
 
     out = {"bpy_pipeline": _version.__version__, "python": platform.python_version(), "numpy": np.__version__}
     out["embreex"] = getattr(embreex, "__version__", "unknown")
-    try:
-        import bpy
-
-        out["blender"] = bpy.app.version_string
-    except ImportError:
-        out["blender"] = None
+    out["blender"] = blender_version()
     return out
+
+
+def blender_version() -> str | None:
+    """The Blender frames are made with, ``"major.minor.patch"``: the loaded bpy's, else the installed bpy module's
+    (read from its package, without starting a Blender: a ``--workers`` run's own process makes no frame), else None."""
+    bpy = sys.modules.get("bpy")
+    if bpy is not None:
+        return ".".join(map(str, bpy.app.version))
+    from importlib import metadata
+
+    try:
+        return metadata.version("bpy")
+    except metadata.PackageNotFoundError:
+        return None
 
 
 @dataclass(frozen=True)

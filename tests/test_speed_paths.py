@@ -267,3 +267,42 @@ def test_a_worker_joins_the_run_on_its_share_of_the_cores(tmp_path):
     joining = argparse.Namespace(join=True, out=str(tmp_path / "run"), threads=1)
     assert load_run_config(joining).threads == 1
     assert load_run_config(argparse.Namespace(join=True, out=str(tmp_path / "run"), threads=None)).threads == config.threads == 0
+
+
+def test_the_parent_of_workers_starts_no_blender_of_its_own(tmp_path):
+    """``--workers N``'s own process opens the run (its manifest names the Blender) and starts the workers' commands
+    without importing bpy: that would start a Blender in it (0.3-0.5 s of a core) before the first worker starts."""
+    import subprocess
+    from importlib import metadata
+
+    program = (
+        "import sys, json\n"
+        "from bpy_pipeline.config import load_config\n"
+        "from bpy_pipeline.dataset import Dataset\n"
+        "from bpy_pipeline.parallel import worker_command\n"
+        f"out = {str(tmp_path / 'run')!r}\n"
+        "with Dataset.open(out, load_config(None, ['frames=4']), 'new'):\n"
+        "    command = worker_command(out, [0, 1], 1)\n"
+        "print(json.dumps({'bpy': 'bpy' in sys.modules, 'command': command}))\n"
+    )
+    done = subprocess.run([sys.executable, "-c", program], capture_output=True, text=True, timeout=120, cwd=Path(__file__).resolve().parents[1])
+    assert done.returncode == 0, done.stderr
+    seen = json.loads(done.stdout)
+    assert not seen["bpy"]
+    assert seen["command"][:4] == [sys.executable, "-m", "bpy_pipeline", "run"]
+    manifest = json.loads((tmp_path / "run" / "manifest.json").read_text())
+    assert manifest["versions"]["blender"] == metadata.version("bpy")
+
+
+def test_inside_blender_workers_are_blenders_and_the_manifest_names_its_version(monkeypatch):
+    import types
+
+    from bpy_pipeline.frame import versions
+    from bpy_pipeline.parallel import worker_command
+
+    blender = types.SimpleNamespace(app=types.SimpleNamespace(binary_path="/opt/blender-4.5/blender", version=(4, 5, 15)))
+    monkeypatch.setitem(sys.modules, "bpy", blender)
+    command = worker_command("out", [3, 4, 5], 2)
+    assert command[:6] == ["/opt/blender-4.5/blender", "--background", "--factory-startup", "--python-exit-code", "1", "--python"]
+    assert command[command.index("--") + 1 :] == ["--out", "out", "--join", "--frames-range", "3:6", "--threads", "2"]
+    assert versions()["blender"] == "4.5.15"
