@@ -4,9 +4,10 @@
 preview), ``--frames`` frames, whole processes (start-up, Blender, the street, every frame written): once in one process
 and once with ``--workers 2``, in alternating rounds; the best wall time of each is kept. ``fps`` = frames / wall;
 ``over_sensor`` = fps / 10. Both sides must give the same bytes (the frames' PLY files). ``cpu_s`` is the CPU time of a
-run's processes.
+run's processes. ``--old DIR``: another checkout's two runs in the same rounds (its bytes must be the same too), and
+``against_old`` = its wall time / this checkout's, for the same worker count.
 
-    python benchmarks/bench_sensor_rate.py [--small] [--frames 200] [--rounds 2] [--out DIR]
+    python benchmarks/bench_sensor_rate.py [--small] [--frames 200] [--rounds 2] [--old DIR] [--out DIR] [--name NAME]
 
 Results: ``benchmarks/results/sensor_rate.json`` (``sensor_rate_small.json`` with ``--small``: 6 frames).
 """
@@ -28,24 +29,34 @@ def main() -> None:
     p.add_argument("--small", action="store_true", help="6 frames, one round (checks the benchmark runs)")
     p.add_argument("--frames", type=int, default=200)
     p.add_argument("--rounds", type=int, default=2)
+    p.add_argument("--old", type=Path, help="another checkout, measured in the same rounds")
     p.add_argument("--out", type=Path, default=RESULTS)
+    p.add_argument("--name", help="the results file's name in --out, without .json (default sensor_rate, sensor_rate_small)")
     args = p.parse_args()
     frames, rounds = (6, 1) if args.small else (args.frames, args.rounds)
     config = ["--config", str(ROOT / "examples" / "street" / "ego_hdl64e.yaml"), "--frames", str(frames)]
-    best: dict[int, tuple[float, float]] = {1: (float("inf"), 0.0), 2: (float("inf"), 0.0)}
+    sides = {"new": ROOT, **({"old": args.old.resolve()} if args.old else {})}
+    runs = [(side, workers) for side in sides for workers in (1, 2)]
+    best = {run: (float("inf"), 0.0) for run in runs}
     digests = {}
     with tempfile.TemporaryDirectory() as tmp:
         for r in range(rounds):
-            for workers in (1, 2) if r % 2 == 0 else (2, 1):
-                out = Path(tmp) / f"w{workers}r{r}"
-                best[workers] = min(best[workers], timed([*config, "--workers", str(workers)], out))
-                digests.setdefault(workers, digest(out))
-    if digests[1] != digests[2]:
-        raise SystemExit("two workers gave other bytes than one process")
-    rows = [{"run": f"{'one process' if w == 1 else '--workers 2'}", "frames": frames, "wall_s": round(best[w][0], 2), "cpu_s": round(best[w][1], 2),
-             "fps": round(frames / best[w][0], 2), "over_sensor": round(frames / best[w][0] / SENSOR_HZ, 2)}
-            for w in (1, 2)]
-    report("sensor_rate" + ("_small" if args.small else ""), rows, args.out, {"sensor_hz": SENSOR_HZ, "same_bytes": True, "rounds": rounds})
+            for side, workers in runs if r % 2 == 0 else runs[::-1]:
+                out = Path(tmp) / f"{side}w{workers}r{r}"
+                best[side, workers] = min(best[side, workers], timed([*config, "--workers", str(workers)], out, sides[side]))
+                digests.setdefault((side, workers), digest(out))
+    if len(set(digests.values())) != 1:
+        raise SystemExit(f"the runs gave other bytes: {sorted(k for k, v in digests.items() if v != digests['new', 1])}")
+    rows = []
+    for side, workers in runs:
+        wall, cpu = best[side, workers]
+        row = {"run": f"{'' if side == 'new' else 'old: '}{'one process' if workers == 1 else '--workers 2'}", "frames": frames, "wall_s": round(wall, 2),
+               "cpu_s": round(cpu, 2), "fps": round(frames / wall, 2), "over_sensor": round(frames / wall / SENSOR_HZ, 2)}
+        if "old" in sides and side == "new":
+            row["against_old"] = round(best["old", workers][0] / wall, 3)
+        rows.append(row)
+    extra = {"sensor_hz": SENSOR_HZ, "same_bytes": True, "rounds": rounds, **({"old": str(args.old)} if args.old else {})}
+    report(args.name or "sensor_rate" + ("_small" if args.small else ""), rows, args.out, extra)
 
 
 if __name__ == "__main__":

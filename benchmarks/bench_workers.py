@@ -40,11 +40,12 @@ from common import ROOT, arguments, report
 ROUNDS = 2
 
 
-def timed(args: list[str], out: Path) -> tuple[float, float]:
-    """``(wall s, CPU s)`` of ``run.py ARGS --out OUT`` and its workers (one BLAS thread in the parent, as the workers have)."""
+def timed(args: list[str], out: Path, root: Path = ROOT) -> tuple[float, float]:
+    """``(wall s, CPU s)`` of ``run.py ARGS --out OUT`` (``root``'s, this checkout's by default) and its workers (one BLAS
+    thread in the parent, as the workers have)."""
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     start = time.perf_counter()
-    done = subprocess.run([sys.executable, str(ROOT / "run.py"), "--out", str(out), *args], capture_output=True, text=True,
+    done = subprocess.run([sys.executable, str(Path(root) / "run.py"), "--out", str(out), *args], capture_output=True, text=True, cwd=root,
                           env={**os.environ, "OPENBLAS_NUM_THREADS": "1"})
     if done.returncode != 0:
         raise RuntimeError(f"run.py {' '.join(args)}: {done.stderr.strip()[-800:]}")

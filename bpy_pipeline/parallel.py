@@ -11,8 +11,10 @@ the machine is not oversubscribed.
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 import sys
+import threading
 from pathlib import Path
 from typing import Callable
 
@@ -54,7 +56,7 @@ def worker_command(out: str, frames: list[int], threads: int) -> list[str]:
     A Blender has loaded bpy before any script runs, so bpy is only looked up: importing it here would start a
     Blender in this process (0.3-0.5 s of a core) only to learn it is not one, before the first worker starts.
     """
-    args = ["--out", str(out), "--join", "--frames-range", f"{frames[0]}:{frames[-1] + 1}", "--threads", str(threads)]
+    args = ["--out", str(out), "--join", "--frames-range", f"{frames[0]}:{frames[-1] + 1}", "--threads", str(threads), "--parent-pipe"]
     bpy = sys.modules.get("bpy")
     binary = bpy.app.binary_path if bpy is not None else ""
     if binary and Path(binary).name.startswith("blender"):
@@ -77,7 +79,8 @@ def run_parallel(config: Config, out: str, frames: list[int], mode: str, workers
         ranges = aligned_ranges(todo, workers, frames_per_scene(config))
         threads = max(1, (config.threads or default_threads()) // len(ranges))
         env = {**os.environ, **SINGLE_THREAD_ENV}
-        procs = [subprocess.Popen(worker_command(out, r, threads), env=env, cwd=os.getcwd()) for r in ranges]
+        # each worker's stdin: a pipe this process holds open until it ends, however it ends (stop_with_parent)
+        procs = [subprocess.Popen(worker_command(out, r, threads), env=env, cwd=os.getcwd(), stdin=subprocess.PIPE) for r in ranges]
         try:
             codes = [p.wait() for p in procs]
         except BaseException:  # Ctrl-C or SIGTERM: the workers stop too (each keeps its committed frames)
@@ -86,11 +89,34 @@ def run_parallel(config: Config, out: str, frames: list[int], mode: str, workers
             for p in procs:
                 p.wait()
             raise
+        finally:
+            for p in procs:
+                p.stdin.close()
     failed = [f"{r[0]}:{r[-1] + 1} (exit {c})" for r, c in zip(ranges, codes) if c != 0]
     if failed:
         log(f"warning: workers failed for frames {', '.join(failed)}; their committed frames are kept, --resume makes the rest")
         return 2 if all(c == 2 for c in codes if c) else 1
     return 0
+
+
+def stop_with_parent(pipe: int) -> threading.Thread:
+    """Stop this worker as SIGTERM stops a run (its committed frames kept, one line, exit 143) once ``pipe`` ends.
+
+    ``pipe`` is the file descriptor of the worker's stdin, which its parent (:func:`run_parallel`) holds open while the
+    run goes: it ends when the parent ends, however (Ctrl-C, a crash, kill -9, the out-of-memory killer). Without this,
+    a worker whose parent was killed goes on committing frames, with no lock held, into a folder that the next run may
+    resume or overwrite with another config. Read with ``os.read``, not through ``sys.stdin``, whose lock this
+    thread would hold at the interpreter's shutdown (a fatal error inside Blender, which shuts the interpreter down).
+    """
+
+    def watch() -> None:
+        while os.read(pipe, 4096):  # b"" at the pipe's end only: the parent never writes to it
+            pass
+        os.kill(os.getpid(), signal.SIGTERM)
+
+    thread = threading.Thread(target=watch, name="parent pipe", daemon=True)
+    thread.start()
+    return thread
 
 
 def _frames_task(out: str, frames: list[int], threads: int) -> int:

@@ -212,6 +212,56 @@ def test_two_workers_give_the_bytes_of_one_process(full_parking, tmp_path):
     assert (out / "kitti" / "ImageSets" / "train.txt").read_text() == (full_parking / "kitti" / "ImageSets" / "train.txt").read_text()
 
 
+def children(pid: int) -> list[int]:
+    """The processes whose parent is ``pid`` (Linux's /proc)."""
+    found = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue  # ended meanwhile
+        if int(fields[1]) == pid:
+            found.append(int(stat.parent.name))
+    return found
+
+
+def running(pid: int) -> bool:
+    """Whether process ``pid`` runs (a zombie no init has reaped yet has ended)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").is_file(), reason="finds the workers through Linux's /proc")
+def test_workers_stop_when_their_parent_is_killed(tmp_path):
+    """kill -9 of a --workers run: its workers stop too (SIGTERM's way: committed frames kept), instead of going on
+    writing into the folder with no lock held, where the next run may resume or overwrite it."""
+    out = tmp_path / "orphans"
+    parent = subprocess.Popen([sys.executable, str(ROOT / "run.py"), "--out", str(out), "--frames", "2000", *PARKING, "--workers", "2"], cwd=ROOT,
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.time() + 120
+        while not any((out / "records").glob("*.json")) and time.time() < deadline and parent.poll() is None:
+            time.sleep(0.05)
+        workers = children(parent.pid)
+        assert len(workers) == 2 and any((out / "records").glob("*.json"))
+    finally:
+        parent.send_signal(signal.SIGKILL)
+        parent.wait()
+    deadline = time.time() + 60
+    while any(running(pid) for pid in workers) and time.time() < deadline:
+        time.sleep(0.05)
+    left = [pid for pid in workers if running(pid)]
+    for pid in left:
+        os.kill(pid, signal.SIGKILL)
+    assert not left, "workers went on after their parent was killed"
+    made = consistent(out)
+    assert 0 < len(made) < 2000
+    time.sleep(0.5)
+    assert consistent(out) == made  # nobody writes any more
+
+
 def test_a_local_ray_cluster_gives_the_bytes_of_one_process(full_parking, tmp_path):
     pytest.importorskip("ray", reason="Ray is not installed (pip install '.[distributed]')")
     ray_cli = Path(sys.executable).with_name("ray")

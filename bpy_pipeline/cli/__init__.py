@@ -43,6 +43,7 @@ def add_run_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     mode.add_argument("--resume", action="store_true", help="continue the run in --out (same config and seed): keep its verified frames, make the rest")
     mode.add_argument("--overwrite", action="store_true", help="remove the run in --out first")
     p.add_argument("--join", action="store_true", help=argparse.SUPPRESS)  # a worker: add frames to the run another process holds
+    p.add_argument("--parent-pipe", action="store_true", help=argparse.SUPPRESS)  # a worker: stop when stdin, its parent's pipe, ends
     p.add_argument("--workers", type=int, default=1, help="local worker processes, each with its own Blender (default 1)")
     p.add_argument("--ray", metavar="ADDRESS", help="send frame ranges to a Ray cluster: auto, or HOST:PORT (pip install .[distributed])")
     p.add_argument("--threads", type=int, help="ray-casting threads per process (default: the cores available, split between workers)")
@@ -149,6 +150,10 @@ def run_main(args) -> int:
     """``run``: make the selected frames of the run into ``--out``; returns the exit code."""
     if not args.out.strip():
         raise InputError("--out: empty; give a folder (default: ./out)")
+    if args.parent_pipe:
+        from ..parallel import stop_with_parent
+
+        stop_with_parent(sys.stdin.fileno())
     if not 1 <= args.workers <= MAX_WORKERS:
         raise InputError(f"--workers: must be 1 .. {MAX_WORKERS}, got {args.workers}")
     if args.overwrite and args.config:  # before any work: --overwrite never removes an input

@@ -120,6 +120,15 @@ def test_background_run_gives_the_bpy_module_bytes(chroot, work, reference, job)
     assert chroot.label().split()[1] in json.dumps(manifest)  # the manifest names the Blender that ran
 
 
+def test_background_run_with_two_workers_gives_the_bpy_module_bytes(chroot, work, reference):
+    """``--workers 2`` inside a Blender: the workers are that Blender's binary (with ``--parent-pipe``: they stop when the
+    run's own process ends), and their frames are the bpy module's one process's."""
+    out = work / chroot.suite / "parking-workers"
+    result = blender_run(chroot, work, out, [*jobs(work)["parking"], "--workers", "2"])
+    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
+    assert frame_files(out) and frame_files(out) == frame_files(reference["parking"])
+
+
 def test_factory_startup_and_a_users_blend(chroot, work, reference, user_blend):
     out = work / chroot.suite / "factory"
     result = blender_run(chroot, work, out, jobs(work)["default"], before=["--factory-startup"])
