@@ -79,8 +79,11 @@ def run_parallel(config: Config, out: str, frames: list[int], mode: str, workers
         ranges = aligned_ranges(todo, workers, frames_per_scene(config))
         threads = max(1, (config.threads or default_threads()) // len(ranges))
         env = {**os.environ, **SINGLE_THREAD_ENV}
-        # each worker's stdin: a pipe this process holds open until it ends, however it ends (stop_with_parent)
-        procs = [subprocess.Popen(worker_command(out, r, threads), env=env, cwd=os.getcwd(), stdin=subprocess.PIPE) for r in ranges]
+        # each worker's stdin: a pipe this process holds open until it ends, however it ends (stop_with_parent);
+        # its stdout and stderr: pipes whose lines this process says in its own log (forward_lines)
+        procs = [subprocess.Popen(worker_command(out, r, threads), env=env, cwd=os.getcwd(), stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                  stderr=subprocess.PIPE, text=True, errors="replace") for r in ranges]
+        readers = forward_lines(procs, log)
         try:
             codes = [p.wait() for p in procs]
         except BaseException:  # Ctrl-C or SIGTERM: the workers stop too (each keeps its committed frames)
@@ -92,11 +95,42 @@ def run_parallel(config: Config, out: str, frames: list[int], mode: str, workers
         finally:
             for p in procs:
                 p.stdin.close()
+            for reader in readers:
+                reader.join()
     failed = [f"{r[0]}:{r[-1] + 1} (exit {c})" for r, c in zip(ranges, codes) if c != 0]
     if failed:
         log(f"warning: workers failed for frames {', '.join(failed)}; their committed frames are kept, --resume makes the rest")
         return 2 if all(c == 2 for c in codes if c) else 1
     return 0
+
+
+def forward_lines(procs: list[subprocess.Popen], log: Callable[[str], None]) -> list[threading.Thread]:
+    """Say every line the workers ``procs`` print in this process's ``log``, one line at a time, as they come.
+
+    A worker's frame lines (its stdout) drive the run's one progress bar, or its one line a frame, instead of a bar
+    per worker on one terminal line; its warnings and notes go where this process's go; anything else it prints to
+    stderr (its stop line, an error line, a traceback) goes to this process's stderr. One thread a stream: a worker
+    whose pipe were not read would stop at a full pipe.
+    """
+    lock = threading.Lock()
+
+    def say_err(text: str) -> None:
+        if text.startswith(("warning", "note")):
+            log(text)
+        else:
+            print(text, file=sys.stderr, flush=True)
+
+    def forward(stream, say: Callable[[str], None]) -> None:
+        for line in stream:
+            with lock:
+                say(line.rstrip("\n"))
+        stream.close()
+
+    readers = [threading.Thread(target=forward, args=(stream, say), name="worker lines", daemon=True)
+               for p in procs for stream, say in ((p.stdout, log), (p.stderr, say_err))]
+    for reader in readers:
+        reader.start()
+    return readers
 
 
 def stop_with_parent(pipe: int) -> threading.Thread:

@@ -2,6 +2,7 @@
 
 import json
 import os
+import re
 import shutil
 import signal
 import socket
@@ -210,6 +211,58 @@ def test_two_workers_give_the_bytes_of_one_process(full_parking, tmp_path):
     assert frame_files(out) == frame_files(full_parking)
     assert consistent(out) == set(range(10))
     assert (out / "kitti" / "ImageSets" / "train.txt").read_text() == (full_parking / "kitti" / "ImageSets" / "train.txt").read_text()
+
+
+def test_workers_frames_drive_the_runs_one_progress_bar(full_parking, tmp_path):
+    """On a terminal, --workers 2 shows one progress bar that reaches every frame (the workers' frame lines said by
+    the run's own process), not a bar per worker on one line beside the run's own left at 0."""
+    pty = pytest.importorskip("pty", reason="a pseudo-terminal is POSIX's")
+    import fcntl
+    import struct
+    import termios
+
+    master, terminal = pty.openpty()
+    fcntl.ioctl(terminal, termios.TIOCSWINSZ, struct.pack("HHHH", 40, 200, 0, 0))
+    out = tmp_path / "bar"
+    proc = subprocess.Popen([sys.executable, str(ROOT / "run.py"), "--out", str(out), "--frames", "10", *PARKING, "--workers", "2"], cwd=ROOT,
+                            stdin=terminal, stdout=terminal, stderr=terminal)
+    os.close(terminal)
+    shown = b""
+    while True:
+        try:
+            chunk = os.read(master, 65536)
+        except OSError:  # the terminal's last holder has ended
+            break
+        if not chunk:
+            break
+        shown += chunk
+    os.close(master)
+    assert proc.wait(timeout=600) == 0, shown.decode(errors="replace")[-2000:]
+    states = re.findall(r"(\d+)/(\d+) \[", shown.decode(errors="replace"))
+    assert states and set(total for _, total in states) == {"10"}  # one bar, the run's
+    assert [int(done) for done, _ in states][-1] == 10
+    assert frame_files(out) == frame_files(full_parking)
+
+
+def test_worker_lines_go_to_the_runs_log_or_its_stderr(capsys):
+    """Frame lines (a worker's stdout) and its warnings and notes go to the run's log; other stderr lines (a stop line, a
+    traceback) to the run's stderr, each line whole."""
+    from bpy_pipeline.parallel import forward_lines
+
+    program = ("import sys\n"
+               "for k in range(300): print(f'frame {k + 1}/300: ' + 'x' * 300)\n"
+               "print('warning: a builder gave up', file=sys.stderr)\n"
+               "print('Traceback (most recent call last):', file=sys.stderr)\n")
+    procs = [subprocess.Popen([sys.executable, "-c", program], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for _ in range(2)]
+    said: list[str] = []
+    readers = forward_lines(procs, said.append)
+    assert [p.wait(timeout=60) for p in procs] == [0, 0]
+    for reader in readers:
+        reader.join()
+    frames = [line for line in said if line.startswith("frame ")]
+    assert len(frames) == 600 and all(line.endswith("x" * 300) for line in frames)
+    assert said.count("warning: a builder gave up") == 2
+    assert capsys.readouterr().err.splitlines() == ["Traceback (most recent call last):"] * 2
 
 
 def children(pid: int) -> list[int]:
