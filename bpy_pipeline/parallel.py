@@ -108,16 +108,20 @@ def forward_lines(procs: list[subprocess.Popen], log: Callable[[str], None]) -> 
     """Say every line the workers ``procs`` print in this process's ``log``, one line at a time, as they come.
 
     A worker's frame lines (its stdout) drive the run's one progress bar, or its one line a frame, instead of a bar
-    per worker on one terminal line; its warnings and notes go where this process's go; anything else it prints to
-    stderr (its stop line, an error line, a traceback) goes to this process's stderr. One thread a stream: a worker
-    whose pipe were not read would stop at a full pipe.
+    per worker on one terminal line; its warnings and notes go where this process's go; its stop line (Ctrl-C,
+    SIGTERM) is not said: this process says its own, or a warning naming the worker's exit code; anything else it
+    prints to stderr (an error line, a traceback) goes to this process's stderr. One thread a stream: a worker whose
+    pipe were not read would stop at a full pipe.
     """
+    from .cli import STOPPED
+
     lock = threading.Lock()
+    stop_lines = tuple(f"{words}:" for words, _ in STOPPED.values())
 
     def say_err(text: str) -> None:
         if text.startswith(("warning", "note")):
             log(text)
-        else:
+        elif not text.startswith(stop_lines):
             print(text, file=sys.stderr, flush=True)
 
     def forward(stream, say: Callable[[str], None]) -> None:

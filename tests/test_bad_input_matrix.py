@@ -489,12 +489,13 @@ def test_two_resumes_on_a_stale_lock_never_both_take_it(tmp_path):
     assert wins.count(1) == len(wins), wins  # and never both refused
 
 
-def test_sigterm_is_one_line_exit_143_lock_released_frames_kept(tmp_path):
+@pytest.mark.parametrize("workers", [[], ["--workers", "2"]], ids=["one process", "two workers"])
+def test_sigterm_is_one_line_exit_143_lock_released_frames_kept(tmp_path, workers):
     pytest.importorskip("bpy")
     out = tmp_path / "out"
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
-    proc = subprocess.Popen([PY, "run.py", "--set", "scene.builder=parking", "--frames", "200", "--out", str(out)], cwd=ROOT, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, env=env)
+    proc = subprocess.Popen([PY, "run.py", "--set", "scene.builder=parking", "--frames", "200", "--out", str(out), *workers], cwd=ROOT,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     deadline = time.time() + 120
     while time.time() < deadline and len(list((out / "records").glob("*.json"))) < 2:
         time.sleep(0.1)
