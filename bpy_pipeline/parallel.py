@@ -83,7 +83,8 @@ def run_parallel(config: Config, out: str, frames: list[int], mode: str, workers
         # its stdout and stderr: pipes whose lines this process says in its own log (forward_lines)
         procs = [subprocess.Popen(worker_command(out, r, threads), env=env, cwd=os.getcwd(), stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                                   stderr=subprocess.PIPE, text=True, errors="replace") for r in ranges]
-        readers = forward_lines(procs, log)
+        errors: list[str] = []
+        readers = forward_lines(procs, log, errors)
         try:
             codes = [p.wait() for p in procs]
         except BaseException:  # Ctrl-C or SIGTERM: the workers stop too (each keeps its committed frames)
@@ -97,21 +98,26 @@ def run_parallel(config: Config, out: str, frames: list[int], mode: str, workers
                 p.stdin.close()
             for reader in readers:
                 reader.join()
+        if errors and all(c == 2 for c in codes if c):  # bad input a worker found: said once, exit 2; with no frame made, nothing left
+            raise InputError(errors[0].removeprefix("error: "))
     failed = [f"{r[0]}:{r[-1] + 1} (exit {c})" for r, c in zip(ranges, codes) if c != 0]
+    for line in dict.fromkeys(errors):
+        print(line, file=sys.stderr, flush=True)
     if failed:
         log(f"warning: workers failed for frames {', '.join(failed)}; their committed frames are kept, --resume makes the rest")
         return 2 if all(c == 2 for c in codes if c) else 1
     return 0
 
 
-def forward_lines(procs: list[subprocess.Popen], log: Callable[[str], None]) -> list[threading.Thread]:
+def forward_lines(procs: list[subprocess.Popen], log: Callable[[str], None], errors: list[str]) -> list[threading.Thread]:
     """Say every line the workers ``procs`` print in this process's ``log``, one line at a time, as they come.
 
     A worker's frame lines (its stdout) drive the run's one progress bar, or its one line a frame, instead of a bar
-    per worker on one terminal line; its warnings and notes go where this process's go; its stop line (Ctrl-C,
-    SIGTERM) is not said: this process says its own, or a warning naming the worker's exit code; anything else it
-    prints to stderr (an error line, a traceback) goes to this process's stderr. One thread a stream: a worker whose
-    pipe were not read would stop at a full pipe.
+    per worker on one terminal line; its warnings and notes go where this process's go; its error lines
+    (``error: ...``) are appended to ``errors``, for the caller to say once; its stop line (Ctrl-C, SIGTERM) is not
+    said: this process says its own, or a warning naming the worker's exit code; anything else it prints to stderr
+    (a traceback) goes to this process's stderr. One thread a stream: a worker whose pipe were not read would stop
+    at a full pipe.
     """
     from .cli import STOPPED
 
@@ -121,6 +127,8 @@ def forward_lines(procs: list[subprocess.Popen], log: Callable[[str], None]) -> 
     def say_err(text: str) -> None:
         if text.startswith(("warning", "note")):
             log(text)
+        elif text.startswith("error: "):
+            errors.append(text)
         elif not text.startswith(stop_lines):
             print(text, file=sys.stderr, flush=True)
 

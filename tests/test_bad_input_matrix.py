@@ -490,6 +490,19 @@ def test_two_resumes_on_a_stale_lock_never_both_take_it(tmp_path):
 
 
 @pytest.mark.parametrize("workers", [[], ["--workers", "2"]], ids=["one process", "two workers"])
+def test_bad_input_found_while_building_is_one_line_and_leaves_no_folder(tmp_path, workers):
+    """A .blend that is not there is found when the scene is built, in the process that builds it: with workers, theirs.
+    The run says it once and leaves no folder behind, as one process does."""
+    pytest.importorskip("bpy")
+    out = tmp_path / "out"
+    result = subprocess_run([PY, "run.py", "--set", "scene.builder=blend", "--set", f"scene.path={tmp_path / 'gone.blend'}", "--frames", "4", "--out",
+                             str(out), *workers], timeout=300)
+    assert result.returncode == 2
+    one_line(result.stderr, "scene.path: ")
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("workers", [[], ["--workers", "2"]], ids=["one process", "two workers"])
 def test_sigterm_is_one_line_exit_143_lock_released_frames_kept(tmp_path, workers):
     pytest.importorskip("bpy")
     out = tmp_path / "out"

@@ -245,24 +245,27 @@ def test_workers_frames_drive_the_runs_one_progress_bar(full_parking, tmp_path):
 
 
 def test_worker_lines_go_to_the_runs_log_or_its_stderr(capsys):
-    """Frame lines (a worker's stdout) and its warnings and notes go to the run's log; other stderr lines (a stop line, a
-    traceback) to the run's stderr, each line whole."""
+    """Frame lines (a worker's stdout) and its warnings and notes go to the run's log, its error lines to the caller's
+    list, its stop line nowhere, anything else (a traceback) to the run's stderr; each line whole."""
     from bpy_pipeline.parallel import forward_lines
 
     program = ("import sys\n"
                "for k in range(300): print(f'frame {k + 1}/300: ' + 'x' * 300)\n"
                "print('warning: a builder gave up', file=sys.stderr)\n"
+               "print('error: scene.path: gone', file=sys.stderr)\n"
+               "print('terminated (SIGTERM): every frame written so far is committed; --resume continues the run', file=sys.stderr)\n"
                "print('Traceback (most recent call last):', file=sys.stderr)\n")
     procs = [subprocess.Popen([sys.executable, "-c", program], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for _ in range(2)]
     said: list[str] = []
-    readers = forward_lines(procs, said.append)
+    errors: list[str] = []
+    readers = forward_lines(procs, said.append, errors)
     assert [p.wait(timeout=60) for p in procs] == [0, 0]
     for reader in readers:
         reader.join()
     frames = [line for line in said if line.startswith("frame ")]
     assert len(frames) == 600 and all(line.endswith("x" * 300) for line in frames)
-    assert said.count("warning: a builder gave up") == 2
-    assert capsys.readouterr().err.splitlines() == ["Traceback (most recent call last):"] * 2
+    assert said.count("warning: a builder gave up") == 2 and errors == ["error: scene.path: gone"] * 2
+    assert capsys.readouterr().err.splitlines() == ["Traceback (most recent call last):"] * 2  # the stop lines are the run's to say
 
 
 def children(pid: int) -> list[int]:
