@@ -4,8 +4,9 @@
 preview), ``--frames`` frames, whole processes (start-up, Blender, the street, every frame written): once in one process
 and once with ``--workers 2``, in alternating rounds; the best wall time of each is kept. ``fps`` = frames / wall;
 ``over_sensor`` = fps / 10. Both sides must give the same bytes (the frames' PLY files). ``cpu_s`` is the CPU time of a
-run's processes. ``--old DIR``: another checkout's two runs in the same rounds (its bytes must be the same too), and
-``against_old`` = its wall time / this checkout's, for the same worker count.
+run's processes. ``--old DIR``: another checkout's two runs in the same rounds (one process and two workers must give
+the same bytes on each side; ``same_bytes_as_old`` says whether the sides do), and ``against_old`` = its wall time /
+this checkout's, for the same worker count.
 
     python benchmarks/bench_sensor_rate.py [--small] [--frames 200] [--rounds 2] [--old DIR] [--out DIR] [--name NAME]
 
@@ -34,7 +35,7 @@ def main() -> None:
     p.add_argument("--name", help="the results file's name in --out, without .json (default sensor_rate, sensor_rate_small)")
     args = p.parse_args()
     frames, rounds = (6, 1) if args.small else (args.frames, args.rounds)
-    config = ["--config", str(ROOT / "examples" / "street" / "ego_hdl64e.yaml"), "--frames", str(frames)]
+    config = ["--config", "examples/street/ego_hdl64e.yaml", "--frames", str(frames)]  # each checkout's own example (run in its folder)
     sides = {"new": ROOT, **({"old": args.old.resolve()} if args.old else {})}
     runs = [(side, workers) for side in sides for workers in (1, 2)]
     best = {run: (float("inf"), 0.0) for run in runs}
@@ -45,8 +46,9 @@ def main() -> None:
                 out = Path(tmp) / f"{side}w{workers}r{r}"
                 best[side, workers] = min(best[side, workers], timed([*config, "--workers", str(workers)], out, sides[side]))
                 digests.setdefault((side, workers), digest(out))
-    if len(set(digests.values())) != 1:
-        raise SystemExit(f"the runs gave other bytes: {sorted(k for k, v in digests.items() if v != digests['new', 1])}")
+    for side in sides:
+        if digests[side, 1] != digests[side, 2]:
+            raise SystemExit(f"{side}: two workers gave other bytes than one process")
     rows = []
     for side, workers in runs:
         wall, cpu = best[side, workers]
@@ -55,7 +57,9 @@ def main() -> None:
         if "old" in sides and side == "new":
             row["against_old"] = round(best["old", workers][0] / wall, 3)
         rows.append(row)
-    extra = {"sensor_hz": SENSOR_HZ, "same_bytes": True, "rounds": rounds, **({"old": str(args.old)} if args.old else {})}
+    extra = {"sensor_hz": SENSOR_HZ, "same_bytes": True, "rounds": rounds}
+    if args.old:
+        extra.update(old=str(args.old), same_bytes_as_old=digests["old", 1] == digests["new", 1])
     report(args.name or "sensor_rate" + ("_small" if args.small else ""), rows, args.out, extra)
 
 
