@@ -114,22 +114,19 @@ def forward_lines(procs: list[subprocess.Popen], log: Callable[[str], None], err
 
     A worker's frame lines (its stdout) drive the run's one progress bar, or its one line a frame, instead of a bar
     per worker on one terminal line; its warnings and notes go where this process's go; its error lines
-    (``error: ...``) are appended to ``errors``, for the caller to say once; its stop line (Ctrl-C, SIGTERM) is not
-    said: this process says its own, or a warning naming the worker's exit code; anything else it prints to stderr
-    (a traceback) goes to this process's stderr. One thread a stream: a worker whose pipe were not read would stop
-    at a full pipe.
+    (``error: ...``) are appended to ``errors``, for the caller to say once; anything else it prints to stderr (a
+    traceback) goes to this process's stderr. (A worker says no stop line on Ctrl-C or SIGTERM: this process says its
+    own, or a warning naming the worker's exit code.) One thread a stream: a worker whose pipe were not read would
+    stop at a full pipe.
     """
-    from .cli import STOPPED
-
     lock = threading.Lock()
-    stop_lines = tuple(f"{words}:" for words, _ in STOPPED.values())
 
     def say_err(text: str) -> None:
         if text.startswith(("warning", "note")):
             log(text)
         elif text.startswith("error: "):
             errors.append(text)
-        elif not text.startswith(stop_lines):
+        else:
             print(text, file=sys.stderr, flush=True)
 
     def forward(stream, say: Callable[[str], None]) -> None:

@@ -246,14 +246,13 @@ def test_workers_frames_drive_the_runs_one_progress_bar(full_parking, tmp_path):
 
 def test_worker_lines_go_to_the_runs_log_or_its_stderr(capsys):
     """Frame lines (a worker's stdout) and its warnings and notes go to the run's log, its error lines to the caller's
-    list, its stop line nowhere, anything else (a traceback) to the run's stderr; each line whole."""
+    list, anything else (a traceback) to the run's stderr; each line whole."""
     from bpy_pipeline.parallel import forward_lines
 
     program = ("import sys\n"
                "for k in range(300): print(f'frame {k + 1}/300: ' + 'x' * 300)\n"
                "print('warning: a builder gave up', file=sys.stderr)\n"
                "print('error: scene.path: gone', file=sys.stderr)\n"
-               "print('terminated (SIGTERM): every frame written so far is committed; --resume continues the run', file=sys.stderr)\n"
                "print('Traceback (most recent call last):', file=sys.stderr)\n")
     procs = [subprocess.Popen([sys.executable, "-c", program], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for _ in range(2)]
     said: list[str] = []
@@ -265,7 +264,7 @@ def test_worker_lines_go_to_the_runs_log_or_its_stderr(capsys):
     frames = [line for line in said if line.startswith("frame ")]
     assert len(frames) == 600 and all(line.endswith("x" * 300) for line in frames)
     assert said.count("warning: a builder gave up") == 2 and errors == ["error: scene.path: gone"] * 2
-    assert capsys.readouterr().err.splitlines() == ["Traceback (most recent call last):"] * 2  # the stop lines are the run's to say
+    assert capsys.readouterr().err.splitlines() == ["Traceback (most recent call last):"] * 2
 
 
 def children(pid: int) -> list[int]:

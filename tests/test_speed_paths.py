@@ -304,5 +304,5 @@ def test_inside_blender_workers_are_blenders_and_the_manifest_names_its_version(
     monkeypatch.setitem(sys.modules, "bpy", blender)
     command = worker_command("out", [3, 4, 5], 2)
     assert command[:6] == ["/opt/blender-4.5/blender", "--background", "--factory-startup", "--python-exit-code", "1", "--python"]
-    assert command[command.index("--") + 1 :] == ["--out", "out", "--join", "--frames-range", "3:6", "--threads", "2"]
+    assert command[command.index("--") + 1 :] == ["--out", "out", "--join", "--frames-range", "3:6", "--threads", "2", "--parent-pipe"]
     assert versions()["blender"] == "4.5.15"

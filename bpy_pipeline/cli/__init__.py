@@ -273,7 +273,8 @@ def guarded(func, args) -> int:
         if kind is None:
             raise
         words, code = STOPPED[kind]
-        print(f"{words}: every frame written so far is committed; --resume continues the run", file=sys.stderr)
+        if not getattr(args, "parent_pipe", False):  # a worker's run says it (parallel.run_parallel), once
+            print(f"{words}: every frame written so far is committed; --resume continues the run", file=sys.stderr)
         return code
     finally:
         if previous is not None:
