@@ -10,6 +10,7 @@ the machine is not oversubscribed.
 
 from __future__ import annotations
 
+import logging
 import os
 import signal
 import subprocess
@@ -162,8 +163,11 @@ def stop_with_parent(pipe: int) -> threading.Thread:
     return thread
 
 
-def _frames_task(out: str, frames: list[int], threads: int) -> int:
-    """A Ray task: make ``frames`` into ``out`` (joining the run) in this worker's own Blender; returns the count."""
+def _frames_task(out: str, frames: list[int], threads: int) -> tuple[int, str | None]:
+    """A Ray task: make ``frames`` into ``out`` (joining the run) in this worker's own Blender.
+
+    Returns the frames made and the one line of the bad input that stopped it (or None): returned, not raised, so
+    that Ray does not run the task again for an input that stays bad, and the run says it once."""
     os.environ.update(SINGLE_THREAD_ENV)
     import bpy
 
@@ -174,17 +178,25 @@ def _frames_task(out: str, frames: list[int], threads: int) -> int:
     bpy.ops.wm.read_factory_settings(use_empty=True)
     config = config_from_dict(read_manifest(out)["config"])
     config = __import__("dataclasses").replace(config, threads=threads)
-    return sum(1 for _ in run_frames(config, out, frames=frames, mode="join"))
+    made = 0
+    try:
+        for _ in run_frames(config, out, frames=frames, mode="join"):
+            made += 1
+    except InputError as err:
+        return made, str(err)
+    return made, None
 
 
 def _run_on_ray(out: str, frames: list[int], address: str, per_scene: int, log: Callable[[str], None]) -> int:
-    """Frame ranges as Ray tasks (retried on failure); every task commits its frames itself."""
+    """Frame ranges as Ray tasks (retried on failure); every task commits its frames itself. Bad input a task met is
+    raised once, as :class:`InputError`, after every task has ended."""
     try:
         import ray
     except ImportError:
         raise InputError("--ray: Ray is not installed; pip install '.[distributed]'") from None
     try:
-        ray.init(address=address, log_to_driver=False, include_dashboard=False, runtime_env={"env_vars": SINGLE_THREAD_ENV})
+        ray.init(address=address, log_to_driver=False, include_dashboard=False, runtime_env={"env_vars": SINGLE_THREAD_ENV},
+                 logging_level=logging.WARNING)  # not Ray's INFO lines about connecting: the run's own say what happens
     except (ConnectionError, RuntimeError, ValueError) as err:
         raise InputError(f"--ray: cannot connect to a Ray cluster at {address} ({str(err).splitlines()[0]}); start one with `ray start --head`") from None
     try:
@@ -192,17 +204,23 @@ def _run_on_ray(out: str, frames: list[int], address: str, per_scene: int, log: 
         task = ray.remote(num_cpus=1, max_retries=3, retry_exceptions=True)(_frames_task)
         ranges = aligned_ranges(frames, 4 * cpus, per_scene)
         pending = {task.remote(str(Path(out).resolve()), r, 1): r for r in ranges}
-        failed = []
+        failed, bad_input = [], []
         while pending:
             done, _ = ray.wait(list(pending), num_returns=1)
             r = pending.pop(done[0])
             try:
-                ray.get(done[0])
-                log(f"frames {r[0]}..{r[-1]} done on the cluster")
+                _, error = ray.get(done[0])
             except Exception as err:  # a task that failed after its retries
                 failed.append(f"{r[0]}:{r[-1] + 1} ({type(err).__name__})")
+                continue
+            if error is None:
+                log(f"frames {r[0]}..{r[-1]} done on the cluster")
+            else:
+                bad_input.append(error)
     finally:
         ray.shutdown()
+    if bad_input:
+        raise InputError(bad_input[0])
     if failed:
         log(f"warning: Ray tasks failed for frames {', '.join(failed)}; --resume makes the rest")
         return 1

@@ -317,7 +317,7 @@ def test_workers_stop_when_their_parent_is_killed(tmp_path):
     assert consistent(out) == made  # nobody writes any more
 
 
-def test_a_local_ray_cluster_gives_the_bytes_of_one_process(full_parking, tmp_path):
+def test_a_local_ray_cluster_gives_the_bytes_of_one_process_and_says_bad_input_once(full_parking, tmp_path):
     pytest.importorskip("ray", reason="Ray is not installed (pip install '.[distributed]')")
     ray_cli = Path(sys.executable).with_name("ray")
     with socket.socket() as s:
@@ -334,6 +334,14 @@ def test_a_local_ray_cluster_gives_the_bytes_of_one_process(full_parking, tmp_pa
         assert done.returncode == 0, done.stderr
         assert frame_files(out) == frame_files(full_parking)
         assert consistent(out) == set(range(10))
+        # a .blend that is not there, found by the tasks: one line, exit 2, no folder (and no task run again for it)
+        bad = tmp_path / "bad"
+        done = cli("--out", str(bad), "--frames", "4", "--set", "scene.builder=blend", "--set", f"scene.path={tmp_path / 'gone.blend'}", "--ray",
+                   f"127.0.0.1:{port}", env=env)
+        assert done.returncode == 2, done.stderr
+        lines = [line for line in done.stderr.splitlines() if line.strip()]
+        assert len(lines) == 1 and lines[0].startswith("error: scene.path: "), done.stderr
+        assert not bad.exists()
     finally:
         subprocess.run([str(ray_cli), "stop", "--force"], capture_output=True, timeout=120, env=env)
 
