@@ -163,11 +163,11 @@ def stop_with_parent(pipe: int) -> threading.Thread:
     return thread
 
 
-def _frames_task(out: str, frames: list[int], threads: int) -> tuple[int, str | None]:
+def _frames_task(out: str, frames: list[int], threads: int) -> str | None:
     """A Ray task: make ``frames`` into ``out`` (joining the run) in this worker's own Blender.
 
-    Returns the frames made and the one line of the bad input that stopped it (or None): returned, not raised, so
-    that Ray does not run the task again for an input that stays bad, and the run says it once."""
+    Returns None, or the one line of the bad input that stopped it: returned, not raised, so that Ray does not run
+    the task again for an input that stays bad, and the run says it once."""
     os.environ.update(SINGLE_THREAD_ENV)
     import bpy
 
@@ -178,13 +178,12 @@ def _frames_task(out: str, frames: list[int], threads: int) -> tuple[int, str | 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     config = config_from_dict(read_manifest(out)["config"])
     config = __import__("dataclasses").replace(config, threads=threads)
-    made = 0
     try:
         for _ in run_frames(config, out, frames=frames, mode="join"):
-            made += 1
+            pass
     except InputError as err:
-        return made, str(err)
-    return made, None
+        return str(err)
+    return None
 
 
 def _run_on_ray(out: str, frames: list[int], address: str, per_scene: int, log: Callable[[str], None]) -> int:
@@ -209,7 +208,7 @@ def _run_on_ray(out: str, frames: list[int], address: str, per_scene: int, log: 
             done, _ = ray.wait(list(pending), num_returns=1)
             r = pending.pop(done[0])
             try:
-                _, error = ray.get(done[0])
+                error = ray.get(done[0])
             except Exception as err:  # a task that failed after its retries
                 failed.append(f"{r[0]}:{r[-1] + 1} ({type(err).__name__})")
                 continue
