@@ -525,6 +525,31 @@ def test_sigterm_is_one_line_exit_143_lock_released_frames_kept(tmp_path, worker
     assert result.returncode == 0, result.stderr
 
 
+SIGTERM_IN_BLENDERS_START = """
+import os, signal, sys
+class Hook:  # SIGTERM sent while Blender's own startup scripts run (they import bl_ui)
+    def find_spec(self, name, path=None, target=None):
+        if name == "bl_ui":
+            sys.meta_path.remove(self)
+            os.kill(os.getpid(), signal.SIGTERM)
+        return None
+sys.meta_path.insert(0, Hook())
+from bpy_pipeline.cli import exit_process, main
+exit_process(main(["run.py", "--set", "scene.builder=parking", "--frames", "3", "--out", sys.argv[1]]))
+"""
+
+
+def test_sigterm_while_blender_starts_stops_the_run_in_one_line(tmp_path):
+    """Raised inside Blender's start, SIGTERM landed in Blender's startup scripts, which printed its traceback and
+    went on: the run made every frame and exited 0. Held until Blender has started, it stops the run."""
+    pytest.importorskip("bpy")
+    out = tmp_path / "out"
+    result = subprocess_run([PY, "-c", SIGTERM_IN_BLENDERS_START, str(out)], timeout=300)
+    assert result.returncode == 143, result.stderr[-2000:]
+    one_line(result.stderr, "terminated (SIGTERM)")
+    assert not out.exists()
+
+
 def test_a_signal_that_a_c_extension_wraps_still_stops_the_run_in_one_line(capsys):
     """SIGTERM landing while numba loads a cached kernel comes back as a SystemError raised from the handler's
     exception (seen once in the test above); Ctrl-C likewise. An error raised while handling one, and any other

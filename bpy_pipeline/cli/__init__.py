@@ -20,6 +20,7 @@ import signal
 import socket
 import sys
 import threading
+from contextlib import contextmanager
 from typing import NoReturn
 
 from ..errors import InputError
@@ -173,14 +174,15 @@ def run_main(args) -> int:
 
         return run_parallel(config, args.out, frames, mode, workers=args.workers, ray_address=args.ray, log=progress(len(frames), estimate))
     started = "bpy" not in sys.modules  # Blender starts in this process now (python run.py), not already running (blender --python)
-    try:
-        import bpy
-    except ImportError:
-        raise InputError(
-            "bpy: Blender's Python module is not installed; pip install 'bpy==4.5.*' (Python 3.11), or run blender --background --python-exit-code 1 --python "
-            "run.py -- ..."
-        ) from None
-    empty_file(bpy, started)
+    with stops_held():
+        try:
+            import bpy
+        except ImportError:
+            raise InputError(
+                "bpy: Blender's Python module is not installed; pip install 'bpy==4.5.*' (Python 3.11), or run blender --background --python-exit-code 1 "
+                "--python run.py -- ..."
+            ) from None
+        empty_file(bpy, started)
     from ..plan import run
 
     if started:  # this process is the run's: the start's objects (modules, Blender's types, the config) stay to its end,
@@ -241,6 +243,28 @@ def _terminate(signum, frame) -> None:
 
 
 STOPPED = {KeyboardInterrupt: ("interrupted", 130), Terminated: ("terminated (SIGTERM)", 143)}  # what stopped a run: its words, its exit code
+
+
+@contextmanager
+def stops_held():
+    """Ctrl-C and SIGTERM held while Blender starts in this process (or reads its factory settings), then raised.
+
+    Raised inside Blender's start, they land in its own startup scripts, which print the traceback and go on: the run
+    went on to its last frame and exited 0. Here they are noted, and the first is raised when the block ends (as
+    :class:`Terminated` or ``KeyboardInterrupt``). Only in the main thread, where Python runs signal handlers.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    caught: list[int] = []
+    previous = {signum: signal.signal(signum, lambda signum, frame: caught.append(signum)) for signum in (signal.SIGTERM, signal.SIGINT)}
+    try:
+        yield
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+    if caught:
+        raise Terminated() if caught[0] == signal.SIGTERM else KeyboardInterrupt()
 
 
 def stopped_by(err: BaseException) -> type | None:
