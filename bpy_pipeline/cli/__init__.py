@@ -251,13 +251,15 @@ def stops_held():
 
     Raised inside Blender's start, they land in its own startup scripts, which print the traceback and go on: the run
     went on to its last frame and exited 0. Here they are noted, and the first is raised when the block ends (as
-    :class:`Terminated` or ``KeyboardInterrupt``). Only in the main thread, where Python runs signal handlers.
+    :class:`Terminated` or ``KeyboardInterrupt``). Only in the main thread, where Python runs signal handlers, and only
+    a signal whose handler Python set: one a program set in C (a Blender's own SIGINT) could not be put back.
     """
     if threading.current_thread() is not threading.main_thread():
         yield
         return
     caught: list[int] = []
-    previous = {signum: signal.signal(signum, lambda signum, frame: caught.append(signum)) for signum in (signal.SIGTERM, signal.SIGINT)}
+    held = [signum for signum in (signal.SIGTERM, signal.SIGINT) if signal.getsignal(signum) is not None]
+    previous = {signum: signal.signal(signum, lambda signum, frame: caught.append(signum)) for signum in held}
     try:
         yield
     finally:
