@@ -169,6 +169,8 @@ def _frames_task(out: str, frames: list[int], threads: int) -> str | None:
     Returns None, or the one line of the bad input that stopped it: returned, not raised, so that Ray does not run
     the task again for an input that stays bad, and the run says it once."""
     os.environ.update(SINGLE_THREAD_ENV)
+    from dataclasses import replace
+
     import bpy
 
     from .config import config_from_dict
@@ -176,8 +178,7 @@ def _frames_task(out: str, frames: list[int], threads: int) -> str | None:
     from .plan import run_frames
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
-    config = config_from_dict(read_manifest(out)["config"])
-    config = __import__("dataclasses").replace(config, threads=threads)
+    config = replace(config_from_dict(read_manifest(out)["config"]), threads=threads)
     try:
         for _ in run_frames(config, out, frames=frames, mode="join"):
             pass
