@@ -330,3 +330,22 @@ def test_a_missing_extra_is_one_line_naming_it(blocked, argv, fragment, tmp_path
     result = subprocess.run([PY, "-c", code, *[files.get(a, a) for a in argv]], cwd=ROOT, capture_output=True, text=True, timeout=300, check=False)
     assert result.returncode == 2, result.stderr
     one_line(result.stderr, fragment)
+
+
+def test_lightgbm_whose_library_does_not_load_is_one_line_naming_libgomp1(monkeypatch):
+    """On a bare Debian 12 LightGBM installs but its library does not load (no GCC OpenMP runtime): importing it
+    raises OSError, not ImportError, which went up as a traceback."""
+    from bpy_pipeline.evaluate import models
+
+    class NoOpenMP:  # the import of lightgbm fails the way a missing libgomp.so.1 makes it fail
+        @staticmethod
+        def find_spec(name, path=None, target=None):
+            if name == "lightgbm":
+                raise OSError("libgomp.so.1: cannot open shared object file: No such file or directory")
+            return None
+
+    monkeypatch.delitem(sys.modules, "lightgbm", raising=False)
+    monkeypatch.setattr(sys, "meta_path", [NoOpenMP(), *sys.meta_path])
+    with pytest.raises(InputError) as err:
+        models._lgbm(0, 1)
+    assert "\n" not in str(err.value) and "libgomp.so.1" in str(err.value) and "apt-get install libgomp1" in str(err.value)

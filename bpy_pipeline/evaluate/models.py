@@ -31,6 +31,9 @@ def _lgbm(seed: int, n_jobs: int):
         import lightgbm
     except ImportError:
         raise InputError("--model lgbm: needs LightGBM (pip install 'bpy_pipeline[evaluate]'), or use --model forest") from None
+    except OSError as err:  # installed, but its library did not load: on a bare Debian, GCC's OpenMP runtime is missing
+        raise InputError(f"--model lgbm: LightGBM's library did not load ({err}); on Debian: apt-get install libgomp1 (./setup.sh test does), "
+                         "or use --model forest") from None
     return lightgbm.LGBMClassifier(
         n_estimators=100, learning_rate=0.08, num_leaves=31, min_child_samples=40,
         subsample=0.8, subsample_freq=1, colsample_bytree=0.8, reg_lambda=1.0,
