@@ -19,6 +19,7 @@ import os
 import signal
 import socket
 import sys
+import tempfile
 import threading
 from contextlib import contextmanager
 from typing import NoReturn
@@ -174,7 +175,7 @@ def run_main(args) -> int:
 
         return run_parallel(config, args.out, frames, mode, workers=args.workers, ray_address=args.ray, log=progress(len(frames), estimate))
     started = "bpy" not in sys.modules  # Blender starts in this process now (python run.py), not already running (blender --python)
-    with stops_held():
+    with stops_held(), start_noise_dropped():
         try:
             import bpy
         except ImportError:
@@ -267,6 +268,31 @@ def stops_held():
             signal.signal(signum, handler)
     if caught:
         raise Terminated() if caught[0] == signal.SIGTERM else KeyboardInterrupt()
+
+
+BLENDER_START_NOISE = frozenset({
+    "could not get a list of mounted file-systems",  # its file browser's volumes, where /etc/mtab is missing (containerd's Debian images)
+})  # lines Blender's start writes to stderr that are no concern of a run
+
+
+@contextmanager
+def start_noise_dropped():
+    """What is written to stderr (file descriptor 2, C's writes with Python's) while Blender starts in this process, said
+    again when the block ends, but the lines of :data:`BLENDER_START_NOISE`: a run's bad input stays one line."""
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with tempfile.TemporaryFile() as written:
+        os.dup2(written.fileno(), 2)
+        try:
+            yield
+        finally:
+            sys.stderr.flush()
+            os.dup2(saved, 2)
+            os.close(saved)
+            written.seek(0)
+            for line in written.read().decode(errors="replace").splitlines():
+                if line not in BLENDER_START_NOISE:
+                    print(line, file=sys.stderr, flush=True)
 
 
 def stopped_by(err: BaseException) -> type | None:
