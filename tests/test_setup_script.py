@@ -10,7 +10,8 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 
-pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux") or shutil.which("bash") is None, reason="setup.sh is a bash script for Debian")
+pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux") or not (shutil.which("bash") and shutil.which("apt-get")),
+                                reason="setup.sh is a bash script for Debian (bash and apt-get)")
 
 
 def setup(*args: str) -> subprocess.CompletedProcess:
