@@ -602,3 +602,28 @@ def test_blenders_start_noise_is_dropped_from_stderr_and_everything_else_said():
     done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=60, check=False)
     assert done.returncode == 0, done.stderr
     assert done.stderr.splitlines() == ["Blender: something else", "a Python line", "after"]
+
+
+@pytest.mark.parametrize("closed", [0, 1, 2])
+def test_a_run_started_without_a_standard_stream_runs_and_keeps_it_off_its_files(closed, tmp_path):
+    """``run.py ... 2>&-`` (a daemon, a cron line) ended with a traceback nobody saw (exit 1): Python has no
+    ``sys.stderr`` then. Worse, the first file the run opened took number 2, so what Blender or a library wrote to stderr
+    went into it. Now the closed stream is opened on the null device first: the run makes its frame, and a file it
+    opens never takes a standard stream's number."""
+
+    def without_it(*command: str) -> subprocess.CompletedProcess:  # the command started by a shell that closed the stream
+        return subprocess.run(["sh", "-c", f'exec "$@" {closed}>&-', "sh", *command], cwd=ROOT, capture_output=closed == 0, timeout=300, check=False)
+
+    code = (
+        "import os, sys\n"
+        "from bpy_pipeline.cli import standard_streams_open\n"
+        "standard_streams_open()\n"
+        "f = open(sys.argv[1], 'w')\n"
+        "print(f.fileno(), os.fstat(%d).st_rdev == os.stat(os.devnull).st_rdev, file=open(sys.argv[2], 'w'))\n" % closed
+    )
+    assert without_it(sys.executable, "-c", code, str(tmp_path / "data"), str(tmp_path / "said")).returncode == 0
+    fileno, on_null = (tmp_path / "said").read_text().split()
+    assert int(fileno) > 2 and on_null == "True"
+    out = tmp_path / "run"
+    assert without_it(sys.executable, "run.py", "--out", str(out), "--frames", "1").returncode == 0
+    assert len(list((out / "ply").glob("*.ply"))) == 1 and (out / "manifest.json").is_file()

@@ -333,8 +333,31 @@ def guarded(func, args) -> int:
             signal.signal(signal.SIGTERM, previous)
 
 
+STANDARD_STREAMS = ((0, "stdin", "r"), (1, "stdout", "w"), (2, "stderr", "w"))  # file descriptor, sys attribute, mode
+
+
+def standard_streams_open() -> None:
+    """A standard stream the process was started without (``2>&-``) opened on the null device, before any file is.
+
+    Otherwise the first file the run opens (its lock, a frame's PLY) takes the closed stream's number, and what Blender
+    or a library writes to stderr lands in the user's data. Python then has no ``sys.stderr`` (``None``): it gets one
+    on the null device too, so the run's own lines go where the user sent them, nowhere.
+    """
+    for fd, name, mode in STANDARD_STREAMS:
+        try:
+            os.fstat(fd)
+        except OSError:
+            null = os.open(os.devnull, os.O_RDWR)  # the lowest free number: fd itself when the lower ones are open
+            if null != fd:
+                os.dup2(null, fd)
+                os.close(null)
+        if getattr(sys, name) is None:
+            setattr(sys, name, open(fd, mode, closefd=False))
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the pipeline; returns the process exit code (2 on bad input, 130 on Ctrl-C, 143 on SIGTERM)."""
+    standard_streams_open()
     args = parser().parse_args(script_arguments(sys.argv if argv is None else argv))
     return guarded(run_main, args)
 

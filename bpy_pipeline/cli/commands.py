@@ -31,7 +31,7 @@ import sys
 
 from ..registry import Registry
 from . import COMMAND as RUN
-from . import OneLineParser, exit_process, guarded
+from . import OneLineParser, exit_process, guarded, standard_streams_open
 from . import convert, evaluate, fit, match, presets, show_config
 from .subcommand import Command
 
@@ -51,6 +51,7 @@ def parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     """Run one command; returns the exit code (2 on bad input; Ctrl-C 130, SIGTERM 143)."""
+    standard_streams_open()
     args = parser().parse_args(sys.argv[1:] if argv is None else argv)
     return guarded(args.func, args)
 
