@@ -278,10 +278,17 @@ BLENDER_START_NOISE = frozenset({
 @contextmanager
 def start_noise_dropped():
     """What is written to stderr (file descriptor 2, C's writes with Python's) while Blender starts in this process, said
-    again when the block ends, but the lines of :data:`BLENDER_START_NOISE`: a run's bad input stays one line."""
+    again when the block ends, but the lines of :data:`BLENDER_START_NOISE`: a run's bad input stays one line. Held in
+    memory on Linux (no temporary folder needed: a container's root may be read-only); with nowhere to hold them, the
+    lines go straight through."""
+    try:
+        written = open(os.memfd_create("blender start"), "w+b") if hasattr(os, "memfd_create") else tempfile.TemporaryFile()
+    except OSError:
+        yield
+        return
     sys.stderr.flush()
     saved = os.dup(2)
-    with tempfile.TemporaryFile() as written:
+    with written:
         os.dup2(written.fileno(), 2)
         try:
             yield
