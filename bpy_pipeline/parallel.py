@@ -16,6 +16,7 @@ import signal
 import subprocess
 import sys
 import threading
+from dataclasses import replace
 from pathlib import Path
 from typing import Callable
 
@@ -169,8 +170,6 @@ def _frames_task(out: str, frames: list[int], threads: int) -> str | None:
     Returns None, or the one line of the bad input that stopped it: returned, not raised, so that Ray does not run
     the task again for an input that stays bad, and the run says it once."""
     os.environ.update(SINGLE_THREAD_ENV)
-    from dataclasses import replace
-
     import bpy
 
     from .config import config_from_dict
