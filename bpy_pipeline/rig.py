@@ -136,7 +136,7 @@ def field_of_view(spec: SensorSpec, pose: np.ndarray) -> FieldOfView:
     """The :class:`~.geometry.field_of_view.FieldOfView` of a sensor of ``spec`` at ``pose`` (4, 4), for placement."""
     table = elevations(spec)
     step = angular_resolution(spec)[1] or 0.0
-    if spec.pattern in ("rosette", "file"):
+    if len(table) == 0:  # a pattern without rows (rosette, profile, rays from a file): every direction
         azimuth, elevation = (-180.0, 180.0), (-90.0, 90.0)
     else:
         lo, hi = spec.horizontal_fov_deg

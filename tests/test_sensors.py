@@ -325,6 +325,8 @@ def test_overrides_replace_what_they_name():
         ({"preset": "railway_tls", "channels": 10, "vertical_resolution_deg": 0.05}, "sensor.channels"),
         ({"preset": "flash96x16", "horizontal_fov_deg": [-10, 50]}, "sensor.horizontal_fov_deg"),
         ({"preset": "flash96x16", "columns": 0}, "sensor.columns"),
+        ({"preset": "flash96x16", "horizontal_resolution_deg": 0.3}, "sensor.horizontal_resolution_deg"),  # the key given, not the columns it unset
+        ({"preset": "flash96x16_grid", "firing_rate_hz": 1e4}, "sensor.firing_rate_hz"),
         ({"preset": "livox_mid40", "deflection_deg": [60, 40]}, "sensor.deflection_deg"),
         ({"preset": "livox_mid40", "point_rate_hz": 0}, "sensor.point_rate_hz"),
     ],
@@ -334,6 +336,22 @@ def test_bad_overrides_name_their_key(overrides, key):
         resolve_sensor({"preset": "vlp16", **overrides})
     assert str(err.value).startswith(key + ":"), str(err.value)
     assert "\n" not in str(err.value)
+
+
+@pytest.mark.parametrize("name", list(presets()))
+def test_every_preset_has_a_field_of_view_for_placement_and_culling(name):
+    """Every builder asks the sensor's field of view before its first frame (placement in view, levels of detail). A pattern
+    without rows (a profile, a rosette) covers every direction; a profiler on any builder crashed here."""
+    from bpy_pipeline.rig import field_of_view, out_of_reach
+
+    spec = preset(name)
+    fov = field_of_view(spec, np.eye(4))
+    assert -180.0 <= fov.azimuth[0] < fov.azimuth[1] <= 360.0 and -90.0 - 1.0 <= fov.elevation[0] < fov.elevation[1] <= 90.0 + 1.0, (fov.azimuth, fov.elevation)
+    if len(elevations(spec)) == 0:
+        assert (fov.azimuth, fov.elevation) == ((-180.0, 180.0), (-90.0, 90.0))
+    centres = np.array([[5.0, 0.0, 0.0], [0.0, 0.0, 30.0], [0.0, 0.0, -30.0], [2 * spec.max_range + 10.0, 0.0, 0.0]])
+    reach = out_of_reach(spec, np.eye(4), centres, np.ones(len(centres)))
+    assert reach[-1] and reach.dtype == bool  # beyond the range: out of reach for every pattern
 
 
 def test_bad_override_through_the_config_names_the_full_key():

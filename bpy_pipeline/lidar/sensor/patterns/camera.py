@@ -42,6 +42,12 @@ def count(spec) -> int:
 
 
 def derive(spec, section: dict, where: str) -> dict:
+    """``horizontal_resolution_deg`` from the image width; a camera given an angle step or a firing rate in its place is
+    refused naming that key (a preset's ``columns`` stop applying once either is given: they decide the same thing)."""
+    named = [key for key in ("horizontal_resolution_deg", "firing_rate_hz") if key in section]
+    if spec.columns < 1 and named:
+        raise InputError(f"{where}.{named[0]}: a {spec.pattern} camera's image width is {where}.columns (pixels), not an angle step or a rate; "
+                         f"give {where}.columns instead")
     return derive_columns(spec, section, where, window=False)
 
 
