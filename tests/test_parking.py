@@ -228,16 +228,3 @@ def test_bad_scene_input_names_the_key():
     with pytest.raises(InputError, match="scene.poses: expected weights"):
         load_config(None, ["scene.builder=industrial_hall", "scene.poses={dancing: 1}"])
     assert load_config(None, ["scene.builder=parking", "scene.place_sensor=false", "sensor.position=[0, 0, 1.5]"]).sensor.position == (0.0, 0.0, 1.5)
-
-
-@pytest.mark.bpy
-def test_a_sensor_without_rows_scans_the_garage(bpy_scene, tmp_path):
-    """A profiler (rays in one plane, no rows) on a builder other than the railway's: its field of view is every direction
-    (the placement's and the levels of detail's view), where asking it for its rows' span crashed before the first frame."""
-    from bpy_pipeline.config import load_config
-    from bpy_pipeline.plan import run
-
-    config = load_config(None, ["scene.builder=parking", "sensor.preset=railway_profiler", "frames=1",
-                                "output.formats=[ply]", "output.preview=false", "output.boxes.formats=[kitti]"])
-    manifest = run(config, tmp_path / "run", log=lambda *_: None)
-    assert manifest["frames"][0]["points"] > 0
