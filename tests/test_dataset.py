@@ -78,6 +78,22 @@ def test_frames_5_to_9_alone_give_the_bytes_of_the_full_run(full_parking, tmp_pa
     assert consistent(part) == {5, 6, 7, 8, 9}
 
 
+def test_the_parts_of_a_run_made_one_after_another_in_one_folder(full_parking, tmp_path):
+    """``--shard 0/2`` then ``--shard 1/2`` into the same folder, as docs/datasets.md shows the parts of a run: the second
+    is told the folder holds this run's frames and to give --resume, which adds its part: the full run's bytes."""
+    out = tmp_path / "run"
+    assert cli("--out", str(out), "--frames", "10", "--shard", "0/2", *PARKING).returncode == 0
+    second = cli("--out", str(out), "--frames", "10", "--shard", "1/2", *PARKING)
+    assert second.returncode == 2 and second.stderr.strip().splitlines() == [
+        f"error: --out: {out} holds 5 frames of this run (same config and seed); give --resume to add this part's frames to them or --overwrite to start "
+        "it again"
+    ]
+    assert consistent(out) == {0, 1, 2, 3, 4}
+    done = cli("--out", str(out), "--frames", "10", "--shard", "1/2", "--resume", *PARKING)
+    assert done.returncode == 0, done.stderr
+    assert frame_files(out) == frame_files(full_parking)
+
+
 def test_a_frame_of_a_scene_serving_several_frames_alone(tmp_path):
     """A railway built once for three stations: frames 4 and 5 alone scan the scene frame 3 built."""
     full, part = tmp_path / "full", tmp_path / "part"
@@ -94,11 +110,14 @@ def test_a_second_run_into_the_folder_refuses(full_parking, tmp_path):
     shutil.copytree(full_parking, out)
     other_seed = cli("--out", str(out), "--frames", "10", *PARKING, "--seed", "12")
     fewer = cli("--out", str(out), "--frames", "3", *PARKING)
-    for done in (other_seed, fewer):
-        assert done.returncode == 2
-        assert done.stderr.strip().splitlines() == [
-            f"error: --out: {out} holds another run (seed 11, 10 frames); give --resume to continue it (same config and seed) or --overwrite to replace it"
-        ]
+    assert other_seed.returncode == fewer.returncode == 2
+    assert other_seed.stderr.strip().splitlines() == [
+        f"error: --out: {out} holds another run (seed 11, 10 frames); give --resume to continue it (same config and seed) or --overwrite to replace it"
+    ]
+    assert fewer.stderr.strip().splitlines() == [  # the same run (frames is not part of its key), as a --shard of it meets it
+        f"error: --out: {out} holds 10 frames of this run (same config and seed); give --resume to add this part's frames to them or --overwrite to start "
+        "it again"
+    ]
     resumed_other = cli("--out", str(out), "--frames", "10", *PARKING, "--seed", "12", "--resume")
     assert resumed_other.returncode == 2 and "another config or seed (differs in: seed)" in resumed_other.stderr
     assert frame_files(out) == frame_files(full_parking)
