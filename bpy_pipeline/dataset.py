@@ -354,8 +354,8 @@ class Dataset:
         if old is not None and self.mode == "new":
             frames = len(list((self.out / RECORDS).glob("*.json")))
             if old.get("format") == DATASET_FORMAT and old.get("run_key") == run_key(self.config):  # another part of the same run (a --shard)
-                raise InputError(f"--out: {self.out} holds {frames} frames of this run (same config and seed); give --resume to add this part's "
-                                 "frames to them or --overwrite to start it again")
+                raise InputError(f"--out: {self.out} holds {frames} frames of this run (same config and seed); give --resume to add the frames "
+                                 "asked for to them or --overwrite to start it again")
             what = f"seed {old.get('seed')}, {frames} frames" if old.get("format") == DATASET_FORMAT else "an earlier version's output"
             raise InputError(f"--out: {self.out} holds another run ({what}); give --resume to continue it (same config and seed) or --overwrite to replace it")
         if old is not None and self.mode == "overwrite":

@@ -85,7 +85,7 @@ def test_the_parts_of_a_run_made_one_after_another_in_one_folder(full_parking, t
     assert cli("--out", str(out), "--frames", "10", "--shard", "0/2", *PARKING).returncode == 0
     second = cli("--out", str(out), "--frames", "10", "--shard", "1/2", *PARKING)
     assert second.returncode == 2 and second.stderr.strip().splitlines() == [
-        f"error: --out: {out} holds 5 frames of this run (same config and seed); give --resume to add this part's frames to them or --overwrite to start "
+        f"error: --out: {out} holds 5 frames of this run (same config and seed); give --resume to add the frames asked for to them or --overwrite to start "
         "it again"
     ]
     assert consistent(out) == {0, 1, 2, 3, 4}
@@ -115,7 +115,7 @@ def test_a_second_run_into_the_folder_refuses(full_parking, tmp_path):
         f"error: --out: {out} holds another run (seed 11, 10 frames); give --resume to continue it (same config and seed) or --overwrite to replace it"
     ]
     assert fewer.stderr.strip().splitlines() == [  # the same run (frames is not part of its key), as a --shard of it meets it
-        f"error: --out: {out} holds 10 frames of this run (same config and seed); give --resume to add this part's frames to them or --overwrite to start "
+        f"error: --out: {out} holds 10 frames of this run (same config and seed); give --resume to add the frames asked for to them or --overwrite to start "
         "it again"
     ]
     resumed_other = cli("--out", str(out), "--frames", "10", *PARKING, "--seed", "12", "--resume")
