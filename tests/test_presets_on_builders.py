@@ -2,8 +2,9 @@
 
 A user tries another sensor on a scene by one key (``--set sensor.preset=...``). Each builder asks the sensor for its
 field of view before its first frame (placement in view, levels of detail), and a pattern that fires no rows crashed
-there on every builder but the railway's. One frame a preset, boxes asked for, the sensor 1.5 m above where the builder
-puts it (a robot's or a handheld unit's preset has no mount height: on the ground it sees nothing, and the run says so).
+there on every builder (a sensor on a path, as in the railway's mobile example, excepted). One frame a preset, boxes asked
+for, the sensor 1.5 m above where the builder puts it (a robot's or a handheld unit's preset has no mount height: on the
+ground it sees nothing, and the run says so).
 """
 
 from __future__ import annotations
