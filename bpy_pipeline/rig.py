@@ -148,7 +148,8 @@ def field_of_view(spec: SensorSpec, pose: np.ndarray) -> FieldOfView:
 def out_of_reach(spec: SensorSpec, pose: np.ndarray, centres: np.ndarray, radii: np.ndarray, margin_deg: float = 1.0) -> np.ndarray:
     """``(n,)`` bool: spheres (world ``centres`` (n, 3), ``radii`` (n,) m) that no ray of a sensor of ``spec`` at
     ``pose`` can pass within: wholly outside its azimuth or elevation span (the rays' own, widened by
-    ``margin_deg``), or farther than its range. Conservative: ``False`` whenever in doubt (rosettes, rays from files)."""
+    ``margin_deg``), or farther than its range. Conservative: ``False`` whenever in doubt (a pattern without rows, a
+    rosette, a profile or rays from a file, spans every direction: :func:`field_of_view`)."""
     local = (np.asarray(centres, float) - pose[:3, 3]) @ pose[:3, :3]
     d = np.linalg.norm(local, axis=1)
     radii = np.asarray(radii, float)
@@ -156,8 +157,6 @@ def out_of_reach(spec: SensorSpec, pose: np.ndarray, centres: np.ndarray, radii:
     spread = np.degrees(np.arcsin(np.clip(radii / np.maximum(d, 1e-12), 0.0, 1.0))) + margin_deg
     far = np.sqrt(np.maximum(d**2 - radii**2, 0.0)) - radii > spec.max_range
     out = far & ~inside
-    if spec.pattern in ("rosette", "file"):
-        return out
     fov = field_of_view(spec, np.eye(4))
     el = np.degrees(np.arcsin(np.clip(local[:, 2] / np.maximum(d, 1e-12), -1.0, 1.0)))
     out |= ~inside & ((el + spread < fov.elevation[0]) | (el - spread > fov.elevation[1]))
