@@ -38,7 +38,8 @@ way, frames = sys.argv[1], int(sys.argv[2])
 config = load_config("examples/street/ego_hdl64e.yaml", [f"frames={frames}"])
 if way == "first":  # the finishing stages and the commit left out
     run_stages = plan.run_stages
-    finishing = {stage.name for stage in plan.plan(config)[plan.finishing_start(plan.plan(config)):]}
+    stages = plan.plan(config)
+    finishing = {stage.name for stage in stages[plan.finishing_start(stages):]}
     plan.run_stages = lambda frame, run, stages, said: None if stages and stages[0].name in finishing else run_stages(frame, run, stages, said)
     dataset.Dataset.commit = lambda self, frame, say=None: {"points": len(frame.points)}
 with tempfile.TemporaryDirectory() as tmp:
