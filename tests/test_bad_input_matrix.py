@@ -385,6 +385,21 @@ def test_resume_with_fewer_frames_is_refused_and_more_extends(tmp_path):
     assert json.loads((out / "manifest.json").read_text())["config"]["frames"] == 30
 
 
+def test_a_new_run_into_a_folder_of_the_same_run_is_refused_naming_resume(tmp_path):
+    """A second --shard of a run (the same config and seed) into its folder without --resume: one line saying the folder
+    holds this run's frames, and nothing in the folder changed."""
+    from bpy_pipeline.config import load_config
+    from bpy_pipeline.dataset import Dataset
+
+    out = tmp_path / "out"
+    config = load_config({"scene": {"builder": "parking"}, "frames": 20})
+    Dataset.open(out, config, "new")._unlock()
+    before = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    refused("holds 0 frames of this run (same config and seed); give --resume", Dataset.open, out, config, "new")
+    refused("holds another run (seed 0, 0 frames)", Dataset.open, out, load_config({"scene": {"builder": "railway"}, "frames": 20}), "new")
+    assert {p: p.read_bytes() for p in out.rglob("*") if p.is_file()} == before
+
+
 def stale_lock(out: Path, holder) -> Path:
     out.mkdir(parents=True, exist_ok=True)
     lock = out / ".lock"
