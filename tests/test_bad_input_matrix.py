@@ -98,6 +98,8 @@ CLI_ROWS = [
      "scene.desks_per_row: 2 row(s) of 9 desk(s) and 3 shelf rack(s) do not fit"),
     ("hall sensor on a shelf", ["--set", "scene={builder: industrial_hall, width: 5, sensor_height: 2.5}"],
      "scene.sensor_height: the sensor 2.5 m above the hall's centre comes within 0.5 m of shelf_0"),
+    # Blender's node seeds are 32-bit: a larger street layout_seed crashed in the planting group's modifier (a TypeError)
+    ("street layout_seed 2**31", ["--set", f"scene={{builder: street, layout_seed: {2**31}}}"], "scene.layout_seed: must lie in 0..2147483647, got 2147483648"),
 ]
 
 

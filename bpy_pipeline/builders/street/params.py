@@ -97,7 +97,7 @@ class StreetScene:
     terrain_step: float = field(default=1.0, metadata=meta("m", low=0, low_open=True))
     terrain_relief: float = field(default=0.5, metadata=meta("m", low=0))
     terrain_slope: float = field(default=0.04, metadata=meta("", low=0))
-    layout_seed: int = field(default=0, metadata=meta("", low=0))
+    layout_seed: int = field(default=0, metadata=meta("", low=0, high=2**31 - 1))  # a Blender node seed: a 32-bit integer
     vehicles: Distribution = field(default_factory=lambda: Distribution("normal", 16.0, 5.0, 0.0, 60.0))
     vehicle_mix: dict = field(default_factory=lambda: {"car": 0.7, "van": 0.15, "truck": 0.08, "bus": 0.07})
     platoon_probability: float = field(default=0.5, metadata=meta("", 0, 1))
