@@ -10,7 +10,7 @@ import dataclasses
 
 import pytest
 
-from test_parking_nodes import exported, same_mesh
+from test_parking_nodes import exported, inputs_cover_their_keys, same_mesh
 
 pytestmark = pytest.mark.bpy
 
@@ -80,3 +80,11 @@ def test_a_racks_levels_edited_in_its_modifier_change_what_the_export_reads():
     seven = shelf(item.name, item.parts[4][0][:2], params.shelf_size, 7).mesh()
     got = exported([item.name])[item.name]
     assert len(got[1]) == len(seven[1]) == 12 * (4 + 7) and same_mesh(got, seven) <= 0.0
+
+
+def test_every_hall_input_the_config_sets_holds_its_keys_range():
+    """The "Industrial Hall" group's inputs from the scene's keys, a rack's Levels among them (2^31 boards ran out of memory)."""
+    from bpy_pipeline.builders.industrial_hall import hall_nodes
+    from bpy_pipeline.builders.industrial_hall.params import IndustrialHallScene
+
+    inputs_cover_their_keys(hall_nodes.INPUTS, hall_nodes.FIELDS | {"Levels": "shelf_levels"}, IndustrialHallScene)

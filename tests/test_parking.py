@@ -221,6 +221,10 @@ def test_bad_scene_input_names_the_key():
         "scene.placement=anywhere": "scene.placement: expected 'free' | 'bays'",
         "sensor.position=[0, 0, 1]": "sensor.position: the parking scene places the sensor itself",
         "output.boxes.min_points={car: -1}": "output.boxes.min_points.car: expected an integer >= 0",
+        # a 10^12 m level and a turn tried 2^31 times ran until killed; Blender's 32-bit input overflowed with a traceback
+        "scene.length=1e12": "scene.length: must lie in 1..10000 m, got 1000000000000.0",
+        "scene.rotations=2147483648": "scene.rotations: at most 36 ",
+        "scene.pillar_every=2147483648": "scene.pillar_every: must lie in 1..1000, got 2147483648",
     }
     for assignment, message in cases.items():
         with pytest.raises(InputError, match=message.replace("(", r"\(").replace("|", r"\|")):
@@ -228,3 +232,4 @@ def test_bad_scene_input_names_the_key():
     with pytest.raises(InputError, match="scene.poses: expected weights"):
         load_config(None, ["scene.builder=industrial_hall", "scene.poses={dancing: 1}"])
     assert load_config(None, ["scene.builder=parking", "scene.place_sensor=false", "sensor.position=[0, 0, 1.5]"]).sensor.position == (0.0, 0.0, 1.5)
+

@@ -202,3 +202,25 @@ def test_the_group_is_laid_out_in_columns_by_depth():
     inputs, outputs = (next(n for n in group.nodes if n.bl_idname == kind) for kind in ("NodeGroupInput", "NodeGroupOutput"))
     assert x[inputs.name] == 0.0 and x[outputs.name] == max(x.values()) and len(places) == len(group.nodes)
     assert all(x[link.to_node.name] > x[link.from_node.name] for link in group.links)
+
+
+def inputs_cover_their_keys(inputs, fields: dict, params) -> None:
+    """Each group input of ``fields`` ({input name: params field}) declares a range (``inputs``' rows: name, type, default,
+    description, min, max) holding its key's whole range (the field's metadata): else Blender would clamp, or for a 32-bit
+    integer input refuse with a traceback, a value the config took, and the scene in Blender would differ from the pure
+    layout the builder places its objects in."""
+    metadata = {f.name: f.metadata for f in dataclasses.fields(params)}
+    rows = {row[0]: row for row in inputs}
+    for name, key in fields.items():
+        low, high = rows[name][4], rows[name][5]
+        assert metadata[key]["low"] is not None and metadata[key]["high"] is not None, key
+        assert low <= metadata[key]["low"] and metadata[key]["high"] <= high, (key, metadata[key]["low"], metadata[key]["high"], low, high)
+
+
+def test_every_level_input_the_config_sets_holds_its_keys_range():
+    """The "Parking Level" group's inputs from the scene's keys (a 10^12 m level ran until killed, a pillar_every of 2^31
+    overflowed the group's integer input)."""
+    from bpy_pipeline.builders.parking import level_nodes
+    from bpy_pipeline.builders.parking.params import ParkingScene
+
+    inputs_cover_their_keys(level_nodes.INPUTS, level_nodes.FIELDS, ParkingScene)

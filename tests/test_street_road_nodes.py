@@ -242,3 +242,13 @@ def test_a_taller_building_in_its_modifier_moves_its_roof_and_nothing_else(stree
     for name in before:
         if name != part.name:
             assert np.array_equal(before[name], after[name]), name
+
+
+def test_every_road_input_the_config_sets_holds_its_keys_range():
+    """The "Street Road" group's inputs from the scene's keys (:data:`road_nodes.FIELDS`)."""
+    pytest.importorskip("bpy")
+    from test_parking_nodes import inputs_cover_their_keys
+
+    from bpy_pipeline.builders.street import road_nodes
+
+    inputs_cover_their_keys(road_nodes.ROAD_INPUTS, road_nodes.FIELDS, StreetScene)

@@ -46,6 +46,10 @@ INPUTS = [
 ]
 
 
+# input -> IndustrialHallScene field, the hall's own inputs of every piece (a rack's Levels: shelf_levels; Centre, Size: per piece)
+FIELDS = {"Length": "length", "Width": "width", "Height": "height", "Wall Thickness": "wall_thickness"}
+
+
 def hall_group() -> bpy.types.NodeTree:
     """The "Industrial Hall" modifier group (see the module docstring); inputs :data:`INPUTS`."""
     group = current_group(GROUP, VERSION)
@@ -109,7 +113,7 @@ def hall_object(name: str, part: str, params, collection, prototypes: dict, inst
     (an ``IndustrialHallScene``); ``inputs`` sets ``Centre``, ``Size``, ``Levels`` of a desk or rack."""
     obj = bpy.data.objects.new(name, bpy.data.meshes.new(name))
     collection.objects.link(obj)
-    hall = {"Length": params.length, "Width": params.width, "Height": params.height, "Wall Thickness": params.wall_thickness}
+    hall = {name: getattr(params, key) for name, key in FIELDS.items()}
     add_group_modifier(obj, hall_group(), hall | inputs | {"Part": PARTS[part], "Box": prototypes["box"], "Instance": int(instance)})
     return obj
 

@@ -31,17 +31,17 @@ class IndustrialHallScene:
     meshes (empty: assets_manifest/assets.yaml); the procedural people are used when it lists none.
     """
 
-    length: float = field(default=16.0, metadata=meta("m", low=0, low_open=True))
-    width: float = field(default=12.0, metadata=meta("m", low=0, low_open=True))
-    height: float = field(default=5.0, metadata=meta("m", low=0, low_open=True))
-    wall_thickness: float = field(default=0.3, metadata=meta("m", low=0, low_open=True))
+    length: float = field(default=16.0, metadata=meta("m", low=0.1, high=10000))
+    width: float = field(default=12.0, metadata=meta("m", low=0.1, high=10000))
+    height: float = field(default=5.0, metadata=meta("m", low=0.1, high=1000))
+    wall_thickness: float = field(default=0.3, metadata=meta("m", low=0, high=10, low_open=True))
     desk_rows: int = field(default=2, metadata=meta("", low=0))
     desks_per_row: int = field(default=3, metadata=meta("", low=0))
     desk_size: tuple[float, float] = field(default=(1.6, 0.8), metadata=meta("m", low=0, low_open=True))
     desk_height: float = field(default=0.72, metadata=meta("m", low=0, low_open=True))
     shelves: int = field(default=3, metadata=meta("", low=0))
     shelf_size: tuple[float, float, float] = field(default=(2.0, 0.6, 2.2), metadata=meta("m", low=0, low_open=True))
-    shelf_levels: int = field(default=4, metadata=meta("", low=0, low_open=True))
+    shelf_levels: int = field(default=4, metadata=meta("", low=1, high=100))
     place_sensor: bool = True
     sensor_height: float = field(default=4.5, metadata=meta("m", low=0, low_open=True))
     area_radius: float = field(default=4.5, metadata=meta("m", low=0, help="people and robots stand within this of the point below the sensor (0: anywhere)"))
@@ -81,16 +81,18 @@ def check_furniture(params: IndustrialHallScene, where: str) -> None:
     from ...geometry.clearance import CLEARANCE, SensorPoses
     from ...geometry.indoor import hall_layout, hall_station
 
-    layout = hall_layout(params)
     rows = f"{params.desk_rows} row(s) of {params.desks_per_row} desk(s) and {params.shelves} shelf rack(s)"
+    misfit = InputError(f"{where}.desks_per_row: {rows} do not fit the hall's {params.length:g} x {params.width:g} m floor without overlapping or "
+                        f"reaching past its walls; use fewer desks (desk_rows, desks_per_row) or shelves, smaller desk_size or shelf_size, or a larger hall")
+    footprints = params.desk_rows * params.desks_per_row * params.desk_size[0] * params.desk_size[1] + params.shelves * params.shelf_size[0] * params.shelf_size[1]
+    if footprints > params.length * params.width:  # more than the floor holds side by side: refused before any piece is laid out
+        raise misfit
+    layout = hall_layout(params)
     boxes = [item.footprint for item in layout.furniture]
     for k, (low, high) in enumerate(boxes):
         if (low < layout.low - 1e-9).any() or (high > layout.high + 1e-9).any() or any((np.minimum(high, h) - np.maximum(low, l) > 1e-9).all() for l,
                                                                                        h in boxes[:k]):
-            raise InputError(
-                f"{where}.desks_per_row: {rows} do not fit the hall's {params.length:g} x {params.width:g} m floor without overlapping or "
-                f"reaching past its walls; use fewer desks (desk_rows, desks_per_row) or shelves, smaller desk_size or shelf_size, or a larger hall"
-            )
+            raise misfit
     if not params.place_sensor:
         return
     if params.sensor_height > params.height - CLEARANCE:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -39,19 +41,19 @@ class ParkingScene:
     ``retroreflector`` and ``glossy_paint``; ``false`` leaves them out.
     """
 
-    length: float = field(default=60.0, metadata=meta("m", low=0, low_open=True))
-    driveway_width: float = field(default=6.5, metadata=meta("m", low=0, low_open=True))
-    bay_width: float = field(default=2.5, metadata=meta("m", low=0, low_open=True))
-    bay_depth: float = field(default=5.0, metadata=meta("m", low=0, low_open=True))
-    ceiling_height: float = field(default=2.6, metadata=meta("m", low=0, low_open=True))
-    slab_thickness: float = field(default=0.3, metadata=meta("m", low=0, low_open=True))
-    wall_thickness: float = field(default=0.3, metadata=meta("m", low=0, low_open=True))
-    pillar_size: float = field(default=0.6, metadata=meta("m", low=0, low_open=True))
-    pillar_every: int = field(default=3, metadata=meta("", low=0, low_open=True))
-    ramp_length: float = field(default=16.0, metadata=meta("m", low=0))
-    wall_openings: int = field(default=0, metadata=meta("", low=0))
-    opening_width: float = field(default=1.2, metadata=meta("m", low=0, low_open=True))
-    opening_height: float = field(default=2.1, metadata=meta("m", low=0, low_open=True))
+    length: float = field(default=60.0, metadata=meta("m", low=1, high=10000))
+    driveway_width: float = field(default=6.5, metadata=meta("m", low=0, high=100, low_open=True))
+    bay_width: float = field(default=2.5, metadata=meta("m", low=0.1, high=100))
+    bay_depth: float = field(default=5.0, metadata=meta("m", low=0, high=100, low_open=True))
+    ceiling_height: float = field(default=2.6, metadata=meta("m", low=0.1, high=100))
+    slab_thickness: float = field(default=0.3, metadata=meta("m", low=0, high=10, low_open=True))
+    wall_thickness: float = field(default=0.3, metadata=meta("m", low=0, high=10, low_open=True))
+    pillar_size: float = field(default=0.6, metadata=meta("m", low=0, high=10, low_open=True))
+    pillar_every: int = field(default=3, metadata=meta("", low=1, high=1000))
+    ramp_length: float = field(default=16.0, metadata=meta("m", low=0, high=1000))
+    wall_openings: int = field(default=0, metadata=meta("", low=0, high=1000))
+    opening_width: float = field(default=1.2, metadata=meta("m", low=0, high=100, low_open=True))
+    opening_height: float = field(default=2.1, metadata=meta("m", low=0, high=100, low_open=True))
     place_sensor: bool = True
     sensor_height: float = field(default=1.51, metadata=meta("m", low=0, low_open=True))
     sensor_start: float = field(default=4.0, metadata=meta("m", low=0))
@@ -76,6 +78,9 @@ def check(params: ParkingScene, where: str) -> None:
     check_distribution(params.cars, f"{where}.cars", low=0.0)
     check_distribution(params.car_distance, f"{where}.car_distance", low=0.0)
     check_distribution(params.car_height, f"{where}.car_height", low=0.5, high=4.0)
+    if params.rotations * params.rotation_step_deg >= 360.0 + params.rotation_step_deg:  # a car's turns past one whole turn repeat its headings
+        raise InputError(f"{where}.rotations: at most {math.ceil(360.0 / params.rotation_step_deg)} (one whole turn in steps of rotation_step_deg, "
+                         f"{params.rotation_step_deg:g} deg), got {params.rotations}")
     if params.ramp_length > params.length - 8.0:
         raise InputError(f"{where}.ramp_length: must leave at least 8 m of the level's length ({params.length} m) for the driveway, got {params.ramp_length}")
     if params.opening_height >= params.ceiling_height:

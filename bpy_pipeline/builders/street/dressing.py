@@ -44,6 +44,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ...errors import InputError
 from ...geometry import primitives
 from ...geometry.clearance import NO_POSES, SensorPoses
 from ...geometry.primitives import beam_mesh, beams_mesh, box_mesh, transformed
@@ -57,6 +58,7 @@ Mesh = tuple[np.ndarray, np.ndarray]
 REFLECTIVITY = {"vegetation": 0.35, "trunk": 0.3, "terrain": 0.4, "pole": 0.2, "fence": 0.3, "wall": 0.35,
                 "barrier": 0.5, "traffic cone": 0.55, "bin": 0.15, "bicycle stand": 0.4}
 BOUNDARIES = ("fence", "hedge", "wall", "none")
+MAX_TERRAIN_VERTICES = 2_000_000  # a terrain block's grid (1 m steps over 1,400 x 1,400 m); a finer one's arrays run to gigabytes
 LEAF_CARD = 0.25  # m: how far a crown's or hedge's leaf cards may reach beyond its nominal size (half a 0.4-0.5 m card)
 
 
@@ -175,6 +177,9 @@ def _height_grid(terrain: Terrain, x0: float, x1: float, y0: float, y1: float, s
     """``(x, y, z, triangles)``: the ground over ``[x0, x1] x [y0, y1]`` sampled at about ``step`` metres;
     ``x, y, z`` (nx, ny) grids (m), ``triangles`` (2 (nx-1) (ny-1), 3) int32 into their raveled order."""
     nx, ny = max(2, int(math.ceil((x1 - x0) / step)) + 1), max(2, int(math.ceil((y1 - y0) / step)) + 1)
+    if nx * ny > MAX_TERRAIN_VERTICES:
+        raise InputError(f"scene.terrain_step: {step:g} m makes the ground beside the road a grid of {nx:,} x {ny:,} vertices over "
+                         f"{x1 - x0:.0f} x {y1 - y0:.0f} m, more than {MAX_TERRAIN_VERTICES:,}; give a coarser terrain_step or shorter arms")
     gx, gy = np.meshgrid(np.linspace(x0, x1, nx), np.linspace(y0, y1, ny), indexing="ij")
     i = np.arange(nx - 1)[:, None] * ny + np.arange(ny - 1)[None, :]
     i = i.ravel()

@@ -65,16 +65,16 @@ class StreetScene:
     ``retroreflector`` and ``glossy_paint`` (applied with ``effects.materials.objects: true``); ``false`` leaves them out.
     """
 
-    arm_length: float = field(default=100.0, metadata=meta("m", low=0, low_open=True))
+    arm_length: float = field(default=100.0, metadata=meta("m", low=0, high=1000, low_open=True))
     junction_mix: dict = field(default_factory=lambda: {"cross": 1.0},
                                metadata=meta("", help="shares of the junction kinds drawn per layout: cross, t_junction, straight"))
-    lanes_per_direction: int = field(default=1, metadata=meta("", low=0, low_open=True))
-    lane_width: float = field(default=3.5, metadata=meta("m", low=0, low_open=True))
-    parking_width: float = field(default=2.2, metadata=meta("m", low=0))
-    kerb_width: float = field(default=0.15, metadata=meta("m", low=0, low_open=True))
-    kerb_height: float = field(default=0.15, metadata=meta("m", low=0, low_open=True))
-    sidewalk_width: float = field(default=3.5, metadata=meta("m", low=0, low_open=True))
-    crossing_width: float = field(default=4.0, metadata=meta("m", low=0, low_open=True))
+    lanes_per_direction: int = field(default=1, metadata=meta("", low=1, high=16))
+    lane_width: float = field(default=3.5, metadata=meta("m", low=0.5, high=10))
+    parking_width: float = field(default=2.2, metadata=meta("m", low=0, high=10))
+    kerb_width: float = field(default=0.15, metadata=meta("m", low=0.01, high=2))
+    kerb_height: float = field(default=0.15, metadata=meta("m", low=0, high=1, low_open=True))
+    sidewalk_width: float = field(default=3.5, metadata=meta("m", low=0.1, high=50))
+    crossing_width: float = field(default=4.0, metadata=meta("m", low=0.8))  # a walking person, 0.4 m from either edge
     crossing_offset: float = field(default=1.0, metadata=meta("m", low=0))
     signs: int = field(default=4, metadata=meta("", low=0))
     building_depth: float = field(default=10.0, metadata=meta("m", low=0, low_open=True))
@@ -86,12 +86,12 @@ class StreetScene:
     boundary_mix: dict = field(default_factory=lambda: {"fence": 0.35, "hedge": 0.3, "wall": 0.15, "none": 0.2})
     street_trees: float = field(default=0.6, metadata=meta("", 0, 1))
     tree_spacing: tuple[float, float] = field(default=(8.0, 16.0), metadata=meta("m", low=0))
-    yard_plants: float = field(default=1.5, metadata=meta("", low=0))
+    yard_plants: float = field(default=1.5, metadata=meta("", low=0, high=100))
     yard_trees: float = field(default=0.0, metadata=meta("", 0, MAX_YARD_TREES, help="more trees per 100 m^2 of yard (0: none)"))
     yard_tree_clearance: float = field(default=4.0, metadata=meta("m", low=0.5, help="apart, at least a trunk's width"))
     yard_tree_height: tuple[float, float] = field(default=(4.0, 14.0), metadata=meta("m", low=2, help="[min, max]: their crowns clear 1.5 m"))
     lamp_spacing: float = field(default=28.0, metadata=meta("m", low=0))
-    furniture_per_100m: float = field(default=3.0, metadata=meta("", low=0))
+    furniture_per_100m: float = field(default=3.0, metadata=meta("", low=0, high=100))
     roadworks: float = field(default=0.25, metadata=meta("", 0, 1))
     terrain: bool = True
     terrain_step: float = field(default=1.0, metadata=meta("m", low=0, low_open=True))

@@ -159,10 +159,14 @@ def centre_lines(arm_length: float, j: Junction = FOUR_ARMS) -> list[np.ndarray]
     return [through] + [np.array([[0.0, 0.0, 0.0], [0.0, sign * a, 0.0]]) for sign in j.arms]
 
 
+# input -> StreetScene field (:func:`road_inputs`)
+FIELDS = {"Lanes": "lanes_per_direction", "Lane Width": "lane_width", "Parking Width": "parking_width", "Kerb Width": "kerb_width",
+          "Kerb Height": "kerb_height", "Sidewalk Width": "sidewalk_width"}
+
+
 def road_inputs(params) -> dict:
     """The group's inputs for :class:`~bpy_pipeline.builders.street.StreetScene` ``params`` (Part and Instance aside)."""
-    return {"Lanes": int(params.lanes_per_direction), "Lane Width": float(params.lane_width), "Parking Width": float(params.parking_width),
-            "Kerb Width": float(params.kerb_width), "Kerb Height": float(params.kerb_height), "Sidewalk Width": float(params.sidewalk_width)}
+    return {name: (int if name == "Lanes" else float)(getattr(params, key)) for name, key in FIELDS.items()}
 
 
 def road_object(name: str, part: str, params, collection: bpy.types.Collection, instance: int = 0) -> bpy.types.Object:
