@@ -101,7 +101,8 @@ CLI_ROWS = [
     # Blender's node seeds are 32-bit: a larger street layout_seed crashed in the planting group's modifier (a TypeError)
     ("street layout_seed 2**31", ["--set", f"scene={{builder: street, layout_seed: {2**31}}}"], "scene.layout_seed: must lie in 0..2147483647, got 2147483648"),
     # values that ran out of memory or ran until killed, or crashed, before their key was bounded (the sweep of round twenty-nine)
-    ("street terrain_step 1 mm", ["--set", "scene={builder: street, terrain_step: 0.001}"], "scene.terrain_step: 0.001 m makes the ground beside the road a grid"),
+    ("street terrain_step 1 mm", ["--set", "scene={builder: street, terrain_step: 0.001}"],
+     "scene.terrain_step: 0.001 m makes the ground beside the road a grid"),
     ("street crossing narrower than a person", ["--set", "scene={builder: street, crossing_width: 0.0001}"], "scene.crossing_width: must be >= 0.8 m"),
     ("street furniture 1e9 per 100 m", ["--set", "scene={builder: street, furniture_per_100m: 1e9}"], "scene.furniture_per_100m: must lie in 0..100"),
     ("hall 2**31 desk rows", ["--set", f"scene={{builder: industrial_hall, desk_rows: {2**31}}}"], "do not fit the hall's 16 x 12 m floor"),

@@ -47,7 +47,7 @@ def test_an_indoor_scenes_sizes_are_its_fields_ranges():
     from bpy_pipeline.schema import check_ranges
 
     check_ranges(dataclasses.replace(ParkingScene(), ramp_length=0.0, wall_openings=0), "scene")  # may be zero
-    with pytest.raises(InputError, match=r"^scene\.bay_width: must be > 0 m, got 0\.0$"):
+    with pytest.raises(InputError, match=r"^scene\.bay_width: must lie in 0\.1\.\.100 m, got 0\.0$"):  # the level group's Bay Width input
         check_ranges(dataclasses.replace(ParkingScene(), bay_width=0.0), "scene")
     with pytest.raises(InputError, match=r"^scene\.setback\[0\]: must be >= 0 m, got -1\.0$"):
         check_ranges(dataclasses.replace(StreetScene(), setback=(-1.0, 8.0)), "scene")

@@ -84,7 +84,8 @@ def check_furniture(params: IndustrialHallScene, where: str) -> None:
     rows = f"{params.desk_rows} row(s) of {params.desks_per_row} desk(s) and {params.shelves} shelf rack(s)"
     misfit = InputError(f"{where}.desks_per_row: {rows} do not fit the hall's {params.length:g} x {params.width:g} m floor without overlapping or "
                         f"reaching past its walls; use fewer desks (desk_rows, desks_per_row) or shelves, smaller desk_size or shelf_size, or a larger hall")
-    footprints = params.desk_rows * params.desks_per_row * params.desk_size[0] * params.desk_size[1] + params.shelves * params.shelf_size[0] * params.shelf_size[1]
+    desks, shelves = params.desk_rows * params.desks_per_row, params.shelves
+    footprints = desks * params.desk_size[0] * params.desk_size[1] + shelves * params.shelf_size[0] * params.shelf_size[1]
     if footprints > params.length * params.width:  # more than the floor holds side by side: refused before any piece is laid out
         raise misfit
     layout = hall_layout(params)
