@@ -206,9 +206,9 @@ def test_the_group_is_laid_out_in_columns_by_depth():
 
 def inputs_cover_their_keys(inputs, fields: dict, params) -> None:
     """Each group input of ``fields`` ({input name: params field}) declares a range (``inputs``' rows: name, type, default,
-    description, min, max) holding its key's whole range (the field's metadata): else Blender would clamp, or for a 32-bit
-    integer input refuse with a traceback, a value the config took, and the scene in Blender would differ from the pure
-    layout the builder places its objects in."""
+    description, min, max) holding its key's whole range (the field's metadata): a value the config takes is one the
+    group's modifier panel offers when the user edits the built scene, and none overflows a 32-bit integer input (Blender
+    refuses that with a traceback; a float beyond its input's range Blender takes as it is)."""
     metadata = {f.name: f.metadata for f in dataclasses.fields(params)}
     rows = {row[0]: row for row in inputs}
     for name, key in fields.items():
