@@ -232,4 +232,3 @@ def test_bad_scene_input_names_the_key():
     with pytest.raises(InputError, match="scene.poses: expected weights"):
         load_config(None, ["scene.builder=industrial_hall", "scene.poses={dancing: 1}"])
     assert load_config(None, ["scene.builder=parking", "scene.place_sensor=false", "sensor.position=[0, 0, 1.5]"]).sensor.position == (0.0, 0.0, 1.5)
-
