@@ -102,3 +102,29 @@ def test_runs_whose_stages_read_blender_keep_filling_it_every_frame():
     assert [stage.name for stage in plan(rendered) if stage.reads_blender] == ["camera"]
     plain = load_config("examples/street/ego_hdl64e.yaml")
     assert not any(stage.reads_blender for stage in plan(plain))
+
+
+def test_parts_joined_in_one_pass_are_the_parts_one_at_a_time():
+    """``parts_buffers`` joins the parts' vertices once; the bytes and rows are those of a part at a time, with parts
+    beyond the range left out (one exactly at it kept), two parts of one name, and one without triangles."""
+    from bpy_pipeline.blender.export import _Labeller, _parts_one_by_one, parts_buffers
+    from bpy_pipeline.labels import load_class_table
+
+    table, rng = load_class_table(), np.random.default_rng(3)
+    tags = {"lidar_class": "car", "lidar_material": "diffuse", "lidar_reflectivity": 0.4, "lidar_instance": 7}
+
+    def part(name, x):
+        return name, dict(tags), rng.normal(size=(5, 3)) + [x, 0.0, 0.0], rng.integers(0, 5, (4, 3))
+
+    flat = ("edge", dict(tags), np.array([[10.0, -1, -1], [11, 1, 1], [12, 0, 0]]), np.array([[0, 1, 2]]))  # its nearest point 10 m away
+    parts = [part("a", 0.0), part("far", 50.0), part("b", 3.0), flat, ("empty", dict(tags), np.zeros((0, 3)), np.zeros((0, 3), int))]
+    within = (np.zeros(3), 10.0)
+    for chosen, keep_within in ((parts, within), (parts, None), (parts + [part("a", 1.0)], within)):
+        made = parts_buffers(table, chosen, keep_within=keep_within)
+        one = _parts_one_by_one(_Labeller(table), [p for p in chosen if len(p[3])], keep_within)
+        for name in ("vertices", "triangles", "triangle_object"):
+            a, b = getattr(one, name), getattr(made, name)
+            assert a.dtype == b.dtype and a.tobytes() == b.tobytes(), name
+        assert made.objects.rows() == one.objects.rows()
+    names = [row["name"] for row in parts_buffers(table, parts, keep_within=within).objects.rows()]
+    assert names == ["a", "b", "edge"]

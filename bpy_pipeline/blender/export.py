@@ -333,23 +333,52 @@ def parts_buffers(table: ClassTable, parts, extra_rules=(), keep_within=None) ->
     parts : ``[(name, lidar properties {"lidar_class": ..., ...}, vertices (n, 3) world, triangles (m, 3))]`` in the
         objects' order; vertices are rounded to float32 as a mesh stores them
     keep_within : as :func:`export_scene`
+
+    The parts' vertices are rounded, bounded and joined as one array (a street frame's 150 parts: one pass each, not
+    a dozen array calls a part); the rows, their order and the bytes are those of one part at a time.
     """
     labeller = _Labeller(table, extra_rules)
+    parts = [part for part in parts if len(part[3])]
+    vertices = [np.asarray(v, np.float32).reshape(-1, 3) for _, _, v, _ in parts]
+    counts = np.array([len(v) for v in vertices], np.int64)
+    if not parts or not counts.all() or len({part[0] for part in parts}) < len(parts):
+        return _parts_one_by_one(labeller, parts, keep_within)  # nothing to join, a part without vertices, or two of one name
+    every = np.concatenate(vertices).astype(np.float64)  # (n, 3) the parts' float32 vertices, one after another
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    kept = np.ones(len(parts), bool)
+    if keep_within is not None:
+        kept = _near_bounds_each(np.minimum.reduceat(every, starts), np.maximum.reduceat(every, starts), *keep_within)
+    rows = []
+    for (name, properties, _, _), keep in zip(parts, kept.tolist()):
+        if keep:
+            rows.append(labeller.row(_Tags(name, properties), [name]))
+    if not rows:
+        return _assembled({}, {}, labeller)
+    chosen = np.flatnonzero(kept)
+    triangles = [np.asarray(parts[i][3], np.int32).reshape(-1, 3) for i in chosen]
+    sizes = np.array([len(t) for t in triangles], np.int64)
+    offsets = np.cumsum(counts[chosen]) - counts[chosen]  # each kept part's first row among the kept vertices
+    # placed by the identity: the world vertices are the local ones plus 0.0, the bits an identity placement's einsum
+    # gives finite coordinates (each times 1 plus the others times 0: exact, and a -0.0 comes out +0.0; a
+    # non-finite vertex is refused by SceneBuffers.check either way, naming the same object)
+    joined = every if kept.all() else every[np.repeat(kept, counts)]
+    joined += 0.0
+    return SceneBuffers(joined, np.concatenate(triangles) + np.repeat(offsets, sizes).astype(np.int32)[:, None],
+                        np.repeat(np.array(rows, np.int32), sizes), labeller.table_out())
+
+
+def _parts_one_by_one(labeller: _Labeller, parts, keep_within) -> SceneBuffers:
+    """:func:`parts_buffers` a part at a time: a part without vertices (refused by :meth:`SceneBuffers.check`, naming it),
+    or parts of one name (one object: the first one's row, the last one's mesh)."""
     meshes: dict[tuple, tuple] = {}
     placements: dict[tuple, list[np.ndarray] | None] = {}
     for name, properties, vertices, triangles in parts:
         local = np.asarray(vertices, np.float32).reshape(-1, 3).astype(np.float64)
-        if not len(triangles):
+        if keep_within is not None and not _near_bounds(local.min(axis=0, initial=np.inf), local.max(axis=0, initial=-np.inf), *keep_within):
             continue
-        if keep_within is not None and not _near_bounds(local.min(axis=0), local.max(axis=0), *keep_within):
-            continue
-        owner = _Tags(name, properties)
-        # placed by the identity: the world vertices are the local ones plus 0.0, the bits an identity placement's einsum
-        # gives finite coordinates (each times 1 plus the others times 0: exact, and a -0.0 comes out +0.0; a
-        # non-finite vertex is refused by SceneBuffers.check either way, naming the same object)
         local += 0.0
         meshes[(name, "")] = (local, np.asarray(triangles, np.int32).reshape(-1, 3), None, None)
-        placements[((name, ""), labeller.row(owner, [name]))] = None
+        placements[((name, ""), labeller.row(_Tags(name, properties), [name]))] = None
     return _assembled(meshes, placements, labeller)
 
 
@@ -430,3 +459,15 @@ def _near_bounds(low: np.ndarray, high: np.ndarray, centre, radius: float) -> bo
     """Whether the world bounds ``low``, ``high`` (3,) come within ``radius`` m of ``centre`` (3,)."""
     nearest = np.minimum(np.maximum(np.asarray(centre, float), low), high)  # np.clip's values, without its dispatch
     return float(np.linalg.norm(nearest - centre)) <= radius
+
+
+def _near_bounds_each(low: np.ndarray, high: np.ndarray, centre, radius: float) -> np.ndarray:
+    """``(k,)`` bool: :func:`_near_bounds` of each of ``k`` bounds ``low``, ``high`` (k, 3), in one pass; the few whose
+    distance lies within a rounding of ``radius`` are asked of :func:`_near_bounds` itself (its norm may round apart)."""
+    centre = np.asarray(centre, float)
+    gap = np.minimum(np.maximum(centre, low), high) - centre
+    distance = np.sqrt(np.einsum("ij,ij->i", gap, gap))
+    near = distance <= radius
+    for k in np.flatnonzero(~(np.abs(distance - radius) > 1e-9 * max(abs(radius), 1.0))):  # nan too
+        near[k] = _near_bounds(low[k], high[k], centre, radius)
+    return near
