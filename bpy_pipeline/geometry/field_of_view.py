@@ -24,10 +24,14 @@ class FieldOfView:
     max_range: float
 
     def contains(self, points) -> np.ndarray:
-        """``(n,)`` bool: which world ``points`` (n, 3) lie inside the field of view and range."""
+        """``(n,)`` bool: which world ``points`` (n, 3) lie inside the field of view and range.
+
+        The numbers of ``np.linalg.norm(local, axis=1)`` and ``np.clip(..., -1, 1)``, without their dispatch (a street
+        frame asks this of every road user placed)."""
         local = (np.asarray(points, float) - self.pose[:3, 3]) @ self.pose[:3, :3]
-        r = np.linalg.norm(local, axis=1)
-        el = np.degrees(np.arcsin(np.clip(local[:, 2] / np.maximum(r, 1e-12), -1, 1)))
+        r = np.sqrt(np.add.reduce(local * local, axis=1))
+        sine = np.minimum(np.maximum(local[:, 2] / np.maximum(r, 1e-12), -1.0), 1.0)
+        el = np.degrees(np.arcsin(sine))
         inside = (el >= self.elevation[0]) & (el <= self.elevation[1]) & (r >= self.min_range) & (r <= self.max_range)
         if self.azimuth[1] - self.azimuth[0] >= 360.0:  # all round: every azimuth
             return inside

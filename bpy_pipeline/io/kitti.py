@@ -168,16 +168,19 @@ def label_lines(boxes: np.ndarray, points: np.ndarray, camera, maps: ClassMaps |
     order = points_of_instances(points["instance"], np.concatenate([boxes["instance"], regions["instance"]]))
     owners = points["instance"][order]
     xyz = np.stack([points[name][order] for name in ("x", "y", "z")], axis=1)  # (m, 3) float32: the boxed instances' points, grouped by instance
+    uv, depth = project(xyz, k, tr)  # each point's numbers as projected box by box (row by row the same arithmetic)
+    seen = in_image(uv, depth, resolution)
+    every = [(b, False) for b in boxes] + [(b, True) for b in regions]
+    wanted = np.concatenate([boxes["instance"], regions["instance"]])
+    first, end = np.searchsorted(owners, wanted, "left"), np.searchsorted(owners, wanted, "right")  # each box's points: rows first..end
+    running = np.concatenate([[0], np.cumsum(seen)])
     lines, dont_care = [], []
-    for box, region in [(b, False) for b in boxes] + [(b, True) for b in regions]:
-        mine = xyz[np.searchsorted(owners, box["instance"], "left") : np.searchsorted(owners, box["instance"], "right")]
-        uv, depth = project(mine, k, tr)
-        seen = in_image(uv, depth, resolution)
-        if not seen.any():
-            continue
-        left, top = uv[seen].min(axis=0)
-        right, bottom_px = uv[seen].max(axis=0)
-        truncation = max(float(box["truncation"]), 1.0 - seen.sum() / len(seen))
+    for j in np.flatnonzero(running[end] > running[first]).tolist():  # the boxes the camera sees a point of, in order
+        (box, region), rows = every[j], slice(first[j], end[j])
+        mine = uv[rows][seen[rows]]
+        left, top = mine.min(axis=0)
+        right, bottom_px = mine.max(axis=0)
+        truncation = max(float(box["truncation"]), 1.0 - len(mine) / (end[j] - first[j]))
         length, width, height = box["size"]
         bottom = np.asarray(box["centre"], float) - [0.0, 0.0, height / 2]
         x, y, z = tr[:, :3] @ bottom + tr[:, 3]
