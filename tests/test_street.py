@@ -114,6 +114,34 @@ def test_field_of_view_counts_azimuth_elevation_and_range():
     assert view.contains(np.array(ahead)).tolist() == [True, False, False, False, False, True]  # 11.3 deg down is out, 5.7 in
 
 
+def test_field_of_view_answers_as_numpys_norm_and_clip_would():
+    """``FieldOfView.contains`` spells out ``np.linalg.norm(axis=1)`` and ``np.clip``: the same answer for every point,
+    its elevation on an edge, at the sensor itself, straight above it, or not finite."""
+    from bpy_pipeline.geometry.field_of_view import FieldOfView
+
+    def by_numpy(view, points):
+        local = (points - view.pose[:3, 3]) @ view.pose[:3, :3]
+        r = np.linalg.norm(local, axis=1)
+        el = np.degrees(np.arcsin(np.clip(local[:, 2] / np.maximum(r, 1e-12), -1, 1)))
+        inside = (el >= view.elevation[0]) & (el <= view.elevation[1]) & (r >= view.min_range) & (r <= view.max_range)
+        az = np.degrees(np.arctan2(local[:, 1], local[:, 0]))
+        return inside if view.azimuth[1] - view.azimuth[0] >= 360.0 else inside & (az >= view.azimuth[0]) & (az <= view.azimuth[1])
+
+    rng = np.random.default_rng(5)
+    for k in range(400):
+        pose = np.eye(4)
+        pose[:3, :3] = np.linalg.qr(rng.normal(size=(3, 3)))[0]
+        pose[:3, 3] = rng.normal(size=3) * 10
+        low = float(rng.uniform(-30, 0))
+        view = FieldOfView(pose, (-180.0, 180.0) if k % 2 else (-45.0, 45.0), (low, low + float(rng.uniform(0, 30))), 0.5, 100.0)
+        points = pose[:3, 3] + rng.normal(size=(27, 3)) * 20
+        points[:4] = pose[:3, 3] + [[0, 0, 0], [0, 0, 5], [np.nan, 0, 0], [np.inf, 1, 1]]
+        edge = np.radians(low)
+        points[4] = pose[:3, 3] + pose[:3, :3] @ [10 * np.cos(edge), 0.0, 10 * np.sin(edge)]
+        with np.errstate(invalid="ignore"):  # the infinite point's inf / inf, both ways
+            assert np.array_equal(view.contains(points), by_numpy(view, points))
+
+
 def test_meshes_that_cross_are_found_and_touching_ones_are_not():
     a = primitives.box_mesh(0, 1, 0, 1, 0, 1)
     assert street.meshes_intersect(a, primitives.box_mesh(0.5, 1.5, 0.2, 0.8, 0.2, 0.8))
