@@ -11,6 +11,7 @@ BENCHMARKS = [
     "bench_caster_reuse.py",
     "bench_workers.py",
     "bench_sensor_rate.py",
+    "bench_call_cpu.py",
     "bench_default_job.py",
     "bench_effects.py",
     "bench_fitting.py",

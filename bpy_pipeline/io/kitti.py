@@ -165,13 +165,13 @@ def label_lines(boxes: np.ndarray, points: np.ndarray, camera, maps: ClassMaps |
     k, tr = camera_matrices(camera, to_points)
     resolution = tuple(int(v) for v in camera.resolution)
     regions = boxes[:0] if regions is None else regions
-    order = points_of_instances(points["instance"], np.concatenate([boxes["instance"], regions["instance"]]))
+    wanted = np.concatenate([boxes["instance"], regions["instance"]])  # the boxes', then the regions' instances
+    order = points_of_instances(points["instance"], wanted)
     owners = points["instance"][order]
     xyz = np.stack([points[name][order] for name in ("x", "y", "z")], axis=1)  # (m, 3) float32: the boxed instances' points, grouped by instance
     uv, depth = project(xyz, k, tr)  # each point's numbers as projected box by box (row by row the same arithmetic)
     seen = in_image(uv, depth, resolution)
     every = [(b, False) for b in boxes] + [(b, True) for b in regions]
-    wanted = np.concatenate([boxes["instance"], regions["instance"]])
     first, end = np.searchsorted(owners, wanted, "left"), np.searchsorted(owners, wanted, "right")  # each box's points: rows first..end
     running = np.concatenate([[0], np.cumsum(seen)])
     lines, dont_care = [], []
