@@ -12,6 +12,7 @@ BENCHMARKS = [
     "bench_workers.py",
     "bench_sensor_rate.py",
     "bench_call_cpu.py",
+    "bench_thread_time.py",
     "bench_default_job.py",
     "bench_effects.py",
     "bench_fitting.py",
