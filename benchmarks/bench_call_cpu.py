@@ -24,7 +24,7 @@ import threading
 import time
 from pathlib import Path
 
-from common import RESULTS, ROOT, report
+from common import RESULTS, ROOT, report, run_ego_job
 
 FUNCTIONS = (  # the parts round thirty changed, and the stages around them
     "bpy_pipeline.blender.export:parts_buffers",
@@ -87,18 +87,13 @@ def child(root: Path, frames: int, specs: list[str], out: Path, result: Path) ->
     """In the child process: ``root``'s package, the job run through its command line, the sums written to ``result``."""
     sys.path.insert(0, str(root))
     os.chdir(root)
-    from bpy_pipeline import cli
+    from bpy_pipeline import cli  # noqa: F401  (the package loaded first: timed_calls wraps each name wherever it was imported)
 
     stats = timed_calls(specs)
-    sys.argv = ["run.py", "--config", "examples/street/ego_hdl64e.yaml", "--frames", str(frames), "--out", str(out)]
-    code = 0
-    try:
-        cli.main()
-    except SystemExit as stop:
-        code = stop.code or 0
+    code = run_ego_job(frames, out)
     result.write_text(json.dumps(stats))
     sys.stdout.flush()
-    os._exit(int(code))  # Blender's modules are loaded: leave without their teardown
+    os._exit(code)  # Blender's modules are loaded: leave without their teardown
 
 
 def measure(root: Path, frames: int, specs: list[str], tmp: Path) -> dict[str, list[float]]:

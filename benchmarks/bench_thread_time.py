@@ -27,7 +27,7 @@ import threading
 import time
 from pathlib import Path
 
-from common import RESULTS, ROOT, report
+from common import RESULTS, ROOT, report, run_ego_job
 
 LANES = {"MainThread": "main thread (first lane)", "finishing_0": "finishing lane", "ThreadPoolExecutor-0_0": "caster's pool"}
 
@@ -45,8 +45,6 @@ def child(frames: int, every: float, out: Path, result: Path) -> None:
     """In the child: the job through the command line, its threads' accounts sampled, the sums written to ``result``."""
     sys.path.insert(0, str(ROOT))
     os.chdir(ROOT)
-    from bpy_pipeline import cli
-
     seen: dict[str, dict] = {}  # thread name -> {first, last (perf_counter s), run, queued (ns)}
     stop = threading.Event()
 
@@ -69,12 +67,7 @@ def child(frames: int, every: float, out: Path, result: Path) -> None:
     seen["MainThread"] = {"first": start, **dict(zip(("run", "queued"), schedstat(threading.main_thread().native_id)))}
     base = dict(seen["MainThread"])
     watcher.start()
-    sys.argv = ["run.py", "--config", "examples/street/ego_hdl64e.yaml", "--frames", str(frames), "--out", str(out)]
-    code = 0
-    try:
-        cli.main()
-    except SystemExit as stop_code:
-        code = stop_code.code or 0
+    code = run_ego_job(frames, out)
     sample()
     wall, after = time.perf_counter() - start, os.times()
     stop.set()
@@ -84,7 +77,7 @@ def child(frames: int, every: float, out: Path, result: Path) -> None:
     process_cpu = (after.user + after.system) - (before.user + before.system)  # every thread's, since the job began
     result.write_text(json.dumps({"wall": wall, "cpu": process_cpu, "cores": len(os.sched_getaffinity(0)), "threads": seen}))
     sys.stdout.flush()
-    os._exit(int(code))  # Blender's modules are loaded: leave without their teardown
+    os._exit(code)  # Blender's modules are loaded: leave without their teardown
 
 
 def main() -> None:

@@ -21,6 +21,19 @@ def arguments(description: str) -> argparse.Namespace:
     return p.parse_args()
 
 
+def run_ego_job(frames: int, out: Path) -> int:
+    """``examples/street/ego_hdl64e.yaml`` for ``frames`` frames into ``out`` through the command line, in this process
+    (the ``bpy_pipeline`` first on ``sys.path``, from the current folder); returns its exit code."""
+    from bpy_pipeline import cli
+
+    sys.argv = ["run.py", "--config", "examples/street/ego_hdl64e.yaml", "--frames", str(frames), "--out", str(out)]
+    try:
+        cli.main()
+    except SystemExit as stop:
+        return int(stop.code or 0)
+    return 0
+
+
 def best_of(fn, repeat: int = 3) -> float:
     """Smallest wall time of ``repeat`` calls of ``fn()``, seconds (shared machines are noisy)."""
     times = []
