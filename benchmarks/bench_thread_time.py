@@ -6,8 +6,8 @@ for one) every ``--every`` seconds and once at the end. Per frame, the first fra
 build) included, for the threads that live through the job: the main thread (the first lane: build, export, scan,
 effects), the finishing lane's thread (boxes, files, commit) and the caster's pool (the scan's second thread), each
 ``run`` (on a core), ``queued`` (runnable, no core free) and ``asleep`` (its life less both: waiting for the
-interpreter lock, for another thread's result, or for I/O). ``other threads`` are the short-lived ones (the preview's
-and the KITTI image's writers), the process's CPU less the named threads'. ``idle cores`` is the share of the cores'
+interpreter lock, for another thread's result, or for I/O). ``other threads`` are every other thread's (the preview's
+and the KITTI image's writers, the libraries' own): the process's CPU less the named threads'. ``idle cores`` is the share of the cores'
 time the process left unused: ``1 - CPU / (cores x wall)``. Linux only (the benchmark says so and stops elsewhere).
 
     python benchmarks/bench_thread_time.py [--small] [--frames 60] [--every 0.05] [--out DIR] [--name NAME]
@@ -29,7 +29,7 @@ from pathlib import Path
 
 from common import RESULTS, ROOT, report, run_ego_job
 
-LANES = {"MainThread": "main thread (first lane)", "finishing_0": "finishing lane", "ThreadPoolExecutor-0_0": "caster's pool"}
+LANES = {"MainThread": "main thread (first lane)", "finishing_0": "finishing lane", "caster_0": "caster's pool"}
 
 
 def schedstat(native_id: int) -> tuple[int, int] | None:

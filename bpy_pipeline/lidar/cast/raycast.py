@@ -393,7 +393,7 @@ class RayCaster:
         Embree and the compiled kernels release the GIL)."""
         items = list(items)
         if self.threads > 1 and len(items) > 1 and self._pool is None:
-            self._pool = ThreadPoolExecutor(self.threads - 1)
+            self._pool = ThreadPoolExecutor(self.threads - 1, "caster")
             weakref.finalize(self, self._pool.shutdown)
         return share(self._pool, fn, items, self.threads)
 
@@ -627,7 +627,7 @@ class CasterCache:
         :func:`.sharing.share`; ``None`` with one thread); made on first use."""
         threads = int(self.threads) if self.threads else default_threads()
         if threads > 1 and self._pool is None:
-            self._pool = ThreadPoolExecutor(threads - 1)
+            self._pool = ThreadPoolExecutor(threads - 1, "caster")
             weakref.finalize(self, self._pool.shutdown)
         return self._pool
 

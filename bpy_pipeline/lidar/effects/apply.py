@@ -113,7 +113,7 @@ def apply_effects(points: np.ndarray, beam: np.ndarray, effects, rng: np.random.
     if pool is not None or threads == 1:
         parts = share(pool, run, range(len(starts)), threads)
     else:
-        with ThreadPoolExecutor(threads - 1) as own:
+        with ThreadPoolExecutor(threads - 1, "effects") as own:
             parts = share(own, run, range(len(starts)), threads)
     raw = np.dtype((np.void, points.dtype.itemsize))
     return np.concatenate([p.view(raw) for p in parts]).view(points.dtype)
