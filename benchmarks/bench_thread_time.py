@@ -43,8 +43,7 @@ def schedstat(native_id: int) -> tuple[int, int] | None:
 
 def child(frames: int, every: float, out: Path, result: Path) -> None:
     """In the child: the job through the command line, its threads' accounts sampled, the sums written to ``result``."""
-    sys.path.insert(0, str(ROOT))
-    os.chdir(ROOT)
+    os.chdir(ROOT)  # the package is ROOT's (common put it first on sys.path)
     seen: dict[str, dict] = {}  # thread name -> {first, last (perf_counter s), run, queued (ns)}
     stop = threading.Event()
 
@@ -63,17 +62,16 @@ def child(frames: int, every: float, out: Path, result: Path) -> None:
             sample()
 
     watcher = threading.Thread(target=watch, name="thread time watcher", daemon=True)
-    start, before = time.perf_counter(), os.times()
-    seen["MainThread"] = {"first": start, **dict(zip(("run", "queued"), schedstat(threading.main_thread().native_id)))}
-    base = dict(seen["MainThread"])
+    start, before, base = time.perf_counter(), os.times(), schedstat(threading.get_native_id())  # the main thread's account so far
+    seen["MainThread"] = {"first": start}
     watcher.start()
     code = run_ego_job(frames, out)
     sample()
     wall, after = time.perf_counter() - start, os.times()
     stop.set()
     watcher.join()
-    seen["MainThread"]["run"] -= base["run"]
-    seen["MainThread"]["queued"] -= base["queued"]
+    seen["MainThread"]["run"] -= base[0]
+    seen["MainThread"]["queued"] -= base[1]
     process_cpu = (after.user + after.system) - (before.user + before.system)  # every thread's, since the job began
     result.write_text(json.dumps({"wall": wall, "cpu": process_cpu, "cores": len(os.sched_getaffinity(0)), "threads": seen}))
     sys.stdout.flush()
