@@ -90,7 +90,8 @@ def test_a_frames_users_meshed_together_are_each_user_meshed_alone():
 def test_every_road_user_part_but_the_glass_is_closed():
     """The scanner takes a back face of a closed object also seen from the front for a ray that slipped between its
     triangles, and traces it again; an open object is not looked at (``RayCaster.suspects``). So every part of the
-    street's vehicles but their glass, every two-wheeler's part and every person's body must be a closed surface, or a slip into it goes unseen."""
+    street's vehicles but their glass, every two-wheeler's part and every person's body must be a closed surface, or a
+    slip into it goes unseen."""
     from bpy_pipeline.lidar.cast.raycast import closed_surface
 
     rng = np.random.default_rng(4)
