@@ -18,6 +18,28 @@ def test_every_pose_lies_within_the_joint_limits_without_self_intersection():
             angles = human.sample_pose(kind, rng)
             assert human.within_limits(angles), (kind, angles)
             assert human.self_gap(angles, 1.0, max(human.BUILDS.values())) >= 0.0
+
+
+def test_the_smallest_gap_is_segment_distances_minimum_bit_for_bit():
+    """:func:`~bpy_pipeline.geometry.collision.smallest_gap` (the compiled loop where numba is) gives the numbers of
+    ``(segment_distance - r_i - r_j).min()``: on the self pairs of drawn poses of every family, and pair by pair on random
+    segments, some of them points (zero length) or almost, some parallel."""
+    from bpy_pipeline.geometry.collision import segment_distance, smallest_gap
+
+    rng = np.random.default_rng(7)
+    build = max(human.BUILDS.values())
+    i, j = human.SELF_PAIRS[:, 0], human.SELF_PAIRS[:, 1]
+    for kind in human.POSES:
+        for _ in range(200):
+            a, b, r = human.capsules(human.segment_frames(human._draw_pose(kind, rng), 1.0), 1.0, build)
+            assert smallest_gap(a, b, r, human.SELF_PAIRS) == float((segment_distance(a[i], b[i], a[j], b[j]) - r[i] - r[j]).min())
+    a = rng.normal(size=(300, 3))
+    b = a + rng.normal(size=(300, 3)) * rng.choice([0.0, 1e-10, 1.0], (300, 1))
+    b[:20] = a[:20] + (a[20:40] - b[20:40])  # parallel to others
+    r = rng.uniform(0.0, 0.1, 300)
+    pairs = rng.integers(0, 300, (3000, 2))
+    every = segment_distance(a[pairs[:, 0]], b[pairs[:, 0]], a[pairs[:, 1]], b[pairs[:, 1]]) - r[pairs[:, 0]] - r[pairs[:, 1]]
+    assert [smallest_gap(a, b, r, pairs[k : k + 1]) for k in range(len(pairs))] == every.tolist()
     assert not human.within_limits(np.where(np.arange(len(human.DOFS)) == human.DOF_INDEX["shank_l.flexion"], 170.0, 0.0))
 
 

@@ -54,6 +54,76 @@ def segment_distance(p1: np.ndarray, q1: np.ndarray, p2: np.ndarray, q2: np.ndar
     return np.linalg.norm(closest1 - closest2, axis=-1)
 
 
+def smallest_gap(a: np.ndarray, b: np.ndarray, radius: np.ndarray, pairs: np.ndarray) -> float:
+    """The smallest surface gap (metres, negative where they overlap) of the capsule pairs ``pairs`` ((p, 2) int rows
+    into capsules ``a (c, 3)``, ``b (c, 3)``, ``radius (c,)``): ``(segment_distance - r_i - r_j).min()``, the same
+    numbers. One compiled loop over the pairs where numba is (:func:`_gap_kernel`), else :func:`segment_distance`."""
+    i, j = pairs[:, 0], pairs[:, 1]
+    kernel = _gap_kernel()
+    if kernel is None:
+        return float((segment_distance(a[i], b[i], a[j], b[j]) - radius[i] - radius[j]).min())
+    return float(kernel(np.ascontiguousarray(a, np.float64), np.ascontiguousarray(b, np.float64), np.asarray(radius, np.float64),
+                        np.ascontiguousarray(i, np.int64), np.ascontiguousarray(j, np.int64)))
+
+
+@lru_cache(maxsize=1)
+def _gap_kernel():
+    """The compiled loop of :func:`smallest_gap` (numba, cached on disk), or ``None`` without numba or when the numpy
+    paths are asked for (:func:`~bpy_pipeline.compiled.compiled_wanted`). Per pair, :func:`segment_distance`'s
+    operations in its order (its einsum dot products as ``(x0 y0 + x2 y2) + x1 y1``, its norm as
+    ``sqrt((x0^2 + x1^2) + x2^2)``), each choice of its ``np.where`` taken as a branch: the same bits (tested)."""
+    from ..compiled import compiled_wanted
+
+    if not compiled_wanted():
+        return None
+    import numba
+
+    @numba.njit(cache=True, nogil=True)
+    def smallest(a, b, radius, first, second):  # pragma: no cover (compiled)
+        tiny = 1e-18
+        best = np.inf
+        for k in range(len(first)):
+            i, j = first[k], second[k]
+            d1 = (b[i, 0] - a[i, 0], b[i, 1] - a[i, 1], b[i, 2] - a[i, 2])
+            d2 = (b[j, 0] - a[j, 0], b[j, 1] - a[j, 1], b[j, 2] - a[j, 2])
+            r = (a[i, 0] - a[j, 0], a[i, 1] - a[j, 1], a[i, 2] - a[j, 2])
+            aa = (d1[0] * d1[0] + d1[2] * d1[2]) + d1[1] * d1[1]
+            e = (d2[0] * d2[0] + d2[2] * d2[2]) + d2[1] * d2[1]
+            f = (d2[0] * r[0] + d2[2] * r[2]) + d2[1] * r[1]
+            c = (d1[0] * r[0] + d1[2] * r[2]) + d1[1] * r[1]
+            bb = (d1[0] * d2[0] + d1[2] * d2[2]) + d1[1] * d2[1]
+            denom = aa * e - bb * bb
+            safe_a = aa if aa > tiny else 1.0
+            safe_e = e if e > tiny else 1.0
+            s = 0.0
+            if denom > tiny * max(aa * e, 1.0):
+                s = min(max((bb * f - c * e) / (denom if denom > 0 else 1.0), 0.0), 1.0)
+            t = (bb * s + f) / safe_e
+            if t < 0.0:
+                s = min(max(-c / safe_a, 0.0), 1.0)
+            elif t > 1.0:
+                s = min(max((bb - c) / safe_a, 0.0), 1.0)
+            t = min(max(t, 0.0), 1.0)
+            point1, point2 = aa <= tiny, e <= tiny
+            if point1:
+                s = 0.0
+                if not point2:
+                    t = min(max(f / safe_e, 0.0), 1.0)
+            if point2:
+                if not point1:
+                    s = min(max(-c / safe_a, 0.0), 1.0)
+                t = 0.0
+            x = (a[i, 0] + d1[0] * s) - (a[j, 0] + d2[0] * t)
+            y = (a[i, 1] + d1[1] * s) - (a[j, 1] + d2[1] * t)
+            z = (a[i, 2] + d1[2] * s) - (a[j, 2] + d2[2] * t)
+            gap = np.sqrt((x * x + y * y) + z * z) - radius[i] - radius[j]
+            if gap < best:
+                best = gap
+        return best
+
+    return smallest
+
+
 def capsule_gaps(a1, b1, r1, a2, b2, r2) -> np.ndarray:
     """``(n, m)`` surface gaps (metres, negative where they overlap) between two capsule sets."""
     a1, b1, a2, b2 = (np.asarray(v, np.float64) for v in (a1, b1, a2, b2))

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .collision import capsule_gaps
+from .collision import capsule_gaps, smallest_gap
 
 # name, parent, joint position at rest (units of H, person frame)
 SEGMENTS = (
@@ -260,10 +260,7 @@ def capsules(frames: np.ndarray, height: float, build: float = 1.0) -> tuple[np.
 def self_gap(angles: np.ndarray, height: float = 1.0, build: float = 1.0) -> float:
     """Smallest surface gap (metres) between the body's own non-adjacent capsules."""
     a, b, r = capsules(segment_frames(angles, height), height, build)
-    i, j = SELF_PAIRS[:, 0], SELF_PAIRS[:, 1]
-    from .collision import segment_distance
-
-    return float((segment_distance(a[i], b[i], a[j], b[j]) - r[i] - r[j]).min())
+    return smallest_gap(a, b, r, SELF_PAIRS)
 
 
 def _level_feet(angles: np.ndarray) -> np.ndarray:
