@@ -1,4 +1,5 @@
-"""Collision primitives for placing things that must not intersect: capsules, boxes, rectangles. Pure numpy.
+"""Collision primitives for placing things that must not intersect: capsules, boxes, rectangles. Pure numpy, and one
+loop compiled with numba where it is (:func:`smallest_gap`, the same numbers).
 
 People and robot links are unions of **capsules** (a segment swept by a sphere); their meshes are
 inscribed in those capsules (:func:`capsule_mesh`), so a capsule test that says "apart" is a
