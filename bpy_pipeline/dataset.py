@@ -38,8 +38,8 @@ import json
 import os
 import shutil
 import socket
-import threading
 import time
+from concurrent.futures import Executor, ThreadPoolExecutor, wait
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
@@ -85,21 +85,19 @@ def sha256_file(path: Path) -> str:
 # thread: Python-heavy, they held the GIL against the other writes; its image goes beside.
 
 
-def write_frame_files(frame, staging: Path, names: list[str]) -> list[Path]:
+def write_frame_files(frame, staging: Path, names: list[str], pool: Executor | None = None) -> list[Path]:
     """Every writer of ``names`` writes ``frame`` under ``staging``; their files in the order of ``names``, each
     writer's ``write`` files, then its ``beside`` files.
 
-    In a process with more than one thread (``config.threads``, 0: the cores available) and more than one
-    writer, each writer's ``beside`` part (the preview, the KITTI layout's image: numpy, compiled passes and
-    zlib, which let go of the interpreter) runs on a thread of its own while the ``write`` parts run here, in
-    the caller's context (its :func:`~.io.atomic.digests_while_writing`); all are waited for before this
-    returns or raises, so nothing writes under ``staging`` afterwards. Otherwise each runs here after its
-    writer's ``write``. A failure of the ``write`` parts is raised first, then the ``beside`` parts' in the
-    order of ``names``.
+    With ``pool`` (:meth:`Dataset.commit` gives its own where the process has more than one thread) and more than
+    one writer, each writer's ``beside`` part (the preview, the KITTI layout's image: numpy, compiled passes and zlib,
+    which let go of the interpreter) runs on the pool while the ``write`` parts run here, in the caller's context (its
+    :func:`~.io.atomic.digests_while_writing`, which the pool's tasks run in too); all are waited for before this
+    returns or raises, so nothing writes under ``staging`` afterwards. Otherwise each runs here after its writer's
+    ``write``. A failure of the ``write`` parts is raised first, then the ``beside`` parts' in the order of ``names``.
     """
     writers = {name: WRITERS.get(name) for name in names}
-    spare_core = (frame.config.threads or default_threads()) > 1
-    threaded = len(names) > 1 and spare_core
+    beside = pool if len(names) > 1 else None
     results: dict[str, list[Path]] = {}
     besides: dict[str, list[Path]] = {}
     failed: dict[str, BaseException] = {}
@@ -111,18 +109,14 @@ def write_frame_files(frame, staging: Path, names: list[str]) -> list[Path]:
             failed[name] = err
 
     later = [name for name in names if writers[name].beside is not None]
-    threads = [threading.Thread(target=contextvars.copy_context().run, args=(background, name),
-                                name=f"frame {frame.index} {name} writer") for name in later] if threaded else []
-    for thread in threads:
-        thread.start()
+    running = [beside.submit(contextvars.copy_context().run, background, name) for name in later] if beside is not None else []
     try:
         for name in names:
             results[name] = writers[name].write(frame, staging)
-            if not threaded and name in later:
+            if beside is None and name in later:
                 besides[name] = writers[name].beside(frame, staging)
     finally:
-        for thread in threads:
-            thread.join()
+        wait(running)
         frame.shared.clear()  # what the writers shared (Frame.shared), no longer needed
     for name in later:
         if name in failed:
@@ -291,6 +285,7 @@ class Dataset:
     lock_fd: int = -1  # the open, flock-ed lock file while locked
     created: bool = False  # the folder did not exist before this run
     _spare: Path | None = field(default=None, repr=False)  # the last committed frame's staging folders, emptied (reused by the next)
+    _beside: ThreadPoolExecutor | None = field(default=None, repr=False)  # the writers' beside parts' threads (made by the first commit using them)
 
     # ------------------------------------------------------------------ opening
     @classmethod
@@ -529,7 +524,7 @@ class Dataset:
                 shutil.rmtree(spare, ignore_errors=True)
         try:
             with digests_while_writing() as hashed:  # sha256 of the files written through atomic.hashed_open, as they were written
-                written = write_frame_files(frame, staging, frame_writers(self.config))
+                written = write_frame_files(frame, staging, frame_writers(self.config), self._beside_pool())
             relative = [str(Path(p).relative_to(staging)) for p in written]
             digests = {rel: hashed.get(os.path.abspath(staging / rel)) or sha256_file(staging / rel) for rel in relative}  # others read back
             intent = self.out / MOVING / f"{frame.stem}.json"
@@ -578,9 +573,19 @@ class Dataset:
         self.committed[frame.index] = record
         return record
 
+    def _beside_pool(self) -> ThreadPoolExecutor | None:
+        """The threads the writers' ``beside`` parts run on (:func:`write_frame_files`), one per such writer of the
+        config, made once and kept for the run (no thread started per frame); ``None`` in a process of one thread
+        (``config.threads`` 1, or 0 on one core) or with no such writer."""
+        beside = sum(WRITERS.get(name).beside is not None for name in frame_writers(self.config))
+        if self._beside is None and beside and (self.config.threads or default_threads()) > 1:
+            self._beside = ThreadPoolExecutor(beside, "beside writer")
+        return self._beside
+
     # ------------------------------------------------------------------ closing
     def close(self) -> None:
         """Derive the per-dataset indexes and the summary from the records, and release the lock."""
+        self._stop_beside()
         if self._spare is not None:
             shutil.rmtree(self._spare, ignore_errors=True)
             self._spare = None
@@ -616,7 +621,13 @@ class Dataset:
         else:
             self.close()
 
+    def _stop_beside(self) -> None:
+        if self._beside is not None:
+            self._beside.shutdown()
+            self._beside = None
+
     def _discard(self) -> None:
+        self._stop_beside()
         if self._spare is not None:
             shutil.rmtree(self._spare, ignore_errors=True)
             self._spare = None

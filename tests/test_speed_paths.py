@@ -153,36 +153,61 @@ def test_a_file_written_past_the_hashing_handle_gets_no_digest(tmp_path):
     assert digests[os.path.abspath(tmp_path / "y.bin")] == hashlib.sha256(np.arange(5, dtype=np.int32).tobytes()).hexdigest()
 
 
-@pytest.mark.parametrize("threaded", [True, False])
-def test_frame_files_keep_the_writers_order_and_a_failure_beside_is_raised(tmp_path, monkeypatch, threaded):
-    from bpy_pipeline import dataset
+@pytest.mark.parametrize("pooled", [True, False])
+def test_frame_files_keep_the_writers_order_and_a_failure_beside_is_raised(tmp_path, monkeypatch, pooled):
+    from concurrent.futures import ThreadPoolExecutor
+
     from bpy_pipeline.dataset import write_frame_files
     from bpy_pipeline.io import formats
 
-    config = load_config(None, ["output.formats=[ply, semantickitti]", f"threads={2 if threaded else 1}"])  # the preview on its thread, or inline
-    started, real_thread = [], threading.Thread
-    monkeypatch.setattr(dataset.threading, "Thread", lambda *a, **k: started.append(k["name"]) or real_thread(*a, **k))
+    config = load_config(None, ["output.formats=[ply, semantickitti]"])
+    pool = ThreadPoolExecutor(2, "beside") if pooled else None
+    ran, preview, image = [], formats.write_frame_preview, formats.kitti.write_image  # where each beside part runs
+    monkeypatch.setattr(formats, "write_frame_preview", lambda *a, **k: ran.append(threading.current_thread().name) or preview(*a, **k))
+    monkeypatch.setattr(formats.kitti, "write_image", lambda *a, **k: ran.append(threading.current_thread().name) or image(*a, **k))
     frame = Frame(0, config, frame_rng(0, 0))
     frame.points = cloud(2000)
-    written = write_frame_files(frame, tmp_path / "a", ["ply", "preview", "semantickitti", "kitti"])
+    written = write_frame_files(frame, tmp_path / "a", ["ply", "preview", "semantickitti", "kitti"], pool)
     names = [str(Path(p).relative_to(tmp_path / "a")) for p in written]
     assert names == ["ply/000000.ply", "preview/000000.png", "sequences/00/velodyne/000000.bin", "sequences/00/labels/000000.label",
                      "kitti/training/velodyne/000000.bin", "kitti/training/label_2/000000.txt", "kitti/training/calib/000000.txt",
                      "kitti/training/planes/000000.txt",
                      "kitti/training/image_2/000000.png"]
-    assert started == (["frame 0 preview writer", "frame 0 kitti writer"] if threaded else [])
-    alone = write_frame_files(frame, tmp_path / "c", ["kitti"])  # one writer: its image after its text, here
-    assert [str(Path(p).relative_to(tmp_path / "c")) for p in alone] == names[4:] and len(started) == (2 if threaded else 0)
+    assert all(name.startswith("beside") for name in ran) if pooled else ran == [threading.current_thread().name] * 2
+    assert len(ran) == 2
+    alone = write_frame_files(frame, tmp_path / "c", ["kitti"], pool)  # one writer: its image after its text, here
+    assert [str(Path(p).relative_to(tmp_path / "c")) for p in alone] == names[4:] and ran[2] == threading.current_thread().name
 
     def broken(*args, **kwargs):
         raise ValueError("preview broke")
 
     monkeypatch.setattr(formats, "write_frame_preview", broken)
     with pytest.raises(ValueError, match="preview broke"):
-        write_frame_files(frame, tmp_path / "b", ["ply", "preview"])
+        write_frame_files(frame, tmp_path / "b", ["ply", "preview"], pool)
     monkeypatch.setattr(formats.kitti, "render_image", lambda *a, **k: (_ for _ in ()).throw(ValueError("image broke")))
     with pytest.raises(ValueError, match="image broke"):
-        write_frame_files(frame, tmp_path / "d", ["ply", "kitti"])
+        write_frame_files(frame, tmp_path / "d", ["ply", "kitti"], pool)
+    if pool is not None:
+        pool.shutdown()
+
+
+@pytest.mark.parametrize("threads", [2, 1])
+def test_a_run_starts_its_beside_writers_once_and_stops_them(tmp_path, monkeypatch, threads):
+    """With a thread to spare, the frames' previews and KITTI images are made on the dataset's own threads, the same
+    ones every frame (none started per frame), which are gone when the run ends; with one thread, on the run's own."""
+    from bpy_pipeline import plan
+    from bpy_pipeline.io import formats
+
+    config = load_config(None, ["sensor.preset=vlp16", "output.formats=[ply]", "output.boxes.formats=[kitti]", "frames=3", f"threads={threads}"])
+    ran, preview, image = [], formats.write_frame_preview, formats.kitti.write_image
+    monkeypatch.setattr(formats, "write_frame_preview", lambda *a, **k: ran.append(threading.current_thread()) or preview(*a, **k))
+    monkeypatch.setattr(formats.kitti, "write_image", lambda *a, **k: ran.append(threading.current_thread()) or image(*a, **k))
+    assert len(list(plan.run_frames(config, tmp_path / "out"))) == 3
+    assert len(ran) == 6
+    if threads > 1:
+        assert len(set(ran)) <= 2 and all(t.name.startswith("beside writer") and not t.is_alive() for t in ran)
+    else:
+        assert set(ran) == {threading.current_thread()}
 
 
 def test_a_single_effects_part_is_kept_and_several_are_joined():
