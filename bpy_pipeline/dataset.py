@@ -49,6 +49,7 @@ from .errors import InputError
 from .io.atomic import atomic_write, digests_while_writing, temporary_files
 from .io.confined import inside, readable_inside
 from .io.manifest import MANIFEST_NAME, read_manifest, to_json, write_manifest
+from .io.page_cache import PageCacheRelease
 from .io.writers import WRITERS, frame_writers
 from .lidar.cast.raycast import default_threads
 
@@ -286,6 +287,7 @@ class Dataset:
     created: bool = False  # the folder did not exist before this run
     _spare: Path | None = field(default=None, repr=False)  # the last committed frame's staging folders, emptied (reused by the next)
     _beside: ThreadPoolExecutor | None = field(default=None, repr=False)  # the writers' beside parts' threads (made by the first commit using them)
+    _page_cache: PageCacheRelease = field(default_factory=PageCacheRelease, repr=False)  # the committed frames' pages, handed back a frame later
 
     # ------------------------------------------------------------------ opening
     @classmethod
@@ -537,6 +539,7 @@ class Dataset:
                     (self.out / rel).parent.mkdir(parents=True, exist_ok=True)
                     (staging / rel).replace(self.out / rel)
             frame.files = relative
+            self._page_cache.written([self.out / rel for rel in relative])
             frame.timings["write"] = frame.timings.get("write", 0.0) + time.perf_counter() - start
             record = frame_record(frame, digests)
             with atomic_write(self.out / RECORDS / f"{frame.stem}.json") as tmp:
