@@ -24,7 +24,8 @@ Per frame, nothing is read back and no folder is made or removed: files written 
 :func:`~.io.atomic.hashed_open` get their sha256 as they are written (small text files are read
 back), the preview is rendered and written on a thread of its own while the other files are
 written (:func:`write_frame_files`, waited for before the intent), and a committed frame's emptied
-staging folders are renamed to the next frame's.
+staging folders are renamed to the next frame's. A committed frame's files start on their way to disk,
+and leave the page cache at the next commit (:class:`~.io.page_cache.PageCacheRelease`).
 """
 
 from __future__ import annotations
@@ -539,7 +540,7 @@ class Dataset:
                     (self.out / rel).parent.mkdir(parents=True, exist_ok=True)
                     (staging / rel).replace(self.out / rel)
             frame.files = relative
-            self._page_cache.written([self.out / rel for rel in relative])
+            self._page_cache.written_later([self.out / rel for rel in relative])
             frame.timings["write"] = frame.timings.get("write", 0.0) + time.perf_counter() - start
             record = frame_record(frame, digests)
             with atomic_write(self.out / RECORDS / f"{frame.stem}.json") as tmp:
@@ -588,7 +589,7 @@ class Dataset:
     # ------------------------------------------------------------------ closing
     def close(self) -> None:
         """Derive the per-dataset indexes and the summary from the records, and release the lock."""
-        self._stop_beside()
+        self._stop_threads()
         if self._spare is not None:
             shutil.rmtree(self._spare, ignore_errors=True)
             self._spare = None
@@ -624,13 +625,14 @@ class Dataset:
         else:
             self.close()
 
-    def _stop_beside(self) -> None:
+    def _stop_threads(self) -> None:
         if self._beside is not None:
             self._beside.shutdown()
             self._beside = None
+        self._page_cache.close()
 
     def _discard(self) -> None:
-        self._stop_beside()
+        self._stop_threads()
         if self._spare is not None:
             shutil.rmtree(self._spare, ignore_errors=True)
             self._spare = None

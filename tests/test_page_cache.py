@@ -1,4 +1,4 @@
-"""A run hands the page cache of its committed frames back one frame later (bpy_pipeline.io.page_cache): the pages of
+"""A run hands the page cache of its committed frames back one frame later, on a thread of its own (bpy_pipeline.io.page_cache): the pages of
 a file on disk are dropped, the bytes stay the same, and a platform without ``posix_fadvise`` is left alone.
 No timings here (benchmarks/bench_page_cache.py measures)."""
 
@@ -6,6 +6,7 @@ import hashlib
 import os
 import shutil
 import subprocess
+import threading
 
 import numpy as np
 import pytest
@@ -41,16 +42,22 @@ def test_a_written_file_leaves_the_page_cache_once_the_next_frame_is_written(tmp
 
 
 @needs_fadvise
-def test_a_run_advises_each_frames_files_when_committed_and_again_one_frame_later(tmp_path, monkeypatch):
+def test_a_run_advises_each_frames_files_when_committed_and_again_one_frame_later_on_a_thread_it_stops(tmp_path, monkeypatch):
     from bpy_pipeline import plan
 
-    advised = []
-    monkeypatch.setattr(page_cache, "advise_dont_need", lambda path: advised.append(os.path.relpath(path, tmp_path / "out")))
+    advised, threads = [], set()
+
+    def advise(path):
+        threads.add(threading.current_thread())
+        advised.append(os.path.relpath(path, tmp_path / "out"))
+
+    monkeypatch.setattr(page_cache, "advise_dont_need", advise)
     config = load_config(None, ["sensor.preset=vlp16", "output.formats=[ply, semantickitti]", "frames=3"])
     frames = list(plan.run_frames(config, tmp_path / "out"))
     files = [frame.files for frame in frames]
     assert all(len(f) == 4 for f in files)  # the PLY, the SemanticKITTI points and labels, the preview
     assert advised == files[0] + files[1] + files[0] + files[2] + files[1]
+    assert len(threads) == 1 and all(t.name.startswith("page cache release") and not t.is_alive() for t in threads)
     for frame in frames:  # every file advised is on disk, whole: the digest of its record
         for rel in frame.files:
             assert hashlib.sha256((tmp_path / "out" / rel).read_bytes()).hexdigest() == frame.record["sha256"][rel]
@@ -61,7 +68,9 @@ def test_without_posix_fadvise_nothing_is_advised(tmp_path, monkeypatch):
     monkeypatch.setattr(page_cache, "advise_dont_need", lambda path: pytest.fail(f"advised {path}"))
     release = PageCacheRelease()
     release.written([tmp_path / "a.bin"])
-    assert not release.available() and release.behind == []
+    release.written_later([tmp_path / "a.bin"])
+    release.close()
+    assert not release.available() and release.behind == [] and release._thread is None
 
 
 def test_a_file_gone_before_its_advice_is_left_alone(tmp_path):

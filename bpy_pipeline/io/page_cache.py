@@ -11,8 +11,9 @@ pages and 5 GB/s into reused ones, and the kernel's copy was an eighth of the st
 
 :class:`PageCacheRelease` does what ``dd oflag=nocache`` and PostgreSQL's ``backend_flush_after``
 do: ``posix_fadvise(POSIX_FADV_DONTNEED)`` on a frame's files right after they are committed
-starts their write-back (without waiting for it), and the same call one frame later, when they are
-on disk, hands their pages back, so the next frame's writes reuse them. The bytes on disk are the
+starts their write-back, and the same call one frame later, when they are on disk, hands their
+pages back, so the next frame's writes reuse them. The calls run on a thread of their own: starting
+a write-back can wait for the disk, and the run does not. The bytes on disk are the
 same; a file still being written back is simply left cached. Where ``os.posix_fadvise`` does not
 exist (Windows, macOS) nothing is done.
 """
@@ -21,6 +22,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Iterable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -48,6 +50,7 @@ class PageCacheRelease:
     """
 
     behind: list[Path] = field(default_factory=list)
+    _thread: ThreadPoolExecutor | None = field(default=None, repr=False)  # where :meth:`written_later` calls :meth:`written`
 
     @staticmethod
     def available() -> bool:
@@ -63,3 +66,18 @@ class PageCacheRelease:
         for path in paths + self.behind:
             advise_dont_need(path)
         self.behind = paths
+
+    def written_later(self, paths: Iterable[Path]) -> None:
+        """:meth:`written` on a thread of its own (made on the first call), in the order of the calls: starting a write-back
+        can wait for the disk's queue, and the run does not wait for it (a slow disk leaves pages cached a little longer)."""
+        if not self.available():
+            return
+        if self._thread is None:
+            self._thread = ThreadPoolExecutor(1, "page cache release")
+        self._thread.submit(self.written, list(paths))
+
+    def close(self) -> None:
+        """Wait for the calls :meth:`written_later` queued, and stop its thread."""
+        if self._thread is not None:
+            self._thread.shutdown()
+            self._thread = None
