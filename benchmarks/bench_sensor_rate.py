@@ -6,9 +6,10 @@ and once with ``--workers 2``, in alternating rounds; the best wall time of each
 ``over_sensor`` = fps / 10. Both sides must give the same bytes (the frames' PLY files). ``cpu_s`` is the CPU time of a
 run's processes. ``--old DIR``: another checkout's two runs in the same rounds (one process and two workers must give
 the same bytes on each side; ``same_bytes_as_old`` says whether the sides do), and ``against_old`` = its wall time /
-this checkout's, for the same worker count.
+this checkout's, for the same worker count. ``--settle S``: before each run, the disk is synced and the machine left
+alone for S seconds (untimed), so no run pays for writing back the files of the one before.
 
-    python benchmarks/bench_sensor_rate.py [--small] [--frames 200] [--rounds 2] [--old DIR] [--out DIR] [--name NAME]
+    python benchmarks/bench_sensor_rate.py [--small] [--frames 200] [--rounds 2] [--old DIR] [--settle 0] [--out DIR] [--name NAME]
 
 Results: ``benchmarks/results/sensor_rate.json`` (``sensor_rate_small.json`` with ``--small``: 6 frames).
 """
@@ -16,7 +17,9 @@ Results: ``benchmarks/results/sensor_rate.json`` (``sensor_rate_small.json`` wit
 from __future__ import annotations
 
 import argparse
+import os
 import tempfile
+import time
 from pathlib import Path
 
 from bench_workers import digest, timed
@@ -31,6 +34,7 @@ def main() -> None:
     p.add_argument("--frames", type=int, default=200)
     p.add_argument("--rounds", type=int, default=2)
     p.add_argument("--old", type=Path, help="another checkout, measured in the same rounds")
+    p.add_argument("--settle", type=float, default=0.0, help="seconds of quiet after syncing the disk, before each run")
     p.add_argument("--out", type=Path, default=RESULTS)
     p.add_argument("--name", help="the results file's name in --out, without .json (default sensor_rate, sensor_rate_small)")
     args = p.parse_args()
@@ -44,6 +48,9 @@ def main() -> None:
         for r in range(rounds):
             for side, workers in runs if r % 2 == 0 else runs[::-1]:
                 out = Path(tmp) / f"{side}w{workers}r{r}"
+                if args.settle:
+                    os.sync()
+                    time.sleep(args.settle)
                 best[side, workers] = min(best[side, workers], timed([*config, "--workers", str(workers)], out, sides[side]))
                 digests.setdefault((side, workers), digest(out))
     for side in sides:
@@ -57,7 +64,7 @@ def main() -> None:
         if "old" in sides and side == "new":
             row["against_old"] = round(best["old", workers][0] / wall, 3)
         rows.append(row)
-    extra = {"sensor_hz": SENSOR_HZ, "same_bytes": True, "rounds": rounds}
+    extra = {"sensor_hz": SENSOR_HZ, "same_bytes": True, "rounds": rounds, "settle_s": args.settle}
     if args.old:
         extra.update(old=str(args.old), same_bytes_as_old=digests["old", 1] == digests["new", 1])
     report(args.name or "sensor_rate" + ("_small" if args.small else ""), rows, args.out, extra)

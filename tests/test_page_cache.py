@@ -52,6 +52,7 @@ def test_a_run_advises_each_frames_files_when_committed_and_again_one_frame_late
         advised.append(os.path.relpath(path, tmp_path / "out"))
 
     monkeypatch.setattr(page_cache, "advise_dont_need", advise)
+    monkeypatch.setattr(page_cache, "MIN_BYTES", 1)  # every file of these small frames
     config = load_config(None, ["sensor.preset=vlp16", "output.formats=[ply, semantickitti]", "frames=3"])
     frames = list(plan.run_frames(config, tmp_path / "out"))
     files = [frame.files for frame in frames]
@@ -73,5 +74,15 @@ def test_without_posix_fadvise_nothing_is_advised(tmp_path, monkeypatch):
     assert not release.available() and release.behind == [] and release._thread is None
 
 
-def test_a_file_gone_before_its_advice_is_left_alone(tmp_path):
+@needs_fadvise
+def test_files_under_a_mib_and_files_gone_are_left_alone(tmp_path, monkeypatch):
+    advised = []
+    monkeypatch.setattr(page_cache, "advise_dont_need", advised.append)
+    small, large = tmp_path / "small.txt", tmp_path / "large.bin"
+    small.write_bytes(b"x" * (page_cache.MIN_BYTES - 1))
+    large.write_bytes(b"x" * page_cache.MIN_BYTES)
+    release = PageCacheRelease()
+    release.written([small, large, tmp_path / "gone.bin"])
+    assert advised == [large] and release.behind == [large]
+    monkeypatch.undo()
     page_cache.advise_dont_need(tmp_path / "gone.bin")  # no error: the advice only ever saves memory

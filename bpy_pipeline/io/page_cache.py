@@ -2,20 +2,19 @@
 
 Left to itself, Linux keeps every page a run writes: dirty until its flusher writes it back (some
 30 s later), then cached until memory runs short. The ego street writes about 12 MB a frame, so a
-200-frame job leaves some 2.4 GB of its own output in memory, pushes out what the user had cached
-(their training data, say), and takes a page never used before for every 4 kB it writes. On a
-virtual machine the first touch of such a page costs the copy into it about ten times the copy
-into a page used a moment ago: on this project's machine, writing 1.2 GB read 0.5 GB/s into fresh
-pages and 5 GB/s into reused ones, and the kernel's copy was an eighth of the street job's CPU
-(``benchmarks/bench_page_cache.py``, docs/performance.md).
+100-frame job leaves 1.2 GB of its own output in memory, pushes out what the user had cached (their
+training data, say), and takes a page never used before for every 4 kB it writes. On a virtual
+machine that gives freed memory back to its host (as this project's does), the first touch of such
+a page is a fault in the host, and the kernel's copy into it can cost several times the copy into a
+page used a moment ago (``benchmarks/bench_page_cache.py``, docs/performance.md).
 
 :class:`PageCacheRelease` does what ``dd oflag=nocache`` and PostgreSQL's ``backend_flush_after``
-do: ``posix_fadvise(POSIX_FADV_DONTNEED)`` on a frame's files right after they are committed
-starts their write-back, and the same call one frame later, when they are on disk, hands their
-pages back, so the next frame's writes reuse them. The calls run on a thread of their own: starting
-a write-back can wait for the disk, and the run does not. The bytes on disk are the
-same; a file still being written back is simply left cached. Where ``os.posix_fadvise`` does not
-exist (Windows, macOS) nothing is done.
+do: ``posix_fadvise(POSIX_FADV_DONTNEED)`` on a frame's large files (1 MiB and more: a street
+frame's points and PLY) right after they are committed starts their write-back, and the same call
+one frame later, when they are on disk, hands their pages back, so the next frame's writes reuse
+them. The calls run on a thread of their own: starting a write-back can wait for the disk, and the
+run does not. The bytes on disk are the same; a file still being written back is simply left
+cached. Where ``os.posix_fadvise`` does not exist (Windows, macOS) nothing is done.
 """
 
 from __future__ import annotations
@@ -25,6 +24,17 @@ from collections.abc import Iterable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
+
+
+MIN_BYTES = 1 << 20  # smaller files (texts, previews, images) keep few pages, and a write-back of each alone costs more than it saves
+
+
+def _size(path: Path) -> int:
+    """``path``'s size in bytes, 0 when it cannot be read."""
+    try:
+        return os.stat(path).st_size
+    except OSError:
+        return 0
 
 
 def advise_dont_need(path: Path) -> None:
@@ -59,13 +69,13 @@ class PageCacheRelease:
 
     def written(self, paths: Iterable[Path]) -> None:
         """``paths``, just written, start on their way to disk; the pages of the files of the call before, on disk by
-        now, are handed back."""
+        now, are handed back. Files under :data:`MIN_BYTES` are left to the kernel."""
         if not self.available():
             return
-        paths = list(paths)
-        for path in paths + self.behind:
+        large = [path for path in paths if _size(path) >= MIN_BYTES]
+        for path in large + self.behind:
             advise_dont_need(path)
-        self.behind = paths
+        self.behind = large
 
     def written_later(self, paths: Iterable[Path]) -> None:
         """:meth:`written` on a thread of its own (made on the first call), in the order of the calls: starting a write-back
