@@ -25,8 +25,7 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
-
-MIN_BYTES = 1 << 20  # smaller files (texts, previews, images) keep few pages, and a write-back of each alone costs more than it saves
+MIN_BYTES = 1 << 20  # smaller files (texts, previews, images) hold few pages: left to the kernel's flusher
 
 
 def _size(path: Path) -> int:
