@@ -52,7 +52,7 @@ def test_a_run_advises_each_frames_files_when_committed_and_again_one_frame_late
         advised.append(os.path.relpath(path, tmp_path / "out"))
 
     monkeypatch.setattr(page_cache, "advise_dont_need", advise)
-    monkeypatch.setattr(page_cache, "MIN_BYTES", 1)  # every file of these small frames
+    monkeypatch.setattr(page_cache, "MIN_BYTES", 0)  # every file of these small frames, an empty one too
     config = load_config(None, ["sensor.preset=vlp16", "output.formats=[ply, semantickitti]", "frames=3"])
     frames = list(plan.run_frames(config, tmp_path / "out"))
     files = [frame.files for frame in frames]
