@@ -581,9 +581,9 @@ class Dataset:
         """The threads the writers' ``beside`` parts run on (:func:`write_frame_files`), one per such writer of the
         config, made once and kept for the run (no thread started per frame); ``None`` in a process of one thread
         (``config.threads`` 1, or 0 on one core) or with no such writer."""
-        beside = sum(WRITERS.get(name).beside is not None for name in frame_writers(self.config))
-        if self._beside is None and beside and (self.config.threads or default_threads()) > 1:
-            self._beside = ThreadPoolExecutor(beside, "beside writer")
+        if self._beside is None and (self.config.threads or default_threads()) > 1:
+            beside = sum(WRITERS.get(name).beside is not None for name in frame_writers(self.config))
+            self._beside = ThreadPoolExecutor(beside, "beside writer") if beside else None
         return self._beside
 
     # ------------------------------------------------------------------ closing
