@@ -596,7 +596,8 @@ class Dataset:
         if self.mode == "join":
             return
         try:
-            records = [r for _, r in sorted(self._read_records().items()) if not r.get("skipped")]  # workers commit frames too
+            every = self._read_records()  # workers commit frames too
+            records = [r for _, r in sorted(every.items()) if not r.get("skipped")]
             indexes = []
             for name in frame_writers(self.config):
                 writer = WRITERS.get(name)
@@ -609,7 +610,7 @@ class Dataset:
             manifest["indexes"] = sorted(set(manifest.get("indexes") or []) | set(indexes))  # what --overwrite removes beside the frames
             manifest["summary"] = {"frames": len(records), "points": int(sum(r["points"] for r in records)),
                                    "frame_indices": _ranges([r["index"] for r in records])}
-            skipped = [i for i, r in self._read_records().items() if r.get("skipped")]
+            skipped = [i for i, r in every.items() if r.get("skipped")]
             if skipped:
                 manifest["summary"]["skipped"] = {"frames": len(skipped), "frame_indices": _ranges(skipped)}
             write_manifest(self.out, manifest)

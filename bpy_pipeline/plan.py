@@ -302,8 +302,13 @@ def finished_now(function: Callable, *args) -> Future:
     return future
 
 
-def run(config: Config, out_dir: str | Path, log=print, build: bool = True, frames: Iterable[int] | None = None, mode: str = "new") -> dict:
-    """Generate the frames ``frames`` (default: all) of ``config`` into ``out_dir``; returns the manifest (with its frames)."""
+def generate(config: Config, out_dir: str | Path, log=print, build: bool = True, frames: Iterable[int] | None = None, mode: str = "new") -> None:
+    """Generate the frames ``frames`` (default: all) of ``config`` into ``out_dir``, a line of ``log`` each."""
     for frame in run_frames(config, out_dir, build, frames, mode, log):  # None: all (output.frames_kept: until enough are kept)
         log(f"frame {frame.index + 1}/{config.frames}: {len(frame.points)} points, " + ", ".join(f"{k} {v:.2f} s" for k, v in frame.timings.items()))
+
+
+def run(config: Config, out_dir: str | Path, log=print, build: bool = True, frames: Iterable[int] | None = None, mode: str = "new") -> dict:
+    """:func:`generate`, then the manifest with its frames' records (read back from ``out_dir``)."""
+    generate(config, out_dir, log, build, frames, mode)
     return read_dataset(out_dir)

@@ -371,3 +371,19 @@ def test_records_hold_each_frame_and_the_manifest_is_written_once(full_parking):
     records = read_dataset(full_parking)["frames"]
     assert [r["index"] for r in records] == list(range(10))
     assert all(set(r["sha256"]) == set(r["files"]) and r["points"] > 0 for r in records)
+
+
+def test_a_run_reads_its_records_back_once_when_it_closes_and_the_cli_reads_nothing_back(tmp_path, monkeypatch):
+    from bpy_pipeline import plan
+    from bpy_pipeline.config import load_config
+    from bpy_pipeline.dataset import Dataset
+
+    reads = []
+    read_records = Dataset._read_records
+    monkeypatch.setattr(Dataset, "_read_records", lambda self: reads.append(self.out) or read_records(self))
+    monkeypatch.setattr(plan, "read_dataset", lambda out: pytest.fail("generate read the dataset back"))
+    config = load_config(None, ["sensor.preset=vlp16", "output.formats=[ply]", "frames=2"])
+    plan.generate(config, tmp_path / "out", log=lambda line: None)  # what the CLI's run calls
+    assert reads == [tmp_path / "out"]  # the summary and the indexes come from one read
+    summary = read_dataset(tmp_path / "out")["summary"]
+    assert summary["frames"] == 2 and summary["frame_indices"] == [[0, 1]]

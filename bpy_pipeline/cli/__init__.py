@@ -184,11 +184,11 @@ def run_main(args) -> int:
                 "--python run.py -- ..."
             ) from None
         empty_file(bpy, started)
-    from ..plan import run
+    from ..plan import generate
 
     if started:  # this process is the run's: the start's objects (modules, Blender's types, the config) stay to its end,
         gc.freeze()  # and no collection of the garbage collector walks them again
-    run(config, args.out, log=progress(len(frames), estimate), frames=frames, mode=mode)
+    generate(config, args.out, log=progress(len(frames), estimate), frames=frames, mode=mode)  # the CLI reads nothing back
     return 0
 
 
