@@ -373,7 +373,8 @@ def test_records_hold_each_frame_and_the_manifest_is_written_once(full_parking):
     assert all(set(r["sha256"]) == set(r["files"]) and r["points"] > 0 for r in records)
 
 
-def test_a_run_reads_its_records_back_once_when_it_closes_and_the_cli_reads_nothing_back(tmp_path, monkeypatch):
+@pytest.mark.bpy
+def test_a_run_reads_its_records_back_once_when_it_closes_and_the_cli_reads_nothing_back(bpy_scene, tmp_path, monkeypatch):
     from bpy_pipeline import plan
     from bpy_pipeline.config import load_config
     from bpy_pipeline.dataset import Dataset

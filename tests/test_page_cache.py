@@ -45,7 +45,8 @@ def test_a_written_file_leaves_the_page_cache_once_the_next_frame_is_written(tmp
 
 
 @needs_fadvise
-def test_a_run_advises_each_frames_files_when_committed_and_again_one_frame_later_on_a_thread_it_stops(tmp_path, monkeypatch):
+@pytest.mark.bpy
+def test_a_run_advises_each_frames_files_when_committed_and_again_one_frame_later_on_a_thread_it_stops(bpy_scene, tmp_path, monkeypatch):
     from bpy_pipeline import plan
 
     advised, threads = [], set()
