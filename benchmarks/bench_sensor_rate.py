@@ -5,8 +5,9 @@ preview), ``--frames`` frames, whole processes (start-up, Blender, the street, e
 and once with ``--workers 2``, in alternating rounds; the best wall time of each is kept. ``fps`` = frames / wall;
 ``over_sensor`` = fps / 10. Both sides must give the same bytes (the frames' PLY files). ``cpu_s`` is the CPU time of a
 run's processes. ``--old DIR``: another checkout's two runs in the same rounds (one process and two workers must give
-the same bytes on each side; ``same_bytes_as_old`` says whether the sides do), and ``against_old`` = its wall time /
-this checkout's, for the same worker count. ``--settle S``: before each run, the disk is synced and the machine left
+the same bytes on each side; ``same_bytes_as_old`` says whether the sides do), and ``against_old`` = its best wall time /
+this checkout's, for the same worker count; ``against_old_rounds``, the same ratio of the two runs of each round (made
+back to back, so a machine whose speed drifts over the minutes moves both alike), and ``against_old_median``, their median. ``--settle S``: before each run, the disk is synced and the machine left
 alone for S seconds (untimed), so no run pays for writing back the files of the one before.
 
     python benchmarks/bench_sensor_rate.py [--small] [--frames 200] [--rounds 2] [--old DIR] [--settle 0] [--out DIR] [--name NAME]
@@ -18,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import statistics
 import tempfile
 import time
 from pathlib import Path
@@ -43,6 +45,7 @@ def main() -> None:
     sides = {"new": ROOT, **({"old": args.old.resolve()} if args.old else {})}
     runs = [(side, workers) for side in sides for workers in (1, 2)]
     best = {run: (float("inf"), 0.0) for run in runs}
+    walls = {run: [] for run in runs}  # each round's wall time, in round order
     digests = {}
     with tempfile.TemporaryDirectory() as tmp:
         for r in range(rounds):
@@ -51,7 +54,9 @@ def main() -> None:
                 if args.settle:
                     os.sync()
                     time.sleep(args.settle)
-                best[side, workers] = min(best[side, workers], timed([*config, "--workers", str(workers)], out, sides[side]))
+                took = timed([*config, "--workers", str(workers)], out, sides[side])
+                best[side, workers] = min(best[side, workers], took)
+                walls[side, workers].append(took[0])
                 digests.setdefault((side, workers), digest(out))
     for side in sides:
         if digests[side, 1] != digests[side, 2]:
@@ -63,6 +68,9 @@ def main() -> None:
                "cpu_s": round(cpu, 2), "fps": round(frames / wall, 2), "over_sensor": round(frames / wall / SENSOR_HZ, 2)}
         if "old" in sides and side == "new":
             row["against_old"] = round(best["old", workers][0] / wall, 3)
+            pairs = [old / new for old, new in zip(walls["old", workers], walls["new", workers])]
+            row["against_old_rounds"] = [round(r, 3) for r in pairs]
+            row["against_old_median"] = round(statistics.median(pairs), 3)
         rows.append(row)
     extra = {"sensor_hz": SENSOR_HZ, "same_bytes": True, "rounds": rounds, "settle_s": args.settle}
     if args.old:
