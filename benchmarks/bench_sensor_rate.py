@@ -7,8 +7,9 @@ and once with ``--workers 2``, in alternating rounds; the best wall time of each
 run's processes. ``--old DIR``: another checkout's two runs in the same rounds (one process and two workers must give
 the same bytes on each side; ``same_bytes_as_old`` says whether the sides do), and ``against_old`` = its best wall time /
 this checkout's, for the same worker count; ``against_old_rounds``, the same ratio of the two runs of each round (made
-back to back, so a machine whose speed drifts over the minutes moves both alike), and ``against_old_median``, their median. ``--settle S``: before each run, the disk is synced and the machine left
-alone for S seconds (untimed), so no run pays for writing back the files of the one before.
+back to back, so a machine whose speed drifts over the minutes moves both alike), and ``against_old_median``, their
+median. ``--settle S``: before each run, the disk is synced and the machine left alone for S seconds (untimed), so no
+run pays for writing back the files of the one before.
 
     python benchmarks/bench_sensor_rate.py [--small] [--frames 200] [--rounds 2] [--old DIR] [--settle 0] [--out DIR] [--name NAME]
 
