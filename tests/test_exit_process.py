@@ -56,3 +56,21 @@ def test_a_process_without_stdout_still_exits_with_its_code():
     program = "import sys; sys.stdout = None; from bpy_pipeline.cli import exit_process; exit_process(4)"
     done = subprocess.run([sys.executable, "-c", program], cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert done.returncode == 4 and done.stderr == ""
+
+
+def test_no_blender_session_folder_is_left_behind(tmp_path):
+    """The bpy module makes ``$TMPDIR/blender_XXXXXX`` at its import and only its teardown removes it: a run ended by
+    exit_process (its bad-input exit here, and a plain exit after importing bpy) leaves the temporary folder as it was."""
+    pytest.importorskip("bpy")
+    temporary = tmp_path / "tmp"
+    temporary.mkdir()
+    (temporary / "theirs").mkdir()  # somebody else's: stays
+    env = {**__import__("os").environ, "TMPDIR": str(temporary)}
+    program = "import bpy, sys; from bpy_pipeline.cli import exit_process; print(bpy.app.tempdir); exit_process(0)"
+    done = subprocess.run([sys.executable, "-c", program], cwd=ROOT, capture_output=True, text=True, timeout=300, env=env)
+    assert done.returncode == 0, done.stderr
+    assert Path(done.stdout.strip()).parent == temporary  # it was made where TMPDIR says
+    bad = subprocess.run([sys.executable, "run.py", "--config", str(tmp_path / "missing.yaml"), "--out", str(tmp_path / "out")], cwd=ROOT,
+                         capture_output=True, text=True, timeout=300, env=env)
+    assert bad.returncode == 2, bad.stderr
+    assert sorted(p.name for p in temporary.iterdir()) == ["theirs"]

@@ -16,6 +16,7 @@ import argparse
 import atexit
 import gc
 import os
+import shutil
 import signal
 import socket
 import sys
@@ -369,14 +370,24 @@ def main(argv: list[str] | None = None) -> int:
     return guarded(run_main, args)
 
 
+def remove_blender_session_folder(bpy) -> None:
+    """Remove the folder the bpy module made for this process at its import (``bpy.app.tempdir``: ``blender_`` and six
+    characters, in ``$TMPDIR`` or ``/tmp``), as Blender's own teardown does; without it every run would leave one behind.
+    Nothing for ``bpy`` ``None`` (not imported) or a folder of another name."""
+    folder = bpy.app.tempdir if bpy is not None else ""
+    if folder and os.path.basename(os.path.normpath(folder)).startswith("blender_"):
+        shutil.rmtree(folder, ignore_errors=True)
+
+
 def exit_process(code: int) -> NoReturn:
     """End the process with exit ``code``, skipping the interpreter's and Blender's teardown.
 
     After a run, that teardown frees every object, module and Blender's data one by one: 0.3-0.5 s
     (docs/performance.md), and nothing of it reaches the disk. What a normal exit does
     that matters is done first: other threads are waited for, the ``atexit`` handlers run (a progress
-    bar's last line, temporary folders), and both output streams are flushed. Inside Blender's own
-    executable (``blender --python run.py``) Blender ends itself: a plain ``sys.exit``.
+    bar's last line, temporary folders), the bpy module's session folder is removed (:func:`remove_blender_session_folder`),
+    and both output streams are flushed. Inside Blender's own executable (``blender --python run.py``) Blender ends itself:
+    a plain ``sys.exit``.
     """
     bpy = sys.modules.get("bpy")
     if bpy is not None and bpy.app.binary_path:  # the bpy module has none
@@ -385,6 +396,7 @@ def exit_process(code: int) -> NoReturn:
     # stop and every other thread waited for, then the atexit handlers
     threading._shutdown()
     atexit._run_exitfuncs()
+    remove_blender_session_folder(bpy)
     for stream in (sys.stdout, sys.stderr):
         try:
             stream.flush()
