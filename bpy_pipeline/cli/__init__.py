@@ -373,8 +373,8 @@ def main(argv: list[str] | None = None) -> int:
 def remove_blender_session_folder(bpy) -> None:
     """Remove the folder the bpy module made for this process at its import (``bpy.app.tempdir``: ``blender_`` and six
     characters, in ``$TMPDIR`` or ``/tmp``), as Blender's own teardown does; without it every run would leave one behind.
-    Nothing for ``bpy`` ``None`` (not imported) or a folder of another name."""
-    folder = bpy.app.tempdir if bpy is not None else ""
+    Nothing for ``bpy`` ``None`` (not imported), a module without that folder or a folder of another name."""
+    folder = getattr(getattr(bpy, "app", None), "tempdir", "")
     if folder and os.path.basename(os.path.normpath(folder)).startswith("blender_"):
         shutil.rmtree(folder, ignore_errors=True)
 
