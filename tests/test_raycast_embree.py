@@ -80,3 +80,33 @@ def test_the_caster_keeps_the_buffers_embree_reads():
 def test_threads_default_to_the_cores_this_process_may_use():
     assert default_threads() == len(os.sched_getaffinity(0))
     assert RayCaster(SceneBuffers.from_meshes({"t": terrain(4)}), frame=np.eye(4), threads=3).threads == 3
+
+
+def test_a_low_build_gives_the_default_builds_hits():
+    """``build="low"`` (Embree's Morton build, for the per-frame scenes few rays meet: visibility's AloneCaster) changes the
+    hierarchy, not the nearest hit of any ray."""
+    vertices, triangles = terrain()
+    origins, directions = rays(50000)
+    buffers = SceneBuffers.from_meshes({"terrain": (vertices, triangles)})
+    pose = np.eye(4)
+    hits = [RayCaster(buffers, frame=pose, build=build).intersect(origins[0].astype(np.float64), directions.astype(np.float64))
+            for build in ("medium", "low")]
+    assert len(hits[0].ray) > len(directions) // 2
+    for field in ("ray", "distance", "triangle", "normal"):
+        np.testing.assert_array_equal(getattr(hits[0], field), getattr(hits[1], field))
+
+
+def test_a_low_build_is_asked_of_the_scene_and_its_geometry(monkeypatch):
+    """Embree builds its fast hierarchy only when both the scene's and the geometry's quality are low."""
+    if not embree.shared_buffers_supported():
+        pytest.skip("this embreex's layout is not the checked one: its TriangleMesh builds at Embree's default")
+    lib = embree._library()
+    asked = []
+    for name in ("rtcSetSceneBuildQuality", "rtcSetGeometryBuildQuality"):
+        real = getattr(lib, name)
+        monkeypatch.setattr(lib, name, lambda handle, quality, name=name, real=real: (asked.append((name, quality)), real(handle, quality))[1])
+    vertices, triangles = terrain(20)
+    embree.attach_triangles(rtcore_scene.EmbreeScene(), vertices, triangles)
+    assert asked == []  # Embree's default
+    embree.attach_triangles(rtcore_scene.EmbreeScene(), vertices, triangles, build="low")
+    assert sorted(asked) == [("rtcSetGeometryBuildQuality", 0), ("rtcSetSceneBuildQuality", 0)]

@@ -28,6 +28,11 @@ from embreex.mesh_construction import TriangleMesh
 RTC_GEOMETRY_TYPE_TRIANGLE = 0
 RTC_BUFFER_TYPE_INDEX, RTC_BUFFER_TYPE_VERTEX = 0, 1
 RTC_FORMAT_UINT3, RTC_FORMAT_FLOAT3 = 0x5003, 0x9003
+# Embree's build qualities (RTC_BUILD_QUALITY_*), set on the scene and on its geometry (both are needed for the fast build)
+BUILD_QUALITY = {
+    "medium": 1,  # Embree's default: a binned SAH hierarchy, for scenes many rays meet
+    "low": 0,  # a Morton-code build, about a third of the build's CPU, its traces slower: for scenes few rays meet
+}
 POINTER = ctypes.sizeof(ctypes.c_void_p)
 HEAD = 2 * POINTER  # PyObject_HEAD: reference count and type
 
@@ -58,6 +63,8 @@ def _library():
         lib.rtcGetSceneDevice.restype, lib.rtcGetSceneDevice.argtypes = v, [v]
         lib.rtcReleaseDevice.restype, lib.rtcReleaseDevice.argtypes = None, [v]
         lib.rtcCommitScene.restype, lib.rtcCommitScene.argtypes = None, [v]
+        lib.rtcSetSceneBuildQuality.restype, lib.rtcSetSceneBuildQuality.argtypes = None, [v, ctypes.c_int]
+        lib.rtcSetGeometryBuildQuality.restype, lib.rtcSetGeometryBuildQuality.argtypes = None, [v, ctypes.c_int]
         return lib
     return None
 
@@ -112,13 +119,16 @@ def scene_handle(scene: rtcore_scene.EmbreeScene) -> int:
     return _handles(scene)[0] if shared_buffers_supported() else 0
 
 
-def attach_triangles(scene: rtcore_scene.EmbreeScene, vertices: np.ndarray, triangles: np.ndarray) -> tuple:
+def attach_triangles(scene: rtcore_scene.EmbreeScene, vertices: np.ndarray, triangles: np.ndarray, build: str = "medium") -> tuple:
     """Add one triangle geometry to an uncommitted embreex ``scene``; returns the buffers Embree reads.
 
     vertices : (n, 3) float local coordinates (cast to float32 once, into Embree's layout)
     triangles : (m, 3) int indices into ``vertices``
+    build : a :data:`BUILD_QUALITY` of the scene's hierarchy, set on the scene and the geometry (where the library is
+        called directly; embreex's own ``TriangleMesh`` builds at its default)
     Keep the returned arrays alive as long as the scene: Embree reads them in place.
     """
+    quality = BUILD_QUALITY[build]
     padded = np.zeros((len(vertices) + 1, 4), np.float32)  # x y z pad, and one spare row: Embree loads 16 bytes per vertex
     padded[:-1, :3] = vertices
     triangles = np.ascontiguousarray(triangles)
@@ -130,6 +140,9 @@ def attach_triangles(scene: rtcore_scene.EmbreeScene, vertices: np.ndarray, tria
     lib = _library()
     scene_handle, device_handle = _handles(scene)
     geometry = lib.rtcNewGeometry(device_handle, RTC_GEOMETRY_TYPE_TRIANGLE)
+    if quality != BUILD_QUALITY["medium"]:
+        lib.rtcSetSceneBuildQuality(scene_handle, quality)
+        lib.rtcSetGeometryBuildQuality(geometry, quality)
     lib.rtcSetSharedGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, padded.ctypes.data, 0, 16, len(vertices))
     lib.rtcSetSharedGeometryBuffer(geometry, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, index.ctypes.data, 0, 12, len(index))
     lib.rtcCommitGeometry(geometry)

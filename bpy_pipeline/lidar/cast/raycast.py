@@ -156,8 +156,9 @@ class EmbreePart:
     handle: int = 0
 
 
-def embree_part(local: np.ndarray, triangles: np.ndarray, subset: np.ndarray | slice | None, normal: np.ndarray) -> EmbreePart | None:
-    """The Embree scene of ``triangles[subset]`` (all when ``None``) without their zero-area ones, committed.
+def embree_part(local: np.ndarray, triangles: np.ndarray, subset: np.ndarray | slice | None, normal: np.ndarray, build: str = "medium") -> EmbreePart | None:
+    """The Embree scene of ``triangles[subset]`` (all when ``None``) without their zero-area ones, committed (``build``: its
+    :data:`.embree.BUILD_QUALITY`).
 
     local : (n, 3) float64 vertices, local frame; subset : (s,) int triangle indices, or a slice of them;
     normal : (s, 3) the subset's plane normals (zero: no area). Embree is given the rows of ``local`` from the
@@ -176,7 +177,7 @@ def embree_part(local: np.ndarray, triangles: np.ndarray, subset: np.ndarray | s
     chosen = triangles if index is None else triangles[index]
     low, high = int(chosen.min()), int(chosen.max())
     scene = rtcore_scene.EmbreeScene()
-    keep = attach_triangles(scene, local[low : high + 1], chosen - np.int32(low) if low else chosen)
+    keep = attach_triangles(scene, local[low : high + 1], chosen - np.int32(low) if low else chosen, build)
     commit_scene(scene)
     return EmbreePart(scene, None if index is None else index.astype(np.int64), keep, scene_handle(scene))
 
@@ -237,12 +238,17 @@ class RayCaster:
     record_pool : the :class:`RecordPool` its scans' records come from (default: its own; a cache shares one across frames)
     pool : the thread pool its work runs on beside the calling thread, ``threads - 1`` workers (default: its own,
         made on first use; a cache shares one across frames, so a frame's caster starts no threads)
+    build : the :data:`.embree.BUILD_QUALITY` of the Embree scene it builds: ``"medium"`` (Embree's default), or ``"low"``
+        for a caster few rays are traced through (:class:`.visibility.AloneCaster`): a third of the build's CPU, slower
+        traces. Each ray's nearest hit is the same; only a ray meeting two triangles at one distance (through a shared
+        edge) may be given the other one
     ``InputError`` (naming the object) for non-finite vertices, bad triangle indices, or vertices
     farther than :data:`MAX_COORDINATE` from the local origin.
     """
 
     def __init__(self, buffers: SceneBuffers, frame=None, threads: int | None = None, chunk: int = 32768, kernel: str | None = None, *,
-                 static: StaticPart | None = None, record_pool: RecordPool | None = None, pool: ThreadPoolExecutor | None = None):
+                 static: StaticPart | None = None, record_pool: RecordPool | None = None, pool: ThreadPoolExecutor | None = None,
+                 build: str = "medium"):
         if len(buffers.triangles):
             buffers.check()
         vertices = np.asarray(buffers.vertices, np.float64)
@@ -273,7 +279,7 @@ class RayCaster:
             local = self.to_local(vertices)
             check_extent(local, triangles, buffers)
             self.plane_normal, self.plane_offset = triangle_planes(local, triangles, self.kernels)  # (m, 3), (m,) local frame
-            parts = [embree_part(local, triangles, None, self.plane_normal)]
+            parts = [embree_part(local, triangles, None, self.plane_normal, build)]
         else:
             m = len(triangles)
             kept, moving = as_block(static.triangle), complement(static.triangle, m)  # slices where they are blocks of rows
@@ -286,7 +292,7 @@ class RayCaster:
                 triangle_planes(local, triangles[moving], self.kernels, out=(self.plane_normal[moving], self.plane_offset[moving]))
             else:
                 self.plane_normal[moving], self.plane_offset[moving] = triangle_planes(local, triangles[moving], self.kernels)
-            parts = [static.part, embree_part(local, triangles, moving, self.plane_normal[moving])]
+            parts = [static.part, embree_part(local, triangles, moving, self.plane_normal[moving], build)]
         # (q, 3) float64 added to the rays' local origins for each part: the kept static part's Embree scene lies in the
         # frame it was built in, a translation of this one (CasterCache); Embree only chooses the triangle, solved here
         self.part_shift = np.array([shift if p is parts[0] and static is not None else np.zeros(3) for p in parts if p is not None]).reshape(-1, 3)

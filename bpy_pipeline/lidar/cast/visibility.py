@@ -588,7 +588,7 @@ class AloneCaster:
         vertex_owner[triangles] = np.repeat(owner, 3)
         vertices = buffers.vertices[used] + self.move[vertex_owner] @ np.asarray(pose, float)[:3, :3].T
         self.buffers = SceneBuffers(vertices, triangles.reshape(-1, 3).astype(np.int32), buffers.triangle_object[triangle], buffers.objects)
-        self.caster = RayCaster(self.buffers, frame=pose)
+        self.caster = RayCaster(self.buffers, frame=pose, build="low")  # built every frame, traced by the few pairs left: Embree's fast build
 
     def count(self, origins, directions, box, along, min_range, max_range, surfaces, rng) -> np.ndarray:
         """``(k,)`` returns per box of the pairs (ray origin ``(p, 3)``, direction ``(p, 3)``, box ``(p,)``,
