@@ -1,5 +1,6 @@
 """cli.exit_process: the end of ``python run.py`` without the interpreter's teardown, and what it still does."""
 
+import os
 import subprocess
 import sys
 import types
@@ -65,7 +66,7 @@ def test_no_blender_session_folder_is_left_behind(tmp_path):
     temporary = tmp_path / "tmp"
     temporary.mkdir()
     (temporary / "theirs").mkdir()  # somebody else's: stays
-    env = {**__import__("os").environ, "TMPDIR": str(temporary)}
+    env = {**os.environ, "TMPDIR": str(temporary)}
     program = "import bpy, sys; from bpy_pipeline.cli import exit_process; print(bpy.app.tempdir); exit_process(0)"
     done = subprocess.run([sys.executable, "-c", program], cwd=ROOT, capture_output=True, text=True, timeout=300, env=env)
     assert done.returncode == 0, done.stderr
