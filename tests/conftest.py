@@ -130,6 +130,15 @@ def pytest_collection_modifyitems(config, items):
 
 
 @pytest.fixture
+def killed_run_environment(tmp_path) -> dict:
+    """This environment with ``TMPDIR`` inside the test's folder, for runs the test kills with SIGKILL: such a process
+    cannot remove the folder the bpy module made for it (``blender_XXXXXX``), so it stays with the test's files."""
+    temporary = tmp_path / "process_tmp"
+    temporary.mkdir(exist_ok=True)
+    return {**os.environ, "TMPDIR": str(temporary)}
+
+
+@pytest.fixture
 def bpy_scene():
     """An empty Blender scene (what a builder keeps across frames is owned by each run or call, never by a module)."""
     bpy = pytest.importorskip("bpy")

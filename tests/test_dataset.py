@@ -126,10 +126,10 @@ def test_a_second_run_into_the_folder_refuses(full_parking, tmp_path):
     assert consistent(out) == {0, 1} and read_dataset(out)["seed"] == 12
 
 
-def test_two_runs_at_once_one_refuses(tmp_path):
+def test_two_runs_at_once_one_refuses(tmp_path, killed_run_environment):
     out = tmp_path / "busy"
     first = subprocess.Popen([sys.executable, str(ROOT / "run.py"), "--out", str(out), "--frames", "40", *PARKING], cwd=ROOT, stdout=subprocess.DEVNULL,
-                             stderr=subprocess.PIPE, text=True)
+                             stderr=subprocess.PIPE, text=True, env=killed_run_environment)
     try:
         deadline = time.time() + 60
         while not (out / ".lock").exists() and time.time() < deadline:
@@ -142,14 +142,14 @@ def test_two_runs_at_once_one_refuses(tmp_path):
         first.wait()
 
 
-def test_kill_9_at_random_points_then_resume_gives_the_uninterrupted_bytes(full_parking, tmp_path):
+def test_kill_9_at_random_points_then_resume_gives_the_uninterrupted_bytes(full_parking, tmp_path, killed_run_environment):
     rng = np.random.default_rng(0)
     reference = frame_files(full_parking)
     runs = int(os.environ.get("BPY_PIPELINE_KILL_RUNS", "20"))
     for k in range(runs):
         out = tmp_path / f"killed{k}"
         proc = subprocess.Popen([sys.executable, str(ROOT / "run.py"), "--out", str(out), "--frames", "10", *PARKING], cwd=ROOT, stdout=subprocess.DEVNULL,
-                                stderr=subprocess.DEVNULL)
+                                stderr=subprocess.DEVNULL, env=killed_run_environment)
         time.sleep(float(rng.uniform(0.6, 2.4)))
         proc.send_signal(signal.SIGKILL)
         proc.wait()
@@ -308,12 +308,12 @@ def running(pid: int) -> bool:
 
 
 @pytest.mark.skipif(not Path("/proc/self/stat").is_file(), reason="finds the workers through Linux's /proc")
-def test_workers_stop_when_their_parent_is_killed(tmp_path):
+def test_workers_stop_when_their_parent_is_killed(tmp_path, killed_run_environment):
     """kill -9 of a --workers run: its workers stop too (SIGTERM's way: committed frames kept), instead of going on
     writing into the folder with no lock held, where the next run may resume or overwrite it."""
     out = tmp_path / "orphans"
     parent = subprocess.Popen([sys.executable, str(ROOT / "run.py"), "--out", str(out), "--frames", "2000", *PARKING, "--workers", "2"], cwd=ROOT,
-                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=killed_run_environment)
     try:
         deadline = time.time() + 120
         while not any((out / "records").glob("*.json")) and time.time() < deadline and parent.poll() is None:

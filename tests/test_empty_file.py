@@ -15,9 +15,9 @@ ROOT = Path(__file__).resolve().parents[1]
 # properties and those of its render, unit and display settings; not its session_uid, a counter of the data blocks
 # the session made), after the given way of emptying the file.
 PROGRAM = """
-import json, os, sys
+import json, sys
 import bpy
-from bpy_pipeline.cli import empty_file
+from bpy_pipeline.cli import empty_file, exit_process
 
 way = sys.argv[1]
 if way == "touched":  # a session the user changed: an object, a setting
@@ -44,8 +44,7 @@ state = {"blocks": blocks, "scene": plain(scene), "render": plain(scene.render),
          "display": plain(scene.display), "world": scene.world and scene.world.name,
          "collection": [c.name for c in scene.collection.children] + [o.name for o in scene.collection.objects]}
 print(json.dumps(state, sort_keys=True, default=str))
-sys.stdout.flush()
-os._exit(0)
+exit_process(0)  # Blender's teardown skipped, its session folder removed
 """
 
 

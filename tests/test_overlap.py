@@ -135,7 +135,7 @@ def test_stopping_after_a_frame_commits_no_other(bpy_scene, tmp_path):
 
 @pytest.mark.bpy
 @pytest.mark.slow
-def test_kill_9_while_a_frame_finishes_beside_the_next_then_resume_gives_the_uninterrupted_bytes(tmp_path):
+def test_kill_9_while_a_frame_finishes_beside_the_next_then_resume_gives_the_uninterrupted_bytes(tmp_path, killed_run_environment):
     args = [a for o in GARAGE for a in ("--set", o)]
 
     def cli(out: Path, *extra):
@@ -149,7 +149,7 @@ def test_kill_9_while_a_frame_finishes_beside_the_next_then_resume_gives_the_uni
     for k in range(int(os.environ.get("BPY_PIPELINE_KILL_RUNS", "6"))):
         out = tmp_path / f"killed{k}"
         proc = subprocess.Popen([sys.executable, str(ROOT / "run.py"), "--out", str(out), "--frames", "16", *args], cwd=ROOT, stdout=subprocess.DEVNULL,
-                                stderr=subprocess.DEVNULL)
+                                stderr=subprocess.DEVNULL, env=killed_run_environment)
         deadline = time.time() + 300
         while not (out / "records" / "000000.json").exists() and proc.poll() is None and time.time() < deadline:
             time.sleep(0.02)
