@@ -17,6 +17,7 @@ import struct
 import subprocess
 import sys
 import time
+import types
 from pathlib import Path
 
 import numpy as np
@@ -653,3 +654,21 @@ def test_a_run_started_without_a_standard_stream_runs_and_keeps_it_off_its_files
     out = tmp_path / "run"
     assert without_it(sys.executable, "run.py", "--out", str(out), "--frames", "1").returncode == 0
     assert len(list((out / "ply").glob("*.ply"))) == 1 and (out / "manifest.json").is_file()
+
+
+@pytest.mark.parametrize("case", ["the temporary folder itself", "another name"])
+def test_the_end_of_a_run_removes_only_blenders_own_session_folder(tmp_path, monkeypatch, case):
+    """``cli.exit_process`` removes ``bpy.app.tempdir`` (Blender's ``blender_XXXXXX``, made for this process). Where Blender
+    could not make it, ``tempdir`` is the temporary folder it was given, perhaps a user's folder of a like name: that one,
+    and a folder of any other name, is left whole."""
+    user = tmp_path / ("blender_ab12CD" if case == "the temporary folder itself" else "blender_mine")
+    (user / "sub").mkdir(parents=True)
+    (user / "sub" / "theirs.txt").write_text("kept")
+    monkeypatch.setenv("TMPDIR", str(user if case == "the temporary folder itself" else tmp_path))
+    cli.remove_blender_session_folder(types.SimpleNamespace(app=types.SimpleNamespace(tempdir=f"{user}/")))
+    assert (user / "sub" / "theirs.txt").read_text() == "kept"
+    session = user / "blender_Xy9z0Q"  # what Blender makes inside the folder it was given: removed
+    (session / "render").mkdir(parents=True)
+    monkeypatch.setenv("TMPDIR", str(user))
+    cli.remove_blender_session_folder(types.SimpleNamespace(app=types.SimpleNamespace(tempdir=f"{session}/")))
+    assert not session.exists() and (user / "sub" / "theirs.txt").read_text() == "kept"

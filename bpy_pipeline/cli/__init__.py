@@ -16,6 +16,7 @@ import argparse
 import atexit
 import gc
 import os
+import re
 import shutil
 import signal
 import socket
@@ -370,12 +371,17 @@ def main(argv: list[str] | None = None) -> int:
     return guarded(run_main, args)
 
 
+SESSION_FOLDER = re.compile(r"blender_[A-Za-z0-9]{6}")  # the name mkdtemp gives Blender's session folder (blender_XXXXXX)
+
+
 def remove_blender_session_folder(bpy) -> None:
     """Remove the folder the bpy module made for this process at its import (``bpy.app.tempdir``: ``blender_`` and six
-    characters, in ``$TMPDIR`` or ``/tmp``), as Blender's own teardown does; without it every run would leave one behind.
-    Nothing for ``bpy`` ``None`` (not imported), a module without that folder or a folder of another name."""
-    folder = getattr(getattr(bpy, "app", None), "tempdir", "")
-    if folder and os.path.basename(os.path.normpath(folder)).startswith("blender_"):
+    letters or digits, made by ``mkdtemp`` in ``$TMPDIR`` or ``/tmp``), as Blender's own teardown does; without it every
+    run would leave one behind. Nothing for ``bpy`` ``None`` (not imported), a module without that folder, a folder of
+    another name, or the temporary folder itself: where Blender cannot make its own, ``tempdir`` is the one it was given."""
+    folder = os.path.normpath(getattr(getattr(bpy, "app", None), "tempdir", "") or ".")
+    given = {os.path.normpath(base) for base in (os.environ.get("TMPDIR"), os.environ.get("TMP"), os.environ.get("TEMP"), "/tmp") if base}
+    if SESSION_FOLDER.fullmatch(os.path.basename(folder)) and folder not in given:
         shutil.rmtree(folder, ignore_errors=True)
 
 
